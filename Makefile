@@ -1,0 +1,39 @@
+# One-command set-up: every target that needs Python creates .venv first and
+# installs the project (editable) with its test dependencies into it.
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+export OPENBLAS_NUM_THREADS ?= 1
+export MPLBACKEND ?= Agg
+
+.PHONY: venv test test-all fmus demo dist bench clean
+
+venv: $(STAMP)
+
+$(STAMP): pyproject.toml
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --upgrade pip
+	$(PY) -m pip install -e ".[test]"
+	touch $(STAMP)
+
+fmus: $(STAMP)
+	$(PY) build_fmu.py
+
+test: $(STAMP)
+	$(PY) -m pytest -q -m "not slow"
+
+test-all: $(STAMP)
+	$(PY) -m pytest -q
+
+demo: $(STAMP)
+	$(PY) -m l1b2.cli demo --out demo_out
+
+dist: $(STAMP)
+	$(PY) -m l1b2.cli export --out dist
+
+bench: $(STAMP)
+	$(PY) bench/run_all.py
+
+clean:
+	rm -rf dist demo_out build .pytest_cache
