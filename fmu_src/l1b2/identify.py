@@ -1,0 +1,1280 @@
+"""Maximum-likelihood identification of the reduced predictor (paper Eq. 32, 35).
+
+:class:`PredictorIdentifier` fits theta of :mod:`l1b2.predictor` (Eq. 35
+order) to measured traverses in the data format of ``shared/data-format.md``.
+
+Method
+------
+* **Criterion.** ``free_run``: residual ``v_pred_free(k) - v_meas(k)`` where
+  the predictor propagates its own speed along the measured positions from
+  the measured first speed of each run (the stricter figure). ``one_step``:
+  ``v_pred(k+1 | v_meas(k)) - v_meas(k+1)`` within runs (the paper's use).
+  An optional boolean ``mask`` selects which samples' residuals enter the
+  likelihood; the free-run recursion always runs over all samples.
+* **Likelihood (Eq. 32).** Gaussian with diagonal covariance R: one variance
+  per run (``noise="per_run"``, floored at 10 % of the median run variance)
+  or one common variance. Iterated: fit theta with weights 1/R, re-estimate R
+  from the residuals, repeat until R changes by < 1 % (at most ``max_outer``
+  times). For fixed R the ML estimate of theta is a weighted least-squares
+  problem, solved by :func:`scipy.optimize.least_squares` (``trf``, bounds).
+* **Conditioning.** Positions are scaled to [-1, 1] and A', B', P are Legendre
+  series (see :mod:`l1b2.predictor`); the optimiser works on ``z = theta /
+  scale`` with ``scale`` the typical magnitude of each parameter (group
+  magnitude for polynomial coefficients) taken from the data-driven centre.
+* **Analytic Jacobian.** Free run: forward sensitivities
+  ``S[k+1] = S[k] (1 + h dF/dv) + h dF/dtheta`` (``h = dt/m_eff``), vectorised
+  over runs and parameters (loop over the time index only). One step: the
+  sensitivity is ``h dF/dtheta`` at the measured speed.
+* **Data-driven initial guess.** For v' > 0 the force is
+  ``F = -D(s) v' + B'(s) V0 + C(s) - 9.81 m_load'`` with ``D = c_r +
+  sigma (0.5 - A')`` and ``C = mu P (g1 - pi/2 A' G) - mu_sd (9.81 m_s +
+  kappa P)``. Its one-step equation error is *linear* in the Legendre
+  coefficients of D, B', C (C has order 2n). Summed over short windows
+  (``m_eff dv' + 9.81 m' dt = sum dt (-D v' + B' V0 + C)``, which averages
+  speed noise), one linear least-squares gives D(s), B'(s), C(s). These are
+  mapped to Eq. 35 parameters by fixing the directions the data cannot
+  determine (see below) at conventional values (or the user's ``fixed``
+  values) and refined by a cheap function-space fit.
+* **Global search.** Like MATLAB's GlobalSearch: the centre plus scrambled
+  Sobol points (seeded) in a box ``z0 +- spread * max(|z0|, 0.05)`` around it,
+  a local ``least_squares`` from each, keep the best. Every start's final
+  cost, nfev, status and message are recorded in ``convergence_``.
+
+Identifiability (structural, v' > 0 data, m_s known)
+----------------------------------------------------
+The data determine the functions D(s), B'(s) and C(s) above (B' directly via
+the voltage dependence; the absolute force scale via the known load weights
+9.81 m_load and the known mass). Writing ``a = mu g1(k0) - mu_sd kappa`` and
+``b = mu (pi/2) G(k0)``::
+
+    D(s) = c_r + sigma/2 - sigma A'(s)
+    C(s) = P(s) (a - b A'(s)) - 9.81 m_s mu_sd
+
+is invariant under three one-parameter groups, whatever the data:
+
+1. ``sigma -> r sigma, A' - alpha_0 -> (A' - alpha_0)/r`` with c_r, alpha_0,
+   mu, k0 adjusted (keeps sigma A'(s) up to a constant, b/sigma and a - b alpha_0);
+2. ``alpha_0 -> alpha_0 + delta/sigma, c_r -> c_r + delta`` with mu, k0
+   adjusted so that ``a - b alpha_0`` is unchanged;
+3. ``P -> lambda P`` with mu, k0 (and thus a, b) scaled by 1/lambda.
+
+So with all 3n+8 parameters varied (the paper's setting) the Fisher matrix
+has rank 3n+5: beta (B') and mu_sd are identifiable, the other parameters
+only in combinations. :attr:`PredictorIdentifier.unidentifiable_` reports
+the null directions numerically (SVD), and the affected parameters get
+``stderr = inf``. Pinning sigma, k0 and mu (``fixed="recommended"``)
+removes all three directions; mu_sd is then identified only through the
+constant ``9.81 m_s mu_sd`` inside C(s), i.e. weakly. See the test-suite and
+``bench/bench_identify.py`` for the numerical check.
+
+Uncertainty
+-----------
+Covariance from the Fisher information ``(J^T R^-1 J)^-1`` at the optimum
+via the SVD of the weighted, scaled Jacobian. Singular values below
+``svd_rtol * s_max`` (default 1e-8) mark directions the data cannot separate;
+every parameter with a component > 1e-6 in that null space gets
+``stderr = inf`` (not determined) -- never a pseudo-inverse value. For the
+other parameters the pseudo-inverse restricted to the identified subspace is
+exact (they are estimable functions).
+
+Free-run residuals are autocorrelated when the model is not exact, which
+makes the white-noise Fisher covariance too optimistic. ``stderr_`` inflates
+the noise variance of each run by the AR(1) long-run variance factor
+``(1 + rho)/(1 - rho)``, rho = lag-1 autocorrelation of that run's residuals
+(clipped to [0, 0.99], so the correction never shrinks the interval). Chosen
+over a run-block sandwich estimator because the sandwich needs many more runs
+than parameters to be stable (72 runs vs 32 parameters at order 8, and far
+fewer runs in small experiments), whereas the AR(1) factor uses every sample
+and is exact for slowly varying sensitivities under AR(1) errors.
+``stderr_fisher_`` keeps the plain white-noise value. Intervals use the t
+distribution with ``n_eff - k`` degrees of freedom, ``n_eff = sum_r n_r /
+f_r`` (AR(1)-effective sample count) and k = number of varied identifiable
+parameters.
+
+Information criteria: ``loglik_`` is the Gaussian log-likelihood at the final
+(theta, R); ``aic_ = 2k - 2 loglik``, ``bic_ = k ln(n) - 2 loglik`` with n
+the number of residuals and k counting only varied, identifiable theta
+parameters (the noise variances are not counted; they are the same for all
+models compared on the same data with the same ``noise`` option).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from typing import Any, Mapping
+
+import numpy as np
+from numpy.polynomial.legendre import legvander
+from scipy import stats
+from scipy.linalg import qr as _qr
+from scipy.optimize import least_squares
+
+from .errors import IdentificationError
+from .predictor import (
+    G_ACC,
+    K0_MAX,
+    SCALAR_NAMES,
+    PredictorParams,
+    RunLayout,
+    G_of_k0,
+    dG_dk0,
+    ddrive_factor_dk0,
+    drive_factor,
+    _force,
+    packed_linear_recursion,
+    packed_recursion,
+    rest_sign,
+    steady_state as _steady_state,
+)
+
+__all__ = ["PredictorIdentifier", "evaluation_mask", "RECOMMENDED_FIXED"]
+
+REQUIRED_COLUMNS = ("time_s", "run", "position_m", "voltage_V", "direction", "load_kg")
+
+#: parameters pinned by ``fixed="recommended"``: one per structural null direction
+RECOMMENDED_FIXED = ("sigma", "k0", "mu")
+
+#: conventional values for the directions the data cannot determine (used only
+#: when such a parameter is fixed without a value, or as the centre of the
+#: global search for a varied but non-identifiable parameter)
+CONVENTIONAL = {"k0": 0.5, "mu": 0.2, "mu_sd": 0.05}
+
+_NULL_TOL = 1e-6
+
+
+def evaluation_mask(df, min_speed: float = 5e-3, edge: float = 2e-3) -> np.ndarray:
+    """Samples used for metrics by ``shared/data-format.md``.
+
+    |speed| >= ``min_speed`` [m/s] and at least ``edge`` [m] of travel away
+    from the first and the last position of the run (end-stop collisions).
+    """
+    run = df["run"].to_numpy()
+    s = df["position_m"].to_numpy(dtype=float)
+    v = df["speed_m_s"].to_numpy(dtype=float)
+    lay = RunLayout(run)
+    s_first = s[lay.starts][lay.run_of_sample]
+    s_last = s[lay.starts + lay.lengths - 1][lay.run_of_sample]
+    return (np.abs(v) >= min_speed) & (np.abs(s - s_first) >= edge) & (np.abs(s_last - s) >= edge)
+
+
+# ---------------------------------------------------------------------------
+# data
+# ---------------------------------------------------------------------------
+
+
+class _Data:
+    """Validated flat arrays of a data-format DataFrame."""
+
+    def __init__(self, df, mask=None, require_speed=True):
+        try:
+            cols = list(df.columns)
+        except AttributeError as exc:
+            raise IdentificationError("data must be a pandas DataFrame in the data format") from exc
+        missing = [c for c in REQUIRED_COLUMNS if c not in cols]
+        if missing:
+            raise IdentificationError(f"data: missing column(s) {missing}")
+        n = len(df)
+        if n == 0:
+            raise IdentificationError("data: no samples")
+        self.run = df["run"].to_numpy()
+        self.layout = RunLayout(self.run)
+        lay = self.layout
+        if len(np.unique(self.run)) != lay.R:
+            raise IdentificationError("data: column 'run': rows of one run must be contiguous")
+        arrays = {}
+        for c in ("time_s", "position_m", "voltage_V", "direction", "load_kg"):
+            try:
+                arrays[c] = df[c].to_numpy(dtype=float)
+            except (TypeError, ValueError) as exc:
+                raise IdentificationError(f"data: column '{c}' is not numeric") from exc
+        if "speed_m_s" in cols:
+            try:
+                arrays["speed_m_s"] = df["speed_m_s"].to_numpy(dtype=float)
+            except (TypeError, ValueError) as exc:
+                raise IdentificationError("data: column 'speed_m_s' is not numeric") from exc
+            self.speed_derived = False
+        else:
+            arrays["speed_m_s"] = None
+            self.speed_derived = True
+        for c, a in arrays.items():
+            if a is None:
+                continue
+            bad = ~np.isfinite(a)
+            if bad.any():
+                i = int(np.flatnonzero(bad)[0])
+                raise IdentificationError(
+                    f"data: run {self.run[i]!r} has NaN/inf in column '{c}' "
+                    f"(first at row {i + 1}); remove or repair that run"
+                )
+        self.t = arrays["time_s"]
+        self.s = arrays["position_m"]
+        self.V0 = arrays["voltage_V"]
+        self.d = arrays["direction"]
+        self.load = arrays["load_kg"]
+        if not np.all(np.isin(self.d, (-1.0, 1.0))):
+            i = int(np.flatnonzero(~np.isin(self.d, (-1.0, 1.0)))[0])
+            raise IdentificationError(f"data: column 'direction' must be +1 or -1 (row {i + 1})")
+        dtt = np.diff(self.t)
+        within = ~lay.is_last[:-1]
+        if np.any(dtt[within] <= 0):
+            i = int(np.flatnonzero((dtt <= 0) & within)[0])
+            raise IdentificationError(f"data: column 'time_s' not increasing within run {self.run[i]!r}")
+        if arrays["speed_m_s"] is None:
+            v = np.empty(n)
+            for r in range(lay.R):
+                sl = slice(lay.starts[r], lay.starts[r] + lay.lengths[r])
+                if lay.lengths[r] >= 2:
+                    v[sl] = np.gradient(self.s[sl], self.t[sl])
+                else:
+                    v[sl] = 0.0
+            self.v = v
+        else:
+            self.v = arrays["speed_m_s"]
+        if mask is None:
+            self.mask = np.ones(n, dtype=bool)
+        else:
+            m = np.asarray(mask)
+            if m.shape != (n,):
+                raise IdentificationError(f"mask has shape {m.shape}, expected ({n},)")
+            self.mask = m.astype(bool)
+        self.n = n
+
+
+# ---------------------------------------------------------------------------
+# model core on arbitrary sample sets
+# ---------------------------------------------------------------------------
+
+
+class _Core:
+    """Force terms and their theta-derivatives on one set of samples."""
+
+    def __init__(self, L, V0, mp, h, d, m_s, kappa):
+        self.L = np.ascontiguousarray(L)
+        self.V0 = V0
+        self.mp = mp
+        self.h = h
+        self.d = d
+        self.hd = h * d
+        self.m_s = float(m_s)
+        self.kappa = float(kappa)
+        self.n1 = L.shape[1]
+
+    def terms(self, theta):
+        n1 = self.n1
+        c_r, sig, mu, k0, musd = theta[:5]
+        Ap = self.L @ theta[5 : 5 + n1]
+        Bp = self.L @ theta[5 + n1 : 5 + 2 * n1]
+        P = self.L @ theta[5 + 2 * n1 :]
+        g1 = float(drive_factor(k0))
+        G = float(G_of_k0(k0))
+        D = c_r + sig * (0.5 - Ap)
+        X = Bp * self.V0 + mu * P * (g1 - 0.5 * np.pi * Ap * G) - G_ACC * self.mp
+        Fr = musd * (G_ACC * self.m_s + self.kappa * P)
+        return Ap, P, D, X, Fr
+
+    def dF(self, theta, vp, sg, Ap, P, cols, rows=None):
+        """dF/dtheta[cols] (drive coordinates) at drive speed vp (on ``rows`` if given).
+
+        ``sg`` is the effective sign(-v') (static-friction value at rest).
+        """
+        n1 = self.n1
+        L = self.L if rows is None else self.L[rows]
+        V0 = self.V0 if rows is None else self.V0[rows]
+        c_r, sig, mu, k0, musd = theta[:5]
+        g1 = float(drive_factor(k0))
+        G = float(G_of_k0(k0))
+        dg1 = float(ddrive_factor_dk0(k0))
+        dG = float(dG_dk0(k0))
+        cols = np.asarray(cols)
+        out = np.empty((vp.size, cols.size))
+        group_a = group_p = None
+        for j, c in enumerate(cols):
+            if c == 0:
+                out[:, j] = -vp
+            elif c == 1:
+                out[:, j] = -(0.5 - Ap) * vp
+            elif c == 2:
+                out[:, j] = P * (g1 - 0.5 * np.pi * Ap * G)
+            elif c == 3:
+                out[:, j] = mu * P * (dg1 - 0.5 * np.pi * Ap * dG)
+            elif c == 4:
+                out[:, j] = sg * (G_ACC * self.m_s + self.kappa * P)
+            elif c < 5 + n1:
+                if group_a is None:
+                    group_a = sig * vp - mu * P * 0.5 * np.pi * G
+                out[:, j] = L[:, c - 5] * group_a
+            elif c < 5 + 2 * n1:
+                out[:, j] = L[:, c - 5 - n1] * V0
+            else:
+                if group_p is None:
+                    group_p = mu * (g1 - 0.5 * np.pi * Ap * G) + sg * musd * self.kappa
+                out[:, j] = L[:, c - 5 - 2 * n1] * group_p
+        return out
+
+
+class _Problem:
+    """Residuals and analytic Jacobian of one criterion on one data set."""
+
+    def __init__(self, data: _Data, order, kappa, include_load_inertia, criterion, s_center, s_half, m_s):
+        self.data = data
+        self.criterion = criterion
+        lay = data.layout
+        self.lay = lay
+        x = (data.s - s_center) / s_half
+        L = legvander(x, order)
+        m_eff = m_s + (np.abs(data.load) if include_load_inertia else 0.0)
+        dt = lay.step_dt(data.t)
+        h = dt / m_eff
+        mp = data.d * data.load
+        self.m_s = m_s
+        if criterion == "free_run":
+            pk = lay.to_packed
+            self.core = _Core(pk(L), pk(data.V0), pk(mp), pk(h), pk(data.d), m_s, kappa)
+            self.nd = -self.core.d
+            self.v0 = data.v[lay.starts][lay.run_order]
+            mask_p = pk(data.mask)
+            self.sel = np.flatnonzero(mask_p)
+            self.z = pk(data.v)[self.sel]
+            self.run_sel = pk(lay.run_of_sample)[self.sel]
+            self.sample_sel = lay.perm[self.sel]  # flat sample index of each residual
+        elif criterion == "one_step":
+            idx = np.flatnonzero(~lay.is_last)
+            self.idx = idx
+            self.core = _Core(L[idx], data.V0[idx], mp[idx], h[idx], data.d[idx], m_s, kappa)
+            self.vprev = data.v[idx]
+            keep = data.mask[idx + 1]
+            self.sel = np.flatnonzero(keep)
+            self.z = data.v[idx + 1][self.sel]
+            self.run_sel = lay.run_of_sample[idx + 1][self.sel]
+            self.sample_sel = (idx + 1)[self.sel]
+        else:
+            raise IdentificationError(f"criterion must be 'free_run' or 'one_step', got {criterion!r}")
+        self._cache_theta = None
+        self._cache = None
+
+    # prediction on the evaluation set (packed for free_run, pairs for one_step)
+    def _evaluate(self, theta):
+        if self._cache_theta is not None and np.array_equal(theta, self._cache_theta):
+            return self._cache
+        core = self.core
+        Ap, P, D, X, Fr = core.terms(theta)
+        z0 = rest_sign(X, Fr)
+        if self.criterion == "free_run":
+            a = 1.0 - core.h * D
+            flags = np.zeros(self.lay.n, dtype=bool)
+            with np.errstate(over="ignore", invalid="ignore"):
+                v = packed_recursion(self.lay, a, core.hd * X, core.hd * Fr, self.nd, z0, self.v0, flags)
+            vp = core.d * v
+        else:
+            vp = core.d * self.vprev
+            with np.errstate(over="ignore", invalid="ignore"):
+                F = _force(D, X, Fr, vp)
+                v = self.vprev + core.hd * F
+            flags = self.vprev * v < 0
+            v = np.where(flags, 0.0, v)
+            a = None
+        sg = np.sign(-vp)
+        rest = vp == 0
+        if rest.any():
+            sg[rest] = z0[rest]
+            flags = flags | (rest & (np.abs(z0) < 1.0))
+        res = (v, a, Ap, P, sg, flags)
+        self._cache_theta = np.array(theta, copy=True)
+        self._cache = res
+        return res
+
+    def residual(self, theta):
+        v = self._evaluate(theta)[0]
+        return v[self.sel] - self.z
+
+    def jacobian(self, theta, cols):
+        """d residual / d theta[cols] (unweighted): forward sensitivities for the free run."""
+        v, a, Ap, P, sg, flags = self._evaluate(theta)
+        core = self.core
+        if self.criterion == "free_run":
+            vp = core.d * v
+            U = core.dF(theta, vp, sg, Ap, P, cols)
+            U *= core.hd[:, None]
+            if flags.any():
+                # clamped / stuck steps: v[k+1] = 0 whatever theta
+                U[flags] = 0.0
+                a = np.where(flags, 0.0, a)
+            with np.errstate(over="ignore", invalid="ignore"):
+                S = packed_linear_recursion(self.lay, a, U)
+            return S[self.sel]
+        vp = core.d * self.vprev
+        sub = self.sel
+        U = core.dF(theta, vp[sub], sg[sub], Ap[sub], P[sub], cols, rows=sub)
+        U *= core.hd[sub, None]
+        U[flags[sub]] = 0.0
+        return U
+
+    def predict_all(self, theta):
+        """Predictions for every sample (flat order); one_step: NaN at run starts."""
+        v = self._evaluate(theta)[0]
+        if self.criterion == "free_run":
+            return self.lay.from_packed(v)
+        out = np.full(self.data.n, np.nan)
+        out[self.idx + 1] = v
+        return out
+
+
+# ---------------------------------------------------------------------------
+# data-driven initial guess
+# ---------------------------------------------------------------------------
+
+
+def _reduced_linear_fit(data: _Data, order, m_s, include_load_inertia, s_center, s_half, use_mask=True):
+    """Linear LS for the Legendre coefficients of D (n+1), B' (n+1), C (2n+1).
+
+    Window-integrated equation error (v' > 0 throughout the window):
+    m_eff (v'[k+w] - v'[k]) + 9.81 sum dt m' = sum dt (-D v' + B' V0 + C).
+    """
+    lay = data.layout
+    vp = data.d * data.v
+    mp = data.d * data.load
+    m_eff = m_s + (np.abs(data.load) if include_load_inertia else 0.0)
+    dt = lay.step_dt(data.t)
+    x = (data.s - s_center) / s_half
+    L = legvander(x, order)
+    L2 = legvander(x, 2 * order)
+    med_dt = float(np.median(dt[dt > 0])) if np.any(dt > 0) else 1e-3
+    w = int(max(4, min(50, round(0.01 / med_dt))))
+    stride = max(1, w // 2)
+    vthr = max(5e-3, 0.05 * float(np.median(np.abs(vp))))
+    A = np.hstack([-L * vp[:, None], L * data.V0[:, None], L2]) * dt[:, None]
+    cumA = np.vstack([np.zeros(A.shape[1]), np.cumsum(A, axis=0)])
+    cumT = np.concatenate([[0.0], np.cumsum(G_ACC * mp * dt)])
+
+    def windows(good):
+        cg = np.concatenate([[0], np.cumsum(good.astype(int))])
+        idx = []
+        for r in range(lay.R):
+            st, ln = lay.starts[r], lay.lengths[r]
+            if ln <= w:
+                continue
+            ks = st + np.arange(0, ln - w, stride)
+            ok = (cg[ks + w + 1] - cg[ks]) == (w + 1)
+            idx.append(ks[ok])
+        return np.concatenate(idx) if idx else np.zeros(0, dtype=int)
+
+    good = vp > vthr
+    ks = windows(good & data.mask) if use_mask else np.zeros(0, dtype=int)
+    ncoef = A.shape[1]
+    if ks.size < 2 * ncoef:
+        ks = windows(good)
+    if ks.size < ncoef + 1:
+        raise IdentificationError(
+            f"too few usable samples for identification: {ks.size} windows of {w} samples "
+            f"moving forward, need more than {ncoef}"
+        )
+    M = cumA[ks + w] - cumA[ks]
+    y = m_eff[ks] * (vp[ks + w] - vp[ks]) + (cumT[ks + w] - cumT[ks])
+    cn = np.sqrt(np.sum(M * M, axis=0))
+    cn[cn == 0] = 1.0
+    sol, *_ = np.linalg.lstsq(M / cn, y, rcond=1e-12)
+    sol = sol / cn
+    n1 = order + 1
+    return sol[:n1], sol[n1 : 2 * n1], sol[2 * n1 :], float(np.median(np.abs(vp))), float(np.median(data.V0))
+
+
+def _grid(order):
+    ng = 4 * order + 4
+    return np.cos(np.pi * (np.arange(ng) + 0.5) / ng)
+
+
+def _map_reduced_to_theta(dco, bco, cco, fixed, order, m_s, kappa):
+    """Eq. 35 parameters reproducing D, B', C, with conventions for the null directions."""
+    n1 = order + 1
+    xg = _grid(order)
+    Lg = legvander(xg, order)
+    L2g = legvander(xg, 2 * order)
+    Dg = Lg @ dco
+    Cg = L2g @ cco
+    d0 = float(dco[0])
+    # sigma: makes A' - alpha_0 = -(D - d0)/sigma span at most +-0.25
+    if "sigma" in fixed:
+        sig = fixed["sigma"]
+    else:
+        sig = max(4.0 * float(np.max(np.abs(Dg - d0))), 0.01 * abs(d0), 1e-6)
+    k0 = fixed.get("k0", CONVENTIONAL["k0"])
+    mu = fixed.get("mu", CONVENTIONAL["mu"])
+    musd = fixed.get("mu_sd", CONVENTIONAL["mu_sd"])
+    alpha = np.zeros(n1)
+    if sig > 0:
+        alpha[1:] = -dco[1:] / sig
+    g1 = float(drive_factor(k0))
+    G = float(G_of_k0(k0))
+    a = mu * g1 - musd * kappa
+    b = mu * 0.5 * np.pi * G
+    e = G_ACC * m_s * musd
+    q = Lg[:, 1:] @ alpha[1:]
+    ce = Cg + e
+    sgn = 1.0 if np.mean(ce) >= 0 else -1.0
+    if "alpha_0" in fixed:
+        alpha0 = fixed["alpha_0"]
+    elif "c_r" in fixed and sig > 0:
+        alpha0 = (fixed["c_r"] + 0.5 * sig - d0) / sig
+    else:
+        # convention: the factor (a - b alpha_0) takes the sign of C + e and
+        # half the magnitude of |a| (or of b if a vanishes)
+        phi = 0.5 * (abs(a) if abs(a) > 1e-9 else max(b, 1e-9))
+        alpha0 = (a - sgn * phi) / b if b > 0 else 0.0
+    alpha[0] = alpha0
+    c_r = fixed.get("c_r", d0 - 0.5 * sig + sig * alpha0)
+    if c_r < 0:
+        c_r = 0.0
+    denom = a - b * alpha0 - b * q
+    if np.any(np.abs(denom) < 1e-9) or np.any(np.sign(denom) != np.sign(denom[0])):
+        denom = np.full_like(denom, np.mean(denom) if abs(np.mean(denom)) > 1e-9 else 1.0)
+    Pg = ce / denom
+    pco, *_ = np.linalg.lstsq(Lg, Pg, rcond=None)
+    theta = np.concatenate([[c_r, sig, mu, k0, musd], alpha, bco, pco])
+    for name, val in fixed.items():
+        theta[PredictorParams.names(order).index(name)] = val
+    lo, hi = PredictorParams.bounds(order)
+    return np.clip(theta, lo, np.minimum(hi, np.where(np.isfinite(hi), hi, np.inf)))
+
+
+def _refine_function_space(theta0, varied, dco, bco, cco, order, m_s, kappa, v_typ, V_typ):
+    """Least squares of the Eq. 35 structure to the reduced functions D, B', C on a grid."""
+    n1 = order + 1
+    xg = _grid(order)
+    Lg = legvander(xg, order)
+    L2g = legvander(xg, 2 * order)
+    Dg, Bg, Cg = Lg @ dco, Lg @ bco, L2g @ cco
+    core = _Core(Lg, np.ones_like(xg), np.zeros_like(xg), np.ones_like(xg), np.ones_like(xg), m_s, kappa)
+    lo, hi = PredictorParams.bounds(order)
+    idx = np.flatnonzero(varied)
+    if idx.size == 0:
+        return theta0
+    scale = np.maximum(np.abs(theta0[idx]), 1e-6)
+
+    def fun(zv):
+        th = theta0.copy()
+        th[idx] = zv * scale
+        Ap, P, D, X, Fr = core.terms(th)
+        Bp = Lg @ th[5 + n1 : 5 + 2 * n1]
+        C = X - Bp - Fr  # mp = 0 and V0 = 1 on the grid
+        return np.concatenate([v_typ * (D - Dg), V_typ * (Bp - Bg), C - Cg])
+
+    z0 = theta0[idx] / scale
+    lb = lo[idx] / scale
+    ub = hi[idx] / scale
+    z0 = np.clip(z0, lb, ub)
+    try:
+        res = least_squares(fun, z0, bounds=(lb, ub), method="trf", x_scale=1.0, max_nfev=200)
+        th = theta0.copy()
+        th[idx] = res.x * scale
+        return th
+    except (ValueError, np.linalg.LinAlgError):
+        return theta0
+
+
+# ---------------------------------------------------------------------------
+# the estimator
+# ---------------------------------------------------------------------------
+
+
+def _json_float(x):
+    x = float(x)
+    if math.isnan(x):
+        return None
+    if math.isinf(x):
+        return "inf" if x > 0 else "-inf"
+    return x
+
+
+def _from_json_float(x):
+    if x is None:
+        return float("nan")
+    if isinstance(x, str):
+        return float(x)
+    return float(x)
+
+
+class PredictorIdentifier:
+    """Maximum-likelihood identification of the Eq. 29 predictor (see module docstring).
+
+    Parameters
+    ----------
+    order : polynomial order n of A', B', P (paper: 8).
+    criterion : ``"free_run"`` (default) or ``"one_step"``.
+    n_starts : number of local optimisations of the global search (centre + Sobol points).
+    seed : seed of the Sobol sequence.
+    fixed : parameters pinned at a value (``vary=False``): dict name -> value
+        (value ``None`` = pin at the data-driven/conventional centre value),
+        a sequence of names, or ``"recommended"`` (= :data:`RECOMMENDED_FIXED`).
+        ``None`` varies all Eq. 35 parameters (the paper's setting).
+    noise : ``"per_run"`` (one variance per run, floored at 10 % of the median)
+        or ``"common"``.
+    kappa : share of the preload loading the guide (fixed, not identified).
+    include_load_inertia : m_eff = m_s + |m_load| (True) or m_s.
+    max_nfev : function evaluations per local optimisation.
+    start_spread : relative half-width of the global-search box.
+    max_outer : maximum number of (theta, R) alternations.
+    svd_rtol : relative singular-value threshold for non-identifiable directions.
+    """
+
+    def __init__(
+        self,
+        order: int = 8,
+        criterion: str = "free_run",
+        n_starts: int = 8,
+        seed: int | None = 0,
+        fixed=None,
+        noise: str = "per_run",
+        kappa: float = 0.5,
+        include_load_inertia: bool = True,
+        max_nfev: int = 200,
+        start_spread: float = 0.5,
+        max_outer: int = 5,
+        svd_rtol: float = 1e-8,
+        tol: float = 1e-10,
+        verbose: bool = False,
+    ):
+        self.order = int(order)
+        self.criterion = criterion
+        self.n_starts = int(n_starts)
+        self.seed = seed
+        self.fixed = fixed
+        self.noise = noise
+        self.kappa = float(kappa)
+        self.include_load_inertia = bool(include_load_inertia)
+        self.max_nfev = int(max_nfev)
+        self.start_spread = float(start_spread)
+        self.max_outer = int(max_outer)
+        self.svd_rtol = float(svd_rtol)
+        self.tol = float(tol)
+        self.verbose = bool(verbose)
+        if criterion not in ("free_run", "one_step"):
+            raise IdentificationError(f"criterion must be 'free_run' or 'one_step', got {criterion!r}")
+        if noise not in ("per_run", "common"):
+            raise IdentificationError(f"noise must be 'per_run' or 'common', got {noise!r}")
+        if self.order < 0:
+            raise IdentificationError("order must be >= 0")
+        if self.n_starts < 1:
+            raise IdentificationError("n_starts must be >= 1")
+
+    # -- helpers -------------------------------------------------------------
+    @property
+    def param_names(self) -> list[str]:
+        return PredictorParams.names(self.order)
+
+    def _parse_fixed(self) -> dict:
+        names = self.param_names
+        fx = self.fixed
+        if fx is None:
+            return {}
+        if isinstance(fx, str):
+            if fx != "recommended":
+                raise IdentificationError(f"fixed: unknown preset {fx!r} (use 'recommended' or a dict)")
+            fx = {k: None for k in RECOMMENDED_FIXED}
+        elif not isinstance(fx, Mapping):
+            fx = {k: None for k in fx}
+        out = {}
+        for k, v in fx.items():
+            if k not in names:
+                raise IdentificationError(f"fixed: unknown parameter {k!r}; known: {names}")
+            out[k] = None if v is None else float(v)
+        return out
+
+    def _log(self, msg):
+        if self.verbose:
+            print(msg, flush=True)
+
+    # -- fitting -------------------------------------------------------------
+    def fit(self, df, slider_mass_kg=None, mask=None):
+        """Identify theta from a data-format DataFrame; returns self."""
+        t_start = time.perf_counter()
+        if slider_mass_kg is None:
+            raise IdentificationError(
+                "slider_mass_kg is missing: give the slider mass [kg] (sidecar 'slider_mass_kg')"
+            )
+        try:
+            m_s = float(slider_mass_kg)
+        except (TypeError, ValueError) as exc:
+            raise IdentificationError(f"slider_mass_kg must be a number [kg], got {slider_mass_kg!r}") from exc
+        if not (math.isfinite(m_s) and m_s > 0):
+            raise IdentificationError(f"slider_mass_kg must be a positive mass [kg], got {slider_mass_kg!r}")
+        data = _Data(df, mask)
+        lay = data.layout
+        names = self.param_names
+        p_all = len(names)
+        fixed_in = self._parse_fixed()
+        n_var = p_all - len(fixed_in)
+        if lay.R < 2:
+            raise IdentificationError(f"too few runs: {lay.R}; need at least 2 (different voltages/loads)")
+        if np.any(lay.lengths < 2):
+            r = int(np.flatnonzero(lay.lengths < 2)[0])
+            raise IdentificationError(f"run {lay.labels[r]!r} has fewer than 2 samples")
+        n_min = max(n_var + 2, 3 * (self.order + 1))
+        if int(data.mask.sum()) < n_min:
+            raise IdentificationError(
+                f"too few samples: {int(data.mask.sum())} selected, need at least {n_min} "
+                f"for {n_var} varied parameters"
+            )
+        vsel = data.v[data.mask]
+        if not np.ptp(data.v) > 1e-9 or np.max(np.abs(vsel)) < 1e-6:
+            raise IdentificationError("no speed variation in the data: the slider does not move")
+        s_lo, s_hi = float(np.min(data.s)), float(np.max(data.s))
+        if not s_hi - s_lo > 1e-6:
+            raise IdentificationError("no position variation in the data (position_m constant)")
+        s_center = 0.5 * (s_lo + s_hi)
+        s_half = 0.5 * (s_hi - s_lo)
+
+        # ---- data-driven centre ------------------------------------------
+        dco, bco, cco, v_typ, V_typ = _reduced_linear_fit(
+            data, self.order, m_s, self.include_load_inertia, s_center, s_half
+        )
+        fixed_vals = {k: v for k, v in fixed_in.items() if v is not None}
+        theta_conv = _map_reduced_to_theta(dco, bco, cco, fixed_vals, self.order, m_s, self.kappa)
+        varied = np.ones(p_all, dtype=bool)
+        for k in fixed_in:
+            varied[names.index(k)] = False
+        theta0 = _refine_function_space(
+            theta_conv, varied, dco, bco, cco, self.order, m_s, self.kappa, v_typ, V_typ
+        )
+        # pin fixed-without-value at the centre
+        fixed_final = {k: (theta0[names.index(k)] if v is None else v) for k, v in fixed_in.items()}
+        for k, v in fixed_final.items():
+            theta0[names.index(k)] = v
+        self.reduced_ = {"D": dco.tolist(), "B_prime": bco.tolist(), "C": cco.tolist()}
+        self.theta_init_ = theta0.copy()
+
+        # ---- scaling -------------------------------------------------------
+        n1 = self.order + 1
+        scale = np.empty(p_all)
+        floors = {"c_r": 1e-3, "sigma": 1e-4, "mu": 1e-2, "k0": 0.05, "mu_sd": 1e-2}
+        for i, nm in enumerate(SCALAR_NAMES):
+            scale[i] = max(abs(theta0[i]), floors[nm])
+        for g in range(3):
+            sl = slice(5 + g * n1, 5 + (g + 1) * n1)
+            scale[sl] = max(float(np.max(np.abs(theta0[sl]))), 1e-12)
+        lo, hi = PredictorParams.bounds(self.order)
+        vidx = np.flatnonzero(varied)
+        sv_scale = scale[vidx]
+        zlo = lo[vidx] / sv_scale
+        zhi = hi[vidx] / sv_scale
+        # keep strictly feasible
+        z_centre = np.clip(theta0[vidx] / sv_scale, zlo, zhi)
+        z_centre = np.where(z_centre >= zhi, zhi - 1e-9 * np.maximum(1, np.abs(zhi)), z_centre)
+
+        problem = _Problem(
+            data, self.order, self.kappa, self.include_load_inertia, self.criterion, s_center, s_half, m_s
+        )
+        run_sel = problem.run_sel
+        n_res = run_sel.size
+        runs_with_res = np.bincount(run_sel, minlength=lay.R)
+
+        def theta_of(z):
+            th = theta0.copy()
+            th[vidx] = z * sv_scale
+            return th
+
+        def estimate_R(r):
+            ss = np.bincount(run_sel, weights=r * r, minlength=lay.R)
+            if self.noise == "common":
+                return np.full(lay.R, max(float(np.sum(ss)) / max(n_res, 1), 1e-300))
+            cnt = runs_with_res
+            var = np.where(cnt > 0, ss / np.maximum(cnt, 1), np.nan)
+            med = float(np.nanmedian(var)) if np.any(cnt > 0) else 1.0
+            if not np.isfinite(med) or med <= 0:
+                med = max(float(np.nanmax(var)) if np.any(np.isfinite(var)) else 1.0, 1e-300)
+            floor = 0.1 * med
+            var = np.where(np.isfinite(var), np.maximum(var, floor), med)
+            return var
+
+        R_cur = None
+        weights = None
+
+        def fun(z):
+            r = problem.residual(theta_of(z))
+            out = r * weights
+            if not np.all(np.isfinite(out)):
+                out = np.where(np.isfinite(out), out, 1e10)
+            return out
+
+        def jac(z):
+            J = problem.jacobian(theta_of(z), vidx)
+            J *= weights[:, None]
+            J *= sv_scale[None, :]
+            if not np.all(np.isfinite(J)):
+                J = np.where(np.isfinite(J), J, 0.0)
+            return J
+
+        r0 = problem.residual(theta_of(z_centre))
+        if not np.all(np.isfinite(r0)):
+            raise IdentificationError(
+                "the data-driven initial guess gives a non-finite prediction; "
+                "check units (m, m/s, V, kg) and slider_mass_kg"
+            )
+        R_cur = estimate_R(r0)
+        weights = 1.0 / np.sqrt(R_cur[run_sel])
+
+        def local(z_init):
+            t0 = time.perf_counter()
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                res = least_squares(
+                    fun,
+                    z_init,
+                    jac=jac,
+                    bounds=(zlo, zhi),
+                    method="trf",
+                    x_scale=1.0,
+                    ftol=self.tol,
+                    xtol=self.tol,
+                    gtol=self.tol,
+                    max_nfev=self.max_nfev,
+                )
+            return res, time.perf_counter() - t0
+
+        # ---- global search (first outer iteration) ---------------------------
+        starts = [z_centre]
+        if self.n_starts > 1:
+            from scipy.stats import qmc
+
+            m = int(math.ceil(math.log2(max(self.n_starts - 1, 1)))) if self.n_starts > 2 else 0
+            sob = qmc.Sobol(d=vidx.size, scramble=True, seed=self.seed)
+            u = sob.random_base2(m)[: self.n_starts - 1]
+            hw = self.start_spread * np.maximum(np.abs(z_centre), 0.05)
+            for row in u:
+                z = z_centre + (2.0 * row - 1.0) * hw
+                z = np.clip(z, zlo, zhi)
+                z = np.where(z >= zhi, zhi - 1e-9 * np.maximum(1, np.abs(zhi)), z)
+                starts.append(z)
+        records = []
+        best = None
+        for i, z_init in enumerate(starts):
+            r_init = fun(z_init)
+            if not np.all(np.abs(r_init) < 1e9):
+                records.append(
+                    {"start": i, "status": None, "message": "skipped: non-finite prediction at start",
+                     "cost": float("inf"), "nfev": 0, "njev": 0, "time_s": 0.0, "x0": (z_init * sv_scale).tolist()}
+                )
+                continue
+            res, dtime = local(z_init)
+            rec = {
+                "start": i,
+                "x0": (z_init * sv_scale).tolist(),
+                "cost": float(res.cost),
+                "nfev": int(res.nfev),
+                "njev": int(res.njev) if res.njev is not None else None,
+                "status": int(res.status),
+                "message": str(res.message),
+                "optimality": float(res.optimality),
+                "time_s": dtime,
+            }
+            records.append(rec)
+            self._log(f"start {i}: cost {res.cost:.6g} nfev {res.nfev} status {res.status} ({dtime:.2f}s)")
+            if best is None or res.cost < best.cost:
+                best = res
+                best_i = i
+        if best is None:
+            raise IdentificationError("global search failed: every start gave a non-finite prediction")
+        z_best = best.x
+        outer_hist = [{"iteration": 0, "cost": float(best.cost), "noise_var_median": float(np.median(R_cur))}]
+        final_res = best
+        converged_R = False
+        for it in range(1, self.max_outer + 1):
+            r = problem.residual(theta_of(z_best))
+            R_new = estimate_R(r)
+            change = float(np.max(np.abs(R_new / R_cur - 1.0)))
+            R_cur = R_new
+            weights = 1.0 / np.sqrt(R_cur[run_sel])
+            outer_hist[-1]["R_change"] = change
+            if change < 0.01:
+                converged_R = True
+                break
+            res, dtime = local(z_best)
+            z_best = res.x
+            final_res = res
+            outer_hist.append(
+                {"iteration": it, "cost": float(res.cost), "nfev": int(res.nfev), "status": int(res.status),
+                 "noise_var_median": float(np.median(R_cur)), "time_s": dtime}
+            )
+            self._log(f"outer {it}: R change {change:.3g}, cost {res.cost:.6g}, nfev {res.nfev}")
+        theta_hat = theta_of(z_best)
+
+        # ---- uncertainty --------------------------------------------------------
+        r = problem.residual(theta_hat)
+        Jz = jac(z_best)  # weighted with final R, scaled
+        self._uncertainty(Jz, r, problem, R_cur, vidx, sv_scale, theta_hat, varied)
+
+        # ---- store ----------------------------------------------------------------
+        self.m_s_ = m_s
+        self.s_center_ = s_center
+        self.s_half_ = s_half
+        self.varied_ = varied
+        self.fixed_ = {k: float(v) for k, v in fixed_final.items()}
+        self.theta_ = theta_hat
+        self.params_ = PredictorParams.from_vector(
+            theta_hat, s_center, s_half, self.kappa, self.include_load_inertia
+        )
+        dts = np.diff(data.t)[~lay.is_last[:-1]]
+        self.T_s_ = float(np.median(dts)) if dts.size else float("nan")
+        self.runs_ = lay.labels.tolist()
+        self.noise_var_ = R_cur.copy()
+        self.n_obs_ = int(n_res)
+        self.residual_rms_ = float(np.sqrt(np.mean(r * r)))
+        self.convergence_ = {
+            "criterion": self.criterion,
+            "n_starts": len(starts),
+            "best_start": int(best_i),
+            "starts": records,
+            "outer": outer_hist,
+            "noise_converged": bool(converged_R),
+            "status": int(final_res.status),
+            "message": str(final_res.message),
+            "success": bool(final_res.status > 0),
+            "optimality": float(final_res.optimality),
+            "cost": float(0.5 * np.sum((r / np.sqrt(R_cur[run_sel])) ** 2)),
+            "nfev_total": int(sum(rec.get("nfev", 0) for rec in records)
+                              + sum(h.get("nfev", 0) for h in outer_hist[1:])),
+        }
+        self.fit_time_s_ = time.perf_counter() - t_start
+        return self
+
+    def _uncertainty(self, Jz, r, problem, R, vidx, sv_scale, theta_hat, varied):
+        names = self.param_names
+        p_all = len(names)
+        run_sel = problem.run_sel
+        lay = problem.lay
+        n_res = r.size
+        # AR(1) factor per run from the lag-1 autocorrelation of consecutive residuals
+        order_ = np.lexsort((problem.sample_sel, run_sel))
+        rs = r[order_]
+        runs_o = run_sel[order_]
+        samp_o = problem.sample_sel[order_]
+        adj = (runs_o[1:] == runs_o[:-1]) & (samp_o[1:] == samp_o[:-1] + 1)
+        num = np.bincount(runs_o[1:][adj], weights=(rs[1:] * rs[:-1])[adj], minlength=lay.R)
+        den = np.bincount(run_sel, weights=r * r, minlength=lay.R)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            rho = np.where(den > 0, num / den, 0.0)
+        rho = np.clip(np.nan_to_num(rho), 0.0, 0.99)
+        f_ar = (1.0 + rho) / (1.0 - rho)
+        self.ar1_rho_ = rho
+        self.ar1_factor_ = f_ar
+
+        U, sv, Vt = np.linalg.svd(Jz, full_matrices=False)
+        self.singular_values_ = sv.copy()
+        thr = self.svd_rtol * (sv[0] if sv.size else 0.0)
+        ident = sv > thr
+        Vn = Vt[~ident].T  # (p_var, q) null directions in z
+        null_norm = np.sqrt(np.sum(Vn * Vn, axis=1)) if Vn.size else np.zeros(vidx.size)
+        affected_v = null_norm > _NULL_TOL
+        k_ident = int(np.sum(ident))
+
+        def cov_from(J):
+            _, s_, Vt_ = np.linalg.svd(J, full_matrices=False)
+            keep = s_ > self.svd_rtol * s_[0]
+            Vr = Vt_[keep].T
+            cz = (Vr / s_[keep] ** 2) @ Vr.T
+            return cz * np.outer(sv_scale, sv_scale)
+
+        cov_plain_v = cov_from(Jz)
+        Jc = Jz / np.sqrt(f_ar[run_sel])[:, None]
+        cov_corr_v = cov_from(Jc)
+
+        def full(cv):
+            c = np.full((p_all, p_all), np.nan)
+            c[np.ix_(vidx, vidx)] = cv
+            aff = vidx[affected_v]
+            c[aff, :] = np.nan
+            c[:, aff] = np.nan
+            c[aff, aff] = np.inf
+            return c
+
+        cov_plain = full(cov_plain_v)
+        cov_corr = full(cov_corr_v)
+        se_plain = np.sqrt(np.diag(cov_plain))
+        se_corr = np.sqrt(np.diag(cov_corr))
+        self.cov_ = cov_corr
+        self.cov_fisher_ = cov_plain
+        self.stderr_ = se_corr
+        self.stderr_fisher_ = se_plain
+        with np.errstate(invalid="ignore", divide="ignore"):
+            corr = cov_corr / np.outer(se_corr, se_corr)
+        ok = np.isfinite(se_corr)
+        corr[~ok, :] = np.nan
+        corr[:, ~ok] = np.nan
+        self.corr_ = corr
+        nr = np.bincount(run_sel, minlength=lay.R)
+        n_eff = float(np.sum(nr / f_ar))
+        dof = max(n_eff - k_ident, 1.0)
+        tq = float(stats.t.ppf(0.975, dof))
+        self.n_eff_ = n_eff
+        self.dof_ = dof
+        self.t_quantile_ = tq
+        ci = np.column_stack([theta_hat - tq * se_corr, theta_hat + tq * se_corr])
+        ci[~varied] = np.nan
+        self.ci95_ = ci
+        self.identifiable_ = np.zeros(p_all, dtype=bool)
+        self.identifiable_[vidx[~affected_v]] = True
+        self.k_params_ = k_ident
+        # log-likelihood, information criteria
+        Rr = R[run_sel]
+        self.loglik_ = float(-0.5 * np.sum(np.log(2 * np.pi * Rr) + r * r / Rr))
+        self.aic_ = 2 * k_ident - 2 * self.loglik_
+        self.bic_ = k_ident * math.log(max(n_res, 1)) - 2 * self.loglik_
+        # describe the null directions
+        combos = []
+        if Vn.size:
+            q = Vn.shape[1]
+            # pivoted QR picks q parameters that span the null space best; express
+            # each direction with a unit change of its pivot and zero change of the others
+            _, _, piv = _qr(Vn.T, pivoting=True, mode="economic")
+            pv = piv[:q]
+            B = Vn @ np.linalg.inv(Vn[pv, :])
+            for j in range(q):
+                col = B[:, j]
+                dtheta = col * sv_scale  # physical units per unit of pivot's scaled change
+                dtheta = dtheta / dtheta[pv[j]]
+                zmag = np.abs(col)
+                members = np.flatnonzero(zmag > 1e-6 * zmag.max())
+                members = members[np.argsort(-zmag[members])]
+                terms = [(names[vidx[i]], float(dtheta[i])) for i in members]
+                txt = " ".join(f"{c:+.4g}*d({nm})" for nm, c in terms)
+                combos.append(
+                    {
+                        "pivot": names[vidx[pv[j]]],
+                        "direction": terms,
+                        "parameters": [nm for nm, _ in terms],
+                        "text": f"predictions unchanged along: {txt}",
+                    }
+                )
+        self.unidentifiable_ = combos
+        self.null_space_ = Vn
+
+    # -- predictions ------------------------------------------------------------
+    def _check_fitted(self):
+        if not hasattr(self, "params_"):
+            raise IdentificationError("PredictorIdentifier is not fitted yet: call fit() first")
+
+    def predict_free_run(self, df) -> np.ndarray:
+        """Free-run speed per sample [m/s] (from each run's first measured speed)."""
+        self._check_fitted()
+        data = _Data(df)
+        prob = _Problem(
+            data, self.order, self.kappa, self.include_load_inertia, "free_run",
+            self.s_center_, self.s_half_, self.m_s_,
+        )
+        return prob.predict_all(self.theta_)
+
+    def predict_one_step(self, df) -> np.ndarray:
+        """v(k+1 | measured v(k)) per sample [m/s]; NaN at the first sample of each run."""
+        self._check_fitted()
+        data = _Data(df)
+        prob = _Problem(
+            data, self.order, self.kappa, self.include_load_inertia, "one_step",
+            self.s_center_, self.s_half_, self.m_s_,
+        )
+        return prob.predict_all(self.theta_)
+
+    def steady_state(self, s, V0, load, direction) -> np.ndarray:
+        """Closed-form steady speed [m/s] (see :func:`l1b2.predictor.steady_state`)."""
+        self._check_fitted()
+        return _steady_state(self.params_, s, V0, load, direction, self.m_s_)
+
+    # -- reporting ----------------------------------------------------------------
+    def fit_report(self, min_correl: float = 0.9) -> str:
+        """Readable summary in the spirit of lmfit's fit_report."""
+        self._check_fitted()
+        names = self.param_names
+        units = PredictorParams.units(self.order)
+        lines = []
+        lines.append("[[Model]]")
+        lines.append(
+            f"    L1B2 reduced predictor (paper Eq. 29), order {self.order}, criterion {self.criterion}, "
+            f"noise {self.noise}, kappa {self.kappa}, m_eff = m_s{' + |m_load|' if self.include_load_inertia else ''}"
+        )
+        lines.append("[[Fit Statistics]]")
+        nvar = int(np.sum(self.varied_))
+        lines.append(f"    # residuals (n)          = {self.n_obs_}")
+        lines.append(f"    # runs                   = {len(self.runs_)}")
+        lines.append(f"    # varied parameters      = {nvar} (identifiable: {self.k_params_})")
+        lines.append(f"    residual RMS             = {self.residual_rms_:.6g} m/s")
+        lines.append(f"    log-likelihood           = {self.loglik_:.6g}")
+        lines.append(f"    AIC                      = {self.aic_:.6g}")
+        lines.append(f"    BIC                      = {self.bic_:.6g}")
+        lines.append("    (k counts varied identifiable theta parameters; noise variances not counted)")
+        lines.append(f"    effective n (AR(1))      = {self.n_eff_:.6g}; t(0.975, {self.dof_:.0f}) = {self.t_quantile_:.4f}")
+        lines.append(f"    slider mass              = {self.m_s_} kg; fit time = {self.fit_time_s_:.2f} s")
+        c = self.convergence_
+        lines.append("[[Convergence]]")
+        lines.append(
+            f"    best start {c['best_start']} of {c['n_starts']}; status {c['status']} ({c['message']}); "
+            f"optimality {c['optimality']:.3g}; noise R converged: {c['noise_converged']}; "
+            f"total nfev {c['nfev_total']}"
+        )
+        costs = [s["cost"] for s in c["starts"]]
+        lines.append("    start costs: " + ", ".join(f"{x:.6g}" for x in costs))
+        lines.append("[[Variables]]  value +/- stderr (AR(1)-corrected; plain Fisher in brackets)  95% CI")
+        w = max(len(nm) for nm in names)
+        for i, nm in enumerate(names):
+            val = self.theta_[i]
+            u = units[nm]
+            if not self.varied_[i]:
+                lines.append(f"    {nm:<{w}} = {val: .6g} [{u}] (fixed)")
+                continue
+            se = self.stderr_[i]
+            if not np.isfinite(se):
+                lines.append(f"    {nm:<{w}} = {val: .6g} [{u}] +/- inf  (not identifiable from these data)")
+                continue
+            rel = f" ({100 * se / abs(val):.2f}%)" if val != 0 else ""
+            lo, hi = self.ci95_[i]
+            lines.append(
+                f"    {nm:<{w}} = {val: .6g} +/- {se:.3g}{rel} [{u}]  [{self.stderr_fisher_[i]:.3g}]"
+                f"  CI [{lo:.6g}, {hi:.6g}]"
+            )
+        pairs = []
+        for i in range(len(names)):
+            for j in range(i + 1, len(names)):
+                cij = self.corr_[i, j]
+                if np.isfinite(cij) and abs(cij) > min_correl:
+                    pairs.append((abs(cij), names[i], names[j], cij))
+        lines.append(f"[[Correlations]] (|C| > {min_correl})")
+        if pairs:
+            for _, a, b, cij in sorted(pairs, reverse=True)[:40]:
+                lines.append(f"    C({a}, {b}) = {cij:+.4f}")
+            if len(pairs) > 40:
+                lines.append(f"    ... {len(pairs) - 40} more")
+        else:
+            lines.append("    none")
+        if self.unidentifiable_:
+            lines.append("[[Warnings]]")
+            lines.append(
+                f"    {len(self.unidentifiable_)} direction(s) in parameter space the data cannot determine "
+                f"(singular values < {self.svd_rtol:g} x largest); affected parameters have stderr = inf."
+            )
+            for cmb in self.unidentifiable_:
+                lines.append("    - " + cmb["text"])
+            lines.append(
+                "    Structurally the data fix only D(s) = c_r + sigma (0.5 - A'(s)), B'(s) and "
+                "C(s) = mu P (2 sqrt(1-k0^2) - 1 - pi/2 A' G(k0)) - mu_sd (9.81 m_s + kappa P); "
+                f"pin one parameter per direction, e.g. fixed='recommended' = {list(RECOMMENDED_FIXED)}."
+            )
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-safe summary (inf -> "inf", NaN -> None) that :meth:`from_dict` restores."""
+        self._check_fitted()
+        names = self.param_names
+        units = PredictorParams.units(self.order)
+        params = {}
+        for i, nm in enumerate(names):
+            params[nm] = {
+                "value": float(self.theta_[i]),
+                "stderr": _json_float(self.stderr_[i]),
+                "stderr_fisher": _json_float(self.stderr_fisher_[i]),
+                "ci95": [_json_float(self.ci95_[i, 0]), _json_float(self.ci95_[i, 1])],
+                "unit": units[nm],
+                "vary": bool(self.varied_[i]),
+                "identifiable": bool(self.identifiable_[i]),
+            }
+        conv = _jsonify(self.convergence_)
+        return {
+            "model": "l1b2 reduced predictor (Eq. 29)",
+            "settings": {
+                "order": self.order,
+                "criterion": self.criterion,
+                "n_starts": self.n_starts,
+                "seed": self.seed,
+                "fixed": self.fixed_,
+                "noise": self.noise,
+                "kappa": self.kappa,
+                "include_load_inertia": self.include_load_inertia,
+                "max_nfev": self.max_nfev,
+                "start_spread": self.start_spread,
+                "max_outer": self.max_outer,
+                "svd_rtol": self.svd_rtol,
+                "tol": self.tol,
+            },
+            "slider_mass_kg": self.m_s_,
+            "predictor_params": self.params_.to_dict(),
+            "parameters": params,
+            "paper_monomials": self.params_.to_paper_monomials(self.T_s_),
+            "T_s": self.T_s_,
+            "runs": [r if isinstance(r, (int, str)) else _jsonify(r) for r in self.runs_],
+            "noise_var": [float(x) for x in self.noise_var_],
+            "ar1_rho": [float(x) for x in self.ar1_rho_],
+            "n_obs": self.n_obs_,
+            "n_eff": self.n_eff_,
+            "k_params": self.k_params_,
+            "loglik": self.loglik_,
+            "aic": self.aic_,
+            "bic": self.bic_,
+            "residual_rms": self.residual_rms_,
+            "singular_values": [float(x) for x in self.singular_values_],
+            "unidentifiable": _jsonify(self.unidentifiable_),
+            "convergence": conv,
+            "fit_time_s": self.fit_time_s_,
+        }
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> "PredictorIdentifier":
+        """Rebuild a fitted identifier (for prediction and reporting) from :meth:`to_dict`."""
+        st = dict(d["settings"])
+        fixed = st.pop("fixed", None)
+        obj = cls(fixed=fixed or None, **st)
+        names = obj.param_names
+        prm = d["parameters"]
+        obj.params_ = PredictorParams.from_dict(d["predictor_params"])
+        obj.theta_ = obj.params_.to_vector()
+        obj.fixed_ = dict(fixed or {})
+        obj.m_s_ = float(d["slider_mass_kg"])
+        obj.s_center_ = obj.params_.s_center
+        obj.s_half_ = obj.params_.s_half
+        obj.varied_ = np.array([prm[n]["vary"] for n in names])
+        obj.identifiable_ = np.array([prm[n]["identifiable"] for n in names])
+        obj.stderr_ = np.array([_from_json_float(prm[n]["stderr"]) for n in names])
+        obj.stderr_fisher_ = np.array([_from_json_float(prm[n]["stderr_fisher"]) for n in names])
+        obj.ci95_ = np.array([[_from_json_float(x) for x in prm[n]["ci95"]] for n in names])
+        obj.T_s_ = float(d["T_s"])
+        obj.runs_ = list(d["runs"])
+        obj.noise_var_ = np.asarray(d["noise_var"], float)
+        obj.ar1_rho_ = np.asarray(d["ar1_rho"], float)
+        obj.ar1_factor_ = (1 + obj.ar1_rho_) / (1 - obj.ar1_rho_)
+        obj.n_obs_ = int(d["n_obs"])
+        obj.n_eff_ = float(d["n_eff"])
+        obj.k_params_ = int(d["k_params"])
+        obj.dof_ = max(obj.n_eff_ - obj.k_params_, 1.0)
+        obj.t_quantile_ = float(stats.t.ppf(0.975, obj.dof_))
+        obj.loglik_ = float(d["loglik"])
+        obj.aic_ = float(d["aic"])
+        obj.bic_ = float(d["bic"])
+        obj.residual_rms_ = float(d["residual_rms"])
+        obj.singular_values_ = np.asarray(d["singular_values"], float)
+        obj.unidentifiable_ = list(d["unidentifiable"])
+        obj.convergence_ = dict(d["convergence"])
+        obj.fit_time_s_ = float(d["fit_time_s"])
+        # covariance is not serialised in full; keep the diagonal
+        p = len(names)
+        obj.cov_ = np.full((p, p), np.nan)
+        np.fill_diagonal(obj.cov_, obj.stderr_ ** 2)
+        obj.cov_fisher_ = np.full((p, p), np.nan)
+        np.fill_diagonal(obj.cov_fisher_, obj.stderr_fisher_ ** 2)
+        obj.corr_ = np.full((p, p), np.nan)
+        np.fill_diagonal(obj.corr_, np.where(np.isfinite(obj.stderr_), 1.0, np.nan))
+        return obj
+
+
+def _jsonify(x):
+    if isinstance(x, dict):
+        return {str(k): _jsonify(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonify(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return [_jsonify(v) for v in x.tolist()]
+    if isinstance(x, (bool, np.bool_)):
+        return bool(x)
+    if isinstance(x, (int, np.integer)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        return _json_float(x)
+    if x is None or isinstance(x, str):
+        return x
+    return str(x)

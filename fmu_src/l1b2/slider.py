@@ -1,0 +1,140 @@
+"""Slider on its linear guide (paper Sect. 3.4, Eq. 21-22).
+
+``m dv/dt + c_r v = F_d + F_g - F_load`` (Eq. 21) with the guide friction
+``F_g = -sign(v) mu_sd (kappa F_p + g m_s)`` (Eq. 22 has ``kappa = 1``, Eq. 29
+``kappa = 0.5``: a parameter here) and the load force ``F_load = g m_load``.
+
+Conventions and decisions
+-------------------------
+* Load sign as in ``shared/data-format.md``: a positive ``m_load`` hangs on the
+  pulley pulling toward -position, so ``F_load > 0`` opposes +direction runs.
+* Moving mass ``m_s + load_inertia * |m_load|``: the hanging weight moves
+  with the slider (``load_inertia = 1`` for the pulley rig; the paper writes m).
+* Stick: a bare ``sign(v)`` chatters at ``v = 0``. The slider sticks when its
+  speed reaches zero and the applied force ``F_d - F_load`` does not exceed
+  the static friction ``mu_ss (kappa F_p + g m_s)`` (Karnopp's idea, exact
+  here because the stepper finds the zero crossing in time).
+* End stops at ``s_min_m`` and ``s_max_m`` are inelastic: the slider stops
+  there (``v = 0``) and stays until the force pulls it away.
+* Stepping: inputs are held over a step (zero-order hold, as in
+  co-simulation) and the piecewise-linear ODE is solved in closed form
+  between events (zero speed, end stop), so the result does not depend on
+  the step size except through the input hold.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from .params import G_M_S2, SliderParams
+
+
+def moving_mass_kg(sp: SliderParams, m_load_kg):
+    """Mass accelerated with the slider [kg]."""
+    return sp.mass_kg + sp.load_inertia * np.abs(np.asarray(m_load_kg, float))
+
+
+def guide_friction_level_N(sp: SliderParams, F_p_N, static: bool = False):
+    """Coulomb level of the guide friction ``mu (kappa F_p + g m_s)`` (Eq. 22) [N]."""
+    mu = sp.mu_ss if static else sp.mu_sd
+    return mu * (sp.kappa * np.asarray(F_p_N, float) + G_M_S2 * sp.mass_kg)
+
+
+def load_force_N(m_load_kg):
+    """Force of the hanging load, positive toward -position [N]."""
+    return G_M_S2 * np.asarray(m_load_kg, float)
+
+
+def acceleration_m_s2(sp: SliderParams, v_m_s, F_d_N, F_p_N, m_load_kg):
+    """Right side of Eq. 21 divided by the moving mass, for a moving slider [m/s^2] (vectorised)."""
+    v = np.asarray(v_m_s, float)
+    F = (np.asarray(F_d_N, float) - load_force_N(m_load_kg) - sp.c_r_N_s_per_m * v
+         - np.sign(v) * guide_friction_level_N(sp, F_p_N))
+    return F / moving_mass_kg(sp, m_load_kg)
+
+
+def first_order_response(v0_m_s, F_N, c_r_N_s_per_m, m_kg, t_s):
+    """Speed and travelled distance of ``m dv/dt = F - c_r v`` from ``v0`` after ``t`` (closed form).
+
+    Handles ``c_r = 0`` (uniform acceleration). Returns ``(v, ds)`` [m/s, m].
+    """
+    v0 = np.asarray(v0_m_s, float)
+    t = np.asarray(t_s, float)
+    if c_r_N_s_per_m == 0:
+        acc = np.asarray(F_N, float) / m_kg
+        return v0 + acc * t, v0 * t + 0.5 * acc * t * t
+    T = m_kg / c_r_N_s_per_m
+    v_inf = np.asarray(F_N, float) / c_r_N_s_per_m
+    decay = -np.expm1(-t / T)  # 1 - exp(-t/T), accurate for small t
+    return v_inf + (v0 - v_inf) * (1 - decay), v_inf * t + (v0 - v_inf) * T * decay
+
+
+class SliderState(NamedTuple):
+    v_m_s: float
+    s_m: float
+    stuck: bool
+    at_stop: int  #: -1 at the negative end stop, +1 at the positive one, 0 elsewhere
+
+
+def step(sp: SliderParams, state: SliderState, F_d_N: float, F_p_N: float, m_load_kg: float,
+         h_s: float) -> SliderState:
+    """Advance the slider by ``h_s`` with the inputs held constant (event-exact)."""
+    v, s, stuck, at_stop = float(state.v_m_s), float(state.s_m), bool(state.stuck), int(state.at_stop)
+    m = float(moving_mass_kg(sp, m_load_kg))
+    F_ext = float(F_d_N) - float(load_force_N(m_load_kg))
+    Fc = float(guide_friction_level_N(sp, F_p_N))
+    Fs = float(guide_friction_level_N(sp, F_p_N, static=True))
+    c = sp.c_r_N_s_per_m
+    t = 0.0
+    for _ in range(16):  # a step holds at most a few events
+        remaining = h_s - t
+        if remaining <= 0:
+            break
+        if stuck or v == 0.0:
+            if abs(F_ext) <= Fs:
+                return SliderState(0.0, s, True, at_stop)
+            direction = 1.0 if F_ext > 0 else -1.0
+            if at_stop == direction:  # pushed into the stop
+                return SliderState(0.0, s, True, at_stop)
+            stuck, v = False, 0.0
+        else:
+            direction = 1.0 if v > 0 else -1.0
+        at_stop = 0
+        F = F_ext - direction * Fc
+        # time at which the speed reaches zero (if the net force decelerates it)
+        t_zero = math.inf
+        if direction * F < 0:  # decelerating: v heads for v_inf of the opposite sign
+            t_zero = -v * m / F if c == 0 else (m / c) * math.log((v - F / c) / (-F / c))
+        tau = min(remaining, t_zero)
+        v_new, ds = first_order_response(v, F, c, m, tau)
+        s_new = s + float(ds)
+        limit = sp.s_max_m if direction > 0 else sp.s_min_m
+        if direction * (s_new - limit) >= 0:  # reaches the end stop within tau
+            tau_hit = _time_to_reach(v, F, c, m, limit - s, tau)
+            t += tau_hit
+            s, v, stuck, at_stop = limit, 0.0, True, int(direction)
+            continue
+        t += tau
+        s = s_new
+        if tau == t_zero:
+            v = 0.0
+            stuck = abs(F_ext) <= Fs
+        else:
+            v = float(v_new)
+    return SliderState(v, s, stuck and v == 0.0, at_stop)
+
+
+def _time_to_reach(v0: float, F: float, c: float, m: float, distance: float, t_max: float) -> float:
+    """First time at which the travelled distance equals ``distance`` (monotone motion), by bisection."""
+    lo, hi = 0.0, t_max
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        _, ds = first_order_response(v0, F, c, m, mid)
+        if (float(ds) - distance) * math.copysign(1.0, distance) < 0:
+            lo = mid
+        else:
+            hi = mid
+    return hi

@@ -1,0 +1,328 @@
+"""Stator: L1 and B2 modal dynamics, axially loaded B2 mode shape (paper Sect. 3.2, Eq. 5-16).
+
+Conventions (decisions where the paper is ambiguous; see ``shared/physics-notes.md``)
+---------------------------------------------------------------------------------------
+* Phasors: a harmonic signal is ``x(t) = Im[X exp(j w t)]`` (the paper writes
+  ``sin(w t)``), so ``|X|`` is the amplitude and ``angle(X)`` the phase.
+* Modal coordinates ``q_l`` (L1) and ``q_b`` (B2) obey Eq. 6-7::
+
+      M_l q_l'' + C_l q_l' + K_l q_l = A_l V0 sin(wt) - eta_N F_N(t)
+      M_b q_b'' + C_b q_b' + K_b q_b = d A_b V0 sin(wt) - eta_T F_f(t)
+
+  ``F_N >= 0`` is the normal contact force pushing the tip away from the
+  bar, ``F_f`` the friction force on the slider (positive toward +position);
+  the tip feels ``-F_N`` and ``-F_f``, hence the minus signs (the paper's
+  ``+eta F`` with unsigned coefficients hides this). ``d = +1`` for CH1 and
+  ``-1`` for CH2 (the channel reverses the B2 excitation).
+* Load coefficients are the mode shapes at the tip (Hamilton's principle):
+  ``eta_N = |phi_u(L)| = 1`` and ``eta_T = |phi_b(L, P)|``. Tip normal
+  displacement (toward the bar) is ``eta_N q_l``, tip tangential displacement
+  (toward +position) ``eta_T q_b``. Eq. 12-13 then give ``U_l = eta_N |Q_l|``
+  and ``U_w = eta_T |Q_b|``.
+* Mode shapes: ``phi_u = cos(pi x / L)`` (Eq. 8), ``int_0^L phi_u^2 dx = L/2``,
+  so ``M_l = rho S L / 2``. ``phi_b`` (Eq. 9) is normalised to
+  ``int_0^L phi_b^2 dx = L`` (so ``M_b = rho S L``) with ``phi_b(L) > 0``; B2 is
+  the second free-free bending mode, antisymmetric about the centre
+  (``beta L = 7.853`` without axial force).
+* Axial force: ``P >= 0`` is the magnitude of the compressive preload the
+  stator carries (as the paper uses it in Eq. 16 and Table 1, ``p(0) = 6 N``).
+  Eq. 10-11 are written for a tensile force (physics notes), so the beam
+  sees the tension ``N = -P``; the square brackets of Eq. 10-11 are a square
+  root. Free-end conditions from the energy ``1/2 int EI w''^2 + N w'^2``:
+  ``w'' = 0`` and ``EI w''' - N w' = 0``.
+* Effective bending modulus: the Euler-Bernoulli shape of Eq. 9-11 overestimates
+  the B2 frequency of this stubby bar (L/width = 4; shear and rotary inertia,
+  which the Timoshenko theory keeps, lower it). We keep the paper's shape
+  functions and choose the effective ``E I`` that puts the unloaded B2 mode at
+  the specified ``f_b0_Hz``; the axial force then shifts it by Eq. 10-11.
+* Position dependence enters through ``P(s) = P0 + k_pre * delta(s)``: the
+  friction bar deviates by ``delta(s)`` (a Legendre series in ``s / half length``)
+  from the guide line and the preload spring turns that into force; the mean
+  normal force is ``F_p = alpha0 P(s)`` (Eq. 16).
+* Envelope dynamics: with slowly varying phasors, Eq. 6-7 become
+  ``(2 j w M + C) dQ/dt = F - (K - w^2 M + j w C) Q`` whose steady state is
+  Eq. 12-13 and whose time constant is ``2 M / C``.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from typing import NamedTuple
+
+import numpy as np
+from numpy.polynomial import legendre
+
+from .params import StatorParams
+
+#: beta*L of the second free-free bending mode without axial force (tan = tanh root)
+BETA_L_B2 = 7.853204624095838
+ETA_N = 1.0  # |phi_u(L)| = |cos(pi)|
+
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(64)
+
+
+# ---------------------------------------------------------------------------
+# L1 mode (Eq. 8)
+# ---------------------------------------------------------------------------
+
+def phi_u(x_m, length_m):
+    """L1 mode shape ``cos(pi x / L)`` (Eq. 8) [-]."""
+    return np.cos(np.pi * np.asarray(x_m, float) / length_m)
+
+
+def modal_mass_l_kg(sp: StatorParams) -> float:
+    """L1 modal mass ``rho S int phi_u^2 = rho S L / 2`` [kg]."""
+    return sp.density_kg_m3 * sp.area_m2 * sp.length_m / 2.0
+
+
+def modal_mass_b_kg(sp: StatorParams) -> float:
+    """B2 modal mass ``rho S int phi_b^2 = rho S L`` (normalisation of phi_b) [kg]."""
+    return sp.density_kg_m3 * sp.area_m2 * sp.length_m
+
+
+def l1_frequency_Hz(sp: StatorParams, T_degC=None):
+    """L1 natural frequency without contact, with optional linear thermal drift [Hz]."""
+    dT = 0.0 if T_degC is None else np.asarray(T_degC, float) - sp.T_ref_degC
+    return sp.f_l0_Hz + sp.df_dT_l_Hz_per_K * dT
+
+
+# ---------------------------------------------------------------------------
+# B2 mode with axial force (Eq. 9-11)
+# ---------------------------------------------------------------------------
+
+def effective_EI_N_m2(sp: StatorParams, T_degC=None):
+    """Bending stiffness that places the unloaded Euler-Bernoulli B2 mode at ``f_b0_Hz`` [N m^2].
+
+    With thermal drift enabled, the unloaded B2 frequency moves by
+    ``df_dT_b_Hz_per_K`` per kelvin, i.e. the effective modulus softens.
+    """
+    f0 = sp.f_b0_Hz
+    if T_degC is not None:
+        f0 = f0 + sp.df_dT_b_Hz_per_K * (np.asarray(T_degC, float) - sp.T_ref_degC)
+    w = 2 * np.pi * np.asarray(f0, float)
+    return (w * sp.length_m ** 2 / BETA_L_B2 ** 2) ** 2 * sp.density_kg_m3 * sp.area_m2
+
+
+def wavenumbers(N_tension_N, omega_rad_s, EI_N_m2, rhoS_kg_m):
+    """Eq. 10-11: ``beta1, beta2`` [1/m] for tension ``N`` at angular frequency ``omega``.
+
+    ``beta^2 = sqrt((N/2EI)^2 + rho S w^2 / EI) -/+ N/(2EI)``.
+    """
+    N = np.asarray(N_tension_N, float)
+    h = N / (2.0 * EI_N_m2)
+    root = np.sqrt(h * h + rhoS_kg_m * np.asarray(omega_rad_s, float) ** 2 / EI_N_m2)
+    return np.sqrt(root - h), np.sqrt(root + h)
+
+
+def _b2_characteristic(omega, N, EI, rhoS, half):
+    """Frequency function of the antisymmetric free-free mode, scaled to O(1)."""
+    b1, b2 = wavenumbers(N, omega, EI, rhoS)
+    return (-b1 * np.sin(b1 * half) * (EI * b2 ** 2 - N)
+            + b2 * np.tanh(b2 * half) * np.cos(b1 * half) * (EI * b1 ** 2 + N)) / (EI * b1 ** 3)
+
+
+@lru_cache(maxsize=1)
+def _phi_slope_ratio() -> float:
+    """``L^2 int phi'^2 / int phi^2`` of the unloaded free-free B2 mode (dimensionless)."""
+    bh = BETA_L_B2 / 2.0
+    xi = _GL_X  # xi in [-1, 1] = x / half
+    E = np.sin(bh) / np.sinh(bh)
+    phi = np.sin(bh * xi) + E * np.sinh(bh * xi)
+    dphi = bh * (np.cos(bh * xi) + E * np.cosh(bh * xi))  # d/dxi
+    # d/dx = d/dxi / half, L = 2 half  => L^2 (dphi/dx)^2 = 4 (dphi/dxi)^2
+    return float(4 * np.sum(_GL_W * dphi ** 2) / np.sum(_GL_W * phi ** 2))
+
+
+def b2_frequency_rad_s(sp: StatorParams, P_N, T_degC=None):
+    """Natural angular frequency of B2 under the compressive axial force ``P_N`` [rad/s].
+
+    Exact root of the free-free frequency equation of the antisymmetric mode
+    with the tension ``N = -P``, by secant iteration from the Rayleigh
+    estimate ``w^2 = w0^2 + N int phi'^2 / (rho S int phi^2)``.
+    """
+    N = -np.asarray(P_N, float)
+    EI = effective_EI_N_m2(sp, T_degC)
+    rhoS = sp.density_kg_m3 * sp.area_m2
+    half = sp.length_m / 2.0
+    w0 = BETA_L_B2 ** 2 / sp.length_m ** 2 * np.sqrt(EI / rhoS)
+    wa = np.sqrt(np.maximum(w0 ** 2 + N * _phi_slope_ratio() / sp.length_m ** 2 / rhoS, 1e-6 * w0 ** 2))
+    wb = wa * (1 + 1e-7)
+    fa = _b2_characteristic(wa, N, EI, rhoS, half)
+    fb = _b2_characteristic(wb, N, EI, rhoS, half)
+    for _ in range(8):
+        moved = fb != fa
+        wc = np.where(moved, wb - fb * (wb - wa) / np.where(moved, fb - fa, 1.0), wb)
+        wa, fa = wb, fb
+        wb, fb = wc, _b2_characteristic(wc, N, EI, rhoS, half)
+    return wb
+
+
+class B2Shape(NamedTuple):
+    """Coefficients of Eq. 9, ``phi_b = C cos b1 x + D sin b1 x + E sinh b2 x + F cosh b2 x`` (x from 0)."""
+
+    C: np.ndarray
+    D: np.ndarray
+    E: np.ndarray
+    F: np.ndarray
+    beta1_per_m: np.ndarray
+    beta2_per_m: np.ndarray
+    omega_rad_s: np.ndarray
+
+
+def b2_mode_shape(sp: StatorParams, P_N, T_degC=None) -> B2Shape:
+    """Normalised B2 mode shape under the compressive axial force ``P_N`` (Eq. 9-11).
+
+    Normalisation ``int_0^L phi_b^2 dx = L`` (64-point Gauss-Legendre), sign
+    ``phi_b(L) > 0``. Vectorised over ``P_N`` (and ``T_degC``).
+    """
+    omega = b2_frequency_rad_s(sp, P_N, T_degC)
+    N = -np.asarray(P_N, float)
+    EI = effective_EI_N_m2(sp, T_degC)
+    rhoS = sp.density_kg_m3 * sp.area_m2
+    half = sp.length_m / 2.0
+    b1, b2 = wavenumbers(N, omega, EI, rhoS)
+    # centred form phi = sin(b1 xi) + Ec sinh(b2 xi), xi = x - L/2, from w''(L/2) = 0
+    Ec = b1 ** 2 * np.sin(b1 * half) / (b2 ** 2 * np.sinh(b2 * half))
+    xi = np.multiply.outer(_GL_X * half, np.ones_like(b1))  # (64, *shape)
+    phi = np.sin(b1 * xi) + Ec * np.sinh(b2 * xi)
+    norm2 = np.tensordot(_GL_W, phi ** 2, axes=1) * half
+    tip = np.sin(b1 * half) + Ec * np.sinh(b2 * half)
+    Dc = np.sign(tip) * np.sqrt(sp.length_m / norm2)
+    Ec = Ec * Dc
+    # shift to x from 0: sin(b1 (x - h)) = sin b1x cos b1h - cos b1x sin b1h, likewise sinh
+    return B2Shape(
+        C=-Dc * np.sin(b1 * half), D=Dc * np.cos(b1 * half),
+        E=Ec * np.cosh(b2 * half), F=-Ec * np.sinh(b2 * half),
+        beta1_per_m=b1, beta2_per_m=b2, omega_rad_s=omega,
+    )
+
+
+def phi_b(shape: B2Shape, x_m, deriv: int = 0):
+    """Evaluate the B2 mode shape (or its ``deriv``-th derivative, 0-3) at ``x_m``."""
+    x = np.asarray(x_m, float)
+    b1, b2 = shape.beta1_per_m, shape.beta2_per_m
+    c, s = np.cos(b1 * x), np.sin(b1 * x)
+    sh, ch = np.sinh(b2 * x), np.cosh(b2 * x)
+    # derivatives cycle: cos -> -sin -> -cos -> sin ; sin -> cos -> -sin -> -cos
+    trig_c = [c, -s, -c, s][deriv] * b1 ** deriv
+    trig_s = [s, c, -s, -c][deriv] * b1 ** deriv
+    hyp_s = [sh, ch, sh, ch][deriv] * b2 ** deriv
+    hyp_c = [ch, sh, ch, sh][deriv] * b2 ** deriv
+    return shape.C * trig_c + shape.D * trig_s + shape.E * hyp_s + shape.F * hyp_c
+
+
+def tip_coefficient_T(sp: StatorParams, P_N, T_degC=None):
+    """``eta_T = |phi_b(L, P)|``: tangential load coefficient of the tip [-]."""
+    shape = b2_mode_shape(sp, P_N, T_degC)
+    return np.abs(phi_b(shape, sp.length_m))
+
+
+# ---------------------------------------------------------------------------
+# Position-dependent axial force (Eq. 16, 31)
+# ---------------------------------------------------------------------------
+
+def bar_deviation_m(sp: StatorParams, s_m):
+    """Deviation of the friction bar from the guide line at slider position ``s_m`` [m]."""
+    xi = np.asarray(s_m, float) / sp.bar_half_length_m
+    return legendre.legval(xi, [0.0, sp.bar_dev_1_m, sp.bar_dev_2_m, sp.bar_dev_3_m])
+
+
+def axial_force_N(sp: StatorParams, s_m):
+    """Nominal compressive axial force ``P(s) = P0 + k_pre delta(s)`` (>= 0) [N]."""
+    return np.maximum(sp.P0_N + sp.preload_stiffness_N_per_m * bar_deviation_m(sp, s_m), 0.0)
+
+
+def preload_N(sp: StatorParams, s_m):
+    """Static axial (mean normal) force ``F_p = alpha0 P(s)``, Eq. 16 [N]."""
+    return sp.alpha0 * axial_force_N(sp, s_m)
+
+
+# ---------------------------------------------------------------------------
+# Modal responses (Eq. 12-14)
+# ---------------------------------------------------------------------------
+
+class ModalProperties(NamedTuple):
+    M_l: float
+    K_l: np.ndarray
+    C_l: np.ndarray
+    M_b: float
+    K_b: np.ndarray
+    C_b: np.ndarray
+    eta_T: np.ndarray
+    omega_l0: np.ndarray
+    omega_b0: np.ndarray
+
+
+def modal_properties(sp: StatorParams, P_N, T_degC=None) -> ModalProperties:
+    """Mass, stiffness, damping of both modes and the tip coefficient, at axial force ``P_N``.
+
+    Damping ``C = 2 zeta M omega0`` (paper's ``zeta = C / (2 M omega0)``).
+    """
+    M_l, M_b = modal_mass_l_kg(sp), modal_mass_b_kg(sp)
+    w_l0 = 2 * np.pi * np.asarray(l1_frequency_Hz(sp, T_degC), float)
+    shape = b2_mode_shape(sp, P_N, T_degC)
+    w_b0 = shape.omega_rad_s
+    eta_T = np.abs(phi_b(shape, sp.length_m))
+    return ModalProperties(
+        M_l=M_l, K_l=M_l * w_l0 ** 2, C_l=2 * sp.zeta_l * M_l * w_l0,
+        M_b=M_b, K_b=M_b * w_b0 ** 2, C_b=2 * sp.zeta_b * M_b * w_b0,
+        eta_T=eta_T, omega_l0=w_l0, omega_b0=w_b0,
+    )
+
+
+def dynamic_stiffness(omega_rad_s, M, K, C):
+    """``Z = K - w^2 M + j w C`` so that the steady phasor is ``Q = F / Z`` [N/m]."""
+    w = np.asarray(omega_rad_s, float)
+    return K - w * w * M + 1j * w * C
+
+
+def steady_amplitude(F_amp_N, eta, omega_rad_s, K, omega0_rad_s, zeta):
+    """Eq. 12-13: ``U = F |phi(L)| / (K sqrt((1 - r^2)^2 + (2 zeta r)^2))``, ``r = w / w0`` [m]."""
+    r = np.asarray(omega_rad_s, float) / omega0_rad_s
+    return np.abs(F_amp_N) * eta / (K * np.sqrt((1 - r * r) ** 2 + (2 * zeta * r) ** 2))
+
+
+def excitation_phasors(sp: StatorParams, V0_V, direction, voltage_phase_rad=0.0):
+    """Electromechanical modal excitations ``(A_l V0, d A_b (1 + d asym) V0)`` as phasors [N]."""
+    d = np.asarray(direction, float)
+    ph = np.exp(1j * np.asarray(voltage_phase_rad, float))
+    V0 = np.asarray(V0_V, float)
+    return sp.A_l_N_per_V * V0 * ph, d * sp.A_b_N_per_V * (1.0 + d * sp.asym_b) * V0 * ph
+
+
+def envelope_derivative(Q, F, omega_rad_s, M, K, C):
+    """Slowly varying phasor dynamics: ``dQ/dt = (F - Z Q) / (2 j w M + C)`` [m/s]."""
+    Z = dynamic_stiffness(omega_rad_s, M, K, C)
+    return (F - Z * Q) / (2j * np.asarray(omega_rad_s, float) * M + C)
+
+
+def envelope_step(Q, F, Y, omega_rad_s, M, K, C, h_s):
+    """Exact step of length ``h_s`` of the envelope ODE with a linear interface load.
+
+    Solves ``(2 j w M + C) dQ/dt = F - (Z + Y) Q`` for constant ``F`` (drive)
+    and ``Y`` (interface describing function: generalised interface force
+    ``= -Y Q``). Unconditionally stable; exact for constant coefficients.
+    """
+    w = np.asarray(omega_rad_s, float)
+    Zt = dynamic_stiffness(w, M, K, C) + Y
+    lam = -Zt / (2j * w * M + C)
+    Qs = F / Zt
+    return Qs + (Q - Qs) * np.exp(lam * h_s)
+
+
+class StatorOutput(NamedTuple):
+    U_l_m: np.ndarray        #: tip normal vibration amplitude [m]
+    U_w_m: np.ndarray        #: tip tangential vibration amplitude [m]
+    phase_l_rad: np.ndarray  #: phase of the tip normal displacement [rad]
+    phase_w_rad: np.ndarray  #: phase of the tip tangential displacement [rad]
+    delta_rad: np.ndarray    #: phase of tangential minus normal displacement, wrapped to (-pi, pi] [rad]
+
+
+def tip_motion(Q_l, Q_b, eta_T) -> StatorOutput:
+    """Tip amplitudes and phases from the modal phasors."""
+    N = ETA_N * np.asarray(Q_l)
+    W = eta_T * np.asarray(Q_b)
+    return StatorOutput(
+        U_l_m=np.abs(N), U_w_m=np.abs(W), phase_l_rad=np.angle(N), phase_w_rad=np.angle(W),
+        delta_rad=np.angle(W * np.conj(N)) if np.ndim(N) else float(np.angle(W * np.conj(N))),
+    )

@@ -1,0 +1,72 @@
+"""SI unit definitions shared by the FMUs (``UnitDefinitions``) and the SSP files (``ssd:Units``).
+
+Each unit is given by its exponents of the SI base units (FMI 2.0 and SSP
+1.0 both use this ``BaseUnit`` form), plus ``factor`` and ``offset`` for
+non-coherent units (degC).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class UnitDef:
+    kg: int = 0
+    m: int = 0
+    s: int = 0
+    A: int = 0
+    K: int = 0
+    mol: int = 0
+    cd: int = 0
+    rad: int = 0
+    factor: float = 1.0
+    offset: float = 0.0
+
+    def base_unit_attributes(self) -> dict[str, str]:
+        """Non-default attributes of the ``BaseUnit`` element."""
+        out = {k: str(getattr(self, k)) for k in ("kg", "m", "s", "A", "K", "mol", "cd", "rad") if getattr(self, k)}
+        if self.factor != 1.0:
+            out["factor"] = repr(self.factor)
+        if self.offset != 0.0:
+            out["offset"] = repr(self.offset)
+        return out
+
+
+UNITS: dict[str, UnitDef] = {
+    "1": UnitDef(),
+    "s": UnitDef(s=1),
+    "m": UnitDef(m=1),
+    "kg": UnitDef(kg=1),
+    "rad": UnitDef(rad=1),
+    "V": UnitDef(kg=1, m=2, s=-3, A=-1),
+    "Hz": UnitDef(s=-1),
+    "rad/s": UnitDef(rad=1, s=-1),
+    "degC": UnitDef(K=1, offset=273.15),
+    "N": UnitDef(kg=1, m=1, s=-2),
+    "m/s": UnitDef(m=1, s=-1),
+    "m/s2": UnitDef(m=1, s=-2),
+    "H": UnitDef(kg=1, m=2, s=-2, A=-2),
+    "F": UnitDef(kg=-1, m=-2, s=4, A=2),
+    "Ohm": UnitDef(kg=1, m=2, s=-3, A=-2),
+    "1/K": UnitDef(K=-1),
+    "1/Hz": UnitDef(s=1),
+    "Hz/K": UnitDef(s=-1, K=-1),
+    "kg/m3": UnitDef(kg=1, m=-3),
+    "N/V": UnitDef(m=-1, s=1, A=1),
+    "N/m": UnitDef(kg=1, s=-2),
+    "N.s/m": UnitDef(kg=1, s=-1),
+}
+
+
+def unit_def(name: str) -> UnitDef:
+    """The definition of unit ``name``; ``KeyError`` names the unknown unit."""
+    try:
+        return UNITS[name]
+    except KeyError:
+        raise KeyError(f"unit '{name}' has no definition in l1b2.units.UNITS") from None
+
+
+def same_dimension(a: str, b: str) -> bool:
+    """True if units ``a`` and ``b`` are identical in base units, factor and offset."""
+    return unit_def(a) == unit_def(b)
