@@ -107,6 +107,13 @@ class Block:
     def initialize(self):  # pragma: no cover - overridden
         raise NotImplementedError
 
+    def refresh(self):
+        """Recompute outputs and caches after the states were set from outside (FMU state restore)."""
+        self.initialize_outputs()
+
+    def initialize_outputs(self):  # pragma: no cover - overridden
+        raise NotImplementedError
+
     def do_step(self, t: float, h: float):  # pragma: no cover - overridden
         raise NotImplementedError
 
@@ -136,6 +143,8 @@ class DriverBlock(Block):
     def initialize(self):
         self.rebuild_params()
         self._compute()
+
+    initialize_outputs = initialize
 
     def _compute(self):
         self.check_inputs()
@@ -192,6 +201,9 @@ class StatorBlock(Block):
 
     def initialize(self):
         self.rebuild_params()
+        self.initialize_outputs()
+
+    def initialize_outputs(self):
         self._props_P = None
         self._props_T = None
         self._update_props()
@@ -284,6 +296,8 @@ class InterfaceBlock(Block):
         self.rebuild_params()
         self._compute()
 
+    initialize_outputs = initialize
+
     def _compute(self):
         self.check_inputs()
         out = itf.interface_forces(self.U_l, self.U_w, self.delta, self.omega, self.v, self.F_p, self.params,
@@ -338,6 +352,9 @@ class SliderBlock(Block):
         self.stuck_state = 1.0 if self.v0 == 0.0 else 0.0
         self.stop_state = 0.0
         self._publish(0.0)
+
+    def initialize_outputs(self):
+        self._publish(self.a)
 
     def _publish(self, acc):
         self.v, self.s, self.a = self.v_state, self.s_state, acc

@@ -122,10 +122,12 @@ from .predictor import (
     dG_dk0,
     ddrive_factor_dk0,
     drive_factor,
-    _force,
+    STEP_REVERSAL,
+    STEP_STUCK,
     packed_linear_recursion,
     packed_recursion,
     rest_sign,
+    step_drive,
     steady_state as _steady_state,
 )
 
@@ -134,7 +136,7 @@ __all__ = ["PredictorIdentifier", "evaluation_mask", "RECOMMENDED_FIXED"]
 REQUIRED_COLUMNS = ("time_s", "run", "position_m", "voltage_V", "direction", "load_kg")
 
 #: parameters pinned by ``fixed="recommended"``: one per structural null direction
-RECOMMENDED_FIXED = ("sigma", "k0", "mu")
+RECOMMENDED_FIXED = ("sigma", "k0", "mu", "mu_sd", "p_0")
 
 #: conventional values for the directions the data cannot determine (used only
 #: when such a parameter is fixed without a value, or as the centre of the
@@ -363,57 +365,99 @@ class _Problem:
         z0 = rest_sign(X, Fr)
         if self.criterion == "free_run":
             a = 1.0 - core.h * D
-            flags = np.zeros(self.lay.n, dtype=bool)
+            flags = np.zeros(self.lay.n, dtype=np.int8)
             with np.errstate(over="ignore", invalid="ignore"):
                 v = packed_recursion(self.lay, a, core.hd * X, core.hd * Fr, self.nd, z0, self.v0, flags)
-            vp = core.d * v
+            vsrc = v
         else:
-            vp = core.d * self.vprev
+            vp0 = core.d * self.vprev
             with np.errstate(over="ignore", invalid="ignore"):
-                F = _force(D, X, Fr, vp)
-                v = self.vprev + core.hd * F
-            flags = self.vprev * v < 0
-            v = np.where(flags, 0.0, v)
+                vnew = step_drive(vp0, D, X, Fr, core.h)
+            v = core.d * vnew
             a = None
+            vsrc = self.vprev
+            # classify the steps like packed_recursion does
+            flags = np.zeros(v.size, dtype=np.int8)
+            stuck = np.abs(z0) < 1.0
+            rest = vp0 == 0
+            with np.errstate(over="ignore", invalid="ignore"):
+                eul = vp0 + core.h * (-D * vp0 + X + np.sign(-vp0) * Fr)
+            cross = (~rest) & (vp0 * eul < 0)
+            flags[cross] = STEP_REVERSAL
+            flags[(cross | rest) & stuck] = STEP_STUCK
+        vp = core.d * vsrc
         sg = np.sign(-vp)
         rest = vp == 0
         if rest.any():
             sg[rest] = z0[rest]
-            flags = flags | (rest & (np.abs(z0) < 1.0))
-        res = (v, a, Ap, P, sg, flags)
+        res = {"v": v, "a": a, "Ap": Ap, "P": P, "sg": sg, "flags": flags, "D": D, "X": X, "Fr": Fr,
+               "z0": z0, "vp": vp}
         self._cache_theta = np.array(theta, copy=True)
         self._cache = res
         return res
 
     def residual(self, theta):
-        v = self._evaluate(theta)[0]
+        v = self._evaluate(theta)["v"]
         return v[self.sel] - self.z
+
+    def _sensitivity_rows(self, theta, c, rows, cols):
+        """Step sensitivities on ``rows``: returns (a_rows, U_rows) in the data convention.
+
+        Normal step: dv[k+1] = a dv[k] + h d dF/dtheta. Reversal within the
+        step (see predictor.step_drive): v'[k+1] = h F_rest + v' F_rest/F with
+        F the moving force at v' and F_rest = X + z0 Fr. Stuck: 0.
+        """
+        core = self.core
+        vp = c["vp"][rows]
+        h = core.h[rows]
+        d = core.d[rows]
+        D, X, Fr, z0 = c["D"][rows], c["X"][rows], c["Fr"][rows], c["z0"][rows]
+        Ap, P = c["Ap"][rows], c["P"][rows]
+        sgm = np.sign(-vp)
+        Fk = -D * vp + X + sgm * Fr
+        Frest = X + z0 * Fr
+        dFk = core.dF(theta, vp, sgm, Ap, P, cols, rows=rows)
+        dFr = core.dF(theta, np.zeros_like(vp), z0, Ap, P, cols, rows=rows)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            a_r = (Frest / Fk) * (1.0 + vp * D / Fk)
+            U = (h + vp / Fk)[:, None] * dFr - (vp * Frest / Fk**2)[:, None] * dFk
+        U *= d[:, None]
+        return a_r, U
 
     def jacobian(self, theta, cols):
         """d residual / d theta[cols] (unweighted): forward sensitivities for the free run."""
-        v, a, Ap, P, sg, flags = self._evaluate(theta)
+        c = self._evaluate(theta)
         core = self.core
+        flags = c["flags"]
         if self.criterion == "free_run":
-            vp = core.d * v
-            U = core.dF(theta, vp, sg, Ap, P, cols)
+            U = core.dF(theta, c["vp"], c["sg"], c["Ap"], c["P"], cols)
             U *= core.hd[:, None]
+            a = c["a"]
             if flags.any():
-                # clamped / stuck steps: v[k+1] = 0 whatever theta
-                U[flags] = 0.0
-                a = np.where(flags, 0.0, a)
+                a = a.copy()
+                rev = np.flatnonzero(flags == STEP_REVERSAL)
+                if rev.size:
+                    a[rev], U[rev] = self._sensitivity_rows(theta, c, rev, cols)
+                st = flags == STEP_STUCK
+                U[st] = 0.0
+                a[st] = 0.0
             with np.errstate(over="ignore", invalid="ignore"):
                 S = packed_linear_recursion(self.lay, a, U)
             return S[self.sel]
-        vp = core.d * self.vprev
         sub = self.sel
-        U = core.dF(theta, vp[sub], sg[sub], Ap[sub], P[sub], cols, rows=sub)
+        U = core.dF(theta, c["vp"][sub], c["sg"][sub], c["Ap"][sub], c["P"][sub], cols, rows=sub)
         U *= core.hd[sub, None]
-        U[flags[sub]] = 0.0
+        fl = flags[sub]
+        if fl.any():
+            rev = np.flatnonzero(fl == STEP_REVERSAL)
+            if rev.size:
+                U[rev] = self._sensitivity_rows(theta, c, sub[rev], cols)[1]
+            U[fl == STEP_STUCK] = 0.0
         return U
 
     def predict_all(self, theta):
         """Predictions for every sample (flat order); one_step: NaN at run starts."""
-        v = self._evaluate(theta)[0]
+        v = self._evaluate(theta)["v"]
         if self.criterion == "free_run":
             return self.lay.from_packed(v)
         out = np.full(self.data.n, np.nan)
@@ -760,7 +804,7 @@ class PredictorIdentifier:
         zhi = hi[vidx] / sv_scale
         # keep strictly feasible
         z_centre = np.clip(theta0[vidx] / sv_scale, zlo, zhi)
-        z_centre = np.where(z_centre >= zhi, zhi - 1e-9 * np.maximum(1, np.abs(zhi)), z_centre)
+        z_centre = np.where(np.isfinite(zhi) & (z_centre >= zhi), zhi - 1e-9 * np.abs(zhi), z_centre)
 
         problem = _Problem(
             data, self.order, self.kappa, self.include_load_inertia, self.criterion, s_center, s_half, m_s
@@ -844,7 +888,7 @@ class PredictorIdentifier:
             for row in u:
                 z = z_centre + (2.0 * row - 1.0) * hw
                 z = np.clip(z, zlo, zhi)
-                z = np.where(z >= zhi, zhi - 1e-9 * np.maximum(1, np.abs(zhi)), z)
+                z = np.where(np.isfinite(zhi) & (z >= zhi), zhi - 1e-9 * np.abs(zhi), z)
                 starts.append(z)
         records = []
         best = None

@@ -41,13 +41,17 @@ Decisions (and where they deviate from the paper)
   v'-terms) and is capped at its Coulomb level, i.e.
   ``F(0) = X - clip(X, -Fr, Fr)`` with ``Fr = mu_sd (9.81 m_s + kappa P)``;
   a slider whose drive does not exceed the friction stays at rest. A step
-  that would reverse the sign of the speed ends at rest (Coulomb friction
-  cannot reverse a motion). Both rules only act at or through v' = 0; for a
-  moving slider (v' != 0, no reversal) the step is exactly Eq. 29. Why it
-  matters: numpy's ``sign(0) = 0`` would omit the guide friction on the first
-  step of every run that starts at rest, an artefact that makes the
-  structurally non-identifiable combinations of theta look (very weakly)
-  identifiable, and it produces sign chatter for stuck runs.
+  that would reverse the sign of the speed stops at v' = 0 at the fraction
+  ``phi = v'(k) / (v'(k) - v'_euler(k+1))`` of the step and continues from
+  rest for the remaining ``(1 - phi) dt`` with the static rule (Coulomb
+  friction cannot reverse a motion within a step). Both rules only act at or
+  through v' = 0; for a moving slider (v' != 0, no reversal) the step is
+  exactly Eq. 29. Why it matters: numpy's ``sign(0) = 0`` would omit the
+  guide friction on the first step of every run that starts at rest (an
+  artefact that makes the structurally non-identifiable combinations of
+  theta look very weakly identifiable), a measured start speed of -0.5 mm/s
+  (noise) in a +1 run would apply the friction the wrong way for a whole
+  step, and stuck runs would chatter.
 * **Direction.** Eq. 29 is written for CH1 (direction +1, toward +position).
   For direction ``d`` in {+1, -1} the mirrored form is used in drive
   coordinates ``v' = d v``, ``m_load' = d m_load`` (a positive ``load_kg``
@@ -94,6 +98,7 @@ __all__ = [
     "G_of_k0",
     "drive_factor",
     "rest_sign",
+    "step_drive",
     "derivative",
     "one_step",
     "free_run",
@@ -495,14 +500,39 @@ def derivative(params: PredictorParams, v, s, V0, load, direction, m_s):
     return d * F / effective_mass(params, load, m_s)
 
 
+def step_drive(vp, D, X, Fr, h):
+    """One Euler step in drive coordinates with the rest and reversal rules.
+
+    ``vp`` drive speed, ``D, X, Fr`` from :func:`_force_parts`, ``h = dt/m_eff``.
+    """
+    vp = np.asarray(vp, dtype=float)
+    z0 = rest_sign(X, Fr)
+    sg = np.sign(-vp)
+    rest = vp == 0
+    stuck = np.abs(z0) < 1.0
+    sg = np.where(rest, z0, sg)
+    new = vp + h * (-D * vp + X + sg * Fr)
+    new = np.where(rest & stuck, 0.0, new)
+    cross = vp * new < 0
+    if np.any(cross):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            frac = np.where(cross, vp / (vp - new), 0.0)
+        from_rest = np.where(stuck, 0.0, h * (X + z0 * Fr))
+        new = np.where(cross, (1.0 - frac) * from_rest, new)
+    return new
+
+
 def one_step(params: PredictorParams, v, s, V0, load, direction, dt, m_s):
     """Eq. 28/29: v(k+1) = v(k) + dt/m_eff F(v(k)) (the paper's one-step prediction).
 
-    A step that would reverse the sign of a non-zero speed ends at rest.
+    Signed data convention; the rest/reversal rules of the module docstring
+    apply only at or through v = 0.
     """
-    v = np.asarray(v, dtype=float)
-    v1 = v + np.asarray(dt, float) * derivative(params, v, s, V0, load, direction, m_s)
-    return np.where(v * v1 < 0, 0.0, v1)
+    d = np.asarray(direction, dtype=float)
+    vp = d * np.asarray(v, dtype=float)
+    D, X, Fr = _force_parts(params, s, V0, d * np.asarray(load, float), m_s)
+    h = np.asarray(dt, float) / effective_mass(params, load, m_s)
+    return d * step_drive(vp, D, X, Fr, h)
 
 
 def steady_state(params: PredictorParams, s, V0, load, direction, m_s):
@@ -608,16 +638,20 @@ def _broadcast_flat(x, n, name):
     return arr
 
 
+#: codes of :func:`packed_recursion`'s ``flags``
+STEP_NORMAL, STEP_REVERSAL, STEP_STUCK = 0, 1, 2
+
+
 def packed_recursion(lay: RunLayout, a, e, f, nd, z0, v0_sorted, flags=None):
     """Free-run recursion in the packed layout (loops over the time index only).
 
     ``v[k+1] = a[k] v[k] + e[k] + f[k] sg[k]`` with ``sg = sign(nd v)``
-    (``nd = -d``: sign(-v') in the data convention), replaced at rest
-    (v = 0) by the static-friction value ``z0`` (see :func:`rest_sign`); a
-    step that reverses the sign of v, or stays stuck at rest (|z0| < 1),
-    gives exactly 0. ``flags`` (bool, packed) if given is set True at the
-    source row of such clamped/stuck steps. ``v0_sorted``: start speeds in
-    sorted-run order.
+    (``nd = -d``: sign(-v') in the data convention), replaced at rest (v = 0)
+    by the static-friction value ``z0`` (see :func:`rest_sign`); a stuck step
+    at rest gives 0, a step that reverses the sign of v continues from rest
+    for the rest of the step (see :func:`step_drive`). ``flags`` (int8,
+    packed) if given receives STEP_REVERSAL / STEP_STUCK at the source row
+    of such steps. ``v0_sorted``: start speeds in sorted-run order.
     """
     v = np.empty(lay.n)
     offs, na = lay.offs, lay.na
@@ -635,13 +669,22 @@ def packed_recursion(lay: RunLayout, a, e, f, nd, z0, v0_sorted, flags=None):
         out = a[i0 : i0 + m] * cur
         out += e[i0 : i0 + m]
         out += f[i0 : i0 + m] * sg
-        clamp = out * cur < 0
         if anyrest:
-            clamp |= rest & (np.abs(sg) < 1.0)
-        if clamp.any():
-            out[clamp] = 0.0
+            st = rest & (np.abs(sg) < 1.0)
+            if st.any():
+                out[st] = 0.0
+                if flags is not None:
+                    flags[i0 : i0 + m][st] = STEP_STUCK
+        cross = out * cur < 0
+        if cross.any():
+            zc = z0[i0 : i0 + m][cross]
+            cc = cur[cross]
+            frac = cc / (cc - out[cross])
+            inc_rest = e[i0 : i0 + m][cross] + f[i0 : i0 + m][cross] * zc
+            inc_rest[np.abs(zc) < 1.0] = 0.0
+            out[cross] = (1.0 - frac) * inc_rest
             if flags is not None:
-                flags[i0 : i0 + m] |= clamp
+                flags[i0 : i0 + m][cross] = np.where(np.abs(zc) < 1.0, STEP_STUCK, STEP_REVERSAL)
         v[i1 : i1 + m] = out
     return v
 
