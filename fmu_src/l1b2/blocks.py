@@ -172,7 +172,7 @@ class StatorBlock(Block):
         Var("omega", "input", "rad/s", "drive angular frequency", start=2 * math.pi * 48500, min=1e3, max=1e7),
         Var("direction", "input", "1", "+1 excites CH1 (toward +position), -1 CH2", start=1.0, min=-1.0, max=1.0),
         Var("s", "input", "m", "slider position (sets the axial force P(s))", start=0.0, min=-1.0, max=1.0),
-        Var("T", "input", "degC", "stator temperature", start=25.0, min=-100.0, max=300.0),
+        Var("T", "input", "degC", "ambient temperature of the stator", start=25.0, min=-100.0, max=300.0),
         Var("F_N1_sin", "input", "N", "sin component of the normal-force fundamental (normal-displacement frame)"),
         Var("F_N1_cos", "input", "N", "cos component of the normal-force fundamental"),
         Var("F_T1_sin", "input", "N", "sin component of the friction-force fundamental"),
@@ -189,18 +189,25 @@ class StatorBlock(Block):
         Var("f_b", "output", "Hz", "B2 natural frequency under the axial force"),
         Var("eta_T", "output", "1", "tangential load coefficient |phi_b(L, P)|"),
         Var("v_tip", "output", "m/s", "tangential tip velocity amplitude omega*U_w"),
+        Var("T_stator", "output", "degC", "stator temperature (equals T unless self-heating is on)"),
     ]
     STATES = [
         Var("Q_l_re", "local", "m", "L1 modal phasor, real part (state)", nominal=1e-6),
         Var("Q_l_im", "local", "m", "L1 modal phasor, imaginary part (state)", nominal=1e-6),
         Var("Q_b_re", "local", "m", "B2 modal phasor, real part (state)", nominal=1e-6),
         Var("Q_b_im", "local", "m", "B2 modal phasor, imaginary part (state)", nominal=1e-6),
+        Var("T_st", "local", "degC", "stator temperature (thermal state)", start=25.0),
+    ]
+    EXTRA_PARAMETERS = [
+        Var("T_st0", "parameter", "degC", "initial stator temperature (used when self-heating is on)",
+            start=25.0, min=-100.0, max=300.0, variability="fixed"),
     ]
     #: recompute the P-dependent B2 properties only when P moved by more than this [N]
     P_TOL_N = 1e-4
 
     def initialize(self):
         self.rebuild_params()
+        self.T_st = float(self.T_st0 if self.params.thermal_tau_s > 0 else self.T)
         self.initialize_outputs()
 
     def initialize_outputs(self):
@@ -211,7 +218,7 @@ class StatorBlock(Block):
 
     def _update_props(self):
         P = float(st.axial_force_N(self.params, self.s))
-        T = float(self.T)
+        T = float(self.T_st)
         if self._props_P is None or abs(P - self._props_P) > self.P_TOL_N or T != self._props_T:
             self._props = st.modal_properties(self.params, P, T)
             self._props_P, self._props_T = P, T
@@ -228,6 +235,7 @@ class StatorBlock(Block):
         self.f_b = float(self._props.omega_b0) / (2 * math.pi)
         self.eta_T = float(self._props.eta_T)
         self.v_tip = self.omega * self.U_w
+        self.T_stator = float(self.T_st)
 
     def do_step(self, t, h):
         self.check_inputs()
@@ -249,6 +257,7 @@ class StatorBlock(Block):
         Q_l = complex(st.envelope_step(Q_l, F_l_eff, Y_l, self.omega, props.M_l, props.K_l, props.C_l, h))
         Q_b = complex(st.envelope_step(Q_b, F_b_eff, Y_b, self.omega, props.M_b, props.K_b, props.C_b, h))
         self.Q_l_re, self.Q_l_im, self.Q_b_re, self.Q_b_im = Q_l.real, Q_l.imag, Q_b.real, Q_b.imag
+        self.T_st = float(st.stator_temperature_step(self.T_st, self.T, self.V0, self.params, h))
         self._update_props()
         self._publish()
 

@@ -17,6 +17,7 @@
 
 from __future__ import annotations
 
+import atexit
 import math
 import shutil
 import tempfile
@@ -33,6 +34,28 @@ from .ssp import SSD_FILE, SystemStructure, check_against_model_descriptions, re
 
 DEFAULT_STEP_S = 2e-4
 DEFAULT_FMU_DIR = Path(__file__).resolve().parents[2] / "dist" / "fmus"
+_EXTRACTED: dict[tuple, str] = {}
+
+
+def extracted(path: Path) -> str:
+    """Folder holding the extracted FMU, one per FMU file and process.
+
+    PythonFMU puts each FMU's ``resources`` folder on ``sys.path`` for good and
+    its bundled modules stay imported, so an extraction must outlive the run
+    that made it: it is reused by later runs and removed at process exit.
+    """
+    from fmpy import extract
+    st = path.stat()
+    key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
+    if key not in _EXTRACTED or not Path(_EXTRACTED[key]).exists():
+        _EXTRACTED[key] = extract(str(path))
+    return _EXTRACTED[key]
+
+
+@atexit.register
+def _remove_extracted():
+    for folder in _EXTRACTED.values():
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 @dataclass
@@ -42,6 +65,7 @@ class _Instance:
     md: object
     unzipdir: str
     vars: dict                       # name -> ModelVariable
+    state: str = "created"           # created -> instantiated -> initialized
     in_names: list = field(default_factory=list)
     in_vrs: list = field(default_factory=list)
     out_names: list = field(default_factory=list)
@@ -169,7 +193,6 @@ class CoSimulation:
         ``start_values`` sets component variables before initialisation
         (e.g. ``{"Slider.s0": -0.02}``).
         """
-        from fmpy import extract
         from fmpy.fmi2 import FMU2Slave
 
         sysst = self.system
@@ -183,25 +206,27 @@ class CoSimulation:
         try:
             for name, path in self.fmu_paths.items():
                 md = self.model_descriptions[name]
-                unz = extract(str(path))
+                unz = extracted(path)
                 fmu = FMU2Slave(guid=md.guid, unzipDirectory=unz, modelIdentifier=md.coSimulation.modelIdentifier,
                                 instanceName=name)
                 inst[name] = _Instance(name, fmu, md, unz, {v.name: v for v in md.modelVariables})
                 fmu.instantiate()
+                inst[name].state = "instantiated"
             self._lookup(inst, record)
             self._initialize(inst, inputs, start_values or {})
             return self._loop(inst, stop_time, inputs, stop_when, progress)
         finally:
-            for i in inst.values():
-                try:
-                    i.fmu.terminate()
-                except Exception:  # noqa: BLE001 - instance may be in an error state
-                    pass
-                try:
-                    i.fmu.freeInstance()
-                except Exception:  # noqa: BLE001
-                    pass
-                shutil.rmtree(i.unzipdir, ignore_errors=True)
+            for i in inst.values():  # calling FMI functions on a NULL component crashes the host
+                if i.state == "initialized":
+                    try:
+                        i.fmu.terminate()
+                    except Exception:  # noqa: BLE001 - instance may be in an error state
+                        pass
+                if i.state != "created":
+                    try:
+                        i.fmu.freeInstance()
+                    except Exception:  # noqa: BLE001
+                        pass
 
     def _lookup(self, inst, record):
         """Resolve value references once: per component, its connected inputs and needed outputs."""
@@ -285,6 +310,7 @@ class CoSimulation:
                     vals.append(float(i.fmu.getReal([i.vars[name].valueReference])[0]))
             i.fmu.setReal(i.in_vrs, vals)
             i.fmu.exitInitializationMode()
+            i.state = "initialized"
             for name, val in zip(i.out_names, i.fmu.getReal(i.out_vrs)):
                 self.values[(n, name)] = val
 

@@ -67,13 +67,16 @@ def steady_state(mp: MotorParams, s_m: float, V0_V: float, m_load_kg: float, dir
     omega = 2 * math.pi * f
     P = float(st.axial_force_N(sp, s_m))
     F_p = sp.alpha0 * P
-    props = st.modal_properties(sp, P, T_degC)
+    T_amb = mp.operating.T_degC if T_degC is None else T_degC
+    T_st = T_amb + sp.heating_K_per_V2 * V0_V ** 2  # steady stator temperature
+    props = st.modal_properties(sp, P, T_st)
     Z_l = st.dynamic_stiffness(omega, props.M_l, props.K_l, props.C_l)
     Z_b = st.dynamic_stiffness(omega, props.M_b, props.K_b, props.C_b)
     F_l, F_b = st.excitation_phasors(sp, V0_V, direction)
     eta_T = float(props.eta_T)
-    Fc = float(sld.guide_friction_level_N(mp.slider, F_p))
-    Fs = float(sld.guide_friction_level_N(mp.slider, F_p, static=True))
+    F_path = float(sld.load_path_friction_N(mp.slider, m_load_kg))
+    Fc = float(sld.guide_friction_level_N(mp.slider, F_p)) + F_path
+    Fs = float(sld.guide_friction_level_N(mp.slider, F_p, static=True)) + F_path
     F_load = G_M_S2 * m_load_kg
     c_r = mp.slider.c_r_N_s_per_m
     q_scale = max(abs(F_l / Z_l), abs(F_b / Z_b), 1e-12)
@@ -140,8 +143,11 @@ class InProcessMotor:
 
     The wiring is written out here on purpose (not read from the SSD): it is
     the independent reference the SSD-driven fmpy master is tested against.
-    Inputs are held over each communication step of length ``h_s``.
+    Inputs are held over each communication step of length ``h_s``; any input
+    may be a function of time.
     """
+
+    INPUTS = ("V_s", "duty", "f_s", "T", "direction", "m_load")
 
     def __init__(self, mp: MotorParams, h_s: float = 2e-4, pure_slip: bool = False):
         from .blocks import make_blocks
@@ -149,32 +155,40 @@ class InProcessMotor:
         self.h = float(h_s)
         self.b = make_blocks(mp, pure_slip=pure_slip)
 
-    def initialize(self, *, V_s: float, duty: float = 1.0, f_s: float = 48500.0, T: float = 25.0,
-                   direction: float = 1.0, m_load: float = 0.0, s0: float = 0.0, v0: float = 0.0):
+    def _inputs_at(self, t):
+        return {k: float(v(t) if callable(v) else v) for k, v in self.inputs.items()}
+
+    def initialize(self, *, V_s, duty=1.0, f_s=48500.0, T=25.0, direction=1.0, m_load=0.0,
+                   s0: float = 0.0, v0: float = 0.0):
+        """Set the system inputs (constants or functions of time) and initialise the blocks."""
+        self.inputs = dict(V_s=V_s, duty=duty, f_s=f_s, T=T, direction=direction, m_load=m_load)
+        u = self._inputs_at(0.0)
         d, stt, itf_, sl = (self.b[k] for k in ("Driver", "Stator", "Interface", "Slider"))
-        d.V_s, d.duty, d.f_s, d.T = V_s, duty, f_s, T
+        d.V_s, d.duty, d.f_s, d.T = u["V_s"], u["duty"], u["f_s"], u["T"]
         d.initialize()
-        stt.V0, stt.omega, stt.direction, stt.T, stt.s = d.V0, d.omega, direction, T, s0
+        stt.V0, stt.omega, stt.direction, stt.T, stt.s = d.V0, d.omega, u["direction"], u["T"], s0
         stt.initialize()
         itf_.U_l, itf_.U_w, itf_.delta, itf_.omega, itf_.v, itf_.F_p = (
             stt.U_l, stt.U_w, stt.delta, d.omega, v0, stt.F_p)
         itf_.initialize()
-        sl.s0, sl.v0, sl.m_load, sl.F_d, sl.F_p = s0, v0, m_load, itf_.F_d, stt.F_p
+        sl.s0, sl.v0, sl.m_load, sl.F_d, sl.F_p = s0, v0, u["m_load"], itf_.F_d, stt.F_p
         sl.initialize()
         self.t = 0.0
 
     def step(self):
         d, stt, itf_, sl = (self.b[k] for k in ("Driver", "Stator", "Interface", "Slider"))
         t, h = self.t, self.h
+        u = self._inputs_at(t)
+        d.V_s, d.duty, d.f_s, d.T = u["V_s"], u["duty"], u["f_s"], u["T"]
         d.do_step(t, h)
-        stt.V0, stt.omega, stt.s = d.V0, d.omega, sl.s
+        stt.V0, stt.omega, stt.s, stt.direction, stt.T = d.V0, d.omega, sl.s, u["direction"], u["T"]
         stt.F_N1_sin, stt.F_N1_cos, stt.F_T1_sin, stt.F_T1_cos = (
             itf_.F_N1_sin, itf_.F_N1_cos, itf_.F_T1_sin, itf_.F_T1_cos)
         stt.do_step(t, h)
         itf_.U_l, itf_.U_w, itf_.delta, itf_.omega, itf_.v, itf_.F_p = (
             stt.U_l, stt.U_w, stt.delta, d.omega, sl.v, stt.F_p)
         itf_.do_step(t, h)
-        sl.F_d, sl.F_p = itf_.F_d, stt.F_p
+        sl.F_d, sl.F_p, sl.m_load = itf_.F_d, stt.F_p, u["m_load"]
         sl.do_step(t, h)
         self.t = t + h
 

@@ -129,7 +129,7 @@ def driver_output(params: DriverParams, V_s_V, duty, f_s_Hz, T_degC) -> DriverOu
     H = tank_gain(omega, L, C, params.R_m_ohm)
     V1 = inverter_fundamental_V(V_s_V, duty)
     return DriverOutput(
-        V0_V=np.abs(H) * V1,
+        V0_V=saturate_V(np.abs(H) * V1, params.V0_sat_V),
         omega_rad_s=omega,
         phase_rad=np.angle(H),
         V_inv1_V=V1,
@@ -139,7 +139,20 @@ def driver_output(params: DriverParams, V_s_V, duty, f_s_Hz, T_degC) -> DriverOu
     )
 
 
+def saturate_V(V0_lin_V, V_sat_V):
+    """Soft output limit of the drive: ``V_sat tanh(V0 / V_sat)``; ``V_sat = 0`` means no limit [V]."""
+    V = np.asarray(V0_lin_V, float)
+    if V_sat_V <= 0:
+        return V
+    return V_sat_V * np.tanh(V / V_sat_V)
+
+
 def supply_for_voltage_V(params: DriverParams, V0_V, duty, f_s_Hz, T_degC):
-    """Supply voltage [V] that yields stator amplitude ``V0_V`` (inverse of :func:`driver_output`)."""
-    unit = driver_output(params, 1.0, duty, f_s_Hz, T_degC).V0_V
-    return np.asarray(V0_V, float) / unit
+    """Supply voltage [V] giving the amplitude ``V0_V`` through the small-signal (linear) tank gain.
+
+    This is the setting an operator derives from the nominal gain; with the
+    output saturation enabled (``V0_sat_V > 0``) the actual V0 is lower.
+    """
+    H = tank_gain(2 * np.pi * np.asarray(f_s_Hz, float), tank_inductance_H(params, T_degC, f_s_Hz),
+                  tank_C1_F(params, f_s_Hz) + params.C_m_F, params.R_m_ohm)
+    return np.asarray(V0_V, float) / (np.abs(H) * inverter_fundamental_V(1.0, duty))

@@ -1,7 +1,7 @@
-"""Generic pythonfmu slave around a co-simulation block (:mod:`l1b2.blocks`).
+"""Adapter between a pythonfmu slave and a co-simulation block (:mod:`l1b2.blocks`).
 
-A slave script only names its block class and its parameter section; this
-base registers every declared variable (parameters, inputs, outputs and the
+A slave script only names its block class and its parameter section; the
+adapter registers every declared variable (parameters, inputs, outputs and the
 continuous states as ``local`` variables, so get/set FMU state captures
 them) with getters and setters into the block.
 
@@ -16,17 +16,17 @@ log, and the instance stays usable until the host frees it.
 
 from __future__ import annotations
 
-import json
 import math
-from pathlib import Path
 
-from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
+from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real  # noqa: F401
 from pythonfmu.enums import Fmi2Status
 
 from .params import DriverParams, InterfaceParams, SliderParams, StatorParams, load_motor
 
-#: written next to this module into the bundled package by build_fmu.py
-DEFAULTS_FILE = Path(__file__).with_name("_fmu_defaults.json")
+try:  # written into the bundled package by l1b2.fmu_build; absent in the source tree
+    from ._fmu_defaults import DEFAULTS as _BUILT_DEFAULTS
+except ImportError:  # pragma: no cover - running from the source tree
+    _BUILT_DEFAULTS = None
 _SECTION_CLASSES = {"driver": DriverParams, "stator": StatorParams, "interface": InterfaceParams,
                     "slider": SliderParams}
 
@@ -34,9 +34,8 @@ _SECTION_CLASSES = {"driver": DriverParams, "stator": StatorParams, "interface":
 def default_parameters(section: str):
     """Start values of a subsystem's parameters: the reference motor baked in at build time."""
     cls = _SECTION_CLASSES[section]
-    if DEFAULTS_FILE.exists():
-        values = json.loads(DEFAULTS_FILE.read_text())[section]
-        return cls(**values)
+    if _BUILT_DEFAULTS is not None:  # held in memory: the FMU's folder may be gone later
+        return cls(**_BUILT_DEFAULTS[section])
     return getattr(load_motor(), section)
 
 
@@ -47,26 +46,27 @@ _VARIABILITY = {"continuous": Fmi2Variability.continuous, "fixed": Fmi2Variabili
 _TYPES = {"Real": (Real, float), "Integer": (Integer, int), "Boolean": (Boolean, bool)}
 
 
-class BlockSlave(Fmi2Slave):
-    """Fmi2Slave exposing a :class:`l1b2.blocks.Block`."""
+class BlockAdapter:
+    """Exposes a :class:`l1b2.blocks.Block` through the ``Fmi2Slave`` that owns it.
 
-    BLOCK = None       # the Block subclass
-    SECTION = ""       # parameter section of MotorParams
-    author = "L1B2 USM tool team"
-    license = "MIT"
+    The slave scripts keep the literal form ``class Name(Fmi2Slave):`` that
+    PythonFMU's loader looks for (its 0.7.0 binary crashes on the second
+    instantiation in a process when the slave class inherits through an
+    imported intermediate class), and delegate here.
+    """
 
-    def __init__(self, **kwargs):
-        super().__init__(**kwargs)
-        params = default_parameters(self.SECTION)
-        self.block = self.BLOCK(params)
-        self._failed = None
-        for var in self.BLOCK.variables(params):
+    def __init__(self, slave: Fmi2Slave, block_cls, section: str):
+        self.slave = slave
+        params = default_parameters(section)
+        self.block = block_cls(params)
+        self.failed = None
+        for var in block_cls.variables(params):
             vtype, conv = _TYPES[var.type]
             kw = dict(causality=_CAUSALITY[var.causality], description=var.description,
                       getter=self._getter(var.name, conv), setter=self._setter(var.name, conv))
             if var.causality in ("parameter", "input", "local"):
                 kw["variability"] = _VARIABILITY[var.variability]
-            self.register_variable(vtype(var.name, **kw))
+            slave.register_variable(vtype(var.name, **kw))
 
     def _getter(self, name, conv):
         return lambda: conv(getattr(self.block, name))
@@ -76,36 +76,36 @@ class BlockSlave(Fmi2Slave):
             try:
                 setattr(self.block, name, conv(value))
             except (TypeError, ValueError) as exc:  # never raise out of a callback
-                self._fail(f"cannot set {name} to {value!r}: {exc}")
+                self.fail(f"cannot set {name} to {value!r}: {exc}")
         return set_value
 
-    def _fail(self, message: str):
-        self._failed = message
-        self.log(message, Fmi2Status.error)
+    def fail(self, message: str):
+        self.failed = message
+        self.slave.log(message, Fmi2Status.error)
 
     def exit_initialization_mode(self):
         try:
             self.block.initialize()
         except Exception as exc:  # noqa: BLE001 - reported through the FMI logger
-            self._fail(f"{type(self).__name__}: initialisation failed: {exc}")
+            self.fail(f"{self.slave.modelName}: initialisation failed: {exc}")
 
-    def do_step(self, current_time, step_size):
-        if self._failed is not None:
-            self.log(f"{type(self).__name__}: refusing to step after an error: {self._failed}", Fmi2Status.error)
+    def do_step(self, current_time, step_size) -> bool:
+        name = self.slave.modelName
+        if self.failed is not None:
+            self.slave.log(f"{name}: refusing to step after an error: {self.failed}", Fmi2Status.error)
             return False
         if not (math.isfinite(step_size) and step_size > 0):
-            self._fail(f"{type(self).__name__}: invalid communication step {step_size!r} s at t={current_time}")
+            self.fail(f"{name}: invalid communication step {step_size!r} s at t={current_time}")
             return False
         try:
             self.block.do_step(current_time, step_size)
             return True
         except Exception as exc:  # noqa: BLE001
-            self._fail(f"{type(self).__name__}: step at t={current_time} s failed: {exc}")
+            self.fail(f"{name}: step at t={current_time} s failed: {exc}")
             return False
 
-    def _set_fmu_state(self, state):
-        super()._set_fmu_state(state)
+    def after_state_restore(self):
         try:
             self.block.refresh()
         except Exception as exc:  # noqa: BLE001
-            self._fail(f"{type(self).__name__}: restoring the FMU state failed: {exc}")
+            self.fail(f"{self.slave.modelName}: restoring the FMU state failed: {exc}")

@@ -16,7 +16,8 @@ What the build adds to a plain ``pythonfmu build``:
   license, and a GUID that is stable for identical content (libcosim caches
   extracted FMUs by GUID, so different content must never share one).
 * **Defaults**: the reference motor's values are baked in as start values
-  (``_fmu_defaults.json`` in the bundled package).
+  (module ``_fmu_defaults`` of the bundled package, imported once and kept in
+  memory).
 """
 
 from __future__ import annotations
@@ -183,7 +184,8 @@ def defaults_document(mp: MotorParams, extra: dict | None = None) -> dict:
 
 
 def build_fmu(name: str, dest_dir: str | Path, *, mp: MotorParams | None = None, version: str = __version__,
-              extra_defaults: dict | None = None, extra_files: dict[str, bytes] | None = None) -> Path:
+              extra_defaults: dict | None = None, extra_files: dict[str, bytes] | None = None,
+              vendor_pythonfmu: bool = True) -> Path:
     """Build ``<dest_dir>/<name>.fmu`` from ``fmu_src/slaves/<name>.py``."""
     from pythonfmu.builder import FmuBuilder
 
@@ -202,7 +204,8 @@ def build_fmu(name: str, dest_dir: str | Path, *, mp: MotorParams | None = None,
         shutil.copytree(PACKAGE_DIR, pkg_dir, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
         for py in pkg_dir.rglob("*.py"):
             py.write_text(rewrite_imports(py.read_text(), package))
-        (pkg_dir / "_fmu_defaults.json").write_text(json.dumps(defaults, indent=1))
+        (pkg_dir / "_fmu_defaults.py").write_text(
+            '"""Start values baked in at build time (generated)."""\nDEFAULTS = ' + repr(defaults) + "\n")
         for rel, data in (extra_files or {}).items():
             (pkg_dir / rel).write_bytes(data)
         script = td / f"{module}.py"
@@ -231,7 +234,8 @@ def build_fmu(name: str, dest_dir: str | Path, *, mp: MotorParams | None = None,
             return _vendor_pythonfmu(data.decode(), package).encode()
         return data
     vendor.extra = vendored
-    _rewrite_zip(dest, vendor)
+    if vendor_pythonfmu:
+        _rewrite_zip(dest, vendor)
 
     variables = variable_table(name, defaults)
     attrs = {"author": AUTHOR, "license": LICENSE, "version": version,

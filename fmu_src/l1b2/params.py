@@ -66,6 +66,8 @@ class DriverParams:
     L_temp_coeff_per_K: float = p("1/K", "relative drift of L per kelvin (Eq. 4)")
     L_freq_coeff_per_Hz: float = p("1/Hz", "relative drift of L per hertz (Eq. 4)")
     C1_freq_coeff_per_Hz: float = p("1/Hz", "relative drift of C1 per hertz (Eq. 4)")
+    V0_sat_V: float = p("V", "output saturation amplitude of the drive, V0 = V_sat tanh(V0_lin/V_sat) (0 = off)",
+                        min=0.0)
 
     def __post_init__(self):
         _validated(self)
@@ -92,9 +94,18 @@ class StatorParams:
     bar_dev_2_m: float = p("m", "friction-bar deviation: Legendre P2 coefficient")
     bar_dev_3_m: float = p("m", "friction-bar deviation: Legendre P3 coefficient")
     bar_half_length_m: float = p("m", "half length of the friction bar (position scale of the deviation)", min=1e-4)
+    bar_wave_amp_m: float = p("m", "amplitude of a periodic waviness of the friction bar (0 = off)")
+    bar_wave_period_m: float = p("m", "period of the friction-bar waviness", min=1e-5)
+    bar_bump_amp_m: float = p("m", "height of a local bump (Gaussian) on the friction bar (0 = off)")
+    bar_bump_center_m: float = p("m", "position of the bump")
+    bar_bump_width_m: float = p("m", "standard deviation of the bump", min=1e-5)
     df_dT_l_Hz_per_K: float = p("Hz/K", "thermal drift of the L1 frequency (0 = off)")
     df_dT_b_Hz_per_K: float = p("Hz/K", "thermal drift of the B2 frequency (0 = off)")
     T_ref_degC: float = p("degC", "reference temperature of the modal frequencies")
+    thermal_tau_s: float = p("s", "thermal time constant of the stator (0 = off: stator at ambient temperature)",
+                             min=0.0)
+    heating_K_per_V2: float = p("K/V2", "steady temperature rise of the stator per V0^2 (dielectric and mechanical loss)",
+                                min=0.0)
     asym_b: float = p("1", "relative B2 coupling asymmetry between CH1 and CH2 (0 = symmetric, off)",
                       min=-0.5, max=0.5)
 
@@ -138,6 +149,8 @@ class SliderParams:
     s_max_m: float = p("m", "end stop at the positive end of the stroke")
     load_inertia: float = p("1", "1 = the hanging load mass is accelerated with the slider, 0 = not",
                             min=0.0, max=1.0)
+    pulley_mu: float = p("1", "Coulomb friction of the load path (pulley) per load weight g|m_load| (0 = off)",
+                         min=0.0)
 
     def __post_init__(self):
         _validated(self)

@@ -3,6 +3,8 @@
 ``m dv/dt + c_r v = F_d + F_g - F_load`` (Eq. 21) with the guide friction
 ``F_g = -sign(v) mu_sd (kappa F_p + g m_s)`` (Eq. 22 has ``kappa = 1``, Eq. 29
 ``kappa = 0.5``: a parameter here) and the load force ``F_load = g m_load``.
+An optional load-path (pulley) friction ``pulley_mu g |m_load|`` adds to the
+Coulomb level; it is off in the reference motor.
 
 Conventions and decisions
 -------------------------
@@ -43,6 +45,11 @@ def guide_friction_level_N(sp: SliderParams, F_p_N, static: bool = False):
     return mu * (sp.kappa * np.asarray(F_p_N, float) + G_M_S2 * sp.mass_kg)
 
 
+def load_path_friction_N(sp: SliderParams, m_load_kg):
+    """Coulomb friction of the load path (pulley bearing) ``pulley_mu g |m_load|`` [N] (0 in the reference)."""
+    return sp.pulley_mu * G_M_S2 * np.abs(np.asarray(m_load_kg, float))
+
+
 def load_force_N(m_load_kg):
     """Force of the hanging load, positive toward -position [N]."""
     return G_M_S2 * np.asarray(m_load_kg, float)
@@ -52,7 +59,7 @@ def acceleration_m_s2(sp: SliderParams, v_m_s, F_d_N, F_p_N, m_load_kg):
     """Right side of Eq. 21 divided by the moving mass, for a moving slider [m/s^2] (vectorised)."""
     v = np.asarray(v_m_s, float)
     F = (np.asarray(F_d_N, float) - load_force_N(m_load_kg) - sp.c_r_N_s_per_m * v
-         - np.sign(v) * guide_friction_level_N(sp, F_p_N))
+         - np.sign(v) * (guide_friction_level_N(sp, F_p_N) + load_path_friction_N(sp, m_load_kg)))
     return F / moving_mass_kg(sp, m_load_kg)
 
 
@@ -85,8 +92,9 @@ def step(sp: SliderParams, state: SliderState, F_d_N: float, F_p_N: float, m_loa
     v, s, stuck, at_stop = float(state.v_m_s), float(state.s_m), bool(state.stuck), int(state.at_stop)
     m = float(moving_mass_kg(sp, m_load_kg))
     F_ext = float(F_d_N) - float(load_force_N(m_load_kg))
-    Fc = float(guide_friction_level_N(sp, F_p_N))
-    Fs = float(guide_friction_level_N(sp, F_p_N, static=True))
+    F_path = float(load_path_friction_N(sp, m_load_kg))
+    Fc = float(guide_friction_level_N(sp, F_p_N)) + F_path
+    Fs = float(guide_friction_level_N(sp, F_p_N, static=True)) + F_path
     c = sp.c_r_N_s_per_m
     t = 0.0
     for _ in range(16):  # a step holds at most a few events

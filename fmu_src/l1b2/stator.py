@@ -222,9 +222,34 @@ def tip_coefficient_T(sp: StatorParams, P_N, T_degC=None):
 # ---------------------------------------------------------------------------
 
 def bar_deviation_m(sp: StatorParams, s_m):
-    """Deviation of the friction bar from the guide line at slider position ``s_m`` [m]."""
-    xi = np.asarray(s_m, float) / sp.bar_half_length_m
-    return legendre.legval(xi, [0.0, sp.bar_dev_1_m, sp.bar_dev_2_m, sp.bar_dev_3_m])
+    """Deviation of the friction bar from the guide line at slider position ``s_m`` [m].
+
+    A smooth Legendre series in ``s / half length`` (tilt, bow, waviness of
+    third order), plus two non-uniformities that are off in the reference
+    motor: a periodic waviness ``A sin(2 pi s / lambda)`` (grinding marks) and a
+    local Gaussian bump (a defect or debris).
+    """
+    s = np.asarray(s_m, float)
+    xi = s / sp.bar_half_length_m
+    dev = legendre.legval(xi, [0.0, sp.bar_dev_1_m, sp.bar_dev_2_m, sp.bar_dev_3_m])
+    if sp.bar_wave_amp_m:
+        dev = dev + sp.bar_wave_amp_m * np.sin(2 * np.pi * s / sp.bar_wave_period_m)
+    if sp.bar_bump_amp_m:
+        dev = dev + sp.bar_bump_amp_m * np.exp(-0.5 * ((s - sp.bar_bump_center_m) / sp.bar_bump_width_m) ** 2)
+    return dev
+
+
+def stator_temperature_step(T_st_degC, T_amb_degC, V0_V, sp: StatorParams, h_s):
+    """Exact step of the stator's thermal state [degC] (off when ``thermal_tau_s = 0``).
+
+    ``tau dT/dt = T_amb + k V0^2 - T``: self-heating by dielectric and
+    mechanical losses, both proportional to the vibration power ~ V0^2,
+    relaxed toward the ambient temperature with time constant ``tau``.
+    """
+    target = np.asarray(T_amb_degC, float) + sp.heating_K_per_V2 * np.asarray(V0_V, float) ** 2
+    if sp.thermal_tau_s <= 0:
+        return target if sp.heating_K_per_V2 else np.asarray(T_amb_degC, float)
+    return target + (np.asarray(T_st_degC, float) - target) * np.exp(-h_s / sp.thermal_tau_s)
 
 
 def axial_force_N(sp: StatorParams, s_m):

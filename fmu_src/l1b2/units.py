@@ -53,6 +53,7 @@ UNITS: dict[str, UnitDef] = {
     "1/Hz": UnitDef(s=1),
     "Hz/K": UnitDef(s=-1, K=-1),
     "kg/m3": UnitDef(kg=1, m=-3),
+    "K/V2": UnitDef(kg=-2, m=-4, s=6, A=2, K=1),
     "N/V": UnitDef(m=-1, s=1, A=1),
     "N/m": UnitDef(kg=1, s=-2),
     "N.s/m": UnitDef(kg=1, s=-1),

@@ -1,0 +1,208 @@
+"""Command line: ``l1b2 <command> ...`` (``l1b2 --help``).
+
+Every user error ends with one line ``l1b2: error: ...`` on stderr and a
+non-zero exit status, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+from . import __version__
+from .errors import L1B2Error
+
+
+def _floats(text: str) -> tuple[float, ...]:
+    try:
+        return tuple(float(x) for x in text.split(",") if x.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got '{text}'") from None
+
+
+def _motor(args):
+    from .params import load_motor
+    return load_motor(getattr(args, "params", None))
+
+
+# ---------------------------------------------------------------------------
+# commands
+# ---------------------------------------------------------------------------
+
+def cmd_fmus(args) -> int:
+    from .fmu_build import SUBSYSTEM_FMUS, build_fmu
+    mp = _motor(args)
+    for name in args.names or SUBSYSTEM_FMUS:
+        print(build_fmu(name, args.out, mp=mp))
+    return 0
+
+
+def cmd_simulate(args) -> int:
+    """One run of the coupled motor; CSV with units in the header."""
+    import numpy as np
+    import pandas as pd
+
+    from . import driver as drv
+    from .cosim import CoSimResult, CoSimulation
+    from .coupled import InProcessMotor
+    from .rig import apply_overrides
+    from .ssp import COMPONENT_PARAMS
+
+    mp = _motor(args)
+    if args.direction not in (1, -1):
+        raise L1B2Error(f"--direction must be 1 or -1, got {args.direction}")
+    s0 = args.s0 if args.s0 is not None else (mp.slider.s_min_m if args.direction > 0 else mp.slider.s_max_m)
+    V_s = float(drv.supply_for_voltage_V(mp.driver, args.V0, 1.0, args.frequency, args.temperature))
+    inputs = dict(V_s=V_s, duty=1.0, f_s=args.frequency, T=args.temperature, direction=float(args.direction),
+                  m_load=args.load)
+    stop = (lambda v: v["Slider.at_stop"] == args.direction) if not args.full else None
+    if args.engine == "fmu":
+        from dataclasses import asdict
+        overrides = {f"{c}.{k}": v for c, a in COMPONENT_PARAMS.items() for k, v in asdict(getattr(mp, a)).items()}
+        if args.pure_slip:
+            overrides["Interface.pure_slip"] = True
+        with CoSimulation(fmu_dir=args.fmu_dir, step_s=args.step, parameters=overrides,
+                          iterate=args.iterate) as cs:
+            res = cs.run(args.duration, inputs, start_values={"Slider.s0": s0, "Stator.s": s0},
+                         stop_when=stop)
+    else:
+        from .coupled import RECORDED
+        m = InProcessMotor(mp, h_s=args.step, pure_slip=args.pure_slip)
+        m.initialize(s0=s0, **inputs)
+        rec = RECORDED + ("Slider.at_stop",)
+        r = m.run(args.duration, record=rec,
+                  until=(lambda mm: mm.value("Slider.at_stop") == args.direction) if not args.full else None)
+        from .blocks import BLOCKS
+        units = {"time": "s"}
+        for name in rec:
+            comp, var = name.split(".")
+            units[name] = next(v.unit for v in BLOCKS[comp].OUTPUTS if v.name == var)
+        res = CoSimResult(pd.DataFrame(r), units)
+    path = res.to_csv(args.out)
+    if args.plot:
+        res.plot(columns=("Slider.v", "Slider.s", "Stator.U_w"), path=args.plot)
+    v = res.df["Slider.v"].to_numpy()
+    print(f"wrote {path}: {len(v)} samples, {res.df['time'].iloc[-1]:.4g} s, peak speed {np.max(np.abs(v)) * 1e3:.1f} mm/s")
+    return 0
+
+
+def cmd_rig(args) -> int:
+    """The paper's whole experiment on the co-simulated motor."""
+    from . import plots
+    from .rig import RigPlan, parse_injection, run_experiment, write_experiment
+
+    mp = _motor(args)
+    plan = RigPlan(voltages_V=args.voltages, loads_kg=args.loads, step_s=args.step, seed=args.seed,
+                   record_temperature=args.record_temperature, pause_s=args.pause, max_run_s=args.max_run)
+    effects = [parse_injection(s) for s in args.inject]
+    t0 = time.perf_counter()
+    df, truth = run_experiment(plan, mp, effects=effects, engine=args.engine, jobs=args.jobs,
+                               fmu_dir=args.fmu_dir, effect_seed=args.effect_seed, progress=not args.quiet)
+    truth["wall_time_s"] = round(time.perf_counter() - t0, 2)
+    paths = write_experiment(df, args.out, mp, plan, truth)
+    out = Path(args.out)
+    summary = {"runs": int(df["run"].nunique()), "samples": int(len(df)), "wall_time_s": truth["wall_time_s"],
+               "files": {k: str(v) for k, v in paths.items()}}
+    if not args.no_plots:
+        plots.fig9a_speed_vs_position_by_voltage(df, out / "fig9a_speed_vs_position_by_voltage.png")
+        plots.fig9b_speed_vs_position_by_load(df, out / "fig9b_speed_vs_position_by_load.png")
+        _, fit = plots.fig9c_speed_vs_tip_velocity(df, out / "fig9c_speed_vs_tip_velocity.png")
+        summary["fig9c"] = fit
+    (out / "rig_summary.json").write_text(json.dumps(summary, indent=1))
+    print(f"rig: {summary['runs']} runs, {summary['samples']} samples in {summary['wall_time_s']} s -> {out}")
+    if "fig9c" in summary:
+        print(f"fig9c: v_s = {summary['fig9c']['k0']:.3f} * omega*U_w + {summary['fig9c']['intercept_m_s'] * 1e3:.1f} mm/s,"
+              f" R^2 = {summary['fig9c']['r2']:.3f}")
+    return 0
+
+
+# ---------------------------------------------------------------------------
+# parser
+# ---------------------------------------------------------------------------
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="l1b2", description="L1B2 linear ultrasonic motor: FMUs, co-simulation, "
+                                                            "virtual rig, identification")
+    ap.add_argument("--version", action="version", version=f"l1b2 {__version__}")
+    sub = ap.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("fmus", help="build the subsystem FMUs")
+    p.add_argument("names", nargs="*", help="Driver Stator Interface Slider (default: all)")
+    p.add_argument("--out", type=Path, default=Path("dist/fmus"))
+    p.add_argument("--params", type=Path, help="motor parameter TOML (default: reference motor)")
+    p.set_defaults(func=cmd_fmus)
+
+    p = sub.add_parser("simulate", help="one run of the coupled motor, CSV out")
+    p.add_argument("--V0", type=float, default=324.0, help="stator voltage amplitude [V]")
+    p.add_argument("--load", type=float, default=0.0, help="signed load [kg], > 0 pulls toward -position")
+    p.add_argument("--direction", type=int, default=1, help="+1 (CH1) or -1 (CH2)")
+    p.add_argument("--frequency", type=float, default=48500.0, help="drive frequency [Hz]")
+    p.add_argument("--temperature", type=float, default=25.0, help="ambient temperature [degC]")
+    p.add_argument("--duration", type=float, default=2.0, help="longest simulated time [s]")
+    p.add_argument("--full", action="store_true", help="do not stop at the far end stop")
+    p.add_argument("--s0", type=float, help="start position [m] (default: the end stop behind)")
+    p.add_argument("--step", type=float, default=2e-4, help="communication step [s]")
+    p.add_argument("--engine", choices=("fmu", "inprocess"), default="fmu")
+    p.add_argument("--fmu-dir", type=Path, default=Path("dist/fmus"))
+    p.add_argument("--iterate", action="store_true", help="fixed-point iteration of each macro step")
+    p.add_argument("--pure-slip", action="store_true", help="interface in the paper's pure-slip mode")
+    p.add_argument("--params", type=Path, help="motor parameter TOML (default: reference motor)")
+    p.add_argument("--out", type=Path, required=True, help="CSV file")
+    p.add_argument("--plot", type=Path, help="PNG of speed, position and tip amplitude")
+    p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser("rig", help="the paper's experiment on the virtual rig (data-format CSVs + Fig. 9 plots)")
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--voltages", type=_floats, default=(220.0, 255.0, 290.0, 324.0), help="V0 levels [V]")
+    p.add_argument("--loads", type=_floats, default=(-0.09, -0.07, -0.05, -0.03, 0.0, 0.03, 0.05, 0.07, 0.09),
+                   help="signed loads [kg]")
+    p.add_argument("--engine", choices=("fmu", "inprocess"), default="fmu")
+    p.add_argument("--fmu-dir", type=Path, default=Path("dist/fmus"))
+    p.add_argument("--jobs", type=int, default=2, help="parallel runs (stateful effects run serially)")
+    p.add_argument("--step", type=float, default=2e-4, help="communication step [s]")
+    p.add_argument("--pause", type=float, default=1.0, help="pause between runs [s]")
+    p.add_argument("--max-run", type=float, default=4.0, help="longest run [s]")
+    p.add_argument("--seed", type=int, default=0, help="seed of the run order")
+    p.add_argument("--inject", action="append", default=[], metavar="EFFECT[:Comp.param=value,...]",
+                   help="switch on an extra effect (repeatable); see `l1b2 effects`")
+    p.add_argument("--effect-seed", type=int, help="draw the injected effects' sizes at random with this seed")
+    p.add_argument("--record-temperature", action="store_true", help="write the stator temperature column")
+    p.add_argument("--no-plots", action="store_true")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--params", type=Path, help="motor parameter TOML (default: reference motor)")
+    p.set_defaults(func=cmd_rig)
+
+    p = sub.add_parser("effects", help="list the effects the rig can inject")
+    p.set_defaults(func=cmd_effects)
+    return ap
+
+
+def cmd_effects(args) -> int:
+    from .rig import EFFECTS
+    for e in EFFECTS.values():
+        params = ", ".join(f"{k}={v:g}" for k, v in e.params.items())
+        print(f"{e.name}  [{e.regressor}]\n    {e.description}\n    {params}")
+    return 0
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except L1B2Error as exc:
+        print(f"l1b2: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("l1b2: interrupted", file=sys.stderr)
+        return 130
+    except FileNotFoundError as exc:
+        print(f"l1b2: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
