@@ -1,0 +1,94 @@
+"""Shared fixtures of the physics / FMU test suite.
+
+* ``motor``: the embedded reference motor (``l1b2.params.load_motor()``).
+* ``fmus`` / ``fmu_dir``: the four subsystem FMUs, built ONCE per session into
+  a temporary folder with :func:`l1b2.fmu_build.build_subsystem_fmus`.
+* ``isolated``: run a module-level worker function of a test file in a fresh
+  Python process and return its JSON result.  Every test that *instantiates*
+  a PythonFMU FMU uses it: PythonFMU's native loader keeps process-wide state
+  (the slave module stays in ``sys.modules``), so one crashing or leaking
+  instantiation must not take the whole pytest session down, and each test
+  sees a clean process, the way a simulation tool would load the FMU.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from l1b2.params import load_motor
+
+REPO = Path(__file__).resolve().parents[1]
+_RESULT_TAG = "@@L1B2-RESULT@@"
+
+_RUNNER = f"""
+import importlib.util, json, sys
+spec = importlib.util.spec_from_file_location("_l1b2_isolated_worker", sys.argv[1])
+mod = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(mod)
+result = getattr(mod, sys.argv[2])(*json.loads(sys.argv[3]))
+sys.stdout.flush()
+print({_RESULT_TAG!r} + json.dumps(result), flush=True)
+"""
+
+
+@pytest.fixture(scope="session")
+def motor():
+    return load_motor()
+
+
+@pytest.fixture(scope="session")
+def fmus(tmp_path_factory) -> dict[str, Path]:
+    """The four subsystem FMUs of the reference motor, built once per session."""
+    from l1b2.fmu_build import build_subsystem_fmus
+
+    dest = tmp_path_factory.mktemp("fmus")
+    return {name: Path(p) for name, p in build_subsystem_fmus(dest).items()}
+
+
+@pytest.fixture(scope="session")
+def fmu_dir(fmus) -> Path:
+    folders = {p.parent for p in fmus.values()}
+    assert len(folders) == 1
+    return folders.pop()
+
+
+@dataclass
+class IsolatedResult:
+    value: object
+    stdout: str
+    stderr: str
+    returncode: int
+
+
+def _run_isolated(module_file, func_name, *args, timeout=300, check=True) -> IsolatedResult:
+    env = dict(os.environ)
+    env.setdefault("OPENBLAS_NUM_THREADS", "1")
+    env.setdefault("MPLBACKEND", "Agg")
+    proc = subprocess.run(
+        [sys.executable, "-c", _RUNNER, str(module_file), func_name, json.dumps(list(args))],
+        capture_output=True, text=True, timeout=timeout, cwd=str(REPO), env=env,
+    )
+    value = None
+    for line in proc.stdout.splitlines():
+        if line.startswith(_RESULT_TAG):
+            value = json.loads(line[len(_RESULT_TAG):])
+    res = IsolatedResult(value, proc.stdout, proc.stderr, proc.returncode)
+    if check and (proc.returncode != 0 or value is None):
+        raise AssertionError(
+            f"isolated worker {func_name} exited with code {proc.returncode}"
+            f" (negative = killed by signal, -11 = segmentation fault)\n"
+            f"--- stdout (tail) ---\n{proc.stdout[-3000:]}\n--- stderr (tail) ---\n{proc.stderr[-3000:]}")
+    return res
+
+
+@pytest.fixture(scope="session")
+def isolated():
+    """``isolated(__file__, "worker", *json_args, check=True) -> IsolatedResult``."""
+    return _run_isolated

@@ -1,0 +1,376 @@
+"""Friction interface (paper Sect. 3.3, Eq. 17-20, 23): l1b2.interface."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+from l1b2 import interface as itf
+
+W = 2 * np.pi * 48500.0  # drive angular frequency [rad/s]
+FIELDS = ("F_d_N", "F_N_mean_N", "F_N1_sin_N", "F_N1_cos_N", "F_T1_sin_N", "F_T1_cos_N", "phi_c_rad",
+          "stick_fraction")
+
+
+@pytest.fixture(scope="module")
+def ip(motor):
+    return motor.interface
+
+
+# ---------------------------------------------------------------------------
+# Eq. 17-18: normal force and contact angle
+# ---------------------------------------------------------------------------
+
+def _period_mean(f, n=2 ** 16):
+    th = (np.arange(n) + 0.5) * (2 * np.pi / n)
+    return np.mean(f(th))
+
+
+@pytest.mark.parametrize("U_l", [0.05e-6, 0.15e-6, 0.2e-6, 0.25e-6, 0.5e-6, 1.22e-6, 3e-6, 20e-6])
+@pytest.mark.parametrize("F_p", [2.0, 5.6])
+def test_eq18_makes_period_mean_of_eq17_equal_Fp(ip, U_l, F_p):
+    # reference: numerical period mean (midpoint rule, 65536 points) of normal_force_N
+    k_e = ip.k_e_N_per_m
+    mean = _period_mean(lambda th: itf.normal_force_N(th, U_l, F_p, k_e))
+    assert mean == pytest.approx(F_p, rel=1e-6)
+    F = itf.normal_force_N(np.linspace(0, 2 * np.pi, 5001), U_l, F_p, k_e)
+    assert np.all(F >= -1e-12 * F_p)  # the bar only pushes
+    a = float(itf.contact_half_angle_rad(U_l, F_p, k_e))
+    if k_e * U_l <= F_p:  # permanent contact: F_N = F_p + k_e U_l sin(theta), phi_c = 2 pi
+        assert a == pytest.approx(np.pi, abs=1e-15)
+        th = np.linspace(0, 2 * np.pi, 101)
+        np.testing.assert_allclose(itf.normal_force_N(th, U_l, F_p, k_e), F_p + k_e * U_l * np.sin(th),
+                                   rtol=1e-12, atol=1e-12 * F_p)
+    else:  # intermittent: zero outside the window centred on pi/2, continuous (zero) at its edges
+        assert 0 < a < np.pi
+        outside = np.pi / 2 + a + np.linspace(1e-9, 2 * np.pi - 2 * a - 1e-9, 200)
+        assert np.all(itf.normal_force_N(outside, U_l, F_p, k_e) == 0.0)
+        for edge in (np.pi / 2 - a, np.pi / 2 + a):
+            assert abs(float(itf.normal_force_N(edge, U_l, F_p, k_e))) < 1e-9 * k_e * U_l
+        assert float(itf.normal_force_N(np.pi / 2, U_l, F_p, k_e)) == pytest.approx(k_e * U_l * (1 - np.cos(a)),
+                                                                                   rel=1e-12)
+        # mean_normal_force_N is the closed form of the same mean
+        assert float(itf.mean_normal_force_N(U_l, a, k_e)) == pytest.approx(F_p, rel=1e-12)
+
+
+@pytest.mark.parametrize("F_p", [1.0, 5.6])
+def test_normal_force_is_continuous_at_permanent_contact_boundary(ip, F_p):
+    # reference: both branches of Eq. 17 must agree at k_e U_l = F_p (a -> pi)
+    k_e = ip.k_e_N_per_m
+    U0 = F_p / k_e
+    th = np.linspace(0, 2 * np.pi, 721)
+    below = itf.normal_force_N(th, U0 * (1 - 1e-9), F_p, k_e)  # permanent contact
+    above = itf.normal_force_N(th, U0 * (1 + 1e-9), F_p, k_e)  # intermittent, a just below pi
+    at = itf.normal_force_N(th, U0, F_p, k_e)
+    np.testing.assert_allclose(above, below, atol=1e-6 * F_p)
+    np.testing.assert_allclose(at, below, atol=1e-6 * F_p)
+
+
+def _r_grid():
+    tiny = np.logspace(-12, 0, 150)
+    return np.unique(np.concatenate([np.pi * tiny, np.pi * (1 - tiny), np.linspace(0.01, np.pi - 0.01, 300)]))
+
+
+def test_contact_half_angle_solves_eq18_over_whole_range(ip):
+    # reference: residual of Eq. 18, g(a) = sin a - a cos a = pi F_p / (k_e U_l), for r in (0, pi)
+    k_e, F_p = ip.k_e_N_per_m, 5.0
+    r = _r_grid()
+    r = r[(r > 0) & (r < np.pi)]
+    U = np.pi * F_p / (k_e * r)
+    a_vec = itf.contact_half_angle_rad(U, F_p, k_e)
+    a_sca = np.array([float(itf.contact_half_angle_rad(float(u), F_p, k_e)) for u in U])
+    for a in (a_vec, a_sca):
+        assert np.all((a > 0) & (a <= np.pi))
+        resid = np.sin(a) - a * np.cos(a) - r
+        assert np.max(np.abs(resid)) < 1e-12
+    order = np.argsort(r)  # g is increasing, so a(r) is monotone
+    assert np.all(np.diff(a_vec[order]) >= -1e-15)
+    assert np.all(np.diff(a_sca[order]) >= -1e-15)
+    # (near a -> 0 the absolute stopping test |g| <= 4e-16 pi leaves a relative error ~1e-6 in a)
+    np.testing.assert_allclose(a_vec, a_sca, rtol=1e-5, atol=1e-12)
+    # against an independent brentq solve on a few points
+    for ri in (1e-6, 0.3, 1.5, 3.0, np.pi - 1e-6):
+        ref = brentq(lambda x: np.sin(x) - x * np.cos(x) - ri, 0, np.pi, xtol=1e-15)
+        assert float(itf.contact_half_angle_rad(np.pi * F_p / (k_e * ri), F_p, k_e)) == pytest.approx(ref, abs=1e-9)
+
+
+def test_contact_half_angle_limits(ip):
+    # reference: Eq. 18 regimes - permanent contact (k_e U_l <= F_p) gives pi, no preload gives 0
+    k_e = ip.k_e_N_per_m
+    assert float(itf.contact_half_angle_rad(1e-7, 5.0, k_e)) == pytest.approx(np.pi)      # k_e U = 3 N < 5 N
+    assert float(itf.contact_half_angle_rad(5.0 / k_e, 5.0, k_e)) == pytest.approx(np.pi)  # boundary
+    assert float(itf.contact_half_angle_rad(1e-6, 0.0, k_e)) == 0.0
+    np.testing.assert_allclose(itf.contact_half_angle_rad(np.array([1e-7, 1e-6, 1e-5]), np.array([5.0, 0.0, 5.0]), k_e)[:2],
+                               [np.pi, 0.0])
+    # increasing amplitude at fixed preload shortens the contact: a decreasing in U_l
+    U = np.logspace(np.log10(5.0 / k_e), -4, 50)
+    assert np.all(np.diff(itf.contact_half_angle_rad(U, 5.0, k_e)) < 0)
+
+
+# ---------------------------------------------------------------------------
+# Pure slip: closed form at phi_c = pi (physics notes) and Eq. 23
+# ---------------------------------------------------------------------------
+
+def _pure_slip_reference(U_w, v, F_p, sigma, mu):
+    """Independent closed form of the pure-slip period means for every v (derived here).
+
+    F_f = sigma (u sin th - v) + mu pi F_p sin th sign(u sin th - v) on [0, pi], 0 elsewhere.
+    Mean: sigma (u/pi - v/2) + mu F_p C(k), C = 2 sqrt(1-k^2) - 1 for 0 <= k < 1, +1 for k < 0, -1 for k >= 1.
+    Fundamental: sigma (u/2 - 2v/pi) + mu F_p S(k), S = pi/2 - 2 th1 + sin 2 th1 (0 <= k < 1),
+    pi/2 for k < 0, -pi/2 for k >= 1, th1 = arcsin k.
+    """
+    u = W * U_w
+    k = v / u
+    if k < 0:
+        C, S = 1.0, np.pi / 2
+    elif k >= 1:
+        C, S = -1.0, -np.pi / 2
+    else:
+        th1 = np.arcsin(k)
+        C, S = 2 * np.sqrt(1 - k * k) - 1, np.pi / 2 - 2 * th1 + np.sin(2 * th1)
+    return sigma * (u / np.pi - v / 2) + mu * F_p * C, sigma * (u / 2 - 2 * v / np.pi) + mu * F_p * S
+
+
+V_ALL = [-0.6, -0.3, -0.1, -0.01, 0.0, 0.05, 0.2, 0.3, 0.4, 0.45, 0.6, 1.0]  # w U_w = 0.427 m/s
+V_NONNEG = [v for v in V_ALL if v >= 0]
+V_NEG = [-0.3, -0.1]  # where the two closed forms below go wrong by more than the tolerance
+
+
+@pytest.mark.parametrize("v", V_ALL)
+def test_pure_slip_numerics_equal_independent_closed_form(ip, v):
+    # reference: piecewise closed form derived in this test (including v < 0 and v > w U_w)
+    U_w, F_p = 1.4e-6, 5.6
+    out = itf.interface_forces(1.2e-6, U_w, -np.pi / 2, W, v, F_p, ip, mode="pure_slip")
+    Fd, F1 = _pure_slip_reference(U_w, v, F_p, ip.sigma_N_s_per_m, ip.mu_p)
+    scale = ip.mu_p * F_p + ip.sigma_N_s_per_m * W * U_w
+    assert out.F_d_N == pytest.approx(Fd, rel=5e-3, abs=1e-4 * scale)
+    assert out.F_T1_sin_N == pytest.approx(F1, rel=5e-3, abs=1e-4 * scale)
+    assert out.F_T1_cos_N == pytest.approx(0.0, abs=1e-4 * scale)  # symmetric about pi/2
+    assert out.F_N_mean_N == pytest.approx(F_p, rel=1e-4)  # midpoint rule: O(h^2) = 6e-6 at n_theta = 256
+    assert out.phi_c_rad == pytest.approx(np.pi)
+    assert out.stick_fraction == pytest.approx(0.0, abs=1e-15)
+
+
+@pytest.mark.parametrize("v", V_NONNEG)
+def test_pure_slip_numerics_equal_physics_notes_closed_form(ip, v):
+    # reference: physics notes closed form (pure_slip_drive_force_N) at phi_c = pi, within 0.5 %
+    U_w, F_p = 1.4e-6, 5.6
+    out = itf.interface_forces(1.2e-6, U_w, -np.pi / 2, W, v, F_p, ip, mode="pure_slip")
+    closed = float(itf.pure_slip_drive_force_N(U_w, W, v, F_p, ip.sigma_N_s_per_m, ip.mu_p))
+    scale = ip.mu_p * F_p + ip.sigma_N_s_per_m * W * U_w
+    assert out.F_d_N == pytest.approx(closed, rel=5e-3, abs=1e-4 * scale)
+
+
+@pytest.mark.parametrize("v", V_NEG)
+def test_pure_slip_closed_form_for_negative_speed(ip, v):
+    # reference: numerical period average (and the independent piecewise closed form) for v < 0
+    U_w, F_p = 1.4e-6, 5.6
+    out = itf.interface_forces(1.2e-6, U_w, -np.pi / 2, W, v, F_p, ip, mode="pure_slip")
+    closed = float(itf.pure_slip_drive_force_N(U_w, W, v, F_p, ip.sigma_N_s_per_m, ip.mu_p))
+    assert closed == pytest.approx(out.F_d_N, rel=5e-3)
+
+
+@pytest.mark.parametrize("v", [v for v in V_NONNEG if v < W * 1.4e-6] + [0.6, 1.0])
+def test_eq23_is_the_fundamental_of_the_pure_slip_force(ip, v):
+    # reference: numerical sin(theta) component of the period force (F_T1_sin) vs Eq. 23
+    U_w, F_p = 1.4e-6, 5.6
+    out = itf.interface_forces(1.2e-6, U_w, -np.pi / 2, W, v, F_p, ip, mode="pure_slip", n_theta=1024)
+    eq23 = float(itf.pure_slip_fundamental_N(U_w, W, v, F_p, ip.sigma_N_s_per_m, ip.mu_p))
+    assert out.F_T1_sin_N == pytest.approx(eq23, rel=1e-3, abs=1e-6)
+
+
+@pytest.mark.parametrize("v", [-0.6] + V_NEG)
+def test_eq23_for_negative_speed(ip, v):
+    # reference: numerical fundamental of the pure-slip force for v < 0
+    U_w, F_p = 1.4e-6, 5.6
+    out = itf.interface_forces(1.2e-6, U_w, -np.pi / 2, W, v, F_p, ip, mode="pure_slip", n_theta=1024)
+    eq23 = float(itf.pure_slip_fundamental_N(U_w, W, v, F_p, ip.sigma_N_s_per_m, ip.mu_p))
+    assert out.F_T1_sin_N == pytest.approx(eq23, rel=1e-3)
+
+
+def test_stick_slip_tends_to_slip_as_u_m_tends_to_zero(ip):
+    # reference: (i) monotone convergence of F_d and the stick fraction as u_m -> 0, at the rate
+    # u_m^(1/2) expected from the stick after a reversal (u_r grows quadratically there), (ii) the
+    # limit equals the brute-force period average with no stick and the same (Eq. 18) contact angle
+    args = (1.22e-6, 1.41e-6, -1.69, W, 0.2, 5.6)
+    n = 16384
+    limit = itf.interface_forces(*args, dataclasses.replace(ip, u_m_m=0.0), n_theta=n)
+    u_ms = np.array([1e-8, 1e-9, 1e-10, 1e-11, 1e-12])
+    diffs, sticks = [], []
+    for u_m in u_ms:
+        out = itf.interface_forces(*args, dataclasses.replace(ip, u_m_m=u_m), n_theta=n)
+        diffs.append(abs(out.F_d_N - limit.F_d_N))
+        sticks.append(out.stick_fraction)
+    diffs, sticks = np.array(diffs), np.array(sticks)
+    assert np.all(np.diff(diffs) < 0)
+    assert np.all(np.diff(sticks) < 0)
+    assert diffs[-1] < 1e-3 * abs(limit.F_d_N)
+    assert sticks[-1] < 1e-3
+    slope = np.polyfit(np.log(u_ms), np.log(diffs), 1)[0]
+    assert 0.35 < slope < 0.75
+    assert limit.stick_fraction == 0.0
+    bf = _brute_force(*args, dataclasses.replace(ip, u_m_m=0.0))
+    assert limit.F_d_N == pytest.approx(bf["F_d_N"], rel=1e-3)
+    assert limit.F_T1_sin_N == pytest.approx(bf["F_T1_sin_N"], rel=1e-3)
+
+
+# ---------------------------------------------------------------------------
+# Independent brute-force time stepping of Eq. 17-20 with the u_r rule
+# ---------------------------------------------------------------------------
+
+def _brute_force(U_l, U_w, delta, omega, v, F_p, ip, n=2 ** 15, periods=3):
+    """Explicit time stepping over several periods; averages over the last one.
+
+    u_r accumulates (w' - v) dt and is reset at the start of every contact interval and
+    whenever the relative velocity changes sign while in contact (module docstring rule).
+    """
+    k_e, mu, sig, um = ip.k_e_N_per_m, ip.mu_p, ip.sigma_N_s_per_m, ip.u_m_m
+    permanent = k_e * U_l <= F_p
+    if not permanent:
+        a = brentq(lambda x: math.sin(x) - x * math.cos(x) - math.pi * F_p / (k_e * U_l), 0.0, math.pi, xtol=1e-15)
+        ca = math.cos(a)
+    dth = 2 * math.pi / n
+    dt = dth / omega
+    acc = np.zeros(6)
+    n_contact = n_stick = 0
+    u_r, prev_contact, prev_sign = 0.0, False, 0
+    for k in range(n * periods):
+        th = (k + 0.5) * dth
+        if permanent:
+            FN = F_p + k_e * U_l * math.sin(th)
+        else:
+            d = abs((th - math.pi / 2 + math.pi) % (2 * math.pi) - math.pi)
+            FN = k_e * U_l * (math.sin(th) - ca) if d <= a else 0.0
+        rv = omega * U_w * math.cos(th + delta) - v
+        sg = (rv > 0) - (rv < 0)
+        contact = FN > 0
+        if contact and (not prev_contact or sg != prev_sign):
+            u_r = 0.0
+        u_r += rv * dt
+        stick = False
+        if not contact:
+            Ff = 0.0
+        elif um > 0 and abs(u_r) <= um:
+            Ff, stick = sg * mu * abs(u_r) / um * FN, True
+        else:
+            Ff = sig * rv + sg * mu * FN
+        prev_contact, prev_sign = contact, sg
+        if k >= n * (periods - 1):
+            s, c = math.sin(th), math.cos(th)
+            acc += np.array([Ff, FN, FN * s, FN * c, Ff * s, Ff * c]) * dth
+            n_contact += contact
+            n_stick += stick
+    out = acc / np.array([2 * math.pi, 2 * math.pi, math.pi, math.pi, math.pi, math.pi])
+    return dict(zip(FIELDS[:6], out), stick_fraction=n_stick / max(n_contact, 1))
+
+
+CASES = {
+    "reference": (1.22e-6, 1.41e-6, -1.69, W, 0.264, 5.6, None),
+    "slider_at_rest": (1.22e-6, 1.41e-6, -1.69, W, 0.0, 5.6, None),
+    "slider_backward": (1.22e-6, 1.41e-6, -1.69, W, -0.1, 5.6, None),
+    "skewed_ellipse": (1.0e-6, 1.2e-6, -np.pi / 2 + 0.5, W, 0.1, 5.0, None),
+    "reverse_drive": (1.0e-6, 1.2e-6, 1.2, W, -0.2, 5.0, None),
+    "permanent_contact": (0.1e-6, 1.4e-6, -np.pi / 2, W, 0.2, 5.6, None),
+    "permanent_no_reversal": (0.1e-6, 1.4e-6, -np.pi / 2, W, 0.5, 5.6, None),
+    "no_reversal_in_contact": (1.22e-6, 1.41e-6, -1.69, W, 0.5, 5.6, None),
+    "long_stick": (1.22e-6, 1.41e-6, -1.69, W, 0.2, 5.6, 200e-9),
+}
+
+
+def _case(ip, name):
+    *args, u_m = CASES[name]
+    return args, (ip if u_m is None else dataclasses.replace(ip, u_m_m=u_m))
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_interface_forces_match_brute_force_time_stepping(ip, name):
+    # reference: independent explicit time stepping of Eq. 17-20 with the documented u_r rule
+    args, p = _case(ip, name)
+    bf = _brute_force(*args, p)
+    out = itf.interface_forces(*args, p, n_theta=1024)  # discretisation: see the n_theta tests below
+    scale = p.mu_p * args[5] + p.sigma_N_s_per_m * args[3] * args[1]
+    for f in FIELDS[:6]:
+        assert getattr(out, f) == pytest.approx(bf[f], rel=1e-3, abs=1e-3 * scale), f
+    assert out.stick_fraction == pytest.approx(bf["stick_fraction"], abs=2e-3)
+    assert out.F_N_mean_N == pytest.approx(args[5], rel=1e-4)
+    a_expected = np.pi if CASES[name][0] * p.k_e_N_per_m <= args[5] else float(
+        itf.contact_half_angle_rad(args[0], args[5], p.k_e_N_per_m))
+    assert out.phi_c_rad == pytest.approx(2 * a_expected, rel=1e-12)
+
+
+def test_friction_drives_the_slider_in_the_tip_direction(ip):
+    # reference: physics - with the ideal ellipse (delta = -pi/2) a resting slider is pushed toward +,
+    # with delta = +pi/2 toward -; the two are mirror images
+    fwd = itf.interface_forces(1.22e-6, 1.41e-6, -np.pi / 2, W, 0.0, 5.6, ip)
+    bwd = itf.interface_forces(1.22e-6, 1.41e-6, +np.pi / 2, W, 0.0, 5.6, ip)
+    assert fwd.F_d_N > 0
+    assert bwd.F_d_N == pytest.approx(-fwd.F_d_N, rel=1e-6)
+    # and the driving force decreases as the slider speeds up
+    v = np.linspace(0.0, 0.6, 13)
+    Fd = itf.interface_forces(1.22e-6, 1.41e-6, -np.pi / 2, W, v, 5.6, ip).F_d_N
+    assert np.all(np.diff(Fd) < 0)
+
+
+# ---------------------------------------------------------------------------
+# Numerics: convergence in n_theta, vectorisation
+# ---------------------------------------------------------------------------
+
+NS = [32, 64, 128, 256, 512, 1024, 2048, 4096]
+
+
+@pytest.mark.parametrize("name", ["reference", "skewed_ellipse", "permanent_contact"])
+def test_stick_slip_converges_in_n_theta(ip, name):
+    # reference: a fine solution (n_theta = 65536); error bound of first order, O(h): at most a
+    # fraction of one cell's Coulomb force per event (reset at a reversal / stick end)
+    args, p = _case(ip, name)
+    ref = itf.interface_forces(*args, p, n_theta=2 ** 16)
+    scale = p.mu_p * args[5] + p.sigma_N_s_per_m * args[3] * args[1]
+    errs = []
+    for n in NS:
+        out = itf.interface_forces(*args, p, n_theta=n)
+        errs.append(max(abs(getattr(out, f) - getattr(ref, f)) for f in FIELDS[:6]) / scale)
+    errs = np.array(errs)
+    assert np.all(errs * np.array(NS) < 1.0), errs
+    assert errs[-1] < 3e-4
+    assert errs[-1] < errs[0] / 10
+
+
+@pytest.mark.parametrize("delta", [-np.pi / 2, -1.9])
+def test_pure_slip_converges_in_n_theta_at_second_order(ip, delta):
+    # reference: fine solution; second order in the cell size (cells aligned with the sign reversals)
+    args = (1.22e-6, 1.41e-6, delta, W, 0.2, 5.6)
+    ref = itf.interface_forces(*args, ip, mode="pure_slip", n_theta=2 ** 16)
+    scale = ip.mu_p * args[5] + ip.sigma_N_s_per_m * W * args[1]
+    errs = np.array([max(abs(getattr(itf.interface_forces(*args, ip, mode="pure_slip", n_theta=n), f)
+                             - getattr(ref, f)) for f in FIELDS[:6]) / scale for n in NS])
+    order = np.log2(errs[:-1] / errs[1:])
+    assert np.all(order > 1.8), (errs, order)
+    assert errs[-1] < 1e-6
+
+
+def test_vectorised_call_equals_loop_of_scalar_calls(ip):
+    # reference: scalar calls (scalar fast path) one by one
+    rows = [c[:6] for c in CASES.values()]
+    cols = [np.array(c) for c in zip(*rows)]
+    vec = itf.interface_forces(*cols, ip)
+    for i, r in enumerate(rows):
+        sca = itf.interface_forces(*r, ip)
+        for f in FIELDS:
+            assert getattr(vec, f)[i] == pytest.approx(getattr(sca, f), rel=1e-9, abs=1e-12), f
+    # 2-D broadcasting keeps the shape
+    U_l = np.array([[0.8e-6], [1.2e-6]])
+    v = np.array([0.0, 0.1, 0.2])
+    out = itf.interface_forces(U_l, 1.4e-6, -1.69, W, v, 5.6, ip)
+    assert out.F_d_N.shape == (2, 3)
+    assert out.F_d_N[1, 2] == pytest.approx(itf.interface_forces(1.2e-6, 1.4e-6, -1.69, W, 0.2, 5.6, ip).F_d_N,
+                                            rel=1e-9)
+
+
+def test_unknown_mode_is_refused(ip):
+    # reference: documented modes only
+    with pytest.raises(ValueError, match="mode"):
+        itf.interface_forces(1e-6, 1e-6, -np.pi / 2, W, 0.0, 5.0, ip, mode="coulomb")
