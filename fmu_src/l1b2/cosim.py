@@ -20,6 +20,7 @@ from __future__ import annotations
 import atexit
 import math
 import shutil
+import warnings
 import tempfile
 import zipfile
 from dataclasses import dataclass, field
@@ -119,12 +120,14 @@ class CoSimulation:
     step_s : communication step [s]
     parameters : overrides ``{"Component.variable": value}`` applied after the SSV
     iterate : repeat each macro step until the coupling values converge
-    tol, max_iter : relative tolerance and iteration limit of the fixed-point iteration
+    tol, max_iter : tolerance and iteration limit of the fixed-point iteration; a coupling value
+        has converged when its change is below ``tol * (|value| + S)``, S the largest magnitude
+        seen so far among the coupling variables of its unit
     """
 
     def __init__(self, system: str | Path = SSD_FILE, fmu_dir: str | Path | None = None,
                  step_s: float = DEFAULT_STEP_S, parameters: Mapping[str, float] | None = None,
-                 iterate: bool = False, tol: float = 1e-8, max_iter: int = 20):
+                 iterate: bool = False, tol: float = 1e-6, max_iter: int = 30):
         if not (step_s > 0 and math.isfinite(step_s)):
             raise SimulationError(f"communication step [s] must be positive, got {step_s}")
         self._tmp = None
@@ -334,8 +337,13 @@ class CoSimulation:
         keys = [tuple(r.split(".", 1)) for r in self.record]
         rows[0] = [self.values[k] for k in keys]
         times = np.arange(n_steps + 1) * h
-        coupling = [k for k in self.values if any(self._sources.get(x) == k for x in self._sources)]
+        coupling = sorted({src for src in self._sources.values() if src[0] is not None})
+        # scale of each coupling variable: the largest magnitude so far among the coupling variables of
+        # the same unit (a force that is zero up to round-off is measured against the other forces)
+        unit = {c: inst[c[0]].vars[c[1]].unit or "1" for c in coupling}
+        scale = {c: abs(self.values[c]) for c in coupling}
         last = n_steps
+        self.unconverged_steps_ = 0
         for k in range(n_steps):
             t = k * h
             if self.iterate:
@@ -343,8 +351,17 @@ class CoSimulation:
                 guess = self.values
                 for it in range(self.max_iter):
                     new = self._pass(inst, t, h, inputs, guess)
-                    change = max(abs(new[c] - guess[c]) / max(abs(new[c]), 1e-12) for c in coupling)
-                    if change < self.tol or it == self.max_iter - 1:
+                    for c in coupling:
+                        scale[c] = max(scale[c], abs(new[c]))
+                    unit_scale = {}
+                    for c in coupling:
+                        unit_scale[unit[c]] = max(unit_scale.get(unit[c], 0.0), scale[c])
+                    change = max(abs(new[c] - guess[c]) / (abs(new[c]) + unit_scale[unit[c]] + 1e-300)
+                                 for c in coupling)
+                    if change < self.tol:
+                        break
+                    if it == self.max_iter - 1:
+                        self.unconverged_steps_ += 1
                         break
                     for n, i in inst.items():
                         i.fmu.setFMUstate(states[n])
@@ -361,6 +378,10 @@ class CoSimulation:
             if stop_when is not None and stop_when({f"{a}.{b}": v for (a, b), v in self.values.items()}):
                 last = k + 1
                 break
+        if self.unconverged_steps_:
+            warnings.warn(f"fixed-point iteration did not reach tol={self.tol} within {self.max_iter} "
+                          f"iterations in {self.unconverged_steps_} of {len(self.iterations_)} steps",
+                          RuntimeWarning, stacklevel=3)
         df = pd.DataFrame(rows[:last + 1], columns=self.record)
         df.insert(0, "time", times[:last + 1])
         units = {"time": "s", **self.units}

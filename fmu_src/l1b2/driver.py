@@ -87,7 +87,10 @@ def tank_input_impedance_ohm(omega_rad_s, L_H, C_F, R_m_ohm):
 def tank_resonance_rad_s(L_H, C_F, R_m_ohm):
     """Eq. 3: ``w0 = sqrt(1/(L C) - 1/(R_m^2 C^2))`` [rad/s] (NaN if overdamped)."""
     arg = 1.0 / (L_H * C_F) - 1.0 / (R_m_ohm ** 2 * C_F ** 2)
-    return np.sqrt(np.where(arg > 0, arg, np.nan))
+    scale = 1.0 / (L_H * C_F)
+    # round-off at the boundary L = R_m^2 C (w0 = 0) must not turn into NaN
+    arg = np.where(np.abs(arg) <= 1e-12 * scale, 0.0, arg)
+    return np.sqrt(np.where(arg >= 0, arg, np.nan))
 
 
 def paper_eq2_amplitude_V(V_s_V, duty, L_H, C_F, R_m_ohm):

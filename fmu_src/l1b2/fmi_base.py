@@ -16,26 +16,34 @@ log, and the instance stays usable until the host frees it.
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real  # noqa: F401
 from pythonfmu.enums import Fmi2Status
 
 from .params import DriverParams, InterfaceParams, SliderParams, StatorParams, load_motor
 
-try:  # written into the bundled package by l1b2.fmu_build; absent in the source tree
-    from ._fmu_defaults import DEFAULTS as _BUILT_DEFAULTS
-except ImportError:  # pragma: no cover - running from the source tree
-    _BUILT_DEFAULTS = None
+#: file holding the start values, written by l1b2.fmu_build into each FMU's resources folder
+DEFAULTS_FILE = "_fmu_defaults.json"
 _SECTION_CLASSES = {"driver": DriverParams, "stator": StatorParams, "interface": InterfaceParams,
                     "slider": SliderParams}
 
 
-def default_parameters(section: str):
-    """Start values of a subsystem's parameters: the reference motor baked in at build time."""
+def default_parameters(section: str, resources: str | None = None):
+    """Start values of a subsystem's parameters.
+
+    Read from this FMU instance's own ``resources`` folder (each FMU carries
+    the values it was built with; the bundled package may be shared with
+    another FMU of the same version in the process), else, in the source
+    tree, the reference motor.
+    """
     cls = _SECTION_CLASSES[section]
-    if _BUILT_DEFAULTS is not None:  # held in memory: the FMU's folder may be gone later
-        return cls(**_BUILT_DEFAULTS[section])
+    if resources:
+        path = Path(resources) / DEFAULTS_FILE
+        if path.exists():
+            return cls(**json.loads(path.read_text())[section])
     return getattr(load_motor(), section)
 
 
@@ -57,7 +65,7 @@ class BlockAdapter:
 
     def __init__(self, slave: Fmi2Slave, block_cls, section: str):
         self.slave = slave
-        params = default_parameters(section)
+        params = default_parameters(section, slave.resources)
         self.block = block_cls(params)
         self.failed = None
         for var in block_cls.variables(params):

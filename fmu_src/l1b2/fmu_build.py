@@ -15,9 +15,9 @@ What the build adds to a plain ``pythonfmu build``:
   ``ModelStructure`` (outputs and initial unknowns), author, version,
   license, and a GUID that is stable for identical content (libcosim caches
   extracted FMUs by GUID, so different content must never share one).
-* **Defaults**: the reference motor's values are baked in as start values
-  (module ``_fmu_defaults`` of the bundled package, imported once and kept in
-  memory).
+* **Defaults**: the reference motor's values (or any other parameter set)
+  are baked in as start values, in ``resources/_fmu_defaults.json`` of each
+  FMU, read by every instance from its own resources folder.
 """
 
 from __future__ import annotations
@@ -204,15 +204,15 @@ def build_fmu(name: str, dest_dir: str | Path, *, mp: MotorParams | None = None,
         shutil.copytree(PACKAGE_DIR, pkg_dir, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
         for py in pkg_dir.rglob("*.py"):
             py.write_text(rewrite_imports(py.read_text(), package))
-        (pkg_dir / "_fmu_defaults.py").write_text(
-            '"""Start values baked in at build time (generated)."""\nDEFAULTS = ' + repr(defaults) + "\n")
+        defaults_file = td / "_fmu_defaults.json"  # lands in resources/, read by each instance
+        defaults_file.write_text(json.dumps(defaults, indent=1))
         for rel, data in (extra_files or {}).items():
             (pkg_dir / rel).write_bytes(data)
         script = td / f"{module}.py"
         script.write_text(rewrite_imports(script_src.read_text(), package))
         dest = dest_dir / f"{name}.fmu"
         try:
-            FmuBuilder.build_FMU(script, dest=dest, project_files=[pkg_dir],
+            FmuBuilder.build_FMU(script, dest=dest, project_files=[pkg_dir, defaults_file],
                                  canGetAndSetFMUstate=True, canSerializeFMUstate=True)
         finally:
             while str(td) in sys.path:

@@ -106,6 +106,7 @@ import warnings
 from typing import Any, Mapping
 
 import numpy as np
+import numpy.polynomial.legendre as npleg
 from numpy.polynomial.legendre import legvander
 from scipy import stats
 from scipy.linalg import qr as _qr
@@ -455,6 +456,28 @@ class _Problem:
             U[fl == STEP_STUCK] = 0.0
         return U
 
+    def start_gain(self, theta):
+        """g = d v_pred / d v_start on the residual rows (free run; zeros for one_step).
+
+        The free run starts from the *measured* first speed, whose noise
+        propagates as ``g * delta0`` into every residual of the run.
+        """
+        if self.criterion != "free_run":
+            return np.zeros(self.sel.size)
+        c = self._evaluate(theta)
+        a = c["a"]
+        flags = c["flags"]
+        if flags.any():
+            a = a.copy()
+            rev = np.flatnonzero(flags == STEP_REVERSAL)
+            if rev.size:
+                a[rev] = self._sensitivity_rows(theta, c, rev, [0])[0]
+            a[flags == STEP_STUCK] = 0.0
+        with np.errstate(over="ignore", invalid="ignore"):
+            g = packed_linear_recursion(self.lay, a, np.zeros((self.lay.n, 1)), S0=1.0)
+        g = g[self.sel, 0]
+        return np.where(np.isfinite(g), g, 0.0)
+
     def predict_all(self, theta):
         """Predictions for every sample (flat order); one_step: NaN at run starts."""
         v = self._evaluate(theta)["v"]
@@ -518,10 +541,43 @@ def _reduced_linear_fit(data: _Data, order, m_s, include_load_inertia, s_center,
     y = m_eff[ks] * (vp[ks + w] - vp[ks]) + (cumT[ks + w] - cumT[ks])
     cn = np.sqrt(np.sum(M * M, axis=0))
     cn[cn == 0] = 1.0
-    sol, *_ = np.linalg.lstsq(M / cn, y, rcond=1e-12)
+    Q, Rm = np.linalg.qr(M / cn)
+    qy = Q.T @ y
+    sol, *_ = np.linalg.lstsq(Rm, qy, rcond=1e-12)
     sol = sol / cn
     n1 = order + 1
-    return sol[:n1], sol[n1 : 2 * n1], sol[2 * n1 :], float(np.median(np.abs(vp))), float(np.median(data.V0))
+    return {
+        "D": sol[:n1],
+        "B": sol[n1 : 2 * n1],
+        "C": sol[2 * n1 :],
+        "R": Rm,
+        "qy": qy,
+        "cn": cn,
+        "v_typ": float(np.median(np.abs(vp))),
+        "V_typ": float(np.median(data.V0)),
+        "n_windows": int(ks.size),
+        "window": w,
+    }
+
+
+def _reduced_of_theta(theta, order, m_s, kappa):
+    """Legendre coefficients of D (n+1), B' (n+1) and C (2n+1) implied by theta."""
+    n1 = order + 1
+    c_r, sig, mu, k0, musd = theta[:5]
+    al = theta[5 : 5 + n1]
+    be = theta[5 + n1 : 5 + 2 * n1]
+    pp = theta[5 + 2 * n1 :]
+    g1 = float(drive_factor(k0))
+    G = float(G_of_k0(k0))
+    Dc = -sig * al
+    Dc = Dc.copy()
+    Dc[0] += c_r + 0.5 * sig
+    Cc = np.zeros(2 * order + 1)
+    Cc[:n1] += (mu * g1 - musd * kappa) * pp
+    prod = npleg.legmul(pp, al)
+    Cc[: prod.size] -= mu * 0.5 * np.pi * G * prod
+    Cc[0] -= musd * G_ACC * m_s
+    return np.concatenate([Dc, be, Cc])
 
 
 def _grid(order):
@@ -582,39 +638,171 @@ def _map_reduced_to_theta(dco, bco, cco, fixed, order, m_s, kappa):
     return np.clip(theta, lo, np.minimum(hi, np.where(np.isfinite(hi), hi, np.inf)))
 
 
-def _refine_function_space(theta0, varied, dco, bco, cco, order, m_s, kappa, v_typ, V_typ):
-    """Least squares of the Eq. 35 structure to the reduced functions D, B', C on a grid."""
-    n1 = order + 1
-    xg = _grid(order)
-    Lg = legvander(xg, order)
-    L2g = legvander(xg, 2 * order)
-    Dg, Bg, Cg = Lg @ dco, Lg @ bco, L2g @ cco
-    core = _Core(Lg, np.ones_like(xg), np.zeros_like(xg), np.ones_like(xg), np.ones_like(xg), m_s, kappa)
-    lo, hi = PredictorParams.bounds(order)
+def _equation_error_fit(theta_start, varied, red, order, m_s, kappa, n_starts, seed, spread, floor=0.25):
+    """Fit the Eq. 35 structure to the window-integrated equation error.
+
+    Minimises ``|M g(theta) - y|^2`` (``g`` = reduced coefficients of D, B',
+    C implied by theta, see :func:`_reduced_of_theta`), evaluated cheaply
+    through the QR factor of the linear problem. This weights the reduced
+    functions by how well the data determine them (e.g. the small position
+    variation of D is weakly determined). The bilinear P*A' term makes the
+    problem multi-modal (the order-2n polynomial C(s) can be split into the
+    factors P(s) and (a - b A'(s)) in several ways), so it is multi-started
+    from ``theta_start`` and scrambled Sobol points in the box
+    ``z0 +- spread * max(|z0|, floor)`` (scaled coordinates). Returns the
+    distinct local minima as a list of ``(cost, theta)``, best first.
+    """
     idx = np.flatnonzero(varied)
     if idx.size == 0:
-        return theta0
-    scale = np.maximum(np.abs(theta0[idx]), 1e-6)
+        return [(float("nan"), theta_start)]
+    lo, hi = PredictorParams.bounds(order)
+    Rm, qy, cn = red["R"], red["qy"], red["cn"]
+    scale = _param_scale(theta_start, order)[idx]
+    lb, ub = lo[idx] / scale, hi[idx] / scale
 
     def fun(zv):
-        th = theta0.copy()
+        th = theta_start.copy()
         th[idx] = zv * scale
-        Ap, P, D, X, Fr = core.terms(th)
-        Bp = Lg @ th[5 + n1 : 5 + 2 * n1]
-        C = X - Bp - Fr  # mp = 0 and V0 = 1 on the grid
-        return np.concatenate([v_typ * (D - Dg), V_typ * (Bp - Bg), C - Cg])
+        return Rm @ (_reduced_of_theta(th, order, m_s, kappa) * cn) - qy
 
-    z0 = theta0[idx] / scale
-    lb = lo[idx] / scale
-    ub = hi[idx] / scale
-    z0 = np.clip(z0, lb, ub)
-    try:
-        res = least_squares(fun, z0, bounds=(lb, ub), method="trf", x_scale=1.0, max_nfev=200)
-        th = theta0.copy()
-        th[idx] = res.x * scale
-        return th
-    except (ValueError, np.linalg.LinAlgError):
-        return theta0
+    z0 = _strictly_inside(theta_start[idx] / scale, lb, ub)
+    starts = [z0] + [
+        _strictly_inside(z, lb, ub) for z in _sobol_box(z0, n_starts - 1, seed, spread, floor)
+    ]
+    sols = []
+    for zs in starts:
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                res = least_squares(fun, zs, bounds=(lb, ub), method="trf", x_scale=1.0, max_nfev=50 * idx.size)
+        except (ValueError, np.linalg.LinAlgError):
+            continue
+        if np.isfinite(res.cost):
+            sols.append((float(res.cost), res.x))
+    if not sols:
+        return [(float("nan"), theta_start)]
+    sols.sort(key=lambda s: s[0])
+    distinct = []
+    for cost, x in sols:
+        if all(np.max(np.abs(x - y)) > 1e-2 for _, y in distinct):
+            distinct.append((cost, x))
+    out = []
+    for cost, x in distinct:
+        th = theta_start.copy()
+        th[idx] = x * scale
+        out.append((cost, th))
+    return out
+
+
+def _param_scale(theta, order):
+    """Typical magnitudes: |value| (with floors) for scalars, group max for polynomials."""
+    n1 = order + 1
+    scale = np.empty(theta.size)
+    floors = {"c_r": 1e-3, "sigma": 1e-4, "mu": 1e-2, "k0": 0.05, "mu_sd": 1e-2}
+    for i, nm in enumerate(SCALAR_NAMES):
+        scale[i] = max(abs(theta[i]), floors[nm])
+    for g in range(3):
+        sl = slice(5 + g * n1, 5 + (g + 1) * n1)
+        scale[sl] = max(float(np.max(np.abs(theta[sl]))), 1e-12)
+    return scale
+
+
+def _strictly_inside(z, lb, ub):
+    z = np.clip(z, lb, ub)
+    fin = np.isfinite(ub)
+    top = np.where(fin, ub - 1e-9 * np.maximum(np.abs(np.where(fin, ub, 0.0)), 1.0), np.inf)
+    return np.minimum(z, top)
+
+
+def _sobol_box(z0, n, seed, spread, floor=0.05):
+    """n scrambled-Sobol points in z0 +- spread*max(|z0|, floor)."""
+    if n <= 0:
+        return []
+    from scipy.stats import qmc
+
+    m = int(math.ceil(math.log2(n))) if n > 1 else 0
+    sob = qmc.Sobol(d=z0.size, scramble=True, seed=seed)
+    u = sob.random_base2(m)[:n]
+    hw = spread * np.maximum(np.abs(z0), floor)
+    return [z0 + (2.0 * row - 1.0) * hw for row in u]
+
+
+class _NoiseModel:
+    """Gaussian residual covariance: per run ``R_r (I + g g^T)``.
+
+    ``R_r`` is the run's measurement-noise variance (``"per_run"``, floored
+    at 10 % of the median, or ``"common"``). ``g = d v_pred / d v_start`` is
+    the propagation of the noise of the measured start speed into the free
+    run (rank-one, same variance as every other sample); ``g = 0`` for the
+    one-step criterion or ``start_noise=False``. Whitening uses
+    ``(I + g g^T)^(-1/2) = I - c g g^T``, ``c = (1 - (1 + g.g)^(-1/2)) / g.g``.
+    """
+
+    def __init__(self, run_sel, n_runs, mode):
+        self.run_sel = run_sel
+        self.n_runs = n_runs
+        self.mode = mode
+        self.n = run_sel.size
+        self.counts = np.bincount(run_sel, minlength=n_runs)
+        self.R = np.ones(n_runs)
+        self.g = None
+        self.gg = np.zeros(n_runs)
+        self._sqrtR = np.ones(self.n)
+
+    def set_start_gain(self, g):
+        from scipy.sparse import csr_matrix
+
+        g = np.asarray(g, float)
+        self.g = g
+        gg = np.bincount(self.run_sel, weights=g * g, minlength=self.n_runs)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            c = np.where(gg > 0, (1.0 - 1.0 / np.sqrt(1.0 + gg)) / gg, 0.0)
+        self.gg = gg
+        self.cg = c[self.run_sel] * g
+        self.G = csr_matrix((g, (self.run_sel, np.arange(self.n))), shape=(self.n_runs, self.n))
+
+    def W(self, x):
+        """(I + g g^T)^(-1/2) x, run by run (x: vector or matrix with residual rows)."""
+        if self.g is None:
+            return x
+        proj = self.G @ x
+        if x.ndim == 1:
+            return x - self.cg * proj[self.run_sel]
+        return x - self.cg[:, None] * proj[self.run_sel]
+
+    def weighted(self, x):
+        y = self.W(x)
+        if y.ndim == 1:
+            return y / self._sqrtR
+        return y / self._sqrtR[:, None]
+
+    def update_R(self, r):
+        """ML variances from the whitened residuals; returns the max relative change."""
+        w = self.W(r)
+        ss = np.bincount(self.run_sel, weights=w * w, minlength=self.n_runs)
+        cnt = self.counts
+        if self.mode == "common":
+            new = np.full(self.n_runs, max(float(np.sum(ss)) / max(self.n, 1), 1e-300))
+        else:
+            var = np.where(cnt > 0, ss / np.maximum(cnt, 1), np.nan)
+            med = float(np.nanmedian(var)) if np.any(cnt > 0) else 1.0
+            if not np.isfinite(med) or med <= 0:
+                med = 1e-300
+            new = np.where(np.isfinite(var), np.maximum(var, 0.1 * med), med)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            change = float(np.nanmax(np.abs(new / self.R - 1.0)))
+        self.R = new
+        self._sqrtR = np.sqrt(new[self.run_sel])
+        return change
+
+    def loglik(self, r):
+        w = self.W(r)
+        quad = np.bincount(self.run_sel, weights=w * w, minlength=self.n_runs)
+        has = self.counts > 0
+        R = self.R[has]
+        return float(
+            -0.5 * np.sum(self.counts[has] * np.log(2 * np.pi * R) + np.log1p(self.gg[has]) + quad[has] / R)
+        )
 
 
 # ---------------------------------------------------------------------------
@@ -660,6 +848,10 @@ class PredictorIdentifier:
     start_spread : relative half-width of the global-search box.
     max_outer : maximum number of (theta, R) alternations.
     svd_rtol : relative singular-value threshold for non-identifiable directions.
+    tol : ftol = xtol = gtol of every local least_squares.
+    start_noise : free run: model the noise of the measured start speed of each
+        run, which propagates through the recursion (residual covariance
+        ``R_r (I + g g^T)``, ``g = d v_pred/d v_start``); see :class:`_NoiseModel`.
     """
 
     def __init__(
@@ -677,6 +869,7 @@ class PredictorIdentifier:
         max_outer: int = 5,
         svd_rtol: float = 1e-8,
         tol: float = 1e-10,
+        start_noise: bool = True,
         verbose: bool = False,
     ):
         self.order = int(order)
@@ -692,6 +885,7 @@ class PredictorIdentifier:
         self.max_outer = int(max_outer)
         self.svd_rtol = float(svd_rtol)
         self.tol = float(tol)
+        self.start_noise = bool(start_noise)
         self.verbose = bool(verbose)
         if criterion not in ("free_run", "one_step"):
             raise IdentificationError(f"criterion must be 'free_run' or 'one_step', got {criterion!r}")
@@ -770,41 +964,37 @@ class PredictorIdentifier:
         s_half = 0.5 * (s_hi - s_lo)
 
         # ---- data-driven centre ------------------------------------------
-        dco, bco, cco, v_typ, V_typ = _reduced_linear_fit(
-            data, self.order, m_s, self.include_load_inertia, s_center, s_half
-        )
+        red = _reduced_linear_fit(data, self.order, m_s, self.include_load_inertia, s_center, s_half)
+        dco, bco, cco = red["D"], red["B"], red["C"]
         fixed_vals = {k: v for k, v in fixed_in.items() if v is not None}
         theta_conv = _map_reduced_to_theta(dco, bco, cco, fixed_vals, self.order, m_s, self.kappa)
         varied = np.ones(p_all, dtype=bool)
         for k in fixed_in:
             varied[names.index(k)] = False
-        theta0 = _refine_function_space(
-            theta_conv, varied, dco, bco, cco, self.order, m_s, self.kappa, v_typ, V_typ
+        ee = _equation_error_fit(
+            theta_conv, varied, red, self.order, m_s, self.kappa,
+            max(32, 8 * self.n_starts), self.seed, 1.0,
         )
+        theta0 = ee[0][1].copy()
         # pin fixed-without-value at the centre
         fixed_final = {k: (theta0[names.index(k)] if v is None else v) for k, v in fixed_in.items()}
         for k, v in fixed_final.items():
             theta0[names.index(k)] = v
-        self.reduced_ = {"D": dco.tolist(), "B_prime": bco.tolist(), "C": cco.tolist()}
+        self.reduced_ = {
+            "D": dco.tolist(), "B_prime": bco.tolist(), "C": cco.tolist(),
+            "n_windows": red["n_windows"], "window_samples": red["window"],
+            "equation_error_minima": [c for c, _ in ee],
+        }
         self.theta_init_ = theta0.copy()
 
         # ---- scaling -------------------------------------------------------
-        n1 = self.order + 1
-        scale = np.empty(p_all)
-        floors = {"c_r": 1e-3, "sigma": 1e-4, "mu": 1e-2, "k0": 0.05, "mu_sd": 1e-2}
-        for i, nm in enumerate(SCALAR_NAMES):
-            scale[i] = max(abs(theta0[i]), floors[nm])
-        for g in range(3):
-            sl = slice(5 + g * n1, 5 + (g + 1) * n1)
-            scale[sl] = max(float(np.max(np.abs(theta0[sl]))), 1e-12)
+        scale = _param_scale(theta0, self.order)
         lo, hi = PredictorParams.bounds(self.order)
         vidx = np.flatnonzero(varied)
         sv_scale = scale[vidx]
         zlo = lo[vidx] / sv_scale
         zhi = hi[vidx] / sv_scale
-        # keep strictly feasible
-        z_centre = np.clip(theta0[vidx] / sv_scale, zlo, zhi)
-        z_centre = np.where(np.isfinite(zhi) & (z_centre >= zhi), zhi - 1e-9 * np.abs(zhi), z_centre)
+        z_centre = _strictly_inside(theta0[vidx] / sv_scale, zlo, zhi)
 
         problem = _Problem(
             data, self.order, self.kappa, self.include_load_inertia, self.criterion, s_center, s_half, m_s
@@ -818,36 +1008,28 @@ class PredictorIdentifier:
             th[vidx] = z * sv_scale
             return th
 
-        def estimate_R(r):
-            ss = np.bincount(run_sel, weights=r * r, minlength=lay.R)
-            if self.noise == "common":
-                return np.full(lay.R, max(float(np.sum(ss)) / max(n_res, 1), 1e-300))
-            cnt = runs_with_res
-            var = np.where(cnt > 0, ss / np.maximum(cnt, 1), np.nan)
-            med = float(np.nanmedian(var)) if np.any(cnt > 0) else 1.0
-            if not np.isfinite(med) or med <= 0:
-                med = max(float(np.nanmax(var)) if np.any(np.isfinite(var)) else 1.0, 1e-300)
-            floor = 0.1 * med
-            var = np.where(np.isfinite(var), np.maximum(var, floor), med)
-            return var
-
-        R_cur = None
-        weights = None
+        noise = _NoiseModel(run_sel, lay.R, self.noise)
 
         def fun(z):
             r = problem.residual(theta_of(z))
-            out = r * weights
+            out = noise.weighted(r)
             if not np.all(np.isfinite(out)):
                 out = np.where(np.isfinite(out), out, 1e10)
             return out
 
         def jac(z):
             J = problem.jacobian(theta_of(z), vidx)
-            J *= weights[:, None]
+            J = noise.weighted(J)
             J *= sv_scale[None, :]
             if not np.all(np.isfinite(J)):
                 J = np.where(np.isfinite(J), J, 0.0)
             return J
+
+        def update_noise(theta):
+            """Re-estimate g (start-speed propagation) and R at theta; returns max rel. R change."""
+            if self.start_noise:
+                noise.set_start_gain(problem.start_gain(theta))
+            return noise.update_R(problem.residual(theta))
 
         r0 = problem.residual(theta_of(z_centre))
         if not np.all(np.isfinite(r0)):
@@ -855,8 +1037,8 @@ class PredictorIdentifier:
                 "the data-driven initial guess gives a non-finite prediction; "
                 "check units (m, m/s, V, kg) and slider_mass_kg"
             )
-        R_cur = estimate_R(r0)
-        weights = 1.0 / np.sqrt(R_cur[run_sel])
+        update_noise(theta_of(z_centre))
+        R_cur = noise.R
 
         def local(z_init):
             t0 = time.perf_counter()
@@ -877,19 +1059,17 @@ class PredictorIdentifier:
             return res, time.perf_counter() - t0
 
         # ---- global search (first outer iteration) ---------------------------
+        # starts: the distinct equation-error minima (best first), then Sobol
+        # points around the best one
         starts = [z_centre]
-        if self.n_starts > 1:
-            from scipy.stats import qmc
-
-            m = int(math.ceil(math.log2(max(self.n_starts - 1, 1)))) if self.n_starts > 2 else 0
-            sob = qmc.Sobol(d=vidx.size, scramble=True, seed=self.seed)
-            u = sob.random_base2(m)[: self.n_starts - 1]
-            hw = self.start_spread * np.maximum(np.abs(z_centre), 0.05)
-            for row in u:
-                z = z_centre + (2.0 * row - 1.0) * hw
-                z = np.clip(z, zlo, zhi)
-                z = np.where(np.isfinite(zhi) & (z >= zhi), zhi - 1e-9 * np.abs(zhi), z)
-                starts.append(z)
+        for _, th_ee in ee[1:]:
+            if len(starts) >= self.n_starts:
+                break
+            starts.append(_strictly_inside(th_ee[vidx] / sv_scale, zlo, zhi))
+        starts += [
+            _strictly_inside(z, zlo, zhi)
+            for z in _sobol_box(z_centre, self.n_starts - len(starts), self.seed, self.start_spread)
+        ]
         records = []
         best = None
         for i, z_init in enumerate(starts):
@@ -924,11 +1104,8 @@ class PredictorIdentifier:
         final_res = best
         converged_R = False
         for it in range(1, self.max_outer + 1):
-            r = problem.residual(theta_of(z_best))
-            R_new = estimate_R(r)
-            change = float(np.max(np.abs(R_new / R_cur - 1.0)))
-            R_cur = R_new
-            weights = 1.0 / np.sqrt(R_cur[run_sel])
+            change = update_noise(theta_of(z_best))
+            R_cur = noise.R
             outer_hist[-1]["R_change"] = change
             if change < 0.01:
                 converged_R = True
@@ -945,8 +1122,8 @@ class PredictorIdentifier:
 
         # ---- uncertainty --------------------------------------------------------
         r = problem.residual(theta_hat)
-        Jz = jac(z_best)  # weighted with final R, scaled
-        self._uncertainty(Jz, r, problem, R_cur, vidx, sv_scale, theta_hat, varied)
+        Jz = jac(z_best)  # whitened with the final noise model, scaled
+        self._uncertainty(Jz, r, problem, noise, vidx, sv_scale, theta_hat, varied)
 
         # ---- store ----------------------------------------------------------------
         self.m_s_ = m_s
@@ -975,19 +1152,20 @@ class PredictorIdentifier:
             "message": str(final_res.message),
             "success": bool(final_res.status > 0),
             "optimality": float(final_res.optimality),
-            "cost": float(0.5 * np.sum((r / np.sqrt(R_cur[run_sel])) ** 2)),
+            "cost": float(0.5 * np.sum(noise.weighted(r) ** 2)),
             "nfev_total": int(sum(rec.get("nfev", 0) for rec in records)
                               + sum(h.get("nfev", 0) for h in outer_hist[1:])),
         }
         self.fit_time_s_ = time.perf_counter() - t_start
         return self
 
-    def _uncertainty(self, Jz, r, problem, R, vidx, sv_scale, theta_hat, varied):
+    def _uncertainty(self, Jz, r_raw, problem, noise, vidx, sv_scale, theta_hat, varied):
         names = self.param_names
         p_all = len(names)
         run_sel = problem.run_sel
         lay = problem.lay
-        n_res = r.size
+        n_res = r_raw.size
+        r = noise.W(r_raw)  # residuals decorrelated from the start-speed noise
         # AR(1) factor per run from the lag-1 autocorrelation of consecutive residuals
         order_ = np.lexsort((problem.sample_sel, run_sel))
         rs = r[order_]
@@ -1060,8 +1238,7 @@ class PredictorIdentifier:
         self.identifiable_[vidx[~affected_v]] = True
         self.k_params_ = k_ident
         # log-likelihood, information criteria
-        Rr = R[run_sel]
-        self.loglik_ = float(-0.5 * np.sum(np.log(2 * np.pi * Rr) + r * r / Rr))
+        self.loglik_ = noise.loglik(r_raw)
         self.aic_ = 2 * k_ident - 2 * self.loglik_
         self.bic_ = k_ident * math.log(max(n_res, 1)) - 2 * self.loglik_
         # describe the null directions
@@ -1236,6 +1413,7 @@ class PredictorIdentifier:
                 "max_outer": self.max_outer,
                 "svd_rtol": self.svd_rtol,
                 "tol": self.tol,
+                "start_noise": self.start_noise,
             },
             "slider_mass_kg": self.m_s_,
             "predictor_params": self.params_.to_dict(),

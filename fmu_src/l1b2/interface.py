@@ -35,9 +35,12 @@ reversal the relative motion never resets and the contact slides.
 contact angle fixed at ``phi_c = pi`` (``F_N = pi F_p sin theta`` on
 ``[0, pi]``, keeping the period mean ``F_p``) and no stick (``u_m -> 0``).
 
-Numerics: the contact window is split into ``n_theta`` equal cells
-(midpoint rule); the sign of the relative velocity is integrated exactly per
-cell from its linear interpolation, so the sign jumps cost O(h^2).
+Numerics: the contact window is split at the relative-velocity reversals
+into up to three segments of ``n_theta // 3`` equal cells each (midpoint
+rule). Inside a segment the friction sign is constant and ``u_r`` grows
+monotonically from the segment start; the stick-to-slip switch inside a cell
+is located by linear interpolation. The period averages are second order in
+the cell size and smooth in the inputs (needed by the steady-state solver).
 """
 
 from __future__ import annotations
@@ -129,15 +132,17 @@ def mean_normal_force_N(U_l_m, a_rad, k_e_N_per_m):
 def pure_slip_drive_force_N(U_w_m, omega_rad_s, v_m_s, F_p_N, sigma_N_s_per_m, mu_p):
     """Closed-form period-mean driving force for pure slip, phi_c = pi, ideal phase (physics notes).
 
-    ``F_d = sigma (w U_w / pi - v / 2) + mu F_p (2 sqrt(1 - k0^2) - 1)``, ``k0 = v / (w U_w)``;
-    for ``|k0| >= 1`` the relative velocity never reverses and the Coulomb
-    part is ``-sign(v) mu F_p``. Eq. 23 is the fundamental of the same force.
+    ``F_d = sigma (w U_w / pi - v / 2) + mu F_p (2 sqrt(1 - k0^2) - 1)``, ``k0 = v / (w U_w)``
+    for ``0 <= k0 < 1``. Outside, the relative velocity keeps one sign over the
+    contact half period: the Coulomb part is ``+mu F_p`` for ``k0 <= 0`` and
+    ``-mu F_p`` for ``k0 >= 1``. Eq. 23 is the fundamental of the same force.
     """
     u = np.asarray(omega_rad_s, float) * np.asarray(U_w_m, float)
     v = np.asarray(v_m_s, float)
     with np.errstate(divide="ignore", invalid="ignore"):
         k = np.where(u > 0, v / u, np.sign(v) * np.inf)
-    coul = np.where(np.abs(k) < 1, 2 * np.sqrt(np.clip(1 - k * k, 0, None)) - 1, -np.sign(v))
+    # k0 <= 0: the relative velocity never reverses within contact (+1); k0 >= 1: never positive (-1)
+    coul = np.where(k >= 1, -1.0, np.where(k <= 0, 1.0, 2 * np.sqrt(np.clip(1 - k * k, 0, None)) - 1))
     return sigma_N_s_per_m * (u / np.pi - v / 2) + mu_p * np.asarray(F_p_N, float) * coul
 
 
@@ -145,11 +150,12 @@ def pure_slip_fundamental_N(U_w_m, omega_rad_s, v_m_s, F_p_N, sigma_N_s_per_m, m
     """Eq. 23: amplitude of the ``sin(w t)`` component of the pure-slip friction force [N].
 
     ``0.5 sigma w U_w - 2 sigma v / pi + mu F_p (sin 2 w t1 + pi/2 - 2 w t1)``
-    with ``w t1 = arcsin(v / (w U_w))`` (valid for ``|v| < w U_w``).
+    with ``w t1 = arcsin(v / (w U_w))`` for ``0 <= v <= w U_w``; ``w t1`` is
+    clipped to ``[0, pi/2]`` (no reversal within contact outside that range).
     """
     u = np.asarray(omega_rad_s, float) * np.asarray(U_w_m, float)
     v = np.asarray(v_m_s, float)
-    wt1 = np.arcsin(np.clip(v / u, -1, 1))
+    wt1 = np.arcsin(np.clip(v / u, 0, 1))
     return sigma_N_s_per_m * (0.5 * u - 2 * v / np.pi) + mu_p * np.asarray(F_p_N, float) * (
         np.sin(2 * wt1) + 0.5 * np.pi - 2 * wt1)
 
@@ -222,41 +228,47 @@ def interface_forces(U_l_m, U_w_m, delta_rad, omega_rad_s, v_m_s, F_p_N,
     # in permanent contact the first reversal is the window start itself
     rev_rel = np.where(permanent & has_rev, np.where(rev_rel < 1e-12, 0.0, rev_rel), rev_rel)
 
-    edges = np.linspace(0.0, 1.0, n_theta + 1)[None, :] * width   # relative phase at cell edges
-    mids = 0.5 * (edges[:, 1:] + edges[:, :-1])
-    h = width / n_theta
+    # Cells aligned with the breakpoints (window start, up to two reversals, window end): inside a
+    # segment the relative velocity keeps its sign and u_r accumulates from the segment start, so the
+    # midpoint rule is second order everywhere. Each segment gets n_theta // 3 cells.
+    r_sorted = np.sort(rev_rel, axis=1)
+    bounds = (np.zeros_like(width), np.minimum(r_sorted[:, :1], width), np.minimum(r_sorted[:, 1:2], width), width)
+    m = max(n_theta // 3, 1)
+    frac_m = (np.arange(m) + 0.5) / m
+    frac_e = np.arange(m + 1) / m
+    mids, hcell, seg_lo, e0, e1 = [], [], [], [], []
+    for lo, hi in zip(bounds[:-1], bounds[1:]):
+        span = hi - lo
+        mids.append(lo + span * frac_m)
+        edges = lo + span * frac_e
+        e0.append(edges[:, :-1])
+        e1.append(edges[:, 1:])
+        hcell.append(np.broadcast_to(span / m, (len(width), m)))
+        seg_lo.append(np.broadcast_to(lo, (len(width), m)))
+    mids, hcell, seg_lo, e0, e1 = (np.concatenate(x, axis=1) for x in (mids, hcell, seg_lo, e0, e1))
     th_m = start + mids
-    th_e = start + edges
 
     # Normal force at midpoints
-    F_N = np.where(permanent, F_p + amp_N * np.sin(th_m), amp_N * (np.sin(th_m) - np.cos(a)))
     if mode == "pure_slip":
         F_N = amp_N * np.sin(th_m)
+    else:
+        F_N = np.where(permanent, F_p + amp_N * np.sin(th_m), amp_N * (np.sin(th_m) - np.cos(a)))
     F_N = np.maximum(F_N, 0.0)
 
-    # Relative velocity at edges and midpoints; cell-exact sign from linear interpolation
-    rv_e = u_tip * np.cos(th_e + delta) - v
+    # Relative velocity (constant sign within a segment) and accumulated relative displacement
     rv_m = u_tip * np.cos(th_m + delta) - v
-    r0, r1 = rv_e[:, :-1], rv_e[:, 1:]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        frac_pos = np.where(r0 * r1 < 0, np.where(r0 > 0, r0 / (r0 - r1), r1 / (r1 - r0)),
-                            (r0 + r1 > 0).astype(float))
-    frac_pos = np.where((r0 == 0) & (r1 == 0), 0.5, frac_pos)
-    sgn = 2.0 * frac_pos - 1.0
+    sgn = np.sign(rv_m)
+    th_r = start + seg_lo
 
-    # Accumulated relative displacement since the latest reset (window start or reversal)
-    last = np.zeros_like(mids)
-    for k in range(rev_rel.shape[1]):
-        r_k = rev_rel[:, k:k + 1]
-        last = np.where((r_k <= mids) & (r_k > last), r_k, last)
-    th_r = start + last
-    u_r = U_w * (np.sin(th_m + delta) - np.sin(th_r + delta)) - v * (th_m - th_r) / omega
-    slides_forever = permanent & ~has_rev
+    def rel_disp(th):
+        return U_w * (np.sin(th + delta) - np.sin(th_r + delta)) - v * (th - th_r) / omega
+
+    u_r = rel_disp(th_m)
+    slides_forever = permanent & ~has_rev  # no reset ever: the contact slides
     if u_m > 0:
-        # |u_r| at the cell edges (same reset as the cell's midpoint): slip share of each cell
-        ur0 = U_w * (np.sin(th_e[:, :-1] + delta) - np.sin(th_r + delta)) - v * (th_e[:, :-1] - th_r) / omega
-        ur1 = U_w * (np.sin(th_e[:, 1:] + delta) - np.sin(th_r + delta)) - v * (th_e[:, 1:] - th_r) / omega
-        g0, g1 = np.abs(ur0) - u_m, np.abs(ur1) - u_m
+        # slip share of each cell from |u_r| - u_m at its edges (|u_r| is monotone in a segment)
+        g0 = np.abs(rel_disp(start + e0)) - u_m
+        g1 = np.abs(rel_disp(start + e1)) - u_m
         with np.errstate(divide="ignore", invalid="ignore"):
             slip = np.where(g0 * g1 < 0, np.where(g1 > 0, g1 / (g1 - g0), g0 / (g0 - g1)),
                             (g0 + g1 > 0).astype(float))
@@ -270,14 +282,16 @@ def interface_forces(U_l_m, U_w_m, delta_rad, omega_rad_s, v_m_s, F_p_N,
 
     two_pi = 2 * np.pi
     s_m, c_m = np.sin(th_m), np.cos(th_m)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        stick_share = np.where(width[:, 0] > 0, np.sum(stick * hcell, axis=1) / width[:, 0], 0.0)
     out = InterfaceOutput(
-        F_d_N=np.sum(F_f, axis=1) * h[:, 0] / two_pi,
-        F_N_mean_N=np.sum(F_N, axis=1) * h[:, 0] / two_pi,
-        F_N1_sin_N=np.sum(F_N * s_m, axis=1) * h[:, 0] / np.pi,
-        F_N1_cos_N=np.sum(F_N * c_m, axis=1) * h[:, 0] / np.pi,
-        F_T1_sin_N=np.sum(F_f * s_m, axis=1) * h[:, 0] / np.pi,
-        F_T1_cos_N=np.sum(F_f * c_m, axis=1) * h[:, 0] / np.pi,
+        F_d_N=np.sum(F_f * hcell, axis=1) / two_pi,
+        F_N_mean_N=np.sum(F_N * hcell, axis=1) / two_pi,
+        F_N1_sin_N=np.sum(F_N * s_m * hcell, axis=1) / np.pi,
+        F_N1_cos_N=np.sum(F_N * c_m * hcell, axis=1) / np.pi,
+        F_T1_sin_N=np.sum(F_f * s_m * hcell, axis=1) / np.pi,
+        F_T1_cos_N=np.sum(F_f * c_m * hcell, axis=1) / np.pi,
         phi_c_rad=(2 * a)[:, 0],
-        stick_fraction=np.mean(stick, axis=1),
+        stick_fraction=stick_share,
     )
     return InterfaceOutput(*(np.reshape(x, shape) if shape else float(x[0]) for x in out))

@@ -223,7 +223,9 @@ def _build(cls, table: dict, path: Path, section: str):
     declared = {f.name: f for f in dataclasses.fields(cls) if "unit" in f.metadata}
     for name in table:
         if name not in declared:
-            raise ParameterError(f"{path}: [{section}] unknown parameter '{name}'")
+            given = table[name].get("unit") if isinstance(table[name], dict) else None
+            raise ParameterError(f"{path}: [{section}] unknown parameter '{name}'"
+                                 + (f" [{given}]" if given is not None else ""))
     for name, f in declared.items():
         unit = f.metadata["unit"]
         if name not in table:

@@ -146,15 +146,48 @@ def b2_frequency_rad_s(sp: StatorParams, P_N, T_degC=None):
     half = sp.length_m / 2.0
     w0 = BETA_L_B2 ** 2 / sp.length_m ** 2 * np.sqrt(EI / rhoS)
     wa = np.sqrt(np.maximum(w0 ** 2 + N * _phi_slope_ratio() / sp.length_m ** 2 / rhoS, 1e-6 * w0 ** 2))
+    w_rayleigh = wa
     wb = wa * (1 + 1e-7)
     fa = _b2_characteristic(wa, N, EI, rhoS, half)
     fb = _b2_characteristic(wb, N, EI, rhoS, half)
-    for _ in range(8):
-        moved = fb != fa
-        wc = np.where(moved, wb - fb * (wb - wa) / np.where(moved, fb - fa, 1.0), wb)
-        wa, fa = wb, fb
-        wb, fb = wc, _b2_characteristic(wc, N, EI, rhoS, half)
-    return wb
+    with np.errstate(all="ignore"):
+        for _ in range(8):
+            moved = fb != fa
+            wc = np.where(moved, wb - fb * (wb - wa) / np.where(moved, fb - fa, 1.0), wb)
+            wa, fa = wb, fb
+            wb, fb = wc, _b2_characteristic(wc, N, EI, rhoS, half)
+    ok = np.isfinite(wb) & (wb > 0) & (np.abs(fb) < 1e-9) & (np.abs(wb / w_rayleigh - 1) < 0.5)
+    if np.all(ok):
+        return wb
+    # Safeguarded fallback (large axial forces): bracket the root nearest the Rayleigh estimate
+    wb = np.array(wb, dtype=float, copy=True)
+    shape = wb.shape
+    wb, w_r = wb.reshape(-1), np.broadcast_to(w_rayleigh, shape).reshape(-1)
+    Nf, EIf = np.broadcast_to(N, shape).reshape(-1), np.broadcast_to(EI, shape).reshape(-1)
+    w0f = np.broadcast_to(w0, shape).reshape(-1)
+    for i in np.flatnonzero(~np.broadcast_to(ok, shape).reshape(-1)):
+        wb[i] = _b2_root_bracketed(w_r[i], w0f[i], Nf[i], EIf[i], rhoS, half)
+    return wb.reshape(shape)
+
+
+def _b2_root_bracketed(w_guess, w0, N, EI, rhoS, half) -> float:
+    """Root of the B2 frequency equation in ``(0, 2 w0]`` nearest ``w_guess`` (scan + Brent).
+
+    Below ``2 w0`` the antisymmetric family has only the B2 root (the next,
+    B4, lies at 3.2 w0) besides, under tension, the stiffened rigid rotation;
+    the root nearest the Rayleigh estimate is B2. NaN when there is none
+    (beyond the buckling load).
+    """
+    from scipy.optimize import brentq
+    f = lambda w: float(_b2_characteristic(w, N, EI, rhoS, half))  # noqa: E731
+    grid = w0 * np.geomspace(1e-3, 2.0, 400)
+    with np.errstate(all="ignore"):
+        vals = np.array([f(w) for w in grid])
+    sign_change = np.flatnonzero(np.isfinite(vals[:-1]) & np.isfinite(vals[1:]) & (vals[:-1] * vals[1:] < 0))
+    if sign_change.size == 0:
+        return float("nan")
+    j = sign_change[np.argmin(np.abs(np.log(grid[sign_change] / w_guess)))]
+    return float(brentq(f, grid[j], grid[j + 1], xtol=1e-12 * grid[j], rtol=1e-14))
 
 
 class B2Shape(NamedTuple):
