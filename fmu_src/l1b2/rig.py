@@ -323,13 +323,18 @@ def sidecar_meta(mp: MotorParams, plan: RigPlan, description: str) -> dict:
 
 def write_experiment(df: pd.DataFrame, out_dir, mp: MotorParams, plan: RigPlan, truth: dict,
                      test_abs_loads=(0.05,)) -> dict:
-    """Write ``all.csv``, the paper's ``train.csv``/``test.csv`` split and sidecars, and ``rig_truth.json``."""
+    """Write ``all.csv``, the paper's ``train.csv``/``test.csv`` split and sidecars, and ``rig_truth.json``.
+
+    A split with no runs (the plan has no load of ``test_abs_loads``, or only
+    those) is not written; the returned dict names the files written.
+    """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     meta = sidecar_meta(mp, plan, "virtual L1B2 rig (l1b2 rig): co-simulated reference motor")
     is_test = np.isclose(np.abs(df[dataio.LOAD].to_numpy()), np.array(test_abs_loads)[:, None], atol=1e-9).any(axis=0)
     paths = {}
     for name, part in (("all", df), ("train", df[~is_test]), ("test", df[is_test])):
-        paths[name] = dataio.write_measurements(part.reset_index(drop=True), out / f"{name}.csv", meta)
+        if len(part):  # a plan without the test loads has no test split
+            paths[name] = dataio.write_measurements(part.reset_index(drop=True), out / f"{name}.csv", meta)
     (out / "rig_truth.json").write_text(json.dumps(truth, indent=1))
     return paths

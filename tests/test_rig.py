@@ -1,0 +1,162 @@
+"""Virtual rig: the paper's experiment (Sect. 5.1, Fig. 9) on the co-simulated motor."""
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from l1b2 import data as dataio
+from l1b2 import plots
+from l1b2.cli import main as cli_main
+from l1b2.metrics import evaluation_mask
+from l1b2.params import load_motor
+from l1b2.rig import EFFECTS, RigPlan, apply_overrides, run_experiment, write_experiment
+
+PLAN = RigPlan(voltages_V=(220.0, 272.0, 324.0), loads_kg=(-0.05, 0.0, 0.05), step_s=1e-3)
+
+
+@pytest.fixture(scope="module")
+def rig_data():
+    df, truth = run_experiment(PLAN, engine="inprocess", jobs=1)
+    return df, truth
+
+
+def _mid_speed(df, V, load, direction):
+    g = df[np.isclose(df.voltage_V, V) & np.isclose(df.load_kg, load) & (df.direction == direction)]
+    mid = g[np.abs(g.position_m) < 0.005]
+    return float(np.mean(np.abs(mid.speed_m_s)))
+
+
+def test_every_run_traverses_the_stroke(rig_data):
+    # reference: each run starts at rest at one end stop and ends at the other (paper Sect. 5.1)
+    df, _ = rig_data
+    mp = load_motor()
+    assert df.run.nunique() == len(PLAN.voltages_V) * len(PLAN.loads_kg) * 2
+    for _, g in df.groupby("run"):
+        d = g.direction.iloc[0]
+        start, end = (mp.slider.s_min_m, mp.slider.s_max_m) if d > 0 else (mp.slider.s_max_m, mp.slider.s_min_m)
+        assert g.position_m.iloc[0] == pytest.approx(start, abs=1e-7)
+        assert g.position_m.iloc[-1] == pytest.approx(end, abs=1e-7)
+
+
+def test_speed_rises_with_voltage_and_falls_with_opposing_load(rig_data):
+    # reference: paper Fig. 9(a) and 9(b)
+    df, _ = rig_data
+    for d in (1, -1):
+        v = [_mid_speed(df, V, 0.0, d) for V in PLAN.voltages_V]
+        assert np.all(np.diff(v) > 0.01), v
+        # a positive load opposes +1 runs and assists -1 runs (data format)
+        opp, free, assist = (_mid_speed(df, 324.0, d * L, d) for L in (0.05, 0.0, -0.05))
+        assert opp < free - 0.02 < assist - 0.04
+
+
+def test_speed_varies_with_position(rig_data):
+    # reference: paper Fig. 9(a), physics notes: 5-20 % over the stroke at constant input
+    df, _ = rig_data
+    g = df[(df.voltage_V == 324.0) & (df.load_kg == 0.0) & (df.direction == 1)].reset_index(drop=True)
+    m = evaluation_mask(g) & (g.position_m.to_numpy() > -0.01)  # after the acceleration
+    v = np.abs(g.speed_m_s.to_numpy()[m])
+    assert 0.03 < (v.max() - v.min()) / v.mean() < 0.25
+
+
+def test_speed_is_close_to_proportional_to_tip_velocity(rig_data):
+    # reference: paper Fig. 9(c): v_s linear in omega*U_w with R^2 >= 0.95
+    df, _ = rig_data
+    fit = plots.fig9c_fit(df)
+    assert fit["r2"] >= 0.95
+    assert 0.2 < fit["k0"] < 1.5
+
+
+def test_mirrored_runs_give_mirrored_speeds(rig_data):
+    # reference: the reference motor is symmetric: (+1, load L) mirrors (-1, load -L); the runs come from
+    # opposite ends over an asymmetric preload profile, so the slider's lag (tens of ms) differs slightly
+    df, _ = rig_data
+    for L in (0.0, 0.05):
+        assert _mid_speed(df, 272.0, L, 1) == pytest.approx(_mid_speed(df, 272.0, -L, -1), rel=0.02)
+
+
+def test_encoder_resolution_and_sampling(rig_data):
+    # reference: 50 nm encoder sampled at 1 kHz (paper Sect. 5.1)
+    df, _ = rig_data
+    counts = df.position_m.to_numpy() / PLAN.encoder_resolution_m
+    assert np.allclose(counts, np.round(counts), atol=1e-6)
+    for _, g in df.groupby("run"):
+        assert np.allclose(np.diff(g.time_s), 1e-3, atol=1e-9)
+
+
+def test_experiment_clock_is_continuous_with_pauses(rig_data):
+    # reference: data format: time strictly increasing over the file, never reset between runs
+    df, _ = rig_data
+    t = df.time_s.to_numpy()
+    assert np.all(np.diff(t) > 0)
+    gaps = np.diff(t)[np.diff(df.run.to_numpy()) != 0]
+    assert np.all(gaps >= PLAN.pause_s - 1e-9)
+
+
+def test_written_files_follow_the_data_format(rig_data, tmp_path):
+    # reference: shared/data-format.md; the paper's split: test = runs with |load| = 0.05 kg
+    df, truth = rig_data
+    mp = load_motor()
+    paths = write_experiment(df, tmp_path, mp, PLAN, truth)
+    all_ = dataio.load_measurements(paths["all"])
+    train = dataio.load_measurements(paths["train"])
+    test = dataio.load_measurements(paths["test"])
+    assert all_.n_samples == len(df)
+    assert set(np.abs(test.df.load_kg)) == {0.05}
+    assert 0.05 not in set(np.abs(train.df.load_kg))
+    assert train.n_samples + test.n_samples == len(df)
+    assert all_.meta["slider_mass_kg"] == mp.slider.mass_kg
+    assert "tip_velocity_amp_m_s" in all_.df.columns  # extra column passed through
+    assert json.loads((tmp_path / "rig_truth.json").read_text())["effects"] == []
+
+
+def test_injected_effect_changes_the_data_but_is_not_declared(tmp_path):
+    # reference: a direction asymmetry makes CH1 faster than CH2; neither CSV nor sidecar names it
+    plan = RigPlan(voltages_V=(324.0,), loads_kg=(0.0,), step_s=1e-3)
+    df, truth = run_experiment(plan, engine="inprocess", effects=["direction_asymmetry"])
+    fwd, bwd = _mid_speed(df, 324.0, 0.0, 1), _mid_speed(df, 324.0, 0.0, -1)
+    assert fwd > bwd * 1.03
+    paths = write_experiment(df, tmp_path, load_motor(), plan, truth)
+    text = paths["all"].read_text() + (tmp_path / "all.json").read_text()
+    assert "asym" not in text and "direction_asymmetry" not in text
+    assert json.loads((tmp_path / "rig_truth.json").read_text())["effects"][0]["name"] == "direction_asymmetry"
+
+
+@pytest.mark.parametrize("name", sorted(EFFECTS))
+def test_every_effect_maps_to_declared_fmu_parameters(name):
+    # reference: each effect only switches on parameters the FMU system declares (off in the reference)
+    mp = load_motor()
+    eff = EFFECTS[name]
+    changed = apply_overrides(mp, eff.draw(np.random.default_rng(0)))
+    assert changed != mp
+    for key in eff.params:
+        comp, _, par = key.partition(".")
+        assert hasattr(getattr(mp, comp.lower()), par)
+
+
+def test_rig_cli_writes_data_plots_and_summary(tmp_path):
+    # reference: issue text: DIR/all.csv, train.csv, test.csv with sidecars; Fig. 9 PNGs
+    out = tmp_path / "rig"
+    code = cli_main(["rig", "--out", str(out), "--engine", "inprocess", "--voltages", "220,324", "--loads", "0,0.05",
+                     "--step", "0.001", "--quiet", "--jobs", "1"])
+    assert code == 0
+    for f in ("all.csv", "all.json", "train.csv", "train.json", "test.csv", "test.json", "rig_truth.json",
+              "fig9a_speed_vs_position_by_voltage.png", "fig9b_speed_vs_position_by_load.png",
+              "fig9c_speed_vs_tip_velocity.png", "rig_summary.json"):
+        assert (out / f).exists(), f
+    summary = json.loads((out / "rig_summary.json").read_text())
+    assert summary["runs"] == 8
+    assert pd.read_csv(out / "all.csv").shape[0] == summary["samples"]
+
+
+def test_cli_refuses_bad_input_with_one_line(capsys, tmp_path):
+    # reference: brief: one clear line, non-zero exit, no traceback
+    code = cli_main(["simulate", "--out", str(tmp_path / "x.csv"), "--engine", "inprocess", "--direction", "2"])
+    err = capsys.readouterr().err
+    assert code != 0
+    assert err.count("\n") == 1 and err.startswith("l1b2: error:") and "Traceback" not in err
+    code = cli_main(["rig", "--out", str(tmp_path / "r"), "--inject", "no_such_effect", "--quiet"])
+    err = capsys.readouterr().err
+    assert code != 0 and "no_such_effect" in err and err.count("\n") == 1
+    assert not (tmp_path / "r").exists()
