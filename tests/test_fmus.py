@@ -503,11 +503,11 @@ def test_interface_fmu_equals_interface_forces(fmus, motor, isolated, mode, n_th
 
 def test_slider_fmu_equals_slider_step(fmus, motor, isolated):
     # reference: l1b2.slider.step called here with the same parameters, inputs and step sizes
-    params = dict(s0=0.012, v0=0.1, mass_kg=0.15)
+    params = dict(s0=0.012, v0=0.1, mass_kg=0.15, c_r_N_s_per_m=3.0)  # light damping: reaches the stop
     steps = [(1.0, 5.6, 0.0, 1e-3)] * 30 + [(1.0, 5.6, 0.0, 0.02)] * 3 + [(-1.5, 5.6, 0.03, 5e-3)] * 20 \
         + [(0.0, 6.0, -0.02, 0.01)] * 10 + [(0.05, 6.0, 0.0, 0.01)] * 3
     got = isolated(__file__, "worker_slider", str(fmus["Slider"]), params, steps).value
-    sp = dataclasses.replace(motor.slider, mass_kg=0.15)
+    sp = dataclasses.replace(motor.slider, mass_kg=0.15, c_r_N_s_per_m=3.0)
     state = sld.SliderState(0.1, 0.012, False, 0)
     assert got[0]["s"] == 0.012 and got[0]["v"] == 0.1
     saw_stop = saw_stuck = False

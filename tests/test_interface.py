@@ -10,6 +10,7 @@ import pytest
 from scipy.optimize import brentq
 
 from l1b2 import interface as itf
+from l1b2.params import InterfaceParams
 
 W = 2 * np.pi * 48500.0  # drive angular frequency [rad/s]
 FIELDS = ("F_d_N", "F_N_mean_N", "F_N1_sin_N", "F_N1_cos_N", "F_T1_sin_N", "F_T1_cos_N", "phi_c_rad",
@@ -17,8 +18,10 @@ FIELDS = ("F_d_N", "F_N_mean_N", "F_N1_sin_N", "F_N1_cos_N", "F_T1_sin_N", "F_T1
 
 
 @pytest.fixture(scope="module")
-def ip(motor):
-    return motor.interface
+def ip():
+    # fixed interface parameters for these unit tests (independent of the reference-motor tuning):
+    # a compliant contact layer (long contact, reversals inside it) and Coulomb-dominated slip
+    return InterfaceParams(k_e_N_per_m=3.0e7, mu_p=0.25, sigma_N_s_per_m=3.0, u_m_m=20e-9)
 
 
 # ---------------------------------------------------------------------------
