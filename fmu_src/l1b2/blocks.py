@@ -61,10 +61,17 @@ def _parameter_vars(cls, values) -> list[Var]:
                 min=d["min"], max=d["max"], variability="fixed") for d in describe(cls)]
 
 
+def motor_defaults(mp: MotorParams) -> dict:
+    """JSON-safe start values of every section of a motor parameter set."""
+    from dataclasses import asdict
+    return {sec: asdict(getattr(mp, sec)) for sec in ("driver", "stator", "interface", "slider", "operating")}
+
+
 class Block:
     """Base class: parameters, inputs, outputs and states as attributes."""
 
     PARAMS_CLASS: type = object
+    SECTION: str = ""     # key of the block's parameters in the baked-in defaults document
     INPUTS: list[Var] = []
     OUTPUTS: list[Var] = []
     STATES: list[Var] = []
@@ -84,6 +91,17 @@ class Block:
         """All variables of the block (parameters with the start values of ``params``)."""
         pars = _parameter_vars(cls.PARAMS_CLASS, params) if params is not None else []
         return pars + list(cls.EXTRA_PARAMETERS) + cls.INPUTS + cls.OUTPUTS + cls.STATES
+
+    @classmethod
+    def params_from_defaults(cls, defaults: dict):
+        """The block's parameter object from a defaults document (see :func:`motor_defaults`)."""
+        return cls.PARAMS_CLASS(**defaults[cls.SECTION])
+
+    def get(self, name: str):
+        return getattr(self, name)
+
+    def set(self, name: str, value):
+        setattr(self, name, value)
 
     def rebuild_params(self):
         """Re-create the frozen parameter dataclass from the (possibly changed) attributes."""
@@ -126,6 +144,7 @@ class DriverBlock(Block):
     """H-bridge + LC tank (Eq. 1-4): algebraic, outputs follow the inputs of the step."""
 
     PARAMS_CLASS = DriverParams
+    SECTION = "driver"
     INPUTS = [
         Var("V_s", "input", "V", "supply voltage of the H bridge", start=67.1, min=0.0, max=2000.0),
         Var("duty", "input", "1", "duty ratio delta of the PWM signal", start=1.0, min=0.0, max=1.0),
@@ -167,6 +186,7 @@ class StatorBlock(Block):
     """L1 and B2 modal envelopes (Eq. 5-16) with interface feedback (Eq. 14)."""
 
     PARAMS_CLASS = StatorParams
+    SECTION = "stator"
     INPUTS = [
         Var("V0", "input", "V", "amplitude of the stator voltage", start=324.0, min=0.0, max=2000.0),
         Var("omega", "input", "rad/s", "drive angular frequency", start=2 * math.pi * 48500, min=1e3, max=1e7),
@@ -270,6 +290,7 @@ class InterfaceBlock(Block):
     """Tip/bar contact and friction over one vibration period (Eq. 17-20): algebraic."""
 
     PARAMS_CLASS = InterfaceParams
+    SECTION = "interface"
     EXTRA_PARAMETERS = [
         Var("pure_slip", "parameter", "", "true: the paper's Sect. 4 assumptions (phi_c = pi, no stick)",
             start=False, variability="fixed", type="Boolean"),
@@ -329,6 +350,7 @@ class SliderBlock(Block):
     """Slider with guide friction, stick and end stops (Eq. 21-22)."""
 
     PARAMS_CLASS = SliderParams
+    SECTION = "slider"
     INPUTS = [
         Var("F_d", "input", "N", "driving force from the interface", min=-1e4, max=1e4),
         Var("F_p", "input", "N", "static axial force (loads the guide, Eq. 22)", start=6.0, min=0.0, max=1e4),
@@ -380,7 +402,160 @@ class SliderBlock(Block):
         self._publish((new.v_m_s - v_old) / h if h > 0 else 0.0)
 
 
-BLOCKS = {"Driver": DriverBlock, "Stator": StatorBlock, "Interface": InterfaceBlock, "Slider": SliderBlock}
+class MotorBlock(Block):
+    """The whole coupled motor in one block (for ``L1B2Motor.fmu``, hosts that cannot import SSP).
+
+    Runs the four subsystem blocks with the same Gauss-Seidel sequence as
+    :class:`l1b2.coupled.InProcessMotor`, sub-stepping each communication step
+    with ``internal_step_s``. Every subsystem parameter is exposed as
+    ``Component.parameter`` (same names and values as the SSV of the SSP), and
+    every sub-block input, output and state as a ``local`` variable
+    ``Component.variable`` so that get/set FMU state captures the whole motor.
+    """
+
+    PARAMS_CLASS = MotorParams
+    SECTION = "motor"
+    COMPONENTS = ("Driver", "Stator", "Interface", "Slider")
+    INPUTS = [
+        Var("V_s", "input", "V", "supply voltage of the H bridge", start=67.1, min=0.0, max=2000.0),
+        Var("duty", "input", "1", "PWM duty ratio", start=1.0, min=0.0, max=1.0),
+        Var("f_s", "input", "Hz", "drive frequency", start=48500.0, min=1e3, max=1e6),
+        Var("T", "input", "degC", "ambient temperature of driver and stator", start=25.0, min=-100.0, max=300.0),
+        Var("direction", "input", "1", "+1 excites CH1 (toward +position), -1 CH2", start=1.0, min=-1.0, max=1.0),
+        Var("m_load", "input", "kg", "signed load mass; > 0 pulls toward -position", min=-100.0, max=100.0),
+    ]
+    OUTPUTS = [
+        Var("v", "output", "m/s", "slider speed"),
+        Var("s", "output", "m", "slider position"),
+        Var("V0", "output", "V", "stator voltage amplitude"),
+        Var("U_l", "output", "m", "tip normal vibration amplitude", nominal=1e-6),
+        Var("U_w", "output", "m", "tip tangential vibration amplitude", nominal=1e-6),
+        Var("delta", "output", "rad", "phase of tangential minus normal tip displacement"),
+        Var("F_p", "output", "N", "static axial force alpha0 P(s)"),
+        Var("F_d", "output", "N", "driving force"),
+        Var("phi_c", "output", "rad", "contact angle"),
+        Var("stick_fraction", "output", "1", "share of the contact time in stick"),
+        Var("T_stator", "output", "degC", "stator temperature"),
+        Var("at_stop", "output", "1", "-1/+1 at the negative/positive end stop, 0 elsewhere"),
+    ]
+    EXTRA_PARAMETERS = [
+        Var("internal_step_s", "parameter", "s", "internal Gauss-Seidel step between the subsystems",
+            start=2e-4, min=1e-6, max=1e-2, variability="fixed"),
+        Var("Interface.pure_slip", "parameter", "", "true: the paper's Sect. 4 assumptions (phi_c = pi, no stick)",
+            start=False, variability="fixed", type="Boolean"),
+        Var("Slider.s0", "parameter", "m", "initial slider position", start=0.0, min=-1.0, max=1.0,
+            variability="fixed"),
+        Var("Slider.v0", "parameter", "m/s", "initial slider speed", start=0.0, min=-10.0, max=10.0,
+            variability="fixed"),
+        Var("Stator.T_st0", "parameter", "degC", "initial stator temperature (when self-heating is on)",
+            start=25.0, min=-100.0, max=300.0, variability="fixed"),
+    ]
+    _OUT_SOURCE = {"v": ("Slider", "v"), "s": ("Slider", "s"), "V0": ("Driver", "V0"), "U_l": ("Stator", "U_l"),
+                   "U_w": ("Stator", "U_w"), "delta": ("Stator", "delta"), "F_p": ("Stator", "F_p"),
+                   "F_d": ("Interface", "F_d"), "phi_c": ("Interface", "phi_c"),
+                   "stick_fraction": ("Interface", "stick_fraction"), "T_stator": ("Stator", "T_stator"),
+                   "at_stop": ("Slider", "at_stop")}
+
+    def __init__(self, params: MotorParams):
+        from .coupled import InProcessMotor
+        self.params = params
+        for var in self.INPUTS + self.OUTPUTS:
+            setattr(self, var.name, 0.0 if var.start is None else var.start)
+        self.internal_step_s = 2e-4
+        self.motor = InProcessMotor(params, h_s=self.internal_step_s)
+        self._extra = {v.name: v.start for v in self.EXTRA_PARAMETERS if "." in v.name}
+
+    @classmethod
+    def params_from_defaults(cls, defaults: dict) -> MotorParams:
+        from .params import OperatingPoint
+        return MotorParams(driver=DriverParams(**defaults["driver"]), stator=StatorParams(**defaults["stator"]),
+                           interface=InterfaceParams(**defaults["interface"]),
+                           slider=SliderParams(**defaults["slider"]),
+                           operating=OperatingPoint(**defaults["operating"]), name="reference")
+
+    @classmethod
+    def _sub_locals(cls) -> list[Var]:
+        out = []
+        for comp in cls.COMPONENTS:
+            bcls = BLOCKS[comp]
+            for v in bcls.INPUTS + bcls.OUTPUTS + bcls.STATES:
+                out.append(Var(f"{comp}.{v.name}", "local", v.unit, f"{comp}: {v.description}", nominal=v.nominal))
+        return out
+
+    @classmethod
+    def variables(cls, params=None) -> list[Var]:
+        pars = []
+        if params is not None:
+            for comp in cls.COMPONENTS:
+                sub = getattr(params, BLOCKS[comp].SECTION)
+                for v in _parameter_vars(type(sub), sub):
+                    pars.append(Var(f"{comp}.{v.name}", v.causality, v.unit, v.description, start=v.start,
+                                    min=v.min, max=v.max, variability=v.variability))
+        return pars + list(cls.EXTRA_PARAMETERS) + cls.INPUTS + cls.OUTPUTS + cls._sub_locals()
+
+    def get(self, name: str):
+        if "." not in name:
+            return getattr(self, name)
+        if name in self._extra:
+            return self._extra[name]
+        comp, var = name.split(".", 1)
+        section = BLOCKS[comp].SECTION
+        if var in {f.name for f in fields(getattr(self.params, section))}:
+            return getattr(getattr(self.params, section), var)  # parameters: the dataclass is the truth
+        return getattr(self.motor.b[comp], var)                  # sub-block inputs, outputs, states
+
+    def set(self, name: str, value):
+        if "." in name:
+            comp, var = name.split(".", 1)
+            if name in self._extra:
+                self._extra[name] = value
+                return
+            section = BLOCKS[comp].SECTION
+            if var in {f.name for f in fields(getattr(self.params, section))}:
+                self.params = self.params.replace(**{f"{section}__{var}": value})
+            setattr(self.motor.b[comp], var, value)
+            return
+        setattr(self, name, value)
+
+    def check_inputs(self):
+        super().check_inputs()
+        if abs(abs(self.direction) - 1.0) > 1e-9:
+            raise SimulationError(f"MotorBlock: input direction [1] = {self.direction} must be +1 or -1")
+
+    def initialize(self):
+        from .coupled import InProcessMotor
+        self.check_inputs()
+        self.motor = InProcessMotor(self.params, h_s=float(self.internal_step_s),
+                                    pure_slip=bool(self._extra["Interface.pure_slip"]))
+        self.motor.b["Stator"].T_st0 = float(self._extra["Stator.T_st0"])
+        self.motor.initialize(V_s=self.V_s, duty=self.duty, f_s=self.f_s, T=self.T, direction=self.direction,
+                              m_load=self.m_load, s0=float(self._extra["Slider.s0"]),
+                              v0=float(self._extra["Slider.v0"]))
+        self._publish()
+
+    def initialize_outputs(self):
+        for b in self.motor.b.values():
+            b.refresh()
+        self._publish()
+
+    def _publish(self):
+        for out, (comp, var) in self._OUT_SOURCE.items():
+            setattr(self, out, float(getattr(self.motor.b[comp], var)))
+
+    def do_step(self, t, h):
+        self.check_inputs()
+        self.motor.inputs = dict(V_s=self.V_s, duty=self.duty, f_s=self.f_s, T=self.T,
+                                 direction=self.direction, m_load=self.m_load)
+        n = max(1, int(round(h / float(self.internal_step_s))))
+        self.motor.h = h / n
+        self.motor.t = t
+        for _ in range(n):
+            self.motor.step()
+        self._publish()
+
+
+BLOCKS = {"Driver": DriverBlock, "Stator": StatorBlock, "Interface": InterfaceBlock, "Slider": SliderBlock,
+          "L1B2Motor": MotorBlock}
 
 
 def make_blocks(mp: MotorParams, pure_slip: bool = False) -> dict[str, Block]:

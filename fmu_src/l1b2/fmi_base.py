@@ -23,28 +23,25 @@ from pathlib import Path
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real  # noqa: F401
 from pythonfmu.enums import Fmi2Status
 
-from .params import DriverParams, InterfaceParams, SliderParams, StatorParams, load_motor
+from .params import load_motor
 
 #: file holding the start values, written by l1b2.fmu_build into each FMU's resources folder
 DEFAULTS_FILE = "_fmu_defaults.json"
-_SECTION_CLASSES = {"driver": DriverParams, "stator": StatorParams, "interface": InterfaceParams,
-                    "slider": SliderParams}
 
 
-def default_parameters(section: str, resources: str | None = None):
-    """Start values of a subsystem's parameters.
+def load_defaults(resources: str | None = None) -> dict:
+    """Start values of an FMU: its own ``resources/_fmu_defaults.json``, else the reference motor.
 
-    Read from this FMU instance's own ``resources`` folder (each FMU carries
-    the values it was built with; the bundled package may be shared with
-    another FMU of the same version in the process), else, in the source
-    tree, the reference motor.
+    Each FMU carries the values it was built with and every instance reads
+    them from its own resources folder: the bundled package may be shared
+    with another FMU of the same version in the process.
     """
-    cls = _SECTION_CLASSES[section]
     if resources:
         path = Path(resources) / DEFAULTS_FILE
         if path.exists():
-            return cls(**json.loads(path.read_text())[section])
-    return getattr(load_motor(), section)
+            return json.loads(path.read_text())
+    from .blocks import motor_defaults
+    return motor_defaults(load_motor())
 
 
 _CAUSALITY = {"input": Fmi2Causality.input, "output": Fmi2Causality.output,
@@ -63,9 +60,9 @@ class BlockAdapter:
     imported intermediate class), and delegate here.
     """
 
-    def __init__(self, slave: Fmi2Slave, block_cls, section: str):
+    def __init__(self, slave: Fmi2Slave, block_cls):
         self.slave = slave
-        params = default_parameters(section, slave.resources)
+        params = block_cls.params_from_defaults(load_defaults(slave.resources))
         self.block = block_cls(params)
         self.failed = None
         for var in block_cls.variables(params):
@@ -77,12 +74,12 @@ class BlockAdapter:
             slave.register_variable(vtype(var.name, **kw))
 
     def _getter(self, name, conv):
-        return lambda: conv(getattr(self.block, name))
+        return lambda: conv(self.block.get(name))
 
     def _setter(self, name, conv):
         def set_value(value):
             try:
-                setattr(self.block, name, conv(value))
+                self.block.set(name, conv(value))
             except (TypeError, ValueError) as exc:  # never raise out of a callback
                 self.fail(f"cannot set {name} to {value!r}: {exc}")
         return set_value

@@ -33,7 +33,6 @@ import tempfile
 import uuid
 import xml.etree.ElementTree as ET
 import zipfile
-from dataclasses import asdict
 from pathlib import Path
 
 from . import __version__
@@ -78,15 +77,10 @@ def _fmt(x) -> str:
 
 
 def variable_table(slave_name: str, defaults: dict) -> dict:
-    """``{name: Var}`` of an FMU's variables, from its block declaration (or the slave's VARIABLES)."""
+    """``{name: Var}`` of an FMU's variables, from its block's declaration."""
     from . import blocks
-    if slave_name in blocks.BLOCKS:
-        cls = blocks.BLOCKS[slave_name]
-        section = {"Driver": "driver", "Stator": "stator", "Interface": "interface", "Slider": "slider"}[slave_name]
-        params = type(getattr(load_motor(), section))(**defaults[section])
-        return {v.name: v for v in cls.variables(params)}
-    mod = importlib.import_module(f"l1b2.fmu_vars_{slave_name.lower()}")
-    return {v.name: v for v in mod.variables(defaults)}
+    cls = blocks.BLOCKS[slave_name]
+    return {v.name: v for v in cls.variables(cls.params_from_defaults(defaults))}
 
 
 def patch_model_description(xml_bytes: bytes, variables: dict, attributes: dict,
@@ -178,7 +172,8 @@ def _content_hash(fmu: Path) -> str:
 
 def defaults_document(mp: MotorParams, extra: dict | None = None) -> dict:
     """The start values baked into the FMUs (JSON-safe)."""
-    doc = {sec: asdict(getattr(mp, sec)) for sec in ("driver", "stator", "interface", "slider")}
+    from .blocks import motor_defaults
+    doc = motor_defaults(mp)
     doc.update(extra or {})
     return doc
 

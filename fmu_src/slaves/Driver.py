@@ -13,7 +13,7 @@ class Driver(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        self.adapter = BlockAdapter(self, DriverBlock, "driver")
+        self.adapter = BlockAdapter(self, DriverBlock)
 
     def exit_initialization_mode(self):
         self.adapter.exit_initialization_mode()

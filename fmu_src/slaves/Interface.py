@@ -13,7 +13,7 @@ class Interface(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        self.adapter = BlockAdapter(self, InterfaceBlock, "interface")
+        self.adapter = BlockAdapter(self, InterfaceBlock)
 
     def exit_initialization_mode(self):
         self.adapter.exit_initialization_mode()

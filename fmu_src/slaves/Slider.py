@@ -13,7 +13,7 @@ class Slider(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        self.adapter = BlockAdapter(self, SliderBlock, "slider")
+        self.adapter = BlockAdapter(self, SliderBlock)
 
     def exit_initialization_mode(self):
         self.adapter.exit_initialization_mode()

@@ -13,7 +13,7 @@ class Stator(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        self.adapter = BlockAdapter(self, StatorBlock, "stator")
+        self.adapter = BlockAdapter(self, StatorBlock)
 
     def exit_initialization_mode(self):
         self.adapter.exit_initialization_mode()
