@@ -11,88 +11,130 @@ Method
   ``v_pred(k+1 | v_meas(k)) - v_meas(k+1)`` within runs (the paper's use).
   An optional boolean ``mask`` selects which samples' residuals enter the
   likelihood; the free-run recursion always runs over all samples.
-* **Likelihood (Eq. 32).** Gaussian with diagonal covariance R: one variance
-  per run (``noise="per_run"``, floored at 10 % of the median run variance)
-  or one common variance. Iterated: fit theta with weights 1/R, re-estimate R
-  from the residuals, repeat until R changes by < 1 % (at most ``max_outer``
-  times). For fixed R the ML estimate of theta is a weighted least-squares
-  problem, solved by :func:`scipy.optimize.least_squares` (``trf``, bounds).
+* **Likelihood (Eq. 32).** Gaussian; the residual covariance is block
+  diagonal by run, ``R_r (I + g g^T)``: ``R_r`` is one variance per run
+  (``noise="per_run"``, floored at 10 % of the median run variance) or one
+  common variance, and the rank-one term is the noise of the *measured*
+  start speed, which the free run propagates through the recursion
+  (``g = d v_pred / d v_start``, same variance as any other sample;
+  ``start_noise=True``). Ignoring it made the stderr of the B' coefficients
+  up to ~25 % too small in simulation. Iterated as Eq. 32 asks for unknown R: fit
+  theta with R fixed (a weighted least-squares problem, solved by
+  :func:`scipy.optimize.least_squares`, ``trf`` with bounds), re-estimate R
+  (and g) from the residuals, repeat until R changes by < 1 % (at most
+  ``max_outer`` times).
 * **Conditioning.** Positions are scaled to [-1, 1] and A', B', P are Legendre
   series (see :mod:`l1b2.predictor`); the optimiser works on ``z = theta /
   scale`` with ``scale`` the typical magnitude of each parameter (group
   magnitude for polynomial coefficients) taken from the data-driven centre.
 * **Analytic Jacobian.** Free run: forward sensitivities
   ``S[k+1] = S[k] (1 + h dF/dv) + h dF/dtheta`` (``h = dt/m_eff``), vectorised
-  over runs and parameters (loop over the time index only). One step: the
-  sensitivity is ``h dF/dtheta`` at the measured speed.
+  over runs and parameters (loop over the time index only; the rest and
+  reversal steps of :func:`l1b2.predictor.step_drive` have their own exact
+  derivatives). One step: the sensitivity is ``h dF/dtheta`` at the measured
+  speed. Both are tested against finite differences.
 * **Data-driven initial guess.** For v' > 0 the force is
   ``F = -D(s) v' + B'(s) V0 + C(s) - 9.81 m_load'`` with ``D = c_r +
   sigma (0.5 - A')`` and ``C = mu P (g1 - pi/2 A' G) - mu_sd (9.81 m_s +
   kappa P)``. Its one-step equation error is *linear* in the Legendre
   coefficients of D, B', C (C has order 2n). Summed over short windows
-  (``m_eff dv' + 9.81 m' dt = sum dt (-D v' + B' V0 + C)``, which averages
-  speed noise), one linear least-squares gives D(s), B'(s), C(s). These are
-  mapped to Eq. 35 parameters by fixing the directions the data cannot
-  determine (see below) at conventional values (or the user's ``fixed``
-  values) and refined by a cheap function-space fit.
-* **Global search.** Like MATLAB's GlobalSearch: the centre plus scrambled
-  Sobol points (seeded) in a box ``z0 +- spread * max(|z0|, 0.05)`` around it,
-  a local ``least_squares`` from each, keep the best. Every start's final
-  cost, nfev, status and message are recorded in ``convergence_``.
+  (``m_eff dv' + 9.81 m' dt = sum dt (-D v' + B' V0 + C)``, ~10 ms, which
+  averages speed noise), one linear least-squares gives D(s), B'(s), C(s).
+  They are mapped to Eq. 35 parameters with conventional values for the
+  directions the data cannot determine (sigma from the spread of D, k0 = 0.5,
+  mu = 0.2, mu_sd = 0.05, or the user's ``fixed`` values), then the Eq. 35
+  structure is fitted to the same window equation error by variable
+  projection (c_r, beta, p are linear) from many scrambled Sobol starts.
+  The distinct minima of this cheap problem seed the global search.
+* **Global search.** Like MATLAB's GlobalSearch: stage 1 scatters many trial
+  points and scores them cheaply (the equation error above); then local
+  ``least_squares`` runs of the true criterion start from the distinct
+  equation-error minima (best first) and from Sobol points in the box
+  ``z0 +- start_spread * max(|z0|, 0.05)`` around the best, ``n_starts`` in
+  all. Each gets ``explore_nfev`` evaluations, the ``n_refine`` best are run
+  to convergence. Every start's cost, nfev, status and message are recorded
+  in ``convergence_``. A local run also stops when the cost (= -log
+  likelihood + const) decreased by < ``stat_tol`` over ``stat_window``
+  iterations: along practically non-identifiable directions trf otherwise
+  creeps for hundreds of iterations without a statistically relevant gain.
 
-Identifiability (structural, v' > 0 data, m_s known)
-----------------------------------------------------
-The data determine the functions D(s), B'(s) and C(s) above (B' directly via
-the voltage dependence; the absolute force scale via the known load weights
-9.81 m_load and the known mass). Writing ``a = mu g1(k0) - mu_sd kappa`` and
-``b = mu (pi/2) G(k0)``::
+Identifiability (findings)
+--------------------------
+*Structural* (exact for any data with v' > 0 and known m_s). The data
+determine the functions D(s), B'(s) and C(s) above (B' via the voltage
+dependence; the absolute force scale via the known load weights and mass).
+Writing ``a = mu g1(k0) - mu_sd kappa`` and ``b = mu (pi/2) G(k0)``::
 
     D(s) = c_r + sigma/2 - sigma A'(s)
     C(s) = P(s) (a - b A'(s)) - 9.81 m_s mu_sd
 
-is invariant under three one-parameter groups, whatever the data:
+is invariant under three one-parameter groups:
 
 1. ``sigma -> r sigma, A' - alpha_0 -> (A' - alpha_0)/r`` with c_r, alpha_0,
-   mu, k0 adjusted (keeps sigma A'(s) up to a constant, b/sigma and a - b alpha_0);
+   mu, k0 adjusted (keeps sigma A'(s) up to a constant, b/sigma and
+   a - b alpha_0);
 2. ``alpha_0 -> alpha_0 + delta/sigma, c_r -> c_r + delta`` with mu, k0
    adjusted so that ``a - b alpha_0`` is unchanged;
 3. ``P -> lambda P`` with mu, k0 (and thus a, b) scaled by 1/lambda.
 
-So with all 3n+8 parameters varied (the paper's setting) the Fisher matrix
-has rank 3n+5: beta (B') and mu_sd are identifiable, the other parameters
-only in combinations. :attr:`PredictorIdentifier.unidentifiable_` reports
-the null directions numerically (SVD), and the affected parameters get
-``stderr = inf``. Pinning sigma, k0 and mu (``fixed="recommended"``)
-removes all three directions; mu_sd is then identified only through the
-constant ``9.81 m_s mu_sd`` inside C(s), i.e. weakly. See the test-suite and
-``bench/bench_identify.py`` for the numerical check.
+With all 3n+8 parameters varied (the paper's setting) the Fisher matrix has
+exactly three zero singular values (tested on noise-free data: relative
+singular values ~1e-16); only beta (B') and mu_sd are identifiable, c_r,
+sigma, mu, k0, every alpha and every p only in combinations.
+:attr:`PredictorIdentifier.unidentifiable_` reports the null directions
+numerically and the affected parameters get ``stderr = inf``.
+
+*Practical*. (a) mu_sd enters only through the constant ``9.81 m_s mu_sd``
+in C(s) (its P-proportional part is absorbed by a); it is separable only
+through the polynomial structure of C and has a relative singular value of
+~7e-7 (order 3, 12 runs) to ~5e-8 (order 8, 72 runs): practically not identifiable, and
+its value barely changes the fit. (b) The split of the order-2n polynomial
+C(s) into the factors P(s) and (a - b A'(s)) is informed only by the small
+position variation of D(s) = c_r + sigma (0.5 - A'); with sigma, k0, mu and
+mu_sd pinned the Fisher matrix has full rank (smallest relative singular
+value ~7e-5 at order 3, ~7e-6 at order 8 in the synthetic rig) but the
+likelihood can be *bimodal* in the preload scale / alpha_0 / c_r (two
+factorisations fitting within ~1 log-likelihood unit, e.g. p_0 = 0.7 N vs
+6 N): locally identifiable, not globally. ``alternative_optima_`` reports
+such a second optimum when the global search finds one.
+
+*Recommendation.* ``fixed="recommended"`` pins sigma, k0, mu (one per
+structural direction; any values give the same predictions) and mu_sd
+(practically unidentifiable; use the guide's datasheet value). The fitted
+c_r, alpha, p are then conditional on those pins. Pinning in addition the
+mean preload p_0 (only meaningful when sigma, k0, mu are physical values)
+removes the bimodality; that configuration is well conditioned (relative
+singular value ~3e-4 at order 3) and its 95 % intervals have the nominal
+coverage in simulation (tests/test_identify.py).
 
 Uncertainty
 -----------
 Covariance from the Fisher information ``(J^T R^-1 J)^-1`` at the optimum
-via the SVD of the weighted, scaled Jacobian. Singular values below
-``svd_rtol * s_max`` (default 1e-8) mark directions the data cannot separate;
-every parameter with a component > 1e-6 in that null space gets
+via the SVD of the weighted (whitened), scaled Jacobian. Singular values
+below ``svd_rtol * s_max`` (default 1e-8) mark directions the data cannot
+separate; every parameter with a component > 1e-6 in that null space gets
 ``stderr = inf`` (not determined) -- never a pseudo-inverse value. For the
 other parameters the pseudo-inverse restricted to the identified subspace is
-exact (they are estimable functions).
+exact (they are estimable functions). Directions with relative singular
+values below ``weak_rtol`` (1e-5) are listed in ``weak_directions_``.
 
 Free-run residuals are autocorrelated when the model is not exact, which
 makes the white-noise Fisher covariance too optimistic. ``stderr_`` inflates
 the noise variance of each run by the AR(1) long-run variance factor
-``(1 + rho)/(1 - rho)``, rho = lag-1 autocorrelation of that run's residuals
-(clipped to [0, 0.99], so the correction never shrinks the interval). Chosen
-over a run-block sandwich estimator because the sandwich needs many more runs
-than parameters to be stable (72 runs vs 32 parameters at order 8, and far
-fewer runs in small experiments), whereas the AR(1) factor uses every sample
-and is exact for slowly varying sensitivities under AR(1) errors.
-``stderr_fisher_`` keeps the plain white-noise value. Intervals use the t
-distribution with ``n_eff - k`` degrees of freedom, ``n_eff = sum_r n_r /
-f_r`` (AR(1)-effective sample count) and k = number of varied identifiable
-parameters.
+``(1 + rho)/(1 - rho)``, rho = lag-1 autocorrelation of that run's
+(whitened) residuals, clipped to [0, 0.99] so the correction never shrinks
+an interval. Chosen over a run-block sandwich estimator because the sandwich
+needs many more runs than parameters to be stable (72 runs vs 32 parameters
+at order 8, far fewer runs in small experiments), whereas the AR(1) factor
+uses every sample and is exact for slowly varying sensitivities under AR(1)
+errors. ``stderr_fisher_`` keeps the plain white-noise value. Intervals use
+the t distribution with ``n_eff - k`` degrees of freedom, ``n_eff = sum_r
+n_r / f_r`` (AR(1)-effective sample count) and k = number of varied
+identifiable parameters. (One-step residuals are MA(1)-like, negatively
+correlated; with rho clipped at 0 their intervals are conservative.)
 
 Information criteria: ``loglik_`` is the Gaussian log-likelihood at the final
-(theta, R); ``aic_ = 2k - 2 loglik``, ``bic_ = k ln(n) - 2 loglik`` with n
+(theta, R) (including the start-speed term); ``aic_ = 2k - 2 loglik``, ``bic_ = k ln(n) - 2 loglik`` with n
 the number of residuals and k counting only varied, identifiable theta
 parameters (the noise variances are not counted; they are the same for all
 models compared on the same data with the same ``noise`` option).
@@ -113,9 +155,9 @@ from scipy.linalg import qr as _qr
 from scipy.optimize import least_squares
 
 from .errors import IdentificationError
+from .metrics import evaluation_mask  # re-exported: the data-format evaluation mask
 from .predictor import (
     G_ACC,
-    K0_MAX,
     SCALAR_NAMES,
     PredictorParams,
     RunLayout,
@@ -136,30 +178,16 @@ __all__ = ["PredictorIdentifier", "evaluation_mask", "RECOMMENDED_FIXED"]
 
 REQUIRED_COLUMNS = ("time_s", "run", "position_m", "voltage_V", "direction", "load_kg")
 
-#: parameters pinned by ``fixed="recommended"``: one per structural null direction
-RECOMMENDED_FIXED = ("sigma", "k0", "mu", "mu_sd", "p_0")
+#: parameters pinned by ``fixed="recommended"``: one per structural null
+#: direction (sigma, k0, mu) plus the practically unidentifiable mu_sd
+RECOMMENDED_FIXED = ("sigma", "k0", "mu", "mu_sd")
 
-#: conventional values for the directions the data cannot determine (used only
-#: when such a parameter is fixed without a value, or as the centre of the
-#: global search for a varied but non-identifiable parameter)
+#: conventional values for the directions the data cannot determine (the pin
+#: when such a parameter is fixed without a value, and the centre of the
+#: global search when it is varied)
 CONVENTIONAL = {"k0": 0.5, "mu": 0.2, "mu_sd": 0.05}
 
 _NULL_TOL = 1e-6
-
-
-def evaluation_mask(df, min_speed: float = 5e-3, edge: float = 2e-3) -> np.ndarray:
-    """Samples used for metrics by ``shared/data-format.md``.
-
-    |speed| >= ``min_speed`` [m/s] and at least ``edge`` [m] of travel away
-    from the first and the last position of the run (end-stop collisions).
-    """
-    run = df["run"].to_numpy()
-    s = df["position_m"].to_numpy(dtype=float)
-    v = df["speed_m_s"].to_numpy(dtype=float)
-    lay = RunLayout(run)
-    s_first = s[lay.starts][lay.run_of_sample]
-    s_last = s[lay.starts + lay.lengths - 1][lay.run_of_sample]
-    return (np.abs(v) >= min_speed) & (np.abs(s - s_first) >= edge) & (np.abs(s_last - s) >= edge)
 
 
 # ---------------------------------------------------------------------------
@@ -167,10 +195,15 @@ def evaluation_mask(df, min_speed: float = 5e-3, edge: float = 2e-3) -> np.ndarr
 # ---------------------------------------------------------------------------
 
 
+def _label(x):
+    """A run label for messages and JSON (numpy scalars -> Python)."""
+    return x.item() if isinstance(x, np.generic) else x
+
+
 class _Data:
     """Validated flat arrays of a data-format DataFrame."""
 
-    def __init__(self, df, mask=None, require_speed=True):
+    def __init__(self, df, mask=None):
         try:
             cols = list(df.columns)
         except AttributeError as exc:
@@ -208,7 +241,7 @@ class _Data:
             if bad.any():
                 i = int(np.flatnonzero(bad)[0])
                 raise IdentificationError(
-                    f"data: run {self.run[i]!r} has NaN/inf in column '{c}' "
+                    f"data: run {_label(self.run[i])} has NaN/inf in column '{c}' "
                     f"(first at row {i + 1}); remove or repair that run"
                 )
         self.t = arrays["time_s"]
@@ -223,7 +256,7 @@ class _Data:
         within = ~lay.is_last[:-1]
         if np.any(dtt[within] <= 0):
             i = int(np.flatnonzero((dtt <= 0) & within)[0])
-            raise IdentificationError(f"data: column 'time_s' not increasing within run {self.run[i]!r}")
+            raise IdentificationError(f"data: column 'time_s' not increasing within run {_label(self.run[i])}")
         if arrays["speed_m_s"] is None:
             v = np.empty(n)
             for r in range(lay.R):
@@ -560,24 +593,68 @@ def _reduced_linear_fit(data: _Data, order, m_s, include_load_inertia, s_center,
     }
 
 
-def _reduced_of_theta(theta, order, m_s, kappa):
-    """Legendre coefficients of D (n+1), B' (n+1) and C (2n+1) implied by theta."""
+_LEGMUL_CACHE: dict = {}
+
+
+def _legmul_tensor(order):
+    """T[i, j, k]: coefficient k of P_i * P_j (Legendre), shape (n+1, n+1, 2n+1)."""
+    T = _LEGMUL_CACHE.get(order)
+    if T is None:
+        n1 = order + 1
+        T = np.zeros((n1, n1, 2 * order + 1))
+        for i in range(n1):
+            for j in range(n1):
+                prod = npleg.legmul(np.eye(n1)[i], np.eye(n1)[j])
+                T[i, j, : prod.size] = prod
+        _LEGMUL_CACHE[order] = T
+    return T
+
+
+def _reduced_of_theta(theta, order, m_s, kappa, jac=False):
+    """Legendre coefficients of D (n+1), B' (n+1) and C (2n+1) implied by theta.
+
+    With ``jac=True`` also returns d(coefficients)/d(theta), shape (4n+3, 3n+8).
+    """
     n1 = order + 1
+    T = _legmul_tensor(order)
     c_r, sig, mu, k0, musd = theta[:5]
     al = theta[5 : 5 + n1]
     be = theta[5 + n1 : 5 + 2 * n1]
     pp = theta[5 + 2 * n1 :]
     g1 = float(drive_factor(k0))
     G = float(G_of_k0(k0))
+    hG = 0.5 * np.pi * G
     Dc = -sig * al
-    Dc = Dc.copy()
     Dc[0] += c_r + 0.5 * sig
-    Cc = np.zeros(2 * order + 1)
+    prod = np.einsum("i,j,ijk->k", pp, al, T)
+    Cc = -mu * hG * prod
     Cc[:n1] += (mu * g1 - musd * kappa) * pp
-    prod = npleg.legmul(pp, al)
-    Cc[: prod.size] -= mu * 0.5 * np.pi * G * prod
     Cc[0] -= musd * G_ACC * m_s
-    return np.concatenate([Dc, be, Cc])
+    g = np.concatenate([Dc, be, Cc])
+    if not jac:
+        return g
+    nC = 2 * order + 1
+    Jg = np.zeros((2 * n1 + nC, 5 + 3 * n1))
+    iD, iB, iC = slice(0, n1), slice(n1, 2 * n1), slice(2 * n1, 2 * n1 + nC)
+    # D
+    Jg[0, 0] = 1.0
+    Jg[iD, 1] = -al
+    Jg[0, 1] += 0.5
+    Jg[iD, 5 : 5 + n1] = -sig * np.eye(n1)
+    # B'
+    Jg[iB, 5 + n1 : 5 + 2 * n1] = np.eye(n1)
+    # C
+    ppad = np.zeros(nC)
+    ppad[:n1] = pp
+    Jg[iC, 2] = g1 * ppad - hG * prod
+    Jg[iC, 3] = mu * float(ddrive_factor_dk0(k0)) * ppad - mu * 0.5 * np.pi * float(dG_dk0(k0)) * prod
+    Jg[iC, 4] = -kappa * ppad
+    Jg[2 * n1, 4] -= G_ACC * m_s
+    Jg[iC, 5 : 5 + n1] = -mu * hG * np.einsum("i,ijk->kj", pp, T)
+    dCp = -mu * hG * np.einsum("j,ijk->ki", al, T)
+    dCp[:n1, :] += (mu * g1 - musd * kappa) * np.eye(n1)
+    Jg[iC, 5 + 2 * n1 :] = dCp
+    return g, Jg
 
 
 def _grid(order):
@@ -638,43 +715,69 @@ def _map_reduced_to_theta(dco, bco, cco, fixed, order, m_s, kappa):
     return np.clip(theta, lo, np.minimum(hi, np.where(np.isfinite(hi), hi, np.inf)))
 
 
-def _equation_error_fit(theta_start, varied, red, order, m_s, kappa, n_starts, seed, spread, floor=0.25):
+def _equation_error_fit(theta_start, varied, red, order, m_s, kappa, n_starts, seed, spread=1.0, floor=0.25,
+                        max_nfev=100):
     """Fit the Eq. 35 structure to the window-integrated equation error.
 
     Minimises ``|M g(theta) - y|^2`` (``g`` = reduced coefficients of D, B',
     C implied by theta, see :func:`_reduced_of_theta`), evaluated cheaply
-    through the QR factor of the linear problem. This weights the reduced
+    through the QR factor of the linear problem; this weights the reduced
     functions by how well the data determine them (e.g. the small position
-    variation of D is weakly determined). The bilinear P*A' term makes the
-    problem multi-modal (the order-2n polynomial C(s) can be split into the
-    factors P(s) and (a - b A'(s)) in several ways), so it is multi-started
-    from ``theta_start`` and scrambled Sobol points in the box
-    ``z0 +- spread * max(|z0|, floor)`` (scaled coordinates). Returns the
-    distinct local minima as a list of ``(cost, theta)``, best first.
+    variation of D is weakly determined).
+
+    ``g`` is affine in c_r, beta and p for fixed (sigma, mu, k0, mu_sd,
+    alpha), so the problem is solved by variable projection: the outer
+    optimisation runs over the varied "nonlinear" parameters only, the
+    linear ones are the exact least-squares solution for each trial. The
+    bilinear P*A' term makes the outer problem multi-modal (the order-2n
+    polynomial C(s) can be split into P(s) and (a - b A'(s)) in several
+    ways), so it is multi-started from ``theta_start`` and scrambled Sobol
+    points in the box ``z0 +- spread * max(|z0|, floor)`` (scaled
+    coordinates). Returns the distinct local minima as ``(cost, theta)``,
+    best first.
     """
     idx = np.flatnonzero(varied)
+    n1 = order + 1
+    Rc = red["R"] * red["cn"][None, :]
+    qy = red["qy"]
+    lin = np.array([i for i in idx if i == 0 or i >= 5 + n1], dtype=int)
+    non = np.array([i for i in idx if i not in set(lin.tolist())], dtype=int)
+
+    def project(th):
+        """theta with the optimal linear parameters, and the residual."""
+        th = th.copy()
+        if lin.size == 0:
+            return th, Rc @ _reduced_of_theta(th, order, m_s, kappa) - qy
+        th[lin] = 0.0
+        g0, Jg = _reduced_of_theta(th, order, m_s, kappa, jac=True)
+        A = Rc @ Jg[:, lin]
+        b = qy - Rc @ g0
+        x, *_ = np.linalg.lstsq(A, b, rcond=1e-13)
+        th[lin] = x
+        return th, A @ x - b
+
     if idx.size == 0:
         return [(float("nan"), theta_start)]
+    if non.size == 0:
+        th, r = project(theta_start)
+        return [(0.5 * float(r @ r), _clip_theta(th, order))]
     lo, hi = PredictorParams.bounds(order)
-    Rm, qy, cn = red["R"], red["qy"], red["cn"]
-    scale = _param_scale(theta_start, order)[idx]
-    lb, ub = lo[idx] / scale, hi[idx] / scale
+    scale = _param_scale(theta_start, order)[non]
+    lb, ub = lo[non] / scale, hi[non] / scale
 
     def fun(zv):
         th = theta_start.copy()
-        th[idx] = zv * scale
-        return Rm @ (_reduced_of_theta(th, order, m_s, kappa) * cn) - qy
+        th[non] = zv * scale
+        return project(th)[1]
 
-    z0 = _strictly_inside(theta_start[idx] / scale, lb, ub)
-    starts = [z0] + [
-        _strictly_inside(z, lb, ub) for z in _sobol_box(z0, n_starts - 1, seed, spread, floor)
-    ]
+    z0 = _strictly_inside(theta_start[non] / scale, lb, ub)
+    starts = [z0] + [_strictly_inside(z, lb, ub) for z in _sobol_box(z0, n_starts - 1, seed, spread, floor)]
     sols = []
     for zs in starts:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
-                res = least_squares(fun, zs, bounds=(lb, ub), method="trf", x_scale=1.0, max_nfev=50 * idx.size)
+                res = least_squares(fun, zs, bounds=(lb, ub), method="trf", x_scale=1.0, max_nfev=max_nfev)
         except (ValueError, np.linalg.LinAlgError):
             continue
         if np.isfinite(res.cost):
@@ -684,14 +787,20 @@ def _equation_error_fit(theta_start, varied, red, order, m_s, kappa, n_starts, s
     sols.sort(key=lambda s: s[0])
     distinct = []
     for cost, x in sols:
-        if all(np.max(np.abs(x - y)) > 1e-2 for _, y in distinct):
+        if all(np.max(np.abs(x - y)) > 0.05 for _, y in distinct):
             distinct.append((cost, x))
     out = []
     for cost, x in distinct:
         th = theta_start.copy()
-        th[idx] = x * scale
-        out.append((cost, th))
+        th[non] = x * scale
+        th = project(th)[0]
+        out.append((cost, _clip_theta(th, order)))
     return out
+
+
+def _clip_theta(theta, order):
+    lo, hi = PredictorParams.bounds(order)
+    return np.clip(theta, lo, hi)
 
 
 def _param_scale(theta, order):
@@ -725,6 +834,36 @@ def _sobol_box(z0, n, seed, spread, floor=0.05):
     u = sob.random_base2(m)[:n]
     hw = spread * np.maximum(np.abs(z0), floor)
     return [z0 + (2.0 * row - 1.0) * hw for row in u]
+
+
+try:  # least_squares(callback=...) exists from scipy 1.16
+    import inspect as _inspect
+
+    _HAS_CALLBACK = "callback" in _inspect.signature(least_squares).parameters
+except (TypeError, ValueError):  # pragma: no cover
+    _HAS_CALLBACK = False
+
+
+class _StatStop:
+    """least_squares callback: stop when the cost stalls statistically.
+
+    The cost is 0.5 * sum(whitened residuals^2) = -log-likelihood + const. In
+    flat, curved valleys along practically non-identifiable directions trf
+    creeps with tiny steps for hundreds of iterations; once the cost
+    decreased by less than ``tol`` (log-likelihood units, default 0.01, far
+    below the 1.92 of a 95 % likelihood-ratio interval) over ``window``
+    iterations, further progress cannot matter statistically.
+    """
+
+    def __init__(self, tol, window):
+        self.tol = float(tol)
+        self.window = int(window)
+        self.costs = []
+
+    def __call__(self, intermediate_result):
+        self.costs.append(float(intermediate_result.cost))
+        if len(self.costs) > self.window and self.costs[-self.window - 1] - self.costs[-1] < self.tol:
+            raise StopIteration
 
 
 class _NoiseModel:
@@ -827,6 +966,22 @@ def _from_json_float(x):
     return float(x)
 
 
+def _describe_direction(vec_z, pivot, vidx, sv_scale, names):
+    """A direction in scaled coordinates as physical parameter changes per unit change of ``pivot``."""
+    dtheta = vec_z * sv_scale
+    dtheta = dtheta / dtheta[pivot]
+    zmag = np.abs(vec_z)
+    members = np.flatnonzero(zmag > 1e-3 * zmag.max())
+    members = members[np.argsort(-zmag[members])]
+    terms = [(names[vidx[i]], float(dtheta[i])) for i in members]
+    return {
+        "pivot": names[vidx[pivot]],
+        "direction": terms,
+        "parameters": [nm for nm, _ in terms],
+        "text": " ".join(f"{c:+.4g}*d({nm})" for nm, c in terms),
+    }
+
+
 class PredictorIdentifier:
     """Maximum-likelihood identification of the Eq. 29 predictor (see module docstring).
 
@@ -848,7 +1003,18 @@ class PredictorIdentifier:
     start_spread : relative half-width of the global-search box.
     max_outer : maximum number of (theta, R) alternations.
     svd_rtol : relative singular-value threshold for non-identifiable directions.
+    weak_rtol : directions with svd_rtol < relative singular value < weak_rtol are
+        reported in ``weak_directions_`` (identifiable, but barely).
     tol : ftol = xtol = gtol of every local least_squares.
+    stat_tol, stat_window : statistical convergence: a local run also stops when
+        its cost (= -log-likelihood + const) decreased by less than ``stat_tol``
+        over ``stat_window`` iterations (scipy >= 1.16; 0 disables).
+    alt_tol : a refined optimum of the global search whose log-likelihood is within
+        ``alt_tol`` of the best but which differs by > 3 stderr is reported in
+        ``alternative_optima_`` (a discrete ambiguity the local stderr cannot show).
+    explore_nfev, n_refine : global search in two stages (when n_starts > n_refine):
+        every start gets a short local run of ``explore_nfev`` evaluations, then
+        the ``n_refine`` best continue to convergence (``max_nfev`` in total).
     start_noise : free run: model the noise of the measured start speed of each
         run, which propagates through the recursion (residual covariance
         ``R_r (I + g g^T)``, ``g = d v_pred/d v_start``); see :class:`_NoiseModel`.
@@ -868,8 +1034,14 @@ class PredictorIdentifier:
         start_spread: float = 0.5,
         max_outer: int = 5,
         svd_rtol: float = 1e-8,
+        weak_rtol: float = 1e-5,
         tol: float = 1e-10,
         start_noise: bool = True,
+        explore_nfev: int = 30,
+        n_refine: int = 3,
+        stat_tol: float = 0.01,
+        stat_window: int = 10,
+        alt_tol: float = 2.0,
         verbose: bool = False,
     ):
         self.order = int(order)
@@ -884,8 +1056,14 @@ class PredictorIdentifier:
         self.start_spread = float(start_spread)
         self.max_outer = int(max_outer)
         self.svd_rtol = float(svd_rtol)
+        self.weak_rtol = float(weak_rtol)
         self.tol = float(tol)
         self.start_noise = bool(start_noise)
+        self.explore_nfev = int(explore_nfev)
+        self.n_refine = max(1, int(n_refine))
+        self.stat_tol = float(stat_tol)
+        self.stat_window = int(stat_window)
+        self.alt_tol = float(alt_tol)
         self.verbose = bool(verbose)
         if criterion not in ("free_run", "one_step"):
             raise IdentificationError(f"criterion must be 'free_run' or 'one_step', got {criterion!r}")
@@ -947,7 +1125,7 @@ class PredictorIdentifier:
             raise IdentificationError(f"too few runs: {lay.R}; need at least 2 (different voltages/loads)")
         if np.any(lay.lengths < 2):
             r = int(np.flatnonzero(lay.lengths < 2)[0])
-            raise IdentificationError(f"run {lay.labels[r]!r} has fewer than 2 samples")
+            raise IdentificationError(f"run {_label(lay.labels[r])} has fewer than 2 samples")
         n_min = max(n_var + 2, 3 * (self.order + 1))
         if int(data.mask.sum()) < n_min:
             raise IdentificationError(
@@ -973,7 +1151,7 @@ class PredictorIdentifier:
             varied[names.index(k)] = False
         ee = _equation_error_fit(
             theta_conv, varied, red, self.order, m_s, self.kappa,
-            max(32, 8 * self.n_starts), self.seed, 1.0,
+            max(16, 4 * self.n_starts), self.seed, 1.0,
         )
         theta0 = ee[0][1].copy()
         # pin fixed-without-value at the centre
@@ -1001,7 +1179,6 @@ class PredictorIdentifier:
         )
         run_sel = problem.run_sel
         n_res = run_sel.size
-        runs_with_res = np.bincount(run_sel, minlength=lay.R)
 
         def theta_of(z):
             th = theta0.copy()
@@ -1040,8 +1217,11 @@ class PredictorIdentifier:
         update_noise(theta_of(z_centre))
         R_cur = noise.R
 
-        def local(z_init):
+        def local(z_init, max_nfev):
             t0 = time.perf_counter()
+            kw = {}
+            if _HAS_CALLBACK and self.stat_tol > 0:
+                kw["callback"] = _StatStop(self.stat_tol, self.stat_window)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
                 res = least_squares(
@@ -1054,7 +1234,13 @@ class PredictorIdentifier:
                     ftol=self.tol,
                     xtol=self.tol,
                     gtol=self.tol,
-                    max_nfev=self.max_nfev,
+                    max_nfev=max_nfev,
+                    **kw,
+                )
+            if res.status == -2:
+                res.message = (
+                    f"statistical convergence: cost decreased by < {self.stat_tol:g} (log-likelihood units) "
+                    f"over the last {self.stat_window} iterations"
                 )
             return res, time.perf_counter() - t0
 
@@ -1070,35 +1256,56 @@ class PredictorIdentifier:
             _strictly_inside(z, zlo, zhi)
             for z in _sobol_box(z_centre, self.n_starts - len(starts), self.seed, self.start_spread)
         ]
+        # stage 1: a short local run from every start; stage 2: the n_refine
+        # best continue to convergence (budget max_nfev in total per start)
+        explore = self.max_nfev if len(starts) <= self.n_refine else min(self.explore_nfev, self.max_nfev)
         records = []
-        best = None
+        results = {}
         for i, z_init in enumerate(starts):
             r_init = fun(z_init)
             if not np.all(np.abs(r_init) < 1e9):
                 records.append(
                     {"start": i, "status": None, "message": "skipped: non-finite prediction at start",
-                     "cost": float("inf"), "nfev": 0, "njev": 0, "time_s": 0.0, "x0": (z_init * sv_scale).tolist()}
+                     "cost": float("inf"), "nfev": 0, "njev": 0, "time_s": 0.0,
+                     "x0": (z_init * sv_scale).tolist(), "refined": False}
                 )
                 continue
-            res, dtime = local(z_init)
-            rec = {
-                "start": i,
-                "x0": (z_init * sv_scale).tolist(),
-                "cost": float(res.cost),
-                "nfev": int(res.nfev),
-                "njev": int(res.njev) if res.njev is not None else None,
-                "status": int(res.status),
-                "message": str(res.message),
-                "optimality": float(res.optimality),
-                "time_s": dtime,
-            }
-            records.append(rec)
+            res, dtime = local(z_init, explore)
+            results[i] = res
+            records.append(
+                {
+                    "start": i,
+                    "x0": (z_init * sv_scale).tolist(),
+                    "cost": float(res.cost),
+                    "nfev": int(res.nfev),
+                    "njev": int(res.njev) if res.njev is not None else None,
+                    "status": int(res.status),
+                    "message": str(res.message),
+                    "optimality": float(res.optimality),
+                    "time_s": dtime,
+                    "refined": False,
+                }
+            )
             self._log(f"start {i}: cost {res.cost:.6g} nfev {res.nfev} status {res.status} ({dtime:.2f}s)")
-            if best is None or res.cost < best.cost:
-                best = res
-                best_i = i
-        if best is None:
+        if not results:
             raise IdentificationError("global search failed: every start gave a non-finite prediction")
+        ranked = sorted(results, key=lambda i: results[i].cost)
+        for i in ranked[: self.n_refine]:
+            res0 = results[i]
+            if res0.status != 0 or explore >= self.max_nfev:
+                continue  # converged already (or had the full budget)
+            res, dtime = local(res0.x, self.max_nfev - explore)
+            results[i] = res
+            rec = records[[r["start"] for r in records].index(i)]
+            rec.update(
+                cost=float(res.cost), nfev=rec["nfev"] + int(res.nfev),
+                njev=(rec["njev"] or 0) + int(res.njev or 0), status=int(res.status),
+                message=str(res.message), optimality=float(res.optimality),
+                time_s=rec["time_s"] + dtime, refined=True,
+            )
+            self._log(f"refine {i}: cost {res.cost:.6g} nfev {res.nfev} status {res.status} ({dtime:.2f}s)")
+        best_i = min(results, key=lambda i: results[i].cost)
+        best = results[best_i]
         z_best = best.x
         outer_hist = [{"iteration": 0, "cost": float(best.cost), "noise_var_median": float(np.median(R_cur))}]
         final_res = best
@@ -1110,7 +1317,7 @@ class PredictorIdentifier:
             if change < 0.01:
                 converged_R = True
                 break
-            res, dtime = local(z_best)
+            res, dtime = local(z_best, self.max_nfev)
             z_best = res.x
             final_res = res
             outer_hist.append(
@@ -1124,6 +1331,30 @@ class PredictorIdentifier:
         r = problem.residual(theta_hat)
         Jz = jac(z_best)  # whitened with the final noise model, scaled
         self._uncertainty(Jz, r, problem, noise, vidx, sv_scale, theta_hat, varied)
+        # other converged optima of the global search that fit almost as well
+        # but lie far away in parameter space (discrete non-identifiability)
+        alts = []
+        for i in ranked[: self.n_refine]:
+            if i == best_i or results[i].status == 0:
+                continue
+            dll = float(results[i].cost - results[best_i].cost)
+            th_i = theta_of(results[i].x)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                zd = np.abs(th_i - theta_hat) / self.stderr_
+            zd = np.where(self.identifiable_ & np.isfinite(zd), zd, 0.0)
+            dup = any(np.allclose(th_i, np.asarray(a["theta"]), rtol=1e-3, atol=1e-12) for a in alts)
+            if dll < self.alt_tol and zd.max() > 3.0 and not dup:
+                top = np.argsort(-zd)[:6]
+                alts.append(
+                    {
+                        "start": int(i),
+                        "delta_loglik": dll,
+                        "theta": th_i.tolist(),
+                        "max_z": float(zd.max()),
+                        "differs_most": [(names[j], float(th_i[j]), float(zd[j])) for j in top if zd[j] > 3.0],
+                    }
+                )
+        self.alternative_optima_ = alts
 
         # ---- store ----------------------------------------------------------------
         self.m_s_ = m_s
@@ -1137,7 +1368,7 @@ class PredictorIdentifier:
         )
         dts = np.diff(data.t)[~lay.is_last[:-1]]
         self.T_s_ = float(np.median(dts)) if dts.size else float("nan")
-        self.runs_ = lay.labels.tolist()
+        self.runs_ = [_label(x) for x in lay.labels]
         self.noise_var_ = R_cur.copy()
         self.n_obs_ = int(n_res)
         self.residual_rms_ = float(np.sqrt(np.mean(r * r)))
@@ -1150,7 +1381,7 @@ class PredictorIdentifier:
             "noise_converged": bool(converged_R),
             "status": int(final_res.status),
             "message": str(final_res.message),
-            "success": bool(final_res.status > 0),
+            "success": bool(final_res.status > 0 or final_res.status == -2),
             "optimality": float(final_res.optimality),
             "cost": float(0.5 * np.sum(noise.weighted(r) ** 2)),
             "nfev_total": int(sum(rec.get("nfev", 0) for rec in records)
@@ -1251,24 +1482,21 @@ class PredictorIdentifier:
             pv = piv[:q]
             B = Vn @ np.linalg.inv(Vn[pv, :])
             for j in range(q):
-                col = B[:, j]
-                dtheta = col * sv_scale  # physical units per unit of pivot's scaled change
-                dtheta = dtheta / dtheta[pv[j]]
-                zmag = np.abs(col)
-                members = np.flatnonzero(zmag > 1e-6 * zmag.max())
-                members = members[np.argsort(-zmag[members])]
-                terms = [(names[vidx[i]], float(dtheta[i])) for i in members]
-                txt = " ".join(f"{c:+.4g}*d({nm})" for nm, c in terms)
-                combos.append(
-                    {
-                        "pivot": names[vidx[pv[j]]],
-                        "direction": terms,
-                        "parameters": [nm for nm, _ in terms],
-                        "text": f"predictions unchanged along: {txt}",
-                    }
-                )
+                d = _describe_direction(B[:, j], pv[j], vidx, sv_scale, names)
+                d["text"] = "predictions unchanged along: " + d["text"]
+                combos.append(d)
         self.unidentifiable_ = combos
         self.null_space_ = Vn
+        # weakly determined directions (identifiable, but barely)
+        weak = []
+        rel = sv / sv[0] if sv.size else sv
+        for j in np.flatnonzero(ident & (rel < self.weak_rtol)):
+            vec = Vt[j]
+            d = _describe_direction(vec, int(np.argmax(np.abs(vec))), vidx, sv_scale, names)
+            d["relative_singular_value"] = float(rel[j])
+            d["text"] = f"weakly determined (relative singular value {rel[j]:.2g}): " + d["text"]
+            weak.append(d)
+        self.weak_directions_ = weak
 
     # -- predictions ------------------------------------------------------------
     def _check_fitted(self):
@@ -1365,19 +1593,33 @@ class PredictorIdentifier:
                 lines.append(f"    ... {len(pairs) - 40} more")
         else:
             lines.append("    none")
+        warn = []
         if self.unidentifiable_:
-            lines.append("[[Warnings]]")
-            lines.append(
+            warn.append(
                 f"    {len(self.unidentifiable_)} direction(s) in parameter space the data cannot determine "
                 f"(singular values < {self.svd_rtol:g} x largest); affected parameters have stderr = inf."
             )
             for cmb in self.unidentifiable_:
-                lines.append("    - " + cmb["text"])
-            lines.append(
+                warn.append("    - " + cmb["text"])
+            warn.append(
                 "    Structurally the data fix only D(s) = c_r + sigma (0.5 - A'(s)), B'(s) and "
                 "C(s) = mu P (2 sqrt(1-k0^2) - 1 - pi/2 A' G(k0)) - mu_sd (9.81 m_s + kappa P); "
                 f"pin one parameter per direction, e.g. fixed='recommended' = {list(RECOMMENDED_FIXED)}."
             )
+        for w in getattr(self, "weak_directions_", []):
+            warn.append("    - " + w["text"])
+        for alt in getattr(self, "alternative_optima_", []):
+            diff = ", ".join(f"{n} = {v:.4g} ({z:.0f} stderr away)" for n, v, z in alt["differs_most"])
+            warn.append(
+                f"    - another optimum (start {alt['start']}) fits almost as well "
+                f"(log-likelihood lower by {alt['delta_loglik']:.2f}) with {diff}: "
+                "the local intervals do not cover it (discrete ambiguity, e.g. the split of C(s) into P and A')."
+            )
+        if not c["success"]:
+            warn.append(f"    - the final local optimisation did not converge: {c['message']}")
+        if warn:
+            lines.append("[[Warnings]]")
+            lines.extend(warn)
         return "\n".join(lines)
 
     def to_dict(self) -> dict[str, Any]:
@@ -1412,8 +1654,14 @@ class PredictorIdentifier:
                 "start_spread": self.start_spread,
                 "max_outer": self.max_outer,
                 "svd_rtol": self.svd_rtol,
+                "weak_rtol": self.weak_rtol,
                 "tol": self.tol,
                 "start_noise": self.start_noise,
+                "explore_nfev": self.explore_nfev,
+                "n_refine": self.n_refine,
+                "stat_tol": self.stat_tol,
+                "stat_window": self.stat_window,
+                "alt_tol": self.alt_tol,
             },
             "slider_mass_kg": self.m_s_,
             "predictor_params": self.params_.to_dict(),
@@ -1432,6 +1680,8 @@ class PredictorIdentifier:
             "residual_rms": self.residual_rms_,
             "singular_values": [float(x) for x in self.singular_values_],
             "unidentifiable": _jsonify(self.unidentifiable_),
+            "weak_directions": _jsonify(self.weak_directions_),
+            "alternative_optima": _jsonify(self.alternative_optima_),
             "convergence": conv,
             "fit_time_s": self.fit_time_s_,
         }
@@ -1471,6 +1721,8 @@ class PredictorIdentifier:
         obj.residual_rms_ = float(d["residual_rms"])
         obj.singular_values_ = np.asarray(d["singular_values"], float)
         obj.unidentifiable_ = list(d["unidentifiable"])
+        obj.weak_directions_ = list(d.get("weak_directions", []))
+        obj.alternative_optima_ = list(d.get("alternative_optima", []))
         obj.convergence_ = dict(d["convergence"])
         obj.fit_time_s_ = float(d["fit_time_s"])
         # covariance is not serialised in full; keep the diagonal
