@@ -97,6 +97,11 @@ class Block:
         """The block's parameter object from a defaults document (see :func:`motor_defaults`)."""
         return cls.PARAMS_CLASS(**defaults[cls.SECTION])
 
+    @classmethod
+    def baked_defaults(cls, mp: MotorParams) -> dict:
+        """Extra entries the FMU build writes into the defaults document (computed once, at build time)."""
+        return {}
+
     def get(self, name: str):
         return getattr(self, name)
 
@@ -554,8 +559,163 @@ class MotorBlock(Block):
         self._publish()
 
 
+@dataclass(frozen=True)
+class PredictorSetup:
+    """What the predictor FMU carries: Eq. 29 parameters, slider mass and the identified sampling time."""
+
+    params: Any            # l1b2.predictor.PredictorParams
+    slider_mass_kg: float
+    T_s: float
+
+    def to_dict(self) -> dict:
+        return {"params": self.params.to_dict(), "slider_mass_kg": float(self.slider_mass_kg), "T_s": float(self.T_s)}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "PredictorSetup":
+        from .predictor import PredictorParams
+        return cls(PredictorParams.from_dict(d["params"]), float(d["slider_mass_kg"]), float(d["T_s"]))
+
+
+class PredictorBlock(Block):
+    """The paper's Eq. 29 speed predictor as a co-simulation block (for ``Predictor.fmu``).
+
+    Inputs V0, s, load, direction; outputs the predicted speed ``v`` (the
+    Eq. 29 map iterated with the identified sampling time ``T_s`` inside each
+    communication step, i.e. the identified discrete-time model) and the
+    closed-form steady speed ``v_steady`` at the current inputs (for
+    feedforward). Every identified parameter is an FMI parameter with its unit.
+    """
+
+    SECTION = "predictor"
+    INPUTS = [
+        Var("V0", "input", "V", "stator voltage amplitude", start=324.0, min=0.0, max=2000.0),
+        Var("s", "input", "m", "slider position", min=-1.0, max=1.0),
+        Var("load", "input", "kg", "signed load mass; > 0 pulls toward -position", min=-100.0, max=100.0),
+        Var("direction", "input", "1", "+1 CH1 (toward +position), -1 CH2", start=1.0, min=-1.0, max=1.0),
+    ]
+    OUTPUTS = [
+        Var("v", "output", "m/s", "predicted slider speed (Eq. 29 iterated at T_s)"),
+        Var("v_steady", "output", "m/s", "closed-form steady speed v* = b/(1-a) at the current inputs"),
+    ]
+    STATES = [Var("v_state", "local", "m/s", "predicted speed (state)")]
+    EXTRA_PARAMETERS = [
+        Var("v0", "parameter", "m/s", "initial speed", start=0.0, min=-10.0, max=10.0, variability="fixed"),
+    ]
+
+    def __init__(self, setup: PredictorSetup):
+        self.setup = setup
+        self.params = setup
+        for var in self.EXTRA_PARAMETERS:
+            setattr(self, var.name, var.start)
+        for var in self.INPUTS + self.OUTPUTS + self.STATES:
+            setattr(self, var.name, 0.0 if var.start is None else var.start)
+        self._values = self._param_values(setup)
+
+    @staticmethod
+    def _param_values(setup: PredictorSetup) -> dict:
+        p = setup.params
+        vals = dict(zip(p.names(p.order), p.to_vector().tolist()))
+        vals.update(s_center=p.s_center, s_half=p.s_half, kappa=p.kappa, load_inertia=float(p.include_load_inertia),
+                    slider_mass_kg=setup.slider_mass_kg, T_s=setup.T_s)
+        return vals
+
+    @classmethod
+    def params_from_defaults(cls, defaults: dict) -> PredictorSetup:
+        if "predictor" in defaults:
+            return PredictorSetup.from_dict(defaults["predictor"])
+        from .derive import derive_predictor_setup
+        return derive_predictor_setup(cls._motor_from(defaults))
+
+    @staticmethod
+    def _motor_from(defaults: dict) -> MotorParams:
+        return MotorBlock.params_from_defaults(defaults)
+
+    @classmethod
+    def baked_defaults(cls, mp: MotorParams) -> dict:
+        """Without an identification, the FMU carries the physical model's linearization (derived once)."""
+        from .derive import derive_predictor_setup
+        return {"predictor": derive_predictor_setup(mp).to_dict()}
+
+    @classmethod
+    def variables(cls, params: PredictorSetup | None = None) -> list[Var]:
+        pars = []
+        if params is not None:
+            p = params.params
+            units = p.units(p.order)
+            for name, value in zip(p.names(p.order), p.to_vector()):
+                pars.append(Var(name, "parameter", units[name].replace("N s/m", "N.s/m").replace("-", "1"),
+                                f"Eq. 35 parameter {name}", start=float(value), variability="fixed"))
+            pars += [
+                Var("s_center", "parameter", "m", "centre of the position scaling of the polynomials",
+                    start=p.s_center, variability="fixed"),
+                Var("s_half", "parameter", "m", "half range of the position scaling", start=p.s_half, min=1e-6,
+                    variability="fixed"),
+                Var("kappa", "parameter", "1", "share of F_p loading the guide", start=p.kappa, min=0.0, max=1.0,
+                    variability="fixed"),
+                Var("load_inertia", "parameter", "1", "1: the load mass is accelerated with the slider",
+                    start=float(p.include_load_inertia), min=0.0, max=1.0, variability="fixed"),
+                Var("slider_mass_kg", "parameter", "kg", "slider mass m_s", start=params.slider_mass_kg, min=1e-6,
+                    variability="fixed"),
+                Var("T_s", "parameter", "s", "sampling time the predictor was identified with", start=params.T_s,
+                    min=1e-7, variability="fixed"),
+            ]
+        return pars + list(cls.EXTRA_PARAMETERS) + cls.INPUTS + cls.OUTPUTS + cls.STATES
+
+    def get(self, name: str):
+        if name in self._values:
+            return self._values[name]
+        return getattr(self, name)
+
+    def set(self, name: str, value):
+        if name in self._values:
+            self._values[name] = float(value)
+        else:
+            setattr(self, name, value)
+
+    def rebuild_params(self):
+        from .predictor import PredictorParams
+        vals = self._values
+        p0 = self.setup.params
+        theta = np.array([vals[n] for n in p0.names(p0.order)])
+        pp = PredictorParams.from_vector(theta, s_center=vals["s_center"], s_half=vals["s_half"],
+                                         kappa=vals["kappa"], include_load_inertia=vals["load_inertia"] >= 0.5)
+        if not (vals["slider_mass_kg"] > 0 and vals["T_s"] > 0):
+            raise SimulationError("PredictorBlock: slider_mass_kg [kg] and T_s [s] must be positive")
+        self.setup = PredictorSetup(pp, vals["slider_mass_kg"], vals["T_s"])
+
+    def check_inputs(self):
+        super().check_inputs()
+        if abs(abs(self.direction) - 1.0) > 1e-9:
+            raise SimulationError(f"PredictorBlock: input direction [1] = {self.direction} must be +1 or -1")
+
+    def initialize(self):
+        self.rebuild_params()
+        self.check_inputs()
+        self.v_state = float(self.v0)
+        self.initialize_outputs()
+
+    def initialize_outputs(self):
+        from . import predictor as pr
+        su = self.setup
+        self.v = float(self.v_state)
+        self.v_steady = float(pr.steady_state(su.params, self.s, self.V0, self.load, self.direction,
+                                              su.slider_mass_kg))
+
+    def do_step(self, t, h):
+        from . import predictor as pr
+        self.check_inputs()
+        su = self.setup
+        n = max(1, int(math.ceil(h / su.T_s - 1e-9)))
+        v = float(self.v_state)
+        for _ in range(n):
+            v = float(pr.one_step(su.params, v, self.s, self.V0, self.load, self.direction, h / n,
+                                  su.slider_mass_kg))
+        self.v_state = v
+        self.initialize_outputs()
+
+
 BLOCKS = {"Driver": DriverBlock, "Stator": StatorBlock, "Interface": InterfaceBlock, "Slider": SliderBlock,
-          "L1B2Motor": MotorBlock}
+          "L1B2Motor": MotorBlock, "Predictor": PredictorBlock}
 
 
 def make_blocks(mp: MotorParams, pure_slip: bool = False) -> dict[str, Block]:

@@ -183,6 +183,29 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--params", type=Path, help="motor parameter TOML (default: reference motor)")
     p.set_defaults(func=cmd_demo)
 
+    p = sub.add_parser("identify", help="identify the Eq. 29 predictor from measured data (max. likelihood)")
+    p.add_argument("--train", type=Path, required=True, help="measured data (shared/data-format.md)")
+    p.add_argument("--test", type=Path, help="held-out data (default: the paper's split of TRAIN by load)")
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--test-loads", type=_floats, default=(0.05,), help="|load| [kg] held out when --test is absent")
+    p.add_argument("--order", type=int, default=8, help="polynomial order of A, B, P (paper: 8)")
+    p.add_argument("--criterion", choices=("free_run", "one_step"), default="free_run")
+    p.add_argument("--fix", default=None, help="'none' (paper, default), 'recommended' (pins sigma, k0, mu, "
+                                                "mu_sd) or name=value,...")
+    p.add_argument("--starts", type=int, default=8, help="multi-start local searches")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--slider-mass", type=float, help="slider mass [kg] (overrides the sidecar)")
+    p.add_argument("--no-plots", action="store_true")
+    p.add_argument("--verbose", action="store_true")
+    p.set_defaults(func=cmd_identify)
+
+    p = sub.add_parser("compare", help="predictor vs the co-simulation's steady states (derived and identified)")
+    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--identification", type=Path, help="identification.json from `l1b2 identify`")
+    p.add_argument("--order", type=int, default=8)
+    p.add_argument("--params", type=Path, help="motor parameter TOML (default: reference motor)")
+    p.set_defaults(func=cmd_compare)
+
     p = sub.add_parser("effects", help="list the effects the rig can inject")
     p.set_defaults(func=cmd_effects)
     return ap
@@ -232,6 +255,41 @@ def cmd_demo(args) -> int:
     if code:
         return code
     print(f"demo outputs in {out}")
+    return 0
+
+
+def cmd_identify(args) -> int:
+    """Maximum-likelihood identification of the Eq. 29 predictor (paper Eq. 32, 35)."""
+    from .workflows import run_identification
+    rep = run_identification(args.train, args.out, args.test, order=args.order, criterion=args.criterion,
+                             fix=args.fix, n_starts=args.starts, seed=args.seed, test_abs_loads=args.test_loads,
+                             slider_mass_kg=args.slider_mass, plots_on=not args.no_plots, verbose=args.verbose)
+    print(f"identify: {rep['data']['train_runs']} train runs, {rep['data']['test_runs']} test runs "
+          f"({rep['data']['split']}); fit {rep['fit_time_s']:.1f} s")
+    for part in ("train", "test"):
+        m = rep["metrics"][part]
+        if m is None:
+            continue
+        for kind in ("one_step", "free_run"):
+            x = m[kind]
+            print(f"  {part:5s} {kind:8s} nrmse {x['nrmse']:.2%}  mean |rel| {x['mean_abs_rel_error']:.2%}  "
+                  f"p95 |rel| {x['p95_abs_rel_error']:.2%}  (n={x['n_samples']})")
+    if rep.get("unidentifiable"):
+        print(f"  warning: {len(rep['unidentifiable'])} parameter combination(s) the data cannot separate; "
+              f"see {Path(args.out) / 'fit_report.txt'}")
+    print(f"wrote {Path(args.out) / 'identification.json'}")
+    return 0
+
+
+def cmd_compare(args) -> int:
+    """Predictor (derived and identified) against the co-simulation's steady states."""
+    from .workflows import run_comparison
+    ident = json.loads(Path(args.identification).read_text()) if args.identification else None
+    rep = run_comparison(args.out, _motor(args), ident, order=args.order)
+    for key, c in rep["cases"].items():
+        print(f"  {key:38s} max |rel err| {c['max_abs_rel_error']:.2%}  rms {c['rms_rel_error']:.2%}  "
+              f"({c['n_points']} points)")
+    print(f"wrote {Path(args.out) / 'comparison.json'}")
     return 0
 
 

@@ -189,7 +189,13 @@ def build_fmu(name: str, dest_dir: str | Path, *, mp: MotorParams | None = None,
     dest_dir.mkdir(parents=True, exist_ok=True)
     package = bundle_name(version)
     module = f"{package}_{name.lower()}"
-    defaults = defaults_document(mp, extra_defaults)
+    from .blocks import BLOCKS
+    if name not in BLOCKS:
+        raise ValueError(f"unknown FMU '{name}'; known: {', '.join(BLOCKS)}")
+    extra = dict(extra_defaults or {})
+    for key, value in BLOCKS[name].baked_defaults(mp).items():
+        extra.setdefault(key, value)
+    defaults = defaults_document(mp, extra)
     script_src = SLAVES_DIR / f"{name}.py"
     if not script_src.exists():
         raise FileNotFoundError(f"no slave script {script_src}")

@@ -120,3 +120,24 @@ def prediction_vs_measured(run_df: pd.DataFrame, v_pred: np.ndarray, path, title
     ax2.set_xlabel("position [mm]")
     ax2.grid(alpha=0.3)
     return _save(fig, path)
+
+
+def steady_comparison(tables: dict, path) -> Path:
+    """Predicted against co-simulated steady speed, one panel per comparison, with the error range."""
+    plt = _plt()
+    n = len(tables)
+    fig, axes = plt.subplots(1, n, figsize=(3.6 * n, 3.8), squeeze=False)
+    for ax, (key, df) in zip(axes[0], tables.items()):
+        moving = df.v_cosim_m_s.abs() > 5e-3
+        x = df.v_cosim_m_s[moving].abs() * 1e3
+        y = df.v_pred_m_s[moving].abs() * 1e3
+        ax.plot(x, y, ".", ms=3)
+        lim = [0, max(x.max(), y.max()) * 1.05]
+        ax.plot(lim, lim, "k-", lw=0.8)
+        e = df.rel_error[moving].abs()
+        ax.set_title(f"{key.replace('_', ' ')}\nmax |err| {e.max():.1%}, rms {np.sqrt(np.mean(e ** 2)):.1%}",
+                     fontsize=8)
+        ax.set_xlabel("co-simulation [mm/s]")
+        ax.set_ylabel("predictor [mm/s]")
+        ax.grid(alpha=0.3)
+    return _save(fig, path)

@@ -1,0 +1,24 @@
+"""Rig experiments shared by several test modules (generated once per test session, in-process engine)."""
+
+import tempfile
+from pathlib import Path
+
+from l1b2.params import load_motor
+from l1b2.rig import RigPlan, run_experiment, write_experiment
+
+_CACHE: dict = {}
+_ROOT = Path(tempfile.mkdtemp(prefix="l1b2_rigcache_"))
+
+
+def rig_dir(name: str = "clean", effects=(), effect_seed=None, plan: RigPlan | None = None) -> Path:
+    """Folder with all/train/test.csv of a rig experiment (the paper's 72-run plan by default)."""
+    key = (name, tuple(effects), effect_seed, plan)
+    if key not in _CACHE:
+        plan = plan or RigPlan(step_s=1e-3)
+        mp = load_motor()
+        df, truth = run_experiment(plan, mp, effects=list(effects), engine="inprocess", jobs=2,
+                                   effect_seed=effect_seed)
+        out = _ROOT / f"{name}_{len(_CACHE)}"
+        write_experiment(df, out, mp, plan, truth)
+        _CACHE[key] = out
+    return _CACHE[key]
