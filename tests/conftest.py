@@ -92,3 +92,23 @@ def _run_isolated(module_file, func_name, *args, timeout=300, check=True) -> Iso
 def isolated():
     """``isolated(__file__, "worker", *json_args, check=True) -> IsolatedResult``."""
     return _run_isolated
+
+
+# ---------------------------------------------------------------------------
+# Export (l1b2.export): every deliverable built and validated once per session
+# ---------------------------------------------------------------------------
+
+@pytest.fixture(scope="session")
+def predictor_setup() -> dict:
+    """A cheap Eq. 29 predictor (``l1b2.predictor.example_params``) standing in for an identification result."""
+    from l1b2.blocks import PredictorSetup
+    from l1b2.predictor import example_params
+    return PredictorSetup(example_params(), 0.1, 1e-3).to_dict()
+
+
+@pytest.fixture(scope="session")
+def exported(tmp_path_factory, predictor_setup):
+    """``(out_dir, manifest)`` of :func:`l1b2.export.export_all` for the reference motor, built once per session."""
+    from l1b2.export import export_all
+    out = tmp_path_factory.mktemp("dist")
+    return out, export_all(out, predictor=predictor_setup)

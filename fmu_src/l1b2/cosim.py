@@ -1,7 +1,9 @@
 """Co-simulation master on fmpy's ``FMU2Slave`` API, driven by the SSP system structure.
 
 * The wiring and the parameter set come from the ``.ssd`` and its bound
-  ``.ssv`` (``system_models/`` or an ``.ssp`` archive); nothing is hard-coded.
+  ``.ssv`` files (``system_models/`` or an ``.ssp`` archive); nothing is
+  hard-coded. The system connectors are wired by the SSD's
+  ``org.l1b2-usm.SystemConnections`` annotation (see :mod:`l1b2.ssp`).
 * Gauss-Seidel: components are stepped in the order they appear in the SSD
   (driver -> stator -> interface -> slider), each one's inputs taken from
   the latest outputs, with a fixed communication step.
@@ -13,6 +15,8 @@
   freed (``finally``), like FMPy's ``custom_input`` example.
 * Connection units are checked against the FMUs' model descriptions; a
   system whose units disagree is refused.
+* Before the first FMU is loaded the PythonFMU exit fix of
+  :mod:`l1b2.fmu_runtime` is installed.
 """
 
 from __future__ import annotations
@@ -31,26 +35,30 @@ import numpy as np
 import pandas as pd
 
 from .errors import SimulationError, SystemStructureError
-from .ssp import SSD_FILE, SystemStructure, check_against_model_descriptions, read_ssd, read_ssv
+from .ssp import (SSD_FILE, SystemStructure, check_against_model_descriptions, read_ssd, read_ssv,
+                  resolve_resource)
 
 DEFAULT_STEP_S = 2e-4
 DEFAULT_FMU_DIR = Path(__file__).resolve().parents[2] / "dist" / "fmus"
-_EXTRACTED: dict[tuple, str] = {}
+_EXTRACTED: dict[str, str] = {}
 
 
 def extracted(path: Path) -> str:
-    """Folder holding the extracted FMU, one per FMU file and process.
+    """Folder holding the extracted FMU, one per FMU content and process.
 
     PythonFMU puts each FMU's ``resources`` folder on ``sys.path`` for good and
     its bundled modules stay imported, so an extraction must outlive the run
     that made it: it is reused by later runs and removed at process exit.
+    The key is the file's SHA-256, so the same FMU reached through another
+    path (e.g. a fresh extraction of the same ``.ssp``) reuses the folder.
     """
+    import hashlib
+
     from fmpy import extract
-    st = path.stat()
-    key = (str(path.resolve()), st.st_mtime_ns, st.st_size)
-    if key not in _EXTRACTED or not Path(_EXTRACTED[key]).exists():
-        _EXTRACTED[key] = extract(str(path))
-    return _EXTRACTED[key]
+    digest = hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    if digest not in _EXTRACTED or not Path(_EXTRACTED[digest]).exists():
+        _EXTRACTED[digest] = extract(str(path))
+    return _EXTRACTED[digest]
 
 
 @atexit.register
@@ -152,26 +160,61 @@ class CoSimulation:
         from fmpy import read_model_description
         self.model_descriptions = {n: read_model_description(str(p)) for n, p in self.fmu_paths.items()}
         check_against_model_descriptions(self.system, self.model_descriptions)
+        self._check_parameter_units()
         self.iterations_ = []
 
     # -- set-up ---------------------------------------------------------------
     def _resolve(self, source: str, kind: str) -> Path:
-        cand = [self.root / source, self.root / Path(source).name]
+        found = resolve_resource(self.root, source)
+        if found is not None:
+            return found
+        cand = [self.root / source]
         if kind == "fmu":
-            cand.append(self.fmu_dir / Path(source).name)
-        for c in cand:
+            c = self.fmu_dir / Path(source).name
             if c.exists():
                 return c
+            cand.append(c)
         hint = " (run `make fmus` / `python build_fmu.py` first)" if kind == "fmu" else ""
         raise SystemStructureError(f"{self.system.path}: cannot find {source}; looked in "
-                                   f"{', '.join(str(c) for c in cand)}{hint}")
+                                   f"{', '.join(str(c) for c in cand)} and beside the SSD{hint}")
 
     def _load_parameters(self) -> dict:
-        values = {}
+        """``{"Component.variable": value}`` from the SSD's parameter bindings.
+
+        Component-level bindings name the FMU's variables bare; system-level
+        ones use hierarchical names and, as in SSP, take precedence. Unit and
+        file of each value are kept in ``self.parameter_sources_`` and checked
+        against the FMUs (an unknown name or another unit is refused).
+        """
+        values, self.parameter_sources_ = {}, {}
+        for name, comp in self.system.components.items():
+            sets = [(self._resolve(src, "ssv"), None) for src in comp.parameter_sources]
+            for path, _ in sets:
+                for var, (value, unit) in read_ssv(path).items():
+                    values[f"{name}.{var}"] = value
+                    self.parameter_sources_[f"{name}.{var}"] = (unit, path)
+            for var, (value, unit) in comp.inline_parameters.items():
+                values[f"{name}.{var}"] = value
+                self.parameter_sources_[f"{name}.{var}"] = (unit, self.system.path)
         for src in self.system.parameter_sources:
-            for name, (value, _unit) in read_ssv(self._resolve(src, "ssv")).items():
-                values[name] = value
+            path = self._resolve(src, "ssv")
+            for key, (value, unit) in read_ssv(path).items():
+                if key.split(".", 1)[0] not in self.system.components:
+                    continue  # SSP: names that match no element of the system are ignored
+                values[key] = value
+                self.parameter_sources_[key] = (unit, path)
         return values
+
+    def _check_parameter_units(self):
+        variables = {n: {v.name: v for v in md.modelVariables} for n, md in self.model_descriptions.items()}
+        for key, (unit, path) in self.parameter_sources_.items():
+            comp, _, var = key.partition(".")
+            v = variables[comp].get(var)
+            if v is None:
+                raise SystemStructureError(f"{path}: parameter '{key}': {comp} has no variable '{var}'")
+            if unit is not None and v.type == "Real" and (v.unit or "1") != unit:
+                raise SystemStructureError(f"{path}: parameter '{key}' has unit [{unit}], "
+                                           f"the FMU declares [{v.unit}]")
 
     def close(self):
         if self._tmp is not None:
@@ -198,6 +241,8 @@ class CoSimulation:
         """
         from fmpy.fmi2 import FMU2Slave
 
+        from .fmu_runtime import install_exit_fix
+        install_exit_fix()  # PythonFMU 0.7.0 exit-time use-after-free (see l1b2.fmu_runtime)
         sysst = self.system
         missing = [c for c, k in sysst.connectors.items() if k.kind == "input" and c not in inputs]
         if missing:

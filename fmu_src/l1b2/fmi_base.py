@@ -12,6 +12,15 @@ setters only store values; problems (non-finite or out-of-range inputs,
 invalid parameters) are logged with status ``fmi2Error`` and ``do_step``
 returns False, which the host sees as ``fmi2Discard`` with the message in its
 log, and the instance stays usable until the host frees it.
+
+Initialization Mode (FMI 2.0, 3.2.3): outputs are initial unknowns
+(``initial="calculated"``), so ``fmi2GetReal`` between
+``fmi2EnterInitializationMode`` and ``fmi2ExitInitializationMode`` returns
+them computed from the current parameters and inputs. Masters that
+propagate start values through the connections in that mode (libcosim runs
+N get/set sweeps before it exits initialisation) depend on it; an input that
+is still provisional there (e.g. 0 rad/s) is not an error until
+``fmi2ExitInitializationMode``.
 """
 
 from __future__ import annotations
@@ -65,19 +74,39 @@ class BlockAdapter:
         params = block_cls.params_from_defaults(load_defaults(slave.resources))
         self.block = block_cls(params)
         self.failed = None
+        self.in_initialization_mode = False
+        self._outputs_stale = True
         for var in block_cls.variables(params):
             vtype, conv = _TYPES[var.type]
+            getter = self._output_getter(var.name, conv) if var.causality == "output" else self._getter(var.name, conv)
             kw = dict(causality=_CAUSALITY[var.causality], description=var.description,
-                      getter=self._getter(var.name, conv), setter=self._setter(var.name, conv))
+                      getter=getter, setter=self._setter(var.name, conv))
             if var.causality in ("parameter", "input", "local"):
                 kw["variability"] = _VARIABILITY[var.variability]
             slave.register_variable(vtype(var.name, **kw))
+        # the slave scripts leave enter_initialization_mode to Fmi2Slave (a no-op): take it over here
+        slave.enter_initialization_mode = self.enter_initialization_mode
+        # PythonFMU 0.7.0 exit-time use-after-free: make exit() empty this library's PyState pointer first
+        from .fmu_runtime import register_exit_fix_in_fmu
+        register_exit_fix_in_fmu(slave.resources, slave.modelName)
 
     def _getter(self, name, conv):
         return lambda: conv(self.block.get(name))
 
+    def _output_getter(self, name, conv):
+        def get_value():
+            if self.in_initialization_mode and self._outputs_stale:
+                self._outputs_stale = False
+                try:
+                    self.block.initialize()
+                except Exception:  # noqa: BLE001 - inputs may be provisional; checked at exit
+                    pass
+            return conv(self.block.get(name))
+        return get_value
+
     def _setter(self, name, conv):
         def set_value(value):
+            self._outputs_stale = True
             try:
                 self.block.set(name, conv(value))
             except (TypeError, ValueError) as exc:  # never raise out of a callback
@@ -88,7 +117,12 @@ class BlockAdapter:
         self.failed = message
         self.slave.log(message, Fmi2Status.error)
 
+    def enter_initialization_mode(self):
+        self.in_initialization_mode = True
+        self._outputs_stale = True
+
     def exit_initialization_mode(self):
+        self.in_initialization_mode = False
         try:
             self.block.initialize()
         except Exception as exc:  # noqa: BLE001 - reported through the FMI logger
