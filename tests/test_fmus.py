@@ -351,19 +351,20 @@ def test_fmpy_dump_lists_units(fmus, name, capsys):
 
 @pytest.mark.parametrize("name", NAMES)
 def test_bundle_is_version_unique(fmus, name):
-    # reference: fmu_build docstring - resources/l1b2_<version>/, slave module l1b2_<version>_<name>,
-    # no shared top-level resources/pythonfmu/
-    pkg = "l1b2_" + re.sub(r"[^0-9A-Za-z]", "_", __version__)
+    # reference: fmu_build docstring - resources/l1b2_<version>_<fmu>/, slave module l1b2_<version>_<fmu>_slave,
+    # no shared top-level resources/pythonfmu/, no C host source inside
+    pkg = "l1b2_" + re.sub(r"[^0-9A-Za-z]", "_", __version__) + "_" + name.lower()
     with zipfile.ZipFile(fmus[name]) as z:
         names = z.namelist()
         assert any(n.startswith(f"resources/{pkg}/") for n in names)
         assert f"resources/{pkg}/__init__.py" in names
-        assert z.read("resources/slavemodule.txt").decode().strip() == f"{pkg}_{name.lower()}"
-        assert f"resources/{pkg}_{name.lower()}.py" in names
+        assert z.read("resources/slavemodule.txt").decode().strip() == f"{pkg}_slave"
+        assert f"resources/{pkg}_slave.py" in names
         assert not any(n.startswith("resources/pythonfmu/") for n in names)
         assert not any(n.startswith("resources/l1b2/") for n in names)
+        assert not any("/chost/" in n for n in names)
         # the bundled code imports only the bundled package
-        src = z.read(f"resources/{pkg}_{name.lower()}.py").decode()
+        src = z.read(f"resources/{pkg}_slave.py").decode()
         assert not re.search(r"^\s*(from|import)\s+l1b2(\s|\.)", src, flags=re.M)
         assert not re.search(r"^\s*(from|import)\s+pythonfmu(\s|\.)", src, flags=re.M)
 

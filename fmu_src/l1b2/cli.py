@@ -206,6 +206,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--params", type=Path, help="motor parameter TOML (default: reference motor)")
     p.set_defaults(func=cmd_compare)
 
+    p = sub.add_parser("export", help="FMUs, L1B2Motor.ssp and L1B2Motor.fmu for other simulators")
+    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--identification", type=Path, help="identification.json whose predictor Predictor.fmu carries")
+    p.add_argument("--no-predictor", action="store_true", help="skip Predictor.fmu")
+    p.add_argument("--params", type=Path, help="motor parameter TOML (default: reference motor)")
+    p.set_defaults(func=cmd_export)
+
     p = sub.add_parser("effects", help="list the effects the rig can inject")
     p.set_defaults(func=cmd_effects)
     return ap
@@ -290,6 +297,28 @@ def cmd_compare(args) -> int:
         print(f"  {key:38s} max |rel err| {c['max_abs_rel_error']:.2%}  rms {c['rms_rel_error']:.2%}  "
               f"({c['n_points']} points)")
     print(f"wrote {Path(args.out) / 'comparison.json'}")
+    return 0
+
+
+def cmd_export(args) -> int:
+    """The drop-in deliverables: subsystem FMUs, Predictor.fmu, L1B2Motor.ssp and L1B2Motor.fmu."""
+    from .export import export_all
+    predictor = None
+    if args.identification:
+        try:
+            predictor = json.loads(Path(args.identification).read_text())["predictor"]
+        except (OSError, ValueError, KeyError) as exc:
+            raise L1B2Error(f"{args.identification}: not an identification.json of `l1b2 identify` ({exc})") from None
+    elif not args.no_predictor:
+        from .derive import derive_predictor_setup
+        predictor = derive_predictor_setup(_motor(args)).to_dict()
+    manifest = export_all(args.out, mp=_motor(args), predictor=predictor)
+    for f in manifest.get("files", []):
+        print(f"  {f.get('path')}")
+    if not args.identification and not args.no_predictor:
+        print("  (Predictor.fmu carries the physical model's linearization; give --identification to ship "
+              "identified parameters)")
+    print(f"wrote {Path(args.out) / 'manifest.json'}")
     return 0
 
 

@@ -2,10 +2,10 @@
 
 What the build adds to a plain ``pythonfmu build``:
 
-* **Unique names per version.** The physics package is bundled as
-  ``l1b2_<version>`` (e.g. ``l1b2_0_1_0``) and each slave module as
-  ``l1b2_<version>_<fmu>``; pythonfmu's own runtime is vendored inside it as
-  ``l1b2_<version>._pythonfmu``. The PythonFMU loader imports the module named
+* **Unique names per version (and FMU).** The physics package is bundled as
+  ``l1b2_<version>_<fmu>`` (e.g. ``l1b2_0_1_0_stator``) and the slave module
+  as ``l1b2_<version>_<fmu>_slave``; pythonfmu's own runtime is vendored
+  inside it as ``l1b2_<version>_<fmu>._pythonfmu``. The PythonFMU loader imports the module named
   in ``resources/slavemodule.txt`` through ``sys.modules``, so two FMUs
   bundling modules of the same name (PythonFMU issue #228), two versions of
   ours or another PythonFMU FMU built with another pythonfmu, would otherwise
@@ -50,9 +50,15 @@ _ORDER = ["ModelExchange", "CoSimulation", "UnitDefinitions", "TypeDefinitions",
           "DefaultExperiment", "VendorAnnotations", "ModelVariables", "ModelStructure"]
 
 
-def bundle_name(version: str = __version__) -> str:
-    """Name of the bundled physics package, unique per project and version."""
-    return "l1b2_" + re.sub(r"[^0-9A-Za-z]", "_", version)
+def bundle_name(version: str = __version__, fmu: str | None = None) -> str:
+    """Name of the bundled physics package: unique per project, version and FMU.
+
+    Per FMU as well as per version, so every FMU is self-contained: a host
+    that unloads or deletes one FMU's folder cannot break another of ours
+    (Python caches imported packages by name for the whole process).
+    """
+    name = "l1b2_" + re.sub(r"[^0-9A-Za-z]", "_", version)
+    return name if fmu is None else f"{name}_{fmu.lower()}"
 
 
 def rewrite_imports(text: str, package: str) -> str:
@@ -187,14 +193,15 @@ def build_fmu(name: str, dest_dir: str | Path, *, mp: MotorParams | None = None,
     mp = mp or load_motor()
     dest_dir = Path(dest_dir)
     dest_dir.mkdir(parents=True, exist_ok=True)
-    package = bundle_name(version)
-    module = f"{package}_{name.lower()}"
+    package = bundle_name(version, name)
+    module = f"{package}_slave"
     from .blocks import BLOCKS
     if name not in BLOCKS:
         raise ValueError(f"unknown FMU '{name}'; known: {', '.join(BLOCKS)}")
     extra = dict(extra_defaults or {})
-    for key, value in BLOCKS[name].baked_defaults(mp).items():
-        extra.setdefault(key, value)
+    if not all(k in extra for k in ("predictor",) if name == "Predictor"):
+        for key, value in BLOCKS[name].baked_defaults(mp).items():
+            extra.setdefault(key, value)
     defaults = defaults_document(mp, extra)
     script_src = SLAVES_DIR / f"{name}.py"
     if not script_src.exists():
@@ -202,7 +209,7 @@ def build_fmu(name: str, dest_dir: str | Path, *, mp: MotorParams | None = None,
     with tempfile.TemporaryDirectory(prefix="l1b2_fmu_") as td:
         td = Path(td)
         pkg_dir = td / package
-        shutil.copytree(PACKAGE_DIR, pkg_dir, ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+        shutil.copytree(PACKAGE_DIR, pkg_dir, ignore=shutil.ignore_patterns("__pycache__", "*.pyc", "chost"))
         for py in pkg_dir.rglob("*.py"):
             py.write_text(rewrite_imports(py.read_text(), package))
         defaults_file = td / "_fmu_defaults.json"  # lands in resources/, read by each instance
