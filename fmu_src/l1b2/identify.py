@@ -107,6 +107,39 @@ removes the bimodality; that configuration is well conditioned (relative
 singular value ~3e-4 at order 3) and its 95 % intervals have the nominal
 coverage in simulation (tests/test_identify.py).
 
+Extra forces ("closing the loop")
+---------------------------------
+``PredictorIdentifier(extra=ExtraForces(...))`` adds candidate physical
+effects the paper's model lacks as extra forces with their own parameters
+phi: in drive coordinates ``X_total = X + features(df) @ phi`` for every
+sample (nothing else changes: Fr, D, the sign, rest and reversal rules, the
+mass). Features are computed once per data frame and never depend on theta.
+phi is identified jointly with theta: it enters the window equation error
+(linear in phi, extra columns of the linear fit), the analytic Jacobian
+(dF/dphi = features), bounds, scaling (phi's scale makes the force ~1 % of
+the typical drive force), ``fixed``, the SVD/Fisher uncertainty and the
+AIC/BIC count. ``init=`` (e.g. a baseline's ``params_``) warm-starts the
+search; with ``n_starts=1`` it is one local refinement: first phi given theta
+(the baseline can sit on a kink of the free run where the joint step cannot
+move), then jointly; the warm runs also stop when the projected gain over the
+remaining budget is below 50 * ``stat_tol`` log-likelihood units. It is a
+*local* refinement: the baseline's theta was bent to absorb the missing
+effect and may lie in another basin of the (multi-modal, see above)
+likelihood (and on a kink, and under noise variances fitted to the missing
+effect); ``n_starts >= 2`` fits two tracks, the warm start and the
+data-driven search with ``n_starts - 1`` starts, and keeps the higher final
+log-likelihood (``convergence_["tracks"]``).
+
+*Confounding.* A feature that is (nearly) a function of position alone is
+largely reproducible by the position polynomials of Eq. 35 (C(s) has order
+2n): its parameter is then weakly determined or not at all. The fit reports
+it: ``stderr = inf`` and a null direction in ``unidentifiable_`` when exactly
+confounded, otherwise a large ``extra_confounding_[name]["variance_inflation"]``
+(joint variance over the variance if theta were known; ``explained_by_theta``
+= 1 - 1/inflation; ``most_correlated`` theta parameters), entries in
+``weak_directions_`` and a [[Warnings]] line in :meth:`fit_report`.
+Direction-dependent or voltage-dependent features are not confounded this way.
+
 Uncertainty
 -----------
 Covariance from the Fisher information ``(J^T R^-1 J)^-1`` at the optimum
@@ -145,7 +178,8 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from typing import Any, Mapping
+from dataclasses import dataclass
+from typing import Any, Callable, Mapping
 
 import numpy as np
 import numpy.polynomial.legendre as npleg
@@ -174,7 +208,7 @@ from .predictor import (
     steady_state as _steady_state,
 )
 
-__all__ = ["PredictorIdentifier", "evaluation_mask", "RECOMMENDED_FIXED"]
+__all__ = ["PredictorIdentifier", "ExtraForces", "evaluation_mask", "RECOMMENDED_FIXED"]
 
 REQUIRED_COLUMNS = ("time_s", "run", "position_m", "voltage_V", "direction", "load_kg")
 
@@ -198,6 +232,112 @@ _NULL_TOL = 1e-6
 def _label(x):
     """A run label for messages and JSON (numpy scalars -> Python)."""
     return x.item() if isinstance(x, np.generic) else x
+
+
+def _opt_tuple(x, n, name, default):
+    if x is None:
+        return tuple(float(default) for _ in range(n))
+    arr = np.atleast_1d(np.asarray(x, dtype=float)).ravel()
+    if arr.size != n:
+        raise IdentificationError(f"ExtraForces.{name} has {arr.size} entries, expected {n} (one per name)")
+    return tuple(float(a) for a in arr)
+
+
+@dataclass(frozen=True)
+class ExtraForces:
+    """Extra exogenous forces with their own parameters (identified jointly with theta).
+
+    The model's drive force becomes ``X_total = X + features(df) @ phi`` in
+    drive coordinates (positive = in the drive direction): ``features`` maps a
+    data-format DataFrame to an ``(n_samples, n_extra)`` array of forces [N]
+    per unit of each parameter (a 1-D array is accepted for one parameter).
+    Features may use any column of the data frame but never theta. Nothing
+    else of the model changes (Fr, D, the sign, rest and reversal rules,
+    the mass).
+
+    ``names`` / ``units``: one per parameter (names must differ from the Eq. 35
+    names). ``start``: start values of phi for a warm start (``init``) when
+    ``init_extra`` is not given (default zeros); the data-driven start takes
+    phi from the joint linear equation-error fit. ``lower`` / ``upper``:
+    bounds (default -inf / +inf). ``features`` cannot be serialised:
+    :meth:`PredictorIdentifier.from_dict` takes it again (``extra=``).
+    """
+
+    names: tuple
+    units: tuple
+    features: Callable
+    start: tuple | None = None
+    lower: tuple | None = None
+    upper: tuple | None = None
+    description: str = ""
+
+    def __post_init__(self):
+        names = (self.names,) if isinstance(self.names, str) else tuple(self.names)
+        names = tuple(str(n) for n in names)
+        if not names:
+            raise IdentificationError("ExtraForces.names is empty")
+        if len(set(names)) != len(names):
+            raise IdentificationError(f"ExtraForces.names are not unique: {names}")
+        units = (self.units,) if isinstance(self.units, str) else tuple(self.units)
+        units = tuple(str(u) for u in units)
+        if len(units) != len(names):
+            raise IdentificationError(f"ExtraForces: {len(units)} units for {len(names)} names")
+        if not callable(self.features):
+            raise IdentificationError("ExtraForces.features must be callable: df -> (n_samples, n_extra) array")
+        n = len(names)
+        lower = _opt_tuple(self.lower, n, "lower", -np.inf)
+        upper = _opt_tuple(self.upper, n, "upper", np.inf)
+        if any(not (lo < hi) for lo, hi in zip(lower, upper)) or any(math.isnan(x) for x in lower + upper):
+            raise IdentificationError(f"ExtraForces: need lower < upper, got {lower} / {upper}")
+        start = None if self.start is None else _opt_tuple(self.start, n, "start", 0.0)
+        if start is not None and not all(math.isfinite(x) for x in start):
+            raise IdentificationError(f"ExtraForces.start must be finite, got {start}")
+        object.__setattr__(self, "names", names)
+        object.__setattr__(self, "units", units)
+        object.__setattr__(self, "lower", None if self.lower is None else lower)
+        object.__setattr__(self, "upper", None if self.upper is None else upper)
+        object.__setattr__(self, "start", start)
+        object.__setattr__(self, "description", str(self.description or ""))
+
+    @property
+    def n(self) -> int:
+        """Number of extra parameters."""
+        return len(self.names)
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        n = self.n
+        lo = np.full(n, -np.inf) if self.lower is None else np.asarray(self.lower, float)
+        hi = np.full(n, np.inf) if self.upper is None else np.asarray(self.upper, float)
+        return lo, hi
+
+    def start_vector(self) -> np.ndarray:
+        return np.zeros(self.n) if self.start is None else np.asarray(self.start, float)
+
+    def evaluate(self, df) -> np.ndarray:
+        """``features(df)`` validated: float array of shape (len(df), n), all finite."""
+        n_rows = len(df)
+        try:
+            E = np.asarray(self.features(df), dtype=float)
+        except IdentificationError:
+            raise
+        except Exception as exc:  # the user's callable: report what failed
+            raise IdentificationError(f"extra forces {list(self.names)}: features(df) failed: {exc}") from exc
+        if E.ndim == 1 and self.n == 1:
+            E = E[:, None]
+        if E.ndim == 0 and self.n == 1:
+            E = np.full((n_rows, 1), float(E))
+        if E.shape != (n_rows, self.n):
+            raise IdentificationError(
+                f"extra forces: features(df) returned shape {E.shape}, expected ({n_rows}, {self.n}) "
+                f"(one column per parameter {list(self.names)})"
+            )
+        bad = ~np.isfinite(E)
+        if bad.any():
+            i, j = (int(a[0]) for a in np.nonzero(bad))
+            raise IdentificationError(
+                f"extra forces: feature of '{self.names[j]}' is not finite (first at row {i + 1})"
+            )
+        return np.ascontiguousarray(E)
 
 
 class _Data:
@@ -286,7 +426,7 @@ class _Data:
 class _Core:
     """Force terms and their theta-derivatives on one set of samples."""
 
-    def __init__(self, L, V0, mp, h, d, m_s, kappa):
+    def __init__(self, L, V0, mp, h, d, m_s, kappa, E=None):
         self.L = np.ascontiguousarray(L)
         self.V0 = V0
         self.mp = mp
@@ -296,17 +436,23 @@ class _Core:
         self.m_s = float(m_s)
         self.kappa = float(kappa)
         self.n1 = L.shape[1]
+        #: length of the Eq. 35 part; entries beyond it are the extra-force parameters phi
+        self.p_theta = 5 + 3 * self.n1
+        #: extra-force features (drive coordinates, N per unit phi), or None
+        self.E = None if E is None else np.ascontiguousarray(E, dtype=float)
 
     def terms(self, theta):
         n1 = self.n1
         c_r, sig, mu, k0, musd = theta[:5]
         Ap = self.L @ theta[5 : 5 + n1]
         Bp = self.L @ theta[5 + n1 : 5 + 2 * n1]
-        P = self.L @ theta[5 + 2 * n1 :]
+        P = self.L @ theta[5 + 2 * n1 : 5 + 3 * n1]
         g1 = float(drive_factor(k0))
         G = float(G_of_k0(k0))
         D = c_r + sig * (0.5 - Ap)
         X = Bp * self.V0 + mu * P * (g1 - 0.5 * np.pi * Ap * G) - G_ACC * self.mp
+        if self.E is not None:
+            X = X + self.E @ theta[self.p_theta :]
         Fr = musd * (G_ACC * self.m_s + self.kappa * P)
         return Ap, P, D, X, Fr
 
@@ -343,6 +489,9 @@ class _Core:
                 out[:, j] = L[:, c - 5] * group_a
             elif c < 5 + 2 * n1:
                 out[:, j] = L[:, c - 5 - n1] * V0
+            elif c >= self.p_theta:
+                # extra force: X += E phi, dF/dphi = E (whatever the speed)
+                out[:, j] = self.E[:, c - self.p_theta] if rows is None else self.E[rows, c - self.p_theta]
             else:
                 if group_p is None:
                     group_p = mu * (g1 - 0.5 * np.pi * Ap * G) + sg * musd * self.kappa
@@ -353,7 +502,8 @@ class _Core:
 class _Problem:
     """Residuals and analytic Jacobian of one criterion on one data set."""
 
-    def __init__(self, data: _Data, order, kappa, include_load_inertia, criterion, s_center, s_half, m_s):
+    def __init__(self, data: _Data, order, kappa, include_load_inertia, criterion, s_center, s_half, m_s,
+                 E=None):
         self.data = data
         self.criterion = criterion
         lay = data.layout
@@ -367,7 +517,8 @@ class _Problem:
         self.m_s = m_s
         if criterion == "free_run":
             pk = lay.to_packed
-            self.core = _Core(pk(L), pk(data.V0), pk(mp), pk(h), pk(data.d), m_s, kappa)
+            self.core = _Core(pk(L), pk(data.V0), pk(mp), pk(h), pk(data.d), m_s, kappa,
+                              None if E is None else pk(E))
             self.nd = -self.core.d
             self.v0 = data.v[lay.starts][lay.run_order]
             mask_p = pk(data.mask)
@@ -378,7 +529,8 @@ class _Problem:
         elif criterion == "one_step":
             idx = np.flatnonzero(~lay.is_last)
             self.idx = idx
-            self.core = _Core(L[idx], data.V0[idx], mp[idx], h[idx], data.d[idx], m_s, kappa)
+            self.core = _Core(L[idx], data.V0[idx], mp[idx], h[idx], data.d[idx], m_s, kappa,
+                              None if E is None else E[idx])
             self.vprev = data.v[idx]
             keep = data.mask[idx + 1]
             self.sel = np.flatnonzero(keep)
@@ -526,11 +678,12 @@ class _Problem:
 # ---------------------------------------------------------------------------
 
 
-def _reduced_linear_fit(data: _Data, order, m_s, include_load_inertia, s_center, s_half, use_mask=True):
-    """Linear LS for the Legendre coefficients of D (n+1), B' (n+1), C (2n+1).
+def _reduced_linear_fit(data: _Data, order, m_s, include_load_inertia, s_center, s_half, use_mask=True, E=None):
+    """Linear LS for the Legendre coefficients of D (n+1), B' (n+1), C (2n+1) (and phi).
 
     Window-integrated equation error (v' > 0 throughout the window):
-    m_eff (v'[k+w] - v'[k]) + 9.81 sum dt m' = sum dt (-D v' + B' V0 + C).
+    m_eff (v'[k+w] - v'[k]) + 9.81 sum dt m' = sum dt (-D v' + B' V0 + C + E phi)
+    (``E``: extra-force features, drive coordinates; linear in phi too).
     """
     lay = data.layout
     vp = data.d * data.v
@@ -544,7 +697,10 @@ def _reduced_linear_fit(data: _Data, order, m_s, include_load_inertia, s_center,
     w = int(max(4, min(50, round(0.01 / med_dt))))
     stride = max(1, w // 2)
     vthr = max(5e-3, 0.05 * float(np.median(np.abs(vp))))
-    A = np.hstack([-L * vp[:, None], L * data.V0[:, None], L2]) * dt[:, None]
+    blocks = [-L * vp[:, None], L * data.V0[:, None], L2]
+    if E is not None:
+        blocks.append(E)
+    A = np.hstack(blocks) * dt[:, None]
     cumA = np.vstack([np.zeros(A.shape[1]), np.cumsum(A, axis=0)])
     cumT = np.concatenate([[0.0], np.cumsum(G_ACC * mp * dt)])
 
@@ -579,10 +735,12 @@ def _reduced_linear_fit(data: _Data, order, m_s, include_load_inertia, s_center,
     sol, *_ = np.linalg.lstsq(Rm, qy, rcond=1e-12)
     sol = sol / cn
     n1 = order + 1
+    nC = 2 * order + 1
     return {
         "D": sol[:n1],
         "B": sol[n1 : 2 * n1],
-        "C": sol[2 * n1 :],
+        "C": sol[2 * n1 : 2 * n1 + nC],
+        "E": sol[2 * n1 + nC :],
         "R": Rm,
         "qy": qy,
         "cn": cn,
@@ -614,13 +772,18 @@ def _reduced_of_theta(theta, order, m_s, kappa, jac=False):
     """Legendre coefficients of D (n+1), B' (n+1) and C (2n+1) implied by theta.
 
     With ``jac=True`` also returns d(coefficients)/d(theta), shape (4n+3, 3n+8).
+    Entries of ``theta`` beyond the Eq. 35 part (extra-force parameters phi)
+    are appended to the coefficients unchanged (identity Jacobian block).
     """
     n1 = order + 1
     T = _legmul_tensor(order)
+    p_theta = 5 + 3 * n1
+    phi = np.asarray(theta[p_theta:], dtype=float)
+    nx = phi.size
     c_r, sig, mu, k0, musd = theta[:5]
     al = theta[5 : 5 + n1]
     be = theta[5 + n1 : 5 + 2 * n1]
-    pp = theta[5 + 2 * n1 :]
+    pp = theta[5 + 2 * n1 : p_theta]
     g1 = float(drive_factor(k0))
     G = float(G_of_k0(k0))
     hG = 0.5 * np.pi * G
@@ -630,11 +793,13 @@ def _reduced_of_theta(theta, order, m_s, kappa, jac=False):
     Cc = -mu * hG * prod
     Cc[:n1] += (mu * g1 - musd * kappa) * pp
     Cc[0] -= musd * G_ACC * m_s
-    g = np.concatenate([Dc, be, Cc])
+    g = np.concatenate([Dc, be, Cc, phi])
     if not jac:
         return g
     nC = 2 * order + 1
-    Jg = np.zeros((2 * n1 + nC, 5 + 3 * n1))
+    Jg = np.zeros((2 * n1 + nC + nx, p_theta + nx))
+    if nx:
+        Jg[2 * n1 + nC :, p_theta:] = np.eye(nx)
     iD, iB, iC = slice(0, n1), slice(n1, 2 * n1), slice(2 * n1, 2 * n1 + nC)
     # D
     Jg[0, 0] = 1.0
@@ -653,7 +818,7 @@ def _reduced_of_theta(theta, order, m_s, kappa, jac=False):
     Jg[iC, 5 : 5 + n1] = -mu * hG * np.einsum("i,ijk->kj", pp, T)
     dCp = -mu * hG * np.einsum("j,ijk->ki", al, T)
     dCp[:n1, :] += (mu * g1 - musd * kappa) * np.eye(n1)
-    Jg[iC, 5 + 2 * n1 :] = dCp
+    Jg[iC, 5 + 2 * n1 : p_theta] = dCp
     return g, Jg
 
 
@@ -799,14 +964,17 @@ def _equation_error_fit(theta_start, varied, red, order, m_s, kappa, n_starts, s
 
 
 def _clip_theta(theta, order):
+    """Clip the Eq. 35 part of theta into its bounds (extra entries, if any, unchanged)."""
     lo, hi = PredictorParams.bounds(order)
-    return np.clip(theta, lo, hi)
+    out = np.array(theta, dtype=float, copy=True)
+    out[: lo.size] = np.clip(out[: lo.size], lo, hi)
+    return out
 
 
 def _param_scale(theta, order):
     """Typical magnitudes: |value| (with floors) for scalars, group max for polynomials."""
     n1 = order + 1
-    scale = np.empty(theta.size)
+    scale = np.ones(theta.size)  # entries beyond Eq. 35 (extra forces) are scaled by the caller
     floors = {"c_r": 1e-3, "sigma": 1e-4, "mu": 1e-2, "k0": 0.05, "mu_sd": 1e-2}
     for i, nm in enumerate(SCALAR_NAMES):
         scale[i] = max(abs(theta[i]), floors[nm])
@@ -853,17 +1021,34 @@ class _StatStop:
     decreased by less than ``tol`` (log-likelihood units, default 0.01, far
     below the 1.92 of a 95 % likelihood-ratio interval) over ``window``
     iterations, further progress cannot matter statistically.
+
+    With ``budget`` (the iteration budget of the run; used for warm starts
+    only) the run also stops when the *projected* gain -- the decrease rate
+    over the last ``window`` iterations times the iterations left -- is below
+    ``budget_tol`` (default 0.5 log-likelihood units): even if the creep
+    went on to the end of the budget, it could not matter statistically.
     """
 
-    def __init__(self, tol, window):
+    def __init__(self, tol, window, budget=None, budget_tol=0.5):
         self.tol = float(tol)
         self.window = int(window)
+        self.budget = None if budget is None else int(budget)
+        self.budget_tol = float(budget_tol)
         self.costs = []
+        self.reason = None
 
     def __call__(self, intermediate_result):
         self.costs.append(float(intermediate_result.cost))
-        if len(self.costs) > self.window and self.costs[-self.window - 1] - self.costs[-1] < self.tol:
-            raise StopIteration
+        if len(self.costs) > self.window:
+            dec = self.costs[-self.window - 1] - self.costs[-1]
+            if dec < self.tol:
+                self.reason = "window"
+                raise StopIteration
+            if self.budget is not None:
+                left = max(self.budget - len(self.costs), 0)
+                if dec / self.window * left < self.budget_tol:
+                    self.reason = "projected"
+                    raise StopIteration
 
 
 class _NoiseModel:
@@ -1018,6 +1203,59 @@ class PredictorIdentifier:
     start_noise : free run: model the noise of the measured start speed of each
         run, which propagates through the recursion (residual covariance
         ``R_r (I + g g^T)``, ``g = d v_pred/d v_start``); see :class:`_NoiseModel`.
+    extra : :class:`ExtraForces` or None. Extra exogenous forces with their own
+        parameters phi, identified jointly with theta: in drive coordinates
+        ``X_total = X + features(df) @ phi``. ``None`` (default) is the
+        paper's model, unchanged. See *Extra forces* below.
+    init : PredictorParams (or theta in Eq. 35 order) to warm-start from,
+        e.g. a baseline fit. With ``n_starts=1`` only this start is run: one
+        local refinement (phi given theta, then jointly, with the noise
+        re-estimation), no equation-error search. With ``n_starts >= 2`` two
+        tracks are fitted and the higher final log-likelihood wins: this
+        warm start, and the data-driven search with ``n_starts - 1`` starts
+        (as without init); ``convergence_["tracks"]`` records both. (One
+        global search with init among the starts would compare the starts
+        under init's noise variances, which are wrong for the others when
+        init lacks an effect.) Parameters pinned by ``fixed`` without a value
+        take init's values in the warm track.
+        Its polynomials are re-expanded exactly if its position scaling
+        (s_center, s_half) differs from the data's; kappa and
+        include_load_inertia are the identifier's.
+    init_extra : start values of phi for the warm start (default
+        ``extra.start``, else zeros). Only used with ``init``.
+
+    Extra forces
+    ------------
+    With ``extra`` the parameter vector is ``[theta, phi]`` internally: phi is
+    in the data-driven start (the window equation error is linear in phi),
+    the analytic Jacobian (dF/dphi = features), the bounds, the scaling, the
+    SVD/Fisher uncertainty with AR(1) inflation (null and weak directions may
+    involve phi), the AIC/BIC parameter count and ``fixed`` (extra names
+    accepted). Attributes keep their theta-only shape and meaning
+    (``theta_``, ``params_``, ``varied_``, ``identifiable_``, ``stderr_``,
+    ``stderr_fisher_``, ``ci95_`` (p, 2), ``cov_``, ``cov_fisher_``,
+    ``corr_`` (p, p) with p = 3n+8: the theta block of the joint covariance);
+    the extras are in ``phi_`` (n_extra,), ``extra_names_``,
+    ``extra_params_``, ``extra_stderr_``, ``extra_stderr_fisher_`` (dict name
+    -> float), ``extra_ci95_`` (dict name -> (lo, hi)), ``extra_varied_``,
+    ``extra_identifiable_`` (bool arrays), and the joint quantities in
+    ``param_names_all_`` (theta names + extra names), ``stderr_all_``,
+    ``ci95_all_``, ``cov_all_``, ``corr_all_`` (cross-correlations theta-phi).
+    ``extra_confounding_`` (dict name -> dict) compares each extra
+    parameter's stderr with the one it would have if theta were known
+    (``variance_inflation``, ``explained_by_theta`` = 1 - 1/inflation,
+    ``most_correlated``): a feature that is a smooth function of position is
+    largely reproducible by the position polynomials of Eq. 35, which shows
+    here, in ``weak_directions_`` / ``unidentifiable_`` and in the
+    [[Warnings]] of :meth:`fit_report`. Without extras these attributes exist
+    and are empty (or equal the theta versions). Also: ``extra_init_`` (phi
+    at the centre start), ``warm_prestep_`` (the phi-given-theta step of a
+    warm start, or None), ``fixed_`` may hold extra names, the ``"theta"`` of
+    ``alternative_optima_`` and the ``x0`` of ``convergence_["starts"]`` are
+    the joint vectors (theta then phi), :meth:`extra_force` gives
+    ``features(df) @ phi`` per sample, ``to_dict()`` has ``"extra"`` (name ->
+    value, stderr, stderr_fisher, ci95, unit, vary, identifiable,
+    confounding) and ``"extra_description"``; ``from_dict(d, extra=...)``.
     """
 
     def __init__(
@@ -1043,6 +1281,9 @@ class PredictorIdentifier:
         stat_window: int = 10,
         alt_tol: float = 2.0,
         verbose: bool = False,
+        extra: "ExtraForces | None" = None,
+        init: PredictorParams | None = None,
+        init_extra=None,
     ):
         self.order = int(order)
         self.criterion = criterion
@@ -1073,14 +1314,46 @@ class PredictorIdentifier:
             raise IdentificationError("order must be >= 0")
         if self.n_starts < 1:
             raise IdentificationError("n_starts must be >= 1")
+        if extra is not None and not isinstance(extra, ExtraForces):
+            raise IdentificationError(f"extra must be an ExtraForces or None, got {type(extra).__name__}")
+        if extra is not None:
+            clash = set(extra.names) & set(PredictorParams.names(self.order))
+            if clash:
+                raise IdentificationError(f"extra: names {sorted(clash)} clash with Eq. 35 parameter names")
+        self.extra = extra
+        self.init = init
+        self.init_extra = None if init_extra is None else np.atleast_1d(np.asarray(init_extra, float)).ravel()
+        if self.init_extra is not None:
+            if extra is None:
+                raise IdentificationError("init_extra given without extra")
+            if self.init_extra.size != extra.n:
+                raise IdentificationError(
+                    f"init_extra has {self.init_extra.size} values, expected {extra.n} ({list(extra.names)})"
+                )
+        if init is not None and not isinstance(init, PredictorParams):
+            th = np.asarray(init, dtype=float).ravel()
+            if th.size != len(PredictorParams.names(self.order)):
+                raise IdentificationError(
+                    f"init: expected PredictorParams or theta of length {len(PredictorParams.names(self.order))}"
+                )
+        elif init is not None and init.order != self.order:
+            raise IdentificationError(f"init has polynomial order {init.order}, the identifier {self.order}")
 
     # -- helpers -------------------------------------------------------------
     @property
     def param_names(self) -> list[str]:
+        """Names of theta (Eq. 35 order); extra parameters are in :attr:`extra_names`."""
         return PredictorParams.names(self.order)
 
+    @property
+    def extra_names(self) -> list[str]:
+        """Names of the extra-force parameters (empty without extras)."""
+        if self.extra is not None:
+            return list(self.extra.names)
+        return list(getattr(self, "extra_names_", []))
+
     def _parse_fixed(self) -> dict:
-        names = self.param_names
+        names = self.param_names + ([] if self.extra is None else list(self.extra.names))
         fx = self.fixed
         if fx is None:
             return {}
@@ -1102,8 +1375,56 @@ class PredictorIdentifier:
             print(msg, flush=True)
 
     # -- fitting -------------------------------------------------------------
+    def _settings(self) -> dict:
+        """The constructor arguments (for the two tracks of a warm start)."""
+        keys = ("order", "criterion", "n_starts", "seed", "fixed", "noise", "kappa", "include_load_inertia",
+                "max_nfev", "start_spread", "max_outer", "svd_rtol", "weak_rtol", "tol", "start_noise",
+                "explore_nfev", "n_refine", "stat_tol", "stat_window", "alt_tol", "verbose", "extra", "init",
+                "init_extra")
+        return {k: getattr(self, k) for k in keys}
+
+    def _fit_two_tracks(self, df, slider_mass_kg, mask):
+        """Warm start with n_starts >= 2: the warm track and the data-driven track; keep the better."""
+        t_start = time.perf_counter()
+        st = self._settings()
+        warm = type(self)(**{**st, "n_starts": 1}).fit(df, slider_mass_kg, mask)
+        tracks = [("warm start (init)", warm)]
+        try:
+            cold = type(self)(**{**st, "n_starts": self.n_starts - 1, "init": None, "init_extra": None}).fit(
+                df, slider_mass_kg, mask
+            )
+            tracks.append(("data-driven", cold))
+        except IdentificationError as exc:  # e.g. too few forward windows for the linear fit
+            self._log(f"data-driven track failed: {exc}")
+            tracks.append(("data-driven", exc))
+        fitted = [(nm, t) for nm, t in tracks if not isinstance(t, Exception)]
+        name, best = max(fitted, key=lambda nt: nt[1].loglik_)
+        for k, v in vars(best).items():
+            if k.endswith("_") and not k.startswith("_"):
+                setattr(self, k, v)
+        rec = []
+        for nm, t in tracks:
+            if isinstance(t, Exception):
+                rec.append({"track": nm, "error": str(t)})
+                continue
+            rec.append({
+                "track": nm, "chosen": t is best, "loglik": t.loglik_, "residual_rms": t.residual_rms_,
+                "n_starts": t.convergence_["n_starts"], "nfev_total": t.convergence_["nfev_total"],
+                "fit_time_s": t.fit_time_s_, "theta": t.theta_.tolist(), "phi": t.phi_.tolist(),
+                "fixed": dict(t.fixed_),
+            })
+        self.convergence_ = dict(best.convergence_)
+        self.convergence_["tracks"] = rec
+        self.convergence_["chosen_track"] = name
+        self.convergence_["nfev_total"] = int(sum(r.get("nfev_total", 0) for r in rec))
+        self.fit_time_s_ = time.perf_counter() - t_start
+        self._log(f"warm start: tracks {[(r['track'], r.get('loglik')) for r in rec]}; chosen: {name}")
+        return self
+
     def fit(self, df, slider_mass_kg=None, mask=None):
-        """Identify theta from a data-format DataFrame; returns self."""
+        """Identify theta (and the extra-force parameters) from a data-format DataFrame; returns self."""
+        if self.init is not None and self.n_starts >= 2:
+            return self._fit_two_tracks(df, slider_mass_kg, mask)
         t_start = time.perf_counter()
         if slider_mass_kg is None:
             raise IdentificationError(
@@ -1118,7 +1439,13 @@ class PredictorIdentifier:
         data = _Data(df, mask)
         lay = data.layout
         names = self.param_names
-        p_all = len(names)
+        extra = self.extra
+        xnames = [] if extra is None else list(extra.names)
+        names_all = names + xnames
+        p_theta = len(names)
+        nx = len(xnames)
+        p_all = p_theta + nx
+        E = None if extra is None else extra.evaluate(df)  # features, once, flat order
         fixed_in = self._parse_fixed()
         n_var = p_all - len(fixed_in)
         if lay.R < 2:
@@ -1140,43 +1467,94 @@ class PredictorIdentifier:
             raise IdentificationError("no position variation in the data (position_m constant)")
         s_center = 0.5 * (s_lo + s_hi)
         s_half = 0.5 * (s_hi - s_lo)
-
-        # ---- data-driven centre ------------------------------------------
-        red = _reduced_linear_fit(data, self.order, m_s, self.include_load_inertia, s_center, s_half)
-        dco, bco, cco = red["D"], red["B"], red["C"]
-        fixed_vals = {k: v for k, v in fixed_in.items() if v is not None}
-        theta_conv = _map_reduced_to_theta(dco, bco, cco, fixed_vals, self.order, m_s, self.kappa)
+        lo_t, hi_t = PredictorParams.bounds(self.order)
+        xlo, xhi = extra.bounds() if extra is not None else (np.zeros(0), np.zeros(0))
+        lo = np.concatenate([lo_t, xlo])
+        hi = np.concatenate([hi_t, xhi])
         varied = np.ones(p_all, dtype=bool)
         for k in fixed_in:
-            varied[names.index(k)] = False
-        ee = _equation_error_fit(
-            theta_conv, varied, red, self.order, m_s, self.kappa,
-            max(16, 4 * self.n_starts), self.seed, 1.0,
-        )
-        theta0 = ee[0][1].copy()
+            varied[names_all.index(k)] = False
+        fixed_vals = {k: v for k, v in fixed_in.items() if v is not None}
+
+        def clip_all(th):
+            th = _clip_theta(th, self.order)
+            th[p_theta:] = np.clip(th[p_theta:], xlo, xhi)
+            return th
+
+        def with_fixed(th):
+            th = th.copy()
+            for k, v in fixed_vals.items():
+                th[names_all.index(k)] = v
+            return th
+
+        # ---- data-driven centre ------------------------------------------
+        warm = self.init is not None  # (then n_starts == 1, see _fit_two_tracks)
+        need_dd = not warm
+        try:
+            red = _reduced_linear_fit(data, self.order, m_s, self.include_load_inertia, s_center, s_half, E=E)
+        except IdentificationError:
+            if not warm:
+                raise
+            red = None  # a warm start does without the data-driven starts
+        ee = []
+        if need_dd and red is not None:
+            dco, bco, cco = red["D"], red["B"], red["C"]
+            theta_conv = _map_reduced_to_theta(
+                dco, bco, cco, {k: v for k, v in fixed_vals.items() if k in names}, self.order, m_s, self.kappa
+            )
+            theta_conv = clip_all(with_fixed(np.concatenate([theta_conv, red["E"]])))
+            ee = _equation_error_fit(
+                theta_conv, varied, red, self.order, m_s, self.kappa,
+                max(16, 4 * self.n_starts), self.seed, 1.0,
+            )
+            ee = [(c, clip_all(with_fixed(th))) for c, th in ee]
+        if warm:
+            phi_init = (
+                self.init_extra if self.init_extra is not None
+                else (extra.start_vector() if extra is not None else np.zeros(0))
+            )
+            theta0 = clip_all(with_fixed(np.concatenate([self._init_vector(s_center, s_half), phi_init])))
+        else:
+            theta0 = ee[0][1].copy()
         # pin fixed-without-value at the centre
-        fixed_final = {k: (theta0[names.index(k)] if v is None else v) for k, v in fixed_in.items()}
+        fixed_final = {k: (theta0[names_all.index(k)] if v is None else v) for k, v in fixed_in.items()}
         for k, v in fixed_final.items():
-            theta0[names.index(k)] = v
-        self.reduced_ = {
-            "D": dco.tolist(), "B_prime": bco.tolist(), "C": cco.tolist(),
-            "n_windows": red["n_windows"], "window_samples": red["window"],
-            "equation_error_minima": [c for c, _ in ee],
-        }
-        self.theta_init_ = theta0.copy()
+            theta0[names_all.index(k)] = v
+        if red is not None:
+            self.reduced_ = {
+                "D": red["D"].tolist(), "B_prime": red["B"].tolist(), "C": red["C"].tolist(),
+                "n_windows": red["n_windows"], "window_samples": red["window"],
+                "equation_error_minima": [c for c, _ in ee],
+            }
+            if nx:
+                self.reduced_["extra"] = dict(zip(xnames, (float(x) for x in red["E"])))
+        else:
+            self.reduced_ = None
+        self.theta_init_ = theta0[:p_theta].copy()
+        self.extra_init_ = theta0[p_theta:].copy()
+
+        problem = _Problem(
+            data, self.order, self.kappa, self.include_load_inertia, self.criterion, s_center, s_half, m_s, E=E
+        )
 
         # ---- scaling -------------------------------------------------------
         scale = _param_scale(theta0, self.order)
-        lo, hi = PredictorParams.bounds(self.order)
+        if nx:
+            # phi: the magnitude that makes the extra force ~1 % of the typical drive force
+            with np.errstate(over="ignore", invalid="ignore"):
+                X0 = problem.core.terms(theta0)[3]
+            X0 = np.abs(X0[np.isfinite(X0)])
+            x_typ = float(np.median(X0)) if X0.size else 1.0
+            x_typ = max(x_typ, 0.1 * G_ACC * m_s)
+            e_rms = np.sqrt(np.mean(E[data.mask] ** 2, axis=0)) if data.mask.any() else np.ones(nx)
+            e_rms = np.where(e_rms > 0, e_rms, 1.0)
+            scale[p_theta:] = np.maximum(np.abs(theta0[p_theta:]), 0.01 * x_typ / e_rms)
         vidx = np.flatnonzero(varied)
         sv_scale = scale[vidx]
         zlo = lo[vidx] / sv_scale
         zhi = hi[vidx] / sv_scale
         z_centre = _strictly_inside(theta0[vidx] / sv_scale, zlo, zhi)
 
-        problem = _Problem(
-            data, self.order, self.kappa, self.include_load_inertia, self.criterion, s_center, s_half, m_s
-        )
         run_sel = problem.run_sel
         n_res = run_sel.size
 
@@ -1211,8 +1589,8 @@ class PredictorIdentifier:
         r0 = problem.residual(theta_of(z_centre))
         if not np.all(np.isfinite(r0)):
             raise IdentificationError(
-                "the data-driven initial guess gives a non-finite prediction; "
-                "check units (m, m/s, V, kg) and slider_mass_kg"
+                ("the warm start (init) gives" if warm else "the data-driven initial guess gives")
+                + " a non-finite prediction; check units (m, m/s, V, kg) and slider_mass_kg"
             )
         update_noise(theta_of(z_centre))
         R_cur = noise.R
@@ -1220,8 +1598,12 @@ class PredictorIdentifier:
         def local(z_init, max_nfev):
             t0 = time.perf_counter()
             kw = {}
+            stop = None
             if _HAS_CALLBACK and self.stat_tol > 0:
-                kw["callback"] = _StatStop(self.stat_tol, self.stat_window)
+                # warm start: also stop a creep whose projected gain is irrelevant
+                stop = _StatStop(self.stat_tol, self.stat_window, budget=max_nfev if warm else None,
+                                 budget_tol=50 * self.stat_tol)
+                kw["callback"] = stop
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
                 res = least_squares(
@@ -1237,16 +1619,64 @@ class PredictorIdentifier:
                     max_nfev=max_nfev,
                     **kw,
                 )
-            if res.status == -2:
+            if res.status == -2 and stop is not None and stop.reason == "projected":
+                res.message = (
+                    f"statistical convergence (warm start): at the rate of the last {self.stat_window} "
+                    f"iterations the remaining budget would gain < {50 * self.stat_tol:g} log-likelihood units"
+                )
+            elif res.status == -2:
                 res.message = (
                     f"statistical convergence: cost decreased by < {self.stat_tol:g} (log-likelihood units) "
                     f"over the last {self.stat_window} iterations"
                 )
             return res, time.perf_counter() - t0
 
+        # ---- warm start with extras: phi given theta first ---------------------
+        # A baseline fitted without the extras can sit on a kink of the free run
+        # (a run at the edge of sticking / reversing); the joint Jacobian there is
+        # one-sided in theta and trf may not move at all. The extras' conditional
+        # fit (theta fixed at init: a small, nearly linear problem) moves off it.
+        self.warm_prestep_ = None
+        xv = np.flatnonzero(vidx >= p_theta)
+        if warm and xv.size:
+            t0 = time.perf_counter()
+            zc = z_centre.copy()
+
+            def fun_x(zx):
+                z = zc.copy()
+                z[xv] = zx
+                return fun(z)
+
+            def jac_x(zx):
+                z = zc.copy()
+                z[xv] = zx
+                J = noise.weighted(problem.jacobian(theta_of(z), vidx[xv]))
+                J *= sv_scale[xv][None, :]
+                return np.where(np.isfinite(J), J, 0.0)
+
+            c_before = 0.5 * float(np.sum(fun(zc) ** 2))
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                pre = least_squares(
+                    fun_x, zc[xv], jac=jac_x, bounds=(zlo[xv], zhi[xv]), method="trf", x_scale=1.0,
+                    ftol=self.tol, xtol=self.tol, gtol=self.tol, max_nfev=self.max_nfev,
+                )
+            if np.isfinite(pre.cost) and pre.cost < c_before:
+                z_centre = z_centre.copy()
+                z_centre[xv] = pre.x
+                z_centre = _strictly_inside(z_centre, zlo, zhi)
+                update_noise(theta_of(z_centre))
+                R_cur = noise.R
+            self.warm_prestep_ = {
+                "cost_before": c_before, "cost_after": float(pre.cost), "nfev": int(pre.nfev),
+                "accepted": bool(np.isfinite(pre.cost) and pre.cost < c_before),
+                "phi": (theta_of(z_centre)[p_theta:]).tolist(), "time_s": time.perf_counter() - t0,
+            }
+            self._log(f"warm start: phi given theta: cost {c_before:.6g} -> {pre.cost:.6g}, nfev {pre.nfev}")
+
         # ---- global search (first outer iteration) ---------------------------
         # starts: the distinct equation-error minima (best first), then Sobol
-        # points around the best one
+        # points around the best one (warm start: init only)
         starts = [z_centre]
         for _, th_ee in ee[1:]:
             if len(starts) >= self.n_starts:
@@ -1330,7 +1760,8 @@ class PredictorIdentifier:
         # ---- uncertainty --------------------------------------------------------
         r = problem.residual(theta_hat)
         Jz = jac(z_best)  # whitened with the final noise model, scaled
-        self._uncertainty(Jz, r, problem, noise, vidx, sv_scale, theta_hat, varied)
+        self._uncertainty(Jz, r, problem, noise, vidx, sv_scale, theta_hat, varied, names_all)
+        self._split_uncertainty(p_theta, Jz, vidx, sv_scale)
         # other converged optima of the global search that fit almost as well
         # but lie far away in parameter space (discrete non-identifiability)
         alts = []
@@ -1340,8 +1771,8 @@ class PredictorIdentifier:
             dll = float(results[i].cost - results[best_i].cost)
             th_i = theta_of(results[i].x)
             with np.errstate(divide="ignore", invalid="ignore"):
-                zd = np.abs(th_i - theta_hat) / self.stderr_
-            zd = np.where(self.identifiable_ & np.isfinite(zd), zd, 0.0)
+                zd = np.abs(th_i - theta_hat) / self.stderr_all_
+            zd = np.where(self.identifiable_all_ & np.isfinite(zd), zd, 0.0)
             dup = any(np.allclose(th_i, np.asarray(a["theta"]), rtol=1e-3, atol=1e-12) for a in alts)
             if dll < self.alt_tol and zd.max() > 3.0 and not dup:
                 top = np.argsort(-zd)[:6]
@@ -1351,7 +1782,8 @@ class PredictorIdentifier:
                         "delta_loglik": dll,
                         "theta": th_i.tolist(),
                         "max_z": float(zd.max()),
-                        "differs_most": [(names[j], float(th_i[j]), float(zd[j])) for j in top if zd[j] > 3.0],
+                        "differs_most": [(names_all[j], float(th_i[j]), float(zd[j])) for j in top
+                                         if zd[j] > 3.0],
                     }
                 )
         self.alternative_optima_ = alts
@@ -1360,12 +1792,19 @@ class PredictorIdentifier:
         self.m_s_ = m_s
         self.s_center_ = s_center
         self.s_half_ = s_half
-        self.varied_ = varied
+        self.varied_ = varied[:p_theta]
         self.fixed_ = {k: float(v) for k, v in fixed_final.items()}
-        self.theta_ = theta_hat
+        self.theta_ = theta_hat[:p_theta].copy()
         self.params_ = PredictorParams.from_vector(
-            theta_hat, s_center, s_half, self.kappa, self.include_load_inertia
+            self.theta_, s_center, s_half, self.kappa, self.include_load_inertia
         )
+        self.extra_names_ = list(xnames)
+        self.extra_units_ = [] if extra is None else list(extra.units)
+        self.extra_description_ = "" if extra is None else extra.description
+        self.phi_ = theta_hat[p_theta:].copy()
+        self.extra_varied_ = varied[p_theta:].copy()
+        self.varied_all_ = varied.copy()
+        self._set_extra_dicts()
         dts = np.diff(data.t)[~lay.is_last[:-1]]
         self.T_s_ = float(np.median(dts)) if dts.size else float("nan")
         self.runs_ = [_label(x) for x in lay.labels]
@@ -1390,8 +1829,9 @@ class PredictorIdentifier:
         self.fit_time_s_ = time.perf_counter() - t_start
         return self
 
-    def _uncertainty(self, Jz, r_raw, problem, noise, vidx, sv_scale, theta_hat, varied):
-        names = self.param_names
+    def _uncertainty(self, Jz, r_raw, problem, noise, vidx, sv_scale, theta_hat, varied, names=None):
+        """Joint (theta and phi) uncertainty; sets the ``*_all_`` attributes (see :meth:`_split_uncertainty`)."""
+        names = self.param_names if names is None else list(names)
         p_all = len(names)
         run_sel = problem.run_sel
         lay = problem.lay
@@ -1445,16 +1885,17 @@ class PredictorIdentifier:
         cov_corr = full(cov_corr_v)
         se_plain = np.sqrt(np.diag(cov_plain))
         se_corr = np.sqrt(np.diag(cov_corr))
-        self.cov_ = cov_corr
-        self.cov_fisher_ = cov_plain
-        self.stderr_ = se_corr
-        self.stderr_fisher_ = se_plain
+        self.cov_all_ = cov_corr
+        self.cov_fisher_all_ = cov_plain
+        self.stderr_all_ = se_corr
+        self.stderr_fisher_all_ = se_plain
         with np.errstate(invalid="ignore", divide="ignore"):
             corr = cov_corr / np.outer(se_corr, se_corr)
         ok = np.isfinite(se_corr)
         corr[~ok, :] = np.nan
         corr[:, ~ok] = np.nan
-        self.corr_ = corr
+        self.corr_all_ = corr
+        self._Jc_ar = Jc  # AR(1)-corrected whitened scaled Jacobian (for the confounding diagnostic)
         nr = np.bincount(run_sel, minlength=lay.R)
         n_eff = float(np.sum(nr / f_ar))
         dof = max(n_eff - k_ident, 1.0)
@@ -1464,9 +1905,10 @@ class PredictorIdentifier:
         self.t_quantile_ = tq
         ci = np.column_stack([theta_hat - tq * se_corr, theta_hat + tq * se_corr])
         ci[~varied] = np.nan
-        self.ci95_ = ci
-        self.identifiable_ = np.zeros(p_all, dtype=bool)
-        self.identifiable_[vidx[~affected_v]] = True
+        self.ci95_all_ = ci
+        self.identifiable_all_ = np.zeros(p_all, dtype=bool)
+        self.identifiable_all_[vidx[~affected_v]] = True
+        self.param_names_all_ = list(names)
         self.k_params_ = k_ident
         # log-likelihood, information criteria
         self.loglik_ = noise.loglik(r_raw)
@@ -1498,37 +1940,176 @@ class PredictorIdentifier:
             weak.append(d)
         self.weak_directions_ = weak
 
+    def _split_uncertainty(self, p_theta, Jz, vidx, sv_scale):
+        """theta-shaped public attributes from the joint ones, and the extra-force diagnostics."""
+        p = p_theta
+        self.cov_ = self.cov_all_[:p, :p].copy()
+        self.cov_fisher_ = self.cov_fisher_all_[:p, :p].copy()
+        self.stderr_ = self.stderr_all_[:p].copy()
+        self.stderr_fisher_ = self.stderr_fisher_all_[:p].copy()
+        self.corr_ = self.corr_all_[:p, :p].copy()
+        self.ci95_ = self.ci95_all_[:p].copy()
+        self.identifiable_ = self.identifiable_all_[:p].copy()
+        self.extra_identifiable_ = self.identifiable_all_[p:].copy()
+        # confounding of each varied extra parameter with theta: its stderr if
+        # theta were known (the other extras still varied) vs. the joint one
+        names_all = self.param_names_all_
+        conf = {}
+        Jc = self._Jc_ar
+        xcols = np.flatnonzero(vidx >= p)
+        if xcols.size:
+            Je = Jc[:, xcols]
+            _, s_, Vt_ = np.linalg.svd(Je, full_matrices=False)
+            keep = s_ > self.svd_rtol * (s_[0] if s_.size and s_[0] > 0 else 1.0)
+            keep &= s_ > 0
+            Vr = Vt_[keep].T
+            cz = (Vr / s_[keep] ** 2) @ Vr.T
+            null_e = np.sqrt(np.sum(Vt_[~keep].T ** 2, axis=1)) if (~keep).any() else np.zeros(xcols.size)
+            se_cond = np.sqrt(np.diag(cz)) * sv_scale[xcols]
+            se_cond = np.where(null_e > _NULL_TOL, np.inf, se_cond)
+            for jj, c in enumerate(xcols):
+                i = int(vidx[c])
+                nm = names_all[i]
+                se_j = float(self.stderr_all_[i])
+                sc = float(se_cond[jj])
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    vif = se_j**2 / sc**2 if (np.isfinite(sc) and sc > 0) else float("nan")
+                if not np.isfinite(se_j) and np.isfinite(sc):
+                    vif = float("inf")
+                cr = self.corr_all_[i, :p]
+                ok = np.flatnonzero(np.isfinite(cr))
+                top = ok[np.argsort(-np.abs(cr[ok]))][:3]
+                conf[nm] = {
+                    "stderr": se_j,
+                    "stderr_if_theta_known": sc,
+                    "variance_inflation": float(vif),
+                    "explained_by_theta": float(1.0 - 1.0 / vif) if np.isfinite(vif) and vif > 0 else (
+                        1.0 if vif == np.inf else float("nan")),
+                    "most_correlated": [(names_all[j], float(cr[j])) for j in top],
+                }
+        self.extra_confounding_ = conf
+        del self._Jc_ar
+
+    def _set_extra_dicts(self):
+        """extra_params_, extra_stderr_, extra_stderr_fisher_, extra_ci95_ (dicts by name) from the arrays."""
+        p = len(self.param_names)
+        names = list(self.extra_names_)
+        se = np.asarray(self.stderr_all_, float)[p:]
+        sef = np.asarray(self.stderr_fisher_all_, float)[p:]
+        ci = np.asarray(self.ci95_all_, float).reshape(-1, 2)[p:]
+        self.extra_params_ = {n: float(v) for n, v in zip(names, self.phi_)}
+        self.extra_stderr_ = {n: float(v) for n, v in zip(names, se)}
+        self.extra_stderr_fisher_ = {n: float(v) for n, v in zip(names, sef)}
+        self.extra_ci95_ = {n: (float(a), float(b)) for n, (a, b) in zip(names, ci)}
+
+    def _init_vector(self, s_center, s_half) -> np.ndarray:
+        """theta of ``init`` in the data's position scaling (exact re-expansion of the polynomials)."""
+        init = self.init
+        if not isinstance(init, PredictorParams):
+            return np.asarray(init, dtype=float).ravel().copy()
+        th = init.to_vector()
+        if math.isclose(init.s_center, s_center, rel_tol=1e-12, abs_tol=1e-15) and math.isclose(
+            init.s_half, s_half, rel_tol=1e-12
+        ):
+            return th
+        n1 = self.order + 1
+        new_dom = [s_center - s_half, s_center + s_half]
+
+        def conv(c):
+            out = np.zeros(n1)
+            cc = npleg.Legendre(np.asarray(c, float), domain=init._domain()).convert(
+                domain=new_dom, kind=npleg.Legendre
+            ).coef
+            out[: cc.size] = cc[:n1]
+            return out
+
+        return np.concatenate([th[:5], conv(init.alpha), conv(init.beta), conv(init.p)])
+
     # -- predictions ------------------------------------------------------------
     def _check_fitted(self):
         if not hasattr(self, "params_"):
             raise IdentificationError("PredictorIdentifier is not fitted yet: call fit() first")
 
+    def _theta_all(self) -> np.ndarray:
+        return np.concatenate([self.theta_, np.asarray(getattr(self, "phi_", np.zeros(0)), float)])
+
+    def _extra_matrix(self, df):
+        """Features of the extra forces on ``df`` (None without extras)."""
+        names = list(getattr(self, "extra_names_", []))
+        if not names:
+            return None
+        if self.extra is None:
+            raise IdentificationError(
+                f"this identifier has extra-force parameters {names} but no feature function: "
+                "reattach it with PredictorIdentifier.from_dict(d, extra=ExtraForces(...))"
+            )
+        if list(self.extra.names) != names:
+            raise IdentificationError(f"extra: names {list(self.extra.names)} differ from the fitted {names}")
+        return self.extra.evaluate(df)
+
+    def extra_force(self, df) -> np.ndarray:
+        """The identified extra force ``features(df) @ phi`` per sample [N, drive coordinates] (0 without extras)."""
+        self._check_fitted()
+        E = self._extra_matrix(df)
+        if E is None:
+            return np.zeros(len(df))
+        return E @ self.phi_
+
     def predict_free_run(self, df) -> np.ndarray:
-        """Free-run speed per sample [m/s] (from each run's first measured speed)."""
+        """Free-run speed per sample [m/s] (from each run's first measured speed).
+
+        With extra forces their features are computed on ``df``.
+        """
         self._check_fitted()
         data = _Data(df)
+        E = self._extra_matrix(df)
         prob = _Problem(
             data, self.order, self.kappa, self.include_load_inertia, "free_run",
-            self.s_center_, self.s_half_, self.m_s_,
+            self.s_center_, self.s_half_, self.m_s_, E=E,
         )
-        return prob.predict_all(self.theta_)
+        return prob.predict_all(self._theta_all())
 
     def predict_one_step(self, df) -> np.ndarray:
-        """v(k+1 | measured v(k)) per sample [m/s]; NaN at the first sample of each run."""
+        """v(k+1 | measured v(k)) per sample [m/s]; NaN at the first sample of each run.
+
+        With extra forces their features are computed on ``df``.
+        """
         self._check_fitted()
         data = _Data(df)
+        E = self._extra_matrix(df)
         prob = _Problem(
             data, self.order, self.kappa, self.include_load_inertia, "one_step",
-            self.s_center_, self.s_half_, self.m_s_,
+            self.s_center_, self.s_half_, self.m_s_, E=E,
         )
-        return prob.predict_all(self.theta_)
+        return prob.predict_all(self._theta_all())
 
-    def steady_state(self, s, V0, load, direction) -> np.ndarray:
-        """Closed-form steady speed [m/s] (see :func:`l1b2.predictor.steady_state`)."""
+    def steady_state(self, s, V0, load, direction, extra_force_N=0.0) -> np.ndarray:
+        """Closed-form steady speed [m/s] (see :func:`l1b2.predictor.steady_state`).
+
+        ``extra_force_N`` [N, drive coordinates, broadcasts] is added to X
+        (default 0). With extra forces, pass ``features @ phi`` for the
+        conditions of interest (e.g. ``self.extra_force(df)``); it is not
+        computed here because the features need a data frame.
+        """
         self._check_fitted()
-        return _steady_state(self.params_, s, V0, load, direction, self.m_s_)
+        return _steady_state(self.params_, s, V0, load, direction, self.m_s_, extra_force=extra_force_N)
 
     # -- reporting ----------------------------------------------------------------
+    def _all_view(self) -> dict:
+        """Joint (theta then phi) names, values and uncertainty, for reporting."""
+        xn = list(getattr(self, "extra_names_", []))
+        names = self.param_names + xn
+        if hasattr(self, "stderr_all_"):
+            return {
+                "names": names, "value": self._theta_all(), "varied": np.asarray(self.varied_all_, bool),
+                "stderr": self.stderr_all_, "stderr_fisher": self.stderr_fisher_all_, "ci95": self.ci95_all_,
+                "corr": self.corr_all_,
+            }
+        return {
+            "names": names, "value": self._theta_all(), "varied": np.asarray(self.varied_, bool),
+            "stderr": self.stderr_, "stderr_fisher": self.stderr_fisher_, "ci95": self.ci95_, "corr": self.corr_,
+        }
+
     def fit_report(self, min_correl: float = 0.9) -> str:
         """Readable summary in the spirit of lmfit's fit_report."""
         self._check_fitted()
@@ -1540,8 +2121,15 @@ class PredictorIdentifier:
             f"    L1B2 reduced predictor (paper Eq. 29), order {self.order}, criterion {self.criterion}, "
             f"noise {self.noise}, kappa {self.kappa}, m_eff = m_s{' + |m_load|' if self.include_load_inertia else ''}"
         )
+        xnames = list(getattr(self, "extra_names_", []))
+        if xnames:
+            desc = getattr(self, "extra_description_", "") or ""
+            lines.append(
+                f"    + extra forces (drive coordinates, X += features @ phi): {', '.join(xnames)}"
+                + (f" -- {desc}" if desc else "")
+            )
         lines.append("[[Fit Statistics]]")
-        nvar = int(np.sum(self.varied_))
+        nvar = int(np.sum(self.varied_)) + int(np.sum(getattr(self, "extra_varied_", np.zeros(0, bool))))
         lines.append(f"    # residuals (n)          = {self.n_obs_}")
         lines.append(f"    # runs                   = {len(self.runs_)}")
         lines.append(f"    # varied parameters      = {nvar} (identifiable: {self.k_params_})")
@@ -1549,7 +2137,11 @@ class PredictorIdentifier:
         lines.append(f"    log-likelihood           = {self.loglik_:.6g}")
         lines.append(f"    AIC                      = {self.aic_:.6g}")
         lines.append(f"    BIC                      = {self.bic_:.6g}")
-        lines.append("    (k counts varied identifiable theta parameters; noise variances not counted)")
+        lines.append(
+            "    (k counts varied identifiable theta "
+            + ("and extra-force " if xnames else "")
+            + "parameters; noise variances not counted)"
+        )
         lines.append(f"    effective n (AR(1))      = {self.n_eff_:.6g}; t(0.975, {self.dof_:.0f}) = {self.t_quantile_:.4f}")
         lines.append(f"    slider mass              = {self.m_s_} kg; fit time = {self.fit_time_s_:.2f} s")
         c = self.convergence_
@@ -1562,29 +2154,38 @@ class PredictorIdentifier:
         costs = [s["cost"] for s in c["starts"]]
         lines.append("    start costs: " + ", ".join(f"{x:.6g}" for x in costs))
         lines.append("[[Variables]]  value +/- stderr (AR(1)-corrected; plain Fisher in brackets)  95% CI")
-        w = max(len(nm) for nm in names)
-        for i, nm in enumerate(names):
-            val = self.theta_[i]
-            u = units[nm]
-            if not self.varied_[i]:
+        av = self._all_view()
+        names_all = av["names"]
+        units = {**units, **dict(zip(xnames, getattr(self, "extra_units_", [""] * len(xnames))))}
+        w = max(len(nm) for nm in names_all)
+        for i, nm in enumerate(names_all):
+            if i == len(names) and xnames:
+                lines.append("    -- extra forces --")
+            val = av["value"][i]
+            u = units.get(nm, "")
+            if not av["varied"][i]:
                 lines.append(f"    {nm:<{w}} = {val: .6g} [{u}] (fixed)")
                 continue
-            se = self.stderr_[i]
+            se = av["stderr"][i]
             if not np.isfinite(se):
                 lines.append(f"    {nm:<{w}} = {val: .6g} [{u}] +/- inf  (not identifiable from these data)")
                 continue
             rel = f" ({100 * se / abs(val):.2f}%)" if val != 0 else ""
-            lo, hi = self.ci95_[i]
+            lo, hi = av["ci95"][i]
+            sig = ""
+            if i >= len(names):
+                sig = "  (significant: CI excludes 0)" if (lo > 0 or hi < 0) else "  (not significant: CI contains 0)"
             lines.append(
-                f"    {nm:<{w}} = {val: .6g} +/- {se:.3g}{rel} [{u}]  [{self.stderr_fisher_[i]:.3g}]"
-                f"  CI [{lo:.6g}, {hi:.6g}]"
+                f"    {nm:<{w}} = {val: .6g} +/- {se:.3g}{rel} [{u}]  [{av['stderr_fisher'][i]:.3g}]"
+                f"  CI [{lo:.6g}, {hi:.6g}]{sig}"
             )
         pairs = []
-        for i in range(len(names)):
-            for j in range(i + 1, len(names)):
-                cij = self.corr_[i, j]
+        corr = av["corr"]
+        for i in range(len(names_all)):
+            for j in range(i + 1, len(names_all)):
+                cij = corr[i, j]
                 if np.isfinite(cij) and abs(cij) > min_correl:
-                    pairs.append((abs(cij), names[i], names[j], cij))
+                    pairs.append((abs(cij), names_all[i], names_all[j], cij))
         lines.append(f"[[Correlations]] (|C| > {min_correl})")
         if pairs:
             for _, a, b, cij in sorted(pairs, reverse=True)[:40]:
@@ -1608,6 +2209,23 @@ class PredictorIdentifier:
             )
         for w in getattr(self, "weak_directions_", []):
             warn.append("    - " + w["text"])
+        for nm, cf in getattr(self, "extra_confounding_", {}).items():
+            vif = cf.get("variance_inflation", float("nan"))
+            if vif is None or not (isinstance(vif, (int, float)) and (vif > 10 or vif == float("inf"))):
+                continue
+            mc = ", ".join(f"{a} ({b:+.3f})" for a, b in cf.get("most_correlated", []))
+            if vif == float("inf"):
+                warn.append(
+                    f"    - extra parameter {nm} is confounded with theta: its effect on the predictions can be "
+                    "reproduced by the Eq. 35 parameters (not identifiable jointly)"
+                )
+            else:
+                warn.append(
+                    f"    - extra parameter {nm} is confounded with theta: {100 * cf['explained_by_theta']:.2f} % of "
+                    f"its effect on the predictions can be reproduced by the Eq. 35 parameters (variance inflation "
+                    f"{vif:.3g}: stderr {cf['stderr']:.3g} jointly vs {cf['stderr_if_theta_known']:.3g} if theta "
+                    f"were known); most correlated: {mc}"
+                )
         for alt in getattr(self, "alternative_optima_", []):
             diff = ", ".join(f"{n} = {v:.4g} ({z:.0f} stderr away)" for n, v, z in alt["differs_most"])
             warn.append(
@@ -1639,6 +2257,22 @@ class PredictorIdentifier:
                 "identifiable": bool(self.identifiable_[i]),
             }
         conv = _jsonify(self.convergence_)
+        xnames = list(getattr(self, "extra_names_", []))
+        p = len(names)
+        extra_sec = {}
+        for j, nm in enumerate(xnames):
+            i = p + j
+            cf = getattr(self, "extra_confounding_", {}).get(nm, {})
+            extra_sec[nm] = {
+                "value": float(self.phi_[j]),
+                "stderr": _json_float(self.stderr_all_[i]),
+                "stderr_fisher": _json_float(self.stderr_fisher_all_[i]),
+                "ci95": [_json_float(self.ci95_all_[i, 0]), _json_float(self.ci95_all_[i, 1])],
+                "unit": self.extra_units_[j],
+                "vary": bool(self.varied_all_[i]),
+                "identifiable": bool(self.identifiable_all_[i]),
+                "confounding": _jsonify(cf),
+            }
         return {
             "model": "l1b2 reduced predictor (Eq. 29)",
             "settings": {
@@ -1666,6 +2300,8 @@ class PredictorIdentifier:
             "slider_mass_kg": self.m_s_,
             "predictor_params": self.params_.to_dict(),
             "parameters": params,
+            "extra": extra_sec,
+            "extra_description": getattr(self, "extra_description_", "") or "",
             "paper_monomials": self.params_.to_paper_monomials(self.T_s_),
             "T_s": self.T_s_,
             "runs": [r if isinstance(r, (int, str)) else _jsonify(r) for r in self.runs_],
@@ -1687,11 +2323,28 @@ class PredictorIdentifier:
         }
 
     @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> "PredictorIdentifier":
-        """Rebuild a fitted identifier (for prediction and reporting) from :meth:`to_dict`."""
+    def from_dict(cls, d: Mapping[str, Any], extra: ExtraForces | None = None) -> "PredictorIdentifier":
+        """Rebuild a fitted identifier (for prediction and reporting) from :meth:`to_dict`.
+
+        The values of extra-force parameters (section ``"extra"``) are
+        restored; their feature function cannot be serialised: pass the same
+        ``extra=ExtraForces(...)`` to reattach it (its names must match).
+        Without it, predictions of a model with extra forces raise
+        :class:`IdentificationError`.
+        """
         st = dict(d["settings"])
         fixed = st.pop("fixed", None)
-        obj = cls(fixed=fixed or None, **st)
+        xsec = dict(d.get("extra") or {})
+        xnames = list(xsec)
+        if extra is not None:
+            if not xnames:
+                raise IdentificationError("from_dict: extra given, but the fit has no extra-force parameters")
+            if sorted(extra.names) != sorted(xnames):
+                raise IdentificationError(
+                    f"from_dict: extra names {list(extra.names)} differ from the fitted {xnames}"
+                )
+            xnames = list(extra.names)
+        obj = cls(fixed=fixed or None, extra=extra, **st)
         names = obj.param_names
         prm = d["parameters"]
         obj.params_ = PredictorParams.from_dict(d["predictor_params"])
@@ -1733,6 +2386,38 @@ class PredictorIdentifier:
         np.fill_diagonal(obj.cov_fisher_, obj.stderr_fisher_ ** 2)
         obj.corr_ = np.full((p, p), np.nan)
         np.fill_diagonal(obj.corr_, np.where(np.isfinite(obj.stderr_), 1.0, np.nan))
+        # extra forces
+        obj.extra_names_ = xnames
+        obj.extra_units_ = [str(xsec[n].get("unit", "")) for n in xnames]
+        obj.extra_description_ = str(d.get("extra_description", "") or "")
+        obj.phi_ = np.array([float(xsec[n]["value"]) for n in xnames])
+        obj.extra_varied_ = np.array([bool(xsec[n].get("vary", True)) for n in xnames], dtype=bool)
+        obj.extra_identifiable_ = np.array([bool(xsec[n].get("identifiable", True)) for n in xnames], dtype=bool)
+        obj.extra_confounding_ = {}
+        for n in xnames:
+            cf = dict(xsec[n].get("confounding") or {})
+            for k in ("stderr", "stderr_if_theta_known", "variance_inflation", "explained_by_theta"):
+                if k in cf:
+                    cf[k] = _from_json_float(cf[k])
+            cf["most_correlated"] = [(str(a), float(b)) for a, b in cf.get("most_correlated", [])]
+            obj.extra_confounding_[n] = cf
+        xse = np.array([_from_json_float(xsec[n].get("stderr")) for n in xnames])
+        xsef = np.array([_from_json_float(xsec[n].get("stderr_fisher", xsec[n].get("stderr"))) for n in xnames])
+        xci = np.array([[_from_json_float(x) for x in xsec[n]["ci95"]] for n in xnames]).reshape(-1, 2)
+        obj.param_names_all_ = names + xnames
+        obj.varied_all_ = np.concatenate([obj.varied_, obj.extra_varied_])
+        obj.identifiable_all_ = np.concatenate([obj.identifiable_, obj.extra_identifiable_])
+        obj.stderr_all_ = np.concatenate([obj.stderr_, xse])
+        obj.stderr_fisher_all_ = np.concatenate([obj.stderr_fisher_, xsef])
+        obj.ci95_all_ = np.vstack([obj.ci95_, xci])
+        pa = p + len(xnames)
+        obj.cov_all_ = np.full((pa, pa), np.nan)
+        np.fill_diagonal(obj.cov_all_, obj.stderr_all_ ** 2)
+        obj.cov_fisher_all_ = np.full((pa, pa), np.nan)
+        np.fill_diagonal(obj.cov_fisher_all_, obj.stderr_fisher_all_ ** 2)
+        obj.corr_all_ = np.full((pa, pa), np.nan)
+        np.fill_diagonal(obj.corr_all_, np.where(np.isfinite(obj.stderr_all_), 1.0, np.nan))
+        obj._set_extra_dicts()
         return obj
 
 

@@ -60,6 +60,17 @@ Decisions (and where they deviate from the paper)
   the same friction-bar point whichever way it drives. Speeds are returned in
   the data's signed convention ``v = d v'``.
 
+Extra forces
+------------
+:func:`derivative`, :func:`one_step`, :func:`free_run`,
+:func:`free_run_coefficients`, :func:`steady_state` and
+:func:`simulate_dataset` accept an optional ``extra_force`` (default
+``None`` = the model above, unchanged): a force [N] in *drive coordinates*
+(positive = in the drive direction) added to the drive force ``X`` of every
+sample, ``X_total = X + extra_force``. It enters the static-friction rule
+like any other part of X. This is how candidate physical effects the paper's
+model lacks are carried (see :class:`l1b2.identify.ExtraForces`).
+
 Position polynomials
 --------------------
 A'(s), B'(s), P(s) have order n (default 8 as in the paper) and are stored as
@@ -487,16 +498,25 @@ def _force(D, X, Fr, vp):
     return -D * vp + X + sg * Fr
 
 
-def derivative(params: PredictorParams, v, s, V0, load, direction, m_s):
+def _add_extra(X, extra_force):
+    """X + extra_force (drive coordinates, N); ``None`` leaves X untouched."""
+    if extra_force is None:
+        return X
+    return X + np.asarray(extra_force, dtype=float)
+
+
+def derivative(params: PredictorParams, v, s, V0, load, direction, m_s, extra_force=None):
     """Slider acceleration dv/dt = d * F(v')/m_eff [m/s^2], signed data convention.
 
     ``v`` [m/s] and ``load`` [kg] in the data convention, ``direction`` +1/-1,
     ``m_s`` slider mass [kg]. All inputs broadcast. At v = 0 the guide
-    friction is static (see the module docstring).
+    friction is static (see the module docstring). ``extra_force`` [N, drive
+    coordinates] is added to X (default None: none).
     """
     d = np.asarray(direction, dtype=float)
     vp = d * np.asarray(v, dtype=float)
     D, X, Fr = _force_parts(params, s, V0, d * np.asarray(load, float), m_s)
+    X = _add_extra(X, extra_force)
     F = _force(D, X, Fr, vp)
     return d * F / effective_mass(params, load, m_s)
 
@@ -523,29 +543,33 @@ def step_drive(vp, D, X, Fr, h):
     return new
 
 
-def one_step(params: PredictorParams, v, s, V0, load, direction, dt, m_s):
+def one_step(params: PredictorParams, v, s, V0, load, direction, dt, m_s, extra_force=None):
     """Eq. 28/29: v(k+1) = v(k) + dt/m_eff F(v(k)) (the paper's one-step prediction).
 
     Signed data convention; the rest/reversal rules of the module docstring
-    apply only at or through v = 0.
+    apply only at or through v = 0. ``extra_force`` [N, drive coordinates]
+    is added to X (default None: none).
     """
     d = np.asarray(direction, dtype=float)
     vp = d * np.asarray(v, dtype=float)
     D, X, Fr = _force_parts(params, s, V0, d * np.asarray(load, float), m_s)
+    X = _add_extra(X, extra_force)
     h = np.asarray(dt, float) / effective_mass(params, load, m_s)
     return d * step_drive(vp, D, X, Fr, h)
 
 
-def steady_state(params: PredictorParams, s, V0, load, direction, m_s):
+def steady_state(params: PredictorParams, s, V0, load, direction, m_s, extra_force=None):
     """Closed-form fixed point v* = b/(1-a) of the affine map (m_eff and T_s cancel).
 
     Forward branch (v' > 0): v'* = (X - Fr)/D, consistent if X - Fr > 0;
     else backward branch (v' < 0): v'* = (X + Fr)/D, consistent if X + Fr < 0;
     else the slider is stuck (|X| <= Fr): v* = 0. Returns NaN where D <= 0
-    (no stable equilibrium). Signed data convention.
+    (no stable equilibrium). Signed data convention. ``extra_force`` [N,
+    drive coordinates] is added to X (default None: none).
     """
     d = np.asarray(direction, dtype=float)
     D, X, Fr = _force_parts(params, s, V0, d * np.asarray(load, float), m_s)
+    X = _add_extra(X, extra_force)
     D, X, Fr = np.broadcast_arrays(D, X, Fr)
     fwd = X - Fr
     bwd = X + Fr
@@ -701,14 +725,16 @@ def packed_linear_recursion(lay: RunLayout, a, U, S0=None):
     return S
 
 
-def free_run_coefficients(params: PredictorParams, s, V0, load, direction, dt, m_s):
+def free_run_coefficients(params: PredictorParams, s, V0, load, direction, dt, m_s, extra_force=None):
     """Per-sample coefficients of the free-run recursion in the data convention.
 
     v[k+1] = a_k v[k] + e_k + f_k sign(-d_k v[k]) with a = 1 - h D, e = d h X,
     f = d h Fr, h = dt/m_eff (see :func:`_force_parts`); z0 = rest_sign(X, Fr).
+    ``extra_force`` [N, drive coordinates] is added to X (default None: none).
     """
     d = np.asarray(direction, float)
     D, X, Fr = _force_parts(params, s, V0, d * np.asarray(load, float), m_s)
+    X = _add_extra(X, extra_force)
     h = np.asarray(dt, float) / effective_mass(params, load, m_s)
     return 1.0 - h * D, d * h * X, d * h * Fr, rest_sign(X, Fr)
 
@@ -723,6 +749,7 @@ def free_run(
     v_start,
     m_s,
     run_index=None,
+    extra_force=None,
 ):
     """Free-run prediction along a MEASURED position trajectory.
 
@@ -735,7 +762,8 @@ def free_run(
     each run is used). Runs are aligned on a common time index internally
     (packed time-major layout, see :class:`RunLayout`: padding without
     computing on the pads) and the recursion loops over the time index
-    only, vectorised across runs.
+    only, vectorised across runs. ``extra_force`` (scalar or one value per
+    sample) [N, drive coordinates] is added to X (default None: none).
     Returns the predicted speed per sample [m/s], signed data convention.
     """
     s = np.asarray(s, dtype=float).ravel()
@@ -756,7 +784,9 @@ def free_run(
     else:
         raise ValueError("v_start must be a scalar, one value per run or one per sample")
     dt = lay.step_dt(t)
-    a, e, f, z0 = free_run_coefficients(params, s, V0, load, d, dt, m_s_arr)
+    if extra_force is not None:
+        extra_force = _broadcast_flat(extra_force, n, "extra_force")
+    a, e, f, z0 = free_run_coefficients(params, s, V0, load, d, dt, m_s_arr, extra_force)
     pk = lay.to_packed
     vpk = packed_recursion(lay, pk(a), pk(e), pk(f), pk(-d), pk(z0), v0[lay.run_order])
     return lay.from_packed(vpk)
@@ -824,6 +854,7 @@ def simulate_dataset(
     seed=None,
     max_duration: float = 5.0,
     pause: float = 0.5,
+    extra_force=None,
 ):
     """Virtual traverses with the predictor itself (for tests and benchmarks).
 
@@ -837,6 +868,13 @@ def simulate_dataset(
     v_start = 0 reproduces the noise-free speeds to rounding. ``time_s`` is continuous across runs
     with ``pause`` seconds between runs. ``noise_std`` [m/s] adds white
     Gaussian noise to ``speed_m_s`` only (positions stay exact).
+    ``extra_force`` (optional callable) adds a drive-coordinate force [N] to
+    X at every step: it is called with a mapping of per-run arrays under the
+    data-format column names ``run``, ``position_m``, ``voltage_V``,
+    ``direction``, ``load_kg``, ``speed_m_s`` (the noise-free state at the
+    start of the step; no ``time_s``) and returns one force per run (or a
+    scalar). A feature function written for data frames with
+    ``np.asarray(df[col])`` works on it, e.g. ``lambda c: features(c) @ phi``.
     Returns a DataFrame with the data-format columns.
     """
     import pandas as pd
@@ -855,8 +893,14 @@ def simulate_dataset(
     Vv = [v.copy()]
     active = np.ones(R, dtype=bool)
     length = np.ones(R, dtype=int)
+    runs = np.arange(R)
     for k in range(1, nmax):
-        v_new = one_step(params, v, s, V0, load, d, dt, m_s_arr)
+        ef = None
+        if extra_force is not None:
+            cols = {"run": runs, "position_m": s, "voltage_V": V0, "direction": d, "load_kg": load,
+                    "speed_m_s": v}
+            ef = np.broadcast_to(np.asarray(extra_force(cols), dtype=float).reshape(-1), (R,))
+        v_new = one_step(params, v, s, V0, load, d, dt, m_s_arr, extra_force=ef)
         s_new = s + 0.5 * dt * (v + v_new)
         inside = (s_new >= lo) & (s_new <= hi)
         active &= inside
