@@ -177,6 +177,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("demo", help="the main job end to end on the reference motor and the virtual rig")
     p.add_argument("--out", type=Path, default=Path("demo_out"))
+    p.add_argument("--effect", default="pulley_friction", help="effect injected for the close-the-loop stage")
     p.add_argument("--engine", choices=("fmu", "inprocess"), default="fmu")
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--quiet", action="store_true")
@@ -205,6 +206,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--order", type=int, default=8)
     p.add_argument("--params", type=Path, help="motor parameter TOML (default: reference motor)")
     p.set_defaults(func=cmd_compare)
+
+    p = sub.add_parser("close-loop", help="find the missing effect in the residual, add it, report before/after")
+    p.add_argument("--train", type=Path, required=True, help="measured data to fit and diagnose on")
+    p.add_argument("--test", type=Path, required=True, help="held-out data, only for the before/after report")
+    p.add_argument("--report-dir", type=Path, required=True)
+    p.add_argument("--order", type=int, default=8)
+    p.add_argument("--folds", type=int, default=5, help="cross-validation folds over runs")
+    p.add_argument("--alpha", type=float, default=0.01, help="significance level (Bonferroni over effects)")
+    p.add_argument("--min-gain", type=float, default=0.5, help="smallest held-out share of the residual an "
+                                                                "effect must explain to be added")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--slider-mass", type=float, help="slider mass [kg] (overrides the sidecars)")
+    p.add_argument("--no-plots", action="store_true")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=cmd_close_loop)
 
     p = sub.add_parser("export", help="FMUs, L1B2Motor.ssp and L1B2Motor.fmu for other simulators")
     p.add_argument("--out", type=Path, required=True)
@@ -261,6 +277,31 @@ def cmd_demo(args) -> int:
     code = main(rig_args)
     if code:
         return code
+    rig = out / "rig"
+    print("[4] identifying the paper's Eq. 29 predictor on the rig's data (the paper's split)")
+    code = main(["identify", "--train", str(rig / "all.csv"), "--out", str(out / "identify")])
+    if code:
+        return code
+    print("[5] predictor vs co-simulation (derived from the physics and identified)")
+    code = main(["compare", "--identification", str(out / "identify" / "identification.json"),
+                 "--out", str(out / "compare")])
+    if code:
+        return code
+    print(f"[6] closing the loop on rig data with an undeclared effect ({args.effect})")
+    eff_dir = out / f"rig_{args.effect}"
+    code = main(["rig", "--out", str(eff_dir), "--engine", "inprocess", "--step", "0.001", "--jobs",
+                 str(args.jobs), "--inject", args.effect, "--no-plots"] + (["--quiet"] if args.quiet else []))
+    if code:
+        return code
+    code = main(["close-loop", "--train", str(eff_dir / "train.csv"), "--test", str(eff_dir / "test.csv"),
+                 "--report-dir", str(out / "close_loop")] + (["--quiet"] if args.quiet else []))
+    if code:
+        return code
+    print("[7] exporting FMUs, L1B2Motor.ssp and L1B2Motor.fmu")
+    code = main(["export", "--out", str(out / "export"), "--identification",
+                 str(out / "identify" / "identification.json")])
+    if code:
+        return code
     print(f"demo outputs in {out}")
     return 0
 
@@ -297,6 +338,20 @@ def cmd_compare(args) -> int:
         print(f"  {key:38s} max |rel err| {c['max_abs_rel_error']:.2%}  rms {c['rms_rel_error']:.2%}  "
               f"({c['n_points']} points)")
     print(f"wrote {Path(args.out) / 'comparison.json'}")
+    return 0
+
+
+def cmd_close_loop(args) -> int:
+    """Residual -> missing effect -> extended model; error before and after on TEST."""
+    from .closeloop import before_after_table, close_loop
+    say = (lambda m: None) if args.quiet else (lambda m: print(f"[close-loop] {m}", flush=True))
+    rep = close_loop(args.train, args.test, args.report_dir, order=args.order, k_folds=args.folds,
+                     alpha=args.alpha, min_gain=args.min_gain, seed=args.seed, slider_mass_kg=args.slider_mass,
+                     plots_on=not args.no_plots, progress=say)
+    d = rep["diagnosis"]
+    print(f"diagnosis: {d['message']}" + (f"; traced to {', '.join(d['traced_to'])}" if d["traced_to"] else ""))
+    print(before_after_table(rep))
+    print(f"wrote {Path(args.report_dir) / 'report.json'} and report.md ({rep['wall_time_s']} s)")
     return 0
 
 

@@ -78,9 +78,9 @@ EFFECTS: dict[str, Effect] = {e.name: e for e in [
            "self-heating of the stator (loss ~ V0^2, time constant tens of s) shifts both resonances by "
            "about -10 Hz/K; the speed drifts along the experiment clock",
            "time",
-           {"Stator.thermal_tau_s": 40.0, "Stator.heating_K_per_V2": 1.2e-4,
+           {"Stator.thermal_tau_s": 30.0, "Stator.heating_K_per_V2": 6e-4,
             "Stator.df_dT_l_Hz_per_K": -10.0, "Stator.df_dT_b_Hz_per_K": -10.0},
-           {"Stator.thermal_tau_s": (25.0, 60.0), "Stator.heating_K_per_V2": (0.8e-4, 1.6e-4)},
+           {"Stator.thermal_tau_s": (20.0, 40.0), "Stator.heating_K_per_V2": (4.5e-4, 8e-4)},
            stateful=True),
     Effect("direction_asymmetry",
            "CH1 and CH2 electrodes excite the B2 mode with different strength (polarisation, electrode "
@@ -90,23 +90,24 @@ EFFECTS: dict[str, Effect] = {e.name: e for e in [
     Effect("bar_waviness",
            "periodic waviness of the friction bar (grinding marks) modulates the preload with position",
            "position",
-           {"Stator.bar_wave_amp_m": 15e-6, "Stator.bar_wave_period_m": 6e-3},
-           {"Stator.bar_wave_amp_m": (12e-6, 20e-6), "Stator.bar_wave_period_m": (4e-3, 8e-3)}),
+           {"Stator.bar_wave_amp_m": 40e-6, "Stator.bar_wave_period_m": 6e-3},
+           {"Stator.bar_wave_amp_m": (30e-6, 50e-6), "Stator.bar_wave_period_m": (4e-3, 8e-3)}),
     Effect("bar_bump",
            "a local bump (defect, debris) on the friction bar raises the preload over a few mm",
            "position",
-           {"Stator.bar_bump_amp_m": 30e-6, "Stator.bar_bump_center_m": 0.004, "Stator.bar_bump_width_m": 2e-3},
-           {"Stator.bar_bump_amp_m": (25e-6, 40e-6), "Stator.bar_bump_center_m": (-0.01, 0.01)}),
+           {"Stator.bar_bump_amp_m": 80e-6, "Stator.bar_bump_center_m": 0.004, "Stator.bar_bump_width_m": 1.0e-3},
+           {"Stator.bar_bump_amp_m": (60e-6, 100e-6), "Stator.bar_bump_center_m": (-0.012, 0.012),
+            "Stator.bar_bump_width_m": (0.7e-3, 1.4e-3)}),
     Effect("pulley_friction",
            "Coulomb friction in the load path (pulley bearing), proportional to the load weight and "
            "always opposing the motion",
            "load",
-           {"Slider.pulley_mu": 0.35}, {"Slider.pulley_mu": (0.25, 0.5)}),
+           {"Slider.pulley_mu": 0.4}, {"Slider.pulley_mu": (0.3, 0.5)}),
     Effect("drive_saturation",
            "the drive's output amplitude saturates (transformer / amplifier limit): the actual V0 falls "
            "below the commanded one at high voltage",
            "voltage",
-           {"Driver.V0_sat_V": 480.0}, {"Driver.V0_sat_V": (420.0, 560.0)}),
+           {"Driver.V0_sat_V": 320.0}, {"Driver.V0_sat_V": (280.0, 360.0)}),
 ]}
 
 
