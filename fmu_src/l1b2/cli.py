@@ -48,7 +48,6 @@ def cmd_simulate(args) -> int:
     from . import driver as drv
     from .cosim import CoSimResult, CoSimulation
     from .coupled import InProcessMotor
-    from .rig import apply_overrides
     from .ssp import COMPONENT_PARAMS
 
     mp = _motor(args)

@@ -15,13 +15,11 @@ Two uses:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
 from scipy import optimize
 
-from . import driver as drv
 from . import interface as itf
 from . import slider as sld
 from . import stator as st

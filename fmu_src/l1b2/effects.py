@@ -19,7 +19,8 @@ Named effects (physics, regressor):
   (electrode area, polarisation): ``dF = d (a V0/V_ref + b)``.
 * ``bar_waviness`` (position): periodic non-uniformity of the friction bar
   (grinding marks) modulates preload and friction:
-  ``dF = (a + c V0/V_ref) cos(2 pi s/L) + (b + e V0/V_ref) sin(2 pi s/L)`` plus the second
+  the thrust, the force factor and the damping are modulated:
+  ``dF = (a + c V0/V_ref + e v/v_ref) cos(2 pi s/L) + (same) sin(2 pi s/L)`` plus the second
   harmonic, L searched around the residual's spectral peak.
 * ``local_defect`` (position): a local bump or contamination of the bar:
   ``dF = a exp(-(s-c)^2 / (2 w^2))``, c and w on a grid.
@@ -149,15 +150,17 @@ def named_candidates(ctx: Context, df_train: pd.DataFrame) -> list[CandidateForc
     def wave(df, L):
         ph = 2 * np.pi * df[dataio.POSITION].to_numpy(float) / L
         g = _V(df) / V_REF
-        # preload modulation acts on the friction thrust and, through the contact, on the force factor;
-        # a strong modulation acts non-linearly (second harmonic)
+        u = _drive_pred(ctx, df) / SPEED_REF
+        # preload modulation acts on the friction thrust, on the force factor (V0) and on the
+        # interface's damping (speed); a strong modulation acts non-linearly (second harmonic)
         return np.column_stack([np.cos(ph), np.sin(ph), g * np.cos(ph), g * np.sin(ph),
-                                np.cos(2 * ph), np.sin(2 * ph)])
+                                u * np.cos(ph), u * np.sin(ph), np.cos(2 * ph), np.sin(2 * ph)])
     for L in sorted(periods):
         out.append(CandidateForce(
             "bar_waviness", "position", f"period {L * 1e3:.2f} mm",
-            ("wave_cos_N", "wave_sin_N", "wave_cos_gain_N", "wave_sin_gain_N", "wave_cos2_N", "wave_sin2_N"),
-            ("N",) * 6,
+            ("wave_cos_N", "wave_sin_N", "wave_cos_gain_N", "wave_sin_gain_N", "wave_cos_damp_N",
+             "wave_sin_damp_N", "wave_cos2_N", "wave_sin2_N"),
+            ("N",) * 8,
             (lambda df, L=L: wave(df, L)), "periodic non-uniformity of the friction bar"))
     for w in (0.6e-3, 1.2e-3, 2.4e-3):
         for c in np.arange(s0 + 2e-3, s1 - 2e-3 + 1e-9, 1.0e-3):

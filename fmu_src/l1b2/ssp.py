@@ -25,7 +25,6 @@ Layout rules, so that the same ``SystemStructure.ssd`` runs in our master
 
 from __future__ import annotations
 
-import dataclasses
 import xml.etree.ElementTree as ET
 import zipfile
 from dataclasses import dataclass, field
