@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Benchmark: `l1b2 close-loop` on a ~50 000-sample TRAIN file (target: under 2 minutes on 2 cores).
 
-The virtual rig runs an enlarged experiment (7 voltage levels x 9 loads x 2
+The virtual rig runs an enlarged experiment (9 voltage levels x 9 loads x 2
 directions, encoder sampled at 2 kHz) with one injected effect; the
 close-the-loop job is then timed end to end, printing each stage's share
 side by side with the whole.
@@ -12,6 +12,8 @@ import argparse
 import sys
 import tempfile
 import time
+
+import numpy as np
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "fmu_src"))
@@ -27,7 +29,7 @@ def main(argv=None):
     ap.add_argument("--effect", default="pulley_friction")
     args = ap.parse_args(argv)
     mp = load_motor()
-    plan = RigPlan(voltages_V=(220.0, 237.0, 255.0, 272.0, 290.0, 307.0, 324.0), sample_rate_Hz=2000.0,
+    plan = RigPlan(voltages_V=tuple(float(v) for v in np.linspace(220.0, 324.0, 9)), sample_rate_Hz=2000.0,
                    step_s=5e-4)
     t0 = time.perf_counter()
     df, truth = run_experiment(plan, mp, effects=[args.effect], engine="inprocess", jobs=2, effect_seed=0)
