@@ -664,3 +664,21 @@ def test_fmus_with_other_defaults_use_their_own_defaults(tmp_path, motor, fmus, 
         dp = dataclasses.replace(motor.driver, R_m_ohm=R)
         assert r["V0"] == pytest.approx(float(drv.driver_output(dp, op.V_s_V, op.duty, op.f_drive_Hz, op.T_degC).V0_V),
                                         rel=1e-12)
+
+
+def worker_build_after_run(dest):
+    from fmpy import simulate_fmu
+
+    from l1b2.fmu_build import build_fmu
+    first = build_fmu("Driver", f"{dest}/a")
+    simulate_fmu(str(first), stop_time=1e-3, step_size=1e-3)   # leaves the FMU's modules imported
+    second = build_fmu("Driver", f"{dest}/b")                   # must build from the new script
+    return float(simulate_fmu(str(second), stop_time=1e-3, step_size=1e-3)["V0"][-1])
+
+
+def test_fmu_can_be_rebuilt_after_running_in_the_same_process(tmp_path, motor, isolated):
+    # reference: driver_output of the reference motor; the demo runs FMUs, then exports (builds) again
+    op = motor.operating
+    V0 = isolated(__file__, "worker_build_after_run", str(tmp_path)).value
+    assert V0 == pytest.approx(float(drv.driver_output(motor.driver, op.V_s_V, op.duty, op.f_drive_Hz,
+                                                        op.T_degC).V0_V), rel=1e-12)

@@ -176,6 +176,13 @@ def _content_hash(fmu: Path) -> str:
     return h.hexdigest()[:32]
 
 
+def _forget_modules(package: str, module: str) -> None:
+    """Drop a bundle's modules from ``sys.modules`` (running instances keep their objects)."""
+    for m in [m for m in sys.modules if m == package or m.startswith(package + ".") or m == module]:
+        del sys.modules[m]
+    importlib.invalidate_caches()
+
+
 def defaults_document(mp: MotorParams, extra: dict | None = None) -> dict:
     """The start values baked into the FMUs (JSON-safe)."""
     from .blocks import motor_defaults
@@ -219,15 +226,16 @@ def build_fmu(name: str, dest_dir: str | Path, *, mp: MotorParams | None = None,
         script = td / f"{module}.py"
         script.write_text(rewrite_imports(script_src.read_text(), package))
         dest = dest_dir / f"{name}.fmu"
+        # An FMU of the same name run earlier in this process left its modules (built on the vendored
+        # Fmi2Slave) in sys.modules; pythonfmu's builder would import those instead of the new script.
+        _forget_modules(package, module)
         try:
             FmuBuilder.build_FMU(script, dest=dest, project_files=[pkg_dir, defaults_file],
                                  canGetAndSetFMUstate=True, canSerializeFMUstate=True)
         finally:
             while str(td) in sys.path:
                 sys.path.remove(str(td))
-            for m in [m for m in sys.modules if m == package or m.startswith(package + ".") or m == module]:
-                del sys.modules[m]
-            importlib.invalidate_caches()
+            _forget_modules(package, module)
 
     import pythonfmu
     vendored = {f"resources/{package}/_pythonfmu/{f.name}": f.read_bytes()
