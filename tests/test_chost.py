@@ -1,6 +1,6 @@
 """A non-Python FMI 2.0 host: ``l1b2/chost/fmu_host.c`` (compiled with gcc here) runs each exported FMU.
 
-What a C host needs for our PythonFMU FMUs (documented in docs/use_fmus.md and
+What a C host needs for our PythonFMU FMUs (documented in README.md, "Use the FMUs in your simulator" and
 :mod:`l1b2.fmu_runtime`), each shown by a test below:
 
 * a shared libpython 3.11 loaded with global symbols *before* the FMU

@@ -247,7 +247,7 @@ def export_all(out_dir: str | Path, mp: MotorParams | None = None, predictor: Ma
             "python": f"{sys.version_info.major}.{sys.version_info.minor}",
             "packages": {"numpy": numpy.__version__, "scipy": scipy.__version__},
             "notes": "PythonFMU FMUs: the host needs a shared libpython of this version loaded with global "
-                     "symbols and numpy/scipy importable by it (PYTHONPATH); see docs/use_fmus.md",
+                     "symbols and numpy/scipy importable by it (PYTHONPATH); see the README section 'Use the FMUs in your simulator'",
         },
     }
     problems = _all_problems(manifest)
