@@ -47,8 +47,8 @@ from . import data as dataio
 from . import effects as eff
 from . import predictor as pr
 from . import residuals as res
-from .errors import IdentificationError
-from .metrics import evaluation_mask, speed_metrics
+from .metrics import evaluation_mask, report_metrics
+from .workflows import load_train_test, slider_mass
 
 DEFAULT_MIN_GAIN = 0.5
 DEFAULT_ALPHA = 0.01
@@ -253,13 +253,6 @@ def _best_per_family(scores: list[Score]) -> list[Score]:
 # the whole job
 # ---------------------------------------------------------------------------
 
-def _metrics(v_free, v_one, df):
-    mask = evaluation_mask(df)
-    v = df[dataio.SPEED].to_numpy(float)
-    ok = mask & np.isfinite(v_one)
-    return {"one_step": speed_metrics(np.where(ok, v_one, 0.0), v, ok), "free_run": speed_metrics(v_free, v, mask)}
-
-
 def close_loop(train_path, test_path, report_dir, *, order=8, k_folds=5, alpha=DEFAULT_ALPHA,
                min_gain=DEFAULT_MIN_GAIN, parsimony=DEFAULT_PARSIMONY, seed=0, n_starts=4,
                slider_mass_kg=None, plots_on=True, progress=None) -> dict:
@@ -268,12 +261,8 @@ def close_loop(train_path, test_path, report_dir, *, order=8, k_folds=5, alpha=D
 
     say = progress or (lambda msg: None)
     t_start = time.perf_counter()
-    train = dataio.load_measurements(train_path, slider_mass_kg=slider_mass_kg)
-    test = dataio.load_measurements(test_path, slider_mass_kg=slider_mass_kg)
-    m_s = train.meta.get("slider_mass_kg")
-    if m_s is None:
-        raise IdentificationError(f"{train_path}: slider mass unknown: give --slider-mass or 'slider_mass_kg' "
-                                  f"in the sidecar {dataio.sidecar_path(train_path)}")
+    train, test, _ = load_train_test(train_path, test_path, slider_mass_kg=slider_mass_kg)
+    m_s = slider_mass(train, train_path)
     dtr, dte = train.df, test.df
     mask_tr = evaluation_mask(dtr)
 
@@ -283,8 +272,8 @@ def close_loop(train_path, test_path, report_dir, *, order=8, k_folds=5, alpha=D
     base.fit(dtr, slider_mass_kg=m_s, mask=mask_tr)
     v_tr = base.predict_free_run(dtr)
     v_te = base.predict_free_run(dte)
-    baseline = {"train": _metrics(v_tr, base.predict_one_step(dtr), dtr),
-                "test": _metrics(v_te, base.predict_one_step(dte), dte)}
+    baseline = {"train": report_metrics(dtr, base.predict_one_step(dtr), v_tr),
+                "test": report_metrics(dte, base.predict_one_step(dte), v_te)}
 
     say("residual analysis on TRAIN")
     r_tr = res.drive_residual(dtr, v_tr)
@@ -317,8 +306,8 @@ def close_loop(train_path, test_path, report_dir, *, order=8, k_folds=5, alpha=D
                                   extra=extra, init=base.params_, init_extra=np.asarray(chosen.phi))
         ext.fit(dtr, slider_mass_kg=m_s, mask=mask_tr)
         v_te_ext = ext.predict_free_run(dte)
-        extended = {"train": _metrics(ext.predict_free_run(dtr), ext.predict_one_step(dtr), dtr),
-                    "test": _metrics(v_te_ext, ext.predict_one_step(dte), dte)}
+        extended = {"train": report_metrics(dtr, ext.predict_one_step(dtr), ext.predict_free_run(dtr)),
+                    "test": report_metrics(dte, ext.predict_one_step(dte), v_te_ext)}
         ext_params = {n: {"value": float(ext.extra_params_[n]), "stderr": _jf(ext.extra_stderr_[n]),
                           "ci95": [_jf(x) for x in ext.extra_ci95_[n]], "unit": u}
                       for n, u in zip(c.names, c.units)}

@@ -244,12 +244,6 @@ def phi_b(shape: B2Shape, x_m, deriv: int = 0):
     return shape.C * trig_c + shape.D * trig_s + shape.E * hyp_s + shape.F * hyp_c
 
 
-def tip_coefficient_T(sp: StatorParams, P_N, T_degC=None):
-    """``eta_T = |phi_b(L, P)|``: tangential load coefficient of the tip [-]."""
-    shape = b2_mode_shape(sp, P_N, T_degC)
-    return np.abs(phi_b(shape, sp.length_m))
-
-
 # ---------------------------------------------------------------------------
 # Position-dependent axial force (Eq. 16, 31)
 # ---------------------------------------------------------------------------

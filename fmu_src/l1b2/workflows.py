@@ -17,7 +17,7 @@ from . import data as dataio
 from . import plots
 from .blocks import PredictorSetup
 from .errors import IdentificationError
-from .metrics import evaluation_mask, speed_metrics
+from .metrics import evaluation_mask, report_metrics, speed_metrics
 
 TEST_ABS_LOADS = (0.05,)
 
@@ -44,13 +44,16 @@ def load_train_test(train_path, test_path=None, *, test_abs_loads=TEST_ABS_LOADS
 
 def metrics_for(est, df: pd.DataFrame) -> dict:
     """Data-format metrics of an identified predictor on a data set (one_step and free_run)."""
-    mask = evaluation_mask(df)
-    v = df[dataio.SPEED].to_numpy(float)
-    one = est.predict_one_step(df)
-    free = est.predict_free_run(df)
-    ok_one = mask & np.isfinite(one)
-    return {"one_step": speed_metrics(np.where(ok_one, one, 0.0), v, ok_one),
-            "free_run": speed_metrics(free, v, mask)}
+    return report_metrics(df, est.predict_one_step(df), est.predict_free_run(df))
+
+
+def slider_mass(meas, path) -> float:
+    """The slider mass of a data set (sidecar or command line), or a clear error."""
+    m_s = meas.meta.get("slider_mass_kg")
+    if m_s is None:
+        raise IdentificationError(f"{path}: slider mass unknown: give --slider-mass or 'slider_mass_kg' "
+                                  f"in the sidecar {dataio.sidecar_path(path)}")
+    return float(m_s)
 
 
 def _parse_fix(text: str | None):
@@ -83,10 +86,7 @@ def run_identification(train_path, out_dir, test_path=None, *, order=8, criterio
     from .identify import PredictorIdentifier
     train, test, split_note = load_train_test(train_path, test_path, test_abs_loads=test_abs_loads,
                                               slider_mass_kg=slider_mass_kg)
-    m_s = train.meta.get("slider_mass_kg")
-    if m_s is None:
-        raise IdentificationError(f"{train_path}: slider mass unknown: give --slider-mass or 'slider_mass_kg' "
-                                  f"in the sidecar {dataio.sidecar_path(train_path)}")
+    m_s = slider_mass(train, train_path)
     est = PredictorIdentifier(order=order, criterion=criterion, fixed=_parse_fix(fix), n_starts=n_starts,
                               seed=seed, verbose=verbose)
     est.fit(train.df, slider_mass_kg=m_s, mask=evaluation_mask(train.df))
