@@ -12,16 +12,16 @@ import argparse
 import sys
 import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
-from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "fmu_src"))
 
-from l1b2 import data as dataio  # noqa: E402
-from l1b2.closeloop import before_after_table, close_loop  # noqa: E402
-from l1b2.params import load_motor  # noqa: E402
-from l1b2.rig import RigPlan, run_experiment, write_experiment  # noqa: E402
+from l1b2.closeloop.loop import before_after_table, close_loop  # noqa: E402
+from l1b2.data import measurements as dataio  # noqa: E402
+from l1b2.physics.params import load_motor  # noqa: E402
+from l1b2.rig.experiment import RigPlan, run_experiment, write_experiment  # noqa: E402
 
 
 def main(argv=None):

@@ -17,12 +17,12 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "fmu_src"))
 
-from l1b2 import driver as drv  # noqa: E402
-from l1b2.coupled import InProcessMotor  # noqa: E402
-from l1b2.cosim import CoSimulation  # noqa: E402
-from l1b2.fmu_build import build_subsystem_fmus  # noqa: E402
-from l1b2.params import load_motor  # noqa: E402
-from l1b2.rig import RigPlan, run_experiment  # noqa: E402
+from l1b2.cosim.engine import InProcessMotor  # noqa: E402
+from l1b2.cosim.master import CoSimulation  # noqa: E402
+from l1b2.fmi.build import build_subsystem_fmus  # noqa: E402
+from l1b2.physics import driver as drv  # noqa: E402
+from l1b2.physics.params import load_motor  # noqa: E402
+from l1b2.rig.experiment import RigPlan, run_experiment  # noqa: E402
 
 
 def main(argv=None):

@@ -7,12 +7,12 @@ Run from the repository root::
 
 Prints, side by side in one run:
 
-* the wall time of :class:`l1b2.identify.PredictorIdentifier` (order 8,
+* the wall time of :class:`l1b2.ident.estimator.PredictorIdentifier` (order 8,
   criterion ``free_run``, default ``n_starts``) on a rig-sized synthetic data
   set (72 runs: 4 voltages x 9 loads x 2 directions, 1 kHz, ~21k samples),
   once in the paper's setting (all of Eq. 35 varied) and once with the
   recommended pins (``fixed="recommended"``); target < 60 s each on 2 cores;
-* the throughput (samples/s) of the vectorised :func:`l1b2.predictor.free_run`
+* the throughput (samples/s) of the vectorised :func:`l1b2.predictor.simulate.free_run`
   against a plain Python loop over samples (scalar ``math`` arithmetic, the
   same force law and step rules), and their ratio.
 
@@ -33,10 +33,11 @@ import sys
 import time
 
 import numpy as np
-
-from l1b2.identify import PredictorIdentifier
-from l1b2.metrics import evaluation_mask
-from l1b2.predictor import G_ACC, design_grid, example_params, free_run, simulate_dataset
+from l1b2.data.metrics import evaluation_mask
+from l1b2.ident.estimator import PredictorIdentifier
+from l1b2.predictor.model import example_params
+from l1b2.predictor.simulate import design_grid, free_run, simulate_dataset
+from l1b2.units import G_M_S2
 
 M_S = 0.1
 
@@ -69,8 +70,8 @@ def python_free_run(prm, s, V0, load, d, t, v_meas, run, m_s):
         vp = dj * out[j]
         mp = dj * load[j]
         D = prm.c_r + prm.sigma * (0.5 - Ap)
-        X = Bp * V0[j] + prm.mu * Pp * (g1 - 0.5 * math.pi * Ap * G) - G_ACC * mp
-        Fr = prm.mu_sd * (G_ACC * m_s + prm.kappa * Pp)
+        X = Bp * V0[j] + prm.mu * Pp * (g1 - 0.5 * math.pi * Ap * G) - G_M_S2 * mp
+        Fr = prm.mu_sd * (G_M_S2 * m_s + prm.kappa * Pp)
         m_eff = m_s + (abs(load[j]) if prm.include_load_inertia else 0.0)
         h = (t[i] - t[j]) / m_eff
         z0 = -max(-1.0, min(1.0, X / Fr)) if Fr > 0 else -math.copysign(1.0, X)

@@ -1,8 +1,8 @@
 """Shared fixtures of the physics / FMU test suite.
 
-* ``motor``: the embedded reference motor (``l1b2.params.load_motor()``).
+* ``motor``: the embedded reference motor (``l1b2.physics.params.load_motor()``).
 * ``fmus`` / ``fmu_dir``: the four subsystem FMUs, built ONCE per session into
-  a temporary folder with :func:`l1b2.fmu_build.build_subsystem_fmus`.
+  a temporary folder with :func:`l1b2.fmi.build.build_subsystem_fmus`.
 * ``isolated``: run a module-level worker function of a test file in a fresh
   Python process and return its JSON result.  Every test that *instantiates*
   a PythonFMU FMU uses it: PythonFMU's native loader keeps process-wide state
@@ -21,8 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-
-from l1b2.params import load_motor
+from l1b2.physics.params import load_motor
 
 REPO = Path(__file__).resolve().parents[1]
 _RESULT_TAG = "@@L1B2-RESULT@@"
@@ -46,7 +45,7 @@ def motor():
 @pytest.fixture(scope="session")
 def fmus(tmp_path_factory) -> dict[str, Path]:
     """The four subsystem FMUs of the reference motor, built once per session."""
-    from l1b2.fmu_build import build_subsystem_fmus
+    from l1b2.fmi.build import build_subsystem_fmus
 
     dest = tmp_path_factory.mktemp("fmus")
     return {name: Path(p) for name, p in build_subsystem_fmus(dest).items()}
@@ -95,20 +94,20 @@ def isolated():
 
 
 # ---------------------------------------------------------------------------
-# Export (l1b2.export): every deliverable built and validated once per session
+# Export (l1b2.fmi.export): every deliverable built and validated once per session
 # ---------------------------------------------------------------------------
 
 @pytest.fixture(scope="session")
 def predictor_setup() -> dict:
-    """A cheap Eq. 29 predictor (``l1b2.predictor.example_params``) standing in for an identification result."""
-    from l1b2.blocks import PredictorSetup
-    from l1b2.predictor import example_params
+    """A cheap Eq. 29 predictor (``l1b2.predictor.model.example_params``) standing in for an identification result."""
+    from l1b2.predictor.model import example_params
+    from l1b2.predictor.setup import PredictorSetup
     return PredictorSetup(example_params(), 0.1, 1e-3).to_dict()
 
 
 @pytest.fixture(scope="session")
 def exported(tmp_path_factory, predictor_setup):
-    """``(out_dir, manifest)`` of :func:`l1b2.export.export_all` for the reference motor, built once per session."""
-    from l1b2.export import export_all
+    """``(out_dir, manifest)`` of :func:`l1b2.fmi.export.export_all` for the reference motor, built once per session."""
+    from l1b2.fmi.export import export_all
     out = tmp_path_factory.mktemp("dist")
     return out, export_all(out, predictor=predictor_setup)

@@ -3,8 +3,8 @@
 import tempfile
 from pathlib import Path
 
-from l1b2.params import load_motor
-from l1b2.rig import RigPlan, run_experiment, write_experiment
+from l1b2.physics.params import load_motor
+from l1b2.rig.experiment import RigPlan, run_experiment, write_experiment
 
 _CACHE: dict = {}
 _ROOT = Path(tempfile.mkdtemp(prefix="l1b2_rigcache_"))

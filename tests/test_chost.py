@@ -1,7 +1,7 @@
 """A non-Python FMI 2.0 host: ``l1b2/chost/fmu_host.c`` (compiled with gcc here) runs each exported FMU.
 
 What a C host needs for our PythonFMU FMUs (documented in README.md, "Use the FMUs in your simulator" and
-:mod:`l1b2.fmu_runtime`), each shown by a test below:
+:mod:`l1b2.fmi.runtime`), each shown by a test below:
 
 * a shared libpython 3.11 loaded with global symbols *before* the FMU
   library (``dlopen(RTLD_GLOBAL)`` in the host, or ``LD_PRELOAD``): the FMU
@@ -10,7 +10,7 @@ What a C host needs for our PythonFMU FMUs (documented in README.md, "Use the FM
   ``PYTHONHOME`` pointing at a virtual environment;
 * nothing for PythonFMU 0.7.0's exit-time use-after-free: each FMU
   registers its library's ``finalizePythonInterpreter`` with
-  ``__cxa_atexit`` when instantiated (:mod:`l1b2.fmu_runtime`); the host may
+  ``__cxa_atexit`` when instantiated (:mod:`l1b2.fmi.runtime`); the host may
   still call it after ``fmi2FreeInstance`` (``-x finalize``, the default),
   which is harmless. Without the in-FMU registration and without the host
   call, the Interface and Predictor FMUs aborted at exit in 20 of 20 runs.
@@ -98,8 +98,7 @@ def worker_fmpy_reference(paths, spec, h, n_steps):
 def worker_python_host_exit_fix(path):
     """fmpy loads an FMU; the exit fix finds its library and finalizes it; the process must exit 0."""
     from fmpy import simulate_fmu
-
-    from l1b2 import fmu_runtime
+    from l1b2.cosim import hosting as fmu_runtime
     assert fmu_runtime.install_exit_fix()
     assert not fmu_runtime.install_exit_fix()  # once per process
     simulate_fmu(path, stop_time=0.001, step_size=H, start_values={"s0": 0.0, "F_d": 1.0, "F_p": 5.6})
@@ -114,7 +113,7 @@ def worker_python_host_exit_fix(path):
 
 @pytest.fixture(scope="module")
 def c_host(tmp_path_factory):
-    from l1b2.fmu_runtime import compile_c_host
+    from l1b2.fmi.runtime import compile_c_host
     if shutil.which("gcc") is None and shutil.which("cc") is None:
         pytest.skip("no C compiler")
     return compile_c_host(tmp_path_factory.mktemp("chost") / "fmu_host")
@@ -166,7 +165,7 @@ def _host_args(c_host, unzipped_dir, name, outputs, extra=()):
 
 
 def _run(args, env=None, timeout=120):
-    from l1b2.fmu_runtime import host_environment
+    from l1b2.fmi.runtime import host_environment
     return subprocess.run(args, capture_output=True, text=True, timeout=timeout,
                           env=host_environment() if env is None else env)
 
@@ -196,7 +195,7 @@ def test_c_host_runs_fmu_and_matches_fmpy(name, c_host, unzipped, reference, fmu
 
 def test_c_host_needs_libpython_with_global_symbols(c_host, unzipped, reference):
     # reference: the FMU binary has undefined Py* symbols and no DT_NEEDED on libpython
-    from l1b2.fmu_runtime import host_environment, libpython_path
+    from l1b2.fmi.runtime import host_environment, libpython_path
     outputs = reference["Slider"]["outputs"]
     env = host_environment()
     env.pop("L1B2_LIBPYTHON")
@@ -221,7 +220,7 @@ def test_c_host_exits_cleanly_every_time(c_host, unzipped, reference):
 @pytest.mark.parametrize("name", ["Interface", "Predictor"])
 def test_c_host_that_does_not_finalize_still_exits_cleanly(name, c_host, unzipped, reference, fmu_names):
     # reference: exit code 0 and the same outputs with -x plain (no finalizePythonInterpreter call by the host);
-    # these two FMUs aborted at exit in 20/20 runs before the in-FMU registration (l1b2.fmu_runtime)
+    # these two FMUs aborted at exit in 20/20 runs before the in-FMU registration (l1b2.fmi.runtime)
     if name not in fmu_names:
         pytest.skip(f"{name}.fmu not exported")
     outputs = reference[name]["outputs"]

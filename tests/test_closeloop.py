@@ -14,10 +14,9 @@ separately because it is not always a half).
 import json
 
 import pytest
-
 from l1b2.cli import main as cli_main
-from l1b2.closeloop import close_loop
-from l1b2.rig import EFFECTS, RigPlan
+from l1b2.closeloop.loop import close_loop
+from l1b2.rig.experiment import EFFECTS, RigPlan
 from rigcache import rig_dir
 
 FAST = [("pulley_friction", 1), ("direction_asymmetry", 2), ("drive_saturation", 3), ("thermal_drift", 4)]

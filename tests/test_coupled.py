@@ -1,4 +1,4 @@
-"""The four subsystems coupled in-process (no FMUs): l1b2.coupled."""
+"""The four subsystems coupled in-process (no FMUs): l1b2.cosim.engine."""
 
 from __future__ import annotations
 
@@ -7,11 +7,11 @@ import math
 
 import numpy as np
 import pytest
-
-from l1b2 import coupled
-from l1b2 import interface as itf
-from l1b2 import slider as sld
-from l1b2 import stator as st
+from l1b2.cosim import engine
+from l1b2.physics import interface as itf
+from l1b2.physics import slider as sld
+from l1b2.physics import stator as st
+from l1b2.physics import steady
 
 G = 9.81
 F_DRIVE = 48500.0
@@ -32,17 +32,17 @@ def flat(motor):
 
 @pytest.fixture(scope="module")
 def flat_run(flat):
-    m = coupled.InProcessMotor(flat, h_s=2e-4)
+    m = engine.InProcessMotor(flat, h_s=2e-4)
     m.initialize(V_s=flat.operating.V_s_V, s0=0.0)
     res = m.run(0.4)
     return m, res
 
 
 def test_in_process_motor_converges_to_steady_state(flat, flat_run):
-    # reference: coupled.steady_state (root of the phasor balance + Eq. 21 with dv/dt = 0)
+    # reference: steady.steady_state (root of the phasor balance + Eq. 21 with dv/dt = 0)
     m, res = flat_run
     V0 = m.value("Driver.V0")
-    ss = coupled.steady_state(flat, m.value("Slider.s"), V0, 0.0, 1)
+    ss = steady.steady_state(flat, m.value("Slider.s"), V0, 0.0, 1)
     assert ss.converged and not ss.stuck
     assert m.value("Slider.v") == pytest.approx(ss.v_m_s, rel=1e-6)
     assert m.value("Stator.U_l") == pytest.approx(ss.U_l_m, rel=1e-6)
@@ -63,7 +63,7 @@ def test_steady_state_satisfies_the_force_balances(flat, motor):
     # evaluated here from the returned amplitudes with the interface and stator functions
     for mp, s, V0, m_load, d in [(flat, 0.0, 324.0, 0.0, 1), (motor, 0.01, 324.0, 0.05, 1),
                                  (motor, -0.012, 250.0, -0.03, -1)]:
-        ss = coupled.steady_state(mp, s, V0, m_load, d)
+        ss = steady.steady_state(mp, s, V0, m_load, d)
         assert ss.converged and not ss.stuck
         w = 2 * math.pi * mp.operating.f_drive_Hz
         F_p = float(st.preload_N(mp.stator, s))
@@ -81,7 +81,7 @@ def test_steady_state_satisfies_the_force_balances(flat, motor):
 def test_steady_state_phasors_solve_the_modal_equations(motor):
     # reference: Z Q + eta F1 = F for both modes (Eq. 6-7 with Eq. 14 feedback), rebuilt here
     mp, s, V0 = motor, 0.005, 324.0
-    ss = coupled.steady_state(mp, s, V0, 0.0, 1)
+    ss = steady.steady_state(mp, s, V0, 0.0, 1)
     w = 2 * math.pi * mp.operating.f_drive_Hz
     P = float(st.axial_force_N(mp.stator, s))
     props = st.modal_properties(mp.stator, P)
@@ -105,7 +105,7 @@ def test_halving_the_communication_step_changes_speed_little(motor):
     # reference: the same model at h and h/2 (reference motor, position dependent, quasi-steady at t = 0.15 s)
     speeds = []
     for h in (2e-4, 1e-4):
-        m = coupled.InProcessMotor(motor, h_s=h)
+        m = engine.InProcessMotor(motor, h_s=h)
         m.initialize(V_s=motor.operating.V_s_V, s0=-0.02)
         m.run(0.15)
         speeds.append(m.value("Slider.v"))
@@ -114,13 +114,13 @@ def test_halving_the_communication_step_changes_speed_little(motor):
 
 
 def test_in_process_motor_steady_speed_does_not_depend_on_step(flat):
-    # reference: coupled.steady_state; the describing-function coupling is exact in steady state
+    # reference: steady.steady_state; the describing-function coupling is exact in steady state
     ss = None
     for h in (1e-4, 5e-4, 1e-3):
-        m = coupled.InProcessMotor(flat, h_s=h)
+        m = engine.InProcessMotor(flat, h_s=h)
         m.initialize(V_s=flat.operating.V_s_V)
         m.run(0.4)
-        ss = ss or coupled.steady_state(flat, 0.0, m.value("Driver.V0"), 0.0, 1)
+        ss = ss or steady.steady_state(flat, 0.0, m.value("Driver.V0"), 0.0, 1)
         assert m.value("Slider.v") == pytest.approx(ss.v_m_s, rel=1e-5)
 
 
@@ -131,7 +131,7 @@ def test_in_process_motor_steady_speed_does_not_depend_on_step(flat):
 def test_no_load_speed_in_range_and_rises_with_voltage(motor):
     # reference: physics notes - 150-300 mm/s at 324 V, rising with V0
     V = [150.0, 200.0, 250.0, 300.0, 324.0, 360.0]
-    v = [coupled.steady_state(motor, 0.0, V0, 0.0, 1).v_m_s for V0 in V]
+    v = [steady.steady_state(motor, 0.0, V0, 0.0, 1).v_m_s for V0 in V]
     assert np.all(np.diff(v) > 0)
     assert 0.150 <= v[V.index(324.0)] <= 0.300
 
@@ -140,10 +140,10 @@ def test_no_load_speed_in_range_and_rises_with_voltage(motor):
 def test_speed_falls_with_opposing_load(motor, direction):
     # reference: paper Sect. 5 - heavier opposing loads slow the slider (load sign: data-format.md)
     loads = [0.0] + PAPER_LOADS
-    speeds = [abs(coupled.steady_state(motor, 0.0, 324.0, direction * m, direction).v_m_s) for m in loads]
+    speeds = [abs(steady.steady_state(motor, 0.0, 324.0, direction * m, direction).v_m_s) for m in loads]
     assert np.all(np.diff(speeds) < 0)
     # assisting loads speed it up
-    assisted = [abs(coupled.steady_state(motor, 0.0, 324.0, -direction * m, direction).v_m_s) for m in PAPER_LOADS]
+    assisted = [abs(steady.steady_state(motor, 0.0, 324.0, -direction * m, direction).v_m_s) for m in PAPER_LOADS]
     assert np.all(np.array(assisted) > speeds[0])
 
 
@@ -151,7 +151,7 @@ def test_speed_falls_with_opposing_load(motor, direction):
 @pytest.mark.parametrize("m_load", [m * s for m in PAPER_LOADS for s in (1, -1)])
 def test_every_paper_load_moves_at_324V(motor, m_load, direction):
     # reference: physics notes - every paper load (0.03-0.09 kg, both signs) still moves at 324 V
-    ss = coupled.steady_state(motor, 0.0, 324.0, m_load, direction)
+    ss = steady.steady_state(motor, 0.0, 324.0, m_load, direction)
     assert not ss.stuck
     assert ss.converged
     assert math.copysign(1, ss.v_m_s) == direction
@@ -161,7 +161,7 @@ def test_every_paper_load_moves_at_324V(motor, m_load, direction):
 def test_speed_varies_with_position_by_5_to_20_percent(motor):
     # reference: physics notes / paper Fig. 9a - 5-20 % variation over a ~40 mm stroke at 324 V, no load
     s = np.linspace(-0.02, 0.02, 21)
-    v = np.array([coupled.steady_state(motor, x, 324.0, 0.0, 1).v_m_s for x in s])
+    v = np.array([steady.steady_state(motor, x, 324.0, 0.0, 1).v_m_s for x in s])
     variation = (v.max() - v.min()) / v.mean()
     assert 0.05 <= variation <= 0.20
 
@@ -170,7 +170,7 @@ def test_tip_motion_amplitudes_and_phase(motor):
     # reference: physics notes - tip amplitudes of order 1 um at 324 V, ~90 deg between the modes
     for s in (-0.02, 0.0, 0.02):
         for d in (1, -1):
-            ss = coupled.steady_state(motor, s, 324.0, 0.0, d)
+            ss = steady.steady_state(motor, s, 324.0, 0.0, d)
             assert 0.3e-6 < ss.U_l_m < 3e-6
             assert 0.3e-6 < ss.U_w_m < 3e-6
             assert abs(abs(math.degrees(ss.delta_rad)) - 90.0) < 25.0
@@ -185,7 +185,7 @@ def test_speed_nearly_proportional_to_tip_velocity(motor):
     ratio = []
     for V0 in (250.0, 324.0):
         for s in (-0.02, -0.01, 0.0, 0.01, 0.02):
-            ss = coupled.steady_state(motor, s, V0, 0.0, 1)
+            ss = steady.steady_state(motor, s, V0, 0.0, 1)
             ratio.append(ss.v_m_s / (w * ss.U_w_m))
     ratio = np.array(ratio)
     assert np.all((ratio > 0.2) & (ratio < 1.0))
@@ -194,5 +194,5 @@ def test_speed_nearly_proportional_to_tip_velocity(motor):
 
 def test_low_voltage_leaves_slider_stuck(motor):
     # reference: Eq. 22 - with a tiny drive the interface force cannot beat the static guide friction
-    ss = coupled.steady_state(motor, 0.0, 5.0, 0.0, 1)
+    ss = steady.steady_state(motor, 0.0, 5.0, 0.0, 1)
     assert ss.stuck and ss.v_m_s == 0.0

@@ -1,4 +1,4 @@
-"""Tests of l1b2.data: the measured-data contract of shared/data-format.md."""
+"""Tests of l1b2.data.measurements: the measured-data contract of shared/data-format.md."""
 
 from __future__ import annotations
 
@@ -8,9 +8,8 @@ import pickle
 import numpy as np
 import pandas as pd
 import pytest
-
-from l1b2 import data as D
-from l1b2.data import (
+from l1b2.data import measurements as D
+from l1b2.data.measurements import (
     Measurements,
     load_measurements,
     split_by_load,

@@ -2,10 +2,10 @@
 
 import numpy as np
 import pytest
-
-from l1b2 import derive
-from l1b2 import predictor as pr
-from l1b2.params import load_motor
+from l1b2.physics import steady
+from l1b2.physics.params import load_motor
+from l1b2.predictor import derive
+from l1b2.predictor import model as pr
 
 GRID = dict(positions=np.array([-0.015, 0.0, 0.015]), voltages=(220.0, 272.0, 324.0), loads=(-0.09, 0.0, 0.09))
 
@@ -31,9 +31,9 @@ def test_linearized_predictor_agrees_with_pure_slip_cosim_within_2_percent(motor
 
 def test_linearized_predictor_is_exact_at_the_reference_point(motor, linearized):
     # reference: the linearization reproduces the physical model exactly where it was taken
-    from l1b2 import coupled
+
     c = linearized.s_center
-    ss = coupled.steady_state(motor, c, derive.DEFAULT_V_REF, 0.0, 1, mode="pure_slip")
+    ss = steady.steady_state(motor, c, derive.DEFAULT_V_REF, 0.0, 1, mode="pure_slip")
     v = float(pr.steady_state(linearized, c, derive.DEFAULT_V_REF, 0.0, 1, motor.slider.mass_kg))
     assert v == pytest.approx(ss.v_m_s, rel=2e-3)  # up to the Legendre fit of A', B', P
 
@@ -41,7 +41,7 @@ def test_linearized_predictor_is_exact_at_the_reference_point(motor, linearized)
 def test_derived_preload_level_is_the_physical_preload(motor, linearized):
     # reference: k0 (structurally free) is chosen so that P(s) is closest to F_p(s) of the stator model
     # (Eq. 16): the mean level agrees; the shape need not (position acts through A' and B' too)
-    from l1b2 import stator as st
+    from l1b2.physics import stator as st
     s = np.linspace(-0.015, 0.015, 7)
     assert np.mean(linearized.P(s)) == pytest.approx(np.mean(st.preload_N(motor.stator, s)), rel=0.1)
     assert linearized.c_r == motor.slider.c_r_N_s_per_m and linearized.mu == motor.interface.mu_p

@@ -1,4 +1,4 @@
-"""Driving circuit (paper Sect. 3.1, Eq. 1-4): l1b2.driver."""
+"""Driving circuit (paper Sect. 3.1, Eq. 1-4): l1b2.physics.driver."""
 
 from __future__ import annotations
 
@@ -6,9 +6,8 @@ import dataclasses
 
 import numpy as np
 import pytest
+from l1b2.physics import driver as drv
 from scipy.optimize import brentq
-
-from l1b2 import driver as drv
 
 # (L [H], C [F], R_m [Ohm]) with a real zero-phase frequency (L < R^2 C), incl. the reference tank
 TANKS = [

@@ -1,4 +1,4 @@
-"""``l1b2.export.export_all``: the deliverables, their validation, the manifest, and the coupled-motor FMU.
+"""``l1b2.fmi.export.export_all``: the deliverables, their validation, the manifest, and the coupled-motor FMU.
 
 The export is built once per session (conftest ``exported``); everything that
 instantiates an FMU runs in a fresh process (conftest ``isolated``).
@@ -14,10 +14,10 @@ import fmpy
 import numpy as np
 import pytest
 from fmpy import read_model_description
+from l1b2 import __version__
+from l1b2.cosim import ssp
+from l1b2.fmi.export import ExportError, export_all
 from lxml import etree
-
-from l1b2 import __version__, ssp
-from l1b2.export import ExportError, export_all
 
 pytestmark = pytest.mark.fmu
 
@@ -35,11 +35,10 @@ def _fmu_files(out: Path, manifest: dict) -> dict[str, Path]:
 # ---------------------------------------------------------------------------
 
 def worker_motor_fmu_vs_cosim(motor_fmu, ssp_path, t_end, inputs, s0):
-    """L1B2Motor.fmu through fmpy.simulate_fmu, and the four FMUs of the .ssp through l1b2.cosim."""
+    """L1B2Motor.fmu through fmpy.simulate_fmu, and the four FMUs of the .ssp through l1b2.cosim.master."""
     from fmpy import simulate_fmu
-
-    from l1b2.cosim import CoSimulation
-    from l1b2.fmu_runtime import install_exit_fix
+    from l1b2.cosim.hosting import install_exit_fix
+    from l1b2.cosim.master import CoSimulation
     install_exit_fix()
     r = simulate_fmu(motor_fmu, stop_time=t_end, step_size=H, output_interval=H,
                      start_values={**inputs, "Slider.s0": s0}, output=["v", "s", "F_d", "at_stop"])
@@ -52,7 +51,7 @@ def worker_motor_fmu_vs_cosim(motor_fmu, ssp_path, t_end, inputs, s0):
 
 def worker_master_reads_ssd_and_ssp(ssp_path, fmu_dir, inputs):
     """Our master on the source tree's SSD (FMUs from fmu_dir) and on the packed .ssp."""
-    from l1b2.cosim import CoSimulation
+    from l1b2.cosim.master import CoSimulation
     out = {}
     for key, system in (("ssd", str(ssp.SSD_FILE)), ("ssp", ssp_path)):
         with CoSimulation(system, fmu_dir=fmu_dir) as cs:
@@ -131,7 +130,7 @@ def test_fmu_metadata_a_host_expects(exported):
 
 def test_guids_are_unique_and_stable(exported, tmp_path, motor):
     # reference: a rebuild of identical content gives the same GUID; other content another one
-    from l1b2.fmu_build import build_fmu
+    from l1b2.fmi.build import build_fmu
     out, manifest = exported
     guids = [r["guid"] for r in manifest["files"] if r["kind"] == "fmu"]
     assert len(set(guids)) == len(guids)
@@ -172,8 +171,8 @@ def test_export_without_predictor_says_so(tmp_path, exported, predictor_setup, m
                                           reason):
     # reference: the issue - no identification result (or no Predictor slave in this tree): no Predictor.fmu,
     # and the manifest tells why; a stale Predictor.fmu from an earlier export is removed
-    import l1b2.export
-    monkeypatch.setattr(l1b2.export, "predictor_available", lambda: slave_exists)
+    import l1b2.fmi.export
+    monkeypatch.setattr(l1b2.fmi.export, "predictor_available", lambda: slave_exists)
     (tmp_path / "fmus").mkdir()
     (tmp_path / "fmus" / "Predictor.fmu").write_bytes((exported[0] / "fmus" / "Predictor.fmu").read_bytes())
     manifest = export_all(tmp_path, predictor=predictor_setup if given else None)
@@ -217,7 +216,7 @@ def test_master_reads_source_tree_ssd_and_packed_ssp_alike(exported, motor, isol
 def test_motor_fmu_agrees_with_four_fmu_cosimulation(exported, motor, isolated, m_load):
     # reference: the four subsystem FMUs of L1B2Motor.ssp under our master (same communication step);
     # a full traverse at 324 V from the end stop, within 1 % of the peak speed
-    from l1b2 import driver as drv
+    from l1b2.physics import driver as drv
     out, _ = exported
     V_s = float(drv.supply_for_voltage_V(motor.driver, 324.0, 1.0, 48500.0, 25.0))
     inputs = dict(V_s=V_s, duty=1.0, f_s=48500.0, T=25.0, direction=1.0, m_load=m_load)
@@ -236,7 +235,7 @@ def test_motor_fmu_agrees_with_four_fmu_cosimulation(exported, motor, isolated, 
 
 def test_master_refuses_parameter_set_with_unknown_name_or_other_unit(exported, tmp_path):
     # reference: the FMUs' model descriptions (variable names, units); the message names the .ssv file
-    from l1b2.cosim import CoSimulation
+    from l1b2.cosim.master import CoSimulation
     from l1b2.errors import SystemStructureError
     out, _ = exported
     (tmp_path / "reference_motor").mkdir()

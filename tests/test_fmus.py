@@ -1,4 +1,4 @@
-"""The subsystem FMUs (l1b2.fmu_build, fmu_src/slaves) and the fmpy co-simulation master (l1b2.cosim).
+"""The subsystem FMUs (l1b2.fmi.build, fmu_src/slaves) and the fmpy co-simulation master (l1b2.cosim.master).
 
 The FMUs are built once per session (conftest ``fmus``).  Everything that
 instantiates an FMU runs in a fresh Python process through the ``isolated``
@@ -17,12 +17,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 from fmpy import read_model_description
-
 from l1b2 import __version__
-from l1b2 import driver as drv
-from l1b2 import interface as itf
-from l1b2 import slider as sld
-from l1b2 import stator as st
+from l1b2.physics import driver as drv
+from l1b2.physics import interface as itf
+from l1b2.physics import slider as sld
+from l1b2.physics import stator as st
 
 pytestmark = pytest.mark.fmu
 
@@ -283,7 +282,7 @@ RECORD = ["Driver.V0", "Stator.U_l", "Stator.U_w", "Stator.delta", "Stator.F_p",
 
 
 def worker_cosim(fmu_dir, t_end, inputs, parameters, iterate, start_values, csv_path, repeat):
-    from l1b2.cosim import CoSimulation
+    from l1b2.cosim.master import CoSimulation
     runs = []
     for _ in range(repeat):
         cs = CoSimulation(fmu_dir=fmu_dir, parameters=parameters or None, iterate=iterate)
@@ -326,8 +325,8 @@ def test_every_real_has_a_defined_unit(fmus, name):
             got = {k: getattr(bu, k) for k in ("kg", "m", "s", "A", "K", "rad") if getattr(bu, k)}
             assert got == SI[u.name], u.name
     assert "degC" not in defs or defs["degC"].baseUnit.offset == pytest.approx(273.15)
-    # parameters carry the units declared in l1b2.params
-    from l1b2.params import describe, load_motor
+    # parameters carry the units declared in l1b2.physics.params
+    from l1b2.physics.params import describe, load_motor
     section = getattr(load_motor(), name.lower())
     declared = {d["name"]: d["unit"] for d in describe(type(section))}
     units = {v.name: v.unit for v in md.modelVariables}
@@ -371,7 +370,7 @@ def test_bundle_is_version_unique(fmus, name):
 
 def test_guid_is_stable_and_follows_the_defaults(tmp_path, motor):
     # reference: two builds of identical content share the GUID; changed defaults change it
-    from l1b2.fmu_build import build_fmu
+    from l1b2.fmi.build import build_fmu
     g1 = read_model_description(str(build_fmu("Driver", tmp_path / "a", mp=motor))).guid
     g2 = read_model_description(str(build_fmu("Driver", tmp_path / "b", mp=motor))).guid
     g3 = read_model_description(str(build_fmu("Driver", tmp_path / "c",
@@ -405,7 +404,7 @@ def test_fmu_parameter_start_values_are_the_reference_motor(fmus, motor):
 # ---------------------------------------------------------------------------
 
 def test_driver_fmu_equals_driver_output(fmus, motor, isolated):
-    # reference: l1b2.driver.driver_output with the same (modified) parameters
+    # reference: l1b2.physics.driver.driver_output with the same (modified) parameters
     params = dict(R_m_ohm=2500.0, L_temp_coeff_per_K=5e-4)
     cases = [dict(V_s=67.1, duty=1.0, f_s=48500.0, T=25.0), dict(V_s=40.0, duty=0.6, f_s=47000.0, T=60.0),
              dict(V_s=90.0, duty=0.9, f_s=50000.0, T=10.0)]
@@ -421,7 +420,7 @@ def test_driver_fmu_equals_driver_output(fmus, motor, isolated):
 
 
 def _stator_reference(sp, start, steps, h):
-    """Envelope_step + tip_motion with the describing-function coupling of l1b2.blocks (written here)."""
+    """Envelope_step + tip_motion with the describing-function coupling of l1b2.cosim.blocks (written here)."""
     s = start["s"]
     P = float(st.axial_force_N(sp, s))
     props = st.modal_properties(sp, P, 25.0)
@@ -483,7 +482,7 @@ def test_stator_fmu_equals_envelope_steps(fmus, motor, isolated):
 
 @pytest.mark.parametrize("mode, n_theta", [("stick_slip", 256), ("pure_slip", 512)])
 def test_interface_fmu_equals_interface_forces(fmus, motor, isolated, mode, n_theta):
-    # reference: l1b2.interface.interface_forces with the same mode and resolution
+    # reference: l1b2.physics.interface.interface_forces with the same mode and resolution
     params = dict(pure_slip=(mode == "pure_slip"), n_theta=n_theta, mu_p=0.22)
     w = 2 * math.pi * 48500.0
     cases = [dict(U_l=1.22e-6, U_w=1.41e-6, delta=-1.69, omega=w, v=0.264, F_p=5.6),
@@ -503,7 +502,7 @@ def test_interface_fmu_equals_interface_forces(fmus, motor, isolated, mode, n_th
 
 
 def test_slider_fmu_equals_slider_step(fmus, motor, isolated):
-    # reference: l1b2.slider.step called here with the same parameters, inputs and step sizes
+    # reference: l1b2.physics.slider.step called here with the same parameters, inputs and step sizes
     params = dict(s0=0.012, v0=0.1, mass_kg=0.15, c_r_N_s_per_m=3.0)  # light damping: reaches the stop
     steps = [(1.0, 5.6, 0.0, 1e-3)] * 30 + [(1.0, 5.6, 0.0, 0.02)] * 3 + [(-1.5, 5.6, 0.03, 5e-3)] * 20 \
         + [(0.0, 6.0, -0.02, 0.01)] * 10 + [(0.05, 6.0, 0.0, 0.01)] * 3
@@ -571,7 +570,7 @@ def test_fmus_can_be_instantiated_repeatedly_in_one_process(fmus, isolated):
 # ---------------------------------------------------------------------------
 
 def _in_process(mp, t_end, s0=0.0, h=H_STEP, **inputs):
-    from l1b2.coupled import InProcessMotor
+    from l1b2.cosim.engine import InProcessMotor
     m = InProcessMotor(mp, h_s=h)
     kw = dict(SYSTEM_INPUTS, V_s=mp.operating.V_s_V)
     kw.update(inputs)
@@ -587,7 +586,7 @@ def cosim_base(fmu_dir, motor, isolated, tmp_path_factory):
 
 
 def test_cosimulation_agrees_with_in_process_motor(cosim_base, motor):
-    # reference: l1b2.coupled.InProcessMotor (hand-wired blocks, same Gauss-Seidel algorithm)
+    # reference: l1b2.cosim.engine.InProcessMotor (hand-wired blocks, same Gauss-Seidel algorithm)
     ref = _in_process(motor, 0.1)
     v, v_ref = np.array(cosim_base["Slider.v"]), ref["Slider.v"]
     assert len(v) == len(v_ref) == 501
@@ -654,7 +653,7 @@ def test_cosimulation_can_run_twice_in_one_process(fmu_dir, motor, isolated):
 
 def test_fmus_with_other_defaults_use_their_own_defaults(tmp_path, motor, fmus, isolated):
     # reference: each FMU's own modelDescription start value of R_m_ohm and driver_output with it
-    from l1b2.fmu_build import build_fmu
+    from l1b2.fmi.build import build_fmu
     other = build_fmu("Driver", tmp_path, mp=motor.replace(driver__R_m_ohm=2600.0))
     res = isolated(__file__, "worker_defaults", [str(fmus["Driver"]), str(other)]).value
     op = motor.operating
@@ -668,8 +667,7 @@ def test_fmus_with_other_defaults_use_their_own_defaults(tmp_path, motor, fmus, 
 
 def worker_build_after_run(dest):
     from fmpy import simulate_fmu
-
-    from l1b2.fmu_build import build_fmu
+    from l1b2.fmi.build import build_fmu
     first = build_fmu("Driver", f"{dest}/a")
     simulate_fmu(str(first), stop_time=1e-3, step_size=1e-3)   # leaves the FMU's modules imported
     second = build_fmu("Driver", f"{dest}/b")                   # must build from the new script

@@ -1,4 +1,4 @@
-"""Tests of the maximum-likelihood identification (paper Eq. 32, 35; l1b2.identify)."""
+"""Tests of the maximum-likelihood identification (paper Eq. 32, 35; l1b2.ident.estimator)."""
 
 import os
 
@@ -9,9 +9,8 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
-
 from l1b2.errors import IdentificationError
-from l1b2.identify import (
+from l1b2.ident.estimator import (
     RECOMMENDED_FIXED,
     PredictorIdentifier,
     _Data,
@@ -19,7 +18,8 @@ from l1b2.identify import (
     _reduced_of_theta,
     evaluation_mask,
 )
-from l1b2.predictor import PredictorParams, design_grid, example_params, simulate_dataset
+from l1b2.predictor.model import PredictorParams, example_params
+from l1b2.predictor.simulate import design_grid, simulate_dataset
 
 M_S = 0.1
 #: a small design for the repeated fits: 2 voltages x 3 loads x 2 directions
@@ -318,6 +318,6 @@ def test_constructor_and_usage_errors():
 
 
 def test_evaluation_mask_is_the_metrics_one():
-    from l1b2 import metrics
+    from l1b2.data import metrics
 
     assert evaluation_mask is metrics.evaluation_mask

@@ -1,7 +1,7 @@
-"""Extra exogenous forces identified jointly with theta (l1b2.identify.ExtraForces).
+"""Extra exogenous forces identified jointly with theta (l1b2.ident.estimator.ExtraForces).
 
 The model with extras: in drive coordinates ``X_total = X + features(df) @ phi``.
-Synthetic data come from :func:`l1b2.predictor.simulate_dataset` with its
+Synthetic data come from :func:`l1b2.predictor.simulate.simulate_dataset` with its
 ``extra_force`` hook (the same step function the predictor uses), so the
 extended model is exact for them.
 """
@@ -14,20 +14,23 @@ import json
 
 import numpy as np
 import pytest
-from numpy.polynomial.legendre import legval
-
 from l1b2.errors import IdentificationError
-from l1b2.identify import ExtraForces, PredictorIdentifier, _Data, _Problem, evaluation_mask
-from l1b2.predictor import (
+from l1b2.ident.estimator import (
+    ExtraForces,
+    PredictorIdentifier,
+    _Data,
+    _Problem,
+    evaluation_mask,
+)
+from l1b2.predictor.model import (
     PredictorParams,
     derivative,
-    design_grid,
     example_params,
-    free_run,
     one_step,
-    simulate_dataset,
     steady_state,
 )
+from l1b2.predictor.simulate import design_grid, free_run, simulate_dataset
+from numpy.polynomial.legendre import legval
 
 M_S = 0.1
 SMALL = design_grid(voltages=(220.0, 324.0), loads=(-0.07, 0.0, 0.07))

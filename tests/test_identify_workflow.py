@@ -4,7 +4,6 @@ import json
 
 import pandas as pd
 import pytest
-
 from l1b2.cli import main as cli_main
 from rigcache import rig_dir
 

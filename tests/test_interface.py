@@ -1,4 +1,4 @@
-"""Friction interface (paper Sect. 3.3, Eq. 17-20, 23): l1b2.interface."""
+"""Friction interface (paper Sect. 3.3, Eq. 17-20, 23): l1b2.physics.interface."""
 
 from __future__ import annotations
 
@@ -7,10 +7,9 @@ import math
 
 import numpy as np
 import pytest
+from l1b2.physics import interface as itf
+from l1b2.physics.params import InterfaceParams
 from scipy.optimize import brentq
-
-from l1b2 import interface as itf
-from l1b2.params import InterfaceParams
 
 W = 2 * np.pi * 48500.0  # drive angular frequency [rad/s]
 FIELDS = ("F_d_N", "F_N_mean_N", "F_N1_sin_N", "F_N1_cos_N", "F_T1_sin_N", "F_T1_cos_N", "phi_c_rad",

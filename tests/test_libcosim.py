@@ -1,6 +1,6 @@
 """Cross-check in an independent engine: libcosim (libcosimpy) runs ``L1B2Motor.ssp``.
 
-libcosim and our master (:mod:`l1b2.cosim`) differ in their master algorithm:
+libcosim and our master (:mod:`l1b2.cosim.master`) differ in their master algorithm:
 
 * **libcosim: fixed-step Jacobi.** All FMUs step from t_k to t_k + h in
   parallel with the inputs transferred at t_k; outputs are transferred after
@@ -62,7 +62,7 @@ SYSTEM_INPUTS = {"V_s": ["Driver.V_s"], "duty": ["Driver.duty"], "f_s": ["Driver
 
 def worker_libcosim(ssp_path, stop_time, inputs, start_values, record, step_s=H):
     """Run an .ssp in libcosim; returns ``{name: samples}`` at every communication point incl. t = 0."""
-    from l1b2.fmu_runtime import install_exit_fix
+    from l1b2.cosim.hosting import install_exit_fix
     install_exit_fix()
     from libcosimpy.CosimEnums import CosimVariableType
     from libcosimpy.CosimExecution import CosimExecution
@@ -103,7 +103,7 @@ def worker_libcosim(ssp_path, stop_time, inputs, start_values, record, step_s=H)
 
 
 def worker_ours(system, stop_time, inputs, start_values, record, step_s=H):
-    from l1b2.cosim import CoSimulation
+    from l1b2.cosim.master import CoSimulation
     with CoSimulation(system, step_s=step_s) as cs:
         r = cs.run(stop_time, inputs, record=record, start_values=start_values)
     return {k: r.df[k].tolist() for k in ["time"] + record}
@@ -148,7 +148,7 @@ def ssp_path(exported):
 
 @pytest.fixture(scope="module")
 def operating(motor):
-    from l1b2 import driver as drv
+    from l1b2.physics import driver as drv
     V_s = float(drv.supply_for_voltage_V(motor.driver, 324.0, 1.0, 48500.0, 25.0))
     return dict(V_s=V_s, duty=1.0, f_s=48500.0, T=25.0)
 
@@ -182,7 +182,7 @@ def test_fmus_compute_outputs_in_initialization_mode(exported, isolated):
 
 def test_libcosim_loads_ssp_and_applies_component_parameter_sets(exported, tmp_path, motor, operating, isolated):
     # reference: the parameter set written into a second .ssp (mu_p, mass differ from the values baked into the FMUs)
-    from l1b2 import ssp
+    from l1b2.cosim import ssp
     out, _ = exported
     fmus = {n: out / "fmus" / f"{n}.fmu" for n in ("Driver", "Stator", "Interface", "Slider")}
     other = ssp.build_ssp(tmp_path / "other.ssp", fmus, mp=motor.replace(interface__mu_p=0.2, slider__mass_kg=0.15))
@@ -196,8 +196,8 @@ def test_libcosim_loads_ssp_and_applies_component_parameter_sets(exported, tmp_p
 
 
 def test_libcosim_starts_at_the_given_position(runs, motor):
-    # reference: the start position s0 (end stop) in both components at t = 0 and the preload F_p(s0) of l1b2.stator
-    from l1b2 import stator as st
+    # reference: the start position s0 (end stop) in both components at t = 0 and the preload F_p(s0) of l1b2.physics.stator
+    from l1b2.physics import stator as st
     for case, (lc, gs, s0, _) in runs.items():
         assert lc["Slider.s"][0] == s0 and lc["Stator.s"][0] == s0, case
         F_p = motor.stator.alpha0 * float(st.axial_force_N(motor.stator, s0))
@@ -247,9 +247,8 @@ def test_libcosim_agrees_with_our_master(runs, motor, case):
 def test_ssd_is_loadable_by_libcosim_as_written():
     # reference: libcosim's SSP parser (ssp_parser.cpp) - every ssd:Connection needs startElement and endElement,
     # parameter bindings are read per component only, prefixes are matched literally (ssd:, ssc:, ssv:)
+    from l1b2.cosim import ssp
     from lxml import etree
-
-    from l1b2 import ssp
     doc = etree.parse(str(ssp.SSD_FILE))
     ns = {k: v for k, v in ssp.NS.items()}
     assert doc.getroot().prefix == "ssd"

@@ -1,4 +1,4 @@
-"""Tests of l1b2.metrics: the error metrics of shared/data-format.md."""
+"""Tests of l1b2.data.metrics: the error metrics of shared/data-format.md."""
 
 from __future__ import annotations
 
@@ -7,10 +7,9 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
-
-from l1b2 import metrics as M
-from l1b2.data import Measurements
-from l1b2.metrics import evaluation_mask, report_metrics, speed_metrics
+from l1b2.data import metrics as M
+from l1b2.data.measurements import Measurements
+from l1b2.data.metrics import evaluation_mask, report_metrics, speed_metrics
 
 MM = 1e-3
 #: a 10 mm traverse sampled away from the 2 mm boundaries: samples 3..8 are evaluated

@@ -1,4 +1,4 @@
-"""Parameter sets: l1b2.params and the reference motor (system_models/reference_motor.toml)."""
+"""Parameter sets: l1b2.physics.params and the reference motor (system_models/reference_motor.toml)."""
 
 from __future__ import annotations
 
@@ -9,11 +9,17 @@ import tomllib
 
 import numpy as np
 import pytest
-
-from l1b2 import driver as drv
-from l1b2 import stator as st
 from l1b2.errors import ParameterError
-from l1b2.params import REFERENCE_MOTOR_FILE, SYSTEM_MODELS_DIR, MotorParams, describe, load_motor, sources
+from l1b2.physics import driver as drv
+from l1b2.physics import stator as st
+from l1b2.physics.params import (
+    REFERENCE_MOTOR_FILE,
+    SYSTEM_MODELS_DIR,
+    MotorParams,
+    describe,
+    load_motor,
+    sources,
+)
 
 REF_TOML = SYSTEM_MODELS_DIR / REFERENCE_MOTOR_FILE
 SECTIONS = ("driver", "stator", "interface", "slider", "operating")

@@ -1,4 +1,4 @@
-"""Tests of the reduced speed predictor (paper Eq. 25-31, l1b2.predictor)."""
+"""Tests of the reduced speed predictor (paper Eq. 25-31, l1b2.predictor.model)."""
 
 import os
 
@@ -11,18 +11,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from l1b2.predictor import (
-    PredictorParams,
+from l1b2.predictor.model import (
     G_of_k0,
+    PredictorParams,
     derivative,
-    design_grid,
     example_params,
-    free_run,
     one_step,
-    simulate_dataset,
     steady_state,
 )
+from l1b2.predictor.simulate import design_grid, free_run, simulate_dataset
 
 PAPER = Path(__file__).resolve().parents[2] / "shared" / "seed" / "l1b2-usm-paper.txt"
 M_S = 0.1

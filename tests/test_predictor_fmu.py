@@ -2,11 +2,10 @@
 
 import numpy as np
 import pytest
-
-from l1b2 import predictor as pr
-from l1b2.blocks import PredictorSetup
-from l1b2.fmu_build import build_fmu
-from l1b2.params import load_motor
+from l1b2.fmi.build import build_fmu
+from l1b2.physics.params import load_motor
+from l1b2.predictor import model as pr
+from l1b2.predictor.setup import PredictorSetup
 
 INPUTS = [(324.0, -0.010, 0.05, 1.0)] * 40 + [(260.0, 0.004, -0.03, -1.0)] * 30
 
@@ -40,7 +39,7 @@ def worker_predictor(path, steps, h):
 
 @pytest.fixture(scope="module")
 def setup():
-    from l1b2.derive import derive_predictor
+    from l1b2.predictor.derive import derive_predictor
     mp = load_motor()
     return PredictorSetup(derive_predictor(mp, n_grid=9), mp.slider.mass_kg, 1e-3)
 
@@ -63,7 +62,7 @@ def test_predictor_fmu_validates_and_declares_units(fmu):
 
 @pytest.mark.parametrize("h", [1e-3, 2.5e-3])
 def test_predictor_fmu_equals_the_predictor_functions(fmu, setup, isolated, h):
-    # reference: l1b2.predictor.one_step iterated at T_s (sub-steps of h/n) and steady_state, called here
+    # reference: l1b2.predictor.model.one_step iterated at T_s (sub-steps of h/n) and steady_state, called here
     got = isolated(__file__, "worker_predictor", str(fmu), INPUTS, h).value
     p, m_s = setup.params, setup.slider_mass_kg
     n = int(np.ceil(h / setup.T_s - 1e-9))

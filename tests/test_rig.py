@@ -5,13 +5,18 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
-
-from l1b2 import data as dataio
-from l1b2 import plots
 from l1b2.cli import main as cli_main
-from l1b2.metrics import evaluation_mask
-from l1b2.params import load_motor
-from l1b2.rig import EFFECTS, RigPlan, apply_overrides, run_experiment, write_experiment
+from l1b2.data import measurements as dataio
+from l1b2.data import plots
+from l1b2.data.metrics import evaluation_mask
+from l1b2.physics.params import load_motor
+from l1b2.rig.experiment import (
+    EFFECTS,
+    RigPlan,
+    apply_overrides,
+    run_experiment,
+    write_experiment,
+)
 
 PLAN = RigPlan(voltages_V=(220.0, 272.0, 324.0), loads_kg=(-0.05, 0.0, 0.05), step_s=1e-3)
 

@@ -1,4 +1,4 @@
-"""Slider on its guide (paper Sect. 3.4, Eq. 21-22): l1b2.slider."""
+"""Slider on its guide (paper Sect. 3.4, Eq. 21-22): l1b2.physics.slider."""
 
 from __future__ import annotations
 
@@ -7,9 +7,8 @@ import math
 
 import numpy as np
 import pytest
+from l1b2.physics import slider as sld
 from scipy.integrate import solve_ivp
-
-from l1b2 import slider as sld
 
 G = 9.81
 

@@ -1,4 +1,4 @@
-"""SSP system structure and parameter values: l1b2.ssp, system_models/L1B2Motor.ssd, reference_motor/*.ssv."""
+"""SSP system structure and parameter values: l1b2.cosim.ssp, system_models/L1B2Motor.ssd, reference_motor/*.ssv."""
 
 from __future__ import annotations
 
@@ -8,12 +8,11 @@ import zipfile
 
 import fmpy
 import pytest
-from lxml import etree
-
-from l1b2 import ssp
+from l1b2.cosim import ssp
 from l1b2.errors import SystemStructureError
-from l1b2.params import describe, load_motor
+from l1b2.physics.params import describe, load_motor
 from l1b2.units import UNITS
+from lxml import etree
 
 SCHEMA_DIR = os.path.join(os.path.dirname(fmpy.__file__), "ssp", "schema")
 NS = {
@@ -229,7 +228,7 @@ def test_build_ssp_archive(tmp_path, motor):
 def test_system_level_bindings_take_precedence(tmp_path):
     # reference: SSP 1.0 (ParameterBinding) - bindings at the system level win over component-level ones;
     # system-level names are hierarchical. Read by our master (libcosim ignores system-level bindings).
-    from l1b2.cosim import CoSimulation
+    from l1b2.cosim.master import CoSimulation
     text = ssp.SSD_FILE.read_text().replace(
         "    <ssd:Elements>",
         '    <ssd:ParameterBindings><ssd:ParameterBinding source="resources/override.ssv"/></ssd:ParameterBindings>\n'

@@ -1,4 +1,4 @@
-"""Stator (paper Sect. 3.2, Eq. 5-16): l1b2.stator."""
+"""Stator (paper Sect. 3.2, Eq. 5-16): l1b2.physics.stator."""
 
 from __future__ import annotations
 
@@ -6,12 +6,11 @@ import dataclasses
 
 import numpy as np
 import pytest
+from l1b2.physics import stator as st
 from numpy.polynomial import legendre as npleg
 from scipy.integrate import quad, solve_ivp
 from scipy.linalg import eigh
 from scipy.optimize import brentq
-
-from l1b2 import stator as st
 
 
 @pytest.fixture(scope="module")

@@ -24,7 +24,7 @@ def _floats(text: str) -> tuple[float, ...]:
 
 
 def _motor(args):
-    from .params import load_motor
+    from .physics.params import load_motor
     return load_motor(getattr(args, "params", None))
 
 
@@ -33,7 +33,7 @@ def _motor(args):
 # ---------------------------------------------------------------------------
 
 def cmd_fmus(args) -> int:
-    from .fmu_build import SUBSYSTEM_FMUS, build_fmu
+    from .fmi.build import SUBSYSTEM_FMUS, build_fmu
     mp = _motor(args)
     for name in args.names or SUBSYSTEM_FMUS:
         print(build_fmu(name, args.out, mp=mp))
@@ -45,10 +45,10 @@ def cmd_simulate(args) -> int:
     import numpy as np
     import pandas as pd
 
-    from . import driver as drv
-    from .cosim import CoSimResult, CoSimulation
-    from .coupled import InProcessMotor
-    from .ssp import COMPONENT_PARAMS
+    from .cosim.engine import InProcessMotor
+    from .cosim.master import CoSimResult, CoSimulation
+    from .cosim.ssp import COMPONENT_PARAMS
+    from .physics import driver as drv
 
     mp = _motor(args)
     if args.direction not in (1, -1):
@@ -68,13 +68,13 @@ def cmd_simulate(args) -> int:
             res = cs.run(args.duration, inputs, start_values={"Slider.s0": s0, "Stator.s": s0},
                          stop_when=stop)
     else:
-        from .coupled import RECORDED
+        from .cosim.engine import RECORDED
         m = InProcessMotor(mp, h_s=args.step, pure_slip=args.pure_slip)
         m.initialize(s0=s0, **inputs)
         rec = RECORDED + ("Slider.at_stop",)
         r = m.run(args.duration, record=rec,
                   until=(lambda mm: mm.value("Slider.at_stop") == args.direction) if not args.full else None)
-        from .blocks import BLOCKS
+        from .cosim.blocks import BLOCKS
         units = {"time": "s"}
         for name in rec:
             comp, var = name.split(".")
@@ -90,8 +90,13 @@ def cmd_simulate(args) -> int:
 
 def cmd_rig(args) -> int:
     """The paper's whole experiment on the co-simulated motor."""
-    from . import plots
-    from .rig import RigPlan, parse_injection, run_experiment, write_experiment
+    from .data import plots
+    from .rig.experiment import (
+        RigPlan,
+        parse_injection,
+        run_experiment,
+        write_experiment,
+    )
 
     mp = _motor(args)
     plan = RigPlan(voltages_V=args.voltages, loads_kg=args.loads, step_s=args.step, seed=args.seed,
@@ -257,7 +262,7 @@ def _fmu_smoke(fmu_dir: Path, mp) -> list[tuple[str, str, float, str]]:
 
 def cmd_demo(args) -> int:
     """The main job end to end on the embedded default: reference motor, virtual rig."""
-    from .fmu_build import build_subsystem_fmus
+    from .fmi.build import build_subsystem_fmus
     mp = _motor(args)
     out = Path(args.out)
     fmu_dir = out / "fmus"
@@ -342,7 +347,7 @@ def cmd_compare(args) -> int:
 
 def cmd_close_loop(args) -> int:
     """Residual -> missing effect -> extended model; error before and after on TEST."""
-    from .closeloop import before_after_table, close_loop
+    from .closeloop.loop import before_after_table, close_loop
     say = (lambda m: None) if args.quiet else (lambda m: print(f"[close-loop] {m}", flush=True))
     rep = close_loop(args.train, args.test, args.report_dir, order=args.order, k_folds=args.folds,
                      alpha=args.alpha, min_gain=args.min_gain, seed=args.seed, slider_mass_kg=args.slider_mass,
@@ -356,7 +361,7 @@ def cmd_close_loop(args) -> int:
 
 def cmd_export(args) -> int:
     """The drop-in deliverables: subsystem FMUs, Predictor.fmu, L1B2Motor.ssp and L1B2Motor.fmu."""
-    from .export import export_all
+    from .fmi.export import export_all
     predictor = None
     if args.identification:
         try:
@@ -364,7 +369,7 @@ def cmd_export(args) -> int:
         except (OSError, ValueError, KeyError) as exc:
             raise L1B2Error(f"{args.identification}: not an identification.json of `l1b2 identify` ({exc})") from None
     elif not args.no_predictor:
-        from .derive import derive_predictor_setup
+        from .predictor.derive import derive_predictor_setup
         predictor = derive_predictor_setup(_motor(args)).to_dict()
     manifest = export_all(args.out, mp=_motor(args), predictor=predictor)
     for f in manifest.get("files", []):
@@ -377,7 +382,7 @@ def cmd_export(args) -> int:
 
 
 def cmd_effects(args) -> int:
-    from .rig import EFFECTS
+    from .rig.experiment import EFFECTS
     for e in EFFECTS.values():
         params = ", ".join(f"{k}={v:g}" for k, v in e.params.items())
         print(f"{e.name}  [{e.regressor}]\n    {e.description}\n    {params}")

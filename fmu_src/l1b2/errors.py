@@ -33,8 +33,8 @@ class DataFormatError(L1B2Error):
         The offending file.
     column : str or None
         Column (or sidecar field) name; ``None`` for file-level problems.
-        Its unit is looked up in :data:`l1b2.data.KNOWN_COLUMNS` /
-        :data:`l1b2.data.SIDECAR_FIELDS`.
+        Its unit is looked up in :data:`l1b2.data.measurements.KNOWN_COLUMNS` /
+        :data:`l1b2.data.measurements.SIDECAR_FIELDS`.
     row : int or None
         1-based data row number (header excluded); ``None`` when the problem
         is not tied to one row.  The file line is ``row + 1``.
@@ -71,8 +71,8 @@ class DataFormatError(L1B2Error):
         """Unit of a known data column or sidecar field, else ``None``."""
         if column is None:
             return None
-        try:  # lazy: l1b2.data imports this module
-            from l1b2.data import unit_of
+        try:  # lazy: l1b2.data.measurements imports this module
+            from .data.measurements import unit_of
         except ImportError:  # pragma: no cover - partial installs only
             return None
         return unit_of(column)

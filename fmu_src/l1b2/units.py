@@ -9,6 +9,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+#: gravitational acceleration used throughout, as in the paper (Eq. 22, 29) [m/s^2]
+G_M_S2 = 9.81
+
 
 @dataclass(frozen=True)
 class UnitDef:

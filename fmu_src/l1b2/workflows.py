@@ -13,11 +13,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from . import data as dataio
-from . import plots
-from .blocks import PredictorSetup
+from .data import measurements as dataio
+from .data import plots
+from .data.metrics import evaluation_mask, report_metrics, speed_metrics
 from .errors import IdentificationError
-from .metrics import evaluation_mask, report_metrics, speed_metrics
+from .predictor.setup import PredictorSetup
 
 TEST_ABS_LOADS = (0.05,)
 
@@ -25,7 +25,7 @@ TEST_ABS_LOADS = (0.05,)
 def load_train_test(train_path, test_path=None, *, test_abs_loads=TEST_ABS_LOADS, slider_mass_kg=None):
     """Load and validate TRAIN (and TEST); without TEST, split TRAIN by load like the paper.
 
-    Returns ``(train, test_or_None, split_note)`` as :class:`l1b2.data.Measurements`.
+    Returns ``(train, test_or_None, split_note)`` as :class:`l1b2.data.measurements.Measurements`.
     """
     train = dataio.load_measurements(train_path, slider_mass_kg=slider_mass_kg)
     if test_path is not None:
@@ -45,15 +45,6 @@ def load_train_test(train_path, test_path=None, *, test_abs_loads=TEST_ABS_LOADS
 def metrics_for(est, df: pd.DataFrame) -> dict:
     """Data-format metrics of an identified predictor on a data set (one_step and free_run)."""
     return report_metrics(df, est.predict_one_step(df), est.predict_free_run(df))
-
-
-def slider_mass(meas, path) -> float:
-    """The slider mass of a data set (sidecar or command line), or a clear error."""
-    m_s = meas.meta.get("slider_mass_kg")
-    if m_s is None:
-        raise IdentificationError(f"{path}: slider mass unknown: give --slider-mass or 'slider_mass_kg' "
-                                  f"in the sidecar {dataio.sidecar_path(path)}")
-    return float(m_s)
 
 
 def _parse_fix(text: str | None):
@@ -83,10 +74,10 @@ def run_identification(train_path, out_dir, test_path=None, *, order=8, criterio
     train and test, convergence), ``fit_report.txt`` and, per test run, a
     Fig. 10-like PNG. Returns the report dict.
     """
-    from .identify import PredictorIdentifier
+    from .ident.estimator import PredictorIdentifier
     train, test, split_note = load_train_test(train_path, test_path, test_abs_loads=test_abs_loads,
                                               slider_mass_kg=slider_mass_kg)
-    m_s = slider_mass(train, train_path)
+    m_s = train.slider_mass_kg
     est = PredictorIdentifier(order=order, criterion=criterion, fixed=_parse_fix(fix), n_starts=n_starts,
                               seed=seed, verbose=verbose)
     est.fit(train.df, slider_mass_kg=m_s, mask=evaluation_mask(train.df))
@@ -125,9 +116,9 @@ def run_comparison(out_dir, mp=None, identification: dict | None = None, *, orde
       difference is reported, not hidden);
     * the identified predictor (if given) vs the stick-slip co-simulation.
     """
-    from . import derive
-    from .params import load_motor
-    from .predictor import PredictorParams
+    from .physics.params import load_motor
+    from .predictor import derive
+    from .predictor.model import PredictorParams
     mp = mp or load_motor()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -147,7 +138,7 @@ def run_comparison(out_dir, mp=None, identification: dict | None = None, *, orde
         df.to_csv(out / f"{key}.csv", index=False)
     fig = plots.steady_comparison(tables, out / "predictor_vs_cosim_steady.png")
     report = {"cases": cases, "figure": str(fig),
-              "note": "co-simulation steady states from l1b2.coupled.steady_state (the fixed point of the "
+              "note": "co-simulation steady states from l1b2.physics.steady.steady_state (the fixed point of the "
                       "time-domain co-simulation); relative error against the co-simulation's speed"}
     (out / "comparison.json").write_text(json.dumps(report, indent=1))
     return report

@@ -1,0 +1,227 @@
+"""Candidate effects the paper's Eq. 29 predictor lacks, each a physically meaningful extension.
+
+Every candidate adds a force to the slider's force balance (drive
+coordinates: positive pushes the slider the way it is driven), linear in its
+own parameters, ``dF = features(df) @ phi``; shape parameters (a wavelength, a
+time constant, a defect position) are not identified but searched on a grid.
+The features depend on the data's columns and, for state-dependent effects,
+on the *baseline model's* predicted speed (never on the measured speed, so a
+free-run prediction on new data needs no measurement).
+
+Named effects (physics, regressor):
+
+* ``thermal_drift`` (time): self-heating of the stator moves its resonances
+  (about -10 Hz/K, physics notes), which changes the force factor of the
+  drive; ``dF = V0 * f(t)``, f smooth in the experiment clock.
+* ``thermal_drift_T`` (temperature): the same, driven by a measured stator
+  temperature: ``dF = V0 (a (T-T0) + b (T-T0)^2)``.
+* ``direction_asymmetry`` (direction): CH1 and CH2 excite B2 unequally
+  (electrode area, polarisation): ``dF = d (a V0/V_ref + b)``.
+* ``bar_waviness`` (position): periodic non-uniformity of the friction bar
+  (grinding marks) modulates preload and friction:
+  the thrust, the force factor and the damping are modulated:
+  ``dF = (a + c V0/V_ref + e v/v_ref) cos(2 pi s/L) + (same) sin(2 pi s/L)`` plus the second
+  harmonic, L searched around the residual's spectral peak.
+* ``local_defect`` (position): a local bump or contamination of the bar:
+  ``dF = a exp(-(s-c)^2 / (2 w^2))``, c and w on a grid.
+* ``load_path_friction`` (load): Coulomb friction in the pulley, proportional
+  to the hanging weight and opposing the motion: ``dF = -a g |m_load|``.
+* ``drive_saturation`` (voltage): the drive's output limits or has a
+  threshold: the force factor is not proportional to V0:
+  ``dF = a (V0/V_ref)^2 + b (V0/V_ref)^3``.
+* ``speed_dependent_friction`` (speed): non-Newtonian film or air drag:
+  ``dF = -(a v + b v |v|)`` at the baseline's predicted drive speed.
+* ``inertia_mismatch`` (acceleration): moving mass other than assumed
+  (load inertia, coupling): ``dF = -a m_s dv/dt`` of the baseline prediction.
+
+Generic fallback: a smooth term (splines, or the regressor's own basis for
+run-level regressors) in one implicated regressor, for residual structure
+that no named effect explains.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+import pandas as pd
+
+from ..data import measurements as dataio
+from ..physics.params import G_M_S2
+from .residuals import REGRESSORS, _bspline_basis
+
+V_REF = 300.0   # voltage scale of the features [V]
+SPEED_REF = 0.2  # speed scale of the features [m/s]
+
+
+@dataclass(frozen=True)
+class CandidateForce:
+    """One candidate: named effect (with fixed shape) whose force is ``features(df) @ phi``."""
+
+    effect: str
+    regressor: str
+    shape: str
+    names: tuple
+    units: tuple
+    features: Callable[[pd.DataFrame], np.ndarray] = field(repr=False, compare=False)
+    description: str = ""
+    generic: bool = False
+
+    @property
+    def label(self) -> str:
+        return f"{self.effect}[{self.shape}]" if self.shape else self.effect
+
+    @property
+    def n_params(self) -> int:
+        return len(self.names)
+
+
+@dataclass
+class Context:
+    """What the features may use besides the data columns."""
+
+    baseline_free_run: Callable[[pd.DataFrame], np.ndarray]  # predicted speed (data sign) on any df
+    m_s: float
+    time_range: tuple[float, float]
+    position_range: tuple[float, float]
+    temperature_ref: float | None = None
+    spectral_period_m: float | None = None
+
+
+def _d(df):
+    return df[dataio.DIRECTION].to_numpy(float)
+
+
+def _V(df):
+    return df[dataio.VOLTAGE].to_numpy(float)
+
+
+def _drive_pred(ctx: Context, df):
+    v = ctx.baseline_free_run(df)
+    return _d(df) * v
+
+
+def _drive_acc(ctx: Context, df):
+    vp = _drive_pred(ctx, df)
+    out = np.zeros(len(df))
+    t = df[dataio.TIME].to_numpy(float)
+    for _, sl in dataio.run_slices(df[dataio.RUN]):
+        if sl.stop - sl.start > 1:
+            out[sl] = np.gradient(vp[sl], t[sl])
+    return out
+
+
+def _scaled(x, lo, hi):
+    return np.clip((np.asarray(x, float) - lo) / (hi - lo), 0.0, 1.0) if hi > lo else np.zeros(len(x))
+
+
+def named_candidates(ctx: Context, df_train: pd.DataFrame) -> list[CandidateForce]:
+    """Every named candidate with its shape grid."""
+    t0, t1 = ctx.time_range
+    s0, s1 = ctx.position_range
+    out = []
+
+    def time_basis(df, n_inner=4):
+        return _bspline_basis(_scaled(df[dataio.TIME].to_numpy(float), t0, t1), n_inner)
+
+    for n_inner in (2, 4):
+        k = n_inner + 4
+        out.append(CandidateForce(
+            "thermal_drift", "time", f"{k} splines in t", tuple(f"thermal_gain_{j}" for j in range(k)),
+            tuple("N/V" for _ in range(k)),
+            (lambda df, n=n_inner: (_V(df) / V_REF)[:, None] * time_basis(df, n)),
+            "drive force factor drifting with the experiment clock (stator self-heating)"))
+    if dataio.TEMPERATURE in df_train.columns and ctx.temperature_ref is not None:
+        T0 = ctx.temperature_ref
+
+        def temp_feat(df):
+            dT = df[dataio.TEMPERATURE].to_numpy(float) - T0
+            return np.column_stack([_V(df) / V_REF * dT, _V(df) / V_REF * dT ** 2 / 10.0])
+        out.append(CandidateForce("thermal_drift_T", "temperature", "", ("thermal_gain_T", "thermal_gain_T2"),
+                                  ("N/K", "N/K2"), temp_feat, "force factor drifting with the stator temperature"))
+    out.append(CandidateForce(
+        "direction_asymmetry", "direction", "", ("asym_gain", "asym_offset_N"), ("N", "N"),
+        lambda df: np.column_stack([_d(df) * _V(df) / V_REF, _d(df)]),
+        "CH1 and CH2 excite the B2 mode with different strength"))
+    periods = set(np.round(np.geomspace(2e-3, 12e-3, 13), 6))
+    if ctx.spectral_period_m:
+        periods |= {round(ctx.spectral_period_m * f, 6) for f in np.linspace(0.85, 1.15, 13)}
+    def wave(df, L):
+        ph = 2 * np.pi * df[dataio.POSITION].to_numpy(float) / L
+        g = _V(df) / V_REF
+        u = _drive_pred(ctx, df) / SPEED_REF
+        # preload modulation acts on the friction thrust, on the force factor (V0) and on the
+        # interface's damping (speed); a strong modulation acts non-linearly (second harmonic)
+        return np.column_stack([np.cos(ph), np.sin(ph), g * np.cos(ph), g * np.sin(ph),
+                                u * np.cos(ph), u * np.sin(ph), np.cos(2 * ph), np.sin(2 * ph)])
+    for L in sorted(periods):
+        out.append(CandidateForce(
+            "bar_waviness", "position", f"period {L * 1e3:.2f} mm",
+            ("wave_cos_N", "wave_sin_N", "wave_cos_gain_N", "wave_sin_gain_N", "wave_cos_damp_N",
+             "wave_sin_damp_N", "wave_cos2_N", "wave_sin2_N"),
+            ("N",) * 8,
+            (lambda df, L=L: wave(df, L)), "periodic non-uniformity of the friction bar"))
+    for w in (0.6e-3, 1.2e-3, 2.4e-3):
+        for c in np.arange(s0 + 2e-3, s1 - 2e-3 + 1e-9, 1.0e-3):
+            out.append(CandidateForce(
+                "local_defect", "position", f"at {c * 1e3:+.0f} mm, width {w * 1e3:.1f} mm", ("defect_N",), ("N",),
+                (lambda df, c=c, w=w: np.exp(-0.5 * ((df[dataio.POSITION].to_numpy(float) - c) / w) ** 2)[:, None]),
+                "local bump or contamination of the friction bar"))
+    out.append(CandidateForce(
+        "load_path_friction", "load", "", ("pulley_mu",), ("1",),
+        lambda df: (-G_M_S2 * np.abs(df[dataio.LOAD].to_numpy(float)))[:, None],
+        "Coulomb friction in the load path, proportional to the hanging weight, opposing motion"))
+    out.append(CandidateForce(
+        "drive_saturation", "voltage", "", ("sat_quad_N", "sat_cubic_N"), ("N", "N"),
+        lambda df: np.column_stack([(_V(df) / V_REF) ** 2, (_V(df) / V_REF) ** 3]),
+        "drive output not proportional to the commanded V0 (saturation or threshold)"))
+    out.append(CandidateForce(
+        "speed_dependent_friction", "speed", "", ("drag_lin_N", "drag_quad_N"), ("N", "N"),
+        lambda df: np.column_stack([-_drive_pred(ctx, df) / SPEED_REF,
+                                    -_drive_pred(ctx, df) * np.abs(_drive_pred(ctx, df)) / SPEED_REF ** 2]),
+        "friction growing non-linearly with speed (film, air)"))
+    out.append(CandidateForce(
+        "inertia_mismatch", "acceleration", "", ("mass_error",), ("1",),
+        lambda df: (-ctx.m_s * _drive_acc(ctx, df))[:, None],
+        "moving mass other than assumed"))
+    return out
+
+
+def generic_candidates(ctx: Context, df_train: pd.DataFrame) -> list[CandidateForce]:
+    """Fallback smooth terms, one per regressor available in the data."""
+    t0, t1 = ctx.time_range
+    s0, s1 = ctx.position_range
+    out = []
+    V_lo, V_hi = float(_V(df_train).min()), float(_V(df_train).max())
+    L_abs = float(np.max(np.abs(df_train[dataio.LOAD].to_numpy(float)))) or 1.0
+    vp_train = np.abs(ctx.baseline_free_run(df_train))
+    v_lo, v_hi = float(np.min(vp_train)), float(np.max(vp_train))
+    specs = {
+        "time": (lambda df: _bspline_basis(_scaled(df[dataio.TIME].to_numpy(float), t0, t1), 6), 9),
+        "position": (lambda df: _bspline_basis(_scaled(df[dataio.POSITION].to_numpy(float), s0, s1),
+                                               int(np.clip(round((s1 - s0) / 1.5e-3), 4, 40))), None),
+        "direction": (lambda df: _d(df)[:, None], 1),
+        "load": (lambda df: np.column_stack([_d(df) * df[dataio.LOAD].to_numpy(float) / L_abs,
+                                             np.abs(df[dataio.LOAD].to_numpy(float)) / L_abs,
+                                             (_d(df) * df[dataio.LOAD].to_numpy(float) / L_abs) ** 2]), 3),
+        "voltage": (lambda df: np.column_stack([(2 * _scaled(_V(df), V_lo, V_hi) - 1),
+                                                (2 * _scaled(_V(df), V_lo, V_hi) - 1) ** 2]), 2),
+        "speed": (lambda df: _bspline_basis(_scaled(np.abs(ctx.baseline_free_run(df)), v_lo, v_hi), 4), 7),
+        "acceleration": (lambda df: np.column_stack([_drive_acc(ctx, df) * ctx.m_s,
+                                                     np.abs(_drive_acc(ctx, df)) * ctx.m_s]), 2),
+    }
+    if dataio.TEMPERATURE in df_train.columns:
+        T = df_train[dataio.TEMPERATURE].to_numpy(float)
+        T_lo, T_hi = float(T.min()), float(T.max())
+        specs["temperature"] = (lambda df: _bspline_basis(_scaled(df[dataio.TEMPERATURE].to_numpy(float),
+                                                                  T_lo, T_hi), 4), 7)
+    for reg in REGRESSORS:
+        if reg not in specs:
+            continue
+        fn, k = specs[reg]
+        k = k if k is not None else fn(df_train.iloc[:2]).shape[1]
+        out.append(CandidateForce(f"smooth_{reg}", reg, "", tuple(f"smooth_{reg}_{j}" for j in range(k)),
+                                  tuple("N" for _ in range(k)), fn,
+                                  f"generic smooth force in {reg} (no named effect)", generic=True))
+    return out

@@ -1,0 +1,723 @@
+"""Co-simulation blocks: the four subsystems as stateful step objects.
+
+Each block holds its parameters (a frozen dataclass), its inputs, outputs and
+states as plain float attributes, and implements ``initialize()`` and
+``do_step(t, h)`` on top of the pure physics functions. The FMU slaves in
+``fmu_src/slaves`` are thin wrappers that expose these attributes as FMI
+variables, and :mod:`l1b2.cosim.master` runs the very same blocks in-process as the
+reference for the fmpy master.
+
+Every variable is declared once, in ``VARIABLES`` of each block, with its
+causality, variability, SI unit, description and range; the FMU build uses
+that table for ``modelDescription.xml``.
+
+Communication between blocks (periodic steady state over a vibration period)
+---------------------------------------------------------------------------
+The blocks exchange amplitudes, phases and period-averaged forces, not 48 kHz
+signals (physics notes). The stator receives the interface force
+fundamentals computed from its own outputs at the start of the step and
+treats them over the step as a describing function (an equivalent complex
+stiffness ``Y = eta F1 / Q``); its envelope ODE stays linear over the step and
+is integrated exactly, which keeps the explicit coupling stable for
+communication steps up to 1 ms. In a steady state ``Y Q`` is exactly the
+interface force, so steady results do not depend on this choice.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields, replace
+from typing import Any
+
+import numpy as np
+
+from ..errors import SimulationError
+from ..physics import driver as drv
+from ..physics import interface as itf
+from ..physics import slider as sld
+from ..physics import stator as st
+from ..physics.params import (
+    DriverParams,
+    InterfaceParams,
+    MotorParams,
+    SliderParams,
+    StatorParams,
+    describe,
+)
+from ..predictor.setup import PredictorSetup
+
+
+@dataclass(frozen=True)
+class Var:
+    """Declaration of one block variable (becomes one FMI ScalarVariable)."""
+
+    name: str
+    causality: str          # "input", "output", "parameter", "local"
+    unit: str
+    description: str
+    start: float | None = None
+    min: float | None = None
+    max: float | None = None
+    variability: str = "continuous"  # parameters: "fixed"
+    type: str = "Real"                 # "Real", "Integer" or "Boolean"
+    nominal: float | None = None
+
+
+def _parameter_vars(cls, values) -> list[Var]:
+    return [Var(d["name"], "parameter", d["unit"], d["description"], start=getattr(values, d["name"]),
+                min=d["min"], max=d["max"], variability="fixed") for d in describe(cls)]
+
+
+def motor_defaults(mp: MotorParams) -> dict:
+    """JSON-safe start values of every section of a motor parameter set."""
+    from dataclasses import asdict
+    return {sec: asdict(getattr(mp, sec)) for sec in ("driver", "stator", "interface", "slider", "operating")}
+
+
+class Block:
+    """Base class: parameters, inputs, outputs and states as attributes."""
+
+    PARAMS_CLASS: type = object
+    SECTION: str = ""     # key of the block's parameters in the baked-in defaults document
+    INPUTS: list[Var] = []
+    OUTPUTS: list[Var] = []
+    STATES: list[Var] = []
+    EXTRA_PARAMETERS: list[Var] = []
+
+    def __init__(self, params):
+        self.params = params
+        for var in self.EXTRA_PARAMETERS:
+            setattr(self, var.name, var.start)
+        for f in fields(params):
+            setattr(self, f.name, getattr(params, f.name))
+        for var in self.INPUTS + self.OUTPUTS + self.STATES:
+            setattr(self, var.name, 0.0 if var.start is None else var.start)
+
+    @classmethod
+    def variables(cls, params=None) -> list[Var]:
+        """All variables of the block (parameters with the start values of ``params``)."""
+        pars = _parameter_vars(cls.PARAMS_CLASS, params) if params is not None else []
+        return pars + list(cls.EXTRA_PARAMETERS) + cls.INPUTS + cls.OUTPUTS + cls.STATES
+
+    @classmethod
+    def params_from_defaults(cls, defaults: dict):
+        """The block's parameter object from a defaults document (see :func:`motor_defaults`)."""
+        return cls.PARAMS_CLASS(**defaults[cls.SECTION])
+
+    @classmethod
+    def baked_defaults(cls, mp: MotorParams) -> dict:
+        """Extra entries the FMU build writes into the defaults document (computed once, at build time)."""
+        return {}
+
+    def get(self, name: str):
+        return getattr(self, name)
+
+    def set(self, name: str, value):
+        setattr(self, name, value)
+
+    def rebuild_params(self):
+        """Re-create the frozen parameter dataclass from the (possibly changed) attributes."""
+        kw = {f.name: float(getattr(self, f.name)) for f in fields(self.params)}
+        self.params = replace(self.params, **kw)
+
+    def check_inputs(self):
+        """Raise :class:`SimulationError` on a non-finite or out-of-range input."""
+        for var in self.INPUTS:
+            value = getattr(self, var.name)
+            if not isinstance(value, (int, float, np.floating)) or not math.isfinite(value):
+                raise SimulationError(f"{type(self).__name__}: input {var.name} [{var.unit}] = {value!r} is not finite")
+            if var.min is not None and value < var.min:
+                raise SimulationError(f"{type(self).__name__}: input {var.name} [{var.unit}] = {value} is below {var.min}")
+            if var.max is not None and value > var.max:
+                raise SimulationError(f"{type(self).__name__}: input {var.name} [{var.unit}] = {value} is above {var.max}")
+
+    def state_vector(self) -> dict[str, float]:
+        return {v.name: float(getattr(self, v.name)) for v in self.STATES}
+
+    def initialize(self):  # pragma: no cover - overridden
+        raise NotImplementedError
+
+    def refresh(self):
+        """Recompute outputs and caches after the states were set from outside (FMU state restore)."""
+        self.initialize_outputs()
+
+    def initialize_outputs(self):  # pragma: no cover - overridden
+        raise NotImplementedError
+
+    def do_step(self, t: float, h: float):  # pragma: no cover - overridden
+        raise NotImplementedError
+
+
+# ---------------------------------------------------------------------------
+# Driver
+# ---------------------------------------------------------------------------
+
+class DriverBlock(Block):
+    """H-bridge + LC tank (Eq. 1-4): algebraic, outputs follow the inputs of the step."""
+
+    PARAMS_CLASS = DriverParams
+    SECTION = "driver"
+    INPUTS = [
+        Var("V_s", "input", "V", "supply voltage of the H bridge", start=67.1, min=0.0, max=2000.0),
+        Var("duty", "input", "1", "duty ratio delta of the PWM signal", start=1.0, min=0.0, max=1.0),
+        Var("f_s", "input", "Hz", "switching (= drive) frequency", start=48500.0, min=1e3, max=1e6),
+        Var("T", "input", "degC", "temperature of the tank components", start=25.0, min=-100.0, max=300.0),
+    ]
+    OUTPUTS = [
+        Var("V0", "output", "V", "amplitude of the sinusoidal stator voltage"),
+        Var("omega", "output", "rad/s", "drive angular frequency"),
+        Var("V0_phase", "output", "rad", "phase of V0 relative to the inverter fundamental"),
+        Var("V_inv1", "output", "V", "fundamental of the inverter voltage (Eq. 1)"),
+        Var("omega0", "output", "rad/s", "zero-phase frequency of the drifted tank (Eq. 3)"),
+    ]
+
+    def initialize(self):
+        self.rebuild_params()
+        self._compute()
+
+    initialize_outputs = initialize
+
+    def _compute(self):
+        self.check_inputs()
+        out = drv.driver_output(self.params, self.V_s, self.duty, self.f_s, self.T)
+        self.V0 = float(out.V0_V)
+        self.omega = float(out.omega_rad_s)
+        self.V0_phase = float(out.phase_rad)
+        self.V_inv1 = float(out.V_inv1_V)
+        self.omega0 = float(out.omega0_rad_s) if np.isfinite(out.omega0_rad_s) else 0.0
+
+    def do_step(self, t, h):
+        self._compute()
+
+
+# ---------------------------------------------------------------------------
+# Stator
+# ---------------------------------------------------------------------------
+
+class StatorBlock(Block):
+    """L1 and B2 modal envelopes (Eq. 5-16) with interface feedback (Eq. 14)."""
+
+    PARAMS_CLASS = StatorParams
+    SECTION = "stator"
+    INPUTS = [
+        Var("V0", "input", "V", "amplitude of the stator voltage", start=324.0, min=0.0, max=2000.0),
+        Var("omega", "input", "rad/s", "drive angular frequency", start=2 * math.pi * 48500, min=1e3, max=1e7),
+        Var("direction", "input", "1", "+1 excites CH1 (toward +position), -1 CH2", start=1.0, min=-1.0, max=1.0),
+        Var("s", "input", "m", "slider position (sets the axial force P(s))", start=0.0, min=-1.0, max=1.0),
+        Var("T", "input", "degC", "ambient temperature of the stator", start=25.0, min=-100.0, max=300.0),
+        Var("F_N1_sin", "input", "N", "sin component of the normal-force fundamental (normal-displacement frame)"),
+        Var("F_N1_cos", "input", "N", "cos component of the normal-force fundamental"),
+        Var("F_T1_sin", "input", "N", "sin component of the friction-force fundamental"),
+        Var("F_T1_cos", "input", "N", "cos component of the friction-force fundamental"),
+    ]
+    OUTPUTS = [
+        Var("U_l", "output", "m", "tip normal vibration amplitude (Eq. 12)", nominal=1e-6),
+        Var("U_w", "output", "m", "tip tangential vibration amplitude (Eq. 13)", nominal=1e-6),
+        Var("delta", "output", "rad", "phase of tangential minus normal tip displacement"),
+        Var("phase_l", "output", "rad", "phase of the tip normal displacement"),
+        Var("phase_w", "output", "rad", "phase of the tip tangential displacement"),
+        Var("F_p", "output", "N", "static axial force = mean normal force, alpha0 P(s) (Eq. 16)"),
+        Var("P", "output", "N", "nominal compressive axial force P(s)"),
+        Var("f_b", "output", "Hz", "B2 natural frequency under the axial force"),
+        Var("eta_T", "output", "1", "tangential load coefficient |phi_b(L, P)|"),
+        Var("v_tip", "output", "m/s", "tangential tip velocity amplitude omega*U_w"),
+        Var("T_stator", "output", "degC", "stator temperature (equals T unless self-heating is on)"),
+    ]
+    STATES = [
+        Var("Q_l_re", "local", "m", "L1 modal phasor, real part (state)", nominal=1e-6),
+        Var("Q_l_im", "local", "m", "L1 modal phasor, imaginary part (state)", nominal=1e-6),
+        Var("Q_b_re", "local", "m", "B2 modal phasor, real part (state)", nominal=1e-6),
+        Var("Q_b_im", "local", "m", "B2 modal phasor, imaginary part (state)", nominal=1e-6),
+        Var("T_st", "local", "degC", "stator temperature (thermal state)", start=25.0),
+    ]
+    EXTRA_PARAMETERS = [
+        Var("T_st0", "parameter", "degC", "initial stator temperature (used when self-heating is on)",
+            start=25.0, min=-100.0, max=300.0, variability="fixed"),
+    ]
+    #: recompute the P-dependent B2 properties only when P moved by more than this [N]
+    P_TOL_N = 1e-4
+
+    def initialize(self):
+        self.rebuild_params()
+        self.T_st = float(self.T_st0 if self.params.thermal_tau_s > 0 else self.T)
+        self.initialize_outputs()
+
+    def initialize_outputs(self):
+        self._props_P = None
+        self._props_T = None
+        self._update_props()
+        self._publish()
+
+    def _update_props(self):
+        P = float(st.axial_force_N(self.params, self.s))
+        T = float(self.T_st)
+        if self._props_P is None or abs(P - self._props_P) > self.P_TOL_N or T != self._props_T:
+            self._props = st.modal_properties(self.params, P, T)
+            self._props_P, self._props_T = P, T
+        self.P = P
+        self.F_p = self.params.alpha0 * P
+
+    def _publish(self):
+        Q_l = complex(self.Q_l_re, self.Q_l_im)
+        Q_b = complex(self.Q_b_re, self.Q_b_im)
+        tip = st.tip_motion(Q_l, Q_b, float(self._props.eta_T))
+        self.U_l, self.U_w = float(tip.U_l_m), float(tip.U_w_m)
+        self.delta = float(tip.delta_rad)
+        self.phase_l, self.phase_w = float(tip.phase_l_rad), float(tip.phase_w_rad)
+        self.f_b = float(self._props.omega_b0) / (2 * math.pi)
+        self.eta_T = float(self._props.eta_T)
+        self.v_tip = self.omega * self.U_w
+        self.T_stator = float(self.T_st)
+
+    def do_step(self, t, h):
+        self.check_inputs()
+        if abs(abs(self.direction) - 1.0) > 1e-9:
+            raise SimulationError(f"StatorBlock: input direction [1] = {self.direction} must be +1 or -1")
+        props = self._props  # properties the interface forces were computed with
+        Q_l = complex(self.Q_l_re, self.Q_l_im)
+        Q_b = complex(self.Q_b_re, self.Q_b_im)
+        rot = np.exp(1j * self.phase_l)  # interface frame -> absolute phasor frame
+        F1_N = complex(self.F_N1_sin, self.F_N1_cos) * rot
+        F1_T = complex(self.F_T1_sin, self.F_T1_cos) * rot
+        F_l, F_b = st.excitation_phasors(self.params, self.V0, self.direction)
+        eta_T = float(props.eta_T)
+        # describing functions: generalised interface force = -Y Q
+        Y_l = st.ETA_N * F1_N / Q_l if abs(Q_l) > 1e-15 else 0.0
+        Y_b = eta_T * F1_T / Q_b if abs(Q_b) > 1e-15 else 0.0
+        F_l_eff = F_l if abs(Q_l) > 1e-15 else F_l - st.ETA_N * F1_N
+        F_b_eff = F_b if abs(Q_b) > 1e-15 else F_b - eta_T * F1_T
+        Q_l = complex(st.envelope_step(Q_l, F_l_eff, Y_l, self.omega, props.M_l, props.K_l, props.C_l, h))
+        Q_b = complex(st.envelope_step(Q_b, F_b_eff, Y_b, self.omega, props.M_b, props.K_b, props.C_b, h))
+        self.Q_l_re, self.Q_l_im, self.Q_b_re, self.Q_b_im = Q_l.real, Q_l.imag, Q_b.real, Q_b.imag
+        self.T_st = float(st.stator_temperature_step(self.T_st, self.T, self.V0, self.params, h))
+        self._update_props()
+        self._publish()
+
+
+# ---------------------------------------------------------------------------
+# Interface
+# ---------------------------------------------------------------------------
+
+class InterfaceBlock(Block):
+    """Tip/bar contact and friction over one vibration period (Eq. 17-20): algebraic."""
+
+    PARAMS_CLASS = InterfaceParams
+    SECTION = "interface"
+    EXTRA_PARAMETERS = [
+        Var("pure_slip", "parameter", "", "true: the paper's Sect. 4 assumptions (phi_c = pi, no stick)",
+            start=False, variability="fixed", type="Boolean"),
+        Var("n_theta", "parameter", "", "cells over the contact window (numerical resolution)",
+            start=256, min=16, max=65536, variability="fixed", type="Integer"),
+    ]
+    INPUTS = [
+        Var("U_l", "input", "m", "tip normal vibration amplitude", min=0.0, max=1e-3, nominal=1e-6),
+        Var("U_w", "input", "m", "tip tangential vibration amplitude", min=0.0, max=1e-3, nominal=1e-6),
+        Var("delta", "input", "rad", "phase of tangential minus normal tip displacement",
+            start=-math.pi / 2, min=-10.0, max=10.0),
+        Var("omega", "input", "rad/s", "vibration angular frequency", start=2 * math.pi * 48500, min=1e3, max=1e7),
+        Var("v", "input", "m/s", "slider speed", min=-10.0, max=10.0),
+        Var("F_p", "input", "N", "static axial force, period mean of the normal force", start=6.0, min=0.0, max=1e4),
+    ]
+    OUTPUTS = [
+        Var("F_d", "output", "N", "period-mean friction force on the slider (driving force, Eq. 27)"),
+        Var("F_N_mean", "output", "N", "period mean of the normal force (equals F_p)"),
+        Var("F_N1_sin", "output", "N", "sin component of the normal-force fundamental"),
+        Var("F_N1_cos", "output", "N", "cos component of the normal-force fundamental"),
+        Var("F_T1_sin", "output", "N", "sin component of the friction-force fundamental (fed back, Eq. 14)"),
+        Var("F_T1_cos", "output", "N", "cos component of the friction-force fundamental"),
+        Var("phi_c", "output", "rad", "contact angle (2 pi = permanent contact, Eq. 18)"),
+        Var("stick_fraction", "output", "1", "share of the contact time in stick (Eq. 19)"),
+    ]
+
+    def __init__(self, params, pure_slip: bool = False, n_theta: int = 256):
+        super().__init__(params)
+        self.pure_slip = bool(pure_slip)
+        self.n_theta = int(n_theta)
+
+    def initialize(self):
+        self.rebuild_params()
+        self._compute()
+
+    initialize_outputs = initialize
+
+    def _compute(self):
+        self.check_inputs()
+        out = itf.interface_forces(self.U_l, self.U_w, self.delta, self.omega, self.v, self.F_p, self.params,
+                                   mode="pure_slip" if self.pure_slip else "stick_slip",
+                                   n_theta=int(self.n_theta))
+        self.F_d, self.F_N_mean = out.F_d_N, out.F_N_mean_N
+        self.F_N1_sin, self.F_N1_cos = out.F_N1_sin_N, out.F_N1_cos_N
+        self.F_T1_sin, self.F_T1_cos = out.F_T1_sin_N, out.F_T1_cos_N
+        self.phi_c, self.stick_fraction = out.phi_c_rad, out.stick_fraction
+
+    def do_step(self, t, h):
+        self._compute()
+
+
+# ---------------------------------------------------------------------------
+# Slider
+# ---------------------------------------------------------------------------
+
+class SliderBlock(Block):
+    """Slider with guide friction, stick and end stops (Eq. 21-22)."""
+
+    PARAMS_CLASS = SliderParams
+    SECTION = "slider"
+    INPUTS = [
+        Var("F_d", "input", "N", "driving force from the interface", min=-1e4, max=1e4),
+        Var("F_p", "input", "N", "static axial force (loads the guide, Eq. 22)", start=6.0, min=0.0, max=1e4),
+        Var("m_load", "input", "kg", "signed load mass; > 0 pulls toward -position", min=-100.0, max=100.0),
+    ]
+    OUTPUTS = [
+        Var("v", "output", "m/s", "slider speed"),
+        Var("s", "output", "m", "slider position"),
+        Var("a", "output", "m/s2", "mean acceleration over the last step"),
+        Var("stuck", "output", "1", "1 while the guide friction holds the slider"),
+        Var("at_stop", "output", "1", "-1/+1 at the negative/positive end stop, 0 elsewhere"),
+    ]
+    STATES = [
+        Var("v_state", "local", "m/s", "slider speed (state)"),
+        Var("s_state", "local", "m", "slider position (state)", start=0.0),
+        Var("stuck_state", "local", "1", "1 while stuck (state)", start=1.0),
+        Var("stop_state", "local", "1", "end-stop flag (state)"),
+    ]
+    EXTRA_PARAMETERS = [
+        Var("s0", "parameter", "m", "initial slider position", start=0.0, min=-1.0, max=1.0, variability="fixed"),
+        Var("v0", "parameter", "m/s", "initial slider speed", start=0.0, min=-10.0, max=10.0, variability="fixed"),
+    ]
+
+    def initialize(self):
+        self.rebuild_params()
+        sp = self.params
+        if not sp.s_min_m <= self.s0 <= sp.s_max_m:
+            raise SimulationError(f"SliderBlock: s0 [m] = {self.s0} outside the stroke [{sp.s_min_m}, {sp.s_max_m}]")
+        self.s_state, self.v_state = float(self.s0), float(self.v0)
+        self.stuck_state = 1.0 if self.v0 == 0.0 else 0.0
+        self.stop_state = 0.0
+        self._publish(0.0)
+
+    def initialize_outputs(self):
+        self._publish(self.a)
+
+    def _publish(self, acc):
+        self.v, self.s, self.a = self.v_state, self.s_state, acc
+        self.stuck, self.at_stop = self.stuck_state, self.stop_state
+
+    def do_step(self, t, h):
+        self.check_inputs()
+        v_old = self.v_state
+        new = sld.step(self.params, sld.SliderState(self.v_state, self.s_state, bool(self.stuck_state),
+                                                    int(self.stop_state)),
+                       self.F_d, self.F_p, self.m_load, h)
+        self.v_state, self.s_state = new.v_m_s, new.s_m
+        self.stuck_state, self.stop_state = float(new.stuck), float(new.at_stop)
+        self._publish((new.v_m_s - v_old) / h if h > 0 else 0.0)
+
+
+class MotorBlock(Block):
+    """The whole coupled motor in one block (for ``L1B2Motor.fmu``, hosts that cannot import SSP).
+
+    Runs the four subsystem blocks with the same Gauss-Seidel sequence as
+    :class:`l1b2.cosim.engine.InProcessMotor`, sub-stepping each communication step
+    with ``internal_step_s``. Every subsystem parameter is exposed as
+    ``Component.parameter`` (same names and values as the SSV of the SSP), and
+    every sub-block input, output and state as a ``local`` variable
+    ``Component.variable`` so that get/set FMU state captures the whole motor.
+    """
+
+    PARAMS_CLASS = MotorParams
+    SECTION = "motor"
+    COMPONENTS = ("Driver", "Stator", "Interface", "Slider")
+    INPUTS = [
+        Var("V_s", "input", "V", "supply voltage of the H bridge", start=67.1, min=0.0, max=2000.0),
+        Var("duty", "input", "1", "PWM duty ratio", start=1.0, min=0.0, max=1.0),
+        Var("f_s", "input", "Hz", "drive frequency", start=48500.0, min=1e3, max=1e6),
+        Var("T", "input", "degC", "ambient temperature of driver and stator", start=25.0, min=-100.0, max=300.0),
+        Var("direction", "input", "1", "+1 excites CH1 (toward +position), -1 CH2", start=1.0, min=-1.0, max=1.0),
+        Var("m_load", "input", "kg", "signed load mass; > 0 pulls toward -position", min=-100.0, max=100.0),
+    ]
+    OUTPUTS = [
+        Var("v", "output", "m/s", "slider speed"),
+        Var("s", "output", "m", "slider position"),
+        Var("V0", "output", "V", "stator voltage amplitude"),
+        Var("U_l", "output", "m", "tip normal vibration amplitude", nominal=1e-6),
+        Var("U_w", "output", "m", "tip tangential vibration amplitude", nominal=1e-6),
+        Var("delta", "output", "rad", "phase of tangential minus normal tip displacement"),
+        Var("F_p", "output", "N", "static axial force alpha0 P(s)"),
+        Var("F_d", "output", "N", "driving force"),
+        Var("phi_c", "output", "rad", "contact angle"),
+        Var("stick_fraction", "output", "1", "share of the contact time in stick"),
+        Var("T_stator", "output", "degC", "stator temperature"),
+        Var("at_stop", "output", "1", "-1/+1 at the negative/positive end stop, 0 elsewhere"),
+    ]
+    EXTRA_PARAMETERS = [
+        Var("internal_step_s", "parameter", "s", "internal Gauss-Seidel step between the subsystems",
+            start=2e-4, min=1e-6, max=1e-2, variability="fixed"),
+        Var("Interface.pure_slip", "parameter", "", "true: the paper's Sect. 4 assumptions (phi_c = pi, no stick)",
+            start=False, variability="fixed", type="Boolean"),
+        Var("Slider.s0", "parameter", "m", "initial slider position", start=0.0, min=-1.0, max=1.0,
+            variability="fixed"),
+        Var("Slider.v0", "parameter", "m/s", "initial slider speed", start=0.0, min=-10.0, max=10.0,
+            variability="fixed"),
+        Var("Stator.T_st0", "parameter", "degC", "initial stator temperature (when self-heating is on)",
+            start=25.0, min=-100.0, max=300.0, variability="fixed"),
+    ]
+    _OUT_SOURCE = {"v": ("Slider", "v"), "s": ("Slider", "s"), "V0": ("Driver", "V0"), "U_l": ("Stator", "U_l"),
+                   "U_w": ("Stator", "U_w"), "delta": ("Stator", "delta"), "F_p": ("Stator", "F_p"),
+                   "F_d": ("Interface", "F_d"), "phi_c": ("Interface", "phi_c"),
+                   "stick_fraction": ("Interface", "stick_fraction"), "T_stator": ("Stator", "T_stator"),
+                   "at_stop": ("Slider", "at_stop")}
+
+    def __init__(self, params: MotorParams):
+        from .engine import InProcessMotor
+        self.params = params
+        for var in self.INPUTS + self.OUTPUTS:
+            setattr(self, var.name, 0.0 if var.start is None else var.start)
+        self.internal_step_s = 2e-4
+        self.motor = InProcessMotor(params, h_s=self.internal_step_s)
+        self._extra = {v.name: v.start for v in self.EXTRA_PARAMETERS if "." in v.name}
+
+    @classmethod
+    def params_from_defaults(cls, defaults: dict) -> MotorParams:
+        from ..physics.params import OperatingPoint
+        return MotorParams(driver=DriverParams(**defaults["driver"]), stator=StatorParams(**defaults["stator"]),
+                           interface=InterfaceParams(**defaults["interface"]),
+                           slider=SliderParams(**defaults["slider"]),
+                           operating=OperatingPoint(**defaults["operating"]), name="reference")
+
+    @classmethod
+    def _sub_locals(cls) -> list[Var]:
+        out = []
+        for comp in cls.COMPONENTS:
+            bcls = BLOCKS[comp]
+            for v in bcls.INPUTS + bcls.OUTPUTS + bcls.STATES:
+                out.append(Var(f"{comp}.{v.name}", "local", v.unit, f"{comp}: {v.description}", nominal=v.nominal))
+        return out
+
+    @classmethod
+    def variables(cls, params=None) -> list[Var]:
+        pars = []
+        if params is not None:
+            for comp in cls.COMPONENTS:
+                sub = getattr(params, BLOCKS[comp].SECTION)
+                for v in _parameter_vars(type(sub), sub):
+                    pars.append(Var(f"{comp}.{v.name}", v.causality, v.unit, v.description, start=v.start,
+                                    min=v.min, max=v.max, variability=v.variability))
+        return pars + list(cls.EXTRA_PARAMETERS) + cls.INPUTS + cls.OUTPUTS + cls._sub_locals()
+
+    def get(self, name: str):
+        if "." not in name:
+            return getattr(self, name)
+        if name in self._extra:
+            return self._extra[name]
+        comp, var = name.split(".", 1)
+        section = BLOCKS[comp].SECTION
+        if var in {f.name for f in fields(getattr(self.params, section))}:
+            return getattr(getattr(self.params, section), var)  # parameters: the dataclass is the truth
+        return getattr(self.motor.b[comp], var)                  # sub-block inputs, outputs, states
+
+    def set(self, name: str, value):
+        if "." in name:
+            comp, var = name.split(".", 1)
+            if name in self._extra:
+                self._extra[name] = value
+                return
+            section = BLOCKS[comp].SECTION
+            if var in {f.name for f in fields(getattr(self.params, section))}:
+                self.params = self.params.replace(**{f"{section}__{var}": value})
+            setattr(self.motor.b[comp], var, value)
+            return
+        setattr(self, name, value)
+
+    def check_inputs(self):
+        super().check_inputs()
+        if abs(abs(self.direction) - 1.0) > 1e-9:
+            raise SimulationError(f"MotorBlock: input direction [1] = {self.direction} must be +1 or -1")
+
+    def initialize(self):
+        from .engine import InProcessMotor
+        self.check_inputs()
+        self.motor = InProcessMotor(self.params, h_s=float(self.internal_step_s),
+                                    pure_slip=bool(self._extra["Interface.pure_slip"]))
+        self.motor.b["Stator"].T_st0 = float(self._extra["Stator.T_st0"])
+        self.motor.initialize(V_s=self.V_s, duty=self.duty, f_s=self.f_s, T=self.T, direction=self.direction,
+                              m_load=self.m_load, s0=float(self._extra["Slider.s0"]),
+                              v0=float(self._extra["Slider.v0"]))
+        self._publish()
+
+    def initialize_outputs(self):
+        for b in self.motor.b.values():
+            b.refresh()
+        self._publish()
+
+    def _publish(self):
+        for out, (comp, var) in self._OUT_SOURCE.items():
+            setattr(self, out, float(getattr(self.motor.b[comp], var)))
+
+    def do_step(self, t, h):
+        self.check_inputs()
+        self.motor.inputs = dict(V_s=self.V_s, duty=self.duty, f_s=self.f_s, T=self.T,
+                                 direction=self.direction, m_load=self.m_load)
+        n = max(1, int(round(h / float(self.internal_step_s))))
+        self.motor.h = h / n
+        self.motor.t = t
+        for _ in range(n):
+            self.motor.step()
+        self._publish()
+
+
+class PredictorBlock(Block):
+    """The paper's Eq. 29 speed predictor as a co-simulation block (for ``Predictor.fmu``).
+
+    Inputs V0, s, load, direction; outputs the predicted speed ``v`` (the
+    Eq. 29 map iterated with the identified sampling time ``T_s`` inside each
+    communication step, i.e. the identified discrete-time model) and the
+    closed-form steady speed ``v_steady`` at the current inputs (for
+    feedforward). Every identified parameter is an FMI parameter with its unit.
+    """
+
+    SECTION = "predictor"
+    INPUTS = [
+        Var("V0", "input", "V", "stator voltage amplitude", start=324.0, min=0.0, max=2000.0),
+        Var("s", "input", "m", "slider position", min=-1.0, max=1.0),
+        Var("load", "input", "kg", "signed load mass; > 0 pulls toward -position", min=-100.0, max=100.0),
+        Var("direction", "input", "1", "+1 CH1 (toward +position), -1 CH2", start=1.0, min=-1.0, max=1.0),
+    ]
+    OUTPUTS = [
+        Var("v", "output", "m/s", "predicted slider speed (Eq. 29 iterated at T_s)"),
+        Var("v_steady", "output", "m/s", "closed-form steady speed v* = b/(1-a) at the current inputs"),
+    ]
+    STATES = [Var("v_state", "local", "m/s", "predicted speed (state)")]
+    EXTRA_PARAMETERS = [
+        Var("v0", "parameter", "m/s", "initial speed", start=0.0, min=-10.0, max=10.0, variability="fixed"),
+    ]
+
+    def __init__(self, setup: PredictorSetup):
+        self.setup = setup
+        self.params = setup
+        for var in self.EXTRA_PARAMETERS:
+            setattr(self, var.name, var.start)
+        for var in self.INPUTS + self.OUTPUTS + self.STATES:
+            setattr(self, var.name, 0.0 if var.start is None else var.start)
+        self._values = self._param_values(setup)
+
+    @staticmethod
+    def _param_values(setup: PredictorSetup) -> dict:
+        p = setup.params
+        vals = dict(zip(p.names(p.order), p.to_vector().tolist()))
+        vals.update(s_center=p.s_center, s_half=p.s_half, kappa=p.kappa, load_inertia=float(p.include_load_inertia),
+                    slider_mass_kg=setup.slider_mass_kg, T_s=setup.T_s)
+        return vals
+
+    @classmethod
+    def params_from_defaults(cls, defaults: dict) -> PredictorSetup:
+        if "predictor" in defaults:
+            return PredictorSetup.from_dict(defaults["predictor"])
+        from ..predictor.derive import derive_predictor_setup
+        return derive_predictor_setup(cls._motor_from(defaults))
+
+    @staticmethod
+    def _motor_from(defaults: dict) -> MotorParams:
+        return MotorBlock.params_from_defaults(defaults)
+
+    @classmethod
+    def baked_defaults(cls, mp: MotorParams) -> dict:
+        """Without an identification, the FMU carries the physical model's linearization (derived once)."""
+        from ..predictor.derive import derive_predictor_setup
+        return {"predictor": derive_predictor_setup(mp).to_dict()}
+
+    @classmethod
+    def variables(cls, params: PredictorSetup | None = None) -> list[Var]:
+        pars = []
+        if params is not None:
+            p = params.params
+            units = p.units(p.order)
+            for name, value in zip(p.names(p.order), p.to_vector()):
+                pars.append(Var(name, "parameter", units[name].replace("N s/m", "N.s/m").replace("-", "1"),
+                                f"Eq. 35 parameter {name}", start=float(value), variability="fixed"))
+            pars += [
+                Var("s_center", "parameter", "m", "centre of the position scaling of the polynomials",
+                    start=p.s_center, variability="fixed"),
+                Var("s_half", "parameter", "m", "half range of the position scaling", start=p.s_half, min=1e-6,
+                    variability="fixed"),
+                Var("kappa", "parameter", "1", "share of F_p loading the guide", start=p.kappa, min=0.0, max=1.0,
+                    variability="fixed"),
+                Var("load_inertia", "parameter", "1", "1: the load mass is accelerated with the slider",
+                    start=float(p.include_load_inertia), min=0.0, max=1.0, variability="fixed"),
+                Var("slider_mass_kg", "parameter", "kg", "slider mass m_s", start=params.slider_mass_kg, min=1e-6,
+                    variability="fixed"),
+                Var("T_s", "parameter", "s", "sampling time the predictor was identified with", start=params.T_s,
+                    min=1e-7, variability="fixed"),
+            ]
+        return pars + list(cls.EXTRA_PARAMETERS) + cls.INPUTS + cls.OUTPUTS + cls.STATES
+
+    def get(self, name: str):
+        if name in self._values:
+            return self._values[name]
+        return getattr(self, name)
+
+    def set(self, name: str, value):
+        if name in self._values:
+            self._values[name] = float(value)
+        else:
+            setattr(self, name, value)
+
+    def rebuild_params(self):
+        from ..predictor.model import PredictorParams
+        vals = self._values
+        p0 = self.setup.params
+        theta = np.array([vals[n] for n in p0.names(p0.order)])
+        pp = PredictorParams.from_vector(theta, s_center=vals["s_center"], s_half=vals["s_half"],
+                                         kappa=vals["kappa"], include_load_inertia=vals["load_inertia"] >= 0.5)
+        if not (vals["slider_mass_kg"] > 0 and vals["T_s"] > 0):
+            raise SimulationError("PredictorBlock: slider_mass_kg [kg] and T_s [s] must be positive")
+        self.setup = PredictorSetup(pp, vals["slider_mass_kg"], vals["T_s"])
+
+    def check_inputs(self):
+        super().check_inputs()
+        if abs(abs(self.direction) - 1.0) > 1e-9:
+            raise SimulationError(f"PredictorBlock: input direction [1] = {self.direction} must be +1 or -1")
+
+    def initialize(self):
+        self.rebuild_params()
+        self.check_inputs()
+        self.v_state = float(self.v0)
+        self.initialize_outputs()
+
+    def initialize_outputs(self):
+        from ..predictor import model as pr
+        su = self.setup
+        self.v = float(self.v_state)
+        self.v_steady = float(pr.steady_state(su.params, self.s, self.V0, self.load, self.direction,
+                                              su.slider_mass_kg))
+
+    def do_step(self, t, h):
+        from ..predictor import model as pr
+        self.check_inputs()
+        su = self.setup
+        n = max(1, int(math.ceil(h / su.T_s - 1e-9)))
+        v = float(self.v_state)
+        for _ in range(n):
+            v = float(pr.one_step(su.params, v, self.s, self.V0, self.load, self.direction, h / n,
+                                  su.slider_mass_kg))
+        self.v_state = v
+        self.initialize_outputs()
+
+
+BLOCKS = {"Driver": DriverBlock, "Stator": StatorBlock, "Interface": InterfaceBlock, "Slider": SliderBlock,
+          "L1B2Motor": MotorBlock, "Predictor": PredictorBlock}
+
+
+def make_blocks(mp: MotorParams, pure_slip: bool = False) -> dict[str, Block]:
+    """The four blocks with the parameters of ``mp``."""
+    return {
+        "Driver": DriverBlock(mp.driver),
+        "Stator": StatorBlock(mp.stator),
+        "Interface": InterfaceBlock(mp.interface, pure_slip=pure_slip),
+        "Slider": SliderBlock(mp.slider),
+    }
+
+
+def block_parameters(name: str, mp: MotorParams) -> Any:
+    """The parameter dataclass of block ``name`` in ``mp``."""
+    return {"Driver": mp.driver, "Stator": mp.stator, "Interface": mp.interface, "Slider": mp.slider}[name]

@@ -1,0 +1,440 @@
+"""Co-simulation master on fmpy's ``FMU2Slave`` API, driven by the SSP system structure.
+
+* The wiring and the parameter set come from the ``.ssd`` and its bound
+  ``.ssv`` files (``system_models/`` or an ``.ssp`` archive); nothing is
+  hard-coded. The system connectors are wired by the SSD's
+  ``org.l1b2-usm.SystemConnections`` annotation (see :mod:`l1b2.cosim.ssp`).
+* Gauss-Seidel: components are stepped in the order they appear in the SSD
+  (driver -> stator -> interface -> slider), each one's inputs taken from
+  the latest outputs, with a fixed communication step.
+* Optional fixed-point iteration: the whole macro step is repeated (FMU
+  states restored with ``fmi2SetFMUstate``) with inputs taken from the
+  previous iterate's end-of-step outputs until the coupling values change by
+  less than a tolerance.
+* Value references are looked up once; instances are always terminated and
+  freed (``finally``), like FMPy's ``custom_input`` example.
+* Connection units are checked against the FMUs' model descriptions; a
+  system whose units disagree is refused.
+* Before the first FMU is loaded the PythonFMU exit fix of
+  :mod:`l1b2.fmi.runtime` is installed.
+"""
+
+from __future__ import annotations
+
+import atexit
+import math
+import shutil
+import tempfile
+import warnings
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Mapping
+
+import numpy as np
+import pandas as pd
+
+from ..errors import SimulationError, SystemStructureError
+from .ssp import (
+    SSD_FILE,
+    SystemStructure,
+    check_against_model_descriptions,
+    read_ssd,
+    read_ssv,
+    resolve_resource,
+)
+
+DEFAULT_STEP_S = 2e-4
+_EXTRACTED: dict[str, str] = {}
+
+
+def extracted(path: Path) -> str:
+    """Folder holding the extracted FMU, one per FMU content and process.
+
+    PythonFMU puts each FMU's ``resources`` folder on ``sys.path`` for good and
+    its bundled modules stay imported, so an extraction must outlive the run
+    that made it: it is reused by later runs and removed at process exit.
+    The key is the file's SHA-256, so the same FMU reached through another
+    path (e.g. a fresh extraction of the same ``.ssp``) reuses the folder.
+    """
+    import hashlib
+
+    from fmpy import extract
+    digest = hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    if digest not in _EXTRACTED or not Path(_EXTRACTED[digest]).exists():
+        _EXTRACTED[digest] = extract(str(path))
+    return _EXTRACTED[digest]
+
+
+@atexit.register
+def _remove_extracted():
+    for folder in _EXTRACTED.values():
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+@dataclass
+class _Instance:
+    name: str
+    fmu: object
+    md: object
+    unzipdir: str
+    vars: dict                       # name -> ModelVariable
+    state: str = "created"           # created -> instantiated -> initialized
+    in_names: list = field(default_factory=list)
+    in_vrs: list = field(default_factory=list)
+    out_names: list = field(default_factory=list)
+    out_vrs: list = field(default_factory=list)
+
+
+class CoSimResult:
+    """Time series of a co-simulation: ``.df`` (pandas), ``.units``, ``.to_csv()``, ``.plot()``."""
+
+    def __init__(self, df: pd.DataFrame, units: Mapping[str, str]):
+        self.df = df
+        self.units = dict(units)
+        self.df.attrs["units"] = self.units
+
+    def to_pandas(self) -> pd.DataFrame:
+        return self.df
+
+    def __getitem__(self, key):
+        return self.df[key].to_numpy()
+
+    def to_csv(self, path) -> Path:
+        """CSV with the unit in every column name, e.g. ``Slider.v [m/s]``."""
+        path = Path(path)
+        out = self.df.rename(columns={c: f"{c} [{self.units.get(c, '1')}]" for c in self.df.columns})
+        path.parent.mkdir(parents=True, exist_ok=True)
+        out.to_csv(path, index=False, float_format="%.10g")
+        return path
+
+    def plot(self, columns=("Slider.v", "Slider.s"), path=None):
+        import matplotlib.pyplot as plt
+        fig, axes = plt.subplots(len(columns), 1, sharex=True, figsize=(7, 2.2 * len(columns)))
+        for ax, col in zip(np.atleast_1d(axes), columns):
+            ax.plot(self.df["time"], self.df[col])
+            ax.set_ylabel(f"{col} [{self.units.get(col, '')}]")
+        np.atleast_1d(axes)[-1].set_xlabel("time [s]")
+        fig.tight_layout()
+        if path is not None:
+            fig.savefig(path, dpi=120)
+            plt.close(fig)
+        return fig
+
+
+class CoSimulation:
+    """A coupled system of FMUs described by an SSD.
+
+    Parameters
+    ----------
+    system : path of an ``.ssd`` file, an ``.ssp`` archive, or a folder with ``SystemStructure.ssd``
+    fmu_dir : where to find the FMUs named by the SSD (``resources/X.fmu``) when they are not
+        beside it (``None``: only beside the SSD; :func:`l1b2.fmi.cache.ensure_fmus` builds
+        the package's FMUs on demand and returns such a folder)
+    step_s : communication step [s]
+    parameters : overrides ``{"Component.variable": value}`` applied after the SSV
+    iterate : repeat each macro step until the coupling values converge
+    tol, max_iter : tolerance and iteration limit of the fixed-point iteration; a coupling value
+        has converged when its change is below ``tol * (|value| + S)``, S the largest magnitude
+        seen so far among the coupling variables of its unit
+    """
+
+    def __init__(self, system: str | Path = SSD_FILE, fmu_dir: str | Path | None = None,
+                 step_s: float = DEFAULT_STEP_S, parameters: Mapping[str, float] | None = None,
+                 iterate: bool = False, tol: float = 1e-6, max_iter: int = 30):
+        if not (step_s > 0 and math.isfinite(step_s)):
+            raise SimulationError(f"communication step [s] must be positive, got {step_s}")
+        self._tmp = None
+        system = Path(system)
+        if system.suffix == ".ssp":
+            self._tmp = tempfile.mkdtemp(prefix="l1b2_ssp_")
+            with zipfile.ZipFile(system) as z:
+                z.extractall(self._tmp)
+            system = Path(self._tmp)
+        self.system: SystemStructure = read_ssd(system)
+        self.root = self.system.path.parent
+        self.fmu_dir = Path(fmu_dir) if fmu_dir is not None else None
+        self.step_s = float(step_s)
+        self.iterate, self.tol, self.max_iter = iterate, tol, max_iter
+        self.parameters = self._load_parameters()
+        for key, value in (parameters or {}).items():
+            comp = key.split(".", 1)[0]
+            if comp not in self.system.components:
+                raise SystemStructureError(f"parameter override '{key}': no component '{comp}'")
+            self.parameters[key] = value
+        self.fmu_paths = {name: self._resolve(c.source, "fmu") for name, c in self.system.components.items()}
+        from fmpy import read_model_description
+        self.model_descriptions = {n: read_model_description(str(p)) for n, p in self.fmu_paths.items()}
+        check_against_model_descriptions(self.system, self.model_descriptions)
+        self._check_parameter_units()
+        self.iterations_ = []
+
+    # -- set-up ---------------------------------------------------------------
+    def _resolve(self, source: str, kind: str) -> Path:
+        found = resolve_resource(self.root, source)
+        if found is not None:
+            return found
+        cand = [self.root / source]
+        if kind == "fmu" and self.fmu_dir is not None:
+            c = self.fmu_dir / Path(source).name
+            if c.exists():
+                return c
+            cand.append(c)
+        hint = (" (pass fmu_dir=l1b2.fmi.cache.ensure_fmus(), or run `python build_fmu.py --out DIR`)"
+                if kind == "fmu" else "")
+        raise SystemStructureError(f"{self.system.path}: cannot find {source}; looked in "
+                                   f"{', '.join(str(c) for c in cand)} and beside the SSD{hint}")
+
+    def _load_parameters(self) -> dict:
+        """``{"Component.variable": value}`` from the SSD's parameter bindings.
+
+        Component-level bindings name the FMU's variables bare; system-level
+        ones use hierarchical names and, as in SSP, take precedence. Unit and
+        file of each value are kept in ``self.parameter_sources_`` and checked
+        against the FMUs (an unknown name or another unit is refused).
+        """
+        values, self.parameter_sources_ = {}, {}
+        for name, comp in self.system.components.items():
+            sets = [(self._resolve(src, "ssv"), None) for src in comp.parameter_sources]
+            for path, _ in sets:
+                for var, (value, unit) in read_ssv(path).items():
+                    values[f"{name}.{var}"] = value
+                    self.parameter_sources_[f"{name}.{var}"] = (unit, path)
+            for var, (value, unit) in comp.inline_parameters.items():
+                values[f"{name}.{var}"] = value
+                self.parameter_sources_[f"{name}.{var}"] = (unit, self.system.path)
+        for src in self.system.parameter_sources:
+            path = self._resolve(src, "ssv")
+            for key, (value, unit) in read_ssv(path).items():
+                if key.split(".", 1)[0] not in self.system.components:
+                    continue  # SSP: names that match no element of the system are ignored
+                values[key] = value
+                self.parameter_sources_[key] = (unit, path)
+        return values
+
+    def _check_parameter_units(self):
+        variables = {n: {v.name: v for v in md.modelVariables} for n, md in self.model_descriptions.items()}
+        for key, (unit, path) in self.parameter_sources_.items():
+            comp, _, var = key.partition(".")
+            v = variables[comp].get(var)
+            if v is None:
+                raise SystemStructureError(f"{path}: parameter '{key}': {comp} has no variable '{var}'")
+            if unit is not None and v.type == "Real" and (v.unit or "1") != unit:
+                raise SystemStructureError(f"{path}: parameter '{key}' has unit [{unit}], "
+                                           f"the FMU declares [{v.unit}]")
+
+    def close(self):
+        if self._tmp is not None:
+            shutil.rmtree(self._tmp, ignore_errors=True)
+            self._tmp = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    # -- run ------------------------------------------------------------------
+    def run(self, stop_time: float, inputs: Mapping[str, float | Callable[[float], float]],
+            record: list[str] | None = None, stop_when: Callable[[dict], bool] | None = None,
+            start_values: Mapping[str, float] | None = None, progress=None) -> CoSimResult:
+        """Simulate from 0 to ``stop_time`` [s].
+
+        ``inputs`` gives every system input connector a constant or a function
+        of time. ``record`` lists ``"Component.variable"`` names (default: all
+        component outputs). ``stop_when(values)`` may end the run early.
+        ``start_values`` sets component variables before initialisation
+        (e.g. ``{"Slider.s0": -0.02}``).
+        """
+        from fmpy.fmi2 import FMU2Slave
+
+        from .hosting import install_exit_fix
+        install_exit_fix()  # PythonFMU 0.7.0 exit-time use-after-free (see l1b2.fmi.runtime)
+        sysst = self.system
+        missing = [c for c, k in sysst.connectors.items() if k.kind == "input" and c not in inputs]
+        if missing:
+            raise SimulationError(f"no value given for system input(s) {missing}")
+        unknown = [c for c in inputs if c not in sysst.connectors]
+        if unknown:
+            raise SimulationError(f"{sysst.path}: no system input connector(s) {unknown}")
+        inst: dict[str, _Instance] = {}
+        try:
+            for name, path in self.fmu_paths.items():
+                md = self.model_descriptions[name]
+                unz = extracted(path)
+                fmu = FMU2Slave(guid=md.guid, unzipDirectory=unz, modelIdentifier=md.coSimulation.modelIdentifier,
+                                instanceName=name)
+                inst[name] = _Instance(name, fmu, md, unz, {v.name: v for v in md.modelVariables})
+                fmu.instantiate()
+                inst[name].state = "instantiated"
+            self._lookup(inst, record)
+            self._initialize(inst, inputs, start_values or {})
+            return self._loop(inst, stop_time, inputs, stop_when, progress)
+        finally:
+            for i in inst.values():  # calling FMI functions on a NULL component crashes the host
+                if i.state == "initialized":
+                    try:
+                        i.fmu.terminate()
+                    except Exception:  # noqa: BLE001 - instance may be in an error state
+                        pass
+                if i.state != "created":
+                    try:
+                        i.fmu.freeInstance()
+                    except Exception:  # noqa: BLE001
+                        pass
+
+    def _lookup(self, inst, record):
+        """Resolve value references once: per component, its connected inputs and needed outputs."""
+        sysst = self.system
+        needed_out = {n: set() for n in inst}
+        for c in sysst.connections:
+            if c.start_element is not None:
+                needed_out[c.start_element].add(c.start_connector)
+        self.record = list(record) if record is not None else [
+            f"{n}.{v.name}" for n, i in inst.items() for v in i.md.modelVariables if v.causality == "output"]
+        for r in self.record:
+            comp, _, var = r.partition(".")
+            if comp not in inst or var not in inst[comp].vars:
+                raise SimulationError(f"cannot record '{r}': no such component variable")
+            needed_out[comp].add(var)
+        self._sources = {}  # (comp, input) -> ("sys", name) or (comp, output)
+        for c in sysst.connections:
+            if c.end_element is None:
+                continue
+            self._sources[(c.end_element, c.end_connector)] = (c.start_element, c.start_connector)
+        for n, i in inst.items():
+            i.in_names = sorted(var for (comp, var) in self._sources if comp == n)
+            i.in_vrs = [self._real_vr(i, v) for v in i.in_names]
+            i.out_names = sorted(needed_out[n])
+            i.out_vrs = [self._real_vr(i, v) for v in i.out_names]
+        self.units = {r: (inst[r.split('.')[0]].vars[r.split('.', 1)[1]].unit or "1") for r in self.record}
+
+    @staticmethod
+    def _real_vr(i: _Instance, name: str) -> int:
+        v = i.vars[name]
+        if v.type != "Real":
+            raise SystemStructureError(f"{i.name}.{name} is {v.type}; connections must be Real")
+        return v.valueReference
+
+    def _set_any(self, i: _Instance, name: str, value):
+        v = i.vars.get(name)
+        if v is None:
+            raise SimulationError(f"{i.name} has no variable '{name}'")
+        if v.type == "Real":
+            i.fmu.setReal([v.valueReference], [float(value)])
+        elif v.type in ("Integer", "Enumeration"):
+            i.fmu.setInteger([v.valueReference], [int(value)])
+        elif v.type == "Boolean":
+            i.fmu.setBoolean([v.valueReference], [bool(value)])
+        else:
+            raise SimulationError(f"{i.name}.{name}: unsupported type {v.type}")
+
+    def _input_values(self, i: _Instance, t: float, inputs, values) -> list[float]:
+        out = []
+        for name in i.in_names:
+            src_comp, src_var = self._sources[(i.name, name)]
+            if src_comp is None:
+                x = inputs[src_var]
+                out.append(float(x(t) if callable(x) else x))
+            else:
+                out.append(values[(src_comp, src_var)])
+        return out
+
+    def _initialize(self, inst, inputs, start_values):
+        for i in inst.values():
+            i.fmu.setupExperiment(startTime=0.0)
+        for key, value in list(self.parameters.items()) + list(start_values.items()):
+            comp, _, var = key.partition(".")
+            if comp not in inst:
+                raise SimulationError(f"start value '{key}': no component '{comp}'")
+            self._set_any(inst[comp], var, value)
+        for i in inst.values():
+            i.fmu.enterInitializationMode()
+        # Initialise in Gauss-Seidel order so each sees its upstream outputs (others: start values)
+        self.values = {}
+        for n, i in inst.items():
+            vals = []
+            for name in i.in_names:
+                src_comp, src_var = self._sources[(n, name)]
+                if src_comp is None:
+                    x = inputs[src_var]
+                    vals.append(float(x(0.0) if callable(x) else x))
+                elif (src_comp, src_var) in self.values:
+                    vals.append(self.values[(src_comp, src_var)])
+                else:
+                    vals.append(float(i.fmu.getReal([i.vars[name].valueReference])[0]))
+            i.fmu.setReal(i.in_vrs, vals)
+            i.fmu.exitInitializationMode()
+            i.state = "initialized"
+            for name, val in zip(i.out_names, i.fmu.getReal(i.out_vrs)):
+                self.values[(n, name)] = val
+
+    def _pass(self, inst, t, h, inputs, source_values):
+        """One Gauss-Seidel pass; inputs from ``source_values`` updated as components step."""
+        values = dict(source_values)
+        for n, i in inst.items():
+            i.fmu.setReal(i.in_vrs, self._input_values(i, t, inputs, values))
+            try:
+                i.fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+            except Exception as exc:  # fmpy raises FMICallException on discard/error
+                raise SimulationError(f"{n}.doStep at t={t:.6g} s failed ({exc}); see the FMU log above") from None
+            for name, val in zip(i.out_names, i.fmu.getReal(i.out_vrs)):
+                values[(n, name)] = val
+        return values
+
+    def _loop(self, inst, stop_time, inputs, stop_when, progress):
+        h = self.step_s
+        n_steps = int(round(stop_time / h))
+        rows = np.empty((n_steps + 1, len(self.record)))
+        keys = [tuple(r.split(".", 1)) for r in self.record]
+        rows[0] = [self.values[k] for k in keys]
+        times = np.arange(n_steps + 1) * h
+        coupling = sorted({src for src in self._sources.values() if src[0] is not None})
+        # scale of each coupling variable: the largest magnitude so far among the coupling variables of
+        # the same unit (a force that is zero up to round-off is measured against the other forces)
+        unit = {c: inst[c[0]].vars[c[1]].unit or "1" for c in coupling}
+        scale = {c: abs(self.values[c]) for c in coupling}
+        last = n_steps
+        self.unconverged_steps_ = 0
+        for k in range(n_steps):
+            t = k * h
+            if self.iterate:
+                states = {n: i.fmu.getFMUstate() for n, i in inst.items()}
+                guess = self.values
+                for it in range(self.max_iter):
+                    new = self._pass(inst, t, h, inputs, guess)
+                    for c in coupling:
+                        scale[c] = max(scale[c], abs(new[c]))
+                    unit_scale = {}
+                    for c in coupling:
+                        unit_scale[unit[c]] = max(unit_scale.get(unit[c], 0.0), scale[c])
+                    change = max(abs(new[c] - guess[c]) / (abs(new[c]) + unit_scale[unit[c]] + 1e-300)
+                                 for c in coupling)
+                    if change < self.tol:
+                        break
+                    if it == self.max_iter - 1:
+                        self.unconverged_steps_ += 1
+                        break
+                    for n, i in inst.items():
+                        i.fmu.setFMUstate(states[n])
+                    guess = new
+                for n, i in inst.items():
+                    i.fmu.freeFMUstate(states[n])
+                self.iterations_.append(it + 1)
+                self.values = new
+            else:
+                self.values = self._pass(inst, t, h, inputs, self.values)
+            rows[k + 1] = [self.values[kk] for kk in keys]
+            if progress is not None:
+                progress(k + 1, n_steps)
+            if stop_when is not None and stop_when({f"{a}.{b}": v for (a, b), v in self.values.items()}):
+                last = k + 1
+                break
+        if self.unconverged_steps_:
+            warnings.warn(f"fixed-point iteration did not reach tol={self.tol} within {self.max_iter} "
+                          f"iterations in {self.unconverged_steps_} of {len(self.iterations_)} steps",
+                          RuntimeWarning, stacklevel=3)
+        df = pd.DataFrame(rows[:last + 1], columns=self.record)
+        df.insert(0, "time", times[:last + 1])
+        units = {"time": "s", **self.units}
+        return CoSimResult(df, units)

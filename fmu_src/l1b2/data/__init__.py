@@ -1,0 +1,1 @@
+"""Measured data: the data contract (:mod:`~l1b2.data.measurements`), error metrics and plots."""

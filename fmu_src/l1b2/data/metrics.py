@@ -1,0 +1,132 @@
+"""Speed-prediction error metrics used in every report.
+
+Implements "Error metrics" of ``shared/data-format.md``. Samples are
+evaluated when the measured speed is at least :data:`MIN_EVAL_SPEED_M_S` in
+magnitude and the sample is not within the first or last
+:data:`END_EXCLUSION_M` of travel of its run (end-stop collisions, as the
+paper notes); see :func:`evaluation_mask`. On those samples:
+
+* ``nrmse`` = sqrt(mean((v_pred - v_meas)^2)) / sqrt(mean(v_meas^2))
+* ``mean_abs_rel_error``, ``p95_abs_rel_error`` = mean and 95th percentile
+  of |v_pred - v_meas| / |v_meas|
+
+The two kinds of prediction, ``one_step`` (v(k+1) from measured v(k), Eq.
+28-29 of the paper) and ``free_run`` (the predictor propagates its own speed
+along the measured position trajectory from the measured speed of the run's
+first sample), are computed elsewhere and scored separately by
+:func:`report_metrics`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from .measurements import (END_EXCLUSION_M, MIN_EVAL_SPEED_M_S, SPEED, Measurements,
+                           as_1d, evaluation_mask)
+
+__all__ = [
+    "MIN_EVAL_SPEED_M_S", "END_EXCLUSION_M", "P95_PERCENTILE", "METRIC_KEYS",
+    "evaluation_mask", "speed_metrics", "report_metrics",
+]
+
+#: Percentile reported as ``p95_abs_rel_error`` [%].
+P95_PERCENTILE: float = 95.0
+#: Keys of the dictionary returned by :func:`speed_metrics`.
+METRIC_KEYS: tuple[str, ...] = ("nrmse", "mean_abs_rel_error", "p95_abs_rel_error", "n_samples")
+
+
+def speed_metrics(v_pred: Any, v_meas: Any, mask: Any) -> dict[str, float | int]:
+    """Error metrics of a speed prediction on the evaluated samples.
+
+    Parameters
+    ----------
+    v_pred : array_like
+        Predicted speed per sample [m/s]. May be NaN outside ``mask`` (e.g.
+        no one-step prediction for a run's first sample).
+    v_meas : array_like
+        Measured speed per sample [m/s].
+    mask : array_like of bool
+        Samples to evaluate, usually :func:`evaluation_mask`.
+
+    Returns
+    -------
+    dict
+        ``nrmse`` = sqrt(mean((v_pred - v_meas)^2)) / sqrt(mean(v_meas^2)),
+        ``mean_abs_rel_error`` and ``p95_abs_rel_error`` = mean and 95th
+        percentile (numpy's default linear interpolation) of
+        |v_pred - v_meas| / |v_meas| (dimensionless fractions, not %), and
+        ``n_samples`` (int). With an empty mask the three values are NaN and
+        ``n_samples`` is 0.
+
+    Raises
+    ------
+    ValueError
+        Shapes differ, ``mask`` is not boolean, a masked prediction or
+        measurement is NaN / infinite (the message says how many), or a
+        masked measured speed is zero (relative error undefined).
+    """
+    pred = as_1d("v_pred", v_pred)
+    meas = as_1d("v_meas", v_meas)
+    m = mask.to_numpy() if isinstance(mask, pd.Series) else np.asarray(mask)
+    if m.dtype != bool:
+        raise ValueError(f"mask must be boolean, got dtype {m.dtype}")
+    if not (pred.shape == meas.shape == m.shape):
+        raise ValueError(f"v_pred, v_meas and mask differ in shape "
+                         f"({pred.shape}, {meas.shape}, {m.shape})")
+    n = int(m.sum())
+    if n == 0:
+        return {"nrmse": float("nan"), "mean_abs_rel_error": float("nan"),
+                "p95_abs_rel_error": float("nan"), "n_samples": 0}
+    p, y = pred[m], meas[m]
+    bad_p = ~np.isfinite(p)
+    if bad_p.any():
+        first = int(np.flatnonzero(m)[np.flatnonzero(bad_p)[0]])
+        raise ValueError(f"{int(bad_p.sum())} of {n} evaluated predictions are NaN or "
+                         f"infinite (first at sample index {first})")
+    bad_y = ~np.isfinite(y)
+    if bad_y.any():
+        first = int(np.flatnonzero(m)[np.flatnonzero(bad_y)[0]])
+        raise ValueError(f"{int(bad_y.sum())} of {n} evaluated measured speeds are NaN or "
+                         f"infinite (first at sample index {first})")
+    zero = y == 0.0
+    if zero.any():
+        raise ValueError(f"{int(zero.sum())} of {n} evaluated measured speeds are zero; "
+                         "relative error undefined (use evaluation_mask)")
+    err = p - y
+    rel = np.abs(err) / np.abs(y)
+    return {
+        "nrmse": float(np.sqrt(np.mean(err ** 2)) / np.sqrt(np.mean(y ** 2))),
+        "mean_abs_rel_error": float(np.mean(rel)),
+        "p95_abs_rel_error": float(np.percentile(rel, P95_PERCENTILE)),
+        "n_samples": n,
+    }
+
+
+def report_metrics(df: pd.DataFrame | Measurements, v_one_step: Any,
+                   v_free_run: Any) -> dict[str, dict[str, float | int]]:
+    """Score one-step and free-run predictions of one data set.
+
+    Parameters
+    ----------
+    df : pandas.DataFrame or Measurements
+        Measured data with ``speed_m_s`` [m/s], ``position_m`` [m], ``run``.
+    v_one_step : array_like
+        One-step prediction per sample [m/s] (v(k+1) from measured v(k)).
+    v_free_run : array_like
+        Free-run prediction per sample [m/s].
+
+    Returns
+    -------
+    dict
+        ``{'one_step': speed_metrics(...), 'free_run': speed_metrics(...)}``
+        on the common :func:`evaluation_mask` of ``df``.
+    """
+    if isinstance(df, Measurements):
+        df = df.df
+    mask = evaluation_mask(df)
+    v_meas = df[SPEED]
+    return {"one_step": speed_metrics(v_one_step, v_meas, mask),
+            "free_run": speed_metrics(v_free_run, v_meas, mask)}

@@ -1,0 +1,259 @@
+"""Export everything a simulation engine needs: the FMUs, the SSP archive and a manifest.
+
+:func:`export_all` writes into one folder (``l1b2 export --out DIR``,
+``make dist``)::
+
+    DIR/fmus/Driver.fmu, Stator.fmu, Interface.fmu, Slider.fmu   the four subsystems
+    DIR/fmus/Predictor.fmu                                       the Eq. 29 predictor (when given)
+    DIR/L1B2Motor.ssp     SSP 1.0 archive: SystemStructure.ssd, the four FMUs and the
+                          motor's parameter set (one .ssv per component)
+    DIR/L1B2Motor.fmu     the whole coupled motor in one co-simulation FMU
+    DIR/manifest.json     files, sizes, SHA-256, GUIDs, versions, validation results
+
+Every FMU is validated with :func:`fmpy.validation.validate_fmu` and checked
+for a unit on every Real; the SSD and the SSVs inside the archive are
+validated against the SSP 1.0 schemas shipped with fmpy. Any problem raises
+:class:`ExportError` (nothing is reported as exported that did not pass).
+``DIR/fmus`` is the folder :class:`l1b2.cosim.master.CoSimulation` looks in by default
+when ``DIR`` is the repository's ``dist``.
+
+The manifest has no time stamps: exporting the same sources twice gives the
+same manifest except for the SHA-256 of the zip files (zip members carry
+their write time); the GUIDs are stable (content-derived, see
+:mod:`l1b2.fmi.build`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import platform
+import sys
+import zipfile
+from pathlib import Path
+from typing import Any, Mapping
+
+from .. import __version__
+from ..errors import L1B2Error
+from ..physics.params import MotorParams, load_motor
+from .build import SUBSYSTEM_FMUS, build_fmu
+from .slaves import SLAVES
+
+MOTOR_FMU = "L1B2Motor"
+PREDICTOR_FMU = "Predictor"
+SSP_NAME = "L1B2Motor.ssp"
+MANIFEST = "manifest.json"
+
+
+class ExportError(L1B2Error):
+    """An exported file failed validation (the message lists every problem)."""
+
+
+def predictor_available() -> bool:
+    """True when the slave template knows the Predictor FMU (:data:`l1b2.fmi.slaves.SLAVES`)."""
+    return PREDICTOR_FMU in SLAVES
+
+
+def _predictor_dict(predictor: Any) -> dict:
+    if hasattr(predictor, "to_dict"):
+        predictor = predictor.to_dict()
+    if not isinstance(predictor, Mapping):
+        raise ExportError(f"predictor must be a dict from an identification result (or have .to_dict()), "
+                          f"got {type(predictor).__name__}")
+    return json.loads(json.dumps(dict(predictor)))  # JSON-safe copy, as baked into the FMU
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def _unit_problems(md) -> list[str]:
+    defined = {u.name for u in md.unitDefinitions}
+    out = []
+    for v in md.modelVariables:
+        if v.type == "Real":
+            if not v.unit:
+                out.append(f"Real variable '{v.name}' has no unit")
+            elif v.unit not in defined:
+                out.append(f"Real variable '{v.name}': unit '{v.unit}' is not in UnitDefinitions")
+    return out
+
+
+def fmu_record(path: Path, root: Path) -> dict:
+    """Manifest entry of one FMU: identity, platforms and validation results (problems listed)."""
+    from fmpy import read_model_description
+    from fmpy.validation import validate_fmu
+
+    md = read_model_description(str(path))
+    with zipfile.ZipFile(path) as z:
+        names = z.namelist()
+    platforms = sorted({n.split("/")[1] for n in names if n.startswith("binaries/") and n.count("/") >= 2})
+    return {
+        "path": path.relative_to(root).as_posix(),
+        "kind": "fmu",
+        "bytes": path.stat().st_size,
+        "sha256": _sha256(path),
+        "modelName": md.modelName,
+        "modelIdentifier": md.coSimulation.modelIdentifier if md.coSimulation else None,
+        "guid": md.guid,
+        "version": md.version,
+        "fmiVersion": md.fmiVersion,
+        "interfaces": ["CoSimulation"] if md.coSimulation else [],
+        "platforms": platforms,
+        "author": md.author,
+        "license": md.license,
+        "variables": len(md.modelVariables),
+        "validation": {"fmpy": list(validate_fmu(str(path))), "units": _unit_problems(md)},
+    }
+
+
+def ssp_record(path: Path, root: Path, fmu_records: Mapping[str, dict]) -> dict:
+    """Manifest entry of the ``.ssp``: members, components and schema validation of SSD and SSVs."""
+    from lxml import etree
+
+    from ..cosim import ssp
+
+    schema_dir = Path(__import__("fmpy").__file__).resolve().parent / "ssp" / "schema"
+    ssd_schema = etree.XMLSchema(etree.parse(str(schema_dir / "SystemStructureDescription.xsd")))
+    ssv_schema = etree.XMLSchema(etree.parse(str(schema_dir / "SystemStructureParameterValues.xsd")))
+    problems: dict[str, list[str]] = {}
+    with zipfile.ZipFile(path) as z:
+        members = sorted(z.namelist())
+        ssd_doc = etree.fromstring(z.read("SystemStructure.ssd"))
+        if not ssd_schema.validate(ssd_doc):
+            problems["SystemStructure.ssd"] = [str(e) for e in ssd_schema.error_log]
+        for name in members:
+            if name.endswith(".ssv"):
+                if not ssv_schema.validate(etree.fromstring(z.read(name))):
+                    problems[name] = [str(e) for e in ssv_schema.error_log]
+        import tempfile
+        with tempfile.TemporaryDirectory(prefix="l1b2_ssp_check_") as td:
+            z.extract("SystemStructure.ssd", td)
+            system = ssp.read_ssd(Path(td) / "SystemStructure.ssd")
+        components = {}
+        for name, comp in system.components.items():
+            data = z.read(comp.source)
+            stem = Path(comp.source).stem
+            rec = fmu_records.get(stem)
+            same = rec is not None and hashlib.sha256(data).hexdigest() == rec["sha256"]
+            if not same:
+                problems.setdefault(comp.source, []).append(f"{comp.source} is not the exported {stem}.fmu")
+            components[name] = {"source": comp.source, "guid": rec["guid"] if rec else None,
+                                "parameter_sets": list(comp.parameter_sources)}
+    return {
+        "path": path.relative_to(root).as_posix(),
+        "kind": "ssp",
+        "bytes": path.stat().st_size,
+        "sha256": _sha256(path),
+        "sspVersion": "1.0",
+        "members": members,
+        "components": components,
+        "system_inputs": [c for c, k in system.connectors.items() if k.kind == "input"],
+        "system_outputs": [c for c, k in system.connectors.items() if k.kind == "output"],
+        "default_step_size_s": system.default_step_size,
+        "validation": {"schema": problems},
+    }
+
+
+def _all_problems(manifest: dict) -> list[str]:
+    out = []
+    for rec in manifest["files"]:
+        for kind, probs in rec["validation"].items():
+            if isinstance(probs, dict):
+                out += [f"{rec['path']}: {member}: {p}" for member, ps in probs.items() for p in ps]
+            else:
+                out += [f"{rec['path']}: {kind}: {p}" for p in probs]
+    return out
+
+
+def export_all(out_dir: str | Path, mp: MotorParams | None = None, predictor: Mapping | Any | None = None) -> dict:
+    """Build, validate and describe every deliverable of the motor in ``out_dir``.
+
+    Parameters
+    ----------
+    out_dir : folder to write into (created; files of earlier exports are replaced)
+    mp : the motor's parameters baked into every FMU and written as the SSP's
+        parameter set (default: the reference motor, ``system_models/reference_motor.toml``)
+    predictor : the identified Eq. 29 predictor, as the dict of an identification
+        result (``PredictorSetup.to_dict()``; an object with ``.to_dict()`` is
+        accepted). ``None``: no ``Predictor.fmu`` is exported and the manifest
+        says why; likewise when this source tree has no Predictor slave.
+
+    Returns
+    -------
+    The manifest (also written to ``out_dir/manifest.json``): ``files`` (one
+    record per FMU and for the ``.ssp``: path relative to ``out_dir``, bytes,
+    sha256, GUID, version, platforms, validation problems), ``predictor``
+    (``included`` and ``reason``), versions of the tool and its runtime.
+
+    Raises
+    ------
+    ExportError
+        if any FMU has an fmpy validation problem or a Real without a unit, or
+        the SSD/SSV do not validate against the SSP 1.0 schemas. The files stay
+        in ``out_dir`` for inspection but no manifest is written.
+    """
+    from ..cosim import ssp
+
+    mp = mp or load_motor()
+    out = Path(out_dir)
+    fmu_dir = out / "fmus"
+    fmu_dir.mkdir(parents=True, exist_ok=True)
+    (out / MANIFEST).unlink(missing_ok=True)
+
+    paths: dict[str, Path] = {name: build_fmu(name, fmu_dir, mp=mp) for name in SUBSYSTEM_FMUS}
+    pred_path = fmu_dir / f"{PREDICTOR_FMU}.fmu"
+    if predictor is None:
+        pred_info = {"included": False, "reason": "no identification result given (predictor=None)"}
+    elif not predictor_available():
+        pred_info = {"included": False, "reason": f"this package has no {PREDICTOR_FMU} slave"}
+    else:
+        pred_info = {"included": True, "path": pred_path.relative_to(out).as_posix()}
+        paths[PREDICTOR_FMU] = build_fmu(PREDICTOR_FMU, fmu_dir, mp=mp,
+                                         extra_defaults={"predictor": _predictor_dict(predictor)})
+    if not pred_info["included"]:
+        pred_path.unlink(missing_ok=True)  # never leave a stale predictor beside a manifest without it
+    paths[MOTOR_FMU] = build_fmu(MOTOR_FMU, out, mp=mp)
+    ssp_path = ssp.build_ssp(out / SSP_NAME, {n: paths[n] for n in SUBSYSTEM_FMUS}, mp=mp)
+
+    for p in list(paths.values()) + [ssp_path]:
+        os.chmod(p, 0o644)  # the build writes through mkstemp (0600); these files are for others to read
+    records = {name: fmu_record(p, out) for name, p in paths.items()}
+    files = [records[n] for n in paths]
+    files.append(ssp_record(ssp_path, out, records))
+    import fmpy
+    import numpy
+    import pythonfmu
+    import scipy
+    manifest = {
+        "tool": "l1b2-usm",
+        "version": __version__,
+        "motor": mp.name,
+        "fmiVersion": "2.0",
+        "files": files,
+        "predictor": pred_info,
+        "build": {
+            "python": platform.python_version(),
+            "platform": f"{sys.platform}-{platform.machine()}",
+            "pythonfmu": pythonfmu.__version__,
+            "fmpy": fmpy.__version__,
+        },
+        "runtime": {
+            "python": f"{sys.version_info.major}.{sys.version_info.minor}",
+            "packages": {"numpy": numpy.__version__, "scipy": scipy.__version__},
+            "notes": "PythonFMU FMUs: the host needs a shared libpython of this version loaded with global "
+                     "symbols and numpy/scipy importable by it (PYTHONPATH); see the README section 'Use the FMUs in your simulator'",
+        },
+    }
+    problems = _all_problems(manifest)
+    if problems:
+        raise ExportError(f"{out}: {len(problems)} validation problem(s):\n  " + "\n  ".join(problems))
+    tmp = out / (MANIFEST + ".tmp")
+    tmp.write_text(json.dumps(manifest, indent=1) + "\n")
+    os.replace(tmp, out / MANIFEST)
+    return manifest

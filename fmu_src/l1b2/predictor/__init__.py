@@ -1,0 +1,7 @@
+"""The paper's reduced speed predictor (Eq. 25-31): model, run-level simulation, derivation.
+
+:mod:`~l1b2.predictor.model` (parameters and the Eq. 29 step),
+:mod:`~l1b2.predictor.simulate` (free runs over many runs, synthetic data),
+:mod:`~l1b2.predictor.setup` (what a deployed predictor carries) and
+:mod:`~l1b2.predictor.derive` (parameters derived from the physical model).
+"""

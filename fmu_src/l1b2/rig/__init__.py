@@ -1,0 +1,1 @@
+"""The virtual test rig: the paper's experiments on the co-simulated motor, with undeclared injections."""

@@ -1,0 +1,338 @@
+"""Virtual test rig: the paper's experiments (Sect. 5.1, Fig. 9) on the co-simulated motor.
+
+A run is one traverse of the stroke from rest at one end stop to the other
+at constant drive inputs (V0, frequency, direction, load). The rig records
+what a real rig records, in the measured-data format
+(``shared/data-format.md``): a 50 nm encoder sampled at 1 kHz, the speed the
+DAQ derives from it, the commanded voltage, load and direction, on one
+continuous experiment clock with pauses between runs. It also records the
+vibrometer's tangential tip velocity amplitude ``omega*U_w`` (paper Fig. 9c)
+as an extra column.
+
+Run order: the (V0, load) conditions are visited in a seeded random order,
+each as a forward (CH1) then backward (CH2) traverse, so that slow drifts on
+the experiment clock are not confounded with the factors.
+
+Injected effects: named physical effects that the reduced predictor does not
+contain (:data:`EFFECTS`). Each switches on declared parameters of the FMU
+system that are off in the reference motor; with none injected the rig is
+the plain coupled model. What was injected is written to ``rig_truth.json``,
+never to the data or its sidecar.
+
+Engines: ``"fmu"`` runs the four FMUs through the SSD-driven fmpy master
+(:class:`l1b2.cosim.master.CoSimulation`); ``"inprocess"`` runs the same blocks
+without FMUs (:class:`l1b2.cosim.engine.InProcessMotor`), identical results,
+faster.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ..data import measurements as dataio
+from ..errors import SimulationError
+from ..physics import driver as drv
+from ..physics.params import MotorParams, load_motor
+
+# ---------------------------------------------------------------------------
+# Injected effects
+# ---------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Effect:
+    """An extra physical effect the rig can switch on (parameters of the FMU system).
+
+    ``params`` maps ``"Component.parameter"`` to a default value; ``ranges``
+    gives, for the parameters that vary between seeded draws, ``(low, high)``.
+    ``regressor`` is the data regressor the effect shows up in (for tests).
+    """
+
+    name: str
+    description: str
+    regressor: str
+    params: dict
+    ranges: dict = field(default_factory=dict)
+    stateful: bool = False  # carries state from run to run (cannot run runs in parallel)
+
+    def draw(self, rng: np.random.Generator | None) -> dict:
+        """Parameter values: defaults, with the ranged ones drawn uniformly when ``rng`` is given."""
+        values = dict(self.params)
+        if rng is not None:
+            for k, (lo, hi) in self.ranges.items():
+                values[k] = float(rng.uniform(lo, hi))
+        return values
+
+
+EFFECTS: dict[str, Effect] = {e.name: e for e in [
+    Effect("thermal_drift",
+           "self-heating of the stator (loss ~ V0^2, time constant tens of s) shifts both resonances by "
+           "about -10 Hz/K; the speed drifts along the experiment clock",
+           "time",
+           {"Stator.thermal_tau_s": 30.0, "Stator.heating_K_per_V2": 6e-4,
+            "Stator.df_dT_l_Hz_per_K": -10.0, "Stator.df_dT_b_Hz_per_K": -10.0},
+           {"Stator.thermal_tau_s": (20.0, 40.0), "Stator.heating_K_per_V2": (4.5e-4, 8e-4)},
+           stateful=True),
+    Effect("direction_asymmetry",
+           "CH1 and CH2 electrodes excite the B2 mode with different strength (polarisation, electrode "
+           "area): forward and backward speeds differ",
+           "direction",
+           {"Stator.asym_b": 0.06}, {"Stator.asym_b": (0.04, 0.09)}),
+    Effect("bar_waviness",
+           "periodic waviness of the friction bar (grinding marks) modulates the preload with position",
+           "position",
+           {"Stator.bar_wave_amp_m": 40e-6, "Stator.bar_wave_period_m": 6e-3},
+           {"Stator.bar_wave_amp_m": (30e-6, 50e-6), "Stator.bar_wave_period_m": (4e-3, 8e-3)}),
+    Effect("bar_bump",
+           "a local bump (defect, debris) on the friction bar raises the preload over a few mm",
+           "position",
+           {"Stator.bar_bump_amp_m": 80e-6, "Stator.bar_bump_center_m": 0.004, "Stator.bar_bump_width_m": 1.0e-3},
+           {"Stator.bar_bump_amp_m": (60e-6, 100e-6), "Stator.bar_bump_center_m": (-0.012, 0.012),
+            "Stator.bar_bump_width_m": (0.7e-3, 1.4e-3)}),
+    Effect("pulley_friction",
+           "Coulomb friction in the load path (pulley bearing), proportional to the load weight and "
+           "always opposing the motion",
+           "load",
+           {"Slider.pulley_mu": 0.4}, {"Slider.pulley_mu": (0.3, 0.5)}),
+    Effect("drive_saturation",
+           "the drive's output amplitude saturates (transformer / amplifier limit): the actual V0 falls "
+           "below the commanded one at high voltage",
+           "voltage",
+           {"Driver.V0_sat_V": 320.0}, {"Driver.V0_sat_V": (280.0, 360.0)}),
+]}
+
+
+def apply_overrides(mp: MotorParams, overrides: dict) -> MotorParams:
+    """MotorParams with ``{"Component.parameter": value}`` applied."""
+    sections = {"Driver": "driver", "Stator": "stator", "Interface": "interface", "Slider": "slider"}
+    changes = {}
+    for key, value in overrides.items():
+        comp, _, name = key.partition(".")
+        if comp not in sections:
+            raise SimulationError(f"override '{key}': unknown component '{comp}'")
+        changes[f"{sections[comp]}__{name}"] = value
+    return mp.replace(**changes)
+
+
+def parse_injection(spec: str) -> tuple[str, dict]:
+    """``"name"`` or ``"name:Component.param=value,..."`` -> (name, overrides)."""
+    name, _, rest = spec.partition(":")
+    if name not in EFFECTS:
+        raise SimulationError(f"unknown effect '{name}'; known: {', '.join(EFFECTS)}")
+    values = {}
+    for item in filter(None, rest.split(",")):
+        k, _, v = item.partition("=")
+        if k not in EFFECTS[name].params:
+            raise SimulationError(f"effect '{name}' has no parameter '{k}' (has {', '.join(EFFECTS[name].params)})")
+        values[k] = float(v)
+    return name, values
+
+
+# ---------------------------------------------------------------------------
+# Experiment plan and single runs
+# ---------------------------------------------------------------------------
+
+PAPER_LOADS_KG = (-0.09, -0.07, -0.05, -0.03, 0.0, 0.03, 0.05, 0.07, 0.09)
+
+
+@dataclass(frozen=True)
+class RigPlan:
+    """What the rig runs: the paper's grid by default (4 V0 x 9 loads x 2 directions = 72 runs)."""
+
+    voltages_V: tuple = (220.0, 255.0, 290.0, 324.0)
+    loads_kg: tuple = PAPER_LOADS_KG
+    directions: tuple = (1, -1)
+    f_drive_Hz: float = 48500.0
+    ambient_degC: float = 25.0
+    sample_rate_Hz: float = 1000.0
+    encoder_resolution_m: float = 5e-8
+    pause_s: float = 1.0
+    max_run_s: float = 4.0
+    step_s: float = 2e-4
+    record_temperature: bool = False
+    shuffle: bool = True
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    run: int
+    V0_V: float
+    load_kg: float
+    direction: int
+    t_start_s: float = 0.0
+    T_stator0_degC: float | None = None
+
+
+def _simulate_inprocess(mp: MotorParams, spec: RunSpec, plan: RigPlan, V_s: float, s0: float):
+    from ..cosim.engine import InProcessMotor
+    m = InProcessMotor(mp, h_s=plan.step_s)
+    if spec.T_stator0_degC is not None:
+        m.b["Stator"].T_st0 = spec.T_stator0_degC
+    m.initialize(V_s=V_s, f_s=plan.f_drive_Hz, T=plan.ambient_degC, direction=spec.direction,
+                 m_load=spec.load_kg, s0=s0)
+    rec = ("Slider.s", "Slider.v", "Stator.v_tip", "Stator.T_stator", "Slider.at_stop")
+    return m.run(plan.max_run_s, record=rec, until=lambda mm: mm.value("Slider.at_stop") == spec.direction)
+
+
+def _simulate_fmu(mp: MotorParams, spec: RunSpec, plan: RigPlan, V_s: float, s0: float, fmu_dir):
+    from ..cosim.master import CoSimulation
+    from ..cosim.ssp import COMPONENT_PARAMS
+    overrides = {f"{comp}.{k}": v for comp, attr in COMPONENT_PARAMS.items()
+                 for k, v in asdict(getattr(mp, attr)).items()}
+    start = {"Slider.s0": s0, "Stator.s": s0}
+    if spec.T_stator0_degC is not None:
+        start["Stator.T_st0"] = spec.T_stator0_degC
+    rec = ["Slider.s", "Slider.v", "Stator.v_tip", "Stator.T_stator", "Slider.at_stop"]
+    with CoSimulation(fmu_dir=fmu_dir, step_s=plan.step_s, parameters=overrides) as cs:
+        res = cs.run(plan.max_run_s, inputs=dict(V_s=V_s, duty=1.0, f_s=plan.f_drive_Hz, T=plan.ambient_degC,
+                                                 direction=float(spec.direction), m_load=spec.load_kg),
+                     record=rec, start_values=start,
+                     stop_when=lambda v: v["Slider.at_stop"] == spec.direction)
+    return {k: res[k] for k in ["time"] + rec}
+
+
+def simulate_run(mp: MotorParams, spec: RunSpec, plan: RigPlan = RigPlan(), engine: str = "inprocess",
+                 fmu_dir=None, nominal: MotorParams | None = None) -> pd.DataFrame:
+    """One traverse; returns the rig's samples of this run (data-format columns plus extras).
+
+    The supply is set from the *nominal* motor's small-signal drive gain (what
+    the operator calibrated), so an injected drive effect is not compensated.
+    """
+    nominal = nominal or mp
+    V_s = float(drv.supply_for_voltage_V(nominal.driver, spec.V0_V, 1.0, plan.f_drive_Hz, plan.ambient_degC))
+    s0 = mp.slider.s_min_m if spec.direction > 0 else mp.slider.s_max_m
+    if engine == "inprocess":
+        r = _simulate_inprocess(mp, spec, plan, V_s, s0)
+    elif engine == "fmu":
+        r = _simulate_fmu(mp, spec, plan, V_s, s0, fmu_dir)
+    else:
+        raise SimulationError(f"unknown engine '{engine}' (use 'inprocess' or 'fmu')")
+    every = int(round(1.0 / (plan.sample_rate_Hz * plan.step_s)))
+    if abs(every * plan.sample_rate_Hz * plan.step_s - 1.0) > 1e-9:
+        raise SimulationError(f"step {plan.step_s} s does not divide the sampling period 1/{plan.sample_rate_Hz} s")
+    idx = np.arange(0, len(r["time"]), every)
+    t = r["time"][idx]
+    pos = np.round(r["Slider.s"][idx] / plan.encoder_resolution_m) * plan.encoder_resolution_m
+    speed = np.gradient(pos, t) if len(t) > 1 else np.zeros_like(t)
+    out = pd.DataFrame({
+        dataio.TIME: spec.t_start_s + t,
+        dataio.RUN: spec.run,
+        dataio.POSITION: pos,
+        dataio.VOLTAGE: spec.V0_V,
+        dataio.DIRECTION: spec.direction,
+        dataio.LOAD: spec.load_kg,
+        dataio.SPEED: speed,
+        dataio.FREQUENCY: plan.f_drive_Hz,
+    })
+    if plan.record_temperature:
+        out[dataio.TEMPERATURE] = np.round(r["Stator.T_stator"][idx], 2)
+    out["tip_velocity_amp_m_s"] = r["Stator.v_tip"][idx]
+    out.attrs["T_stator_end"] = float(r["Stator.T_stator"][-1])
+    return out
+
+
+def plan_runs(plan: RigPlan) -> list[tuple[float, float, int]]:
+    """Run conditions in rig order: shuffled (V0, load) pairs, each forward then backward."""
+    conds = [(V, L) for V in plan.voltages_V for L in plan.loads_kg]
+    if plan.shuffle:
+        rng = np.random.default_rng(plan.seed)
+        conds = [conds[i] for i in rng.permutation(len(conds))]
+    return [(V, L, d) for V, L in conds for d in plan.directions]
+
+
+def _worker(args):
+    mp, spec, plan, engine, fmu_dir, nominal = args
+    return simulate_run(mp, spec, plan, engine, fmu_dir, nominal)
+
+
+def run_experiment(plan: RigPlan = RigPlan(), mp: MotorParams | None = None, effects=(), engine="inprocess",
+                   jobs: int = 1, fmu_dir=None, effect_seed: int | None = None, progress: bool = False):
+    """Run the whole experiment; returns ``(DataFrame, truth)``.
+
+    ``effects`` is a list of effect names or ``(name, overrides)`` pairs; with
+    ``effect_seed`` the ranged effect parameters are drawn at random.
+    """
+    nominal = mp or load_motor()
+    rng = np.random.default_rng(effect_seed) if effect_seed is not None else None
+    overrides, injected = {}, []
+    for e in effects:
+        name, user = (e, {}) if isinstance(e, str) else e
+        if name not in EFFECTS:
+            raise SimulationError(f"unknown effect '{name}'; known: {', '.join(EFFECTS)}")
+        values = {**EFFECTS[name].draw(rng), **user}
+        overrides.update(values)
+        injected.append({"name": name, "regressor": EFFECTS[name].regressor, "parameters": values})
+    motor = apply_overrides(nominal, overrides)
+    stateful = any(EFFECTS[i["name"]].stateful for i in injected)
+    conditions = plan_runs(plan)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(total=len(conditions), desc=f"rig ({engine})", unit="run")
+    frames = []
+    t_next = 0.0
+    try:
+        if stateful or jobs <= 1:
+            T_st = plan.ambient_degC
+            for k, (V, L, d) in enumerate(conditions):
+                spec = RunSpec(k + 1, V, L, d, t_next,
+                               T_st if motor.stator.thermal_tau_s > 0 else None)
+                f = simulate_run(motor, spec, plan, engine, fmu_dir, nominal)
+                frames.append(f)
+                t_next = float(f[dataio.TIME].iloc[-1]) + plan.pause_s
+                if motor.stator.thermal_tau_s > 0:  # cools toward ambient during the pause
+                    T_st = plan.ambient_degC + (f.attrs["T_stator_end"] - plan.ambient_degC) * math.exp(
+                        -plan.pause_s / motor.stator.thermal_tau_s)
+                if bar:
+                    bar.update()
+        else:
+            specs = [RunSpec(k + 1, V, L, d) for k, (V, L, d) in enumerate(conditions)]
+            with ProcessPoolExecutor(max_workers=jobs) as ex:
+                for f in ex.map(_worker, [(motor, s, plan, engine, fmu_dir, nominal) for s in specs]):
+                    frames.append(f)
+                    if bar:
+                        bar.update()
+            for f in frames:  # lay the runs on one experiment clock with pauses
+                f[dataio.TIME] += t_next
+                t_next = float(f[dataio.TIME].iloc[-1]) + plan.pause_s
+    finally:
+        if bar:
+            bar.close()
+    df = pd.concat(frames, ignore_index=True)
+    truth = {"effects": injected, "plan": asdict(plan), "engine": engine, "motor": nominal.name}
+    return df, truth
+
+
+# ---------------------------------------------------------------------------
+# Output
+# ---------------------------------------------------------------------------
+
+def sidecar_meta(mp: MotorParams, plan: RigPlan, description: str) -> dict:
+    return {"slider_mass_kg": mp.slider.mass_kg, "encoder_resolution_m": plan.encoder_resolution_m,
+            "drive_frequency_Hz": plan.f_drive_Hz, "description": description}
+
+
+def write_experiment(df: pd.DataFrame, out_dir, mp: MotorParams, plan: RigPlan, truth: dict,
+                     test_abs_loads=(0.05,)) -> dict:
+    """Write ``all.csv``, the paper's ``train.csv``/``test.csv`` split and sidecars, and ``rig_truth.json``.
+
+    A split with no runs (the plan has no load of ``test_abs_loads``, or only
+    those) is not written; the returned dict names the files written.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    meta = sidecar_meta(mp, plan, "virtual L1B2 rig (l1b2 rig): co-simulated reference motor")
+    is_test = np.isclose(np.abs(df[dataio.LOAD].to_numpy()), np.array(test_abs_loads)[:, None], atol=1e-9).any(axis=0)
+    paths = {}
+    for name, part in (("all", df), ("train", df[~is_test]), ("test", df[is_test])):
+        if len(part):  # a plan without the test loads has no test split
+            paths[name] = dataio.write_measurements(part.reset_index(drop=True), out / f"{name}.csv", meta)
+    (out / "rig_truth.json").write_text(json.dumps(truth, indent=1))
+    return paths
