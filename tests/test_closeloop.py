@@ -16,7 +16,7 @@ import json
 import pytest
 from l1b2.cli import main as cli_main
 from l1b2.closeloop.loop import close_loop
-from l1b2.rig.experiment import EFFECTS, RigPlan
+from l1b2.rig.experiment import INJECTIONS, RigPlan
 from rigcache import rig_dir
 
 FAST = [("pulley_friction", 1), ("direction_asymmetry", 2), ("drive_saturation", 3), ("thermal_drift", 4)]
@@ -25,7 +25,7 @@ SLOW = [(e, s) for e in ("pulley_friction", "direction_asymmetry", "drive_satura
 
 
 def _run(effect, seed, tmp_path):
-    d = rig_dir(f"{effect}_{seed}", effects=[effect] if effect else [], effect_seed=seed,
+    d = rig_dir(f"{effect}_{seed}", injections=[effect] if effect else [], injection_seed=seed,
                 plan=RigPlan(step_s=1e-3, seed=seed))
     rep = close_loop(d / "train.csv", d / "test.csv", tmp_path / "report", plots_on=False)
     truth = json.loads((d / "rig_truth.json").read_text())
@@ -33,7 +33,7 @@ def _run(effect, seed, tmp_path):
 
 
 def _check_effect(rep, truth):
-    want = truth["effects"][0]["regressor"]
+    want = truth["injections"][0]["regressor"]
     d = rep["diagnosis"]
     assert d["significant"], d["message"]
     assert d["traced_to"][0] == want, (d["traced_to"], truth)
@@ -95,7 +95,7 @@ def test_control_ten_seeds(tmp_path):
 def test_cli_writes_the_report_files_and_figures(tmp_path, capsys):
     # reference: issue: DIR/report.json keys, report.md, PNGs (residual vs regressors, chosen effect,
     # before/after on TEST); the before/after table printed
-    d = rig_dir("direction_asymmetry_2", effects=["direction_asymmetry"], effect_seed=2,
+    d = rig_dir("direction_asymmetry_2", injections=["direction_asymmetry"], injection_seed=2,
                 plan=RigPlan(step_s=1e-3, seed=2))
     out = tmp_path / "cl"
     assert cli_main(["close-loop", "--train", str(d / "train.csv"), "--test", str(d / "test.csv"),
@@ -136,4 +136,4 @@ def test_refuses_bad_input_before_writing(tmp_path, capsys):
 
 def test_every_effect_in_the_rig_has_a_regressor_name_the_report_uses():
     allowed = {"time", "position", "direction", "load", "voltage", "speed", "acceleration", "temperature"}
-    assert all(e.regressor in allowed for e in EFFECTS.values())
+    assert all(e.regressor in allowed for e in INJECTIONS.values())

@@ -35,6 +35,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import SimulationError, SystemStructureError
+from .result import CoSimResult
 from .ssp import (
     SSD_FILE,
     SystemStructure,
@@ -84,42 +85,6 @@ class _Instance:
     in_vrs: list = field(default_factory=list)
     out_names: list = field(default_factory=list)
     out_vrs: list = field(default_factory=list)
-
-
-class CoSimResult:
-    """Time series of a co-simulation: ``.df`` (pandas), ``.units``, ``.to_csv()``, ``.plot()``."""
-
-    def __init__(self, df: pd.DataFrame, units: Mapping[str, str]):
-        self.df = df
-        self.units = dict(units)
-        self.df.attrs["units"] = self.units
-
-    def to_pandas(self) -> pd.DataFrame:
-        return self.df
-
-    def __getitem__(self, key):
-        return self.df[key].to_numpy()
-
-    def to_csv(self, path) -> Path:
-        """CSV with the unit in every column name, e.g. ``Slider.v [m/s]``."""
-        path = Path(path)
-        out = self.df.rename(columns={c: f"{c} [{self.units.get(c, '1')}]" for c in self.df.columns})
-        path.parent.mkdir(parents=True, exist_ok=True)
-        out.to_csv(path, index=False, float_format="%.10g")
-        return path
-
-    def plot(self, columns=("Slider.v", "Slider.s"), path=None):
-        import matplotlib.pyplot as plt
-        fig, axes = plt.subplots(len(columns), 1, sharex=True, figsize=(7, 2.2 * len(columns)))
-        for ax, col in zip(np.atleast_1d(axes), columns):
-            ax.plot(self.df["time"], self.df[col])
-            ax.set_ylabel(f"{col} [{self.units.get(col, '')}]")
-        np.atleast_1d(axes)[-1].set_xlabel("time [s]")
-        fig.tight_layout()
-        if path is not None:
-            fig.savefig(path, dpi=120)
-            plt.close(fig)
-        return fig
 
 
 class CoSimulation:

@@ -32,6 +32,7 @@ from pathlib import Path
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real  # noqa: F401
 from pythonfmu.enums import Fmi2Status
 
+from ..cosim.blocks import motor_defaults
 from ..physics.params import load_motor
 
 #: file holding the start values, written by l1b2.fmi.build into each FMU's resources folder
@@ -49,7 +50,6 @@ def load_defaults(resources: str | None = None) -> dict:
         path = Path(resources) / DEFAULTS_FILE
         if path.exists():
             return json.loads(path.read_text())
-    from ..cosim.blocks import motor_defaults
     return motor_defaults(load_motor())
 
 

@@ -13,7 +13,7 @@ from typing import NamedTuple
 
 
 class SlaveSpec(NamedTuple):
-    block: str        #: block class in :mod:`l1b2.cosim.blocks`
+    block: str        #: block class in :mod:`l1b2.cosim.blocks` or :mod:`l1b2.cosim.composite`
     summary: str      #: one line: what the FMU is (the script's docstring)
     description: str  #: modelDescription ``description``
 
@@ -48,7 +48,7 @@ SLAVES: dict[str, SlaveSpec] = {
 TEMPLATE = '''"""{summary}"""
 from pythonfmu import Fmi2Slave
 
-from l1b2.cosim.blocks import {block}
+from l1b2.cosim.{module} import {block}
 from l1b2.fmi.adapter import BlockAdapter
 
 
@@ -79,5 +79,6 @@ def slave_script(name: str, *, author: str, license: str) -> str:
         spec = SLAVES[name]
     except KeyError:
         raise ValueError(f"unknown FMU '{name}'; known: {', '.join(SLAVES)}") from None
-    return TEMPLATE.format(name=name, block=spec.block, summary=spec.summary, description=spec.description,
+    module = "composite" if spec.block in ("MotorBlock", "PredictorBlock") else "blocks"
+    return TEMPLATE.format(name=name, module=module, block=spec.block, summary=spec.summary, description=spec.description,
                            author=author, license=license)
