@@ -16,6 +16,7 @@ from l1b2.data.measurements import (
     write_measurements,
 )
 from l1b2.errors import DataFormatError, IdentificationError, L1B2Error, ParameterError
+from l1b2.units import COLUMN_UNITS, SIDECAR_FIELD_UNITS
 
 COLUMNS = ["time_s", "run", "position_m", "voltage_V", "direction", "load_kg",
            "speed_m_s", "frequency_Hz", "temperature_C"]
@@ -437,6 +438,15 @@ def test_known_columns_table():
     assert D.REQUIRED_COLUMNS == ("time_s", "run", "position_m", "voltage_V", "direction",
                                   "load_kg")
     assert {c.name: c.unit for c in D.KNOWN_COLUMNS}["speed_m_s"] == "m/s"
+
+
+def test_units_are_defined_once_in_l1b2_units():
+    assert [(c.name, c.unit) for c in D.KNOWN_COLUMNS] == list(COLUMN_UNITS.items())
+    assert D.SIDECAR_FIELDS == SIDECAR_FIELD_UNITS
+    assert all(D.unit_of(name) == unit for name, unit in {**COLUMN_UNITS, **SIDECAR_FIELD_UNITS}.items())
+    assert D.unit_of("not_a_column") is None
+    exc = DataFormatError("x.json", "drive_frequency_Hz", None, "bad")
+    assert str(exc) == "x.json: field 'drive_frequency_Hz' [Hz]: bad"
 
 
 # --------------------------------------------------------------------------

@@ -40,6 +40,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import DataFormatError, IdentificationError, ParameterError
+from ..units import COLUMN_UNITS, SIDECAR_FIELD_UNITS, data_unit
 
 __all__ = [
     "TIME", "RUN", "POSITION", "VOLTAGE", "DIRECTION", "LOAD", "SPEED",
@@ -79,7 +80,8 @@ class ColumnSpec(NamedTuple):
     required : bool
         Whether every file must contain it.
     unit : str
-        SI unit (``"-"`` for dimensionless / identifiers).
+        SI unit (``"-"`` for dimensionless / identifiers), from
+        :data:`l1b2.units.COLUMN_UNITS`.
     meaning : str
         Short description, from ``shared/data-format.md``.
     """
@@ -92,24 +94,24 @@ class ColumnSpec(NamedTuple):
 
 #: The known columns, in the order of the contract table.
 KNOWN_COLUMNS: tuple[ColumnSpec, ...] = (
-    ColumnSpec(TIME, True, "s",
+    ColumnSpec(TIME, True, COLUMN_UNITS[TIME],
                "experiment clock; strictly increasing over the whole file in "
                "recording order, not reset between runs"),
-    ColumnSpec(RUN, True, "-",
+    ColumnSpec(RUN, True, COLUMN_UNITS[RUN],
                "run identifier (integer or string); rows of one run are contiguous"),
-    ColumnSpec(POSITION, True, "m",
+    ColumnSpec(POSITION, True, COLUMN_UNITS[POSITION],
                "slider position from the encoder (0 = centre of the friction bar)"),
-    ColumnSpec(VOLTAGE, True, "V", "drive voltage amplitude V0 at the stator"),
-    ColumnSpec(DIRECTION, True, "-",
+    ColumnSpec(VOLTAGE, True, COLUMN_UNITS[VOLTAGE], "drive voltage amplitude V0 at the stator"),
+    ColumnSpec(DIRECTION, True, COLUMN_UNITS[DIRECTION],
                "+1 when channel CH1 is excited (drives toward +position), -1 for CH2"),
-    ColumnSpec(LOAD, True, "kg",
+    ColumnSpec(LOAD, True, COLUMN_UNITS[LOAD],
                "signed load mass on the pulley: positive pulls toward -position, "
                "negative toward +position, 0 = no load"),
-    ColumnSpec(SPEED, False, "m/s",
+    ColumnSpec(SPEED, False, COLUMN_UNITS[SPEED],
                "measured slider speed; derived from position_m when absent"),
-    ColumnSpec(FREQUENCY, False, "Hz",
+    ColumnSpec(FREQUENCY, False, COLUMN_UNITS[FREQUENCY],
                "drive frequency; filled from the sidecar / default when absent"),
-    ColumnSpec(TEMPERATURE, False, "degC", "stator temperature, when measured"),
+    ColumnSpec(TEMPERATURE, False, COLUMN_UNITS[TEMPERATURE], "stator temperature, when measured"),
 )
 
 _SPEC = {c.name: c for c in KNOWN_COLUMNS}
@@ -120,13 +122,8 @@ REQUIRED_COLUMNS: tuple[str, ...] = tuple(c.name for c in KNOWN_COLUMNS if c.req
 #: Known columns holding real numbers (everything but ``run``).
 NUMERIC_COLUMNS: tuple[str, ...] = tuple(c.name for c in KNOWN_COLUMNS if c.name != RUN)
 
-#: Sidecar fields and their units.
-SIDECAR_FIELDS: dict[str, str] = {
-    "slider_mass_kg": "kg",
-    "encoder_resolution_m": "m",
-    "drive_frequency_Hz": "Hz",
-    "description": "-",
-}
+#: Sidecar fields and their units (:data:`l1b2.units.SIDECAR_FIELD_UNITS`).
+SIDECAR_FIELDS: dict[str, str] = SIDECAR_FIELD_UNITS
 
 # --------------------------------------------------------------------------
 # Defaults and plausibility thresholds (SI)
@@ -181,9 +178,7 @@ def unit_of(name: str | None) -> str | None:
     str or None
         The unit (``"-"`` for dimensionless), ``None`` when unknown.
     """
-    if name in _SPEC:
-        return _SPEC[name].unit
-    return SIDECAR_FIELDS.get(name)  # type: ignore[arg-type]
+    return data_unit(name)
 
 
 def sidecar_path(path: str | os.PathLike) -> Path:
