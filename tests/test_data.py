@@ -1,4 +1,8 @@
-"""Tests of l1b2.data.measurements: the measured-data contract of shared/data-format.md."""
+"""Tests of the data layer (l1b2.data.measurements and the columns / validate / io modules behind it).
+
+The measured-data contract of shared/data-format.md, exercised through the
+public API :mod:`l1b2.data.measurements`.
+"""
 
 from __future__ import annotations
 
@@ -439,6 +443,14 @@ def test_known_columns_table():
                                   "load_kg")
     assert {c.name: c.unit for c in D.KNOWN_COLUMNS}["speed_m_s"] == "m/s"
 
+
+def test_public_api_reexports_the_modules_behind_it():
+    from l1b2.data import columns, io, validate
+    assert D.KNOWN_COLUMNS is columns.KNOWN_COLUMNS and D.SIDECAR_FIELDS is columns.SIDECAR_FIELDS
+    assert D.validate_frame is validate.validate_frame and D.run_slices is validate.run_slices
+    assert D.sidecar_path is columns.sidecar_path and D.unit_of is columns.unit_of
+    assert all(hasattr(D, name) for name in D.__all__)
+    assert all(hasattr(m, name) for m in (columns, validate, io) for name in m.__all__)
 
 def test_units_are_defined_once_in_l1b2_units():
     assert [(c.name, c.unit) for c in D.KNOWN_COLUMNS] == list(COLUMN_UNITS.items())

@@ -96,6 +96,7 @@ END_EXCLUSION_M: float = 2e-3
 
 
 def as_1d(name: str, values: Any) -> np.ndarray:
+    """``values`` (Series or array_like) as a 1-D float array; ``ValueError`` naming ``name`` otherwise."""
     arr = values.to_numpy(dtype=float) if isinstance(values, pd.Series) \
         else np.asarray(values, dtype=float)
     if arr.ndim != 1:
