@@ -299,7 +299,9 @@ class InterfaceBlock(Block):
     EXTRA_PARAMETERS = [
         Var("pure_slip", "parameter", "", "true: the paper's Sect. 4 assumptions (phi_c = pi, no stick)",
             start=False, variability="fixed", type="Boolean"),
-        Var("n_theta", "parameter", "", "cells over the contact window (numerical resolution)",
+        Var("quadrature", "parameter", "", "true: the numerical reference kernel (n_theta cells, slow) "
+            "instead of the exact closed form", start=False, variability="fixed", type="Boolean"),
+        Var("n_theta", "parameter", "", "cells over the contact window of the numerical reference kernel",
             start=256, min=16, max=65536, variability="fixed", type="Integer"),
     ]
     INPUTS = [
@@ -335,9 +337,9 @@ class InterfaceBlock(Block):
 
     def _compute(self):
         self.check_inputs()
-        out = itf.interface_forces(self.U_l, self.U_w, self.delta, self.omega, self.v, self.F_p, self.params,
-                                   mode="pure_slip" if self.pure_slip else "stick_slip",
-                                   n_theta=int(self.n_theta))
+        kernel = itf.interface_forces_reference if self.quadrature else itf.interface_forces
+        out = kernel(self.U_l, self.U_w, self.delta, self.omega, self.v, self.F_p, self.params,
+                     mode="pure_slip" if self.pure_slip else "stick_slip", n_theta=int(self.n_theta))
         self.F_d, self.F_N_mean = out.F_d_N, out.F_N_mean_N
         self.F_N1_sin, self.F_N1_cos = out.F_N1_sin_N, out.F_N1_cos_N
         self.F_T1_sin, self.F_T1_cos = out.F_T1_sin_N, out.F_T1_cos_N
