@@ -211,8 +211,12 @@ def interface_forces(U_l_m, U_w_m, delta_rad, omega_rad_s, v_m_s, F_p_N,
     if mode not in MODES:
         raise ValueError(f"interface mode must be one of {MODES}, got {mode!r}")
     args = (U_l_m, U_w_m, delta_rad, omega_rad_s, v_m_s, F_p_N)
-    if all(isinstance(x, (float, int)) for x in args):
-        return _interface_scalar(*(float(x) for x in args), params, mode)
+    for x in args:
+        if not isinstance(x, (float, int)):
+            break
+    else:  # plain (or numpy) scalars: the co-simulation's hot path
+        return _interface_scalar(float(U_l_m), float(U_w_m), float(delta_rad), float(omega_rad_s),
+                                 float(v_m_s), float(F_p_N), params, mode)
     arrays = np.broadcast_arrays(*(np.asarray(x, float) for x in args))
     shape = arrays[0].shape
     if not shape:
@@ -350,7 +354,7 @@ def _switch_phase(lo: float, hi: float, sgn: int, U_w: float, delta: float, q: f
             return x
         slope = sgn * (U_w * math.cos(x + delta) - q)
         x_new = x - gx / slope if slope > 0 else 0.5 * (a + b)
-        if abs(x_new - x) <= 1e-13 or b - a <= 1e-13:
+        if abs(x_new - x) <= 1e-10 or b - a <= 1e-13:  # quadratic convergence: x_new is then exact
             return min(max(x_new, a), b)
         x = x_new
     return x
