@@ -336,7 +336,7 @@ def modal_properties(sp: StatorParams, P_N, T_degC=None) -> ModalProperties:
     Damping ``C = 2 zeta M omega0`` (paper's ``zeta = C / (2 M omega0)``).
     Scalar ``P_N`` and ``T_degC`` take a plain-float fast path (floats out).
     """
-    if np.ndim(P_N) == 0 and np.ndim(T_degC) == 0:
+    if isinstance(P_N, (float, int)) and (T_degC is None or isinstance(T_degC, (float, int))):
         fast = _modal_properties_scalar(sp, float(P_N), T_degC)
         if fast is not None:
             return fast
