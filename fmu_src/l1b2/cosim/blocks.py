@@ -67,6 +67,10 @@ def parameter_vars(cls, values) -> list[Var]:
                 min=d["min"], max=d["max"], variability="fixed") for d in describe(cls)]
 
 
+#: per block class: (name, min, max) of its inputs, for the fast pass of Block.check_inputs
+_INPUT_BOUNDS: dict[type, tuple] = {}
+
+
 def motor_defaults(mp: MotorParams) -> dict:
     """JSON-safe start values of every section of a motor parameter set."""
     from dataclasses import asdict
@@ -121,6 +125,17 @@ class Block:
 
     def check_inputs(self):
         """Raise :class:`SimulationError` on a non-finite or out-of-range input."""
+        bounds = _INPUT_BOUNDS.get(type(self))
+        if bounds is None:
+            bounds = _INPUT_BOUNDS[type(self)] = tuple(
+                (v.name, -math.inf if v.min is None else v.min, math.inf if v.max is None else v.max)
+                for v in self.INPUTS)
+        for name, lo, hi in bounds:  # fast pass: finite floats inside their ranges
+            value = getattr(self, name)
+            if type(value) is not float or not lo <= value <= hi or value - value != 0.0:
+                break
+        else:
+            return
         for var in self.INPUTS:
             value = getattr(self, var.name)
             if not isinstance(value, (int, float, np.floating)) or not math.isfinite(value):
@@ -172,12 +187,17 @@ class DriverBlock(Block):
 
     def initialize(self):
         self.rebuild_params()
+        self._memo = None
         self._compute()
 
     initialize_outputs = initialize
 
     def _compute(self):
         self.check_inputs()
+        memo = (self.params, self.V_s, self.duty, self.f_s, self.T)
+        if self._memo is not None and memo[0] is self._memo[0] and memo[1:] == self._memo[1:]:
+            return  # algebraic: same parameters and inputs as the last call, the outputs stand
+        self._memo = memo
         out = drv.driver_output(self.params, self.V_s, self.duty, self.f_s, self.T)
         self.V0 = float(out.V0_V)
         self.omega = float(out.omega_rad_s)
@@ -305,7 +325,9 @@ class InterfaceBlock(Block):
     EXTRA_PARAMETERS = [
         Var("pure_slip", "parameter", "", "true: the paper's Sect. 4 assumptions (phi_c = pi, no stick)",
             start=False, variability="fixed", type="Boolean"),
-        Var("n_theta", "parameter", "", "cells over the contact window (numerical resolution)",
+        Var("quadrature", "parameter", "", "true: the numerical reference kernel (n_theta cells, slow) "
+            "instead of the exact closed form", start=False, variability="fixed", type="Boolean"),
+        Var("n_theta", "parameter", "", "cells over the contact window of the numerical reference kernel",
             start=256, min=16, max=65536, variability="fixed", type="Integer"),
     ]
     INPUTS = [
@@ -341,9 +363,9 @@ class InterfaceBlock(Block):
 
     def _compute(self):
         self.check_inputs()
-        out = itf.interface_forces(self.U_l, self.U_w, self.delta, self.omega, self.v, self.F_p, self.params,
-                                   mode="pure_slip" if self.pure_slip else "stick_slip",
-                                   n_theta=int(self.n_theta))
+        kernel = itf.interface_forces_reference if self.quadrature else itf.interface_forces
+        out = kernel(self.U_l, self.U_w, self.delta, self.omega, self.v, self.F_p, self.params,
+                     mode="pure_slip" if self.pure_slip else "stick_slip", n_theta=int(self.n_theta))
         self.F_d, self.F_N_mean = out.F_d_N, out.F_N_mean_N
         self.F_N1_sin, self.F_N1_cos = out.F_N1_sin_N, out.F_N1_cos_N
         self.F_T1_sin, self.F_T1_cos = out.F_T1_sin_N, out.F_T1_cos_N
