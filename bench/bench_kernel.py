@@ -6,7 +6,7 @@ Prints, side by side in one run:
   n_theta = 256) vs new (closed form), over tip motions taken from steady
   states of the reference motor, with the largest output differences;
 * the real-time factor (wall time / simulated time) of the in-process engine
-  (``l1b2.coupled.InProcessMotor``, 324 V, 0.2 ms step) with the old kernel
+  (``l1b2.cosim.engine.InProcessMotor``, 324 V, 0.2 ms step) with the old kernel
   (``Interface.quadrature = true``) and the new one (target: <= 0.1), and the
   final slider speeds of both;
 * the same for the four-FMU co-simulation (``l1b2.cosim.CoSimulation``),
@@ -27,10 +27,11 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "fmu_src"))
 
-from l1b2 import coupled  # noqa: E402
-from l1b2 import driver as drv  # noqa: E402
-from l1b2 import interface as itf  # noqa: E402
-from l1b2.params import load_motor  # noqa: E402
+from l1b2.cosim import engine  # noqa: E402
+from l1b2.physics import driver as drv  # noqa: E402
+from l1b2.physics import interface as itf  # noqa: E402
+from l1b2.physics import steady  # noqa: E402
+from l1b2.physics.params import load_motor  # noqa: E402
 
 STEP_S = 2e-4
 V0_V = 324.0
@@ -41,7 +42,7 @@ def _tip_motions(mp):
     rows = []
     for V0 in (150.0, 250.0, 324.0):
         for m_load, d in ((0.0, 1), (0.1, 1), (0.0, -1), (0.05, -1)):
-            ss = coupled.steady_state(mp, 0.0, V0, m_load, d)
+            ss = steady.steady_state(mp, 0.0, V0, m_load, d)
             for frac in (0.0, 1.0):  # at rest (start-up) and at the steady speed
                 rows.append((ss.U_l_m, ss.U_w_m, ss.delta_rad, 2 * 3.141592653589793 * mp.operating.f_drive_Hz,
                              frac * ss.v_m_s, ss.F_p_N))
@@ -80,7 +81,7 @@ def bench_calls(mp, repeat):
 
 
 def _inprocess(mp, inputs, sim_time, quadrature):
-    m = coupled.InProcessMotor(mp, h_s=STEP_S)
+    m = engine.InProcessMotor(mp, h_s=STEP_S)
     m.b["Interface"].quadrature = quadrature
     t0, c0 = time.perf_counter(), time.process_time()
     m.initialize(**inputs)
@@ -89,7 +90,7 @@ def _inprocess(mp, inputs, sim_time, quadrature):
 
 
 def _fmu(fmu_dir, inputs, sim_time, quadrature):
-    from l1b2.cosim import CoSimulation
+    from l1b2.cosim.master import CoSimulation
     params = {"Slider.s_min_m": -1.0, "Slider.s_max_m": 1.0, "Interface.quadrature": quadrature}
     t0, c0 = time.perf_counter(), time.process_time()
     with CoSimulation(fmu_dir=fmu_dir, step_s=STEP_S, parameters=params) as cs:
@@ -130,7 +131,7 @@ def main(argv=None):
     inputs = dict(V_s=V_s, duty=1.0, f_s=48500.0, T=25.0, direction=1.0, m_load=0.0)
     rows = [("in-process", _engine_rows(lambda q: _inprocess(mp_wide, inputs, args.sim_time, q), args.repeat))]
     if not args.no_fmu:
-        from l1b2.fmu_build import build_subsystem_fmus
+        from l1b2.fmi.build import build_subsystem_fmus
         with tempfile.TemporaryDirectory(prefix="l1b2_bench_kernel_") as tmp:
             build_subsystem_fmus(tmp, mp)
             rows.append(("4 FMUs", _engine_rows(lambda q: _fmu(tmp, inputs, args.sim_time, q), args.repeat)))

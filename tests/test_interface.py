@@ -572,7 +572,7 @@ STEADY_GRID = [  # (position [m], V0 [V], load [kg], direction)
 def test_steady_speeds_unchanged_by_the_closed_form(motor, monkeypatch, mode):
     # reference: coupled.steady_state with the numerical kernel (default n_theta = 256, and 4096 on part
     # of the grid) patched in; within 1e-4 relative of the former, 1e-6 of the finer one
-    from l1b2 import coupled
+    from l1b2.physics import steady as coupled
     new = [coupled.steady_state(motor, s, V0, m, d, mode=mode) for s, V0, m, d in STEADY_GRID]
     with monkeypatch.context() as mp:
         mp.setattr(itf, "interface_forces", itf.interface_forces_reference)
@@ -590,7 +590,7 @@ def test_steady_speeds_unchanged_by_the_closed_form(motor, monkeypatch, mode):
 
 def test_steady_state_stuck_slider_unchanged(motor, monkeypatch):
     # reference: the numerical kernel patched in; at low voltage with a load the guide holds the slider
-    from l1b2 import coupled
+    from l1b2.physics import steady as coupled
     new = coupled.steady_state(motor, 0.0, 60.0, 0.15, 1)
     with monkeypatch.context() as mp:
         mp.setattr(itf, "interface_forces", itf.interface_forces_reference)
