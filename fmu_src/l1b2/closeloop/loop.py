@@ -257,7 +257,8 @@ def close_loop(train_path, test_path, report_dir, *, order=8, k_folds=5, alpha=D
                min_gain=DEFAULT_MIN_GAIN, parsimony=DEFAULT_PARSIMONY, seed=0, n_starts=4,
                slider_mass_kg=None, plots_on=True, progress=None) -> dict:
     """Identify, diagnose, extend, re-identify and report (see the module docstring)."""
-    from ..ident.estimator import ExtraForces, PredictorIdentifier
+    from ..ident.estimator import PredictorIdentifier
+    from ..ident.extra import ExtraForces
 
     say = progress or (lambda msg: None)
     t_start = time.perf_counter()
