@@ -22,9 +22,9 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
-from l1b2 import interface as itf
-from l1b2.coupled import steady_state
-from l1b2.params import SYSTEM_MODELS_DIR, load_motor, sources
+from l1b2.physics import interface as itf
+from l1b2.physics.steady import steady_state
+from l1b2.physics.params import SYSTEM_MODELS_DIR, load_motor, sources
 
 REALISTIC = SYSTEM_MODELS_DIR / "realistic_motor.toml"
 V_PAPER = (220.0, 255.0, 290.0, 324.0)                     # the paper's V0 levels [V]
