@@ -24,7 +24,11 @@ def _floats(text: str) -> tuple[float, ...]:
 
 
 def _motor(args):
-    from .physics.params import load_motor
+    from .physics.params import load_motor, motor_file
+    if getattr(args, "motor", None) and getattr(args, "params", None):
+        raise L1B2Error("give either --motor NAME or --params FILE, not both")
+    if getattr(args, "motor", None):
+        return load_motor(motor_file(args.motor))
     return load_motor(getattr(args, "params", None))
 
 
@@ -132,6 +136,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("names", nargs="*", help="Driver Stator Interface Slider (default: all)")
     p.add_argument("--out", type=Path, default=Path("dist/fmus"))
     p.add_argument("--params", type=Path, help="motor parameter TOML (default: reference motor)")
+    p.add_argument("--motor", help="an embedded motor by name: reference_motor (default), realistic_motor "
+                   "(Coulomb-dominated friction, where Eq. 29 is not exact)")
     p.set_defaults(func=cmd_fmus)
 
     p = sub.add_parser("simulate", help="one run of the coupled motor, CSV out")
@@ -150,6 +156,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--iterate", action="store_true", help="fixed-point iteration of each macro step")
     p.add_argument("--pure-slip", action="store_true", help="interface in the paper's pure-slip mode")
     p.add_argument("--params", type=Path, help="motor parameter TOML (default: reference motor)")
+    p.add_argument("--motor", help="an embedded motor by name: reference_motor (default), realistic_motor "
+                   "(Coulomb-dominated friction, where Eq. 29 is not exact)")
     p.add_argument("--out", type=Path, required=True, help="CSV file")
     p.add_argument("--plot", type=Path, help="PNG of speed, position and tip amplitude")
     p.set_defaults(func=cmd_simulate)
@@ -175,6 +183,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-plots", action="store_true")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--params", type=Path, help="motor parameter TOML (default: reference motor)")
+    p.add_argument("--motor", help="an embedded motor by name: reference_motor (default), realistic_motor "
+                   "(Coulomb-dominated friction, where Eq. 29 is not exact)")
     p.set_defaults(func=cmd_rig)
 
     p = sub.add_parser("demo", help="the main job end to end on the reference motor and the virtual rig")
@@ -184,6 +194,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--quiet", action="store_true")
     p.add_argument("--params", type=Path, help="motor parameter TOML (default: reference motor)")
+    p.add_argument("--motor", help="an embedded motor by name: reference_motor (default), realistic_motor "
+                   "(Coulomb-dominated friction, where Eq. 29 is not exact)")
     p.set_defaults(func=cmd_demo)
 
     p = sub.add_parser("identify", help="identify the Eq. 29 predictor from measured data (max. likelihood)")
@@ -207,6 +219,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--identification", type=Path, help="identification.json from `l1b2 identify`")
     p.add_argument("--order", type=int, default=8)
     p.add_argument("--params", type=Path, help="motor parameter TOML (default: reference motor)")
+    p.add_argument("--motor", help="an embedded motor by name: reference_motor (default), realistic_motor "
+                   "(Coulomb-dominated friction, where Eq. 29 is not exact)")
     p.set_defaults(func=cmd_compare)
 
     p = sub.add_parser("close-loop", help="find the missing effect in the residual, add it, report before/after")
@@ -229,6 +243,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--identification", type=Path, help="identification.json whose predictor Predictor.fmu carries")
     p.add_argument("--no-predictor", action="store_true", help="skip Predictor.fmu")
     p.add_argument("--params", type=Path, help="motor parameter TOML (default: reference motor)")
+    p.add_argument("--motor", help="an embedded motor by name: reference_motor (default), realistic_motor "
+                   "(Coulomb-dominated friction, where Eq. 29 is not exact)")
     p.set_defaults(func=cmd_export)
 
     p = sub.add_parser("injections", aliases=["effects"], help="list the effects the rig can inject")
