@@ -80,5 +80,13 @@ class SystemStructureError(L1B2Error):
     """An SSP system structure is inconsistent (missing FMU, unit mismatch)."""
 
 
+class ArchiveError(SystemStructureError):
+    """An ``.ssp`` or ``.fmu`` archive is unreadable or exceeds the extraction limits (size, members, ratio)."""
+
+
+class SourceOutsideError(SystemStructureError):
+    """An SSD ``source`` names a file outside the ``.ssp`` archive (or the SSD's folder)."""
+
+
 class IdentificationError(L1B2Error):
     """Identification failed or was asked something the data cannot answer."""

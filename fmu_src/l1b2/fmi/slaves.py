@@ -67,8 +67,11 @@ class {name}(Fmi2Slave):
     def do_step(self, current_time, step_size):
         return self.adapter.do_step(current_time, step_size)
 
+    def _get_fmu_state(self):
+        return self.adapter.fmu_state(super()._get_fmu_state())
+
     def _set_fmu_state(self, state):
-        super()._set_fmu_state(state)
+        super()._set_fmu_state(self.adapter.before_state_restore(state))
         self.adapter.after_state_restore()
 '''
 
