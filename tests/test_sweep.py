@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from l1b2.cli import main as cli_main
-from l1b2.errors import SimulationError, SpecError
+from l1b2.errors import L1B2Error, SimulationError, SpecError
 from l1b2.sweep.analysis import sobol_indices, src_ranking
 from l1b2.sweep.sampling import draw_samples
 from l1b2.sweep.spec import parse_spec
@@ -149,6 +149,27 @@ def test_parameters_by_ssv_or_toml_name_and_nested_tables():
     with pytest.raises(SpecError, match="given twice"):
         parse_spec(TINY.replace('"Interface.mu_p" = { distribution = "uniform", low = 0.13, high = 0.17, unit = "1" }',
                                 'stator.P0_N = { distribution = "normal", sd = 0.1, unit = "N" }'))
+
+
+def test_the_shipped_study_parses_and_a_spec_may_name_its_motor(tmp_path):
+    from l1b2.physics.params import SYSTEM_MODELS_DIR, load_motor
+    from l1b2.sweep.spec import motor_reference
+    shipped = SYSTEM_MODELS_DIR / "studies" / "tolerances_220V.toml"
+    spec = parse_spec(shipped.read_text(), str(shipped))
+    assert spec.draws == 50 and len(draw_samples(spec)) == 50 and len(spec.parameters) == 5
+    # a motor file beside the spec: its values are the defaults and ranges the spec is checked against
+    (tmp_path / "m.toml").write_text((SYSTEM_MODELS_DIR / "reference_motor.toml").read_text().replace(
+        "P0_N = { value = 6.35,", "P0_N = { value = 5.0,"))
+    (tmp_path / "s.toml").write_text(TINY.replace("[study]", '[study]\nmotor = "m.toml"').replace(
+        "bounds = [5.5, 7.2]", "bounds = [4.0, 6.0]"))
+    text = (tmp_path / "s.toml").read_text()
+    assert motor_reference(text) == "m.toml"
+    spec = parse_spec(text, "s.toml", load_motor(tmp_path / "m.toml"))
+    assert spec.parameters[0].a == 5.0  # the normal's mean defaults to this motor's preload
+    (tmp_path / "bad.toml").write_text(TINY.replace("[study]", '[study]\nmotor = "nope.toml"'))
+    with pytest.raises(L1B2Error, match="nope.toml"):
+        run_sweep(tmp_path / "bad.toml", tmp_path / "o", workers=0, progress=False, plots_on=False)
+    assert not (tmp_path / "o").exists()
 
 
 def test_samples_are_drawn_up_front_from_the_seed_within_bounds():

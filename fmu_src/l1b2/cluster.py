@@ -92,7 +92,7 @@ def _check_workers(client, scheduler: str) -> None:
         client.wait_for_workers(1, timeout=30)
     except TimeoutError:
         raise ClusterError(f"--scheduler {scheduler}: no worker joined within 30 s "
-                           f"(start `dask-worker {scheduler}` on machines with l1b2 installed)") from None
+                           f"(start `dask worker {scheduler} --nthreads 1` on machines with l1b2 installed)") from None
     try:
         versions = client.run(package_version)
     except Exception as exc:  # noqa: BLE001 - a worker without the package fails to unpickle the call

@@ -209,23 +209,22 @@ def run_sweep(spec_path, out_dir, *, workers: int | None = None, scheduler: str 
     chunks_dir = out / "chunks"
     done = _stored_chunks(chunks_dir, spec.fingerprint(), len(bounds))
     ctx = TaskContext.from_spec(spec, mp, ensure_fmus() if spec.engine == "fmu" else None)
-    chunks_dir.mkdir(parents=True, exist_ok=True)
-    (chunks_dir / "study.json").write_text(json.dumps({"fingerprint": spec.fingerprint(), "samples": len(samples),
-                                                       "chunk_size": spec.chunk_size}, indent=1))
     skipped = sum(b - a for cid, (a, b) in enumerate(bounds) if cid in done)
-    bar = tqdm(total=len(samples), initial=skipped, desc=f"sweep ({spec.engine})", unit="traverse",
-               disable=not progress)
     parallel = scheduler is not None or workers != 0
     t0 = time.perf_counter()
     with (dask_client(workers, scheduler) if parallel else contextlib.nullcontext()) as client:
         n_workers = len(client.nthreads()) if client is not None else 1
+        chunks_dir.mkdir(parents=True, exist_ok=True)
+        (chunks_dir / "study.json").write_text(json.dumps(
+            {"fingerprint": spec.fingerprint(), "samples": len(samples), "chunk_size": spec.chunk_size}, indent=1))
         t1 = time.perf_counter()
-        for cid, frame in runner.execute(samples, ctx, spec.chunk_size, done=done, client=client,
-                                         traverse=traverse):
-            _write_parquet_atomically(frame, chunks_dir / f"chunk-{cid:05d}.parquet")
-            bar.update(len(frame))
+        with tqdm(total=len(samples), initial=skipped, desc=f"sweep ({spec.engine})", unit="traverse",
+                  disable=not progress) as bar:
+            for cid, frame in runner.execute(samples, ctx, spec.chunk_size, done=done, client=client,
+                                             traverse=traverse):
+                _write_parquet_atomically(frame, chunks_dir / f"chunk-{cid:05d}.parquet")
+                bar.update(len(frame))
         t2 = time.perf_counter()
-    bar.close()
     table = runner.assemble((pd.read_parquet(chunks_dir / f"chunk-{cid:05d}.parquet") for cid in range(len(bounds))),
                             len(samples))
     run = len(samples) - skipped

@@ -80,8 +80,8 @@ def sensitivity_bars(res, path) -> Path | None:
     ax.invert_yaxis()
     ax.set_xlabel(f"sensitivity of {c}")
     ax.legend(fontsize=7)
-    ax.set_title(f"{res.spec.name}: which parameter matters most (operating point {int(g['op_id'].iloc[0])})",
-                 fontsize=9)
+    op = res.table[res.table["op_id"] == g["op_id"].iloc[0]].iloc[0]
+    ax.set_title(f"{res.spec.name}\nwhich parameter matters most at {_op_label(op)}", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
