@@ -12,7 +12,9 @@
 * :func:`sobol_indices`: for a Saltelli design, first-order indices by
   Saltelli et al. (2010) ``S_i = mean(f_B (f_ABi - f_A)) / V`` and total
   indices by Jansen (1999) ``ST_i = mean((f_A - f_ABi)^2) / (2 V)``, with
-  95 % bootstrap half-widths (resampling the base draws).
+  95 % bootstrap half-widths (resampling the base draws); the outputs are
+  centred on their mean first, which leaves the estimators' expectation and
+  cuts their variance.
 """
 
 from __future__ import annotations
@@ -83,6 +85,8 @@ def src_ranking(df: pd.DataFrame, outputs) -> pd.DataFrame:
 
 
 def _sobol(fa, fb, fab):
+    mean = np.mean(np.concatenate([fa, fb]))  # centred: the estimators' variance grows with the output's mean
+    fa, fb, fab = fa - mean, fb - mean, fab - mean
     var = np.var(np.concatenate([fa, fb]), ddof=1)
     if not var > 0:
         return np.full(fab.shape[0], np.nan), np.full(fab.shape[0], np.nan)
