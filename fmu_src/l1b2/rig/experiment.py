@@ -211,9 +211,15 @@ def worker_fmu_dir(fmu_dir=None) -> Path:
     worker on another machine may not see it and builds the FMUs once into
     its own cache (:func:`l1b2.fmi.cache.ensure_fmus`), reused by later tasks.
     """
+    global _WORKER_FMUS
     if fmu_dir is not None and Path(fmu_dir).is_dir():
         return Path(fmu_dir)
-    return ensure_fmus(log=None)
+    if _WORKER_FMUS is None or not _WORKER_FMUS.is_dir():
+        _WORKER_FMUS = ensure_fmus(log=None)
+    return _WORKER_FMUS
+
+
+_WORKER_FMUS: Path | None = None  # this process's fallback FMU folder (found or built once)
 
 
 def simulate_traverse(mp: MotorParams, spec: RunSpec, plan: RigPlan = RigPlan(), engine: str = "inprocess",
