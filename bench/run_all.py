@@ -1,5 +1,9 @@
 #!/usr/bin/env python
-"""Run every benchmark in bench/ (each prints its own side-by-side table)."""
+"""Run every benchmark in bench/ (each prints its own side-by-side table).
+
+bench_closeloop.py, bench_cosim.py, bench_identify.py, bench_sweep.py: every
+``bench_*.py`` beside this file is run, in name order.
+"""
 import runpy
 import sys
 from pathlib import Path

@@ -16,7 +16,7 @@ def rig_dir(name: str = "clean", injections=(), injection_seed=None, plan: RigPl
     if key not in _CACHE:
         plan = plan or RigPlan(step_s=1e-3)
         mp = load_motor()
-        df, truth = run_experiment(plan, mp, injections=list(injections), engine="inprocess", jobs=2,
+        df, truth = run_experiment(plan, mp, injections=list(injections), engine="inprocess", workers=2,
                                    injection_seed=injection_seed)
         out = _ROOT / f"{name}_{len(_CACHE)}"
         write_experiment(df, out, mp, plan, truth)

@@ -32,11 +32,13 @@ ALLOWED = {
     "fmi": {"errors", "units", "physics", "predictor", "cosim"},
     "ident": {"errors", "units", "physics", "predictor", "data"},
     "closeloop": {"errors", "units", "physics", "predictor", "data", "ident"},
-    "rig": {"errors", "units", "physics", "predictor", "cosim", "fmi", "data"},
+    "cluster": {"errors", "units"},  # the parallel engine (Dask) under the rig and the sweeps
+    "rig": {"errors", "units", "physics", "predictor", "cosim", "fmi", "data", "cluster"},
+    "sweep": {"errors", "units", "physics", "predictor", "cosim", "fmi", "data", "rig", "cluster"},
     "workflows": {"errors", "units", "physics", "predictor", "cosim", "fmi", "data", "ident", "closeloop", "rig",
-                  "__init__"},
+                  "cluster", "sweep", "__init__"},
     "cli": {"errors", "units", "physics", "predictor", "cosim", "fmi", "data", "ident", "closeloop", "rig",
-            "workflows", "__init__"},
+            "cluster", "sweep", "workflows", "__init__"},
     "__init__": set(),
 }
 #: the package's version lives in ``l1b2/__init__.py``; any layer may read it

@@ -102,8 +102,12 @@ def cmd_rig(args) -> int:
                    record_temperature=args.record_temperature, pause_s=args.pause, max_run_s=args.max_run)
     injections = [parse_injection(s) for s in args.inject]
     t0 = time.perf_counter()
-    df, truth = run_experiment(plan, mp, injections=injections, engine=args.engine, jobs=args.jobs,
-                               fmu_dir=args.fmu_dir, injection_seed=args.injection_seed, progress=not args.quiet)
+    if args.jobs is not None:
+        print("l1b2: warning: --jobs is deprecated, use --workers", file=sys.stderr)
+    workers = args.jobs if args.jobs is not None else args.workers
+    df, truth = run_experiment(plan, mp, injections=injections, engine=args.engine, workers=workers,
+                               scheduler=args.scheduler, fmu_dir=args.fmu_dir, injection_seed=args.injection_seed,
+                               progress=not args.quiet)
     truth["wall_time_s"] = round(time.perf_counter() - t0, 2)
     paths = write_experiment(df, args.out, mp, plan, truth)
     out = Path(args.out)
@@ -120,6 +124,48 @@ def cmd_rig(args) -> int:
         print(f"fig9c: v_s = {summary['fig9c']['k0']:.3f} * omega*U_w + {summary['fig9c']['intercept_m_s'] * 1e3:.1f} mm/s,"
               f" R^2 = {summary['fig9c']['r2']:.3f}")
     return 0
+
+
+def cmd_sweep(args) -> int:
+    """A design study: operating-point grid x Monte-Carlo / Saltelli draws of motor parameters, on Dask."""
+    from .workflows import run_sweep
+    try:
+        res = run_sweep(args.spec, args.out, workers=args.workers, scheduler=args.scheduler,
+                        progress=not args.quiet, plots_on=not args.no_plots)
+    except KeyboardInterrupt:
+        print(f"l1b2: interrupted; finished chunks are in {Path(args.out) / 'chunks'}: run the same command "
+              f"to resume", file=sys.stderr)
+        return 130
+    i = res.info
+    print(f"sweep: {len(res.table)} samples ({i['executed_samples']} run, {i['skipped_samples']} already stored), "
+          f"{len(res.failed)} failed, {i['wall_time_s']} s on {i['engine_workers']} worker(s)"
+          + (f", {i['worker_seconds_per_traverse']} worker-s per traverse" if i['worker_seconds_per_traverse'] else ""))
+    for line in res.report_lines():
+        print(line)
+    print(f"wrote {Path(args.out) / 'samples.parquet'}, summary.csv, sensitivity.csv, study.json")
+    for f in sorted(Path(args.out).glob("sweep_*.png")):
+        print(f"plot: {f}")
+    return 0
+
+
+def _add_sweep_parser(sub):
+    from .cluster import default_workers
+    p = sub.add_parser("sweep", help="design study: operating points x parameter draws on Dask (Parquet, "
+                                     "percentiles, sensitivities, PNGs)")
+    p.add_argument("--spec", type=Path, required=True, help="study specification (TOML; see README 'Design studies')")
+    p.add_argument("--out", type=Path, required=True, help="output folder (rerun the same command to resume)")
+    _engine_args(p, default_workers=default_workers(), what="traverses (0 = serially in this process)")
+    p.add_argument("--no-plots", action="store_true")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_sweep)
+
+
+def _engine_args(p, default_workers, what):
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--workers", type=int, default=default_workers,
+                   help=f"local Dask worker processes (one thread each) for the {what}")
+    g.add_argument("--scheduler", metavar="ADDRESS", help="use the Dask cluster at ADDRESS (tcp://host:8786) "
+                   "instead of a local one")
 
 
 # ---------------------------------------------------------------------------
@@ -172,7 +218,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--engine", choices=("fmu", "inprocess"), default="fmu")
     p.add_argument("--fmu-dir", type=Path, help="folder with the subsystem FMUs (default: built once into the "
                    "per-user cache)")
-    p.add_argument("--jobs", type=int, default=2, help="parallel runs (stateful effects run serially)")
+    _engine_args(p, default_workers=2, what="runs (stateful effects run serially; 1 = serially here)")
+    p.add_argument("--jobs", type=int, help="deprecated alias of --workers")
     p.add_argument("--step", type=float, default=2e-4, help="communication step [s]")
     p.add_argument("--pause", type=float, default=1.0, help="pause between runs [s]")
     p.add_argument("--max-run", type=float, default=4.0, help="longest run [s]")
@@ -187,6 +234,7 @@ def build_parser() -> argparse.ArgumentParser:
     _motor_args(p)
     p.set_defaults(func=cmd_rig)
 
+    _add_sweep_parser(sub)
     p = sub.add_parser("demo", help="the main job end to end on the reference motor and the virtual rig")
     p.add_argument("--out", type=Path, default=Path("demo_out"))
     p.add_argument("--effect", default="pulley_friction", help="effect injected for the close-the-loop stage")
@@ -285,7 +333,7 @@ def cmd_demo(args) -> int:
         print(f"    {fmu:9s} {name:28s} {value:12.5g} {unit}")
     print(f"[3] the paper's experiment on the virtual rig, four FMUs co-simulated by fmpy (engine {args.engine})")
     rig_args = ["rig", "--out", str(out / "rig"), "--engine", args.engine, "--fmu-dir", str(fmu_dir),
-                "--jobs", str(args.jobs)] + (["--quiet"] if args.quiet else [])
+                "--workers", str(args.jobs)] + (["--quiet"] if args.quiet else [])
     code = main(rig_args)
     if code:
         return code
@@ -301,7 +349,7 @@ def cmd_demo(args) -> int:
         return code
     print(f"[6] closing the loop on rig data with an undeclared effect ({args.effect})")
     eff_dir = out / f"rig_{args.effect}"
-    code = main(["rig", "--out", str(eff_dir), "--engine", "inprocess", "--step", "0.001", "--jobs",
+    code = main(["rig", "--out", str(eff_dir), "--engine", "inprocess", "--step", "0.001", "--workers",
                  str(args.jobs), "--inject", args.effect, "--no-plots"] + (["--quiet"] if args.quiet else []))
     if code:
         return code
@@ -312,6 +360,12 @@ def cmd_demo(args) -> int:
     print("[7] exporting FMUs, L1B2Motor.ssp and L1B2Motor.fmu")
     code = main(["export", "--out", str(out / "export"), "--identification",
                  str(out / "identify" / "identification.json")])
+    if code:
+        return code
+    print("[8] a design study: speed over the motor's tolerances at 220 V, 0.05 kg (50 draws, on Dask)")
+    from .physics.params import SYSTEM_MODELS_DIR
+    code = main(["sweep", "--spec", str(SYSTEM_MODELS_DIR / "studies" / "tolerances_220V.toml"),
+                 "--out", str(out / "sweep"), "--workers", str(args.jobs)] + (["--quiet"] if args.quiet else []))
     if code:
         return code
     print(f"demo outputs in {out}")

@@ -90,3 +90,14 @@ class SourceOutsideError(SystemStructureError):
 
 class IdentificationError(L1B2Error):
     """Identification failed or was asked something the data cannot answer."""
+
+
+class SpecError(L1B2Error):
+    """A study specification (``l1b2 sweep --spec``) is invalid; the message names the key.
+
+    E.g. ``study.toml: parameters.Interface.mu_q: unknown parameter (Interface has k_e_N_per_m, mu_p, ...)``.
+    """
+
+
+class ClusterError(L1B2Error):
+    """The parallel engine could not be used (scheduler unreachable, workers lost for good)."""

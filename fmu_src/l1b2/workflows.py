@@ -141,3 +141,95 @@ def run_comparison(out_dir, mp=None, identification: dict | None = None, *, orde
                       "time-domain co-simulation); relative error against the co-simulation's speed"}
     (out / "comparison.json").write_text(json.dumps(report, indent=1))
     return report
+
+
+# ---------------------------------------------------------------------------
+# Design studies (issue 13): `l1b2 sweep`
+# ---------------------------------------------------------------------------
+
+def _stored_chunks(chunks_dir: Path, fingerprint: str, n_chunks: int) -> set[int]:
+    """Chunk ids already stored for this study; refuses a folder that holds another study's chunks."""
+    manifest = chunks_dir / "study.json"
+    if not manifest.is_file():
+        return set()
+    from .errors import SpecError
+    stored = json.loads(manifest.read_text()).get("fingerprint")
+    if stored != fingerprint:
+        raise SpecError(f"{chunks_dir}: holds the chunks of another study (fingerprint {stored}, this spec "
+                        f"{fingerprint}); use another --out or remove {chunks_dir}")
+    ids = {int(p.stem.split("-")[1]) for p in chunks_dir.glob("chunk-*.parquet")}
+    return {i for i in ids if i < n_chunks}
+
+
+def _write_parquet_atomically(df: pd.DataFrame, path: Path) -> None:
+    import os
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    df.to_parquet(tmp, index=False)
+    os.replace(tmp, path)
+
+
+def run_sweep(spec_path, out_dir, *, workers: int | None = None, scheduler: str | None = None,
+              progress: bool = True, plots_on: bool = True, traverse=None):
+    """Run the study of ``spec_path`` into ``out_dir``; returns its :class:`l1b2.sweep.result.SweepResult`.
+
+    Resumable: every finished chunk is written at once, atomically, to
+    ``out_dir/chunks/chunk-NNNNN.parquet``; the same command run again skips
+    the chunks stored (a folder holding another study's chunks is refused).
+    At the end: ``samples.parquet`` (every sample's parameters and outputs,
+    in sample-id order), ``summary.csv``, ``sensitivity.csv`` (+ ``sobol.csv``),
+    ``study.json`` and PNGs. ``workers=0`` runs in this process, otherwise
+    a local Dask cluster of ``workers`` processes or the one at ``scheduler``.
+    For the FMU engine the FMUs are built (or found in the cache) once, here.
+    """
+    import contextlib
+    import time
+
+    from tqdm import tqdm
+
+    from .cluster import dask_client
+    from .errors import SpecError
+    from .fmi.cache import ensure_fmus
+    from .physics.params import load_motor
+    from .sweep import runner
+    from .sweep.result import SweepResult
+    from .sweep.sampling import draw_samples
+    from .sweep.spec import motor_reference, parse_spec
+    from .sweep.tasks import TaskContext
+    spec_path, out = Path(spec_path), Path(out_dir)
+    try:
+        text = spec_path.read_text()
+    except OSError as exc:
+        raise SpecError(f"{spec_path}: cannot read the study ({exc.strerror})") from None
+    ref = motor_reference(text, str(spec_path))
+    mp = load_motor(spec_path.parent / ref if ref else None)
+    spec = parse_spec(text, str(spec_path), mp)
+    samples = draw_samples(spec)
+    bounds = runner.chunk_bounds(len(samples), spec.chunk_size)
+    chunks_dir = out / "chunks"
+    done = _stored_chunks(chunks_dir, spec.fingerprint(), len(bounds))
+    ctx = TaskContext.from_spec(spec, mp, ensure_fmus() if spec.engine == "fmu" else None)
+    skipped = sum(b - a for cid, (a, b) in enumerate(bounds) if cid in done)
+    parallel = scheduler is not None or workers != 0
+    t0 = time.perf_counter()
+    with (dask_client(workers, scheduler) if parallel else contextlib.nullcontext()) as client:
+        n_workers = len(client.nthreads()) if client is not None else 1
+        chunks_dir.mkdir(parents=True, exist_ok=True)
+        (chunks_dir / "study.json").write_text(json.dumps(
+            {"fingerprint": spec.fingerprint(), "samples": len(samples), "chunk_size": spec.chunk_size}, indent=1))
+        t1 = time.perf_counter()
+        with tqdm(total=len(samples), initial=skipped, desc=f"sweep ({spec.engine})", unit="traverse",
+                  disable=not progress) as bar:
+            for cid, frame in runner.execute(samples, ctx, spec.chunk_size, done=done, client=client,
+                                             traverse=traverse):
+                _write_parquet_atomically(frame, chunks_dir / f"chunk-{cid:05d}.parquet")
+                bar.update(len(frame))
+        t2 = time.perf_counter()
+    table = runner.assemble((pd.read_parquet(chunks_dir / f"chunk-{cid:05d}.parquet") for cid in range(len(bounds))),
+                            len(samples))
+    run = len(samples) - skipped
+    info = {"engine_workers": n_workers, "scheduler": scheduler, "executed_samples": run,
+            "skipped_samples": skipped, "wall_time_s": round(t2 - t0, 3), "startup_s": round(t1 - t0, 3),
+            "worker_seconds_per_traverse": round((t2 - t1) * n_workers / run, 4) if run else None}
+    res = SweepResult(table, spec, ctx, info)
+    res.save(out, plots=plots_on)
+    return res

@@ -23,13 +23,17 @@ Engines: ``"fmu"`` runs the four FMUs through the SSD-driven fmpy master
 (:class:`l1b2.cosim.master.CoSimulation`); ``"inprocess"`` runs the same blocks
 without FMUs (:class:`l1b2.cosim.engine.InProcessMotor`), identical results,
 faster.
+
+Parallel runs: independent runs go to the Dask engine of :mod:`l1b2.cluster`
+(``workers`` local processes or an existing cluster) and are put back in rig
+order on one clock, identical to a serial run; runs that carry state
+(self-heating) run serially in rig order.
 """
 
 from __future__ import annotations
 
 import json
 import math
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -179,7 +183,8 @@ def _simulate_inprocess(mp: MotorParams, spec: RunSpec, plan: RigPlan, V_s: floa
     m.initialize(V_s=V_s, f_s=plan.f_drive_Hz, T=plan.ambient_degC, direction=spec.direction,
                  m_load=spec.load_kg, s0=s0)
     rec = ("Slider.s", "Slider.v", "Stator.v_tip", "Stator.T_stator", "Slider.at_stop")
-    return m.run(plan.max_run_s, record=rec, until=lambda mm: mm.value("Slider.at_stop") == spec.direction)
+    res = m.run(plan.max_run_s, record=rec, until=lambda mm: mm.value("Slider.at_stop") == spec.direction)
+    return {k: res[k] for k in ("time",) + rec}
 
 
 def _simulate_fmu(mp: MotorParams, spec: RunSpec, plan: RigPlan, V_s: float, s0: float, fmu_dir):
@@ -199,6 +204,43 @@ def _simulate_fmu(mp: MotorParams, spec: RunSpec, plan: RigPlan, V_s: float, s0:
     return {k: res[k] for k in ["time"] + rec}
 
 
+def worker_fmu_dir(fmu_dir=None) -> Path:
+    """The FMU folder to use in this process: ``fmu_dir`` if it exists here, else the per-user cache.
+
+    The coordinating process passes the folder it built (or was given); a
+    worker on another machine may not see it and builds the FMUs once into
+    its own cache (:func:`l1b2.fmi.cache.ensure_fmus`), reused by later tasks.
+    """
+    global _WORKER_FMUS
+    if fmu_dir is not None and Path(fmu_dir).is_dir():
+        return Path(fmu_dir)
+    if _WORKER_FMUS is None or not _WORKER_FMUS.is_dir():
+        _WORKER_FMUS = ensure_fmus(log=None)
+    return _WORKER_FMUS
+
+
+_WORKER_FMUS: Path | None = None  # this process's fallback FMU folder (found or built once)
+
+
+def simulate_traverse(mp: MotorParams, spec: RunSpec, plan: RigPlan = RigPlan(), engine: str = "inprocess",
+                      fmu_dir=None, nominal: MotorParams | None = None) -> dict:
+    """One traverse from rest at the end stop behind to the far one; the raw co-simulated series.
+
+    Returns ``{"time", "Slider.s", "Slider.v", "Stator.v_tip", "Stator.T_stator", "Slider.at_stop"}``
+    (numpy arrays at every communication step). The supply is set from the
+    *nominal* motor's small-signal drive gain (what the operator calibrated),
+    so an injected drive effect or a drawn driver tolerance is not compensated.
+    """
+    nominal = nominal or mp
+    V_s = float(drv.supply_for_voltage_V(nominal.driver, spec.V0_V, 1.0, plan.f_drive_Hz, plan.ambient_degC))
+    s0 = mp.slider.s_min_m if spec.direction > 0 else mp.slider.s_max_m
+    if engine == "inprocess":
+        return _simulate_inprocess(mp, spec, plan, V_s, s0)
+    if engine == "fmu":
+        return _simulate_fmu(mp, spec, plan, V_s, s0, worker_fmu_dir(fmu_dir))
+    raise SimulationError(f"unknown engine '{engine}' (use 'inprocess' or 'fmu')")
+
+
 def simulate_run(mp: MotorParams, spec: RunSpec, plan: RigPlan = RigPlan(), engine: str = "inprocess",
                  fmu_dir=None, nominal: MotorParams | None = None) -> pd.DataFrame:
     """One traverse; returns the rig's samples of this run (data-format columns plus extras).
@@ -206,15 +248,7 @@ def simulate_run(mp: MotorParams, spec: RunSpec, plan: RigPlan = RigPlan(), engi
     The supply is set from the *nominal* motor's small-signal drive gain (what
     the operator calibrated), so an injected drive effect is not compensated.
     """
-    nominal = nominal or mp
-    V_s = float(drv.supply_for_voltage_V(nominal.driver, spec.V0_V, 1.0, plan.f_drive_Hz, plan.ambient_degC))
-    s0 = mp.slider.s_min_m if spec.direction > 0 else mp.slider.s_max_m
-    if engine == "inprocess":
-        r = _simulate_inprocess(mp, spec, plan, V_s, s0)
-    elif engine == "fmu":
-        r = _simulate_fmu(mp, spec, plan, V_s, s0, fmu_dir)
-    else:
-        raise SimulationError(f"unknown engine '{engine}' (use 'inprocess' or 'fmu')")
+    r = simulate_traverse(mp, spec, plan, engine, fmu_dir, nominal)
     every = int(round(1.0 / (plan.sample_rate_Hz * plan.step_s)))
     if abs(every * plan.sample_rate_Hz * plan.step_s - 1.0) > 1e-9:
         raise SimulationError(f"step {plan.step_s} s does not divide the sampling period 1/{plan.sample_rate_Hz} s")
@@ -248,20 +282,36 @@ def plan_runs(plan: RigPlan) -> list[tuple[float, float, int]]:
     return [(V, L, d) for V, L in conds for d in plan.directions]
 
 
-def _worker(args):
-    mp, spec, plan, engine, fmu_dir, nominal = args
-    return simulate_run(mp, spec, plan, engine, fmu_dir, nominal)
+def is_stateful(motor: MotorParams, injected=()) -> bool:
+    """Whether runs carry state from one to the next (then they run serially, in rig order).
+
+    A stateful injection does; so does a motor whose stator heats up
+    (``thermal_tau_s > 0``): each run starts at the temperature the previous
+    one left after the pause.
+    """
+    return any(INJECTIONS[i["name"]].stateful for i in injected) or motor.stator.thermal_tau_s > 0
 
 
 def run_experiment(plan: RigPlan = RigPlan(), mp: MotorParams | None = None, injections=(), engine="inprocess",
-                   jobs: int = 1, fmu_dir=None, injection_seed: int | None = None, progress: bool = False):
+                   jobs: int | None = None, fmu_dir=None, injection_seed: int | None = None, progress: bool = False,
+                   *, workers: int = 1, scheduler: str | None = None):
     """Run the whole experiment; returns ``(DataFrame, truth)``.
 
     ``injections`` is a list of injection names or ``(name, overrides)`` pairs; with
     ``injection_seed`` the ranged effect parameters are drawn at random.
     With ``engine="fmu"`` and no ``fmu_dir``, the FMUs come from the per-user
     cache (:func:`l1b2.fmi.cache.ensure_fmus`, built once on demand).
+
+    Runs are independent unless an injection (or the motor) carries state
+    from run to run (:func:`is_stateful`): then they run serially in rig
+    order. Otherwise, with ``workers >= 2`` or a ``scheduler`` address, they
+    run on the Dask engine of :mod:`l1b2.cluster` (a local cluster of
+    ``workers`` single-thread processes, or the cluster at ``scheduler``);
+    the data are identical to a serial run. ``jobs`` is the deprecated name
+    of ``workers``.
     """
+    if jobs is not None:
+        workers = jobs
     nominal = mp or load_motor()
     if engine == "fmu" and fmu_dir is None:
         fmu_dir = ensure_fmus()
@@ -275,44 +325,56 @@ def run_experiment(plan: RigPlan = RigPlan(), mp: MotorParams | None = None, inj
         overrides.update(values)
         injected.append({"name": name, "regressor": INJECTIONS[name].regressor, "parameters": values})
     motor = apply_overrides(nominal, overrides)
-    stateful = any(INJECTIONS[i["name"]].stateful for i in injected)
     conditions = plan_runs(plan)
     bar = None
     if progress:
         from tqdm import tqdm
         bar = tqdm(total=len(conditions), desc=f"rig ({engine})", unit="run")
-    frames = []
-    t_next = 0.0
     try:
-        if stateful or jobs <= 1:
-            T_st = plan.ambient_degC
-            for k, (V, L, d) in enumerate(conditions):
-                spec = RunSpec(k + 1, V, L, d, t_next,
-                               T_st if motor.stator.thermal_tau_s > 0 else None)
-                f = simulate_run(motor, spec, plan, engine, fmu_dir, nominal)
-                frames.append(f)
-                t_next = float(f[dataio.TIME].iloc[-1]) + plan.pause_s
-                if motor.stator.thermal_tau_s > 0:  # cools toward ambient during the pause
-                    T_st = plan.ambient_degC + (f.attrs["T_stator_end"] - plan.ambient_degC) * math.exp(
-                        -plan.pause_s / motor.stator.thermal_tau_s)
-                if bar:
-                    bar.update()
+        if is_stateful(motor, injected) or (workers <= 1 and not scheduler):
+            frames = _run_serially(motor, nominal, conditions, plan, engine, fmu_dir, bar)
         else:
-            specs = [RunSpec(k + 1, V, L, d) for k, (V, L, d) in enumerate(conditions)]
-            with ProcessPoolExecutor(max_workers=jobs) as ex:
-                for f in ex.map(_worker, [(motor, s, plan, engine, fmu_dir, nominal) for s in specs]):
-                    frames.append(f)
-                    if bar:
-                        bar.update()
-            for f in frames:  # lay the runs on one experiment clock with pauses
-                f[dataio.TIME] += t_next
-                t_next = float(f[dataio.TIME].iloc[-1]) + plan.pause_s
+            frames = _run_on_cluster(motor, nominal, conditions, plan, engine, fmu_dir, bar, workers, scheduler)
     finally:
         if bar:
             bar.close()
     df = pd.concat(frames, ignore_index=True)
     truth = {"injections": injected, "plan": asdict(plan), "engine": engine, "motor": nominal.name}
     return df, truth
+
+
+def _run_serially(motor, nominal, conditions, plan, engine, fmu_dir, bar) -> list:
+    """The runs one after the other on one experiment clock; the stator temperature carried over."""
+    frames, t_next, T_st = [], 0.0, plan.ambient_degC
+    for k, (V, L, d) in enumerate(conditions):
+        spec = RunSpec(k + 1, V, L, d, t_next, T_st if motor.stator.thermal_tau_s > 0 else None)
+        f = simulate_run(motor, spec, plan, engine, fmu_dir, nominal)
+        frames.append(f)
+        t_next = float(f[dataio.TIME].iloc[-1]) + plan.pause_s
+        if motor.stator.thermal_tau_s > 0:  # cools toward ambient during the pause
+            T_st = plan.ambient_degC + (f.attrs["T_stator_end"] - plan.ambient_degC) * math.exp(
+                -plan.pause_s / motor.stator.thermal_tau_s)
+        if bar:
+            bar.update()
+    return frames
+
+
+def _run_on_cluster(motor, nominal, conditions, plan, engine, fmu_dir, bar, workers, scheduler) -> list:
+    """Independent runs on the Dask engine, then laid on one experiment clock in rig order."""
+    from ..cluster import dask_client, run_tasks
+    specs = [RunSpec(k + 1, V, L, d) for k, (V, L, d) in enumerate(conditions)]
+    frames = [None] * len(specs)
+    with dask_client(workers, scheduler) as client:
+        args = [(motor, s, plan, engine, None if fmu_dir is None else str(fmu_dir), nominal) for s in specs]
+        for i, f in run_tasks(simulate_run, args, client=client, name="l1b2-rig"):
+            frames[i] = f
+            if bar:
+                bar.update()
+    t_next = 0.0
+    for f in frames:  # lay the runs on one experiment clock with pauses, as the serial rig does
+        f[dataio.TIME] += t_next
+        t_next = float(f[dataio.TIME].iloc[-1]) + plan.pause_s
+    return frames
 
 
 # ---------------------------------------------------------------------------
