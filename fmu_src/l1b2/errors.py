@@ -90,3 +90,7 @@ class SourceOutsideError(SystemStructureError):
 
 class IdentificationError(L1B2Error):
     """Identification failed or was asked something the data cannot answer."""
+
+
+class OutputError(L1B2Error):
+    """An output folder cannot be written: it is a file, holds files not written by l1b2, or another run holds it."""
