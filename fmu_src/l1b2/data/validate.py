@@ -337,7 +337,7 @@ def _range_problems(values: dict[str, np.ndarray]) -> list[DataProblem]:
     x = values[POSITION]
     _add_first(problems, POSITION, np.abs(x) > MAX_ABS_POSITION_M,
                lambda i: f"|position| = {fmt(abs(x[i]))} m > {fmt(MAX_ABS_POSITION_M)} m "
-                         "is implausible in SI units (suggests millimetres)")
+                         "is implausible in SI units (suggests millimetres or centimetres)")
     u = values[VOLTAGE]
     _add_first(problems, VOLTAGE, u < MIN_VOLTAGE_V,
                lambda i: f"voltage amplitude {fmt(u[i])} V is negative")
