@@ -198,10 +198,10 @@ def output_dir(out, *, command: str = "l1b2") -> Iterator[Path]:
         _swap_into_place(tmp, out)
         tmp = None
     finally:
+        lock.unlink(missing_ok=True)
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)
             _remove_empty(created)
-        lock.unlink(missing_ok=True)
 
 
 def _remove_empty(folders: list[Path]) -> None:
