@@ -196,3 +196,33 @@ def test_low_voltage_leaves_slider_stuck(motor):
     # reference: Eq. 22 - with a tiny drive the interface force cannot beat the static guide friction
     ss = steady.steady_state(motor, 0.0, 5.0, 0.0, 1)
     assert ss.stuck and ss.v_m_s == 0.0
+
+
+@pytest.mark.parametrize("margin, moves", [(-0.01, False), (+0.01, True)])
+def test_breakaway_threshold_in_the_engine_is_the_static_friction_level(motor, margin, moves):
+    # reference: Eq. 22 with the static coefficient - the slider held at its end stop by the drive
+    # leaves it backwards only when the pulley load beats drive force + mu_ss (kappa F_p + g m_s);
+    # 1 % of that level below it stays, 1 % above it moves (mu_sd, 20 % lower, would move both)
+    sl = motor.slider
+    t_switch = 0.1  # the stator has settled; until then no load, the drive presses the slider into the stop
+
+    def run(m_after):
+        m = engine.InProcessMotor(motor, h_s=2e-4)
+        m.initialize(V_s=motor.operating.V_s_V, s0=sl.s_max_m, direction=1.0,
+                     m_load=lambda t: 0.0 if t < t_switch else m_after)
+        return m.run(0.2, record=("Interface.F_d", "Stator.F_p", "Slider.s", "Slider.v"))
+
+    probe = run(0.0)
+    k = int(np.searchsorted(probe["time"], t_switch)) - 1
+    F_d, F_p = float(probe["Interface.F_d"][k]), float(probe["Stator.F_p"][k])
+    assert probe["Slider.s"][-1] == sl.s_max_m and F_d > 1.0  # pressed into the stop
+    assert abs(probe["Interface.F_d"][k - 50] - F_d) < 1e-6 * F_d  # settled before the switch
+    assert sl.pulley_mu == 0.0  # no load-path friction in the reference motor
+    static = sl.mu_ss * (sl.kappa * F_p + G * sl.mass_kg)
+    threshold_kg = (F_d + static) / G
+    r = run(threshold_kg + margin * static / G)
+    left = sl.s_max_m - r["Slider.s"][-1]
+    if moves:
+        assert left > 1e-4 and r["Slider.v"].min() < -1e-3
+    else:
+        assert left == 0.0 and np.all(r["Slider.v"] == 0.0)

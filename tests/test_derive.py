@@ -60,3 +60,51 @@ def test_paper_reduction_is_computable_and_reported(motor):
     assert p.sigma == motor.interface.sigma_N_s_per_m
     s = derive.summarize(derive.compare_steady(p, motor, mode="pure_slip", **GRID))
     assert np.isfinite(s["max_abs_rel_error"])
+
+
+# ---------------------------------------------------------------------------
+# The paper's reduction (Eq. 25, 26, 30) against the formulas evaluated here, independently
+# ---------------------------------------------------------------------------
+
+def _paper_reduction_by_hand(motor, s):
+    """A'(s), B'(s) [per second] and P(s) of Eq. 26 and Eq. 30 (divided by T_s), written out from the paper.
+
+    Eq. 26: Theta = |phi_b(L)| / (K_b sqrt((1 - (w/w_b0)^2)^2 + (2 zeta_b w/w_b0)^2)),
+    w_b0 = sqrt(K_b/M_b), zeta_b = C_b / (2 M_b w_b0); Eq. 25's denominator
+    Theta^-1 + 0.5 eta_T sigma w; Eq. 30: A = 4 sigma eta_T T_s / (pi T den),
+    B = 2 sigma A_b T_s / (T den). Only the B2 modal mass, stiffness, damping
+    and tip mode-shape value come from the stator model (eta_T = |phi_b(L)|).
+    """
+    from l1b2.physics import stator as st
+    w = 2 * np.pi * motor.operating.f_drive_Hz
+    T = 2 * np.pi / w
+    sigma = motor.interface.sigma_N_s_per_m
+    props = st.modal_properties(motor.stator, st.axial_force_N(motor.stator, s))
+    M, K, C, eta = (np.asarray(x, float) for x in (props.M_b, props.K_b, props.C_b, props.eta_T))
+    w_b0 = np.sqrt(K / M)
+    zeta = C / (2 * M * w_b0)
+    theta = eta / (K * np.sqrt((1 - (w / w_b0) ** 2) ** 2 + (2 * zeta * w / w_b0) ** 2))
+    den = 1 / theta + 0.5 * eta * sigma * w
+    A = 4 * sigma * eta / (np.pi * T * den)
+    B = 2 * sigma * motor.stator.A_b_N_per_V / (T * den)
+    return A, B, st.preload_N(motor.stator, s)
+
+
+def test_paper_reduction_matches_eq_26_and_30_evaluated_independently(motor):
+    # reference: Deng et al. Eq. 25, 26 and 30 written out above; with order + 1 grid points the
+    # Legendre series interpolates the derived functions exactly at the grid
+    order = 8
+    p = derive.derive_predictor(motor, method="paper", mode="pure_slip", order=order, n_grid=order + 1)
+    s = np.linspace(motor.slider.s_min_m + 1e-3, motor.slider.s_max_m - 1e-3, order + 1)
+    A, B, P = _paper_reduction_by_hand(motor, s)
+    np.testing.assert_allclose(p.A_prime(s), A, rtol=1e-7)
+    np.testing.assert_allclose(p.B_prime(s), B, rtol=1e-7)
+    np.testing.assert_allclose(p.P(s), P, rtol=1e-7)
+    # the check is sensitive: the friction term is about half of Eq. 25's denominator here and
+    # eta_T = |phi_b(L)| is about 2, so a factor 2 on either or eta_T^2 on Theta moves A' by > 20 %
+    from l1b2.physics import stator as st
+    props = st.modal_properties(motor.stator, st.axial_force_N(motor.stator, s))
+    w = 2 * np.pi * motor.operating.f_drive_Hz
+    friction = 0.5 * props.eta_T * motor.interface.sigma_N_s_per_m * w
+    den = 4 * motor.interface.sigma_N_s_per_m * props.eta_T * w / (2 * np.pi ** 2 * A)
+    assert np.all(friction / den > 0.3) and np.all(np.abs(props.eta_T - 1) > 0.5)

@@ -169,6 +169,7 @@ def test_coverage_pinned_configuration_free_run():
     noise = 5e-5
     inside = []
     ratios = []
+    estimates, stderrs, fisher_se, noise_var = [], [], [], []
     for seed in range(20):
         df = simulate_dataset(prm, SMALL, M_S, noise_std=noise, seed=100 + seed)
         idf = PredictorIdentifier(order=3, n_starts=4, fixed=fixed, seed=0).fit(df, M_S, mask=evaluation_mask(df))
@@ -177,12 +178,59 @@ def test_coverage_pinned_configuration_free_run():
         lo, hi = idf.ci95_[v, 0], idf.ci95_[v, 1]
         inside.append((lo <= th[v]) & (th[v] <= hi))
         ratios.append(idf.residual_rms_ / noise)
+        estimates.append(idf.theta_[v])
+        stderrs.append(idf.stderr_[v])
+        fisher_se.append(idf.stderr_fisher_[v])
+        noise_var.append(idf.noise_var_)
     inside = np.array(inside)
     cover = inside.mean(axis=0)
     vn = [n for n in names if n not in fixed]
     assert np.all(cover >= 0.9), dict(zip(vn, cover))
     ratios = np.array(ratios)
     assert np.all(np.abs(ratios - 1) < 0.1), ratios
+    # issue 14: the Eq. 32 noise variances are the simulated one (per run within 25 %, on average within
+    # 5 %): a variance off by a factor (standard errors scaled with it) fails here. (In this configuration
+    # the intervals are conservative for the higher Legendre coefficients - Fisher stderr up to ~1.9x the
+    # spread of the estimates over the repetitions, pooled coverage 99 % - so the two-sided coverage test
+    # is the next one, on a configuration where the Fisher matrix is calibrated.)
+    noise_var = np.array(noise_var)
+    assert np.all(np.abs(noise_var / noise**2 - 1) < 0.25), noise_var / noise**2
+    assert abs(np.mean(noise_var) / noise**2 - 1) < 0.05, np.mean(noise_var) / noise**2
+    assert np.all(np.array(stderrs) >= np.array(fisher_se) * (1 - 1e-12))
+
+
+#: the two-sided coverage configuration: the leading coefficients and c_r varied, the rest pinned at the truth
+TWO_SIDED_VARIED = ("c_r", "alpha_0", "alpha_1", "beta_0", "beta_1", "p_1")
+
+
+def test_coverage_is_two_sided():
+    """95 % intervals cover 90-99 % of 30 repeated simulations (pooled), not more, not less.
+
+    Six parameters varied (the rest pinned at the truth), order 3, white speed
+    noise 5e-5 m/s. Too wide intervals fail as well as too narrow ones: the
+    reported stderr must agree with the spread of the estimates over the
+    repetitions (factor 0.7-1.4, the sampling error of 30 repetitions) and the
+    Eq. 32 noise variance with the simulated one.
+    """
+    prm, th, names = _truth(3)
+    fixed = {n: th[names.index(n)] for n in names if n not in TWO_SIDED_VARIED}
+    noise = 5e-5
+    inside, est, se, nv = [], [], [], []
+    for seed in range(30):
+        df = simulate_dataset(prm, SMALL, M_S, noise_std=noise, seed=300 + seed)
+        idf = PredictorIdentifier(order=3, n_starts=1, fixed=fixed, seed=0).fit(df, M_S, mask=evaluation_mask(df))
+        v = idf.varied_
+        assert [names[i] for i in np.flatnonzero(v)] == list(TWO_SIDED_VARIED)
+        lo, hi = idf.ci95_[v, 0], idf.ci95_[v, 1]
+        inside.append((lo <= th[v]) & (th[v] <= hi))
+        est.append(idf.theta_[v])
+        se.append(idf.stderr_[v])
+        nv.append(np.mean(idf.noise_var_))
+    inside = np.array(inside)
+    assert 0.90 <= inside.mean() <= 0.99, inside.mean(axis=0)
+    ratio = np.mean(se, axis=0) / np.std(est, axis=0, ddof=1)
+    assert np.all((ratio > 0.7) & (ratio < 1.4)), dict(zip(TWO_SIDED_VARIED, ratio))
+    assert abs(np.mean(nv) / noise**2 - 1) < 0.05
 
 
 def test_one_step_recovers_theta_on_low_noise_data():

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -97,28 +98,32 @@ def cmd_rig(args) -> int:
         write_experiment,
     )
 
+    from .data.jsonsafe import dumps
+    from .workflows import output_dir
+
     mp = _motor(args)
     plan = RigPlan(voltages_V=args.voltages, loads_kg=args.loads, step_s=args.step, seed=args.seed,
                    record_temperature=args.record_temperature, pause_s=args.pause, max_run_s=args.max_run)
     injections = [parse_injection(s) for s in args.inject]
-    t0 = time.perf_counter()
     if args.jobs is not None:
         print("l1b2: warning: --jobs is deprecated, use --workers", file=sys.stderr)
     workers = args.jobs if args.jobs is not None else args.workers
-    df, truth = run_experiment(plan, mp, injections=injections, engine=args.engine, workers=workers,
-                               scheduler=args.scheduler, fmu_dir=args.fmu_dir, injection_seed=args.injection_seed,
-                               progress=not args.quiet)
-    truth["wall_time_s"] = round(time.perf_counter() - t0, 2)
-    paths = write_experiment(df, args.out, mp, plan, truth)
     out = Path(args.out)
-    summary = {"runs": int(df["run"].nunique()), "samples": int(len(df)), "wall_time_s": truth["wall_time_s"],
-               "files": {k: str(v) for k, v in paths.items()}}
-    if not args.no_plots:
-        plots.fig9a_speed_vs_position_by_voltage(df, out / "fig9a_speed_vs_position_by_voltage.png")
-        plots.fig9b_speed_vs_position_by_load(df, out / "fig9b_speed_vs_position_by_load.png")
-        _, fit = plots.fig9c_speed_vs_tip_velocity(df, out / "fig9c_speed_vs_tip_velocity.png")
-        summary["fig9c"] = fit
-    (out / "rig_summary.json").write_text(json.dumps(summary, indent=1))
+    with output_dir(out, command="rig") as tmp:
+        t0 = time.perf_counter()
+        df, truth = run_experiment(plan, mp, injections=injections, engine=args.engine, workers=workers,
+                                   scheduler=args.scheduler, fmu_dir=args.fmu_dir,
+                                   injection_seed=args.injection_seed, progress=not args.quiet)
+        truth["wall_time_s"] = round(time.perf_counter() - t0, 2)
+        paths = write_experiment(df, tmp, mp, plan, truth)
+        summary = {"runs": int(df["run"].nunique()), "samples": int(len(df)), "wall_time_s": truth["wall_time_s"],
+                   "files": {k: str(out / Path(v).name) for k, v in paths.items()}}
+        if not args.no_plots:
+            plots.fig9a_speed_vs_position_by_voltage(df, tmp / "fig9a_speed_vs_position_by_voltage.png")
+            plots.fig9b_speed_vs_position_by_load(df, tmp / "fig9b_speed_vs_position_by_load.png")
+            _, fit = plots.fig9c_speed_vs_tip_velocity(df, tmp / "fig9c_speed_vs_tip_velocity.png")
+            summary["fig9c"] = fit
+        (tmp / "rig_summary.json").write_text(dumps(summary))
     print(f"rig: {summary['runs']} runs, {summary['samples']} samples in {summary['wall_time_s']} s -> {out}")
     if "fig9c" in summary:
         print(f"fig9c: v_s = {summary['fig9c']['k0']:.3f} * omega*U_w + {summary['fig9c']['intercept_m_s'] * 1e3:.1f} mm/s,"
@@ -176,6 +181,11 @@ def _motor_args(p) -> None:
     p.add_argument("--params", type=Path, help="motor parameter TOML (default: reference motor)")
     p.add_argument("--motor", help="an embedded motor by name: reference_motor (default), realistic_motor "
                    "(Coulomb-dominated friction, where Eq. 29 is not exact)")
+
+
+UNUSUAL_UNITS_HELP = ("accept values a linear USM rig does not produce in SI units (grams as kg, kV, ms, a speed "
+                      "column disagreeing with the position's derivative, ...) instead of refusing them as a likely "
+                      "unit mistake; recorded in the report")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -256,6 +266,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--starts", type=int, default=8, help="multi-start local searches")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--slider-mass", type=float, help="slider mass [kg] (overrides the sidecar)")
+    p.add_argument("--allow-unusual-units", action="store_true", help=UNUSUAL_UNITS_HELP)
     p.add_argument("--no-plots", action="store_true")
     p.add_argument("--verbose", action="store_true")
     p.set_defaults(func=cmd_identify)
@@ -278,6 +289,7 @@ def build_parser() -> argparse.ArgumentParser:
                                                                 "effect must explain to be added")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--slider-mass", type=float, help="slider mass [kg] (overrides the sidecars)")
+    p.add_argument("--allow-unusual-units", action="store_true", help=UNUSUAL_UNITS_HELP)
     p.add_argument("--no-plots", action="store_true")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_close_loop)
@@ -372,12 +384,34 @@ def cmd_demo(args) -> int:
     return 0
 
 
+def _pct(x) -> str:
+    return "-" if x is None or x != x else f"{x:.2%}"
+
+
+def print_input_checks(checks: dict, metrics: dict) -> None:
+    """Warnings of a report's input checks and diverged runs (shared by identify and close-loop)."""
+    found = [m for part in ("train", "test") for m in checks.get("unusual_units", {}).get(part, [])]
+    if checks.get("allow_unusual_units") and found:
+        print(f"  warning: --allow-unusual-units accepted {len(found)} likely unit mistake(s), e.g.: {found[0]}")
+    if checks.get("extrapolation"):
+        runs = [str(f["run"]) for f in checks.get("test_runs_outside_training_range", [])]
+        print(f"  warning: TEST {checks['extrapolation']} (runs {', '.join(runs[:10])}"
+              f"{', ...' if len(runs) > 10 else ''})")
+    for part, m in metrics.items():
+        for kind, x in (m or {}).items():
+            if x.get("n_diverged_runs"):
+                print(f"  warning: {part} {kind}: {x['n_diverged_runs']} of {x['n_runs']} runs diverged "
+                      f"(non-finite or absurd prediction; excluded from the metrics): runs "
+                      f"{', '.join(map(str, x['diverged_runs'][:10]))}{', ...' if x['n_diverged_runs'] > 10 else ''}")
+
+
 def cmd_identify(args) -> int:
     """Maximum-likelihood identification of the Eq. 29 predictor (paper Eq. 32, 35)."""
     from .workflows import run_identification
     rep = run_identification(args.train, args.out, args.test, order=args.order, criterion=args.criterion,
                              fix=args.fix, n_starts=args.starts, seed=args.seed, test_abs_loads=args.test_loads,
-                             slider_mass_kg=args.slider_mass, plots_on=not args.no_plots, verbose=args.verbose)
+                             slider_mass_kg=args.slider_mass, plots_on=not args.no_plots, verbose=args.verbose,
+                             allow_unusual_units=args.allow_unusual_units)
     print(f"identify: {rep['data']['train_runs']} train runs, {rep['data']['test_runs']} test runs "
           f"({rep['data']['split']}); fit {rep['fit_time_s']:.1f} s")
     for part in ("train", "test"):
@@ -386,8 +420,9 @@ def cmd_identify(args) -> int:
             continue
         for kind in ("one_step", "free_run"):
             x = m[kind]
-            print(f"  {part:5s} {kind:8s} nrmse {x['nrmse']:.2%}  mean |rel| {x['mean_abs_rel_error']:.2%}  "
-                  f"p95 |rel| {x['p95_abs_rel_error']:.2%}  (n={x['n_samples']})")
+            print(f"  {part:5s} {kind:8s} nrmse {_pct(x['nrmse'])}  mean |rel| {_pct(x['mean_abs_rel_error'])}  "
+                  f"p95 |rel| {_pct(x['p95_abs_rel_error'])}  (n={x['n_samples']})")
+    print_input_checks(rep["checks"], rep["metrics"])
     if rep.get("unidentifiable"):
         print(f"  warning: {len(rep['unidentifiable'])} parameter combination(s) the data cannot separate; "
               f"see {Path(args.out) / 'fit_report.txt'}")
@@ -395,10 +430,20 @@ def cmd_identify(args) -> int:
     return 0
 
 
+def _read_identification(path: Path) -> dict:
+    try:
+        doc = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise L1B2Error(f"{path}: not an identification.json of `l1b2 identify` ({exc})") from None
+    if not isinstance(doc, dict) or "predictor" not in doc:
+        raise L1B2Error(f"{path}: not an identification.json of `l1b2 identify` (no 'predictor' section)")
+    return doc
+
+
 def cmd_compare(args) -> int:
     """Predictor (derived and identified) against the co-simulation's steady states."""
     from .workflows import run_comparison
-    ident = json.loads(Path(args.identification).read_text()) if args.identification else None
+    ident = _read_identification(args.identification) if args.identification else None
     rep = run_comparison(args.out, _motor(args), ident, order=args.order)
     for key, c in rep["cases"].items():
         print(f"  {key:38s} max |rel err| {c['max_abs_rel_error']:.2%}  rms {c['rms_rel_error']:.2%}  "
@@ -413,10 +458,11 @@ def cmd_close_loop(args) -> int:
     say = (lambda m: None) if args.quiet else (lambda m: print(f"[close-loop] {m}", flush=True))
     rep = close_loop(args.train, args.test, args.report_dir, order=args.order, k_folds=args.folds,
                      alpha=args.alpha, min_gain=args.min_gain, seed=args.seed, slider_mass_kg=args.slider_mass,
-                     plots_on=not args.no_plots, progress=say)
+                     plots_on=not args.no_plots, progress=say, allow_unusual_units=args.allow_unusual_units)
     d = rep["diagnosis"]
     print(f"diagnosis: {d['message']}" + (f"; traced to {', '.join(d['traced_to'])}" if d["traced_to"] else ""))
     print(before_after_table(rep))
+    print_input_checks(rep["checks"], {"baseline " + k: v for k, v in rep["baseline"].items()})
     print(f"wrote {Path(args.report_dir) / 'report.json'} and report.md ({rep['wall_time_s']} s)")
     return 0
 
@@ -425,15 +471,14 @@ def cmd_export(args) -> int:
     """The drop-in deliverables: subsystem FMUs, Predictor.fmu, L1B2Motor.ssp and L1B2Motor.fmu."""
     from .fmi.export import export_all
     predictor = None
+    from .workflows import output_dir
     if args.identification:
-        try:
-            predictor = json.loads(Path(args.identification).read_text())["predictor"]
-        except (OSError, ValueError, KeyError) as exc:
-            raise L1B2Error(f"{args.identification}: not an identification.json of `l1b2 identify` ({exc})") from None
-    elif not args.no_predictor:
-        from .predictor.derive import derive_predictor_setup
-        predictor = derive_predictor_setup(_motor(args)).to_dict()
-    manifest = export_all(args.out, mp=_motor(args), predictor=predictor)
+        predictor = _read_identification(args.identification)["predictor"]
+    with output_dir(args.out, command="export") as tmp:
+        if not args.identification and not args.no_predictor:
+            from .predictor.derive import derive_predictor_setup
+            predictor = derive_predictor_setup(_motor(args)).to_dict()
+        manifest = export_all(tmp, mp=_motor(args), predictor=predictor)
     for f in manifest.get("files", []):
         print(f"  {f.get('path')}")
     if not args.identification and not args.no_predictor:
@@ -465,6 +510,13 @@ def main(argv=None) -> int:
     except FileNotFoundError as exc:
         print(f"l1b2: error: {exc}", file=sys.stderr)
         return 2
+    except Exception as exc:  # a bug: one line (the traceback with L1B2_TRACEBACK=1)
+        if os.environ.get("L1B2_TRACEBACK"):
+            raise
+        text = " ".join(str(exc).split()) or "no message"
+        print(f"l1b2: error: internal error ({type(exc).__name__}: {text}); please report it "
+              "(L1B2_TRACEBACK=1 shows the traceback)", file=sys.stderr)
+        return 3
 
 
 if __name__ == "__main__":

@@ -101,3 +101,7 @@ class SpecError(L1B2Error):
 
 class ClusterError(L1B2Error):
     """The parallel engine could not be used (scheduler unreachable, workers lost for good)."""
+
+
+class OutputError(L1B2Error):
+    """An output folder cannot be written: it is a file, holds files not written by l1b2, or another run holds it."""

@@ -1,13 +1,25 @@
-"""End-to-end jobs behind the CLI: identification (issue 4) and the predictor/co-simulation comparison.
+"""End-to-end jobs behind the CLI: identification (issue 4), the predictor/co-simulation comparison, output folders.
 
-Every job validates all its input before it creates its output folder, so
-nothing is written when input is refused, and writes its JSON report plus
-PNG figures.
+Every job writes through :func:`output_dir`: the target is checked and
+locked before any computation (an existing file, a folder of someone else's
+files or a second concurrent run are refused with one line), the job writes
+into a temporary sibling folder, and only a complete result is renamed into
+place, replacing the previous complete result (never mixed with it). Input
+is validated inside, so nothing is left behind when input is refused. JSON
+reports are strict (:func:`l1b2.data.jsonsafe.dumps`: no NaN or Infinity).
 """
 
 from __future__ import annotations
 
+import fnmatch
 import json
+import os
+import shutil
+import socket
+import tempfile
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -15,37 +27,268 @@ import pandas as pd
 
 from .data import measurements as dataio
 from .data import plots
-from .data.metrics import evaluation_mask, report_metrics, speed_metrics
-from .errors import IdentificationError
+from .data.coverage import data_range, outside_range, summarize_outside
+from .data.jsonsafe import dumps
+from .data.metrics import diverged_runs, evaluation_mask, report_metrics, speed_metrics
+from .errors import IdentificationError, OutputError
 from .predictor.setup import PredictorSetup
 
+#: marker file in every output folder written by :func:`output_dir`
+OUTPUT_MARKER = ".l1b2-output.json"
+
+
+# ---------------------------------------------------------------------------
+# output folders
+# ---------------------------------------------------------------------------
+
+def _pid_alive(pid: int) -> bool:
+    if os.name != "posix":
+        return True  # no safe liveness probe: never take over a lock
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:
+        return True
+    return True
+
+
+def _acquire_lock(out: Path) -> Path:
+    """Create ``.NAME.lock`` beside ``out`` exclusively; a lock of a dead process on this host is taken over."""
+    lock = out.parent / f".{out.name}.lock"
+    me = f"{os.getpid()} {socket.gethostname()}"
+    for _ in range(3):
+        try:
+            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+        except FileExistsError:
+            try:
+                pid_text, _, host = lock.read_text().partition(" ")
+                pid = int(pid_text)
+            except (OSError, ValueError):
+                pid, host = -1, ""
+            if host.strip() == socket.gethostname() and pid > 0 and not _pid_alive(pid):
+                stale = lock.with_name(f"{lock.name}.stale-{os.getpid()}")
+                try:
+                    os.replace(lock, stale)
+                    stale.unlink()
+                except OSError:
+                    pass
+                continue
+            who = f"pid {pid} on {host.strip()}" if pid > 0 else "another process"
+            raise OutputError(f"{out}: another l1b2 run ({who}) is writing this output folder; wait for it to "
+                              f"finish or choose another folder (lock file {lock})") from None
+        with os.fdopen(fd, "w") as fh:
+            fh.write(me)
+        return lock
+    raise OutputError(f"{out}: cannot take the lock {lock}")
+
+
+def _foreign_files(out: Path, known: tuple[str, ...]) -> list[str]:
+    """Files in ``out`` (relative, posix) that match none of the ``known`` output patterns."""
+    return [rel for rel in (f.relative_to(out).as_posix() for f in out.rglob("*") if not f.is_dir())
+            if not any(fnmatch.fnmatch(rel, pat) for pat in known)]
+
+
+def _check_target(out: Path, known: tuple[str, ...] = ()) -> None:
+    """Refuse a target that is a file, or a folder holding files not written by :func:`output_dir`."""
+    if out.exists() or out.is_symlink():
+        if not out.is_dir() or out.is_symlink():
+            raise OutputError(f"{out}: exists and is not a folder; give a folder (new, empty, or an earlier "
+                              "result of the same command) as output")
+        if not (out / OUTPUT_MARKER).is_file():
+            foreign = _foreign_files(out, known)
+            if foreign:
+                raise OutputError(f"{out}: folder holds files not written by this command (e.g. {foreign[0]}) "
+                                  "and would be replaced: give a new or empty folder as output")
+    elif out.parent.exists() and not out.parent.is_dir():
+        raise OutputError(f"{out.parent}: exists and is not a folder")
+
+
+def _make_parents(folder: Path) -> list[Path]:
+    """Create ``folder`` and missing parents; the ones created, deepest first."""
+    missing = []
+    p = folder
+    while not p.exists():
+        missing.append(p)
+        if p.parent == p:
+            break
+        p = p.parent
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"{folder}: cannot create the output folder's parent: {exc.strerror or exc}") from None
+    return missing
+
+
+def _swap_into_place(tmp: Path, out: Path) -> None:
+    """Rename the complete ``tmp`` to ``out``; a previous ``out`` is removed only after that succeeded."""
+    old = None
+    if out.exists():
+        old = out.parent / f".{out.name}.old-{os.getpid()}"
+        os.replace(out, old)
+    try:
+        os.replace(tmp, out)
+    except OSError:
+        if old is not None:
+            os.replace(old, out)
+        raise
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+#: file patterns each command writes (an unmarked folder holding only these, e.g. from an older version,
+#: may be replaced)
+KNOWN_OUTPUTS: dict[str, tuple[str, ...]] = {
+    "identify": ("identification.json", "fit_report.txt", "fig10_test_run_*.png"),
+    "compare": ("comparison.json", "*_vs_*.csv", "predictor_vs_cosim_steady.png"),
+    "rig": ("all.csv", "all.json", "train.csv", "train.json", "test.csv", "test.json", "rig_truth.json",
+            "rig_summary.json", "fig9*.png"),
+    "export": ("fmus/*.fmu", "*.fmu", "*.ssp", "manifest.json"),
+    "close-loop": ("report.json", "report.md", "*.png"),
+}
+
+
+@contextmanager
+def output_dir(out, *, command: str = "l1b2") -> Iterator[Path]:
+    """Write a command's results into ``out`` all at once, or not at all.
+
+    Before the body runs: ``out`` must not be a file nor a non-empty folder
+    without :data:`OUTPUT_MARKER` holding files other than the command's own
+    (:data:`KNOWN_OUTPUTS`; someone else's files are never replaced);
+    a lock file ``.NAME.lock`` beside it refuses a second concurrent writer
+    (a lock left by a dead process on this host is taken over), and
+    temporary folders left by killed runs are removed. The body writes into
+    the yielded temporary sibling folder; when it completes, the marker is
+    added and the folder renamed to ``out``, replacing the previous result
+    only then. When it raises (or is interrupted), the temporary folder and
+    any parent folders created for it are removed and ``out`` is untouched.
+
+    Yields
+    ------
+    pathlib.Path
+        The temporary folder to write into. Paths recorded in reports should
+        name the final folder (``out / name``).
+
+    Raises
+    ------
+    OutputError
+        ``out`` cannot be used (see above); nothing is computed.
+    """
+    out = Path(out)
+    known = KNOWN_OUTPUTS.get(command, ())
+    _check_target(out, known)
+    created = _make_parents(out.parent)
+    try:
+        lock = _acquire_lock(out)
+    except BaseException:
+        _remove_empty(created)
+        raise
+    tmp = None
+    try:
+        for stale in out.parent.glob(f".{out.name}.tmp-*"):
+            shutil.rmtree(stale, ignore_errors=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-{os.getpid()}-", dir=out.parent))
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o777 & ~umask)  # mkdtemp's 0700 would make the result private
+        yield tmp
+        (tmp / OUTPUT_MARKER).write_text(json.dumps({"command": command, "finished": time.time(),
+                                                     "pid": os.getpid()}))
+        _check_target(out, known)  # nothing foreign appeared there meanwhile
+        _swap_into_place(tmp, out)
+        tmp = None
+    finally:
+        lock.unlink(missing_ok=True)
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
+            _remove_empty(created)
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    for f in folders:
+        try:
+            f.rmdir()
+        except OSError:
+            break
+
+
+# ---------------------------------------------------------------------------
+# identification
+# ---------------------------------------------------------------------------
+
 TEST_ABS_LOADS = (0.05,)
+#: smallest number of runs the identification needs
+MIN_TRAIN_RUNS = 2
 
 
-def load_train_test(train_path, test_path=None, *, test_abs_loads=TEST_ABS_LOADS, slider_mass_kg=None):
+def _check_train_runs(train: dataio.Measurements, path, split_note: str) -> None:
+    """Refuse TRAIN with fewer runs than the identification needs, naming the file and the likely cause."""
+    runs = train.runs
+    if len(runs) >= MIN_TRAIN_RUNS:
+        return
+    part = "" if split_note.startswith("test file") or "no held-out" in split_note else f" after the {split_note}"
+    raise IdentificationError(
+        f"{path}: TRAIN has {len(runs)} run{'s' if len(runs) != 1 else ''}{part} "
+        f"({', '.join(map(str, runs)) or 'none'}); the identification needs at least {MIN_TRAIN_RUNS} runs "
+        "(traverses at different voltages/loads/directions): does the 'run' column number each traverse, "
+        "or did the export keep only one?")
+
+
+def load_train_test(train_path, test_path=None, *, test_abs_loads=TEST_ABS_LOADS, slider_mass_kg=None,
+                    allow_unusual_units=False):
     """Load and validate TRAIN (and TEST); without TEST, split TRAIN by load like the paper.
 
-    Returns ``(train, test_or_None, split_note)`` as :class:`l1b2.data.measurements.Measurements`.
+    Both files get the same checks, including the unit plausibility
+    (``allow_unusual_units`` overrides it for both). Returns
+    ``(train, test_or_None, split_note)`` as
+    :class:`l1b2.data.measurements.Measurements`.
     """
-    train = dataio.load_measurements(train_path, slider_mass_kg=slider_mass_kg)
+    kw = dict(slider_mass_kg=slider_mass_kg, allow_unusual_units=allow_unusual_units)
+    train = dataio.load_measurements(train_path, **kw)
     if test_path is not None:
-        test = dataio.load_measurements(test_path, slider_mass_kg=slider_mass_kg)
-        return train, test, f"test file {test_path}"
+        test = dataio.load_measurements(test_path, **kw)
+        note = f"test file {test_path}"
+        _check_train_runs(train, train_path, note)
+        return train, test, note
     loads = np.abs(train.df[dataio.LOAD].to_numpy())
     has_test = np.isclose(loads[:, None], np.array(test_abs_loads)[None, :], atol=1e-9).any(axis=1)
     if not has_test.any():
-        return train, None, f"no runs with |load| in {list(test_abs_loads)} kg: no held-out test"
+        note = f"no runs with |load| in {list(test_abs_loads)} kg: no held-out test"
+        _check_train_runs(train, train_path, note)
+        return train, None, note
     if has_test.all():
         raise IdentificationError(f"{train_path}: every run has |load| in {list(test_abs_loads)} kg; "
                                   f"nothing left to train on (give --test or other --test-loads)")
     tr, te = dataio.split_by_load(train, test_abs_loads)
-    return tr, te, f"paper's split: test = runs with |load| in {list(test_abs_loads)} kg"
+    note = f"paper's split: test = runs with |load| in {list(test_abs_loads)} kg"
+    _check_train_runs(tr, train_path, note)
+    return tr, te, note
 
 
 def metrics_for(est, data: dataio.Measurements | pd.DataFrame) -> dict:
-    """Data-format metrics of an identified predictor on a data set (one_step and free_run)."""
+    """Data-format metrics of an identified predictor on a data set (one_step and free_run).
+
+    Diverged runs (non-finite or absurd predictions) are excluded and
+    counted (:func:`l1b2.data.metrics.report_metrics`).
+    """
     df = data.df if isinstance(data, dataio.Measurements) else data
-    return report_metrics(df, est.predict_one_step(data), est.predict_free_run(data))
+    with np.errstate(all="ignore"):
+        return report_metrics(df, est.predict_one_step(data), est.predict_free_run(data))
+
+
+def input_checks(train: dataio.Measurements, test: dataio.Measurements | None) -> dict:
+    """The report's record of the data checks: unit findings (allowed or none) and TEST runs outside TRAIN's range."""
+    rng = data_range(train)
+    flagged = outside_range(test, rng) if test is not None else []
+    n_test = len(test.runs) if test is not None else 0
+    return {
+        "allow_unusual_units": bool(train.meta.get("allow_unusual_units")),
+        "unusual_units": {"train": list(train.meta.get("unusual_units", [])),
+                          "test": list(test.meta.get("unusual_units", [])) if test is not None else []},
+        "training_range": rng,
+        "test_runs_outside_training_range": flagged,
+        "extrapolation": summarize_outside(flagged, n_test),
+    }
 
 
 def _parse_fix(text: str | None):
@@ -65,44 +308,74 @@ def _parse_fix(text: str | None):
     return out
 
 
-def run_identification(train_path, out_dir, test_path=None, *, order=8, criterion="free_run", fix=None,
-                       n_starts=8, seed=0, test_abs_loads=TEST_ABS_LOADS, slider_mass_kg=None, plots_on=True,
-                       verbose=False) -> dict:
-    """Identify the Eq. 29 predictor on TRAIN by maximum likelihood; report on TRAIN and TEST.
+def _fit_naming_file(est, train: dataio.Measurements, train_path) -> None:
+    """``est.fit(train)``; an IdentificationError names the TRAIN file."""
+    try:
+        est.fit(train)  # slider mass and evaluation mask from the validated Measurements
+    except IdentificationError as exc:
+        text = str(exc)
+        raise IdentificationError(text if str(train_path) in text else f"{train_path}: {text}") from exc
 
-    Writes ``out_dir/identification.json`` (parameters with value, stderr, 95 %
-    interval and unit, the paper's monomial form, identifiability, metrics for
-    train and test, convergence), ``fit_report.txt`` and, per test run, a
-    Fig. 10-like PNG. Returns the report dict.
-    """
-    from .ident.estimator import PredictorIdentifier
-    train, test, split_note = load_train_test(train_path, test_path, test_abs_loads=test_abs_loads,
-                                              slider_mass_kg=slider_mass_kg)
-    est = PredictorIdentifier(order=order, criterion=criterion, fixed=_parse_fix(fix), n_starts=n_starts,
-                              seed=seed, verbose=verbose)
-    est.fit(train)  # slider mass and evaluation mask from the validated Measurements
-    sections = {
-        "data": {"train": str(train_path), "test": str(test_path) if test_path else None,
-                 "split": split_note, "train_runs": len(train.runs),
-                 "test_runs": len(test.runs) if test is not None else 0},
-        "metrics": {"train": metrics_for(est, train), "test": metrics_for(est, test) if test is not None else None},
-        "predictor": PredictorSetup(est.params_, est.m_s_, est.T_s_).to_dict(),
-    }
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    figs = []
-    if plots_on and test is not None:
+
+def _test_figures(est, test: dataio.Measurements, tmp: Path, out: Path) -> list[str]:
+    """Fig. 10-like PNG per TEST run (diverged predictions are drawn where finite and named in the title)."""
+    with np.errstate(all="ignore"):
         free = est.predict_free_run(test)
         one = est.predict_one_step(test)
-        for run, sl in dataio.run_slices(test.df[dataio.RUN]):
-            g = test.df.iloc[sl].reset_index(drop=True)
-            m = speed_metrics(free[sl], g[dataio.SPEED].to_numpy(), evaluation_mask(g))
-            title = (f"run {run}: V0 {g[dataio.VOLTAGE].iloc[0]:g} V, load {g[dataio.LOAD].iloc[0]:+g} kg, "
-                     f"dir {int(g[dataio.DIRECTION].iloc[0]):+d}; free-run p95 {m['p95_abs_rel_error']:.1%}")
-            figs.append(str(plots.prediction_vs_measured(g, free[sl], out / f"fig10_test_run_{run}.png", title,
-                                                         v_pred_alt=one[sl], labels=("free run", "one step"))))
-    sections["figures"] = figs
-    est.result_.save(out, **sections)  # identification.json (strict JSON) and fit_report.txt
+    bad = set(diverged_runs(test.df, free))
+    figs = []
+    for run, sl in dataio.run_slices(test.df[dataio.RUN]):
+        g = test.df.iloc[sl].reset_index(drop=True)
+        f, o = free[sl].copy(), one[sl].copy()
+        if run in bad:
+            lim = 10 * max(float(np.max(np.abs(g[dataio.SPEED]))), 5e-3)
+            f[~(np.abs(f) <= lim)] = np.nan
+            o[~(np.abs(o) <= lim)] = np.nan
+            note = "free run DIVERGED (excluded from the metrics)"
+        else:
+            m = speed_metrics(f, g[dataio.SPEED].to_numpy(), evaluation_mask(g) & np.isfinite(f))
+            note = f"free-run p95 {m['p95_abs_rel_error']:.1%}"
+        title = (f"run {run}: V0 {g[dataio.VOLTAGE].iloc[0]:g} V, load {g[dataio.LOAD].iloc[0]:+g} kg, "
+                 f"dir {int(g[dataio.DIRECTION].iloc[0]):+d}; {note}")
+        name = f"fig10_test_run_{run}.png"
+        plots.prediction_vs_measured(g, f, tmp / name, title, v_pred_alt=o, labels=("free run", "one step"))
+        figs.append(str(out / name))
+    return figs
+
+
+def run_identification(train_path, out_dir, test_path=None, *, order=8, criterion="free_run", fix=None,
+                       n_starts=8, seed=0, test_abs_loads=TEST_ABS_LOADS, slider_mass_kg=None, plots_on=True,
+                       verbose=False, allow_unusual_units=False) -> dict:
+    """Identify the Eq. 29 predictor on TRAIN by maximum likelihood; report on TRAIN and TEST.
+
+    Writes (through :func:`output_dir`, so all at once or nothing)
+    ``out_dir/identification.json`` (parameters with value, stderr, 95 %
+    interval and unit, the paper's monomial form, identifiability, metrics for
+    train and test with diverged runs excluded and counted, the input checks:
+    unit findings, TRAIN's range and the TEST runs outside it),
+    ``fit_report.txt`` and, per test run, a Fig. 10-like PNG. Returns the
+    report dict.
+    """
+    from .ident.estimator import PredictorIdentifier
+    out = Path(out_dir)
+    with output_dir(out, command="identify") as tmp:
+        train, test, split_note = load_train_test(train_path, test_path, test_abs_loads=test_abs_loads,
+                                                  slider_mass_kg=slider_mass_kg,
+                                                  allow_unusual_units=allow_unusual_units)
+        est = PredictorIdentifier(order=order, criterion=criterion, fixed=_parse_fix(fix), n_starts=n_starts,
+                                  seed=seed, verbose=verbose)
+        _fit_naming_file(est, train, train_path)
+        sections = {
+            "data": {"train": str(train_path), "test": str(test_path) if test_path else None,
+                     "split": split_note, "train_runs": len(train.runs),
+                     "test_runs": len(test.runs) if test is not None else 0},
+            "checks": input_checks(train, test),
+            "metrics": {"train": metrics_for(est, train),
+                        "test": metrics_for(est, test) if test is not None else None},
+            "predictor": PredictorSetup(est.params_, est.m_s_, est.T_s_).to_dict(),
+        }
+        sections["figures"] = _test_figures(est, test, tmp, out) if plots_on and test is not None else []
+        est.result_.save(tmp, **sections)  # identification.json (strict JSON) and fit_report.txt
     return {**est.to_dict(), **sections}
 
 
@@ -113,33 +386,46 @@ def run_comparison(out_dir, mp=None, identification: dict | None = None, *, orde
       pure-slip settings) vs the co-simulation in pure-slip mode;
     * the same derived predictor vs the stick-slip co-simulation (the
       difference is reported, not hidden);
-    * the identified predictor (if given) vs the stick-slip co-simulation.
+    * the identified predictor (if given) vs the stick-slip co-simulation;
+      grid points outside the range the identification was trained on
+      (``checks.training_range`` of its report) are counted and reported as
+      extrapolation.
     """
     from .physics.params import load_motor
     from .predictor import derive
     from .predictor.model import PredictorParams
     mp = mp or load_motor()
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    cases = {}
-    tables = {}
-    for method in ("linearized", "paper"):
-        p = derive.derive_predictor(mp, method=method, mode="pure_slip", order=order)
-        for mode in ("pure_slip", "stick_slip"):
-            key = f"derived_{method}_vs_{mode}"
-            tables[key] = derive.compare_steady(p, mp, mode=mode)
-            cases[key] = derive.summarize(tables[key])
-    if identification is not None:
-        pid = PredictorParams.from_dict(identification["predictor"]["params"])
-        tables["identified_vs_stick_slip"] = derive.compare_steady(pid, mp, mode="stick_slip")
-        cases["identified_vs_stick_slip"] = derive.summarize(tables["identified_vs_stick_slip"])
-    for key, df in tables.items():
-        df.to_csv(out / f"{key}.csv", index=False)
-    fig = plots.steady_comparison(tables, out / "predictor_vs_cosim_steady.png")
-    report = {"cases": cases, "figure": str(fig),
-              "note": "co-simulation steady states from l1b2.physics.steady.steady_state (the fixed point of the "
-                      "time-domain co-simulation); relative error against the co-simulation's speed"}
-    (out / "comparison.json").write_text(json.dumps(report, indent=1))
+    with output_dir(out, command="compare") as tmp:
+        cases = {}
+        tables = {}
+        for method in ("linearized", "paper"):
+            p = derive.derive_predictor(mp, method=method, mode="pure_slip", order=order)
+            for mode in ("pure_slip", "stick_slip"):
+                key = f"derived_{method}_vs_{mode}"
+                tables[key] = derive.compare_steady(p, mp, mode=mode)
+                cases[key] = derive.summarize(tables[key])
+        if identification is not None:
+            try:
+                pid = PredictorParams.from_dict(identification["predictor"]["params"])
+            except (KeyError, TypeError, ValueError) as exc:
+                raise IdentificationError(f"--identification: not an identification.json of `l1b2 identify` "
+                                          f"({type(exc).__name__}: {exc})") from None
+            tables["identified_vs_stick_slip"] = derive.compare_steady(pid, mp, mode="stick_slip")
+            cases["identified_vs_stick_slip"] = derive.summarize(tables["identified_vs_stick_slip"])
+            rng = (identification.get("checks") or {}).get("training_range")
+            if rng:
+                grid = tables["identified_vs_stick_slip"].assign(run=0)
+                flags = outside_range(grid, rng)
+                cases["identified_vs_stick_slip"]["extrapolation"] = (
+                    {c: v["share_outside"] for c, v in flags[0]["outside"].items()} if flags else {})
+        for key, df in tables.items():
+            df.to_csv(tmp / f"{key}.csv", index=False)
+        plots.steady_comparison(tables, tmp / "predictor_vs_cosim_steady.png")
+        report = {"cases": cases, "figure": str(out / "predictor_vs_cosim_steady.png"),
+                  "note": "co-simulation steady states from l1b2.physics.steady.steady_state (the fixed point of the "
+                          "time-domain co-simulation); relative error against the co-simulation's speed"}
+        (tmp / "comparison.json").write_text(dumps(report))
     return report
 
 

@@ -34,7 +34,6 @@ Procedure (TEST is never used for fitting or choosing):
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from dataclasses import dataclass
@@ -44,9 +43,10 @@ import numpy as np
 import pandas as pd
 
 from ..data import measurements as dataio
+from ..data.jsonsafe import dumps, sig
 from ..data.metrics import evaluation_mask, report_metrics
 from ..predictor import model as pr
-from ..workflows import load_train_test
+from ..workflows import input_checks, load_train_test
 from . import candidates as eff
 from . import residuals as res
 
@@ -255,14 +255,15 @@ def _best_per_family(scores: list[Score]) -> list[Score]:
 
 def close_loop(train_path, test_path, report_dir, *, order=8, k_folds=5, alpha=DEFAULT_ALPHA,
                min_gain=DEFAULT_MIN_GAIN, parsimony=DEFAULT_PARSIMONY, seed=0, n_starts=4,
-               slider_mass_kg=None, plots_on=True, progress=None) -> dict:
+               slider_mass_kg=None, plots_on=True, progress=None, allow_unusual_units=False) -> dict:
     """Identify, diagnose, extend, re-identify and report (see the module docstring)."""
     from ..ident.estimator import PredictorIdentifier
     from ..ident.extra import ExtraForces
 
     say = progress or (lambda msg: None)
     t_start = time.perf_counter()
-    train, test, _ = load_train_test(train_path, test_path, slider_mass_kg=slider_mass_kg)
+    train, test, _ = load_train_test(train_path, test_path, slider_mass_kg=slider_mass_kg,
+                                     allow_unusual_units=allow_unusual_units)
     m_s = train.slider_mass_kg
     dtr, dte = train.df, test.df
     mask_tr = evaluation_mask(dtr)
@@ -345,6 +346,7 @@ def close_loop(train_path, test_path, report_dir, *, order=8, k_folds=5, alpha=D
         "baseline_parameters": base.to_dict()["parameters"],
         "data": {"train": str(train_path), "test": str(test_path), "train_runs": len(train.runs),
                  "test_runs": len(test.runs), "train_samples": train.n_samples, "test_samples": test.n_samples},
+        "checks": input_checks(train, test),
         "wall_time_s": None,
     }
     out = Path(report_dir)
@@ -354,7 +356,7 @@ def close_loop(train_path, test_path, report_dir, *, order=8, k_folds=5, alpha=D
         report["figures"] = _plots(out, dtr, dte, r_tr, mask_tr, whiteness, freq, power, chosen, v_te, v_te_ext,
                                    base, m_s)
     report["wall_time_s"] = round(time.perf_counter() - t_start, 2)
-    (out / "report.json").write_text(json.dumps(report, indent=1, default=_jf))
+    (out / "report.json").write_text(dumps(report))
     (out / "report.md").write_text(markdown_report(report))
     return report
 
@@ -418,7 +420,8 @@ def markdown_report(rep: dict) -> str:
         lines += ["## Extended model's new parameters", "", "| name | value | stderr | 95 % interval | unit |",
                   "|---|---|---|---|---|"]
         for n, p in rep["extended_parameters"].items():
-            lines.append(f"| {n} | {p['value']:.4g} | {p['stderr']} | {p['ci95']} | {p['unit']} |")
+            lines.append(f"| {n} | {sig(p['value'])} | {sig(p['stderr'])} | [{sig(p['ci95'][0])}, "
+                         f"{sig(p['ci95'][1])}] | {p['unit']} |")
     if rep.get("figures"):
         lines += ["", "## Figures", ""] + [f"![{Path(f).stem}]({Path(f).name})" for f in rep["figures"]]
     lines.append("")

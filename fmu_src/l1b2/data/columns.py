@@ -31,6 +31,8 @@ __all__ = [
     "MAX_ABS_POSITION_M", "MAX_ABS_SPEED_M_S", "MIN_VOLTAGE_V", "MAX_VOLTAGE_V",
     "MAX_ABS_LOAD_KG", "MIN_FREQUENCY_HZ", "MAX_FREQUENCY_HZ",
     "MIN_TEMPERATURE_C", "MAX_TEMPERATURE_C",
+    "PlausibleRange", "PLAUSIBLE", "SPEED_SLOPE_BAND", "MAX_SAMPLE_INTERVAL_S",
+    "MIN_PEAK_SPEED_M_S",
     "sidecar_path", "unit_of",
 ]
 
@@ -106,7 +108,8 @@ NUMERIC_COLUMNS: tuple[str, ...] = tuple(c.name for c in KNOWN_COLUMNS if c.name
 SIDECAR_FIELDS: dict[str, str] = SIDECAR_FIELD_UNITS
 
 #: ``meta`` keys computed at load time; never written to nor read from a sidecar.
-LOAD_TIME_META: tuple[str, ...] = ("source", "sidecar", "speed_derived", "frequency_filled")
+LOAD_TIME_META: tuple[str, ...] = ("source", "sidecar", "speed_derived", "frequency_filled", "unusual_units",
+                                    "allow_unusual_units")
 
 #: Texts (lower case, stripped) that mean "no value" (NaN) in a CSV cell.
 NAN_TOKENS: frozenset[str] = frozenset({
@@ -141,6 +144,59 @@ MAX_FREQUENCY_HZ: float = 1e6
 MIN_TEMPERATURE_C: float = -100.0
 #: Highest plausible stator temperature [degC] (above suggests kelvin).
 MAX_TEMPERATURE_C: float = 300.0
+
+
+
+# --------------------------------------------------------------------------
+# Physical plausibility for a linear USM rig (overridable: allow_unusual_units)
+# --------------------------------------------------------------------------
+
+class PlausibleRange(NamedTuple):
+    """The range of values a linear ultrasonic-motor rig produces in SI units.
+
+    Values outside are refused when reading unless the caller allows unusual
+    units (``--allow-unusual-units``); unlike the hard limits above they are
+    not impossible, only far more likely a unit mistake.
+
+    Attributes
+    ----------
+    low, high : float
+        Plausible magnitudes [unit of the column / field]; ``low`` applies to
+        non-zero magnitudes only (0 is always plausible; ``low = 0`` means no
+        lower bound). With ``signed`` the values themselves are compared.
+    below, above : str
+        The likely unit mistake named in the message when a value is below
+        ``low`` / above ``high``.
+    signed : bool
+        Compare signed values instead of magnitudes (temperatures).
+    """
+
+    low: float
+    high: float
+    below: str
+    above: str
+    signed: bool = False
+
+
+#: column or sidecar field -> plausible magnitudes and the unit mistakes they hint at.
+PLAUSIBLE: dict[str, PlausibleRange] = {
+    "slider_mass_kg": PlausibleRange(1e-3, 5.0, "a slider lighter than 1 g?", "grams?"),
+    LOAD: PlausibleRange(0.0, 2.0, "", "grams?"),
+    VOLTAGE: PlausibleRange(5.0, 1000.0, "kV?", "mV?"),
+    FREQUENCY: PlausibleRange(15e3, 1e6, "not ultrasonic: kHz x 10?", "a drive frequency above 1 MHz?"),
+    "drive_frequency_Hz": PlausibleRange(15e3, 1e6, "not ultrasonic: kHz x 10?", "a drive frequency above 1 MHz?"),
+    SPEED: PlausibleRange(0.0, 1.5, "", "mm/s, or position_m not in metres?"),
+    POSITION: PlausibleRange(0.0, 0.5, "", "position_m scaled (cm or mm)?"),
+    TEMPERATURE: PlausibleRange(-60.0, 150.0, "a temperature below -60 degC?", "kelvin or degF?", signed=True),
+    "encoder_resolution_m": PlausibleRange(1e-10, 1e-4, "a resolution finer than 0.1 nm?", "micrometres or nanometres?"),
+}
+#: Per run, the regression slope of speed_m_s on d(position_m)/dt must lie in this band
+#: (1 = consistent; filtering and a lag of a few samples give 0.9-1.0).
+SPEED_SLOPE_BAND: tuple[float, float] = (0.5, 2.0)
+#: Median sample interval within runs at or above this is implausible for a rig [s] (time in ms?).
+MAX_SAMPLE_INTERVAL_S: float = 1.0
+#: A file whose fastest sample is slower than this has no traverse in it [m/s] (time in ms?).
+MIN_PEAK_SPEED_M_S: float = 1e-3
 
 
 def unit_of(name: str | None) -> str | None:

@@ -44,9 +44,17 @@ from .columns import (
     TIME,
     sidecar_path,
 )
-from .validate import check_setting, format_value, is_blank_row, run_slices, validate_frame
+from .validate import (
+    check_setting,
+    format_value,
+    is_blank_row,
+    run_slices,
+    unusual_setting,
+    unusual_values,
+    validate_frame,
+)
 
-__all__ = ["read_table_and_sidecar", "write_table_and_sidecar", "read_sidecar"]
+__all__ = ["read_table_and_sidecar", "write_table_and_sidecar", "read_sidecar", "unit_findings"]
 
 _LINE_IN_PARSER_ERROR = re.compile(r"line (\d+)")
 _FIELDS_IN_PARSER_ERROR = re.compile(r"Expected (\d+) fields in line (\d+), saw (\d+)")
@@ -130,6 +138,7 @@ def _read_table(path: Path) -> pd.DataFrame:
                               f"not UTF-8 text (byte 0x{raw[exc.start]:02x} on line {line})") from None
     if not text.strip():
         raise DataFormatError(path, None, None, "file is empty")
+    _check_separator(path, text)
     try:
         table = pd.read_csv(StringIO(text), header=None, dtype=str, keep_default_na=False,
                             skip_blank_lines=False)
@@ -156,6 +165,21 @@ def _read_table(path: Path) -> pd.DataFrame:
     while n > 0 and is_blank_row(body.iloc[n - 1]):
         n -= 1
     return body.iloc[:n]
+
+
+def _check_separator(path: Path, text: str) -> None:
+    """Refuse a header written with another separator (';' or tab), naming the likely export setting."""
+    header = text.lstrip("\ufeff").split("\n", 1)[0]
+    if "," in header:
+        return
+    for sep, name in ((";", "';'"), ("\t", "tab")):
+        if sep in header:
+            body = text.split("\n", 2)[1] if text.count("\n") >= 1 else ""
+            decimal = (" and ',' as decimal mark" if re.search(r"\d,\d", body) else "")
+            raise DataFormatError(path, None, None,
+                                  f"the header line uses {name} as separator{decimal}? the format requires "
+                                  "',' between fields and '.' as decimal point (export as plain CSV, "
+                                  "e.g. with an English locale)")
 
 
 def _infer_extra(col: pd.Series) -> pd.Series:
@@ -201,13 +225,49 @@ def _derive_speed(df: pd.DataFrame, path) -> np.ndarray:
     return v
 
 
+def unit_findings(df: pd.DataFrame, meta: Mapping, path: Path, side: Path,
+                  explicit: Mapping[str, float | None]) -> list[DataFormatError | ParameterError]:
+    """Likely unit mistakes of a validated table and its settings, as the errors they raise when not allowed.
+
+    Settings first (an option: :class:`~l1b2.errors.ParameterError`; a
+    sidecar field: :class:`~l1b2.errors.DataFormatError` naming the field),
+    then the columns in row order (:func:`~l1b2.data.validate.unusual_values`).
+    """
+    found: list[DataFormatError | ParameterError] = []
+    for name in SIDECAR_FIELDS:
+        why = unusual_setting(name, meta.get(name))
+        if why is None:
+            continue
+        if explicit.get(name) is not None:
+            found.append(ParameterError(f"option {name} [{SIDECAR_FIELDS[name]}]: {why}"))
+        elif name in meta.get("sidecar_fields", ()):
+            found.append(DataFormatError(side, name, None, why))
+    for q in unusual_values(df, speed_derived=bool(meta.get("speed_derived"))):
+        found.append(DataFormatError(path, q.column, q.row + 1, q.text))
+    return found
+
+
+#: appended to a refused likely unit mistake
+OVERRIDE_HINT = " (if the values are right, allow them with --allow-unusual-units)"
+
+
+def _with_override_hint(exc: DataFormatError | ParameterError) -> DataFormatError | ParameterError:
+    if isinstance(exc, DataFormatError):
+        return DataFormatError(exc.path, exc.column, exc.row, exc.problem + OVERRIDE_HINT)
+    return ParameterError(str(exc) + OVERRIDE_HINT)
+
+
 def read_table_and_sidecar(path: str | os.PathLike, *, slider_mass_kg: float | None = None,
                            encoder_resolution_m: float | None = None,
-                           drive_frequency_Hz: float | None = None) -> tuple[pd.DataFrame, dict]:
+                           drive_frequency_Hz: float | None = None,
+                           allow_unusual_units: bool = False) -> tuple[pd.DataFrame, dict]:
     """Read and validate a measured-data CSV and its sidecar.
 
     The work of :func:`l1b2.data.measurements.load_measurements` (see there
     for the parameters, the columns and ``meta``), without the container.
+    Likely unit mistakes (:func:`unit_findings`) raise the first of them
+    unless ``allow_unusual_units``; either way their messages are in
+    ``meta["unusual_units"]``.
 
     Returns
     -------
@@ -235,6 +295,13 @@ def read_table_and_sidecar(path: str | os.PathLike, *, slider_mass_kg: float | N
         df[FREQUENCY] = np.full(len(df), float(meta["drive_frequency_Hz"]))
     meta["source"] = str(path)
     meta["sidecar"] = str(side) if side != path and side.exists() else None
+    explicit = {"slider_mass_kg": slider_mass_kg, "encoder_resolution_m": encoder_resolution_m,
+                "drive_frequency_Hz": drive_frequency_Hz}
+    found = unit_findings(df, {**meta, "sidecar_fields": tuple(sidecar)}, path, side, explicit)
+    if found and not allow_unusual_units:
+        raise _with_override_hint(found[0])
+    meta["unusual_units"] = [str(e) for e in found]
+    meta["allow_unusual_units"] = bool(allow_unusual_units)
     return df.reset_index(drop=True), meta
 
 

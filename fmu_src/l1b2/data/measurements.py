@@ -262,7 +262,8 @@ class Measurements:
 
 def load_measurements(path: str | os.PathLike, *, slider_mass_kg: float | None = None,
                       encoder_resolution_m: float | None = None,
-                      drive_frequency_Hz: float | None = None) -> Measurements:
+                      drive_frequency_Hz: float | None = None,
+                      allow_unusual_units: bool = False) -> Measurements:
     """Read and validate a measured-data CSV (and its sidecar).
 
     Parameters
@@ -279,6 +280,12 @@ def load_measurements(path: str | os.PathLike, *, slider_mass_kg: float | None =
         Drive frequency [Hz]; overrides the sidecar; default
         :data:`DEFAULT_DRIVE_FREQUENCY_HZ`. Used to fill ``frequency_Hz``
         only when that column is absent (a measured column always wins).
+    allow_unusual_units : bool
+        Accept values a linear USM rig does not produce in SI units (loads
+        above 2 kg, V0 below 5 V, a speed column that disagrees with the
+        position's derivative, ...; :func:`l1b2.data.validate.unusual_values`)
+        instead of refusing them as a likely unit mistake. The findings are
+        kept in ``meta['unusual_units']`` either way.
 
     Returns
     -------
@@ -290,8 +297,10 @@ def load_measurements(path: str | os.PathLike, *, slider_mass_kg: float | None =
     DataFormatError
         The CSV or the sidecar breaks the contract (message names file,
         column or field with unit, and first offending row / line).
+        Likely unit mistakes (see ``allow_unusual_units``) too.
     ParameterError
-        A keyword argument is not a plausible positive number.
+        A keyword argument is not a plausible positive number (or, unless
+        ``allow_unusual_units``, outside the range of a linear USM rig).
 
     Notes
     -----
@@ -305,7 +314,8 @@ def load_measurements(path: str | os.PathLike, *, slider_mass_kg: float | None =
     """
     df, meta = read_table_and_sidecar(path, slider_mass_kg=slider_mass_kg,
                                       encoder_resolution_m=encoder_resolution_m,
-                                      drive_frequency_Hz=drive_frequency_Hz)
+                                      drive_frequency_Hz=drive_frequency_Hz,
+                                      allow_unusual_units=allow_unusual_units)
     return Measurements(df=df, meta=meta, path=Path(path))
 
 

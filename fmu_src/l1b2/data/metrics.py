@@ -15,6 +15,14 @@ The two kinds of prediction, ``one_step`` (v(k+1) from measured v(k), Eq.
 along the measured position trajectory from the measured speed of the run's
 first sample), are computed elsewhere and scored separately by
 :func:`report_metrics`.
+
+A prediction can diverge (the free run of a model used outside the range it
+was identified on grows without bound): a run whose prediction is infinite,
+or non-finite or faster than :data:`DIVERGED_FACTOR` times the run's fastest
+measured speed on an evaluated sample, is a *diverged run*
+(:func:`diverged_runs`). :func:`report_metrics` excludes diverged runs from
+the metrics and reports them (``n_diverged_runs``, ``diverged_runs``), so a
+report never shows ``inf`` or a mean error of 1e183 %.
 """
 
 from __future__ import annotations
@@ -27,16 +35,21 @@ import pandas as pd
 from .measurements import (
     END_EXCLUSION_M,
     MIN_EVAL_SPEED_M_S,
+    RUN,
     SPEED,
     Measurements,
     as_1d,
     evaluation_mask,
+    run_slices,
 )
 
 __all__ = [
-    "MIN_EVAL_SPEED_M_S", "END_EXCLUSION_M", "P95_PERCENTILE", "METRIC_KEYS",
-    "evaluation_mask", "speed_metrics", "report_metrics",
+    "MIN_EVAL_SPEED_M_S", "END_EXCLUSION_M", "P95_PERCENTILE", "METRIC_KEYS", "DIVERGED_FACTOR",
+    "evaluation_mask", "speed_metrics", "report_metrics", "diverged_runs",
 ]
+
+#: A prediction faster than this many times the run's fastest measured speed (at least 5 mm/s) has diverged.
+DIVERGED_FACTOR: float = 10.0
 
 #: Percentile reported as ``p95_abs_rel_error`` [%].
 P95_PERCENTILE: float = 95.0
@@ -127,12 +140,60 @@ def report_metrics(df: pd.DataFrame | Measurements, v_one_step: Any,
     Returns
     -------
     dict
-        ``{'one_step': speed_metrics(...), 'free_run': speed_metrics(...)}``
-        on the common :func:`evaluation_mask` of ``df``.
+        ``{'one_step': {...}, 'free_run': {...}}``: :func:`speed_metrics` on
+        the :func:`evaluation_mask` of ``df`` without the diverged runs of
+        that prediction (:func:`diverged_runs`), plus ``n_runs``,
+        ``n_diverged_runs`` and ``diverged_runs`` (their ids). With every
+        run diverged the metrics are NaN and ``n_samples`` is 0.
     """
     if isinstance(df, Measurements):
         df = df.df
     mask = evaluation_mask(df)
     v_meas = df[SPEED]
-    return {"one_step": speed_metrics(v_one_step, v_meas, mask),
-            "free_run": speed_metrics(v_free_run, v_meas, mask)}
+    blocks = run_slices(df[RUN])
+    out = {}
+    for kind, pred in (("one_step", v_one_step), ("free_run", v_free_run)):
+        pred = as_1d("v_pred", pred)
+        bad = diverged_runs(df, pred, mask)
+        keep = mask.copy()
+        for rid, sl in blocks:
+            if rid in bad:
+                keep[sl] = False
+        out[kind] = {**speed_metrics(pred, v_meas, keep), "n_runs": len(blocks),
+                     "n_diverged_runs": len(bad), "diverged_runs": bad}
+    return out
+
+
+def diverged_runs(df: pd.DataFrame, v_pred: Any, mask: Any = None) -> list:
+    """Runs whose prediction diverged: non-finite where evaluated, or absurdly fast anywhere.
+
+    Parameters
+    ----------
+    df : pandas.DataFrame
+        Measured data with ``speed_m_s`` [m/s] and ``run``.
+    v_pred : array_like
+        Predicted speed per sample [m/s] (NaN outside the evaluated samples
+        is allowed, e.g. the one-step prediction of a run's first sample).
+    mask : array_like of bool, optional
+        Evaluated samples (default :func:`evaluation_mask`).
+
+    Returns
+    -------
+    list
+        Run ids (file order) with a non-finite prediction on an evaluated
+        sample or an infinite one anywhere, or an evaluated prediction faster
+        than :data:`DIVERGED_FACTOR` x max(the run's fastest measured speed, 5 mm/s).
+    """
+    pred = as_1d("v_pred", v_pred)
+    meas = as_1d(SPEED, df[SPEED])
+    m = evaluation_mask(df) if mask is None else np.asarray(mask, dtype=bool)
+    out = []
+    for rid, sl in run_slices(df[RUN]):
+        p = pred[sl]
+        finite = np.isfinite(p)
+        limit = DIVERGED_FACTOR * max(float(np.max(np.abs(meas[sl]))), MIN_EVAL_SPEED_M_S)
+        judged = finite & m[sl]
+        if np.isinf(p).any() or (~finite & m[sl]).any() or \
+                (judged.any() and float(np.max(np.abs(p[judged]))) > limit):
+            out.append(rid)
+    return out

@@ -9,6 +9,15 @@ found is a :class:`DataProblem`; the earliest one is raised as a
 :class:`~l1b2.errors.DataFormatError` naming the file, the column with its
 unit and the row.
 
+A third stage, applied when reading (:mod:`~l1b2.data.io`), looks for unit
+mistakes that the hard limits let through: :func:`unusual_values` finds
+values outside the range a linear USM rig produces
+(:data:`~l1b2.data.columns.PLAUSIBLE`: grams as kg, kV as V, ms as s, ...)
+and a speed column that disagrees with the position's time derivative
+(:func:`speed_slopes`, per run, robust to noise, filtering and a lag of a
+few samples); :func:`unusual_setting` does the same for a rig setting. These
+are overridable (``allow_unusual_units``), the hard limits are not.
+
 :func:`check_setting` is the rule for one rig setting (sidecar field or
 keyword argument). :func:`run_slices` gives the contiguous blocks of a run
 that the contiguity rule checks, and :func:`format_value` the shortest text
@@ -45,21 +54,27 @@ from .columns import (
     MAX_VOLTAGE_V,
     MIN_FREQUENCY_HZ,
     MIN_TEMPERATURE_C,
+    MAX_SAMPLE_INTERVAL_S,
+    MIN_PEAK_SPEED_M_S,
     MIN_VOLTAGE_V,
     NAN_TOKENS,
     NUMERIC_COLUMNS,
+    PLAUSIBLE,
     POSITION,
     REQUIRED_COLUMNS,
     RUN,
+    SIDECAR_FIELDS,
     SPEED,
+    SPEED_SLOPE_BAND,
     TEMPERATURE,
     TIME,
     VOLTAGE,
+    PlausibleRange,
 )
 
 __all__ = [
     "DataProblem", "validate_frame", "check_setting", "run_slices", "format_value",
-    "is_blank_row",
+    "is_blank_row", "unusual_setting", "unusual_values", "speed_slopes",
 ]
 
 _CANONICAL_INT = re.compile(r"^-?(0|[1-9][0-9]*)$")
@@ -322,7 +337,7 @@ def _range_problems(values: dict[str, np.ndarray]) -> list[DataProblem]:
     x = values[POSITION]
     _add_first(problems, POSITION, np.abs(x) > MAX_ABS_POSITION_M,
                lambda i: f"|position| = {fmt(abs(x[i]))} m > {fmt(MAX_ABS_POSITION_M)} m "
-                         "is implausible in SI units (suggests millimetres)")
+                         "is implausible in SI units (suggests millimetres or centimetres)")
     u = values[VOLTAGE]
     _add_first(problems, VOLTAGE, u < MIN_VOLTAGE_V,
                lambda i: f"voltage amplitude {fmt(u[i])} V is negative")
@@ -466,3 +481,173 @@ def check_setting(name: str, value: Any) -> str | None:
     if name == "encoder_resolution_m" and v > MAX_ABS_POSITION_M:
         return f"{format_value(v)} m is implausible in SI units"
     return None
+
+
+# --------------------------------------------------------------------------
+# Physical plausibility (stage 3, on reading; overridable)
+# --------------------------------------------------------------------------
+
+def _unusual_text(value: float, rng: PlausibleRange, label: str, unit: str) -> str | None:
+    """Problem text for one value outside its plausible range, or ``None``."""
+    x = value if rng.signed else abs(value)
+    shown = f"{label} = {x:.4g} {unit}"
+    if x > rng.high:
+        return f"{shown} > {rng.high:g} {unit} is unusual for a linear USM rig: {rng.above}"
+    if rng.low and (rng.signed or x > 0) and x < rng.low:
+        return f"{shown} < {rng.low:g} {unit} is unusual for a linear USM rig: {rng.below}"
+    return None
+
+
+def unusual_setting(name: str, value: Any) -> str | None:
+    """Problem text for a rig setting outside the range a linear USM rig has, or ``None``.
+
+    Parameters
+    ----------
+    name : str
+        A sidecar field (:data:`~l1b2.data.columns.SIDECAR_FIELDS`).
+    value : object
+        Its value (already accepted by :func:`check_setting`; ``None`` = not given).
+    """
+    rng = PLAUSIBLE.get(name)
+    if rng is None or value is None or isinstance(value, str):
+        return None
+    return _unusual_text(float(value), rng, name, SIDECAR_FIELDS[name])
+
+
+def speed_slopes(df: pd.DataFrame, *, min_travel_m: float = 2e-4,
+                 min_rms_speed_m_s: float = 5e-3) -> list[tuple[Any, int, float]]:
+    """Per run, the regression slope of ``speed_m_s`` on d(``position_m``)/dt.
+
+    The slope through the origin, ``sum(v * x') / sum(x'^2)`` with ``x'`` the
+    per-run ``numpy.gradient`` of position over time, is 1 for a consistent
+    file and stays within a few percent of it under measurement noise, a
+    low-pass filtered speed and a lag of a few samples (the tests use a
+    25 Hz filter at 1 kHz: 0.93-0.97), while a unit mistake moves it by a
+    factor of 10 or more (time in ms: 1000, position x 100: 0.01) and a sign
+    mistake makes it negative.
+
+    Parameters
+    ----------
+    df : pandas.DataFrame
+        Validated samples with ``time_s``, ``run``, ``position_m`` and ``speed_m_s``.
+    min_travel_m, min_rms_speed_m_s : float
+        A run is judged only when it travels at least this far [m] and its
+        position derivative has at least this RMS [m/s] (a stalled run has
+        nothing to compare).
+
+    Returns
+    -------
+    list of (run_id, first_row, slope)
+        One entry per judged run; ``first_row`` is the 0-based position of
+        the run's first sample.
+    """
+    x = df[POSITION].to_numpy(dtype=float)
+    t = df[TIME].to_numpy(dtype=float)
+    v = df[SPEED].to_numpy(dtype=float)
+    out = []
+    for rid, sl in run_slices(df[RUN]):
+        if sl.stop - sl.start < 3 or np.ptp(x[sl]) < min_travel_m:
+            continue
+        xd = np.gradient(x[sl], t[sl])
+        ss = float(np.sum(xd * xd))
+        if not (np.isfinite(ss) and ss > 0) or math.sqrt(ss / xd.size) < min_rms_speed_m_s:
+            continue
+        out.append((rid, sl.start, float(np.sum(v[sl] * xd)) / ss))
+    return out
+
+
+def _slope_hint(b: float) -> str:
+    if b < 0:
+        return "the speed has the opposite sign of the position's change (sign convention of speed_m_s?)"
+    if b > SPEED_SLOPE_BAND[1]:
+        return (f"the speed is {b:.3g} x the position's derivative: time_s in ms, speed_m_s in mm/s, "
+                "or position_m scaled down?")
+    return (f"the speed is {b:.3g} x the position's derivative: position_m scaled up (mm, cm, x100) "
+            "or time_s not in seconds?")
+
+
+def _interval_problem(df: pd.DataFrame) -> DataProblem | None:
+    """Median sample interval within runs implausibly long for a rig (time in ms?)."""
+    t = df[TIME].to_numpy(dtype=float)
+    if t.size < 2:
+        return None
+    same_run = np.zeros(t.size - 1, dtype=bool)
+    for _, sl in run_slices(df[RUN]):
+        same_run[sl.start:sl.stop - 1] = True
+    dts = np.diff(t)[same_run]
+    if not dts.size:
+        return None
+    med = float(np.median(dts))
+    if med < MAX_SAMPLE_INTERVAL_S:
+        return None
+    i = int(np.flatnonzero(same_run & (np.diff(t) >= MAX_SAMPLE_INTERVAL_S))[0]) + 1
+    return DataProblem(i, _ORDER[TIME], TIME,
+                       f"median sample interval within runs {med:.4g} s >= "
+                       f"{format_value(MAX_SAMPLE_INTERVAL_S)} s is unusual for a test rig: time in ms?")
+
+
+def _peak_speed_problem(df: pd.DataFrame, speed_derived: bool) -> DataProblem | None:
+    """No sample of the file as fast as a traverse (speed or time scaled?)."""
+    v = np.abs(df[SPEED].to_numpy(dtype=float))
+    if not v.size or float(np.max(v)) >= MIN_PEAK_SPEED_M_S:
+        return None
+    i = int(np.argmax(v))
+    cause = "time_s in ms or position_m not in metres?" if speed_derived else \
+        "speed_m_s not in m/s (km/s?) or time_s in ms?"
+    return DataProblem(i, _ORDER[SPEED], SPEED,
+                       f"the fastest sample of the file moves at {float(v[i]):.4g} m/s < "
+                       f"{format_value(MIN_PEAK_SPEED_M_S)} m/s: no traverse of a linear USM is that slow; {cause}")
+
+
+def unusual_values(df: pd.DataFrame, *, speed_derived: bool = False) -> list[DataProblem]:
+    """Likely unit mistakes in a validated table (at most one per column, its first row).
+
+    Values outside :data:`~l1b2.data.columns.PLAUSIBLE` (``load_kg`` above
+    2 kg: grams?, ``voltage_V`` below 5 V: kV?, ...), a median sample
+    interval above :data:`~l1b2.data.columns.MAX_SAMPLE_INTERVAL_S` (time in
+    ms?) and, when the speed was measured, a run whose speed disagrees with
+    the position's derivative (:func:`speed_slopes` outside
+    :data:`~l1b2.data.columns.SPEED_SLOPE_BAND`).
+
+    Parameters
+    ----------
+    df : pandas.DataFrame
+        Validated samples (:func:`validate_frame`, speed derived if absent).
+    speed_derived : bool
+        ``speed_m_s`` was derived from position (then it is not compared
+        with the derivative, and an implausible value blames position/time).
+
+    Returns
+    -------
+    list of DataProblem
+        Empty when everything is plausible.
+    """
+    problems: list[DataProblem] = []
+    for name, rng in PLAUSIBLE.items():
+        if name not in df.columns or name not in _ORDER:
+            continue
+        vals = df[name].to_numpy(dtype=float)
+        mags = vals if rng.signed else np.abs(vals)
+        bad = (mags > rng.high) | ((mags < rng.low) & (rng.signed | (mags > 0)))
+        i = _first(bad)
+        if i is None:
+            continue
+        label = name if (rng.signed or name in (VOLTAGE, FREQUENCY)) else f"|{name}|"
+        text = _unusual_text(float(vals[i]), rng, label, COLUMN_SPECS[name].unit)
+        if name == SPEED and speed_derived:
+            text += " (speed derived from position_m and time_s: check both units)"
+        span = f"{float(np.min(mags)):.4g} to {float(np.max(mags)):.4g}"
+        problems.append(DataProblem(i, _ORDER[name], name, f"{text} ({label} in this file: {span})"))
+    for extra in (_interval_problem(df), _peak_speed_problem(df, speed_derived) if SPEED in df.columns else None):
+        if extra is not None:
+            problems.append(extra)
+    if not speed_derived and SPEED in df.columns:
+        lo, hi = SPEED_SLOPE_BAND
+        for rid, row, b in speed_slopes(df):
+            if not lo <= b <= hi:
+                problems.append(DataProblem(
+                    row, _ORDER[SPEED], SPEED,
+                    f"run {format_value(rid)}: speed_m_s disagrees with d(position_m)/dt (regression slope "
+                    f"{b:.3g}, expected 1 within [{format_value(lo)}, {format_value(hi)}]): {_slope_hint(b)}"))
+                break
+    return sorted(problems, key=lambda q: (q.row, q.order))

@@ -138,6 +138,9 @@ from .uncertainty import alternative_optima, extra_confounding, fisher_uncertain
 
 __all__ = ["PredictorIdentifier", "clone", "RECOMMENDED_FIXED", "evaluation_mask"]
 
+#: exceptions of numpy/scipy that mean the data cannot support the fit (wrapped in IdentificationError)
+NUMERICAL_FAILURES = (np.linalg.LinAlgError, FloatingPointError, OverflowError, ZeroDivisionError, ValueError)
+
 #: constructor arguments that are not part of the serialised settings
 _NOT_SERIALISED = ("verbose", "extra", "init", "init_extra")
 
@@ -230,7 +233,9 @@ class PredictorIdentifier:
     ``result_`` (:class:`~l1b2.ident.result.IdentificationResult`: report,
     JSON, plots) and, for direct use, ``theta_``, ``params_``, ``varied_``,
     ``identifiable_``, ``stderr_`` (AR(1)-corrected), ``stderr_fisher_``,
-    ``ci95_`` (p, 2), ``cov_``, ``cov_fisher_``, ``corr_`` (p, p) with p =
+    ``ci95_`` (p, 2), ``stderr_robust_`` / ``ci95_robust_`` / ``cov_robust_``
+    (cluster-robust sandwich by run, valid under misspecification; see
+    :mod:`l1b2.ident.uncertainty`), ``cov_``, ``cov_fisher_``, ``corr_`` (p, p) with p =
     3n+8 (the theta block), ``fixed_``, ``loglik_``, ``aic_``, ``bic_``,
     ``k_params_``, ``n_obs_``, ``n_eff_``, ``dof_``, ``t_quantile_``,
     ``noise_var_``, ``ar1_rho_``, ``ar1_factor_``, ``residual_rms_`` [m/s],
@@ -410,7 +415,24 @@ class PredictorIdentifier:
         mask : array_like of bool, optional
             Samples whose residuals enter the likelihood (DataFrame default:
             all; Measurements default: its evaluation mask).
+
+        Raises
+        ------
+        IdentificationError
+            Bad settings or data, and every numerical failure inside the fit
+            (a singular or non-converging linear algebra, overflow, non-finite
+            residuals), as "the data do not determine ... because ...".
         """
+        try:
+            return self._fit(data, slider_mass_kg, mask)
+        except NUMERICAL_FAILURES as exc:
+            text = " ".join(str(exc).split()) or type(exc).__name__
+            raise IdentificationError(
+                "the data do not determine the Eq. 29 parameters: the fit failed numerically because "
+                f"{type(exc).__name__}: {text} (check the units of time, position, speed, voltage, load and "
+                "the slider mass; too few or too similar runs also do this)") from exc
+
+    def _fit(self, data, slider_mass_kg, mask) -> "PredictorIdentifier":
         cfg = self._checked_settings()
         if cfg.init is not None and cfg.n_starts >= 2:
             return self._fit_two_tracks(cfg, data, slider_mass_kg, mask)
@@ -521,6 +543,7 @@ class PredictorIdentifier:
             extra_description="" if extra is None else extra.description,
             varied=space.varied.copy(), identifiable=unc.identifiable, stderr=unc.stderr,
             stderr_fisher=unc.stderr_fisher, ci95=unc.ci95, cov=unc.cov, cov_fisher=unc.cov_fisher, corr=unc.corr,
+            stderr_robust=unc.stderr_robust, ci95_robust=unc.ci95_robust, cov_robust=unc.cov_robust,
             slider_mass_kg=problem.m_s, T_s=sample.sample_period(),
             runs=[run_label(x) for x in sample.layout.labels], noise_var=noise.R.copy(), ar1_rho=unc.ar1_rho,
             n_obs=int(problem.run_sel.size), n_eff=unc.n_eff, k_params=unc.k_params, dof=unc.dof,
@@ -577,12 +600,14 @@ class PredictorIdentifier:
         phi = result.values[p:].copy()
         joint = {
             "varied": result.varied, "identifiable": result.identifiable, "stderr": result.stderr,
-            "stderr_fisher": result.stderr_fisher, "ci95": result.ci95,
+            "stderr_fisher": result.stderr_fisher, "ci95": result.ci95, "stderr_robust": result.stderr_robust,
+            "ci95_robust": result.ci95_robust,
         }
         for key, arr in joint.items():
             setattr(self, f"{key}_all_", arr)
             setattr(self, f"{key}_", arr[:p].copy())
-        for key, mat in {"cov": result.cov, "cov_fisher": result.cov_fisher, "corr": result.corr}.items():
+        for key, mat in {"cov": result.cov, "cov_fisher": result.cov_fisher, "cov_robust": result.cov_robust,
+                         "corr": result.corr}.items():
             setattr(self, f"{key}_all_", mat)
             setattr(self, f"{key}_", mat[:p, :p].copy())
         self.extra_varied_ = result.varied[p:].copy()
@@ -591,6 +616,8 @@ class PredictorIdentifier:
         self.extra_stderr_ = {n: float(v) for n, v in zip(names, result.stderr[p:])}
         self.extra_stderr_fisher_ = {n: float(v) for n, v in zip(names, result.stderr_fisher[p:])}
         self.extra_ci95_ = {n: (float(a), float(b)) for n, (a, b) in zip(names, result.ci95[p:])}
+        self.extra_stderr_robust_ = {n: float(v) for n, v in zip(names, result.stderr_robust[p:])}
+        self.extra_ci95_robust_ = {n: (float(a), float(b)) for n, (a, b) in zip(names, result.ci95_robust[p:])}
         attributes = dict(
             result_=result, params_=result.params, theta_=result.values[:p].copy(), phi_=phi,
             param_names_all_=result.names, extra_names_=names, extra_units_=list(result.extra_units),

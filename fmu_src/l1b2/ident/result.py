@@ -114,6 +114,11 @@ class Parameter:
     identifiable : bool
     stderr_fisher : float
         Plain (white-noise) Fisher standard error.
+    stderr_robust : float
+        Cluster-robust (sandwich, by run) standard error: valid when the
+        model misses an effect (see :mod:`l1b2.ident.uncertainty`).
+    ci95_robust : tuple of float
+        95 % interval from ``stderr_robust`` (t with runs - 1 degrees of freedom).
     """
 
     name: str
@@ -124,6 +129,8 @@ class Parameter:
     vary: bool = True
     identifiable: bool = True
     stderr_fisher: float = float("nan")
+    stderr_robust: float = float("nan")
+    ci95_robust: tuple = (float("nan"), float("nan"))
 
 
 @dataclass(eq=False)
@@ -184,6 +191,18 @@ class IdentificationResult:
     convergence: dict
     fit_time_s: float
     extra: Any = None
+    stderr_robust: np.ndarray | None = None
+    ci95_robust: np.ndarray | None = None
+    cov_robust: np.ndarray | None = None
+
+    def __post_init__(self):
+        p = len(self.values)
+        if self.stderr_robust is None:
+            self.stderr_robust = np.full(p, np.nan)
+        if self.ci95_robust is None:
+            self.ci95_robust = np.full((p, 2), np.nan)
+        if self.cov_robust is None:
+            self.cov_robust, _ = _diagonal(np.asarray(self.stderr_robust, float))
 
     # -- views ------------------------------------------------------------------
     @property
@@ -243,7 +262,8 @@ class IdentificationResult:
                 name=nm, value=float(self.values[i]), stderr=float(self.stderr[i]),
                 ci95=(float(self.ci95[i, 0]), float(self.ci95[i, 1])), unit=units.get(nm, ""),
                 vary=bool(self.varied[i]), identifiable=bool(self.identifiable[i]),
-                stderr_fisher=float(self.stderr_fisher[i]),
+                stderr_fisher=float(self.stderr_fisher[i]), stderr_robust=float(self.stderr_robust[i]),
+                ci95_robust=(float(self.ci95_robust[i, 0]), float(self.ci95_robust[i, 1])),
             )
         return out
 
@@ -400,7 +420,8 @@ class IdentificationResult:
         ]
 
     def _report_variables(self) -> list[str]:
-        lines = ["[[Variables]]  value +/- stderr (AR(1)-corrected; plain Fisher in brackets)  95% CI"]
+        lines = ["[[Variables]]  value +/- stderr (AR(1)-corrected; plain Fisher in brackets)  95% CI"
+                 "  | robust (sandwich by run) stderr and 95% CI"]
         names_all = self.names
         p = self.p_theta
         w = max(len(nm) for nm in names_all)
@@ -420,9 +441,12 @@ class IdentificationResult:
             sig = ""
             if i >= p:
                 sig = "  (significant: CI excludes 0)" if (lo > 0 or hi < 0) else "  (not significant: CI contains 0)"
+            rlo, rhi = prm.ci95_robust
+            robust = (f"  | robust +/- {prm.stderr_robust:.3g} CI [{rlo:.6g}, {rhi:.6g}]"
+                      if np.isfinite(prm.stderr_robust) else "")
             lines.append(
                 f"    {nm:<{w}} = {val: .6g} +/- {se:.3g}{rel} [{u}]  [{prm.stderr_fisher:.3g}]"
-                f"  CI [{lo:.6g}, {hi:.6g}]{sig}"
+                f"  CI [{lo:.6g}, {hi:.6g}]{sig}{robust}"
             )
         return lines
 
@@ -473,6 +497,8 @@ class IdentificationResult:
             "stderr": _json_float(prm.stderr),
             "stderr_fisher": _json_float(prm.stderr_fisher),
             "ci95": [_json_float(prm.ci95[0]), _json_float(prm.ci95[1])],
+            "stderr_robust": _json_float(prm.stderr_robust),
+            "ci95_robust": [_json_float(prm.ci95_robust[0]), _json_float(prm.ci95_robust[1])],
             "unit": prm.unit,
             "vary": prm.vary,
             "identifiable": prm.identifiable,
@@ -566,6 +592,9 @@ class IdentificationResult:
             alternative_optima=list(d.get("alternative_optima", [])),
             extra_confounding={n: _confounding_from_json(xsec[n].get("confounding")) for n in xnames},
             convergence=dict(d["convergence"]), fit_time_s=float(d["fit_time_s"]), extra=extra,
+            stderr_robust=np.array([_from_json_float(s.get("stderr_robust")) for s in sec]),
+            ci95_robust=np.array([[_from_json_float(x) for x in s.get("ci95_robust", [None, None])]
+                                  for s in sec]).reshape(-1, 2),
         )
 
     def save(self, directory, **sections) -> Path:

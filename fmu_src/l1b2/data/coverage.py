@@ -1,0 +1,80 @@
+"""The range a model was identified on, and the runs that lie outside it (extrapolation).
+
+An Eq. 29 predictor is a position polynomial with voltage and load terms
+fitted on TRAIN: outside TRAIN's positions the polynomials extrapolate (an
+order-8 Legendre series at 2.6 x its half-width grows by ~1e5), outside its
+voltages and loads the affine dependence is untested. :func:`data_range`
+records TRAIN's range (it goes into ``identification.json``),
+:func:`outside_range` flags, per run of any data set to be predicted, each
+input that leaves it.
+
+A run is flagged for a column when one of its samples lies further outside
+the range than ``tolerance`` x the range's width (at least
+:data:`MIN_TOLERANCE`, so one encoder count or rounding does not count).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import pandas as pd
+
+from .measurements import LOAD, POSITION, RUN, VOLTAGE, Measurements, run_slices
+
+__all__ = ["RANGE_COLUMNS", "DEFAULT_TOLERANCE", "MIN_TOLERANCE", "data_range", "outside_range",
+           "summarize_outside"]
+
+#: The prediction inputs whose range is checked (unit in the name).
+RANGE_COLUMNS: tuple[str, ...] = (VOLTAGE, LOAD, POSITION)
+#: Share of the range's width a value may lie outside it before the run is flagged.
+DEFAULT_TOLERANCE: float = 0.02
+#: Smallest absolute tolerance per column (1 mV, 1 mg, 1 um).
+MIN_TOLERANCE: dict[str, float] = {VOLTAGE: 1e-3, LOAD: 1e-6, POSITION: 1e-6}
+
+
+def _frame(data: pd.DataFrame | Measurements) -> pd.DataFrame:
+    return data.df if isinstance(data, Measurements) else data
+
+
+def data_range(data: pd.DataFrame | Measurements) -> dict[str, list[float]]:
+    """``{column: [min, max]}`` of the prediction inputs (:data:`RANGE_COLUMNS`) over all samples."""
+    df = _frame(data)
+    return {c: [float(df[c].min()), float(df[c].max())] for c in RANGE_COLUMNS if c in df.columns}
+
+
+def outside_range(data: pd.DataFrame | Measurements, train_range: Mapping[str, Any], *,
+                  tolerance: float = DEFAULT_TOLERANCE) -> list[dict]:
+    """Runs of ``data`` with an input outside ``train_range`` (:func:`data_range` of TRAIN).
+
+    Returns
+    -------
+    list of dict
+        One entry per flagged run, in file order: ``run``, and ``outside``:
+        column -> ``{"min", "max"}`` (the run's extremes), ``"train"``
+        ([min, max] of TRAIN) and ``"share_outside"`` (fraction of the
+        run's samples outside).
+    """
+    df = _frame(data)
+    out = []
+    for rid, sl in run_slices(df[RUN]):
+        flags = {}
+        for col, (lo, hi) in ((c, train_range[c]) for c in RANGE_COLUMNS if c in train_range and c in df.columns):
+            x = df[col].to_numpy(dtype=float)[sl]
+            tol = max(tolerance * (float(hi) - float(lo)), MIN_TOLERANCE[col])
+            bad = (x < float(lo) - tol) | (x > float(hi) + tol)
+            if bad.any():
+                flags[col] = {"min": float(x.min()), "max": float(x.max()), "train": [float(lo), float(hi)],
+                              "share_outside": float(bad.mean())}
+        if flags:
+            out.append({"run": rid, "outside": flags})
+    return out
+
+
+def summarize_outside(flagged: list[dict], n_runs: int) -> str:
+    """One line: how many runs leave the range, in which inputs (empty when none)."""
+    if not flagged:
+        return ""
+    per = {c: sum(c in f["outside"] for f in flagged) for c in RANGE_COLUMNS}
+    cols = ", ".join(f"{c} {k}" for c, k in per.items() if k)
+    return f"{len(flagged)} of {n_runs} runs outside the training range ({cols}): predictions there extrapolate"
