@@ -108,14 +108,15 @@ def _half_angle_scalar(U: float, Fp: float, k_e: float) -> float:
     a = min(max(a, 1e-12), math.pi - 1e-12)
     lo, hi = 0.0, math.pi
     for _ in range(60):
-        g = math.sin(a) - a * math.cos(a) - r
+        sin_a = math.sin(a)
+        g = sin_a - a * math.cos(a) - r
         if abs(g) <= 4e-16 * math.pi:
             break
         if g < 0:
             lo = a
         else:
             hi = a
-        a_new = a - g / max(a * math.sin(a), 1e-300)
+        a_new = a - g / max(a * sin_a, 1e-300)
         a = a_new if lo <= a_new <= hi else 0.5 * (lo + hi)
     return a
 

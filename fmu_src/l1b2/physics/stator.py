@@ -439,7 +439,7 @@ class ModalTable:
 
     def _build(self, k: int):
         deg, w = TABLE_DEGREE, TABLE_CELL_N
-        x = np.cos(np.pi * np.arange(deg + 1) / deg)
+        x, to_power = _lobatto_interpolation()
         nodes = k * w + 0.5 * (x + 1.0) * w
         try:  # the scalar path: the values the per-step calls had before the table
             props = [modal_properties(self.sp, float(P), self.T_b) for P in nodes]
@@ -449,9 +449,7 @@ class ModalTable:
             wb = eta = np.full(deg + 1, np.nan)
         cell = None
         if np.all(np.isfinite(wb)) and np.all(np.isfinite(eta)) and k * w >= 0.0:
-            cheb = np.polynomial.chebyshev
-            cell = (tuple(cheb.cheb2poly(cheb.chebfit(x, wb, deg))[::-1].tolist()),
-                    tuple(cheb.cheb2poly(cheb.chebfit(x, eta, deg))[::-1].tolist()))
+            cell = (_power_coefficients(to_power, wb), _power_coefficients(to_power, eta))
         self.cells[k] = cell
         return cell
 
@@ -482,6 +480,27 @@ class ModalTable:
             w_l0 = 2 * math.pi * (sp.f_l0_Hz + sp.df_dT_l_Hz_per_K * dT)
             self._l1_T, self._l1 = T_degC, (self.M_l * w_l0 ** 2, 2 * sp.zeta_l * self.M_l * w_l0, w_l0)
         return self._l1
+
+
+@lru_cache(maxsize=1)
+def _lobatto_interpolation():
+    """Chebyshev-Lobatto nodes on [-1, 1] and the matrix from values there to the interpolant's
+    power-series coefficients, highest power first (for Horner's scheme)."""
+    deg = TABLE_DEGREE
+    cheb = np.polynomial.chebyshev
+    x = np.cos(np.pi * np.arange(deg + 1) / deg)
+    to_cheb = cheb.chebfit(x, np.eye(deg + 1), deg)  # column j: coefficients of the j-th node's cardinal
+    to_power = np.column_stack([cheb.cheb2poly(to_cheb[:, j]) for j in range(deg + 1)])
+    return x, to_power[::-1].copy()
+
+
+def _power_coefficients(to_power, values) -> tuple:
+    """Interpolant's power coefficients from node values; the mean is taken out first, so that the
+    matrix's large entries act only on the small variation over the cell (no cancellation)."""
+    mean = float(np.mean(values))
+    coef = to_power @ (values - mean)
+    coef[-1] += mean
+    return tuple(coef.tolist())
 
 
 _TABLES: dict = {}
