@@ -455,7 +455,8 @@ class CoSimulation:
         outputs, in SSD order) has a fixed slot in one list; per component and
         step: one ``fmi2SetReal`` from preallocated ctypes arrays, ``fmi2DoStep``
         and one ``fmi2GetReal`` into a preallocated array copied into the
-        component's slots. Returns ``(step(t), slots, slot of (component, variable))``;
+        component's slots (``fmi2SetReal`` only when a component's inputs changed: an
+        FMU holds the values set). Returns ``(step(t), slots, slot of (component, variable))``;
         constant system inputs are converted once, functions of time at every step.
         """
         from fmpy.fmi2 import fmi2Real, fmi2True, fmi2ValueReference
@@ -481,23 +482,28 @@ class CoSimulation:
             src = [slot[self._sources[(n, name)]] for name in i.in_names]
             take = operator.itemgetter(*src) if len(src) > 1 else (lambda values, j=src[0] if src else 0: (values[j],))
             nin, nout = len(src), len(i.out_vrs)
-            plan.append((n, i.fmu, i.fmu.component, take if src else None, (fmi2ValueReference * nin)(*i.in_vrs),
-                         (fmi2Real * nin)(), nin, (fmi2ValueReference * nout)(*i.out_vrs), (fmi2Real * nout)(),
-                         nout, *spans[n]))
+            fmu = i.fmu
+            plan.append((n, fmu.component, fmu.fmi2SetReal, fmu.fmi2DoStep, fmu.fmi2GetReal, take if src else None,
+                         (fmi2ValueReference * nin)(*i.in_vrs), (fmi2Real * nin)(), nin,
+                         (fmi2ValueReference * nout)(*i.out_vrs), (fmi2Real * nout)(), nout, *spans[n]))
+        held: dict[str, tuple] = {}
 
         def step(t):
             for j, x in timed:
                 flat[j] = float(x(t))
-            for n, fmu, comp, take, in_vr, in_val, nin, out_vr, out_val, nout, lo, hi in plan:
+            for n, comp, set_real, do_step, get_real, take, in_vr, in_val, nin, out_vr, out_val, nout, lo, hi in plan:
                 if take is not None:
-                    in_val[:] = take(flat)
-                    fmu.fmi2SetReal(comp, in_vr, nin, in_val)
+                    u = take(flat)
+                    if u != held.get(n):  # inputs keep their values in the FMU: set them when they change
+                        in_val[:] = u
+                        set_real(comp, in_vr, nin, in_val)
+                        held[n] = u
                 try:
-                    fmu.fmi2DoStep(comp, t, h, fmi2True)
+                    do_step(comp, t, h, fmi2True)
                 except Exception as exc:  # fmpy raises FMICallException on discard/error
                     raise SimulationError(f"{n}.doStep at t={t:.6g} s failed ({exc}); see the FMU log above") from None
                 if nout:
-                    fmu.fmi2GetReal(comp, out_vr, nout, out_val)
+                    get_real(comp, out_vr, nout, out_val)
                     flat[lo:hi] = out_val
 
         return step, flat, slot
