@@ -651,6 +651,39 @@ def test_cosimulation_can_run_twice_in_one_process(fmu_dir, motor, isolated):
     assert runs[0]["Slider.v"] == runs[1]["Slider.v"]
 
 
+def worker_cosim_kept(fmu_dir, t_end, inputs, plans):
+    """Runs with different start values and inputs, once through one CoSimulation that keeps its
+    FMU instances (fmi2Reset between runs) and once through a fresh CoSimulation each."""
+    from l1b2.cosim.master import CoSimulation
+    kept, fresh = [], []
+    with CoSimulation(fmu_dir=fmu_dir, keep_instances=True) as cs:
+        for start, extra in plans:
+            r = cs.run(t_end, {**inputs, **extra}, record=RECORD + ["Slider.at_stop"], start_values=start,
+                       stop_when=lambda v: v["Slider.at_stop"] != 0.0)
+            kept.append({k: r.df[k].tolist() for k in ["time"] + RECORD})
+        n_kept = len(cs._kept)
+    for start, extra in plans:
+        with CoSimulation(fmu_dir=fmu_dir) as cs:
+            r = cs.run(t_end, {**inputs, **extra}, record=RECORD + ["Slider.at_stop"], start_values=start,
+                       stop_when=lambda v: v["Slider.at_stop"] != 0.0)
+            fresh.append({k: r.df[k].tolist() for k in ["time"] + RECORD})
+    return {"kept": kept, "fresh": fresh, "n_kept": n_kept}
+
+
+def test_cosimulation_keeps_instances_across_runs(fmu_dir, motor, isolated):
+    # reference: the same runs, each through a fresh CoSimulation (new instances): results identical
+    inputs = dict(SYSTEM_INPUTS, V_s=motor.operating.V_s_V)
+    plans = [({"Slider.s0": -0.02, "Stator.s": -0.02}, {}),
+             ({"Slider.s0": 0.01, "Stator.s": 0.01}, {"direction": -1.0, "m_load": 0.03}),
+             ({"Slider.s0": -0.02, "Stator.s": -0.02}, {})]
+    res = isolated(__file__, "worker_cosim_kept", str(fmu_dir), 0.03, inputs, plans).value
+    assert res["n_kept"] == 4
+    for kept, fresh in zip(res["kept"], res["fresh"]):
+        assert kept == fresh
+    assert res["kept"][0] == res["kept"][2]
+    assert res["kept"][0]["Slider.v"] != res["kept"][1]["Slider.v"]
+
+
 def test_fmus_with_other_defaults_use_their_own_defaults(tmp_path, motor, fmus, isolated):
     # reference: each FMU's own modelDescription start value of R_m_ohm and driver_output with it
     from l1b2.fmi.build import build_fmu

@@ -380,3 +380,76 @@ def test_scalar_fast_paths_equal_vector_paths(sp, drift):
         fast, vec = st.tip_motion(Q + 1e-7, F * 1e-8, props.eta_T), st.tip_motion(_one(Q + 1e-7), F * 1e-8, props.eta_T)
         for a, b in zip(fast, vec):
             assert a == pytest.approx(float(np.ravel(b)[0]), rel=1e-15, abs=1e-300)
+
+
+# ---------------------------------------------------------------------------
+# ModalTable: the stator block's per-step modal properties (interpolated in P) equal the exact ones
+# ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize("drift", [False, True])
+def test_modal_table_equals_modal_properties(sp, drift):
+    if drift:  # B2 drifts with the temperature: one table per temperature
+        sp = dataclasses.replace(sp, df_dT_b_Hz_per_K=-4.0, df_dT_l_Hz_per_K=-3.0)
+    rng = np.random.default_rng(1)
+    T = 40.0
+    table = st.ModalTable(sp, T if drift else None)
+    # over the reference motor's forces and far beyond, across cell edges, and a node exactly
+    forces = np.concatenate([rng.uniform(0.0, 60.0, 400), np.arange(0.0, 61.0, 1.0), [5.6, 6.35, 1e-9]])
+    worst = 0.0
+    for P in forces:
+        got = table(float(P), T)
+        exact = st.modal_properties(sp, float(P), T)
+        for f in got._fields:
+            a, b = getattr(got, f), getattr(exact, f)
+            assert isinstance(a, float)
+            worst = max(worst, abs(a / b - 1))
+    assert worst < 2e-14  # round-off (TABLE_DEGREE over TABLE_CELL_N newtons)
+    assert st.modal_table(sp, T) is st.modal_table(sp, T)  # shared per parameters (and B2 temperature)
+
+
+def test_modal_table_falls_back_beyond_buckling(sp):
+    table = st.ModalTable(sp)
+    P = 3e5  # beyond the B2 stability limit: the cell is not tabulated, the exact path answers
+    got, exact = table(P, 25.0), st.modal_properties(sp, P, 25.0)
+    assert table.cells[int(P // st.TABLE_CELL_N)] is None
+    for a, b in zip(got, exact):
+        assert (np.isnan(a) and np.isnan(b)) or a == b
+
+
+@pytest.mark.parametrize("thermal", [False, True])
+def test_stator_block_step_equals_physics_functions(motor, thermal):
+    # the block writes excitation, envelope step and temperature step out in plain floats
+    from l1b2.cosim.blocks import StatorBlock
+    sp = motor.stator
+    if thermal:
+        sp = dataclasses.replace(sp, thermal_tau_s=20.0, heating_K_per_V2=1e-4, df_dT_b_Hz_per_K=-4.0)
+    b = StatorBlock(sp)
+    b.V0, b.omega, b.direction, b.s, b.T = 300.0, 2 * np.pi * 48500.0, -1.0, 0.004, 25.0
+    b.initialize()
+    for k in range(40):
+        # reference: the same step through the physics functions
+        props = b._props
+        Q_l, Q_b = complex(b.Q_l_re, b.Q_l_im), complex(b.Q_b_re, b.Q_b_im)
+        b.F_N1_sin, b.F_N1_cos, b.F_T1_sin, b.F_T1_cos = (0.0, 0.0, 0.0, 0.0) if k == 0 else (5.8, 0.3, -0.4, 1.2)
+        rot = np.exp(1j * b.phase_l)
+        F1_N = complex(b.F_N1_sin, b.F_N1_cos) * rot
+        F1_T = complex(b.F_T1_sin, b.F_T1_cos) * rot
+        F_l, F_b = st.excitation_phasors(sp, b.V0, b.direction)
+        big_l, big_b = abs(Q_l) > 1e-15, abs(Q_b) > 1e-15
+        Y_l = st.ETA_N * F1_N / Q_l if big_l else 0.0
+        Y_b = props.eta_T * F1_T / Q_b if big_b else 0.0
+        F_l = F_l if big_l else F_l - st.ETA_N * F1_N
+        F_b = F_b if big_b else F_b - props.eta_T * F1_T
+        w = b.omega
+        Q_l = st.envelope_step(Q_l, F_l, Y_l, w, props.M_l, props.K_l, props.C_l, 2e-4)
+        Q_b = st.envelope_step(Q_b, F_b, Y_b, w, props.M_b, props.K_b, props.C_b, 2e-4)
+        T_st = st.stator_temperature_step(b.T_st, b.T, b.V0, sp, 2e-4)
+        b.do_step(k * 2e-4, 2e-4)
+        assert complex(b.Q_l_re, b.Q_l_im) == pytest.approx(Q_l, rel=1e-13)
+        assert complex(b.Q_b_re, b.Q_b_im) == pytest.approx(Q_b, rel=1e-13)
+        assert b.T_st == pytest.approx(T_st, rel=1e-15)
+        tip = st.tip_motion(Q_l, Q_b, b._props.eta_T)
+        assert (b.U_l, b.U_w) == pytest.approx((tip.U_l_m, tip.U_w_m), rel=1e-13)
+        assert b.delta == pytest.approx(tip.delta_rad, rel=1e-12)
+        exact = st.modal_properties(sp, st.axial_force_N(sp, b.s), b.T_st)
+        assert b.eta_T == pytest.approx(exact.eta_T, rel=1e-13)

@@ -25,6 +25,7 @@ interface force, so steady results do not depend on this choice.
 
 from __future__ import annotations
 
+import cmath
 import math
 from dataclasses import dataclass, fields, replace
 from typing import Any
@@ -253,8 +254,6 @@ class StatorBlock(Block):
         Var("T_st0", "parameter", "degC", "initial stator temperature (used when self-heating is on)",
             start=25.0, min=-100.0, max=300.0, variability="fixed"),
     ]
-    #: recompute the P-dependent B2 properties only when P moved by more than this [N]
-    P_TOL_N = 1e-4
 
     def initialize(self):
         self.rebuild_params()
@@ -262,53 +261,92 @@ class StatorBlock(Block):
         self.initialize_outputs()
 
     def initialize_outputs(self):
-        self._props_P = None
         self._props_T = None
+        self._table = None
         self._update_props()
         self._publish()
 
     def _update_props(self):
-        P = float(st.axial_force_N(self.params, self.s))
-        T = float(self.T_st)
-        if self._props_P is None or abs(P - self._props_P) > self.P_TOL_N or T != self._props_T:
-            self._props = st.modal_properties(self.params, P, T)
-            self._props_P, self._props_T = P, T
+        """Modal properties at the current ``P(s)`` and stator temperature.
+
+        From the shared :class:`~l1b2.physics.stator.ModalTable` (exact to round-off)
+        while the B2 properties do not change with the temperature or the
+        temperature did not change since the last step; evaluated directly otherwise.
+        """
+        sp = self.params
+        s = self.s
+        P = st.axial_force_N(sp, s if type(s) is float else float(s))
+        T = self.T_st
+        T = T if type(T) is float else float(T)
+        if sp.df_dT_b_Hz_per_K == 0.0 or T == self._props_T:
+            table = self._table
+            if table is None or (table.T_b is not None and table.T_b != T):
+                table = self._table = st.modal_table(sp, T)
+            self._props = table(P, T)
+        else:
+            self._props = st.modal_properties(sp, P, T)
+        self._props_T = T
         self.P = P
-        self.F_p = self.params.alpha0 * P
+        self.F_p = sp.alpha0 * P
 
     def _publish(self):
-        Q_l = complex(self.Q_l_re, self.Q_l_im)
-        Q_b = complex(self.Q_b_re, self.Q_b_im)
-        tip = st.tip_motion(Q_l, Q_b, float(self._props.eta_T))
-        self.U_l, self.U_w = float(tip.U_l_m), float(tip.U_w_m)
-        self.delta = float(tip.delta_rad)
-        self.phase_l, self.phase_w = float(tip.phase_l_rad), float(tip.phase_w_rad)
-        self.f_b = float(self._props.omega_b0) / (2 * math.pi)
-        self.eta_T = float(self._props.eta_T)
+        """Outputs from the modal phasors (the formulas of :func:`l1b2.physics.stator.tip_motion`, inline)."""
+        props = self._props
+        eta_T = props.eta_T
+        N = st.ETA_N * complex(self.Q_l_re, self.Q_l_im)
+        W = eta_T * complex(self.Q_b_re, self.Q_b_im)
+        self.U_l, self.U_w = abs(N), abs(W)
+        self.phase_l, self.phase_w = cmath.phase(N), cmath.phase(W)
+        self.delta = cmath.phase(W * N.conjugate())
+        self.f_b = props.omega_b0 / (2 * math.pi)
+        self.eta_T = eta_T
         self.v_tip = self.omega * self.U_w
-        self.T_stator = float(self.T_st)
+        self.T_stator = self.T_st
 
     def do_step(self, t, h):
+        """One communication step: the envelopes integrated exactly with the interface's describing functions.
+
+        The formulas of :func:`~l1b2.physics.stator.excitation_phasors`,
+        :func:`~l1b2.physics.stator.envelope_step` and
+        :func:`~l1b2.physics.stator.stator_temperature_step` written out in
+        plain floats (tests/test_stator.py checks them against those functions).
+        """
         self.check_inputs()
-        if abs(abs(self.direction) - 1.0) > 1e-9:
-            raise SimulationError(f"StatorBlock: input direction [1] = {self.direction} must be +1 or -1")
-        props = self._props  # properties the interface forces were computed with
+        d = self.direction
+        if abs(abs(d) - 1.0) > 1e-9:
+            raise SimulationError(f"StatorBlock: input direction [1] = {d} must be +1 or -1")
+        sp, props = self.params, self._props  # the properties the interface forces were computed with
+        w, V0 = self.omega, self.V0
         Q_l = complex(self.Q_l_re, self.Q_l_im)
         Q_b = complex(self.Q_b_re, self.Q_b_im)
-        rot = np.exp(1j * self.phase_l)  # interface frame -> absolute phasor frame
+        rot = cmath.exp(1j * self.phase_l)  # interface frame -> absolute phasor frame
         F1_N = complex(self.F_N1_sin, self.F_N1_cos) * rot
         F1_T = complex(self.F_T1_sin, self.F_T1_cos) * rot
-        F_l, F_b = st.excitation_phasors(self.params, self.V0, self.direction)
-        eta_T = float(props.eta_T)
+        F_l = complex(sp.A_l_N_per_V * V0)
+        F_b = complex(d * sp.A_b_N_per_V * (1.0 + d * sp.asym_b) * V0)
+        eta_T = props.eta_T
         # describing functions: generalised interface force = -Y Q
-        Y_l = st.ETA_N * F1_N / Q_l if abs(Q_l) > 1e-15 else 0.0
-        Y_b = eta_T * F1_T / Q_b if abs(Q_b) > 1e-15 else 0.0
-        F_l_eff = F_l if abs(Q_l) > 1e-15 else F_l - st.ETA_N * F1_N
-        F_b_eff = F_b if abs(Q_b) > 1e-15 else F_b - eta_T * F1_T
-        Q_l = complex(st.envelope_step(Q_l, F_l_eff, Y_l, self.omega, props.M_l, props.K_l, props.C_l, h))
-        Q_b = complex(st.envelope_step(Q_b, F_b_eff, Y_b, self.omega, props.M_b, props.K_b, props.C_b, h))
+        if abs(Q_l) > 1e-15:
+            Y_l = st.ETA_N * F1_N / Q_l
+        else:
+            Y_l, F_l = 0.0, F_l - st.ETA_N * F1_N
+        if abs(Q_b) > 1e-15:
+            Y_b = eta_T * F1_T / Q_b
+        else:
+            Y_b, F_b = 0.0, F_b - eta_T * F1_T
+        M, C = props.M_l, props.C_l
+        Zt = props.K_l - w * w * M + 1j * w * C + Y_l
+        Qs = F_l / Zt
+        Q_l = Qs + (Q_l - Qs) * cmath.exp(-Zt / (2j * w * M + C) * h)
+        M, C = props.M_b, props.C_b
+        Zt = props.K_b - w * w * M + 1j * w * C + Y_b
+        Qs = F_b / Zt
+        Q_b = Qs + (Q_b - Qs) * cmath.exp(-Zt / (2j * w * M + C) * h)
         self.Q_l_re, self.Q_l_im, self.Q_b_re, self.Q_b_im = Q_l.real, Q_l.imag, Q_b.real, Q_b.imag
-        self.T_st = float(st.stator_temperature_step(self.T_st, self.T, self.V0, self.params, h))
+        if sp.thermal_tau_s <= 0.0 and not sp.heating_K_per_V2:
+            self.T_st = float(self.T)
+        else:
+            self.T_st = float(st.stator_temperature_step(float(self.T_st), float(self.T), float(V0), sp, h))
         self._update_props()
         self._publish()
 
@@ -363,9 +401,13 @@ class InterfaceBlock(Block):
 
     def _compute(self):
         self.check_inputs()
-        kernel = itf.interface_forces_reference if self.quadrature else itf.interface_forces
-        out = kernel(self.U_l, self.U_w, self.delta, self.omega, self.v, self.F_p, self.params,
-                     mode="pure_slip" if self.pure_slip else "stick_slip", n_theta=int(self.n_theta))
+        mode = "pure_slip" if self.pure_slip else "stick_slip"
+        if self.quadrature:
+            out = itf.interface_forces_reference(self.U_l, self.U_w, self.delta, self.omega, self.v, self.F_p,
+                                                 self.params, mode=mode, n_theta=int(self.n_theta))
+        else:  # inputs are real numbers here (check_inputs)
+            out = itf.interface_forces_scalar(float(self.U_l), float(self.U_w), float(self.delta),
+                                              float(self.omega), float(self.v), float(self.F_p), self.params, mode)
         self.F_d, self.F_N_mean = out.F_d_N, out.F_N_mean_N
         self.F_N1_sin, self.F_N1_cos = out.F_N1_sin_N, out.F_N1_cos_N
         self.F_T1_sin, self.F_T1_cos = out.F_T1_sin_N, out.F_T1_cos_N

@@ -69,6 +69,8 @@ class MotorBlock(Block):
             start=2e-4, min=1e-6, max=1e-2, variability="fixed"),
         Var("Interface.pure_slip", "parameter", "", "true: the paper's Sect. 4 assumptions (phi_c = pi, no stick)",
             start=False, variability="fixed", type="Boolean"),
+        Var("Interface.quadrature", "parameter", "", "true: the numerical reference kernel of the interface "
+            "(slow) instead of the exact closed form", start=False, variability="fixed", type="Boolean"),
         Var("Slider.s0", "parameter", "m", "initial slider position", start=0.0, min=-1.0, max=1.0,
             variability="fixed"),
         Var("Slider.v0", "parameter", "m/s", "initial slider speed", start=0.0, min=-10.0, max=10.0,
@@ -88,6 +90,7 @@ class MotorBlock(Block):
             setattr(self, var.name, 0.0 if var.start is None else var.start)
         self.internal_step_s = 2e-4
         self.motor = InProcessMotor(params, h_s=self.internal_step_s)
+        self._held = None  # system inputs the engine holds (set at the first step after initialisation)
         self._extra = {v.name: v.start for v in self.EXTRA_PARAMETERS if "." in v.name}
 
     @classmethod
@@ -151,6 +154,8 @@ class MotorBlock(Block):
         self.motor = InProcessMotor(self.params, h_s=float(self.internal_step_s),
                                     pure_slip=bool(self._extra["Interface.pure_slip"]))
         self.motor.b["Stator"].T_st0 = float(self._extra["Stator.T_st0"])
+        self.motor.b["Interface"].quadrature = bool(self._extra["Interface.quadrature"])
+        self._held = None
         self.motor.initialize(V_s=self.V_s, duty=self.duty, f_s=self.f_s, T=self.T, direction=self.direction,
                               m_load=self.m_load, s0=float(self._extra["Slider.s0"]),
                               v0=float(self._extra["Slider.v0"]))
@@ -162,13 +167,16 @@ class MotorBlock(Block):
         self._publish()
 
     def _publish(self):
+        b = self.motor.b
         for out, (comp, var) in self._OUT_SOURCE.items():
-            setattr(self, out, float(getattr(self.motor.b[comp], var)))
+            setattr(self, out, float(getattr(b[comp], var)))
 
     def do_step(self, t, h):
         self.check_inputs()
-        self.motor.inputs = dict(V_s=self.V_s, duty=self.duty, f_s=self.f_s, T=self.T,
-                                 direction=self.direction, m_load=self.m_load)
+        u = (self.V_s, self.duty, self.f_s, self.T, self.direction, self.m_load)
+        if u != self._held:  # the engine converts new inputs once
+            self.motor.inputs = dict(zip(InProcessMotor.INPUTS, u))
+            self._held = u
         n = max(1, int(round(h / float(self.internal_step_s))))
         self.motor.h = h / n
         self.motor.t = t

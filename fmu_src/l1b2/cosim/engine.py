@@ -39,9 +39,25 @@ class InProcessMotor:
         self.mp = mp
         self.h = float(h_s)
         self.b = make_blocks(mp, pure_slip=pure_slip)
+        self._inputs: dict = {}
+        self._constant = None
+
+    @property
+    def inputs(self) -> dict:
+        """The system inputs: constants or functions of time (assigning a new dict is allowed)."""
+        return self._inputs
+
+    @inputs.setter
+    def inputs(self, values: dict):
+        self._inputs = dict(values)
+        # all constant: converted once, not at every step
+        self._constant = (None if any(callable(v) for v in self._inputs.values())
+                          else {k: float(v) for k, v in self._inputs.items()})
 
     def _inputs_at(self, t):
-        return {k: float(v(t) if callable(v) else v) for k, v in self.inputs.items()}
+        if self._constant is not None:
+            return self._constant
+        return {k: float(v(t) if callable(v) else v) for k, v in self._inputs.items()}
 
     def initialize(self, *, V_s, duty=1.0, f_s=48500.0, T=25.0, direction=1.0, m_load=0.0,
                    s0: float = 0.0, v0: float = 0.0):
@@ -61,7 +77,8 @@ class InProcessMotor:
         self.t = 0.0
 
     def step(self):
-        d, stt, itf_, sl = (self.b[k] for k in ("Driver", "Stator", "Interface", "Slider"))
+        b = self.b
+        d, stt, itf_, sl = b["Driver"], b["Stator"], b["Interface"], b["Slider"]
         t, h = self.t, self.h
         u = self._inputs_at(t)
         d.V_s, d.duty, d.f_s, d.T = u["V_s"], u["duty"], u["f_s"], u["T"]

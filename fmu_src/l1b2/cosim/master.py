@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import atexit
 import math
+import operator
 import shutil
 import warnings
 import weakref
@@ -115,6 +116,9 @@ class CoSimulation:
     allow_outside : load FMUs and parameter sets that the SSD names by an absolute path or a
         ``..`` leaving the archive (or the SSD's folder); refused by default
     limits : what an ``.ssp`` and each FMU may unpack to (default :data:`l1b2.cosim.ssp.DEFAULT_LIMITS`)
+    keep_instances : keep the FMU instances between runs: the next :meth:`run` resets them
+        (``fmi2Reset``) instead of instantiating the FMUs again, so many short runs (the rig's
+        experiment) cost little more than their steps; :meth:`close` (or :meth:`reset`) frees them
 
     Use it as a context manager (or call :meth:`close`) to remove an unpacked ``.ssp`` at once.
     """
@@ -127,11 +131,13 @@ class CoSimulation:
     def __init__(self, system: str | Path = SSD_FILE, fmu_dir: str | Path | None = None,
                  step_s: float = DEFAULT_STEP_S, parameters: Mapping[str, float] | None = None,
                  iterate: bool = False, tol: float = 1e-6, max_iter: int = 30, *,
-                 allow_outside: bool = False, limits: ArchiveLimits | None = None):
+                 allow_outside: bool = False, limits: ArchiveLimits | None = None, keep_instances: bool = False):
         if not (step_s > 0 and math.isfinite(step_s)):
             raise SimulationError(f"communication step [s] must be positive, got {step_s}")
         self._tmp = None
         self._finalizer = None
+        self._kept: dict[str, _Instance] = {}
+        self.keep_instances = bool(keep_instances)
         self.allow_outside = bool(allow_outside)
         self.limits = limits or DEFAULT_LIMITS
         try:
@@ -246,8 +252,31 @@ class CoSimulation:
                 raise SystemStructureError(f"{self._member(path)}: parameter '{key}' has unit [{unit}], "
                                            f"the FMU declares [{v.unit}]")
 
+    def reset(self):
+        """Free the FMU instances kept between runs (``keep_instances``); the next run instantiates anew."""
+        kept, self._kept = self._kept, {}
+        self._release(kept, free=True)
+
+    @staticmethod
+    def _release(inst: dict, free: bool):
+        """Terminate the instances (and free them with ``free``); never raises."""
+        for i in inst.values():  # calling FMI functions on a NULL component crashes the host
+            if i.state == "initialized":
+                try:
+                    i.fmu.terminate()
+                    i.state = "terminated"
+                except Exception:  # noqa: BLE001 - instance may be in an error state
+                    i.state = "failed"
+            if free and i.state != "created":
+                try:
+                    i.fmu.freeInstance()
+                except Exception:  # noqa: BLE001
+                    pass
+                i.state = "created"
+
     def close(self):
-        """Remove the unpacked ``.ssp`` (if any); idempotent."""
+        """Free kept FMU instances and remove the unpacked ``.ssp`` (if any); idempotent."""
+        self.reset()
         if getattr(self, "_finalizer", None) is not None:
             self._finalizer()  # runs shutil.rmtree once and detaches
             self._finalizer = None
@@ -284,9 +313,15 @@ class CoSimulation:
         unknown = [c for c in inputs if c not in sysst.connectors]
         if unknown:
             raise SimulationError(f"{sysst.path}: no system input connector(s) {unknown}")
-        inst: dict[str, _Instance] = {}
+        inst, self._kept = self._kept, {}
+        ok = False
         try:
+            for i in inst.values():  # kept from the last run: back to the instantiated state
+                i.fmu.reset()
+                i.state = "instantiated"
             for name, path in self.fmu_paths.items():
+                if name in inst:
+                    continue
                 md = self.model_descriptions[name]
                 unz = extracted(path)
                 fmu = FMU2Slave(guid=md.guid, unzipDirectory=unz, modelIdentifier=md.coSimulation.modelIdentifier,
@@ -296,19 +331,14 @@ class CoSimulation:
                 inst[name].state = "instantiated"
             self._lookup(inst, record)
             self._initialize(inst, inputs, start_values or {})
-            return self._loop(inst, stop_time, inputs, stop_when, progress)
+            result = self._loop(inst, stop_time, inputs, stop_when, progress)
+            ok = True
+            return result
         finally:
-            for i in inst.values():  # calling FMI functions on a NULL component crashes the host
-                if i.state == "initialized":
-                    try:
-                        i.fmu.terminate()
-                    except Exception:  # noqa: BLE001 - instance may be in an error state
-                        pass
-                if i.state != "created":
-                    try:
-                        i.fmu.freeInstance()
-                    except Exception:  # noqa: BLE001
-                        pass
+            keep = ok and self.keep_instances
+            self._release(inst, free=not keep)
+            if keep:
+                self._kept = inst
 
     def _lookup(self, inst, record):
         """Resolve value references once: per component, its connected inputs and needed outputs."""
@@ -370,11 +400,20 @@ class CoSimulation:
     def _initialize(self, inst, inputs, start_values):
         for i in inst.values():
             i.fmu.setupExperiment(startTime=0.0)
+        reals: dict[str, dict] = {n: {} for n in inst}  # Reals set in one fmi2SetReal per component
         for key, value in list(self.parameters.items()) + list(start_values.items()):
             comp, _, var = key.partition(".")
             if comp not in inst:
                 raise SimulationError(f"start value '{key}': no component '{comp}'")
-            self._set_any(inst[comp], var, value)
+            v = inst[comp].vars.get(var)
+            if v is not None and v.type == "Real":
+                reals[comp].pop(v.valueReference, None)  # the later value wins, in its place
+                reals[comp][v.valueReference] = float(value)
+            else:
+                self._set_any(inst[comp], var, value)
+        for comp, vals in reals.items():
+            if vals:
+                inst[comp].fmu.setReal(list(vals), list(vals.values()))
         for i in inst.values():
             i.fmu.enterInitializationMode()
         # Initialise in Gauss-Seidel order so each sees its upstream outputs (others: start values)
@@ -409,7 +448,69 @@ class CoSimulation:
                 values[(n, name)] = val
         return values
 
+    def _fast_pass(self, inst, inputs, h):
+        """The Gauss-Seidel pass of :meth:`_pass` on buffers made once per run.
+
+        Every value the pass moves (system inputs, then each component's needed
+        outputs, in SSD order) has a fixed slot in one list; per component and
+        step: one ``fmi2SetReal`` from preallocated ctypes arrays, ``fmi2DoStep``
+        and one ``fmi2GetReal`` into a preallocated array copied into the
+        component's slots (``fmi2SetReal`` only when a component's inputs changed: an
+        FMU holds the values set). Returns ``(step(t), slots, slot of (component, variable))``;
+        constant system inputs are converted once, functions of time at every step.
+        """
+        from fmpy.fmi2 import fmi2Real, fmi2True, fmi2ValueReference
+        slot: dict[tuple, int] = {}
+        flat: list[float] = []
+        timed = []
+        for src_comp, src_var in self._sources.values():
+            if src_comp is None and (None, src_var) not in slot:
+                x = inputs[src_var]
+                slot[(None, src_var)] = len(flat)
+                flat.append(0.0 if callable(x) else float(x))
+                if callable(x):
+                    timed.append((len(flat) - 1, x))
+        spans = {}
+        for n, i in inst.items():
+            lo = len(flat)
+            for name in i.out_names:
+                slot[(n, name)] = len(flat)
+                flat.append(float(self.values[(n, name)]))
+            spans[n] = (lo, len(flat))
+        plan = []
+        for n, i in inst.items():
+            src = [slot[self._sources[(n, name)]] for name in i.in_names]
+            take = operator.itemgetter(*src) if len(src) > 1 else (lambda values, j=src[0] if src else 0: (values[j],))
+            nin, nout = len(src), len(i.out_vrs)
+            fmu = i.fmu
+            plan.append((n, fmu.component, fmu.fmi2SetReal, fmu.fmi2DoStep, fmu.fmi2GetReal, take if src else None,
+                         (fmi2ValueReference * nin)(*i.in_vrs), (fmi2Real * nin)(), nin,
+                         (fmi2ValueReference * nout)(*i.out_vrs), (fmi2Real * nout)(), nout, *spans[n]))
+        held: dict[str, tuple] = {}
+
+        def step(t):
+            for j, x in timed:
+                flat[j] = float(x(t))
+            for n, comp, set_real, do_step, get_real, take, in_vr, in_val, nin, out_vr, out_val, nout, lo, hi in plan:
+                if take is not None:
+                    u = take(flat)
+                    if u != held.get(n):  # inputs keep their values in the FMU: set them when they change
+                        in_val[:] = u
+                        set_real(comp, in_vr, nin, in_val)
+                        held[n] = u
+                try:
+                    do_step(comp, t, h, fmi2True)
+                except Exception as exc:  # fmpy raises FMICallException on discard/error
+                    raise SimulationError(f"{n}.doStep at t={t:.6g} s failed ({exc}); see the FMU log above") from None
+                if nout:
+                    get_real(comp, out_vr, nout, out_val)
+                    flat[lo:hi] = out_val
+
+        return step, flat, slot
+
     def _loop(self, inst, stop_time, inputs, stop_when, progress):
+        if not self.iterate:
+            return self._loop_fast(inst, stop_time, inputs, stop_when, progress)
         h = self.step_s
         n_steps = int(round(stop_time / h))
         rows = np.empty((n_steps + 1, len(self.record)))
@@ -457,10 +558,40 @@ class CoSimulation:
             if stop_when is not None and stop_when({f"{a}.{b}": v for (a, b), v in self.values.items()}):
                 last = k + 1
                 break
+        return self._result(rows, times, last)
+
+    def _loop_fast(self, inst, stop_time, inputs, stop_when, progress):
+        """:meth:`_loop` without fixed-point iteration, on :meth:`_fast_pass` (same values, less work per step)."""
+        h = self.step_s
+        n_steps = int(round(stop_time / h))
+        step, flat, slot = self._fast_pass(inst, inputs, h)
+        rows = np.empty((n_steps + 1, len(self.record)))
+        rec = [slot[tuple(r.split(".", 1))] for r in self.record]
+        take = operator.itemgetter(*rec) if len(rec) > 1 else (lambda values, j=rec[0] if rec else 0: (values[j],))
+        rows[0] = take(flat) if rec else ()
+        times = np.arange(n_steps + 1) * h
+        named = [(f"{a}.{b}", j) for (a, b), j in slot.items() if a is not None]
+        last = n_steps
+        self.unconverged_steps_ = 0
+        try:
+            for k in range(n_steps):
+                step(k * h)
+                if rec:
+                    rows[k + 1] = take(flat)
+                if progress is not None:
+                    progress(k + 1, n_steps)
+                if stop_when is not None and stop_when({name: flat[j] for name, j in named}):
+                    last = k + 1
+                    break
+        finally:
+            self.values = {(a, b): flat[j] for (a, b), j in slot.items() if a is not None}
+        return self._result(rows, times, last)
+
+    def _result(self, rows, times, last) -> CoSimResult:
         if self.unconverged_steps_:
             warnings.warn(f"fixed-point iteration did not reach tol={self.tol} within {self.max_iter} "
                           f"iterations in {self.unconverged_steps_} of {len(self.iterations_)} steps",
-                          RuntimeWarning, stacklevel=3)
+                          RuntimeWarning, stacklevel=4)
         df = pd.DataFrame(rows[:last + 1], columns=self.record)
         df.insert(0, "time", times[:last + 1])
         units = {"time": "s", **self.units}

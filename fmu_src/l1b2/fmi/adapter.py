@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import json
 import math
+import operator
 from pathlib import Path
 
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real  # noqa: F401
@@ -114,8 +115,12 @@ class BlockAdapter:
         self.mode = INSTANTIATED
         self.in_initialization_mode = False
         self._outputs_stale = True
+        self._plain: dict[int, str] = {}   # value reference -> attribute, for the fast get_real/set_real
+        self._plans: dict[tuple, object] = {}
         for var in block_cls.variables(params):
             vtype, conv = _TYPES[var.type]
+            if var.type == "Real" and var.causality != "parameter" and "." not in var.name:
+                self._plain[len(slave.vars)] = var.name  # PythonFMU numbers the variables in this order
             getter = self._output_getter(var.name, conv) if var.causality == "output" else self._getter(var.name, conv)
             kw = dict(causality=_CAUSALITY[var.causality], description=var.description,
                       getter=getter, setter=self._setter(var.name, conv))
@@ -151,6 +156,43 @@ class BlockAdapter:
             except (TypeError, ValueError) as exc:  # never raise out of a callback
                 self.fail(f"cannot set {name} to {value!r}: {exc}")
         return set_value
+
+    # -- fmi2GetReal / fmi2SetReal -----------------------------------------------------
+    # PythonFMU 0.7.0's get_real/set_real look every variable up, check its type and call
+    # its getter/setter closure. Inputs, outputs and states of a block are plain float
+    # attributes (blocks.py), so a list of them is read with one attrgetter, planned once
+    # per list of value references; anything else takes PythonFMU's general path.
+    def _plan(self, vrs: tuple):
+        if len(self._plans) >= 64:
+            self._plans.clear()
+        names = [self._plain.get(vr) for vr in vrs]
+        plan = None
+        if names and None not in names:
+            plan = (operator.attrgetter(*names) if len(names) > 1
+                    else (lambda block, n=names[0]: (getattr(block, n),)), names)
+        self._plans[vrs] = plan
+        return plan
+
+    def get_real(self, vrs) -> list:
+        """``fmi2GetReal`` (same values as ``Fmi2Slave.get_real``, which serves initialization mode)."""
+        if not self.in_initialization_mode:
+            key = tuple(vrs)
+            plan = self._plans[key] if key in self._plans else self._plan(key)
+            if plan is not None:
+                return list(plan[0](self.block))
+        return Fmi2Slave.get_real(self.slave, vrs)
+
+    def set_real(self, vrs, values):
+        """``fmi2SetReal`` (same effect as ``Fmi2Slave.set_real`` through the setters)."""
+        key = tuple(vrs)
+        plan = self._plans[key] if key in self._plans else self._plan(key)
+        if plan is None:
+            Fmi2Slave.set_real(self.slave, vrs, values)
+            return
+        self._outputs_stale = True
+        block = self.block
+        for name, value in zip(plan[1], values):
+            setattr(block, name, float(value))
 
     def log_error(self, message: str):
         """One line with status ``fmi2Error`` in the FMU log."""

@@ -67,6 +67,12 @@ class {name}(Fmi2Slave):
     def do_step(self, current_time, step_size):
         return self.adapter.do_step(current_time, step_size)
 
+    def get_real(self, vrs):
+        return self.adapter.get_real(vrs)
+
+    def set_real(self, vrs, values):
+        self.adapter.set_real(vrs, values)
+
     def _get_fmu_state(self):
         return self.adapter.fmu_state(super()._get_fmu_state())
 

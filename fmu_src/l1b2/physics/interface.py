@@ -108,14 +108,15 @@ def _half_angle_scalar(U: float, Fp: float, k_e: float) -> float:
     a = min(max(a, 1e-12), math.pi - 1e-12)
     lo, hi = 0.0, math.pi
     for _ in range(60):
-        g = math.sin(a) - a * math.cos(a) - r
+        sin_a = math.sin(a)
+        g = sin_a - a * math.cos(a) - r
         if abs(g) <= 4e-16 * math.pi:
             break
         if g < 0:
             lo = a
         else:
             hi = a
-        a_new = a - g / max(a * math.sin(a), 1e-300)
+        a_new = a - g / max(a * sin_a, 1e-300)
         a = a_new if lo <= a_new <= hi else 0.5 * (lo + hi)
     return a
 
@@ -215,19 +216,22 @@ def interface_forces(U_l_m, U_w_m, delta_rad, omega_rad_s, v_m_s, F_p_N,
         if not isinstance(x, (float, int)):
             break
     else:  # plain (or numpy) scalars: the co-simulation's hot path
-        return _interface_scalar(float(U_l_m), float(U_w_m), float(delta_rad), float(omega_rad_s),
-                                 float(v_m_s), float(F_p_N), params, mode)
+        return interface_forces_scalar(float(U_l_m), float(U_w_m), float(delta_rad), float(omega_rad_s),
+                                       float(v_m_s), float(F_p_N), params, mode)
     arrays = np.broadcast_arrays(*(np.asarray(x, float) for x in args))
     shape = arrays[0].shape
     if not shape:
-        return _interface_scalar(*(float(x) for x in arrays), params, mode)
-    rows = [_interface_scalar(*row, params, mode) for row in zip(*(x.ravel().tolist() for x in arrays))]
+        return interface_forces_scalar(*(float(x) for x in arrays), params, mode)
+    rows = [interface_forces_scalar(*row, params, mode) for row in zip(*(x.ravel().tolist() for x in arrays))]
     cols = np.array(rows, dtype=float).reshape(shape + (len(InterfaceOutput._fields),))
     return InterfaceOutput(*np.moveaxis(cols, -1, 0))
 
 
-def _interface_scalar(U_l, U_w, delta, omega, v, F_p, params: InterfaceParams, mode: str) -> InterfaceOutput:
-    """Exact period averages for scalar inputs: the contact window cut into elementary pieces.
+def interface_forces_scalar(U_l, U_w, delta, omega, v, F_p, params: InterfaceParams, mode: str) -> InterfaceOutput:
+    """Exact period averages for scalar inputs (floats): the contact window cut into elementary pieces.
+
+    The scalar kernel behind :func:`interface_forces`, for callers that already hold
+    plain floats and a valid ``mode`` (the co-simulation's per-step call).
 
     ``F_N = A sin(theta) + B`` on the window. The cuts are the relative-velocity
     reversals (friction sign and ``u_r`` reset) and, inside each segment, the

@@ -409,6 +409,118 @@ def _modal_properties_scalar(sp: StatorParams, P: float, T_degC) -> ModalPropert
     )
 
 
+#: width [N] and polynomial degree of the cells of :class:`ModalTable` (interpolation error at
+#: round-off, ~1e-15 relative, over 0-60 N of the reference motor: tests/test_stator.py)
+TABLE_CELL_N = 1.0
+TABLE_DEGREE = 9
+
+
+class ModalTable:
+    """:func:`modal_properties` at a fixed B2 temperature, by piecewise polynomial interpolation in ``P``.
+
+    The co-simulation needs the modal properties every step at a slowly moving
+    axial force ``P(s)``. The B2 frequency and tip coefficient are smooth in
+    ``P``: the table cuts the force axis into cells of :data:`TABLE_CELL_N`
+    newtons, built when first visited from exact evaluations at the
+    :data:`TABLE_DEGREE` + 1 Chebyshev-Lobatto nodes of the cell, and returns
+    the interpolant (Horner in the cell's scaled coordinate), equal to the
+    exact values to round-off. A cell with a failed node (beyond buckling) is
+    not tabulated: :func:`modal_properties` is called instead. ``T_b_degC`` is
+    the temperature the B2 properties are taken at (``None`` when the B2 mode
+    has no thermal drift); the L1 properties follow the ``T`` of each call.
+    """
+
+    def __init__(self, sp: StatorParams, T_b_degC=None):
+        self.sp, self.T_b = sp, T_b_degC
+        self.cells: dict[int, tuple | None] = {}
+        self.M_l, self.M_b = modal_mass_l_kg(sp), modal_mass_b_kg(sp)
+        self._l1_T: object = object()  # temperature of the cached L1 properties
+        self._l1 = (0.0, 0.0, 0.0)
+
+    def _build(self, k: int):
+        deg, w = TABLE_DEGREE, TABLE_CELL_N
+        x, to_power = _lobatto_interpolation()
+        nodes = k * w + 0.5 * (x + 1.0) * w
+        try:  # the scalar path: the values the per-step calls had before the table
+            props = [modal_properties(self.sp, float(P), self.T_b) for P in nodes]
+            wb = np.array([float(p.omega_b0) for p in props])
+            eta = np.array([float(p.eta_T) for p in props])
+        except (ValueError, FloatingPointError):
+            wb = eta = np.full(deg + 1, np.nan)
+        cell = None
+        if np.all(np.isfinite(wb)) and np.all(np.isfinite(eta)) and k * w >= 0.0:
+            cell = (_power_coefficients(to_power, wb), _power_coefficients(to_power, eta))
+        self.cells[k] = cell
+        return cell
+
+    def __call__(self, P: float, T_degC=None) -> ModalProperties:
+        w = TABLE_CELL_N
+        k = math.floor(P / w)
+        cell = self.cells[k] if k in self.cells else self._build(k)
+        sp = self.sp
+        if cell is None:  # B2 at T_b: T_degC == T_b, or B2 does not depend on the temperature
+            return modal_properties(sp, float(P), T_degC)
+        u = 2.0 * (P - k * w) / w - 1.0
+        cw, ce = cell
+        wb = cw[0]
+        for c in cw[1:]:
+            wb = wb * u + c
+        eta = ce[0]
+        for c in ce[1:]:
+            eta = eta * u + c
+        K_l, C_l, w_l0 = self._l1_props(T_degC)
+        M_b = self.M_b
+        return ModalProperties(M_l=self.M_l, K_l=K_l, C_l=C_l, M_b=M_b, K_b=M_b * wb ** 2,
+                               C_b=2 * sp.zeta_b * M_b * wb, eta_T=abs(eta), omega_l0=w_l0, omega_b0=wb)
+
+    def _l1_props(self, T_degC):
+        if T_degC != self._l1_T:
+            sp = self.sp
+            dT = 0.0 if T_degC is None else float(T_degC) - sp.T_ref_degC
+            w_l0 = 2 * math.pi * (sp.f_l0_Hz + sp.df_dT_l_Hz_per_K * dT)
+            self._l1_T, self._l1 = T_degC, (self.M_l * w_l0 ** 2, 2 * sp.zeta_l * self.M_l * w_l0, w_l0)
+        return self._l1
+
+
+@lru_cache(maxsize=1)
+def _lobatto_interpolation():
+    """Chebyshev-Lobatto nodes on [-1, 1] and the matrix from values there to the interpolant's
+    power-series coefficients, highest power first (for Horner's scheme)."""
+    deg = TABLE_DEGREE
+    cheb = np.polynomial.chebyshev
+    x = np.cos(np.pi * np.arange(deg + 1) / deg)
+    to_cheb = cheb.chebfit(x, np.eye(deg + 1), deg)  # column j: coefficients of the j-th node's cardinal
+    to_power = np.column_stack([cheb.cheb2poly(to_cheb[:, j]) for j in range(deg + 1)])
+    return x, to_power[::-1].copy()
+
+
+def _power_coefficients(to_power, values) -> tuple:
+    """Interpolant's power coefficients from node values; the mean is taken out first, so that the
+    matrix's large entries act only on the small variation over the cell (no cancellation)."""
+    mean = float(np.mean(values))
+    coef = to_power @ (values - mean)
+    coef[-1] += mean
+    return tuple(coef.tolist())
+
+
+_TABLES: dict = {}
+
+
+def modal_table(sp: StatorParams, T_degC=None) -> ModalTable:
+    """The shared :class:`ModalTable` of ``sp`` for B2 at ``T_degC`` (any ``T`` when B2 has no thermal drift).
+
+    Tables are shared by every stator with the same parameters in the process
+    (runs of an experiment reuse the cells they visited); at most 32 are kept.
+    """
+    key = (sp, T_degC if sp.df_dT_b_Hz_per_K != 0.0 else None)
+    table = _TABLES.get(key)
+    if table is None:
+        if len(_TABLES) >= 32:
+            _TABLES.pop(next(iter(_TABLES)))
+        table = _TABLES[key] = ModalTable(sp, key[1])
+    return table
+
+
 def dynamic_stiffness(omega_rad_s, M, K, C):
     """``Z = K - w^2 M + j w C`` so that the steady phasor is ``Q = F / Z`` [N/m]."""
     w = np.asarray(omega_rad_s, float)
