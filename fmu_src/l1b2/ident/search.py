@@ -434,11 +434,12 @@ def profile_refine(objective, z, max_iter=100, stat_tol=0.01, stat_window=3, log
     def loglik_at(zz, start_gain=True):
         theta = obj.theta_of(zz)
         r = obj.problem.residual(theta)
-        if start_gain:
-            obj.update_noise(theta)
-        else:  # the step's model: g as at the iteration's start
-            noise.update_R(r)
-        return noise.loglik(r)
+        with np.errstate(over="ignore", invalid="ignore"):  # a trial step may blow the free run up: rejected
+            if start_gain:
+                obj.update_noise(theta)
+            else:  # the step's model: g as at the iteration's start
+                noise.update_R(r)
+            return noise.loglik(r)
 
     ll = loglik_at(z)
     history = [{"iteration": 0, "loglik": ll}]
@@ -470,7 +471,8 @@ def profile_refine(objective, z, max_iter=100, stat_tol=0.01, stat_window=3, log
                 dz = _bounded_step(Hc, D, g, lam_c, z, obj.zlo, obj.zhi)
                 z_new = strictly_inside(np.clip(z + dz, obj.zlo, obj.zhi), obj.zlo, obj.zhi)
                 if frozen:  # at the variances of the iteration's start
-                    ll_trial, ref = noise.loglik(obj.problem.residual(obj.theta_of(z_new))), ll_frozen
+                    with np.errstate(over="ignore", invalid="ignore"):
+                        ll_trial, ref = noise.loglik(obj.problem.residual(obj.theta_of(z_new))), ll_frozen
                 else:  # at the variances' ML values there (g as at the start)
                     ll_trial, ref = loglik_at(z_new, start_gain=False), ll
                 nfev += 1
