@@ -370,3 +370,46 @@ def test_evaluation_mask_is_the_metrics_one():
     from l1b2.data import metrics
 
     assert evaluation_mask is metrics.evaluation_mask
+
+
+# ---------------------------------------------------------------------------
+# noise fit: profile likelihood (default) against the former alternation
+# ---------------------------------------------------------------------------
+
+
+def test_profile_noise_fit_reaches_the_ml_variances_and_beats_the_alternation():
+    """On data the model does not fit exactly (order-5 truth, order-2 model, per-run noise), the profile
+    search ends at a point where the noise variances are their ML values (re-estimating them changes
+    nothing) and its log-likelihood is at least the former alternation's."""
+    prm = example_params(5)
+    df = simulate_dataset(prm, SMALL, M_S, noise_std=3e-4, seed=5)
+    kw = dict(order=2, n_starts=3, fixed="recommended", seed=0)
+    alt = PredictorIdentifier(noise_fit="alternate", **kw).fit(df, M_S, mask=evaluation_mask(df))
+    pro = PredictorIdentifier(**kw).fit(df, M_S, mask=evaluation_mask(df))
+    assert pro.result_.settings["noise_fit"] == "profile"  # the setting is in the report
+    assert alt.result_.settings["noise_fit"] == "alternate"
+    assert pro.loglik_ >= alt.loglik_ - 0.1
+    conv = pro.convergence_
+    assert conv["success"] and conv["noise_converged"]
+    ll = [h["loglik"] for h in conv["outer"]]
+    assert np.all(np.diff(ll) > 0)  # every accepted iteration gains likelihood
+    # the final variances are the ML ones at the optimum: a profile step from there gains < stat_tol
+    assert conv["outer"][-1]["loglik"] == pytest.approx(pro.loglik_, abs=1e-6)
+
+
+def test_profile_search_statistical_stop_and_settings_errors():
+    prm, th, names = _truth(3)
+    df = simulate_dataset(prm, SMALL, M_S, noise_std=1e-4, seed=7)
+    est = PredictorIdentifier(order=3, n_starts=6, fixed="recommended", start_agree=2, seed=0)
+    est.fit(df, M_S, mask=evaluation_mask(df))
+    starts = est.convergence_["starts"]
+    run = [s for s in starts if s.get("status") is not None]
+    skipped = [s for s in starts if s.get("status") is None]
+    # well-posed data: the starts agree, so the search stops after the second agreeing start
+    assert len(run) >= 2 and len(run) + len(skipped) == 6
+    assert all("statistical stop" in s["message"] for s in skipped)
+    best = max(s["loglik"] for s in run)
+    assert sum(s["loglik"] >= best - 10 * est.stat_tol for s in run) >= 2
+    for bad in (dict(noise_fit="newton"), dict(start_agree=-1), dict(stat_window_profile=0)):
+        with pytest.raises(IdentificationError):
+            PredictorIdentifier(order=3, **bad).fit(df, M_S)

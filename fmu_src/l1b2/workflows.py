@@ -193,7 +193,7 @@ def output_dir(out, *, command: str = "l1b2") -> Iterator[Path]:
         os.chmod(tmp, 0o777 & ~umask)  # mkdtemp's 0700 would make the result private
         yield tmp
         (tmp / OUTPUT_MARKER).write_text(json.dumps({"command": command, "finished": time.time(),
-                                                     "pid": os.getpid()}))
+                                                     "pid": os.getpid()}, allow_nan=False))
         _check_target(out, known)  # nothing foreign appeared there meanwhile
         _swap_into_place(tmp, out)
         tmp = None

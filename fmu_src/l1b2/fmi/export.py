@@ -254,6 +254,6 @@ def export_all(out_dir: str | Path, mp: MotorParams | None = None, predictor: Ma
     if problems:
         raise ExportError(f"{out}: {len(problems)} validation problem(s):\n  " + "\n  ".join(problems))
     tmp = out / (MANIFEST + ".tmp")
-    tmp.write_text(json.dumps(manifest, indent=1) + "\n")
+    tmp.write_text(json.dumps(manifest, indent=1, allow_nan=False) + "\n")
     os.replace(tmp, out / MANIFEST)
     return manifest

@@ -133,7 +133,7 @@ from .problem import (
 )
 from .reduced import data_driven_start, init_theta, reduced_summary
 from .result import IdentificationResult
-from .search import LocalSolver, alternate_noise, multi_start, start_points, warm_prestep
+from .search import LocalSolver, alternate_noise, multi_start, profile_search, start_points, warm_prestep
 from .uncertainty import alternative_optima, extra_confounding, fisher_uncertainty
 
 __all__ = ["PredictorIdentifier", "clone", "RECOMMENDED_FIXED", "evaluation_mask"]
@@ -191,6 +191,20 @@ class PredictorIdentifier:
     stat_tol, stat_window : statistical convergence: a local run also stops when
         its cost (= -log-likelihood + const) decreased by less than ``stat_tol``
         over ``stat_window`` iterations (scipy >= 1.16; 0 disables).
+    noise_fit : how Eq. 32's unknown noise variances are fitted with theta.
+        ``"profile"`` (default): every local search maximises the profile
+        likelihood (variances at their ML values at every point, a damped
+        Gauss-Newton iteration with the theta-variance coupling,
+        :func:`l1b2.ident.search.profile_refine`) from each start in turn, and
+        the global search compares the starts by their likelihood.
+        ``"alternate"``: the former scheme -- a two-stage multi-start of
+        ``least_squares`` at variances fixed at the start, then fit theta /
+        re-estimate R alternately (``max_outer`` times at most); on data the
+        model does not fit exactly it converges slowly (tens of refits).
+    start_agree : profile search: stop the global search once this many starts
+        reached the best log-likelihood within ``10 * stat_tol`` (0: run every start).
+    stat_window_profile : profile search: a local search stops when its
+        log-likelihood gained less than ``stat_tol`` over this many iterations.
     alt_tol : a refined optimum of the global search whose log-likelihood is within
         ``alt_tol`` of the best but which differs by > 3 stderr is reported in
         ``alternative_optima_`` (a discrete ambiguity the local stderr cannot show).
@@ -276,6 +290,9 @@ class PredictorIdentifier:
         stat_tol: float = 0.01,
         stat_window: int = 10,
         alt_tol: float = 2.0,
+        noise_fit: str = "profile",
+        start_agree: int = 2,
+        stat_window_profile: int = 3,
         verbose: bool = False,
         extra: ExtraForces | None = None,
         init: PredictorParams | None = None,
@@ -301,6 +318,9 @@ class PredictorIdentifier:
         self.stat_tol = stat_tol
         self.stat_window = stat_window
         self.alt_tol = alt_tol
+        self.noise_fit = noise_fit
+        self.start_agree = start_agree
+        self.stat_window_profile = stat_window_profile
         self.verbose = verbose
         self.extra = extra
         self.init = init
@@ -338,7 +358,8 @@ class PredictorIdentifier:
     def _checked_settings(self) -> SimpleNamespace:
         """The settings with their types normalised; IdentificationError for an invalid one."""
         cfg = SimpleNamespace(**self.get_params())
-        for name in ("order", "n_starts", "max_nfev", "max_outer", "explore_nfev", "stat_window"):
+        for name in ("order", "n_starts", "max_nfev", "max_outer", "explore_nfev", "stat_window", "start_agree",
+                     "stat_window_profile"):
             setattr(cfg, name, int(getattr(cfg, name)))
         for name in ("kappa", "start_spread", "svd_rtol", "weak_rtol", "tol", "stat_tol", "alt_tol"):
             setattr(cfg, name, float(getattr(cfg, name)))
@@ -347,6 +368,10 @@ class PredictorIdentifier:
         cfg.n_refine = max(1, int(cfg.n_refine))
         if cfg.criterion not in ("free_run", "one_step"):
             raise IdentificationError(f"criterion must be 'free_run' or 'one_step', got {cfg.criterion!r}")
+        if cfg.noise_fit not in ("profile", "alternate"):
+            raise IdentificationError(f"noise_fit must be 'profile' or 'alternate', got {cfg.noise_fit!r}")
+        if cfg.start_agree < 0 or cfg.stat_window_profile < 1:
+            raise IdentificationError("start_agree must be >= 0 and stat_window_profile >= 1")
         if cfg.noise not in ("per_run", "common"):
             raise IdentificationError(f"noise must be 'per_run' or 'common', got {cfg.noise!r}")
         if cfg.order < 0:
@@ -480,9 +505,13 @@ class PredictorIdentifier:
             z_centre, self.warm_prestep_ = warm_prestep(obj, z_centre, xv, cfg.tol, cfg.max_nfev, self._log)
         starts = start_points(z_centre, [obj.z_of(th) for _, th in minima[1:]], cfg.n_starts, cfg.seed,
                               cfg.start_spread, obj.zlo, obj.zhi)
-        search = multi_start(solver, starts, cfg.max_nfev, cfg.explore_nfev, cfg.n_refine, self._log)
-        best = search.results[search.best]
-        outer = alternate_noise(solver, best.x, best, cfg.max_outer, cfg.max_nfev, self._log)
+        if cfg.noise_fit == "profile":
+            search, outer = profile_search(obj, starts, cfg.max_nfev // 2, cfg.stat_tol, cfg.stat_window_profile,
+                                           cfg.start_agree, self._log)
+        else:
+            search = multi_start(solver, starts, cfg.max_nfev, cfg.explore_nfev, cfg.n_refine, self._log)
+            best = search.results[search.best]
+            outer = alternate_noise(solver, best.x, best, cfg.max_outer, cfg.max_nfev, self._log)
 
         # ---- uncertainty and the result ------------------------------------------
         result = self._result(cfg, space, sample, obj, search, outer, fixed_final, t_start)
@@ -529,8 +558,8 @@ class PredictorIdentifier:
             "success": bool(final.status > 0 or final.status == -2),
             "optimality": float(final.optimality),
             "cost": float(0.5 * np.sum(noise.weighted(r) ** 2)),
-            "nfev_total": int(sum(rec.get("nfev", 0) for rec in records)
-                              + sum(h.get("nfev", 0) for h in outer_hist[1:])),
+            "nfev_total": int(sum(rec.get("nfev", 0) for rec in records)  # profile: outer = the best start's
+                              + (0 if cfg.noise_fit == "profile" else sum(h.get("nfev", 0) for h in outer_hist[1:]))),
         }
         p = space.p_theta
         extra = cfg.extra

@@ -29,6 +29,7 @@ import math
 import time
 import warnings
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -38,7 +39,7 @@ from .problem import strictly_inside
 
 __all__ = [
     "HAS_CALLBACK", "StatStop", "sobol_box", "LocalSolver", "start_points", "SearchOutcome", "multi_start",
-    "warm_prestep", "NoiseRefinement", "alternate_noise",
+    "warm_prestep", "NoiseRefinement", "alternate_noise", "ProfileRefinement", "profile_refine", "profile_search",
 ]
 
 
@@ -362,3 +363,196 @@ def alternate_noise(solver, z_best, best_res, max_outer, max_nfev, log=None):
         if log is not None:
             log(f"outer {it}: R change {change:.3g}, cost {res.cost:.6g}, nfev {res.nfev}")
     return NoiseRefinement(z_best, final_res, outer_hist, converged_R)
+
+
+@dataclass
+class ProfileRefinement:
+    """Result of :func:`profile_refine`: final point, a least_squares-like result, history, convergence."""
+
+    z: np.ndarray
+    final: object
+    history: list
+    converged: bool
+
+
+def _run_sums(run_sel, n_runs, X):
+    """Per-run column sums of the rows of ``X`` (n_runs, p)."""
+    out = np.zeros((n_runs, X.shape[1]))
+    np.add.at(out, run_sel, X)
+    return out
+
+
+def _bounded_step(H, D, g, lam, z, zlo, zhi):
+    """Damped Newton step ``(H + lam diag D) dz = -g``; coordinates at a bound that the step would
+    push further out are held (solved again without them)."""
+    d = np.maximum(D, 1e-12 * max(float(np.max(D)), 1e-300))
+    A = H + lam * np.diag(d)
+    free = np.ones(z.size, bool)
+    for _ in range(3):
+        dz = np.zeros_like(z)
+        idx = np.flatnonzero(free)
+        dz[idx] = np.linalg.solve(A[np.ix_(idx, idx)], -g[idx])
+        tol = np.where(np.isfinite(zhi - zlo), 1e-9 * (zhi - zlo), 0.0)
+        out = free & (((z <= zlo + tol) & (dz < 0)) | ((z >= zhi - tol) & (dz > 0)))
+        if not out.any():
+            break
+        free &= ~out
+    return dz
+
+
+def history_nfev(history) -> int:
+    """Evaluations counted in a refinement history so far."""
+    return 1 + sum(h.get("nfev", 0) for h in history[1:])
+
+
+def profile_refine(objective, z, max_iter=100, stat_tol=0.01, stat_window=3, log=None, coupling=2.0):
+    """Eq. 32 with unknown R as one problem: maximise the profile likelihood over theta.
+
+    The per-run variances are at their ML values at every point (``R_r = S_r / n_r``,
+    S_r the run's whitened sum of squares; floored runs keep the floor), so the
+    criterion is ``-sum_r n_r/2 log S_r`` + const. A damped Gauss-Newton
+    iteration: gradient ``J_w^T r_w`` (the weighted least-squares gradient at those
+    variances) and curvature ``sum_r J_w,r^T (I - c P_r) J_w,r`` with ``P_r`` the
+    projector on the run's weighted residual and ``c = coupling`` (2: the
+    Gauss-Newton curvature of ``n_r/2 log S_r``; the variance absorbs what
+    only rescales the run's residuals), damped Levenberg-Marquardt style with
+    the least-squares diagonal. This keeps the coupling between theta and R that the alternation
+    of :func:`alternate_noise` (fit theta at fixed R, re-estimate R, repeat)
+    resolves only over many refits on data the model does not fit exactly.
+    The start-speed term ``g`` is re-estimated at every accepted point.
+
+    Stops on statistical progress: when the log-likelihood gained less than
+    ``stat_tol`` over the last ``stat_window`` iterations (or no step gains).
+    The free run is only piecewise smooth (a run at the edge of sticking or
+    reversing is a kink): a local search can end on one, which is why the
+    global search (:func:`profile_search`) compares several starts.
+    """
+    obj = objective
+    noise = obj.noise
+    t0 = time.perf_counter()
+
+    def loglik_at(zz, start_gain=True):
+        theta = obj.theta_of(zz)
+        r = obj.problem.residual(theta)
+        with np.errstate(over="ignore", invalid="ignore"):  # a trial step may blow the free run up: rejected
+            if start_gain:
+                obj.update_noise(theta)
+            else:  # the step's model: g as at the iteration's start
+                noise.update_R(r)
+            return noise.loglik(r)
+
+    ll = loglik_at(z)
+    history = [{"iteration": 0, "loglik": ll}]
+    lam, nfev, njev, converged, reason = 1e-3, 1, 0, False, "iteration limit"
+    g = np.zeros_like(z)
+    n_runs, run_sel = noise.n_runs, noise.run_sel
+    for it in range(1, max_iter + 1):
+        rw = obj.fun(z)
+        J = obj.jac(z)
+        njev += 1
+        g = J.T @ rw
+        H = J.T @ J
+        D = np.diag(H).copy()
+        s = np.bincount(run_sel, weights=rw * rw, minlength=n_runs)
+        u = _run_sums(run_sel, n_runs, J * rw[:, None])
+        w = noise.W(obj.problem.residual(obj.theta_of(z)))
+        ss = np.bincount(run_sel, weights=w * w, minlength=n_runs)
+        at_ml = (noise.counts > 0) & (s > 0) & np.isclose(noise.R * np.maximum(noise.counts, 1), ss, rtol=1e-9)
+        saved = dict(vars(noise))
+        ll_frozen = noise.loglik(obj.problem.residual(obj.theta_of(z)))
+        accepted = False
+        # the coupled step (profile likelihood); on a kink of the free run, where it finds no gain, the
+        # least-squares step at the current variances (accepted by the likelihood at those variances,
+        # the variances then re-estimated: a step of the alternation, which cannot lose likelihood)
+        for c, lam_max, frozen in ((coupling, 1e4, False), (0.0, 1e10, True)):
+            Hc = H if c == 0.0 or not at_ml.any() else H - c * (u[at_ml] / s[at_ml, None]).T @ u[at_ml]
+            lam_c = lam
+            while lam_c < lam_max:
+                dz = _bounded_step(Hc, D, g, lam_c, z, obj.zlo, obj.zhi)
+                z_new = strictly_inside(np.clip(z + dz, obj.zlo, obj.zhi), obj.zlo, obj.zhi)
+                if frozen:  # at the variances of the iteration's start
+                    with np.errstate(over="ignore", invalid="ignore"):
+                        ll_trial, ref = noise.loglik(obj.problem.residual(obj.theta_of(z_new))), ll_frozen
+                else:  # at the variances' ML values there (g as at the start)
+                    ll_trial, ref = loglik_at(z_new, start_gain=False), ll
+                nfev += 1
+                if np.isfinite(ll_trial) and ll_trial > ref:
+                    accepted = True
+                    lam = max(lam_c / 3.0, 1e-9)
+                    ll_new = loglik_at(z_new)  # g and R at the new point
+                    break
+                vars(noise).update(saved)
+                lam_c *= 4.0
+            if accepted:
+                break
+        if not accepted or not ll_new > ll - 1e-9 * abs(ll):
+            vars(noise).update(saved)
+            converged, reason = True, "no step increases the log-likelihood"
+            break
+        history.append({"iteration": it, "loglik": ll_new, "nfev": nfev - history_nfev(history), "lambda": lam})
+        z, ll = z_new, ll_new
+        if log is not None:
+            log(f"profile {it}: loglik {ll:.4f} (lambda {lam:.1e})")
+        if it >= stat_window and ll - history[-1 - stat_window]["loglik"] < stat_tol:
+            converged = True
+            reason = (f"statistical convergence: log-likelihood gained < {stat_tol:g} "
+                      f"over the last {stat_window} iterations")
+            break
+    r = obj.fun(z)
+    final = SimpleNamespace(x=z, cost=float(0.5 * np.sum(r * r)), nfev=nfev, njev=njev,
+                            status=-2 if converged else 0, message=reason,
+                            optimality=float(np.max(np.abs(g))) if g.size else 0.0,
+                            time_s=time.perf_counter() - t0)
+    return ProfileRefinement(z, final, history, converged)
+
+
+def profile_search(objective, starts, max_iter, stat_tol, stat_window, agree, log=None):
+    """Global search on the profile likelihood: :func:`profile_refine` from every start, in order.
+
+    Each start is refined to statistical convergence with the noise variances at
+    their ML values, so the starts are compared by the likelihood itself (not at
+    variances estimated at another point). Statistical stop of the search: once
+    ``agree`` starts (0: never) reached the best log-likelihood within
+    ``10 * stat_tol``, the remaining starts are skipped (recorded as skipped):
+    a further start finding the same optimum again would not change the fit.
+
+    Returns ``(SearchOutcome, ProfileRefinement of the best start)``; the results'
+    ``cost`` is the negative log-likelihood (differences are log-likelihood units).
+    """
+    obj = objective
+    sv_scale = obj.sv_scale
+    records, results, refinements = [], {}, {}
+    for i, z_init in enumerate(starts):
+        r_init = obj.fun(z_init)
+        if not np.all(np.abs(r_init) < 1e9):
+            records.append({"start": i, "status": None, "message": "skipped: non-finite prediction at start",
+                            "cost": float("inf"), "nfev": 0, "njev": 0, "time_s": 0.0,
+                            "x0": (z_init * sv_scale).tolist(), "refined": False})
+            continue
+        ref = profile_refine(obj, z_init, max_iter, stat_tol, stat_window)
+        ll = ref.history[-1]["loglik"]
+        res = ref.final
+        res.cost = -ll
+        results[i], refinements[i] = res, ref
+        records.append({"start": i, "x0": (z_init * sv_scale).tolist(), "cost": -ll, "loglik": ll,
+                        "nfev": int(res.nfev), "njev": int(res.njev), "status": int(res.status),
+                        "message": str(res.message), "optimality": float(res.optimality),
+                        "iterations": len(ref.history) - 1, "time_s": res.time_s, "refined": True})
+        if log is not None:
+            log(f"start {i}: loglik {ll:.4f} after {len(ref.history) - 1} iterations, nfev {res.nfev} "
+                f"({res.time_s:.2f}s)")
+        best_ll = max(-r.cost for r in results.values())
+        if agree and sum(-r.cost >= best_ll - 10 * stat_tol for r in results.values()) >= agree:
+            for j in range(i + 1, len(starts)):
+                records.append({"start": j, "status": None, "cost": float("inf"), "nfev": 0, "njev": 0,
+                                "time_s": 0.0, "x0": (starts[j] * sv_scale).tolist(), "refined": False,
+                                "message": f"skipped: statistical stop ({agree} starts reached the best "
+                                           f"log-likelihood within {10 * stat_tol:g})"})
+            break
+    if not results:
+        raise IdentificationError("global search failed: every start gave a non-finite prediction")
+    ranked = sorted(results, key=lambda i: results[i].cost)
+    best = ranked[0]
+    ref = refinements[best]
+    obj.update_noise(obj.theta_of(ref.z))  # the noise model at the chosen optimum (not the last start's)
+    return SearchOutcome(records, results, ranked, best, 0, list(ranked)), ref

@@ -401,5 +401,5 @@ def write_experiment(df: pd.DataFrame, out_dir, mp: MotorParams, plan: RigPlan, 
     for name, part in (("all", df), ("train", df[~is_test]), ("test", df[is_test])):
         if len(part):  # a plan without the test loads has no test split
             paths[name] = dataio.write_measurements(part.reset_index(drop=True), out / f"{name}.csv", meta)
-    (out / "rig_truth.json").write_text(json.dumps(truth, indent=1))
+    (out / "rig_truth.json").write_text(json.dumps(truth, indent=1, allow_nan=False))
     return paths
