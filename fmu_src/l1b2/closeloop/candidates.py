@@ -49,7 +49,7 @@ import pandas as pd
 
 from ..data import measurements as dataio
 from ..physics.params import G_M_S2
-from .residuals import REGRESSORS, _bspline_basis
+from .residuals import REGRESSORS, bspline_basis
 
 V_REF = 300.0   # voltage scale of the features [V]
 SPEED_REF = 0.2  # speed scale of the features [m/s]
@@ -123,7 +123,7 @@ def named_candidates(ctx: Context, df_train: pd.DataFrame) -> list[CandidateForc
     out = []
 
     def time_basis(df, n_inner=4):
-        return _bspline_basis(_scaled(df[dataio.TIME].to_numpy(float), t0, t1), n_inner)
+        return bspline_basis(_scaled(df[dataio.TIME].to_numpy(float), t0, t1), n_inner)
 
     for n_inner in (2, 4):
         k = n_inner + 4
@@ -198,8 +198,8 @@ def generic_candidates(ctx: Context, df_train: pd.DataFrame) -> list[CandidateFo
     vp_train = np.abs(ctx.baseline_free_run(df_train))
     v_lo, v_hi = float(np.min(vp_train)), float(np.max(vp_train))
     specs = {
-        "time": (lambda df: _bspline_basis(_scaled(df[dataio.TIME].to_numpy(float), t0, t1), 6), 9),
-        "position": (lambda df: _bspline_basis(_scaled(df[dataio.POSITION].to_numpy(float), s0, s1),
+        "time": (lambda df: bspline_basis(_scaled(df[dataio.TIME].to_numpy(float), t0, t1), 6), 9),
+        "position": (lambda df: bspline_basis(_scaled(df[dataio.POSITION].to_numpy(float), s0, s1),
                                                int(np.clip(round((s1 - s0) / 1.5e-3), 4, 40))), None),
         "direction": (lambda df: _d(df)[:, None], 1),
         "load": (lambda df: np.column_stack([_d(df) * df[dataio.LOAD].to_numpy(float) / L_abs,
@@ -207,14 +207,14 @@ def generic_candidates(ctx: Context, df_train: pd.DataFrame) -> list[CandidateFo
                                              (_d(df) * df[dataio.LOAD].to_numpy(float) / L_abs) ** 2]), 3),
         "voltage": (lambda df: np.column_stack([(2 * _scaled(_V(df), V_lo, V_hi) - 1),
                                                 (2 * _scaled(_V(df), V_lo, V_hi) - 1) ** 2]), 2),
-        "speed": (lambda df: _bspline_basis(_scaled(np.abs(ctx.baseline_free_run(df)), v_lo, v_hi), 4), 7),
+        "speed": (lambda df: bspline_basis(_scaled(np.abs(ctx.baseline_free_run(df)), v_lo, v_hi), 4), 7),
         "acceleration": (lambda df: np.column_stack([_drive_acc(ctx, df) * ctx.m_s,
                                                      np.abs(_drive_acc(ctx, df)) * ctx.m_s]), 2),
     }
     if dataio.TEMPERATURE in df_train.columns:
         T = df_train[dataio.TEMPERATURE].to_numpy(float)
         T_lo, T_hi = float(T.min()), float(T.max())
-        specs["temperature"] = (lambda df: _bspline_basis(_scaled(df[dataio.TEMPERATURE].to_numpy(float),
+        specs["temperature"] = (lambda df: bspline_basis(_scaled(df[dataio.TEMPERATURE].to_numpy(float),
                                                                   T_lo, T_hi), 4), 7)
     for reg in REGRESSORS:
         if reg not in specs:

@@ -222,7 +222,7 @@ def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5,
         coef = np.linalg.lstsq(Xf, y, rcond=None)[0]
         sse1 = float(np.sum((y - Xf @ coef) ** 2))
         dll = n_eff * math.log(max(sse1, 1e-300) / max(sse0, 1e-300))
-        out.append(Score(c, gain, res._wilcoxon_greater(per_run), float(np.mean(per_run > 0)),
+        out.append(Score(c, gain, res.wilcoxon_greater(per_run), float(np.mean(per_run > 0)),
                          dll + w * math.log(n_eff), coef[A.shape[1]:], dll + 2 * w))
     return out
 
@@ -426,7 +426,7 @@ def markdown_report(rep: dict) -> str:
 
 def _plots(out, dtr, dte, r_tr, mask, whiteness, freq, power, chosen, v_te, v_te_ext, base, m_s) -> list[str]:
     from ..data import plots
-    plt = plots._plt()
+    plt = plots.pyplot()
     figs = []
     vals = res.regressor_values(dtr)
     names = [n for n in res.REGRESSORS if n in vals]
@@ -442,7 +442,7 @@ def _plots(out, dtr, dte, r_tr, mask, whiteness, freq, power, chosen, v_te, v_te
     for ax in list(axes.flat)[len(names):]:
         ax.axis("off")
     fig.suptitle("TRAIN free-run residual (drive coordinates) against each regressor")
-    figs.append(str(plots._save(fig, out / "residual_vs_regressors.png")))
+    figs.append(str(plots.save_figure(fig, out / "residual_vs_regressors.png")))
 
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.6))
     if len(freq):
@@ -464,7 +464,7 @@ def _plots(out, dtr, dte, r_tr, mask, whiteness, freq, power, chosen, v_te, v_te
             a2.legend(fontsize=7)
             a2.set_title("whiteness per run")
             a2.grid(alpha=0.3)
-    figs.append(str(plots._save(fig, out / "residual_spectrum_and_whiteness.png")))
+    figs.append(str(plots.save_figure(fig, out / "residual_spectrum_and_whiteness.png")))
 
     if chosen is not None:
         c = chosen.candidate
@@ -476,7 +476,7 @@ def _plots(out, dtr, dte, r_tr, mask, whiteness, freq, power, chosen, v_te, v_te
         ax.set_ylabel("extra force [N]")
         ax.set_title(f"chosen effect: {c.label}")
         ax.grid(alpha=0.3)
-        figs.append(str(plots._save(fig, out / "chosen_effect.png")))
+        figs.append(str(plots.save_figure(fig, out / "chosen_effect.png")))
 
     runs = [r for r, _ in dataio.run_slices(dte[dataio.RUN])]
     pick = runs[:: max(1, len(runs) // 4)][:4]
@@ -493,5 +493,5 @@ def _plots(out, dtr, dte, r_tr, mask, whiteness, freq, power, chosen, v_te, v_te
         ax.grid(alpha=0.3)
     axes[0, 0].legend(fontsize=7)
     axes[-1, 0].set_xlabel("position [mm]")
-    figs.append(str(plots._save(fig, out / "before_after_test.png")))
+    figs.append(str(plots.save_figure(fig, out / "before_after_test.png")))
     return figs
