@@ -1,14 +1,19 @@
-"""Candidate effects the paper's Eq. 29 predictor lacks, each a physically meaningful extension.
+"""The candidate library: extensions of the paper's Eq. 29 predictor, each a hypothesis of a missing effect.
 
 Every candidate adds a force to the slider's force balance (drive
 coordinates: positive pushes the slider the way it is driven), linear in its
 own parameters, ``dF = features(df) @ phi``; shape parameters (a wavelength, a
 time constant, a defect position) are not identified but searched on a grid.
-The features depend on the data's columns and, for state-dependent effects,
-on the *baseline model's* predicted speed (never on the measured speed, so a
-free-run prediction on new data needs no measurement).
+The features depend on the data's columns and, for state-dependent
+candidates, on the *baseline model's* predicted speed (never on the measured
+speed, so a free-run prediction on new data needs no measurement).
 
-Named effects (physics, regressor):
+Candidates come from a :class:`CandidateLibrary`, a callable
+``(ctx, df_train) -> list[CandidateForce]`` that the close-the-loop estimator
+takes as an argument; libraries combine with ``+`` or :func:`combine`. The
+default, :func:`default_library`, is ``named_library() + generic_library()``.
+
+Named families (:func:`named_library`; physics, regressor):
 
 * ``thermal_drift`` (time): self-heating of the stator moves its resonances
   (about -10 Hz/K, physics notes), which changes the force factor of the
@@ -34,15 +39,15 @@ Named effects (physics, regressor):
 * ``inertia_mismatch`` (acceleration): moving mass other than assumed
   (load inertia, coupling): ``dF = -a m_s dv/dt`` of the baseline prediction.
 
-Generic fallback: a smooth term (splines, or the regressor's own basis for
-run-level regressors) in one implicated regressor, for residual structure
-that no named effect explains.
+Generic fallback (:func:`generic_library`): a smooth term (splines, or the
+regressor's own basis for run-level regressors) in one implicated regressor,
+for residual structure that no named family explains.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Protocol
 
 import numpy as np
 import pandas as pd
@@ -57,9 +62,14 @@ SPEED_REF = 0.2  # speed scale of the features [m/s]
 
 @dataclass(frozen=True)
 class CandidateForce:
-    """One candidate: named effect (with fixed shape) whose force is ``features(df) @ phi``."""
+    """One candidate: a family (with fixed shape) whose force is ``features(df) @ phi``.
 
-    effect: str
+    ``family`` names the hypothesis (``"load_path_friction"``, ``"smooth_time"``;
+    the report's ``effect``), ``shape`` the grid point of its shape
+    parameters, ``names``/``units`` its linear parameters.
+    """
+
+    family: str
     regressor: str
     shape: str
     names: tuple
@@ -70,7 +80,7 @@ class CandidateForce:
 
     @property
     def label(self) -> str:
-        return f"{self.effect}[{self.shape}]" if self.shape else self.effect
+        return f"{self.family}[{self.shape}]" if self.shape else self.family
 
     @property
     def n_params(self) -> int:
@@ -225,3 +235,74 @@ def generic_candidates(ctx: Context, df_train: pd.DataFrame) -> list[CandidateFo
                                   tuple("N" for _ in range(k)), fn,
                                   f"generic smooth force in {reg} (no named effect)", generic=True))
     return out
+
+
+# ---------------------------------------------------------------------------
+# libraries: what the close-the-loop estimator takes as its candidate argument
+# ---------------------------------------------------------------------------
+
+class CandidateSource(Protocol):
+    """Anything that lists candidates for a fit: ``source(ctx, df_train) -> list[CandidateForce]``."""
+
+    def __call__(self, ctx: Context, df_train: pd.DataFrame) -> list[CandidateForce]: ...
+
+
+class CandidateLibrary:
+    """A composable candidate library: the concatenation of its sources' candidates, in order.
+
+    Parameters
+    ----------
+    *sources : CandidateSource
+        Callables ``(ctx, df_train) -> list[CandidateForce]`` (functions such
+        as :func:`named_candidates`, or other libraries).
+    name : str, optional
+        Shown by ``repr``; default: the sources' names joined by ``+``.
+
+    Examples
+    --------
+    >>> lib = named_library() + generic_library()      # the default
+    >>> lib = combine(named_library(), my_source)      # any callable source
+    """
+
+    def __init__(self, *sources: CandidateSource, name: str | None = None):
+        for src in sources:
+            if not callable(src):
+                raise TypeError(f"a candidate source must be callable (ctx, df_train) -> list, got {src!r}")
+        self.sources: tuple = tuple(sources)
+        self.name = name or " + ".join(getattr(s, "name", None) or getattr(s, "__name__", repr(s))
+                                       for s in self.sources)
+
+    def __call__(self, ctx: Context, df_train: pd.DataFrame) -> list[CandidateForce]:
+        out: list[CandidateForce] = []
+        for src in self.sources:
+            out.extend(src(ctx, df_train))
+        return out
+
+    def __add__(self, other: CandidateSource) -> CandidateLibrary:
+        return combine(self, other)
+
+    def __radd__(self, other: CandidateSource) -> CandidateLibrary:
+        return combine(other, self)
+
+    def __repr__(self) -> str:
+        return f"CandidateLibrary({self.name})"
+
+
+def combine(*sources: CandidateSource) -> CandidateLibrary:
+    """One library listing the candidates of every source in turn."""
+    return CandidateLibrary(*sources)
+
+
+def named_library() -> CandidateLibrary:
+    """The named physical families (:func:`named_candidates`)."""
+    return CandidateLibrary(named_candidates, name="named")
+
+
+def generic_library() -> CandidateLibrary:
+    """The generic smooth term per regressor (:func:`generic_candidates`)."""
+    return CandidateLibrary(generic_candidates, name="generic")
+
+
+def default_library() -> CandidateLibrary:
+    """``named_library() + generic_library()``: what the close-the-loop estimator uses unless told otherwise."""
+    return named_library() + generic_library()

@@ -107,7 +107,7 @@ class Score:
 
     def to_dict(self) -> dict:
         c = self.candidate
-        return {"effect": c.effect, "label": c.label, "regressor": c.regressor, "generic": c.generic,
+        return {"effect": c.family, "label": c.label, "regressor": c.regressor, "generic": c.generic,
                 "n_params": c.n_params, "cv_gain": self.cv_gain, "p_value": self.p_value,
                 "runs_improved": self.runs_improved, "delta_aic": self.delta_aic, "delta_bic": self.delta_bic,
                 "parameters": dict(zip(c.names, (float(x) for x in self.phi)))}
@@ -229,7 +229,7 @@ def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5,
 
 def choose(scores: list[Score], *, alpha=DEFAULT_ALPHA, min_gain=DEFAULT_MIN_GAIN, parsimony=DEFAULT_PARSIMONY):
     """The significant candidates and the chosen one (None when nothing is significant)."""
-    families = {s.candidate.effect for s in scores}
+    families = {s.candidate.family for s in scores}
     level = alpha / max(len(families), 1)
     sig = [s for s in scores if s.cv_gain >= min_gain and s.p_value < level and s.delta_aic < 0]
     if not sig:
@@ -243,7 +243,7 @@ def choose(scores: list[Score], *, alpha=DEFAULT_ALPHA, min_gain=DEFAULT_MIN_GAI
 def _best_per_family(scores: list[Score]) -> list[Score]:
     best = {}
     for s in scores:
-        key = s.candidate.effect
+        key = s.candidate.family
         if key not in best or s.cv_gain > best[key].cv_gain:
             best[key] = s
     return sorted(best.values(), key=lambda s: -s.cv_gain)
@@ -321,7 +321,7 @@ def close_loop(train_path, test_path, report_dir, *, order=8, k_folds=5, alpha=D
         "diagnosis": {
             "significant": chosen is not None,
             "traced_to": traced_to,
-            "effect": chosen.candidate.effect if chosen else None,
+            "effect": chosen.candidate.family if chosen else None,
             "effect_shape": chosen.candidate.shape if chosen else None,
             "effect_description": chosen.candidate.description if chosen else None,
             "message": (f"missing effect: {chosen.candidate.label} ({chosen.candidate.regressor})" if chosen
