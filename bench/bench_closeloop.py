@@ -3,8 +3,9 @@
 
 The virtual rig runs an enlarged experiment (9 voltage levels x 9 loads x 2
 directions, encoder sampled at 2 kHz) with one injected effect; the
-close-the-loop job is then timed end to end, printing each stage's share
-side by side with the whole.
+close-the-loop job (:func:`l1b2.workflows.run_close_loop`, what `l1b2
+close-loop` runs: load, fit, plots, report files) is then timed end to end,
+printing each stage's share side by side with the whole.
 
 Usage: python bench/bench_closeloop.py [--effect pulley_friction]
 """
@@ -18,10 +19,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "fmu_src"))
 
-from l1b2.closeloop.loop import before_after_table, close_loop  # noqa: E402
 from l1b2.data import measurements as dataio  # noqa: E402
 from l1b2.physics.params import load_motor  # noqa: E402
 from l1b2.rig.experiment import RigPlan, run_experiment, write_experiment  # noqa: E402
+from l1b2.workflows import run_close_loop  # noqa: E402
 
 
 def main(argv=None):
@@ -45,11 +46,12 @@ def main(argv=None):
             stages[msg] = now
             last[0] = now
         t0 = time.perf_counter()
-        rep = close_loop(Path(td) / "train.csv", Path(td) / "test.csv", Path(td) / "report", progress=progress)
+        result = run_close_loop(Path(td) / "train.csv", Path(td) / "test.csv", Path(td) / "report",
+                                progress=progress)
         t_total = time.perf_counter() - t0
     print(f"rig data: {len(df)} samples ({n_train} in TRAIN), generated in {t_rig:.1f} s (not part of the target)")
-    print(f"diagnosis: {rep['diagnosis']['message']}")
-    print(before_after_table(rep))
+    print(f"diagnosis: {result.diagnosis['message']}")
+    print(result.before_after_table())
     marks = sorted(stages.items(), key=lambda kv: kv[1]) + [("end", t0 + t_total)]
     print(f"\n{'stage':55s} {'wall [s]':>9s} {'share':>7s}")
     for (name, start), (_, end) in zip(marks[:-1], marks[1:]):

@@ -347,15 +347,15 @@ def cmd_compare(args) -> int:
 
 def cmd_close_loop(args) -> int:
     """Residual -> missing effect -> extended model; error before and after on TEST."""
-    from .closeloop.loop import before_after_table, close_loop
+    from .workflows import run_close_loop
     say = (lambda m: None) if args.quiet else (lambda m: print(f"[close-loop] {m}", flush=True))
-    rep = close_loop(args.train, args.test, args.report_dir, order=args.order, k_folds=args.folds,
-                     alpha=args.alpha, min_gain=args.min_gain, seed=args.seed, slider_mass_kg=args.slider_mass,
-                     plots_on=not args.no_plots, progress=say)
-    d = rep["diagnosis"]
+    result = run_close_loop(args.train, args.test, args.report_dir, order=args.order, k_folds=args.folds,
+                            alpha=args.alpha, min_gain=args.min_gain, seed=args.seed,
+                            slider_mass_kg=args.slider_mass, plots_on=not args.no_plots, progress=say)
+    d = result.diagnosis
     print(f"diagnosis: {d['message']}" + (f"; traced to {', '.join(d['traced_to'])}" if d["traced_to"] else ""))
-    print(before_after_table(rep))
-    print(f"wrote {Path(args.report_dir) / 'report.json'} and report.md ({rep['wall_time_s']} s)")
+    print(result.before_after_table())
+    print(f"wrote {Path(args.report_dir) / 'report.json'} and report.md ({result.wall_time_s} s)")
     return 0
 
 

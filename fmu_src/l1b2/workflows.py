@@ -1,4 +1,4 @@
-"""End-to-end jobs behind the CLI: identification (issue 4) and the predictor/co-simulation comparison.
+"""End-to-end jobs behind the CLI: identification (issue 4), the predictor/co-simulation comparison and close-the-loop.
 
 Every job validates all its input before it creates its output folder, so
 nothing is written when input is refused, and writes its JSON report plus
@@ -7,7 +7,9 @@ PNG figures.
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import time
 from pathlib import Path
 
 import numpy as np
@@ -142,3 +144,26 @@ def run_comparison(out_dir, mp=None, identification: dict | None = None, *, orde
                       "time-domain co-simulation); relative error against the co-simulation's speed"}
     (out / "comparison.json").write_text(json.dumps(report, indent=1))
     return report
+
+
+def run_close_loop(train_path, test_path, out_dir, *, slider_mass_kg=None, plots_on=True, progress=None,
+                   **settings):
+    """Close the loop on TRAIN/TEST files; write ``report.json``, ``report.md`` and the PNGs into ``out_dir``.
+
+    Loads and validates both files (slider mass: ``slider_mass_kg`` or
+    TRAIN's sidecar) before anything is written, runs
+    :class:`l1b2.closeloop.loop.CloseLoop` with ``settings`` (``order``,
+    ``k_folds``, ``alpha``, ``min_gain``, ``parsimony``, ``seed``,
+    ``n_starts``, ``library``) and saves its result. Returns the
+    :class:`~l1b2.closeloop.result.CloseLoopResult`; its ``wall_time_s``
+    counts loading and the fit.
+    """
+    from .closeloop.loop import CloseLoop
+    t_start = time.perf_counter()
+    train, test, _ = load_train_test(train_path, test_path, slider_mass_kg=slider_mass_kg)
+    result = CloseLoop(progress=progress, **settings).fit(train, test).result_
+    result = dataclasses.replace(result, wall_time_s=round(time.perf_counter() - t_start, 2))
+    if plots_on and progress is not None:
+        progress("plots")
+    result.save(out_dir, plots_on=plots_on)
+    return result
