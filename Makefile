@@ -7,7 +7,7 @@ STAMP  := $(VENV)/.installed
 export OPENBLAS_NUM_THREADS ?= 1
 export MPLBACKEND ?= Agg
 
-.PHONY: venv test test-slow test-all fmus demo dist bench clean
+.PHONY: venv test test-slow test-all check-install fmus demo dist bench clean
 
 venv: $(STAMP)
 
@@ -24,6 +24,9 @@ test: $(STAMP)
 
 test-slow: $(STAMP)
 	$(PY) -m pytest -q -m slow
+
+check-install:
+	bash .ci/install_check.sh
 
 test-all: $(STAMP)
 	$(PY) -m pytest -q

@@ -33,7 +33,7 @@ def main(argv=None):
     plan = RigPlan(voltages_V=tuple(float(v) for v in np.linspace(220.0, 324.0, 9)), sample_rate_Hz=2000.0,
                    step_s=5e-4)
     t0 = time.perf_counter()
-    df, truth = run_experiment(plan, mp, effects=[args.effect], engine="inprocess", jobs=2, effect_seed=0)
+    df, truth = run_experiment(plan, mp, injections=[args.effect], engine="inprocess", jobs=2, injection_seed=0)
     t_rig = time.perf_counter() - t0
     with tempfile.TemporaryDirectory() as td:
         write_experiment(df, td, mp, plan, truth)

@@ -10,14 +10,14 @@ _CACHE: dict = {}
 _ROOT = Path(tempfile.mkdtemp(prefix="l1b2_rigcache_"))
 
 
-def rig_dir(name: str = "clean", effects=(), effect_seed=None, plan: RigPlan | None = None) -> Path:
+def rig_dir(name: str = "clean", injections=(), injection_seed=None, plan: RigPlan | None = None) -> Path:
     """Folder with all/train/test.csv of a rig experiment (the paper's 72-run plan by default)."""
-    key = (name, tuple(effects), effect_seed, plan)
+    key = (name, tuple(injections), injection_seed, plan)
     if key not in _CACHE:
         plan = plan or RigPlan(step_s=1e-3)
         mp = load_motor()
-        df, truth = run_experiment(plan, mp, effects=list(effects), engine="inprocess", jobs=2,
-                                   effect_seed=effect_seed)
+        df, truth = run_experiment(plan, mp, injections=list(injections), engine="inprocess", jobs=2,
+                                   injection_seed=injection_seed)
         out = _ROOT / f"{name}_{len(_CACHE)}"
         write_experiment(df, out, mp, plan, truth)
         _CACHE[key] = out

@@ -23,7 +23,7 @@ PKG = Path(__file__).resolve().parents[1] / "fmu_src" / "l1b2"
 
 #: layer -> the layers it may import (besides itself)
 ALLOWED = {
-    "errors": set(),
+    "errors": {"units"},  # DataFormatError names the unit of a data column (l1b2.units.COLUMN_UNITS)
     "units": set(),
     "physics": {"errors", "units"},
     "data": {"errors", "units", "physics"},

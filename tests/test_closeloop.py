@@ -23,7 +23,7 @@ from l1b2.closeloop.candidates import (CandidateLibrary, Context, combine, defau
 from l1b2.closeloop.loop import CloseLoop, close_loop
 from l1b2.closeloop.result import CloseLoopResult
 from l1b2.data.measurements import load_measurements
-from l1b2.rig.experiment import EFFECTS, RigPlan
+from l1b2.rig.experiment import INJECTIONS, RigPlan
 from rigcache import rig_dir
 
 FAST = [("pulley_friction", 1), ("direction_asymmetry", 2), ("drive_saturation", 3), ("thermal_drift", 4)]
@@ -33,7 +33,7 @@ SLOW = [(e, s) for e in ("pulley_friction", "direction_asymmetry", "drive_satura
 
 @functools.cache
 def _run(effect, seed):
-    d = rig_dir(f"{effect}_{seed}", effects=[effect] if effect else [], effect_seed=seed,
+    d = rig_dir(f"{effect}_{seed}", injections=[effect] if effect else [], injection_seed=seed,
                 plan=RigPlan(step_s=1e-3, seed=seed))
     res = close_loop(load_measurements(d / "train.csv"), load_measurements(d / "test.csv"))
     truth = json.loads((d / "rig_truth.json").read_text())
@@ -41,7 +41,7 @@ def _run(effect, seed):
 
 
 def _check_effect(res, truth):
-    want = truth["effects"][0]["regressor"]
+    want = truth["injections"][0]["regressor"]
     d = res.diagnosis
     assert d["significant"], d["message"]
     assert d["traced_to"][0] == want, (d["traced_to"], truth)
@@ -103,7 +103,7 @@ def test_control_ten_seeds():
 def test_cli_writes_the_report_files_and_figures(tmp_path, capsys):
     # reference: issue: DIR/report.json keys, report.md, PNGs (residual vs regressors, chosen effect,
     # before/after on TEST); the before/after table printed
-    d = rig_dir("direction_asymmetry_2", effects=["direction_asymmetry"], effect_seed=2,
+    d = rig_dir("direction_asymmetry_2", injections=["direction_asymmetry"], injection_seed=2,
                 plan=RigPlan(step_s=1e-3, seed=2))
     out = tmp_path / "cl"
     assert cli_main(["close-loop", "--train", str(d / "train.csv"), "--test", str(d / "test.csv"),
@@ -145,7 +145,7 @@ def test_refuses_bad_input_before_writing(tmp_path, capsys):
 
 def test_every_effect_in_the_rig_has_a_regressor_name_the_report_uses():
     allowed = {"time", "position", "direction", "load", "voltage", "speed", "acceleration", "temperature"}
-    assert all(e.regressor in allowed for e in EFFECTS.values())
+    assert all(e.regressor in allowed for e in INJECTIONS.values())
 
 
 def _toy_context_and_frame():

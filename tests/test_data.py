@@ -1,4 +1,8 @@
-"""Tests of l1b2.data.measurements: the measured-data contract of shared/data-format.md."""
+"""Tests of the data layer (l1b2.data.measurements and the columns / validate / io modules behind it).
+
+The measured-data contract of shared/data-format.md, exercised through the
+public API :mod:`l1b2.data.measurements`.
+"""
 
 from __future__ import annotations
 
@@ -16,6 +20,7 @@ from l1b2.data.measurements import (
     write_measurements,
 )
 from l1b2.errors import DataFormatError, IdentificationError, L1B2Error, ParameterError
+from l1b2.units import COLUMN_UNITS, SIDECAR_FIELD_UNITS
 
 COLUMNS = ["time_s", "run", "position_m", "voltage_V", "direction", "load_kg",
            "speed_m_s", "frequency_Hz", "temperature_C"]
@@ -437,6 +442,23 @@ def test_known_columns_table():
     assert D.REQUIRED_COLUMNS == ("time_s", "run", "position_m", "voltage_V", "direction",
                                   "load_kg")
     assert {c.name: c.unit for c in D.KNOWN_COLUMNS}["speed_m_s"] == "m/s"
+
+
+def test_public_api_reexports_the_modules_behind_it():
+    from l1b2.data import columns, io, validate
+    assert D.KNOWN_COLUMNS is columns.KNOWN_COLUMNS and D.SIDECAR_FIELDS is columns.SIDECAR_FIELDS
+    assert D.validate_frame is validate.validate_frame and D.run_slices is validate.run_slices
+    assert D.sidecar_path is columns.sidecar_path and D.unit_of is columns.unit_of
+    assert all(hasattr(D, name) for name in D.__all__)
+    assert all(hasattr(m, name) for m in (columns, validate, io) for name in m.__all__)
+
+def test_units_are_defined_once_in_l1b2_units():
+    assert [(c.name, c.unit) for c in D.KNOWN_COLUMNS] == list(COLUMN_UNITS.items())
+    assert D.SIDECAR_FIELDS == SIDECAR_FIELD_UNITS
+    assert all(D.unit_of(name) == unit for name, unit in {**COLUMN_UNITS, **SIDECAR_FIELD_UNITS}.items())
+    assert D.unit_of("not_a_column") is None
+    exc = DataFormatError("x.json", "drive_frequency_Hz", None, "bad")
+    assert str(exc) == "x.json: field 'drive_frequency_Hz' [Hz]: bad"
 
 
 # --------------------------------------------------------------------------

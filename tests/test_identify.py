@@ -1,4 +1,4 @@
-"""Tests of the maximum-likelihood identification (paper Eq. 32, 35; l1b2.ident.estimator)."""
+"""Tests of the maximum-likelihood identification (paper Eq. 32, 35; l1b2.ident)."""
 
 import os
 
@@ -13,11 +13,10 @@ from l1b2.errors import IdentificationError
 from l1b2.ident.estimator import (
     RECOMMENDED_FIXED,
     PredictorIdentifier,
-    _Data,
-    _Problem,
-    _reduced_of_theta,
     evaluation_mask,
 )
+from l1b2.ident.problem import LikelihoodProblem, SampleData
+from l1b2.ident.reduced import reduced_of_theta
 from l1b2.predictor.model import PredictorParams, example_params
 from l1b2.predictor.simulate import design_grid, simulate_dataset
 
@@ -52,13 +51,13 @@ def test_jacobian_matches_finite_differences(noisy_small, criterion):
     df = df.copy()
     starts = np.flatnonzero(np.r_[True, np.diff(df["run"].to_numpy()) != 0])
     df.loc[starts[:2], "speed_m_s"] = 0.0  # runs starting exactly at rest
-    data = _Data(df, evaluation_mask(df))
-    prob = _Problem(data, 3, 0.5, True, criterion, 0.0, 0.02, M_S)
+    data = SampleData(df, evaluation_mask(df))
+    prob = LikelihoodProblem(data, 3, 0.5, True, criterion, 0.0, 0.02, M_S)
     theta = th * (1 + 0.05 * np.sin(np.arange(th.size)))  # away from the truth
     cols = np.arange(th.size)
     J = prob.jacobian(theta, cols)
     # the data exercise the rest rule and the reversal rule
-    flags = prob._evaluate(theta)["flags"]
+    flags = prob.evaluate(theta)["flags"]
     if criterion == "free_run":
         assert np.any(flags == 1), "no reversal step in the test data"
     Jfd = np.empty_like(J)
@@ -80,10 +79,10 @@ def test_jacobian_matches_finite_differences(noisy_small, criterion):
         d_res = prob.core.d[prob.sel]
         v0 = prob.v0.copy()
         prob.v0 = v0 + 1e-7 * d_run
-        prob._cache_theta = None
+        prob.reset_cache()
         rp = prob.residual(theta)
         prob.v0 = v0
-        prob._cache_theta = None
+        prob.reset_cache()
         r0 = prob.residual(theta)
         np.testing.assert_allclose((rp - r0) / (1e-7 * d_res), g, rtol=1e-4, atol=1e-6)
         assert lay.R == 12
@@ -91,14 +90,14 @@ def test_jacobian_matches_finite_differences(noisy_small, criterion):
 
 def test_equation_error_jacobian():
     th = example_params(8).to_vector() * 1.1
-    g, Jg = _reduced_of_theta(th, 8, M_S, 0.5, jac=True)
+    g, Jg = reduced_of_theta(th, 8, M_S, 0.5, jac=True)
     Jfd = np.empty_like(Jg)
     for j in range(th.size):
         h = 1e-6 * max(abs(th[j]), 1e-3)
         tp, tm = th.copy(), th.copy()
         tp[j] += h
         tm[j] -= h
-        Jfd[:, j] = (_reduced_of_theta(tp, 8, M_S, 0.5) - _reduced_of_theta(tm, 8, M_S, 0.5)) / (2 * h)
+        Jfd[:, j] = (reduced_of_theta(tp, 8, M_S, 0.5) - reduced_of_theta(tm, 8, M_S, 0.5)) / (2 * h)
     assert np.abs(Jg - Jfd).max() / np.abs(Jfd).max() < 1e-7
 
 
@@ -309,10 +308,12 @@ def test_errors_raise_identification_error(case):
 
 
 def test_constructor_and_usage_errors():
+    # the constructor only stores the settings (scikit-learn convention); fit checks them
+    df = _df_ok()
     with pytest.raises(IdentificationError):
-        PredictorIdentifier(criterion="two_step")
+        PredictorIdentifier(criterion="two_step").fit(df, M_S)
     with pytest.raises(IdentificationError):
-        PredictorIdentifier(noise="white")
+        PredictorIdentifier(noise="white").fit(df, M_S)
     with pytest.raises(IdentificationError, match="not fitted"):
         PredictorIdentifier().predict_free_run(pd.DataFrame())
 

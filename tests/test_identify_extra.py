@@ -1,4 +1,4 @@
-"""Extra exogenous forces identified jointly with theta (l1b2.ident.estimator.ExtraForces).
+"""Extra exogenous forces identified jointly with theta (l1b2.ident.extra.ExtraForces).
 
 The model with extras: in drive coordinates ``X_total = X + features(df) @ phi``.
 Synthetic data come from :func:`l1b2.predictor.simulate.simulate_dataset` with its
@@ -15,13 +15,10 @@ import json
 import numpy as np
 import pytest
 from l1b2.errors import IdentificationError
-from l1b2.ident.estimator import (
-    ExtraForces,
-    PredictorIdentifier,
-    _Data,
-    _Problem,
-    evaluation_mask,
-)
+from l1b2.ident.estimator import PredictorIdentifier, evaluation_mask
+from l1b2.ident.extra import ExtraForces
+from l1b2.ident.problem import LikelihoodProblem, SampleData
+from l1b2.ident.reduced import init_theta
 from l1b2.predictor.model import (
     PredictorParams,
     derivative,
@@ -150,12 +147,12 @@ def test_jacobian_wrt_phi_matches_finite_differences(criterion):
     starts = np.flatnonzero(np.r_[True, np.diff(df["run"].to_numpy()) != 0])
     df.loc[starts[:2], "speed_m_s"] = 0.0  # runs starting exactly at rest
     E = np.column_stack([asym(df)[:, 0], bump(df)[:, 0]])
-    data = _Data(df, evaluation_mask(df))
-    prob = _Problem(data, 3, 0.5, True, criterion, 0.0, 0.02, M_S, E=E)
+    data = SampleData(df, evaluation_mask(df))
+    prob = LikelihoodProblem(data, 3, 0.5, True, criterion, 0.0, 0.02, M_S, E=E)
     theta = np.concatenate([TH * (1 + 0.05 * np.sin(np.arange(TH.size))), [0.02, -0.03]])
     cols = np.arange(theta.size)
     J = prob.jacobian(theta, cols)
-    flags = prob._evaluate(theta)["flags"]
+    flags = prob.evaluate(theta)["flags"]
     if criterion == "free_run":
         assert np.any(flags == 1), "no reversal step in the test data"
     Jfd = np.empty_like(J)
@@ -169,8 +166,8 @@ def test_jacobian_wrt_phi_matches_finite_differences(criterion):
     assert rel.max() < 1e-5, dict(zip(NAMES + ["asym", "bump"], rel))
     assert np.abs(Jfd[:, -2:]).max() > 0  # the extras do act on the residuals
     # zero features: residuals and theta columns are those of the model without extras
-    prob0 = _Problem(data, 3, 0.5, True, criterion, 0.0, 0.02, M_S)
-    probz = _Problem(data, 3, 0.5, True, criterion, 0.0, 0.02, M_S, E=np.zeros_like(E))
+    prob0 = LikelihoodProblem(data, 3, 0.5, True, criterion, 0.0, 0.02, M_S)
+    probz = LikelihoodProblem(data, 3, 0.5, True, criterion, 0.0, 0.02, M_S, E=np.zeros_like(E))
     np.testing.assert_array_equal(probz.residual(theta), prob0.residual(theta[: TH.size]))
     np.testing.assert_array_equal(probz.jacobian(theta, np.arange(TH.size)),
                                   prob0.jacobian(theta[: TH.size], np.arange(TH.size)))
@@ -285,15 +282,14 @@ def test_warm_start_from_the_baseline(fits_asym, data_clean, base_clean):
 
 
 def test_init_in_another_position_scaling_is_re_expanded():
-    est = PredictorIdentifier(order=3, init=PRM)
-    th = est._init_vector(0.001, 0.018)
+    th = init_theta(PRM, 3, 0.001, 0.018)
     p2 = PredictorParams.from_vector(th, s_center=0.001, s_half=0.018)
     s = np.linspace(-0.017, 0.019, 37)
     np.testing.assert_allclose(p2.A_prime(s), PRM.A_prime(s), rtol=1e-12, atol=1e-14)
     np.testing.assert_allclose(p2.B_prime(s), PRM.B_prime(s), rtol=1e-12, atol=1e-16)
     np.testing.assert_allclose(p2.P(s), PRM.P(s), rtol=1e-12, atol=1e-12)
     np.testing.assert_array_equal(th[:5], TH[:5])
-    np.testing.assert_array_equal(est._init_vector(0.0, 0.02), TH)
+    np.testing.assert_array_equal(init_theta(PRM, 3, 0.0, 0.02), TH)
 
 
 # ---------------------------------------------------------------------------
@@ -366,12 +362,13 @@ def test_extra_forces_validation(data_clean):
         ExtraForces(("a",), ("N",), None)
     with pytest.raises(IdentificationError, match="lower < upper"):
         ExtraForces(("a",), ("N",), ones, lower=(1.0,), upper=(0.0,))
+    # settings are checked by fit (the constructor only stores them)
     with pytest.raises(IdentificationError, match="clash"):
-        PredictorIdentifier(order=3, extra=ExtraForces(("c_r",), ("N",), ones))
+        PredictorIdentifier(order=3, extra=ExtraForces(("c_r",), ("N",), ones)).fit(df, M_S)
     with pytest.raises(IdentificationError, match="init_extra"):
-        PredictorIdentifier(order=3, extra=ExtraForces(("a",), ("N",), ones), init_extra=[1.0, 2.0])
+        PredictorIdentifier(order=3, extra=ExtraForces(("a",), ("N",), ones), init_extra=[1.0, 2.0]).fit(df, M_S)
     with pytest.raises(IdentificationError, match="order"):
-        PredictorIdentifier(order=3, init=example_params(4))
+        PredictorIdentifier(order=3, init=example_params(4)).fit(df, M_S)
     bad_shape = ExtraForces(("a", "b"), ("N", "N"), ones)
     with pytest.raises(IdentificationError, match="shape"):
         PredictorIdentifier(order=3, n_starts=1, extra=bad_shape).fit(df, M_S)

@@ -327,13 +327,14 @@ NS = [32, 64, 128, 256, 512, 1024, 2048, 4096]
 @pytest.mark.parametrize("name", ["reference", "skewed_ellipse", "permanent_contact"])
 def test_stick_slip_converges_in_n_theta(ip, name):
     # reference: a fine solution (n_theta = 65536); error bound of first order, O(h): at most a
-    # fraction of one cell's Coulomb force per event (reset at a reversal / stick end)
+    # fraction of one cell's Coulomb force per event (reset at a reversal / stick end).
+    # (n_theta is the resolution of the numerical reference kernel; interface_forces is exact.)
     args, p = _case(ip, name)
-    ref = itf.interface_forces(*args, p, n_theta=2 ** 16)
+    ref = itf.interface_forces_reference(*args, p, n_theta=2 ** 16)
     scale = p.mu_p * args[5] + p.sigma_N_s_per_m * args[3] * args[1]
     errs = []
     for n in NS:
-        out = itf.interface_forces(*args, p, n_theta=n)
+        out = itf.interface_forces_reference(*args, p, n_theta=n)
         errs.append(max(abs(getattr(out, f) - getattr(ref, f)) for f in FIELDS[:6]) / scale)
     errs = np.array(errs)
     assert np.all(errs * np.array(NS) < 1.0), errs
@@ -345,9 +346,9 @@ def test_stick_slip_converges_in_n_theta(ip, name):
 def test_pure_slip_converges_in_n_theta_at_second_order(ip, delta):
     # reference: fine solution; second order in the cell size (cells aligned with the sign reversals)
     args = (1.22e-6, 1.41e-6, delta, W, 0.2, 5.6)
-    ref = itf.interface_forces(*args, ip, mode="pure_slip", n_theta=2 ** 16)
+    ref = itf.interface_forces_reference(*args, ip, mode="pure_slip", n_theta=2 ** 16)
     scale = ip.mu_p * args[5] + ip.sigma_N_s_per_m * W * args[1]
-    errs = np.array([max(abs(getattr(itf.interface_forces(*args, ip, mode="pure_slip", n_theta=n), f)
+    errs = np.array([max(abs(getattr(itf.interface_forces_reference(*args, ip, mode="pure_slip", n_theta=n), f)
                              - getattr(ref, f)) for f in FIELDS[:6]) / scale for n in NS])
     order = np.log2(errs[:-1] / errs[1:])
     assert np.all(order > 1.8), (errs, order)
@@ -376,3 +377,223 @@ def test_unknown_mode_is_refused(ip):
     # reference: documented modes only
     with pytest.raises(ValueError, match="mode"):
         itf.interface_forces(1e-6, 1e-6, -np.pi / 2, W, 0.0, 5.0, ip, mode="coulomb")
+
+
+# ---------------------------------------------------------------------------
+# Closed-form kernel: exact period averages against the numerical kernel and an
+# independent adaptive quadrature; continuity; steady speeds unchanged
+# ---------------------------------------------------------------------------
+
+def _piecewise_quad_reference(U_l, U_w, delta, omega, v, F_p, ip, mode="stick_slip"):
+    """Independent period averages of Eq. 17-20: breakpoints by root finding, pieces by adaptive quadrature.
+
+    The contact window comes from Eq. 18 (brentq), the relative-velocity reversals from sign
+    changes of w' - v on a grid refined by brentq, the stick end from brentq on |u_r| - u_m with
+    u_r the integral of (w' - v) dt since the latest reset; every smooth piece is integrated by
+    scipy's adaptive Gauss-Kronrod rule.
+    """
+    from scipy.integrate import quad
+    k_e, mu, sig = ip.k_e_N_per_m, ip.mu_p, ip.sigma_N_s_per_m
+    um = 0.0 if mode == "pure_slip" else ip.u_m_m
+    rv = lambda th: omega * U_w * math.cos(th + delta) - v  # noqa: E731
+    permanent = mode != "pure_slip" and k_e * U_l <= F_p
+    if mode == "pure_slip":
+        FN, start, width, a = (lambda th: math.pi * F_p * math.sin(th)), 0.0, math.pi, math.pi / 2
+    elif permanent:
+        FN, width, a = (lambda th: F_p + k_e * U_l * math.sin(th)), 2 * math.pi, math.pi
+    else:
+        a = brentq(lambda x: math.sin(x) - x * math.cos(x) - math.pi * F_p / (k_e * U_l), 0.0, math.pi, xtol=1e-15)
+        FN, start, width = (lambda th: k_e * U_l * (math.sin(th) - math.cos(a))), math.pi / 2 - a, 2 * a
+    grid = 0.1234567 + np.linspace(0.0, 2 * math.pi, 4001)  # offset: no reversal on a grid point
+    vals = np.array([rv(t) for t in grid])
+    revs = [brentq(rv, grid[i], grid[i + 1], xtol=1e-15) for i in np.flatnonzero(vals[:-1] * vals[1:] < 0)]
+    if permanent:  # the window starts at a reset (a reversal, or anywhere when the contact slides)
+        start = revs[0] if revs else 0.0
+    cuts = sorted({start} | {start + (r - start) % (2 * math.pi) for r in revs} | {start + width})
+    cuts = [c for c in cuts if c <= start + width]
+    acc, stick_len = np.zeros(6), 0.0
+    for lo, hi in zip(cuts[:-1], cuts[1:]):
+        sg = math.copysign(1.0, rv(0.5 * (lo + hi)))
+        u_r = lambda th, lo=lo: (U_w * (math.sin(th + delta) - math.sin(lo + delta))  # noqa: E731
+                                 - v * (th - lo) / omega)
+        sw = lo
+        if um > 0 and (revs or not permanent):
+            sw = hi if abs(u_r(hi)) <= um else brentq(lambda th: abs(u_r(th)) - um, lo, hi, xtol=1e-15)
+        stick_len += sw - lo
+        for p, q, Ff in ((lo, sw, lambda th: mu * u_r(th) / um * FN(th)),
+                         (sw, hi, lambda th: sig * rv(th) + sg * mu * FN(th))):
+            if q > p:
+                for j, f in enumerate((Ff, FN)):
+                    for w, wf in enumerate((lambda th: 1.0, math.sin, math.cos)):
+                        acc[3 * j + w] += quad(lambda th: f(th) * wf(th), p, q, epsabs=1e-12, epsrel=1e-12,
+                                               limit=200)[0]
+    return dict(F_d_N=acc[0] / (2 * math.pi), F_N_mean_N=acc[3] / (2 * math.pi), F_N1_sin_N=acc[4] / math.pi,
+                F_N1_cos_N=acc[5] / math.pi, F_T1_sin_N=acc[1] / math.pi, F_T1_cos_N=acc[2] / math.pi,
+                phi_c_rad=2 * a, stick_fraction=stick_len / width)
+
+
+#: regimes of the closed-form tests: contact geometry x u_m; speeds are scaled by the tip speed w U_w
+REGIMES = {
+    "partial_contact": (1.22e-6, 1.41e-6, -1.69, 5.6),
+    "partial_skewed": (1.0e-6, 1.2e-6, -np.pi / 2 + 0.5, 5.0),
+    "partial_reverse_drive": (1.0e-6, 1.2e-6, 1.2, 5.0),
+    "permanent_contact": (0.1e-6, 1.4e-6, -np.pi / 2, 5.6),
+    "permanent_skewed": (0.15e-6, 1.0e-6, -1.2, 5.6),
+}
+V_OVER_TIP = [-1.3, -0.4, 0.0, 0.3, 0.62, 0.95, 1.2]  # v / (w U_w): backward, forward, beyond the tip speed
+U_M = {"slip_dominated": 0.5e-9, "reference_u_m": 20e-9, "stick_dominated": 400e-9, "huge_u_m": 20e-6}
+
+
+def _regime_cases():
+    for name, (U_l, U_w, delta, F_p) in REGIMES.items():
+        for k in V_OVER_TIP:
+            yield f"{name}-v{k}", (U_l, U_w, delta, W, k * W * U_w, F_p)
+
+
+@pytest.mark.parametrize("mode, u_m_name", [("stick_slip", k) for k in U_M] + [("pure_slip", "reference_u_m")])
+def test_closed_form_equals_fine_quadrature_over_regimes(ip, u_m_name, mode):
+    # reference: the numerical kernel at n_theta = 3 * 2^15 (error ~1e-8 N, second order toward the
+    # closed form); tolerance 1e-5 N on every force, 1e-5 on the stick fraction, phi_c exact
+    p = dataclasses.replace(ip, u_m_m=U_M[u_m_name])
+    for label, args in _regime_cases():
+        new = itf.interface_forces(*args, p, mode=mode)
+        ref = itf.interface_forces_reference(*args, p, mode=mode, n_theta=3 * 2 ** 15)
+        for f in FIELDS[:6]:
+            assert getattr(new, f) == pytest.approx(getattr(ref, f), abs=1e-5), (label, f)
+        assert new.stick_fraction == pytest.approx(ref.stick_fraction, abs=1e-5), label
+        assert new.phi_c_rad == ref.phi_c_rad, label
+        assert new.F_N_mean_N == pytest.approx(args[5], rel=1e-12), label  # Eq. 18, exact now
+
+
+@pytest.mark.parametrize("u_m_name", ["slip_dominated", "reference_u_m", "stick_dominated"])
+def test_closed_form_equals_independent_adaptive_quadrature(ip, u_m_name):
+    # reference: _piecewise_quad_reference (brentq breakpoints + adaptive quadrature, ~1e-12 N);
+    # the closed form is exact, so the tolerance is 1e-8 N (far below the 1e-5 N requirement)
+    p = dataclasses.replace(ip, u_m_m=U_M[u_m_name])
+    for label, args in _regime_cases():
+        new = itf.interface_forces(*args, p)
+        ref = _piecewise_quad_reference(*args, p)
+        for f in FIELDS:
+            assert getattr(new, f) == pytest.approx(ref[f], abs=1e-8), (label, f)
+    for v in (-0.3, 0.1, 0.2, 0.5):  # pure slip against the same reference
+        new = itf.interface_forces(1.22e-6, 1.41e-6, -1.9, W, v, 5.6, p, mode="pure_slip")
+        ref = _piecewise_quad_reference(1.22e-6, 1.41e-6, -1.9, W, v, 5.6, p, mode="pure_slip")
+        for f in FIELDS:
+            assert getattr(new, f) == pytest.approx(ref[f], abs=1e-8), (v, f)
+
+
+def test_closed_form_pure_slip_equals_eq23_and_physics_notes_exactly(ip):
+    # reference: the closed forms pure_slip_drive_force_N and Eq. 23 (ideal phase), now to round-off
+    U_w, F_p = 1.4e-6, 5.6
+    for v in V_ALL:
+        out = itf.interface_forces(1.2e-6, U_w, -np.pi / 2, W, v, F_p, ip, mode="pure_slip")
+        Fd, F1 = _pure_slip_reference(U_w, v, F_p, ip.sigma_N_s_per_m, ip.mu_p)
+        assert out.F_d_N == pytest.approx(Fd, abs=1e-12)
+        assert out.F_T1_sin_N == pytest.approx(F1, abs=1e-12)
+        assert out.F_T1_cos_N == pytest.approx(0.0, abs=1e-12)
+        assert out.F_N_mean_N == pytest.approx(F_p, rel=1e-14)
+        assert out.F_N1_sin_N == pytest.approx(np.pi * F_p / 2, rel=1e-14)
+
+
+def _jump(ip, args, index, x0, eps, mode="stick_slip", kernel=itf.interface_forces, **kw):
+    lo, hi = list(args), list(args)
+    lo[index], hi[index] = x0 - eps, x0 + eps
+    a, b = kernel(*lo, ip, mode=mode, **kw), kernel(*hi, ip, mode=mode, **kw)
+    return max(abs(getattr(a, f) - getattr(b, f)) for f in FIELDS[:6]), a, b
+
+
+def test_closed_form_is_continuous_across_regime_boundaries(ip):
+    # reference: physics - where the structure of the period changes but the model does not jump,
+    # the period averages change by O(eps) (Lipschitz, here < 1e-6 N for a step of 2e-9)
+    U_l, U_w, F_p = 1.22e-6, 1.41e-6, 5.6
+    a = float(itf.contact_half_angle_rad(U_l, F_p, ip.k_e_N_per_m))
+    k0 = 0.3
+    ac = math.acos(k0)
+    eps = 1e-9
+    base = [U_l, U_w, 0.0, W, k0 * W * U_w, F_p]
+    # a velocity reversal crossing the contact start, then the contact end (delta sweeps)
+    for delta0 in (ac - (np.pi / 2 - a), ac - (np.pi / 2 + a), -ac - (np.pi / 2 - a) + 2 * np.pi):
+        d, lo, hi = _jump(ip, base, 2, delta0, eps)
+        assert d < 1e-6, delta0
+    # the stick reaching the end of its segment (u_m at the full relative travel, no reversal in contact)
+    args = (U_l, U_w, -1.69, W, 0.5, F_p)
+    lo_th, hi_th = np.pi / 2 - a, np.pi / 2 + a
+    travel = abs(U_w * (math.sin(hi_th - 1.69) - math.sin(lo_th - 1.69)) - 0.5 * (hi_th - lo_th) / W)
+    below = itf.interface_forces(*args, dataclasses.replace(ip, u_m_m=travel * (1 - 1e-9)))
+    above = itf.interface_forces(*args, dataclasses.replace(ip, u_m_m=travel * (1 + 1e-9)))
+    assert above.stick_fraction == 1.0 and below.stick_fraction < 1.0
+    assert max(abs(getattr(above, f) - getattr(below, f)) for f in FIELDS[:6]) < 1e-6
+    # pure slip at v = 0 (nothing special) and where the two reversals merge (v = w U_w, inside the
+    # contact): there the sign flips over an interval ~ sqrt(w U_w - v), so the modulus is a square root
+    d, _, _ = _jump(ip, [U_l, U_w, -1.9, W, 0.0, F_p], 4, 0.0, eps, mode="pure_slip")
+    assert d < 1e-6
+    d = [_jump(ip, [U_l, U_w, -1.9, W, W * U_w, F_p], 4, W * U_w, e, mode="pure_slip")[0] for e in (1e-8, 1e-12)]
+    assert d[1] < 2e-5 and 50 < d[0] / d[1] < 200
+
+
+def test_closed_form_reproduces_the_model_jumps_of_the_reference(ip):
+    # reference: the numerical kernel (n_theta = 3 * 2^15) on both sides of the two places where the
+    # u_r rule itself is discontinuous: permanent contact k_e U_l = F_p (the contact-start reset
+    # disappears) and, in permanent contact, the tangency v = w U_w (no reversal: the contact slides)
+    U_w, F_p = 1.0e-6, 5.6
+    for idx, x0, args in ((0, F_p / ip.k_e_N_per_m, [0.0, U_w, -1.6, W, 0.1, F_p]),
+                          (4, W * U_w, [0.1e-6, U_w, -1.6, W, 0.0, F_p])):
+        eps = 1e-9 * x0
+        d_new, lo_n, hi_n = _jump(ip, args, idx, x0, eps)
+        d_ref, lo_r, hi_r = _jump(ip, args, idx, x0, eps, kernel=itf.interface_forces_reference, n_theta=3 * 2 ** 15)
+        assert d_new > 1e-3  # a real jump
+        for f in FIELDS[:6]:
+            assert getattr(lo_n, f) == pytest.approx(getattr(lo_r, f), abs=1e-5), (idx, f)
+            assert getattr(hi_n, f) == pytest.approx(getattr(hi_r, f), abs=1e-5), (idx, f)
+
+
+def test_closed_form_scalar_and_array_paths_agree_bitwise(ip):
+    # reference: the scalar fast path (what the blocks call) element by element; numpy scalars and
+    # 0-d arrays take it too
+    rows = [c[:6] for c in CASES.values()]
+    cols = [np.array(c) for c in zip(*rows)]
+    vec = itf.interface_forces(*cols, ip)
+    for i, r in enumerate(rows):
+        sca = itf.interface_forces(*r, ip)
+        assert all(isinstance(x, float) for x in sca)
+        for f in FIELDS:
+            assert getattr(vec, f)[i] == getattr(sca, f), f
+    zero_d = itf.interface_forces(*(np.float64(x) for x in rows[0][:5]), np.array(rows[0][5]), ip)
+    assert tuple(zero_d) == tuple(itf.interface_forces(*rows[0], ip))
+
+
+STEADY_GRID = [  # (position [m], V0 [V], load [kg], direction)
+    (0.0, 324.0, 0.0, 1), (0.0, 200.0, 0.0, 1), (0.005, 324.0, 0.1, 1), (-0.01, 280.0, 0.0, -1),
+    (0.0, 324.0, 0.2, -1), (0.0, 150.0, 0.05, 1), (0.01, 324.0, -0.1, 1),
+]
+
+
+@pytest.mark.parametrize("mode", ["stick_slip", "pure_slip"])
+def test_steady_speeds_unchanged_by_the_closed_form(motor, monkeypatch, mode):
+    # reference: coupled.steady_state with the numerical kernel (default n_theta = 256, and 4096 on part
+    # of the grid) patched in; within 1e-4 relative of the former, 1e-6 of the finer one
+    from l1b2.physics import steady as coupled
+    new = [coupled.steady_state(motor, s, V0, m, d, mode=mode) for s, V0, m, d in STEADY_GRID]
+    with monkeypatch.context() as mp:
+        mp.setattr(itf, "interface_forces", itf.interface_forces_reference)
+        old = [coupled.steady_state(motor, s, V0, m, d, mode=mode) for s, V0, m, d in STEADY_GRID]
+        mp.setattr(itf, "interface_forces", lambda *a, **k: itf.interface_forces_reference(*a, **k, n_theta=4096))
+        fine = [coupled.steady_state(motor, s, V0, m, d, mode=mode) for s, V0, m, d in STEADY_GRID[:3]]
+    for g, n, o in zip(STEADY_GRID, new, old):
+        assert n.converged and o.converged and n.stuck == o.stuck, g
+        assert abs(n.v_m_s) > 0.05, g
+        assert n.v_m_s == pytest.approx(o.v_m_s, rel=1e-4), g
+        assert n.F_d_N == pytest.approx(o.F_d_N, rel=1e-3, abs=1e-4), g
+    for g, n, f in zip(STEADY_GRID, new, fine):
+        assert n.v_m_s == pytest.approx(f.v_m_s, rel=1e-6), g
+
+
+def test_steady_state_stuck_slider_unchanged(motor, monkeypatch):
+    # reference: the numerical kernel patched in; at low voltage with a load the guide holds the slider
+    from l1b2.physics import steady as coupled
+    new = coupled.steady_state(motor, 0.0, 60.0, 0.15, 1)
+    with monkeypatch.context() as mp:
+        mp.setattr(itf, "interface_forces", itf.interface_forces_reference)
+        old = coupled.steady_state(motor, 0.0, 60.0, 0.15, 1)
+    assert new.stuck and old.stuck and new.v_m_s == old.v_m_s == 0.0
+    assert new.F_d_N == pytest.approx(old.F_d_N, rel=1e-3)

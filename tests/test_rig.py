@@ -11,7 +11,7 @@ from l1b2.data import plots
 from l1b2.data.metrics import evaluation_mask
 from l1b2.physics.params import load_motor
 from l1b2.rig.experiment import (
-    EFFECTS,
+    INJECTIONS,
     RigPlan,
     apply_overrides,
     run_experiment,
@@ -113,26 +113,26 @@ def test_written_files_follow_the_data_format(rig_data, tmp_path):
     assert train.n_samples + test.n_samples == len(df)
     assert all_.meta["slider_mass_kg"] == mp.slider.mass_kg
     assert "tip_velocity_amp_m_s" in all_.df.columns  # extra column passed through
-    assert json.loads((tmp_path / "rig_truth.json").read_text())["effects"] == []
+    assert json.loads((tmp_path / "rig_truth.json").read_text())["injections"] == []
 
 
 def test_injected_effect_changes_the_data_but_is_not_declared(tmp_path):
     # reference: a direction asymmetry makes CH1 faster than CH2; neither CSV nor sidecar names it
     plan = RigPlan(voltages_V=(324.0,), loads_kg=(0.0,), step_s=1e-3)
-    df, truth = run_experiment(plan, engine="inprocess", effects=["direction_asymmetry"])
+    df, truth = run_experiment(plan, engine="inprocess", injections=["direction_asymmetry"])
     fwd, bwd = _mid_speed(df, 324.0, 0.0, 1), _mid_speed(df, 324.0, 0.0, -1)
     assert fwd > bwd * 1.03
     paths = write_experiment(df, tmp_path, load_motor(), plan, truth)
     text = paths["all"].read_text() + (tmp_path / "all.json").read_text()
     assert "asym" not in text and "direction_asymmetry" not in text
-    assert json.loads((tmp_path / "rig_truth.json").read_text())["effects"][0]["name"] == "direction_asymmetry"
+    assert json.loads((tmp_path / "rig_truth.json").read_text())["injections"][0]["name"] == "direction_asymmetry"
 
 
-@pytest.mark.parametrize("name", sorted(EFFECTS))
+@pytest.mark.parametrize("name", sorted(INJECTIONS))
 def test_every_effect_maps_to_declared_fmu_parameters(name):
     # reference: each effect only switches on parameters the FMU system declares (off in the reference)
     mp = load_motor()
-    eff = EFFECTS[name]
+    eff = INJECTIONS[name]
     changed = apply_overrides(mp, eff.draw(np.random.default_rng(0)))
     assert changed != mp
     for key in eff.params:

@@ -248,3 +248,21 @@ def test_acceleration_matches_eq21(motor):
     Fc, _ = _levels(sp, F_p)
     expect = (F_d - G * m_load - sp.c_r_N_s_per_m * v - np.sign(v) * Fc) / (sp.mass_kg + sp.load_inertia * m_load)
     np.testing.assert_allclose(sld.acceleration_m_s2(sp, v, F_d, F_p, m_load), expect, rtol=1e-13)
+
+
+def test_scalar_fast_paths_equal_vector_paths(motor):
+    # reference: the same helpers called with one-element arrays (numpy code paths)
+    sp = _params(motor, pulley_mu=0.05)
+    one = lambda x: np.array([x])  # noqa: E731
+    for m in (-0.07, 0.0, 0.05):
+        assert sld.moving_mass_kg(sp, m) == pytest.approx(sld.moving_mass_kg(sp, one(m))[0], rel=1e-15)
+        assert sld.load_path_friction_N(sp, m) == pytest.approx(sld.load_path_friction_N(sp, one(m))[0], rel=1e-15)
+        assert sld.load_force_N(m) == pytest.approx(sld.load_force_N(one(m))[0], rel=1e-15)
+    for static in (False, True):
+        assert sld.guide_friction_level_N(sp, 5.6, static) == pytest.approx(
+            sld.guide_friction_level_N(sp, one(5.6), static)[0], rel=1e-15)
+    for v0, F, t in ((0.0, 1.2, 2e-4), (0.3, -2.0, 1e-3), (-0.1, 0.5, 0.05)):
+        fast = sld.first_order_response(v0, F, sp.c_r_N_s_per_m, sp.mass_kg, t)
+        vec = sld.first_order_response(one(v0), one(F), sp.c_r_N_s_per_m, sp.mass_kg, one(t))
+        for a, b in zip(fast, vec):
+            assert isinstance(a, float) and a == pytest.approx(b[0], rel=1e-14, abs=1e-18)

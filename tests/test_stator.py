@@ -341,3 +341,42 @@ def test_b2_frequency_near_b2_buckling_load(sp):
     P = 1.4e5
     w_ritz = _ritz_b2_frequency(sp, P, float(st.effective_EI_N_m2(sp)))
     assert float(st.b2_frequency_rad_s(sp, P)) == pytest.approx(w_ritz, rel=1e-3)
+
+
+# ---------------------------------------------------------------------------
+# Scalar fast paths (the per-step calls of the stator block) equal the numpy paths
+# ---------------------------------------------------------------------------
+
+def _one(x):
+    return np.array([x], dtype=complex if isinstance(x, complex) else float)
+
+
+@pytest.mark.parametrize("drift", [False, True])
+def test_scalar_fast_paths_equal_vector_paths(sp, drift):
+    # reference: the same functions called with one-element arrays (numpy code paths)
+    if drift:  # thermal drift, self-heating, bar waviness and bump switched on
+        sp = dataclasses.replace(sp, df_dT_b_Hz_per_K=-4.0, df_dT_l_Hz_per_K=-3.0, thermal_tau_s=20.0,
+                                 heating_K_per_V2=1e-4, bar_wave_amp_m=2e-6, bar_bump_amp_m=3e-6,
+                                 bar_bump_center_m=0.004)
+    for s in (-0.02, -0.003, 0.0, 0.0071, 0.019):
+        assert st.axial_force_N(sp, s) == pytest.approx(st.axial_force_N(sp, _one(s))[0], rel=1e-14)
+    for P in (-3e4, -10.0, 0.0, 5.6, 6.35, 40.0, 3e4):
+        for T in (None, 10.0, 25.0, 70.0):
+            fast = st.modal_properties(sp, P, T)
+            vec = st.modal_properties(sp, _one(P), None if T is None else _one(T))
+            assert all(isinstance(x, float) for x in fast)
+            for f in fast._fields:  # eta_T: closed-form vs 64-point Gauss-Legendre normalisation
+                assert getattr(fast, f) == pytest.approx(float(np.ravel(getattr(vec, f))[0]), rel=1e-12), (P, T, f)
+    for V0, d in ((324.0, 1.0), (120.0, -1.0)):
+        for a, b in zip(st.excitation_phasors(sp, V0, d, 0.3), st.excitation_phasors(sp, _one(V0), _one(d), 0.3)):
+            assert a == pytest.approx(b[0], rel=1e-15)
+    assert st.stator_temperature_step(30.0, 25.0, 324.0, sp, 1e-3) == pytest.approx(
+        np.ravel(st.stator_temperature_step(_one(30.0), _one(25.0), 324.0, sp, 1e-3))[0], rel=1e-15)
+    props = st.modal_properties(sp, 6.0, 25.0)
+    for Q, F, Y in ((1e-6 + 2e-7j, 40.0 + 3j, 1e5 + 2e5j), (0j, 40.0 + 0j, 0.0), (3e-6 - 1e-6j, -5j, -2e4 + 1e3j)):
+        args = (2 * np.pi * 48500.0, props.M_b, props.K_b, props.C_b, 2e-4)
+        assert st.envelope_step(Q, F, Y, *args) == pytest.approx(st.envelope_step(_one(Q), F, Y, *args)[0],
+                                                                 rel=1e-13, abs=1e-22)
+        fast, vec = st.tip_motion(Q + 1e-7, F * 1e-8, props.eta_T), st.tip_motion(_one(Q + 1e-7), F * 1e-8, props.eta_T)
+        for a, b in zip(fast, vec):
+            assert a == pytest.approx(float(np.ravel(b)[0]), rel=1e-15, abs=1e-300)

@@ -24,7 +24,11 @@ def _floats(text: str) -> tuple[float, ...]:
 
 
 def _motor(args):
-    from .physics.params import load_motor
+    from .physics.params import load_motor, motor_file
+    if getattr(args, "motor", None) and getattr(args, "params", None):
+        raise L1B2Error("give either --motor NAME or --params FILE, not both")
+    if getattr(args, "motor", None):
+        return load_motor(motor_file(args.motor))
     return load_motor(getattr(args, "params", None))
 
 
@@ -43,11 +47,11 @@ def cmd_fmus(args) -> int:
 def cmd_simulate(args) -> int:
     """One run of the coupled motor; CSV with units in the header."""
     import numpy as np
-    import pandas as pd
 
     from .cosim.engine import InProcessMotor
-    from .cosim.master import CoSimResult, CoSimulation
+    from .cosim.master import CoSimulation
     from .cosim.ssp import COMPONENT_PARAMS
+    from .fmi.cache import ensure_fmus
     from .physics import driver as drv
 
     mp = _motor(args)
@@ -63,7 +67,8 @@ def cmd_simulate(args) -> int:
         overrides = {f"{c}.{k}": v for c, a in COMPONENT_PARAMS.items() for k, v in asdict(getattr(mp, a)).items()}
         if args.pure_slip:
             overrides["Interface.pure_slip"] = True
-        with CoSimulation(fmu_dir=args.fmu_dir, step_s=args.step, parameters=overrides,
+        fmu_dir = args.fmu_dir or ensure_fmus()
+        with CoSimulation(fmu_dir=fmu_dir, step_s=args.step, parameters=overrides,
                           iterate=args.iterate) as cs:
             res = cs.run(args.duration, inputs, start_values={"Slider.s0": s0, "Stator.s": s0},
                          stop_when=stop)
@@ -72,14 +77,8 @@ def cmd_simulate(args) -> int:
         m = InProcessMotor(mp, h_s=args.step, pure_slip=args.pure_slip)
         m.initialize(s0=s0, **inputs)
         rec = RECORDED + ("Slider.at_stop",)
-        r = m.run(args.duration, record=rec,
-                  until=(lambda mm: mm.value("Slider.at_stop") == args.direction) if not args.full else None)
-        from .cosim.blocks import BLOCKS
-        units = {"time": "s"}
-        for name in rec:
-            comp, var = name.split(".")
-            units[name] = next(v.unit for v in BLOCKS[comp].OUTPUTS if v.name == var)
-        res = CoSimResult(pd.DataFrame(r), units)
+        res = m.run(args.duration, record=rec,
+                    until=(lambda mm: mm.value("Slider.at_stop") == args.direction) if not args.full else None)
     path = res.to_csv(args.out)
     if args.plot:
         res.plot(columns=("Slider.v", "Slider.s", "Stator.U_w"), path=args.plot)
@@ -101,10 +100,10 @@ def cmd_rig(args) -> int:
     mp = _motor(args)
     plan = RigPlan(voltages_V=args.voltages, loads_kg=args.loads, step_s=args.step, seed=args.seed,
                    record_temperature=args.record_temperature, pause_s=args.pause, max_run_s=args.max_run)
-    effects = [parse_injection(s) for s in args.inject]
+    injections = [parse_injection(s) for s in args.inject]
     t0 = time.perf_counter()
-    df, truth = run_experiment(plan, mp, effects=effects, engine=args.engine, jobs=args.jobs,
-                               fmu_dir=args.fmu_dir, effect_seed=args.effect_seed, progress=not args.quiet)
+    df, truth = run_experiment(plan, mp, injections=injections, engine=args.engine, jobs=args.jobs,
+                               fmu_dir=args.fmu_dir, injection_seed=args.injection_seed, progress=not args.quiet)
     truth["wall_time_s"] = round(time.perf_counter() - t0, 2)
     paths = write_experiment(df, args.out, mp, plan, truth)
     out = Path(args.out)
@@ -137,6 +136,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("names", nargs="*", help="Driver Stator Interface Slider (default: all)")
     p.add_argument("--out", type=Path, default=Path("dist/fmus"))
     p.add_argument("--params", type=Path, help="motor parameter TOML (default: reference motor)")
+    p.add_argument("--motor", help="an embedded motor by name: reference_motor (default), realistic_motor "
+                   "(Coulomb-dominated friction, where Eq. 29 is not exact)")
     p.set_defaults(func=cmd_fmus)
 
     p = sub.add_parser("simulate", help="one run of the coupled motor, CSV out")
@@ -150,10 +151,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--s0", type=float, help="start position [m] (default: the end stop behind)")
     p.add_argument("--step", type=float, default=2e-4, help="communication step [s]")
     p.add_argument("--engine", choices=("fmu", "inprocess"), default="fmu")
-    p.add_argument("--fmu-dir", type=Path, default=Path("dist/fmus"))
+    p.add_argument("--fmu-dir", type=Path, help="folder with the subsystem FMUs (default: built once into the "
+                   "per-user cache)")
     p.add_argument("--iterate", action="store_true", help="fixed-point iteration of each macro step")
     p.add_argument("--pure-slip", action="store_true", help="interface in the paper's pure-slip mode")
     p.add_argument("--params", type=Path, help="motor parameter TOML (default: reference motor)")
+    p.add_argument("--motor", help="an embedded motor by name: reference_motor (default), realistic_motor "
+                   "(Coulomb-dominated friction, where Eq. 29 is not exact)")
     p.add_argument("--out", type=Path, required=True, help="CSV file")
     p.add_argument("--plot", type=Path, help="PNG of speed, position and tip amplitude")
     p.set_defaults(func=cmd_simulate)
@@ -164,19 +168,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--loads", type=_floats, default=(-0.09, -0.07, -0.05, -0.03, 0.0, 0.03, 0.05, 0.07, 0.09),
                    help="signed loads [kg]")
     p.add_argument("--engine", choices=("fmu", "inprocess"), default="fmu")
-    p.add_argument("--fmu-dir", type=Path, default=Path("dist/fmus"))
+    p.add_argument("--fmu-dir", type=Path, help="folder with the subsystem FMUs (default: built once into the "
+                   "per-user cache)")
     p.add_argument("--jobs", type=int, default=2, help="parallel runs (stateful effects run serially)")
     p.add_argument("--step", type=float, default=2e-4, help="communication step [s]")
     p.add_argument("--pause", type=float, default=1.0, help="pause between runs [s]")
     p.add_argument("--max-run", type=float, default=4.0, help="longest run [s]")
     p.add_argument("--seed", type=int, default=0, help="seed of the run order")
     p.add_argument("--inject", action="append", default=[], metavar="EFFECT[:Comp.param=value,...]",
-                   help="switch on an extra effect (repeatable); see `l1b2 effects`")
-    p.add_argument("--effect-seed", type=int, help="draw the injected effects' sizes at random with this seed")
+                   help="switch on an undeclared physical effect (repeatable); see `l1b2 injections`")
+    p.add_argument("--injection-seed", "--effect-seed", dest="injection_seed", type=int,
+                   help="draw the injections' sizes at random with this seed")
     p.add_argument("--record-temperature", action="store_true", help="write the stator temperature column")
     p.add_argument("--no-plots", action="store_true")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--params", type=Path, help="motor parameter TOML (default: reference motor)")
+    p.add_argument("--motor", help="an embedded motor by name: reference_motor (default), realistic_motor "
+                   "(Coulomb-dominated friction, where Eq. 29 is not exact)")
     p.set_defaults(func=cmd_rig)
 
     p = sub.add_parser("demo", help="the main job end to end on the reference motor and the virtual rig")
@@ -186,6 +194,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--quiet", action="store_true")
     p.add_argument("--params", type=Path, help="motor parameter TOML (default: reference motor)")
+    p.add_argument("--motor", help="an embedded motor by name: reference_motor (default), realistic_motor "
+                   "(Coulomb-dominated friction, where Eq. 29 is not exact)")
     p.set_defaults(func=cmd_demo)
 
     p = sub.add_parser("identify", help="identify the Eq. 29 predictor from measured data (max. likelihood)")
@@ -209,6 +219,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--identification", type=Path, help="identification.json from `l1b2 identify`")
     p.add_argument("--order", type=int, default=8)
     p.add_argument("--params", type=Path, help="motor parameter TOML (default: reference motor)")
+    p.add_argument("--motor", help="an embedded motor by name: reference_motor (default), realistic_motor "
+                   "(Coulomb-dominated friction, where Eq. 29 is not exact)")
     p.set_defaults(func=cmd_compare)
 
     p = sub.add_parser("close-loop", help="find the missing effect in the residual, add it, report before/after")
@@ -231,10 +243,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--identification", type=Path, help="identification.json whose predictor Predictor.fmu carries")
     p.add_argument("--no-predictor", action="store_true", help="skip Predictor.fmu")
     p.add_argument("--params", type=Path, help="motor parameter TOML (default: reference motor)")
+    p.add_argument("--motor", help="an embedded motor by name: reference_motor (default), realistic_motor "
+                   "(Coulomb-dominated friction, where Eq. 29 is not exact)")
     p.set_defaults(func=cmd_export)
 
-    p = sub.add_parser("effects", help="list the effects the rig can inject")
-    p.set_defaults(func=cmd_effects)
+    p = sub.add_parser("injections", aliases=["effects"], help="list the effects the rig can inject")
+    p.set_defaults(func=cmd_injections)
     return ap
 
 
@@ -381,9 +395,9 @@ def cmd_export(args) -> int:
     return 0
 
 
-def cmd_effects(args) -> int:
-    from .rig.experiment import EFFECTS
-    for e in EFFECTS.values():
+def cmd_injections(args) -> int:
+    from .rig.experiment import INJECTIONS
+    for e in INJECTIONS.values():
         params = ", ".join(f"{k}={v:g}" for k, v in e.params.items())
         print(f"{e.name}  [{e.regressor}]\n    {e.description}\n    {params}")
     return 0

@@ -2,9 +2,14 @@
 
 Every error a user can cause by bad input is one of these; the CLI prints
 ``str(exc)`` as one line and exits non-zero.
+
+Layering: only :mod:`l1b2.units` is imported (for the units that
+:class:`DataFormatError` names), so every layer may raise these.
 """
 
 from __future__ import annotations
+
+from .units import data_unit
 
 
 class L1B2Error(Exception):
@@ -33,8 +38,8 @@ class DataFormatError(L1B2Error):
         The offending file.
     column : str or None
         Column (or sidecar field) name; ``None`` for file-level problems.
-        Its unit is looked up in :data:`l1b2.data.measurements.KNOWN_COLUMNS` /
-        :data:`l1b2.data.measurements.SIDECAR_FIELDS`.
+        Its unit is looked up in :data:`l1b2.units.COLUMN_UNITS` /
+        :data:`l1b2.units.SIDECAR_FIELD_UNITS`.
     row : int or None
         1-based data row number (header excluded); ``None`` when the problem
         is not tied to one row.  The file line is ``row + 1``.
@@ -47,7 +52,7 @@ class DataFormatError(L1B2Error):
         self.column = column
         self.row = row
         self.problem = problem
-        self.unit = self._unit_of(column)
+        self.unit = data_unit(column)
         self.line = None if row is None else int(row) + 1
         where = self.path
         sep = ": "
@@ -66,17 +71,6 @@ class DataFormatError(L1B2Error):
         # four-argument constructor.
         return (type(self), (self.path, self.column, self.row, self.problem))
 
-    @staticmethod
-    def _unit_of(column):
-        """Unit of a known data column or sidecar field, else ``None``."""
-        if column is None:
-            return None
-        try:  # lazy: l1b2.data.measurements imports this module
-            from .data.measurements import unit_of
-        except ImportError:  # pragma: no cover - partial installs only
-            return None
-        return unit_of(column)
-
 
 class SimulationError(L1B2Error):
     """A simulation could not be carried out (bad inputs, diverging coupling)."""
@@ -84,6 +78,14 @@ class SimulationError(L1B2Error):
 
 class SystemStructureError(L1B2Error):
     """An SSP system structure is inconsistent (missing FMU, unit mismatch)."""
+
+
+class ArchiveError(SystemStructureError):
+    """An ``.ssp`` or ``.fmu`` archive is unreadable or exceeds the extraction limits (size, members, ratio)."""
+
+
+class SourceOutsideError(SystemStructureError):
+    """An SSD ``source`` names a file outside the ``.ssp`` archive (or the SSD's folder)."""
 
 
 class IdentificationError(L1B2Error):

@@ -1,8 +1,16 @@
-"""SI unit definitions shared by the FMUs (``UnitDefinitions``) and the SSP files (``ssd:Units``).
+"""Units: SI unit definitions for the FMUs and SSP files, and the units of the measured data.
 
-Each unit is given by its exponents of the SI base units (FMI 2.0 and SSP
-1.0 both use this ``BaseUnit`` form), plus ``factor`` and ``offset`` for
-non-coherent units (degC).
+* :data:`UNITS`: each unit by its exponents of the SI base units (FMI 2.0 and
+  SSP 1.0 both use this ``BaseUnit`` form), plus ``factor`` and ``offset``
+  for non-coherent units (degC); used by the FMUs (``UnitDefinitions``) and
+  the SSP files (``ssd:Units``).
+* :data:`COLUMN_UNITS` and :data:`SIDECAR_FIELD_UNITS`: the unit of every
+  column of the measured-data CSV and of every sidecar field
+  (``shared/data-format.md``), defined here once so that both the data layer
+  (:mod:`l1b2.data.columns`) and :class:`l1b2.errors.DataFormatError` (which
+  names the unit in its messages) read the same table.
+
+This is the bottom layer: it imports nothing of the package.
 """
 
 from __future__ import annotations
@@ -74,3 +82,48 @@ def unit_def(name: str) -> UnitDef:
 def same_dimension(a: str, b: str) -> bool:
     """True if units ``a`` and ``b`` are identical in base units, factor and offset."""
     return unit_def(a) == unit_def(b)
+
+
+# --------------------------------------------------------------------------
+# Units of the measured data (shared/data-format.md)
+# --------------------------------------------------------------------------
+
+#: Unit of each known column of the measured-data CSV, in the order of the
+#: contract table (``"-"`` = dimensionless or identifier).
+COLUMN_UNITS: dict[str, str] = {
+    "time_s": "s",
+    "run": "-",
+    "position_m": "m",
+    "voltage_V": "V",
+    "direction": "-",
+    "load_kg": "kg",
+    "speed_m_s": "m/s",
+    "frequency_Hz": "Hz",
+    "temperature_C": "degC",
+}
+
+#: Unit of each known field of a measured-data sidecar ``NAME.json``.
+SIDECAR_FIELD_UNITS: dict[str, str] = {
+    "slider_mass_kg": "kg",
+    "encoder_resolution_m": "m",
+    "drive_frequency_Hz": "Hz",
+    "description": "-",
+}
+
+
+def data_unit(name: str | None) -> str | None:
+    """Unit of a known measured-data column or sidecar field.
+
+    Parameters
+    ----------
+    name : str or None
+        Column or sidecar field name.
+
+    Returns
+    -------
+    str or None
+        The unit (``"-"`` for dimensionless), ``None`` when unknown.
+    """
+    if name in COLUMN_UNITS:
+        return COLUMN_UNITS[name]
+    return SIDECAR_FIELD_UNITS.get(name)  # type: ignore[arg-type]

@@ -44,9 +44,10 @@ def load_train_test(train_path, test_path=None, *, test_abs_loads=TEST_ABS_LOADS
     return tr, te, f"paper's split: test = runs with |load| in {list(test_abs_loads)} kg"
 
 
-def metrics_for(est, df: pd.DataFrame) -> dict:
+def metrics_for(est, data: dataio.Measurements | pd.DataFrame) -> dict:
     """Data-format metrics of an identified predictor on a data set (one_step and free_run)."""
-    return report_metrics(df, est.predict_one_step(df), est.predict_free_run(df))
+    df = data.df if isinstance(data, dataio.Measurements) else data
+    return report_metrics(df, est.predict_one_step(data), est.predict_free_run(data))
 
 
 def _parse_fix(text: str | None):
@@ -79,23 +80,22 @@ def run_identification(train_path, out_dir, test_path=None, *, order=8, criterio
     from .ident.estimator import PredictorIdentifier
     train, test, split_note = load_train_test(train_path, test_path, test_abs_loads=test_abs_loads,
                                               slider_mass_kg=slider_mass_kg)
-    m_s = train.slider_mass_kg
     est = PredictorIdentifier(order=order, criterion=criterion, fixed=_parse_fix(fix), n_starts=n_starts,
                               seed=seed, verbose=verbose)
-    est.fit(train.df, slider_mass_kg=m_s, mask=evaluation_mask(train.df))
-    report = est.to_dict()
-    report["data"] = {"train": str(train_path), "test": str(test_path) if test_path else None,
-                      "split": split_note, "train_runs": len(train.runs),
-                      "test_runs": len(test.runs) if test is not None else 0}
-    report["metrics"] = {"train": metrics_for(est, train.df),
-                         "test": metrics_for(est, test.df) if test is not None else None}
-    report["predictor"] = PredictorSetup(est.params_, m_s, est.T_s_).to_dict()
+    est.fit(train)  # slider mass and evaluation mask from the validated Measurements
+    sections = {
+        "data": {"train": str(train_path), "test": str(test_path) if test_path else None,
+                 "split": split_note, "train_runs": len(train.runs),
+                 "test_runs": len(test.runs) if test is not None else 0},
+        "metrics": {"train": metrics_for(est, train), "test": metrics_for(est, test) if test is not None else None},
+        "predictor": PredictorSetup(est.params_, est.m_s_, est.T_s_).to_dict(),
+    }
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     figs = []
     if plots_on and test is not None:
-        free = est.predict_free_run(test.df)
-        one = est.predict_one_step(test.df)
+        free = est.predict_free_run(test)
+        one = est.predict_one_step(test)
         for run, sl in dataio.run_slices(test.df[dataio.RUN]):
             g = test.df.iloc[sl].reset_index(drop=True)
             m = speed_metrics(free[sl], g[dataio.SPEED].to_numpy(), evaluation_mask(g))
@@ -103,10 +103,9 @@ def run_identification(train_path, out_dir, test_path=None, *, order=8, criterio
                      f"dir {int(g[dataio.DIRECTION].iloc[0]):+d}; free-run p95 {m['p95_abs_rel_error']:.1%}")
             figs.append(str(plots.prediction_vs_measured(g, free[sl], out / f"fig10_test_run_{run}.png", title,
                                                          v_pred_alt=one[sl], labels=("free run", "one step"))))
-    report["figures"] = figs
-    (out / "identification.json").write_text(json.dumps(report, indent=1))
-    (out / "fit_report.txt").write_text(est.fit_report())
-    return report
+    sections["figures"] = figs
+    est.result_.save(out, **sections)  # identification.json (strict JSON) and fit_report.txt
+    return {**est.to_dict(), **sections}
 
 
 def run_comparison(out_dir, mp=None, identification: dict | None = None, *, order=8) -> dict:

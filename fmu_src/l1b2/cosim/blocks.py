@@ -44,7 +44,6 @@ from ..physics.params import (
     StatorParams,
     describe,
 )
-from ..predictor.setup import PredictorSetup
 
 
 @dataclass(frozen=True)
@@ -63,9 +62,13 @@ class Var:
     nominal: float | None = None
 
 
-def _parameter_vars(cls, values) -> list[Var]:
+def parameter_vars(cls, values) -> list[Var]:
     return [Var(d["name"], "parameter", d["unit"], d["description"], start=getattr(values, d["name"]),
                 min=d["min"], max=d["max"], variability="fixed") for d in describe(cls)]
+
+
+#: per block class: (name, min, max) of its inputs, for the fast pass of Block.check_inputs
+_INPUT_BOUNDS: dict[type, tuple] = {}
 
 
 def motor_defaults(mp: MotorParams) -> dict:
@@ -96,7 +99,7 @@ class Block:
     @classmethod
     def variables(cls, params=None) -> list[Var]:
         """All variables of the block (parameters with the start values of ``params``)."""
-        pars = _parameter_vars(cls.PARAMS_CLASS, params) if params is not None else []
+        pars = parameter_vars(cls.PARAMS_CLASS, params) if params is not None else []
         return pars + list(cls.EXTRA_PARAMETERS) + cls.INPUTS + cls.OUTPUTS + cls.STATES
 
     @classmethod
@@ -122,6 +125,17 @@ class Block:
 
     def check_inputs(self):
         """Raise :class:`SimulationError` on a non-finite or out-of-range input."""
+        bounds = _INPUT_BOUNDS.get(type(self))
+        if bounds is None:
+            bounds = _INPUT_BOUNDS[type(self)] = tuple(
+                (v.name, -math.inf if v.min is None else v.min, math.inf if v.max is None else v.max)
+                for v in self.INPUTS)
+        for name, lo, hi in bounds:  # fast pass: finite floats inside their ranges
+            value = getattr(self, name)
+            if type(value) is not float or not lo <= value <= hi or value - value != 0.0:
+                break
+        else:
+            return
         for var in self.INPUTS:
             value = getattr(self, var.name)
             if not isinstance(value, (int, float, np.floating)) or not math.isfinite(value):
@@ -173,12 +187,17 @@ class DriverBlock(Block):
 
     def initialize(self):
         self.rebuild_params()
+        self._memo = None
         self._compute()
 
     initialize_outputs = initialize
 
     def _compute(self):
         self.check_inputs()
+        memo = (self.params, self.V_s, self.duty, self.f_s, self.T)
+        if self._memo is not None and memo[0] is self._memo[0] and memo[1:] == self._memo[1:]:
+            return  # algebraic: same parameters and inputs as the last call, the outputs stand
+        self._memo = memo
         out = drv.driver_output(self.params, self.V_s, self.duty, self.f_s, self.T)
         self.V0 = float(out.V0_V)
         self.omega = float(out.omega_rad_s)
@@ -306,7 +325,9 @@ class InterfaceBlock(Block):
     EXTRA_PARAMETERS = [
         Var("pure_slip", "parameter", "", "true: the paper's Sect. 4 assumptions (phi_c = pi, no stick)",
             start=False, variability="fixed", type="Boolean"),
-        Var("n_theta", "parameter", "", "cells over the contact window (numerical resolution)",
+        Var("quadrature", "parameter", "", "true: the numerical reference kernel (n_theta cells, slow) "
+            "instead of the exact closed form", start=False, variability="fixed", type="Boolean"),
+        Var("n_theta", "parameter", "", "cells over the contact window of the numerical reference kernel",
             start=256, min=16, max=65536, variability="fixed", type="Integer"),
     ]
     INPUTS = [
@@ -342,9 +363,9 @@ class InterfaceBlock(Block):
 
     def _compute(self):
         self.check_inputs()
-        out = itf.interface_forces(self.U_l, self.U_w, self.delta, self.omega, self.v, self.F_p, self.params,
-                                   mode="pure_slip" if self.pure_slip else "stick_slip",
-                                   n_theta=int(self.n_theta))
+        kernel = itf.interface_forces_reference if self.quadrature else itf.interface_forces
+        out = kernel(self.U_l, self.U_w, self.delta, self.omega, self.v, self.F_p, self.params,
+                     mode="pure_slip" if self.pure_slip else "stick_slip", n_theta=int(self.n_theta))
         self.F_d, self.F_N_mean = out.F_d_N, out.F_N_mean_N
         self.F_N1_sin, self.F_N1_cos = out.F_N1_sin_N, out.F_N1_cos_N
         self.F_T1_sin, self.F_T1_cos = out.F_T1_sin_N, out.F_T1_cos_N
@@ -414,298 +435,17 @@ class SliderBlock(Block):
         self._publish((new.v_m_s - v_old) / h if h > 0 else 0.0)
 
 
-class MotorBlock(Block):
-    """The whole coupled motor in one block (for ``L1B2Motor.fmu``, hosts that cannot import SSP).
-
-    Runs the four subsystem blocks with the same Gauss-Seidel sequence as
-    :class:`l1b2.cosim.engine.InProcessMotor`, sub-stepping each communication step
-    with ``internal_step_s``. Every subsystem parameter is exposed as
-    ``Component.parameter`` (same names and values as the SSV of the SSP), and
-    every sub-block input, output and state as a ``local`` variable
-    ``Component.variable`` so that get/set FMU state captures the whole motor.
-    """
-
-    PARAMS_CLASS = MotorParams
-    SECTION = "motor"
-    COMPONENTS = ("Driver", "Stator", "Interface", "Slider")
-    INPUTS = [
-        Var("V_s", "input", "V", "supply voltage of the H bridge", start=67.1, min=0.0, max=2000.0),
-        Var("duty", "input", "1", "PWM duty ratio", start=1.0, min=0.0, max=1.0),
-        Var("f_s", "input", "Hz", "drive frequency", start=48500.0, min=1e3, max=1e6),
-        Var("T", "input", "degC", "ambient temperature of driver and stator", start=25.0, min=-100.0, max=300.0),
-        Var("direction", "input", "1", "+1 excites CH1 (toward +position), -1 CH2", start=1.0, min=-1.0, max=1.0),
-        Var("m_load", "input", "kg", "signed load mass; > 0 pulls toward -position", min=-100.0, max=100.0),
-    ]
-    OUTPUTS = [
-        Var("v", "output", "m/s", "slider speed"),
-        Var("s", "output", "m", "slider position"),
-        Var("V0", "output", "V", "stator voltage amplitude"),
-        Var("U_l", "output", "m", "tip normal vibration amplitude", nominal=1e-6),
-        Var("U_w", "output", "m", "tip tangential vibration amplitude", nominal=1e-6),
-        Var("delta", "output", "rad", "phase of tangential minus normal tip displacement"),
-        Var("F_p", "output", "N", "static axial force alpha0 P(s)"),
-        Var("F_d", "output", "N", "driving force"),
-        Var("phi_c", "output", "rad", "contact angle"),
-        Var("stick_fraction", "output", "1", "share of the contact time in stick"),
-        Var("T_stator", "output", "degC", "stator temperature"),
-        Var("at_stop", "output", "1", "-1/+1 at the negative/positive end stop, 0 elsewhere"),
-    ]
-    EXTRA_PARAMETERS = [
-        Var("internal_step_s", "parameter", "s", "internal Gauss-Seidel step between the subsystems",
-            start=2e-4, min=1e-6, max=1e-2, variability="fixed"),
-        Var("Interface.pure_slip", "parameter", "", "true: the paper's Sect. 4 assumptions (phi_c = pi, no stick)",
-            start=False, variability="fixed", type="Boolean"),
-        Var("Slider.s0", "parameter", "m", "initial slider position", start=0.0, min=-1.0, max=1.0,
-            variability="fixed"),
-        Var("Slider.v0", "parameter", "m/s", "initial slider speed", start=0.0, min=-10.0, max=10.0,
-            variability="fixed"),
-        Var("Stator.T_st0", "parameter", "degC", "initial stator temperature (when self-heating is on)",
-            start=25.0, min=-100.0, max=300.0, variability="fixed"),
-    ]
-    _OUT_SOURCE = {"v": ("Slider", "v"), "s": ("Slider", "s"), "V0": ("Driver", "V0"), "U_l": ("Stator", "U_l"),
-                   "U_w": ("Stator", "U_w"), "delta": ("Stator", "delta"), "F_p": ("Stator", "F_p"),
-                   "F_d": ("Interface", "F_d"), "phi_c": ("Interface", "phi_c"),
-                   "stick_fraction": ("Interface", "stick_fraction"), "T_stator": ("Stator", "T_stator"),
-                   "at_stop": ("Slider", "at_stop")}
-
-    def __init__(self, params: MotorParams):
-        from .engine import InProcessMotor
-        self.params = params
-        for var in self.INPUTS + self.OUTPUTS:
-            setattr(self, var.name, 0.0 if var.start is None else var.start)
-        self.internal_step_s = 2e-4
-        self.motor = InProcessMotor(params, h_s=self.internal_step_s)
-        self._extra = {v.name: v.start for v in self.EXTRA_PARAMETERS if "." in v.name}
-
-    @classmethod
-    def params_from_defaults(cls, defaults: dict) -> MotorParams:
-        from ..physics.params import OperatingPoint
-        return MotorParams(driver=DriverParams(**defaults["driver"]), stator=StatorParams(**defaults["stator"]),
-                           interface=InterfaceParams(**defaults["interface"]),
-                           slider=SliderParams(**defaults["slider"]),
-                           operating=OperatingPoint(**defaults["operating"]), name="reference")
-
-    @classmethod
-    def _sub_locals(cls) -> list[Var]:
-        out = []
-        for comp in cls.COMPONENTS:
-            bcls = BLOCKS[comp]
-            for v in bcls.INPUTS + bcls.OUTPUTS + bcls.STATES:
-                out.append(Var(f"{comp}.{v.name}", "local", v.unit, f"{comp}: {v.description}", nominal=v.nominal))
-        return out
-
-    @classmethod
-    def variables(cls, params=None) -> list[Var]:
-        pars = []
-        if params is not None:
-            for comp in cls.COMPONENTS:
-                sub = getattr(params, BLOCKS[comp].SECTION)
-                for v in _parameter_vars(type(sub), sub):
-                    pars.append(Var(f"{comp}.{v.name}", v.causality, v.unit, v.description, start=v.start,
-                                    min=v.min, max=v.max, variability=v.variability))
-        return pars + list(cls.EXTRA_PARAMETERS) + cls.INPUTS + cls.OUTPUTS + cls._sub_locals()
-
-    def get(self, name: str):
-        if "." not in name:
-            return getattr(self, name)
-        if name in self._extra:
-            return self._extra[name]
-        comp, var = name.split(".", 1)
-        section = BLOCKS[comp].SECTION
-        if var in {f.name for f in fields(getattr(self.params, section))}:
-            return getattr(getattr(self.params, section), var)  # parameters: the dataclass is the truth
-        return getattr(self.motor.b[comp], var)                  # sub-block inputs, outputs, states
-
-    def set(self, name: str, value):
-        if "." in name:
-            comp, var = name.split(".", 1)
-            if name in self._extra:
-                self._extra[name] = value
-                return
-            section = BLOCKS[comp].SECTION
-            if var in {f.name for f in fields(getattr(self.params, section))}:
-                self.params = self.params.replace(**{f"{section}__{var}": value})
-            setattr(self.motor.b[comp], var, value)
-            return
-        setattr(self, name, value)
-
-    def check_inputs(self):
-        super().check_inputs()
-        if abs(abs(self.direction) - 1.0) > 1e-9:
-            raise SimulationError(f"MotorBlock: input direction [1] = {self.direction} must be +1 or -1")
-
-    def initialize(self):
-        from .engine import InProcessMotor
-        self.check_inputs()
-        self.motor = InProcessMotor(self.params, h_s=float(self.internal_step_s),
-                                    pure_slip=bool(self._extra["Interface.pure_slip"]))
-        self.motor.b["Stator"].T_st0 = float(self._extra["Stator.T_st0"])
-        self.motor.initialize(V_s=self.V_s, duty=self.duty, f_s=self.f_s, T=self.T, direction=self.direction,
-                              m_load=self.m_load, s0=float(self._extra["Slider.s0"]),
-                              v0=float(self._extra["Slider.v0"]))
-        self._publish()
-
-    def initialize_outputs(self):
-        for b in self.motor.b.values():
-            b.refresh()
-        self._publish()
-
-    def _publish(self):
-        for out, (comp, var) in self._OUT_SOURCE.items():
-            setattr(self, out, float(getattr(self.motor.b[comp], var)))
-
-    def do_step(self, t, h):
-        self.check_inputs()
-        self.motor.inputs = dict(V_s=self.V_s, duty=self.duty, f_s=self.f_s, T=self.T,
-                                 direction=self.direction, m_load=self.m_load)
-        n = max(1, int(round(h / float(self.internal_step_s))))
-        self.motor.h = h / n
-        self.motor.t = t
-        for _ in range(n):
-            self.motor.step()
-        self._publish()
+#: the four subsystem blocks by component name (the composite blocks are in :mod:`l1b2.cosim.composite`)
+SUBSYSTEM_BLOCKS = {"Driver": DriverBlock, "Stator": StatorBlock, "Interface": InterfaceBlock, "Slider": SliderBlock}
 
 
-class PredictorBlock(Block):
-    """The paper's Eq. 29 speed predictor as a co-simulation block (for ``Predictor.fmu``).
-
-    Inputs V0, s, load, direction; outputs the predicted speed ``v`` (the
-    Eq. 29 map iterated with the identified sampling time ``T_s`` inside each
-    communication step, i.e. the identified discrete-time model) and the
-    closed-form steady speed ``v_steady`` at the current inputs (for
-    feedforward). Every identified parameter is an FMI parameter with its unit.
-    """
-
-    SECTION = "predictor"
-    INPUTS = [
-        Var("V0", "input", "V", "stator voltage amplitude", start=324.0, min=0.0, max=2000.0),
-        Var("s", "input", "m", "slider position", min=-1.0, max=1.0),
-        Var("load", "input", "kg", "signed load mass; > 0 pulls toward -position", min=-100.0, max=100.0),
-        Var("direction", "input", "1", "+1 CH1 (toward +position), -1 CH2", start=1.0, min=-1.0, max=1.0),
-    ]
-    OUTPUTS = [
-        Var("v", "output", "m/s", "predicted slider speed (Eq. 29 iterated at T_s)"),
-        Var("v_steady", "output", "m/s", "closed-form steady speed v* = b/(1-a) at the current inputs"),
-    ]
-    STATES = [Var("v_state", "local", "m/s", "predicted speed (state)")]
-    EXTRA_PARAMETERS = [
-        Var("v0", "parameter", "m/s", "initial speed", start=0.0, min=-10.0, max=10.0, variability="fixed"),
-    ]
-
-    def __init__(self, setup: PredictorSetup):
-        self.setup = setup
-        self.params = setup
-        for var in self.EXTRA_PARAMETERS:
-            setattr(self, var.name, var.start)
-        for var in self.INPUTS + self.OUTPUTS + self.STATES:
-            setattr(self, var.name, 0.0 if var.start is None else var.start)
-        self._values = self._param_values(setup)
-
-    @staticmethod
-    def _param_values(setup: PredictorSetup) -> dict:
-        p = setup.params
-        vals = dict(zip(p.names(p.order), p.to_vector().tolist()))
-        vals.update(s_center=p.s_center, s_half=p.s_half, kappa=p.kappa, load_inertia=float(p.include_load_inertia),
-                    slider_mass_kg=setup.slider_mass_kg, T_s=setup.T_s)
-        return vals
-
-    @classmethod
-    def params_from_defaults(cls, defaults: dict) -> PredictorSetup:
-        if "predictor" in defaults:
-            return PredictorSetup.from_dict(defaults["predictor"])
-        from ..predictor.derive import derive_predictor_setup
-        return derive_predictor_setup(cls._motor_from(defaults))
-
-    @staticmethod
-    def _motor_from(defaults: dict) -> MotorParams:
-        return MotorBlock.params_from_defaults(defaults)
-
-    @classmethod
-    def baked_defaults(cls, mp: MotorParams) -> dict:
-        """Without an identification, the FMU carries the physical model's linearization (derived once)."""
-        from ..predictor.derive import derive_predictor_setup
-        return {"predictor": derive_predictor_setup(mp).to_dict()}
-
-    @classmethod
-    def variables(cls, params: PredictorSetup | None = None) -> list[Var]:
-        pars = []
-        if params is not None:
-            p = params.params
-            units = p.units(p.order)
-            for name, value in zip(p.names(p.order), p.to_vector()):
-                pars.append(Var(name, "parameter", units[name].replace("N s/m", "N.s/m").replace("-", "1"),
-                                f"Eq. 35 parameter {name}", start=float(value), variability="fixed"))
-            pars += [
-                Var("s_center", "parameter", "m", "centre of the position scaling of the polynomials",
-                    start=p.s_center, variability="fixed"),
-                Var("s_half", "parameter", "m", "half range of the position scaling", start=p.s_half, min=1e-6,
-                    variability="fixed"),
-                Var("kappa", "parameter", "1", "share of F_p loading the guide", start=p.kappa, min=0.0, max=1.0,
-                    variability="fixed"),
-                Var("load_inertia", "parameter", "1", "1: the load mass is accelerated with the slider",
-                    start=float(p.include_load_inertia), min=0.0, max=1.0, variability="fixed"),
-                Var("slider_mass_kg", "parameter", "kg", "slider mass m_s", start=params.slider_mass_kg, min=1e-6,
-                    variability="fixed"),
-                Var("T_s", "parameter", "s", "sampling time the predictor was identified with", start=params.T_s,
-                    min=1e-7, variability="fixed"),
-            ]
-        return pars + list(cls.EXTRA_PARAMETERS) + cls.INPUTS + cls.OUTPUTS + cls.STATES
-
-    def get(self, name: str):
-        if name in self._values:
-            return self._values[name]
-        return getattr(self, name)
-
-    def set(self, name: str, value):
-        if name in self._values:
-            self._values[name] = float(value)
-        else:
-            setattr(self, name, value)
-
-    def rebuild_params(self):
-        from ..predictor.model import PredictorParams
-        vals = self._values
-        p0 = self.setup.params
-        theta = np.array([vals[n] for n in p0.names(p0.order)])
-        pp = PredictorParams.from_vector(theta, s_center=vals["s_center"], s_half=vals["s_half"],
-                                         kappa=vals["kappa"], include_load_inertia=vals["load_inertia"] >= 0.5)
-        if not (vals["slider_mass_kg"] > 0 and vals["T_s"] > 0):
-            raise SimulationError("PredictorBlock: slider_mass_kg [kg] and T_s [s] must be positive")
-        self.setup = PredictorSetup(pp, vals["slider_mass_kg"], vals["T_s"])
-
-    def check_inputs(self):
-        super().check_inputs()
-        if abs(abs(self.direction) - 1.0) > 1e-9:
-            raise SimulationError(f"PredictorBlock: input direction [1] = {self.direction} must be +1 or -1")
-
-    def initialize(self):
-        self.rebuild_params()
-        self.check_inputs()
-        self.v_state = float(self.v0)
-        self.initialize_outputs()
-
-    def initialize_outputs(self):
-        from ..predictor import model as pr
-        su = self.setup
-        self.v = float(self.v_state)
-        self.v_steady = float(pr.steady_state(su.params, self.s, self.V0, self.load, self.direction,
-                                              su.slider_mass_kg))
-
-    def do_step(self, t, h):
-        from ..predictor import model as pr
-        self.check_inputs()
-        su = self.setup
-        n = max(1, int(math.ceil(h / su.T_s - 1e-9)))
-        v = float(self.v_state)
-        for _ in range(n):
-            v = float(pr.one_step(su.params, v, self.s, self.V0, self.load, self.direction, h / n,
-                                  su.slider_mass_kg))
-        self.v_state = v
-        self.initialize_outputs()
-
-
-BLOCKS = {"Driver": DriverBlock, "Stator": StatorBlock, "Interface": InterfaceBlock, "Slider": SliderBlock,
-          "L1B2Motor": MotorBlock, "Predictor": PredictorBlock}
+def variable_unit(component: str, variable: str) -> str:
+    """Unit of ``component.variable`` of a subsystem block (inputs, outputs, states and parameters)."""
+    cls = SUBSYSTEM_BLOCKS[component]
+    for v in cls.variables():
+        if v.name == variable:
+            return v.unit or "1"
+    raise KeyError(f"{component} has no variable '{variable}'")
 
 
 def make_blocks(mp: MotorParams, pure_slip: bool = False) -> dict[str, Block]:

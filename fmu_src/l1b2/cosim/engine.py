@@ -9,9 +9,11 @@ directly: the reference against which the fmpy co-simulation is tested.
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 
 from ..physics.params import MotorParams
-from .blocks import make_blocks
+from .blocks import make_blocks, variable_unit
+from .result import CoSimResult
 
 # ---------------------------------------------------------------------------
 # In-process time simulation (reference for the FMU master)
@@ -80,7 +82,11 @@ class InProcessMotor:
         return float(getattr(self.b[comp], var))
 
     def run(self, t_end: float, record: tuple[str, ...] = RECORDED, until=None):
-        """Step to ``t_end`` (or until ``until(self)`` is true); return ``{name: array}`` incl. ``time``."""
+        """Step to ``t_end`` (or until ``until(self)`` is true); the recorded series incl. ``time``.
+
+        Returns the same :class:`~l1b2.cosim.result.CoSimResult` as the fmpy
+        master (``res["Slider.v"]`` is a numpy array; units from the blocks).
+        """
         n = int(round(t_end / self.h))
         out = {k: [self.value(k)] for k in record}
         times = [self.t]
@@ -91,6 +97,8 @@ class InProcessMotor:
                 out[k].append(self.value(k))
             if until is not None and until(self):
                 break
-        res = {"time": np.array(times)}
-        res.update({k: np.array(v) for k, v in out.items()})
-        return res
+        cols = {"time": np.array(times)}
+        cols.update({k: np.array(v) for k, v in out.items()})
+        units = {"time": "s"}
+        units.update({k: variable_unit(*k.split(".")) for k in record})
+        return CoSimResult(pd.DataFrame(cols), units)

@@ -17,6 +17,13 @@
   system whose units disagree is refused.
 * Before the first FMU is loaded the PythonFMU exit fix of
   :mod:`l1b2.fmi.runtime` is installed.
+* An ``.ssp`` is untrusted: it is unpacked under :class:`~l1b2.cosim.ssp.ArchiveLimits`
+  into a temporary folder that is removed by :meth:`CoSimulation.close`
+  (``with CoSimulation(...) as cs``), when the object is collected, at
+  exit, and at once when the constructor fails; its FMUs and parameter sets
+  must lie inside the archive (``allow_outside=True`` lifts that), and each
+  FMU is checked against the same limits before it is read. Every problem
+  is a :class:`~l1b2.errors.SystemStructureError` naming archive member and element.
 """
 
 from __future__ import annotations
@@ -24,9 +31,8 @@ from __future__ import annotations
 import atexit
 import math
 import shutil
-import tempfile
 import warnings
-import zipfile
+import weakref
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Mapping
@@ -35,13 +41,18 @@ import numpy as np
 import pandas as pd
 
 from ..errors import SimulationError, SystemStructureError
+from .result import CoSimResult
 from .ssp import (
+    DEFAULT_LIMITS,
     SSD_FILE,
+    ArchiveLimits,
     SystemStructure,
     check_against_model_descriptions,
+    check_zip_file,
     read_ssd,
     read_ssv,
     resolve_resource,
+    unpack_ssp,
 )
 
 DEFAULT_STEP_S = 2e-4
@@ -86,42 +97,6 @@ class _Instance:
     out_vrs: list = field(default_factory=list)
 
 
-class CoSimResult:
-    """Time series of a co-simulation: ``.df`` (pandas), ``.units``, ``.to_csv()``, ``.plot()``."""
-
-    def __init__(self, df: pd.DataFrame, units: Mapping[str, str]):
-        self.df = df
-        self.units = dict(units)
-        self.df.attrs["units"] = self.units
-
-    def to_pandas(self) -> pd.DataFrame:
-        return self.df
-
-    def __getitem__(self, key):
-        return self.df[key].to_numpy()
-
-    def to_csv(self, path) -> Path:
-        """CSV with the unit in every column name, e.g. ``Slider.v [m/s]``."""
-        path = Path(path)
-        out = self.df.rename(columns={c: f"{c} [{self.units.get(c, '1')}]" for c in self.df.columns})
-        path.parent.mkdir(parents=True, exist_ok=True)
-        out.to_csv(path, index=False, float_format="%.10g")
-        return path
-
-    def plot(self, columns=("Slider.v", "Slider.s"), path=None):
-        import matplotlib.pyplot as plt
-        fig, axes = plt.subplots(len(columns), 1, sharex=True, figsize=(7, 2.2 * len(columns)))
-        for ax, col in zip(np.atleast_1d(axes), columns):
-            ax.plot(self.df["time"], self.df[col])
-            ax.set_ylabel(f"{col} [{self.units.get(col, '')}]")
-        np.atleast_1d(axes)[-1].set_xlabel("time [s]")
-        fig.tight_layout()
-        if path is not None:
-            fig.savefig(path, dpi=120)
-            plt.close(fig)
-        return fig
-
-
 class CoSimulation:
     """A coupled system of FMUs described by an SSD.
 
@@ -137,41 +112,75 @@ class CoSimulation:
     tol, max_iter : tolerance and iteration limit of the fixed-point iteration; a coupling value
         has converged when its change is below ``tol * (|value| + S)``, S the largest magnitude
         seen so far among the coupling variables of its unit
+    allow_outside : load FMUs and parameter sets that the SSD names by an absolute path or a
+        ``..`` leaving the archive (or the SSD's folder); refused by default
+    limits : what an ``.ssp`` and each FMU may unpack to (default :data:`l1b2.cosim.ssp.DEFAULT_LIMITS`)
+
+    Use it as a context manager (or call :meth:`close`) to remove an unpacked ``.ssp`` at once.
     """
+
+    #: class defaults, so that the parameter loading works on a bare instance too
+    allow_outside = False
+    archive: Path | None = None
+    limits: ArchiveLimits = DEFAULT_LIMITS
 
     def __init__(self, system: str | Path = SSD_FILE, fmu_dir: str | Path | None = None,
                  step_s: float = DEFAULT_STEP_S, parameters: Mapping[str, float] | None = None,
-                 iterate: bool = False, tol: float = 1e-6, max_iter: int = 30):
+                 iterate: bool = False, tol: float = 1e-6, max_iter: int = 30, *,
+                 allow_outside: bool = False, limits: ArchiveLimits | None = None):
         if not (step_s > 0 and math.isfinite(step_s)):
             raise SimulationError(f"communication step [s] must be positive, got {step_s}")
         self._tmp = None
-        system = Path(system)
-        if system.suffix == ".ssp":
-            self._tmp = tempfile.mkdtemp(prefix="l1b2_ssp_")
-            with zipfile.ZipFile(system) as z:
-                z.extractall(self._tmp)
-            system = Path(self._tmp)
-        self.system: SystemStructure = read_ssd(system)
-        self.root = self.system.path.parent
-        self.fmu_dir = Path(fmu_dir) if fmu_dir is not None else None
+        self._finalizer = None
+        self.allow_outside = bool(allow_outside)
+        self.limits = limits or DEFAULT_LIMITS
+        try:
+            self._open(Path(system), fmu_dir, parameters)
+        except BaseException:
+            self.close()  # nothing unpacked may outlive a failed constructor
+            raise
         self.step_s = float(step_s)
         self.iterate, self.tol, self.max_iter = iterate, tol, max_iter
+        self.iterations_ = []
+
+    def _open(self, system: Path, fmu_dir, parameters):
+        label = None
+        if system.suffix.lower() == ".ssp":
+            self._tmp = unpack_ssp(system, self.limits)
+            self._finalizer = weakref.finalize(self, shutil.rmtree, self._tmp, True)
+            self.archive = system
+            label = f"{system}: SystemStructure.ssd"
+            system = self._tmp
+        self.system: SystemStructure = read_ssd(system, label=label)
+        self.root = self.system.path.parent
+        self.fmu_dir = Path(fmu_dir) if fmu_dir is not None else None
         self.parameters = self._load_parameters()
         for key, value in (parameters or {}).items():
             comp = key.split(".", 1)[0]
             if comp not in self.system.components:
                 raise SystemStructureError(f"parameter override '{key}': no component '{comp}'")
             self.parameters[key] = value
-        self.fmu_paths = {name: self._resolve(c.source, "fmu") for name, c in self.system.components.items()}
-        from fmpy import read_model_description
-        self.model_descriptions = {n: read_model_description(str(p)) for n, p in self.fmu_paths.items()}
+        self.fmu_paths = {name: self._resolve(c.source, "fmu", f'<Component name="{name}">')
+                          for name, c in self.system.components.items()}
+        self.model_descriptions = {n: self._model_description(n, p) for n, p in self.fmu_paths.items()}
         check_against_model_descriptions(self.system, self.model_descriptions)
         self._check_parameter_units()
-        self.iterations_ = []
 
     # -- set-up ---------------------------------------------------------------
-    def _resolve(self, source: str, kind: str) -> Path:
-        found = resolve_resource(self.root, source)
+    def _member(self, path: Path) -> str:
+        """How messages name a file: ``archive.ssp: resources/X.fmu`` inside an archive, else the path."""
+        if self.archive is not None:
+            try:
+                return f"{self.archive}: {Path(path).relative_to(self.root).as_posix()}"
+            except ValueError:
+                pass
+        return str(path)
+
+    def _resolve(self, source: str, kind: str, element: str = "") -> Path:
+        where = f"{self.system.where}: {element}" if element else self.system.where
+        outside_of = "the archive" if self.archive is not None else f"the SSD's folder {self.root}"
+        found = resolve_resource(self.root, source, allow_outside=self.allow_outside, where=where,
+                                 outside_of=outside_of)
         if found is not None:
             return found
         cand = [self.root / source]
@@ -182,8 +191,21 @@ class CoSimulation:
             cand.append(c)
         hint = (" (pass fmu_dir=l1b2.fmi.cache.ensure_fmus(), or run `python build_fmu.py --out DIR`)"
                 if kind == "fmu" else "")
-        raise SystemStructureError(f"{self.system.path}: cannot find {source}; looked in "
+        if self.archive is not None:
+            also = f"; not in {cand[-1]} either" if len(cand) > 1 else ""
+            raise SystemStructureError(f"{where} source '{source}': no such member in the archive{also}")
+        raise SystemStructureError(f"{self.system.where}: cannot find {source}; looked in "
                                    f"{', '.join(str(c) for c in cand)} and beside the SSD{hint}")
+
+    def _model_description(self, name: str, path: Path):
+        """The FMU's model description, after checking the FMU archive against the limits."""
+        from fmpy import read_model_description
+        where = f'{self._member(path)} (<Component name="{name}">)'
+        check_zip_file(path, where, self.limits)
+        try:
+            return read_model_description(str(path))
+        except Exception as exc:  # noqa: BLE001 - fmpy raises many kinds on a broken FMU
+            raise SystemStructureError(f"{where}: not a valid FMU ({type(exc).__name__}: {exc})") from None
 
     def _load_parameters(self) -> dict:
         """``{"Component.variable": value}`` from the SSD's parameter bindings.
@@ -195,17 +217,18 @@ class CoSimulation:
         """
         values, self.parameter_sources_ = {}, {}
         for name, comp in self.system.components.items():
-            sets = [(self._resolve(src, "ssv"), None) for src in comp.parameter_sources]
-            for path, _ in sets:
-                for var, (value, unit) in read_ssv(path).items():
+            sets = [self._resolve(src, "ssv", f'<Component name="{name}"> ParameterBinding')
+                    for src in comp.parameter_sources]
+            for path in sets:
+                for var, (value, unit) in read_ssv(path, label=self._member(path)).items():
                     values[f"{name}.{var}"] = value
                     self.parameter_sources_[f"{name}.{var}"] = (unit, path)
             for var, (value, unit) in comp.inline_parameters.items():
                 values[f"{name}.{var}"] = value
                 self.parameter_sources_[f"{name}.{var}"] = (unit, self.system.path)
         for src in self.system.parameter_sources:
-            path = self._resolve(src, "ssv")
-            for key, (value, unit) in read_ssv(path).items():
+            path = self._resolve(src, "ssv", f'<System name="{self.system.name}"> ParameterBinding')
+            for key, (value, unit) in read_ssv(path, label=self._member(path)).items():
                 if key.split(".", 1)[0] not in self.system.components:
                     continue  # SSP: names that match no element of the system are ignored
                 values[key] = value
@@ -218,13 +241,17 @@ class CoSimulation:
             comp, _, var = key.partition(".")
             v = variables[comp].get(var)
             if v is None:
-                raise SystemStructureError(f"{path}: parameter '{key}': {comp} has no variable '{var}'")
+                raise SystemStructureError(f"{self._member(path)}: parameter '{key}': {comp} has no variable '{var}'")
             if unit is not None and v.type == "Real" and (v.unit or "1") != unit:
-                raise SystemStructureError(f"{path}: parameter '{key}' has unit [{unit}], "
+                raise SystemStructureError(f"{self._member(path)}: parameter '{key}' has unit [{unit}], "
                                            f"the FMU declares [{v.unit}]")
 
     def close(self):
-        if self._tmp is not None:
+        """Remove the unpacked ``.ssp`` (if any); idempotent."""
+        if getattr(self, "_finalizer", None) is not None:
+            self._finalizer()  # runs shutil.rmtree once and detaches
+            self._finalizer = None
+        if getattr(self, "_tmp", None) is not None:
             shutil.rmtree(self._tmp, ignore_errors=True)
             self._tmp = None
 

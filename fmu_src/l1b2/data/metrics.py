@@ -24,8 +24,14 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .measurements import (END_EXCLUSION_M, MIN_EVAL_SPEED_M_S, SPEED, Measurements,
-                           as_1d, evaluation_mask)
+from .measurements import (
+    END_EXCLUSION_M,
+    MIN_EVAL_SPEED_M_S,
+    SPEED,
+    Measurements,
+    as_1d,
+    evaluation_mask,
+)
 
 __all__ = [
     "MIN_EVAL_SPEED_M_S", "END_EXCLUSION_M", "P95_PERCENTILE", "METRIC_KEYS",

@@ -21,6 +21,24 @@ propagate start values through the connections in that mode (libcosim runs
 N get/set sweeps before it exits initialisation) depend on it; an input that
 is still provisional there (e.g. 0 rad/s) is not an error until
 ``fmi2ExitInitializationMode``.
+
+FMI state machine (FMI 2.0, 4.2.4): the adapter tracks the mode of the
+instance (instantiated -> initialization mode -> stepping -> terminated). A
+call in the wrong mode - ``fmi2DoStep`` before ``fmi2ExitInitializationMode``
+or after ``fmi2Terminate``, ``fmi2ExitInitializationMode`` without
+``fmi2EnterInitializationMode``, entering initialization mode twice - has
+no effect and logs one line with status ``fmi2Error`` naming the call and
+the mode. PythonFMU 0.7.0's ``fmi2DoStep`` can only return ``fmi2OK``,
+``fmi2Discard`` (``do_step`` returned False) or ``fmi2Fatal`` (``do_step``
+raised, which also frees the Python slave under the host's feet), so a
+refused step is reported as ``fmi2Discard``, the same in every FMU; the
+other calls return ``fmi2OK`` with the error in the log.
+
+FMU state: ``fmi2GetFMUstate`` captures every variable and the error flag
+(:meth:`BlockAdapter.fmu_state`), so ``fmi2SetFMUstate`` with a state taken
+before a discarded step makes the instance usable again, and restoring a
+state taken after an error brings the error back. The mode is not part of
+the state (restoring never moves the instance back into initialization mode).
 """
 
 from __future__ import annotations
@@ -32,6 +50,7 @@ from pathlib import Path
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real  # noqa: F401
 from pythonfmu.enums import Fmi2Status
 
+from ..cosim.blocks import motor_defaults
 from ..physics.params import load_motor
 
 #: file holding the start values, written by l1b2.fmi.build into each FMU's resources folder
@@ -49,7 +68,6 @@ def load_defaults(resources: str | None = None) -> dict:
         path = Path(resources) / DEFAULTS_FILE
         if path.exists():
             return json.loads(path.read_text())
-    from ..cosim.blocks import motor_defaults
     return motor_defaults(load_motor())
 
 
@@ -58,6 +76,25 @@ _CAUSALITY = {"input": Fmi2Causality.input, "output": Fmi2Causality.output,
 _VARIABILITY = {"continuous": Fmi2Variability.continuous, "fixed": Fmi2Variability.fixed,
                 "tunable": Fmi2Variability.tunable, "discrete": Fmi2Variability.discrete}
 _TYPES = {"Real": (Real, float), "Integer": (Integer, int), "Boolean": (Boolean, bool)}
+
+
+#: key of the adapter's own entries in an FMU state (beside the variables; see BlockAdapter.fmu_state)
+STATE_KEY = "__l1b2_adapter__"
+#: modes of an instance (FMI 2.0 co-simulation state machine, reduced to what the FMUs distinguish)
+INSTANTIATED, INITIALIZATION, STEPPING, TERMINATED = "instantiated", "initialization mode", "stepping", "terminated"
+_WHEN = {INSTANTIATED: "before initialisation", INITIALIZATION: "in initialization mode",
+         STEPPING: "after initialisation", TERMINATED: "after fmi2Terminate"}
+_HINT = {
+    INSTANTIATED: "call fmi2EnterInitializationMode and fmi2ExitInitializationMode first",
+    INITIALIZATION: "call fmi2ExitInitializationMode first",
+    STEPPING: "the instance is already initialised",
+    TERMINATED: "call fmi2Reset or instantiate the FMU again",
+}
+
+
+def safe_text(message: str) -> str:
+    """``message`` as text PythonFMU 0.7.0 can pass to the host (it crashes on text that is not valid UTF-8)."""
+    return str(message).encode("utf-8", "replace").decode("utf-8")
 
 
 class BlockAdapter:
@@ -74,6 +111,7 @@ class BlockAdapter:
         params = block_cls.params_from_defaults(load_defaults(slave.resources))
         self.block = block_cls(params)
         self.failed = None
+        self.mode = INSTANTIATED
         self.in_initialization_mode = False
         self._outputs_stale = True
         for var in block_cls.variables(params):
@@ -84,8 +122,9 @@ class BlockAdapter:
             if var.causality in ("parameter", "input", "local"):
                 kw["variability"] = _VARIABILITY[var.variability]
             slave.register_variable(vtype(var.name, **kw))
-        # the slave scripts leave enter_initialization_mode to Fmi2Slave (a no-op): take it over here
+        # the slave scripts leave enter_initialization_mode and terminate to Fmi2Slave (no-ops): take them over
         slave.enter_initialization_mode = self.enter_initialization_mode
+        slave.terminate = self.terminate
         # PythonFMU 0.7.0 exit-time use-after-free: make exit() empty this library's PyState pointer first
         from ..cosim.hosting import register_exit_fix_in_fmu
         register_exit_fix_in_fmu(slave.resources, slave.modelName)
@@ -113,25 +152,52 @@ class BlockAdapter:
                 self.fail(f"cannot set {name} to {value!r}: {exc}")
         return set_value
 
+    def log_error(self, message: str):
+        """One line with status ``fmi2Error`` in the FMU log."""
+        self.slave.log(safe_text(message), Fmi2Status.error)
+
     def fail(self, message: str):
-        self.failed = message
-        self.slave.log(message, Fmi2Status.error)
+        self.failed = safe_text(message)
+        self.log_error(message)
+
+    def refused(self, call: str, allowed: tuple[str, ...]) -> bool:
+        """True (and one ``fmi2Error`` log line) when ``call`` is not allowed in the current mode."""
+        if self.mode in allowed:
+            return False
+        self.log_error(f"{self.slave.modelName}: {call} called {_WHEN[self.mode]} (mode '{self.mode}', FMI 2.0 "
+                       f"allows it only in {' or '.join(repr(m) for m in allowed)}): {_HINT[self.mode]}; "
+                       "the call has no effect")
+        return True
 
     def enter_initialization_mode(self):
+        if self.refused("fmi2EnterInitializationMode", (INSTANTIATED,)):
+            return
+        self.mode = INITIALIZATION
         self.in_initialization_mode = True
         self._outputs_stale = True
 
     def exit_initialization_mode(self):
+        if self.refused("fmi2ExitInitializationMode", (INITIALIZATION,)):
+            return
+        self.mode = STEPPING
         self.in_initialization_mode = False
         try:
             self.block.initialize()
         except Exception as exc:  # noqa: BLE001 - reported through the FMI logger
             self.fail(f"{self.slave.modelName}: initialisation failed: {exc}")
 
+    def terminate(self):
+        self.mode = TERMINATED
+        self.in_initialization_mode = False
+
     def do_step(self, current_time, step_size) -> bool:
+        """``True``: step done (``fmi2OK``); ``False``: step refused (``fmi2Discard``, reason in the log)."""
         name = self.slave.modelName
+        if self.refused("fmi2DoStep", (STEPPING,)):
+            return False
         if self.failed is not None:
-            self.slave.log(f"{name}: refusing to step after an error: {self.failed}", Fmi2Status.error)
+            self.log_error(f"{name}: refusing to step after an error: {self.failed} (restore an FMU state taken "
+                           "before the error with fmi2SetFMUstate, or fmi2Reset)")
             return False
         if not (math.isfinite(step_size) and step_size > 0):
             self.fail(f"{name}: invalid communication step {step_size!r} s at t={current_time}")
@@ -143,7 +209,27 @@ class BlockAdapter:
             self.fail(f"{name}: step at t={current_time} s failed: {exc}")
             return False
 
+    # -- FMU state (fmi2GetFMUstate / fmi2SetFMUstate / (de)serialisation) ----------
+    def fmu_state(self, variables: dict) -> dict:
+        """The FMU state: ``variables`` (name -> value, from ``Fmi2Slave``) plus the error flag.
+
+        JSON-serialisable, as PythonFMU's ``fmi2SerializeFMUstate`` needs.
+        """
+        return {**variables, STATE_KEY: {"failed": self.failed}}
+
+    def before_state_restore(self, state: dict) -> dict:
+        """Take the error flag from ``state``; return the variables (a copy: the host may restore it again)."""
+        state = dict(state)
+        own = state.pop(STATE_KEY, None)
+        if isinstance(own, dict) and "failed" in own:
+            failed = own["failed"]
+            self.failed = None if failed is None else safe_text(failed)
+        return state
+
     def after_state_restore(self):
+        self._outputs_stale = True
+        if self.mode != STEPPING:
+            return  # nothing computed yet: fmi2ExitInitializationMode initialises from the restored values
         try:
             self.block.refresh()
         except Exception as exc:  # noqa: BLE001

@@ -36,6 +36,8 @@ import zipfile
 from pathlib import Path
 
 from .. import __version__
+from ..cosim.blocks import motor_defaults
+from ..cosim.composite import BLOCKS
 from ..physics.params import MotorParams, load_motor
 from ..units import UNITS
 from .slaves import slave_script
@@ -88,8 +90,7 @@ def _fmt(x) -> str:
 
 def variable_table(slave_name: str, defaults: dict) -> dict:
     """``{name: Var}`` of an FMU's variables, from its block's declaration."""
-    from ..cosim import blocks
-    cls = blocks.BLOCKS[slave_name]
+    cls = BLOCKS[slave_name]
     return {v.name: v for v in cls.variables(cls.params_from_defaults(defaults))}
 
 
@@ -189,7 +190,6 @@ def _forget_modules(package: str, module: str) -> None:
 
 def defaults_document(mp: MotorParams, extra: dict | None = None) -> dict:
     """The start values baked into the FMUs (JSON-safe)."""
-    from ..cosim.blocks import motor_defaults
     doc = motor_defaults(mp)
     doc.update(extra or {})
     return doc
@@ -229,7 +229,6 @@ def build_fmu(name: str, dest_dir: str | Path, *, mp: MotorParams | None = None,
     dest_dir.mkdir(parents=True, exist_ok=True)
     package = bundle_name(version, name)
     module = f"{package}_slave"
-    from ..cosim.blocks import BLOCKS
     if name not in BLOCKS:
         raise ValueError(f"unknown FMU '{name}'; known: {', '.join(BLOCKS)}")
     extra = dict(extra_defaults or {})

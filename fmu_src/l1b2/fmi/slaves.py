@@ -13,7 +13,7 @@ from typing import NamedTuple
 
 
 class SlaveSpec(NamedTuple):
-    block: str        #: block class in :mod:`l1b2.cosim.blocks`
+    block: str        #: block class in :mod:`l1b2.cosim.blocks` or :mod:`l1b2.cosim.composite`
     summary: str      #: one line: what the FMU is (the script's docstring)
     description: str  #: modelDescription ``description``
 
@@ -48,7 +48,7 @@ SLAVES: dict[str, SlaveSpec] = {
 TEMPLATE = '''"""{summary}"""
 from pythonfmu import Fmi2Slave
 
-from l1b2.cosim.blocks import {block}
+from l1b2.cosim.{module} import {block}
 from l1b2.fmi.adapter import BlockAdapter
 
 
@@ -67,8 +67,11 @@ class {name}(Fmi2Slave):
     def do_step(self, current_time, step_size):
         return self.adapter.do_step(current_time, step_size)
 
+    def _get_fmu_state(self):
+        return self.adapter.fmu_state(super()._get_fmu_state())
+
     def _set_fmu_state(self, state):
-        super()._set_fmu_state(state)
+        super()._set_fmu_state(self.adapter.before_state_restore(state))
         self.adapter.after_state_restore()
 '''
 
@@ -79,5 +82,6 @@ def slave_script(name: str, *, author: str, license: str) -> str:
         spec = SLAVES[name]
     except KeyError:
         raise ValueError(f"unknown FMU '{name}'; known: {', '.join(SLAVES)}") from None
-    return TEMPLATE.format(name=name, block=spec.block, summary=spec.summary, description=spec.description,
+    module = "composite" if spec.block in ("MotorBlock", "PredictorBlock") else "blocks"
+    return TEMPLATE.format(name=name, module=module, block=spec.block, summary=spec.summary, description=spec.description,
                            author=author, license=license)

@@ -35,12 +35,23 @@ reversal the relative motion never resets and the contact slides.
 contact angle fixed at ``phi_c = pi`` (``F_N = pi F_p sin theta`` on
 ``[0, pi]``, keeping the period mean ``F_p``) and no stick (``u_m -> 0``).
 
-Numerics: the contact window is split at the relative-velocity reversals
-into up to three segments of ``n_theta // 3`` equal cells each (midpoint
-rule). Inside a segment the friction sign is constant and ``u_r`` grows
-monotonically from the segment start; the stick-to-slip switch inside a cell
-is located by linear interpolation. The period averages are second order in
-the cell size and smooth in the inputs (needed by the steady-state solver).
+Numerics (closed form): the contact window is split at the relative-velocity
+reversals into up to three segments. Inside a segment the friction sign is
+constant and ``u_r(theta) = U(theta) - U(theta_reset)``, with
+``U = U_w sin(theta + delta) - (v / w) theta``, grows monotonically in
+magnitude, so the stick-to-slip switch ``|u_r| = u_m`` is a unique root,
+found by safeguarded Newton iteration. On every piece the integrands are
+elementary (``F_N = A sin theta + B``; stick: ``(mu_p / u_m) u_r F_N``; slip:
+``sigma (w' - v) + sign mu_p F_N``; times 1, ``sin theta``, ``cos theta``) and
+are integrated exactly from their antiderivatives. The period averages are
+exact to round-off and continuous in the inputs (needed by the steady-state
+solver), except where the model itself jumps: at ``k_e U_l = F_p`` the
+contact-start reset of ``u_r`` disappears.
+
+:func:`interface_forces_reference` keeps the original numerical kernel
+(midpoint rule, ``n_theta // 3`` cells per segment, switch located by linear
+interpolation inside a cell), which converges to the closed form as
+``n_theta`` grows; it serves as a check and for benchmarks.
 """
 
 from __future__ import annotations
@@ -173,7 +184,7 @@ class InterfaceOutput(NamedTuple):
 
 def interface_forces(U_l_m, U_w_m, delta_rad, omega_rad_s, v_m_s, F_p_N,
                      params: InterfaceParams, mode: str = "stick_slip", n_theta: int = 256) -> InterfaceOutput:
-    """Period-averaged interface forces for the given tip motion and slider speed.
+    """Period-averaged interface forces for the given tip motion and slider speed (closed form).
 
     Parameters
     ----------
@@ -184,13 +195,180 @@ def interface_forces(U_l_m, U_w_m, delta_rad, omega_rad_s, v_m_s, F_p_N,
     F_p_N : static axial force, the period mean of the normal force [N]
     params : contact stiffness, friction coefficients, stick threshold
     mode : ``"stick_slip"`` (Eq. 17-20) or ``"pure_slip"`` (Eq. 23 assumptions)
-    n_theta : cells over the contact window
+    n_theta : not used: the period averages are exact integrals (module
+        docstring). Kept for compatibility; it is the resolution of
+        :func:`interface_forces_reference`, the numerical kernel.
+
+    Scalar arguments (the co-simulation's hot path) give floats; arrays are
+    broadcast and evaluated element by element.
 
     Returns
     -------
     InterfaceOutput
         Fundamental components are in the frame of the normal displacement:
         ``F(theta) ~ F1_sin sin(theta) + F1_cos cos(theta)``.
+    """
+    if mode not in MODES:
+        raise ValueError(f"interface mode must be one of {MODES}, got {mode!r}")
+    args = (U_l_m, U_w_m, delta_rad, omega_rad_s, v_m_s, F_p_N)
+    for x in args:
+        if not isinstance(x, (float, int)):
+            break
+    else:  # plain (or numpy) scalars: the co-simulation's hot path
+        return _interface_scalar(float(U_l_m), float(U_w_m), float(delta_rad), float(omega_rad_s),
+                                 float(v_m_s), float(F_p_N), params, mode)
+    arrays = np.broadcast_arrays(*(np.asarray(x, float) for x in args))
+    shape = arrays[0].shape
+    if not shape:
+        return _interface_scalar(*(float(x) for x in arrays), params, mode)
+    rows = [_interface_scalar(*row, params, mode) for row in zip(*(x.ravel().tolist() for x in arrays))]
+    cols = np.array(rows, dtype=float).reshape(shape + (len(InterfaceOutput._fields),))
+    return InterfaceOutput(*np.moveaxis(cols, -1, 0))
+
+
+def _interface_scalar(U_l, U_w, delta, omega, v, F_p, params: InterfaceParams, mode: str) -> InterfaceOutput:
+    """Exact period averages for scalar inputs: the contact window cut into elementary pieces.
+
+    ``F_N = A sin(theta) + B`` on the window. The cuts are the relative-velocity
+    reversals (friction sign and ``u_r`` reset) and, inside each segment, the
+    stick-to-slip switch ``|u_r| = u_m`` (:func:`_switch_phase`). Each piece
+    is integrated with the antiderivatives of :func:`_primitives`.
+    """
+    if mode == "pure_slip":  # phi_c = pi, F_N = pi F_p sin(theta), no stick
+        a, A, B, u_m, permanent = 0.5 * math.pi, math.pi * F_p, 0.0, 0.0, False
+    else:
+        a = _half_angle_scalar(U_l, F_p, params.k_e_N_per_m)
+        A = params.k_e_N_per_m * U_l
+        permanent = a >= math.pi
+        B = F_p if permanent else -A * math.cos(a)
+        u_m = params.u_m_m
+    two_pi = 2.0 * math.pi
+    u_tip = omega * U_w
+    has_rev = u_tip > 0 and abs(v) < u_tip
+    if permanent:  # the window starts at a reset: the first reversal if there is one
+        start, width = (math.acos(v / u_tip) - delta if has_rev else 0.0), two_pi
+    else:
+        start, width = 0.5 * math.pi - a, 2.0 * a
+    bounds = [start, start + width]
+    if has_rev:
+        ac = math.acos(v / u_tip)
+        cuts = sorted(x for x in ((ac - delta - start) % two_pi, (-ac - delta - start) % two_pi) if x < width)
+        bounds[1:1] = [start + (0.0 if permanent and x < 1e-12 else x) for x in cuts]
+    q = v / omega  # u_r(th) = U(th) - U(lo), U(th) = U_w sin(th + delta) - q th
+    cd, sd = math.cos(delta), math.sin(delta)
+    k = (A, B, U_w, q, u_tip, v, cd, sd)
+    stick_on = u_m > 0 and not (permanent and not has_rev)  # permanent contact without reversal slides
+    mu, sigma = params.mu_p, params.sigma_N_s_per_m
+    P0 = P_lo = _primitives(start, *k)
+    I0 = I1 = I2 = 0.0  # integrals of F_f, F_f sin, F_f cos over the window
+    stick_len = 0.0
+    for hi in bounds[1:]:
+        lo = P_lo[0]
+        P_hi = _primitives(hi, *k)
+        if hi > lo:
+            rv_mid = u_tip * math.cos(0.5 * (lo + hi) + delta) - v
+            sgn = (rv_mid > 0) - (rv_mid < 0)
+            P_sw = P_lo
+            if stick_on:  # stick on [lo, sw]: F_f = (mu / u_m) (U - U(lo)) F_N
+                sw = _switch_phase(lo, hi, sgn, U_w, delta, q, u_m)
+                P_sw = P_hi if sw == hi else _primitives(sw, *k)
+                c, U_lo = mu / u_m, P_lo[10]
+                I0 += c * (P_sw[4] - P_lo[4] - U_lo * (P_sw[1] - P_lo[1]))
+                I1 += c * (P_sw[5] - P_lo[5] - U_lo * (P_sw[2] - P_lo[2]))
+                I2 += c * (P_sw[6] - P_lo[6] - U_lo * (P_sw[3] - P_lo[3]))
+                stick_len += sw - lo
+            if P_sw is not P_hi:  # slip on [sw, hi]: F_f = sigma (w' - v) + sgn mu F_N
+                c = sgn * mu
+                I0 += sigma * (P_hi[7] - P_sw[7]) + c * (P_hi[1] - P_sw[1])
+                I1 += sigma * (P_hi[8] - P_sw[8]) + c * (P_hi[2] - P_sw[2])
+                I2 += sigma * (P_hi[9] - P_sw[9]) + c * (P_hi[3] - P_sw[3])
+        P_lo = P_hi
+    return InterfaceOutput(
+        F_d_N=I0 / two_pi,
+        F_N_mean_N=(P_lo[1] - P0[1]) / two_pi,
+        F_N1_sin_N=(P_lo[2] - P0[2]) / math.pi,
+        F_N1_cos_N=(P_lo[3] - P0[3]) / math.pi,
+        F_T1_sin_N=I1 / math.pi,
+        F_T1_cos_N=I2 / math.pi,
+        phi_c_rad=2.0 * a,
+        stick_fraction=stick_len / width if width > 0 else 0.0,
+    )
+
+
+def _primitives(th, A, B, U_w, q, u_tip, v, cd, sd) -> tuple:
+    """Antiderivatives at ``th`` of the integrands of the period averages, and ``U(th)``.
+
+    Returns ``(th, F_N w ..., U F_N w ..., (w' - v) w ..., U)`` for the weights
+    ``w = 1, sin th, cos th``, with ``F_N = A sin th + B``, the relative velocity
+    ``w' - v = u_tip cos(th + delta) - v`` and ``U = U_w sin(th + delta) - q th``
+    (so that ``u_r = U(th) - U(reset)``).
+    """
+    S, C = math.sin(th), math.cos(th)
+    SC, SS, CC = S * C, S * S, C * C
+    s2, c2 = 2.0 * SC * cd + (CC - SS) * sd, (CC - SS) * cd - 2.0 * SC * sd  # sin, cos of 2 th + delta
+    E, G = S * cd + C * sd, C * cd - S * sd  # sin, cos of th + delta
+    tS, tC, tt = th * S, th * C, th * th
+    iS, iC = S - tC, C + tS  # int th S, int th C
+    return (
+        th,
+        B * th - A * C,                                  # int F_N
+        0.5 * A * (th - SC) - B * C,                     # int F_N S
+        0.5 * A * SS + B * S,                            # int F_N C
+        U_w * (A * (0.5 * th * cd - 0.25 * s2) - B * G) - q * (A * iS + 0.5 * B * tt),
+        U_w * (A * (cd * C * (CC / 3.0 - 1.0) + sd * S * SS / 3.0) + B * (0.5 * th * cd - 0.25 * s2))
+        - q * (A * (0.25 * tt - 0.5 * th * SC - 0.125 * (CC - SS)) + B * iS),
+        U_w * (A * (cd * S * SS - sd * C * CC) / 3.0 + B * (0.5 * th * sd - 0.25 * c2))
+        - q * (A * (0.25 * SC - 0.25 * th * (CC - SS)) + B * iC),
+        u_tip * E - v * th,                              # int (w' - v)
+        u_tip * (-0.25 * c2 - 0.5 * th * sd) + v * C,   # int (w' - v) S
+        u_tip * (0.25 * s2 + 0.5 * th * cd) - v * S,    # int (w' - v) C
+        U_w * E - q * th,                                # U
+    )
+
+
+def _switch_phase(lo: float, hi: float, sgn: int, U_w: float, delta: float, q: float, u_m: float) -> float:
+    """Phase in ``[lo, hi]`` where the stick ends, ``sgn u_r(th) = u_m``; ``hi`` if it never does.
+
+    ``u_r(th) = U_w (sin(th + delta) - sin(lo + delta)) - q (th - lo)``, ``q = v / w``, is
+    reset at ``lo`` and ``sgn u_r`` rises monotonically over the segment (its slope
+    ``sgn (w' - v) / w >= 0``), so the root is unique. Newton's method from the
+    second-order Taylor estimate, kept inside a shrinking bracket (bisection otherwise).
+    """
+    e0, g0 = math.sin(lo + delta), math.cos(lo + delta)
+    if sgn == 0 or sgn * (U_w * (math.sin(hi + delta) - e0) - q * (hi - lo)) <= u_m:
+        return hi
+    d1, d2 = sgn * (U_w * g0 - q), -sgn * U_w * e0  # first two derivatives of sgn u_r at lo
+    disc = d1 * d1 + 2 * d2 * u_m
+    den = d1 + math.sqrt(disc) if disc > 0 else 0.0
+    x = lo + 2 * u_m / den if den > 0 else 0.5 * (lo + hi)
+    a, b = lo, hi  # g(a) < 0 < g(b)
+    for _ in range(100):
+        if not a < x < b:
+            x = 0.5 * (a + b)
+        gx = sgn * (U_w * (math.sin(x + delta) - e0) - q * (x - lo)) - u_m
+        if gx < 0:
+            a = x
+        elif gx > 0:
+            b = x
+        else:
+            return x
+        slope = sgn * (U_w * math.cos(x + delta) - q)
+        x_new = x - gx / slope if slope > 0 else 0.5 * (a + b)
+        if abs(x_new - x) <= 1e-10 or b - a <= 1e-13:  # quadratic convergence: x_new is then exact
+            return min(max(x_new, a), b)
+        x = x_new
+    return x
+
+
+def interface_forces_reference(U_l_m, U_w_m, delta_rad, omega_rad_s, v_m_s, F_p_N, params: InterfaceParams,
+                               mode: str = "stick_slip", n_theta: int = 256) -> InterfaceOutput:
+    """Numerical reference kernel of :func:`interface_forces` (same arguments and outputs).
+
+    Midpoint rule with ``n_theta // 3`` cells per segment between the window
+    start, the relative-velocity reversals and the window end; the stick-to-slip
+    switch inside a cell by linear interpolation (module docstring). First
+    order in the cell size for stick-slip, second order for pure slip. Kept to
+    check and benchmark the closed form against; vectorised with numpy.
     """
     if mode not in MODES:
         raise ValueError(f"interface mode must be one of {MODES}, got {mode!r}")

@@ -293,6 +293,20 @@ def load_motor(path: str | Path | None = None) -> MotorParams:
     return MotorParams(**parts, name=str(meta.get("name", path.stem)), source=str(path))
 
 
+def embedded_motors() -> list[str]:
+    """Names of the motor files shipped in ``system_models/`` (``l1b2 rig --motor NAME``)."""
+    return sorted(p.stem for p in SYSTEM_MODELS_DIR.glob("*.toml"))
+
+
+def motor_file(name: str) -> Path:
+    """Path of the embedded motor ``name`` (e.g. ``reference_motor``, ``realistic_motor``)."""
+    path = SYSTEM_MODELS_DIR / f"{name}.toml"
+    if not path.is_file():
+        raise ParameterError(f"unknown motor '{name}'; embedded motors: {', '.join(embedded_motors())} "
+                             f"(or give a parameter file with --params)")
+    return path
+
+
 def sources(path: str | Path | None = None) -> dict[str, dict[str, str]]:
     """The recorded reason for every value of a parameter file (``source`` keys)."""
     path = Path(path) if path is not None else SYSTEM_MODELS_DIR / REFERENCE_MOTOR_FILE

@@ -36,22 +36,30 @@ from .params import G_M_S2, SliderParams
 
 def moving_mass_kg(sp: SliderParams, m_load_kg):
     """Mass accelerated with the slider [kg]."""
+    if isinstance(m_load_kg, float):  # scalar fast path (per-step call)
+        return sp.mass_kg + sp.load_inertia * abs(m_load_kg)
     return sp.mass_kg + sp.load_inertia * np.abs(np.asarray(m_load_kg, float))
 
 
 def guide_friction_level_N(sp: SliderParams, F_p_N, static: bool = False):
     """Coulomb level of the guide friction ``mu (kappa F_p + g m_s)`` (Eq. 22) [N]."""
     mu = sp.mu_ss if static else sp.mu_sd
+    if isinstance(F_p_N, float):
+        return mu * (sp.kappa * F_p_N + G_M_S2 * sp.mass_kg)
     return mu * (sp.kappa * np.asarray(F_p_N, float) + G_M_S2 * sp.mass_kg)
 
 
 def load_path_friction_N(sp: SliderParams, m_load_kg):
     """Coulomb friction of the load path (pulley bearing) ``pulley_mu g |m_load|`` [N] (0 in the reference)."""
+    if isinstance(m_load_kg, float):
+        return sp.pulley_mu * G_M_S2 * abs(m_load_kg)
     return sp.pulley_mu * G_M_S2 * np.abs(np.asarray(m_load_kg, float))
 
 
 def load_force_N(m_load_kg):
     """Force of the hanging load, positive toward -position [N]."""
+    if isinstance(m_load_kg, float):
+        return G_M_S2 * m_load_kg
     return G_M_S2 * np.asarray(m_load_kg, float)
 
 
@@ -68,6 +76,11 @@ def first_order_response(v0_m_s, F_N, c_r_N_s_per_m, m_kg, t_s):
 
     Handles ``c_r = 0`` (uniform acceleration). Returns ``(v, ds)`` [m/s, m].
     """
+    if isinstance(v0_m_s, float) and isinstance(F_N, float) and isinstance(t_s, float) and c_r_N_s_per_m != 0:
+        T = m_kg / c_r_N_s_per_m  # scalar fast path, same formulas
+        v_inf = F_N / c_r_N_s_per_m
+        decay = -math.expm1(-t_s / T)
+        return v_inf + (v0_m_s - v_inf) * (1 - decay), v_inf * t_s + (v0_m_s - v_inf) * T * decay
     v0 = np.asarray(v0_m_s, float)
     t = np.asarray(t_s, float)
     if c_r_N_s_per_m == 0:

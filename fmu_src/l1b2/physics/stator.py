@@ -46,6 +46,8 @@ Conventions (decisions where the paper is ambiguous; see ``shared/physics-notes.
 
 from __future__ import annotations
 
+import cmath
+import math
 from functools import lru_cache
 from typing import NamedTuple
 
@@ -59,6 +61,14 @@ BETA_L_B2 = 7.853204624095838
 ETA_N = 1.0  # |phi_u(L)| = |cos(pi)|
 
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(64)
+
+
+def _scalars(*xs) -> bool:
+    """True when every argument is a plain (or numpy) scalar: the per-step fast paths apply."""
+    for x in xs:
+        if not isinstance(x, (float, complex, int)):
+            return False
+    return True
 
 
 # ---------------------------------------------------------------------------
@@ -256,6 +266,14 @@ def bar_deviation_m(sp: StatorParams, s_m):
     motor: a periodic waviness ``A sin(2 pi s / lambda)`` (grinding marks) and a
     local Gaussian bump (a defect or debris).
     """
+    if isinstance(s_m, float):  # scalar fast path: the same series in plain floats
+        xi = s_m / sp.bar_half_length_m
+        dev = xi * (sp.bar_dev_1_m + sp.bar_dev_3_m * (2.5 * xi * xi - 1.5)) + sp.bar_dev_2_m * (1.5 * xi * xi - 0.5)
+        if sp.bar_wave_amp_m:
+            dev += sp.bar_wave_amp_m * math.sin(2 * math.pi * s_m / sp.bar_wave_period_m)
+        if sp.bar_bump_amp_m:
+            dev += sp.bar_bump_amp_m * math.exp(-0.5 * ((s_m - sp.bar_bump_center_m) / sp.bar_bump_width_m) ** 2)
+        return dev
     s = np.asarray(s_m, float)
     xi = s / sp.bar_half_length_m
     dev = legendre.legval(xi, [0.0, sp.bar_dev_1_m, sp.bar_dev_2_m, sp.bar_dev_3_m])
@@ -273,6 +291,11 @@ def stator_temperature_step(T_st_degC, T_amb_degC, V0_V, sp: StatorParams, h_s):
     mechanical losses, both proportional to the vibration power ~ V0^2,
     relaxed toward the ambient temperature with time constant ``tau``.
     """
+    if _scalars(T_st_degC, T_amb_degC, V0_V, h_s):
+        target = T_amb_degC + sp.heating_K_per_V2 * V0_V ** 2
+        if sp.thermal_tau_s <= 0:
+            return float(target if sp.heating_K_per_V2 else T_amb_degC)
+        return float(target + (T_st_degC - target) * math.exp(-h_s / sp.thermal_tau_s))
     target = np.asarray(T_amb_degC, float) + sp.heating_K_per_V2 * np.asarray(V0_V, float) ** 2
     if sp.thermal_tau_s <= 0:
         return target if sp.heating_K_per_V2 else np.asarray(T_amb_degC, float)
@@ -281,6 +304,8 @@ def stator_temperature_step(T_st_degC, T_amb_degC, V0_V, sp: StatorParams, h_s):
 
 def axial_force_N(sp: StatorParams, s_m):
     """Nominal compressive axial force ``P(s) = P0 + k_pre delta(s)`` (>= 0) [N]."""
+    if isinstance(s_m, float):
+        return max(sp.P0_N + sp.preload_stiffness_N_per_m * bar_deviation_m(sp, s_m), 0.0)
     return np.maximum(sp.P0_N + sp.preload_stiffness_N_per_m * bar_deviation_m(sp, s_m), 0.0)
 
 
@@ -309,7 +334,12 @@ def modal_properties(sp: StatorParams, P_N, T_degC=None) -> ModalProperties:
     """Mass, stiffness, damping of both modes and the tip coefficient, at axial force ``P_N``.
 
     Damping ``C = 2 zeta M omega0`` (paper's ``zeta = C / (2 M omega0)``).
+    Scalar ``P_N`` and ``T_degC`` take a plain-float fast path (floats out).
     """
+    if isinstance(P_N, (float, int)) and (T_degC is None or isinstance(T_degC, (float, int))):
+        fast = _modal_properties_scalar(sp, float(P_N), T_degC)
+        if fast is not None:
+            return fast
     M_l, M_b = modal_mass_l_kg(sp), modal_mass_b_kg(sp)
     w_l0 = 2 * np.pi * np.asarray(l1_frequency_Hz(sp, T_degC), float)
     shape = b2_mode_shape(sp, P_N, T_degC)
@@ -319,6 +349,63 @@ def modal_properties(sp: StatorParams, P_N, T_degC=None) -> ModalProperties:
         M_l=M_l, K_l=M_l * w_l0 ** 2, C_l=2 * sp.zeta_l * M_l * w_l0,
         M_b=M_b, K_b=M_b * w_b0 ** 2, C_b=2 * sp.zeta_b * M_b * w_b0,
         eta_T=eta_T, omega_l0=w_l0, omega_b0=w_b0,
+    )
+
+
+def _modal_properties_scalar(sp: StatorParams, P: float, T_degC) -> ModalProperties | None:
+    """Scalar fast path of :func:`modal_properties` (the co-simulation's per-step call), plain floats.
+
+    Same secant iteration for the B2 frequency as :func:`b2_frequency_rad_s`; the
+    normalisation integral of the centred mode shape in closed form instead of
+    Gauss-Legendre (both exact to round-off). ``None`` when the secant
+    iteration fails its checks: the caller then takes the safeguarded vector path.
+    """
+    dT = 0.0 if T_degC is None else float(T_degC) - sp.T_ref_degC
+    rhoS = sp.density_kg_m3 * sp.area_m2
+    L, half = sp.length_m, sp.length_m / 2.0
+    EI = (2 * math.pi * (sp.f_b0_Hz + sp.df_dT_b_Hz_per_K * dT) * L ** 2 / BETA_L_B2 ** 2) ** 2 * rhoS
+    N = -P
+
+    def wavenumbers_(w):
+        h = N / (2.0 * EI)
+        root = math.sqrt(h * h + rhoS * w * w / EI)
+        return math.sqrt(root - h), math.sqrt(root + h)
+
+    def characteristic(w):
+        b1, b2 = wavenumbers_(w)
+        return (-b1 * math.sin(b1 * half) * (EI * b2 ** 2 - N)
+                + b2 * math.tanh(b2 * half) * math.cos(b1 * half) * (EI * b1 ** 2 + N)) / (EI * b1 ** 3)
+
+    try:
+        w0 = BETA_L_B2 ** 2 / L ** 2 * math.sqrt(EI / rhoS)
+        wa = math.sqrt(max(w0 ** 2 + N * _phi_slope_ratio() / L ** 2 / rhoS, 1e-6 * w0 ** 2))
+        w_rayleigh, wb = wa, wa * (1 + 1e-7)
+        fa, fb = characteristic(wa), characteristic(wb)
+        for _ in range(8):
+            wc = wb - fb * (wb - wa) / (fb - fa) if fb != fa else wb
+            if wc == wb:  # converged: the remaining iterations would not move it
+                break
+            wa, fa = wb, fb
+            wb, fb = wc, characteristic(wc)
+        if not (math.isfinite(wb) and wb > 0 and abs(fb) < 1e-9 and abs(wb / w_rayleigh - 1) < 0.5):
+            return None
+        b1, b2 = wavenumbers_(wb)
+        # phi = sin(b1 xi) + Ec sinh(b2 xi) on [-half, half]; int phi^2 in closed form
+        s1, sh2 = math.sin(b1 * half), math.sinh(b2 * half)
+        Ec = b1 ** 2 * s1 / (b2 ** 2 * sh2)
+        i_ss = half - math.sin(2 * b1 * half) / (2 * b1)
+        i_hh = math.sinh(2 * b2 * half) / (2 * b2) - half
+        i_sh = 2 * (b2 * s1 * math.cosh(b2 * half) - b1 * math.cos(b1 * half) * sh2) / (b1 * b1 + b2 * b2)
+        norm2 = i_ss + 2 * Ec * i_sh + Ec * Ec * i_hh
+        eta_T = abs(s1 + Ec * sh2) * math.sqrt(L / norm2)
+    except (ValueError, ZeroDivisionError, OverflowError):
+        return None
+    M_l, M_b = modal_mass_l_kg(sp), modal_mass_b_kg(sp)
+    w_l0 = 2 * math.pi * (sp.f_l0_Hz + sp.df_dT_l_Hz_per_K * dT)
+    return ModalProperties(
+        M_l=M_l, K_l=M_l * w_l0 ** 2, C_l=2 * sp.zeta_l * M_l * w_l0,
+        M_b=M_b, K_b=M_b * wb ** 2, C_b=2 * sp.zeta_b * M_b * wb,
+        eta_T=eta_T, omega_l0=w_l0, omega_b0=wb,
     )
 
 
@@ -336,6 +423,10 @@ def steady_amplitude(F_amp_N, eta, omega_rad_s, K, omega0_rad_s, zeta):
 
 def excitation_phasors(sp: StatorParams, V0_V, direction, voltage_phase_rad=0.0):
     """Electromechanical modal excitations ``(A_l V0, d A_b (1 + d asym) V0)`` as phasors [N]."""
+    if _scalars(V0_V, direction, voltage_phase_rad):
+        ph = cmath.exp(1j * voltage_phase_rad)
+        return (sp.A_l_N_per_V * V0_V * ph,
+                direction * sp.A_b_N_per_V * (1.0 + direction * sp.asym_b) * V0_V * ph)
     d = np.asarray(direction, float)
     ph = np.exp(1j * np.asarray(voltage_phase_rad, float))
     V0 = np.asarray(V0_V, float)
@@ -355,6 +446,11 @@ def envelope_step(Q, F, Y, omega_rad_s, M, K, C, h_s):
     and ``Y`` (interface describing function: generalised interface force
     ``= -Y Q``). Unconditionally stable; exact for constant coefficients.
     """
+    if _scalars(Q, F, Y, omega_rad_s, M, K, C, h_s):
+        w = omega_rad_s
+        Zt = K - w * w * M + 1j * w * C + Y
+        Qs = F / Zt
+        return Qs + (Q - Qs) * cmath.exp(-Zt / (2j * w * M + C) * h_s)
     w = np.asarray(omega_rad_s, float)
     Zt = dynamic_stiffness(w, M, K, C) + Y
     lam = -Zt / (2j * w * M + C)
@@ -372,6 +468,10 @@ class StatorOutput(NamedTuple):
 
 def tip_motion(Q_l, Q_b, eta_T) -> StatorOutput:
     """Tip amplitudes and phases from the modal phasors."""
+    if _scalars(Q_l, Q_b, eta_T):
+        N, W = ETA_N * complex(Q_l), eta_T * complex(Q_b)
+        return StatorOutput(U_l_m=abs(N), U_w_m=abs(W), phase_l_rad=cmath.phase(N), phase_w_rad=cmath.phase(W),
+                            delta_rad=cmath.phase(W * N.conjugate()))
     N = ETA_N * np.asarray(Q_l)
     W = eta_T * np.asarray(Q_b)
     return StatorOutput(

@@ -69,7 +69,7 @@ Extra forces
 (positive = in the drive direction) added to the drive force ``X`` of every
 sample, ``X_total = X + extra_force``. It enters the static-friction rule
 like any other part of X. This is how candidate physical effects the paper's
-model lacks are carried (see :class:`l1b2.ident.estimator.ExtraForces`).
+model lacks are carried (see :class:`l1b2.ident.extra.ExtraForces`).
 
 Position polynomials
 --------------------

@@ -13,8 +13,8 @@ Run order: the (V0, load) conditions are visited in a seeded random order,
 each as a forward (CH1) then backward (CH2) traverse, so that slow drifts on
 the experiment clock are not confounded with the factors.
 
-Injected effects: named physical effects that the reduced predictor does not
-contain (:data:`EFFECTS`). Each switches on declared parameters of the FMU
+Injections: named physical effects that the reduced predictor does not
+contain (:data:`INJECTIONS`). Each switches on declared parameters of the FMU
 system that are off in the reference motor; with none injected the rig is
 the plain coupled model. What was injected is written to ``rig_truth.json``,
 never to the data or its sidecar.
@@ -38,15 +38,16 @@ import pandas as pd
 
 from ..data import measurements as dataio
 from ..errors import SimulationError
+from ..fmi.cache import ensure_fmus
 from ..physics import driver as drv
 from ..physics.params import MotorParams, load_motor
 
 # ---------------------------------------------------------------------------
-# Injected effects
+# Injections (the rig's undeclared physical effects)
 # ---------------------------------------------------------------------------
 
 @dataclass(frozen=True)
-class Effect:
+class Injection:
     """An extra physical effect the rig can switch on (parameters of the FMU system).
 
     ``params`` maps ``"Component.parameter"`` to a default value; ``ranges``
@@ -70,8 +71,8 @@ class Effect:
         return values
 
 
-EFFECTS: dict[str, Effect] = {e.name: e for e in [
-    Effect("thermal_drift",
+INJECTIONS: dict[str, Injection] = {e.name: e for e in [
+    Injection("thermal_drift",
            "self-heating of the stator (loss ~ V0^2, time constant tens of s) shifts both resonances by "
            "about -10 Hz/K; the speed drifts along the experiment clock",
            "time",
@@ -79,28 +80,28 @@ EFFECTS: dict[str, Effect] = {e.name: e for e in [
             "Stator.df_dT_l_Hz_per_K": -10.0, "Stator.df_dT_b_Hz_per_K": -10.0},
            {"Stator.thermal_tau_s": (20.0, 40.0), "Stator.heating_K_per_V2": (4.5e-4, 8e-4)},
            stateful=True),
-    Effect("direction_asymmetry",
+    Injection("direction_asymmetry",
            "CH1 and CH2 electrodes excite the B2 mode with different strength (polarisation, electrode "
            "area): forward and backward speeds differ",
            "direction",
            {"Stator.asym_b": 0.06}, {"Stator.asym_b": (0.04, 0.09)}),
-    Effect("bar_waviness",
+    Injection("bar_waviness",
            "periodic waviness of the friction bar (grinding marks) modulates the preload with position",
            "position",
            {"Stator.bar_wave_amp_m": 40e-6, "Stator.bar_wave_period_m": 6e-3},
            {"Stator.bar_wave_amp_m": (30e-6, 50e-6), "Stator.bar_wave_period_m": (4e-3, 8e-3)}),
-    Effect("bar_bump",
+    Injection("bar_bump",
            "a local bump (defect, debris) on the friction bar raises the preload over a few mm",
            "position",
            {"Stator.bar_bump_amp_m": 80e-6, "Stator.bar_bump_center_m": 0.004, "Stator.bar_bump_width_m": 1.0e-3},
            {"Stator.bar_bump_amp_m": (60e-6, 100e-6), "Stator.bar_bump_center_m": (-0.012, 0.012),
             "Stator.bar_bump_width_m": (0.7e-3, 1.4e-3)}),
-    Effect("pulley_friction",
+    Injection("pulley_friction",
            "Coulomb friction in the load path (pulley bearing), proportional to the load weight and "
            "always opposing the motion",
            "load",
            {"Slider.pulley_mu": 0.4}, {"Slider.pulley_mu": (0.3, 0.5)}),
-    Effect("drive_saturation",
+    Injection("drive_saturation",
            "the drive's output amplitude saturates (transformer / amplifier limit): the actual V0 falls "
            "below the commanded one at high voltage",
            "voltage",
@@ -123,13 +124,13 @@ def apply_overrides(mp: MotorParams, overrides: dict) -> MotorParams:
 def parse_injection(spec: str) -> tuple[str, dict]:
     """``"name"`` or ``"name:Component.param=value,..."`` -> (name, overrides)."""
     name, _, rest = spec.partition(":")
-    if name not in EFFECTS:
-        raise SimulationError(f"unknown effect '{name}'; known: {', '.join(EFFECTS)}")
+    if name not in INJECTIONS:
+        raise SimulationError(f"unknown injection '{name}'; known: {', '.join(INJECTIONS)}")
     values = {}
     for item in filter(None, rest.split(",")):
         k, _, v = item.partition("=")
-        if k not in EFFECTS[name].params:
-            raise SimulationError(f"effect '{name}' has no parameter '{k}' (has {', '.join(EFFECTS[name].params)})")
+        if k not in INJECTIONS[name].params:
+            raise SimulationError(f"injection '{name}' has no parameter '{k}' (has {', '.join(INJECTIONS[name].params)})")
         values[k] = float(v)
     return name, values
 
@@ -252,25 +253,29 @@ def _worker(args):
     return simulate_run(mp, spec, plan, engine, fmu_dir, nominal)
 
 
-def run_experiment(plan: RigPlan = RigPlan(), mp: MotorParams | None = None, effects=(), engine="inprocess",
-                   jobs: int = 1, fmu_dir=None, effect_seed: int | None = None, progress: bool = False):
+def run_experiment(plan: RigPlan = RigPlan(), mp: MotorParams | None = None, injections=(), engine="inprocess",
+                   jobs: int = 1, fmu_dir=None, injection_seed: int | None = None, progress: bool = False):
     """Run the whole experiment; returns ``(DataFrame, truth)``.
 
-    ``effects`` is a list of effect names or ``(name, overrides)`` pairs; with
-    ``effect_seed`` the ranged effect parameters are drawn at random.
+    ``injections`` is a list of injection names or ``(name, overrides)`` pairs; with
+    ``injection_seed`` the ranged effect parameters are drawn at random.
+    With ``engine="fmu"`` and no ``fmu_dir``, the FMUs come from the per-user
+    cache (:func:`l1b2.fmi.cache.ensure_fmus`, built once on demand).
     """
     nominal = mp or load_motor()
-    rng = np.random.default_rng(effect_seed) if effect_seed is not None else None
+    if engine == "fmu" and fmu_dir is None:
+        fmu_dir = ensure_fmus()
+    rng = np.random.default_rng(injection_seed) if injection_seed is not None else None
     overrides, injected = {}, []
-    for e in effects:
+    for e in injections:
         name, user = (e, {}) if isinstance(e, str) else e
-        if name not in EFFECTS:
-            raise SimulationError(f"unknown effect '{name}'; known: {', '.join(EFFECTS)}")
-        values = {**EFFECTS[name].draw(rng), **user}
+        if name not in INJECTIONS:
+            raise SimulationError(f"unknown injection '{name}'; known: {', '.join(INJECTIONS)}")
+        values = {**INJECTIONS[name].draw(rng), **user}
         overrides.update(values)
-        injected.append({"name": name, "regressor": EFFECTS[name].regressor, "parameters": values})
+        injected.append({"name": name, "regressor": INJECTIONS[name].regressor, "parameters": values})
     motor = apply_overrides(nominal, overrides)
-    stateful = any(EFFECTS[i["name"]].stateful for i in injected)
+    stateful = any(INJECTIONS[i["name"]].stateful for i in injected)
     conditions = plan_runs(plan)
     bar = None
     if progress:
@@ -306,7 +311,7 @@ def run_experiment(plan: RigPlan = RigPlan(), mp: MotorParams | None = None, eff
         if bar:
             bar.close()
     df = pd.concat(frames, ignore_index=True)
-    truth = {"effects": injected, "plan": asdict(plan), "engine": engine, "motor": nominal.name}
+    truth = {"injections": injected, "plan": asdict(plan), "engine": engine, "motor": nominal.name}
     return df, truth
 
 

@@ -1,0 +1,316 @@
+"""Composite blocks: the whole coupled motor in one block, and the Eq. 29 predictor as a block.
+
+:class:`MotorBlock` (``L1B2Motor.fmu``) runs the in-process engine inside one
+block; :class:`PredictorBlock` (``Predictor.fmu``) wraps the reduced speed
+predictor. :data:`BLOCKS` maps every FMU name to its block class.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import fields
+
+import numpy as np
+
+from ..errors import SimulationError
+from ..physics.params import (
+    DriverParams,
+    InterfaceParams,
+    MotorParams,
+    OperatingPoint,
+    SliderParams,
+    StatorParams,
+)
+from ..predictor import model as pr
+from ..predictor.model import PredictorParams
+from ..predictor.setup import PredictorSetup
+from .blocks import SUBSYSTEM_BLOCKS, Block, Var, parameter_vars
+from .engine import InProcessMotor
+
+
+class MotorBlock(Block):
+    """The whole coupled motor in one block (for ``L1B2Motor.fmu``, hosts that cannot import SSP).
+
+    Runs the four subsystem blocks with the same Gauss-Seidel sequence as
+    :class:`l1b2.cosim.engine.InProcessMotor`, sub-stepping each communication step
+    with ``internal_step_s``. Every subsystem parameter is exposed as
+    ``Component.parameter`` (same names and values as the SSV of the SSP), and
+    every sub-block input, output and state as a ``local`` variable
+    ``Component.variable`` so that get/set FMU state captures the whole motor.
+    """
+
+    PARAMS_CLASS = MotorParams
+    SECTION = "motor"
+    COMPONENTS = ("Driver", "Stator", "Interface", "Slider")
+    INPUTS = [
+        Var("V_s", "input", "V", "supply voltage of the H bridge", start=67.1, min=0.0, max=2000.0),
+        Var("duty", "input", "1", "PWM duty ratio", start=1.0, min=0.0, max=1.0),
+        Var("f_s", "input", "Hz", "drive frequency", start=48500.0, min=1e3, max=1e6),
+        Var("T", "input", "degC", "ambient temperature of driver and stator", start=25.0, min=-100.0, max=300.0),
+        Var("direction", "input", "1", "+1 excites CH1 (toward +position), -1 CH2", start=1.0, min=-1.0, max=1.0),
+        Var("m_load", "input", "kg", "signed load mass; > 0 pulls toward -position", min=-100.0, max=100.0),
+    ]
+    OUTPUTS = [
+        Var("v", "output", "m/s", "slider speed"),
+        Var("s", "output", "m", "slider position"),
+        Var("V0", "output", "V", "stator voltage amplitude"),
+        Var("U_l", "output", "m", "tip normal vibration amplitude", nominal=1e-6),
+        Var("U_w", "output", "m", "tip tangential vibration amplitude", nominal=1e-6),
+        Var("delta", "output", "rad", "phase of tangential minus normal tip displacement"),
+        Var("F_p", "output", "N", "static axial force alpha0 P(s)"),
+        Var("F_d", "output", "N", "driving force"),
+        Var("phi_c", "output", "rad", "contact angle"),
+        Var("stick_fraction", "output", "1", "share of the contact time in stick"),
+        Var("T_stator", "output", "degC", "stator temperature"),
+        Var("at_stop", "output", "1", "-1/+1 at the negative/positive end stop, 0 elsewhere"),
+    ]
+    EXTRA_PARAMETERS = [
+        Var("internal_step_s", "parameter", "s", "internal Gauss-Seidel step between the subsystems",
+            start=2e-4, min=1e-6, max=1e-2, variability="fixed"),
+        Var("Interface.pure_slip", "parameter", "", "true: the paper's Sect. 4 assumptions (phi_c = pi, no stick)",
+            start=False, variability="fixed", type="Boolean"),
+        Var("Slider.s0", "parameter", "m", "initial slider position", start=0.0, min=-1.0, max=1.0,
+            variability="fixed"),
+        Var("Slider.v0", "parameter", "m/s", "initial slider speed", start=0.0, min=-10.0, max=10.0,
+            variability="fixed"),
+        Var("Stator.T_st0", "parameter", "degC", "initial stator temperature (when self-heating is on)",
+            start=25.0, min=-100.0, max=300.0, variability="fixed"),
+    ]
+    _OUT_SOURCE = {"v": ("Slider", "v"), "s": ("Slider", "s"), "V0": ("Driver", "V0"), "U_l": ("Stator", "U_l"),
+                   "U_w": ("Stator", "U_w"), "delta": ("Stator", "delta"), "F_p": ("Stator", "F_p"),
+                   "F_d": ("Interface", "F_d"), "phi_c": ("Interface", "phi_c"),
+                   "stick_fraction": ("Interface", "stick_fraction"), "T_stator": ("Stator", "T_stator"),
+                   "at_stop": ("Slider", "at_stop")}
+
+    def __init__(self, params: MotorParams):
+        self.params = params
+        for var in self.INPUTS + self.OUTPUTS:
+            setattr(self, var.name, 0.0 if var.start is None else var.start)
+        self.internal_step_s = 2e-4
+        self.motor = InProcessMotor(params, h_s=self.internal_step_s)
+        self._extra = {v.name: v.start for v in self.EXTRA_PARAMETERS if "." in v.name}
+
+    @classmethod
+    def params_from_defaults(cls, defaults: dict) -> MotorParams:
+        return MotorParams(driver=DriverParams(**defaults["driver"]), stator=StatorParams(**defaults["stator"]),
+                           interface=InterfaceParams(**defaults["interface"]),
+                           slider=SliderParams(**defaults["slider"]),
+                           operating=OperatingPoint(**defaults["operating"]), name="reference")
+
+    @classmethod
+    def _sub_locals(cls) -> list[Var]:
+        out = []
+        for comp in cls.COMPONENTS:
+            bcls = SUBSYSTEM_BLOCKS[comp]
+            for v in bcls.INPUTS + bcls.OUTPUTS + bcls.STATES:
+                out.append(Var(f"{comp}.{v.name}", "local", v.unit, f"{comp}: {v.description}", nominal=v.nominal))
+        return out
+
+    @classmethod
+    def variables(cls, params=None) -> list[Var]:
+        pars = []
+        if params is not None:
+            for comp in cls.COMPONENTS:
+                sub = getattr(params, SUBSYSTEM_BLOCKS[comp].SECTION)
+                for v in parameter_vars(type(sub), sub):
+                    pars.append(Var(f"{comp}.{v.name}", v.causality, v.unit, v.description, start=v.start,
+                                    min=v.min, max=v.max, variability=v.variability))
+        return pars + list(cls.EXTRA_PARAMETERS) + cls.INPUTS + cls.OUTPUTS + cls._sub_locals()
+
+    def get(self, name: str):
+        if "." not in name:
+            return getattr(self, name)
+        if name in self._extra:
+            return self._extra[name]
+        comp, var = name.split(".", 1)
+        section = SUBSYSTEM_BLOCKS[comp].SECTION
+        if var in {f.name for f in fields(getattr(self.params, section))}:
+            return getattr(getattr(self.params, section), var)  # parameters: the dataclass is the truth
+        return getattr(self.motor.b[comp], var)                  # sub-block inputs, outputs, states
+
+    def set(self, name: str, value):
+        if "." in name:
+            comp, var = name.split(".", 1)
+            if name in self._extra:
+                self._extra[name] = value
+                return
+            section = SUBSYSTEM_BLOCKS[comp].SECTION
+            if var in {f.name for f in fields(getattr(self.params, section))}:
+                self.params = self.params.replace(**{f"{section}__{var}": value})
+            setattr(self.motor.b[comp], var, value)
+            return
+        setattr(self, name, value)
+
+    def check_inputs(self):
+        super().check_inputs()
+        if abs(abs(self.direction) - 1.0) > 1e-9:
+            raise SimulationError(f"MotorBlock: input direction [1] = {self.direction} must be +1 or -1")
+
+    def initialize(self):
+        self.check_inputs()
+        self.motor = InProcessMotor(self.params, h_s=float(self.internal_step_s),
+                                    pure_slip=bool(self._extra["Interface.pure_slip"]))
+        self.motor.b["Stator"].T_st0 = float(self._extra["Stator.T_st0"])
+        self.motor.initialize(V_s=self.V_s, duty=self.duty, f_s=self.f_s, T=self.T, direction=self.direction,
+                              m_load=self.m_load, s0=float(self._extra["Slider.s0"]),
+                              v0=float(self._extra["Slider.v0"]))
+        self._publish()
+
+    def initialize_outputs(self):
+        for b in self.motor.b.values():
+            b.refresh()
+        self._publish()
+
+    def _publish(self):
+        for out, (comp, var) in self._OUT_SOURCE.items():
+            setattr(self, out, float(getattr(self.motor.b[comp], var)))
+
+    def do_step(self, t, h):
+        self.check_inputs()
+        self.motor.inputs = dict(V_s=self.V_s, duty=self.duty, f_s=self.f_s, T=self.T,
+                                 direction=self.direction, m_load=self.m_load)
+        n = max(1, int(round(h / float(self.internal_step_s))))
+        self.motor.h = h / n
+        self.motor.t = t
+        for _ in range(n):
+            self.motor.step()
+        self._publish()
+
+
+class PredictorBlock(Block):
+    """The paper's Eq. 29 speed predictor as a co-simulation block (for ``Predictor.fmu``).
+
+    Inputs V0, s, load, direction; outputs the predicted speed ``v`` (the
+    Eq. 29 map iterated with the identified sampling time ``T_s`` inside each
+    communication step, i.e. the identified discrete-time model) and the
+    closed-form steady speed ``v_steady`` at the current inputs (for
+    feedforward). Every identified parameter is an FMI parameter with its unit.
+    """
+
+    SECTION = "predictor"
+    INPUTS = [
+        Var("V0", "input", "V", "stator voltage amplitude", start=324.0, min=0.0, max=2000.0),
+        Var("s", "input", "m", "slider position", min=-1.0, max=1.0),
+        Var("load", "input", "kg", "signed load mass; > 0 pulls toward -position", min=-100.0, max=100.0),
+        Var("direction", "input", "1", "+1 CH1 (toward +position), -1 CH2", start=1.0, min=-1.0, max=1.0),
+    ]
+    OUTPUTS = [
+        Var("v", "output", "m/s", "predicted slider speed (Eq. 29 iterated at T_s)"),
+        Var("v_steady", "output", "m/s", "closed-form steady speed v* = b/(1-a) at the current inputs"),
+    ]
+    STATES = [Var("v_state", "local", "m/s", "predicted speed (state)")]
+    EXTRA_PARAMETERS = [
+        Var("v0", "parameter", "m/s", "initial speed", start=0.0, min=-10.0, max=10.0, variability="fixed"),
+    ]
+
+    def __init__(self, setup: PredictorSetup):
+        self.setup = setup
+        self.params = setup
+        for var in self.EXTRA_PARAMETERS:
+            setattr(self, var.name, var.start)
+        for var in self.INPUTS + self.OUTPUTS + self.STATES:
+            setattr(self, var.name, 0.0 if var.start is None else var.start)
+        self._values = self._param_values(setup)
+
+    @staticmethod
+    def _param_values(setup: PredictorSetup) -> dict:
+        p = setup.params
+        vals = dict(zip(p.names(p.order), p.to_vector().tolist()))
+        vals.update(s_center=p.s_center, s_half=p.s_half, kappa=p.kappa, load_inertia=float(p.include_load_inertia),
+                    slider_mass_kg=setup.slider_mass_kg, T_s=setup.T_s)
+        return vals
+
+    @classmethod
+    def params_from_defaults(cls, defaults: dict) -> PredictorSetup:
+        if "predictor" in defaults:
+            return PredictorSetup.from_dict(defaults["predictor"])
+        from ..predictor.derive import derive_predictor_setup
+        return derive_predictor_setup(cls._motor_from(defaults))
+
+    @staticmethod
+    def _motor_from(defaults: dict) -> MotorParams:
+        return MotorBlock.params_from_defaults(defaults)
+
+    @classmethod
+    def baked_defaults(cls, mp: MotorParams) -> dict:
+        """Without an identification, the FMU carries the physical model's linearization (derived once)."""
+        from ..predictor.derive import derive_predictor_setup
+        return {"predictor": derive_predictor_setup(mp).to_dict()}
+
+    @classmethod
+    def variables(cls, params: PredictorSetup | None = None) -> list[Var]:
+        pars = []
+        if params is not None:
+            p = params.params
+            units = p.units(p.order)
+            for name, value in zip(p.names(p.order), p.to_vector()):
+                pars.append(Var(name, "parameter", units[name].replace("N s/m", "N.s/m").replace("-", "1"),
+                                f"Eq. 35 parameter {name}", start=float(value), variability="fixed"))
+            pars += [
+                Var("s_center", "parameter", "m", "centre of the position scaling of the polynomials",
+                    start=p.s_center, variability="fixed"),
+                Var("s_half", "parameter", "m", "half range of the position scaling", start=p.s_half, min=1e-6,
+                    variability="fixed"),
+                Var("kappa", "parameter", "1", "share of F_p loading the guide", start=p.kappa, min=0.0, max=1.0,
+                    variability="fixed"),
+                Var("load_inertia", "parameter", "1", "1: the load mass is accelerated with the slider",
+                    start=float(p.include_load_inertia), min=0.0, max=1.0, variability="fixed"),
+                Var("slider_mass_kg", "parameter", "kg", "slider mass m_s", start=params.slider_mass_kg, min=1e-6,
+                    variability="fixed"),
+                Var("T_s", "parameter", "s", "sampling time the predictor was identified with", start=params.T_s,
+                    min=1e-7, variability="fixed"),
+            ]
+        return pars + list(cls.EXTRA_PARAMETERS) + cls.INPUTS + cls.OUTPUTS + cls.STATES
+
+    def get(self, name: str):
+        if name in self._values:
+            return self._values[name]
+        return getattr(self, name)
+
+    def set(self, name: str, value):
+        if name in self._values:
+            self._values[name] = float(value)
+        else:
+            setattr(self, name, value)
+
+    def rebuild_params(self):
+        vals = self._values
+        p0 = self.setup.params
+        theta = np.array([vals[n] for n in p0.names(p0.order)])
+        pp = PredictorParams.from_vector(theta, s_center=vals["s_center"], s_half=vals["s_half"],
+                                         kappa=vals["kappa"], include_load_inertia=vals["load_inertia"] >= 0.5)
+        if not (vals["slider_mass_kg"] > 0 and vals["T_s"] > 0):
+            raise SimulationError("PredictorBlock: slider_mass_kg [kg] and T_s [s] must be positive")
+        self.setup = PredictorSetup(pp, vals["slider_mass_kg"], vals["T_s"])
+
+    def check_inputs(self):
+        super().check_inputs()
+        if abs(abs(self.direction) - 1.0) > 1e-9:
+            raise SimulationError(f"PredictorBlock: input direction [1] = {self.direction} must be +1 or -1")
+
+    def initialize(self):
+        self.rebuild_params()
+        self.check_inputs()
+        self.v_state = float(self.v0)
+        self.initialize_outputs()
+
+    def initialize_outputs(self):
+        su = self.setup
+        self.v = float(self.v_state)
+        self.v_steady = float(pr.steady_state(su.params, self.s, self.V0, self.load, self.direction,
+                                              su.slider_mass_kg))
+
+    def do_step(self, t, h):
+        self.check_inputs()
+        su = self.setup
+        n = max(1, int(math.ceil(h / su.T_s - 1e-9)))
+        v = float(self.v_state)
+        for _ in range(n):
+            v = float(pr.one_step(su.params, v, self.s, self.V0, self.load, self.direction, h / n,
+                                  su.slider_mass_kg))
+        self.v_state = v
+        self.initialize_outputs()
+
+
+#: every FMU's block class by FMU name
+BLOCKS = {**SUBSYSTEM_BLOCKS, "L1B2Motor": MotorBlock, "Predictor": PredictorBlock}

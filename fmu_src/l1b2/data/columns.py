@@ -1,0 +1,175 @@
+"""The vocabulary of the measured-data contract (``shared/data-format.md``).
+
+Declarations only, no file access: the column names of the CSV and their
+specifications (:data:`KNOWN_COLUMNS`), the sidecar fields
+(:data:`SIDECAR_FIELDS`) and how a sidecar is named (:func:`sidecar_path`),
+the default rig settings and the plausibility thresholds that tell SI values
+from millimetres, grams or kHz. The units themselves are defined once in
+:mod:`l1b2.units` (:data:`~l1b2.units.COLUMN_UNITS`,
+:data:`~l1b2.units.SIDECAR_FIELD_UNITS`), where :class:`~l1b2.errors.DataFormatError`
+reads them too.
+
+Used by :mod:`~l1b2.data.validate` (the rules), :mod:`~l1b2.data.io`
+(reading and writing) and :mod:`~l1b2.data.measurements` (the public API,
+which re-exports these names).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import NamedTuple
+
+from ..units import COLUMN_UNITS, SIDECAR_FIELD_UNITS, data_unit
+
+__all__ = [
+    "TIME", "RUN", "POSITION", "VOLTAGE", "DIRECTION", "LOAD", "SPEED",
+    "FREQUENCY", "TEMPERATURE",
+    "ColumnSpec", "KNOWN_COLUMNS", "COLUMN_SPECS", "REQUIRED_COLUMNS", "NUMERIC_COLUMNS",
+    "SIDECAR_FIELDS", "LOAD_TIME_META", "NAN_TOKENS",
+    "DEFAULT_DRIVE_FREQUENCY_HZ", "DEFAULT_ENCODER_RESOLUTION_M",
+    "MAX_ABS_POSITION_M", "MAX_ABS_SPEED_M_S", "MIN_VOLTAGE_V", "MAX_VOLTAGE_V",
+    "MAX_ABS_LOAD_KG", "MIN_FREQUENCY_HZ", "MAX_FREQUENCY_HZ",
+    "MIN_TEMPERATURE_C", "MAX_TEMPERATURE_C",
+    "sidecar_path", "unit_of",
+]
+
+# --------------------------------------------------------------------------
+# Columns
+# --------------------------------------------------------------------------
+
+TIME = "time_s"
+RUN = "run"
+POSITION = "position_m"
+VOLTAGE = "voltage_V"
+DIRECTION = "direction"
+LOAD = "load_kg"
+SPEED = "speed_m_s"
+FREQUENCY = "frequency_Hz"
+TEMPERATURE = "temperature_C"
+
+
+class ColumnSpec(NamedTuple):
+    """One known column of the measured-data CSV.
+
+    Attributes
+    ----------
+    name : str
+        Column name as written in the CSV header (case-sensitive).
+    required : bool
+        Whether every file must contain it.
+    unit : str
+        SI unit (``"-"`` for dimensionless / identifiers), from
+        :data:`l1b2.units.COLUMN_UNITS`.
+    meaning : str
+        Short description, from ``shared/data-format.md``.
+    """
+
+    name: str
+    required: bool
+    unit: str
+    meaning: str
+
+
+#: The known columns, in the order of the contract table.
+KNOWN_COLUMNS: tuple[ColumnSpec, ...] = (
+    ColumnSpec(TIME, True, COLUMN_UNITS[TIME],
+               "experiment clock; strictly increasing over the whole file in "
+               "recording order, not reset between runs"),
+    ColumnSpec(RUN, True, COLUMN_UNITS[RUN],
+               "run identifier (integer or string); rows of one run are contiguous"),
+    ColumnSpec(POSITION, True, COLUMN_UNITS[POSITION],
+               "slider position from the encoder (0 = centre of the friction bar)"),
+    ColumnSpec(VOLTAGE, True, COLUMN_UNITS[VOLTAGE], "drive voltage amplitude V0 at the stator"),
+    ColumnSpec(DIRECTION, True, COLUMN_UNITS[DIRECTION],
+               "+1 when channel CH1 is excited (drives toward +position), -1 for CH2"),
+    ColumnSpec(LOAD, True, COLUMN_UNITS[LOAD],
+               "signed load mass on the pulley: positive pulls toward -position, "
+               "negative toward +position, 0 = no load"),
+    ColumnSpec(SPEED, False, COLUMN_UNITS[SPEED],
+               "measured slider speed; derived from position_m when absent"),
+    ColumnSpec(FREQUENCY, False, COLUMN_UNITS[FREQUENCY],
+               "drive frequency; filled from the sidecar / default when absent"),
+    ColumnSpec(TEMPERATURE, False, COLUMN_UNITS[TEMPERATURE], "stator temperature, when measured"),
+)
+
+#: The known columns by name.
+COLUMN_SPECS: dict[str, ColumnSpec] = {c.name: c for c in KNOWN_COLUMNS}
+
+#: Names of the required columns, in contract order.
+REQUIRED_COLUMNS: tuple[str, ...] = tuple(c.name for c in KNOWN_COLUMNS if c.required)
+
+#: Known columns holding real numbers (everything but ``run``).
+NUMERIC_COLUMNS: tuple[str, ...] = tuple(c.name for c in KNOWN_COLUMNS if c.name != RUN)
+
+#: Sidecar fields and their units (:data:`l1b2.units.SIDECAR_FIELD_UNITS`).
+SIDECAR_FIELDS: dict[str, str] = SIDECAR_FIELD_UNITS
+
+#: ``meta`` keys computed at load time; never written to nor read from a sidecar.
+LOAD_TIME_META: tuple[str, ...] = ("source", "sidecar", "speed_derived", "frequency_filled")
+
+#: Texts (lower case, stripped) that mean "no value" (NaN) in a CSV cell.
+NAN_TOKENS: frozenset[str] = frozenset({
+    "nan", "-nan", "+nan", "na", "n/a", "#n/a", "null", "none", "<na>",
+    "nat", "#nan", "-1.#ind", "1.#qnan",
+})
+
+# --------------------------------------------------------------------------
+# Defaults and plausibility thresholds (SI)
+# --------------------------------------------------------------------------
+
+#: Drive frequency used when neither column, sidecar nor caller gives one [Hz].
+DEFAULT_DRIVE_FREQUENCY_HZ: float = 48_500.0
+#: Encoder resolution used when neither sidecar nor caller gives one [m].
+DEFAULT_ENCODER_RESOLUTION_M: float = 5e-8
+
+#: |position_m| above this suggests the file is in millimetres [m].
+MAX_ABS_POSITION_M: float = 1.0
+#: |speed_m_s| above this suggests the file is in mm/s [m/s].
+MAX_ABS_SPEED_M_S: float = 10.0
+#: Lowest plausible drive voltage amplitude [V] (an amplitude is never negative).
+MIN_VOLTAGE_V: float = 0.0
+#: Highest plausible drive voltage amplitude [V] (above suggests mV).
+MAX_VOLTAGE_V: float = 2000.0
+#: |load_kg| above this suggests grams [kg].
+MAX_ABS_LOAD_KG: float = 50.0
+#: Lowest plausible drive frequency [Hz] (below suggests kHz).
+MIN_FREQUENCY_HZ: float = 1e3
+#: Highest plausible drive frequency [Hz].
+MAX_FREQUENCY_HZ: float = 1e6
+#: Lowest plausible stator temperature [degC].
+MIN_TEMPERATURE_C: float = -100.0
+#: Highest plausible stator temperature [degC] (above suggests kelvin).
+MAX_TEMPERATURE_C: float = 300.0
+
+
+def unit_of(name: str | None) -> str | None:
+    """Unit of a known column or sidecar field.
+
+    Parameters
+    ----------
+    name : str or None
+        Column or sidecar field name.
+
+    Returns
+    -------
+    str or None
+        The unit (``"-"`` for dimensionless), ``None`` when unknown.
+    """
+    return data_unit(name)
+
+
+def sidecar_path(path: str | os.PathLike) -> Path:
+    """Path of the sidecar ``NAME.json`` belonging to ``NAME.csv``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The measured-data CSV file.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path`` with its suffix replaced by ``.json``.
+    """
+    return Path(path).with_suffix(".json")

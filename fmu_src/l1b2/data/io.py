@@ -1,0 +1,317 @@
+"""Files of measured data: reading and writing the CSV and its sidecar JSON.
+
+The file side of the contract in ``shared/data-format.md``: one CSV file (one
+row per sample, header line first) plus an optional sidecar ``NAME.json``
+beside ``NAME.csv`` with the rig settings. :func:`read_table_and_sidecar`
+reads both, applies :func:`~l1b2.data.validate.validate_frame`, merges the
+settings (keyword > sidecar > default), derives ``speed_m_s`` / fills
+``frequency_Hz`` when absent; :func:`write_table_and_sidecar` validates the
+same way and writes both files atomically. Problems of the files themselves
+(missing, not UTF-8, ragged lines, invalid JSON) are reported as
+:class:`~l1b2.errors.DataFormatError` naming file and line.
+
+The public entry points are :func:`l1b2.data.measurements.load_measurements`
+and :func:`l1b2.data.measurements.write_measurements`, which wrap these two
+functions in the :class:`~l1b2.data.measurements.Measurements` container.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import tempfile
+from collections.abc import Mapping
+from io import StringIO
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from ..errors import DataFormatError, ParameterError
+from .columns import (
+    COLUMN_SPECS,
+    DEFAULT_DRIVE_FREQUENCY_HZ,
+    DEFAULT_ENCODER_RESOLUTION_M,
+    FREQUENCY,
+    LOAD_TIME_META,
+    NAN_TOKENS,
+    POSITION,
+    RUN,
+    SIDECAR_FIELDS,
+    SPEED,
+    TIME,
+    sidecar_path,
+)
+from .validate import check_setting, format_value, is_blank_row, run_slices, validate_frame
+
+__all__ = ["read_table_and_sidecar", "write_table_and_sidecar", "read_sidecar"]
+
+_LINE_IN_PARSER_ERROR = re.compile(r"line (\d+)")
+_FIELDS_IN_PARSER_ERROR = re.compile(r"Expected (\d+) fields in line (\d+), saw (\d+)")
+
+
+# --------------------------------------------------------------------------
+# Settings (sidecar, keywords, defaults)
+# --------------------------------------------------------------------------
+
+def read_sidecar(path: Path) -> dict:
+    """Read and validate a sidecar JSON file (``{}`` when absent)."""
+    if not path.exists():
+        return {}
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DataFormatError(path, None, None, f"cannot read sidecar: {exc}") from None
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise DataFormatError(path, None, None,
+                              f"invalid JSON at line {exc.lineno} column {exc.colno}: "
+                              f"{exc.msg}") from None
+    if not isinstance(data, dict):
+        raise DataFormatError(path, None, None,
+                              f"sidecar must be a JSON object, got {type(data).__name__}")
+    out = {}
+    for key, value in data.items():
+        if key in SIDECAR_FIELDS:
+            if value is None:  # JSON null = not given
+                continue
+            why = check_setting(key, value)
+            if why is not None:
+                raise DataFormatError(path, key, None, why)
+            out[key] = value if key == "description" else float(value)
+        elif key in LOAD_TIME_META:
+            continue  # computed at load time, never taken from a file
+        else:
+            out[key] = value  # pass through unknown fields
+    return out
+
+
+def _merge_settings(sidecar: dict, **explicit: float | None) -> dict:
+    meta: dict[str, Any] = {
+        "slider_mass_kg": None,
+        "encoder_resolution_m": DEFAULT_ENCODER_RESOLUTION_M,
+        "drive_frequency_Hz": DEFAULT_DRIVE_FREQUENCY_HZ,
+        "description": "",
+    }
+    meta.update(sidecar)
+    for name, value in explicit.items():
+        if value is None:
+            continue
+        why = check_setting(name, value)
+        if why is not None:
+            raise ParameterError(f"option {name} [{SIDECAR_FIELDS[name]}]: {why}")
+        meta[name] = float(value)
+    return meta
+
+
+# --------------------------------------------------------------------------
+# Reading
+# --------------------------------------------------------------------------
+
+def _read_table(path: Path) -> pd.DataFrame:
+    """Read a CSV as strings, one DataFrame row per file line after the header."""
+    if not path.exists():
+        raise DataFormatError(path, None, None, "file not found")
+    if path.is_dir():
+        raise DataFormatError(path, None, None, "is a directory, not a CSV file")
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise DataFormatError(path, None, None, f"cannot read file: {exc.strerror or exc}") from None
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = raw[:exc.start].count(b"\n") + 1
+        row = line - 1 if line > 1 else None
+        raise DataFormatError(path, None, row,
+                              f"not UTF-8 text (byte 0x{raw[exc.start]:02x} on line {line})") from None
+    if not text.strip():
+        raise DataFormatError(path, None, None, "file is empty")
+    try:
+        table = pd.read_csv(StringIO(text), header=None, dtype=str, keep_default_na=False,
+                            skip_blank_lines=False)
+    except pd.errors.ParserError as exc:
+        msg = str(exc).splitlines()[-1].strip()
+        m = _FIELDS_IN_PARSER_ERROR.search(msg)
+        if m:
+            expected, line, saw = (int(g) for g in m.groups())
+            raise DataFormatError(path, None, line - 1 if line > 1 else None,
+                                  f"line has {saw} fields, the header has {expected}") from None
+        m = _LINE_IN_PARSER_ERROR.search(msg)
+        row = int(m.group(1)) - 1 if m else None
+        raise DataFormatError(path, None, row if row else None,
+                              f"cannot parse CSV: {msg}") from None
+    header = [str(h).strip() for h in table.iloc[0].tolist()]
+    if not any(header):
+        raise DataFormatError(path, None, None, "header line (line 1) is blank")
+    header = [h if h else f"Unnamed: {k}" for k, h in enumerate(header)]
+    body = table.iloc[1:].reset_index(drop=True)
+    body.columns = header
+    # drop blank lines at the end of the file (blank lines inside are refused
+    # later as empty values, so data rows keep mapping to line = row + 1)
+    n = len(body)
+    while n > 0 and is_blank_row(body.iloc[n - 1]):
+        n -= 1
+    return body.iloc[:n]
+
+
+def _infer_extra(col: pd.Series) -> pd.Series:
+    """Type an unknown (pass-through) column read as text.
+
+    Integers when every value is a canonical integer, floats when every
+    non-empty value is a number (empty -> NaN), booleans for True/False,
+    else strings (empty -> NaN), as pandas would infer.
+    """
+    stripped = col.str.strip()
+    empty = (stripped == "").to_numpy()
+    if not empty.any() and stripped.str.fullmatch(r"[+-]?\d+").all():
+        try:
+            return stripped.astype("int64")
+        except (ValueError, OverflowError):
+            pass
+    no_value = empty | stripped.str.lower().isin(NAN_TOKENS).to_numpy()
+    nums = pd.to_numeric(stripped.where(~no_value, "nan"), errors="coerce")
+    if not (nums.isna().to_numpy() & ~no_value).any():
+        return nums.astype("float64")
+    if not empty.any() and stripped.isin(["True", "False"]).all():
+        return stripped == "True"
+    return col.where(~empty, np.nan)
+
+
+def _derive_speed(df: pd.DataFrame, path) -> np.ndarray:
+    """Per-run finite-difference speed from position and time [m/s].
+
+    Inside a run ``numpy.gradient`` (second-order central differences, valid
+    for uneven sampling); at the two ends of a run second-order one-sided
+    differences (first-order for a two-sample run). Never across runs.
+    """
+    x = df[POSITION].to_numpy(dtype=float)
+    t = df[TIME].to_numpy(dtype=float)
+    v = np.empty_like(x)
+    for rid, sl in run_slices(df[RUN]):
+        n = sl.stop - sl.start
+        if n < 2:
+            raise DataFormatError(path, POSITION, sl.start + 1,
+                                  f"run {format_value(rid)} has a single sample: speed_m_s is "
+                                  "absent and cannot be derived from position")
+        v[sl] = np.gradient(x[sl], t[sl], edge_order=2 if n >= 3 else 1)
+    return v
+
+
+def read_table_and_sidecar(path: str | os.PathLike, *, slider_mass_kg: float | None = None,
+                           encoder_resolution_m: float | None = None,
+                           drive_frequency_Hz: float | None = None) -> tuple[pd.DataFrame, dict]:
+    """Read and validate a measured-data CSV and its sidecar.
+
+    The work of :func:`l1b2.data.measurements.load_measurements` (see there
+    for the parameters, the columns and ``meta``), without the container.
+
+    Returns
+    -------
+    df : pandas.DataFrame
+        The validated samples (index 0..n-1).
+    meta : dict
+        The settings and the load-time flags.
+    """
+    path = Path(path)
+    table = _read_table(path)
+    side = sidecar_path(path)
+    sidecar = read_sidecar(side) if side != path else {}
+    meta = _merge_settings(sidecar, slider_mass_kg=slider_mass_kg,
+                           encoder_resolution_m=encoder_resolution_m,
+                           drive_frequency_Hz=drive_frequency_Hz)
+    df = validate_frame(table, path)
+    for name in df.columns:
+        if name not in COLUMN_SPECS:
+            df[name] = _infer_extra(df[name])
+    meta["speed_derived"] = SPEED not in df.columns
+    if meta["speed_derived"]:
+        df[SPEED] = _derive_speed(df, path)
+    meta["frequency_filled"] = FREQUENCY not in df.columns
+    if meta["frequency_filled"]:
+        df[FREQUENCY] = np.full(len(df), float(meta["drive_frequency_Hz"]))
+    meta["source"] = str(path)
+    meta["sidecar"] = str(side) if side != path and side.exists() else None
+    return df.reset_index(drop=True), meta
+
+
+# --------------------------------------------------------------------------
+# Writing
+# --------------------------------------------------------------------------
+
+def _sidecar_payload(meta: Mapping | None, side: Path) -> dict:
+    """Settings to write into the sidecar, validated like a read sidecar."""
+    meta = dict(meta or {})
+    payload: dict[str, Any] = {
+        "slider_mass_kg": meta.get("slider_mass_kg"),
+        "encoder_resolution_m": meta.get("encoder_resolution_m", DEFAULT_ENCODER_RESOLUTION_M),
+        "drive_frequency_Hz": meta.get("drive_frequency_Hz", DEFAULT_DRIVE_FREQUENCY_HZ),
+        "description": meta.get("description", ""),
+    }
+    for key, value in meta.items():
+        if key not in payload and key not in LOAD_TIME_META:
+            payload[key] = value
+    out = {}
+    for key, value in payload.items():
+        if key in SIDECAR_FIELDS:
+            if value is None:
+                continue
+            why = check_setting(key, value)
+            if why is not None:
+                raise DataFormatError(side, key, None, why)
+            value = value if key == "description" else float(value)
+        try:
+            json.dumps(value, allow_nan=False)
+        except (TypeError, ValueError) as exc:
+            raise DataFormatError(side, key, None, f"not JSON-serialisable: {exc}") from None
+        out[key] = value
+    return out
+
+
+def _atomic_pair(files: list[tuple[Path, str]]) -> None:
+    """Write texts to temp files beside their targets, then ``os.replace`` all."""
+    temps: list[tuple[str, Path]] = []
+    try:
+        for target, text in files:
+            fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp",
+                                       dir=target.parent)
+            temps.append((tmp, target))
+            with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
+                fh.write(text)
+                fh.flush()
+                os.fsync(fh.fileno())
+            mode = target.stat().st_mode & 0o777 if target.exists() else 0o644
+            os.chmod(tmp, mode)
+        for tmp, target in temps:
+            os.replace(tmp, target)
+    finally:
+        for tmp, _ in temps:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+
+
+def write_table_and_sidecar(df: pd.DataFrame, path: str | os.PathLike, meta: Mapping | None = None) -> Path:
+    """Validate and write measured data as CSV plus sidecar JSON.
+
+    The work of :func:`l1b2.data.measurements.write_measurements` (see there
+    for the parameters and the rules), for a plain DataFrame.
+    """
+    path = Path(path)
+    side = sidecar_path(path)
+    if side == path:
+        raise DataFormatError(path, None, None,
+                              "a measured-data file must not have the suffix .json "
+                              "(reserved for the sidecar)")
+    meta = dict(meta or {})
+    drop = [c for c, flag in ((SPEED, "speed_derived"), (FREQUENCY, "frequency_filled"))
+            if meta.get(flag) and c in df.columns]
+    table = df.drop(columns=drop)
+    validate_frame(table, path)
+    payload = _sidecar_payload(meta, side)
+    csv_text = table.to_csv(index=False, lineterminator="\n")
+    json_text = json.dumps(payload, indent=2, allow_nan=False) + "\n"
+    _atomic_pair([(side, json_text), (path, csv_text)])
+    return path

@@ -1,0 +1,468 @@
+"""The rules of the measured-data contract: checking a table and the rig settings.
+
+:func:`validate_frame` checks a table (as read from a CSV, or about to be
+written) in two stages: first every value must parse (non-numeric, empty,
+NaN and infinite values; the earliest offending row over all columns is
+reported), then the contents rules (direction, SI plausibility, time order,
+run contiguity; again the earliest offending row is reported). Each breach
+found is a :class:`DataProblem`; the earliest one is raised as a
+:class:`~l1b2.errors.DataFormatError` naming the file, the column with its
+unit and the row.
+
+:func:`check_setting` is the rule for one rig setting (sidecar field or
+keyword argument). :func:`run_slices` gives the contiguous blocks of a run
+that the contiguity rule checks, and :func:`format_value` the shortest text
+of a value, as used in every message of the data layer.
+
+Used by :mod:`~l1b2.data.io` (reading and writing apply the same checks) and
+:mod:`~l1b2.data.measurements` (which re-exports :func:`validate_frame` and
+:func:`run_slices`).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from collections.abc import Callable, Sequence
+from typing import Any, NamedTuple
+
+import numpy as np
+import pandas as pd
+
+from ..errors import DataFormatError
+from .columns import (
+    COLUMN_SPECS,
+    DIRECTION,
+    FREQUENCY,
+    KNOWN_COLUMNS,
+    LOAD,
+    MAX_ABS_LOAD_KG,
+    MAX_ABS_POSITION_M,
+    MAX_ABS_SPEED_M_S,
+    MAX_FREQUENCY_HZ,
+    MAX_TEMPERATURE_C,
+    MAX_VOLTAGE_V,
+    MIN_FREQUENCY_HZ,
+    MIN_TEMPERATURE_C,
+    MIN_VOLTAGE_V,
+    NAN_TOKENS,
+    NUMERIC_COLUMNS,
+    POSITION,
+    REQUIRED_COLUMNS,
+    RUN,
+    SPEED,
+    TEMPERATURE,
+    TIME,
+    VOLTAGE,
+)
+
+__all__ = [
+    "DataProblem", "validate_frame", "check_setting", "run_slices", "format_value",
+    "is_blank_row",
+]
+
+_CANONICAL_INT = re.compile(r"^-?(0|[1-9][0-9]*)$")
+
+#: column -> its place in the contract table (tie-break between columns)
+_ORDER = {c.name: k for k, c in enumerate(KNOWN_COLUMNS)}
+
+
+# --------------------------------------------------------------------------
+# Shared helpers: run blocks, message text
+# --------------------------------------------------------------------------
+
+def run_slices(run: pd.Series | Sequence | np.ndarray) -> list[tuple[Any, slice]]:
+    """Contiguous blocks of equal run id, in order.
+
+    Parameters
+    ----------
+    run : array_like
+        Run id per sample.
+
+    Returns
+    -------
+    list of (run_id, slice)
+        One entry per block of consecutive equal ids; ``slice`` indexes
+        positions (not labels). With contiguous runs (as validated) there is
+        exactly one block per run.
+    """
+    values = run.to_numpy() if isinstance(run, pd.Series) else np.asarray(run)
+    n = len(values)
+    if n == 0:
+        return []
+    change = np.ones(n, dtype=bool)
+    if n > 1:
+        change[1:] = values[1:] != values[:-1]
+    starts = np.flatnonzero(change)
+    stops = np.append(starts[1:], n)
+    return [(_py(values[a]), slice(int(a), int(b))) for a, b in zip(starts, stops)]
+
+
+def _py(value: Any) -> Any:
+    """Numpy scalar -> Python scalar (for run ids in lists and messages)."""
+    return value.item() if isinstance(value, np.generic) else value
+
+
+def format_value(x: Any) -> str:
+    """Shortest round-trip text of a value for messages (``1.0`` -> ``1``, strings quoted)."""
+    if isinstance(x, (float, np.floating)):
+        text = repr(float(x))
+        return text[:-2] if text.endswith(".0") else text
+    return repr(_py(x)) if isinstance(x, str) else str(_py(x))
+
+
+def is_blank_row(row: pd.Series) -> bool:
+    """True for a row read from a blank line (every field an empty string)."""
+    return all(isinstance(v, str) and not v.strip() for v in row.tolist())
+
+
+# --------------------------------------------------------------------------
+# Parsing values (stage 1)
+# --------------------------------------------------------------------------
+
+class DataProblem(NamedTuple):
+    """One breach of the data contract found in a table.
+
+    Attributes
+    ----------
+    row : int
+        0-based position of the offending row.
+    order : int
+        Place of the column in the contract table (tie-break among columns
+        of the same row).
+    column : str
+        The offending column.
+    text : str
+        What is wrong, in plain words.
+    """
+
+    row: int
+    order: int
+    column: str
+    text: str
+
+
+def _first(mask: np.ndarray) -> int | None:
+    idx = np.flatnonzero(mask)
+    return int(idx[0]) if idx.size else None
+
+
+def _earliest(problems: list[DataProblem]) -> DataProblem:
+    """The problem of the earliest row (ties: the column first in the contract table)."""
+    return min(problems, key=lambda q: (q.row, q.order))
+
+
+def _raise_first(path, problems: list[DataProblem]):
+    p = _earliest(problems)
+    raise DataFormatError(path, p.column, p.row + 1, p.text)
+
+
+def _add_first(problems: list[DataProblem], name: str, bad: np.ndarray,
+               text: Callable[[int], str]) -> None:
+    """Record the first row where ``bad`` holds, with ``text(row)``, as a problem of column ``name``."""
+    i = _first(bad)
+    if i is not None:
+        problems.append(DataProblem(i, _ORDER[name], name, text(i)))
+
+
+def _strip_text(col: pd.Series) -> tuple[pd.Series, np.ndarray, bool]:
+    """Strip whitespace from string values.
+
+    Returns
+    -------
+    text : pandas.Series
+        Object series: stripped strings, other values unchanged, missing
+        values replaced by ``""``.
+    missing : numpy.ndarray of bool
+        Where the input was missing (None / NaN).
+    all_str : bool
+        Whether every non-missing value is a string.
+    """
+    missing = col.isna().to_numpy()
+    if pd.api.types.infer_dtype(col, skipna=True) == "string":
+        text = col.str.strip().astype(object).where(~missing, "")
+        return text, missing, True
+    obj = col.astype(object).where(~missing, "")
+    return obj.map(lambda v: v.strip() if isinstance(v, str) else v), missing, False
+
+
+def _parse_numeric(col: pd.Series) -> tuple[np.ndarray, int | None, str]:
+    """Parse one column to float64.
+
+    Returns
+    -------
+    values : numpy.ndarray
+        Parsed values (NaN where not parseable).
+    bad : int or None
+        0-based position of the first value that is empty, NaN, infinite or
+        non-numeric; ``None`` when all are finite numbers.
+    why : str
+        Description of the first bad value.
+    """
+    if pd.api.types.is_numeric_dtype(col.dtype):
+        values = col.to_numpy(dtype=float, na_value=np.nan)
+        i = _first(~np.isfinite(values))
+        if i is None:
+            return values, None, ""
+        v = values[i]
+        what = "NaN value" if np.isnan(v) else f"infinite value ({format_value(v)})"
+        return values, i, what
+    if pd.api.types.infer_dtype(col, skipna=False) == "string":
+        # fast path (pd.to_numeric ignores surrounding whitespace)
+        values = pd.to_numeric(col, errors="coerce").to_numpy(dtype=float, na_value=np.nan)
+        if np.isfinite(values).all():
+            return values, None, ""
+    obj = col.astype(object)
+    text, missing, _ = _strip_text(col)
+    values = pd.to_numeric(text, errors="coerce").to_numpy(dtype=float, na_value=np.nan)
+    i = _first(~np.isfinite(values) | missing)
+    if i is None:
+        return values, None, ""
+    raw = text.iloc[i]
+    if missing[i]:
+        orig = obj.iloc[i]
+        what = "NaN value" if isinstance(orig, (float, np.floating)) else "empty value"
+    elif isinstance(raw, str) and raw == "":
+        what = "empty value"
+    elif isinstance(raw, str) and raw.lower() in NAN_TOKENS:
+        what = f"NaN value ({raw!r})"
+    elif np.isinf(values[i]):
+        what = f"infinite value ({raw!r})"
+    elif isinstance(raw, float) and np.isnan(raw):
+        what = "NaN value"
+    else:
+        hint = ""
+        if isinstance(raw, str) and re.fullmatch(r"[+-]?\d+,\d*([eE][+-]?\d+)?", raw):
+            hint = " (decimal comma? the format requires a decimal point)"
+        what = f"non-numeric value {raw!r}{hint}"
+    return values, i, what
+
+
+def _normalise_run(col: pd.Series) -> tuple[pd.Series, int | None]:
+    """Strip string run ids; integers when every id is a canonical integer.
+
+    Returns the normalised column and the 0-based position of the first
+    empty id (or ``None``).
+    """
+    if pd.api.types.is_integer_dtype(col.dtype) or pd.api.types.is_bool_dtype(col.dtype):
+        return col, None
+    if pd.api.types.is_float_dtype(col.dtype):
+        return col, _first(col.isna().to_numpy())
+    stripped, missing, all_str = _strip_text(col)
+    bad = _first(missing | (stripped == "").to_numpy(dtype=bool))
+    if bad is not None:
+        return col, bad
+    if all_str:
+        if bool(stripped.str.fullmatch(_CANONICAL_INT.pattern).all()):
+            return stripped.astype("int64"), None
+        return stripped.astype(str), None
+    return stripped, None
+
+
+def _parse_values(table: pd.DataFrame, path) -> tuple[dict[str, np.ndarray], pd.Series]:
+    """Stage 1: every value must parse.
+
+    Returns the known numeric columns present, parsed to float64, and the
+    normalised ``run`` column; raises for the earliest value that does not
+    parse (over all columns), or for a blank line inside the data.
+    """
+    problems: list[DataProblem] = []
+    values: dict[str, np.ndarray] = {}
+    for name in NUMERIC_COLUMNS:
+        if name not in table.columns:
+            continue
+        vals, bad, why = _parse_numeric(table[name])
+        values[name] = vals
+        if bad is not None:
+            problems.append(DataProblem(bad, _ORDER[name], name, why))
+    run_col, bad_run = _normalise_run(table[RUN])
+    if bad_run is not None:
+        problems.append(DataProblem(bad_run, _ORDER[RUN], RUN, "empty run id"))
+    if problems:
+        first = _earliest(problems)
+        if is_blank_row(table.iloc[first.row]):
+            raise DataFormatError(path, None, first.row + 1, "blank line inside the data")
+        _raise_first(path, problems)
+    return values, run_col
+
+
+# --------------------------------------------------------------------------
+# Contents rules (stage 2)
+# --------------------------------------------------------------------------
+
+def _order_problems(t: np.ndarray, run_col: pd.Series) -> list[DataProblem]:
+    """Time strictly increasing over the whole file; rows of one run contiguous."""
+    problems: list[DataProblem] = []
+    if len(t) > 1:
+        bad = np.zeros(len(t), dtype=bool)
+        bad[1:] = ~(t[1:] > t[:-1])
+        _add_first(problems, TIME, bad,
+                   lambda i: f"time not increasing ({format_value(t[i])} after {format_value(t[i - 1])})")
+    first_seen: dict[Any, int] = {}
+    for rid, sl in run_slices(run_col):
+        if rid in first_seen:
+            prev = _py(run_col.iloc[sl.start - 1])
+            problems.append(DataProblem(
+                sl.start, _ORDER[RUN], RUN,
+                f"run {format_value(rid)} reappears after run {format_value(prev)} (first seen at row "
+                f"{first_seen[rid] + 1}); rows of one run must be contiguous"))
+            break
+        first_seen[rid] = sl.start
+    return problems
+
+
+def _range_problems(values: dict[str, np.ndarray]) -> list[DataProblem]:
+    """Direction exactly +-1; every physical value plausible in SI units."""
+    problems: list[DataProblem] = []
+    fmt = format_value
+    d = values[DIRECTION]
+    _add_first(problems, DIRECTION, (d != 1.0) & (d != -1.0),
+               lambda i: f"direction must be exactly +1 or -1, got {fmt(d[i])}")
+    x = values[POSITION]
+    _add_first(problems, POSITION, np.abs(x) > MAX_ABS_POSITION_M,
+               lambda i: f"|position| = {fmt(abs(x[i]))} m > {fmt(MAX_ABS_POSITION_M)} m "
+                         "is implausible in SI units (suggests millimetres)")
+    u = values[VOLTAGE]
+    _add_first(problems, VOLTAGE, u < MIN_VOLTAGE_V,
+               lambda i: f"voltage amplitude {fmt(u[i])} V is negative")
+    _add_first(problems, VOLTAGE, u > MAX_VOLTAGE_V,
+               lambda i: f"voltage amplitude {fmt(u[i])} V > {fmt(MAX_VOLTAGE_V)} V "
+                         "is implausible (suggests millivolts)")
+    m = values[LOAD]
+    _add_first(problems, LOAD, np.abs(m) > MAX_ABS_LOAD_KG,
+               lambda i: f"|load| = {fmt(abs(m[i]))} kg > {fmt(MAX_ABS_LOAD_KG)} kg "
+                         "is implausible (suggests grams)")
+    if SPEED in values:
+        v = values[SPEED]
+        _add_first(problems, SPEED, np.abs(v) > MAX_ABS_SPEED_M_S,
+                   lambda i: f"|speed| = {fmt(abs(v[i]))} m/s > {fmt(MAX_ABS_SPEED_M_S)} m/s "
+                             "is implausible in SI units (suggests mm/s)")
+    if FREQUENCY in values:
+        f = values[FREQUENCY]
+        _add_first(problems, FREQUENCY, f < MIN_FREQUENCY_HZ,
+                   lambda i: f"frequency {fmt(f[i])} Hz < {fmt(MIN_FREQUENCY_HZ)} Hz "
+                             "is implausible (suggests kHz)")
+        _add_first(problems, FREQUENCY, f > MAX_FREQUENCY_HZ,
+                   lambda i: f"frequency {fmt(f[i])} Hz > {fmt(MAX_FREQUENCY_HZ)} Hz "
+                             "is implausible")
+    if TEMPERATURE in values:
+        th = values[TEMPERATURE]
+        _add_first(problems, TEMPERATURE, th < MIN_TEMPERATURE_C,
+                   lambda i: f"temperature {fmt(th[i])} degC < {fmt(MIN_TEMPERATURE_C)} degC "
+                             "is implausible")
+        _add_first(problems, TEMPERATURE, th > MAX_TEMPERATURE_C,
+                   lambda i: f"temperature {fmt(th[i])} degC > {fmt(MAX_TEMPERATURE_C)} degC "
+                             "is implausible (kelvin?)")
+    return problems
+
+
+# --------------------------------------------------------------------------
+# The table as a whole
+# --------------------------------------------------------------------------
+
+def _checked_header(df: pd.DataFrame, path) -> list[str]:
+    """Column names as strings; refuses duplicate names, missing required columns and no rows."""
+    columns = [str(c) for c in df.columns]
+    seen: set[str] = set()
+    for c in columns:
+        if c in seen:
+            raise DataFormatError(path, c, None, "duplicate column name")
+        seen.add(c)
+    missing = [c for c in REQUIRED_COLUMNS if c not in seen]
+    if missing:
+        raise DataFormatError(path, missing[0], None,
+                              "missing required column" + _missing_hint(missing, columns))
+    if len(df) == 0:
+        raise DataFormatError(path, None, None, "no data rows")
+    return columns
+
+
+def _missing_hint(missing: list[str], columns: list[str]) -> str:
+    """Hint for a missing column: lists all missing ones and near names."""
+    hint = ""
+    if len(missing) > 1:
+        hint += " (also missing: " + ", ".join(repr(c) for c in missing[1:]) + ")"
+    if len(columns) == 1 and (";" in columns[0] or "\t" in columns[0]):
+        return hint + "; the header looks like it uses ';' or tab as separator, " \
+                      "the format requires ','"
+    stem = missing[0].split("_")[0].lower()
+    near = [c for c in columns if c.lower() == missing[0].lower()
+            or (c.lower().split("_")[0] == stem and c not in COLUMN_SPECS)]
+    if near:
+        hint += "; found " + ", ".join(repr(c) for c in near) + \
+                f": names are case-sensitive and the unit must be SI " \
+                f"[{COLUMN_SPECS[missing[0]].unit}]"
+    return hint
+
+
+def validate_frame(df: pd.DataFrame, path: str | os.PathLike) -> pd.DataFrame:
+    """Check a measurement table against the contract and type its columns.
+
+    Parameters
+    ----------
+    df : pandas.DataFrame
+        Table with (at least) the required columns; values may be strings
+        (as read from a CSV) or numbers.
+    path : str or os.PathLike
+        File named in error messages (the file read or to be written).
+
+    Returns
+    -------
+    pandas.DataFrame
+        A copy with known numeric columns as ``float64`` (``direction`` as
+        ``int64``), ``run`` normalised (see
+        :class:`~l1b2.data.measurements.Measurements`), all other columns
+        untouched, column order unchanged.
+
+    Raises
+    ------
+    DataFormatError
+        On the first breach of the contract; row numbers are 1-based data
+        rows (positional, header excluded).
+    """
+    columns = _checked_header(df, path)
+    out = df.copy()
+    out.columns = columns
+    values, run_col = _parse_values(out, path)
+    problems = _order_problems(values[TIME], run_col) + _range_problems(values)
+    if problems:
+        _raise_first(path, problems)
+    for name, vals in values.items():
+        out[name] = vals.astype(np.int64) if name == DIRECTION else vals
+    out[RUN] = run_col
+    return out
+
+
+# --------------------------------------------------------------------------
+# Rig settings (sidecar fields, keyword arguments)
+# --------------------------------------------------------------------------
+
+def check_setting(name: str, value: Any) -> str | None:
+    """Problem text for a bad value of a rig setting, or ``None`` when acceptable.
+
+    Parameters
+    ----------
+    name : str
+        A sidecar field (:data:`~l1b2.data.columns.SIDECAR_FIELDS`).
+    value : object
+        Its value: ``description`` must be a string, every other setting a
+        positive finite number (plausible in SI units for the drive
+        frequency and the encoder resolution).
+    """
+    if name == "description":
+        return None if isinstance(value, str) else \
+            f"must be a string, got {type(value).__name__}"
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        return f"must be a number, got {value!r}"
+    v = float(value)
+    if not math.isfinite(v) or v <= 0.0:
+        return f"must be a positive finite number, got {format_value(v)}"
+    if name == "drive_frequency_Hz":
+        if v < MIN_FREQUENCY_HZ:
+            return f"{format_value(v)} Hz < {format_value(MIN_FREQUENCY_HZ)} Hz is implausible (suggests kHz)"
+        if v > MAX_FREQUENCY_HZ:
+            return f"{format_value(v)} Hz > {format_value(MAX_FREQUENCY_HZ)} Hz is implausible"
+    if name == "encoder_resolution_m" and v > MAX_ABS_POSITION_M:
+        return f"{format_value(v)} m is implausible in SI units"
+    return None

@@ -1,0 +1,320 @@
+"""Uncertainty and identifiability of a maximum-likelihood fit.
+
+Covariance from the Fisher information ``(J^T R^-1 J)^-1`` at the optimum via
+the SVD of the weighted (whitened), scaled Jacobian (:func:`fisher_uncertainty`).
+Singular values below ``svd_rtol * s_max`` (default 1e-8) mark directions the
+data cannot separate; every parameter with a component > :data:`NULL_TOL` in
+that null space gets ``stderr = inf`` (not determined) -- never a
+pseudo-inverse value. For the other parameters the pseudo-inverse restricted
+to the identified subspace is exact (they are estimable functions).
+Directions with relative singular values below ``weak_rtol`` (1e-5) are
+reported as weak directions; both kinds are described as parameter changes
+per unit change of a pivot parameter (:func:`describe_direction`).
+
+AR(1) inflation
+---------------
+Free-run residuals are autocorrelated when the model is not exact, which
+makes the white-noise Fisher covariance too optimistic. The corrected
+covariance inflates the noise variance of each run by the AR(1) long-run
+variance factor ``(1 + rho)/(1 - rho)``, rho = lag-1 autocorrelation of that
+run's (whitened) residuals, clipped to [0, 0.99] so the correction never
+shrinks an interval (:func:`ar1_factors`). Chosen over a run-block sandwich
+estimator because the sandwich needs many more runs than parameters to be
+stable (72 runs vs 32 parameters at order 8, far fewer runs in small
+experiments), whereas the AR(1) factor uses every sample and is exact for
+slowly varying sensitivities under AR(1) errors. The plain white-noise values
+are kept as ``*_fisher``. Intervals use the t distribution with ``n_eff - k``
+degrees of freedom, ``n_eff = sum_r n_r / f_r`` (AR(1)-effective sample
+count) and k = number of varied identifiable parameters. (One-step residuals
+are MA(1)-like, negatively correlated; with rho clipped at 0 their intervals
+are conservative.)
+
+Information criteria: the log-likelihood at the final (theta, R) (including
+the start-speed term); ``aic = 2k - 2 loglik``, ``bic = k ln(n) - 2 loglik``
+with n the number of residuals and k counting only varied, identifiable
+parameters (noise variances not counted: they are the same for all models
+compared on the same data with the same ``noise`` option).
+
+Extra forces: :func:`extra_confounding` compares each extra parameter's
+stderr with the one it would have if theta were known (variance inflation);
+:func:`alternative_optima` lists other optima of the global search that fit
+almost as well but lie > 3 stderr away (a discrete ambiguity the local
+intervals cannot show).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+from scipy.linalg import qr
+
+__all__ = [
+    "NULL_TOL", "describe_direction", "ar1_factors", "Uncertainty", "fisher_uncertainty", "extra_confounding",
+    "alternative_optima",
+]
+
+#: a parameter with a component above this in a null direction is not identifiable
+NULL_TOL = 1e-6
+
+
+def describe_direction(vec_z, pivot, vidx, sv_scale, names):
+    """A direction in scaled coordinates as physical parameter changes per unit change of ``pivot``."""
+    dtheta = vec_z * sv_scale
+    dtheta = dtheta / dtheta[pivot]
+    zmag = np.abs(vec_z)
+    members = np.flatnonzero(zmag > 1e-3 * zmag.max())
+    members = members[np.argsort(-zmag[members])]
+    terms = [(names[vidx[i]], float(dtheta[i])) for i in members]
+    return {
+        "pivot": names[vidx[pivot]],
+        "direction": terms,
+        "parameters": [nm for nm, _ in terms],
+        "text": " ".join(f"{c:+.4g}*d({nm})" for nm, c in terms),
+    }
+
+
+def ar1_factors(r, run_sel, sample_sel, n_runs):
+    """Lag-1 autocorrelation rho per run of consecutive residuals and the factor ``(1 + rho)/(1 - rho)``.
+
+    ``r``: whitened residuals; ``run_sel`` / ``sample_sel``: run and flat
+    sample index of each residual (consecutive = adjacent samples of one run).
+    rho is clipped to [0, 0.99].
+    """
+    order_ = np.lexsort((sample_sel, run_sel))
+    rs = r[order_]
+    runs_o = run_sel[order_]
+    samp_o = sample_sel[order_]
+    adj = (runs_o[1:] == runs_o[:-1]) & (samp_o[1:] == samp_o[:-1] + 1)
+    num = np.bincount(runs_o[1:][adj], weights=(rs[1:] * rs[:-1])[adj], minlength=n_runs)
+    den = np.bincount(run_sel, weights=r * r, minlength=n_runs)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rho = np.where(den > 0, num / den, 0.0)
+    rho = np.clip(np.nan_to_num(rho), 0.0, 0.99)
+    return rho, (1.0 + rho) / (1.0 - rho)
+
+
+@dataclass
+class Uncertainty:
+    """Joint (theta then phi) uncertainty of a fit; see :func:`fisher_uncertainty`.
+
+    Arrays have the joint length p (fixed entries: NaN; not identifiable:
+    inf on the diagonal, NaN elsewhere). ``jac_ar1`` is the AR(1)-corrected
+    whitened scaled Jacobian (for :func:`extra_confounding`).
+    """
+
+    ar1_rho: np.ndarray
+    ar1_factor: np.ndarray
+    singular_values: np.ndarray
+    cov: np.ndarray
+    cov_fisher: np.ndarray
+    stderr: np.ndarray
+    stderr_fisher: np.ndarray
+    corr: np.ndarray
+    n_eff: float
+    dof: float
+    t_quantile: float
+    ci95: np.ndarray
+    identifiable: np.ndarray
+    k_params: int
+    loglik: float
+    aic: float
+    bic: float
+    unidentifiable: list
+    null_space: np.ndarray
+    weak_directions: list
+    jac_ar1: np.ndarray
+
+
+def _covariance(J, sv_scale, svd_rtol):
+    """Pseudo-inverse covariance of the scaled parameters restricted to the identified subspace."""
+    _, s_, Vt_ = np.linalg.svd(J, full_matrices=False)
+    keep = s_ > svd_rtol * s_[0]
+    Vr = Vt_[keep].T
+    cz = (Vr / s_[keep] ** 2) @ Vr.T
+    return cz * np.outer(sv_scale, sv_scale)
+
+
+def _embed(cv, p_all, vidx, affected_v):
+    """Covariance of the varied entries -> joint matrix (NaN for fixed, inf diagonal for unidentifiable)."""
+    c = np.full((p_all, p_all), np.nan)
+    c[np.ix_(vidx, vidx)] = cv
+    aff = vidx[affected_v]
+    c[aff, :] = np.nan
+    c[:, aff] = np.nan
+    c[aff, aff] = np.inf
+    return c
+
+
+def _directions(Vn, sv, Vt, ident, vidx, sv_scale, names, weak_rtol):
+    """Descriptions of the null directions and of the weakly determined ones."""
+    combos = []
+    if Vn.size:
+        q = Vn.shape[1]
+        # pivoted QR picks q parameters that span the null space best; express
+        # each direction with a unit change of its pivot and zero change of the others
+        _, _, piv = qr(Vn.T, pivoting=True, mode="economic")
+        pv = piv[:q]
+        B = Vn @ np.linalg.inv(Vn[pv, :])
+        for j in range(q):
+            d = describe_direction(B[:, j], pv[j], vidx, sv_scale, names)
+            d["text"] = "predictions unchanged along: " + d["text"]
+            combos.append(d)
+    weak = []
+    rel = sv / sv[0] if sv.size else sv
+    for j in np.flatnonzero(ident & (rel < weak_rtol)):
+        vec = Vt[j]
+        d = describe_direction(vec, int(np.argmax(np.abs(vec))), vidx, sv_scale, names)
+        d["relative_singular_value"] = float(rel[j])
+        d["text"] = f"weakly determined (relative singular value {rel[j]:.2g}): " + d["text"]
+        weak.append(d)
+    return combos, weak
+
+
+def fisher_uncertainty(Jz, r_raw, problem, noise, vidx, sv_scale, theta_hat, varied, names, svd_rtol,
+                       weak_rtol) -> Uncertainty:
+    """Joint uncertainty, identifiability and information criteria at the optimum.
+
+    Parameters
+    ----------
+    Jz : ndarray, shape (n_res, n_varied)
+        Whitened, scaled Jacobian at the optimum (final noise model).
+    r_raw : ndarray
+        Residuals [m/s] at the optimum.
+    problem : LikelihoodProblem
+        For the run and sample index of each residual.
+    noise : NoiseModel
+        The final noise model.
+    vidx, sv_scale : ndarray
+        Varied entries of the joint vector and their scales.
+    theta_hat : ndarray
+        The joint estimate.
+    varied : ndarray of bool
+    names : list of str
+        Joint names.
+    svd_rtol, weak_rtol : float
+        Relative singular-value thresholds for null and weak directions.
+    """
+    p_all = len(names)
+    run_sel = problem.run_sel
+    n_runs = problem.lay.R
+    n_res = r_raw.size
+    r = noise.W(r_raw)  # residuals decorrelated from the start-speed noise
+    rho, f_ar = ar1_factors(r, run_sel, problem.sample_sel, n_runs)
+
+    U, sv, Vt = np.linalg.svd(Jz, full_matrices=False)
+    thr = svd_rtol * (sv[0] if sv.size else 0.0)
+    ident = sv > thr
+    Vn = Vt[~ident].T  # (p_var, q) null directions in z
+    null_norm = np.sqrt(np.sum(Vn * Vn, axis=1)) if Vn.size else np.zeros(vidx.size)
+    affected_v = null_norm > NULL_TOL
+    k_ident = int(np.sum(ident))
+
+    cov_plain = _embed(_covariance(Jz, sv_scale, svd_rtol), p_all, vidx, affected_v)
+    Jc = Jz / np.sqrt(f_ar[run_sel])[:, None]
+    cov_corr = _embed(_covariance(Jc, sv_scale, svd_rtol), p_all, vidx, affected_v)
+    se_plain = np.sqrt(np.diag(cov_plain))
+    se_corr = np.sqrt(np.diag(cov_corr))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov_corr / np.outer(se_corr, se_corr)
+    ok = np.isfinite(se_corr)
+    corr[~ok, :] = np.nan
+    corr[:, ~ok] = np.nan
+    nr = np.bincount(run_sel, minlength=n_runs)
+    n_eff = float(np.sum(nr / f_ar))
+    dof = max(n_eff - k_ident, 1.0)
+    tq = float(stats.t.ppf(0.975, dof))
+    ci = np.column_stack([theta_hat - tq * se_corr, theta_hat + tq * se_corr])
+    ci[~varied] = np.nan
+    identifiable = np.zeros(p_all, dtype=bool)
+    identifiable[vidx[~affected_v]] = True
+    loglik = noise.loglik(r_raw)
+    combos, weak = _directions(Vn, sv, Vt, ident, vidx, sv_scale, list(names), weak_rtol)
+    return Uncertainty(
+        ar1_rho=rho, ar1_factor=f_ar, singular_values=sv.copy(), cov=cov_corr, cov_fisher=cov_plain,
+        stderr=se_corr, stderr_fisher=se_plain, corr=corr, n_eff=n_eff, dof=dof, t_quantile=tq, ci95=ci,
+        identifiable=identifiable, k_params=k_ident, loglik=loglik, aic=2 * k_ident - 2 * loglik,
+        bic=k_ident * math.log(max(n_res, 1)) - 2 * loglik, unidentifiable=combos, null_space=Vn,
+        weak_directions=weak, jac_ar1=Jc,
+    )
+
+
+def extra_confounding(unc: Uncertainty, p_theta, vidx, sv_scale, names_all, svd_rtol) -> dict:
+    """Confounding of each varied extra parameter with theta.
+
+    Its stderr if theta were known (the other extras still varied) against
+    the joint one: ``variance_inflation`` (joint variance / conditional
+    variance; inf when only the joint fit cannot determine it),
+    ``explained_by_theta`` = 1 - 1/inflation and the three ``most_correlated``
+    theta parameters. Returns name -> dict (empty without varied extras).
+    """
+    p = p_theta
+    conf = {}
+    xcols = np.flatnonzero(vidx >= p)
+    if not xcols.size:
+        return conf
+    Je = unc.jac_ar1[:, xcols]
+    _, s_, Vt_ = np.linalg.svd(Je, full_matrices=False)
+    keep = s_ > svd_rtol * (s_[0] if s_.size and s_[0] > 0 else 1.0)
+    keep &= s_ > 0
+    Vr = Vt_[keep].T
+    cz = (Vr / s_[keep] ** 2) @ Vr.T
+    null_e = np.sqrt(np.sum(Vt_[~keep].T ** 2, axis=1)) if (~keep).any() else np.zeros(xcols.size)
+    se_cond = np.sqrt(np.diag(cz)) * sv_scale[xcols]
+    se_cond = np.where(null_e > NULL_TOL, np.inf, se_cond)
+    for jj, c in enumerate(xcols):
+        i = int(vidx[c])
+        nm = names_all[i]
+        se_j = float(unc.stderr[i])
+        sc = float(se_cond[jj])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            vif = se_j**2 / sc**2 if (np.isfinite(sc) and sc > 0) else float("nan")
+        if not np.isfinite(se_j) and np.isfinite(sc):
+            vif = float("inf")
+        cr = unc.corr[i, :p]
+        ok = np.flatnonzero(np.isfinite(cr))
+        top = ok[np.argsort(-np.abs(cr[ok]))][:3]
+        conf[nm] = {
+            "stderr": se_j,
+            "stderr_if_theta_known": sc,
+            "variance_inflation": float(vif),
+            "explained_by_theta": float(1.0 - 1.0 / vif) if np.isfinite(vif) and vif > 0 else (
+                1.0 if vif == np.inf else float("nan")),
+            "most_correlated": [(names_all[j], float(cr[j])) for j in top],
+        }
+    return conf
+
+
+def alternative_optima(results, candidates, best, theta_of, theta_hat, unc: Uncertainty, names_all, alt_tol):
+    """Other converged optima of the global search that fit almost as well but lie far away.
+
+    ``results``: start -> OptimizeResult; ``candidates``: the refined starts;
+    ``best``: the chosen start; ``theta_of``: z -> joint vector. An optimum
+    within ``alt_tol`` log-likelihood units of the best that differs by more
+    than 3 stderr (identifiable entries) is reported (discrete
+    non-identifiability, e.g. the split of C(s) into P and A').
+    """
+    alts = []
+    for i in candidates:
+        if i == best or results[i].status == 0:
+            continue
+        dll = float(results[i].cost - results[best].cost)
+        th_i = theta_of(results[i].x)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            zd = np.abs(th_i - theta_hat) / unc.stderr
+        zd = np.where(unc.identifiable & np.isfinite(zd), zd, 0.0)
+        dup = any(np.allclose(th_i, np.asarray(a["theta"]), rtol=1e-3, atol=1e-12) for a in alts)
+        if dll < alt_tol and zd.max() > 3.0 and not dup:
+            top = np.argsort(-zd)[:6]
+            alts.append(
+                {
+                    "start": int(i),
+                    "delta_loglik": dll,
+                    "theta": th_i.tolist(),
+                    "max_z": float(zd.max()),
+                    "differs_most": [(names_all[j], float(th_i[j]), float(zd[j])) for j in top if zd[j] > 3.0],
+                }
+            )
+    return alts
