@@ -126,6 +126,12 @@ def cmd_rig(args) -> int:
 # parser
 # ---------------------------------------------------------------------------
 
+def _motor_args(p) -> None:
+    p.add_argument("--params", type=Path, help="motor parameter TOML (default: reference motor)")
+    p.add_argument("--motor", help="an embedded motor by name: reference_motor (default), realistic_motor "
+                   "(Coulomb-dominated friction, where Eq. 29 is not exact)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="l1b2", description="L1B2 linear ultrasonic motor: FMUs, co-simulation, "
                                                             "virtual rig, identification")
@@ -135,9 +141,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("fmus", help="build the subsystem FMUs")
     p.add_argument("names", nargs="*", help="Driver Stator Interface Slider (default: all)")
     p.add_argument("--out", type=Path, default=Path("dist/fmus"))
-    p.add_argument("--params", type=Path, help="motor parameter TOML (default: reference motor)")
-    p.add_argument("--motor", help="an embedded motor by name: reference_motor (default), realistic_motor "
-                   "(Coulomb-dominated friction, where Eq. 29 is not exact)")
+    _motor_args(p)
     p.set_defaults(func=cmd_fmus)
 
     p = sub.add_parser("simulate", help="one run of the coupled motor, CSV out")
@@ -155,9 +159,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "per-user cache)")
     p.add_argument("--iterate", action="store_true", help="fixed-point iteration of each macro step")
     p.add_argument("--pure-slip", action="store_true", help="interface in the paper's pure-slip mode")
-    p.add_argument("--params", type=Path, help="motor parameter TOML (default: reference motor)")
-    p.add_argument("--motor", help="an embedded motor by name: reference_motor (default), realistic_motor "
-                   "(Coulomb-dominated friction, where Eq. 29 is not exact)")
+    _motor_args(p)
     p.add_argument("--out", type=Path, required=True, help="CSV file")
     p.add_argument("--plot", type=Path, help="PNG of speed, position and tip amplitude")
     p.set_defaults(func=cmd_simulate)
@@ -182,9 +184,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--record-temperature", action="store_true", help="write the stator temperature column")
     p.add_argument("--no-plots", action="store_true")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.add_argument("--params", type=Path, help="motor parameter TOML (default: reference motor)")
-    p.add_argument("--motor", help="an embedded motor by name: reference_motor (default), realistic_motor "
-                   "(Coulomb-dominated friction, where Eq. 29 is not exact)")
+    _motor_args(p)
     p.set_defaults(func=cmd_rig)
 
     p = sub.add_parser("demo", help="the main job end to end on the reference motor and the virtual rig")
@@ -193,9 +193,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--engine", choices=("fmu", "inprocess"), default="fmu")
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--quiet", action="store_true")
-    p.add_argument("--params", type=Path, help="motor parameter TOML (default: reference motor)")
-    p.add_argument("--motor", help="an embedded motor by name: reference_motor (default), realistic_motor "
-                   "(Coulomb-dominated friction, where Eq. 29 is not exact)")
+    _motor_args(p)
     p.set_defaults(func=cmd_demo)
 
     p = sub.add_parser("identify", help="identify the Eq. 29 predictor from measured data (max. likelihood)")
@@ -218,9 +216,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--identification", type=Path, help="identification.json from `l1b2 identify`")
     p.add_argument("--order", type=int, default=8)
-    p.add_argument("--params", type=Path, help="motor parameter TOML (default: reference motor)")
-    p.add_argument("--motor", help="an embedded motor by name: reference_motor (default), realistic_motor "
-                   "(Coulomb-dominated friction, where Eq. 29 is not exact)")
+    _motor_args(p)
     p.set_defaults(func=cmd_compare)
 
     p = sub.add_parser("close-loop", help="find the missing effect in the residual, add it, report before/after")
@@ -242,9 +238,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--identification", type=Path, help="identification.json whose predictor Predictor.fmu carries")
     p.add_argument("--no-predictor", action="store_true", help="skip Predictor.fmu")
-    p.add_argument("--params", type=Path, help="motor parameter TOML (default: reference motor)")
-    p.add_argument("--motor", help="an embedded motor by name: reference_motor (default), realistic_motor "
-                   "(Coulomb-dominated friction, where Eq. 29 is not exact)")
+    _motor_args(p)
     p.set_defaults(func=cmd_export)
 
     p = sub.add_parser("injections", aliases=["effects"], help="list the effects the rig can inject")
