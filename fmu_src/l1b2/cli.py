@@ -226,8 +226,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--order", type=int, default=8)
     p.add_argument("--folds", type=int, default=5, help="cross-validation folds over runs")
     p.add_argument("--alpha", type=float, default=0.01, help="significance level (Bonferroni over effects)")
-    p.add_argument("--min-gain", type=float, default=0.5, help="smallest held-out share of the residual an "
-                                                                "effect must explain to be added")
+    p.add_argument("--min-gain", type=float, default=0.05, help="smallest linearised held-out share of the "
+                   "residual for a candidate to be shortlisted (refit and cross-validated)")
+    p.add_argument("--min-cv-gain", type=float, default=0.03, help="smallest relative fall of the cross-validated "
+                   "free-run error (re-identified model, folds over runs) for an effect to be added")
+    p.add_argument("--max-rounds", type=int, default=3, help="most effects added, one per round")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--slider-mass", type=float, help="slider mass [kg] (overrides the sidecars)")
     p.add_argument("--no-plots", action="store_true")
@@ -359,9 +362,11 @@ def cmd_close_loop(args) -> int:
     say = (lambda m: None) if args.quiet else (lambda m: print(f"[close-loop] {m}", flush=True))
     result = run_close_loop(args.train, args.test, args.report_dir, order=args.order, k_folds=args.folds,
                             alpha=args.alpha, min_gain=args.min_gain, seed=args.seed,
+                            max_rounds=args.max_rounds, min_cv_gain=args.min_cv_gain,
                             slider_mass_kg=args.slider_mass, plots_on=not args.no_plots, progress=say)
     d = result.diagnosis
     print(f"diagnosis: {d['message']}" + (f"; traced to {', '.join(d['traced_to'])}" if d["traced_to"] else ""))
+    print(result.rounds_table())
     print(result.before_after_table())
     print(f"wrote {Path(args.report_dir) / 'report.json'} and report.md ({result.wall_time_s} s)")
     return 0

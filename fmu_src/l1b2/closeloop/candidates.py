@@ -11,7 +11,8 @@ speed, so a free-run prediction on new data needs no measurement).
 Candidates come from a :class:`CandidateLibrary`, a callable
 ``(ctx, df_train) -> list[CandidateForce]`` that the close-the-loop estimator
 takes as an argument; libraries combine with ``+`` or :func:`combine`. The
-default, :func:`default_library`, is ``named_library() + generic_library()``.
+default, :func:`default_library`, is ``named_library() + generic_library()``; the estimator uses
+:func:`full_library`, which adds the two-regressor candidates (:func:`interaction_candidates`).
 
 Named families (:func:`named_library`; physics, regressor):
 
@@ -77,6 +78,12 @@ class CandidateForce:
     features: Callable[[pd.DataFrame], np.ndarray] = field(repr=False, compare=False)
     description: str = ""
     generic: bool = False
+    also: tuple = ()   #: further regressors of an interaction (the report's traced names)
+
+    @property
+    def regressors(self) -> tuple:
+        """Every regressor the candidate depends on (``regressor`` first)."""
+        return (self.regressor,) + tuple(self.also)
 
     @property
     def label(self) -> str:
@@ -198,6 +205,75 @@ def named_candidates(ctx: Context, df_train: pd.DataFrame) -> list[CandidateForc
     return out
 
 
+def interaction_candidates(ctx: Context, df_train: pd.DataFrame) -> list[CandidateForce]:
+    """Effects of two regressors: named physical forms, and a generic low-order tensor product otherwise.
+
+    Named (physics gives the form; ``d`` the direction, ``m`` the signed load,
+    ``g`` gravity, ``x`` the scaled position):
+
+    * ``load_slope_voltage`` (load, voltage): the load's effect on speed depends
+      on the drive (slip friction whose speed slope changes with V0):
+      ``dF = -a d m g (V0 - V_ref)/V_ref``;
+    * ``damping_voltage`` (speed, voltage): damping that changes with the drive
+      amplitude: ``dF = -a (v/v_ref) (V0 - V_ref)/V_ref``;
+    * ``position_load`` (position, load): the load's effect varies along the
+      bar (preload profile, pulley geometry): ``dF = -d m g (a x + b x^2)``.
+
+    Generic: ``smooth_<A>_x_<B>``, the products of two regressors' linear and
+    quadratic terms (scaled to [-1, 1]; direction: itself) over TRAIN's ranges.
+    """
+    s0, s1 = ctx.position_range
+    V_ref = float(np.median(_V(df_train)))
+
+    def dv(df):
+        return (_V(df) - V_ref) / V_REF
+
+    def wload(df):
+        return _d(df) * df[dataio.LOAD].to_numpy(float) * G_M_S2
+
+    def xpos(df):
+        return 2 * _scaled(df[dataio.POSITION].to_numpy(float), s0, s1) - 1
+
+    out = [
+        CandidateForce("load_slope_voltage", "load", "", ("load_V_gain",), ("1",),
+                       lambda df: (-wload(df) * dv(df))[:, None],
+                       "the load's effect on the speed depends on the drive voltage", also=("voltage",)),
+        CandidateForce("damping_voltage", "speed", "", ("damping_V_N",), ("N",),
+                       lambda df: (-_drive_pred(ctx, df) / SPEED_REF * dv(df))[:, None],
+                       "damping of the slider that changes with the drive voltage", also=("voltage",)),
+        CandidateForce("position_load", "position", "", ("load_pos_1", "load_pos_2"), ("1", "1"),
+                       lambda df: np.column_stack([-wload(df) * xpos(df), -wload(df) * xpos(df) ** 2]),
+                       "the load's effect varies along the bar", also=("load",)),
+    ]
+    t0, t1 = ctx.time_range
+    V_lo, V_hi = float(_V(df_train).min()), float(_V(df_train).max())
+    L_abs = float(np.max(np.abs(df_train[dataio.LOAD].to_numpy(float)))) or 1.0
+    vp = np.abs(ctx.baseline_free_run(df_train))
+    v_lo, v_hi = float(np.min(vp)), float(np.max(vp))
+
+    def lin_quad(u):
+        return np.column_stack([u, u ** 2])
+    one = {
+        "time": lambda df: lin_quad(2 * _scaled(df[dataio.TIME].to_numpy(float), t0, t1) - 1),
+        "position": lambda df: lin_quad(xpos(df)),
+        "direction": lambda df: _d(df)[:, None],
+        "load": lambda df: lin_quad(_d(df) * df[dataio.LOAD].to_numpy(float) / L_abs),
+        "voltage": lambda df: lin_quad(2 * _scaled(_V(df), V_lo, V_hi) - 1),
+        "speed": lambda df: lin_quad(2 * _scaled(np.abs(ctx.baseline_free_run(df)), v_lo, v_hi) - 1),
+    }
+    names = list(one)
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            def feat(df, a=a, b=b):
+                A, B = one[a](df), one[b](df)
+                return np.column_stack([A[:, j] * B[:, k] for j in range(A.shape[1]) for k in range(B.shape[1])])
+            k = feat(df_train.iloc[:2]).shape[1]
+            out.append(CandidateForce(f"smooth_{a}_x_{b}", a, "", tuple(f"smooth_{a}_x_{b}_{j}" for j in range(k)),
+                                      ("N",) * k, feat, f"generic smooth interaction of {a} and {b}",
+                                      generic=True, also=(b,)))
+    return out
+
+
 def generic_candidates(ctx: Context, df_train: pd.DataFrame) -> list[CandidateForce]:
     """Fallback smooth terms, one per regressor available in the data."""
     t0, t1 = ctx.time_range
@@ -303,6 +379,16 @@ def generic_library() -> CandidateLibrary:
     return CandidateLibrary(generic_candidates, name="generic")
 
 
+def interaction_library() -> CandidateLibrary:
+    """Effects of two regressors, named and generic (:func:`interaction_candidates`)."""
+    return CandidateLibrary(interaction_candidates, name="interactions")
+
+
 def default_library() -> CandidateLibrary:
-    """``named_library() + generic_library()``: what the close-the-loop estimator uses unless told otherwise."""
+    """``named_library() + generic_library()``: the one-regressor candidates."""
     return named_library() + generic_library()
+
+
+def full_library() -> CandidateLibrary:
+    """``default_library() + interaction_library()``: what the close-the-loop estimator uses unless told otherwise."""
+    return default_library() + interaction_library()

@@ -15,24 +15,35 @@ Procedure (TEST is never used for fitting or choosing):
 2. **Residual analysis** on TRAIN (:mod:`l1b2.closeloop.residuals`): drive-coordinate
    free-run residual; whiteness per run; spectrum over position; evidence per
    regressor by cross-validation over runs, traced by forward selection.
-3. **Candidates** from the library (:mod:`l1b2.closeloop.candidates`; default:
-   every named family over its shape grid and a generic smooth term per
-   regressor), each scored exactly against the fixed baseline
-   (:mod:`l1b2.closeloop.selection`: held-out gain over runs, run-level
-   Wilcoxon p-value, AIC/BIC).
-4. **Selection** (:func:`l1b2.closeloop.selection.choose`): significant when
-   the held-out gain is at least ``min_gain``, the run-level p-value below
-   ``alpha`` / number of families and the AIC improves; the most parsimonious
-   significant candidate within ``parsimony`` of the best gain is chosen.
-   Otherwise: "no significant missing effect" and the baseline is kept.
-5. **Extended model**: baseline + chosen candidate, re-identified jointly by
-   maximum likelihood (warm start from the baseline); both models are
-   reported on TEST.
+3. **Rounds** (at most ``max_rounds``), each against the *current* model
+   (the baseline plus the effects accepted so far):
+
+   a. *shortlist*: every candidate of the library (default
+      :func:`l1b2.closeloop.candidates.full_library`; families already added
+      excluded) scored exactly against the fixed current model
+      (:mod:`l1b2.closeloop.selection`: linearised held-out gain over runs,
+      run-level Wilcoxon p-value, AIC); the best of each family passing
+      ``min_gain``, ``alpha`` / number of families and an AIC improvement,
+      the best ``shortlist`` of them;
+   b. *acceptance* (:mod:`l1b2.closeloop.acceptance`): current model and
+      current model + candidate re-identified on ``refit_folds`` - 1 run folds
+      (warm start, bounded budget) and predicting the held-out fold in free
+      run; accepted when the pooled held-out sum of squares falls by
+      ``min_cv_gain`` in most folds; the most parsimonious within
+      ``parsimony`` of the best CV gain is added;
+   c. *joint re-identification* of the model with every accepted effect
+      (warm start).
+
+   The rounds stop when no shortlisted candidate is accepted. Otherwise
+   "no significant missing effect" and the baseline is kept.
+4. Both the baseline and the final model are reported on TEST, with the
+   metrics after every round.
 """
 
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -41,10 +52,12 @@ from ..data import measurements as dataio
 from ..data.metrics import report_metrics
 from ..ident.estimator import ExtraForces, PredictorIdentifier
 from . import residuals as res
-from .candidates import CandidateSource, Context, default_library
+from .candidates import CandidateSource, Context, full_library
+from .acceptance import (DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT_FOLDS, DEFAULT_REFIT_NFEV, EffectSet, RefitCV,
+                         accepts, fold_errors, fold_start_phi, refit, stratified_folds)
 from .result import CloseLoopResult, ResidualAnalysis
-from .selection import (DEFAULT_ALPHA, DEFAULT_MIN_GAIN, DEFAULT_PARSIMONY, Choice, Score, best_per_family,
-                        choose, score_candidates)
+from .selection import (DEFAULT_ALPHA, DEFAULT_PARSIMONY, SHORTLIST_MIN_GAIN, Score, best_per_family, design,
+                        score_candidates, shortlist, significance_level)
 
 
 def _quiet(msg: str) -> None:
@@ -63,18 +76,29 @@ class CloseLoop:
     alpha : float
         Significance level, Bonferroni-corrected over the candidate families.
     min_gain : float
-        Smallest held-out share of the residual a candidate must explain.
+        Smallest linearised held-out share of the residual for a candidate to be shortlisted.
     parsimony : float
-        Candidates within this share of the best gain count as equally good.
+        Accepted candidates within this share of the best CV gain count as equally good
+        (named before generic, then fewer parameters).
     seed : int
         Seed of the folds and of the baseline's multi-start.
     n_starts : int
         Multi-start local searches of the baseline identification.
     library : CandidateSource, optional
         Candidate library ``(ctx, df_train) -> list[CandidateForce]``;
-        default :func:`l1b2.closeloop.candidates.default_library`.
+        default :func:`l1b2.closeloop.candidates.full_library` (one-regressor and two-regressor candidates).
     progress : callable, optional
         Called with a short message at the start of each stage.
+    max_rounds : int
+        Most effects added (one per round).
+    shortlist : int
+        Candidates (best of their family by linearised gain) refit and cross-validated per round.
+    refit_folds : int
+        Folds over runs of the cross-validated refit (stratified by direction and voltage).
+    min_cv_gain : float
+        Smallest relative fall of the cross-validated free-run sum of squares (in most folds) to add an effect.
+    refit_nfev, final_nfev : int
+        Function evaluations of each fold's warm refit and of the joint re-identification after a round.
 
     Attributes
     ----------
@@ -83,8 +107,11 @@ class CloseLoop:
     """
 
     def __init__(self, *, order: int = 8, k_folds: int = 5, alpha: float = DEFAULT_ALPHA,
-                 min_gain: float = DEFAULT_MIN_GAIN, parsimony: float = DEFAULT_PARSIMONY, seed: int = 0,
-                 n_starts: int = 4, library: CandidateSource | None = None, progress=None):
+                 min_gain: float = SHORTLIST_MIN_GAIN, parsimony: float = DEFAULT_PARSIMONY, seed: int = 0,
+                 n_starts: int = 4, library: CandidateSource | None = None, progress=None, max_rounds: int = 3,
+                 shortlist: int = 2, refit_folds: int = DEFAULT_REFIT_FOLDS,
+                 min_cv_gain: float = DEFAULT_MIN_CV_GAIN, refit_nfev: int = DEFAULT_REFIT_NFEV,
+                 final_nfev: int = 60):
         self.order = order
         self.k_folds = k_folds
         self.alpha = alpha
@@ -94,11 +121,19 @@ class CloseLoop:
         self.n_starts = n_starts
         self.library = library
         self.progress = progress
+        self.max_rounds = max_rounds
+        self.shortlist = shortlist
+        self.refit_folds = refit_folds
+        self.min_cv_gain = min_cv_gain
+        self.refit_nfev = refit_nfev
+        self.final_nfev = final_nfev
 
     def get_params(self) -> dict:
         """The settings given to ``__init__``."""
         return {k: getattr(self, k) for k in ("order", "k_folds", "alpha", "min_gain", "parsimony", "seed",
-                                              "n_starts", "library", "progress")}
+                                              "n_starts", "library", "progress", "max_rounds", "shortlist",
+                                              "refit_folds", "min_cv_gain", "refit_nfev",
+                                              "final_nfev")}
 
     def __repr__(self) -> str:
         args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items() if k != "progress")
@@ -106,7 +141,7 @@ class CloseLoop:
 
     # -- the job -------------------------------------------------------------
     def fit(self, train: dataio.Measurements, test: dataio.Measurements | None = None) -> CloseLoop:
-        """Identify, diagnose, extend and re-identify on ``train``; report on ``train`` and ``test``.
+        """Identify, diagnose, extend round by round and re-identify on ``train``; report on ``train`` and ``test``.
 
         ``train``/``test`` are :class:`l1b2.data.measurements.Measurements`
         (``load_measurements(path)``); the slider mass is ``train``'s.
@@ -128,70 +163,113 @@ class CloseLoop:
         base.fit(dtr, slider_mass_kg=m_s, mask=mask_tr)
         v_tr = base.predict_free_run(dtr)
         v_te = base.predict_free_run(dte) if dte is not None else None
-        baseline = {"train": report_metrics(dtr, base.predict_one_step(dtr), v_tr),
-                    "test": report_metrics(dte, base.predict_one_step(dte), v_te) if dte is not None else None}
+        baseline = _metrics(base, dtr, dte)
 
         say("residual analysis on TRAIN")
         analysis = analyse_residuals(dtr, v_tr, mask_tr, alpha=self.alpha, k=self.k_folds, seed=self.seed)
-
-        say("scoring candidate effects")
         ctx = candidate_context(base.predict_free_run, m_s, dtr, mask_tr, analysis.peak)
-        library = self.library if self.library is not None else default_library()
-        scores = score_candidates(library(ctx, dtr), analysis.residual, dtr, mask_tr, base.params_, m_s,
-                                  v_pred=v_tr, k=self.k_folds, seed=self.seed)
-        choice = choose(scores, alpha=self.alpha, min_gain=self.min_gain, parsimony=self.parsimony)
+        library = self.library if self.library is not None else full_library()
+        pool = library(ctx, dtr)
+        it = self._iterate(base, pool, dtr, dte, mask_tr, m_s, baseline, say)
 
-        ext = extended = ext_params = v_te_ext = None
-        if choice.chosen is not None:
-            say(f"extended model: re-identifying with {choice.chosen.candidate.label}")
-            ext = self._extend(base, choice.chosen, dtr, m_s, mask_tr)
-            v_te_ext = ext.predict_free_run(dte) if dte is not None else None
-            extended = {"train": report_metrics(dtr, ext.predict_one_step(dtr), ext.predict_free_run(dtr)),
-                        "test": (report_metrics(dte, ext.predict_one_step(dte), v_te_ext)
-                                 if dte is not None else None)}
-            c = choice.chosen.candidate
-            ext_params = {n: {"value": float(ext.extra_params_[n]), "stderr": float(ext.extra_stderr_[n]),
-                              "ci95": [float(x) for x in ext.extra_ci95_[n]], "unit": u}
-                          for n, u in zip(c.names, c.units)}
-
+        ext = it.model if it.effects.candidates else None
+        v_te_ext = ext.predict_free_run(dte) if (ext is not None and dte is not None) else None
+        extended = it.rounds[-1]["metrics"] if ext is not None else None
+        ext_params = _parameters(ext, it.effects) if ext is not None else None
+        first = it.first_scores or []
+        chosen = it.chosen
         self.result_ = CloseLoopResult(
-            baseline=baseline, diagnosis=self._diagnosis(choice, scores, analysis), scores=scores,
-            significant=choice.significant, chosen=choice.chosen, extended=extended,
+            baseline=baseline, diagnosis=self._diagnosis(it, first, analysis, ext_params), scores=first,
+            significant=it.significant, chosen=chosen, extended=extended,
             extended_parameters=ext_params, baseline_parameters=base.to_dict()["parameters"],
             data=_data_summary(train, test), wall_time_s=round(time.perf_counter() - t_start, 2),
             baseline_model=base, extended_model=ext, analysis=analysis, train_df=dtr, test_df=dte,
-            test_free_run_before=v_te, test_free_run_after=v_te_ext)
+            test_free_run_before=v_te, test_free_run_after=v_te_ext, rounds=it.rounds)
         return self
 
-    def _extend(self, base, chosen: Score, dtr: pd.DataFrame, m_s: float, mask: np.ndarray):
-        """Baseline + the chosen candidate, re-identified jointly (warm start from the baseline and phi)."""
-        c = chosen.candidate
-        extra = ExtraForces(names=c.names, units=c.units, features=c.features, start=tuple(chosen.phi),
-                            description=c.description)
-        ext = PredictorIdentifier(order=self.order, criterion="free_run", fixed="recommended", n_starts=1,
-                                  seed=self.seed, extra=extra, init=base.params_, init_extra=np.asarray(chosen.phi))
-        ext.fit(dtr, slider_mass_kg=m_s, mask=mask)
-        return ext
+    def _iterate(self, base, pool, dtr, dte, mask, m_s, baseline, say) -> _Iteration:
+        """Rounds of linearised shortlist -> cross-validated refit -> acceptance -> joint re-identification."""
+        it = _Iteration(model=base, effects=EffectSet(),
+                        rounds=[{"round": 0, "added": None, "metrics": baseline}])
+        folds = stratified_folds(dtr, self.refit_folds, self.seed)
+        cur_err = None
+        for rnd in range(1, self.max_rounds + 1):
+            cur = it.model
+            v_cur = cur.predict_free_run(dtr)
+            r = res.drive_residual(dtr, v_cur)
+            cands = [c for c in pool if c.family not in it.effects.families]
+            say(f"round {rnd}: scoring {len(cands)} candidate effects (linearised)")
+            scores = score_candidates(cands, r, dtr, mask, cur.params_, m_s, v_pred=v_cur, k=self.k_folds,
+                                      seed=self.seed)
+            level = significance_level(scores, self.alpha)
+            short = shortlist(scores, level=level, min_gain=self.min_gain, size=self.shortlist)
+            if rnd == 1:
+                it.first_scores, it.level = scores, level
+            if not short:
+                it.trials.append([])
+                break
+            if cur_err is None:
+                say(f"round {rnd}: cross-validating the current model over {len(folds)} run folds")
+                cur_err = fold_errors(dtr, mask, m_s, folds, cur.params_, it.effects, order=self.order,
+                                      seed=self.seed, max_nfev=self.refit_nfev)
+            trials = []
+            for s in short:
+                say(f"round {rnd}: cross-validating the refit with {s.candidate.label}")
+                y, A, S, runs_m = design(s.candidate, r, dtr, mask, cur.params_, m_s, v_pred=v_cur)
+                fphi = fold_start_phi(S, A, y, runs_m, folds)
+                err = fold_errors(dtr, mask, m_s, folds, cur.params_, it.effects.add(s.candidate, s.phi),
+                                  order=self.order, seed=self.seed, max_nfev=self.refit_nfev, fold_phi=fphi)
+                trials.append(RefitCV(s.candidate, cur_err, err, s.cv_gain, s.phi))
+            it.trials.append(trials)
+            ok = [t for t in trials if accepts(t, min_gain=self.min_cv_gain)]
+            if not ok:
+                break
+            best_gain = max(t.gain for t in ok)
+            ok.sort(key=lambda t: (t.candidate.generic, t.candidate.n_params, -t.gain))
+            pick = next(t for t in ok if t.gain >= self.parsimony * best_gain)
+            if rnd == 1:
+                it.chosen = next(s for s in short if s.candidate is pick.candidate)
+                it.significant = [s for s in short if any(t.candidate is s.candidate for t in ok)]
+            say(f"round {rnd}: adding {pick.candidate.label}; re-identifying jointly")
+            effects = it.effects.add(pick.candidate, pick.phi)
+            model = refit(dtr, mask, m_s, cur.params_, effects, order=self.order, seed=self.seed,
+                          max_nfev=self.final_nfev, max_outer=3)
+            it.model, it.effects = model, effects.with_phi(model.phi_)
+            cur_err = None
+            it.rounds.append({"round": rnd, "added": pick.candidate.label, "effect": pick.candidate.family,
+                              "regressors": list(pick.candidate.regressors), "cv": pick.to_dict(),
+                              "metrics": _metrics(model, dtr, dte)})
+        return it
 
-    def _diagnosis(self, choice: Choice, scores: list[Score], a: ResidualAnalysis) -> dict:
+    def _diagnosis(self, it: _Iteration, scores: list[Score], a: ResidualAnalysis, ext_params) -> dict:
         """The report's ``diagnosis`` section."""
-        chosen = choice.chosen
-        c = chosen.candidate if chosen is not None else None
-        traced_to = [c.regressor] + [r for r in a.traced if r != c.regressor] if c is not None else []
+        effects = it.effects.candidates
+        c = effects[0] if effects else None
+        traced_to = []
+        for e in effects:
+            traced_to += [r for r in e.regressors if r not in traced_to]
+        if effects:
+            traced_to += [r for r in a.traced if r not in traced_to]
         w = a.whiteness
+        labels = "; ".join(f"{e.label} ({', '.join(e.regressors)})" for e in effects)
         return {
             "significant": c is not None,
             "traced_to": traced_to,
             "effect": c.family if c else None,
             "effect_shape": c.shape if c else None,
             "effect_description": c.description if c else None,
-            "message": f"missing effect: {c.label} ({c.regressor})" if c else "no significant missing effect",
+            "effects": [_effect_record(e, rec, ext_params) for e, rec in zip(effects, it.rounds[1:])],
+            "message": (f"missing effect{'s' if len(effects) > 1 else ''}: {labels}" if c
+                        else "no significant missing effect"),
             "residual_trace": a.traced,
             "candidates": [s.to_dict() for s in best_per_family(scores)],
             "n_candidates_scored": len(scores),
-            "significance_level": choice.level,
+            "significance_level": it.level,
+            "refit_trials": [[t.to_dict() for t in rnd] for rnd in it.trials],
             "rules": {"min_gain": self.min_gain, "alpha": self.alpha, "parsimony": self.parsimony,
-                      "k_folds": self.k_folds},
+                      "k_folds": self.k_folds, "shortlist": self.shortlist,
+                      "refit_folds": self.refit_folds, "min_cv_gain": self.min_cv_gain,
+                      "max_rounds": self.max_rounds},
             "regressor_evidence": [[e.to_dict() for e in rnd] for rnd in a.rounds],
             "whiteness": {"runs": len(w),
                           "share_runs_ljung_box_p_below_0.05": (float(np.mean([x["ljung_box_p"] < 0.05 for x in w]))
@@ -199,6 +277,43 @@ class CloseLoop:
                           "median_rho1": float(np.median([x["rho1"] for x in w])) if w else None},
             "position_spectrum_peak": a.peak,
         }
+
+
+@dataclass
+class _Iteration:
+    """State of the rounds: the current model, its effects, per-round records."""
+
+    model: object
+    effects: EffectSet
+    rounds: list
+    trials: list = field(default_factory=list)
+    first_scores: list | None = None
+    chosen: Score | None = None
+    significant: list = field(default_factory=list)
+    level: float = float("nan")
+
+
+def _metrics(model, dtr, dte) -> dict:
+    return {"train": report_metrics(dtr, model.predict_one_step(dtr), model.predict_free_run(dtr)),
+            "test": (report_metrics(dte, model.predict_one_step(dte), model.predict_free_run(dte))
+                     if dte is not None else None)}
+
+
+def _parameters(model, effects: EffectSet) -> dict:
+    """Every added parameter of the final model: value, stderr, 95 % interval, unit."""
+    return {n: {"value": float(model.extra_params_[n]), "stderr": float(model.extra_stderr_[n]),
+                "ci95": [float(x) for x in model.extra_ci95_[n]], "unit": u}
+            for c in effects.candidates for n, u in zip(c.names, c.units)}
+
+
+def _effect_record(c, rec: dict, params: dict | None) -> dict:
+    cv = rec.get("cv", {})
+    return {"round": rec["round"], "effect": c.family, "label": c.label, "shape": c.shape,
+            "regressors": list(c.regressors), "description": c.description, "generic": c.generic,
+            "parameters": {n: (params or {}).get(n) for n in c.names},
+            "cv_gain": cv.get("cv_gain"), "cv_free_run_nrmse_before": cv.get("cv_free_run_nrmse_current"),
+            "cv_free_run_nrmse_after": cv.get("cv_free_run_nrmse_refit"),
+            "folds_improved": cv.get("folds_improved")}
 
 
 def close_loop(train: dataio.Measurements, test: dataio.Measurements | None = None, **settings) -> CloseLoopResult:

@@ -88,6 +88,7 @@ class CloseLoopResult:
     test_df: pd.DataFrame | None = field(default=None, repr=False)
     test_free_run_before: np.ndarray | None = field(default=None, repr=False)
     test_free_run_after: np.ndarray | None = field(default=None, repr=False)
+    rounds: list = field(default_factory=list)   #: per round: what was added, its CV result, the metrics after
 
     # -- views ---------------------------------------------------------------
     @property
@@ -119,12 +120,17 @@ class CloseLoopResult:
         """Plain-text table of the error metrics before and after (TEST and TRAIN)."""
         return before_after_table({"baseline": self.baseline, "extended": self.extended})
 
+    def rounds_table(self) -> str:
+        """Plain-text table: per round, the effect added and the free-run nrmse (TRAIN, TEST) after it."""
+        return rounds_table(self.to_dict())
+
     def to_dict(self) -> dict:
         """The report (``report.json`` without ``figures``), strict JSON: non-finite numbers are None."""
         return _jsonable({
             "baseline": self.baseline,
             "diagnosis": self.diagnosis,
             "extended": self.extended,
+            "rounds": self.rounds,
             "extended_parameters": self.extended_parameters,
             "baseline_parameters": self.baseline_parameters,
             "data": self.data,
@@ -209,6 +215,26 @@ def before_after_table(report: dict) -> str:
     return "\n".join(lines)
 
 
+def rounds_table(report: dict) -> str:
+    """Per round: the effect added, its cross-validated (refit) gain and the free-run nrmse before/after it."""
+    def f(x):
+        return f"{x:.2%}" if x is not None else "-"
+
+    rounds = report.get("rounds") or []
+    lines = [f"{'round':6s}{'added':44s}{'CV gain':>9s}{'train before':>14s}{'train after':>13s}"
+             f"{'test before':>13s}{'test after':>12s}"]
+    for prev, rnd in zip(rounds[:-1], rounds[1:]):
+        def nr(rec, part):
+            m = rec["metrics"].get(part)
+            return m["free_run"]["nrmse"] if m else None
+        lines.append(f"{rnd['round']:<6d}{(rnd['added'] or '-')[:43]:44s}{f(rnd['cv'].get('cv_gain')):>9s}"
+                     f"{f(nr(prev, 'train')):>14s}{f(nr(rnd, 'train')):>13s}{f(nr(prev, 'test')):>13s}"
+                     f"{f(nr(rnd, 'test')):>12s}")
+    if len(rounds) <= 1:
+        lines.append("(no round added an effect: the baseline is kept)")
+    return "\n".join(lines)
+
+
 def markdown_report(rep: dict) -> str:
     """``report.md`` from a report dict (:meth:`CloseLoopResult.to_dict`, plus ``figures`` when saved)."""
     d = rep["diagnosis"]
@@ -222,9 +248,25 @@ def markdown_report(rep: dict) -> str:
         lines += [f"* traced to: {', '.join(d['traced_to'])}",
                   f"* effect: `{d['effect']}` {d['effect_shape'] or ''} — {d['effect_description']}"]
     else:
-        lines += ["* the baseline is kept (no candidate met all of: held-out gain >= "
-                  f"{d['rules']['min_gain']:.0%}, run-level p < {d['significance_level']:.2g}, AIC improvement)"]
-    lines += ["", "## Error before and after", "", "```", before_after_table(rep), "```", "",
+        lines += ["* the baseline is kept (no shortlisted candidate's re-identified model lowered the "
+                  f"cross-validated free-run error by >= {d['rules'].get('min_cv_gain', 0):.0%} in most run folds)"]
+    for e in d.get("effects", [])[1:]:
+        lines.append(f"* then (round {e['round']}): `{e['label']}` ({', '.join(e['regressors'])}) — "
+                     f"{e['description']}")
+    lines += ["", "## Rounds (free-run nrmse before/after each added effect; CV gain = held-out free-run "
+              "sum of squares of the re-identified model over run folds)", "", "```", rounds_table(rep), "```"]
+    for i, trials in enumerate(d.get("refit_trials", []), 1):
+        if trials:
+            lines += ["", f"Round {i}: candidates refit and cross-validated:", "",
+                      "| candidate | regressors | linearised gain | CV nrmse current | CV nrmse refit | CV gain "
+                      "| folds improved |", "|---|---|---|---|---|---|---|"]
+            for t in trials:
+                lines.append(f"| {t['label']} | {', '.join(t['regressors'])} | {t['linearised_gain']:.1%} | "
+                             f"{t['cv_free_run_nrmse_current']:.2%} | "
+                             f"{t['cv_free_run_nrmse_refit'] if t['cv_free_run_nrmse_refit'] is None else format(t['cv_free_run_nrmse_refit'], '.2%')}"
+                             f" | {t['cv_gain'] if t['cv_gain'] is None else format(t['cv_gain'], '.1%')} | "
+                             f"{t['folds_improved']}/{t['folds']} |")
+    lines += ["", "## Error before and after (all rounds)", "", "```", before_after_table(rep), "```", "",
               "## Candidates (best of each family, by held-out gain)", "",
               "| effect | regressor | params | held-out gain | p (runs) | runs improved | dAIC | dBIC |",
               "|---|---|---|---|---|---|---|---|"]

@@ -41,6 +41,8 @@ from .candidates import CandidateForce
 DEFAULT_MIN_GAIN = 0.5
 DEFAULT_ALPHA = 0.01
 DEFAULT_PARSIMONY = 0.9
+#: smallest linearised held-out gain for the shortlist of the cross-validated refit
+SHORTLIST_MIN_GAIN = 0.05
 
 
 # ---------------------------------------------------------------------------
@@ -186,6 +188,22 @@ class FoldSolver:
         s1 = np.array([sse1[k] for k in keys])
         gain = 1 - s1.sum() / s0.sum() if s0.sum() > 0 else 0.0
         return float(gain), (s0 - s1) / max(s0.mean(), 1e-300)
+
+
+def design(candidate: CandidateForce, r_drive, df, mask, params, m_s, *, v_pred):
+    """``(y, A, S, runs)`` on the masked samples: residual, intercept + nuisance responses, candidate response."""
+    idx = np.flatnonzero(mask)
+    N = linear_response(params, df, m_s, nuisance_forces(params, df, v_pred))[idx]
+    F = np.asarray(candidate.features(df), float).reshape(len(df), -1)
+    S = linear_response(params, df, m_s, F)[idx]
+    A = np.column_stack([np.ones(len(idx)), N])
+    return r_drive[idx], A, S, df[dataio.RUN].to_numpy()[idx]
+
+
+def shortlist(scores: list[Score], *, level: float, min_gain: float, size: int) -> list[Score]:
+    """The best candidate of each family passing the linearised screen (gain, run-level p, AIC), best ``size``."""
+    ok = [s for s in best_per_family(scores) if s.cv_gain >= min_gain and s.p_value < level and s.delta_aic < 0]
+    return ok[:size]
 
 
 def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5, seed=0) -> list[Score]:
