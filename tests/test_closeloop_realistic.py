@@ -142,3 +142,25 @@ PAIRS = [(("pulley_friction", "drive_saturation"), 5), (("direction_asymmetry", 
 def test_realistic_two_effects(effects, seed):
     res, truth = _run(effects, seed)
     _check_effects(res, truth, seed, 3)
+
+
+def test_measurement_chain_filter_is_found_from_position_and_speed_alone():
+    # reference: issue 11 (measurement chain): a first-order low-pass on the speed column is detected by
+    # comparing it with the position's derivative per run, cross-validated over runs; a clean column is not
+    from l1b2.closeloop.chain import speed_channel
+    from l1b2.rig.experiment import lowpass_speed
+    m = load_measurements(_dir((), 21) / "train.csv")
+    mask = np.array(m.mask)
+    assert not speed_channel(m.df, mask)["accepted"]
+    tau, dt = 5e-3, 1e-3
+    ch = speed_channel(lowpass_speed(m.df, tau), mask)
+    assert ch["accepted"] and ch["cv_gain"] > 0.9
+    assert ch["filter"].a == pytest.approx(np.exp(-dt / tau), abs=0.02)
+    assert ch["filter"].to_dict()["dc_gain"] == pytest.approx(1.0, abs=0.02)
+
+
+@pytest.mark.slow
+def test_realistic_measurement_chain_effect():
+    res, truth = _run(("speed_lowpass",), 8)
+    _check_effects(res, truth, 8, 2)
+    assert res.diagnosis["measurement_chain"]["accepted"]

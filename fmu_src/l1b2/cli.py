@@ -395,8 +395,8 @@ def cmd_export(args) -> int:
 
 
 def cmd_injections(args) -> int:
-    from .rig.experiment import INJECTIONS
-    for e in INJECTIONS.values():
+    from .rig.experiment import DATA_INJECTIONS, INJECTIONS
+    for e in list(INJECTIONS.values()) + list(DATA_INJECTIONS.values()):
         params = ", ".join(f"{k}={v:g}" for k, v in e.params.items())
         print(f"{e.name}  [{e.regressor}]\n    {e.description}\n    {params}")
     return 0

@@ -51,6 +51,7 @@ import pandas as pd
 from ..data import measurements as dataio
 from ..data.metrics import report_metrics
 from ..ident.estimator import ExtraForces, PredictorIdentifier
+from . import chain
 from . import residuals as res
 from .candidates import CandidateSource, Context, full_library
 from .acceptance import (DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT_FOLDS, DEFAULT_REFIT_NFEV, EffectSet, RefitCV,
@@ -171,15 +172,23 @@ class CloseLoop:
         library = self.library if self.library is not None else full_library()
         pool = library(ctx, dtr)
         it = self._iterate(base, pool, dtr, dte, mask_tr, m_s, baseline, say)
+        say("measurement chain: speed column against the position's derivative")
+        chain = self._chain(it, dtr, dte, mask_tr)
 
-        ext = it.model if it.effects.candidates else None
+        ext = it.model if (it.effects.candidates or it.output_filter is not None) else None
         v_te_ext = ext.predict_free_run(dte) if (ext is not None and dte is not None) else None
         extended = it.rounds[-1]["metrics"] if ext is not None else None
         ext_params = _parameters(ext, it.effects) if ext is not None else None
+        if it.output_filter is not None:
+            ext_params.update({f"speed_filter_{k}": {"value": v, "stderr": None, "ci95": None, "unit": "1"}
+                               for k, v in (("a", it.output_filter.a), ("b0", it.output_filter.b0),
+                                            ("b1", it.output_filter.b1))})
         first = it.first_scores or []
         chosen = it.chosen
+        diagnosis = self._diagnosis(it, first, analysis, ext_params)
+        diagnosis["measurement_chain"] = chain
         self.result_ = CloseLoopResult(
-            baseline=baseline, diagnosis=self._diagnosis(it, first, analysis, ext_params), scores=first,
+            baseline=baseline, diagnosis=diagnosis, scores=first,
             significant=it.significant, chosen=chosen, extended=extended,
             extended_parameters=ext_params, baseline_parameters=base.to_dict()["parameters"],
             data=_data_summary(train, test), wall_time_s=round(time.perf_counter() - t_start, 2),
@@ -241,6 +250,30 @@ class CloseLoop:
                               "metrics": _metrics(model, dtr, dte)})
         return it
 
+    def _chain(self, it: _Iteration, dtr, dte, mask) -> dict:
+        """Output filter of the speed channel (:mod:`l1b2.closeloop.chain`), kept if it lowers TRAIN's free-run error."""
+        ch = chain.speed_channel(dtr, mask, k=self.k_folds, seed=self.seed)
+        rec = {k: v for k, v in ch.items() if k != "filter"}
+        if "filter" in ch:
+            rec["filter"] = ch["filter"].to_dict()
+        if not ch["accepted"]:
+            return rec
+        v = dtr[dataio.SPEED].to_numpy(float)[mask]
+        raw = it.model.predict_free_run(dtr)
+        filt = FilteredModel(it.model, ch["filter"])
+        sse0 = float(np.sum((v - raw[mask]) ** 2))
+        sse1 = float(np.sum((v - filt.predict_free_run(dtr)[mask]) ** 2))
+        gain = 1 - sse1 / sse0 if sse0 > 0 else 0.0
+        rec["train_free_run_gain"] = gain
+        if gain < self.min_cv_gain:
+            rec["accepted"] = False
+            return rec
+        it.model, it.output_filter = filt, ch["filter"]
+        it.rounds.append({"round": len(it.rounds), "added": "speed_channel_filter", "effect": "speed_channel_filter",
+                          "regressors": ["speed"], "cv": {"cv_gain": ch["cv_gain"], "train_free_run_gain": gain},
+                          "metrics": _metrics(filt, dtr, dte)})
+        return rec
+
     def _diagnosis(self, it: _Iteration, scores: list[Score], a: ResidualAnalysis, ext_params) -> dict:
         """The report's ``diagnosis`` section."""
         effects = it.effects.candidates
@@ -248,19 +281,23 @@ class CloseLoop:
         traced_to = []
         for e in effects:
             traced_to += [r for r in e.regressors if r not in traced_to]
-        if effects:
+        if it.output_filter is not None and "speed" not in traced_to:
+            traced_to.append("speed")
+        if effects or it.output_filter is not None:
             traced_to += [r for r in a.traced if r not in traced_to]
         w = a.whiteness
         labels = "; ".join(f"{e.label} ({', '.join(e.regressors)})" for e in effects)
         return {
-            "significant": c is not None,
+            "significant": c is not None or it.output_filter is not None,
             "traced_to": traced_to,
-            "effect": c.family if c else None,
+            "effect": c.family if c else ("speed_channel_filter" if it.output_filter is not None else None),
             "effect_shape": c.shape if c else None,
             "effect_description": c.description if c else None,
-            "effects": [_effect_record(e, rec, ext_params) for e, rec in zip(effects, it.rounds[1:])],
+            "effects": ([_effect_record(e, rec, ext_params) for e, rec in zip(effects, it.rounds[1:])]
+                        + ([_filter_record(it.rounds[-1], ext_params)] if it.output_filter is not None else [])),
             "message": (f"missing effect{'s' if len(effects) > 1 else ''}: {labels}" if c
-                        else "no significant missing effect"),
+                        else "no significant missing effect")
+                       + ("; speed channel filtered (measurement chain)" if it.output_filter is not None else ""),
             "residual_trace": a.traced,
             "candidates": [s.to_dict() for s in best_per_family(scores)],
             "n_candidates_scored": len(scores),
@@ -291,6 +328,34 @@ class _Iteration:
     chosen: Score | None = None
     significant: list = field(default_factory=list)
     level: float = float("nan")
+    output_filter: chain.OutputFilter | None = None
+
+
+class FilteredModel:
+    """A fitted model whose free-run prediction passes through the speed channel's output filter."""
+
+    def __init__(self, model, output_filter: chain.OutputFilter):
+        self.model, self.output_filter = model, output_filter
+
+    def predict_free_run(self, df) -> np.ndarray:
+        return self.output_filter.apply(df, self.model.predict_free_run(df))
+
+    def predict_one_step(self, df) -> np.ndarray:
+        return self.model.predict_one_step(df)
+
+    def __getattr__(self, name):
+        return getattr(self.model, name)
+
+
+def _filter_record(rec: dict, params: dict | None) -> dict:
+    return {"round": rec["round"], "effect": "speed_channel_filter", "label": "speed_channel_filter", "shape": "",
+            "regressors": ["speed"], "generic": False, "parameters": {n: (params or {}).get(n) for n in
+                                                                     ("speed_filter_a", "speed_filter_b0",
+                                                                      "speed_filter_b1")},
+            "description": "the speed column is a filtered/delayed/scaled derivative of the position "
+                           "(measurement chain): output filter on the predicted speed",
+            "cv_gain": rec["cv"]["cv_gain"], "cv_free_run_nrmse_before": None, "cv_free_run_nrmse_after": None,
+            "folds_improved": None}
 
 
 def _metrics(model, dtr, dte) -> dict:
