@@ -3,19 +3,25 @@
 import tempfile
 from pathlib import Path
 
-from l1b2.physics.params import load_motor
+from l1b2.physics.params import SYSTEM_MODELS_DIR, load_motor
 from l1b2.rig.experiment import RigPlan, run_experiment, write_experiment
 
 _CACHE: dict = {}
 _ROOT = Path(tempfile.mkdtemp(prefix="l1b2_rigcache_"))
 
 
-def rig_dir(name: str = "clean", injections=(), injection_seed=None, plan: RigPlan | None = None) -> Path:
+#: the two worlds of the close-the-loop tests: the reference motor (Eq. 29 almost exact) and the
+#: realistic variant (Eq. 29 not exact: Coulomb-dominated friction, V0-dependent load slope)
+WORLDS = {"reference": None, "realistic": "realistic_motor.toml"}
+
+
+def rig_dir(name: str = "clean", injections=(), injection_seed=None, plan: RigPlan | None = None,
+            world: str = "reference") -> Path:
     """Folder with all/train/test.csv of a rig experiment (the paper's 72-run plan by default)."""
-    key = (name, tuple(injections), injection_seed, plan)
+    key = (name, tuple(injections), injection_seed, plan, world)
     if key not in _CACHE:
         plan = plan or RigPlan(step_s=1e-3)
-        mp = load_motor()
+        mp = load_motor(SYSTEM_MODELS_DIR / WORLDS[world]) if WORLDS[world] else load_motor()
         df, truth = run_experiment(plan, mp, injections=list(injections), engine="inprocess", workers=2,
                                    injection_seed=injection_seed)
         out = _ROOT / f"{name}_{len(_CACHE)}"

@@ -285,8 +285,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--order", type=int, default=8)
     p.add_argument("--folds", type=int, default=5, help="cross-validation folds over runs")
     p.add_argument("--alpha", type=float, default=0.01, help="significance level (Bonferroni over effects)")
-    p.add_argument("--min-gain", type=float, default=0.5, help="smallest held-out share of the residual an "
-                                                                "effect must explain to be added")
+    p.add_argument("--min-gain", type=float, default=0.05, help="smallest linearised held-out share of the "
+                   "residual for a candidate to be shortlisted (refit and cross-validated)")
+    p.add_argument("--min-cv-gain", type=float, default=0.03, help="smallest relative fall of the cross-validated "
+                   "free-run error (re-identified model, folds over runs) for an effect to be added")
+    p.add_argument("--max-rounds", type=int, default=3, help="most effects added, one per round")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--slider-mass", type=float, help="slider mass [kg] (overrides the sidecars)")
     p.add_argument("--allow-unusual-units", action="store_true", help=UNUSUAL_UNITS_HELP)
@@ -454,16 +457,19 @@ def cmd_compare(args) -> int:
 
 def cmd_close_loop(args) -> int:
     """Residual -> missing effect -> extended model; error before and after on TEST."""
-    from .closeloop.loop import before_after_table, close_loop
+    from .workflows import run_close_loop
     say = (lambda m: None) if args.quiet else (lambda m: print(f"[close-loop] {m}", flush=True))
-    rep = close_loop(args.train, args.test, args.report_dir, order=args.order, k_folds=args.folds,
-                     alpha=args.alpha, min_gain=args.min_gain, seed=args.seed, slider_mass_kg=args.slider_mass,
-                     plots_on=not args.no_plots, progress=say, allow_unusual_units=args.allow_unusual_units)
-    d = rep["diagnosis"]
+    result = run_close_loop(args.train, args.test, args.report_dir, order=args.order, k_folds=args.folds,
+                            alpha=args.alpha, min_gain=args.min_gain, seed=args.seed,
+                            max_rounds=args.max_rounds, min_cv_gain=args.min_cv_gain,
+                            slider_mass_kg=args.slider_mass, plots_on=not args.no_plots, progress=say,
+                            allow_unusual_units=args.allow_unusual_units)
+    d = result.diagnosis
     print(f"diagnosis: {d['message']}" + (f"; traced to {', '.join(d['traced_to'])}" if d["traced_to"] else ""))
-    print(before_after_table(rep))
-    print_input_checks(rep["checks"], {"baseline " + k: v for k, v in rep["baseline"].items()})
-    print(f"wrote {Path(args.report_dir) / 'report.json'} and report.md ({rep['wall_time_s']} s)")
+    print(result.rounds_table())
+    print(result.before_after_table())
+    print_input_checks(result.checks, {"baseline " + k: v for k, v in result.baseline.items()})
+    print(f"wrote {Path(args.report_dir) / 'report.json'} and report.md ({result.wall_time_s} s)")
     return 0
 
 
@@ -489,8 +495,8 @@ def cmd_export(args) -> int:
 
 
 def cmd_injections(args) -> int:
-    from .rig.experiment import INJECTIONS
-    for e in INJECTIONS.values():
+    from .rig.experiment import DATA_INJECTIONS, INJECTIONS
+    for e in list(INJECTIONS.values()) + list(DATA_INJECTIONS.values()):
         params = ", ".join(f"{k}={v:g}" for k, v in e.params.items())
         print(f"{e.name}  [{e.regressor}]\n    {e.description}\n    {params}")
     return 0

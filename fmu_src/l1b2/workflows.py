@@ -1,4 +1,4 @@
-"""End-to-end jobs behind the CLI: identification (issue 4), the predictor/co-simulation comparison, output folders.
+"""End-to-end jobs behind the CLI: identification, the predictor/co-simulation comparison, close-the-loop, sweeps.
 
 Every job writes through :func:`output_dir`: the target is checked and
 locked before any computation (an existing file, a folder of someone else's
@@ -11,6 +11,7 @@ reports are strict (:func:`l1b2.data.jsonsafe.dumps`: no NaN or Infinity).
 
 from __future__ import annotations
 
+import dataclasses
 import fnmatch
 import json
 import os
@@ -519,3 +520,29 @@ def run_sweep(spec_path, out_dir, *, workers: int | None = None, scheduler: str 
     res = SweepResult(table, spec, ctx, info)
     res.save(out, plots=plots_on)
     return res
+def run_close_loop(train_path, test_path, out_dir, *, slider_mass_kg=None, plots_on=True, progress=None,
+                   allow_unusual_units=False, **settings):
+    """Close the loop on TRAIN/TEST files; write ``report.json``, ``report.md`` and the PNGs into ``out_dir``.
+
+    The output folder is checked and locked first (:func:`output_dir`); both
+    files are loaded and validated (slider mass: ``slider_mass_kg`` or
+    TRAIN's sidecar; unit plausibility unless ``allow_unusual_units``)
+    before any fit; :class:`l1b2.closeloop.loop.CloseLoop` runs with
+    ``settings`` (``order``, ``k_folds``, ``alpha``, ``min_gain``, ``seed``,
+    ``n_starts``, ``max_rounds``, ``min_cv_gain``, ``library``); the result,
+    with the data checks (TEST runs outside TRAIN's range flagged), is saved
+    all at once. Returns the :class:`~l1b2.closeloop.result.CloseLoopResult`;
+    its ``wall_time_s`` counts loading and the fit.
+    """
+    from .closeloop.loop import CloseLoop
+    t_start = time.perf_counter()
+    with output_dir(Path(out_dir), command="close-loop") as tmp:
+        train, test, _ = load_train_test(train_path, test_path, slider_mass_kg=slider_mass_kg,
+                                         allow_unusual_units=allow_unusual_units)
+        result = CloseLoop(progress=progress, **settings).fit(train, test).result_
+        result = dataclasses.replace(result, wall_time_s=round(time.perf_counter() - t_start, 2),
+                                     checks=input_checks(train, test))
+        if plots_on and progress is not None:
+            progress("plots")
+        result.save(tmp, plots_on=plots_on)
+    return result

@@ -1,1 +1,12 @@
-"""Close the loop with measured data: residuals, candidate library, selection, the loop and its result."""
+"""Close the loop with measured data: residual -> missing effect -> extended model -> error before and after.
+
+:mod:`~l1b2.closeloop.residuals` (residual analysis: whiteness, position
+spectrum, evidence per regressor by cross-validation over runs),
+:mod:`~l1b2.closeloop.candidates` (the candidate library, an argument of the
+estimator), :mod:`~l1b2.closeloop.selection` (exact scores against the fixed
+baseline and the selection rules), :mod:`~l1b2.closeloop.loop` (the
+:class:`~l1b2.closeloop.loop.CloseLoop` estimator and
+:func:`~l1b2.closeloop.loop.close_loop`) and :mod:`~l1b2.closeloop.result`
+(:class:`~l1b2.closeloop.result.CloseLoopResult`: report, table, figures,
+``save``). No file is read here; only ``CloseLoopResult.save`` writes.
+"""

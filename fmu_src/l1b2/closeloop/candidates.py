@@ -1,14 +1,20 @@
-"""Candidate effects the paper's Eq. 29 predictor lacks, each a physically meaningful extension.
+"""The candidate library: extensions of the paper's Eq. 29 predictor, each a hypothesis of a missing effect.
 
 Every candidate adds a force to the slider's force balance (drive
 coordinates: positive pushes the slider the way it is driven), linear in its
 own parameters, ``dF = features(df) @ phi``; shape parameters (a wavelength, a
 time constant, a defect position) are not identified but searched on a grid.
-The features depend on the data's columns and, for state-dependent effects,
-on the *baseline model's* predicted speed (never on the measured speed, so a
-free-run prediction on new data needs no measurement).
+The features depend on the data's columns and, for state-dependent
+candidates, on the *baseline model's* predicted speed (never on the measured
+speed, so a free-run prediction on new data needs no measurement).
 
-Named effects (physics, regressor):
+Candidates come from a :class:`CandidateLibrary`, a callable
+``(ctx, df_train) -> list[CandidateForce]`` that the close-the-loop estimator
+takes as an argument; libraries combine with ``+`` or :func:`combine`. The
+default, :func:`default_library`, is ``named_library() + generic_library()``; the estimator uses
+:func:`full_library`, which adds the two-regressor candidates (:func:`interaction_candidates`).
+
+Named families (:func:`named_library`; physics, regressor):
 
 * ``thermal_drift`` (time): self-heating of the stator moves its resonances
   (about -10 Hz/K, physics notes), which changes the force factor of the
@@ -34,22 +40,22 @@ Named effects (physics, regressor):
 * ``inertia_mismatch`` (acceleration): moving mass other than assumed
   (load inertia, coupling): ``dF = -a m_s dv/dt`` of the baseline prediction.
 
-Generic fallback: a smooth term (splines, or the regressor's own basis for
-run-level regressors) in one implicated regressor, for residual structure
-that no named effect explains.
+Generic fallback (:func:`generic_library`): a smooth term (splines, or the
+regressor's own basis for run-level regressors) in one implicated regressor,
+for residual structure that no named family explains.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Protocol
 
 import numpy as np
 import pandas as pd
 
 from ..data import measurements as dataio
 from ..physics.params import G_M_S2
-from .residuals import REGRESSORS, _bspline_basis
+from .residuals import REGRESSORS, bspline_basis
 
 V_REF = 300.0   # voltage scale of the features [V]
 SPEED_REF = 0.2  # speed scale of the features [m/s]
@@ -57,9 +63,14 @@ SPEED_REF = 0.2  # speed scale of the features [m/s]
 
 @dataclass(frozen=True)
 class CandidateForce:
-    """One candidate: named effect (with fixed shape) whose force is ``features(df) @ phi``."""
+    """One candidate: a family (with fixed shape) whose force is ``features(df) @ phi``.
 
-    effect: str
+    ``family`` names the hypothesis (``"load_path_friction"``, ``"smooth_time"``;
+    the report's ``effect``), ``shape`` the grid point of its shape
+    parameters, ``names``/``units`` its linear parameters.
+    """
+
+    family: str
     regressor: str
     shape: str
     names: tuple
@@ -67,10 +78,16 @@ class CandidateForce:
     features: Callable[[pd.DataFrame], np.ndarray] = field(repr=False, compare=False)
     description: str = ""
     generic: bool = False
+    also: tuple = ()   #: further regressors of an interaction (the report's traced names)
+
+    @property
+    def regressors(self) -> tuple:
+        """Every regressor the candidate depends on (``regressor`` first)."""
+        return (self.regressor,) + tuple(self.also)
 
     @property
     def label(self) -> str:
-        return f"{self.effect}[{self.shape}]" if self.shape else self.effect
+        return f"{self.family}[{self.shape}]" if self.shape else self.family
 
     @property
     def n_params(self) -> int:
@@ -123,7 +140,7 @@ def named_candidates(ctx: Context, df_train: pd.DataFrame) -> list[CandidateForc
     out = []
 
     def time_basis(df, n_inner=4):
-        return _bspline_basis(_scaled(df[dataio.TIME].to_numpy(float), t0, t1), n_inner)
+        return bspline_basis(_scaled(df[dataio.TIME].to_numpy(float), t0, t1), n_inner)
 
     for n_inner in (2, 4):
         k = n_inner + 4
@@ -188,6 +205,75 @@ def named_candidates(ctx: Context, df_train: pd.DataFrame) -> list[CandidateForc
     return out
 
 
+def interaction_candidates(ctx: Context, df_train: pd.DataFrame) -> list[CandidateForce]:
+    """Effects of two regressors: named physical forms, and a generic low-order tensor product otherwise.
+
+    Named (physics gives the form; ``d`` the direction, ``m`` the signed load,
+    ``g`` gravity, ``x`` the scaled position):
+
+    * ``load_slope_voltage`` (load, voltage): the load's effect on speed depends
+      on the drive (slip friction whose speed slope changes with V0):
+      ``dF = -a d m g (V0 - V_ref)/V_ref``;
+    * ``damping_voltage`` (speed, voltage): damping that changes with the drive
+      amplitude: ``dF = -a (v/v_ref) (V0 - V_ref)/V_ref``;
+    * ``position_load`` (position, load): the load's effect varies along the
+      bar (preload profile, pulley geometry): ``dF = -d m g (a x + b x^2)``.
+
+    Generic: ``smooth_<A>_x_<B>``, the products of two regressors' linear and
+    quadratic terms (scaled to [-1, 1]; direction: itself) over TRAIN's ranges.
+    """
+    s0, s1 = ctx.position_range
+    V_ref = float(np.median(_V(df_train)))
+
+    def dv(df):
+        return (_V(df) - V_ref) / V_REF
+
+    def wload(df):
+        return _d(df) * df[dataio.LOAD].to_numpy(float) * G_M_S2
+
+    def xpos(df):
+        return 2 * _scaled(df[dataio.POSITION].to_numpy(float), s0, s1) - 1
+
+    out = [
+        CandidateForce("load_slope_voltage", "load", "", ("load_V_gain",), ("1",),
+                       lambda df: (-wload(df) * dv(df))[:, None],
+                       "the load's effect on the speed depends on the drive voltage", also=("voltage",)),
+        CandidateForce("damping_voltage", "speed", "", ("damping_V_N",), ("N",),
+                       lambda df: (-_drive_pred(ctx, df) / SPEED_REF * dv(df))[:, None],
+                       "damping of the slider that changes with the drive voltage", also=("voltage",)),
+        CandidateForce("position_load", "position", "", ("load_pos_1", "load_pos_2"), ("1", "1"),
+                       lambda df: np.column_stack([-wload(df) * xpos(df), -wload(df) * xpos(df) ** 2]),
+                       "the load's effect varies along the bar", also=("load",)),
+    ]
+    t0, t1 = ctx.time_range
+    V_lo, V_hi = float(_V(df_train).min()), float(_V(df_train).max())
+    L_abs = float(np.max(np.abs(df_train[dataio.LOAD].to_numpy(float)))) or 1.0
+    vp = np.abs(ctx.baseline_free_run(df_train))
+    v_lo, v_hi = float(np.min(vp)), float(np.max(vp))
+
+    def lin_quad(u):
+        return np.column_stack([u, u ** 2])
+    one = {
+        "time": lambda df: lin_quad(2 * _scaled(df[dataio.TIME].to_numpy(float), t0, t1) - 1),
+        "position": lambda df: lin_quad(xpos(df)),
+        "direction": lambda df: _d(df)[:, None],
+        "load": lambda df: lin_quad(_d(df) * df[dataio.LOAD].to_numpy(float) / L_abs),
+        "voltage": lambda df: lin_quad(2 * _scaled(_V(df), V_lo, V_hi) - 1),
+        "speed": lambda df: lin_quad(2 * _scaled(np.abs(ctx.baseline_free_run(df)), v_lo, v_hi) - 1),
+    }
+    names = list(one)
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            def feat(df, a=a, b=b):
+                A, B = one[a](df), one[b](df)
+                return np.column_stack([A[:, j] * B[:, k] for j in range(A.shape[1]) for k in range(B.shape[1])])
+            k = feat(df_train.iloc[:2]).shape[1]
+            out.append(CandidateForce(f"smooth_{a}_x_{b}", a, "", tuple(f"smooth_{a}_x_{b}_{j}" for j in range(k)),
+                                      ("N",) * k, feat, f"generic smooth interaction of {a} and {b}",
+                                      generic=True, also=(b,)))
+    return out
+
+
 def generic_candidates(ctx: Context, df_train: pd.DataFrame) -> list[CandidateForce]:
     """Fallback smooth terms, one per regressor available in the data."""
     t0, t1 = ctx.time_range
@@ -198,8 +284,8 @@ def generic_candidates(ctx: Context, df_train: pd.DataFrame) -> list[CandidateFo
     vp_train = np.abs(ctx.baseline_free_run(df_train))
     v_lo, v_hi = float(np.min(vp_train)), float(np.max(vp_train))
     specs = {
-        "time": (lambda df: _bspline_basis(_scaled(df[dataio.TIME].to_numpy(float), t0, t1), 6), 9),
-        "position": (lambda df: _bspline_basis(_scaled(df[dataio.POSITION].to_numpy(float), s0, s1),
+        "time": (lambda df: bspline_basis(_scaled(df[dataio.TIME].to_numpy(float), t0, t1), 6), 9),
+        "position": (lambda df: bspline_basis(_scaled(df[dataio.POSITION].to_numpy(float), s0, s1),
                                                int(np.clip(round((s1 - s0) / 1.5e-3), 4, 40))), None),
         "direction": (lambda df: _d(df)[:, None], 1),
         "load": (lambda df: np.column_stack([_d(df) * df[dataio.LOAD].to_numpy(float) / L_abs,
@@ -207,14 +293,14 @@ def generic_candidates(ctx: Context, df_train: pd.DataFrame) -> list[CandidateFo
                                              (_d(df) * df[dataio.LOAD].to_numpy(float) / L_abs) ** 2]), 3),
         "voltage": (lambda df: np.column_stack([(2 * _scaled(_V(df), V_lo, V_hi) - 1),
                                                 (2 * _scaled(_V(df), V_lo, V_hi) - 1) ** 2]), 2),
-        "speed": (lambda df: _bspline_basis(_scaled(np.abs(ctx.baseline_free_run(df)), v_lo, v_hi), 4), 7),
+        "speed": (lambda df: bspline_basis(_scaled(np.abs(ctx.baseline_free_run(df)), v_lo, v_hi), 4), 7),
         "acceleration": (lambda df: np.column_stack([_drive_acc(ctx, df) * ctx.m_s,
                                                      np.abs(_drive_acc(ctx, df)) * ctx.m_s]), 2),
     }
     if dataio.TEMPERATURE in df_train.columns:
         T = df_train[dataio.TEMPERATURE].to_numpy(float)
         T_lo, T_hi = float(T.min()), float(T.max())
-        specs["temperature"] = (lambda df: _bspline_basis(_scaled(df[dataio.TEMPERATURE].to_numpy(float),
+        specs["temperature"] = (lambda df: bspline_basis(_scaled(df[dataio.TEMPERATURE].to_numpy(float),
                                                                   T_lo, T_hi), 4), 7)
     for reg in REGRESSORS:
         if reg not in specs:
@@ -225,3 +311,84 @@ def generic_candidates(ctx: Context, df_train: pd.DataFrame) -> list[CandidateFo
                                   tuple("N" for _ in range(k)), fn,
                                   f"generic smooth force in {reg} (no named effect)", generic=True))
     return out
+
+
+# ---------------------------------------------------------------------------
+# libraries: what the close-the-loop estimator takes as its candidate argument
+# ---------------------------------------------------------------------------
+
+class CandidateSource(Protocol):
+    """Anything that lists candidates for a fit: ``source(ctx, df_train) -> list[CandidateForce]``."""
+
+    def __call__(self, ctx: Context, df_train: pd.DataFrame) -> list[CandidateForce]: ...
+
+
+class CandidateLibrary:
+    """A composable candidate library: the concatenation of its sources' candidates, in order.
+
+    Parameters
+    ----------
+    *sources : CandidateSource
+        Callables ``(ctx, df_train) -> list[CandidateForce]`` (functions such
+        as :func:`named_candidates`, or other libraries).
+    name : str, optional
+        Shown by ``repr``; default: the sources' names joined by ``+``.
+
+    Examples
+    --------
+    >>> lib = named_library() + generic_library()      # the default
+    >>> lib = combine(named_library(), my_source)      # any callable source
+    """
+
+    def __init__(self, *sources: CandidateSource, name: str | None = None):
+        for src in sources:
+            if not callable(src):
+                raise TypeError(f"a candidate source must be callable (ctx, df_train) -> list, got {src!r}")
+        self.sources: tuple = tuple(sources)
+        self.name = name or " + ".join(getattr(s, "name", None) or getattr(s, "__name__", repr(s))
+                                       for s in self.sources)
+
+    def __call__(self, ctx: Context, df_train: pd.DataFrame) -> list[CandidateForce]:
+        out: list[CandidateForce] = []
+        for src in self.sources:
+            out.extend(src(ctx, df_train))
+        return out
+
+    def __add__(self, other: CandidateSource) -> CandidateLibrary:
+        return combine(self, other)
+
+    def __radd__(self, other: CandidateSource) -> CandidateLibrary:
+        return combine(other, self)
+
+    def __repr__(self) -> str:
+        return f"CandidateLibrary({self.name})"
+
+
+def combine(*sources: CandidateSource) -> CandidateLibrary:
+    """One library listing the candidates of every source in turn."""
+    return CandidateLibrary(*sources)
+
+
+def named_library() -> CandidateLibrary:
+    """The named physical families (:func:`named_candidates`)."""
+    return CandidateLibrary(named_candidates, name="named")
+
+
+def generic_library() -> CandidateLibrary:
+    """The generic smooth term per regressor (:func:`generic_candidates`)."""
+    return CandidateLibrary(generic_candidates, name="generic")
+
+
+def interaction_library() -> CandidateLibrary:
+    """Effects of two regressors, named and generic (:func:`interaction_candidates`)."""
+    return CandidateLibrary(interaction_candidates, name="interactions")
+
+
+def default_library() -> CandidateLibrary:
+    """``named_library() + generic_library()``: the one-regressor candidates."""
+    return named_library() + generic_library()
+
+
+def full_library() -> CandidateLibrary:
+    """``default_library() + interaction_library()``: what the close-the-loop estimator uses unless told otherwise."""
+    return default_library() + interaction_library()

@@ -1,5 +1,12 @@
 """Close the loop with measured data: residual -> missing effect -> extended model -> error before and after.
 
+:class:`CloseLoop` is the estimator (scikit-learn convention: ``__init__``
+stores the settings, :meth:`CloseLoop.fit` takes validated
+:class:`l1b2.data.measurements.Measurements` and sets ``result_``, a
+:class:`~l1b2.closeloop.result.CloseLoopResult`); :func:`close_loop` is the
+one-call form. No file is read or written and nothing is plotted here
+(:func:`l1b2.workflows.run_close_loop` does the files).
+
 Procedure (TEST is never used for fitting or choosing):
 
 1. **Baseline**: the Eq. 29 predictor identified on TRAIN by maximum likelihood
@@ -8,494 +15,412 @@ Procedure (TEST is never used for fitting or choosing):
 2. **Residual analysis** on TRAIN (:mod:`l1b2.closeloop.residuals`): drive-coordinate
    free-run residual; whiteness per run; spectrum over position; evidence per
    regressor by cross-validation over runs, traced by forward selection.
-3. **Candidates** (:mod:`l1b2.closeloop.candidates`): every named effect over its shape
-   grid, and a generic smooth term per regressor. With the baseline fixed, an
-   extra force changes the free-run speed *linearly* (the speed recursion is
-   affine in the force), so each candidate is scored exactly and cheaply:
-   its free-run response ``S`` is computed by the baseline's linear
-   recursion, the residual is regressed on ``S`` with K-fold cross-validation
-   over runs, and information criteria (AIC and BIC with the AR(1)-effective
-   sample size) are computed on all of TRAIN.
-4. **Selection that does not fool itself**: a candidate is significant when
-   its held-out gain (share of the held-out residual sum of squares it
-   removes) is at least ``min_gain``, its run-level Wilcoxon p-value is below
-   ``alpha`` / number of effect families tested, and its AIC improves on the
-   baseline (AIC, asymptotically leave-one-out cross-validation, rather than
-   BIC: with the strongly autocorrelated free-run residual the effective
-   sample size is small and BIC's log n penalty would overrule a held-out
-   gain seen in nearly every run; both are reported). Among significant candidates the most parsimonious one within
-   ``parsimony`` of the best gain is chosen (named effects before generic
-   smooth terms, then fewer parameters). Otherwise: "no significant missing
-   effect" and the baseline is kept.
-5. **Extended model**: baseline + chosen effect, re-identified jointly by
-   maximum likelihood (warm start from the baseline); both models are
-   reported on TEST.
+3. **Rounds** (at most ``max_rounds``), each against the *current* model
+   (the baseline plus the effects accepted so far):
+
+   a. *shortlist*: every candidate of the library (default
+      :func:`l1b2.closeloop.candidates.full_library`; families already added
+      excluded) scored exactly against the fixed current model
+      (:mod:`l1b2.closeloop.selection`: linearised held-out gain over runs,
+      run-level Wilcoxon p-value, AIC); the best of each family passing
+      ``min_gain``, ``alpha`` / number of families and an AIC improvement,
+      the best ``shortlist`` of them;
+   b. *acceptance* (:mod:`l1b2.closeloop.acceptance`): current model and
+      current model + candidate re-identified on ``refit_folds`` - 1 run folds
+      (warm start, bounded budget) and predicting the held-out fold in free
+      run; accepted when the pooled held-out sum of squares falls by
+      ``min_cv_gain`` in most folds; the most parsimonious within
+      ``parsimony`` of the best CV gain is added;
+   c. *joint re-identification* of the model with every accepted effect
+      (warm start).
+
+   The rounds stop when no shortlisted candidate is accepted. Otherwise
+   "no significant missing effect" and the baseline is kept.
+4. Both the baseline and the final model are reported on TEST, with the
+   metrics after every round.
 """
 
 from __future__ import annotations
 
-import math
 import time
-from dataclasses import dataclass
-from pathlib import Path
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
 
 from ..data import measurements as dataio
-from ..data.jsonsafe import dumps, sig
-from ..data.metrics import evaluation_mask, report_metrics
-from ..predictor import model as pr
-from ..workflows import input_checks, load_train_test
-from . import candidates as eff
+from ..data.metrics import report_metrics
+from ..ident.estimator import PredictorIdentifier
+from . import chain
 from . import residuals as res
+from .candidates import CandidateSource, Context, full_library
+from .acceptance import (DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT_FOLDS, DEFAULT_REFIT_NFEV, EffectSet, RefitCV,
+                         accepts, fold_errors, fold_start_phi, refit, stratified_folds)
+from .result import CloseLoopResult, ResidualAnalysis
+from .selection import (DEFAULT_ALPHA, DEFAULT_PARSIMONY, SHORTLIST_MIN_GAIN, Score, best_per_family, design,
+                        score_candidates, shortlist, significance_level)
 
-DEFAULT_MIN_GAIN = 0.5
-DEFAULT_ALPHA = 0.01
-DEFAULT_PARSIMONY = 0.9
+
+def _quiet(msg: str) -> None:
+    pass
 
 
-# ---------------------------------------------------------------------------
-# exact linear response of the baseline free run to extra forces
-# ---------------------------------------------------------------------------
+class CloseLoop:
+    """Find the missing effect in the free-run residual of the Eq. 29 predictor, add it, report before/after.
 
-def linear_response(params: pr.PredictorParams, df: pd.DataFrame, m_s: float, F: np.ndarray) -> np.ndarray:
-    """Drive-coordinate free-run speed response to drive-coordinate forces ``F`` (n x k) [m/s per unit].
+    Parameters
+    ----------
+    order : int
+        Polynomial order of the predictor's A, B, P (paper: 8).
+    k_folds : int
+        Cross-validation folds over runs.
+    alpha : float
+        Significance level, Bonferroni-corrected over the candidate families.
+    min_gain : float
+        Smallest linearised held-out share of the residual for a candidate to be shortlisted.
+    parsimony : float
+        Accepted candidates within this share of the best CV gain count as equally good
+        (named before generic, then fewer parameters).
+    seed : int
+        Seed of the folds and of the baseline's multi-start.
+    n_starts : int
+        Multi-start local searches of the baseline identification.
+    library : CandidateSource, optional
+        Candidate library ``(ctx, df_train) -> list[CandidateForce]``;
+        default :func:`l1b2.closeloop.candidates.full_library` (one-regressor and two-regressor candidates).
+    progress : callable, optional
+        Called with a short message at the start of each stage.
+    max_rounds : int
+        Most effects added (one per round).
+    shortlist : int
+        Candidates (best of their family by linearised gain) refit and cross-validated per round.
+    refit_folds : int
+        Folds over runs of the cross-validated refit (stratified by direction and voltage).
+    min_cv_gain : float
+        Smallest relative fall of the cross-validated free-run sum of squares (in most folds) to add an effect.
+    refit_nfev, final_nfev : int
+        Function evaluations of each fold's warm refit and of the joint re-identification after a round.
 
-    ``S(k+1) = (1 - h_k D_k) S(k) + h_k F_k`` with ``h = dt / m_eff`` and ``D``
-    the baseline's damping at the measured position, ``S = 0`` at each
-    run's first sample (the free run starts from the measured speed).
-    Exact for a moving slider (constant sign of the guide friction).
+    Attributes
+    ----------
+    result_ : CloseLoopResult
+        Set by :meth:`fit`.
     """
-    d = df[dataio.DIRECTION].to_numpy(float)
-    s = df[dataio.POSITION].to_numpy(float)
-    V0 = df[dataio.VOLTAGE].to_numpy(float)
-    load = df[dataio.LOAD].to_numpy(float)
-    t = df[dataio.TIME].to_numpy(float)
-    D, _, _ = pr.force_parts(params, s, V0, d * load, m_s)
-    D = np.broadcast_to(D, s.shape)
-    m_eff = pr.effective_mass(params, load, m_s)
-    F = np.asarray(F, float).reshape(len(df), -1)
-    S = np.zeros_like(F)
-    slices = [sl for _, sl in dataio.run_slices(df[dataio.RUN])]
-    starts = np.array([sl.start for sl in slices])
-    lengths = np.array([sl.stop - sl.start for sl in slices])
-    dt = np.zeros(len(df))
-    dt[:-1] = np.diff(t)
-    h = dt / m_eff
-    a = 1.0 - h * D
-    for k in range(int(lengths.max()) - 1):
-        act = lengths > k + 1
-        cur = starts[act] + k
-        S[cur + 1] = a[cur, None] * S[cur] + h[cur, None] * F[cur]
-    return S
 
+    def __init__(self, *, order: int = 8, k_folds: int = 5, alpha: float = DEFAULT_ALPHA,
+                 min_gain: float = SHORTLIST_MIN_GAIN, parsimony: float = DEFAULT_PARSIMONY, seed: int = 0,
+                 n_starts: int = 4, library: CandidateSource | None = None, progress=None, max_rounds: int = 3,
+                 shortlist: int = 2, refit_folds: int = DEFAULT_REFIT_FOLDS,
+                 min_cv_gain: float = DEFAULT_MIN_CV_GAIN, refit_nfev: int = DEFAULT_REFIT_NFEV,
+                 final_nfev: int = 60):
+        self.order = order
+        self.k_folds = k_folds
+        self.alpha = alpha
+        self.min_gain = min_gain
+        self.parsimony = parsimony
+        self.seed = seed
+        self.n_starts = n_starts
+        self.library = library
+        self.progress = progress
+        self.max_rounds = max_rounds
+        self.shortlist = shortlist
+        self.refit_folds = refit_folds
+        self.min_cv_gain = min_cv_gain
+        self.refit_nfev = refit_nfev
+        self.final_nfev = final_nfev
 
-# ---------------------------------------------------------------------------
-# scoring
-# ---------------------------------------------------------------------------
+    def get_params(self) -> dict:
+        """The settings given to ``__init__``."""
+        return {k: getattr(self, k) for k in ("order", "k_folds", "alpha", "min_gain", "parsimony", "seed",
+                                              "n_starts", "library", "progress", "max_rounds", "shortlist",
+                                              "refit_folds", "min_cv_gain", "refit_nfev",
+                                              "final_nfev")}
+
+    def __repr__(self) -> str:
+        args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items() if k != "progress")
+        return f"CloseLoop({args})"
+
+    # -- the job -------------------------------------------------------------
+    def fit(self, train: dataio.Measurements, test: dataio.Measurements | None = None) -> CloseLoop:
+        """Identify, diagnose, extend round by round and re-identify on ``train``; report on ``train`` and ``test``.
+
+        ``train``/``test`` are :class:`l1b2.data.measurements.Measurements`
+        (``load_measurements(path)``); the slider mass is ``train``'s.
+        ``test`` is only predicted, never used to fit or choose.
+        """
+        _check_measurements(train, "train")
+        if test is not None:
+            _check_measurements(test, "test")
+        say = self.progress or _quiet
+        t_start = time.perf_counter()
+        m_s = train.slider_mass_kg
+        dtr = train.df
+        dte = test.df if test is not None else None
+        mask_tr = np.array(train.mask)
+
+        say("baseline: identifying the Eq. 29 predictor on TRAIN")
+        base = PredictorIdentifier(order=self.order, criterion="free_run", fixed="recommended",
+                                   n_starts=self.n_starts, seed=self.seed)
+        base.fit(dtr, slider_mass_kg=m_s, mask=mask_tr)
+        v_tr = base.predict_free_run(dtr)
+        v_te = base.predict_free_run(dte) if dte is not None else None
+        baseline = _metrics(base, dtr, dte)
+
+        say("residual analysis on TRAIN")
+        analysis = analyse_residuals(dtr, v_tr, mask_tr, alpha=self.alpha, k=self.k_folds, seed=self.seed)
+        ctx = candidate_context(base.predict_free_run, m_s, dtr, mask_tr, analysis.peak)
+        library = self.library if self.library is not None else full_library()
+        pool = library(ctx, dtr)
+        it = self._iterate(base, pool, dtr, dte, mask_tr, m_s, baseline, say)
+        say("measurement chain: speed column against the position's derivative")
+        chain = self._chain(it, dtr, dte, mask_tr)
+
+        ext = it.model if (it.effects.candidates or it.output_filter is not None) else None
+        v_te_ext = ext.predict_free_run(dte) if (ext is not None and dte is not None) else None
+        extended = it.rounds[-1]["metrics"] if ext is not None else None
+        ext_params = _parameters(ext, it.effects) if ext is not None else None
+        if it.output_filter is not None:
+            ext_params.update({f"speed_filter_{k}": {"value": v, "stderr": None, "ci95": None, "unit": "1"}
+                               for k, v in (("a", it.output_filter.a), ("b0", it.output_filter.b0),
+                                            ("b1", it.output_filter.b1))})
+        first = it.first_scores or []
+        chosen = it.chosen
+        diagnosis = self._diagnosis(it, first, analysis, ext_params)
+        diagnosis["measurement_chain"] = chain
+        self.result_ = CloseLoopResult(
+            baseline=baseline, diagnosis=diagnosis, scores=first,
+            significant=it.significant, chosen=chosen, extended=extended,
+            extended_parameters=ext_params, baseline_parameters=base.to_dict()["parameters"],
+            data=_data_summary(train, test), wall_time_s=round(time.perf_counter() - t_start, 2),
+            baseline_model=base, extended_model=ext, analysis=analysis, train_df=dtr, test_df=dte,
+            test_free_run_before=v_te, test_free_run_after=v_te_ext, rounds=it.rounds)
+        return self
+
+    def _iterate(self, base, pool, dtr, dte, mask, m_s, baseline, say) -> _Iteration:
+        """Rounds of linearised shortlist -> cross-validated refit -> acceptance -> joint re-identification."""
+        it = _Iteration(model=base, effects=EffectSet(),
+                        rounds=[{"round": 0, "added": None, "metrics": baseline}])
+        folds = stratified_folds(dtr, self.refit_folds, self.seed)
+        cur_err = None
+        for rnd in range(1, self.max_rounds + 1):
+            cur = it.model
+            v_cur = cur.predict_free_run(dtr)
+            r = res.drive_residual(dtr, v_cur)
+            cands = [c for c in pool if c.family not in it.effects.families]
+            say(f"round {rnd}: scoring {len(cands)} candidate effects (linearised)")
+            scores = score_candidates(cands, r, dtr, mask, cur.params_, m_s, v_pred=v_cur, k=self.k_folds,
+                                      seed=self.seed)
+            level = significance_level(scores, self.alpha)
+            short = shortlist(scores, level=level, min_gain=self.min_gain, size=self.shortlist)
+            if rnd == 1:
+                it.first_scores, it.level = scores, level
+            if not short:
+                it.trials.append([])
+                break
+            if cur_err is None:
+                say(f"round {rnd}: cross-validating the current model over {len(folds)} run folds")
+                cur_err = fold_errors(dtr, mask, m_s, folds, cur.params_, it.effects, order=self.order,
+                                      seed=self.seed, max_nfev=self.refit_nfev)
+            trials = []
+            for s in short:
+                say(f"round {rnd}: cross-validating the refit with {s.candidate.label}")
+                y, A, S, runs_m = design(s.candidate, r, dtr, mask, cur.params_, m_s, v_pred=v_cur)
+                fphi = fold_start_phi(S, A, y, runs_m, folds)
+                err = fold_errors(dtr, mask, m_s, folds, cur.params_, it.effects.add(s.candidate, s.phi),
+                                  order=self.order, seed=self.seed, max_nfev=self.refit_nfev, fold_phi=fphi)
+                trials.append(RefitCV(s.candidate, cur_err, err, s.cv_gain, s.phi))
+            it.trials.append(trials)
+            ok = [t for t in trials if accepts(t, min_gain=self.min_cv_gain)]
+            if not ok:
+                break
+            best_gain = max(t.gain for t in ok)
+            ok.sort(key=lambda t: (t.candidate.generic, t.candidate.n_params, -t.gain))
+            pick = next(t for t in ok if t.gain >= self.parsimony * best_gain)
+            if rnd == 1:
+                it.chosen = next(s for s in short if s.candidate is pick.candidate)
+                it.significant = [s for s in short if any(t.candidate is s.candidate for t in ok)]
+            say(f"round {rnd}: adding {pick.candidate.label}; re-identifying jointly")
+            effects = it.effects.add(pick.candidate, pick.phi)
+            model = refit(dtr, mask, m_s, cur.params_, effects, order=self.order, seed=self.seed,
+                          max_nfev=self.final_nfev, max_outer=3)
+            it.model, it.effects = model, effects.with_phi(model.phi_)
+            cur_err = None
+            it.rounds.append({"round": rnd, "added": pick.candidate.label, "effect": pick.candidate.family,
+                              "regressors": list(pick.candidate.regressors), "cv": pick.to_dict(),
+                              "metrics": _metrics(model, dtr, dte)})
+        return it
+
+    def _chain(self, it: _Iteration, dtr, dte, mask) -> dict:
+        """Output filter of the speed channel (:mod:`l1b2.closeloop.chain`), kept if it lowers TRAIN's free-run error."""
+        ch = chain.speed_channel(dtr, mask, k=self.k_folds, seed=self.seed)
+        rec = {k: v for k, v in ch.items() if k != "filter"}
+        if "filter" in ch:
+            rec["filter"] = ch["filter"].to_dict()
+        if not ch["accepted"]:
+            return rec
+        v = dtr[dataio.SPEED].to_numpy(float)[mask]
+        raw = it.model.predict_free_run(dtr)
+        filt = FilteredModel(it.model, ch["filter"])
+        sse0 = float(np.sum((v - raw[mask]) ** 2))
+        sse1 = float(np.sum((v - filt.predict_free_run(dtr)[mask]) ** 2))
+        gain = 1 - sse1 / sse0 if sse0 > 0 else 0.0
+        rec["train_free_run_gain"] = gain
+        if gain < self.min_cv_gain:
+            rec["accepted"] = False
+            return rec
+        it.model, it.output_filter = filt, ch["filter"]
+        it.rounds.append({"round": len(it.rounds), "added": "speed_channel_filter", "effect": "speed_channel_filter",
+                          "regressors": ["speed"], "cv": {"cv_gain": ch["cv_gain"], "train_free_run_gain": gain},
+                          "metrics": _metrics(filt, dtr, dte)})
+        return rec
+
+    def _diagnosis(self, it: _Iteration, scores: list[Score], a: ResidualAnalysis, ext_params) -> dict:
+        """The report's ``diagnosis`` section."""
+        effects = it.effects.candidates
+        c = effects[0] if effects else None
+        traced_to = []
+        for e in effects:
+            traced_to += [r for r in e.regressors if r not in traced_to]
+        if it.output_filter is not None and "speed" not in traced_to:
+            traced_to.append("speed")
+        if effects or it.output_filter is not None:
+            traced_to += [r for r in a.traced if r not in traced_to]
+        w = a.whiteness
+        labels = "; ".join(f"{e.label} ({', '.join(e.regressors)})" for e in effects)
+        return {
+            "significant": c is not None or it.output_filter is not None,
+            "traced_to": traced_to,
+            "effect": c.family if c else ("speed_channel_filter" if it.output_filter is not None else None),
+            "effect_shape": c.shape if c else None,
+            "effect_description": c.description if c else None,
+            "effects": ([_effect_record(e, rec, ext_params) for e, rec in zip(effects, it.rounds[1:])]
+                        + ([_filter_record(it.rounds[-1], ext_params)] if it.output_filter is not None else [])),
+            "message": (f"missing effect{'s' if len(effects) > 1 else ''}: {labels}" if c
+                        else "no significant missing effect")
+                       + ("; speed channel filtered (measurement chain)" if it.output_filter is not None else ""),
+            "residual_trace": a.traced,
+            "candidates": [s.to_dict() for s in best_per_family(scores)],
+            "n_candidates_scored": len(scores),
+            "significance_level": it.level,
+            "refit_trials": [[t.to_dict() for t in rnd] for rnd in it.trials],
+            "rules": {"min_gain": self.min_gain, "alpha": self.alpha, "parsimony": self.parsimony,
+                      "k_folds": self.k_folds, "shortlist": self.shortlist,
+                      "refit_folds": self.refit_folds, "min_cv_gain": self.min_cv_gain,
+                      "max_rounds": self.max_rounds},
+            "regressor_evidence": [[e.to_dict() for e in rnd] for rnd in a.rounds],
+            "whiteness": {"runs": len(w),
+                          "share_runs_ljung_box_p_below_0.05": (float(np.mean([x["ljung_box_p"] < 0.05 for x in w]))
+                                                                if w else None),
+                          "median_rho1": float(np.median([x["rho1"] for x in w])) if w else None},
+            "position_spectrum_peak": a.peak,
+        }
+
 
 @dataclass
-class Score:
-    candidate: eff.CandidateForce
-    cv_gain: float
-    p_value: float
-    runs_improved: float
-    delta_bic: float
-    phi: np.ndarray
-    delta_aic: float = 0.0
+class _Iteration:
+    """State of the rounds: the current model, its effects, per-round records."""
 
-    def to_dict(self) -> dict:
-        c = self.candidate
-        return {"effect": c.effect, "label": c.label, "regressor": c.regressor, "generic": c.generic,
-                "n_params": c.n_params, "cv_gain": self.cv_gain, "p_value": self.p_value,
-                "runs_improved": self.runs_improved, "delta_aic": self.delta_aic, "delta_bic": self.delta_bic,
-                "parameters": dict(zip(c.names, (float(x) for x in self.phi)))}
+    model: object
+    effects: EffectSet
+    rounds: list
+    trials: list = field(default_factory=list)
+    first_scores: list | None = None
+    chosen: Score | None = None
+    significant: list = field(default_factory=list)
+    level: float = float("nan")
+    output_filter: chain.OutputFilter | None = None
 
 
-def _effective_n(r: np.ndarray, runs: np.ndarray) -> float:
-    """Sample count corrected for lag-1 autocorrelation within runs."""
-    n_eff = 0.0
-    for run in pd.unique(runs):
-        x = r[runs == run]
-        if len(x) < 3:
-            n_eff += len(x)
-            continue
-        rho = float(np.clip(res.acf(x, 1)[1], 0.0, 0.99))
-        n_eff += len(x) * (1 - rho) / (1 + rho)
-    return max(n_eff, 1.0)
+class FilteredModel:
+    """A fitted model whose free-run prediction passes through the speed channel's output filter."""
+
+    def __init__(self, model, output_filter: chain.OutputFilter):
+        self.model, self.output_filter = model, output_filter
+
+    def predict_free_run(self, df) -> np.ndarray:
+        return self.output_filter.apply(df, self.model.predict_free_run(df))
+
+    def predict_one_step(self, df) -> np.ndarray:
+        return self.model.predict_one_step(df)
+
+    def __getattr__(self, name):
+        return getattr(self.model, name)
 
 
-def nuisance_forces(params: pr.PredictorParams, df: pd.DataFrame, v_pred: np.ndarray) -> np.ndarray:
-    """Forces spanning Eq. 29's own function space around the fit (drive coordinates).
-
-    Perturbations of D(s), B'(s) and the offset E(s) as Legendre series in
-    the scaled position: ``-v' L_j(x)``, ``V0 L_j(x)``, ``L_j(x)``. Their
-    free-run responses are the re-identification directions of the baseline:
-    a candidate gets credit only for what the baseline cannot absorb by
-    re-fitting itself (a score test with nuisance parameters).
-    """
-    from numpy.polynomial.legendre import legvander
-    x = np.clip(params.scaled_position(df[dataio.POSITION].to_numpy(float)), -1.2, 1.2)
-    Lv = legvander(x, params.order)
-    vp = df[dataio.DIRECTION].to_numpy(float) * np.asarray(v_pred, float)
-    V0 = df[dataio.VOLTAGE].to_numpy(float)
-    return np.column_stack([-vp[:, None] * Lv, V0[:, None] * Lv / 300.0, Lv])
+def _filter_record(rec: dict, params: dict | None) -> dict:
+    return {"round": rec["round"], "effect": "speed_channel_filter", "label": "speed_channel_filter", "shape": "",
+            "regressors": ["speed"], "generic": False, "parameters": {n: (params or {}).get(n) for n in
+                                                                     ("speed_filter_a", "speed_filter_b0",
+                                                                      "speed_filter_b1")},
+            "description": "the speed column is a filtered/delayed/scaled derivative of the position "
+                           "(measurement chain): output filter on the predicted speed",
+            "cv_gain": rec["cv"]["cv_gain"], "cv_free_run_nrmse_before": None, "cv_free_run_nrmse_after": None,
+            "folds_improved": None}
 
 
-class _FoldSolver:
-    """Cross-validated least squares over runs with a fixed nuisance block (Gram matrices precomputed)."""
-
-    def __init__(self, y, N, runs, folds, lam=1e-10):
-        self.y, self.runs, self.folds, self.lam = y, runs, folds, lam
-        self.A = np.column_stack([np.ones(len(y)), N])
-        self.parts = []
-        for fold in folds:
-            test = np.isin(runs, fold)
-            tr = ~test
-            A_tr = self.A[tr]
-            G = A_tr.T @ A_tr
-            self.parts.append((test, tr, G, A_tr.T @ y[tr]))
-        self.sse0 = self._held_out(None)
-
-    def _solve(self, G, g):
-        reg = self.lam * (np.trace(G) / len(G)) * np.eye(len(G))
-        return np.linalg.solve(G + reg, g)
-
-    def _held_out(self, S):
-        sse = {}
-        for test, tr, G, g in self.parts:
-            if S is None:
-                beta = self._solve(G, g)
-                pred = self.A[test] @ beta
-            else:
-                S_tr = S[tr]
-                AS = self.A[tr].T @ S_tr
-                Gf = np.block([[G, AS], [AS.T, S_tr.T @ S_tr]])
-                gf = np.concatenate([g, S_tr.T @ self.y[tr]])
-                beta = self._solve(Gf, gf)
-                pred = np.column_stack([self.A[test], S[test]]) @ beta
-            e = self.y[test] - pred
-            for run in pd.unique(self.runs[test]):
-                sse[run] = float(np.sum(e[self.runs[test] == run] ** 2))
-        return sse
-
-    def gain(self, S):
-        sse1 = self._held_out(S)
-        keys = list(self.sse0)
-        s0 = np.array([self.sse0[k] for k in keys])
-        s1 = np.array([sse1[k] for k in keys])
-        gain = 1 - s1.sum() / s0.sum() if s0.sum() > 0 else 0.0
-        return float(gain), (s0 - s1) / max(s0.mean(), 1e-300)
+def _metrics(model, dtr, dte) -> dict:
+    return {"train": report_metrics(dtr, model.predict_one_step(dtr), model.predict_free_run(dtr)),
+            "test": (report_metrics(dte, model.predict_one_step(dte), model.predict_free_run(dte))
+                     if dte is not None else None)}
 
 
-def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5, seed=0):
-    """Cross-validated gain, run-level p-value and BIC change of every candidate.
-
-    The regression of the TRAIN residual on a candidate's free-run response
-    includes the nuisance responses (:func:`nuisance_forces`) in both the
-    null and the candidate model; folds are whole runs.
-    """
-    runs = df[dataio.RUN].to_numpy()
-    idx = np.flatnonzero(mask)
-    y, runs_m = r_drive[idx], runs[idx]
-    folds = res.run_folds(runs_m, k, seed)
-    n_eff = _effective_n(y, runs_m)
-    feats = [np.asarray(c.features(df), float).reshape(len(df), -1) for c in candidates]
-    widths = [f.shape[1] for f in feats]
-    N = linear_response(params, df, m_s, nuisance_forces(params, df, v_pred))[idx]
-    S_all = linear_response(params, df, m_s, np.column_stack(feats))[idx]
-    solver = _FoldSolver(y, N, runs_m, folds)
-    A = solver.A
-    coef0 = np.linalg.lstsq(A, y, rcond=None)[0]
-    sse0 = float(np.sum((y - A @ coef0) ** 2))
-    out = []
-    col = 0
-    for c, w in zip(candidates, widths):
-        S = S_all[:, col:col + w]
-        col += w
-        if not np.all(np.isfinite(S)) or np.allclose(S, 0):
-            out.append(Score(c, 0.0, 1.0, 0.0, 0.0, np.zeros(w)))
-            continue
-        gain, per_run = solver.gain(S)
-        Xf = np.column_stack([A, S])
-        coef = np.linalg.lstsq(Xf, y, rcond=None)[0]
-        sse1 = float(np.sum((y - Xf @ coef) ** 2))
-        dll = n_eff * math.log(max(sse1, 1e-300) / max(sse0, 1e-300))
-        out.append(Score(c, gain, res._wilcoxon_greater(per_run), float(np.mean(per_run > 0)),
-                         dll + w * math.log(n_eff), coef[A.shape[1]:], dll + 2 * w))
-    return out
+def _parameters(model, effects: EffectSet) -> dict:
+    """Every added parameter of the final model: value, stderr, 95 % interval, unit."""
+    return {n: {"value": float(model.extra_params_[n]), "stderr": float(model.extra_stderr_[n]),
+                "ci95": [float(x) for x in model.extra_ci95_[n]], "unit": u}
+            for c in effects.candidates for n, u in zip(c.names, c.units)}
 
 
-def choose(scores: list[Score], *, alpha=DEFAULT_ALPHA, min_gain=DEFAULT_MIN_GAIN, parsimony=DEFAULT_PARSIMONY):
-    """The significant candidates and the chosen one (None when nothing is significant)."""
-    families = {s.candidate.effect for s in scores}
-    level = alpha / max(len(families), 1)
-    sig = [s for s in scores if s.cv_gain >= min_gain and s.p_value < level and s.delta_aic < 0]
-    if not sig:
-        return sig, None, level
-    best = max(s.cv_gain for s in sig)
-    close = [s for s in sig if s.cv_gain >= parsimony * best]
-    close.sort(key=lambda s: (s.candidate.generic, s.candidate.n_params, -s.cv_gain))
-    return sig, close[0], level
+def _effect_record(c, rec: dict, params: dict | None) -> dict:
+    cv = rec.get("cv", {})
+    return {"round": rec["round"], "effect": c.family, "label": c.label, "shape": c.shape,
+            "regressors": list(c.regressors), "description": c.description, "generic": c.generic,
+            "parameters": {n: (params or {}).get(n) for n in c.names},
+            "cv_gain": cv.get("cv_gain"), "cv_free_run_nrmse_before": cv.get("cv_free_run_nrmse_current"),
+            "cv_free_run_nrmse_after": cv.get("cv_free_run_nrmse_refit"),
+            "folds_improved": cv.get("folds_improved")}
 
 
-def _best_per_family(scores: list[Score]) -> list[Score]:
-    best = {}
-    for s in scores:
-        key = s.candidate.effect
-        if key not in best or s.cv_gain > best[key].cv_gain:
-            best[key] = s
-    return sorted(best.values(), key=lambda s: -s.cv_gain)
+def close_loop(train: dataio.Measurements, test: dataio.Measurements | None = None, **settings) -> CloseLoopResult:
+    """``CloseLoop(**settings).fit(train, test).result_`` (settings: see :class:`CloseLoop`)."""
+    return CloseLoop(**settings).fit(train, test).result_
 
 
 # ---------------------------------------------------------------------------
-# the whole job
+# stages
 # ---------------------------------------------------------------------------
 
-def close_loop(train_path, test_path, report_dir, *, order=8, k_folds=5, alpha=DEFAULT_ALPHA,
-               min_gain=DEFAULT_MIN_GAIN, parsimony=DEFAULT_PARSIMONY, seed=0, n_starts=4,
-               slider_mass_kg=None, plots_on=True, progress=None, allow_unusual_units=False) -> dict:
-    """Identify, diagnose, extend, re-identify and report (see the module docstring)."""
-    from ..ident.estimator import PredictorIdentifier
-    from ..ident.extra import ExtraForces
+def analyse_residuals(df: pd.DataFrame, v_pred: np.ndarray, mask: np.ndarray, *, alpha: float, k: int,
+                      seed: int) -> ResidualAnalysis:
+    """Drive-coordinate residual, whiteness, position spectrum and regressor trace (TRAIN)."""
+    r = res.drive_residual(df, v_pred)
+    whiteness = res.whiteness(r, df, mask)
+    freq, power, peak = res.position_spectrum(r, df, mask)
+    traced, rounds = res.trace(r, df, mask, alpha=alpha, k=k, seed=seed)
+    return ResidualAnalysis(residual=r, mask=mask, whiteness=whiteness, frequency=freq, power=power, peak=peak,
+                            traced=traced, rounds=rounds)
 
-    say = progress or (lambda msg: None)
-    t_start = time.perf_counter()
-    train, test, _ = load_train_test(train_path, test_path, slider_mass_kg=slider_mass_kg,
-                                     allow_unusual_units=allow_unusual_units)
-    m_s = train.slider_mass_kg
-    dtr, dte = train.df, test.df
-    mask_tr = evaluation_mask(dtr)
 
-    say("baseline: identifying the Eq. 29 predictor on TRAIN")
-    base = PredictorIdentifier(order=order, criterion="free_run", fixed="recommended", n_starts=n_starts,
-                               seed=seed)
-    base.fit(dtr, slider_mass_kg=m_s, mask=mask_tr)
-    v_tr = base.predict_free_run(dtr)
-    v_te = base.predict_free_run(dte)
-    baseline = {"train": report_metrics(dtr, base.predict_one_step(dtr), v_tr),
-                "test": report_metrics(dte, base.predict_one_step(dte), v_te)}
-
-    say("residual analysis on TRAIN")
-    r_tr = res.drive_residual(dtr, v_tr)
-    whiteness = res.whiteness(r_tr, dtr, mask_tr)
-    freq, power, peak = res.position_spectrum(r_tr, dtr, mask_tr)
-    traced, rounds = res.trace(r_tr, dtr, mask_tr, alpha=alpha, k=k_folds, seed=seed)
-
-    say("scoring candidate effects")
-    pos = dtr[dataio.POSITION].to_numpy(float)[mask_tr]
-    ctx = eff.Context(
-        baseline_free_run=base.predict_free_run, m_s=float(m_s),
-        time_range=(float(dtr[dataio.TIME].min()), float(dtr[dataio.TIME].max())),
+def candidate_context(baseline_free_run, m_s: float, df: pd.DataFrame, mask: np.ndarray, peak: dict) -> Context:
+    """What candidate features may use: the baseline's free run, the mass, TRAIN's ranges, the spectral peak."""
+    pos = df[dataio.POSITION].to_numpy(float)[mask]
+    return Context(
+        baseline_free_run=baseline_free_run, m_s=float(m_s),
+        time_range=(float(df[dataio.TIME].min()), float(df[dataio.TIME].max())),
         position_range=(float(pos.min()), float(pos.max())),
-        temperature_ref=float(dtr[dataio.TEMPERATURE].median()) if dataio.TEMPERATURE in dtr.columns else None,
+        temperature_ref=float(df[dataio.TEMPERATURE].median()) if dataio.TEMPERATURE in df.columns else None,
         spectral_period_m=peak.get("period_m") if peak.get("power_ratio_to_median", 0) > 4 else None)
-    candidates = eff.named_candidates(ctx, dtr) + eff.generic_candidates(ctx, dtr)
-    scores = score_candidates(candidates, r_tr, dtr, mask_tr, base.params_, m_s, v_pred=v_tr, k=k_folds,
-                              seed=seed)
-    significant, chosen, level = choose(scores, alpha=alpha, min_gain=min_gain, parsimony=parsimony)
-
-    extended = None
-    ext_params = None
-    v_te_ext = None
-    if chosen is not None:
-        say(f"extended model: re-identifying with {chosen.candidate.label}")
-        c = chosen.candidate
-        extra = ExtraForces(names=c.names, units=c.units, features=c.features, start=tuple(chosen.phi),
-                            description=c.description)
-        ext = PredictorIdentifier(order=order, criterion="free_run", fixed="recommended", n_starts=1, seed=seed,
-                                  extra=extra, init=base.params_, init_extra=np.asarray(chosen.phi))
-        ext.fit(dtr, slider_mass_kg=m_s, mask=mask_tr)
-        v_te_ext = ext.predict_free_run(dte)
-        extended = {"train": report_metrics(dtr, ext.predict_one_step(dtr), ext.predict_free_run(dtr)),
-                    "test": report_metrics(dte, ext.predict_one_step(dte), v_te_ext)}
-        ext_params = {n: {"value": float(ext.extra_params_[n]), "stderr": _jf(ext.extra_stderr_[n]),
-                          "ci95": [_jf(x) for x in ext.extra_ci95_[n]], "unit": u}
-                      for n, u in zip(c.names, c.units)}
-
-    if chosen is not None:
-        traced_to = [chosen.candidate.regressor] + [r for r in traced if r != chosen.candidate.regressor]
-    else:
-        traced_to = []
-    report = {
-        "baseline": baseline,
-        "diagnosis": {
-            "significant": chosen is not None,
-            "traced_to": traced_to,
-            "effect": chosen.candidate.effect if chosen else None,
-            "effect_shape": chosen.candidate.shape if chosen else None,
-            "effect_description": chosen.candidate.description if chosen else None,
-            "message": (f"missing effect: {chosen.candidate.label} ({chosen.candidate.regressor})" if chosen
-                        else "no significant missing effect"),
-            "residual_trace": traced,
-            "candidates": [s.to_dict() for s in _best_per_family(scores)],
-            "n_candidates_scored": len(scores),
-            "significance_level": level,
-            "rules": {"min_gain": min_gain, "alpha": alpha, "parsimony": parsimony, "k_folds": k_folds},
-            "regressor_evidence": [[e.to_dict() for e in rnd] for rnd in rounds],
-            "whiteness": {"runs": len(whiteness),
-                          "share_runs_ljung_box_p_below_0.05": float(np.mean([w["ljung_box_p"] < 0.05
-                                                                               for w in whiteness]))
-                          if whiteness else None,
-                          "median_rho1": float(np.median([w["rho1"] for w in whiteness])) if whiteness else None},
-            "position_spectrum_peak": peak,
-        },
-        "extended": extended,
-        "extended_parameters": ext_params,
-        "baseline_parameters": base.to_dict()["parameters"],
-        "data": {"train": str(train_path), "test": str(test_path), "train_runs": len(train.runs),
-                 "test_runs": len(test.runs), "train_samples": train.n_samples, "test_samples": test.n_samples},
-        "checks": input_checks(train, test),
-        "wall_time_s": None,
-    }
-    out = Path(report_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    if plots_on:
-        say("plots")
-        report["figures"] = _plots(out, dtr, dte, r_tr, mask_tr, whiteness, freq, power, chosen, v_te, v_te_ext,
-                                   base, m_s)
-    report["wall_time_s"] = round(time.perf_counter() - t_start, 2)
-    (out / "report.json").write_text(dumps(report))
-    (out / "report.md").write_text(markdown_report(report))
-    return report
 
 
-def _jf(x):
-    x = float(x)
-    return x if math.isfinite(x) else ("inf" if x > 0 else ("-inf" if x < 0 else None))
+def _check_measurements(m, name: str) -> None:
+    if not isinstance(m, dataio.Measurements):
+        raise TypeError(f"{name}: expected l1b2.data.measurements.Measurements (validated data, e.g. "
+                        f"load_measurements(path)), got {type(m).__name__}")
 
 
-# ---------------------------------------------------------------------------
-# report
-# ---------------------------------------------------------------------------
-
-def before_after_table(report: dict) -> str:
-    """Plain-text table of the error metrics before and after (TEST and TRAIN)."""
-    lines = [f"{'':8s}{'':10s}{'nrmse':>18s}{'mean |rel|':>22s}{'p95 |rel|':>22s}",
-             f"{'data':8s}{'kind':10s}{'before':>9s}{'after':>9s}{'before':>11s}{'after':>11s}"
-             f"{'before':>11s}{'after':>11s}"]
-    for part in ("test", "train"):
-        for kind in ("free_run", "one_step"):
-            b = report["baseline"][part][kind]
-            a = report["extended"][part][kind] if report["extended"] else None
-
-            def f(x):
-                return f"{x:.2%}" if x is not None else "-"
-            lines.append(f"{part:8s}{kind:10s}{f(b['nrmse']):>9s}{f(a['nrmse'] if a else None):>9s}"
-                         f"{f(b['mean_abs_rel_error']):>11s}{f(a['mean_abs_rel_error'] if a else None):>11s}"
-                         f"{f(b['p95_abs_rel_error']):>11s}{f(a['p95_abs_rel_error'] if a else None):>11s}")
-    return "\n".join(lines)
-
-
-def markdown_report(rep: dict) -> str:
-    d = rep["diagnosis"]
-    lines = ["# Close the loop: residual -> missing effect -> extended model", "",
-             f"TRAIN: `{rep['data']['train']}` ({rep['data']['train_runs']} runs), "
-             f"TEST: `{rep['data']['test']}` ({rep['data']['test_runs']} runs; never used for fitting or choosing).",
-             "", "## Diagnosis", "", f"**{d['message']}**", ""]
-    if d["significant"]:
-        lines += [f"* traced to: {', '.join(d['traced_to'])}",
-                  f"* effect: `{d['effect']}` {d['effect_shape'] or ''} — {d['effect_description']}"]
-    else:
-        lines += ["* the baseline is kept (no candidate met all of: held-out gain >= "
-                  f"{d['rules']['min_gain']:.0%}, run-level p < {d['significance_level']:.2g}, AIC improvement)"]
-    lines += ["", "## Error before and after", "", "```", before_after_table(rep), "```", "",
-              "## Candidates (best of each family, by held-out gain)", "",
-              "| effect | regressor | params | held-out gain | p (runs) | runs improved | dAIC | dBIC |",
-              "|---|---|---|---|---|---|---|---|"]
-    for c in d["candidates"]:
-        lines.append(f"| {c['label']} | {c['regressor']} | {c['n_params']} | {c['cv_gain']:.1%} | "
-                     f"{c['p_value']:.2g} | {c['runs_improved']:.0%} | {c['delta_aic']:.1f} | "
-                     f"{c['delta_bic']:.1f} |")
-    lines += ["", "## Residual evidence per regressor (first round, cross-validated over runs)", "",
-              "| regressor | held-out gain | p (runs) |", "|---|---|---|"]
-    for e in d["regressor_evidence"][0] if d["regressor_evidence"] else []:
-        lines.append(f"| {e['regressor']} | {e['cv_gain']:.1%} | {e['p_value']:.2g} |")
-    w = d["whiteness"]
-    lines += ["", f"Whiteness: median lag-1 autocorrelation {w['median_rho1']:.2f}; Ljung-Box p < 0.05 in "
-              f"{w['share_runs_ljung_box_p_below_0.05']:.0%} of {w['runs']} runs (free-run residuals are "
-              "coloured by the slider's low-pass even without a missing effect; evidence is judged per run).", ""]
-    if rep.get("extended_parameters"):
-        lines += ["## Extended model's new parameters", "", "| name | value | stderr | 95 % interval | unit |",
-                  "|---|---|---|---|---|"]
-        for n, p in rep["extended_parameters"].items():
-            lines.append(f"| {n} | {sig(p['value'])} | {sig(p['stderr'])} | [{sig(p['ci95'][0])}, "
-                         f"{sig(p['ci95'][1])}] | {p['unit']} |")
-    if rep.get("figures"):
-        lines += ["", "## Figures", ""] + [f"![{Path(f).stem}]({Path(f).name})" for f in rep["figures"]]
-    lines.append("")
-    return "\n".join(lines)
-
-
-def _plots(out, dtr, dte, r_tr, mask, whiteness, freq, power, chosen, v_te, v_te_ext, base, m_s) -> list[str]:
-    from ..data import plots
-    plt = plots._plt()
-    figs = []
-    vals = res.regressor_values(dtr)
-    names = [n for n in res.REGRESSORS if n in vals]
-    ncol = 4
-    nrow = math.ceil(len(names) / ncol)
-    fig, axes = plt.subplots(nrow, ncol, figsize=(3.4 * ncol, 2.8 * nrow), squeeze=False)
-    for ax, n in zip(axes.flat, names):
-        x = vals[n][mask]
-        ax.plot(x, r_tr[mask] * 1e3, ".", ms=1, alpha=0.3)
-        ax.set_xlabel(n)
-        ax.set_ylabel("residual [mm/s]")
-        ax.grid(alpha=0.3)
-    for ax in list(axes.flat)[len(names):]:
-        ax.axis("off")
-    fig.suptitle("TRAIN free-run residual (drive coordinates) against each regressor")
-    figs.append(str(plots._save(fig, out / "residual_vs_regressors.png")))
-
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.6))
-    if len(freq):
-        a1.semilogy(freq[1:] ** -1 * 1e3, power[1:])
-        a1.set_xscale("log")
-        a1.set_xlabel("period over position [mm]")
-        a1.set_ylabel("residual power")
-        a1.set_title("residual spectrum over position")
-        a1.grid(alpha=0.3)
-    if whiteness:
-        acfs = np.array([w["acf"][:11] for w in whiteness if len(w["acf"]) >= 11])
-        if len(acfs):
-            a2.plot(np.arange(11), acfs.T, color="0.7", lw=0.5)
-            a2.plot(np.arange(11), np.median(acfs, axis=0), "k-", lw=2, label="median over runs")
-            band = np.median([w["band"] for w in whiteness])
-            a2.axhspan(-band, band, color="b", alpha=0.15, label="95 % white-noise band")
-            a2.set_xlabel("lag [samples]")
-            a2.set_ylabel("autocorrelation")
-            a2.legend(fontsize=7)
-            a2.set_title("whiteness per run")
-            a2.grid(alpha=0.3)
-    figs.append(str(plots._save(fig, out / "residual_spectrum_and_whiteness.png")))
-
-    if chosen is not None:
-        c = chosen.candidate
-        F = np.asarray(c.features(dtr), float).reshape(len(dtr), -1) @ chosen.phi
-        x = vals.get(c.regressor, vals["position"])
-        fig, ax = plt.subplots(figsize=(6, 4))
-        ax.plot(x[mask], F[mask], ".", ms=1)
-        ax.set_xlabel(c.regressor)
-        ax.set_ylabel("extra force [N]")
-        ax.set_title(f"chosen effect: {c.label}")
-        ax.grid(alpha=0.3)
-        figs.append(str(plots._save(fig, out / "chosen_effect.png")))
-
-    runs = [r for r, _ in dataio.run_slices(dte[dataio.RUN])]
-    pick = runs[:: max(1, len(runs) // 4)][:4]
-    fig, axes = plt.subplots(len(pick), 1, figsize=(7, 2.6 * len(pick)), squeeze=False)
-    for ax, (run, sl) in zip(axes[:, 0], [(r, s) for r, s in dataio.run_slices(dte[dataio.RUN]) if r in pick]):
-        g = dte.iloc[sl]
-        ax.plot(g[dataio.POSITION] * 1e3, np.abs(g[dataio.SPEED]) * 1e3, "k.", ms=1.5, label="measured (TEST)")
-        ax.plot(g[dataio.POSITION] * 1e3, np.abs(v_te[sl]) * 1e3, "b-", label="baseline")
-        if v_te_ext is not None:
-            ax.plot(g[dataio.POSITION] * 1e3, np.abs(v_te_ext[sl]) * 1e3, "r--", label="extended")
-        ax.set_title(f"run {run}: V0 {g[dataio.VOLTAGE].iloc[0]:g} V, load {g[dataio.LOAD].iloc[0]:+g} kg, "
-                     f"dir {int(g[dataio.DIRECTION].iloc[0]):+d}", fontsize=9)
-        ax.set_ylabel("speed [mm/s]")
-        ax.grid(alpha=0.3)
-    axes[0, 0].legend(fontsize=7)
-    axes[-1, 0].set_xlabel("position [mm]")
-    figs.append(str(plots._save(fig, out / "before_after_test.png")))
-    return figs
+def _data_summary(train: dataio.Measurements, test: dataio.Measurements | None) -> dict:
+    def where(m):
+        return str(m.path) if m is not None and m.path is not None else None
+    return {"train": where(train), "test": where(test), "train_runs": len(train.runs),
+            "test_runs": len(test.runs) if test is not None else 0, "train_samples": train.n_samples,
+            "test_samples": test.n_samples if test is not None else 0}

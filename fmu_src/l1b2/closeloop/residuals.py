@@ -86,7 +86,7 @@ def _scaled(x, lo, hi):
     return (x - lo) / (hi - lo) if hi > lo else np.zeros_like(x)
 
 
-def _bspline_basis(u: np.ndarray, n_inner: int, degree: int = 3) -> np.ndarray:
+def bspline_basis(u: np.ndarray, n_inner: int, degree: int = 3) -> np.ndarray:
     """Cubic B-spline basis on [0, 1] with ``n_inner`` equally spaced inner knots."""
     inner = np.linspace(0, 1, n_inner + 2)[1:-1]
     t = np.concatenate([np.zeros(degree + 1), inner, np.ones(degree + 1)])
@@ -119,8 +119,8 @@ def basis(name: str, values: dict[str, np.ndarray], ranges: dict[str, tuple[floa
         return np.column_stack([u, u ** 2])
     if name == "position":
         n_inner = int(np.clip(round((hi - lo) / 1.5e-3), 4, 60))
-        return _bspline_basis(_scaled(x, lo, hi), n_inner)[:, 1:]
-    return _bspline_basis(_scaled(x, lo, hi), 6)[:, 1:]
+        return bspline_basis(_scaled(x, lo, hi), n_inner)[:, 1:]
+    return bspline_basis(_scaled(x, lo, hi), 6)[:, 1:]
 
 
 # ---------------------------------------------------------------------------
@@ -278,7 +278,8 @@ def cv_gain(r: np.ndarray, X: np.ndarray, runs: np.ndarray, folds, base: np.ndar
     return float(gain), per_run, ss1
 
 
-def _wilcoxon_greater(x: np.ndarray) -> float:
+def wilcoxon_greater(x: np.ndarray) -> float:
+    """One-sided Wilcoxon signed-rank p-value that the per-run values ``x`` are positive (1.0 below 6 runs)."""
     x = x[np.abs(x) > 0]
     if len(x) < 6:
         return 1.0
@@ -305,7 +306,7 @@ def regressor_evidence(r: np.ndarray, df: pd.DataFrame, mask: np.ndarray, *, k: 
             continue
         X = basis(name, sub, ranges)
         g, per_run, _ = cv_gain(rr, X, runs, folds, base)
-        out.append(Evidence(name, g, _wilcoxon_greater(per_run), float(np.mean(per_run > 0)), len(per_run),
+        out.append(Evidence(name, g, wilcoxon_greater(per_run), float(np.mean(per_run > 0)), len(per_run),
                             tuple(given), per_run))
     return sorted(out, key=lambda e: -e.cv_gain)
 

@@ -11,25 +11,27 @@ from . import measurements as dataio
 from .metrics import evaluation_mask
 
 
-def _plt():
+def pyplot():
+    """matplotlib.pyplot with the non-interactive Agg backend (unless a backend was chosen already)."""
     import matplotlib
     matplotlib.use("Agg", force=False)
     import matplotlib.pyplot as plt
     return plt
 
 
-def _save(fig, path) -> Path:
+def save_figure(fig, path) -> Path:
+    """Write ``fig`` as a PNG (120 dpi, tight layout; parent folders created), close it, return the path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
-    _plt().close(fig)
+    pyplot().close(fig)
     return path
 
 
 def fig9a_speed_vs_position_by_voltage(df: pd.DataFrame, path, load_kg: float = 0.0, direction: int = 1) -> Path:
     """Paper Fig. 9(a): load-free speed against position for each V0."""
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(7, 4.2))
     sel = df[np.isclose(df[dataio.LOAD], load_kg) & (df[dataio.DIRECTION] == direction)]
     for V, g in sorted(sel.groupby(dataio.VOLTAGE), key=lambda x: x[0]):
@@ -39,12 +41,12 @@ def fig9a_speed_vs_position_by_voltage(df: pd.DataFrame, path, load_kg: float = 
     ax.set_title(f"Speed vs position, load {load_kg:g} kg, direction {direction:+d} (cf. paper Fig. 9a)")
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def fig9b_speed_vs_position_by_load(df: pd.DataFrame, path, V0_V: float | None = None, direction: int = 1) -> Path:
     """Paper Fig. 9(b): speed against position for each horizontal load at one V0."""
-    plt = _plt()
+    plt = pyplot()
     V0_V = float(df[dataio.VOLTAGE].max()) if V0_V is None else V0_V
     fig, ax = plt.subplots(figsize=(7, 4.2))
     sel = df[np.isclose(df[dataio.VOLTAGE], V0_V) & (df[dataio.DIRECTION] == direction)]
@@ -55,7 +57,7 @@ def fig9b_speed_vs_position_by_load(df: pd.DataFrame, path, V0_V: float | None =
     ax.set_title(f"Speed vs position at V0 = {V0_V:g} V, direction {direction:+d} (cf. paper Fig. 9b)")
     ax.legend(fontsize=7, ncol=2)
     ax.grid(alpha=0.3)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def fig9c_fit(df: pd.DataFrame, load_kg: float = 0.0) -> dict:
@@ -78,7 +80,7 @@ def fig9c_fit(df: pd.DataFrame, load_kg: float = 0.0) -> dict:
 
 def fig9c_speed_vs_tip_velocity(df: pd.DataFrame, path, load_kg: float = 0.0) -> tuple[Path, dict]:
     """Paper Fig. 9(c): v_s against omega*U_w with the fitted line, its slope k0 and R^2."""
-    plt = _plt()
+    plt = pyplot()
     fit = fig9c_fit(df, load_kg)
     fig, ax = plt.subplots(figsize=(6, 4.5))
     ax.plot(fit["x"] * 1e3, fit["y"] * 1e3, ".", ms=2, alpha=0.4, label="samples (no load)")
@@ -90,13 +92,13 @@ def fig9c_speed_vs_tip_velocity(df: pd.DataFrame, path, load_kg: float = 0.0) ->
     ax.set_title("Speed vs transverse vibration velocity (cf. paper Fig. 9c)")
     ax.legend()
     ax.grid(alpha=0.3)
-    return _save(fig, path), {k: v for k, v in fit.items() if k not in ("x", "y")}
+    return save_figure(fig, path), {k: v for k, v in fit.items() if k not in ("x", "y")}
 
 
 def prediction_vs_measured(run_df: pd.DataFrame, v_pred: np.ndarray, path, title: str,
                            v_pred_alt: np.ndarray | None = None, labels=("predicted", "alternative")) -> Path:
     """Paper Fig. 10: predicted and measured speed over position, with the relative error."""
-    plt = _plt()
+    plt = pyplot()
     s = run_df[dataio.POSITION].to_numpy() * 1e3
     v = run_df[dataio.SPEED].to_numpy()
     fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(7, 5.5), gridspec_kw={"height_ratios": [2, 1]})
@@ -119,12 +121,12 @@ def prediction_vs_measured(run_df: pd.DataFrame, v_pred: np.ndarray, path, title
     ax2.set_ylabel("rel. error [%]")
     ax2.set_xlabel("position [mm]")
     ax2.grid(alpha=0.3)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def steady_comparison(tables: dict, path) -> Path:
     """Predicted against co-simulated steady speed, one panel per comparison, with the error range."""
-    plt = _plt()
+    plt = pyplot()
     n = len(tables)
     fig, axes = plt.subplots(1, n, figsize=(3.6 * n, 3.8), squeeze=False)
     for ax, (key, df) in zip(axes[0], tables.items()):
@@ -140,4 +142,4 @@ def steady_comparison(tables: dict, path) -> Path:
         ax.set_xlabel("co-simulation [mm/s]")
         ax.set_ylabel("predictor [mm/s]")
         ax.grid(alpha=0.3)
-    return _save(fig, path)
+    return save_figure(fig, path)

@@ -112,6 +112,30 @@ INJECTIONS: dict[str, Injection] = {e.name: e for e in [
            {"Driver.V0_sat_V": 320.0}, {"Driver.V0_sat_V": (280.0, 360.0)}),
 ]}
 
+#: effects of the measurement chain, applied to the recorded data (not to the FMU system; "DAQ." parameters)
+DATA_INJECTIONS: dict[str, Injection] = {e.name: e for e in [
+    Injection("speed_lowpass",
+           "the DAQ's speed channel is low-pass filtered (first order, a few ms): the speed column lags "
+           "the position's derivative (a measurement-chain effect, applied to the recorded data)",
+           "speed",
+           {"DAQ.speed_tau_s": 0.004}, {"DAQ.speed_tau_s": (0.003, 0.008)}),
+]}
+
+DAQ_PREFIX = "DAQ."
+
+
+def lowpass_speed(df: pd.DataFrame, tau_s: float) -> pd.DataFrame:
+    """The speed column passed through a first-order low-pass (time constant ``tau_s``), run by run."""
+    out = df.copy()
+    v = out[dataio.SPEED].to_numpy(float).copy()
+    t = out[dataio.TIME].to_numpy(float)
+    for _, sl in dataio.run_slices(out[dataio.RUN]):
+        for k in range(sl.start + 1, sl.stop):
+            a = math.exp(-(t[k] - t[k - 1]) / tau_s)
+            v[k] = a * v[k - 1] + (1 - a) * v[k]
+    out[dataio.SPEED] = v
+    return out
+
 
 def apply_overrides(mp: MotorParams, overrides: dict) -> MotorParams:
     """MotorParams with ``{"Component.parameter": value}`` applied."""
@@ -128,13 +152,14 @@ def apply_overrides(mp: MotorParams, overrides: dict) -> MotorParams:
 def parse_injection(spec: str) -> tuple[str, dict]:
     """``"name"`` or ``"name:Component.param=value,..."`` -> (name, overrides)."""
     name, _, rest = spec.partition(":")
-    if name not in INJECTIONS:
-        raise SimulationError(f"unknown injection '{name}'; known: {', '.join(INJECTIONS)}")
+    known = {**INJECTIONS, **DATA_INJECTIONS}
+    if name not in known:
+        raise SimulationError(f"unknown injection '{name}'; known: {', '.join(known)}")
     values = {}
     for item in filter(None, rest.split(",")):
         k, _, v = item.partition("=")
-        if k not in INJECTIONS[name].params:
-            raise SimulationError(f"injection '{name}' has no parameter '{k}' (has {', '.join(INJECTIONS[name].params)})")
+        if k not in known[name].params:
+            raise SimulationError(f"injection '{name}' has no parameter '{k}' (has {', '.join(known[name].params)})")
         values[k] = float(v)
     return name, values
 
@@ -289,7 +314,8 @@ def is_stateful(motor: MotorParams, injected=()) -> bool:
     (``thermal_tau_s > 0``): each run starts at the temperature the previous
     one left after the pause.
     """
-    return any(INJECTIONS[i["name"]].stateful for i in injected) or motor.stator.thermal_tau_s > 0
+    return any(i["name"] in INJECTIONS and INJECTIONS[i["name"]].stateful for i in injected) \
+        or motor.stator.thermal_tau_s > 0
 
 
 def run_experiment(plan: RigPlan = RigPlan(), mp: MotorParams | None = None, injections=(), engine="inprocess",
@@ -317,14 +343,16 @@ def run_experiment(plan: RigPlan = RigPlan(), mp: MotorParams | None = None, inj
         fmu_dir = ensure_fmus()
     rng = np.random.default_rng(injection_seed) if injection_seed is not None else None
     overrides, injected = {}, []
+    known = {**INJECTIONS, **DATA_INJECTIONS}
     for e in injections:
         name, user = (e, {}) if isinstance(e, str) else e
-        if name not in INJECTIONS:
-            raise SimulationError(f"unknown injection '{name}'; known: {', '.join(INJECTIONS)}")
-        values = {**INJECTIONS[name].draw(rng), **user}
+        if name not in known:
+            raise SimulationError(f"unknown injection '{name}'; known: {', '.join(known)}")
+        values = {**known[name].draw(rng), **user}
         overrides.update(values)
-        injected.append({"name": name, "regressor": INJECTIONS[name].regressor, "parameters": values})
-    motor = apply_overrides(nominal, overrides)
+        injected.append({"name": name, "regressor": known[name].regressor, "parameters": values})
+    daq = {k[len(DAQ_PREFIX):]: v for k, v in overrides.items() if k.startswith(DAQ_PREFIX)}
+    motor = apply_overrides(nominal, {k: v for k, v in overrides.items() if not k.startswith(DAQ_PREFIX)})
     conditions = plan_runs(plan)
     bar = None
     if progress:
@@ -339,6 +367,8 @@ def run_experiment(plan: RigPlan = RigPlan(), mp: MotorParams | None = None, inj
         if bar:
             bar.close()
     df = pd.concat(frames, ignore_index=True)
+    if "speed_tau_s" in daq:
+        df = lowpass_speed(df, daq["speed_tau_s"])
     truth = {"injections": injected, "plan": asdict(plan), "engine": engine, "motor": nominal.name}
     return df, truth
 

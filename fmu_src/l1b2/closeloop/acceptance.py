@@ -1,0 +1,185 @@
+"""Acceptance of a candidate by cross-validation of the *re-identified* model over whole runs.
+
+The linearised score (:mod:`l1b2.closeloop.selection`) only shortlists: it
+assumes the current model's parameters stay put, which is wrong when the
+baseline itself is imperfect (its structural error is absorbed differently
+once a term is added). Here each shortlisted candidate is judged by what a
+user would see on new runs:
+
+* TRAIN's runs are split into ``k`` folds (:func:`stratified_folds`: seeded,
+  stratified by direction and voltage);
+* for each fold, the current model (its accepted effects included) and the
+  current model + the candidate are both re-identified on the other folds
+  (warm start from the current fit, one local search with a bounded budget,
+  the candidate's parameters started from its linearised fit on the same
+  training folds only) and predict the held-out fold in free run;
+* the candidate is accepted when the pooled held-out free-run error
+  (sum of squares on the evaluation mask) falls by at least ``min_gain``
+  (relative) and falls in most folds (:func:`accepts`).
+
+An :class:`EffectSet` is the ordered list of accepted candidates with their
+parameter values; it builds the :class:`~l1b2.ident.extra.ExtraForces` of
+the joint identification.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from ..data import measurements as dataio
+from ..errors import IdentificationError
+from ..ident.estimator import ExtraForces, PredictorIdentifier
+from .candidates import CandidateForce
+
+DEFAULT_REFIT_FOLDS = 4
+DEFAULT_REFIT_NFEV = 10
+DEFAULT_MIN_CV_GAIN = 0.03
+
+
+@dataclass(frozen=True)
+class EffectSet:
+    """Accepted candidates, in order, with the start values of their parameters."""
+
+    candidates: tuple = ()
+    phi: tuple = ()          #: one array of parameter values per candidate
+
+    def add(self, c: CandidateForce, phi) -> EffectSet:
+        return EffectSet(self.candidates + (c,), self.phi + (np.asarray(phi, float).ravel(),))
+
+    @property
+    def families(self) -> set:
+        return {c.family for c in self.candidates}
+
+    def start(self) -> np.ndarray:
+        return np.concatenate(self.phi) if self.phi else np.zeros(0)
+
+    def extra(self) -> ExtraForces | None:
+        """The joint extra forces (None when empty)."""
+        if not self.candidates:
+            return None
+        cands = self.candidates
+
+        def features(df):
+            return np.column_stack([np.asarray(c.features(df), float).reshape(len(df), -1) for c in cands])
+        names = tuple(n for c in cands for n in c.names)
+        units = tuple(u for c in cands for u in c.units)
+        desc = "; ".join(c.description for c in cands)
+        return ExtraForces(names=names, units=units, features=features, start=tuple(self.start()),
+                           description=desc)
+
+    def with_phi(self, phi_all) -> EffectSet:
+        """The same candidates with the parameter values ``phi_all`` (flat, in order)."""
+        out, i = [], 0
+        for c in self.candidates:
+            out.append(np.asarray(phi_all[i:i + c.n_params], float))
+            i += c.n_params
+        return EffectSet(self.candidates, tuple(out))
+
+
+def stratified_folds(df: pd.DataFrame, k: int, seed: int = 0) -> list[np.ndarray]:
+    """Run ids in ``k`` folds: seeded shuffle, then dealt in turn within each (direction, voltage) stratum."""
+    first = df.groupby(dataio.RUN, sort=False)[[dataio.DIRECTION, dataio.VOLTAGE]].first()
+    runs = first.index.to_numpy()
+    rng = np.random.default_rng(seed)
+    order = rng.permutation(len(runs))
+    keys = first.iloc[order]
+    ranked = keys.assign(_o=np.arange(len(order))).sort_values([dataio.DIRECTION, dataio.VOLTAGE, "_o"],
+                                                               kind="stable")
+    ids = ranked.index.to_numpy()
+    k = min(k, len(ids))
+    return [ids[i::k] for i in range(k)]
+
+
+def refit(df: pd.DataFrame, mask: np.ndarray, m_s: float, init, effects: EffectSet, *, order: int, seed: int,
+          max_nfev: int, max_outer: int = 2) -> PredictorIdentifier:
+    """The model with ``effects``, re-identified on ``df`` by one warm local search (bounded budget)."""
+    extra = effects.extra()
+    est = PredictorIdentifier(order=order, criterion="free_run", fixed="recommended", n_starts=1, seed=seed,
+                              extra=extra, init=init, init_extra=effects.start() if extra is not None else None,
+                              max_nfev=max_nfev, max_outer=max_outer)
+    return est.fit(df, slider_mass_kg=m_s, mask=mask)
+
+
+@dataclass
+class FoldErrors:
+    """Held-out free-run sums of squares per fold (on the evaluation mask) and the measured speed's."""
+
+    sse: np.ndarray
+    ss_meas: np.ndarray
+    failed: int = 0
+
+    @property
+    def nrmse(self) -> float:
+        return float(np.sqrt(self.sse.sum() / max(self.ss_meas.sum(), 1e-300)))
+
+
+@dataclass
+class RefitCV:
+    """Outcome of one candidate's cross-validated refit against the current model on the same folds."""
+
+    candidate: CandidateForce
+    current: FoldErrors
+    extended: FoldErrors
+    linear_gain: float = 0.0
+    phi: np.ndarray = field(default=None, repr=False)
+
+    @property
+    def gain(self) -> float:
+        """Relative fall of the pooled held-out free-run sum of squares."""
+        return float(1.0 - self.extended.sse.sum() / max(self.current.sse.sum(), 1e-300))
+
+    @property
+    def folds_improved(self) -> int:
+        return int(np.sum(self.extended.sse < self.current.sse))
+
+    def to_dict(self) -> dict:
+        c = self.candidate
+        return {"effect": c.family, "label": c.label, "regressors": list(c.regressors),
+                "cv_free_run_nrmse_current": self.current.nrmse, "cv_free_run_nrmse_refit": self.extended.nrmse,
+                "cv_gain": self.gain, "folds_improved": self.folds_improved, "folds": len(self.current.sse),
+                "linearised_gain": self.linear_gain}
+
+
+def accepts(r: RefitCV, *, min_gain: float = DEFAULT_MIN_CV_GAIN) -> bool:
+    """At least ``min_gain`` relative fall of the held-out free-run SS, in more than half of the folds."""
+    k = len(r.current.sse)
+    return r.extended.failed == 0 and r.gain >= min_gain and r.folds_improved > k / 2
+
+
+def fold_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init, effects: EffectSet, *, order: int,
+                seed: int, max_nfev: int, fold_phi=None) -> FoldErrors:
+    """Refit on all folds but one, predict the held-out one in free run; per fold SS (failed fits: inf)."""
+    runs = df[dataio.RUN].to_numpy()
+    v = df[dataio.SPEED].to_numpy(float)
+    sse, ssm, failed = [], [], 0
+    for i, fold in enumerate(folds):
+        held = np.isin(runs, fold)
+        tr_df = df.loc[~held].reset_index(drop=True)
+        te_df = df.loc[held].reset_index(drop=True)
+        eff = effects if fold_phi is None else effects.with_phi(np.concatenate([effects.start()[:-len(fold_phi[i])],
+                                                                                 fold_phi[i]]))
+        m_te = mask[held]
+        ssm.append(float(np.sum(v[held][m_te] ** 2)))
+        try:
+            est = refit(tr_df, mask[~held], m_s, init, eff, order=order, seed=seed, max_nfev=max_nfev)
+            pred = est.predict_free_run(te_df)
+            e = (v[held] - pred)[m_te]
+            sse.append(float(np.sum(e ** 2)) if np.all(np.isfinite(e)) else np.inf)
+        except IdentificationError:
+            failed += 1
+            sse.append(np.inf)
+    return FoldErrors(np.array(sse), np.array(ssm), failed)
+
+
+def fold_start_phi(S: np.ndarray, A: np.ndarray, y: np.ndarray, runs_m: np.ndarray, folds) -> list[np.ndarray]:
+    """Per fold, the candidate's linearised parameters fitted on the training folds only (no held-out leak)."""
+    out = []
+    X = np.column_stack([A, S])
+    for fold in folds:
+        tr = ~np.isin(runs_m, fold)
+        coef = np.linalg.lstsq(X[tr], y[tr], rcond=None)[0]
+        out.append(coef[A.shape[1]:])
+    return out

@@ -1,0 +1,123 @@
+"""The measurement chain: is the speed column the position's derivative, or filtered, delayed or scaled?
+
+A rig's ``speed_m_s`` need not be a clean central difference of
+``position_m``: the DAQ may low-pass it, delay it or scale it. The physics
+model cannot absorb that (it predicts the slider's speed), so the effect is
+found and modelled apart from the physics, from position and speed alone:
+
+* per run, ``u = d position / d t`` (central differences, as the data format
+  derives the speed when it is absent);
+* the output filter ``y(k) = a y(k-1) + b0 u(k) + b1 u(k-1)`` (a first-order
+  lag with a fractional delay and a scale; identity: a = b1 = 0, b0 = 1) is
+  fitted by least squares on the measured speed, K-fold over runs;
+* it is accepted when it lowers the held-out sum of squares of
+  ``speed - filter(u)`` against the identity by at least ``min_gain`` in most
+  runs *and* the speed column's mismatch with the derivative is above the
+  quantisation level (``min_rel_rms`` of the speed's rms).
+
+The accepted filter is then applied to the model's free-run prediction
+(:meth:`OutputFilter.apply`; the physics is not refit).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from ..data import measurements as dataio
+from .residuals import run_folds, wilcoxon_greater
+
+
+@dataclass(frozen=True)
+class OutputFilter:
+    """``y(k) = a y(k-1) + b0 u(k) + b1 u(k-1)`` per run, ``y(0) = (b0 + b1) u(0) / (1 - a)`` (steady start)."""
+
+    a: float = 0.0
+    b0: float = 1.0
+    b1: float = 0.0
+
+    def apply(self, df: pd.DataFrame, u) -> np.ndarray:
+        """The filtered signal of ``u`` (per sample), run by run."""
+        u = np.asarray(u, float)
+        y = np.empty_like(u)
+        gain0 = (self.b0 + self.b1) / (1.0 - self.a) if abs(1.0 - self.a) > 1e-9 else 1.0
+        for _, sl in dataio.run_slices(df[dataio.RUN]):
+            x = u[sl]
+            out = np.empty_like(x)
+            out[0] = gain0 * x[0]
+            for k in range(1, len(x)):
+                out[k] = self.a * out[k - 1] + self.b0 * x[k] + self.b1 * x[k - 1]
+            y[sl] = out
+        return y
+
+    def to_dict(self) -> dict:
+        dc = (self.b0 + self.b1) / (1.0 - self.a) if abs(1.0 - self.a) > 1e-9 else float("nan")
+        return {"a": self.a, "b0": self.b0, "b1": self.b1, "dc_gain": dc,
+                "time_constant_samples": (-1.0 / np.log(self.a)) if 0 < self.a < 1 else 0.0}
+
+
+def position_derivative(df: pd.DataFrame) -> np.ndarray:
+    """``d position / d t`` per run (central differences) [m/s]."""
+    pos = df[dataio.POSITION].to_numpy(float)
+    t = df[dataio.TIME].to_numpy(float)
+    out = np.zeros(len(df))
+    for _, sl in dataio.run_slices(df[dataio.RUN]):
+        if sl.stop - sl.start > 1:
+            out[sl] = np.gradient(pos[sl], t[sl])
+    return out
+
+
+def _design(df: pd.DataFrame, u: np.ndarray, v: np.ndarray):
+    """Rows k >= 1 of each run: ``[v(k-1), u(k), u(k-1)]`` and target ``v(k)``; their run ids."""
+    keep = np.ones(len(df), bool)
+    for _, sl in dataio.run_slices(df[dataio.RUN]):
+        keep[sl.start] = False
+    prev_v = np.roll(v, 1)
+    prev_u = np.roll(u, 1)
+    X = np.column_stack([prev_v, u, prev_u])[keep]
+    return X, v[keep], df[dataio.RUN].to_numpy()[keep], keep
+
+
+def speed_channel(df: pd.DataFrame, mask: np.ndarray, *, k: int = 5, seed: int = 0, min_gain: float = 0.5,
+                  min_rel_rms: float = 0.01) -> dict:
+    """Compare the speed column with the position's derivative; the accepted output filter (or None).
+
+    Returns a dict: ``rel_rms_mismatch`` (rms of speed - derivative over the
+    speed's rms), ``cv_gain`` (held-out share of the identity's mismatch the
+    filter removes, one-step on the measured speed), ``p_value`` (runs),
+    ``filter`` (:class:`OutputFilter` parameters fitted on all runs) and
+    ``accepted``.
+    """
+    if dataio.SPEED not in df.columns:
+        return {"accepted": False, "reason": "no speed column"}
+    u = position_derivative(df)
+    v = df[dataio.SPEED].to_numpy(float)
+    X, y, runs, keep = _design(df, u, v)
+    m = np.asarray(mask, bool)[keep]
+    X, y, runs = X[m], y[m], runs[m]
+    if len(y) < 10:
+        return {"accepted": False, "reason": "too few samples"}
+    ident = X[:, 1]
+    rel = float(np.sqrt(np.mean((v[mask] - u[mask]) ** 2)) / max(np.sqrt(np.mean(v[mask] ** 2)), 1e-300))
+    folds = run_folds(runs, k, seed)
+    ss0, ss1 = {}, {}
+    for fold in folds:
+        te = np.isin(runs, fold)
+        coef = np.linalg.lstsq(X[~te], y[~te], rcond=None)[0]
+        e1 = y[te] - X[te] @ coef
+        e0 = y[te] - ident[te]
+        for run in fold:
+            sel = runs[te] == run
+            ss0[run] = float(np.sum(e0[sel] ** 2))
+            ss1[run] = float(np.sum(e1[sel] ** 2))
+    s0 = np.array(list(ss0.values()))
+    s1 = np.array([ss1[r] for r in ss0])
+    gain = float(1 - s1.sum() / s0.sum()) if s0.sum() > 0 else 0.0
+    p = wilcoxon_greater((s0 - s1) / max(s0.mean(), 1e-300)) if s0.sum() > 0 else 1.0
+    coef = np.linalg.lstsq(X, y, rcond=None)[0]
+    filt = OutputFilter(float(coef[0]), float(coef[1]), float(coef[2]))
+    ok = bool(rel >= min_rel_rms and gain >= min_gain and p < 0.01 and abs(filt.a) < 0.999)
+    return {"accepted": ok, "rel_rms_mismatch": rel, "cv_gain": gain, "p_value": p,
+            "runs_improved": float(np.mean(s1 < s0)) if len(s0) else 0.0, "filter": filt}

@@ -1,0 +1,375 @@
+"""What a close-the-loop fit found: diagnosis, candidate scores, error before and after, report and figures.
+
+:class:`CloseLoopResult` is returned by :func:`l1b2.closeloop.loop.close_loop`
+(and kept as ``CloseLoop.result_``). It computes nothing new: it presents.
+``to_dict()`` is the content of ``report.json`` (strict JSON: non-finite
+numbers become ``None``), ``markdown()`` that of ``report.md``, ``plot()``
+returns the figures, and ``save(dir)`` is the only method that writes files
+(``report.json``, ``report.md`` and the PNGs).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from ..data import measurements as dataio
+from ..data import plots
+from . import residuals as res
+from .selection import Score
+
+#: file names (without ``.png``) of the figures, in report order
+FIGURES = ("residual_vs_regressors", "residual_spectrum_and_whiteness", "chosen_effect", "before_after_test")
+
+
+@dataclass(eq=False)
+class ResidualAnalysis:
+    """The TRAIN residual and what :mod:`l1b2.closeloop.residuals` found in it."""
+
+    residual: np.ndarray          #: drive-coordinate free-run residual per TRAIN sample [m/s]
+    mask: np.ndarray              #: the evaluation mask of TRAIN
+    whiteness: list               #: per-run whiteness (``residuals.whiteness``)
+    frequency: np.ndarray         #: spatial frequencies of the position spectrum [1/m]
+    power: np.ndarray             #: residual power per frequency
+    peak: dict                    #: the spectrum's peak (``residuals.position_spectrum``)
+    traced: list                  #: regressors traced by forward selection
+    rounds: list                  #: per round, the ``residuals.Evidence`` of each regressor
+
+
+@dataclass(eq=False)
+class CloseLoopResult:
+    """Outcome of one close-the-loop fit (TEST never used for fitting or choosing).
+
+    Attributes
+    ----------
+    baseline, extended : dict
+        Error metrics ``{"train": {"one_step": ..., "free_run": ...}, "test": ...}``
+        of the baseline and of the extended model (``extended`` is None when
+        nothing was significant; ``"test"`` is None without TEST data).
+    diagnosis : dict
+        ``significant``, ``traced_to``, ``effect`` (the chosen candidate's
+        family), ``message``, the best candidate per family, the rules, the
+        regressor evidence, whiteness and the spectral peak (``report.json``'s
+        ``diagnosis``).
+    scores : list of Score
+        Every candidate scored (see :meth:`scores_to_pandas`).
+    significant : list of Score
+        The candidates that passed every selection rule.
+    chosen : Score or None
+        The candidate added to the model.
+    extended_parameters, baseline_parameters : dict
+        The new parameters (value, stderr, ci95, unit) and the baseline's.
+    data : dict
+        Files, run and sample counts of TRAIN and TEST.
+    wall_time_s : float or None
+        Wall time of the job [s].
+    """
+
+    baseline: dict
+    diagnosis: dict
+    scores: list
+    significant: list
+    chosen: Score | None
+    extended: dict | None
+    extended_parameters: dict | None
+    baseline_parameters: dict
+    data: dict
+    wall_time_s: float | None = None
+    baseline_model: Any = field(default=None, repr=False)
+    extended_model: Any = field(default=None, repr=False)
+    analysis: ResidualAnalysis | None = field(default=None, repr=False)
+    train_df: pd.DataFrame | None = field(default=None, repr=False)
+    test_df: pd.DataFrame | None = field(default=None, repr=False)
+    test_free_run_before: np.ndarray | None = field(default=None, repr=False)
+    test_free_run_after: np.ndarray | None = field(default=None, repr=False)
+    rounds: list = field(default_factory=list)   #: per round: what was added, its CV result, the metrics after
+    checks: dict | None = None    #: the data checks (unit findings, TEST runs outside TRAIN's range), set by the caller
+
+    # -- views ---------------------------------------------------------------
+    @property
+    def before(self) -> dict:
+        """Error metrics of the baseline (``self.baseline``)."""
+        return self.baseline
+
+    @property
+    def after(self) -> dict | None:
+        """Error metrics of the extended model, None when the baseline was kept."""
+        return self.extended
+
+    def scores_to_pandas(self) -> pd.DataFrame:
+        """One row per candidate scored, by decreasing held-out gain, with ``significant``/``chosen`` flags."""
+        sig = {id(s) for s in self.significant}
+        rows = []
+        for s in self.scores:
+            d = s.to_dict()
+            d["family"] = d.pop("effect")
+            d["significant"] = id(s) in sig
+            d["chosen"] = s is self.chosen
+            rows.append(d)
+        cols = ["family", "label", "regressor", "generic", "n_params", "cv_gain", "p_value", "runs_improved",
+                "delta_aic", "delta_bic", "significant", "chosen", "parameters"]
+        df = pd.DataFrame(rows, columns=cols)
+        return df.sort_values("cv_gain", ascending=False, kind="stable").reset_index(drop=True)
+
+    def before_after_table(self) -> str:
+        """Plain-text table of the error metrics before and after (TEST and TRAIN)."""
+        return before_after_table({"baseline": self.baseline, "extended": self.extended})
+
+    def rounds_table(self) -> str:
+        """Plain-text table: per round, the effect added and the free-run nrmse (TRAIN, TEST) after it."""
+        return rounds_table(self.to_dict())
+
+    def to_dict(self) -> dict:
+        """The report (``report.json`` without ``figures``), strict JSON: non-finite numbers are None."""
+        return _jsonable({
+            "baseline": self.baseline,
+            "diagnosis": self.diagnosis,
+            "extended": self.extended,
+            "rounds": self.rounds,
+            "extended_parameters": self.extended_parameters,
+            "baseline_parameters": self.baseline_parameters,
+            "data": self.data,
+            "checks": self.checks,
+            "wall_time_s": self.wall_time_s,
+        })
+
+    def markdown(self) -> str:
+        """The report as Markdown (``report.md`` without the figure links)."""
+        return markdown_report(self.to_dict())
+
+    # -- figures and files ---------------------------------------------------
+    def plot(self) -> dict:
+        """The report's figures as ``{name: matplotlib Figure}`` (names as in :data:`FIGURES`); writes nothing.
+
+        ``chosen_effect`` only when a candidate was chosen, ``before_after_test``
+        only with TEST data. The caller closes the figures.
+        """
+        a = self.analysis
+        if a is None or self.train_df is None:
+            raise ValueError("this result carries no residual analysis to plot")
+        plt = plots.pyplot()
+        figs = {"residual_vs_regressors": _fig_residual_vs_regressors(plt, self.train_df, a),
+                "residual_spectrum_and_whiteness": _fig_spectrum_and_whiteness(plt, a)}
+        if self.chosen is not None:
+            figs["chosen_effect"] = _fig_chosen(plt, self.train_df, a.mask, self.chosen)
+        if self.test_df is not None and self.test_free_run_before is not None:
+            figs["before_after_test"] = _fig_before_after(plt, self.test_df, self.test_free_run_before,
+                                                          self.test_free_run_after)
+        return figs
+
+    def save(self, directory, *, plots_on: bool = True) -> list[Path]:
+        """Write ``report.json``, ``report.md`` and (``plots_on``) the PNGs into ``directory``; the paths written."""
+        out = Path(directory)
+        out.mkdir(parents=True, exist_ok=True)
+        report = self.to_dict()
+        written = []
+        if plots_on:
+            for name, fig in self.plot().items():
+                written.append(plots.save_figure(fig, out / f"{name}.png"))
+            report["figures"] = [str(p) for p in written]
+        (out / "report.json").write_text(json.dumps(report, indent=1, allow_nan=False))
+        (out / "report.md").write_text(markdown_report(report))
+        return [out / "report.json", out / "report.md"] + written
+
+
+def _jsonable(x):
+    """``x`` with numpy scalars/arrays as Python numbers/lists, tuples as lists and non-finite floats as None."""
+    if isinstance(x, dict):
+        return {k: _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple, np.ndarray)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, (bool, np.bool_)):
+        return bool(x)
+    if isinstance(x, (int, np.integer)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        return float(x) if math.isfinite(x) else None
+    return x
+
+
+# ---------------------------------------------------------------------------
+# text
+# ---------------------------------------------------------------------------
+
+def before_after_table(report: dict) -> str:
+    """Plain-text table of the error metrics before and after (TEST and TRAIN) of a report dict."""
+    def f(x):
+        return f"{x:.2%}" if x is not None else "-"
+
+    lines = [f"{'':8s}{'':10s}{'nrmse':>18s}{'mean |rel|':>22s}{'p95 |rel|':>22s}",
+             f"{'data':8s}{'kind':10s}{'before':>9s}{'after':>9s}{'before':>11s}{'after':>11s}"
+             f"{'before':>11s}{'after':>11s}"]
+    for part in ("test", "train"):
+        if report["baseline"].get(part) is None:
+            continue
+        for kind in ("free_run", "one_step"):
+            b = report["baseline"][part][kind]
+            a = report["extended"][part][kind] if report["extended"] else None
+            lines.append(f"{part:8s}{kind:10s}{f(b['nrmse']):>9s}{f(a['nrmse'] if a else None):>9s}"
+                         f"{f(b['mean_abs_rel_error']):>11s}{f(a['mean_abs_rel_error'] if a else None):>11s}"
+                         f"{f(b['p95_abs_rel_error']):>11s}{f(a['p95_abs_rel_error'] if a else None):>11s}")
+    return "\n".join(lines)
+
+
+def rounds_table(report: dict) -> str:
+    """Per round: the effect added, its cross-validated (refit) gain and the free-run nrmse before/after it."""
+    def f(x):
+        return f"{x:.2%}" if x is not None else "-"
+
+    rounds = report.get("rounds") or []
+    lines = [f"{'round':6s}{'added':44s}{'CV gain':>9s}{'train before':>14s}{'train after':>13s}"
+             f"{'test before':>13s}{'test after':>12s}"]
+    for prev, rnd in zip(rounds[:-1], rounds[1:]):
+        def nr(rec, part):
+            m = rec["metrics"].get(part)
+            return m["free_run"]["nrmse"] if m else None
+        lines.append(f"{rnd['round']:<6d}{(rnd['added'] or '-')[:43]:44s}{f(rnd['cv'].get('cv_gain')):>9s}"
+                     f"{f(nr(prev, 'train')):>14s}{f(nr(rnd, 'train')):>13s}{f(nr(prev, 'test')):>13s}"
+                     f"{f(nr(rnd, 'test')):>12s}")
+    if len(rounds) <= 1:
+        lines.append("(no round added an effect: the baseline is kept)")
+    return "\n".join(lines)
+
+
+def markdown_report(rep: dict) -> str:
+    """``report.md`` from a report dict (:meth:`CloseLoopResult.to_dict`, plus ``figures`` when saved)."""
+    d = rep["diagnosis"]
+    data = rep["data"]
+    test = (f"TEST: `{data['test']}` ({data['test_runs']} runs; never used for fitting or choosing)."
+            if data.get("test") is not None else "no TEST data.")
+    lines = ["# Close the loop: residual -> missing effect -> extended model", "",
+             f"TRAIN: `{data['train']}` ({data['train_runs']} runs), {test}",
+             "", "## Diagnosis", "", f"**{d['message']}**", ""]
+    if d["significant"]:
+        lines += [f"* traced to: {', '.join(d['traced_to'])}",
+                  f"* effect: `{d['effect']}` {d['effect_shape'] or ''} — {d['effect_description']}"]
+    else:
+        lines += ["* the baseline is kept (no shortlisted candidate's re-identified model lowered the "
+                  f"cross-validated free-run error by >= {d['rules'].get('min_cv_gain', 0):.0%} in most run folds)"]
+    for e in d.get("effects", [])[1:]:
+        lines.append(f"* then (round {e['round']}): `{e['label']}` ({', '.join(e['regressors'])}) — "
+                     f"{e['description']}")
+    lines += ["", "## Rounds (free-run nrmse before/after each added effect; CV gain = held-out free-run "
+              "sum of squares of the re-identified model over run folds)", "", "```", rounds_table(rep), "```"]
+    for i, trials in enumerate(d.get("refit_trials", []), 1):
+        if trials:
+            lines += ["", f"Round {i}: candidates refit and cross-validated:", "",
+                      "| candidate | regressors | linearised gain | CV nrmse current | CV nrmse refit | CV gain "
+                      "| folds improved |", "|---|---|---|---|---|---|---|"]
+            for t in trials:
+                lines.append(f"| {t['label']} | {', '.join(t['regressors'])} | {t['linearised_gain']:.1%} | "
+                             f"{t['cv_free_run_nrmse_current']:.2%} | "
+                             f"{t['cv_free_run_nrmse_refit'] if t['cv_free_run_nrmse_refit'] is None else format(t['cv_free_run_nrmse_refit'], '.2%')}"
+                             f" | {t['cv_gain'] if t['cv_gain'] is None else format(t['cv_gain'], '.1%')} | "
+                             f"{t['folds_improved']}/{t['folds']} |")
+    lines += ["", "## Error before and after (all rounds)", "", "```", before_after_table(rep), "```", "",
+              "## Candidates (best of each family, by held-out gain)", "",
+              "| effect | regressor | params | held-out gain | p (runs) | runs improved | dAIC | dBIC |",
+              "|---|---|---|---|---|---|---|---|"]
+    for c in d["candidates"]:
+        lines.append(f"| {c['label']} | {c['regressor']} | {c['n_params']} | {c['cv_gain']:.1%} | "
+                     f"{c['p_value']:.2g} | {c['runs_improved']:.0%} | {c['delta_aic']:.1f} | "
+                     f"{c['delta_bic']:.1f} |")
+    lines += ["", "## Residual evidence per regressor (first round, cross-validated over runs)", "",
+              "| regressor | held-out gain | p (runs) |", "|---|---|---|"]
+    for e in d["regressor_evidence"][0] if d["regressor_evidence"] else []:
+        lines.append(f"| {e['regressor']} | {e['cv_gain']:.1%} | {e['p_value']:.2g} |")
+    w = d["whiteness"]
+    lines += ["", f"Whiteness: median lag-1 autocorrelation {w['median_rho1']:.2f}; Ljung-Box p < 0.05 in "
+              f"{w['share_runs_ljung_box_p_below_0.05']:.0%} of {w['runs']} runs (free-run residuals are "
+              "coloured by the slider's low-pass even without a missing effect; evidence is judged per run).", ""]
+    if rep.get("extended_parameters"):
+        lines += ["## Extended model's new parameters", "", "| name | value | stderr | 95 % interval | unit |",
+                  "|---|---|---|---|---|"]
+        for n, p in rep["extended_parameters"].items():
+            lines.append(f"| {n} | {p['value']:.4g} | {p['stderr']} | {p['ci95']} | {p['unit']} |")
+    if rep.get("figures"):
+        lines += ["", "## Figures", ""] + [f"![{Path(f).stem}]({Path(f).name})" for f in rep["figures"]]
+    lines.append("")
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------
+# figures (each returns an open Figure)
+# ---------------------------------------------------------------------------
+
+def _fig_residual_vs_regressors(plt, dtr: pd.DataFrame, a: ResidualAnalysis):
+    vals = res.regressor_values(dtr)
+    names = [n for n in res.REGRESSORS if n in vals]
+    ncol = 4
+    nrow = math.ceil(len(names) / ncol)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(3.4 * ncol, 2.8 * nrow), squeeze=False)
+    for ax, n in zip(axes.flat, names):
+        x = vals[n][a.mask]
+        ax.plot(x, a.residual[a.mask] * 1e3, ".", ms=1, alpha=0.3)
+        ax.set_xlabel(n)
+        ax.set_ylabel("residual [mm/s]")
+        ax.grid(alpha=0.3)
+    for ax in list(axes.flat)[len(names):]:
+        ax.axis("off")
+    fig.suptitle("TRAIN free-run residual (drive coordinates) against each regressor")
+    return fig
+
+
+def _fig_spectrum_and_whiteness(plt, a: ResidualAnalysis):
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.6))
+    freq, power, whiteness = a.frequency, a.power, a.whiteness
+    if len(freq):
+        a1.semilogy(freq[1:] ** -1 * 1e3, power[1:])
+        a1.set_xscale("log")
+        a1.set_xlabel("period over position [mm]")
+        a1.set_ylabel("residual power")
+        a1.set_title("residual spectrum over position")
+        a1.grid(alpha=0.3)
+    if whiteness:
+        acfs = np.array([w["acf"][:11] for w in whiteness if len(w["acf"]) >= 11])
+        if len(acfs):
+            a2.plot(np.arange(11), acfs.T, color="0.7", lw=0.5)
+            a2.plot(np.arange(11), np.median(acfs, axis=0), "k-", lw=2, label="median over runs")
+            band = np.median([w["band"] for w in whiteness])
+            a2.axhspan(-band, band, color="b", alpha=0.15, label="95 % white-noise band")
+            a2.set_xlabel("lag [samples]")
+            a2.set_ylabel("autocorrelation")
+            a2.legend(fontsize=7)
+            a2.set_title("whiteness per run")
+            a2.grid(alpha=0.3)
+    return fig
+
+
+def _fig_chosen(plt, dtr: pd.DataFrame, mask: np.ndarray, chosen: Score):
+    c = chosen.candidate
+    vals = res.regressor_values(dtr)
+    F = np.asarray(c.features(dtr), float).reshape(len(dtr), -1) @ chosen.phi
+    x = vals.get(c.regressor, vals["position"])
+    fig, ax = plt.subplots(figsize=(6, 4))
+    ax.plot(x[mask], F[mask], ".", ms=1)
+    ax.set_xlabel(c.regressor)
+    ax.set_ylabel("extra force [N]")
+    ax.set_title(f"chosen effect: {c.label}")
+    ax.grid(alpha=0.3)
+    return fig
+
+
+def _fig_before_after(plt, dte: pd.DataFrame, v_te: np.ndarray, v_te_ext: np.ndarray | None):
+    runs = [r for r, _ in dataio.run_slices(dte[dataio.RUN])]
+    pick = runs[:: max(1, len(runs) // 4)][:4]
+    fig, axes = plt.subplots(len(pick), 1, figsize=(7, 2.6 * len(pick)), squeeze=False)
+    for ax, (run, sl) in zip(axes[:, 0], [(r, s) for r, s in dataio.run_slices(dte[dataio.RUN]) if r in pick]):
+        g = dte.iloc[sl]
+        ax.plot(g[dataio.POSITION] * 1e3, np.abs(g[dataio.SPEED]) * 1e3, "k.", ms=1.5, label="measured (TEST)")
+        ax.plot(g[dataio.POSITION] * 1e3, np.abs(v_te[sl]) * 1e3, "b-", label="baseline")
+        if v_te_ext is not None:
+            ax.plot(g[dataio.POSITION] * 1e3, np.abs(v_te_ext[sl]) * 1e3, "r--", label="extended")
+        ax.set_title(f"run {run}: V0 {g[dataio.VOLTAGE].iloc[0]:g} V, load {g[dataio.LOAD].iloc[0]:+g} kg, "
+                     f"dir {int(g[dataio.DIRECTION].iloc[0]):+d}", fontsize=9)
+        ax.set_ylabel("speed [mm/s]")
+        ax.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=7)
+    axes[-1, 0].set_xlabel("position [mm]")
+    return fig

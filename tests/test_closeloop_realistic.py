@@ -1,0 +1,166 @@
+"""Close the loop where Eq. 29 is NOT exact (issue 11): the realistic motor variant.
+
+On the realistic motor (``system_models/realistic_motor.toml``) the baseline
+itself has a structural error of a few %, so a gate like "removes half of the
+held-out residual" cannot work; what is checked instead, on TEST (never used
+for fitting or choosing):
+
+* with an injected effect: the right regressor among the first traced, and
+  the held-out free-run error cut by at least half of the *excess* over the
+  clean world's baseline, in quadrature: ``a^2 <= b0^2 + (b^2 - b0^2)/4``
+  (b: baseline, a: extended, b0: baseline of the same seed without the effect);
+* without one (control): the held-out free-run nrmse never more than 2 %
+  (relative) above the baseline; what was added is reported.
+
+Fast set (``make test``): one control seed and one effect (also checks the
+report's per-round fields). Slow set (CI): ten control seeds, six effects,
+three pairs of effects.
+"""
+
+import functools
+import json
+
+import numpy as np
+import pytest
+from l1b2.cli import main as cli_main
+from l1b2.closeloop.loop import close_loop
+from l1b2.data.measurements import load_measurements
+from l1b2.data.metrics import report_metrics
+from l1b2.ident.estimator import PredictorIdentifier
+from l1b2.rig.experiment import RigPlan
+from rigcache import rig_dir
+
+WORLD = "realistic"
+
+
+def _dir(effects, seed):
+    name = "+".join(effects) or "clean"
+    return rig_dir(f"{WORLD}_{name}_{seed}", injections=list(effects), injection_seed=seed,
+                   plan=RigPlan(step_s=1e-3, seed=seed), world=WORLD)
+
+
+@functools.cache
+def _run(effects: tuple, seed: int):
+    d = _dir(effects, seed)
+    res = close_loop(load_measurements(d / "train.csv"), load_measurements(d / "test.csv"))
+    truth = json.loads((d / "rig_truth.json").read_text())
+    return res, truth
+
+
+@functools.cache
+def _clean_baseline(seed: int) -> float:
+    """b0: the baseline's held-out free-run nrmse on the same seed's data without any effect."""
+    d = _dir((), seed)
+    tr, te = load_measurements(d / "train.csv"), load_measurements(d / "test.csv")
+    est = PredictorIdentifier(order=8, criterion="free_run", fixed="recommended", n_starts=4, seed=0)
+    est.fit(tr.df, slider_mass_kg=tr.slider_mass_kg, mask=np.array(tr.mask))
+    return report_metrics(te.df, est.predict_one_step(te.df), est.predict_free_run(te.df))["free_run"]["nrmse"]
+
+
+def _test_nrmse(res):
+    b = res.before["test"]["free_run"]["nrmse"]
+    a = res.after["test"]["free_run"]["nrmse"] if res.after is not None else b
+    return b, a
+
+
+def _check_effects(res, truth, seed, n_first):
+    want = [i["regressor"] for i in truth["injections"]]
+    d = res.diagnosis
+    assert d["significant"], d["message"]
+    for w in want:
+        assert w in d["traced_to"][:n_first], (want, d["traced_to"], d["message"])
+    b, a = _test_nrmse(res)
+    b0 = _clean_baseline(seed)
+    assert a ** 2 <= b0 ** 2 + (b ** 2 - b0 ** 2) / 4, (b0, b, a, d["message"])
+
+
+def _check_control(res):
+    b, a = _test_nrmse(res)
+    assert a <= 1.02 * b, (b, a, res.diagnosis["message"])
+    d = res.diagnosis
+    # what was added (if anything) is reported, round by round
+    assert len(d["effects"]) == len(res.rounds) - 1
+    assert (res.extended is None) == (not d["effects"])
+
+
+@pytest.mark.parametrize("seed", [21])
+def test_realistic_control_is_never_made_worse(seed):
+    res, _ = _run((), seed)
+    _check_control(res)
+
+
+@pytest.mark.slow
+def test_realistic_control_ten_seeds():
+    for seed in range(30, 40):
+        _check_control(_run((), seed)[0])
+
+
+def test_realistic_load_path_effect_report_rounds(tmp_path, capsys):
+    # reference: issue 11: report.json gains diagnosis.effects and rounds; the CLI prints a table per round;
+    # report.md shows each round; the held-out error cut in quadrature of the excess over the clean world
+    d = _dir(("pulley_friction",), 1)
+    out = tmp_path / "cl"
+    assert cli_main(["close-loop", "--train", str(d / "train.csv"), "--test", str(d / "test.csv"),
+                     "--report-dir", str(out), "--quiet", "--no-plots"]) == 0
+    printed = capsys.readouterr().out
+    assert "round" in printed and "CV gain" in printed
+    rep = json.loads((out / "report.json").read_text())
+    eff = rep["diagnosis"]["effects"]
+    assert eff and rep["diagnosis"]["effect"] == eff[0]["effect"]
+    assert "load" in rep["diagnosis"]["traced_to"][:2]
+    for e in eff:
+        assert e["regressors"] and e["cv_gain"] >= 0.03 and e["parameters"]
+        assert all({"value", "stderr", "ci95", "unit"} <= set(p) for p in e["parameters"].values())
+    rounds = rep["rounds"]
+    assert rounds[0]["round"] == 0 and rounds[0]["added"] is None and len(rounds) == len(eff) + 1
+    assert rep["extended"] == rounds[-1]["metrics"]
+    md = (out / "report.md").read_text()
+    assert "## Rounds" in md
+    b = rep["baseline"]["test"]["free_run"]["nrmse"]
+    a = rep["extended"]["test"]["free_run"]["nrmse"]
+    b0 = _clean_baseline(1)
+    assert a ** 2 <= b0 ** 2 + (b ** 2 - b0 ** 2) / 4, (b0, b, a)
+
+
+SINGLE = [("thermal_drift", 4), ("direction_asymmetry", 2), ("bar_waviness", 2), ("pulley_friction", 11),
+          ("drive_saturation", 3), ("thermal_drift", 12), ("direction_asymmetry", 13)]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("effect,seed", SINGLE)
+def test_realistic_single_effect(effect, seed):
+    res, truth = _run((effect,), seed)
+    _check_effects(res, truth, seed, 2)
+
+
+PAIRS = [(("pulley_friction", "drive_saturation"), 5), (("direction_asymmetry", "thermal_drift"), 6),
+         (("bar_waviness", "pulley_friction"), 7)]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("effects,seed", PAIRS)
+def test_realistic_two_effects(effects, seed):
+    res, truth = _run(effects, seed)
+    _check_effects(res, truth, seed, 3)
+
+
+def test_measurement_chain_filter_is_found_from_position_and_speed_alone():
+    # reference: issue 11 (measurement chain): a first-order low-pass on the speed column is detected by
+    # comparing it with the position's derivative per run, cross-validated over runs; a clean column is not
+    from l1b2.closeloop.chain import speed_channel
+    from l1b2.rig.experiment import lowpass_speed
+    m = load_measurements(_dir((), 21) / "train.csv")
+    mask = np.array(m.mask)
+    assert not speed_channel(m.df, mask)["accepted"]
+    tau, dt = 5e-3, 1e-3
+    ch = speed_channel(lowpass_speed(m.df, tau), mask)
+    assert ch["accepted"] and ch["cv_gain"] > 0.9
+    assert ch["filter"].a == pytest.approx(np.exp(-dt / tau), abs=0.02)
+    assert ch["filter"].to_dict()["dc_gain"] == pytest.approx(1.0, abs=0.02)
+
+
+@pytest.mark.slow
+def test_realistic_measurement_chain_effect():
+    res, truth = _run(("speed_lowpass",), 8)
+    _check_effects(res, truth, 8, 2)
+    assert res.diagnosis["measurement_chain"]["accepted"]
