@@ -57,7 +57,7 @@ def test_strict_json_and_significant_digits():
 
 def test_close_loop_report_md_prints_parameters_with_4_significant_digits():
     # reference: issue 14 item 7 - report.md printed a stderr with 17 digits
-    from l1b2.closeloop.loop import markdown_report
+    from l1b2.closeloop.result import markdown_report
     metrics = {"nrmse": 0.1, "mean_abs_rel_error": 0.1, "p95_abs_rel_error": 0.2, "n_samples": 10}
     part = {"one_step": metrics, "free_run": metrics}
     rep = {

@@ -21,6 +21,7 @@ import pandas as pd
 
 from ..data import measurements as dataio
 from ..data import plots
+from ..data.jsonsafe import sig
 from . import residuals as res
 from .selection import Score
 
@@ -288,7 +289,9 @@ def markdown_report(rep: dict) -> str:
         lines += ["## Extended model's new parameters", "", "| name | value | stderr | 95 % interval | unit |",
                   "|---|---|---|---|---|"]
         for n, p in rep["extended_parameters"].items():
-            lines.append(f"| {n} | {p['value']:.4g} | {p['stderr']} | {p['ci95']} | {p['unit']} |")
+            ci = p.get("ci95") or [None, None]
+            lines.append(f"| {n} | {sig(p['value'])} | {sig(p['stderr'])} | [{sig(ci[0])}, {sig(ci[1])}] | "
+                         f"{p['unit']} |")
     if rep.get("figures"):
         lines += ["", "## Figures", ""] + [f"![{Path(f).stem}]({Path(f).name})" for f in rep["figures"]]
     lines.append("")
