@@ -37,6 +37,9 @@ from .candidates import CandidateForce
 DEFAULT_REFIT_FOLDS = 4
 DEFAULT_REFIT_NFEV = 10
 DEFAULT_MIN_CV_GAIN = 0.03
+#: smallest fall of the cross-validated free-run nrmse (absolute, share of the speed's rms): a relative gain of a
+#: residual already near the noise floor is not worth a new term
+DEFAULT_MIN_CV_DROP = 0.005
 
 
 @dataclass(frozen=True)
@@ -143,10 +146,12 @@ class RefitCV:
                 "linearised_gain": self.linear_gain}
 
 
-def accepts(r: RefitCV, *, min_gain: float = DEFAULT_MIN_CV_GAIN) -> bool:
-    """At least ``min_gain`` relative fall of the held-out free-run SS, in more than half of the folds."""
+def accepts(r: RefitCV, *, min_gain: float = DEFAULT_MIN_CV_GAIN, min_drop: float = DEFAULT_MIN_CV_DROP) -> bool:
+    """At least ``min_gain`` relative fall of the held-out free-run SS, in more than half of the folds, and a
+    fall of the pooled held-out free-run nrmse by at least ``min_drop`` (absolute)."""
     k = len(r.current.sse)
-    return r.extended.failed == 0 and r.gain >= min_gain and r.folds_improved > k / 2
+    return (r.extended.failed == 0 and r.gain >= min_gain and r.folds_improved > k / 2
+            and r.current.nrmse - r.extended.nrmse >= min_drop)
 
 
 def fold_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init, effects: EffectSet, *, order: int,

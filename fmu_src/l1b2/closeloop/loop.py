@@ -54,8 +54,8 @@ from ..ident.estimator import PredictorIdentifier
 from . import chain
 from . import residuals as res
 from .candidates import CandidateSource, Context, full_library
-from .acceptance import (DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT_FOLDS, DEFAULT_REFIT_NFEV, EffectSet, RefitCV,
-                         accepts, fold_errors, fold_start_phi, refit, stratified_folds)
+from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT_FOLDS, DEFAULT_REFIT_NFEV,
+                         EffectSet, RefitCV, accepts, fold_errors, fold_start_phi, refit, stratified_folds)
 from .result import CloseLoopResult, ResidualAnalysis
 from .selection import (DEFAULT_ALPHA, DEFAULT_PARSIMONY, SHORTLIST_MIN_GAIN, Score, best_per_family, design,
                         score_candidates, shortlist, significance_level)
@@ -98,6 +98,8 @@ class CloseLoop:
         Folds over runs of the cross-validated refit (stratified by direction and voltage).
     min_cv_gain : float
         Smallest relative fall of the cross-validated free-run sum of squares (in most folds) to add an effect.
+    min_cv_drop : float
+        Smallest absolute fall of the cross-validated free-run nrmse to add an effect.
     refit_nfev, final_nfev : int
         Function evaluations of each fold's warm refit and of the joint re-identification after a round.
 
@@ -111,7 +113,8 @@ class CloseLoop:
                  min_gain: float = SHORTLIST_MIN_GAIN, parsimony: float = DEFAULT_PARSIMONY, seed: int = 0,
                  n_starts: int = 4, library: CandidateSource | None = None, progress=None, max_rounds: int = 3,
                  shortlist: int = 2, refit_folds: int = DEFAULT_REFIT_FOLDS,
-                 min_cv_gain: float = DEFAULT_MIN_CV_GAIN, refit_nfev: int = DEFAULT_REFIT_NFEV,
+                 min_cv_gain: float = DEFAULT_MIN_CV_GAIN, min_cv_drop: float = DEFAULT_MIN_CV_DROP,
+                 refit_nfev: int = DEFAULT_REFIT_NFEV,
                  final_nfev: int = 60):
         self.order = order
         self.k_folds = k_folds
@@ -126,6 +129,7 @@ class CloseLoop:
         self.shortlist = shortlist
         self.refit_folds = refit_folds
         self.min_cv_gain = min_cv_gain
+        self.min_cv_drop = min_cv_drop
         self.refit_nfev = refit_nfev
         self.final_nfev = final_nfev
 
@@ -133,7 +137,7 @@ class CloseLoop:
         """The settings given to ``__init__``."""
         return {k: getattr(self, k) for k in ("order", "k_folds", "alpha", "min_gain", "parsimony", "seed",
                                               "n_starts", "library", "progress", "max_rounds", "shortlist",
-                                              "refit_folds", "min_cv_gain", "refit_nfev",
+                                              "refit_folds", "min_cv_gain", "min_cv_drop", "refit_nfev",
                                               "final_nfev")}
 
     def __repr__(self) -> str:
@@ -230,7 +234,7 @@ class CloseLoop:
                                   order=self.order, seed=self.seed, max_nfev=self.refit_nfev, fold_phi=fphi)
                 trials.append(RefitCV(s.candidate, cur_err, err, s.cv_gain, s.phi))
             it.trials.append(trials)
-            ok = [t for t in trials if accepts(t, min_gain=self.min_cv_gain)]
+            ok = [t for t in trials if accepts(t, min_gain=self.min_cv_gain, min_drop=self.min_cv_drop)]
             if not ok:
                 break
             best_gain = max(t.gain for t in ok)
@@ -251,7 +255,7 @@ class CloseLoop:
         return it
 
     def _chain(self, it: _Iteration, dtr, dte, mask) -> dict:
-        """Output filter of the speed channel (:mod:`l1b2.closeloop.chain`), kept if it lowers TRAIN's free-run error."""
+        """Output filter of the speed channel (:mod:`l1b2.closeloop.chain`), kept if TRAIN's free-run error falls."""
         ch = chain.speed_channel(dtr, mask, k=self.k_folds, seed=self.seed)
         rec = {k: v for k, v in ch.items() if k != "filter"}
         if "filter" in ch:
@@ -306,6 +310,7 @@ class CloseLoop:
             "rules": {"min_gain": self.min_gain, "alpha": self.alpha, "parsimony": self.parsimony,
                       "k_folds": self.k_folds, "shortlist": self.shortlist,
                       "refit_folds": self.refit_folds, "min_cv_gain": self.min_cv_gain,
+                      "min_cv_drop": self.min_cv_drop,
                       "max_rounds": self.max_rounds},
             "regressor_evidence": [[e.to_dict() for e in rnd] for rnd in a.rounds],
             "whiteness": {"runs": len(w),

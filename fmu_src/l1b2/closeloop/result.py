@@ -264,10 +264,11 @@ def markdown_report(rep: dict) -> str:
                       "| candidate | regressors | linearised gain | CV nrmse current | CV nrmse refit | CV gain "
                       "| folds improved |", "|---|---|---|---|---|---|---|"]
             for t in trials:
-                lines.append(f"| {t['label']} | {', '.join(t['regressors'])} | {t['linearised_gain']:.1%} | "
-                             f"{t['cv_free_run_nrmse_current']:.2%} | "
-                             f"{t['cv_free_run_nrmse_refit'] if t['cv_free_run_nrmse_refit'] is None else format(t['cv_free_run_nrmse_refit'], '.2%')}"
-                             f" | {t['cv_gain'] if t['cv_gain'] is None else format(t['cv_gain'], '.1%')} | "
+                def pct(x, spec):
+                    return "-" if x is None else format(x, spec)
+                lines.append(f"| {t['label']} | {', '.join(t['regressors'])} | {pct(t['linearised_gain'], '.1%')} | "
+                             f"{pct(t['cv_free_run_nrmse_current'], '.2%')} | "
+                             f"{pct(t['cv_free_run_nrmse_refit'], '.2%')} | {pct(t['cv_gain'], '.1%')} | "
                              f"{t['folds_improved']}/{t['folds']} |")
     lines += ["", "## Error before and after (all rounds)", "", "```", before_after_table(rep), "```", "",
               "## Candidates (best of each family, by held-out gain)", "",
