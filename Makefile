@@ -20,7 +20,7 @@ fmus: $(STAMP)
 	$(PY) build_fmu.py
 
 test: $(STAMP)
-	$(PY) -m pytest -q -m "not slow"
+	$(PY) -m pytest -q -m "not slow" --durations=25
 
 test-slow: $(STAMP)
 	$(PY) -m pytest -q -m slow

@@ -40,6 +40,7 @@ from .problem import strictly_inside
 __all__ = [
     "HAS_CALLBACK", "StatStop", "sobol_box", "LocalSolver", "start_points", "SearchOutcome", "multi_start",
     "warm_prestep", "NoiseRefinement", "alternate_noise", "ProfileRefinement", "profile_refine", "profile_search",
+    "STALL_MESSAGE", "polish_stalled",
 ]
 
 
@@ -487,7 +488,7 @@ def profile_refine(objective, z, max_iter=100, stat_tol=0.01, stat_window=3, log
                 break
         if not accepted or not ll_new > ll - 1e-9 * abs(ll):
             vars(noise).update(saved)
-            converged, reason = True, "no step increases the log-likelihood"
+            converged, reason = True, STALL_MESSAGE
             break
         history.append({"iteration": it, "loglik": ll_new, "nfev": nfev - history_nfev(history), "lambda": lam})
         z, ll = z_new, ll_new
@@ -504,6 +505,54 @@ def profile_refine(objective, z, max_iter=100, stat_tol=0.01, stat_window=3, log
                             optimality=float(np.max(np.abs(g))) if g.size else 0.0,
                             time_s=time.perf_counter() - t0)
     return ProfileRefinement(z, final, history, converged)
+
+
+#: :func:`profile_refine`'s stop when no damped step gains (a numerical, not a statistical, stop)
+STALL_MESSAGE = "no step increases the log-likelihood"
+
+
+def polish_stalled(solver, refinement, max_outer, max_nfev, min_gain=0.0, log=None):
+    """Continue a profile refinement that stalled numerically with least-squares refits.
+
+    :func:`profile_refine` can stop with :data:`STALL_MESSAGE` short of the
+    optimum when its damped steps find no gain: near-exact data (residuals
+    ~1e-7 of the speed with exact null directions) or a kink of the free run
+    (measured: 1 log-likelihood unit short on an order-mismatched fit). Its
+    statistical stop never fired there, so the fit is not done: trust-region
+    least squares at the variances' ML values, the variances re-estimated
+    after each refit, continue from the stalled point while a refit gains
+    more than ``min_gain`` (the statistical tolerance) in log-likelihood, at
+    most ``max_outer`` refits (converged: a further refit gains < ``min_gain``).
+    A refit that does not gain is not kept; if none gains, the refinement (and its noise model) is returned unchanged.
+    """
+    obj = solver.objective
+    ll0 = refinement.history[-1]["loglik"]
+    z, ll, nfev, final, steps, converged = refinement.z, ll0, 0, None, 0, False
+    for _ in range(max_outer):
+        res, _dt = solver(z, max_nfev)
+        nfev += int(res.nfev)
+        obj.update_noise(obj.theta_of(res.x))
+        ll_new = obj.noise.loglik(obj.problem.residual(obj.theta_of(res.x)))
+        if not ll_new > ll:  # a further refit gains nothing
+            converged = True
+            break
+        z, final, steps = res.x, res, steps + 1
+        gain, ll = ll_new - ll, ll_new
+        if gain <= min_gain:
+            converged = True
+            break
+    obj.update_noise(obj.theta_of(z))
+    if final is None:
+        return refinement
+    final.status = -2 if converged else final.status
+    final.message = (f"{STALL_MESSAGE}; continued by {steps} least-squares refit(s) at the ML variances: "
+                     + ("a further refit gains < stat_tol log-likelihood units" if converged else str(final.message)))
+    history = refinement.history + [{"iteration": len(refinement.history), "loglik": ll, "nfev": nfev,
+                                     "polish": f"{steps} least-squares refit(s) after the damped Gauss-Newton "
+                                               "stalled"}]
+    if log is not None:
+        log(f"polish: loglik {ll0:.4f} -> {ll:.4f}, nfev {nfev}")
+    return ProfileRefinement(z, final, history, refinement.converged)
 
 
 def profile_search(objective, starts, max_iter, stat_tol, stat_window, agree, log=None):
