@@ -211,3 +211,21 @@ def test_allow_unusual_units_is_recorded_in_the_report(tmp_path, capsys):
     assert checks["allow_unusual_units"] is True
     assert any("slider_mass_kg" in m for m in checks["unusual_units"]["train"])
     assert "--allow-unusual-units accepted" in printed
+
+
+@pytest.mark.parametrize("column, value", [("voltage_V", 0.0), ("load_kg", 0.05), ("direction", -1)])
+def test_a_drive_input_changing_within_a_run_is_refused(tmp_path, column, value):
+    # reference: shared/data-format.md - "a run is one continuous traverse of the slider at constant drive
+    # inputs"; one corrupted cell of a set value passed every range check before
+    df = synthetic_frame()
+    row = int(np.flatnonzero(df["run"].to_numpy() == 2)[10])   # run 2: 220 V, no load, +1
+    df.loc[row, column] = value
+    path = write(tmp_path, df)
+    with pytest.raises(DataFormatError) as info:
+        load_measurements(path)
+    assert info.value.column == column and info.value.row == row + 1
+    assert "changes within the run" in str(info.value)
+    # a measured, noisy V0 (1 % ripple) is fine
+    ok = synthetic_frame()
+    ok["voltage_V"] = ok["voltage_V"] * (1 + 0.01 * np.sin(np.arange(len(ok))))
+    assert load_measurements(write(tmp_path, ok, "noisy_v")).meta["unusual_units"] == []

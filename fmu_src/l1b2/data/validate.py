@@ -599,6 +599,34 @@ def _peak_speed_problem(df: pd.DataFrame, speed_derived: bool) -> DataProblem | 
                        f"{format_value(MIN_PEAK_SPEED_M_S)} m/s: no traverse of a linear USM is that slow; {cause}")
 
 
+#: relative spread of voltage_V within a run above which it is not a run at constant drive inputs
+MAX_RUN_VOLTAGE_SPREAD: float = 0.1
+
+
+def _drive_input_problems(df: pd.DataFrame) -> list[DataProblem]:
+    """A run is a traverse at constant drive inputs: direction and load constant, V0 within 10 % (measured V0 is noisy)."""
+    problems: list[DataProblem] = []
+    cols = {c: df[c].to_numpy(dtype=float) for c in (DIRECTION, LOAD, VOLTAGE)}
+    for rid, sl in run_slices(df[RUN]):
+        for name, x in cols.items():
+            seg = x[sl]
+            if name == VOLTAGE:
+                ref = float(np.median(seg))
+                bad = np.abs(seg - ref) > MAX_RUN_VOLTAGE_SPREAD * max(abs(ref), 1.0)
+            else:
+                ref = float(seg[0])
+                bad = seg != ref
+            i = _first(bad)
+            if i is not None:
+                problems.append(DataProblem(
+                    sl.start + i, _ORDER[name], name,
+                    f"run {format_value(rid)}: {name} changes within the run ({format_value(float(seg[i]))} where "
+                    f"the run has {format_value(ref)}): a run is one traverse at constant drive inputs "
+                    "(a corrupted cell, or two runs with one id?)"))
+                break
+    return problems[:1]
+
+
 def unusual_values(df: pd.DataFrame, *, speed_derived: bool = False) -> list[DataProblem]:
     """Likely unit mistakes in a validated table (at most one per column, its first row).
 
@@ -607,7 +635,8 @@ def unusual_values(df: pd.DataFrame, *, speed_derived: bool = False) -> list[Dat
     interval above :data:`~l1b2.data.columns.MAX_SAMPLE_INTERVAL_S` (time in
     ms?) and, when the speed was measured, a run whose speed disagrees with
     the position's derivative (:func:`speed_slopes` outside
-    :data:`~l1b2.data.columns.SPEED_SLOPE_BAND`).
+    :data:`~l1b2.data.columns.SPEED_SLOPE_BAND`), and a run whose direction,
+    load or voltage (beyond 10 %) changes within it.
 
     Parameters
     ----------
@@ -638,6 +667,7 @@ def unusual_values(df: pd.DataFrame, *, speed_derived: bool = False) -> list[Dat
             text += " (speed derived from position_m and time_s: check both units)"
         span = f"{float(np.min(mags)):.4g} to {float(np.max(mags)):.4g}"
         problems.append(DataProblem(i, _ORDER[name], name, f"{text} ({label} in this file: {span})"))
+    problems += _drive_input_problems(df)
     for extra in (_interval_problem(df), _peak_speed_problem(df, speed_derived) if SPEED in df.columns else None):
         if extra is not None:
             problems.append(extra)
