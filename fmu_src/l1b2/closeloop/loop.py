@@ -43,10 +43,11 @@ import numpy as np
 import pandas as pd
 
 from ..data import measurements as dataio
+from ..data.coverage import input_checks
 from ..data.jsonsafe import dumps, sig
 from ..data.metrics import evaluation_mask, report_metrics
 from ..predictor import model as pr
-from ..workflows import input_checks, load_train_test
+from ..workflows import load_train_test
 from . import candidates as eff
 from . import residuals as res
 
