@@ -188,13 +188,14 @@ def test_coverage_pinned_configuration_free_run():
     assert np.all(cover >= 0.9), dict(zip(vn, cover))
     ratios = np.array(ratios)
     assert np.all(np.abs(ratios - 1) < 0.1), ratios
-    # issue 14: the Eq. 32 noise variances are the simulated one (per run within 25 %, on average within
-    # 5 %): a variance off by a factor (standard errors scaled with it) fails here. (In this configuration
+    # issue 14: the Eq. 32 noise variances are the simulated one (per run within 50 % - ~150 residuals per
+    # run, sampling SD ~12 % -, on average within 5 %): a variance off by a factor (standard errors scaled
+    # with it) fails here. (In this configuration
     # the intervals are conservative for the higher Legendre coefficients - Fisher stderr up to ~1.9x the
     # spread of the estimates over the repetitions, pooled coverage 99 % - so the two-sided coverage test
     # is the next one, on a configuration where the Fisher matrix is calibrated.)
     noise_var = np.array(noise_var)
-    assert np.all(np.abs(noise_var / noise**2 - 1) < 0.25), noise_var / noise**2
+    assert np.all(np.abs(noise_var / noise**2 - 1) < 0.5), noise_var / noise**2
     assert abs(np.mean(noise_var) / noise**2 - 1) < 0.05, np.mean(noise_var) / noise**2
     assert np.all(np.array(stderrs) >= np.array(fisher_se) * (1 - 1e-12))
 
