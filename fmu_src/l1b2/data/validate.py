@@ -548,8 +548,9 @@ def speed_slopes(df: pd.DataFrame, *, min_travel_m: float = 2e-4,
     for rid, sl in run_slices(df[RUN]):
         if sl.stop - sl.start < 3 or np.ptp(x[sl]) < min_travel_m:
             continue
-        xd = np.gradient(x[sl], t[sl])
-        ss = float(np.sum(xd * xd))
+        with np.errstate(all="ignore"):  # absurd positions (1e308) give inf here and are not judged
+            xd = np.gradient(x[sl], t[sl])
+            ss = float(np.sum(xd * xd))
         if not (np.isfinite(ss) and ss > 0) or math.sqrt(ss / xd.size) < min_rms_speed_m_s:
             continue
         out.append((rid, sl.start, float(np.sum(v[sl] * xd)) / ss))
