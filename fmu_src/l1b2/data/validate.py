@@ -557,6 +557,32 @@ def speed_slopes(df: pd.DataFrame, *, min_travel_m: float = 2e-4,
     return out
 
 
+#: a measured speed sample further than this share of the run's peak speed (+ 10 mm/s + 6 x the robust noise
+#: level) from the median of its 5 neighbours is a glitch (a step, e.g. at an end stop, and a filtered or
+#: lagged speed are not)
+MAX_SPEED_DEVIATION: float = 0.5
+
+
+def _speed_spike_problem(df: pd.DataFrame, judged: list[tuple[Any, int, float]]) -> DataProblem | None:
+    """An isolated speed sample far from its neighbours (a glitch), in a run whose slope is consistent."""
+    v = df[SPEED].to_numpy(dtype=float)
+    starts = {row for _, row, _ in judged}
+    for rid, sl in run_slices(df[RUN]):
+        seg = v[sl]
+        if sl.start not in starts or seg.size < 5:
+            continue
+        med = np.median(np.lib.stride_tricks.sliding_window_view(np.pad(seg, 2, mode="edge"), 5), axis=1)
+        noise = 1.4826 * float(np.median(np.abs(seg - med)))  # robust noise level: a glitch does not move it
+        limit = MAX_SPEED_DEVIATION * float(np.max(np.abs(med))) + 0.01 + 6.0 * noise
+        i = _first(np.abs(seg - med) > limit)
+        if i is not None:
+            return DataProblem(sl.start + i, _ORDER[SPEED], SPEED,
+                               f"run {format_value(rid)}: speed_m_s = {seg[i]:.4g} m/s where its neighbours have "
+                               f"{med[i]:.4g} m/s (more than {MAX_SPEED_DEVIATION:.0%} of the run's peak speed "
+                               "off): a glitch in the speed column?")
+    return None
+
+
 def _slope_hint(b: float) -> str:
     if b < 0:
         return "the speed has the opposite sign of the position's change (sign convention of speed_m_s?)"
@@ -636,8 +662,10 @@ def unusual_values(df: pd.DataFrame, *, speed_derived: bool = False) -> list[Dat
     interval above :data:`~l1b2.data.columns.MAX_SAMPLE_INTERVAL_S` (time in
     ms?) and, when the speed was measured, a run whose speed disagrees with
     the position's derivative (:func:`speed_slopes` outside
-    :data:`~l1b2.data.columns.SPEED_SLOPE_BAND`), and a run whose direction,
-    load or voltage (beyond 10 %) changes within it.
+    :data:`~l1b2.data.columns.SPEED_SLOPE_BAND`) or an isolated speed
+    sample (a glitch: further than half the run's peak speed from the median
+    of its 5 neighbours), and a run whose direction, load or voltage (beyond
+    10 %) changes within it.
 
     Parameters
     ----------
@@ -674,11 +702,16 @@ def unusual_values(df: pd.DataFrame, *, speed_derived: bool = False) -> list[Dat
             problems.append(extra)
     if not speed_derived and SPEED in df.columns:
         lo, hi = SPEED_SLOPE_BAND
-        for rid, row, b in speed_slopes(df):
+        slopes = speed_slopes(df)
+        for rid, row, b in slopes:
             if not lo <= b <= hi:
                 problems.append(DataProblem(
                     row, _ORDER[SPEED], SPEED,
                     f"run {format_value(rid)}: speed_m_s disagrees with d(position_m)/dt (regression slope "
                     f"{b:.3g}, expected 1 within [{format_value(lo)}, {format_value(hi)}]): {_slope_hint(b)}"))
                 break
+        else:
+            spike = _speed_spike_problem(df, slopes)
+            if spike is not None:
+                problems.append(spike)
     return sorted(problems, key=lambda q: (q.row, q.order))
