@@ -218,14 +218,15 @@ class Campaign:
     def identify(self, cls, note, train_df, test_df=None, sidecar=None, expect="refuse", extra=(), text=None):
         d = self.case_dir()
         side = {**self.sidecar, **(sidecar or {})}
+        train_side = self.sidecar if test_df is not None else side  # with TEST, only TEST's sidecar is wrong
         if text is not None:
             (d / "train.csv").write_text(text, encoding="utf-8")
-            (d / "train.json").write_text(json.dumps(side))
+            (d / "train.json").write_text(json.dumps(train_side))
         else:
-            write_pair(train_df, d / "train.csv", side)
+            write_pair(train_df, d / "train.csv", train_side)
         argv = ["identify", "--train", str(d / "train.csv"), "--out", str(d / "out"), *FAST, *extra]
         if test_df is not None:
-            write_pair(test_df, d / "test.csv", {**self.sidecar, **(sidecar or {})})
+            write_pair(test_df, d / "test.csv", side)
             argv += ["--test", str(d / "test.csv")]
         before = set(p.name for p in d.iterdir())
         res = run_cli(argv)

@@ -211,3 +211,37 @@ def test_allow_unusual_units_is_recorded_in_the_report(tmp_path, capsys):
     assert checks["allow_unusual_units"] is True
     assert any("slider_mass_kg" in m for m in checks["unusual_units"]["train"])
     assert "--allow-unusual-units accepted" in printed
+
+
+@pytest.mark.parametrize("column, value", [("voltage_V", 0.0), ("load_kg", 0.05), ("direction", -1)])
+def test_a_drive_input_changing_within_a_run_is_refused(tmp_path, column, value):
+    # reference: shared/data-format.md - "a run is one continuous traverse of the slider at constant drive
+    # inputs"; one corrupted cell of a set value passed every range check before
+    df = synthetic_frame()
+    row = int(np.flatnonzero(df["run"].to_numpy() == 2)[10])   # run 2: 220 V, no load, +1
+    df.loc[row, column] = value
+    path = write(tmp_path, df)
+    with pytest.raises(DataFormatError) as info:
+        load_measurements(path)
+    assert info.value.column == column and info.value.row == row + 1
+    assert "changes within the run" in str(info.value)
+    # a measured, noisy V0 (1 % ripple) is fine
+    ok = synthetic_frame()
+    ok["voltage_V"] = ok["voltage_V"] * (1 + 0.01 * np.sin(np.arange(len(ok))))
+    assert load_measurements(write(tmp_path, ok, "noisy_v")).meta["unusual_units"] == []
+
+
+def test_a_single_speed_glitch_is_refused_noise_and_steps_are_not(tmp_path, rig_frame):
+    # reference: the malformed-data campaign - one speed sample replaced by -1 m/s passed every check and
+    # raised the held-out nrmse from 0.44 % to 6.1 %
+    df = rig_frame.copy()
+    runs = df["run"].to_numpy()
+    row = int(np.flatnonzero(runs == runs[0])[60])
+    df.loc[row, "speed_m_s"] = -1.0
+    path = write(tmp_path, df, "glitch", {"slider_mass_kg": 0.12})
+    with pytest.raises(DataFormatError) as info:
+        load_measurements(path)
+    assert info.value.column == "speed_m_s" and info.value.row == row + 1 and "glitch" in str(info.value)
+    # a noisy speed (10 mm/s white noise on top) and the end-stop steps of the rig's data are not glitches
+    noisy = rig_frame.assign(speed_m_s=rig_frame["speed_m_s"] + np.random.default_rng(1).normal(0, 0.01, len(df)))
+    assert load_measurements(write(tmp_path, noisy, "noisy", {"slider_mass_kg": 0.12})).meta["unusual_units"] == []

@@ -451,6 +451,10 @@ def cmd_compare(args) -> int:
     for key, c in rep["cases"].items():
         print(f"  {key:38s} max |rel err| {c['max_abs_rel_error']:.2%}  rms {c['rms_rel_error']:.2%}  "
               f"({c['n_points']} points)")
+        if c.get("extrapolation"):
+            shares = ", ".join(f"{col} {share:.0%}" for col, share in c["extrapolation"].items())
+            print(f"  warning: {key}: grid points outside the identification's training range ({shares}): "
+                  "errors there are extrapolation")
     print(f"wrote {Path(args.out) / 'comparison.json'}")
     return 0
 

@@ -28,7 +28,7 @@ import pandas as pd
 
 from .data import measurements as dataio
 from .data import plots
-from .data.coverage import data_range, outside_range, summarize_outside
+from .data.coverage import input_checks, outside_range
 from .data.jsonsafe import dumps
 from .data.metrics import diverged_runs, evaluation_mask, report_metrics, speed_metrics
 from .errors import IdentificationError, OutputError
@@ -275,21 +275,6 @@ def metrics_for(est, data: dataio.Measurements | pd.DataFrame) -> dict:
     df = data.df if isinstance(data, dataio.Measurements) else data
     with np.errstate(all="ignore"):
         return report_metrics(df, est.predict_one_step(data), est.predict_free_run(data))
-
-
-def input_checks(train: dataio.Measurements, test: dataio.Measurements | None) -> dict:
-    """The report's record of the data checks: unit findings (allowed or none) and TEST runs outside TRAIN's range."""
-    rng = data_range(train)
-    flagged = outside_range(test, rng) if test is not None else []
-    n_test = len(test.runs) if test is not None else 0
-    return {
-        "allow_unusual_units": bool(train.meta.get("allow_unusual_units")),
-        "unusual_units": {"train": list(train.meta.get("unusual_units", [])),
-                          "test": list(test.meta.get("unusual_units", [])) if test is not None else []},
-        "training_range": rng,
-        "test_runs_outside_training_range": flagged,
-        "extrapolation": summarize_outside(flagged, n_test),
-    }
 
 
 def _parse_fix(text: str | None):

@@ -6,7 +6,9 @@ order-8 Legendre series at 2.6 x its half-width grows by ~1e5), outside its
 voltages and loads the affine dependence is untested. :func:`data_range`
 records TRAIN's range (it goes into ``identification.json``),
 :func:`outside_range` flags, per run of any data set to be predicted, each
-input that leaves it.
+input that leaves it, and :func:`input_checks` is the ``checks`` section of
+the identify and close-loop reports (these flags and the unit findings of
+both files).
 
 A run is flagged for a column when one of its samples lies further outside
 the range than ``tolerance`` x the range's width (at least
@@ -23,7 +25,7 @@ import pandas as pd
 from .measurements import LOAD, POSITION, RUN, VOLTAGE, Measurements, run_slices
 
 __all__ = ["RANGE_COLUMNS", "DEFAULT_TOLERANCE", "MIN_TOLERANCE", "data_range", "outside_range",
-           "summarize_outside"]
+           "summarize_outside", "input_checks"]
 
 #: The prediction inputs whose range is checked (unit in the name).
 RANGE_COLUMNS: tuple[str, ...] = (VOLTAGE, LOAD, POSITION)
@@ -78,3 +80,18 @@ def summarize_outside(flagged: list[dict], n_runs: int) -> str:
     per = {c: sum(c in f["outside"] for f in flagged) for c in RANGE_COLUMNS}
     cols = ", ".join(f"{c} {k}" for c, k in per.items() if k)
     return f"{len(flagged)} of {n_runs} runs outside the training range ({cols}): predictions there extrapolate"
+
+
+def input_checks(train: Measurements, test: Measurements | None) -> dict:
+    """The report's record of the data checks: unit findings (allowed or none) and TEST runs outside TRAIN's range."""
+    rng = data_range(train)
+    flagged = outside_range(test, rng) if test is not None else []
+    n_test = len(test.runs) if test is not None else 0
+    return {
+        "allow_unusual_units": bool(train.meta.get("allow_unusual_units")),
+        "unusual_units": {"train": list(train.meta.get("unusual_units", [])),
+                          "test": list(test.meta.get("unusual_units", [])) if test is not None else []},
+        "training_range": rng,
+        "test_runs_outside_training_range": flagged,
+        "extrapolation": summarize_outside(flagged, n_test),
+    }

@@ -221,7 +221,8 @@ def _derive_speed(df: pd.DataFrame, path) -> np.ndarray:
             raise DataFormatError(path, POSITION, sl.start + 1,
                                   f"run {format_value(rid)} has a single sample: speed_m_s is "
                                   "absent and cannot be derived from position")
-        v[sl] = np.gradient(x[sl], t[sl], edge_order=2 if n >= 3 else 1)
+        with np.errstate(all="ignore"):  # absurd positions overflow to inf, refused as implausible speed
+            v[sl] = np.gradient(x[sl], t[sl], edge_order=2 if n >= 3 else 1)
     return v
 
 

@@ -548,12 +548,39 @@ def speed_slopes(df: pd.DataFrame, *, min_travel_m: float = 2e-4,
     for rid, sl in run_slices(df[RUN]):
         if sl.stop - sl.start < 3 or np.ptp(x[sl]) < min_travel_m:
             continue
-        xd = np.gradient(x[sl], t[sl])
-        ss = float(np.sum(xd * xd))
+        with np.errstate(all="ignore"):  # absurd positions (1e308) give inf here and are not judged
+            xd = np.gradient(x[sl], t[sl])
+            ss = float(np.sum(xd * xd))
         if not (np.isfinite(ss) and ss > 0) or math.sqrt(ss / xd.size) < min_rms_speed_m_s:
             continue
         out.append((rid, sl.start, float(np.sum(v[sl] * xd)) / ss))
     return out
+
+
+#: a measured speed sample further than this share of the run's peak speed (+ 10 mm/s + 6 x the robust noise
+#: level) from the median of its 5 neighbours is a glitch (a step, e.g. at an end stop, and a filtered or
+#: lagged speed are not)
+MAX_SPEED_DEVIATION: float = 0.5
+
+
+def _speed_spike_problem(df: pd.DataFrame, judged: list[tuple[Any, int, float]]) -> DataProblem | None:
+    """An isolated speed sample far from its neighbours (a glitch), in a run whose slope is consistent."""
+    v = df[SPEED].to_numpy(dtype=float)
+    starts = {row for _, row, _ in judged}
+    for rid, sl in run_slices(df[RUN]):
+        seg = v[sl]
+        if sl.start not in starts or seg.size < 5:
+            continue
+        med = np.median(np.lib.stride_tricks.sliding_window_view(np.pad(seg, 2, mode="edge"), 5), axis=1)
+        noise = 1.4826 * float(np.median(np.abs(seg - med)))  # robust noise level: a glitch does not move it
+        limit = MAX_SPEED_DEVIATION * float(np.max(np.abs(med))) + 0.01 + 6.0 * noise
+        i = _first(np.abs(seg - med) > limit)
+        if i is not None:
+            return DataProblem(sl.start + i, _ORDER[SPEED], SPEED,
+                               f"run {format_value(rid)}: speed_m_s = {seg[i]:.4g} m/s where its neighbours have "
+                               f"{med[i]:.4g} m/s (more than {MAX_SPEED_DEVIATION:.0%} of the run's peak speed "
+                               "off): a glitch in the speed column?")
+    return None
 
 
 def _slope_hint(b: float) -> str:
@@ -599,6 +626,34 @@ def _peak_speed_problem(df: pd.DataFrame, speed_derived: bool) -> DataProblem | 
                        f"{format_value(MIN_PEAK_SPEED_M_S)} m/s: no traverse of a linear USM is that slow; {cause}")
 
 
+#: relative spread of voltage_V within a run above which it is not a run at constant drive inputs
+MAX_RUN_VOLTAGE_SPREAD: float = 0.1
+
+
+def _drive_input_problems(df: pd.DataFrame) -> list[DataProblem]:
+    """A run is a traverse at constant drive inputs: direction and load constant, V0 within 10 % (measured V0 is noisy)."""
+    problems: list[DataProblem] = []
+    cols = {c: df[c].to_numpy(dtype=float) for c in (DIRECTION, LOAD, VOLTAGE)}
+    for rid, sl in run_slices(df[RUN]):
+        for name, x in cols.items():
+            seg = x[sl]
+            if name == VOLTAGE:
+                ref = float(np.median(seg))
+                bad = np.abs(seg - ref) > MAX_RUN_VOLTAGE_SPREAD * max(abs(ref), 1.0)
+            else:
+                ref = float(seg[0])
+                bad = seg != ref
+            i = _first(bad)
+            if i is not None:
+                problems.append(DataProblem(
+                    sl.start + i, _ORDER[name], name,
+                    f"run {format_value(rid)}: {name} changes within the run ({format_value(float(seg[i]))} where "
+                    f"the run has {format_value(ref)}): a run is one traverse at constant drive inputs "
+                    "(a corrupted cell, or two runs with one id?)"))
+                break
+    return problems[:1]
+
+
 def unusual_values(df: pd.DataFrame, *, speed_derived: bool = False) -> list[DataProblem]:
     """Likely unit mistakes in a validated table (at most one per column, its first row).
 
@@ -607,7 +662,10 @@ def unusual_values(df: pd.DataFrame, *, speed_derived: bool = False) -> list[Dat
     interval above :data:`~l1b2.data.columns.MAX_SAMPLE_INTERVAL_S` (time in
     ms?) and, when the speed was measured, a run whose speed disagrees with
     the position's derivative (:func:`speed_slopes` outside
-    :data:`~l1b2.data.columns.SPEED_SLOPE_BAND`).
+    :data:`~l1b2.data.columns.SPEED_SLOPE_BAND`) or an isolated speed
+    sample (a glitch: further than half the run's peak speed from the median
+    of its 5 neighbours), and a run whose direction, load or voltage (beyond
+    10 %) changes within it.
 
     Parameters
     ----------
@@ -638,16 +696,22 @@ def unusual_values(df: pd.DataFrame, *, speed_derived: bool = False) -> list[Dat
             text += " (speed derived from position_m and time_s: check both units)"
         span = f"{float(np.min(mags)):.4g} to {float(np.max(mags)):.4g}"
         problems.append(DataProblem(i, _ORDER[name], name, f"{text} ({label} in this file: {span})"))
+    problems += _drive_input_problems(df)
     for extra in (_interval_problem(df), _peak_speed_problem(df, speed_derived) if SPEED in df.columns else None):
         if extra is not None:
             problems.append(extra)
     if not speed_derived and SPEED in df.columns:
         lo, hi = SPEED_SLOPE_BAND
-        for rid, row, b in speed_slopes(df):
+        slopes = speed_slopes(df)
+        for rid, row, b in slopes:
             if not lo <= b <= hi:
                 problems.append(DataProblem(
                     row, _ORDER[SPEED], SPEED,
                     f"run {format_value(rid)}: speed_m_s disagrees with d(position_m)/dt (regression slope "
                     f"{b:.3g}, expected 1 within [{format_value(lo)}, {format_value(hi)}]): {_slope_hint(b)}"))
                 break
+        else:
+            spike = _speed_spike_problem(df, slopes)
+            if spike is not None:
+                problems.append(spike)
     return sorted(problems, key=lambda q: (q.row, q.order))
