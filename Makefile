@@ -6,6 +6,8 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 export OPENBLAS_NUM_THREADS ?= 1
 export MPLBACKEND ?= Agg
+# pytest-xdist workers for `make test` (the CI machine has 2 cores); modules stay whole on one worker
+TEST_WORKERS ?= 2
 
 .PHONY: venv test test-slow test-all check-install fmus demo dist bench clean
 
@@ -20,7 +22,7 @@ fmus: $(STAMP)
 	$(PY) build_fmu.py
 
 test: $(STAMP)
-	$(PY) -m pytest -q -m "not slow" --durations=25
+	$(PY) -m pytest -q -m "not slow" -n $(TEST_WORKERS) --dist loadscope --durations=25
 
 test-slow: $(STAMP)
 	$(PY) -m pytest -q -m slow
