@@ -123,7 +123,7 @@ def test_realistic_load_path_effect_report_rounds(tmp_path, capsys):
 
 
 SINGLE = [("thermal_drift", 4), ("direction_asymmetry", 2), ("bar_waviness", 2), ("pulley_friction", 11),
-          ("drive_saturation", 3), ("thermal_drift", 12), ("direction_asymmetry", 13)]
+          ("drive_saturation", 3), ("thermal_drift", 12), ("direction_asymmetry", 13), ("bar_bump", 8)]
 
 
 @pytest.mark.slow

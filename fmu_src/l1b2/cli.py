@@ -289,6 +289,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "residual for a candidate to be shortlisted (refit and cross-validated)")
     p.add_argument("--min-cv-gain", type=float, default=0.03, help="smallest relative fall of the cross-validated "
                    "free-run error (re-identified model, folds over runs) for an effect to be added")
+    p.add_argument("--min-cv-drop", type=float, default=0.005, help="smallest absolute fall of the cross-validated "
+                   "free-run nrmse (share of the speed's rms; 0.005 = 0.5 percentage points) for an effect to be "
+                   "added: the materiality threshold (0 reports every structural term that helps)")
     p.add_argument("--max-rounds", type=int, default=3, help="most effects added, one per round")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--slider-mass", type=float, help="slider mass [kg] (overrides the sidecars)")
@@ -466,7 +469,7 @@ def cmd_close_loop(args) -> int:
     result = run_close_loop(args.train, args.test, args.report_dir, order=args.order, k_folds=args.folds,
                             alpha=args.alpha, min_gain=args.min_gain, seed=args.seed,
                             max_rounds=args.max_rounds, min_cv_gain=args.min_cv_gain,
-                            slider_mass_kg=args.slider_mass, plots_on=not args.no_plots, progress=say,
+                            min_cv_drop=args.min_cv_drop, slider_mass_kg=args.slider_mass, plots_on=not args.no_plots, progress=say,
                             allow_unusual_units=args.allow_unusual_units)
     d = result.diagnosis
     print(f"diagnosis: {d['message']}" + (f"; traced to {', '.join(d['traced_to'])}" if d["traced_to"] else ""))
