@@ -5,7 +5,6 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-import pytest
 
 from l1b2.physics.params import load_motor
 from l1b2.rig.experiment import RigPlan, run_experiment, write_experiment
@@ -25,7 +24,6 @@ def test_readme_has_the_three_examples():
     assert "PredictorIdentifier" in blocks[0] and "close_loop" in blocks[1] and "CoSimulation" in blocks[2]
 
 
-@pytest.mark.slow
 def test_readme_examples_run(tmp_path, monkeypatch):
     # reference: the README itself; every block runs in one namespace, in order, on rig data
     monkeypatch.chdir(tmp_path)

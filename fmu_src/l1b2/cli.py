@@ -188,6 +188,26 @@ UNUSUAL_UNITS_HELP = ("accept values a linear USM rig does not produce in SI uni
                       "unit mistake; recorded in the report")
 
 
+def _close_loop_args(p: argparse.ArgumentParser) -> None:
+    """The close-loop command's settings (the :class:`l1b2.closeloop.loop.CloseLoop` rules)."""
+    p.add_argument("--order", type=int, default=8)
+    p.add_argument("--folds", type=int, default=5, help="cross-validation folds over runs")
+    p.add_argument("--alpha", type=float, default=0.01, help="significance level (Bonferroni over effects)")
+    p.add_argument("--min-gain", type=float, default=0.05, help="smallest linearised held-out share of the "
+                   "residual for a candidate to be shortlisted (refit and cross-validated)")
+    p.add_argument("--min-cv-gain", type=float, default=0.03, help="smallest relative fall of the cross-validated "
+                   "free-run error (re-identified model, folds over runs) for an effect to be added")
+    p.add_argument("--min-cv-drop", type=float, default=0.005, help="smallest absolute fall of the cross-validated "
+                   "free-run nrmse (share of the speed's rms; 0.005 = 0.5 percentage points) for an effect to be "
+                   "added: the materiality threshold (0 reports every structural term that helps)")
+    p.add_argument("--max-rounds", type=int, default=3, help="most effects added, one per round")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--slider-mass", type=float, help="slider mass [kg] (overrides the sidecars)")
+    p.add_argument("--allow-unusual-units", action="store_true", help=UNUSUAL_UNITS_HELP)
+    p.add_argument("--no-plots", action="store_true")
+    p.add_argument("--quiet", action="store_true")
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="l1b2", description="L1B2 linear ultrasonic motor: FMUs, co-simulation, "
                                                             "virtual rig, identification")
@@ -282,22 +302,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--train", type=Path, required=True, help="measured data to fit and diagnose on")
     p.add_argument("--test", type=Path, required=True, help="held-out data, only for the before/after report")
     p.add_argument("--report-dir", type=Path, required=True)
-    p.add_argument("--order", type=int, default=8)
-    p.add_argument("--folds", type=int, default=5, help="cross-validation folds over runs")
-    p.add_argument("--alpha", type=float, default=0.01, help="significance level (Bonferroni over effects)")
-    p.add_argument("--min-gain", type=float, default=0.05, help="smallest linearised held-out share of the "
-                   "residual for a candidate to be shortlisted (refit and cross-validated)")
-    p.add_argument("--min-cv-gain", type=float, default=0.03, help="smallest relative fall of the cross-validated "
-                   "free-run error (re-identified model, folds over runs) for an effect to be added")
-    p.add_argument("--min-cv-drop", type=float, default=0.005, help="smallest absolute fall of the cross-validated "
-                   "free-run nrmse (share of the speed's rms; 0.005 = 0.5 percentage points) for an effect to be "
-                   "added: the materiality threshold (0 reports every structural term that helps)")
-    p.add_argument("--max-rounds", type=int, default=3, help="most effects added, one per round")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--slider-mass", type=float, help="slider mass [kg] (overrides the sidecars)")
-    p.add_argument("--allow-unusual-units", action="store_true", help=UNUSUAL_UNITS_HELP)
-    p.add_argument("--no-plots", action="store_true")
-    p.add_argument("--quiet", action="store_true")
+    _close_loop_args(p)
     p.set_defaults(func=cmd_close_loop)
 
     p = sub.add_parser("export", help="FMUs, L1B2Motor.ssp and L1B2Motor.fmu for other simulators")

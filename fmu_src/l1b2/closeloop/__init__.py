@@ -10,3 +10,9 @@ baseline and the selection rules), :mod:`~l1b2.closeloop.loop` (the
 (:class:`~l1b2.closeloop.result.CloseLoopResult`: report, table, figures,
 ``save``). No file is read here; only ``CloseLoopResult.save`` writes.
 """
+
+from .candidates import CandidateLibrary, default_library, full_library
+from .loop import CloseLoop, close_loop
+from .result import CloseLoopResult
+
+__all__ = ["CloseLoop", "close_loop", "CloseLoopResult", "CandidateLibrary", "default_library", "full_library"]
