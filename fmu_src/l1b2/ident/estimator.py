@@ -204,10 +204,11 @@ class PredictorIdentifier:
         the global search compares the starts by their likelihood. Its damped
         steps can stall on a kink of the free run (a run at the edge of
         sticking); the stalled start is then continued by least-squares refits
-        (:func:`l1b2.ident.search.polish_stalled`). Not the default: on
-        identification tests with exact data it stopped up to 2e-4
-        log-likelihood units (6e-6 relative in theta) short of the optimum
-        and once reported a useless constant force as significant.
+        (:func:`l1b2.ident.search.polish_stalled`). Not the default: before
+        that continuation its stalls ended fits short of the optimum (1.3
+        log-likelihood units on an order-mismatched test fit; 6e-6 relative
+        in theta on exact data, where it once reported a useless constant
+        force as significant).
     start_agree : profile search: stop the global search once this many starts
         reached the best log-likelihood within ``10 * stat_tol`` (0: run every start).
     stat_window_profile : profile search: a local search stops when its

@@ -523,7 +523,8 @@ def polish_stalled(solver, refinement, max_outer, max_nfev, min_gain=0.0, log=No
     after each refit, continue from the stalled point while a refit gains
     more than ``min_gain`` (the statistical tolerance) in log-likelihood, at
     most ``max_outer`` refits (converged: a further refit gains < ``min_gain``).
-    A refit that does not gain is not kept; if none gains, the refinement (and its noise model) is returned unchanged.
+    A refit that does not gain is not kept; if none gains, the refinement
+    (and its noise model) is returned unchanged.
     """
     obj = solver.objective
     ll0 = refinement.history[-1]["loglik"]
