@@ -6,8 +6,8 @@ parameters are drawn from the effect's range with a per-case seed. The test
 set is used only for the before/after report, never for fitting or choosing.
 
 Fast set (``make test``): four effects, one seed each, plus two controls.
-Slow set (CI): two more seeds per effect, the ten-seed control, and the
-friction-bar waviness (traced to position; its error cut is reported
+Slow set (``make test-slow``, not in CI: it does not fit CI's time): two more
+seeds per effect, the ten-seed control, and the friction-bar waviness (traced to position; its error cut is reported
 separately because it is not always a half).
 """
 

@@ -13,8 +13,11 @@ for fitting or choosing):
   (relative) above the baseline; what was added is reported.
 
 Fast set (``make test``): one control seed and one effect (also checks the
-report's per-round fields). Slow set (CI): ten control seeds, six effects,
-three pairs of effects.
+report's per-round fields). Slow set (``make test-slow``, not in CI: it does
+not fit CI's time): ten control seeds, six effect kinds, three pairs of
+effects. Measured on 2026-11-23: the single-effect checks fail for
+thermal_drift (seeds 4, 12), bar_waviness 2 and bar_bump 8 (the baseline's
+own load x voltage error is taken first); they pass for the other four.
 """
 
 import functools
