@@ -20,7 +20,8 @@ import pytest
 from l1b2.cli import main as cli_main
 from l1b2.closeloop.candidates import (CandidateLibrary, Context, combine, default_library, generic_candidates,
                                        generic_library, named_candidates, named_library)
-from l1b2.closeloop.loop import CloseLoop, close_loop
+from l1b2.closeloop.candidates import full_library
+from l1b2.closeloop.loop import CloseLoop, close_loop, order_traced
 from l1b2.closeloop.result import CloseLoopResult
 from l1b2.data.measurements import load_measurements
 from l1b2.rig.experiment import INJECTIONS, RigPlan
@@ -173,6 +174,32 @@ def test_candidate_library_is_an_argument_that_combines():
     assert [c.family for c in only(ctx, df)] == ["drive_saturation"]
     with pytest.raises(TypeError):
         CandidateLibrary("not callable")
+
+
+def test_structural_terms_are_the_voltage_dependence_of_eq29s_slopes_and_trace_after_missing_effects():
+    # reference: Eq. 25's closed form: the drive force's slope over speed changes with omega U_w (with V0),
+    # which Eq. 29 holds constant; exactly the load x voltage and voltage x speed candidates relax it
+    ctx, df = _toy_context_and_frame()
+    lib = full_library()(ctx, df)
+    structural = {c.family for c in lib if c.structural}
+    assert structural == {"load_slope_voltage", "damping_voltage", "smooth_load_x_voltage", "smooth_voltage_x_speed"}
+    by = {c.family: c for c in lib}
+    assert set(by["smooth_voltage_x_speed"].regressors) == {"voltage", "speed"}
+    assert not by["smooth_time_x_voltage"].structural and not by["smooth_position_x_load"].structural
+    # order: the missing effects in the order they were added, the speed filter, then the structural terms,
+    # then the residual trace; nothing when nothing was added
+    s, pos = by["smooth_load_x_voltage"], by["smooth_position"]
+    assert order_traced([s, pos], False, ["voltage", "time"]) == ["position", "load", "voltage", "time"]
+    assert order_traced([pos, s], True, []) == ["position", "speed", "load", "voltage"]
+    assert order_traced([s], False, ["time"]) == ["load", "voltage", "time"]
+    assert order_traced([], False, ["time"]) == []
+    assert order_traced([], True, ["time"]) == ["speed", "time"]
+    # evidence below the materiality threshold: after the missing effects, before the structural terms
+    t, d = by["smooth_time"], by["smooth_direction_x_voltage"]
+    assert order_traced([s], False, ["position"], evidence=[t]) == ["time", "load", "voltage", "position"]
+    assert order_traced([pos, s], False, [], evidence=[by["smooth_voltage_x_speed"], d]) == [
+        "position", "direction", "voltage", "load", "speed"]
+    assert order_traced([], False, ["time"], evidence=[t]) == []
 
 
 def test_estimator_takes_measurements_and_stores_settings():

@@ -58,6 +58,11 @@ from ..physics.params import G_M_S2
 from .residuals import REGRESSORS, bspline_basis
 
 V_REF = 300.0   # voltage scale of the features [V]
+
+#: the approximation of Eq. 29 that the structural interaction candidates relax
+EQ29_LINEARISATION = ("Eq. 29 holds the drive force's slope over speed constant; by Eq. 25 it changes with "
+                      "omega U_w, i.e. with V0 (load slope and damping depend on the voltage)")
+_LINEARISATION_PAIRS = ({"load", "voltage"}, {"voltage", "speed"})
 SPEED_REF = 0.2  # speed scale of the features [m/s]
 
 
@@ -79,6 +84,9 @@ class CandidateForce:
     description: str = ""
     generic: bool = False
     also: tuple = ()   #: further regressors of an interaction (the report's traced names)
+    #: non-empty when the candidate relaxes an approximation of Eq. 29 itself (what it relaxes), rather
+    #: than adding an effect the paper's physics lacks; such terms are traced after the missing effects
+    structural: str = ""
 
     @property
     def regressors(self) -> tuple:
@@ -221,6 +229,18 @@ def interaction_candidates(ctx: Context, df_train: pd.DataFrame) -> list[Candida
 
     Generic: ``smooth_<A>_x_<B>``, the products of two regressors' linear and
     quadratic terms (scaled to [-1, 1]; direction: itself) over TRAIN's ranges.
+
+    Four of them are *structural* (:data:`EQ29_LINEARISATION`): Eq. 29 holds
+    the slope of the drive force over speed constant, while the pure-slip
+    closed form behind it (Eq. 25, physics notes:
+    ``F_d = sigma (omega U_w/pi - v/2) + mu F_p (2 sqrt(1 - k0^2) - 1)``,
+    ``k0 = v/(omega U_w)``) has a slope that changes with ``omega U_w``, i.e.
+    with V0; so the damping and the load's effect on speed depend on the
+    voltage. ``load_slope_voltage``, ``damping_voltage`` and their generic
+    forms ``smooth_load_x_voltage``, ``smooth_voltage_x_speed`` relax that
+    approximation of the paper's model; they are still found, added and
+    reported like any other effect, but traced after the effects the model
+    lacks (:func:`l1b2.closeloop.loop.order_traced`).
     """
     s0, s1 = ctx.position_range
     V_ref = float(np.median(_V(df_train)))
@@ -237,10 +257,12 @@ def interaction_candidates(ctx: Context, df_train: pd.DataFrame) -> list[Candida
     out = [
         CandidateForce("load_slope_voltage", "load", "", ("load_V_gain",), ("1",),
                        lambda df: (-wload(df) * dv(df))[:, None],
-                       "the load's effect on the speed depends on the drive voltage", also=("voltage",)),
+                       "the load's effect on the speed depends on the drive voltage", also=("voltage",),
+                       structural=EQ29_LINEARISATION),
         CandidateForce("damping_voltage", "speed", "", ("damping_V_N",), ("N",),
                        lambda df: (-_drive_pred(ctx, df) / SPEED_REF * dv(df))[:, None],
-                       "damping of the slider that changes with the drive voltage", also=("voltage",)),
+                       "damping of the slider that changes with the drive voltage", also=("voltage",),
+                       structural=EQ29_LINEARISATION),
         CandidateForce("position_load", "position", "", ("load_pos_1", "load_pos_2"), ("1", "1"),
                        lambda df: np.column_stack([-wload(df) * xpos(df), -wload(df) * xpos(df) ** 2]),
                        "the load's effect varies along the bar", also=("load",)),
@@ -270,7 +292,8 @@ def interaction_candidates(ctx: Context, df_train: pd.DataFrame) -> list[Candida
             k = feat(df_train.iloc[:2]).shape[1]
             out.append(CandidateForce(f"smooth_{a}_x_{b}", a, "", tuple(f"smooth_{a}_x_{b}_{j}" for j in range(k)),
                                       ("N",) * k, feat, f"generic smooth interaction of {a} and {b}",
-                                      generic=True, also=(b,)))
+                                      generic=True, also=(b,),
+                                      structural=EQ29_LINEARISATION if {a, b} in _LINEARISATION_PAIRS else ""))
     return out
 
 

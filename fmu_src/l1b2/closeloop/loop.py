@@ -37,7 +37,9 @@ Procedure (TEST is never used for fitting or choosing):
    The rounds stop when no shortlisted candidate is accepted. Otherwise
    "no significant missing effect" and the baseline is kept.
 4. Both the baseline and the final model are reported on TEST, with the
-   metrics after every round.
+   metrics after every round. ``diagnosis.traced_to`` lists the regressors of
+   the added effects strongest first, the terms that only relax Eq. 29's own
+   linearisation after the missing effects (:func:`order_traced`).
 """
 
 from __future__ import annotations
@@ -278,19 +280,30 @@ class CloseLoop:
                           "metrics": _metrics(filt, dtr, dte)})
         return rec
 
+    def _immaterial(self, it: _Iteration) -> list[RefitCV]:
+        """Candidates of the last round that pass every acceptance rule but the materiality threshold.
+
+        They were cross-validated against the final model (its residual) and improve it in most folds by at
+        least ``min_cv_gain``: significant evidence of a regressor, too small to add (``min_cv_drop``);
+        largest CV gain first.
+        """
+        if not it.trials or not it.trials[-1] or len(it.trials) <= len(it.effects.candidates):
+            return []   # the last round added its pick: its other trials were against an earlier model
+        added = {e.family for e in it.effects.candidates}
+        last = [t for t in it.trials[-1] if t.candidate.family not in added
+                and accepts(t, min_gain=self.min_cv_gain, min_drop=-np.inf)]
+        return sorted(last, key=lambda t: -t.gain)
+
     def _diagnosis(self, it: _Iteration, scores: list[Score], a: ResidualAnalysis, ext_params) -> dict:
         """The report's ``diagnosis`` section."""
         effects = it.effects.candidates
         c = effects[0] if effects else None
-        traced_to = []
-        for e in effects:
-            traced_to += [r for r in e.regressors if r not in traced_to]
-        if it.output_filter is not None and "speed" not in traced_to:
-            traced_to.append("speed")
-        if effects or it.output_filter is not None:
-            traced_to += [r for r in a.traced if r not in traced_to]
+        below = self._immaterial(it)
+        traced_to = order_traced(effects, it.output_filter is not None, a.traced,
+                                 evidence=[t.candidate for t in below])
         w = a.whiteness
-        labels = "; ".join(f"{e.label} ({', '.join(e.regressors)})" for e in effects)
+        labels = "; ".join(f"{e.label} ({', '.join(e.regressors)})" + (", relaxes Eq. 29" if e.structural else "")
+                           for e in effects)
         return {
             "significant": c is not None or it.output_filter is not None,
             "traced_to": traced_to,
@@ -302,6 +315,9 @@ class CloseLoop:
             "message": (f"missing effect{'s' if len(effects) > 1 else ''}: {labels}" if c
                         else "no significant missing effect")
                        + ("; speed channel filtered (measurement chain)" if it.output_filter is not None else ""),
+            "structural_effects": [{"label": e.label, "regressors": list(e.regressors), "relaxes": e.structural}
+                                   for e in effects if e.structural],
+            "immaterial_evidence": [t.to_dict() for t in below],
             "residual_trace": a.traced,
             "candidates": [s.to_dict() for s in best_per_family(scores)],
             "n_candidates_scored": len(scores),
@@ -352,9 +368,39 @@ class FilteredModel:
         return getattr(self.model, name)
 
 
+def order_traced(effects, speed_filter: bool, residual_trace, evidence=()) -> list[str]:
+    """``diagnosis.traced_to``: the regressors with significant evidence, strongest first.
+
+    The added effects in the order they were chosen (each round takes the
+    candidate with the largest cross-validated gain against the current
+    model, so earlier is stronger); ``speed`` if the speed channel's filter
+    was kept; then ``evidence``, the candidates that improve the final model
+    in cross-validation but by less than the materiality threshold (largest
+    gain first). *Structural* terms (``CandidateForce.structural``: they
+    relax an approximation of Eq. 29 itself) come after all of these: they
+    are the paper model's own error, present on clean data too, and the first
+    regressors should point at what the data hold beyond it. Then the rest of
+    the baseline residual's regressor trace. Empty when nothing was added.
+    """
+    if not effects and not speed_filter:
+        return []
+    traced: list[str] = []
+
+    def take(cands):
+        for c in cands:
+            traced.extend(r for r in c.regressors if r not in traced)
+    take(e for e in effects if not e.structural)
+    if speed_filter and "speed" not in traced:
+        traced.append("speed")
+    take(e for e in evidence if not e.structural)
+    take(e for e in effects if e.structural)
+    take(e for e in evidence if e.structural)
+    return traced + [r for r in residual_trace if r not in traced]
+
+
 def _filter_record(rec: dict, params: dict | None) -> dict:
     return {"round": rec["round"], "effect": "speed_channel_filter", "label": "speed_channel_filter", "shape": "",
-            "regressors": ["speed"], "generic": False, "parameters": {n: (params or {}).get(n) for n in
+            "regressors": ["speed"], "generic": False, "structural": None, "parameters": {n: (params or {}).get(n) for n in
                                                                      ("speed_filter_a", "speed_filter_b0",
                                                                       "speed_filter_b1")},
             "description": "the speed column is a filtered/delayed/scaled derivative of the position "
@@ -380,6 +426,7 @@ def _effect_record(c, rec: dict, params: dict | None) -> dict:
     cv = rec.get("cv", {})
     return {"round": rec["round"], "effect": c.family, "label": c.label, "shape": c.shape,
             "regressors": list(c.regressors), "description": c.description, "generic": c.generic,
+            "structural": c.structural or None,
             "parameters": {n: (params or {}).get(n) for n in c.names},
             "cv_gain": cv.get("cv_gain"), "cv_free_run_nrmse_before": cv.get("cv_free_run_nrmse_current"),
             "cv_free_run_nrmse_after": cv.get("cv_free_run_nrmse_refit"),

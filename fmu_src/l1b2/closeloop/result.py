@@ -256,6 +256,13 @@ def markdown_report(rep: dict) -> str:
     for e in d.get("effects", [])[1:]:
         lines.append(f"* then (round {e['round']}): `{e['label']}` ({', '.join(e['regressors'])}) — "
                      f"{e['description']}")
+    for e in d.get("structural_effects", []):
+        lines.append(f"* `{e['label']}` relaxes the paper model's own approximation ({e['relaxes']}); traced after "
+                     "the missing effects")
+    for t in d.get("immaterial_evidence", []):
+        lines.append(f"* evidence below the materiality threshold: `{t['label']}` ({', '.join(t['regressors'])}), "
+                     f"CV nrmse {t['cv_free_run_nrmse_current']:.2%} -> {t['cv_free_run_nrmse_refit']:.2%} "
+                     f"(< {d['rules'].get('min_cv_drop', 0):.2%} drop: not added)")
     lines += ["", "## Rounds (free-run nrmse before/after each added effect; CV gain = held-out free-run "
               "sum of squares of the re-identified model over run folds)", "", "```", rounds_table(rep), "```"]
     for i, trials in enumerate(d.get("refit_trials", []), 1):
