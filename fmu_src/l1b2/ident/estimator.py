@@ -133,7 +133,7 @@ from .problem import (
 )
 from .reduced import data_driven_start, init_theta, reduced_summary
 from .result import IdentificationResult
-from .search import (STALL_MESSAGE, LocalSolver, alternate_noise, multi_start, polish_stalled, profile_search,
+from .search import (LocalSolver, alternate_noise, multi_start, polish_stalled, profile_search,
                      start_points, warm_prestep)
 from .uncertainty import alternative_optima, extra_confounding, fisher_uncertainty
 
@@ -516,7 +516,7 @@ class PredictorIdentifier:
         if cfg.noise_fit == "profile":
             search, outer = profile_search(obj, starts, cfg.max_nfev // 2, cfg.stat_tol, cfg.stat_window_profile,
                                            cfg.start_agree, self._log)
-            if outer.final.message == STALL_MESSAGE:
+            if outer.stalled:
                 outer = polish_stalled(solver, outer, cfg.max_outer, cfg.max_nfev, cfg.stat_tol, self._log)
         else:
             search = multi_start(solver, starts, cfg.max_nfev, cfg.explore_nfev, cfg.n_refine, self._log)

@@ -374,6 +374,7 @@ class ProfileRefinement:
     final: object
     history: list
     converged: bool
+    stalled: bool = False   #: stopped because no damped step gained (numerical, not statistical, stop)
 
 
 def _run_sums(run_sel, n_runs, X):
@@ -444,7 +445,7 @@ def profile_refine(objective, z, max_iter=100, stat_tol=0.01, stat_window=3, log
 
     ll = loglik_at(z)
     history = [{"iteration": 0, "loglik": ll}]
-    lam, nfev, njev, converged, reason = 1e-3, 1, 0, False, "iteration limit"
+    lam, nfev, njev, converged, reason, stalled = 1e-3, 1, 0, False, "iteration limit", False
     g = np.zeros_like(z)
     n_runs, run_sel = noise.n_runs, noise.run_sel
     for it in range(1, max_iter + 1):
@@ -488,7 +489,7 @@ def profile_refine(objective, z, max_iter=100, stat_tol=0.01, stat_window=3, log
                 break
         if not accepted or not ll_new > ll - 1e-9 * abs(ll):
             vars(noise).update(saved)
-            converged, reason = True, STALL_MESSAGE
+            converged, reason, stalled = True, STALL_MESSAGE, True
             break
         history.append({"iteration": it, "loglik": ll_new, "nfev": nfev - history_nfev(history), "lambda": lam})
         z, ll = z_new, ll_new
@@ -504,7 +505,7 @@ def profile_refine(objective, z, max_iter=100, stat_tol=0.01, stat_window=3, log
                             status=-2 if converged else 0, message=reason,
                             optimality=float(np.max(np.abs(g))) if g.size else 0.0,
                             time_s=time.perf_counter() - t0)
-    return ProfileRefinement(z, final, history, converged)
+    return ProfileRefinement(z, final, history, converged, stalled=stalled)
 
 
 #: :func:`profile_refine`'s stop when no damped step gains (a numerical, not a statistical, stop)
