@@ -108,7 +108,7 @@ def test_cli_writes_the_report_files_and_figures(tmp_path, capsys):
                 plan=RigPlan(step_s=1e-3, seed=2))
     out = tmp_path / "cl"
     assert cli_main(["close-loop", "--train", str(d / "train.csv"), "--test", str(d / "test.csv"),
-                     "--report-dir", str(out), "--quiet", "--min-cv-drop", "0.006"]) == 0
+                     "--report-dir", str(out), "--quiet", "--min-cv-drop", "0.006", "--screen-alpha", "1e-6"]) == 0
     printed = capsys.readouterr().out
     assert "before" in printed and "after" in printed and "direction" in printed
     text = (out / "report.json").read_text()
@@ -122,6 +122,7 @@ def test_cli_writes_the_report_files_and_figures(tmp_path, capsys):
     d_ = rep["diagnosis"]
     assert {"significant", "traced_to", "effect", "candidates"} <= set(d_)
     assert d_["rules"]["min_cv_drop"] == 0.006  # the CLI's materiality threshold reaches the loop
+    assert d_["rules"]["screen_alpha"] == 1e-6  # and the uncorrected screen's level (below Bonferroni's: no cost)
     assert all("cv_gain" in c for c in d_["candidates"])
     assert set(d_["traced_to"]) <= {"time", "position", "direction", "load", "voltage", "speed", "acceleration",
                                     "temperature"}

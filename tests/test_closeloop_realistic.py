@@ -15,9 +15,12 @@ for fitting or choosing):
 Fast set (``make test``): one control seed and one effect (also checks the
 report's per-round fields). Slow set (``make test-slow``, not in CI: it does
 not fit CI's time): ten control seeds, six effect kinds, three pairs of
-effects. Measured on 2026-11-23: the single-effect checks fail for
-thermal_drift (seeds 4, 12), bar_waviness 2 and bar_bump 8 (the baseline's
-own load x voltage error is taken first); they pass for the other four.
+effects. Measured on 2026-11-23 (second session, with structural terms traced after
+the missing effects and immaterial evidence traced): the single-effect
+checks pass for direction_asymmetry 2 and 13, bar_waviness 2, pulley_friction
+11, drive_saturation 3 and bar_bump 8, and fail for thermal_drift 4 and 12
+(time not shortlisted by default; see the screened test); pair 5 passes,
+pair 6 (with thermal drift) fails.
 """
 
 import functools
@@ -133,6 +136,18 @@ SINGLE = [("thermal_drift", 4), ("direction_asymmetry", 2), ("bar_waviness", 2),
 @pytest.mark.parametrize("effect,seed", SINGLE)
 def test_realistic_single_effect(effect, seed):
     res, truth = _run((effect,), seed)
+    _check_effects(res, truth, seed, 2)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [4, 12])
+def test_realistic_thermal_drift_with_the_uncorrected_screen(seed):
+    # reference: issue 11; by default (Bonferroni screen) the drift in time is not shortlisted once the load x
+    # voltage term is in; with screen_alpha=0.01 it is cross-validated and traced (seed 4: 2.26 -> 1.82 % CV nrmse,
+    # below the 0.5 pp materiality threshold, so reported as immaterial evidence)
+    d = _dir(("thermal_drift",), seed)
+    res = close_loop(load_measurements(d / "train.csv"), load_measurements(d / "test.csv"), screen_alpha=0.01)
+    truth = json.loads((d / "rig_truth.json").read_text())
     _check_effects(res, truth, seed, 2)
 
 

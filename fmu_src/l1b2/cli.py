@@ -200,6 +200,9 @@ def _close_loop_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--min-cv-drop", type=float, default=0.005, help="smallest absolute fall of the cross-validated "
                    "free-run nrmse (share of the speed's rms; 0.005 = 0.5 percentage points) for an effect to be "
                    "added: the materiality threshold (0 reports every structural term that helps)")
+    p.add_argument("--screen-alpha", type=float, default=0.0, help="when no candidate passes the Bonferroni-"
+                   "corrected screen, the best one with a run-level p-value below this (uncorrected) level, e.g. "
+                   "0.01, is still refit and cross-validated (finds drifts in time; 2-4x slower); 0: off")
     p.add_argument("--max-rounds", type=int, default=3, help="most effects added, one per round")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--slider-mass", type=float, help="slider mass [kg] (overrides the sidecars)")
@@ -474,7 +477,8 @@ def cmd_close_loop(args) -> int:
     result = run_close_loop(args.train, args.test, args.report_dir, order=args.order, k_folds=args.folds,
                             alpha=args.alpha, min_gain=args.min_gain, seed=args.seed,
                             max_rounds=args.max_rounds, min_cv_gain=args.min_cv_gain,
-                            min_cv_drop=args.min_cv_drop, slider_mass_kg=args.slider_mass, plots_on=not args.no_plots, progress=say,
+                            min_cv_drop=args.min_cv_drop, screen_alpha=args.screen_alpha or None,
+                            slider_mass_kg=args.slider_mass, plots_on=not args.no_plots, progress=say,
                             allow_unusual_units=args.allow_unusual_units)
     d = result.diagnosis
     print(f"diagnosis: {d['message']}" + (f"; traced to {', '.join(d['traced_to'])}" if d["traced_to"] else ""))

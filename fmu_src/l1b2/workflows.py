@@ -514,7 +514,7 @@ def run_close_loop(train_path, test_path, out_dir, *, slider_mass_kg=None, plots
     TRAIN's sidecar; unit plausibility unless ``allow_unusual_units``)
     before any fit; :class:`l1b2.closeloop.loop.CloseLoop` runs with
     ``settings`` (``order``, ``k_folds``, ``alpha``, ``min_gain``, ``seed``,
-    ``n_starts``, ``max_rounds``, ``min_cv_gain``, ``min_cv_drop``, ``library``); the result,
+    ``n_starts``, ``max_rounds``, ``min_cv_gain``, ``min_cv_drop``, ``screen_alpha``, ``library``); the result,
     with the data checks (TEST runs outside TRAIN's range flagged), is saved
     all at once. Returns the :class:`~l1b2.closeloop.result.CloseLoopResult`;
     its ``wall_time_s`` counts loading and the fit.
