@@ -58,12 +58,12 @@ from ..physics.params import G_M_S2
 from .residuals import REGRESSORS, bspline_basis
 
 V_REF = 300.0   # voltage scale of the features [V]
+SPEED_REF = 0.2  # speed scale of the features [m/s]
 
 #: the approximation of Eq. 29 that the structural interaction candidates relax
 EQ29_LINEARISATION = ("Eq. 29 holds the drive force's slope over speed constant; by Eq. 25 it changes with "
                       "omega U_w, i.e. with V0 (load slope and damping depend on the voltage)")
 _LINEARISATION_PAIRS = ({"load", "voltage"}, {"voltage", "speed"})
-SPEED_REF = 0.2  # speed scale of the features [m/s]
 
 
 @dataclass(frozen=True)

@@ -413,9 +413,8 @@ def order_traced(effects, speed_filter: bool, residual_trace, evidence=()) -> li
 
 def _filter_record(rec: dict, params: dict | None) -> dict:
     return {"round": rec["round"], "effect": "speed_channel_filter", "label": "speed_channel_filter", "shape": "",
-            "regressors": ["speed"], "generic": False, "structural": None, "parameters": {n: (params or {}).get(n) for n in
-                                                                     ("speed_filter_a", "speed_filter_b0",
-                                                                      "speed_filter_b1")},
+            "regressors": ["speed"], "generic": False, "structural": None,
+            "parameters": {n: (params or {}).get(n) for n in ("speed_filter_a", "speed_filter_b0", "speed_filter_b1")},
             "description": "the speed column is a filtered/delayed/scaled derivative of the position "
                            "(measurement chain): output filter on the predicted speed",
             "cv_gain": rec["cv"]["cv_gain"], "cv_free_run_nrmse_before": None, "cv_free_run_nrmse_after": None,
