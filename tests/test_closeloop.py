@@ -18,9 +18,8 @@ import numpy as np
 import pandas as pd
 import pytest
 from l1b2.cli import main as cli_main
-from l1b2.closeloop.candidates import (CandidateLibrary, Context, combine, default_library, generic_candidates,
-                                       generic_library, named_candidates, named_library)
-from l1b2.closeloop.candidates import full_library
+from l1b2.closeloop.candidates import (CandidateLibrary, Context, combine, default_library, full_library,
+                                       generic_candidates, generic_library, named_candidates, named_library)
 from l1b2.closeloop.loop import CloseLoop, close_loop, order_traced
 from l1b2.closeloop.result import CloseLoopResult
 from l1b2.data.measurements import load_measurements
