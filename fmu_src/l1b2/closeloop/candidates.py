@@ -54,11 +54,9 @@ import numpy as np
 import pandas as pd
 
 from ..data import measurements as dataio
-from ..physics.params import G_M_S2
-from .residuals import REGRESSORS, bspline_basis
-
-V_REF = 300.0   # voltage scale of the features [V]
-SPEED_REF = 0.2  # speed scale of the features [m/s]
+from ..predictor import effects as fx
+from ..predictor.effects import SPEED_REF, V_REF  # noqa: F401  (re-exported: the features' scales)
+from .residuals import REGRESSORS
 
 #: the approximation of Eq. 29 that the structural interaction candidates relax
 EQ29_LINEARISATION = ("Eq. 29 holds the drive force's slope over speed constant; by Eq. 25 it changes with "
@@ -72,7 +70,9 @@ class CandidateForce:
 
     ``family`` names the hypothesis (``"load_path_friction"``, ``"smooth_time"``;
     the report's ``effect``), ``shape`` the grid point of its shape
-    parameters, ``names``/``units`` its linear parameters.
+    parameters, ``names``/``units`` its linear parameters. ``spec`` is the
+    JSON-safe form of the features (:func:`l1b2.predictor.effects.effect_features`:
+    kind and the TRAIN scalars it uses), which ``Predictor.fmu`` evaluates per step.
     """
 
     family: str
@@ -87,6 +87,7 @@ class CandidateForce:
     #: non-empty when the candidate relaxes an approximation of Eq. 29 itself (what it relaxes), rather
     #: than adding an effect the paper's physics lacks; such terms are traced after the missing effects
     structural: str = ""
+    spec: dict = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def regressors(self) -> tuple:
@@ -114,31 +115,37 @@ class Context:
     spectral_period_m: float | None = None
 
 
-def _d(df):
-    return df[dataio.DIRECTION].to_numpy(float)
+def signals(df: pd.DataFrame, ctx: Context, wanted) -> dict:
+    """The signals of :data:`l1b2.predictor.effects.SIGNALS` in ``wanted``, from a data frame.
+
+    ``v_base`` is the baseline's free run on ``df`` and ``a_base`` its time
+    derivative per run (:func:`l1b2.predictor.effects.time_derivative`).
+    """
+    x = {"t": df[dataio.TIME].to_numpy(float), "s": df[dataio.POSITION].to_numpy(float),
+         "V0": df[dataio.VOLTAGE].to_numpy(float), "load": df[dataio.LOAD].to_numpy(float),
+         "d": df[dataio.DIRECTION].to_numpy(float)}
+    if "T" in wanted:
+        x["T"] = df[dataio.TEMPERATURE].to_numpy(float)
+    if {"v_base", "a_base"} & set(wanted):
+        x["v_base"] = np.asarray(ctx.baseline_free_run(df), float)
+        starts = [sl.start for _, sl in dataio.run_slices(df[dataio.RUN])]
+        x["a_base"] = fx.time_derivative(x["v_base"], x["t"], sorted(starts))
+    return x
 
 
-def _V(df):
-    return df[dataio.VOLTAGE].to_numpy(float)
+def candidate(ctx: Context, family: str, regressor: str, shape: str, names, units, spec: dict, description: str,
+              **kw) -> CandidateForce:
+    """A candidate whose features are :func:`l1b2.predictor.effects.effect_features` of ``spec``."""
+    wanted = fx.needs(spec)
+
+    def features(df):
+        return fx.effect_features(spec, signals(df, ctx, wanted))
+    return CandidateForce(family, regressor, shape, tuple(names), tuple(units), features, description, spec=spec, **kw)
 
 
-def _drive_pred(ctx: Context, df):
-    v = ctx.baseline_free_run(df)
-    return _d(df) * v
-
-
-def _drive_acc(ctx: Context, df):
-    vp = _drive_pred(ctx, df)
-    out = np.zeros(len(df))
-    t = df[dataio.TIME].to_numpy(float)
-    for _, sl in dataio.run_slices(df[dataio.RUN]):
-        if sl.stop - sl.start > 1:
-            out[sl] = np.gradient(vp[sl], t[sl])
-    return out
-
-
-def _scaled(x, lo, hi):
-    return np.clip((np.asarray(x, float) - lo) / (hi - lo), 0.0, 1.0) if hi > lo else np.zeros(len(x))
+def _width(ctx: Context, spec: dict, df_train: pd.DataFrame) -> int:
+    """Number of feature columns (parameters) of ``spec``."""
+    return fx.effect_features(spec, signals(df_train.iloc[:2], ctx, fx.needs(spec))).shape[1]
 
 
 def named_candidates(ctx: Context, df_train: pd.DataFrame) -> list[CandidateForce]:
@@ -146,71 +153,57 @@ def named_candidates(ctx: Context, df_train: pd.DataFrame) -> list[CandidateForc
     t0, t1 = ctx.time_range
     s0, s1 = ctx.position_range
     out = []
-
-    def time_basis(df, n_inner=4):
-        return bspline_basis(_scaled(df[dataio.TIME].to_numpy(float), t0, t1), n_inner)
-
     for n_inner in (2, 4):
         k = n_inner + 4
-        out.append(CandidateForce(
-            "thermal_drift", "time", f"{k} splines in t", tuple(f"thermal_gain_{j}" for j in range(k)),
-            tuple("N/V" for _ in range(k)),
-            (lambda df, n=n_inner: (_V(df) / V_REF)[:, None] * time_basis(df, n)),
+        out.append(candidate(
+            ctx, "thermal_drift", "time", f"{k} splines in t", [f"thermal_gain_{j}" for j in range(k)], ["N"] * k,
+            {"kind": "thermal_drift", "t_lo": t0, "t_hi": t1, "n_inner": n_inner},
             "drive force factor drifting with the experiment clock (stator self-heating)"))
     if dataio.TEMPERATURE in df_train.columns and ctx.temperature_ref is not None:
-        T0 = ctx.temperature_ref
-
-        def temp_feat(df):
-            dT = df[dataio.TEMPERATURE].to_numpy(float) - T0
-            return np.column_stack([_V(df) / V_REF * dT, _V(df) / V_REF * dT ** 2 / 10.0])
-        out.append(CandidateForce("thermal_drift_T", "temperature", "", ("thermal_gain_T", "thermal_gain_T2"),
-                                  ("N/K", "N/K2"), temp_feat, "force factor drifting with the stator temperature"))
-    out.append(CandidateForce(
-        "direction_asymmetry", "direction", "", ("asym_gain", "asym_offset_N"), ("N", "N"),
-        lambda df: np.column_stack([_d(df) * _V(df) / V_REF, _d(df)]),
-        "CH1 and CH2 excite the B2 mode with different strength"))
+        out.append(candidate(ctx, "thermal_drift_T", "temperature", "", ("thermal_gain_T", "thermal_gain_T2"),
+                             ("N/K", "N/K2"), {"kind": "thermal_drift_T", "T_ref": float(ctx.temperature_ref)},
+                             "force factor drifting with the stator temperature"))
+    out.append(candidate(ctx, "direction_asymmetry", "direction", "", ("asym_gain", "asym_offset_N"), ("N", "N"),
+                         {"kind": "direction_asymmetry"}, "CH1 and CH2 excite the B2 mode with different strength"))
     periods = set(np.round(np.geomspace(2e-3, 12e-3, 13), 6))
     if ctx.spectral_period_m:
         periods |= {round(ctx.spectral_period_m * f, 6) for f in np.linspace(0.85, 1.15, 13)}
-    def wave(df, L):
-        ph = 2 * np.pi * df[dataio.POSITION].to_numpy(float) / L
-        g = _V(df) / V_REF
-        u = _drive_pred(ctx, df) / SPEED_REF
-        # preload modulation acts on the friction thrust, on the force factor (V0) and on the
-        # interface's damping (speed); a strong modulation acts non-linearly (second harmonic)
-        return np.column_stack([np.cos(ph), np.sin(ph), g * np.cos(ph), g * np.sin(ph),
-                                u * np.cos(ph), u * np.sin(ph), np.cos(2 * ph), np.sin(2 * ph)])
+    # preload modulation acts on the friction thrust, on the force factor (V0) and on the interface's damping
+    # (speed); a strong modulation acts non-linearly (second harmonic)
     for L in sorted(periods):
-        out.append(CandidateForce(
-            "bar_waviness", "position", f"period {L * 1e3:.2f} mm",
+        out.append(candidate(
+            ctx, "bar_waviness", "position", f"period {L * 1e3:.2f} mm",
             ("wave_cos_N", "wave_sin_N", "wave_cos_gain_N", "wave_sin_gain_N", "wave_cos_damp_N",
-             "wave_sin_damp_N", "wave_cos2_N", "wave_sin2_N"),
-            ("N",) * 8,
-            (lambda df, L=L: wave(df, L)), "periodic non-uniformity of the friction bar"))
+             "wave_sin_damp_N", "wave_cos2_N", "wave_sin2_N"), ("N",) * 8,
+            {"kind": "bar_waviness", "period_m": float(L)}, "periodic non-uniformity of the friction bar"))
     for w in (0.6e-3, 1.2e-3, 2.4e-3):
         for c in np.arange(s0 + 2e-3, s1 - 2e-3 + 1e-9, 1.0e-3):
-            out.append(CandidateForce(
-                "local_defect", "position", f"at {c * 1e3:+.0f} mm, width {w * 1e3:.1f} mm", ("defect_N",), ("N",),
-                (lambda df, c=c, w=w: np.exp(-0.5 * ((df[dataio.POSITION].to_numpy(float) - c) / w) ** 2)[:, None]),
+            out.append(candidate(
+                ctx, "local_defect", "position", f"at {c * 1e3:+.0f} mm, width {w * 1e3:.1f} mm", ("defect_N",),
+                ("N",), {"kind": "local_defect", "center_m": float(c), "width_m": float(w)},
                 "local bump or contamination of the friction bar"))
-    out.append(CandidateForce(
-        "load_path_friction", "load", "", ("pulley_mu",), ("1",),
-        lambda df: (-G_M_S2 * np.abs(df[dataio.LOAD].to_numpy(float)))[:, None],
-        "Coulomb friction in the load path, proportional to the hanging weight, opposing motion"))
-    out.append(CandidateForce(
-        "drive_saturation", "voltage", "", ("sat_quad_N", "sat_cubic_N"), ("N", "N"),
-        lambda df: np.column_stack([(_V(df) / V_REF) ** 2, (_V(df) / V_REF) ** 3]),
-        "drive output not proportional to the commanded V0 (saturation or threshold)"))
-    out.append(CandidateForce(
-        "speed_dependent_friction", "speed", "", ("drag_lin_N", "drag_quad_N"), ("N", "N"),
-        lambda df: np.column_stack([-_drive_pred(ctx, df) / SPEED_REF,
-                                    -_drive_pred(ctx, df) * np.abs(_drive_pred(ctx, df)) / SPEED_REF ** 2]),
-        "friction growing non-linearly with speed (film, air)"))
-    out.append(CandidateForce(
-        "inertia_mismatch", "acceleration", "", ("mass_error",), ("1",),
-        lambda df: (-ctx.m_s * _drive_acc(ctx, df))[:, None],
-        "moving mass other than assumed"))
+    out.append(candidate(ctx, "load_path_friction", "load", "", ("pulley_mu",), ("1",), {"kind": "load_path_friction"},
+                         "Coulomb friction in the load path, proportional to the hanging weight, opposing motion"))
+    out.append(candidate(ctx, "drive_saturation", "voltage", "", ("sat_quad_N", "sat_cubic_N"), ("N", "N"),
+                         {"kind": "drive_saturation"},
+                         "drive output not proportional to the commanded V0 (saturation or threshold)"))
+    out.append(candidate(ctx, "speed_dependent_friction", "speed", "", ("drag_lin_N", "drag_quad_N"), ("N", "N"),
+                         {"kind": "speed_dependent_friction"}, "friction growing non-linearly with speed (film, air)"))
+    out.append(candidate(ctx, "inertia_mismatch", "acceleration", "", ("mass_error",), ("1",),
+                         {"kind": "inertia_mismatch", "m_s": float(ctx.m_s)}, "moving mass other than assumed"))
     return out
+
+
+def _train_ranges(ctx: Context, df_train: pd.DataFrame) -> dict:
+    """The TRAIN scalars of the generic terms: ranges of time, position, voltage, |load|, |baseline speed|."""
+    t0, t1 = ctx.time_range
+    s0, s1 = ctx.position_range
+    V = df_train[dataio.VOLTAGE].to_numpy(float)
+    vp = np.abs(ctx.baseline_free_run(df_train))
+    return {"t_lo": float(t0), "t_hi": float(t1), "s_lo": float(s0), "s_hi": float(s1),
+            "V_lo": float(V.min()), "V_hi": float(V.max()),
+            "load_abs": float(np.max(np.abs(df_train[dataio.LOAD].to_numpy(float)))) or 1.0,
+            "v_lo": float(np.min(vp)), "v_hi": float(np.max(vp))}
 
 
 def interaction_candidates(ctx: Context, df_train: pd.DataFrame) -> list[CandidateForce]:
@@ -243,96 +236,52 @@ def interaction_candidates(ctx: Context, df_train: pd.DataFrame) -> list[Candida
     lacks (:func:`l1b2.closeloop.loop.order_traced`).
     """
     s0, s1 = ctx.position_range
-    V_ref = float(np.median(_V(df_train)))
-
-    def dv(df):
-        return (_V(df) - V_ref) / V_REF
-
-    def wload(df):
-        return _d(df) * df[dataio.LOAD].to_numpy(float) * G_M_S2
-
-    def xpos(df):
-        return 2 * _scaled(df[dataio.POSITION].to_numpy(float), s0, s1) - 1
-
+    V_ref = float(np.median(df_train[dataio.VOLTAGE].to_numpy(float)))
     out = [
-        CandidateForce("load_slope_voltage", "load", "", ("load_V_gain",), ("1",),
-                       lambda df: (-wload(df) * dv(df))[:, None],
-                       "the load's effect on the speed depends on the drive voltage", also=("voltage",),
-                       structural=EQ29_LINEARISATION),
-        CandidateForce("damping_voltage", "speed", "", ("damping_V_N",), ("N",),
-                       lambda df: (-_drive_pred(ctx, df) / SPEED_REF * dv(df))[:, None],
-                       "damping of the slider that changes with the drive voltage", also=("voltage",),
-                       structural=EQ29_LINEARISATION),
-        CandidateForce("position_load", "position", "", ("load_pos_1", "load_pos_2"), ("1", "1"),
-                       lambda df: np.column_stack([-wload(df) * xpos(df), -wload(df) * xpos(df) ** 2]),
-                       "the load's effect varies along the bar", also=("load",)),
+        candidate(ctx, "load_slope_voltage", "load", "", ("load_V_gain",), ("1",),
+                  {"kind": "load_slope_voltage", "V_ref": V_ref},
+                  "the load's effect on the speed depends on the drive voltage", also=("voltage",),
+                  structural=EQ29_LINEARISATION),
+        candidate(ctx, "damping_voltage", "speed", "", ("damping_V_N",), ("N",),
+                  {"kind": "damping_voltage", "V_ref": V_ref},
+                  "damping of the slider that changes with the drive voltage", also=("voltage",),
+                  structural=EQ29_LINEARISATION),
+        candidate(ctx, "position_load", "position", "", ("load_pos_1", "load_pos_2"), ("1", "1"),
+                  {"kind": "position_load", "s_lo": float(s0), "s_hi": float(s1)},
+                  "the load's effect varies along the bar", also=("load",)),
     ]
-    t0, t1 = ctx.time_range
-    V_lo, V_hi = float(_V(df_train).min()), float(_V(df_train).max())
-    L_abs = float(np.max(np.abs(df_train[dataio.LOAD].to_numpy(float)))) or 1.0
-    vp = np.abs(ctx.baseline_free_run(df_train))
-    v_lo, v_hi = float(np.min(vp)), float(np.max(vp))
-
-    def lin_quad(u):
-        return np.column_stack([u, u ** 2])
-    one = {
-        "time": lambda df: lin_quad(2 * _scaled(df[dataio.TIME].to_numpy(float), t0, t1) - 1),
-        "position": lambda df: lin_quad(xpos(df)),
-        "direction": lambda df: _d(df)[:, None],
-        "load": lambda df: lin_quad(_d(df) * df[dataio.LOAD].to_numpy(float) / L_abs),
-        "voltage": lambda df: lin_quad(2 * _scaled(_V(df), V_lo, V_hi) - 1),
-        "speed": lambda df: lin_quad(2 * _scaled(np.abs(ctx.baseline_free_run(df)), v_lo, v_hi) - 1),
-    }
-    names = list(one)
+    ranges = _train_ranges(ctx, df_train)
+    names = ["time", "position", "direction", "load", "voltage", "speed"]
     for i, a in enumerate(names):
         for b in names[i + 1:]:
-            def feat(df, a=a, b=b):
-                A, B = one[a](df), one[b](df)
-                return np.column_stack([A[:, j] * B[:, k] for j in range(A.shape[1]) for k in range(B.shape[1])])
-            k = feat(df_train.iloc[:2]).shape[1]
-            out.append(CandidateForce(f"smooth_{a}_x_{b}", a, "", tuple(f"smooth_{a}_x_{b}_{j}" for j in range(k)),
-                                      ("N",) * k, feat, f"generic smooth interaction of {a} and {b}",
-                                      generic=True, also=(b,),
-                                      structural=EQ29_LINEARISATION if {a, b} in _LINEARISATION_PAIRS else ""))
+            spec = {"kind": "smooth_pair", "a": a, "b": b, **ranges}
+            k = _width(ctx, spec, df_train)
+            out.append(candidate(ctx, f"smooth_{a}_x_{b}", a, "", [f"smooth_{a}_x_{b}_{j}" for j in range(k)],
+                                 ["N"] * k, spec,
+                                 f"generic smooth interaction of {a} and {b}", generic=True, also=(b,),
+                                 structural=EQ29_LINEARISATION if {a, b} in _LINEARISATION_PAIRS else ""))
     return out
 
 
 def generic_candidates(ctx: Context, df_train: pd.DataFrame) -> list[CandidateForce]:
     """Fallback smooth terms, one per regressor available in the data."""
-    t0, t1 = ctx.time_range
     s0, s1 = ctx.position_range
-    out = []
-    V_lo, V_hi = float(_V(df_train).min()), float(_V(df_train).max())
-    L_abs = float(np.max(np.abs(df_train[dataio.LOAD].to_numpy(float)))) or 1.0
-    vp_train = np.abs(ctx.baseline_free_run(df_train))
-    v_lo, v_hi = float(np.min(vp_train)), float(np.max(vp_train))
-    specs = {
-        "time": (lambda df: bspline_basis(_scaled(df[dataio.TIME].to_numpy(float), t0, t1), 6), 9),
-        "position": (lambda df: bspline_basis(_scaled(df[dataio.POSITION].to_numpy(float), s0, s1),
-                                               int(np.clip(round((s1 - s0) / 1.5e-3), 4, 40))), None),
-        "direction": (lambda df: _d(df)[:, None], 1),
-        "load": (lambda df: np.column_stack([_d(df) * df[dataio.LOAD].to_numpy(float) / L_abs,
-                                             np.abs(df[dataio.LOAD].to_numpy(float)) / L_abs,
-                                             (_d(df) * df[dataio.LOAD].to_numpy(float) / L_abs) ** 2]), 3),
-        "voltage": (lambda df: np.column_stack([(2 * _scaled(_V(df), V_lo, V_hi) - 1),
-                                                (2 * _scaled(_V(df), V_lo, V_hi) - 1) ** 2]), 2),
-        "speed": (lambda df: bspline_basis(_scaled(np.abs(ctx.baseline_free_run(df)), v_lo, v_hi), 4), 7),
-        "acceleration": (lambda df: np.column_stack([_drive_acc(ctx, df) * ctx.m_s,
-                                                     np.abs(_drive_acc(ctx, df)) * ctx.m_s]), 2),
-    }
+    ranges = _train_ranges(ctx, df_train)
+    ranges["n_inner"] = int(np.clip(round((s1 - s0) / 1.5e-3), 4, 40))
+    ranges["m_s"] = float(ctx.m_s)
+    available = ["time", "position", "direction", "load", "voltage", "speed", "acceleration"]
     if dataio.TEMPERATURE in df_train.columns:
         T = df_train[dataio.TEMPERATURE].to_numpy(float)
-        T_lo, T_hi = float(T.min()), float(T.max())
-        specs["temperature"] = (lambda df: bspline_basis(_scaled(df[dataio.TEMPERATURE].to_numpy(float),
-                                                                  T_lo, T_hi), 4), 7)
+        ranges.update(T_lo=float(T.min()), T_hi=float(T.max()))
+        available.append("temperature")
+    out = []
     for reg in REGRESSORS:
-        if reg not in specs:
+        if reg not in available:
             continue
-        fn, k = specs[reg]
-        k = k if k is not None else fn(df_train.iloc[:2]).shape[1]
-        out.append(CandidateForce(f"smooth_{reg}", reg, "", tuple(f"smooth_{reg}_{j}" for j in range(k)),
-                                  tuple("N" for _ in range(k)), fn,
-                                  f"generic smooth force in {reg} (no named effect)", generic=True))
+        spec = {"kind": "smooth", "regressor": reg, **ranges}
+        k = _width(ctx, spec, df_train)
+        out.append(candidate(ctx, f"smooth_{reg}", reg, "", [f"smooth_{reg}_{j}" for j in range(k)], ["N"] * k, spec,
+                             f"generic smooth force in {reg} (no named effect)", generic=True))
     return out
 
 

@@ -27,6 +27,7 @@ import numpy as np
 import pandas as pd
 
 from ..data import measurements as dataio
+from ..predictor.effects import apply_output_filter
 from .residuals import run_folds, wilcoxon_greater
 
 
@@ -39,18 +40,9 @@ class OutputFilter:
     b1: float = 0.0
 
     def apply(self, df: pd.DataFrame, u) -> np.ndarray:
-        """The filtered signal of ``u`` (per sample), run by run."""
-        u = np.asarray(u, float)
-        y = np.empty_like(u)
-        gain0 = (self.b0 + self.b1) / (1.0 - self.a) if abs(1.0 - self.a) > 1e-9 else 1.0
-        for _, sl in dataio.run_slices(df[dataio.RUN]):
-            x = u[sl]
-            out = np.empty_like(x)
-            out[0] = gain0 * x[0]
-            for k in range(1, len(x)):
-                out[k] = self.a * out[k - 1] + self.b0 * x[k] + self.b1 * x[k - 1]
-            y[sl] = out
-        return y
+        """The filtered signal of ``u`` (per sample), run by run (:func:`l1b2.predictor.effects.apply_output_filter`)."""
+        starts = sorted(sl.start for _, sl in dataio.run_slices(df[dataio.RUN]))
+        return apply_output_filter({"a": self.a, "b0": self.b0, "b1": self.b1}, u, starts)
 
     def to_dict(self) -> dict:
         dc = (self.b0 + self.b1) / (1.0 - self.a) if abs(1.0 - self.a) > 1e-9 else float("nan")

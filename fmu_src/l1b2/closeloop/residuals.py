@@ -36,9 +36,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 from scipy import stats
-from scipy.interpolate import BSpline
 
 from ..data import measurements as dataio
+from ..predictor.effects import bspline_basis  # noqa: F401  (re-exported)
 
 REGRESSORS = ("time", "position", "direction", "load", "voltage", "speed", "acceleration", "temperature")
 #: regressors constant within a run (their evidence is carried by run-to-run differences only)
@@ -84,15 +84,6 @@ def regressor_values(df: pd.DataFrame) -> dict[str, np.ndarray]:
 
 def _scaled(x, lo, hi):
     return (x - lo) / (hi - lo) if hi > lo else np.zeros_like(x)
-
-
-def bspline_basis(u: np.ndarray, n_inner: int, degree: int = 3) -> np.ndarray:
-    """Cubic B-spline basis on [0, 1] with ``n_inner`` equally spaced inner knots."""
-    inner = np.linspace(0, 1, n_inner + 2)[1:-1]
-    t = np.concatenate([np.zeros(degree + 1), inner, np.ones(degree + 1)])
-    n_basis = len(t) - degree - 1
-    u = np.clip(u, 0.0, 1.0 - 1e-12)
-    return np.column_stack([BSpline(t, np.eye(n_basis)[i], degree, extrapolate=False)(u) for i in range(n_basis)])
 
 
 def basis(name: str, values: dict[str, np.ndarray], ranges: dict[str, tuple[float, float]]) -> np.ndarray:
