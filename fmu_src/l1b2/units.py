@@ -66,6 +66,8 @@ UNITS: dict[str, UnitDef] = {
     "kg/m3": UnitDef(kg=1, m=-3),
     "K/V2": UnitDef(kg=-2, m=-4, s=6, A=2, K=1),
     "N/V": UnitDef(m=-1, s=1, A=1),
+    "N/K": UnitDef(kg=1, m=1, s=-2, K=-1),
+    "N/K2": UnitDef(kg=1, m=1, s=-2, K=-2),
     "N/m": UnitDef(kg=1, s=-2),
     "N.s/m": UnitDef(kg=1, s=-1),
 }

@@ -21,7 +21,9 @@ from ..physics.params import (
     SliderParams,
     StatorParams,
 )
+from ..predictor import effects as fx
 from ..predictor import model as pr
+from ..predictor.effects import ExtendedPredictor
 from ..predictor.model import PredictorParams
 from ..predictor.setup import PredictorSetup
 from .blocks import SUBSYSTEM_BLOCKS, Block, Var, parameter_vars
@@ -211,6 +213,11 @@ class PredictorBlock(Block):
         Var("v0", "parameter", "m/s", "initial speed", start=0.0, min=-10.0, max=10.0, variability="fixed"),
     ]
 
+    def __new__(cls, setup=None):
+        if cls is PredictorBlock and isinstance(setup, ExtendedPredictor):
+            cls = ExtendedPredictorTBlock if setup.needs_temperature else ExtendedPredictorBlock
+        return super().__new__(cls)
+
     def __init__(self, setup: PredictorSetup):
         self.setup = setup
         self.params = setup
@@ -229,7 +236,9 @@ class PredictorBlock(Block):
         return vals
 
     @classmethod
-    def params_from_defaults(cls, defaults: dict) -> PredictorSetup:
+    def params_from_defaults(cls, defaults: dict) -> PredictorSetup | ExtendedPredictor:
+        if "extended_predictor" in defaults:
+            return ExtendedPredictor.from_dict(defaults["extended_predictor"])
         if "predictor" in defaults:
             return PredictorSetup.from_dict(defaults["predictor"])
         from ..predictor.derive import derive_predictor_setup
@@ -246,7 +255,15 @@ class PredictorBlock(Block):
         return {"predictor": derive_predictor_setup(mp).to_dict()}
 
     @classmethod
-    def variables(cls, params: PredictorSetup | None = None) -> list[Var]:
+    def variables(cls, params: PredictorSetup | ExtendedPredictor | None = None) -> list[Var]:
+        if cls is PredictorBlock and isinstance(params, ExtendedPredictor):
+            sub = ExtendedPredictorTBlock if params.needs_temperature else ExtendedPredictorBlock
+            return sub.variables(params)
+        return cls._setup_vars(params) + list(cls.EXTRA_PARAMETERS) + cls.INPUTS + cls.OUTPUTS + cls.STATES
+
+    @staticmethod
+    def _setup_vars(params: PredictorSetup | None, prefix: str = "", what: str = "Eq. 35 parameter") -> list[Var]:
+        """The parameters of one Eq. 29 setup (names prefixed with ``prefix``)."""
         pars = []
         if params is not None:
             p = params.params
@@ -268,7 +285,9 @@ class PredictorBlock(Block):
                 Var("T_s", "parameter", "s", "sampling time the predictor was identified with", start=params.T_s,
                     min=1e-7, variability="fixed"),
             ]
-        return pars + list(cls.EXTRA_PARAMETERS) + cls.INPUTS + cls.OUTPUTS + cls.STATES
+        return [Var(prefix + v.name, v.causality, v.unit, (f"{what} {v.name}" if v.description.startswith("Eq. 35")
+                                                             else v.description), v.start, v.min, v.max, v.variability)
+                for v in pars]
 
     def get(self, name: str):
         if name in self._values:
@@ -282,14 +301,7 @@ class PredictorBlock(Block):
             setattr(self, name, value)
 
     def rebuild_params(self):
-        vals = self._values
-        p0 = self.setup.params
-        theta = np.array([vals[n] for n in p0.names(p0.order)])
-        pp = PredictorParams.from_vector(theta, s_center=vals["s_center"], s_half=vals["s_half"],
-                                         kappa=vals["kappa"], include_load_inertia=vals["load_inertia"] >= 0.5)
-        if not (vals["slider_mass_kg"] > 0 and vals["T_s"] > 0):
-            raise SimulationError("PredictorBlock: slider_mass_kg [kg] and T_s [s] must be positive")
-        self.setup = PredictorSetup(pp, vals["slider_mass_kg"], vals["T_s"])
+        self.setup = _setup_from_values(self._values, self.setup)
 
     def check_inputs(self):
         super().check_inputs()
@@ -318,6 +330,165 @@ class PredictorBlock(Block):
                                   su.slider_mass_kg))
         self.v_state = v
         self.initialize_outputs()
+
+
+def _setup_from_values(vals: dict, template: PredictorSetup, prefix: str = "") -> PredictorSetup:
+    """The Eq. 29 setup from the FMU's current parameter values (names prefixed with ``prefix``)."""
+    p0 = template.params
+    theta = np.array([vals[prefix + n] for n in p0.names(p0.order)])
+    pp = PredictorParams.from_vector(theta, s_center=vals[prefix + "s_center"], s_half=vals[prefix + "s_half"],
+                                     kappa=vals[prefix + "kappa"],
+                                     include_load_inertia=vals[prefix + "load_inertia"] >= 0.5)
+    m_s, T_s = vals[prefix + "slider_mass_kg"], vals[prefix + "T_s"]
+    if not (m_s > 0 and T_s > 0):
+        raise SimulationError(f"PredictorBlock: {prefix}slider_mass_kg [kg] and {prefix}T_s [s] must be positive")
+    return PredictorSetup(pp, m_s, T_s)
+
+
+def _unit(u: str) -> str:
+    return {"-": "1", "N s/m": "N.s/m"}.get(u, u)
+
+
+class ExtendedPredictorBlock(PredictorBlock):
+    """The calibrated, extended predictor (``Predictor.fmu`` built from a close-the-loop result).
+
+    Carries an :class:`l1b2.predictor.effects.ExtendedPredictor`: the
+    re-identified Eq. 35 parameters (same names as the baseline FMU's), the
+    baseline's (prefix ``baseline_``, they give the effects' signals
+    ``v_base``/``a_base``), every effect's parameters with unit, value and
+    standard error in the description, and the speed channel's output filter
+    (``speed_filter_a/b0/b1``) when one was kept. Per communication step
+    (inputs at the step's start, as in the identification's free run):
+
+    1. the baseline speed is advanced one step (``v_base`` -> ``v_base_next``);
+       its time derivative ``a_base`` is the one-sided or central difference of
+       :func:`l1b2.predictor.effects.time_derivative`;
+    2. the effects' force ``F_extra`` is evaluated from the inputs, the FMU's
+       time (the session clock: start the simulation at the run's session
+       time), ``v_base`` and ``a_base``;
+    3. the model speed is advanced with ``F_extra`` added to its drive force,
+       and passed through the output filter.
+    """
+
+    EXT_OUTPUTS = [
+        Var("v_baseline", "output", "m/s", "baseline Eq. 29 speed (the effects' v_base signal)"),
+        Var("F_extra", "output", "N", "sum of the identified effects' forces at the last step (drive coordinates)"),
+    ]
+    EXT_STATES = [
+        Var("v_base", "local", "m/s", "baseline speed (state)"),
+        Var("v_base_prev", "local", "m/s", "baseline speed one step back"),
+        Var("h_prev", "local", "s", "previous communication step (0 before the first)"),
+        Var("v_raw", "local", "m/s", "model speed before the output filter"),
+        Var("t_now", "local", "s", "time of the current communication point"),
+    ]
+    TEMPERATURE = Var("T", "input", "degC", "measured stator temperature (used by a temperature effect)",
+                      start=25.0, min=-100.0, max=300.0)
+
+    def __init__(self, setup: ExtendedPredictor):
+        self.extended = setup
+        super().__init__(setup.model)
+        for var in self.EXT_OUTPUTS + self.EXT_STATES:
+            setattr(self, var.name, 0.0)
+        self._values.update({"baseline_" + k: v for k, v in self._param_values(setup.baseline).items()})
+        for e in setup.effects:
+            self._values.update(zip(e.names, (float(p) for p in e.phi)))
+        if setup.output_filter is not None:
+            self._values.update({f"speed_filter_{k}": float(setup.output_filter[k]) for k in ("a", "b0", "b1")})
+        self.base_setup = setup.baseline
+
+    @classmethod
+    def variables(cls, params: ExtendedPredictor | None = None) -> list[Var]:
+        if params is None:
+            return PredictorBlock.variables(None)
+        src = params.source.get("train") or "TRAIN data"
+        out = cls._setup_vars(params.model, what="re-identified Eq. 35 parameter")
+        out += cls._setup_vars(params.baseline, "baseline_", "baseline Eq. 35 parameter (gives v_base)")
+        for e in params.effects:
+            for name, unit, phi, se in zip(e.names, e.units, e.phi, e.stderr):
+                sd = "n/a" if se is None else f"{se:.3g}"
+                out.append(Var(name, "parameter", _unit(unit),
+                               f"{e.label}: {e.description}; identified {phi:.6g} (standard error {sd}) from {src}",
+                               start=float(phi), variability="fixed"))
+        if params.output_filter is not None:
+            for k in ("a", "b0", "b1"):
+                out.append(Var(f"speed_filter_{k}", "parameter", "1",
+                               f"speed channel output filter y(k) = a y(k-1) + b0 u(k) + b1 u(k-1): {k}",
+                               start=float(params.output_filter[k]), variability="fixed"))
+        return (out + list(cls.EXTRA_PARAMETERS) + cls.INPUTS + cls.OUTPUTS + cls.EXT_OUTPUTS + cls.STATES
+                + cls.EXT_STATES)
+
+    def set_start_time(self, t0: float):
+        self.t_now = float(t0)
+
+    def rebuild_params(self):
+        super().rebuild_params()
+        self.base_setup = _setup_from_values(self._values, self.extended.baseline, "baseline_")
+        ext = self.extended
+        self.effects = [(e.spec, np.array([self._values[n] for n in e.names])) for e in ext.effects]
+        self.filter = (None if ext.output_filter is None
+                       else {k: self._values[f"speed_filter_{k}"] for k in ("a", "b0", "b1")})
+
+    def initialize(self):
+        self.rebuild_params()
+        self.check_inputs()
+        self.v_base = self.v_raw = self.v_base_prev = float(self.v0)
+        self.h_prev = 0.0
+        self.v_state = self.v_raw * (1.0 if self.filter is None else fx.filter_start_gain(self.filter))
+        self.F_extra = self._force(self._signals(0.0))   # a_base is not known before the first step
+        self.v_baseline = float(self.v_base)
+        self.initialize_outputs()
+
+    def _signals(self, a_base: float) -> dict:
+        x = {"t": [self.t_now], "s": [self.s], "V0": [self.V0], "load": [self.load], "d": [self.direction],
+             "v_base": [self.v_base], "a_base": [a_base]}
+        if hasattr(self, "T"):
+            x["T"] = [self.T]
+        return x
+
+    def _force(self, x) -> float:
+        F = 0.0
+        for spec, phi in self.effects:
+            F = F + float((fx.effect_features(spec, x) @ phi)[0])
+        return F
+
+    def initialize_outputs(self):
+        su = self.setup
+        self.v = float(self.v_state)
+        self.v_steady = float(pr.steady_state(su.params, self.s, self.V0, self.load, self.direction,
+                                              su.slider_mass_kg, extra_force=getattr(self, "F_extra", 0.0)))
+
+    def _advance(self, su: PredictorSetup, v: float, h: float, F=None) -> float:
+        n = max(1, int(math.ceil(h / su.T_s - 1e-9)))
+        for _ in range(n):
+            v = float(pr.one_step(su.params, v, self.s, self.V0, self.load, self.direction, h / n,
+                                  su.slider_mass_kg, extra_force=F))
+        return v
+
+    def do_step(self, t, h):
+        self.check_inputs()
+        self.t_now = float(t)
+        vb, vb_next = self.v_base, self._advance(self.base_setup, self.v_base, h)
+        a_base = ((vb_next - vb) / h if self.h_prev <= 0.0
+                  else float(fx.derivative_step(self.v_base_prev, vb, vb_next, self.h_prev, h)))
+        F = self._force(self._signals(a_base))
+        self.F_extra = F
+        u_prev = self.v_raw
+        self.v_raw = self._advance(self.setup, self.v_raw, h, F if self.effects else None)
+        if self.filter is not None:
+            f = self.filter
+            self.v_state = f["a"] * self.v_state + f["b0"] * self.v_raw + f["b1"] * u_prev
+        else:
+            self.v_state = self.v_raw
+        self.v_base_prev, self.v_base, self.h_prev = vb, vb_next, h
+        self.t_now = float(t) + h
+        self.v_baseline = float(self.v_base)
+        self.initialize_outputs()
+
+
+class ExtendedPredictorTBlock(ExtendedPredictorBlock):
+    """:class:`ExtendedPredictorBlock` with the measured stator temperature ``T`` [degC] as an input."""
+
+    INPUTS = PredictorBlock.INPUTS + [ExtendedPredictorBlock.TEMPERATURE]
 
 
 #: every FMU's block class by FMU name

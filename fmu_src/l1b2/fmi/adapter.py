@@ -129,6 +129,7 @@ class BlockAdapter:
             slave.register_variable(vtype(var.name, **kw))
         # the slave scripts leave enter_initialization_mode and terminate to Fmi2Slave (no-ops): take them over
         slave.enter_initialization_mode = self.enter_initialization_mode
+        slave.setup_experiment = self.setup_experiment
         slave.terminate = self.terminate
         # PythonFMU 0.7.0 exit-time use-after-free: make exit() empty this library's PyState pointer first
         from ..cosim.hosting import register_exit_fix_in_fmu
@@ -210,6 +211,14 @@ class BlockAdapter:
                        f"allows it only in {' or '.join(repr(m) for m in allowed)}): {_HINT[self.mode]}; "
                        "the call has no effect")
         return True
+
+    def setup_experiment(self, start_time, stop_time=None, tolerance=None):
+        """``fmi2SetupExperiment``: blocks that use the FMU's own time (``set_start_time``) learn its start."""
+        if hasattr(self.block, "set_start_time"):
+            try:
+                self.block.set_start_time(float(start_time))
+            except (TypeError, ValueError) as exc:  # never raise out of a callback
+                self.fail(f"invalid start time {start_time!r}: {exc}")
 
     def enter_initialization_mode(self):
         if self.refused("fmi2EnterInitializationMode", (INSTANTIATED,)):

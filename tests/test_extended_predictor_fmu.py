@@ -1,0 +1,263 @@
+"""Predictor.fmu carrying a calibrated extended model (issue 15): every candidate kind, through fmpy and a C host.
+
+Reference: :meth:`l1b2.predictor.effects.ExtendedPredictor.free_run`, the
+vectorised free run of the extended model (the baseline's free run gives
+``v_base``; its time derivative ``a_base``; the effects' forces are added to the
+re-identified model's drive force; the output filter last). The effects come
+from the close-the-loop library itself (:func:`l1b2.closeloop.candidates.full_library`
+on a small data set), one FMU per kind, with random parameters large enough to
+move the speed. That the same reference equals the close-the-loop estimator's
+own prediction is checked on a real close-the-loop result in
+``test_closeloop.py`` (``test_export_of_the_calibrated_model``).
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+
+import numpy as np
+import pandas as pd
+import pytest
+from l1b2.closeloop.candidates import Context, full_library
+from l1b2.data import measurements as dataio
+from l1b2.fmi.build import build_fmu
+from l1b2.physics.params import load_motor
+from l1b2.predictor import effects as fx
+from l1b2.predictor.derive import derive_predictor
+from l1b2.predictor.effects import Effect, ExtendedPredictor
+from l1b2.predictor.setup import PredictorSetup
+
+pytestmark = pytest.mark.fmu
+
+N = 90
+DT = 1e-3
+T0 = 5.0                      # session time of the runs' start [s]
+KINDS = fx.KINDS + ("output_filter",)
+FILTER = {"a": 0.3, "b0": 0.5, "b1": 0.2}
+
+
+def _run_inputs(d, V0, load):
+    t = T0 + np.arange(N) * DT
+    return {"t": t, "s": -0.01 * d + d * 0.2 * (t - T0), "V0": np.full(N, V0), "load": np.full(N, load),
+            "d": np.full(N, d), "T": 30.0 + 5.0 * (t - T0), "v_start": 0.12 * d}
+
+
+RUNS = [_run_inputs(1.0, 324.0, 0.03), _run_inputs(-1.0, 250.0, -0.02)]
+
+
+def _setups():
+    mp = load_motor()
+    pp = derive_predictor(mp, n_grid=9)
+    base = PredictorSetup(pp, mp.slider.mass_kg, DT)
+    refit = type(pp).from_vector(pp.to_vector() * 1.03, s_center=pp.s_center, s_half=pp.s_half, kappa=pp.kappa,
+                                 include_load_inertia=pp.include_load_inertia)
+    return base, PredictorSetup(refit, mp.slider.mass_kg, DT)
+
+
+def _frame() -> pd.DataFrame:
+    return pd.concat([pd.DataFrame({dataio.TIME: r["t"], dataio.RUN: i, dataio.POSITION: r["s"],
+                                    dataio.VOLTAGE: r["V0"], dataio.LOAD: r["load"], dataio.DIRECTION: r["d"],
+                                    dataio.TEMPERATURE: r["T"], dataio.SPEED: r["v_start"]})
+                      for i, r in enumerate(RUNS)], ignore_index=True)
+
+
+def _free_run(ep: ExtendedPredictor, r, t=None) -> np.ndarray:
+    return ep.free_run(r["t"] if t is None else t, r["s"], r["V0"], r["load"], r["d"], r["v_start"], temperature=r["T"])
+
+
+def _phi(rng, F: np.ndarray) -> np.ndarray:
+    """Random parameters giving each feature column a force of about 0.1 N rms (columns that vanish: 0)."""
+    rms = np.sqrt(np.mean(np.asarray(F, float) ** 2, axis=0))
+    return np.where(rms > 1e-12, rng.normal(0.0, 1.0, len(rms)) * 0.1 / np.maximum(rms, 1e-12), 0.0) / np.sqrt(len(rms))
+
+
+@pytest.fixture(scope="module")
+def pool():
+    """The close-the-loop library's candidates on the test frame (baseline: the derived predictor)."""
+    base, _ = _setups()
+    plain = ExtendedPredictor(base, base)
+
+    def baseline_free_run(frame):
+        firsts = frame.groupby(dataio.RUN, sort=False)[dataio.SPEED].first().to_numpy()
+        return plain.free_run(frame[dataio.TIME], frame[dataio.POSITION], frame[dataio.VOLTAGE], frame[dataio.LOAD],
+                              frame[dataio.DIRECTION], firsts, frame[dataio.RUN].to_numpy())
+    ctx = Context(baseline_free_run, base.slider_mass_kg, (T0, T0 + 1.0), (-0.02, 0.02), temperature_ref=31.0)
+    return full_library()(ctx, _frame())
+
+
+def test_every_candidate_has_one_parameter_per_feature_column_and_a_spec(pool):
+    # reference: the candidate's own feature matrix (a mismatch made generic time/speed/temperature terms unfittable)
+    df = _frame()
+    for c in pool:
+        assert c.spec and c.spec["kind"] in fx.KINDS, c.label
+        assert np.asarray(c.features(df)).shape == (len(df), c.n_params) == (len(df), len(c.units)), c.label
+
+
+@pytest.fixture(scope="module")
+def models(pool) -> dict[str, ExtendedPredictor]:
+    """One extended model per kind: the library's candidates of that kind (all regressors for the generic kinds)."""
+    base, refit = _setups()
+    df = _frame()
+    rng = np.random.default_rng(7)
+    out = {}
+    for kind in fx.KINDS:
+        cands = [c for c in pool if c.spec["kind"] == kind]
+        assert cands, f"the library has no candidate of kind {kind}"
+        if kind not in ("smooth", "smooth_pair"):   # a defect on the runs' path (centre near 0 mm)
+            cands = [min(cands, key=lambda c: abs(c.spec.get("center_m", 0.0)))]
+        effects = tuple(Effect(c.family, c.label, c.spec, c.names, c.units, tuple(_phi(rng, c.features(df))),
+                               (0.01,) * c.n_params, c.description, c.regressors, c.structural) for c in cands)
+        out[kind] = ExtendedPredictor(base, refit, effects, None, {"train": "synthetic test frame"})
+    out["output_filter"] = ExtendedPredictor(base, refit, out["load_path_friction"].effects, FILTER,
+                                             {"train": "synthetic test frame"})
+    return out
+
+
+@pytest.fixture(scope="module")
+def built(models, tmp_path_factory) -> dict[str, str]:
+    root = tmp_path_factory.mktemp("extended")
+    return {k: str(build_fmu("Predictor", root / k, extra_defaults={"predictor": m.model.to_dict(),
+                                                                    "extended_predictor": m.to_dict()}))
+            for k, m in models.items()}
+
+
+def worker_fmpy(paths: dict, runs: list, t0: float):
+    """Each FMU through fmpy over each run: v after initialisation, then after each step (inputs at the step's start)."""
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+    out = {}
+    for kind, path in paths.items():
+        md = read_model_description(path)
+        vr = {v.name: v.valueReference for v in md.modelVariables}
+        names = ["V0", "s", "load", "direction"] + (["T"] if "T" in vr else [])
+        unzipped = extract(path)
+        out[kind] = []
+        for r in runs:
+            cols = [r["V0"], r["s"], r["load"], r["d"]] + ([r["T"]] if "T" in vr else [])
+            fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=md.coSimulation.modelIdentifier,
+                            instanceName=kind)
+            v = []
+            try:
+                fmu.instantiate()
+                fmu.setupExperiment(startTime=t0)
+                fmu.setReal([vr["v0"]], [r["v_start"]])
+                fmu.setReal([vr[n] for n in names], [c[0] for c in cols])
+                fmu.enterInitializationMode()
+                fmu.exitInitializationMode()
+                v.append(fmu.getReal([vr["v"]])[0])
+                for k in range(len(r["t"]) - 1):
+                    fmu.setReal([vr[n] for n in names], [c[k] for c in cols])
+                    fmu.doStep(currentCommunicationPoint=r["t"][k], communicationStepSize=r["t"][k + 1] - r["t"][k])
+                    v.append(fmu.getReal([vr["v"]])[0])
+                fmu.terminate()
+            finally:
+                fmu.freeInstance()
+            out[kind].append(v)
+    return out
+
+
+@pytest.fixture(scope="module")
+def through_fmpy(built, isolated):
+    runs = [{k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in r.items()} for r in RUNS]
+    return isolated(__file__, "worker_fmpy", built, runs, T0).value
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_extended_predictor_fmu_equals_the_extended_model_through_fmpy(kind, models, through_fmpy):
+    # reference: ExtendedPredictor.free_run (vectorised), 1e-10 relative; the effect must move the speed
+    ep = models[kind]
+    plain = ExtendedPredictor(ep.baseline, ep.model)
+    for r, got in zip(RUNS, through_fmpy[kind]):
+        want = _free_run(ep, r)
+        np.testing.assert_allclose(np.array(got), want, rtol=1e-10, atol=1e-14)
+        assert np.max(np.abs(want - _free_run(plain, r))) > 1e-4   # not vacuous: the effect changes the speed
+
+
+def test_extended_predictor_fmu_declares_every_parameter_with_unit_and_provenance(models, built):
+    # reference: fmpy validation, and the model's own effects (names, units, values, stderr in the description)
+    from fmpy import read_model_description
+    from fmpy.validation import validate_fmu
+    for kind, path in built.items():
+        assert validate_fmu(path) == [], kind
+        md = read_model_description(path)
+        var = {v.name: v for v in md.modelVariables}
+        assert all(v.unit for v in md.modelVariables if v.type == "Real"), kind
+        for e in models[kind].effects:
+            for n, u, p in zip(e.names, e.units, e.phi):
+                assert var[n].causality == "parameter" and var[n].unit == u
+                assert float(var[n].start) == pytest.approx(p, rel=1e-15)
+                assert "standard error 0.01" in var[n].description and "synthetic test frame" in var[n].description
+        assert ("T" in var) == models[kind].needs_temperature, kind
+        assert {"baseline_c_r", "c_r", "v_baseline", "F_extra"} <= set(var), kind
+
+
+def test_extended_model_spec_roundtrips_through_json(models):
+    # reference: the model itself (to_dict -> JSON -> from_dict gives the same predictions)
+    for ep in models.values():
+        again = ExtendedPredictor.from_dict(json.loads(json.dumps(ep.to_dict())))
+        for r in RUNS:
+            np.testing.assert_array_equal(_free_run(again, r), _free_run(ep, r))
+
+
+def test_time_derivative_is_numpys_gradient_and_exact_on_quadratics():
+    # reference: numpy.gradient (non-uniform spacing) and the exact derivative of a quadratic
+    rng = np.random.default_rng(3)
+    t = np.cumsum(rng.uniform(0.5e-3, 1.5e-3, 50))
+    v = 3.0 * t ** 2 - t + 0.2
+    got = fx.time_derivative(v, t)
+    np.testing.assert_allclose(got, np.gradient(v, t), rtol=1e-12)
+    np.testing.assert_allclose(got[1:-1], 6.0 * t[1:-1] - 1.0, rtol=1e-9)
+    two = fx.time_derivative(np.r_[v, v], np.r_[t, t], [0, 50])   # run by run
+    np.testing.assert_allclose(two, np.r_[got, got], rtol=0, atol=0)
+
+
+def test_unknown_effect_kinds_and_missing_signals_are_named():
+    with pytest.raises(fx.EffectSpecError, match="unknown effect kind 'nope'"):
+        fx.effect_features({"kind": "nope"}, {})
+    with pytest.raises(fx.EffectSpecError, match="lacks the scalar 'period_m'"):
+        fx.effect_features({"kind": "bar_waviness"}, {"V0": [300.0], "d": [1.0], "s": [0.0], "v_base": [0.1]})
+    with pytest.raises(fx.EffectSpecError, match="signal 'T'"):
+        fx.effect_features({"kind": "thermal_drift_T", "T_ref": 25.0}, {"V0": [300.0], "d": [1.0]})
+    assert fx.needs({"kind": "smooth_pair", "a": "load", "b": "speed"}) == {"V0", "d", "load", "v_base"}
+
+
+# ---------------------------------------------------------------------------
+# the C host (l1b2/fmi/chost/fmu_host.c): constant inputs, FMU time from 0
+# ---------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def c_host(tmp_path_factory):
+    import shutil
+
+    from l1b2.fmi.runtime import compile_c_host
+    if shutil.which("gcc") is None and shutil.which("cc") is None:
+        pytest.skip("no C compiler")
+    return compile_c_host(tmp_path_factory.mktemp("chost") / "fmu_host")
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_extended_predictor_fmu_equals_the_extended_model_through_the_c_host(kind, models, built, c_host,
+                                                                              tmp_path):
+    # reference: ExtendedPredictor.free_run with the C host's inputs (held constant) and time (0, h, 2h, ...)
+    import zipfile
+
+    from fmpy import read_model_description
+    from l1b2.fmi.runtime import host_environment
+    d = tmp_path / "fmu"
+    with zipfile.ZipFile(built[kind]) as z:
+        z.extractall(d)
+    md = read_model_description(str(d / "modelDescription.xml"))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    r = {k: (np.full(N, v[0]) if isinstance(v, np.ndarray) and k not in ("t",) else v) for k, v in RUNS[0].items()}
+    args = [str(c_host), "-h", repr(DT), "-n", str(N - 1), "-p", f"{vr['v0']}={r['v_start']!r}"]
+    for name, key in (("V0", "V0"), ("s", "s"), ("load", "load"), ("direction", "d"), ("T", "T")):
+        if name in vr:
+            args += ["-i", f"{vr[name]}={float(r[key][0])!r}"]
+    args += ["-o", str(vr["v"]), str(d), md.coSimulation.modelIdentifier, md.guid]
+    proc = subprocess.run(args, capture_output=True, text=True, timeout=120, env=host_environment())
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    rows = np.array([[float(x) for x in line.split()] for line in proc.stdout.splitlines() if line.strip()])
+    t = np.arange(N) * DT
+    np.testing.assert_allclose(rows[:, 0], t, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(rows[:, 1], _free_run(models[kind], r, t=t), rtol=1e-10, atol=1e-14)
