@@ -31,7 +31,8 @@ ALLOWED = {
     "cosim": {"errors", "units", "physics", "predictor"},
     "fmi": {"errors", "units", "physics", "predictor", "cosim"},
     "ident": {"errors", "units", "physics", "predictor", "data"},
-    "closeloop": {"errors", "units", "physics", "predictor", "data", "ident"},
+    # closeloop -> fmi: only CloseLoopResult.export (writes the calibrated Predictor.fmu; I/O off the result)
+    "closeloop": {"errors", "units", "physics", "predictor", "data", "ident", "fmi"},
     "cluster": {"errors", "units"},  # the parallel engine (Dask) under the rig and the sweeps
     "rig": {"errors", "units", "physics", "predictor", "cosim", "fmi", "data", "cluster"},
     "sweep": {"errors", "units", "physics", "predictor", "cosim", "fmi", "data", "rig", "cluster"},

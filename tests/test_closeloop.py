@@ -58,6 +58,69 @@ def test_undeclared_effect_is_traced_and_halves_the_held_out_error(effect, seed)
     _check_effect(res, truth)
 
 
+def _extended_free_run(model, df):
+    """``ExtendedPredictor.free_run`` over a data frame (runs from their first measured speed)."""
+    from l1b2.data import measurements as dataio
+    first = df.groupby(dataio.RUN, sort=False)[dataio.SPEED].first().to_numpy()
+    return model.free_run(df[dataio.TIME], df[dataio.POSITION], df[dataio.VOLTAGE], df[dataio.LOAD],
+                          df[dataio.DIRECTION], first, df[dataio.RUN].to_numpy(),
+                          temperature=df[dataio.TEMPERATURE] if dataio.TEMPERATURE in df else None)
+
+
+def test_export_of_the_calibrated_model(tmp_path, isolated):
+    # reference: the close-the-loop estimator's own free-run prediction of TEST (1e-10 relative), for the
+    # serialisable model and for Predictor.fmu through fmpy (one TEST run); the manifest names each effect's home
+    from pathlib import Path
+    res, _ = _run("pulley_friction", 1)
+    ep = res.calibrated_model
+    assert [e.label for e in ep.effects] == [e["label"] for e in res.diagnosis["effects"]
+                                             if e["effect"] != "speed_channel_filter"]
+    assert ep.effects, res.diagnosis["message"]
+    dte = res.test_df
+    want = res.extended_model.predict_free_run(dte)
+    np.testing.assert_allclose(_extended_free_run(ep, dte), want, rtol=1e-10, atol=1e-13)
+    manifest = res.export(tmp_path / "exp")
+    fam = {e["family"]: e for e in manifest["effects"]}
+    assert fam["load_path_friction"]["subsystems"]["home"] == "Slider.pulley_mu"
+    assert all(e["predictor_fmu"] == "fmus/Predictor.fmu" for e in manifest["effects"])
+    run = dte[dte["run"] == dte["run"].iloc[0]]
+    r = {"t": run["time_s"].tolist(), "s": run["position_m"].tolist(), "V0": run["voltage_V"].tolist(),
+         "load": run["load_kg"].tolist(), "d": run["direction"].tolist(), "T": run["time_s"].tolist(),
+         "v_start": float(run["speed_m_s"].iloc[0])}
+    got = isolated(str(Path(__file__).with_name("test_extended_predictor_fmu.py")), "worker_fmpy",
+                   {"fmu": str(tmp_path / "exp" / "fmus" / "Predictor.fmu")}, [r], r["t"][0]).value["fmu"][0]
+    np.testing.assert_allclose(got, want[: len(run)], rtol=1e-10, atol=1e-13)
+
+
+@pytest.mark.parametrize("effect,seed,home", [("pulley_friction", 1, "Slider.pulley_mu"),
+                                              ("direction_asymmetry", 2, "Stator.asym_b")])
+def test_calibrated_ssp_carries_the_identified_effect(effect, seed, home, tmp_path, isolated):
+    # reference: rig_truth.json (the injected parameter, within 10 %) and the held-out runs: the calibrated SSP's
+    # free-run nrmse is at most 1 pp above the extended predictor's and below half the uncalibrated SSP's;
+    # libcosim loads the calibrated SSP with the calibrated parameter
+    from pathlib import Path
+
+    from l1b2.workflows import export_calibrated_model
+    res, truth = _run(effect, seed)
+    d = rig_dir(f"{effect}_{seed}", injections=[effect], injection_seed=seed, plan=RigPlan(step_s=1e-3, seed=seed))
+    out = tmp_path / "exp"
+    man = export_calibrated_model(res.calibrated_model, out, test=load_measurements(d / "test.csv"),
+                                  test_prediction=res.test_free_run_after)
+    got = man["calibrated_ssp"]["changed"][home]
+    assert got == pytest.approx(truth["injections"][0]["parameters"][home], rel=0.1)
+    chk = man["held_out_check"]
+    assert chk["extended_predictor_nrmse"] == pytest.approx(res.after["test"]["free_run"]["nrmse"], rel=1e-9)
+    assert chk["calibrated_ssp_nrmse"] <= chk["extended_predictor_nrmse"] + 0.01, chk
+    assert chk["calibrated_ssp_nrmse"] < 0.5 * chk["uncalibrated_ssp_nrmse"], chk
+    assert (out / "held_out_ssp.png").is_file() and (out / "calibrated_ssv" / "Slider.ssv").is_file()
+    pytest.importorskip("libcosimpy")
+    inputs = {"V_s": 67.1, "duty": 1.0, "f_s": 48500.0, "T": 25.0, "direction": 1.0, "m_load": 0.0}
+    lc = isolated(str(Path(__file__).with_name("test_libcosim.py")), "worker_libcosim",
+                  str(out / "L1B2Motor_calibrated.ssp"), 0.002, inputs, {"Slider.s0": 0.0, "Stator.s": 0.0},
+                  [home], 2e-4).value
+    np.testing.assert_allclose(lc[home], got, rtol=1e-12)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("effect,seed", SLOW)
 def test_undeclared_effect_over_more_seeds(effect, seed):
@@ -107,8 +170,17 @@ def test_cli_writes_the_report_files_and_figures(tmp_path, capsys):
                 plan=RigPlan(step_s=1e-3, seed=2))
     out = tmp_path / "cl"
     assert cli_main(["close-loop", "--train", str(d / "train.csv"), "--test", str(d / "test.csv"),
-                     "--report-dir", str(out), "--quiet", "--min-cv-drop", "0.006", "--screen-alpha", "1e-6"]) == 0
+                     "--report-dir", str(out), "--quiet", "--min-cv-drop", "0.006", "--screen-alpha", "1e-6",
+                     "--export", str(tmp_path / "fmu")]) == 0
     printed = capsys.readouterr().out
+    # the calibrated model went into Predictor.fmu, and again from the report alone
+    assert (tmp_path / "fmu" / "fmus" / "Predictor.fmu").is_file()
+    assert cli_main(["export", "--from-report", str(out), "--out", str(tmp_path / "again")]) == 0
+    first = json.loads((tmp_path / "fmu" / "calibrated_manifest.json").read_text())
+    again = json.loads((tmp_path / "again" / "calibrated_manifest.json").read_text())
+    assert first["effects"] == again["effects"] and first["effects"]
+    assert cli_main(["export", "--from-report", str(tmp_path), "--out", str(tmp_path / "x")]) == 2
+    assert "no close-loop report here" in capsys.readouterr().err
     assert "before" in printed and "after" in printed and "direction" in printed
     text = (out / "report.json").read_text()
     rep = json.loads(text, parse_constant=lambda c: pytest.fail(f"report.json is not strict JSON: {c}"))

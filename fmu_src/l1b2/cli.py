@@ -305,6 +305,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--train", type=Path, required=True, help="measured data to fit and diagnose on")
     p.add_argument("--test", type=Path, required=True, help="held-out data, only for the before/after report")
     p.add_argument("--report-dir", type=Path, required=True)
+    p.add_argument("--export", type=Path, metavar="DIR",
+                   help="also write DIR/fmus/Predictor.fmu carrying the final extended model, and "
+                        "DIR/calibrated_manifest.json (which effect went where); effects with a physical home "
+                        "are also carried into DIR/L1B2Motor_calibrated.ssp of the motor (--motor/--params)")
+    _motor_args(p)
     _close_loop_args(p)
     p.set_defaults(func=cmd_close_loop)
 
@@ -312,6 +317,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--identification", type=Path, help="identification.json whose predictor Predictor.fmu carries")
     p.add_argument("--no-predictor", action="store_true", help="skip Predictor.fmu")
+    p.add_argument("--from-report", type=Path, metavar="REPORT_DIR",
+                   help="instead: Predictor.fmu carrying the calibrated extended model of a close-loop report "
+                        "(REPORT_DIR/report.json), with calibrated_manifest.json")
     _motor_args(p)
     p.set_defaults(func=cmd_export)
 
@@ -479,21 +487,51 @@ def cmd_close_loop(args) -> int:
                             max_rounds=args.max_rounds, min_cv_gain=args.min_cv_gain,
                             min_cv_drop=args.min_cv_drop, screen_alpha=args.screen_alpha or None,
                             slider_mass_kg=args.slider_mass, plots_on=not args.no_plots, progress=say,
-                            allow_unusual_units=args.allow_unusual_units)
+                            allow_unusual_units=args.allow_unusual_units, export_dir=args.export,
+                            motor=_motor(args) if args.export is not None else None)
     d = result.diagnosis
     print(f"diagnosis: {d['message']}" + (f"; traced to {', '.join(d['traced_to'])}" if d["traced_to"] else ""))
     print(result.rounds_table())
     print(result.before_after_table())
     print_input_checks(result.checks, {"baseline " + k: v for k, v in result.baseline.items()})
     print(f"wrote {Path(args.report_dir) / 'report.json'} and report.md ({result.wall_time_s} s)")
+    if args.export is not None:
+        _print_calibrated(args.export, result.calibrated_note)
     return 0
+
+
+def _print_calibrated(out: Path, note: str = "") -> None:
+    """Where each effect went, the held-out check of the calibrated SSP, the files written."""
+    import json
+    man = json.loads((Path(out) / "calibrated_manifest.json").read_text())
+    for e in man["effects"]:
+        sub = e["subsystems"]
+        where = (f"; {', '.join(f'{k} = {v:.4g}' for k, v in sub['parameters'].items())} in the calibrated SSP"
+                 if sub["mapped"] else f"; subsystems: not mapped ({sub['reason']})")
+        print(f"  {e['label']}: Predictor.fmu{where}")
+    chk = man.get("held_out_check")
+    if chk:
+        f = {k: ("-" if chk[k] is None else f"{100 * chk[k]:.2f} %")
+             for k in ("extended_predictor_nrmse", "calibrated_ssp_nrmse", "uncalibrated_ssp_nrmse")}
+        print(f"  TEST free-run nrmse: extended predictor {f['extended_predictor_nrmse']}, calibrated SSP "
+              f"{f['calibrated_ssp_nrmse']}, uncalibrated SSP {f['uncalibrated_ssp_nrmse']}")
+    print(f"wrote {Path(out) / 'fmus' / 'Predictor.fmu'}" + (f" ({note})" if note else "")
+          + (f", {Path(out) / man['calibrated_ssp']['path']}" if man["calibrated_ssp"]["included"] else "")
+          + f" and {Path(out) / 'calibrated_manifest.json'}")
 
 
 def cmd_export(args) -> int:
     """The drop-in deliverables: subsystem FMUs, Predictor.fmu, L1B2Motor.ssp and L1B2Motor.fmu."""
     from .fmi.export import export_all
     predictor = None
-    from .workflows import output_dir
+    from .workflows import export_from_report, output_dir
+    if args.from_report is not None:
+        if args.identification or args.no_predictor:
+            raise L1B2Error("--from-report exports the calibrated Predictor.fmu only: drop --identification "
+                            "and --no-predictor")
+        export_from_report(args.from_report, args.out, mp=_motor(args))
+        _print_calibrated(args.out)
+        return 0
     if args.identification:
         predictor = _read_identification(args.identification)["predictor"]
     with output_dir(args.out, command="export") as tmp:

@@ -146,6 +146,7 @@ KNOWN_OUTPUTS: dict[str, tuple[str, ...]] = {
             "rig_summary.json", "fig9*.png"),
     "export": ("fmus/*.fmu", "*.fmu", "*.ssp", "manifest.json"),
     "close-loop": ("report.json", "report.md", "*.png"),
+    "export-calibrated": ("fmus/*.fmu", "calibrated_manifest.json", "*.ssp", "calibrated_ssv/*.ssv", "*.png"),
 }
 
 
@@ -505,8 +506,95 @@ def run_sweep(spec_path, out_dir, *, workers: int | None = None, scheduler: str 
     res = SweepResult(table, spec, ctx, info)
     res.save(out, plots=plots_on)
     return res
+def export_calibrated_model(model, out_dir, mp=None, *, test=None, test_prediction=None) -> dict:
+    """Write ``Predictor.fmu`` with a calibrated extended model into ``out_dir`` (all at once); the manifest.
+
+    With ``test`` (held-out :class:`~l1b2.data.measurements.Measurements`)
+    and a calibrated SSP exported, the manifest also gets ``held_out_check``
+    (:func:`held_out_check`: free-run nrmse on TEST of the extended predictor,
+    given as ``test_prediction`` [m/s per sample], of the calibrated SSP and of
+    the uncalibrated one) and ``held_out_ssp.png`` is drawn.
+    """
+    from .fmi.export import CALIBRATED_MANIFEST, export_calibrated
+    from .physics.params import load_motor
+    mp = mp or load_motor()
+    with output_dir(Path(out_dir), command="export-calibrated") as tmp:
+        manifest = export_calibrated(model, tmp, mp=mp)
+        if test is not None and manifest["calibrated_ssp"]["included"]:
+            check, fig = held_out_check(tmp, test, mp, test_prediction)
+            manifest["held_out_check"] = check
+            plots.save_figure(fig, tmp / "held_out_ssp.png")
+            (tmp / CALIBRATED_MANIFEST).write_text(json.dumps(manifest, indent=1, allow_nan=False) + "\n")
+    return manifest
+
+
+def held_out_check(export_dir, test, mp, test_prediction=None) -> tuple[dict, object]:
+    """TEST's free-run error of the calibrated SSP in ``export_dir``, of the uncalibrated one and of the predictor.
+
+    The uncalibrated SSP has the same FMUs with the parameter set of ``mp``
+    (the motor before calibration). Every TEST run is replayed from rest at its
+    first position (:func:`l1b2.rig.replay.replay_runs`, communication step:
+    the data's sample period, at most 1 ms). Returns ``(figures, figure)``:
+    the nrmse [1] on TEST's evaluation mask of each, and a matplotlib figure
+    of the first TEST run.
+    """
+    from .cosim import ssp
+    from .fmi.build import SUBSYSTEM_FMUS
+    from .fmi.export import CALIBRATED_SSP
+    from .rig.replay import replay_runs
+    export_dir = Path(export_dir)
+    df = test.df
+    v = df[dataio.SPEED].to_numpy(float)
+    dt = float(np.median(np.diff(df[dataio.TIME].to_numpy(float))))
+    step = min(dt, 1e-3) if dt > 0 else 1e-3
+    v_cal = replay_runs(export_dir / CALIBRATED_SSP, df, mp, step_s=step)
+    with tempfile.TemporaryDirectory(prefix="l1b2_uncal_") as td:
+        unc = ssp.build_ssp(Path(td) / "uncalibrated.ssp",
+                            {n: export_dir / "fmus" / f"{n}.fmu" for n in SUBSYSTEM_FMUS}, mp=mp)
+        v_unc = replay_runs(unc, df, mp, step_s=step)
+    out = {"step_s": step, "runs": int(df[dataio.RUN].nunique()), "samples": int(test.mask.sum()),
+           "calibrated_ssp_nrmse": speed_metrics(v_cal, v, test.mask)["nrmse"],
+           "uncalibrated_ssp_nrmse": speed_metrics(v_unc, v, test.mask)["nrmse"],
+           "extended_predictor_nrmse": (speed_metrics(test_prediction, v, test.mask)["nrmse"]
+                                        if test_prediction is not None else None)}
+    plt = plots.pyplot()
+    fig, ax = plt.subplots(figsize=(7, 4))
+    first = dataio.run_slices(df[dataio.RUN])[0][1]
+    t = df[dataio.TIME].to_numpy(float)[first]
+    ax.plot(t, 1e3 * v[first], "k.", ms=2, label="measured (TEST)")
+    if test_prediction is not None:
+        ax.plot(t, 1e3 * np.asarray(test_prediction)[first], label="extended predictor")
+    ax.plot(t, 1e3 * v_cal[first], label="calibrated SSP (4 FMUs)")
+    ax.plot(t, 1e3 * v_unc[first], "--", label="uncalibrated SSP")
+    ax.set(xlabel="time [s]", ylabel="speed [mm/s]", title="first held-out run, free run")
+    ax.legend()
+    return out, fig
+
+
+def export_from_report(report_dir, out_dir, mp=None) -> dict:
+    """``l1b2 export --from-report``: the calibrated model of a close-loop ``report.json``, exported."""
+    from .predictor.effects import EffectSpecError, ExtendedPredictor
+    path = Path(report_dir) / "report.json"
+    if not path.is_file():
+        raise OutputError(f"{path}: no close-loop report here (run 'l1b2 close-loop ... --report-dir {report_dir}')")
+    try:
+        rep = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise OutputError(f"{path}: not a readable report.json ({exc})") from None
+    spec = rep.get("calibrated_model") if isinstance(rep, dict) else None
+    if spec is None:
+        note = rep.get("calibrated_note") if isinstance(rep, dict) else None
+        raise OutputError(f"{path}: field 'calibrated_model' is empty or missing"
+                          + (f" ({note})" if note else " (a report of an older version?)"))
+    try:
+        model = ExtendedPredictor.from_dict(spec)
+    except EffectSpecError as exc:
+        raise OutputError(f"{path}: field 'calibrated_model': {exc}") from None
+    return export_calibrated_model(model, out_dir, mp=mp)
+
+
 def run_close_loop(train_path, test_path, out_dir, *, slider_mass_kg=None, plots_on=True, progress=None,
-                   allow_unusual_units=False, **settings):
+                   allow_unusual_units=False, export_dir=None, motor=None, **settings):
     """Close the loop on TRAIN/TEST files; write ``report.json``, ``report.md`` and the PNGs into ``out_dir``.
 
     The output folder is checked and locked first (:func:`output_dir`); both
@@ -516,8 +604,11 @@ def run_close_loop(train_path, test_path, out_dir, *, slider_mass_kg=None, plots
     ``settings`` (``order``, ``k_folds``, ``alpha``, ``min_gain``, ``seed``,
     ``n_starts``, ``max_rounds``, ``min_cv_gain``, ``min_cv_drop``, ``screen_alpha``, ``library``); the result,
     with the data checks (TEST runs outside TRAIN's range flagged), is saved
-    all at once. Returns the :class:`~l1b2.closeloop.result.CloseLoopResult`;
-    its ``wall_time_s`` counts loading and the fit.
+    all at once. ``export_dir``: also write ``Predictor.fmu`` carrying the
+    final model there, and the calibrated SSP of ``motor`` (default: the
+    reference motor) with its held-out check (:func:`export_calibrated_model`). Returns the
+    :class:`~l1b2.closeloop.result.CloseLoopResult`; its ``wall_time_s``
+    counts loading and the fit.
     """
     from .closeloop.loop import CloseLoop
     t_start = time.perf_counter()
@@ -530,4 +621,11 @@ def run_close_loop(train_path, test_path, out_dir, *, slider_mass_kg=None, plots
         if plots_on and progress is not None:
             progress("plots")
         result.save(tmp, plots_on=plots_on)
+    if export_dir is not None:
+        if result.calibrated_model is None:
+            raise OutputError(f"--export {export_dir}: nothing to export: {result.calibrated_note}")
+        if progress is not None:
+            progress(f"exporting the calibrated model to {export_dir}")
+        export_calibrated_model(result.calibrated_model, export_dir, mp=motor, test=test,
+                                test_prediction=result.test_free_run_after)
     return result

@@ -54,6 +54,8 @@ import pandas as pd
 from ..data import measurements as dataio
 from ..data.metrics import report_metrics
 from ..ident.estimator import PredictorIdentifier
+from ..predictor.effects import Effect, ExtendedPredictor
+from ..predictor.setup import PredictorSetup
 from . import chain
 from . import residuals as res
 from .candidates import CandidateSource, Context, full_library
@@ -198,6 +200,8 @@ class CloseLoop:
             ext_params.update({f"speed_filter_{k}": {"value": v, "stderr": None, "ci95": None, "unit": "1"}
                                for k, v in (("a", it.output_filter.a), ("b0", it.output_filter.b0),
                                             ("b1", it.output_filter.b1))})
+        calibrated, why = calibrated_model(base, ext, it.effects, it.output_filter,
+                                           {**_data_summary(train, test), "operating_points": _operating_points(dtr)})
         first = it.first_scores or []
         chosen = it.chosen
         diagnosis = self._diagnosis(it, first, analysis, ext_params)
@@ -208,7 +212,8 @@ class CloseLoop:
             extended_parameters=ext_params, baseline_parameters=base.to_dict()["parameters"],
             data=_data_summary(train, test), wall_time_s=round(time.perf_counter() - t_start, 2),
             baseline_model=base, extended_model=ext, analysis=analysis, train_df=dtr, test_df=dte,
-            test_free_run_before=v_te, test_free_run_after=v_te_ext, rounds=it.rounds)
+            test_free_run_before=v_te, test_free_run_after=v_te_ext, rounds=it.rounds,
+            calibrated_model=calibrated, calibrated_note=why)
         return self
 
     def _iterate(self, base, pool, dtr, dte, mask, m_s, baseline, say) -> _Iteration:
@@ -474,6 +479,37 @@ def candidate_context(baseline_free_run, m_s: float, df: pd.DataFrame, mask: np.
         position_range=(float(pos.min()), float(pos.max())),
         temperature_ref=float(df[dataio.TEMPERATURE].median()) if dataio.TEMPERATURE in df.columns else None,
         spectral_period_m=peak.get("period_m") if peak.get("power_ratio_to_median", 0) > 4 else None)
+
+
+def calibrated_model(base, ext, effects: EffectSet, output_filter, source: dict):
+    """``(ExtendedPredictor or None, note)``: the final model in the serialisable form ``Predictor.fmu`` carries.
+
+    When nothing was added it is the baseline (no effects); None when an
+    effect has no spec (a user's candidate with a Python feature function
+    only), the note says which.
+    """
+    base_setup = PredictorSetup(base.params_, base.m_s_, base.T_s_)
+    if ext is None:
+        return (ExtendedPredictor(base_setup, base_setup, (), None, dict(source)),
+                "nothing was added: the baseline Eq. 29 predictor is the model")
+    missing = [c.label for c in effects.candidates if not c.spec]
+    if missing:
+        return None, f"effects without a serialisable spec (custom candidates): {', '.join(missing)}"
+    recs = tuple(Effect(c.family, c.label, dict(c.spec), tuple(c.names), tuple(c.units),
+                        tuple(float(p) for p in phi), tuple(float(ext.extra_stderr_[n]) for n in c.names),
+                        c.description, tuple(c.regressors), c.structural)
+                 for c, phi in zip(effects.candidates, effects.phi))
+    filt = None if output_filter is None else {"a": output_filter.a, "b0": output_filter.b0, "b1": output_filter.b1}
+    model = ExtendedPredictor(base_setup, PredictorSetup(ext.params_, ext.m_s_, ext.T_s_), recs, filt, dict(source))
+    return model, "the final extended model"
+
+
+def _operating_points(df: pd.DataFrame) -> dict:
+    """TRAIN's operating grid: its voltages [V], loads [kg] and position range [m] (for mapping effects)."""
+    pos = df[dataio.POSITION].to_numpy(float)
+    return {"voltages_V": sorted(float(v) for v in np.unique(df[dataio.VOLTAGE].round(6))),
+            "loads_kg": sorted(float(v) for v in np.unique(df[dataio.LOAD].round(9))),
+            "position_m": [float(pos.min()), float(pos.max())]}
 
 
 def _check_measurements(m, name: str) -> None:

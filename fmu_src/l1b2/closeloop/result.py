@@ -91,6 +91,10 @@ class CloseLoopResult:
     test_free_run_after: np.ndarray | None = field(default=None, repr=False)
     rounds: list = field(default_factory=list)   #: per round: what was added, its CV result, the metrics after
     checks: dict | None = None    #: the data checks (unit findings, TEST runs outside TRAIN's range), set by the caller
+    #: the final model as :class:`l1b2.predictor.effects.ExtendedPredictor` (what ``Predictor.fmu`` carries;
+    #: None when nothing was added), and why it is None
+    calibrated_model: Any = field(default=None, repr=False)
+    calibrated_note: str = ""
 
     # -- views ---------------------------------------------------------------
     @property
@@ -138,7 +142,21 @@ class CloseLoopResult:
             "data": self.data,
             "checks": self.checks,
             "wall_time_s": self.wall_time_s,
+            "calibrated_model": self.calibrated_model.to_dict() if self.calibrated_model is not None else None,
+            "calibrated_note": self.calibrated_note,
         })
+
+    def export(self, directory, *, mp=None) -> dict:
+        """Write ``Predictor.fmu`` carrying the final extended model and its manifest into ``directory``.
+
+        See :func:`l1b2.fmi.export.export_calibrated` (returns the manifest).
+        Raises :class:`l1b2.fmi.export.ExportError` when there is nothing to
+        export (``calibrated_note`` says why) or the FMU fails validation.
+        """
+        from ..fmi.export import ExportError, export_calibrated
+        if self.calibrated_model is None:
+            raise ExportError(f"nothing to export: {self.calibrated_note or 'no extended model'}")
+        return export_calibrated(self.calibrated_model, directory, mp=mp)
 
     def markdown(self) -> str:
         """The report as Markdown (``report.md`` without the figure links)."""

@@ -38,6 +38,7 @@ from .. import __version__
 from ..errors import L1B2Error
 from ..physics.params import MotorParams, load_motor
 from .build import SUBSYSTEM_FMUS, build_fmu
+from .calibrate import map_effects
 from .slaves import SLAVES
 
 MOTOR_FMU = "L1B2Motor"
@@ -256,4 +257,93 @@ def export_all(out_dir: str | Path, mp: MotorParams | None = None, predictor: Ma
     tmp = out / (MANIFEST + ".tmp")
     tmp.write_text(json.dumps(manifest, indent=1, allow_nan=False) + "\n")
     os.replace(tmp, out / MANIFEST)
+    return manifest
+
+
+# ---------------------------------------------------------------------------
+# the calibrated, extended model of a close-the-loop job
+# ---------------------------------------------------------------------------
+
+CALIBRATED_MANIFEST = "calibrated_manifest.json"
+CALIBRATED_SSP = "L1B2Motor_calibrated.ssp"
+CALIBRATED_SSV_DIR = "calibrated_ssv"
+
+
+def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None) -> dict:
+    """Write ``Predictor.fmu`` carrying a calibrated extended predictor, and a manifest of where each effect went.
+
+    Parameters
+    ----------
+    model : l1b2.predictor.effects.ExtendedPredictor
+        The close-the-loop job's final model (``CloseLoopResult.calibrated_model``).
+    out_dir : folder to write into (created): ``fmus/Predictor.fmu`` and ``calibrated_manifest.json``
+    mp : motor parameters baked into the FMU's defaults document (default: the reference motor)
+
+    Returns
+    -------
+    The manifest: the FMU's record (validation results), and per effect its
+    parameters and where it went (``Predictor.fmu``; the subsystem FMUs only
+    where mapped, :func:`l1b2.fmi.calibrate.map_effects`, else the reason).
+    When at least one effect was mapped, also ``L1B2Motor_calibrated.ssp``
+    (the four subsystem FMUs with the calibrated parameter set) and the
+    parameter set itself, ``calibrated_ssv/<Component>.ssv``.
+
+    Raises
+    ------
+    ExportError
+        if the FMU fails fmpy validation or a Real has no unit (no manifest is written).
+    """
+    from ..predictor.effects import ExtendedPredictor
+
+    if not isinstance(model, ExtendedPredictor):
+        raise ExportError(f"export_calibrated needs an l1b2.predictor.effects.ExtendedPredictor, "
+                          f"got {type(model).__name__}")
+    mp = mp or load_motor()
+    out = Path(out_dir)
+    fmu_dir = out / "fmus"
+    fmu_dir.mkdir(parents=True, exist_ok=True)
+    (out / CALIBRATED_MANIFEST).unlink(missing_ok=True)
+    defaults = {"predictor": model.model.to_dict()}
+    if model.effects or model.output_filter is not None:   # else the plain Eq. 29 predictor is the model
+        defaults["extended_predictor"] = model.to_dict()
+    path = build_fmu(PREDICTOR_FMU, fmu_dir, mp=mp, extra_defaults=defaults)
+    os.chmod(path, 0o644)
+    records = {PREDICTOR_FMU: fmu_record(path, out)}
+    mp_cal, mapping = map_effects(model, mp)
+    files = [records[PREDICTOR_FMU]]
+    ssp_info = {"included": False, "reason": "no effect was mapped into the subsystem FMUs"}
+    if any(m["mapped"] for m in mapping):
+        from ..cosim import ssp
+        paths = {name: build_fmu(name, fmu_dir, mp=mp_cal) for name in SUBSYSTEM_FMUS}
+        ssp_path = ssp.build_ssp(out / CALIBRATED_SSP, paths, mp=mp_cal)
+        for p in list(paths.values()) + [ssp_path]:
+            os.chmod(p, 0o644)
+        records.update({name: fmu_record(p, out) for name, p in paths.items()})
+        files = [records[n] for n in records] + [ssp_record(ssp_path, out, records)]
+        ssv_dir = out / CALIBRATED_SSV_DIR
+        ssv_dir.mkdir(exist_ok=True)
+        for comp, text in ssp.motor_to_ssvs(mp_cal).items():
+            (ssv_dir / f"{comp}.ssv").write_text(text)
+        ssp_info = {"included": True, "path": CALIBRATED_SSP, "parameter_sets": CALIBRATED_SSV_DIR,
+                    "motor": mp.name, "changed": {k: v for m in mapping for k, v in m["parameters"].items()}}
+    problems = _all_problems({"files": files})
+    if problems:
+        raise ExportError(f"{out}: {len(problems)} validation problem(s):\n  " + "\n  ".join(problems))
+    effects = [{"label": e.label, "family": e.family, "regressors": list(e.regressors),
+                "parameters": {n: {"value": p, "stderr": s, "unit": u}
+                               for n, p, s, u in zip(e.names, e.phi, e.stderr, e.units)},
+                "predictor_fmu": records[PREDICTOR_FMU]["path"],
+                "subsystems": {k: v for k, v in m.items() if k not in ("label", "family")}}
+               for e, m in zip(model.effects, mapping)]
+    manifest = {
+        "tool": "l1b2-usm", "version": __version__, "kind": "calibrated extended predictor",
+        "source": model.source, "files": files, "effects": effects, "calibrated_ssp": ssp_info,
+        "output_filter": model.output_filter,
+        "inputs": ["V0", "s", "load", "direction"] + (["T"] if model.needs_temperature else []),
+        "time": "the FMU's own time is the session clock the effects use (start the simulation at the run's "
+                "session time)",
+    }
+    tmp = out / (CALIBRATED_MANIFEST + ".tmp")
+    tmp.write_text(json.dumps(manifest, indent=1, allow_nan=False) + "\n")
+    os.replace(tmp, out / CALIBRATED_MANIFEST)
     return manifest
