@@ -381,14 +381,18 @@ def cmd_demo(args) -> int:
                  "--out", str(out / "compare")])
     if code:
         return code
-    print(f"[6] closing the loop on rig data with an undeclared effect ({args.effect})")
+    print(f"[6] closing the loop on rig data with an undeclared effect ({args.effect}); the calibrated model "
+          "exported (Predictor.fmu, calibrated SSP)")
     eff_dir = out / f"rig_{args.effect}"
     code = main(["rig", "--out", str(eff_dir), "--engine", "inprocess", "--step", "0.001", "--workers",
                  str(args.jobs), "--inject", args.effect, "--no-plots"] + (["--quiet"] if args.quiet else []))
     if code:
         return code
+    motor = (["--motor", args.motor] if getattr(args, "motor", None) else []) + \
+        (["--params", str(args.params)] if getattr(args, "params", None) else [])
     code = main(["close-loop", "--train", str(eff_dir / "train.csv"), "--test", str(eff_dir / "test.csv"),
-                 "--report-dir", str(out / "close_loop")] + (["--quiet"] if args.quiet else []))
+                 "--report-dir", str(out / "close_loop"), "--export", str(out / "close_loop_export")] + motor
+                + (["--quiet"] if args.quiet else []))
     if code:
         return code
     print("[7] exporting FMUs, L1B2Motor.ssp and L1B2Motor.fmu")
