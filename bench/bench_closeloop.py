@@ -9,7 +9,12 @@ close-the-loop job (:func:`l1b2.workflows.run_close_loop`, what `l1b2
 close-loop` runs: load, fit, plots, report files) is then timed end to end,
 printing each stage's share side by side with the whole.
 
-Usage: python bench/bench_closeloop.py [--effect pulley_friction]
+``--train-samples N``: keep only the first TRAIN runs in rig order (the
+order of (voltage, load) conditions is shuffled, so these are a random subset
+of the conditions) until TRAIN has at least N samples; TEST is kept whole.
+The issue's figure is ``--train-samples 20000``.
+
+Usage: python bench/bench_closeloop.py [--effect pulley_friction] [--train-samples 20000]
 """
 import argparse
 import sys
@@ -31,6 +36,9 @@ def main(argv=None):
     ap = argparse.ArgumentParser()
     ap.add_argument("--effect", default="pulley_friction")
     ap.add_argument("--large", action="store_true")
+    ap.add_argument("--train-samples", type=int, default=None, help="cut TRAIN to whole runs totalling >= N samples")
+    ap.add_argument("--noise-fit", choices=("alternate", "profile"), default="alternate",
+                    help="the baseline identification's search (CloseLoop(noise_fit=...))")
     args = ap.parse_args(argv)
     if args.large:
         mp = load_motor()
@@ -43,6 +51,8 @@ def main(argv=None):
     t0 = time.perf_counter()
     df, truth = run_experiment(plan, mp, injections=[args.effect], engine="inprocess", jobs=2, injection_seed=0)
     t_rig = time.perf_counter() - t0
+    if args.train_samples:
+        df = _cut_train(df, args.train_samples)
     with tempfile.TemporaryDirectory() as td:
         write_experiment(df, td, mp, plan, truth)
         n_train = dataio.load_measurements(Path(td) / "train.csv").n_samples
@@ -55,7 +65,7 @@ def main(argv=None):
             last[0] = now
         t0 = time.perf_counter()
         result = run_close_loop(Path(td) / "train.csv", Path(td) / "test.csv", Path(td) / "report",
-                                progress=progress)
+                                progress=progress, noise_fit=args.noise_fit)
         t_total = time.perf_counter() - t0
     print(f"rig data: {len(df)} samples ({n_train} in TRAIN), generated in {t_rig:.1f} s (not part of the target)")
     print(f"diagnosis: {result.diagnosis['message']}")
@@ -66,6 +76,18 @@ def main(argv=None):
     for (name, start), (_, end) in zip(marks[:-1], marks[1:]):
         print(f"{name:55s} {end - start:9.1f} {100 * (end - start) / t_total:6.0f}%")
     print(f"{'close-loop total':55s} {t_total:9.1f}   target < {target:.0f} s {'ok' if t_total < target else 'MISSED'}")
+
+
+def _cut_train(df, n_samples: int, test_abs_load: float = 0.05):
+    """``df`` with only the first TRAIN runs (rig order) that reach ``n_samples`` samples; TEST runs all kept."""
+    is_test = np.isclose(np.abs(df[dataio.LOAD].to_numpy(float)), test_abs_load, atol=1e-9)
+    keep, total = set(), 0
+    for run, size in df[~is_test].groupby(dataio.RUN, sort=False).size().items():
+        if total >= n_samples:
+            break
+        keep.add(run)
+        total += int(size)
+    return df[is_test | df[dataio.RUN].isin(keep).to_numpy()].reset_index(drop=True)
 
 
 if __name__ == "__main__":

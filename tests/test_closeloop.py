@@ -282,6 +282,13 @@ def test_estimator_takes_measurements_and_stores_settings():
     with pytest.raises(TypeError, match="Measurements"):
         est.fit("train.csv")
     assert not hasattr(est, "result_")
+    # the baseline's search setting reaches the identification (an unknown one is refused there, by name)
+    assert CloseLoop(noise_fit="profile").get_params()["noise_fit"] == "profile"
+    d = rig_dir("direction_asymmetry_2", injections=["direction_asymmetry"], injection_seed=2,
+                plan=RigPlan(step_s=1e-3, seed=2))
+    from l1b2.errors import IdentificationError
+    with pytest.raises(IdentificationError, match="noise_fit must be 'profile' or 'alternate', got 'nope'"):
+        CloseLoop(noise_fit="nope").fit(load_measurements(d / "train.csv"))
 
 
 def test_result_api_matches_the_saved_report(tmp_path):

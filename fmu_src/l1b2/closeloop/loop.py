@@ -90,6 +90,9 @@ class CloseLoop:
         Seed of the folds and of the baseline's multi-start.
     n_starts : int
         Multi-start local searches of the baseline identification.
+    noise_fit : {"alternate", "profile"}
+        The baseline identification's search (:class:`l1b2.ident.estimator.PredictorIdentifier`);
+        the refits are warm-started local searches either way.
     library : CandidateSource, optional
         Candidate library ``(ctx, df_train) -> list[CandidateForce]``;
         default :func:`l1b2.closeloop.candidates.full_library` (one-regressor and two-regressor candidates).
@@ -127,7 +130,7 @@ class CloseLoop:
                  shortlist: int = 2, refit_folds: int = DEFAULT_REFIT_FOLDS,
                  min_cv_gain: float = DEFAULT_MIN_CV_GAIN, min_cv_drop: float = DEFAULT_MIN_CV_DROP,
                  refit_nfev: int = DEFAULT_REFIT_NFEV,
-                 final_nfev: int = 60, screen_alpha: float | None = None):
+                 final_nfev: int = 60, screen_alpha: float | None = None, noise_fit: str = "alternate"):
         self.order = order
         self.k_folds = k_folds
         self.alpha = alpha
@@ -135,6 +138,7 @@ class CloseLoop:
         self.parsimony = parsimony
         self.seed = seed
         self.n_starts = n_starts
+        self.noise_fit = noise_fit
         self.library = library
         self.progress = progress
         self.max_rounds = max_rounds
@@ -151,7 +155,7 @@ class CloseLoop:
         return {k: getattr(self, k) for k in ("order", "k_folds", "alpha", "min_gain", "parsimony", "seed",
                                               "n_starts", "library", "progress", "max_rounds", "shortlist",
                                               "refit_folds", "min_cv_gain", "min_cv_drop", "refit_nfev",
-                                              "final_nfev", "screen_alpha")}
+                                              "final_nfev", "screen_alpha", "noise_fit")}
 
     def __repr__(self) -> str:
         args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items() if k != "progress")
@@ -177,7 +181,7 @@ class CloseLoop:
 
         say("baseline: identifying the Eq. 29 predictor on TRAIN")
         base = PredictorIdentifier(order=self.order, criterion="free_run", fixed="recommended",
-                                   n_starts=self.n_starts, seed=self.seed)
+                                   n_starts=self.n_starts, seed=self.seed, noise_fit=self.noise_fit)
         base.fit(dtr, slider_mass_kg=m_s, mask=mask_tr)
         v_tr = base.predict_free_run(dtr)
         v_te = base.predict_free_run(dte) if dte is not None else None
@@ -345,6 +349,7 @@ class CloseLoop:
                       "k_folds": self.k_folds, "shortlist": self.shortlist,
                       "refit_folds": self.refit_folds, "min_cv_gain": self.min_cv_gain,
                       "min_cv_drop": self.min_cv_drop, "screen_alpha": self.screen_alpha,
+                      "noise_fit": self.noise_fit,
                       "max_rounds": self.max_rounds},
             "regressor_evidence": [[e.to_dict() for e in rnd] for rnd in a.rounds],
             "whiteness": {"runs": len(w),

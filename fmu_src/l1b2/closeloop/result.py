@@ -149,9 +149,13 @@ class CloseLoopResult:
     def export(self, directory, *, mp=None) -> dict:
         """Write ``Predictor.fmu`` carrying the final extended model and its manifest into ``directory``.
 
-        See :func:`l1b2.fmi.export.export_calibrated` (returns the manifest).
-        Raises :class:`l1b2.fmi.export.ExportError` when there is nothing to
-        export (``calibrated_note`` says why) or the FMU fails validation.
+        See :func:`l1b2.fmi.export.export_calibrated` (returns the manifest;
+        effects with a physical home also go into ``L1B2Motor_calibrated.ssp``
+        of ``mp``, default the reference motor). The held-out check of that
+        SSP against TEST is :func:`l1b2.workflows.export_calibrated_model`
+        (what ``l1b2 close-loop --export`` runs). Raises
+        :class:`l1b2.fmi.export.ExportError` when there is nothing to export
+        (``calibrated_note`` says why) or a file fails validation.
         """
         from ..fmi.export import ExportError, export_calibrated
         if self.calibrated_model is None:
