@@ -537,7 +537,7 @@ def held_out_check(export_dir, test, mp, test_prediction=None) -> tuple[dict, ob
     The uncalibrated SSP has the same FMUs with the parameter set of ``mp``
     (the motor before calibration). Every TEST run is replayed from rest at its
     first position (:func:`l1b2.rig.replay.replay_runs`, communication step:
-    the data's sample period, at most 1 ms). Returns ``(figures, figure)``:
+    the data's sample period, at most 1 ms). Returns ``(check, figure)``:
     the nrmse [1] on TEST's evaluation mask of each, and a matplotlib figure
     of the first TEST run.
     """
