@@ -518,7 +518,7 @@ def export_calibrated_model(model, out_dir, mp=None, *, test=None, test_predicti
     given as ``test_prediction`` [m/s per sample], of the calibrated SSP and of
     the uncalibrated one) and ``held_out_ssp.png`` is drawn.
     """
-    from .fmi.export import CALIBRATED_MANIFEST, export_calibrated
+    from .fmi.export import CALIBRATED_MANIFEST, export_calibrated, write_manifest
     from .physics.params import load_motor
     mp = mp or load_motor()
     with output_dir(Path(out_dir), command="export-calibrated") as tmp:
@@ -527,7 +527,7 @@ def export_calibrated_model(model, out_dir, mp=None, *, test=None, test_predicti
             check, fig = held_out_check(tmp, test, mp, test_prediction)
             manifest["held_out_check"] = check
             plots.save_figure(fig, tmp / "held_out_ssp.png")
-            (tmp / CALIBRATED_MANIFEST).write_text(json.dumps(manifest, indent=1, allow_nan=False) + "\n")
+            write_manifest(tmp / CALIBRATED_MANIFEST, manifest)
     return manifest
 
 

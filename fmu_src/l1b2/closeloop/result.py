@@ -92,7 +92,7 @@ class CloseLoopResult:
     rounds: list = field(default_factory=list)   #: per round: what was added, its CV result, the metrics after
     checks: dict | None = None    #: the data checks (unit findings, TEST runs outside TRAIN's range), set by the caller
     #: the final model as :class:`l1b2.predictor.effects.ExtendedPredictor` (what ``Predictor.fmu`` carries;
-    #: None when nothing was added), and why it is None
+    #: the baseline alone when nothing was added; None when an effect has no serialisable spec), and a note
     calibrated_model: Any = field(default=None, repr=False)
     calibrated_note: str = ""
 

@@ -8,7 +8,7 @@ predictor. :data:`BLOCKS` maps every FMU name to its block class.
 from __future__ import annotations
 
 import math
-from dataclasses import fields
+from dataclasses import fields, replace
 
 import numpy as np
 
@@ -270,7 +270,7 @@ class PredictorBlock(Block):
             units = p.units(p.order)
             for name, value in zip(p.names(p.order), p.to_vector()):
                 pars.append(Var(name, "parameter", units[name].replace("N s/m", "N.s/m").replace("-", "1"),
-                                f"Eq. 35 parameter {name}", start=float(value), variability="fixed"))
+                                f"{what} {name}", start=float(value), variability="fixed"))
             pars += [
                 Var("s_center", "parameter", "m", "centre of the position scaling of the polynomials",
                     start=p.s_center, variability="fixed"),
@@ -285,9 +285,7 @@ class PredictorBlock(Block):
                 Var("T_s", "parameter", "s", "sampling time the predictor was identified with", start=params.T_s,
                     min=1e-7, variability="fixed"),
             ]
-        return [Var(prefix + v.name, v.causality, v.unit, (f"{what} {v.name}" if v.description.startswith("Eq. 35")
-                                                             else v.description), v.start, v.min, v.max, v.variability)
-                for v in pars]
+        return [replace(v, name=prefix + v.name) for v in pars]
 
     def get(self, name: str):
         if name in self._values:
@@ -320,15 +318,17 @@ class PredictorBlock(Block):
         self.v_steady = float(pr.steady_state(su.params, self.s, self.V0, self.load, self.direction,
                                               su.slider_mass_kg))
 
-    def do_step(self, t, h):
-        self.check_inputs()
-        su = self.setup
+    def _advance(self, su: PredictorSetup, v: float, h: float, F=None) -> float:
+        """Speed after the communication step ``h`` [s]: Eq. 29 iterated at sub-steps of at most ``su.T_s``."""
         n = max(1, int(math.ceil(h / su.T_s - 1e-9)))
-        v = float(self.v_state)
         for _ in range(n):
             v = float(pr.one_step(su.params, v, self.s, self.V0, self.load, self.direction, h / n,
-                                  su.slider_mass_kg))
-        self.v_state = v
+                                  su.slider_mass_kg, extra_force=F))
+        return v
+
+    def do_step(self, t, h):
+        self.check_inputs()
+        self.v_state = self._advance(self.setup, float(self.v_state), h)
         self.initialize_outputs()
 
 
@@ -423,8 +423,9 @@ class ExtendedPredictorBlock(PredictorBlock):
     def rebuild_params(self):
         super().rebuild_params()
         self.base_setup = _setup_from_values(self._values, self.extended.baseline, "baseline_")
-        ext = self.extended
-        self.effects = [(e.spec, np.array([self._values[n] for n in e.names])) for e in ext.effects]
+        ext = self.extended   # with the parameter values the host set
+        self.current = replace(ext, effects=tuple(replace(e, phi=tuple(self._values[n] for n in e.names))
+                                                  for e in ext.effects))
         self.filter = (None if ext.output_filter is None
                        else {k: self._values[f"speed_filter_{k}"] for k in ("a", "b0", "b1")})
 
@@ -446,23 +447,13 @@ class ExtendedPredictorBlock(PredictorBlock):
         return x
 
     def _force(self, x) -> float:
-        F = 0.0
-        for spec, phi in self.effects:
-            F = F + float((fx.effect_features(spec, x) @ phi)[0])
-        return F
+        return float(self.current.extra_force(x)[0])
 
     def initialize_outputs(self):
         su = self.setup
         self.v = float(self.v_state)
         self.v_steady = float(pr.steady_state(su.params, self.s, self.V0, self.load, self.direction,
                                               su.slider_mass_kg, extra_force=getattr(self, "F_extra", 0.0)))
-
-    def _advance(self, su: PredictorSetup, v: float, h: float, F=None) -> float:
-        n = max(1, int(math.ceil(h / su.T_s - 1e-9)))
-        for _ in range(n):
-            v = float(pr.one_step(su.params, v, self.s, self.V0, self.load, self.direction, h / n,
-                                  su.slider_mass_kg, extra_force=F))
-        return v
 
     def do_step(self, t, h):
         self.check_inputs()
@@ -473,12 +464,9 @@ class ExtendedPredictorBlock(PredictorBlock):
         F = self._force(self._signals(a_base))
         self.F_extra = F
         u_prev = self.v_raw
-        self.v_raw = self._advance(self.setup, self.v_raw, h, F if self.effects else None)
-        if self.filter is not None:
-            f = self.filter
-            self.v_state = f["a"] * self.v_state + f["b0"] * self.v_raw + f["b1"] * u_prev
-        else:
-            self.v_state = self.v_raw
+        self.v_raw = self._advance(self.setup, self.v_raw, h, F if self.current.effects else None)
+        self.v_state = (self.v_raw if self.filter is None
+                        else fx.filter_step(self.filter, self.v_state, self.v_raw, u_prev))
         self.v_base_prev, self.v_base, self.h_prev = vb, vb_next, h
         self.t_now = float(t) + h
         self.v_baseline = float(self.v_base)

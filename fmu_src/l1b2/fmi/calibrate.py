@@ -76,14 +76,14 @@ def calibrate_asymmetry(model: fx.ExtendedPredictor, effect: fx.Effect, mp: Moto
     grid = operating_grid(model)
     target = _predictor_speed_change(model, effect, grid)
     v0 = _physical_speeds(_with_asym(mp, 0.0), grid)
-    a = 0.0
+    a, va = 0.0, v0
     for _ in range(iterations):
-        va = _physical_speeds(_with_asym(mp, a), grid)
         J = (_physical_speeds(_with_asym(mp, a + h), grid) - va) / h
         if not np.any(J):
             break
         a = float(np.clip(a + J @ (target - (va - v0)) / (J @ J), -ASYM_LIMIT, ASYM_LIMIT))
-    fit = _physical_speeds(_with_asym(mp, a), grid) - v0
+        va = _physical_speeds(_with_asym(mp, a), grid)
+    fit = va - v0
     rms_t = float(np.sqrt(np.mean(target ** 2)))
     return {"value": a, "grid_points": len(grid), "target_rms_m_s": rms_t,
             "misfit_rms_m_s": float(np.sqrt(np.mean((fit - target) ** 2)))}

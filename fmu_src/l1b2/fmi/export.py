@@ -254,10 +254,15 @@ def export_all(out_dir: str | Path, mp: MotorParams | None = None, predictor: Ma
     problems = _all_problems(manifest)
     if problems:
         raise ExportError(f"{out}: {len(problems)} validation problem(s):\n  " + "\n  ".join(problems))
-    tmp = out / (MANIFEST + ".tmp")
-    tmp.write_text(json.dumps(manifest, indent=1, allow_nan=False) + "\n")
-    os.replace(tmp, out / MANIFEST)
+    write_manifest(out / MANIFEST, manifest)
     return manifest
+
+
+def write_manifest(path: Path, manifest: dict) -> None:
+    """``manifest`` as strict JSON at ``path``, replaced at once (through a temporary sibling)."""
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(manifest, indent=1, allow_nan=False) + "\n")
+    os.replace(tmp, path)
 
 
 # ---------------------------------------------------------------------------
@@ -343,7 +348,5 @@ def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None)
         "time": "the FMU's own time is the session clock the effects use (start the simulation at the run's "
                 "session time)",
     }
-    tmp = out / (CALIBRATED_MANIFEST + ".tmp")
-    tmp.write_text(json.dumps(manifest, indent=1, allow_nan=False) + "\n")
-    os.replace(tmp, out / CALIBRATED_MANIFEST)
+    write_manifest(out / CALIBRATED_MANIFEST, manifest)
     return manifest

@@ -385,7 +385,7 @@ class ExtendedPredictor:
 
 def apply_output_filter(filt: Mapping, u, run_starts=None) -> np.ndarray:
     """``y(k) = a y(k-1) + b0 u(k) + b1 u(k-1)`` run by run, ``y(0) = (b0 + b1)/(1 - a) u(0)`` (steady start)."""
-    a, b0, b1 = float(filt["a"]), float(filt["b0"]), float(filt["b1"])
+    filt = {k: float(filt[k]) for k in ("a", "b0", "b1")}
     u = np.asarray(u, float)
     y = np.empty_like(u)
     gain0 = filter_start_gain(filt)
@@ -395,8 +395,13 @@ def apply_output_filter(filt: Mapping, u, run_starts=None) -> np.ndarray:
             continue
         y[i0] = gain0 * u[i0]
         for k in range(i0 + 1, i1):
-            y[k] = a * y[k - 1] + b0 * u[k] + b1 * u[k - 1]
+            y[k] = filter_step(filt, y[k - 1], u[k], u[k - 1])
     return y
+
+
+def filter_step(filt: Mapping, y_prev, u, u_prev):
+    """One step of the output filter: ``a y_prev + b0 u + b1 u_prev``."""
+    return filt["a"] * y_prev + filt["b0"] * u + filt["b1"] * u_prev
 
 
 def filter_start_gain(filt: Mapping) -> float:
