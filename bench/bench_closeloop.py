@@ -14,7 +14,11 @@ order of (voltage, load) conditions is shuffled, so these are a random subset
 of the conditions) until TRAIN has at least N samples; TEST is kept whole.
 The issue's figure is ``--train-samples 20000``.
 
-Usage: python bench/bench_closeloop.py [--effect pulley_friction] [--train-samples 20000]
+The cross-validated refits run on a local Dask cluster of ``--workers``
+processes (default 2, the machine's cores; what `l1b2 close-loop` does by
+default); ``--workers 0`` runs everything in this process.
+
+Usage: python bench/bench_closeloop.py [--effect pulley_friction] [--train-samples 20000] [--workers N]
 """
 import argparse
 import sys
@@ -39,6 +43,8 @@ def main(argv=None):
     ap.add_argument("--train-samples", type=int, default=None, help="cut TRAIN to whole runs totalling >= N samples")
     ap.add_argument("--noise-fit", choices=("alternate", "profile"), default="alternate",
                     help="the baseline identification's search (CloseLoop(noise_fit=...))")
+    ap.add_argument("--workers", type=int, default=2,
+                    help="local Dask worker processes for the cross-validated refits (0 or 1: in this process)")
     args = ap.parse_args(argv)
     if args.large:
         mp = load_motor()
@@ -65,7 +71,7 @@ def main(argv=None):
             last[0] = now
         t0 = time.perf_counter()
         result = run_close_loop(Path(td) / "train.csv", Path(td) / "test.csv", Path(td) / "report",
-                                progress=progress, noise_fit=args.noise_fit)
+                                progress=progress, noise_fit=args.noise_fit, workers=args.workers)
         t_total = time.perf_counter() - t0
     print(f"rig data: {len(df)} samples ({n_train} in TRAIN), generated in {t_rig:.1f} s (not part of the target)")
     print(f"diagnosis: {result.diagnosis['message']}")

@@ -9,11 +9,12 @@ the data of ``tests/test_closeloop_realistic.py``), made once and cached in
 settings; printed: wall time, ``traced_to``, the free-run nrmse of TRAIN and
 TEST after each round, and every cross-validated trial.
 
-Usage: python bench/realistic_case.py EFFECTS SEED [--settings JSON] [--cache DIR]
+Usage: python bench/realistic_case.py EFFECTS SEED [--settings JSON] [--cache DIR] [--workers N]
        EFFECTS: clean, one effect, or effects joined by + (e.g. direction_asymmetry+thermal_drift)
 Example: python bench/realistic_case.py thermal_drift 4 --settings '{"noise_fit": "profile"}'
 """
 import argparse
+import contextlib
 import json
 import os
 import shutil
@@ -24,6 +25,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "fmu_src"))
 
 from l1b2.closeloop.loop import close_loop  # noqa: E402
+from l1b2.cluster import dask_client  # noqa: E402
 from l1b2.data.measurements import load_measurements  # noqa: E402
 from l1b2.physics.params import SYSTEM_MODELS_DIR, load_motor  # noqa: E402
 from l1b2.rig.experiment import RigPlan, run_experiment, write_experiment  # noqa: E402
@@ -36,6 +38,9 @@ def main(argv=None):
     ap.add_argument("--settings", default="{}", help="CloseLoop settings as JSON, e.g. '{\"screen_alpha\": 0.01}'")
     ap.add_argument("--cache", default=str(Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
                                            / "l1b2" / "realistic_cases"))
+    ap.add_argument("--workers", type=int, default=0,
+                    help="local Dask worker processes for the cross-validated refits (0: in this process, as the "
+                         "tests run)")
     args = ap.parse_args(argv)
     effects = [e for e in args.effects.split("+") if e and e != "clean"]
     settings = json.loads(args.settings)
@@ -50,7 +55,9 @@ def main(argv=None):
         write_experiment(df, tmp, mp, plan, truth)
         os.replace(tmp, out)
     t = time.perf_counter()
-    res = close_loop(load_measurements(out / "train.csv"), load_measurements(out / "test.csv"), **settings)
+    with (dask_client(args.workers) if args.workers > 1 else contextlib.nullcontext()) as client:
+        res = close_loop(load_measurements(out / "train.csv"), load_measurements(out / "test.csv"), client=client,
+                         **settings)
     d = res.diagnosis
     print(f"case {args.effects} seed {args.seed} settings {settings}: {time.perf_counter() - t:.0f} s")
     print(f"traced_to {d['traced_to']}: {d['message']}")

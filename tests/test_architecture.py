@@ -32,8 +32,9 @@ ALLOWED = {
     "fmi": {"errors", "units", "physics", "predictor", "cosim"},
     "ident": {"errors", "units", "physics", "predictor", "data"},
     # closeloop -> fmi: only CloseLoopResult.export (writes the calibrated Predictor.fmu; I/O off the result)
-    "closeloop": {"errors", "units", "physics", "predictor", "data", "ident", "fmi"},
-    "cluster": {"errors", "units"},  # the parallel engine (Dask) under the rig and the sweeps
+    # closeloop -> cluster: its cross-validated refits are tasks of the parallel engine
+    "closeloop": {"errors", "units", "physics", "predictor", "data", "ident", "fmi", "cluster"},
+    "cluster": {"errors", "units"},  # the parallel engine (Dask) under the rig, the sweeps and the closed loop
     "rig": {"errors", "units", "physics", "predictor", "cosim", "fmi", "data", "cluster"},
     "sweep": {"errors", "units", "physics", "predictor", "cosim", "fmi", "data", "rig", "cluster"},
     "workflows": {"errors", "units", "physics", "predictor", "cosim", "fmi", "data", "ident", "closeloop", "rig",

@@ -258,11 +258,11 @@ def test_structural_terms_are_the_voltage_dependence_of_eq29s_slopes_and_trace_a
     by = {c.family: c for c in lib}
     assert set(by["smooth_voltage_x_speed"].regressors) == {"voltage", "speed"}
     assert not by["smooth_time_x_voltage"].structural and not by["smooth_position_x_load"].structural
-    # order: the missing effects in the order they were added, the speed filter, then the structural terms,
+    # order: the speed filter, the missing effects in the order they were added, then the structural terms,
     # then the residual trace; nothing when nothing was added
     s, pos = by["smooth_load_x_voltage"], by["smooth_position"]
     assert order_traced([s, pos], False, ["voltage", "time"]) == ["position", "load", "voltage", "time"]
-    assert order_traced([pos, s], True, []) == ["position", "speed", "load", "voltage"]
+    assert order_traced([pos, s], True, []) == ["speed", "position", "load", "voltage"]
     assert order_traced([s], False, ["time"]) == ["load", "voltage", "time"]
     assert order_traced([], False, ["time"]) == []
     assert order_traced([], True, ["time"]) == ["speed", "time"]

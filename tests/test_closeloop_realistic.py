@@ -24,7 +24,11 @@ pair 6 (with thermal drift) fails; the ten-seed control passes; the
 measurement-chain effect speed_lowpass (seed 8) fails (the speed filter is
 not kept). Re-measured on 2026-11-23 (third session) after the fix that made
 the generic time/speed/temperature terms fittable: thermal_drift 4 unchanged
-(traced to load, voltage; TEST 5.09 -> 2.43 %).
+(traced to load, voltage; TEST 5.09 -> 2.43 %). Fourth session: with the
+measurement chain settled before the rounds (physics re-identified on the
+position's derivative), speed_lowpass seed 8 passes (traced speed, load,
+voltage; TEST 3.65 -> 3.42 % after the filter, 1.05 % after the load x voltage
+term; it failed with the filter applied after the rounds: 3.65 -> 1.50 %, speed not traced).
 """
 
 import functools

@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 from . import __version__
+from .cluster import default_workers
 from .errors import L1B2Error
 
 
@@ -154,7 +155,6 @@ def cmd_sweep(args) -> int:
 
 
 def _add_sweep_parser(sub):
-    from .cluster import default_workers
     p = sub.add_parser("sweep", help="design study: operating points x parameter draws on Dask (Parquet, "
                                      "percentiles, sensitivities, PNGs)")
     p.add_argument("--spec", type=Path, required=True, help="study specification (TOML; see README 'Design studies')")
@@ -320,6 +320,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "are also carried into DIR/L1B2Motor_calibrated.ssp of the motor (--motor/--params)")
     _motor_args(p)
     _close_loop_args(p)
+    _engine_args(p, default_workers=default_workers(), what="cross-validated refits (0 or 1 = serially in this "
+                                                            "process)")
     p.set_defaults(func=cmd_close_loop)
 
     p = sub.add_parser("export", help="FMUs, L1B2Motor.ssp and L1B2Motor.fmu for other simulators")
@@ -502,7 +504,8 @@ def cmd_close_loop(args) -> int:
                             noise_fit=args.noise_fit,
                             slider_mass_kg=args.slider_mass, plots_on=not args.no_plots, progress=say,
                             allow_unusual_units=args.allow_unusual_units, export_dir=args.export,
-                            motor=_motor(args) if args.export is not None else None)
+                            motor=_motor(args) if args.export is not None else None,
+                            workers=args.workers, scheduler=args.scheduler)
     d = result.diagnosis
     print(f"diagnosis: {d['message']}" + (f"; traced to {', '.join(d['traced_to'])}" if d["traced_to"] else ""))
     print(result.rounds_table())

@@ -597,7 +597,7 @@ def export_from_report(report_dir, out_dir, mp=None) -> dict:
 
 
 def run_close_loop(train_path, test_path, out_dir, *, slider_mass_kg=None, plots_on=True, progress=None,
-                   allow_unusual_units=False, export_dir=None, motor=None, **settings):
+                   allow_unusual_units=False, export_dir=None, motor=None, workers=0, scheduler=None, **settings):
     """Close the loop on TRAIN/TEST files; write ``report.json``, ``report.md`` and the PNGs into ``out_dir``.
 
     The output folder is checked and locked first (:func:`output_dir`); both
@@ -609,16 +609,23 @@ def run_close_loop(train_path, test_path, out_dir, *, slider_mass_kg=None, plots
     with the data checks (TEST runs outside TRAIN's range flagged), is saved
     all at once. ``export_dir``: also write ``Predictor.fmu`` carrying the
     final model there, and the calibrated SSP of ``motor`` (default: the
-    reference motor) with its held-out check (:func:`export_calibrated_model`). Returns the
+    reference motor) with its held-out check (:func:`export_calibrated_model`). The cross-validated
+    refits run on a local Dask cluster of ``workers`` processes (0 or 1: in this process) or on the one at
+    ``scheduler`` (:func:`l1b2.cluster.dask_client`). Returns the
     :class:`~l1b2.closeloop.result.CloseLoopResult`; its ``wall_time_s``
     counts loading and the fit.
     """
+    import contextlib
+
     from .closeloop.loop import CloseLoop
+    from .cluster import dask_client
     t_start = time.perf_counter()
     with output_dir(Path(out_dir), command="close-loop") as tmp:
         train, test, _ = load_train_test(train_path, test_path, slider_mass_kg=slider_mass_kg,
                                          allow_unusual_units=allow_unusual_units)
-        result = CloseLoop(progress=progress, **settings).fit(train, test).result_
+        parallel = scheduler is not None or (workers or 0) > 1
+        with (dask_client(workers, scheduler) if parallel else contextlib.nullcontext()) as client:
+            result = CloseLoop(progress=progress, client=client, **settings).fit(train, test).result_
         result = dataclasses.replace(result, wall_time_s=round(time.perf_counter() - t_start, 2),
                                      checks=input_checks(train, test))
         if plots_on and progress is not None:

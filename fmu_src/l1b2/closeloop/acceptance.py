@@ -154,29 +154,59 @@ def accepts(r: RefitCV, *, min_gain: float = DEFAULT_MIN_CV_GAIN, min_drop: floa
             and r.current.nrmse - r.extended.nrmse >= min_drop)
 
 
-def fold_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init, effects: EffectSet, *, order: int,
-                seed: int, max_nfev: int, fold_phi=None) -> FoldErrors:
-    """Refit on all folds but one, predict the held-out one in free run; per fold SS (failed fits: inf)."""
+def fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, init, effects: EffectSet, *, order: int,
+               seed: int, max_nfev: int) -> tuple[float, float, bool]:
+    """One fold: refit on the runs not in ``held_runs``, predict those in free run.
+
+    Returns ``(sse, ss_meas, failed)`` on the held-out evaluation mask (a
+    failed fit or a diverged prediction: ``sse = inf``). A pure function of
+    its arguments: the unit of work of :func:`cv_errors`.
+    """
     runs = df[dataio.RUN].to_numpy()
     v = df[dataio.SPEED].to_numpy(float)
-    sse, ssm, failed = [], [], 0
-    for i, fold in enumerate(folds):
-        held = np.isin(runs, fold)
-        tr_df = df.loc[~held].reset_index(drop=True)
-        te_df = df.loc[held].reset_index(drop=True)
-        eff = effects if fold_phi is None else effects.with_phi(np.concatenate([effects.start()[:-len(fold_phi[i])],
-                                                                                 fold_phi[i]]))
-        m_te = mask[held]
-        ssm.append(float(np.sum(v[held][m_te] ** 2)))
-        try:
-            est = refit(tr_df, mask[~held], m_s, init, eff, order=order, seed=seed, max_nfev=max_nfev)
-            pred = est.predict_free_run(te_df)
-            e = (v[held] - pred)[m_te]
-            sse.append(float(np.sum(e ** 2)) if np.all(np.isfinite(e)) else np.inf)
-        except IdentificationError:
-            failed += 1
-            sse.append(np.inf)
-    return FoldErrors(np.array(sse), np.array(ssm), failed)
+    held = np.isin(runs, held_runs)
+    m_te = mask[held]
+    ssm = float(np.sum(v[held][m_te] ** 2))
+    try:
+        est = refit(df.loc[~held].reset_index(drop=True), mask[~held], m_s, init, effects, order=order, seed=seed,
+                    max_nfev=max_nfev)
+        e = (v[held] - est.predict_free_run(df.loc[held].reset_index(drop=True)))[m_te]
+    except IdentificationError:
+        return np.inf, ssm, True
+    return (float(np.sum(e ** 2)) if np.all(np.isfinite(e)) else np.inf), ssm, False
+
+
+def cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init, jobs, *, order: int, seed: int,
+              max_nfev: int, client=None) -> list[FoldErrors]:
+    """:class:`FoldErrors` of every job ``(effects, fold_phi)`` on the same ``folds``, all folds as tasks.
+
+    ``fold_phi`` (or None): per fold, the start of the last effect's parameters
+    (:func:`fold_start_phi`). The ``len(jobs) * len(folds)`` refits are
+    independent tasks of :func:`l1b2.cluster.run_tasks`: in this process in
+    order with ``client=None``, else spread over the Dask cluster's workers;
+    the result does not depend on where they ran.
+    """
+    from ..cluster import run_tasks
+    args = []
+    for effects, fold_phi in jobs:
+        for i, fold in enumerate(folds):
+            eff = effects if fold_phi is None else effects.with_phi(
+                np.concatenate([effects.start()[:-len(fold_phi[i])], fold_phi[i]]))
+            args.append((df, mask, m_s, fold, init, eff, order, seed, max_nfev))
+    out = [None] * len(args)
+    for i, r in run_tasks(_fold_error_task, args, client=client, name="l1b2-cv-refit"):
+        out[i] = r
+    k = len(folds)
+    res = []
+    for j in range(len(jobs)):
+        rows = out[j * k:(j + 1) * k]
+        res.append(FoldErrors(np.array([r[0] for r in rows]), np.array([r[1] for r in rows]),
+                              sum(bool(r[2]) for r in rows)))
+    return res
+
+
+def _fold_error_task(df, mask, m_s, held_runs, init, effects, order, seed, max_nfev):
+    return fold_error(df, mask, m_s, held_runs, init, effects, order=order, seed=seed, max_nfev=max_nfev)
 
 
 def fold_start_phi(S: np.ndarray, A: np.ndarray, y: np.ndarray, runs_m: np.ndarray, folds) -> list[np.ndarray]:

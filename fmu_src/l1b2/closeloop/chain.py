@@ -15,8 +15,10 @@ found and modelled apart from the physics, from position and speed alone:
   runs *and* the speed column's mismatch with the derivative is above the
   quantisation level (``min_rel_rms`` of the speed's rms).
 
-The accepted filter is then applied to the model's free-run prediction
-(:meth:`OutputFilter.apply`; the physics is not refit).
+When the filter is accepted, the close-the-loop estimator identifies the
+physics on the position's derivative (:func:`with_position_speed`) and
+applies the filter to its predictions (:meth:`OutputFilter.apply`), before
+it looks for missing physical effects (:class:`l1b2.closeloop.loop.ChainModel`).
 """
 
 from __future__ import annotations
@@ -58,6 +60,18 @@ def position_derivative(df: pd.DataFrame) -> np.ndarray:
     for _, sl in dataio.run_slices(df[dataio.RUN]):
         if sl.stop - sl.start > 1:
             out[sl] = np.gradient(pos[sl], t[sl])
+    return out
+
+
+def with_position_speed(df: pd.DataFrame) -> pd.DataFrame:
+    """A copy of ``df`` whose speed column is the position's derivative (:func:`position_derivative`) [m/s].
+
+    The slider's speed as the data format derives it when the column is
+    absent: what the physics predicts when the recorded column went through a
+    filter of the measurement chain.
+    """
+    out = df.copy()
+    out[dataio.SPEED] = position_derivative(df)
     return out
 
 

@@ -12,10 +12,14 @@ Procedure (TEST is never used for fitting or choosing):
 1. **Baseline**: the Eq. 29 predictor identified on TRAIN by maximum likelihood
    (free-run criterion; sigma, k0, mu, mu_sd pinned, which leaves the
    predictions unchanged and makes the fit well posed, see :mod:`l1b2.ident.estimator`).
-2. **Residual analysis** on TRAIN (:mod:`l1b2.closeloop.residuals`): drive-coordinate
+2. **Measurement chain** (:meth:`CloseLoop._chain`): when the speed column is a
+   filtered derivative of the position, the physics is re-identified on the
+   derivative and the filter applied to its predictions (:class:`ChainModel`);
+   everything below then works on the derivative.
+3. **Residual analysis** on TRAIN (:mod:`l1b2.closeloop.residuals`): drive-coordinate
    free-run residual; whiteness per run; spectrum over position; evidence per
    regressor by cross-validation over runs, traced by forward selection.
-3. **Rounds** (at most ``max_rounds``), each against the *current* model
+4. **Rounds** (at most ``max_rounds``), each against the *current* model
    (the baseline plus the effects accepted so far):
 
    a. *shortlist*: every candidate of the library (default
@@ -37,7 +41,7 @@ Procedure (TEST is never used for fitting or choosing):
 
    The rounds stop when no shortlisted candidate is accepted. Otherwise
    "no significant missing effect" and the baseline is kept.
-4. Both the baseline and the final model are reported on TEST, with the
+5. Both the baseline and the final model are reported on TEST, with the
    metrics after every round. ``diagnosis.traced_to`` lists the regressors of
    the added effects strongest first, the terms that only relax Eq. 29's own
    linearisation after the missing effects (:func:`order_traced`).
@@ -60,7 +64,7 @@ from . import chain
 from . import residuals as res
 from .candidates import CandidateSource, Context, full_library
 from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT_FOLDS, DEFAULT_REFIT_NFEV,
-                         EffectSet, RefitCV, accepts, fold_errors, fold_start_phi, refit, stratified_folds)
+                         EffectSet, RefitCV, accepts, cv_errors, fold_start_phi, refit, stratified_folds)
 from .result import CloseLoopResult, ResidualAnalysis
 from .selection import (DEFAULT_ALPHA, DEFAULT_PARSIMONY, SHORTLIST_MIN_GAIN, Score, best_per_family, design,
                         score_candidates, shortlist, significance_level)
@@ -98,6 +102,10 @@ class CloseLoop:
         default :func:`l1b2.closeloop.candidates.full_library` (one-regressor and two-regressor candidates).
     progress : callable, optional
         Called with a short message at the start of each stage.
+    client : dask.distributed.Client, optional
+        Where the cross-validated refits run (:func:`l1b2.cluster.dask_client`): each fold of each trial is
+        one task, spread over the cluster's workers; ``None``: in this process, in order. The result does
+        not depend on it.
     max_rounds : int
         Most effects added (one per round).
     shortlist : int
@@ -130,7 +138,8 @@ class CloseLoop:
                  shortlist: int = 2, refit_folds: int = DEFAULT_REFIT_FOLDS,
                  min_cv_gain: float = DEFAULT_MIN_CV_GAIN, min_cv_drop: float = DEFAULT_MIN_CV_DROP,
                  refit_nfev: int = DEFAULT_REFIT_NFEV,
-                 final_nfev: int = 60, screen_alpha: float | None = None, noise_fit: str = "alternate"):
+                 final_nfev: int = 60, screen_alpha: float | None = None, noise_fit: str = "alternate",
+                 client=None):
         self.order = order
         self.k_folds = k_folds
         self.alpha = alpha
@@ -149,16 +158,17 @@ class CloseLoop:
         self.refit_nfev = refit_nfev
         self.final_nfev = final_nfev
         self.screen_alpha = screen_alpha
+        self.client = client
 
     def get_params(self) -> dict:
         """The settings given to ``__init__``."""
         return {k: getattr(self, k) for k in ("order", "k_folds", "alpha", "min_gain", "parsimony", "seed",
                                               "n_starts", "library", "progress", "max_rounds", "shortlist",
                                               "refit_folds", "min_cv_gain", "min_cv_drop", "refit_nfev",
-                                              "final_nfev", "screen_alpha", "noise_fit")}
+                                              "final_nfev", "screen_alpha", "noise_fit", "client")}
 
     def __repr__(self) -> str:
-        args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items() if k != "progress")
+        args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items() if k not in ("progress", "client"))
         return f"CloseLoop({args})"
 
     # -- the job -------------------------------------------------------------
@@ -180,21 +190,25 @@ class CloseLoop:
         mask_tr = np.array(train.mask)
 
         say("baseline: identifying the Eq. 29 predictor on TRAIN")
-        base = PredictorIdentifier(order=self.order, criterion="free_run", fixed="recommended",
-                                   n_starts=self.n_starts, seed=self.seed, noise_fit=self.noise_fit)
-        base.fit(dtr, slider_mass_kg=m_s, mask=mask_tr)
-        v_tr = base.predict_free_run(dtr)
+        base = self._identify(dtr, m_s, mask_tr)
         v_te = base.predict_free_run(dte) if dte is not None else None
         baseline = _metrics(base, dtr, dte)
+        it = _Iteration(model=base, effects=EffectSet(), rounds=[{"round": 0, "added": None, "metrics": baseline}])
+
+        say("measurement chain: speed column against the position's derivative")
+        chain_rec, fit_tr = self._chain(it, dtr, dte, mask_tr, m_s)
+        start = it.model     # the physics model the rounds extend (fitted on fit_tr)
+        wrap = ((lambda mdl: ChainModel(mdl, it.output_filter)) if it.output_filter is not None
+                else (lambda mdl: mdl))
 
         say("residual analysis on TRAIN")
-        analysis = analyse_residuals(dtr, v_tr, mask_tr, alpha=self.alpha, k=self.k_folds, seed=self.seed)
-        ctx = candidate_context(base.predict_free_run, m_s, dtr, mask_tr, analysis.peak)
+        analysis = analyse_residuals(fit_tr, start.predict_free_run(fit_tr), mask_tr, alpha=self.alpha,
+                                     k=self.k_folds, seed=self.seed)
+        ctx = candidate_context(start.predict_free_run, m_s, fit_tr, mask_tr, analysis.peak)
         library = self.library if self.library is not None else full_library()
-        pool = library(ctx, dtr)
-        it = self._iterate(base, pool, dtr, dte, mask_tr, m_s, baseline, say)
-        say("measurement chain: speed column against the position's derivative")
-        chain = self._chain(it, dtr, dte, mask_tr)
+        pool = library(ctx, fit_tr)
+        self._iterate(it, pool, fit_tr, mask_tr, m_s, lambda mdl: _metrics(wrap(mdl), dtr, dte), say)
+        it.model = wrap(it.model)
 
         ext = it.model if (it.effects.candidates or it.output_filter is not None) else None
         v_te_ext = ext.predict_free_run(dte) if (ext is not None and dte is not None) else None
@@ -204,12 +218,12 @@ class CloseLoop:
             ext_params.update({f"speed_filter_{k}": {"value": v, "stderr": None, "ci95": None, "unit": "1"}
                                for k, v in (("a", it.output_filter.a), ("b0", it.output_filter.b0),
                                             ("b1", it.output_filter.b1))})
-        calibrated, why = calibrated_model(base, ext, it.effects, it.output_filter,
+        calibrated, why = calibrated_model(start, ext, it.effects, it.output_filter,
                                            {**_data_summary(train, test), "operating_points": _operating_points(dtr)})
         first = it.first_scores or []
         chosen = it.chosen
         diagnosis = self._diagnosis(it, first, analysis, ext_params)
-        diagnosis["measurement_chain"] = chain
+        diagnosis["measurement_chain"] = chain_rec
         self.result_ = CloseLoopResult(
             baseline=baseline, diagnosis=diagnosis, scores=first,
             significant=it.significant, chosen=chosen, extended=extended,
@@ -220,13 +234,21 @@ class CloseLoop:
             calibrated_model=calibrated, calibrated_note=why)
         return self
 
-    def _iterate(self, base, pool, dtr, dte, mask, m_s, baseline, say) -> _Iteration:
-        """Rounds of linearised shortlist -> cross-validated refit -> acceptance -> joint re-identification."""
-        it = _Iteration(model=base, effects=EffectSet(),
-                        rounds=[{"round": 0, "added": None, "metrics": baseline}])
+    def _identify(self, df: pd.DataFrame, m_s: float, mask: np.ndarray) -> PredictorIdentifier:
+        """The baseline Eq. 29 predictor identified on ``df`` (free-run maximum likelihood, multi-start)."""
+        return PredictorIdentifier(order=self.order, criterion="free_run", fixed="recommended",
+                                   n_starts=self.n_starts, seed=self.seed, noise_fit=self.noise_fit
+                                   ).fit(df, slider_mass_kg=m_s, mask=mask)
+
+    def _iterate(self, it: _Iteration, pool, dtr, mask, m_s, report, say) -> None:
+        """Rounds of linearised shortlist -> cross-validated refit -> acceptance -> joint re-identification.
+
+        Extends ``it`` in place; ``report(model)`` gives a round's metrics (on the measured speed).
+        """
         folds = stratified_folds(dtr, self.refit_folds, self.seed)
         cur_err = None
         for rnd in range(1, self.max_rounds + 1):
+            n_rnd = len(it.rounds)
             cur = it.model
             v_cur = cur.predict_free_run(dtr)
             r = res.drive_residual(dtr, v_cur)
@@ -245,18 +267,20 @@ class CloseLoop:
             if not short:
                 it.trials.append([])
                 break
+            jobs, labels = [], []
             if cur_err is None:
-                say(f"round {rnd}: cross-validating the current model over {len(folds)} run folds")
-                cur_err = fold_errors(dtr, mask, m_s, folds, cur.params_, it.effects, order=self.order,
-                                      seed=self.seed, max_nfev=self.refit_nfev)
-            trials = []
+                jobs.append((it.effects, None))
             for s in short:
-                say(f"round {rnd}: cross-validating the refit with {s.candidate.label}")
                 y, A, S, runs_m = design(s.candidate, r, dtr, mask, cur.params_, m_s, v_pred=v_cur)
-                fphi = fold_start_phi(S, A, y, runs_m, folds)
-                err = fold_errors(dtr, mask, m_s, folds, cur.params_, it.effects.add(s.candidate, s.phi),
-                                  order=self.order, seed=self.seed, max_nfev=self.refit_nfev, fold_phi=fphi)
-                trials.append(RefitCV(s.candidate, cur_err, err, s.cv_gain, s.phi))
+                jobs.append((it.effects.add(s.candidate, s.phi), fold_start_phi(S, A, y, runs_m, folds)))
+                labels.append(s.candidate.label)
+            say(f"round {rnd}: cross-validating {'the current model and ' if cur_err is None else ''}the refit "
+                f"with {', '.join(labels)} over {len(folds)} run folds")
+            errs = cv_errors(dtr, mask, m_s, folds, cur.params_, jobs, order=self.order, seed=self.seed,
+                             max_nfev=self.refit_nfev, client=self.client)
+            if cur_err is None:
+                cur_err, errs = errs[0], errs[1:]
+            trials = [RefitCV(s.candidate, cur_err, err, s.cv_gain, s.phi) for s, err in zip(short, errs)]
             it.trials.append(trials)
             ok = [t for t in trials if accepts(t, min_gain=self.min_cv_gain, min_drop=self.min_cv_drop)]
             if not ok:
@@ -273,34 +297,42 @@ class CloseLoop:
                           max_nfev=self.final_nfev, max_outer=3)
             it.model, it.effects = model, effects.with_phi(model.phi_)
             cur_err = None
-            it.rounds.append({"round": rnd, "added": pick.candidate.label, "effect": pick.candidate.family,
+            it.rounds.append({"round": n_rnd, "added": pick.candidate.label, "effect": pick.candidate.family,
                               "regressors": list(pick.candidate.regressors), "cv": pick.to_dict(),
-                              "metrics": _metrics(model, dtr, dte)})
-        return it
+                              "metrics": report(model)})
 
-    def _chain(self, it: _Iteration, dtr, dte, mask) -> dict:
-        """Output filter of the speed channel (:mod:`l1b2.closeloop.chain`), kept if TRAIN's free-run error falls."""
+    def _chain(self, it: _Iteration, dtr, dte, mask, m_s):
+        """The speed channel first (:mod:`l1b2.closeloop.chain`): ``(record, the TRAIN frame the rounds fit)``.
+
+        When the speed column is a filtered derivative of the position (found from
+        position and speed alone, cross-validated over runs), the physics is
+        re-identified on the position's derivative (the slider's speed) and the
+        filter is applied to its prediction (:class:`ChainModel`); this is kept
+        when it lowers TRAIN's free-run sum of squares on the measured speed by
+        ``min_cv_gain`` against the baseline. The rounds then extend that model
+        on the derivative data. Otherwise TRAIN is returned unchanged.
+        """
         ch = chain.speed_channel(dtr, mask, k=self.k_folds, seed=self.seed)
         rec = {k: v for k, v in ch.items() if k != "filter"}
         if "filter" in ch:
             rec["filter"] = ch["filter"].to_dict()
         if not ch["accepted"]:
-            return rec
+            return rec, dtr
+        ptr = chain.with_position_speed(dtr)
+        filt = ChainModel(self._identify(ptr, m_s, mask), ch["filter"])
         v = dtr[dataio.SPEED].to_numpy(float)[mask]
-        raw = it.model.predict_free_run(dtr)
-        filt = FilteredModel(it.model, ch["filter"])
-        sse0 = float(np.sum((v - raw[mask]) ** 2))
+        sse0 = float(np.sum((v - it.model.predict_free_run(dtr)[mask]) ** 2))
         sse1 = float(np.sum((v - filt.predict_free_run(dtr)[mask]) ** 2))
         gain = 1 - sse1 / sse0 if sse0 > 0 else 0.0
         rec["train_free_run_gain"] = gain
         if gain < self.min_cv_gain:
             rec["accepted"] = False
-            return rec
-        it.model, it.output_filter = filt, ch["filter"]
+            return rec, dtr
+        it.model, it.output_filter = filt.model, ch["filter"]
         it.rounds.append({"round": len(it.rounds), "added": "speed_channel_filter", "effect": "speed_channel_filter",
                           "regressors": ["speed"], "cv": {"cv_gain": ch["cv_gain"], "train_free_run_gain": gain},
                           "metrics": _metrics(filt, dtr, dte)})
-        return rec
+        return rec, ptr
 
     def _immaterial(self, it: _Iteration) -> list[RefitCV]:
         """Candidates of the last round that pass every acceptance rule but the materiality threshold.
@@ -321,6 +353,9 @@ class CloseLoop:
         effects = it.effects.candidates
         c = effects[0] if effects else None
         below = self._immaterial(it)
+        records = ([_filter_record(rec, ext_params) for rec in it.rounds if rec["added"] == "speed_channel_filter"]
+                   + [_effect_record(e, rec, ext_params) for e, rec in
+                      zip(effects, [r for r in it.rounds[1:] if r["added"] != "speed_channel_filter"])])
         traced_to = order_traced(effects, it.output_filter is not None, a.traced,
                                  evidence=[t.candidate for t in below])
         w = a.whiteness
@@ -329,11 +364,10 @@ class CloseLoop:
         return {
             "significant": c is not None or it.output_filter is not None,
             "traced_to": traced_to,
-            "effect": c.family if c else ("speed_channel_filter" if it.output_filter is not None else None),
-            "effect_shape": c.shape if c else None,
-            "effect_description": c.description if c else None,
-            "effects": ([_effect_record(e, rec, ext_params) for e, rec in zip(effects, it.rounds[1:])]
-                        + ([_filter_record(it.rounds[-1], ext_params)] if it.output_filter is not None else [])),
+            "effect": records[0]["effect"] if records else None,
+            "effect_shape": records[0]["shape"] if records else None,
+            "effect_description": records[0]["description"] if records else None,
+            "effects": records,
             "message": (f"missing effect{'s' if len(effects) > 1 else ''}: {labels}" if c
                         else "no significant missing effect")
                        + ("; speed channel filtered (measurement chain)" if it.output_filter is not None else ""),
@@ -375,29 +409,38 @@ class _Iteration:
     output_filter: chain.OutputFilter | None = None
 
 
-class FilteredModel:
-    """A fitted model whose free-run prediction passes through the speed channel's output filter."""
+class ChainModel:
+    """The measurement chain around a physics model fitted on the position's derivative.
+
+    The model predicts the slider's speed along the position's derivative
+    (:func:`l1b2.closeloop.chain.with_position_speed`: run starts and one-step
+    inputs from it); the speed channel's output filter turns that into the
+    measured speed column.
+    """
 
     def __init__(self, model, output_filter: chain.OutputFilter):
         self.model, self.output_filter = model, output_filter
 
     def predict_free_run(self, df) -> np.ndarray:
-        return self.output_filter.apply(df, self.model.predict_free_run(df))
+        return self.output_filter.apply(df, self.model.predict_free_run(chain.with_position_speed(df)))
 
     def predict_one_step(self, df) -> np.ndarray:
-        return self.model.predict_one_step(df)
+        return self.output_filter.apply(df, self.model.predict_one_step(chain.with_position_speed(df)))
 
     def __getattr__(self, name):
+        if name == "model":
+            raise AttributeError(name)
         return getattr(self.model, name)
 
 
 def order_traced(effects, speed_filter: bool, residual_trace, evidence=()) -> list[str]:
     """``diagnosis.traced_to``: the regressors with significant evidence, strongest first.
 
-    The added effects in the order they were chosen (each round takes the
-    candidate with the largest cross-validated gain against the current
-    model, so earlier is stronger); ``speed`` if the speed channel's filter
-    was kept; then ``evidence``, the candidates that improve the final model
+    ``speed`` first if the speed channel's filter was kept (the measurement
+    chain is settled before any physical effect); the added effects in the
+    order they were chosen (each round takes the candidate with the largest
+    cross-validated gain against the current model, so earlier is stronger);
+    then ``evidence``, the candidates that improve the final model
     in cross-validation but by less than the materiality threshold (largest
     gain first). *Structural* terms (``CandidateForce.structural``: they
     relax an approximation of Eq. 29 itself) come after all of these: they
@@ -407,14 +450,12 @@ def order_traced(effects, speed_filter: bool, residual_trace, evidence=()) -> li
     """
     if not effects and not speed_filter:
         return []
-    traced: list[str] = []
+    traced: list[str] = ["speed"] if speed_filter else []
 
     def take(cands):
         for c in cands:
             traced.extend(r for r in c.regressors if r not in traced)
     take(e for e in effects if not e.structural)
-    if speed_filter and "speed" not in traced:
-        traced.append("speed")
     take(e for e in evidence if not e.structural)
     take(e for e in effects if e.structural)
     take(e for e in evidence if e.structural)
