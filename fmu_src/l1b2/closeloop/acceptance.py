@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
+from ..cluster import run_tasks
 from ..data import measurements as dataio
 from ..errors import IdentificationError
 from ..ident.estimator import ExtraForces, PredictorIdentifier
@@ -154,7 +155,7 @@ def accepts(r: RefitCV, *, min_gain: float = DEFAULT_MIN_CV_GAIN, min_drop: floa
             and r.current.nrmse - r.extended.nrmse >= min_drop)
 
 
-def fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, init, effects: EffectSet, *, order: int,
+def fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, init, effects: EffectSet, order: int,
                seed: int, max_nfev: int) -> tuple[float, float, bool]:
     """One fold: refit on the runs not in ``held_runs``, predict those in free run.
 
@@ -186,7 +187,6 @@ def cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init, jobs,
     order with ``client=None``, else spread over the Dask cluster's workers;
     the result does not depend on where they ran.
     """
-    from ..cluster import run_tasks
     args = []
     for effects, fold_phi in jobs:
         for i, fold in enumerate(folds):
@@ -194,7 +194,7 @@ def cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init, jobs,
                 np.concatenate([effects.start()[:-len(fold_phi[i])], fold_phi[i]]))
             args.append((df, mask, m_s, fold, init, eff, order, seed, max_nfev))
     out = [None] * len(args)
-    for i, r in run_tasks(_fold_error_task, args, client=client, name="l1b2-cv-refit"):
+    for i, r in run_tasks(fold_error, args, client=client, name="l1b2-cv-refit"):
         out[i] = r
     k = len(folds)
     res = []
@@ -203,10 +203,6 @@ def cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init, jobs,
         res.append(FoldErrors(np.array([r[0] for r in rows]), np.array([r[1] for r in rows]),
                               sum(bool(r[2]) for r in rows)))
     return res
-
-
-def _fold_error_task(df, mask, m_s, held_runs, init, effects, order, seed, max_nfev):
-    return fold_error(df, mask, m_s, held_runs, init, effects, order=order, seed=seed, max_nfev=max_nfev)
 
 
 def fold_start_phi(S: np.ndarray, A: np.ndarray, y: np.ndarray, runs_m: np.ndarray, folds) -> list[np.ndarray]:
