@@ -14,7 +14,6 @@ Usage: python bench/realistic_case.py EFFECTS SEED [--settings JSON] [--cache DI
 Example: python bench/realistic_case.py thermal_drift 4 --settings '{"noise_fit": "profile"}'
 """
 import argparse
-import contextlib
 import json
 import os
 import shutil
@@ -25,7 +24,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "fmu_src"))
 
 from l1b2.closeloop.loop import close_loop  # noqa: E402
-from l1b2.cluster import dask_client  # noqa: E402
+from l1b2.cluster import optional_client  # noqa: E402
 from l1b2.data.measurements import load_measurements  # noqa: E402
 from l1b2.physics.params import SYSTEM_MODELS_DIR, load_motor  # noqa: E402
 from l1b2.rig.experiment import RigPlan, run_experiment, write_experiment  # noqa: E402
@@ -55,7 +54,7 @@ def main(argv=None):
         write_experiment(df, tmp, mp, plan, truth)
         os.replace(tmp, out)
     t = time.perf_counter()
-    with (dask_client(args.workers) if args.workers > 1 else contextlib.nullcontext()) as client:
+    with optional_client(args.workers, serial_up_to=1) as client:
         res = close_loop(load_measurements(out / "train.csv"), load_measurements(out / "test.csv"), client=client,
                          **settings)
     d = res.diagnosis

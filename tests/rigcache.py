@@ -28,3 +28,18 @@ def rig_dir(name: str = "clean", injections=(), injection_seed=None, plan: RigPl
         write_experiment(df, out, mp, plan, truth)
         _CACHE[key] = out
     return _CACHE[key]
+
+
+def case_row(world: str, case: str, res, b0: float | None = None) -> str:
+    """One close-the-loop case as a JSON line: what a closing note's table needs.
+
+    Recorded by the close-loop tests with ``record_property("case", ...)``;
+    ``pytest --junitxml=FILE`` keeps them (``python bench/case_table.py FILE`` prints the table).
+    """
+    import json
+    d = res.diagnosis
+    b = res.before["test"]["free_run"]["nrmse"]
+    a = res.after["test"]["free_run"]["nrmse"] if res.after is not None else b
+    return json.dumps({"world": world, "case": case, "traced_to": d["traced_to"],
+                       "added": [e["label"] for e in d["effects"]], "before": b, "after": a, "b0": b0,
+                       "wall_s": res.wall_time_s})

@@ -24,7 +24,7 @@ from l1b2.closeloop.loop import CloseLoop, close_loop, order_traced
 from l1b2.closeloop.result import CloseLoopResult
 from l1b2.data.measurements import load_measurements
 from l1b2.rig.experiment import INJECTIONS, RigPlan
-from rigcache import rig_dir
+from rigcache import case_row, rig_dir
 
 FAST = [("pulley_friction", 1), ("direction_asymmetry", 2), ("drive_saturation", 3), ("thermal_drift", 4)]
 SLOW = [(e, s) for e in ("pulley_friction", "direction_asymmetry", "drive_saturation", "thermal_drift")
@@ -40,7 +40,8 @@ def _run(effect, seed):
     return res, truth
 
 
-def _check_effect(res, truth):
+def _check_effect(res, truth, case, record):
+    record("case", case_row("reference", case, res))
     want = truth["injections"][0]["regressor"]
     d = res.diagnosis
     assert d["significant"], d["message"]
@@ -52,10 +53,10 @@ def _check_effect(res, truth):
 
 
 @pytest.mark.parametrize("effect,seed", FAST)
-def test_undeclared_effect_is_traced_and_halves_the_held_out_error(effect, seed):
+def test_undeclared_effect_is_traced_and_halves_the_held_out_error(effect, seed, record_property):
     # reference: rig_truth.json (what was injected) and the held-out (TEST) free-run nrmse before/after
     res, truth = _run(effect, seed)
-    _check_effect(res, truth)
+    _check_effect(res, truth, f"{effect} {seed}", record_property)
 
 
 def _extended_free_run(model, df):
@@ -123,18 +124,19 @@ def test_calibrated_ssp_carries_the_identified_effect(effect, seed, home, tmp_pa
 
 @pytest.mark.slow
 @pytest.mark.parametrize("effect,seed", SLOW)
-def test_undeclared_effect_over_more_seeds(effect, seed):
+def test_undeclared_effect_over_more_seeds(effect, seed, record_property):
     res, truth = _run(effect, seed)
-    _check_effect(res, truth)
+    _check_effect(res, truth, f"{effect} {seed}", record_property)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", [2, 12])
-def test_bar_waviness_is_traced_to_position(seed):
+def test_bar_waviness_is_traced_to_position(seed, record_property):
     # reference: rig_truth.json; a friction-bar waviness of 30-50 um modulates the preload by +/-60 %, which
     # acts strongly non-linearly on the speed: the extension is traced to position and cuts the held-out
     # error substantially, but not always by half (measured: 3.1x and 1.9x for these seeds)
     res, truth = _run("bar_waviness", seed)
+    record_property("case", case_row("reference", f"bar_waviness {seed}", res))
     d = res.diagnosis
     assert d["significant"] and d["traced_to"][0] == "position"
     assert res.after["test"]["free_run"]["nrmse"] < 0.6 * res.before["test"]["free_run"]["nrmse"]
@@ -148,18 +150,22 @@ def _check_control(res):
 
 
 @pytest.mark.parametrize("seed", [21, 22])
-def test_control_without_effect_reports_nothing(seed):
+def test_control_without_effect_reports_nothing(seed, record_property):
     # reference: no effect injected -> "no significant missing effect", baseline kept, traced_to empty
     res, _ = _run(None, seed)
+    record_property("case", case_row("reference", f"clean {seed}", res))
     assert _check_control(res), res.diagnosis["message"]
     assert res.diagnosis["traced_to"] == [] and res.diagnosis["effect"] is None
     assert res.extended is None
 
 
 @pytest.mark.slow
-def test_control_ten_seeds():
+def test_control_ten_seeds(record_property):
     # reference: issue: no significant effect in at least 9 of 10 controls, never a worse held-out error
-    quiet = [_check_control(_run(None, seed)[0]) for seed in range(30, 40)]
+    runs = [_run(None, seed)[0] for seed in range(30, 40)]
+    for seed, res in zip(range(30, 40), runs):
+        record_property("case", case_row("reference", f"clean {seed}", res))
+    quiet = [_check_control(res) for res in runs]
     assert sum(quiet) >= 9
 
 

@@ -7,7 +7,7 @@ from l1b2.closeloop.acceptance import EffectSet, cv_errors, fold_error, fold_sta
 from l1b2.closeloop.candidates import full_library
 from l1b2.closeloop.loop import analyse_residuals, candidate_context
 from l1b2.closeloop.selection import design
-from l1b2.cluster import dask_client
+from l1b2.cluster import optional_client
 from l1b2.data.measurements import load_measurements
 from l1b2.ident.estimator import PredictorIdentifier
 from l1b2.rig.experiment import RigPlan
@@ -34,7 +34,8 @@ def test_cv_refits_on_a_local_cluster_equal_the_serial_ones():
     jobs = [(EffectSet(), None), (EffectSet().add(c, np.zeros(c.n_params)), fphi)]
     kw = dict(order=8, seed=0, max_nfev=3)
     serial = cv_errors(df, mask, m_s, folds, base.params_, jobs, **kw)
-    with dask_client(workers=2) as client:
+    with optional_client(2, serial_up_to=1) as client:
+        assert len(client.nthreads()) == 2
         parallel = cv_errors(df, mask, m_s, folds, base.params_, jobs, client=client, **kw)
     for s, p in zip(serial, parallel):
         np.testing.assert_allclose(p.sse, s.sse, rtol=1e-12, atol=0)
@@ -44,3 +45,10 @@ def test_cv_refits_on_a_local_cluster_equal_the_serial_ones():
     one = fold_error(df, mask, m_s, folds[1], base.params_, jobs[1][0].with_phi(fphi[1]), **kw)
     assert one[0] == pytest.approx(serial[1].sse[1], rel=1e-12) and one[1] == serial[1].ss_meas[1]
     assert serial[1].sse.sum() < serial[0].sse.sum()
+
+
+@pytest.mark.parametrize("workers,serial_up_to", [(0, 0), (0, 1), (1, 1)])
+def test_no_cluster_is_started_for_the_in_process_worker_counts(workers, serial_up_to):
+    # reference: the callers' rule (a sweep runs in process with 0 workers, the close-loop refits with 0 or 1)
+    with optional_client(workers, serial_up_to=serial_up_to) as client:
+        assert client is None

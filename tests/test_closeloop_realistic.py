@@ -42,7 +42,7 @@ from l1b2.data.measurements import load_measurements
 from l1b2.data.metrics import report_metrics
 from l1b2.ident.estimator import PredictorIdentifier
 from l1b2.rig.experiment import RigPlan
-from rigcache import rig_dir
+from rigcache import case_row, rig_dir
 
 WORLD = "realistic"
 
@@ -77,18 +77,20 @@ def _test_nrmse(res):
     return b, a
 
 
-def _check_effects(res, truth, seed, n_first):
+def _check_effects(res, truth, seed, n_first, record):
     want = [i["regressor"] for i in truth["injections"]]
     d = res.diagnosis
+    b, a = _test_nrmse(res)
+    b0 = _clean_baseline(seed)
+    record("case", case_row(WORLD, "+".join(i["name"] for i in truth["injections"]) + f" {seed}", res, b0))
     assert d["significant"], d["message"]
     for w in want:
         assert w in d["traced_to"][:n_first], (want, d["traced_to"], d["message"])
-    b, a = _test_nrmse(res)
-    b0 = _clean_baseline(seed)
     assert a ** 2 <= b0 ** 2 + (b ** 2 - b0 ** 2) / 4, (b0, b, a, d["message"])
 
 
-def _check_control(res):
+def _check_control(res, case, record):
+    record("case", case_row(WORLD, case, res))
     b, a = _test_nrmse(res)
     assert a <= 1.02 * b, (b, a, res.diagnosis["message"])
     d = res.diagnosis
@@ -98,15 +100,15 @@ def _check_control(res):
 
 
 @pytest.mark.parametrize("seed", [21])
-def test_realistic_control_is_never_made_worse(seed):
+def test_realistic_control_is_never_made_worse(seed, record_property):
     res, _ = _run((), seed)
-    _check_control(res)
+    _check_control(res, f"clean {seed}", record_property)
 
 
 @pytest.mark.slow
-def test_realistic_control_ten_seeds():
+def test_realistic_control_ten_seeds(record_property):
     for seed in range(30, 40):
-        _check_control(_run((), seed)[0])
+        _check_control(_run((), seed)[0], f"clean {seed}", record_property)
 
 
 def test_realistic_load_path_effect_report_rounds(tmp_path, capsys):
@@ -142,21 +144,9 @@ SINGLE = [("thermal_drift", 4), ("direction_asymmetry", 2), ("bar_waviness", 2),
 
 @pytest.mark.slow
 @pytest.mark.parametrize("effect,seed", SINGLE)
-def test_realistic_single_effect(effect, seed):
+def test_realistic_single_effect(effect, seed, record_property):
     res, truth = _run((effect,), seed)
-    _check_effects(res, truth, seed, 2)
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("seed", [4, 12])
-def test_realistic_thermal_drift_with_the_uncorrected_screen(seed):
-    # reference: issue 11; by default (Bonferroni screen) the drift in time is not shortlisted once the load x
-    # voltage term is in; with screen_alpha=0.01 it is cross-validated and traced (seed 4: 2.26 -> 1.82 % CV nrmse,
-    # below the 0.5 pp materiality threshold, so reported as immaterial evidence)
-    d = _dir(("thermal_drift",), seed)
-    res = close_loop(load_measurements(d / "train.csv"), load_measurements(d / "test.csv"), screen_alpha=0.01)
-    truth = json.loads((d / "rig_truth.json").read_text())
-    _check_effects(res, truth, seed, 2)
+    _check_effects(res, truth, seed, 2, record_property)
 
 
 PAIRS = [(("pulley_friction", "drive_saturation"), 5), (("direction_asymmetry", "thermal_drift"), 6),
@@ -165,9 +155,9 @@ PAIRS = [(("pulley_friction", "drive_saturation"), 5), (("direction_asymmetry", 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("effects,seed", PAIRS)
-def test_realistic_two_effects(effects, seed):
+def test_realistic_two_effects(effects, seed, record_property):
     res, truth = _run(effects, seed)
-    _check_effects(res, truth, seed, 3)
+    _check_effects(res, truth, seed, 3, record_property)
 
 
 def test_measurement_chain_filter_is_found_from_position_and_speed_alone():

@@ -206,9 +206,9 @@ def _close_loop_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--min-cv-drop", type=float, default=0.005, help="smallest absolute fall of the cross-validated "
                    "free-run nrmse (share of the speed's rms; 0.005 = 0.5 percentage points) for an effect to be "
                    "added: the materiality threshold (0 reports every structural term that helps)")
-    p.add_argument("--screen-alpha", type=float, default=0.0, help="when no candidate passes the Bonferroni-"
+    p.add_argument("--screen-alpha", type=float, default=0.01, help="when no candidate passes the Bonferroni-"
                    "corrected screen, the best one with a run-level p-value below this (uncorrected) level, e.g. "
-                   "0.01, is still refit and cross-validated (finds drifts in time; 2-4x slower); 0: off")
+                   "0.01, is still refit and cross-validated (finds drifts in time); 0: off")
     p.add_argument("--max-rounds", type=int, default=3, help="most effects added, one per round")
     p.add_argument("--noise-fit", choices=NOISE_FITS, default="alternate",
                    help="the baseline identification's search: " + NOISE_FIT_HELP)

@@ -87,6 +87,23 @@ def dask_client(workers: int | None = None, scheduler: str | None = None):
             cluster.close()
 
 
+@contextlib.contextmanager
+def optional_client(workers: int | None, scheduler: str | None = None, *, serial_up_to: int = 0):
+    """:func:`dask_client` when ``scheduler`` is given or ``workers`` exceeds ``serial_up_to``; else ``None``.
+
+    ``None`` means: run in this process. The callers' rule in one place: a sweep
+    with ``workers=0`` runs in process (``serial_up_to=0``); the close-loop refits
+    with 0 or 1 workers too (``serial_up_to=1``: one worker process is slower than none).
+    ``workers=None`` means :func:`default_workers`.
+    """
+    n = default_workers() if workers is None else int(workers)
+    if scheduler is None and n <= serial_up_to:
+        yield None
+        return
+    with dask_client(n, scheduler) as client:
+        yield client
+
+
 def _check_workers(client, scheduler: str) -> None:
     try:
         client.wait_for_workers(1, timeout=30)

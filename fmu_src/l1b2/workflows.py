@@ -457,12 +457,11 @@ def run_sweep(spec_path, out_dir, *, workers: int | None = None, scheduler: str 
     a local Dask cluster of ``workers`` processes or the one at ``scheduler``.
     For the FMU engine the FMUs are built (or found in the cache) once, here.
     """
-    import contextlib
     import time
 
     from tqdm import tqdm
 
-    from .cluster import dask_client
+    from .cluster import optional_client
     from .errors import SpecError
     from .fmi.cache import ensure_fmus
     from .physics.params import load_motor
@@ -485,9 +484,8 @@ def run_sweep(spec_path, out_dir, *, workers: int | None = None, scheduler: str 
     done = _stored_chunks(chunks_dir, spec.fingerprint(), len(bounds))
     ctx = TaskContext.from_spec(spec, mp, ensure_fmus() if spec.engine == "fmu" else None)
     skipped = sum(b - a for cid, (a, b) in enumerate(bounds) if cid in done)
-    parallel = scheduler is not None or workers != 0
     t0 = time.perf_counter()
-    with (dask_client(workers, scheduler) if parallel else contextlib.nullcontext()) as client:
+    with optional_client(workers, scheduler) as client:
         n_workers = len(client.nthreads()) if client is not None else 1
         chunks_dir.mkdir(parents=True, exist_ok=True)
         (chunks_dir / "study.json").write_text(json.dumps(
@@ -615,16 +613,13 @@ def run_close_loop(train_path, test_path, out_dir, *, slider_mass_kg=None, plots
     :class:`~l1b2.closeloop.result.CloseLoopResult`; its ``wall_time_s``
     counts loading and the fit.
     """
-    import contextlib
-
     from .closeloop.loop import CloseLoop
-    from .cluster import dask_client
+    from .cluster import optional_client
     t_start = time.perf_counter()
     with output_dir(Path(out_dir), command="close-loop") as tmp:
         train, test, _ = load_train_test(train_path, test_path, slider_mass_kg=slider_mass_kg,
                                          allow_unusual_units=allow_unusual_units)
-        parallel = scheduler is not None or (workers or 0) > 1
-        with (dask_client(workers, scheduler) if parallel else contextlib.nullcontext()) as client:
+        with optional_client(workers or 0, scheduler, serial_up_to=1) as client:
             result = CloseLoop(progress=progress, client=client, **settings).fit(train, test).result_
         result = dataclasses.replace(result, wall_time_s=round(time.perf_counter() - t_start, 2),
                                      checks=input_checks(train, test))

@@ -123,8 +123,9 @@ class CloseLoop:
         below this uncorrected level is still refit and cross-validated (one per round; ``None``: off).
         The screen only decides what is worth the refit: Bonferroni over ~30 families misses an effect
         whose per-run gains are uneven (a drift in time) although the re-identified model improves on
-        held-out runs; what is added is decided by the acceptance rule. Off by default: each screened
-        round costs two cross-validated refits, which made the close-loop tests 2-4x slower (measured).
+        held-out runs; what is added is decided by the acceptance rule. A screened round costs the
+        cross-validated refits of the current model and of one candidate (and, if it is accepted, the
+        next round).
 
     Attributes
     ----------
@@ -138,7 +139,7 @@ class CloseLoop:
                  shortlist: int = 2, refit_folds: int = DEFAULT_REFIT_FOLDS,
                  min_cv_gain: float = DEFAULT_MIN_CV_GAIN, min_cv_drop: float = DEFAULT_MIN_CV_DROP,
                  refit_nfev: int = DEFAULT_REFIT_NFEV,
-                 final_nfev: int = 60, screen_alpha: float | None = None, noise_fit: str = "alternate",
+                 final_nfev: int = 60, screen_alpha: float | None = 0.01, noise_fit: str = "alternate",
                  client=None):
         self.order = order
         self.k_folds = k_folds
@@ -253,7 +254,7 @@ class CloseLoop:
             v_cur = cur.predict_free_run(dtr)
             r = res.drive_residual(dtr, v_cur)
             cands = [c for c in pool if c.family not in it.effects.families]
-            say(f"round {rnd}: scoring {len(cands)} candidate effects (linearised)")
+            say(f"round {n_rnd}: scoring {len(cands)} candidate effects (linearised)")
             scores = score_candidates(cands, r, dtr, mask, cur.params_, m_s, v_pred=v_cur, k=self.k_folds,
                                       seed=self.seed)
             level = significance_level(scores, self.alpha)
@@ -274,7 +275,7 @@ class CloseLoop:
                 y, A, S, runs_m = design(s.candidate, r, dtr, mask, cur.params_, m_s, v_pred=v_cur)
                 jobs.append((it.effects.add(s.candidate, s.phi), fold_start_phi(S, A, y, runs_m, folds)))
                 labels.append(s.candidate.label)
-            say(f"round {rnd}: cross-validating {'the current model and ' if cur_err is None else ''}the refit "
+            say(f"round {n_rnd}: cross-validating {'the current model and ' if cur_err is None else ''}the refit "
                 f"with {', '.join(labels)} over {len(folds)} run folds")
             errs = cv_errors(dtr, mask, m_s, folds, cur.params_, jobs, order=self.order, seed=self.seed,
                              max_nfev=self.refit_nfev, client=self.client)
@@ -291,7 +292,7 @@ class CloseLoop:
             if rnd == 1:
                 it.chosen = next(s for s in short if s.candidate is pick.candidate)
                 it.significant = [s for s in short if any(t.candidate is s.candidate for t in ok)]
-            say(f"round {rnd}: adding {pick.candidate.label}; re-identifying jointly")
+            say(f"round {n_rnd}: adding {pick.candidate.label}; re-identifying jointly")
             effects = it.effects.add(pick.candidate, pick.phi)
             model = refit(dtr, mask, m_s, cur.params_, effects, order=self.order, seed=self.seed,
                           max_nfev=self.final_nfev, max_outer=3)

@@ -1,0 +1,29 @@
+"""Print the close-the-loop cases recorded by the tests (``pytest --junitxml=FILE``) as a markdown table.
+
+Usage: python bench/case_table.py FILE.xml [FILE.xml ...]
+"""
+import json
+import sys
+import xml.etree.ElementTree as ET
+
+
+def rows(paths):
+    for path in paths:
+        for case in ET.parse(path).getroot().iter("testcase"):
+            outcome = "fail" if case.find("failure") is not None or case.find("error") is not None else "pass"
+            for prop in case.iter("property"):
+                if prop.get("name") == "case":
+                    yield {**json.loads(prop.get("value")), "test": outcome}
+
+
+def main(argv):
+    print("| world | case | test | traced_to | effects added | TEST free-run nrmse before -> after | b0 |")
+    print("|---|---|---|---|---|---|---|")
+    for r in sorted(rows(argv), key=lambda r: (r["world"], r["case"])):
+        b0 = f"{100 * r['b0']:.2f} %" if r.get("b0") is not None else ""
+        print(f"| {r['world']} | {r['case']} | {r['test']} | {', '.join(r['traced_to']) or '-'} | "
+              f"{', '.join(r['added']) or '-'} | {100 * r['before']:.2f} -> {100 * r['after']:.2f} % | {b0} |")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
