@@ -28,7 +28,13 @@ the generic time/speed/temperature terms fittable: thermal_drift 4 unchanged
 measurement chain settled before the rounds (physics re-identified on the
 position's derivative), speed_lowpass seed 8 passes (traced speed, load,
 voltage; TEST 3.65 -> 3.42 % after the filter, 1.05 % after the load x voltage
-term; it failed with the filter applied after the rounds: 3.65 -> 1.50 %, speed not traced).
+term; it failed with the filter applied after the rounds: 3.65 -> 1.50 %, speed not traced). Fifth
+session, with the uncorrected screen (``screen_alpha=0.01``) on by default: all eight single-effect
+cases pass (thermal_drift 4 and 12 now too), pairs 5 and 7 pass, the ten-seed control and
+speed_lowpass 8 pass; pair 6 (direction_asymmetry + thermal_drift) still fails: after the direction
+and load x voltage terms, the time candidates' linearised held-out gain on TRAIN is 0.055 (p 0.23),
+the self-heating (driven by V0^2) having been taken up by the voltage terms. Each case's figures are
+recorded (``pytest --junitxml=F``, then ``python bench/case_table.py F``).
 """
 
 import functools
@@ -176,7 +182,7 @@ def test_measurement_chain_filter_is_found_from_position_and_speed_alone():
 
 
 @pytest.mark.slow
-def test_realistic_measurement_chain_effect():
+def test_realistic_measurement_chain_effect(record_property):
     res, truth = _run(("speed_lowpass",), 8)
-    _check_effects(res, truth, 8, 2)
+    _check_effects(res, truth, 8, 2, record_property)
     assert res.diagnosis["measurement_chain"]["accepted"]

@@ -204,8 +204,9 @@ def _close_loop_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--min-cv-gain", type=float, default=0.03, help="smallest relative fall of the cross-validated "
                    "free-run error (re-identified model, folds over runs) for an effect to be added")
     p.add_argument("--min-cv-drop", type=float, default=0.005, help="smallest absolute fall of the cross-validated "
-                   "free-run nrmse (share of the speed's rms; 0.005 = 0.5 percentage points) for an effect to be "
-                   "added: the materiality threshold (0 reports every structural term that helps)")
+                   "free-run nrmse (share of the speed's rms; 0.005 = 0.5 percentage points) for a structural term "
+                   "(one relaxing Eq. 29's linearisation) to be added: the materiality threshold (0 reports every "
+                   "structural term that helps)")
     p.add_argument("--screen-alpha", type=float, default=0.01, help="when no candidate passes the Bonferroni-"
                    "corrected screen, the best one with a run-level p-value below this (uncorrected) level, e.g. "
                    "0.01, is still refit and cross-validated (finds drifts in time); 0: off")
