@@ -280,6 +280,27 @@ def test_structural_terms_are_the_voltage_dependence_of_eq29s_slopes_and_trace_a
     assert order_traced([], False, ["time"], evidence=[t]) == []
 
 
+def test_materiality_threshold_binds_structural_terms_only():
+    # reference: measured on the reference motor: the thermal drift of seed 11 halved a small held-out error
+    # (CV nrmse 0.73 -> 0.41 %, 4 of 4 folds) and must be added; a structural term with the same figures (on
+    # clean data a voltage x speed term halves a 0.4 % error) must not be: it is Eq. 29's own error
+    from l1b2.closeloop.acceptance import DEFAULT_MIN_CV_DROP, FoldErrors, RefitCV, accepts, materiality
+    ctx, df = _toy_context_and_frame()
+    by = {c.family: c for c in full_library()(ctx, df)}
+    ss = np.full(4, 1.0)
+    cur = FoldErrors(sse=ss * 0.0073 ** 2, ss_meas=ss)
+    ext = FoldErrors(sse=ss * 0.0041 ** 2, ss_meas=ss)
+    for family, added in (("thermal_drift", True), ("smooth_voltage_x_speed", False)):
+        t = RefitCV(by[family], cur, ext)
+        assert t.current.nrmse == pytest.approx(0.0073) and t.gain > 0.6 and t.folds_improved == 4
+        assert accepts(t, min_drop=materiality(t.candidate, DEFAULT_MIN_CV_DROP)) is added, family
+    # a material fall adds a structural term too; a non-structural one still needs the relative gain
+    big = RefitCV(by["smooth_voltage_x_speed"], FoldErrors(ss * 0.02 ** 2, ss), FoldErrors(ss * 0.01 ** 2, ss))
+    assert accepts(big, min_drop=materiality(big.candidate, DEFAULT_MIN_CV_DROP))
+    small = RefitCV(by["thermal_drift"], cur, FoldErrors(ss * 0.99 * 0.0073 ** 2, ss))
+    assert not accepts(small, min_drop=materiality(small.candidate, DEFAULT_MIN_CV_DROP))
+
+
 def test_estimator_takes_measurements_and_stores_settings():
     # reference: scikit-learn convention: __init__ stores the settings unchanged; fit refuses file paths
     lib = named_library()

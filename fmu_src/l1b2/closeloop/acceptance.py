@@ -155,6 +155,15 @@ def accepts(r: RefitCV, *, min_gain: float = DEFAULT_MIN_CV_GAIN, min_drop: floa
             and r.current.nrmse - r.extended.nrmse >= min_drop)
 
 
+def materiality(candidate: CandidateForce, min_drop: float) -> float:
+    """The smallest fall of the CV free-run nrmse that ``candidate`` must bring: ``min_drop`` if it is structural.
+
+    Structural terms relax Eq. 29's own linearisation; clean data carry them too, so only a material fall
+    adds one. Any other candidate needs only the relative rule of :func:`accepts` (returns 0).
+    """
+    return min_drop if candidate.structural else 0.0
+
+
 def fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, init, effects: EffectSet, order: int,
                seed: int, max_nfev: int) -> tuple[float, float, bool]:
     """One fold: refit on the runs not in ``held_runs``, predict those in free run.

@@ -64,7 +64,8 @@ from . import chain
 from . import residuals as res
 from .candidates import CandidateSource, Context, full_library
 from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT_FOLDS, DEFAULT_REFIT_NFEV,
-                         EffectSet, RefitCV, accepts, cv_errors, fold_start_phi, refit, stratified_folds)
+                         EffectSet, RefitCV, accepts, cv_errors, fold_start_phi, materiality, refit,
+                         stratified_folds)
 from .result import CloseLoopResult, ResidualAnalysis
 from .selection import (DEFAULT_ALPHA, DEFAULT_PARSIMONY, SHORTLIST_MIN_GAIN, Score, best_per_family, design,
                         score_candidates, shortlist, significance_level)
@@ -287,7 +288,8 @@ class CloseLoop:
                 cur_err, errs = errs[0], errs[1:]
             trials = [RefitCV(s.candidate, cur_err, err, s.cv_gain, s.phi) for s, err in zip(short, errs)]
             it.trials.append(trials)
-            ok = [t for t in trials if accepts(t, min_gain=self.min_cv_gain, min_drop=self._min_drop(t.candidate))]
+            ok = [t for t in trials if accepts(t, min_gain=self.min_cv_gain,
+                                               min_drop=materiality(t.candidate, self.min_cv_drop))]
             if not ok:
                 break
             best_gain = max(t.gain for t in ok)
@@ -338,10 +340,6 @@ class CloseLoop:
                           "regressors": ["speed"], "cv": {"cv_gain": ch["cv_gain"], "train_free_run_gain": gain},
                           "metrics": _metrics(filt, dtr, dte)})
         return rec, ptr
-
-    def _min_drop(self, c) -> float:
-        """The materiality threshold of candidate ``c``: ``min_cv_drop`` for structural terms, 0 otherwise."""
-        return self.min_cv_drop if c.structural else 0.0
 
     def _immaterial(self, it: _Iteration) -> list[RefitCV]:
         """Candidates of the last round that pass every acceptance rule but the materiality threshold.
