@@ -38,8 +38,14 @@ def case_row(world: str, case: str, res, b0: float | None = None) -> str:
     """
     import json
     d = res.diagnosis
-    b = res.before["test"]["free_run"]["nrmse"]
-    a = res.after["test"]["free_run"]["nrmse"] if res.after is not None else b
+    b, a = held_out_nrmse(res)
     return json.dumps({"world": world, "case": case, "traced_to": d["traced_to"],
                        "added": [e["label"] for e in d["effects"]], "before": b, "after": a, "b0": b0,
                        "wall_s": res.wall_time_s})
+
+
+def held_out_nrmse(res) -> tuple[float, float]:
+    """TEST free-run nrmse of a close-loop result, ``(baseline, final)`` (final = baseline if nothing was added)."""
+    b = res.before["test"]["free_run"]["nrmse"]
+    a = res.after["test"]["free_run"]["nrmse"] if res.after is not None else b
+    return b, a

@@ -48,7 +48,7 @@ from l1b2.data.measurements import load_measurements
 from l1b2.data.metrics import report_metrics
 from l1b2.ident.estimator import PredictorIdentifier
 from l1b2.rig.experiment import RigPlan
-from rigcache import case_row, rig_dir
+from rigcache import case_row, held_out_nrmse, rig_dir
 
 WORLD = "realistic"
 
@@ -77,16 +77,10 @@ def _clean_baseline(seed: int) -> float:
     return report_metrics(te.df, est.predict_one_step(te.df), est.predict_free_run(te.df))["free_run"]["nrmse"]
 
 
-def _test_nrmse(res):
-    b = res.before["test"]["free_run"]["nrmse"]
-    a = res.after["test"]["free_run"]["nrmse"] if res.after is not None else b
-    return b, a
-
-
 def _check_effects(res, truth, seed, n_first, record):
     want = [i["regressor"] for i in truth["injections"]]
     d = res.diagnosis
-    b, a = _test_nrmse(res)
+    b, a = held_out_nrmse(res)
     b0 = _clean_baseline(seed)
     record("case", case_row(WORLD, "+".join(i["name"] for i in truth["injections"]) + f" {seed}", res, b0))
     assert d["significant"], d["message"]
@@ -97,7 +91,7 @@ def _check_effects(res, truth, seed, n_first, record):
 
 def _check_control(res, case, record):
     record("case", case_row(WORLD, case, res))
-    b, a = _test_nrmse(res)
+    b, a = held_out_nrmse(res)
     assert a <= 1.02 * b, (b, a, res.diagnosis["message"])
     d = res.diagnosis
     # what was added (if anything) is reported, round by round
