@@ -47,8 +47,7 @@ from l1b2.closeloop.loop import close_loop
 from l1b2.data.measurements import load_measurements
 from l1b2.data.metrics import report_metrics
 from l1b2.ident.estimator import PredictorIdentifier
-from l1b2.rig.experiment import RigPlan
-from rigcache import case_row, held_out_nrmse, rig_dir
+from rigcache import case_row, held_out_nrmse, rig_dir, world_plan
 
 WORLD = "realistic"
 
@@ -56,7 +55,7 @@ WORLD = "realistic"
 def _dir(effects, seed):
     name = "+".join(effects) or "clean"
     return rig_dir(f"{WORLD}_{name}_{seed}", injections=list(effects), injection_seed=seed,
-                   plan=RigPlan(step_s=1e-3, seed=seed), world=WORLD)
+                   plan=world_plan(WORLD, seed), world=WORLD)
 
 
 @functools.cache

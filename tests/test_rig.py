@@ -1,6 +1,7 @@
 """Virtual rig: the paper's experiment (Sect. 5.1, Fig. 9) on the co-simulated motor."""
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pandas as pd
@@ -13,10 +14,14 @@ from l1b2.physics.params import load_motor
 from l1b2.rig.experiment import (
     INJECTIONS,
     RigPlan,
+    RunSpec,
     apply_overrides,
     run_experiment,
+    run_contact_factors,
+    simulate_run,
     write_experiment,
 )
+from l1b2.errors import SimulationError
 
 PLAN = RigPlan(voltages_V=(220.0, 272.0, 324.0), loads_kg=(-0.05, 0.0, 0.05), step_s=1e-3)
 
@@ -164,4 +169,75 @@ def test_cli_refuses_bad_input_with_one_line(capsys, tmp_path):
     code = cli_main(["rig", "--out", str(tmp_path / "r"), "--inject", "no_such_effect", "--quiet"])
     err = capsys.readouterr().err
     assert code != 0 and "no_such_effect" in err and err.count("\n") == 1
+    assert not (tmp_path / "r").exists()
+
+
+NOISY = RigPlan(voltages_V=(324.0,), loads_kg=(0.0, 0.05), step_s=1e-3, seed=5)
+
+
+@pytest.fixture(scope="module")
+def noise_pair():
+    """The same small plan without and with speed noise and run scatter (same seed, same run order)."""
+    clean, _ = run_experiment(NOISY, engine="inprocess")
+    noisy, truth = run_experiment(replace(NOISY, **{"speed_noise_m_s": 2e-3, "run_scatter": 0.05}),
+                                  engine="inprocess")
+    return clean, noisy, truth
+
+
+def test_speed_noise_is_white_with_the_declared_std(noise_pair):
+    # reference: closed form: speed = derivative of the encoder position + N(0, sigma^2) per sample
+    clean, _, _ = noise_pair
+    plan = replace(NOISY, **{"speed_noise_m_s": 2e-3})
+    noisy, _ = run_experiment(plan, engine="inprocess")
+    np.testing.assert_array_equal(noisy.position_m.to_numpy(), clean.position_m.to_numpy())
+    e = noisy.speed_m_s.to_numpy() - clean.speed_m_s.to_numpy()
+    n = len(e)
+    assert abs(np.std(e) / 2e-3 - 1) < 4 / np.sqrt(2 * n)  # std of a sample std: sigma / sqrt(2n)
+    assert abs(np.mean(e)) < 4 * 2e-3 / np.sqrt(n)
+    assert abs(np.corrcoef(e[1:], e[:-1])[0, 1]) < 4 / np.sqrt(n)  # white: no lag-1 correlation
+    again, _ = run_experiment(plan, engine="inprocess")
+    np.testing.assert_array_equal(again.speed_m_s.to_numpy(), noisy.speed_m_s.to_numpy())  # seeded
+    other, _ = run_experiment(replace(plan, **{"seed": 6}), engine="inprocess")
+    assert not np.allclose(np.sort(other.speed_m_s.to_numpy()), np.sort(noisy.speed_m_s.to_numpy()))
+
+
+def test_run_scatter_runs_each_traverse_with_its_own_preload(noise_pair):
+    # reference: independent solution: each run equals a single traverse of the motor with P0 and mu_p
+    # scaled by the run's recorded factors (and the noise-free runs differ from it by the scatter's effect)
+    clean, noisy, truth = noise_pair
+    factors = np.column_stack([truth["run_contact_factors"]["P0"], truth["run_contact_factors"]["mu_p"]])
+    assert len(factors) == noisy.run.nunique()
+    np.testing.assert_array_equal(factors, run_contact_factors(replace(NOISY, run_scatter=0.05), len(factors)))
+    mp = load_motor()
+    k = int(np.argmax(np.abs(factors - 1).max(axis=1)))  # the run with the largest contact change
+    row = noisy[noisy.run == k + 1].iloc[0]
+    spec = RunSpec(k + 1, float(row.voltage_V), float(row.load_kg), int(row.direction), float(row.time_s))
+    scaled = mp.replace(stator__P0_N=mp.stator.P0_N * factors[k, 0], interface__mu_p=mp.interface.mu_p * factors[k, 1])
+    one = simulate_run(scaled, spec, NOISY, nominal=mp)
+    np.testing.assert_array_equal(one.position_m.to_numpy(), noisy[noisy.run == k + 1].position_m.to_numpy())
+    assert not np.array_equal(one.position_m.to_numpy(), clean[clean.run == k + 1].position_m.to_numpy())
+
+
+def test_run_contact_factors_have_the_declared_scatter():
+    # reference: closed form: 1 + s z, z standard normal (mean 1, std s), the same draws for any s,
+    # preload and friction drawn independently
+    f = run_contact_factors(RigPlan(run_scatter=0.02, seed=9), 20000)
+    assert f.shape == (20000, 2) and abs(np.corrcoef(f.T)[0, 1]) < 4 / np.sqrt(20000)
+    assert abs(f.mean() - 1) < 4 * 0.02 / np.sqrt(20000) and abs(f.std() / 0.02 - 1) < 4 / np.sqrt(40000)
+    g = run_contact_factors(RigPlan(run_scatter=0.04, seed=9), 20000)
+    np.testing.assert_allclose(g - 1, 2 * (f - 1), rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(run_contact_factors(RigPlan(seed=9), 5), np.ones((5, 2)))
+
+
+@pytest.mark.parametrize("field,value", [("speed_noise_m_s", -1e-3), ("run_scatter", float("nan")),
+                                         ("run_scatter", 0.3)])
+def test_rig_plan_refuses_bad_noise_settings(field, value):
+    with pytest.raises(SimulationError, match=f"RigPlan.{field}"):
+        RigPlan(**{field: value})
+
+
+def test_rig_cli_refuses_a_negative_speed_noise_with_one_line(capsys, tmp_path):
+    code = cli_main(["rig", "--out", str(tmp_path / "r"), "--speed-noise", "-0.001", "--quiet"])
+    err = capsys.readouterr().err
+    assert code != 0 and "speed_noise_m_s" in err and err.count("\n") == 1
     assert not (tmp_path / "r").exists()

@@ -104,7 +104,8 @@ def cmd_rig(args) -> int:
 
     mp = _motor(args)
     plan = RigPlan(voltages_V=args.voltages, loads_kg=args.loads, step_s=args.step, seed=args.seed,
-                   record_temperature=args.record_temperature, pause_s=args.pause, max_run_s=args.max_run)
+                   record_temperature=args.record_temperature, pause_s=args.pause, max_run_s=args.max_run,
+                   speed_noise_m_s=args.speed_noise, run_scatter=args.run_scatter)
     injections = [parse_injection(s) for s in args.inject]
     if args.jobs is not None:
         print("l1b2: warning: --jobs is deprecated, use --workers", file=sys.stderr)
@@ -265,7 +266,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--step", type=float, default=2e-4, help="communication step [s]")
     p.add_argument("--pause", type=float, default=1.0, help="pause between runs [s]")
     p.add_argument("--max-run", type=float, default=4.0, help="longest run [s]")
-    p.add_argument("--seed", type=int, default=0, help="seed of the run order")
+    p.add_argument("--seed", type=int, default=0, help="seed of the run order, the speed noise and the run scatter")
+    p.add_argument("--speed-noise", type=float, default=0.0, metavar="M_PER_S",
+                   help="std of white noise on the speed channel [m/s] (default 0)")
+    p.add_argument("--run-scatter", type=float, default=0.0, metavar="REL",
+                   help="relative std of the contact's preload and friction coefficient from run to run "
+                        "(default 0; 0.02 is a 2 %% scatter)")
     p.add_argument("--inject", action="append", default=[], metavar="EFFECT[:Comp.param=value,...]",
                    help="switch on an undeclared physical effect (repeatable); see `l1b2 injections`")
     p.add_argument("--injection-seed", "--effect-seed", dest="injection_seed", type=int,

@@ -13,6 +13,12 @@ Run order: the (V0, load) conditions are visited in a seeded random order,
 each as a forward (CH1) then backward (CH2) traverse, so that slow drifts on
 the experiment clock are not confounded with the factors.
 
+Noise and repeatability (off by default, seeded by ``RigPlan.seed``): white
+noise on the speed channel (``speed_noise_m_s``) and a run-to-run scatter of
+the contact's preload and friction coefficient (``run_scatter``, independent
+factors per run, as a contact that re-seats between traverses gives). With both off, runs of the same conditions are
+identical and a different seed only reorders the runs.
+
 Injections: named physical effects that the reduced predictor does not
 contain (:data:`INJECTIONS`). Each switches on declared parameters of the FMU
 system that are off in the reference motor; with none injected the rig is
@@ -188,6 +194,22 @@ class RigPlan:
     record_temperature: bool = False
     shuffle: bool = True
     seed: int = 0
+    #: standard deviation [m/s] of white noise on the DAQ's speed channel (pick-up, vibration of the
+    #: sensor mount); drawn from ``seed``. 0: the speed is the clean derivative of the encoder position
+    speed_noise_m_s: float = 0.0
+    #: relative standard deviation of the contact's preload and friction coefficient from run to run (the
+    #: contact re-seats, debris, wear, humidity: a real rig's run-to-run repeatability); two independent
+    #: factors per run drawn from ``seed``. 0: every run alike
+    run_scatter: float = 0.0
+
+    def __post_init__(self):
+        for name in ("speed_noise_m_s", "run_scatter"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise SimulationError(f"RigPlan.{name} = {value!r}: must be a finite number >= 0")
+        if self.run_scatter >= 0.25:
+            raise SimulationError(f"RigPlan.run_scatter = {self.run_scatter!r} (relative preload std): "
+                                  "must be below 0.25 (a contact factor must stay positive)")
 
 
 @dataclass(frozen=True)
@@ -307,6 +329,33 @@ def plan_runs(plan: RigPlan) -> list[tuple[float, float, int]]:
     return [(V, L, d) for V, L in conds for d in plan.directions]
 
 
+def run_contact_factors(plan: RigPlan, n_runs: int) -> np.ndarray:
+    """Each run's contact factors, shape ``(n_runs, 2)``: preload ``P0`` and friction coefficient ``mu_p``.
+
+    Each factor is 1 + ``run_scatter`` x an independent standard normal draw,
+    from its own stream of ``plan.seed`` (not the run order's), so changing
+    ``run_scatter`` scales the same draws.
+    """
+    z = np.random.default_rng([plan.seed, 1]).standard_normal((n_runs, 2))
+    return 1.0 + plan.run_scatter * z
+
+
+def scattered_motor(motor: MotorParams, factors) -> MotorParams:
+    """``motor`` with one run's contact factors (preload, friction coefficient) applied."""
+    return motor.replace(stator__P0_N=motor.stator.P0_N * float(factors[0]),
+                         interface__mu_p=motor.interface.mu_p * float(factors[1]))
+
+
+def add_speed_noise(df: pd.DataFrame, plan: RigPlan) -> pd.DataFrame:
+    """The speed column plus white noise of standard deviation ``plan.speed_noise_m_s`` (from ``plan.seed``)."""
+    if plan.speed_noise_m_s == 0:
+        return df
+    out = df.copy()
+    z = np.random.default_rng([plan.seed, 2]).standard_normal(len(out))
+    out[dataio.SPEED] = out[dataio.SPEED].to_numpy(float) + plan.speed_noise_m_s * z
+    return out
+
+
 def is_stateful(motor: MotorParams, injected=()) -> bool:
     """Whether runs carry state from one to the next (then they run serially, in rig order).
 
@@ -354,29 +403,35 @@ def run_experiment(plan: RigPlan = RigPlan(), mp: MotorParams | None = None, inj
     daq = {k[len(DAQ_PREFIX):]: v for k, v in overrides.items() if k.startswith(DAQ_PREFIX)}
     motor = apply_overrides(nominal, {k: v for k, v in overrides.items() if not k.startswith(DAQ_PREFIX)})
     conditions = plan_runs(plan)
+    factors = run_contact_factors(plan, len(conditions))
+    motors = [motor if plan.run_scatter == 0 else scattered_motor(motor, f) for f in factors]
     bar = None
     if progress:
         from tqdm import tqdm
         bar = tqdm(total=len(conditions), desc=f"rig ({engine})", unit="run")
     try:
         if is_stateful(motor, injected) or (workers <= 1 and not scheduler):
-            frames = _run_serially(motor, nominal, conditions, plan, engine, fmu_dir, bar)
+            frames = _run_serially(motors, nominal, conditions, plan, engine, fmu_dir, bar)
         else:
-            frames = _run_on_cluster(motor, nominal, conditions, plan, engine, fmu_dir, bar, workers, scheduler)
+            frames = _run_on_cluster(motors, nominal, conditions, plan, engine, fmu_dir, bar, workers, scheduler)
     finally:
         if bar:
             bar.close()
     df = pd.concat(frames, ignore_index=True)
+    df = add_speed_noise(df, plan)  # the sensor's noise, then the DAQ's filter (if injected) acts on it
     if "speed_tau_s" in daq:
         df = lowpass_speed(df, daq["speed_tau_s"])
     truth = {"injections": injected, "plan": asdict(plan), "engine": engine, "motor": nominal.name}
+    if plan.run_scatter > 0:
+        truth["run_contact_factors"] = {"P0": factors[:, 0].tolist(), "mu_p": factors[:, 1].tolist()}
     return df, truth
 
 
-def _run_serially(motor, nominal, conditions, plan, engine, fmu_dir, bar) -> list:
+def _run_serially(motors, nominal, conditions, plan, engine, fmu_dir, bar) -> list:
     """The runs one after the other on one experiment clock; the stator temperature carried over."""
     frames, t_next, T_st = [], 0.0, plan.ambient_degC
     for k, (V, L, d) in enumerate(conditions):
+        motor = motors[k]
         spec = RunSpec(k + 1, V, L, d, t_next, T_st if motor.stator.thermal_tau_s > 0 else None)
         f = simulate_run(motor, spec, plan, engine, fmu_dir, nominal)
         frames.append(f)
@@ -389,13 +444,13 @@ def _run_serially(motor, nominal, conditions, plan, engine, fmu_dir, bar) -> lis
     return frames
 
 
-def _run_on_cluster(motor, nominal, conditions, plan, engine, fmu_dir, bar, workers, scheduler) -> list:
+def _run_on_cluster(motors, nominal, conditions, plan, engine, fmu_dir, bar, workers, scheduler) -> list:
     """Independent runs on the Dask engine, then laid on one experiment clock in rig order."""
     from ..cluster import dask_client, run_tasks
     specs = [RunSpec(k + 1, V, L, d) for k, (V, L, d) in enumerate(conditions)]
     frames = [None] * len(specs)
     with dask_client(workers, scheduler) as client:
-        args = [(motor, s, plan, engine, None if fmu_dir is None else str(fmu_dir), nominal) for s in specs]
+        args = [(m, s, plan, engine, None if fmu_dir is None else str(fmu_dir), nominal) for m, s in zip(motors, specs)]
         for i, f in run_tasks(simulate_run, args, client=client, name="l1b2-rig"):
             frames[i] = f
             if bar:
