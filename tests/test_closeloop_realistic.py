@@ -35,6 +35,18 @@ speed_lowpass 8 pass; pair 6 (direction_asymmetry + thermal_drift) still fails: 
 and load x voltage terms, the time candidates' linearised held-out gain on TRAIN is 0.055 (p 0.23),
 the self-heating (driven by V0^2) having been taken up by the voltage terms. Each case's figures are
 recorded (``pytest --junitxml=F``, then ``python bench/case_table.py F``).
+
+Sixth session: the realistic world's rig now has measurement noise and run-to-run scatter
+(``rigcache.RIG_NOISE``: 1 mm/s white noise on the speed column, 2 % scatter of the contact's preload
+and friction coefficient per run), so the seeds are different data. Whole file, ``pytest -n 2 -m "slow
+or not slow"``: 11 passed, 5 failed in 81 min. Pass: the ten-seed control (each gets one structural
+term; TEST 2.78-4.36 % -> 1.67-2.46 %), clean 21, the load-path report, direction_asymmetry 2 and 13,
+bar_waviness 2, bar_bump 8, pulley_friction 11, pairs 5 and 7. Fail: thermal_drift 4 and 12 and pair 6
+(time not traced; the cut holds in all three), drive_saturation 3 (nothing significant: with the
+scatter its baseline, 2.25 %, is below the clean one, 2.67 %), speed_lowpass 8 (filter found, CV gain
+0.998, then refused by the 3 % TRAIN gate at 2.3 %; the gate is now "any fall", see
+``CloseLoop._chain``; with it speed_lowpass 8 passes: traced speed, load, voltage, TEST 3.68 -> 2.24 %,
+and the exact world's chain test still passes).
 """
 
 import functools

@@ -315,8 +315,12 @@ class CloseLoop:
         position and speed alone, cross-validated over runs), the physics is
         re-identified on the position's derivative (the slider's speed) and the
         filter is applied to its prediction (:class:`ChainModel`); this is kept
-        when it lowers TRAIN's free-run sum of squares on the measured speed by
-        ``min_cv_gain`` against the baseline. The rounds then extend that model
+        when it lowers TRAIN's free-run sum of squares on the measured speed
+        against the baseline (by any amount: the evidence for the filter is the
+        channel's own cross-validation over runs; this only guards against harm.
+        A 3 % threshold refused a 4.6 ms low-pass found with CV gain 0.998 on a
+        rig with run-to-run scatter, where the filter lowered TRAIN's free-run
+        sum of squares by 2.3 %). The rounds then extend that model
         on the derivative data. Otherwise TRAIN is returned unchanged.
         """
         ch = chain.speed_channel(dtr, mask, k=self.k_folds, seed=self.seed)
@@ -332,7 +336,7 @@ class CloseLoop:
         sse1 = float(np.sum((v - filt.predict_free_run(dtr)[mask]) ** 2))
         gain = 1 - sse1 / sse0 if sse0 > 0 else 0.0
         rec["train_free_run_gain"] = gain
-        if gain < self.min_cv_gain:
+        if not gain > 0:
             rec["accepted"] = False
             return rec, dtr
         it.model, it.output_filter = filt.model, ch["filter"]
