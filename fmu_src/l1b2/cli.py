@@ -221,6 +221,38 @@ def _close_loop_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true")
 
 
+def _add_rig_parser(sub) -> None:
+    """The ``rig`` subcommand's options."""
+    p = sub.add_parser("rig", help="the paper's experiment on the virtual rig (data-format CSVs + Fig. 9 plots)")
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--voltages", type=_floats, default=(220.0, 255.0, 290.0, 324.0), help="V0 levels [V]")
+    p.add_argument("--loads", type=_floats, default=(-0.09, -0.07, -0.05, -0.03, 0.0, 0.03, 0.05, 0.07, 0.09),
+                   help="signed loads [kg]")
+    p.add_argument("--engine", choices=("fmu", "inprocess"), default="fmu")
+    p.add_argument("--fmu-dir", type=Path, help="folder with the subsystem FMUs (default: built once into the "
+                   "per-user cache)")
+    _engine_args(p, default_workers=2, what="runs (stateful effects run serially; 1 = serially here)")
+    p.add_argument("--jobs", type=int, help="deprecated alias of --workers")
+    p.add_argument("--step", type=float, default=2e-4, help="communication step [s]")
+    p.add_argument("--pause", type=float, default=1.0, help="pause between runs [s]")
+    p.add_argument("--max-run", type=float, default=4.0, help="longest run [s]")
+    p.add_argument("--seed", type=int, default=0, help="seed of the run order, the speed noise and the run scatter")
+    p.add_argument("--speed-noise", type=float, default=0.0, metavar="M_PER_S",
+                   help="std of white noise on the speed channel [m/s] (default 0)")
+    p.add_argument("--run-scatter", type=float, default=0.0, metavar="REL",
+                   help="relative std of the contact's preload and friction coefficient from run to run "
+                        "(default 0; 0.02 is a 2 %% scatter)")
+    p.add_argument("--inject", action="append", default=[], metavar="EFFECT[:Comp.param=value,...]",
+                   help="switch on an undeclared physical effect (repeatable); see `l1b2 injections`")
+    p.add_argument("--injection-seed", "--effect-seed", dest="injection_seed", type=int,
+                   help="draw the injections' sizes at random with this seed")
+    p.add_argument("--record-temperature", action="store_true", help="write the stator temperature column")
+    p.add_argument("--no-plots", action="store_true")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    _motor_args(p)
+    p.set_defaults(func=cmd_rig)
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="l1b2", description="L1B2 linear ultrasonic motor: FMUs, co-simulation, "
                                                             "virtual rig, identification")
@@ -253,34 +285,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--plot", type=Path, help="PNG of speed, position and tip amplitude")
     p.set_defaults(func=cmd_simulate)
 
-    p = sub.add_parser("rig", help="the paper's experiment on the virtual rig (data-format CSVs + Fig. 9 plots)")
-    p.add_argument("--out", type=Path, required=True, help="output folder")
-    p.add_argument("--voltages", type=_floats, default=(220.0, 255.0, 290.0, 324.0), help="V0 levels [V]")
-    p.add_argument("--loads", type=_floats, default=(-0.09, -0.07, -0.05, -0.03, 0.0, 0.03, 0.05, 0.07, 0.09),
-                   help="signed loads [kg]")
-    p.add_argument("--engine", choices=("fmu", "inprocess"), default="fmu")
-    p.add_argument("--fmu-dir", type=Path, help="folder with the subsystem FMUs (default: built once into the "
-                   "per-user cache)")
-    _engine_args(p, default_workers=2, what="runs (stateful effects run serially; 1 = serially here)")
-    p.add_argument("--jobs", type=int, help="deprecated alias of --workers")
-    p.add_argument("--step", type=float, default=2e-4, help="communication step [s]")
-    p.add_argument("--pause", type=float, default=1.0, help="pause between runs [s]")
-    p.add_argument("--max-run", type=float, default=4.0, help="longest run [s]")
-    p.add_argument("--seed", type=int, default=0, help="seed of the run order, the speed noise and the run scatter")
-    p.add_argument("--speed-noise", type=float, default=0.0, metavar="M_PER_S",
-                   help="std of white noise on the speed channel [m/s] (default 0)")
-    p.add_argument("--run-scatter", type=float, default=0.0, metavar="REL",
-                   help="relative std of the contact's preload and friction coefficient from run to run "
-                        "(default 0; 0.02 is a 2 %% scatter)")
-    p.add_argument("--inject", action="append", default=[], metavar="EFFECT[:Comp.param=value,...]",
-                   help="switch on an undeclared physical effect (repeatable); see `l1b2 injections`")
-    p.add_argument("--injection-seed", "--effect-seed", dest="injection_seed", type=int,
-                   help="draw the injections' sizes at random with this seed")
-    p.add_argument("--record-temperature", action="store_true", help="write the stator temperature column")
-    p.add_argument("--no-plots", action="store_true")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    _motor_args(p)
-    p.set_defaults(func=cmd_rig)
+    _add_rig_parser(sub)
 
     _add_sweep_parser(sub)
     p = sub.add_parser("demo", help="the main job end to end on the reference motor and the virtual rig")
