@@ -208,7 +208,7 @@ class RigPlan:
             if not (math.isfinite(value) and value >= 0):
                 raise SimulationError(f"RigPlan.{name} = {value!r}: must be a finite number >= 0")
         if self.run_scatter >= 0.25:
-            raise SimulationError(f"RigPlan.run_scatter = {self.run_scatter!r} (relative preload std): "
+            raise SimulationError(f"RigPlan.run_scatter = {self.run_scatter!r} (relative contact std): "
                                   "must be below 0.25 (a contact factor must stay positive)")
 
 
