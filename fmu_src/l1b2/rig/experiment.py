@@ -16,8 +16,9 @@ the experiment clock are not confounded with the factors.
 Noise and repeatability (off by default, seeded by ``RigPlan.seed``): white
 noise on the speed channel (``speed_noise_m_s``) and a run-to-run scatter of
 the contact's preload and friction coefficient (``run_scatter``, independent
-factors per run, as a contact that re-seats between traverses gives). With both off, runs of the same conditions are
-identical and a different seed only reorders the runs.
+factors per run, as a contact that re-seats between traverses gives). With
+both off, runs of the same conditions are identical and a different seed
+only reorders the runs.
 
 Injections: named physical effects that the reduced predictor does not
 contain (:data:`INJECTIONS`). Each switches on declared parameters of the FMU
@@ -450,7 +451,8 @@ def _run_on_cluster(motors, nominal, conditions, plan, engine, fmu_dir, bar, wor
     specs = [RunSpec(k + 1, V, L, d) for k, (V, L, d) in enumerate(conditions)]
     frames = [None] * len(specs)
     with dask_client(workers, scheduler) as client:
-        args = [(m, s, plan, engine, None if fmu_dir is None else str(fmu_dir), nominal) for m, s in zip(motors, specs)]
+        where = None if fmu_dir is None else str(fmu_dir)
+        args = [(m, s, plan, engine, where, nominal) for m, s in zip(motors, specs)]
         for i, f in run_tasks(simulate_run, args, client=client, name="l1b2-rig"):
             frames[i] = f
             if bar:
