@@ -12,8 +12,10 @@ for fitting or choosing):
 * without one (control): the held-out free-run nrmse never more than 2 %
   (relative) above the baseline; what was added is reported.
 
-Fast set (``make test``): one control seed and one effect (also checks the
-report's per-round fields). Slow set (``make test-slow``, not in CI: it does
+Fast set (``make test``): one control seed and the speed-channel detector
+(the load-path case, which also checks the report's per-round fields, moved
+to the slow set in the sixth session: on the noisy rig it took 399 s and
+``make test`` 16 min; the exact world's report test stays fast). Slow set (``make test-slow``, not in CI: it does
 not fit CI's time): ten control seeds, six effect kinds, three pairs of
 effects. Measured on 2026-11-23 (second session, with structural terms traced after
 the missing effects and immaterial evidence traced): the single-effect
@@ -122,6 +124,7 @@ def test_realistic_control_ten_seeds(record_property):
         _check_control(_run((), seed)[0], f"clean {seed}", record_property)
 
 
+@pytest.mark.slow  # 399 s on the noisy rig (236 s without noise): `make test` took 16 min with it
 def test_realistic_load_path_effect_report_rounds(tmp_path, capsys):
     # reference: issue 11: report.json gains diagnosis.effects and rounds; the CLI prints a table per round;
     # report.md shows each round; the held-out error cut in quadrature of the excess over the clean world
