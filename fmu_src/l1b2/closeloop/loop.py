@@ -333,7 +333,8 @@ class CloseLoop:
         filt = ChainModel(self._identify(ptr, m_s, mask), ch["filter"])
         v = dtr[dataio.SPEED].to_numpy(float)[mask]
         sse0 = float(np.sum((v - it.model.predict_free_run(dtr)[mask]) ** 2))
-        sse1 = float(np.sum((v - filt.predict_free_run(dtr)[mask]) ** 2))
+        fr1 = filt.predict_free_run(dtr)
+        sse1 = float(np.sum((v - fr1[mask]) ** 2))
         gain = 1 - sse1 / sse0 if sse0 > 0 else 0.0
         rec["train_free_run_gain"] = gain
         if not gain > 0:
@@ -342,7 +343,7 @@ class CloseLoop:
         it.model, it.output_filter = filt.model, ch["filter"]
         it.rounds.append({"round": len(it.rounds), "added": "speed_channel_filter", "effect": "speed_channel_filter",
                           "regressors": ["speed"], "cv": {"cv_gain": ch["cv_gain"], "train_free_run_gain": gain},
-                          "metrics": _metrics(filt, dtr, dte)})
+                          "metrics": _metrics(filt, dtr, dte, train_free_run=fr1)})
         return rec, ptr
 
     def _immaterial(self, it: _Iteration) -> list[RefitCV]:
@@ -483,8 +484,10 @@ def _filter_record(rec: dict, params: dict | None) -> dict:
             "folds_improved": None}
 
 
-def _metrics(model, dtr, dte) -> dict:
-    return {"train": report_metrics(dtr, model.predict_one_step(dtr), model.predict_free_run(dtr)),
+def _metrics(model, dtr, dte, train_free_run=None) -> dict:
+    """TRAIN and TEST metrics of ``model`` (``train_free_run``: its free run on ``dtr``, when already computed)."""
+    fr = model.predict_free_run(dtr) if train_free_run is None else train_free_run
+    return {"train": report_metrics(dtr, model.predict_one_step(dtr), fr),
             "test": (report_metrics(dte, model.predict_one_step(dte), model.predict_free_run(dte))
                      if dte is not None else None)}
 
