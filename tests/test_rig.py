@@ -201,7 +201,7 @@ def test_speed_noise_is_white_with_the_declared_std(noise_pair):
     assert not np.allclose(np.sort(other.speed_m_s.to_numpy()), np.sort(noisy.speed_m_s.to_numpy()))
 
 
-def test_run_scatter_runs_each_traverse_with_its_own_preload(noise_pair):
+def test_run_scatter_runs_each_traverse_with_its_own_contact(noise_pair):
     # reference: independent solution: each run equals a single traverse of the motor with P0 and mu_p
     # scaled by the run's recorded factors (and the noise-free runs differ from it by the scatter's effect)
     clean, noisy, truth = noise_pair
