@@ -266,6 +266,22 @@ def test_one_step_recovers_theta_on_low_noise_data():
 # ---------------------------------------------------------------------------
 
 
+def test_common_noise_loglik_is_the_closed_form_of_the_residual_sum_of_squares():
+    """Eq. 32 with one unknown variance R (the default): at the fit, R = RSS / n and the log-likelihood is
+    -n/2 (log(2 pi RSS / n) + 1), from the residuals of the reported prediction (start-speed term off)."""
+    prm, th, names = _truth(3)
+    df = simulate_dataset(prm, SMALL, M_S, noise_std=1e-4, seed=5)
+    mask = evaluation_mask(df)
+    idf = PredictorIdentifier(order=3, n_starts=2, fixed="recommended", seed=1, start_noise=False).fit(
+        df, M_S, mask=mask)
+    assert idf.noise == "common" and idf.result_.settings["noise"] == "common"
+    e = (df["speed_m_s"].to_numpy() - idf.predict_free_run(df))[mask]
+    n, rss = e.size, float(np.sum(e ** 2))
+    assert idf.n_obs_ == n
+    assert np.allclose(idf.noise_var_, rss / n, rtol=1e-9)
+    assert idf.loglik_ == pytest.approx(-0.5 * n * (np.log(2 * np.pi * rss / n) + 1.0), abs=1e-6)
+
+
 def test_fixed_pins_reporting_and_serialisation(tmp_path):
     prm, th, names = _truth(3)
     df = simulate_dataset(prm, SMALL, M_S, noise_std=1e-4, seed=5)
@@ -385,16 +401,17 @@ def test_evaluation_mask_is_the_metrics_one():
 
 
 def test_profile_noise_fit_reaches_the_ml_variances_and_beats_the_alternation():
-    """On data the model does not fit exactly (order-5 truth, order-2 model, per-run noise), the profile
-    search ends at a point where the noise variances are their ML values (re-estimating them changes
-    nothing) and its log-likelihood is at least the former alternation's."""
+    """On data the model does not fit exactly (order-5 truth, order-2 model, per-run noise variances), the
+    profile search ends at a point where the noise variances are their ML values (re-estimating them
+    changes nothing) and its log-likelihood is at least the alternation's."""
     prm = example_params(5)
     df = simulate_dataset(prm, SMALL, M_S, noise_std=3e-4, seed=5)
-    kw = dict(order=2, n_starts=3, fixed="recommended", seed=0)
+    kw = dict(order=2, n_starts=3, fixed="recommended", seed=0, noise="per_run")
     alt = PredictorIdentifier(noise_fit="alternate", **kw).fit(df, M_S, mask=evaluation_mask(df))
     pro = PredictorIdentifier(noise_fit="profile", **kw).fit(df, M_S, mask=evaluation_mask(df))
     assert pro.result_.settings["noise_fit"] == "profile"  # the setting is in the report
-    assert PredictorIdentifier().noise_fit == "alternate"  # the default
+    assert PredictorIdentifier().noise_fit == "alternate"  # the defaults
+    assert PredictorIdentifier().noise == "common"
     assert alt.result_.settings["noise_fit"] == "alternate"
     assert pro.loglik_ >= alt.loglik_ - 0.1
     conv = pro.convergence_

@@ -332,11 +332,11 @@ def _test_figures(est, test: dataio.Measurements, tmp: Path, out: Path) -> list[
 
 def run_identification(train_path, out_dir, test_path=None, *, order=8, criterion="free_run", fix=None,
                        n_starts=8, seed=0, test_abs_loads=TEST_ABS_LOADS, slider_mass_kg=None, plots_on=True,
-                       verbose=False, allow_unusual_units=False, noise_fit="alternate") -> dict:
+                       verbose=False, allow_unusual_units=False, noise_fit="alternate", noise="common") -> dict:
     """Identify the Eq. 29 predictor on TRAIN by maximum likelihood; report on TRAIN and TEST.
 
-    ``noise_fit``: ``"alternate"`` (default) or ``"profile"``
-    (:class:`l1b2.ident.estimator.PredictorIdentifier`).
+    ``noise_fit``: ``"alternate"`` (default) or ``"profile"``; ``noise``: ``"common"`` (default) or
+    ``"per_run"`` (:class:`l1b2.ident.estimator.PredictorIdentifier`).
 
     Writes (through :func:`output_dir`, so all at once or nothing)
     ``out_dir/identification.json`` (parameters with value, stderr, 95 %
@@ -353,7 +353,7 @@ def run_identification(train_path, out_dir, test_path=None, *, order=8, criterio
                                                   slider_mass_kg=slider_mass_kg,
                                                   allow_unusual_units=allow_unusual_units)
         est = PredictorIdentifier(order=order, criterion=criterion, fixed=_parse_fix(fix), n_starts=n_starts,
-                                  seed=seed, verbose=verbose, noise_fit=noise_fit)
+                                  seed=seed, verbose=verbose, noise_fit=noise_fit, noise=noise)
         _fit_naming_file(est, train, train_path)
         sections = {
             "data": {"train": str(train_path), "test": str(test_path) if test_path else None,
@@ -603,7 +603,8 @@ def run_close_loop(train_path, test_path, out_dir, *, slider_mass_kg=None, plots
     TRAIN's sidecar; unit plausibility unless ``allow_unusual_units``)
     before any fit; :class:`l1b2.closeloop.loop.CloseLoop` runs with
     ``settings`` (``order``, ``k_folds``, ``alpha``, ``min_gain``, ``seed``,
-    ``n_starts``, ``max_rounds``, ``min_cv_gain``, ``min_cv_drop``, ``screen_alpha``, ``library``); the result,
+    ``n_starts``, ``max_rounds``, ``min_cv_gain``, ``min_cv_drop``, ``screen_alpha``, ``noise_fit``, ``noise``,
+    ``library``); the result,
     with the data checks (TEST runs outside TRAIN's range flagged), is saved
     all at once. ``export_dir``: also write ``Predictor.fmu`` carrying the
     final model there, and the calibrated SSP of ``motor`` (default: the

@@ -98,12 +98,16 @@ def stratified_folds(df: pd.DataFrame, k: int, seed: int = 0) -> list[np.ndarray
 
 
 def refit(df: pd.DataFrame, mask: np.ndarray, m_s: float, init, effects: EffectSet, *, order: int, seed: int,
-          max_nfev: int, max_outer: int = 2) -> PredictorIdentifier:
-    """The model with ``effects``, re-identified on ``df`` by one warm local search (bounded budget)."""
+          max_nfev: int, max_outer: int = 2, noise: str = "common") -> PredictorIdentifier:
+    """The model with ``effects``, re-identified on ``df`` by one warm local search (bounded budget).
+
+    ``noise``: the identifier's noise variances (``"common"`` or ``"per_run"``); the search is the
+    least-squares alternation (``noise_fit="alternate"``) whatever the baseline's.
+    """
     extra = effects.extra()
     est = PredictorIdentifier(order=order, criterion="free_run", fixed="recommended", n_starts=1, seed=seed,
                               extra=extra, init=init, init_extra=effects.start() if extra is not None else None,
-                              max_nfev=max_nfev, max_outer=max_outer)
+                              max_nfev=max_nfev, max_outer=max_outer, noise=noise, noise_fit="alternate")
     return est.fit(df, slider_mass_kg=m_s, mask=mask)
 
 
@@ -165,7 +169,7 @@ def materiality(candidate: CandidateForce, min_drop: float) -> float:
 
 
 def fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, init, effects: EffectSet, order: int,
-               seed: int, max_nfev: int) -> tuple[float, float, bool]:
+               seed: int, max_nfev: int, noise: str = "common") -> tuple[float, float, bool]:
     """One fold: refit on the runs not in ``held_runs``, predict those in free run.
 
     Returns ``(sse, ss_meas, failed)`` on the held-out evaluation mask (a
@@ -179,7 +183,7 @@ def fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, init, 
     ssm = float(np.sum(v[held][m_te] ** 2))
     try:
         est = refit(df.loc[~held].reset_index(drop=True), mask[~held], m_s, init, effects, order=order, seed=seed,
-                    max_nfev=max_nfev)
+                    max_nfev=max_nfev, noise=noise)
         e = (v[held] - est.predict_free_run(df.loc[held].reset_index(drop=True)))[m_te]
     except IdentificationError:
         return np.inf, ssm, True
@@ -187,7 +191,7 @@ def fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, init, 
 
 
 def cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init, jobs, *, order: int, seed: int,
-              max_nfev: int, client=None) -> list[FoldErrors]:
+              max_nfev: int, client=None, noise: str = "common") -> list[FoldErrors]:
     """:class:`FoldErrors` of every job ``(effects, fold_phi)`` on the same ``folds``, all folds as tasks.
 
     ``fold_phi`` (or None): per fold, the start of the last effect's parameters
@@ -201,7 +205,7 @@ def cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init, jobs,
         for i, fold in enumerate(folds):
             eff = effects if fold_phi is None else effects.with_phi(
                 np.concatenate([effects.start()[:-len(fold_phi[i])], fold_phi[i]]))
-            args.append((df, mask, m_s, fold, init, eff, order, seed, max_nfev))
+            args.append((df, mask, m_s, fold, init, eff, order, seed, max_nfev, noise))
     out = [None] * len(args)
     for i, r in run_tasks(fold_error, args, client=client, name="l1b2-cv-refit"):
         out[i] = r

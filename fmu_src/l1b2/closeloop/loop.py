@@ -98,6 +98,9 @@ class CloseLoop:
     noise_fit : {"alternate", "profile"}
         The baseline identification's search (:class:`l1b2.ident.estimator.PredictorIdentifier`);
         the refits are warm-started local searches either way.
+    noise : {"common", "per_run"}
+        The noise variances of every identification of the loop (baseline, refits): one common
+        variance (default, the paper's single R) or one per run (see ``PredictorIdentifier``).
     library : CandidateSource, optional
         Candidate library ``(ctx, df_train) -> list[CandidateForce]``;
         default :func:`l1b2.closeloop.candidates.full_library` (one-regressor and two-regressor candidates).
@@ -145,7 +148,7 @@ class CloseLoop:
                  min_cv_gain: float = DEFAULT_MIN_CV_GAIN, min_cv_drop: float = DEFAULT_MIN_CV_DROP,
                  refit_nfev: int = DEFAULT_REFIT_NFEV,
                  final_nfev: int = 60, screen_alpha: float | None = 0.01, noise_fit: str = "alternate",
-                 client=None):
+                 noise: str = "common", client=None):
         self.order = order
         self.k_folds = k_folds
         self.alpha = alpha
@@ -154,6 +157,7 @@ class CloseLoop:
         self.seed = seed
         self.n_starts = n_starts
         self.noise_fit = noise_fit
+        self.noise = noise
         self.library = library
         self.progress = progress
         self.max_rounds = max_rounds
@@ -171,7 +175,7 @@ class CloseLoop:
         return {k: getattr(self, k) for k in ("order", "k_folds", "alpha", "min_gain", "parsimony", "seed",
                                               "n_starts", "library", "progress", "max_rounds", "shortlist",
                                               "refit_folds", "min_cv_gain", "min_cv_drop", "refit_nfev",
-                                              "final_nfev", "screen_alpha", "noise_fit", "client")}
+                                              "final_nfev", "screen_alpha", "noise_fit", "noise", "client")}
 
     def __repr__(self) -> str:
         args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items() if k not in ("progress", "client"))
@@ -243,8 +247,8 @@ class CloseLoop:
     def _identify(self, df: pd.DataFrame, m_s: float, mask: np.ndarray) -> PredictorIdentifier:
         """The baseline Eq. 29 predictor identified on ``df`` (free-run maximum likelihood, multi-start)."""
         return PredictorIdentifier(order=self.order, criterion="free_run", fixed="recommended",
-                                   n_starts=self.n_starts, seed=self.seed, noise_fit=self.noise_fit
-                                   ).fit(df, slider_mass_kg=m_s, mask=mask)
+                                   n_starts=self.n_starts, seed=self.seed, noise_fit=self.noise_fit,
+                                   noise=self.noise).fit(df, slider_mass_kg=m_s, mask=mask)
 
     def _iterate(self, it: _Iteration, pool, dtr, mask, m_s, report, say) -> None:
         """Rounds of linearised shortlist -> cross-validated refit -> acceptance -> joint re-identification.
@@ -283,7 +287,7 @@ class CloseLoop:
             say(f"round {n_rnd}: cross-validating {'the current model and ' if cur_err is None else ''}the refit "
                 f"with {', '.join(labels)} over {len(folds)} run folds")
             errs = cv_errors(dtr, mask, m_s, folds, cur.params_, jobs, order=self.order, seed=self.seed,
-                             max_nfev=self.refit_nfev, client=self.client)
+                             max_nfev=self.refit_nfev, client=self.client, noise=self.noise)
             if cur_err is None:
                 cur_err, errs = errs[0], errs[1:]
             trials = [RefitCV(s.candidate, cur_err, err, s.cv_gain, s.phi) for s, err in zip(short, errs)]
@@ -301,7 +305,7 @@ class CloseLoop:
             say(f"round {n_rnd}: adding {pick.candidate.label}; re-identifying jointly")
             effects = it.effects.add(pick.candidate, pick.phi)
             model = refit(dtr, mask, m_s, cur.params_, effects, order=self.order, seed=self.seed,
-                          max_nfev=self.final_nfev, max_outer=3)
+                          max_nfev=self.final_nfev, max_outer=3, noise=self.noise)
             it.model, it.effects = model, effects.with_phi(model.phi_)
             cur_err = None
             it.rounds.append({"round": n_rnd, "added": pick.candidate.label, "effect": pick.candidate.family,
@@ -395,7 +399,7 @@ class CloseLoop:
                       "k_folds": self.k_folds, "shortlist": self.shortlist,
                       "refit_folds": self.refit_folds, "min_cv_gain": self.min_cv_gain,
                       "min_cv_drop": self.min_cv_drop, "screen_alpha": self.screen_alpha,
-                      "noise_fit": self.noise_fit,
+                      "noise_fit": self.noise_fit, "noise": self.noise,
                       "max_rounds": self.max_rounds},
             "regressor_evidence": [[e.to_dict() for e in rnd] for rnd in a.rounds],
             "whiteness": {"runs": len(w),

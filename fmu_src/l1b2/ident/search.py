@@ -513,7 +513,7 @@ STALL_MESSAGE = "no step increases the log-likelihood"
 
 
 def polish_stalled(solver, refinement, max_outer, max_nfev, min_gain=0.0, log=None):
-    """Continue a profile refinement that stalled numerically with least-squares refits.
+    """Continue a profile refinement with least-squares refits (the estimator runs it after every profile search).
 
     :func:`profile_refine` can stop with :data:`STALL_MESSAGE` short of the
     optimum when its damped steps find no gain: near-exact data (residuals
@@ -547,11 +547,11 @@ def polish_stalled(solver, refinement, max_outer, max_nfev, min_gain=0.0, log=No
     if final is None:
         return refinement
     final.status = -2 if converged else final.status
-    final.message = (f"{STALL_MESSAGE}; continued by {steps} least-squares refit(s) at the ML variances: "
+    final.message = (f"{refinement.final.message}; continued by {steps} least-squares refit(s) at the ML variances: "
                      + ("a further refit gains < stat_tol log-likelihood units" if converged else str(final.message)))
     history = refinement.history + [{"iteration": len(refinement.history), "loglik": ll, "nfev": nfev,
                                      "polish": f"{steps} least-squares refit(s) after the damped Gauss-Newton "
-                                               "stalled"}]
+                                               f"stopped ({refinement.final.message})"}]
     if log is not None:
         log(f"polish: loglik {ll0:.4f} -> {ll:.4f}, nfev {nfev}")
     return ProfileRefinement(z, final, history, refinement.converged)
