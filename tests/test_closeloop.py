@@ -200,6 +200,7 @@ def test_cli_writes_the_report_files_and_figures(tmp_path, capsys):
     assert {"significant", "traced_to", "effect", "candidates"} <= set(d_)
     assert d_["rules"]["min_cv_drop"] == 0.006  # the CLI's materiality threshold reaches the loop
     assert d_["rules"]["screen_alpha"] == 1e-6  # and the uncorrected screen's level (below Bonferroni's: no cost)
+    assert d_["rules"]["noise"] == "common"  # the fits' noise model is recorded
     assert all("cv_gain" in c for c in d_["candidates"])
     assert set(d_["traced_to"]) <= {"time", "position", "direction", "load", "voltage", "speed", "acceleration",
                                     "temperature"}
@@ -311,11 +312,14 @@ def test_estimator_takes_measurements_and_stores_settings():
     assert not hasattr(est, "result_")
     # the baseline's search setting reaches the identification (an unknown one is refused there, by name)
     assert CloseLoop(noise_fit="profile").get_params()["noise_fit"] == "profile"
+    assert CloseLoop().noise == "common" and CloseLoop(noise="per_run").get_params()["noise"] == "per_run"
     d = rig_dir("direction_asymmetry_2", injections=["direction_asymmetry"], injection_seed=2,
                 plan=RigPlan(step_s=1e-3, seed=2))
     from l1b2.errors import IdentificationError
     with pytest.raises(IdentificationError, match="noise_fit must be 'profile' or 'alternate', got 'nope'"):
         CloseLoop(noise_fit="nope").fit(load_measurements(d / "train.csv"))
+    with pytest.raises(IdentificationError, match="noise must be 'per_run' or 'common', got 'white'"):
+        CloseLoop(noise="white").fit(load_measurements(d / "train.csv"))
 
 
 def test_result_api_matches_the_saved_report(tmp_path):

@@ -203,10 +203,11 @@ def test_allow_unusual_units_is_recorded_in_the_report(tmp_path, capsys):
     with pytest.raises(L1B2Error):  # refused without the flag
         load_measurements(train)
     code = cli_main(["identify", "--train", str(train), "--out", str(out), "--order", "3", "--starts", "1",
-                     "--test-loads", "0.05", "--no-plots", "--allow-unusual-units"])
+                     "--test-loads", "0.05", "--no-plots", "--allow-unusual-units", "--noise", "per_run"])
     printed = capsys.readouterr().out
     assert code == 0
     rep = json.loads((out / "identification.json").read_text())
+    assert rep["settings"]["noise"] == "per_run"  # the CLI's noise model reaches the fit and its report
     checks = rep["checks"]
     assert checks["allow_unusual_units"] is True
     assert any("slider_mass_kg" in m for m in checks["unusual_units"]["train"])

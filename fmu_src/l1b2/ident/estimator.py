@@ -183,13 +183,12 @@ class PredictorIdentifier:
         10 % of the median). Per-run variances are estimated from the
         residuals, so on data the model does not fit exactly they reward fits
         that specialise on some runs: the likelihood becomes strongly
-        multimodal (8 starts ending 2000 log-likelihood units apart on a
-        20 000-sample TRAIN of the realistic motor) and its higher optima
-        predict held-out runs *worse* (free-run nrmse 2.85, 3.09, 4.11 % at
-        log-likelihoods 76284, 77194, 78216, against 2.61 % for the common
-        variance; measured with bench/bench_identify_realistic.py). The common
-        variance was better on held-out data on all five mismatched data sets
-        measured.
+        multimodal (8 profile searches ending up to 1200 log-likelihood units
+        apart on a 20 000-sample TRAIN of the realistic motor) and its higher
+        optima predict held-out runs *worse* (free-run nrmse 2.85 % at
+        log-likelihood 76284, 3.09 % at 77194, against 2.61 % for the common
+        variance; bench/bench_identify_realistic.py). The common variance was
+        better on held-out data on all five mismatched data sets measured.
     kappa : share of the preload loading the guide (fixed, not identified).
     include_load_inertia : m_eff = m_s + |m_load| (True) or m_s.
     max_nfev : function evaluations per local optimisation.
@@ -213,9 +212,9 @@ class PredictorIdentifier:
         :func:`l1b2.ident.search.profile_refine`) from each start in turn, and
         the global search compares the starts by their likelihood. Its damped
         steps can stall on a kink of the free run (a run at the edge of
-        sticking) or crawl along a weakly determined direction until its
-        statistical stop fires; the best start is therefore always continued
-        by least-squares refits at the ML variances, kept if they gain
+        sticking) or creep until its iteration limit (common variance, exact
+        data); the best start is therefore always continued by least-squares
+        refits at the ML variances, kept if they gain
         (:func:`l1b2.ident.search.polish_stalled`). Before that continuation
         its stalls ended fits short of the optimum (1.3 log-likelihood units
         on an order-mismatched test fit; 6e-6 relative in theta on exact
@@ -534,9 +533,9 @@ class PredictorIdentifier:
             search, outer = profile_search(obj, starts, cfg.max_nfev // 2, cfg.stat_tol, cfg.stat_window_profile,
                                            cfg.start_agree, self._log)
             # always continued by least-squares refits at the ML variances: the damped Gauss-Newton can stop
-            # short of the optimum, numerically (a kink), at its iteration limit or even statistically (a slow
-            # crawl along a weakly determined direction: measured 10 log-likelihood units short on an extra
-            # constant force, tests/test_identify_extra.py); a refit that gains nothing is not kept
+            # short of the optimum numerically (a kink) or at its iteration limit (with the common variance on
+            # exact data it crept for 100 iterations and ended at 5.7e-8 m/s rms; the refit reached 4e-16,
+            # tests/test_identify.py); a refit that gains nothing is not kept
             outer = polish_stalled(solver, outer, cfg.max_outer, cfg.max_nfev, cfg.stat_tol, self._log)
         else:
             search = multi_start(solver, starts, cfg.max_nfev, cfg.explore_nfev, cfg.n_refine, self._log)
