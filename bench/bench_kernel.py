@@ -1,14 +1,16 @@
 #!/usr/bin/env python
-"""Benchmark: closed-form interface kernel vs the numerical (quadrature) kernel.
+"""Benchmark: the interface kernels, and the real-time factors of the three engines with the old and new kernel.
 
 Prints, side by side in one run:
-* time per ``interface_forces`` call, old (``interface_forces_reference``,
-  n_theta = 256) vs new (closed form), over tip motions taken from steady
-  states of the reference motor, with the largest output differences;
+* time per interface call over tip motions taken from steady states of the
+  reference motor: the numerical kernel (``interface_forces_reference``,
+  n_theta = 256), the closed form in plain Python (the kernel of the previous
+  releases) and the same closed form compiled by numba (``l1b2.physics.jit``),
+  with the largest output differences;
 * the real-time factor (wall time / simulated time) of the in-process engine
   (``l1b2.cosim.engine.InProcessMotor``, 324 V, 0.2 ms step) with the old kernel
-  (``Interface.quadrature = true``) and the new one (target: <= 0.1), and the
-  final slider speeds of both;
+  (``Interface.compiled = false``: the closed form in plain Python) and the new
+  one (compiled; target: <= 0.1), and the final slider speeds of both;
 * the same for the four-FMU co-simulation (``l1b2.cosim.CoSimulation``,
   target <= 0.5) and for ``L1B2Motor.fmu`` alone, stepped through fmpy
   (``doStep`` and ``getReal`` of its outputs every step, target <= 0.15),
@@ -62,38 +64,51 @@ def _per_call(fn, rows, ip, repeat):
 
 
 def bench_calls(mp, repeat):
+    from l1b2.physics.jit import jit_status
     rows = _tip_motions(mp)
     ip = mp.interface
-    t_new, t_old = float("inf"), float("inf")
+    itf.compiled_kernel()  # compile (or load from the cache) outside the timing
+
+    def python(*r):
+        return itf.interface_forces_scalar(*r, "stick_slip", jit=False)
+
+    def compiled(*r):
+        return itf.interface_forces_scalar(*r, "stick_slip", jit=True)
+
+    t_quad = t_py = t_jit = float("inf")
     for _ in range(repeat):  # alternate
-        t_new = min(t_new, _per_call(itf.interface_forces, rows, ip, 3))
-        t_old = min(t_old, _per_call(itf.interface_forces_reference, rows, ip, 1))
-    d256 = dfine = 0.0
+        t_jit = min(t_jit, _per_call(compiled, rows, ip, 3))
+        t_py = min(t_py, _per_call(python, rows, ip, 3))
+        t_quad = min(t_quad, _per_call(itf.interface_forces_reference, rows, ip, 1))
+    d256 = dfine = djit = 0.0
     for r in rows:
-        new = itf.interface_forces(*r, ip)
+        new, py = compiled(*r, ip), python(*r, ip)
         old = itf.interface_forces_reference(*r, ip)
         fine = itf.interface_forces_reference(*r, ip, n_theta=3 * 2 ** 15)
+        djit = max(djit, max(abs(a - b) for a, b in zip(new, py)))
         d256 = max(d256, max(abs(a - b) for a, b in zip(new[:6], old[:6])))
         dfine = max(dfine, max(abs(a - b) for a, b in zip(new[:6], fine[:6])))
-    print(f"interface_forces per call over {len(rows)} operating points of the reference motor")
-    print(f"{'old (quadrature, 256) [us]':>27} {'new (closed form) [us]':>23} {'speed-up':>9}")
-    print(f"{t_old * 1e6:27.1f} {t_new * 1e6:23.1f} {t_old / t_new:9.1f}")
-    print(f"largest force difference new - old: {d256:.2e} N at n_theta = 256, "
-          f"{dfine:.2e} N at n_theta = {3 * 2 ** 15}")
+    print(f"interface kernel per call over {len(rows)} operating points of the reference motor "
+          f"(numba: {jit_status()})")
+    print(f"{'quadrature, 256 [us]':>21} {'closed form, Python [us]':>25} {'closed form, compiled [us]':>27} "
+          f"{'speed-up Python / compiled':>27}")
+    print(f"{t_quad * 1e6:21.1f} {t_py * 1e6:25.1f} {t_jit * 1e6:27.2f} {t_py / t_jit:27.1f}")
+    print(f"largest difference compiled - Python: {djit:.2e} (any output); largest force difference "
+          f"compiled - quadrature: {d256:.2e} N at n_theta = 256, {dfine:.2e} N at n_theta = {3 * 2 ** 15}")
 
 
-def _inprocess(mp, inputs, sim_time, quadrature):
+def _inprocess(mp, inputs, sim_time, compiled):
     m = engine.InProcessMotor(mp, h_s=STEP_S)
-    m.b["Interface"].quadrature = quadrature
+    m.b["Interface"].compiled = compiled
     t0, c0 = time.perf_counter(), time.process_time()
     m.initialize(**inputs)
     m.run(sim_time, record=("Slider.v",))
     return (time.perf_counter() - t0) / sim_time, (time.process_time() - c0) / sim_time, m.value("Slider.v")
 
 
-def _fmu(cosims, inputs, sim_time, quadrature):
+def _fmu(cosims, inputs, sim_time, compiled):
     """One run of the kept four-FMU co-simulation (reset, initialisation and stepping are timed)."""
-    cs = cosims[quadrature]
+    cs = cosims[compiled]
     t0, c0 = time.perf_counter(), time.process_time()
     res = cs.run(sim_time, inputs, record=["Slider.v"])
     return (time.perf_counter() - t0) / sim_time, (time.process_time() - c0) / sim_time, float(res["Slider.v"][-1])
@@ -103,12 +118,12 @@ def _cosims(fmu_dir):
     """One CoSimulation per kernel, keeping its FMU instances between the runs (SSD, SSV and model
     descriptions read once, as a host running many simulations would)."""
     from l1b2.cosim.master import CoSimulation
-    return {q: CoSimulation(fmu_dir=fmu_dir, step_s=STEP_S, keep_instances=True,
-                            parameters={"Slider.s_min_m": -1.0, "Slider.s_max_m": 1.0, "Interface.quadrature": q})
-            for q in (False, True)}
+    return {c: CoSimulation(fmu_dir=fmu_dir, step_s=STEP_S, keep_instances=True,
+                            parameters={"Slider.s_min_m": -1.0, "Slider.s_max_m": 1.0, "Interface.compiled": c})
+            for c in (False, True)}
 
 
-def _motor_fmu(fmu_path, inputs, sim_time, quadrature):
+def _motor_fmu(fmu_path, inputs, sim_time, compiled):
     """L1B2Motor.fmu alone through fmpy: a host loop of doStep and getReal (speed, position) per step."""
     from fmpy import read_model_description
     from fmpy.fmi2 import FMU2Slave
@@ -125,7 +140,7 @@ def _motor_fmu(fmu_path, inputs, sim_time, quadrature):
     try:
         fmu.setupExperiment(startTime=0.0)
         fmu.setReal([vr["Slider.s_min_m"], vr["Slider.s_max_m"]], [-1.0, 1.0])
-        fmu.setBoolean([vr["Interface.quadrature"]], [quadrature])
+        fmu.setBoolean([vr["Interface.compiled"]], [compiled])
         fmu.setReal([vr[k] for k in inputs], [float(x) for x in inputs.values()])
         fmu.enterInitializationMode()
         fmu.exitInitializationMode()
@@ -144,11 +159,11 @@ def _engine_rows(run, repeat):
     """Best (wall RTF, CPU RTF, final speed) of ``repeat`` alternating runs: old kernel, new kernel."""
     best = {True: (float("inf"), float("inf"), None), False: (float("inf"), float("inf"), None)}
     for _ in range(repeat):
-        for quadrature in (False, True):
-            wall, cpu, v = run(quadrature)
-            b = best[quadrature]
-            best[quadrature] = (min(b[0], wall), min(b[1], cpu), v)
-    return best[True], best[False]
+        for compiled in (True, False):
+            wall, cpu, v = run(compiled)
+            b = best[compiled]
+            best[compiled] = (min(b[0], wall), min(b[1], cpu), v)
+    return best[False], best[True]
 
 
 #: real-time factor targets (issue #12) per engine
@@ -191,7 +206,8 @@ def main(argv=None):
             rows.append(("L1B2Motor.fmu",
                          _engine_rows(lambda q: _motor_fmu(motor, inputs, args.sim_time, q), args.repeat)))
     print(f"\nreal-time factor (wall / simulated time), reference motor, {V0_V:.0f} V, no load, "
-          f"{STEP_S * 1e3:.1f} ms step, {args.sim_time} s simulated; old = numerical interface kernel")
+          f"{STEP_S * 1e3:.1f} ms step, {args.sim_time} s simulated; old = the interface's closed form in "
+          "plain Python, new = compiled")
     print(f"{'engine':>13} {'time':>5} {'RTF old':>9} {'RTF new':>9} {'speed-up':>9} {'target':>7} {'':>6}   "
           f"{'v_end old':>10} {'v_end new':>10} {'rel diff':>9}")
     for name, (old, new) in rows:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -597,3 +598,83 @@ def test_steady_state_stuck_slider_unchanged(motor, monkeypatch):
         old = coupled.steady_state(motor, 0.0, 60.0, 0.15, 1)
     assert new.stuck and old.stuck and new.v_m_s == old.v_m_s == 0.0
     assert new.F_d_N == pytest.approx(old.F_d_N, rel=1e-3)
+
+
+# ---------------------------------------------------------------------------
+# The compiled kernel (l1b2.physics.jit): same source, same numbers
+# ---------------------------------------------------------------------------
+
+def _random_tip_motions(n, seed):
+    """Inputs over every regime: partial and permanent contact, any phase, speeds beyond the tip speed."""
+    rng = np.random.default_rng(seed)
+    for i in range(n):
+        U_w = rng.uniform(0.0, 1.5e-6) if i % 17 else 0.0
+        v = rng.uniform(-1.5, 1.5) * W * max(U_w, 1e-7) if i % 11 else 0.0
+        yield (rng.uniform(0.0, 4e-6) if i % 13 else 0.0, U_w, rng.uniform(-3.5, 3.5),
+               W * rng.uniform(0.6, 1.4), v, rng.uniform(0.0, 80.0) if i % 19 else 0.0)
+
+
+@pytest.mark.parametrize("mode", ["stick_slip", "pure_slip"])
+def test_compiled_kernel_equals_the_python_kernel(ip, mode):
+    # the compiled function is the Python function translated by numba: the same operations in the same
+    # order, so the outputs agree to a few ulps (1e-12 relative to the force scale k_e U_l + F_p)
+    from l1b2.physics.jit import jit_status
+    if itf.compiled_kernel() is None:
+        pytest.skip(f"numba kernel not available: {jit_status()}")
+    for u_m in (0.0, 0.5e-9, 20e-9, 400e-9):
+        p = dataclasses.replace(ip, u_m_m=u_m)
+        for args in _random_tip_motions(400, seed=int(u_m * 1e12)):
+            py = itf.interface_forces_scalar(*args, p, mode, jit=False)
+            jt = itf.interface_forces_scalar(*args, p, mode, jit=True)
+            scale = p.k_e_N_per_m * args[0] + args[5] + p.sigma_N_s_per_m * (args[3] * args[1] + abs(args[4])) + 1.0
+            for f, a, b in zip(FIELDS, py, jt):
+                assert abs(a - b) <= 1e-12 * scale, (f, args, a, b)
+
+
+def test_kernel_without_numba_is_the_python_kernel(tmp_path):
+    # L1B2_JIT=0: nothing is compiled, the Python function runs, the block gives the same forces
+    import subprocess
+    import sys
+    code = ("from l1b2.physics import interface as itf, jit; from l1b2.physics.params import load_motor; "
+            "ip = load_motor().interface; "
+            "out = itf.interface_forces_scalar(1.2e-7, 7e-7, -1.6, 3.05e5, 0.05, 40.0, ip, 'stick_slip'); "
+            "print(itf.compiled_kernel() is None, jit.jit_status(), repr(out.F_d_N))")
+    env = dict(__import__("os").environ, L1B2_JIT="0", L1B2_CACHE_DIR=str(tmp_path))
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True)
+    none, *status, f_d = res.stdout.split()
+    assert none == "True" and " ".join(status) == "disabled by L1B2_JIT=0"
+    from l1b2.physics.params import load_motor
+    expected = itf.interface_forces_scalar(1.2e-7, 7e-7, -1.6, 3.05e5, 0.05, 40.0, load_motor().interface,
+                                           "stick_slip", jit=False)
+    assert float(f_d) == expected.F_d_N
+    assert not (tmp_path / "numba").exists()
+
+
+def test_compiled_kernel_cache_is_shared_by_copies_of_the_module(tmp_path):
+    # copies of the physics package in different folders, as every extraction of one FMU holds its bundle:
+    # the first compiles into the content-keyed cache, a copy under the same package name elsewhere loads
+    # from it; a copy under another package name (another FMU's bundle) compiles its own
+    import os
+    import shutil
+    import subprocess
+    import sys
+    src = Path(itf.__file__).resolve().parent
+    env = dict(os.environ, L1B2_CACHE_DIR=str(tmp_path / "cache"), L1B2_JIT="1")
+    stats = []
+    for folder, pkg in (("x1", "pkg_same"), ("x2", "pkg_same"), ("x3", "pkg_other")):
+        shutil.copytree(src, tmp_path / folder / pkg / "physics", ignore=shutil.ignore_patterns("__pycache__"))
+        (tmp_path / folder / pkg / "__init__.py").write_text("")
+        for f in ("errors.py", "units.py"):
+            shutil.copy(src.parent / f, tmp_path / folder / pkg)
+        code = (f"import {pkg}.physics.interface as itf, {pkg}.physics.jit as jit; "
+                "k = itf.compiled_kernel(); s = k.stats; "
+                "print(jit.jit_status(), sum(s.cache_hits.values()), sum(s.cache_misses.values()))")
+        res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env,
+                             cwd=tmp_path / folder)
+        assert res.returncode == 0, res.stderr
+        stats.append(res.stdout.split())
+    assert stats[0] == ["compiled", "0", "1"], stats   # compiled and stored
+    assert stats[1] == ["compiled", "1", "0"], stats   # another extraction: loaded, not compiled
+    assert stats[2] == ["compiled", "0", "1"], stats   # another bundle name: its own entry
+    assert sorted(p.name.split("-")[0] for p in (tmp_path / "cache" / "numba").iterdir()) == [
+        "pkg_other.physics.interface", "pkg_same.physics.interface"]

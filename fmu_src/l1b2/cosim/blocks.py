@@ -367,6 +367,9 @@ class InterfaceBlock(Block):
             "instead of the exact closed form", start=False, variability="fixed", type="Boolean"),
         Var("n_theta", "parameter", "", "cells over the contact window of the numerical reference kernel",
             start=256, min=16, max=65536, variability="fixed", type="Integer"),
+        Var("compiled", "parameter", "", "true: the closed form compiled by numba when it is available "
+            "(same results to round-off); false: the same closed form in plain Python",
+            start=True, variability="fixed", type="Boolean"),
     ]
     INPUTS = [
         Var("U_l", "input", "m", "tip normal vibration amplitude", min=0.0, max=1e-3, nominal=1e-6),
@@ -407,7 +410,8 @@ class InterfaceBlock(Block):
                                                  self.params, mode=mode, n_theta=int(self.n_theta))
         else:  # inputs are real numbers here (check_inputs)
             out = itf.interface_forces_scalar(float(self.U_l), float(self.U_w), float(self.delta),
-                                              float(self.omega), float(self.v), float(self.F_p), self.params, mode)
+                                              float(self.omega), float(self.v), float(self.F_p), self.params, mode,
+                                              jit=None if self.compiled else False)
         self.F_d, self.F_N_mean = out.F_d_N, out.F_N_mean_N
         self.F_N1_sin, self.F_N1_cos = out.F_N1_sin_N, out.F_N1_cos_N
         self.F_T1_sin, self.F_T1_cos = out.F_T1_sin_N, out.F_T1_cos_N

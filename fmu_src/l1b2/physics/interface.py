@@ -227,25 +227,58 @@ def interface_forces(U_l_m, U_w_m, delta_rad, omega_rad_s, v_m_s, F_p_N,
     return InterfaceOutput(*np.moveaxis(cols, -1, 0))
 
 
-def interface_forces_scalar(U_l, U_w, delta, omega, v, F_p, params: InterfaceParams, mode: str) -> InterfaceOutput:
+def interface_forces_scalar(U_l, U_w, delta, omega, v, F_p, params: InterfaceParams, mode: str,
+                            jit: bool | None = None) -> InterfaceOutput:
     """Exact period averages for scalar inputs (floats): the contact window cut into elementary pieces.
 
     The scalar kernel behind :func:`interface_forces`, for callers that already hold
-    plain floats and a valid ``mode`` (the co-simulation's per-step call).
+    plain floats and a valid ``mode`` (the co-simulation's per-step call). The
+    work is done by :func:`period_integrals`, compiled with numba when it is
+    available (``jit=None``, the default; :mod:`l1b2.physics.jit`); ``jit=False``
+    runs the same function as plain Python (the results agree to round-off).
+    """
+    kernel = compiled_kernel() if jit is None or jit else None
+    if kernel is None:
+        if jit:
+            from .jit import jit_status
+            raise RuntimeError(f"the compiled interface kernel is not available: {jit_status()}")
+        kernel = period_integrals
+    return InterfaceOutput(*kernel(U_l, U_w, delta, omega, v, F_p, params.k_e_N_per_m, params.u_m_m,
+                                   params.mu_p, params.sigma_N_s_per_m, 1.0 if mode == "pure_slip" else 0.0))
+
+
+_COMPILED: list = []  # [kernel or None], filled on the first call of compiled_kernel()
+
+
+def compiled_kernel():
+    """:func:`period_integrals` compiled by numba (compiled once per process), or None (see :mod:`.jit`)."""
+    if not _COMPILED:
+        from .jit import compile_family
+        family = {"_half_angle_scalar": _half_angle_scalar, "_primitives": _primitives,
+                  "_switch_phase": _switch_phase, "period_integrals": period_integrals}
+        _COMPILED.append(compile_family(family, "period_integrals", "UniTuple(float64, 8)(" +
+                                        ", ".join(["float64"] * 11) + ")"))
+    return _COMPILED[0]
+
+
+def period_integrals(U_l, U_w, delta, omega, v, F_p, k_e, u_m, mu, sigma, pure_slip):
+    """The period averages of :class:`InterfaceOutput`, in its order, as a tuple of floats.
+
+    Plain floats in, plain floats out (``pure_slip`` 1.0 or 0.0), written in
+    the subset of Python that numba compiles (:func:`compiled_kernel`).
 
     ``F_N = A sin(theta) + B`` on the window. The cuts are the relative-velocity
     reversals (friction sign and ``u_r`` reset) and, inside each segment, the
     stick-to-slip switch ``|u_r| = u_m`` (:func:`_switch_phase`). Each piece
     is integrated with the antiderivatives of :func:`_primitives`.
     """
-    if mode == "pure_slip":  # phi_c = pi, F_N = pi F_p sin(theta), no stick
+    if pure_slip != 0.0:  # phi_c = pi, F_N = pi F_p sin(theta), no stick
         a, A, B, u_m, permanent = 0.5 * math.pi, math.pi * F_p, 0.0, 0.0, False
     else:
-        a = _half_angle_scalar(U_l, F_p, params.k_e_N_per_m)
-        A = params.k_e_N_per_m * U_l
+        a = _half_angle_scalar(U_l, F_p, k_e)
+        A = k_e * U_l
         permanent = a >= math.pi
         B = F_p if permanent else -A * math.cos(a)
-        u_m = params.u_m_m
     two_pi = 2.0 * math.pi
     u_tip = omega * U_w
     has_rev = u_tip > 0 and abs(v) < u_tip
@@ -253,50 +286,52 @@ def interface_forces_scalar(U_l, U_w, delta, omega, v, F_p, params: InterfacePar
         start, width = (math.acos(v / u_tip) - delta if has_rev else 0.0), two_pi
     else:
         start, width = 0.5 * math.pi - a, 2.0 * a
-    bounds = [start, start + width]
+    # the window [start, start + width] cut at the reversals inside it: up to three segments
+    cut1 = cut2 = math.inf  # "no cut"
     if has_rev:
         ac = math.acos(v / u_tip)
-        cuts = sorted(x for x in ((ac - delta - start) % two_pi, (-ac - delta - start) % two_pi) if x < width)
-        bounds[1:1] = [start + (0.0 if permanent and x < 1e-12 else x) for x in cuts]
+        x1, x2 = (ac - delta - start) % two_pi, (-ac - delta - start) % two_pi
+        if x2 < x1:
+            x1, x2 = x2, x1
+        if x1 < width:
+            cut1 = start + (0.0 if permanent and x1 < 1e-12 else x1)
+            if x2 < width:
+                cut2 = start + x2
+    end = start + width
     q = v / omega  # u_r(th) = U(th) - U(lo), U(th) = U_w sin(th + delta) - q th
     cd, sd = math.cos(delta), math.sin(delta)
-    k = (A, B, U_w, q, u_tip, v, cd, sd)
     stick_on = u_m > 0 and not (permanent and not has_rev)  # permanent contact without reversal slides
-    mu, sigma = params.mu_p, params.sigma_N_s_per_m
-    P0 = P_lo = _primitives(start, *k)
+    P0 = P_lo = _primitives(start, A, B, U_w, q, u_tip, v, cd, sd)
     I0 = I1 = I2 = 0.0  # integrals of F_f, F_f sin, F_f cos over the window
     stick_len = 0.0
-    for hi in bounds[1:]:
+    for i in range(3):
+        hi = cut1 if i == 0 else (cut2 if i == 1 else end)
+        if hi > end:  # no such cut
+            continue
         lo = P_lo[0]
-        P_hi = _primitives(hi, *k)
+        P_hi = _primitives(hi, A, B, U_w, q, u_tip, v, cd, sd)
         if hi > lo:
             rv_mid = u_tip * math.cos(0.5 * (lo + hi) + delta) - v
-            sgn = (rv_mid > 0) - (rv_mid < 0)
+            sgn = 1 if rv_mid > 0 else (-1 if rv_mid < 0 else 0)
             P_sw = P_lo
+            slips = True
             if stick_on:  # stick on [lo, sw]: F_f = (mu / u_m) (U - U(lo)) F_N
                 sw = _switch_phase(lo, hi, sgn, U_w, delta, q, u_m)
-                P_sw = P_hi if sw == hi else _primitives(sw, *k)
+                slips = sw != hi
+                P_sw = _primitives(sw, A, B, U_w, q, u_tip, v, cd, sd) if slips else P_hi
                 c, U_lo = mu / u_m, P_lo[10]
                 I0 += c * (P_sw[4] - P_lo[4] - U_lo * (P_sw[1] - P_lo[1]))
                 I1 += c * (P_sw[5] - P_lo[5] - U_lo * (P_sw[2] - P_lo[2]))
                 I2 += c * (P_sw[6] - P_lo[6] - U_lo * (P_sw[3] - P_lo[3]))
                 stick_len += sw - lo
-            if P_sw is not P_hi:  # slip on [sw, hi]: F_f = sigma (w' - v) + sgn mu F_N
+            if slips:  # slip on [sw, hi]: F_f = sigma (w' - v) + sgn mu F_N
                 c = sgn * mu
                 I0 += sigma * (P_hi[7] - P_sw[7]) + c * (P_hi[1] - P_sw[1])
                 I1 += sigma * (P_hi[8] - P_sw[8]) + c * (P_hi[2] - P_sw[2])
                 I2 += sigma * (P_hi[9] - P_sw[9]) + c * (P_hi[3] - P_sw[3])
         P_lo = P_hi
-    return InterfaceOutput(
-        F_d_N=I0 / two_pi,
-        F_N_mean_N=(P_lo[1] - P0[1]) / two_pi,
-        F_N1_sin_N=(P_lo[2] - P0[2]) / math.pi,
-        F_N1_cos_N=(P_lo[3] - P0[3]) / math.pi,
-        F_T1_sin_N=I1 / math.pi,
-        F_T1_cos_N=I2 / math.pi,
-        phi_c_rad=2.0 * a,
-        stick_fraction=stick_len / width if width > 0 else 0.0,
-    )
+    return (I0 / two_pi, (P_lo[1] - P0[1]) / two_pi, (P_lo[2] - P0[2]) / math.pi, (P_lo[3] - P0[3]) / math.pi,
+            I1 / math.pi, I2 / math.pi, 2.0 * a, stick_len / width if width > 0 else 0.0)
 
 
 def _primitives(th, A, B, U_w, q, u_tip, v, cd, sd) -> tuple:

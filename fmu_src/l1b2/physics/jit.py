@@ -1,0 +1,136 @@
+"""Optional compilation of the per-step physics kernels with numba (issue: faster than real time).
+
+The hot kernels (:func:`l1b2.physics.interface.interface_forces_scalar` and
+what it calls) are written in plain Python restricted to floats, ``math`` and
+tuples, so that numba can compile the *same source*. :func:`compile_family`
+compiles such a family of functions; the plain functions stay untouched (they
+are the pure-Python kernel, used when numba is missing or disabled, and the
+"old kernel" of ``bench/bench_kernel.py``).
+
+Whether the compiled kernel is used:
+
+* numba importable (it is a project dependency, installed by ``make``), and
+* the environment variable ``L1B2_JIT`` is not ``0`` (``L1B2_JIT=0`` forces
+  the pure-Python kernel, e.g. for a host interpreter without numba).
+
+Otherwise, or if compilation fails, the pure-Python functions are used and
+:func:`jit_status` says why.
+
+Caching across FMU extractions
+------------------------------
+numba caches compiled code next to the source file, or under
+``NUMBA_CACHE_DIR`` in a folder named after the *source path*. Every FMU of
+ours bundles this package and every host extracts an FMU into a fresh
+temporary folder, so a path-keyed cache would compile again (seconds) for
+every FMU instance. The locator installed here keys the cache by the module's
+name and the SHA-256 of its source instead, in ``$L1B2_CACHE_DIR/numba``
+(default ``~/.cache/l1b2/numba``): every extraction of one FMU (its bundle has a
+fixed package name per FMU and version) loads the kernel compiled by the
+first. The name is part of the key because a cached kernel refers to its
+module by name. When that folder is not writable numba's own locators are used.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import types
+from pathlib import Path
+
+#: why the compiled kernels are or are not used ("compiled", or the reason for the fallback)
+_STATUS = {"state": "not requested"}
+#: source files whose functions the content-keyed locator serves
+_REGISTERED: set[str] = set()
+
+
+def jit_enabled() -> bool:
+    """True unless ``L1B2_JIT=0`` (or ``false``/``no``/``off``) is set in the environment."""
+    return os.environ.get("L1B2_JIT", "1").strip().lower() not in ("0", "false", "no", "off")
+
+
+def jit_status() -> str:
+    """How the last :func:`compile_family` call ended: ``"compiled"`` or why it fell back to Python."""
+    return _STATUS["state"]
+
+
+def cache_root() -> Path:
+    """Folder of the content-keyed numba cache: ``$L1B2_CACHE_DIR/numba``, else ``~/.cache/l1b2/numba``."""
+    base = os.environ.get("L1B2_CACHE_DIR")
+    if base:
+        return Path(base) / "numba"
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    return (Path(xdg) if xdg else Path.home() / ".cache") / "l1b2" / "numba"
+
+
+def _install_locator(numba_caching) -> None:
+    """Put :class:`ContentCacheLocator` first in numba's list of cache locators (once per process)."""
+    impl = getattr(numba_caching, "CacheImpl", None) or getattr(numba_caching, "_CacheImpl")
+    base = getattr(numba_caching, "_CacheLocator")
+    mixin = getattr(numba_caching, "_SourceFileBackedLocatorMixin")
+    if any(getattr(c, "L1B2_CONTENT_KEYED", False) for c in impl._locator_classes):
+        return
+
+    class ContentCacheLocator(mixin, base):
+        """Cache folder named after the source file's content hash, for the files registered here."""
+
+        L1B2_CONTENT_KEYED = True
+
+        def __init__(self, py_func, py_file):
+            self._py_file = py_file
+            self._lineno = py_func.__code__.co_firstlineno
+            # the module name is part of the key: a cached kernel refers to its module by name
+            digest = hashlib.sha256(Path(py_file).read_bytes()).hexdigest()[:20]
+            self._cache_path = str(cache_root() / f"{py_func.__module__}-{digest}")
+
+        def get_cache_path(self):
+            return self._cache_path
+
+        @classmethod
+        def from_function(cls, py_func, py_file):
+            if os.path.abspath(py_file) not in _REGISTERED:
+                return None
+            return super().from_function(py_func, py_file)
+
+    impl._locator_classes.insert(0, ContentCacheLocator)
+
+
+def compile_family(functions: dict, entry: str, signature: str):
+    """Compile ``functions`` (name -> plain function of one module) with numba; the compiled ``entry``.
+
+    The functions are cloned with a namespace in which every name of the
+    family refers to its compiled clone, so that the compiled entry calls
+    compiled helpers while the module's own functions stay pure Python.
+    ``signature`` (numba's string form) makes the entry compile (or load
+    from the cache) at once, so a failure shows here and not mid-simulation.
+
+    Returns ``None`` when numba is missing, disabled by ``L1B2_JIT=0``, or
+    fails; :func:`jit_status` then says why.
+    """
+    if not jit_enabled():
+        _STATUS["state"] = "disabled by L1B2_JIT=0"
+        return None
+    try:
+        import numba
+        from numba.core import caching
+    except Exception as exc:  # pragma: no cover - numba is a dependency; a foreign host may lack it
+        _STATUS["state"] = f"numba not importable ({type(exc).__name__}: {exc})"
+        return None
+    try:
+        _install_locator(caching)
+        first = next(iter(functions.values()))
+        _REGISTERED.add(os.path.abspath(first.__code__.co_filename))
+        namespace = dict(first.__globals__)
+        clones = {name: types.FunctionType(f.__code__, namespace, name, f.__defaults__, f.__closure__)
+                  for name, f in functions.items()}
+        for name, clone in clones.items():
+            clone.__qualname__ = functions[name].__qualname__
+            clone.__module__ = functions[name].__module__
+            if name != entry:
+                namespace[name] = numba.njit(cache=True)(clone)
+        compiled = numba.njit(signature, cache=True)(clones[entry])
+        namespace[entry] = compiled
+    except Exception as exc:
+        _STATUS["state"] = f"compilation failed ({type(exc).__name__}: {exc})"
+        return None
+    _STATUS["state"] = "compiled"
+    return compiled
