@@ -8,9 +8,10 @@ Prints, side by side in one run:
   releases) and the same closed form compiled by numba (``l1b2.physics.jit``),
   with the largest output differences;
 * the real-time factor (wall time / simulated time) of the in-process engine
-  (``l1b2.cosim.engine.InProcessMotor``, 324 V, 0.2 ms step) with the old kernel
-  (``Interface.compiled = false``: the closed form in plain Python) and the new
-  one (compiled; target: <= 0.1), and the final slider speeds of both;
+  (``l1b2.cosim.engine.InProcessMotor``, 324 V, 0.2 ms step) with the old kernels
+  (``L1B2_JIT=0``: interface, stator and slider steps in plain Python, as in
+  the previous releases) and the new ones (compiled by numba; target: <= 0.1),
+  and the final slider speeds of both;
 * the same for the four-FMU co-simulation (``l1b2.cosim.CoSimulation``,
   target <= 0.5) and for ``L1B2Motor.fmu`` alone, stepped through fmpy
   (``doStep`` and ``getReal`` of its outputs every step, target <= 0.15),
@@ -24,6 +25,7 @@ the wall time.
 Usage: python bench/bench_kernel.py [--sim-time S] [--repeat N] [--no-fmu]
 """
 import argparse
+import os
 import sys
 import tempfile
 import time
@@ -97,9 +99,14 @@ def bench_calls(mp, repeat):
           f"compiled - quadrature: {d256:.2e} N at n_theta = 256, {dfine:.2e} N at n_theta = {3 * 2 ** 15}")
 
 
+def _use_compiled(compiled: bool):
+    """Select the kernels for the blocks initialised next, in this process and in the FMUs it hosts."""
+    os.environ["L1B2_JIT"] = "1" if compiled else "0"
+
+
 def _inprocess(mp, inputs, sim_time, compiled):
+    _use_compiled(compiled)
     m = engine.InProcessMotor(mp, h_s=STEP_S)
-    m.b["Interface"].compiled = compiled
     t0, c0 = time.perf_counter(), time.process_time()
     m.initialize(**inputs)
     m.run(sim_time, record=("Slider.v",))
@@ -109,6 +116,7 @@ def _inprocess(mp, inputs, sim_time, compiled):
 def _fmu(cosims, inputs, sim_time, compiled):
     """One run of the kept four-FMU co-simulation (reset, initialisation and stepping are timed)."""
     cs = cosims[compiled]
+    _use_compiled(compiled)
     t0, c0 = time.perf_counter(), time.process_time()
     res = cs.run(sim_time, inputs, record=["Slider.v"])
     return (time.perf_counter() - t0) / sim_time, (time.process_time() - c0) / sim_time, float(res["Slider.v"][-1])
@@ -119,7 +127,7 @@ def _cosims(fmu_dir):
     descriptions read once, as a host running many simulations would)."""
     from l1b2.cosim.master import CoSimulation
     return {c: CoSimulation(fmu_dir=fmu_dir, step_s=STEP_S, keep_instances=True,
-                            parameters={"Slider.s_min_m": -1.0, "Slider.s_max_m": 1.0, "Interface.compiled": c})
+                            parameters={"Slider.s_min_m": -1.0, "Slider.s_max_m": 1.0})
             for c in (False, True)}
 
 
@@ -133,6 +141,7 @@ def _motor_fmu(fmu_path, inputs, sim_time, compiled):
     md = read_model_description(str(fmu_path))
     vr = {v.name: v.valueReference for v in md.modelVariables}
     unzipped = extracted(fmu_path)
+    _use_compiled(compiled)
     t0, c0 = time.perf_counter(), time.process_time()
     fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=md.coSimulation.modelIdentifier,
                     instanceName="motor")
@@ -140,7 +149,6 @@ def _motor_fmu(fmu_path, inputs, sim_time, compiled):
     try:
         fmu.setupExperiment(startTime=0.0)
         fmu.setReal([vr["Slider.s_min_m"], vr["Slider.s_max_m"]], [-1.0, 1.0])
-        fmu.setBoolean([vr["Interface.compiled"]], [compiled])
         fmu.setReal([vr[k] for k in inputs], [float(x) for x in inputs.values()])
         fmu.enterInitializationMode()
         fmu.exitInitializationMode()
@@ -206,8 +214,8 @@ def main(argv=None):
             rows.append(("L1B2Motor.fmu",
                          _engine_rows(lambda q: _motor_fmu(motor, inputs, args.sim_time, q), args.repeat)))
     print(f"\nreal-time factor (wall / simulated time), reference motor, {V0_V:.0f} V, no load, "
-          f"{STEP_S * 1e3:.1f} ms step, {args.sim_time} s simulated; old = the interface's closed form in "
-          "plain Python, new = compiled")
+          f"{STEP_S * 1e3:.1f} ms step, {args.sim_time} s simulated; old = kernels in plain Python "
+          "(L1B2_JIT=0), new = compiled by numba")
     print(f"{'engine':>13} {'time':>5} {'RTF old':>9} {'RTF new':>9} {'speed-up':>9} {'target':>7} {'':>6}   "
           f"{'v_end old':>10} {'v_end new':>10} {'rel diff':>9}")
     for name, (old, new) in rows:

@@ -226,3 +226,21 @@ def test_breakaway_threshold_in_the_engine_is_the_static_friction_level(motor, m
         assert left > 1e-4 and r["Slider.v"].min() < -1e-3
     else:
         assert left == 0.0 and np.all(r["Slider.v"] == 0.0)
+
+
+def test_in_process_motor_same_with_compiled_and_python_kernels(motor, monkeypatch):
+    # one run two ways: every kernel compiled by numba, and every kernel in plain Python (L1B2_JIT=0, read by
+    # the blocks at initialisation); start-up with stick-slip, a load step and the run to steady speed
+    from l1b2.cosim.engine import InProcessMotor
+    from l1b2.physics import driver as drv
+    V_s = float(drv.supply_for_voltage_V(motor.driver, 300.0, 1.0, 48500.0, 25.0))
+    runs = {}
+    for flag in ("1", "0"):
+        monkeypatch.setenv("L1B2_JIT", flag)
+        m = InProcessMotor(motor, h_s=2e-4)
+        m.initialize(V_s=V_s, m_load=lambda t: 0.0 if t < 0.03 else 0.05)
+        runs[flag] = m.run(0.06, record=("Slider.v", "Slider.s", "Stator.U_w", "Interface.F_d"))
+    for col in ("Slider.v", "Slider.s", "Stator.U_w", "Interface.F_d"):
+        a, b = np.asarray(runs["1"][col]), np.asarray(runs["0"][col])
+        assert np.allclose(a, b, rtol=1e-12, atol=1e-15 * np.max(np.abs(b))), col
+    assert np.max(runs["1"]["Slider.v"]) > 0.1  # it moved

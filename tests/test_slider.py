@@ -266,3 +266,27 @@ def test_scalar_fast_paths_equal_vector_paths(motor):
         vec = sld.first_order_response(one(v0), one(F), sp.c_r_N_s_per_m, sp.mass_kg, one(t))
         for a, b in zip(fast, vec):
             assert isinstance(a, float) and a == pytest.approx(b[0], rel=1e-14, abs=1e-18)
+
+
+def test_compiled_event_loop_equals_the_python_one(motor):
+    # the slider's event loop compiled by numba (l1b2.physics.jit) against the same function in Python, over
+    # stuck, breaking away, decelerating to rest, reversing and end-stop cases; 1e-15 m/s and m absolute
+    from l1b2.physics.jit import jit_status
+    kern = sld.compiled_step()
+    if kern is None:
+        pytest.skip(f"numba kernel not available: {jit_status()}")
+    sp = motor.slider
+    rng = np.random.default_rng(3)
+    events = set()
+    for _ in range(3000):
+        v = float(rng.choice([0.0, rng.uniform(-0.3, 0.3)]))
+        s = float(rng.uniform(sp.s_min_m, sp.s_max_m)) if rng.random() < 0.8 else float(
+            rng.choice([sp.s_min_m, sp.s_max_m]))
+        args = (v, s, float(v == 0.0), float(np.sign(s) if s in (sp.s_min_m, sp.s_max_m) else 0.0),
+                sp.mass_kg + rng.uniform(0.0, 0.2), rng.uniform(-4.0, 4.0), rng.uniform(0.0, 1.0),
+                rng.uniform(0.0, 1.3), float(rng.choice([0.0, sp.c_r_N_s_per_m])), sp.s_min_m, sp.s_max_m,
+                float(rng.choice([2e-4, 1e-3, 0.05])))
+        py, jt = sld.step_floats(*args), kern(*args)
+        assert np.allclose(py, jt, rtol=0.0, atol=1e-15), (args, py, jt)
+        events.add((py[2], py[3]))
+    assert {(1.0, 0.0), (0.0, 0.0), (1.0, 1.0), (1.0, -1.0)} <= events  # stuck, moving, at both stops

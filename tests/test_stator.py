@@ -453,3 +453,25 @@ def test_stator_block_step_equals_physics_functions(motor, thermal):
         assert b.delta == pytest.approx(tip.delta_rad, rel=1e-12)
         exact = st.modal_properties(sp, st.axial_force_N(sp, b.s), b.T_st)
         assert b.eta_T == pytest.approx(exact.eta_T, rel=1e-13)
+
+
+def test_compiled_envelope_step_equals_the_python_one(motor):
+    # the stator's per-step update compiled by numba against the same function in Python, for modes at rest
+    # (force moved into the excitation), ringing up and loaded by the interface; 1e-13 relative
+    from l1b2.physics.jit import jit_status
+    kern = st.compiled_envelope_step()
+    if kern is None:
+        pytest.skip(f"numba kernel not available: {jit_status()}")
+    props = st.modal_properties(motor.stator, 70.0)
+    rng = np.random.default_rng(5)
+    for i in range(2000):
+        Q = [0.0] * 4 if i % 10 == 0 else list(rng.normal(0.0, 1e-6, 4))
+        args = (*Q, rng.uniform(-np.pi, np.pi), *rng.normal(0.0, 20.0, 4), rng.uniform(0.0, 30.0),
+                rng.uniform(-30.0, 30.0), props.eta_T, 2 * np.pi * rng.uniform(45e3, 52e3), props.M_l, props.K_l,
+                props.C_l, props.M_b, props.K_b, props.C_b, float(rng.choice([2e-5, 2e-4, 1e-3])),
+                props.eta_T * rng.uniform(0.9, 1.1))
+        py, jt = st.coupled_envelope_step(*args), kern(*args)
+        scale = max(abs(x) for x in py[:6]) + 1e-300
+        for k, (a, b) in enumerate(zip(py, jt)):
+            tol = 1e-13 * scale if k < 6 else 1e-12  # phasors and amplitudes [m]; phases [rad]
+            assert abs(a - b) <= tol or (k >= 6 and abs(abs(a - b) - 2 * np.pi) <= 1e-12), (k, args, a, b)

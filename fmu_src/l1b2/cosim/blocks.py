@@ -27,6 +27,8 @@ from __future__ import annotations
 
 import cmath
 import math
+import operator
+import sys
 from dataclasses import dataclass, fields, replace
 from typing import Any
 
@@ -127,16 +129,23 @@ class Block:
     def check_inputs(self):
         """Raise :class:`SimulationError` on a non-finite or out-of-range input."""
         bounds = _INPUT_BOUNDS.get(type(self))
-        if bounds is None:
-            bounds = _INPUT_BOUNDS[type(self)] = tuple(
-                (v.name, -math.inf if v.min is None else v.min, math.inf if v.max is None else v.max)
-                for v in self.INPUTS)
-        for name, lo, hi in bounds:  # fast pass: finite floats inside their ranges
-            value = getattr(self, name)
-            if type(value) is not float or not lo <= value <= hi or value - value != 0.0:
-                break
-        else:
-            return
+        if bounds is None:  # unbounded inputs: the largest finite floats, so that inf and nan fail
+            big = sys.float_info.max
+            names = tuple(v.name for v in self.INPUTS)
+            bounds = _INPUT_BOUNDS[type(self)] = (
+                operator.attrgetter(*names) if len(names) > 1
+                else (lambda obj, names=names: tuple(getattr(obj, n) for n in names)),
+                tuple(-big if v.min is None else v.min for v in self.INPUTS),
+                tuple(big if v.max is None else v.max for v in self.INPUTS))
+        getter, lows, highs = bounds
+        try:  # fast pass: every value inside its (finite) range; nan fails every comparison
+            for value, lo, hi in zip(getter(self), lows, highs):
+                if not lo <= value <= hi:
+                    break
+            else:
+                return
+        except TypeError:  # not a number: the checks below say which
+            pass
         for var in self.INPUTS:
             value = getattr(self, var.name)
             if not isinstance(value, (int, float, np.floating)) or not math.isfinite(value):
@@ -254,9 +263,11 @@ class StatorBlock(Block):
         Var("T_st0", "parameter", "degC", "initial stator temperature (used when self-heating is on)",
             start=25.0, min=-100.0, max=300.0, variability="fixed"),
     ]
+    _envelope_step = None  # the compiled (or Python) envelope step, looked up at the first step
 
     def initialize(self):
         self.rebuild_params()
+        self._envelope_step = None
         self.T_st = float(self.T_st0 if self.params.thermal_tau_s > 0 else self.T)
         self.initialize_outputs()
 
@@ -306,49 +317,37 @@ class StatorBlock(Block):
     def do_step(self, t, h):
         """One communication step: the envelopes integrated exactly with the interface's describing functions.
 
-        The formulas of :func:`~l1b2.physics.stator.excitation_phasors`,
-        :func:`~l1b2.physics.stator.envelope_step` and
-        :func:`~l1b2.physics.stator.stator_temperature_step` written out in
-        plain floats (tests/test_stator.py checks them against those functions).
+        The formulas of :func:`~l1b2.physics.stator.excitation_phasors` and
+        :func:`~l1b2.physics.stator.envelope_step` in plain floats
+        (:func:`~l1b2.physics.stator.coupled_envelope_step`, compiled by numba when
+        available), then :func:`~l1b2.physics.stator.stator_temperature_step`
+        (tests/test_stator.py checks the step against those functions).
         """
         self.check_inputs()
         d = self.direction
         if abs(abs(d) - 1.0) > 1e-9:
             raise SimulationError(f"StatorBlock: input direction [1] = {d} must be +1 or -1")
         sp, props = self.params, self._props  # the properties the interface forces were computed with
-        w, V0 = self.omega, self.V0
-        Q_l = complex(self.Q_l_re, self.Q_l_im)
-        Q_b = complex(self.Q_b_re, self.Q_b_im)
-        rot = cmath.exp(1j * self.phase_l)  # interface frame -> absolute phasor frame
-        F1_N = complex(self.F_N1_sin, self.F_N1_cos) * rot
-        F1_T = complex(self.F_T1_sin, self.F_T1_cos) * rot
-        F_l = complex(sp.A_l_N_per_V * V0)
-        F_b = complex(d * sp.A_b_N_per_V * (1.0 + d * sp.asym_b) * V0)
-        eta_T = props.eta_T
-        # describing functions: generalised interface force = -Y Q
-        if abs(Q_l) > 1e-15:
-            Y_l = st.ETA_N * F1_N / Q_l
-        else:
-            Y_l, F_l = 0.0, F_l - st.ETA_N * F1_N
-        if abs(Q_b) > 1e-15:
-            Y_b = eta_T * F1_T / Q_b
-        else:
-            Y_b, F_b = 0.0, F_b - eta_T * F1_T
-        M, C = props.M_l, props.C_l
-        Zt = props.K_l - w * w * M + 1j * w * C + Y_l
-        Qs = F_l / Zt
-        Q_l = Qs + (Q_l - Qs) * cmath.exp(-Zt / (2j * w * M + C) * h)
-        M, C = props.M_b, props.C_b
-        Zt = props.K_b - w * w * M + 1j * w * C + Y_b
-        Qs = F_b / Zt
-        Q_b = Qs + (Q_b - Qs) * cmath.exp(-Zt / (2j * w * M + C) * h)
-        self.Q_l_re, self.Q_l_im, self.Q_b_re, self.Q_b_im = Q_l.real, Q_l.imag, Q_b.real, Q_b.imag
+        V0 = self.V0
         if sp.thermal_tau_s <= 0.0 and not sp.heating_K_per_V2:
             self.T_st = float(self.T)
         else:
             self.T_st = float(st.stator_temperature_step(float(self.T_st), float(self.T), float(V0), sp, h))
-        self._update_props()
-        self._publish()
+        self._update_props()  # at the step's end: the input s, the new stator temperature
+        new = self._props
+        step = self._envelope_step
+        if step is None:
+            step = self._envelope_step = st.compiled_envelope_step() or st.coupled_envelope_step
+        (self.Q_l_re, self.Q_l_im, self.Q_b_re, self.Q_b_im,
+         self.U_l, self.U_w, self.phase_l, self.phase_w, self.delta) = step(
+            self.Q_l_re, self.Q_l_im, self.Q_b_re, self.Q_b_im, self.phase_l,
+            self.F_N1_sin, self.F_N1_cos, self.F_T1_sin, self.F_T1_cos,
+            sp.A_l_N_per_V * V0, d * sp.A_b_N_per_V * (1.0 + d * sp.asym_b) * V0, props.eta_T, self.omega,
+            props.M_l, props.K_l, props.C_l, props.M_b, props.K_b, props.C_b, h, new.eta_T)
+        self.f_b = new.omega_b0 / (2 * math.pi)  # the rest of _publish
+        self.eta_T = new.eta_T
+        self.v_tip = self.omega * self.U_w
+        self.T_stator = self.T_st
 
 
 # ---------------------------------------------------------------------------
@@ -367,9 +366,6 @@ class InterfaceBlock(Block):
             "instead of the exact closed form", start=False, variability="fixed", type="Boolean"),
         Var("n_theta", "parameter", "", "cells over the contact window of the numerical reference kernel",
             start=256, min=16, max=65536, variability="fixed", type="Integer"),
-        Var("compiled", "parameter", "", "true: the closed form compiled by numba when it is available "
-            "(same results to round-off); false: the same closed form in plain Python",
-            start=True, variability="fixed", type="Boolean"),
     ]
     INPUTS = [
         Var("U_l", "input", "m", "tip normal vibration amplitude", min=0.0, max=1e-3, nominal=1e-6),
@@ -398,20 +394,24 @@ class InterfaceBlock(Block):
 
     def initialize(self):
         self.rebuild_params()
+        p = self.params
+        # the closed form's kernel and its parameter arguments (itf.interface_forces_scalar, unwrapped)
+        self._kernel = itf.compiled_kernel() or itf.period_integrals  # Python when L1B2_JIT=0
+        self._kernel_args = (p.k_e_N_per_m, p.u_m_m, p.mu_p, p.sigma_N_s_per_m, 1.0 if self.pure_slip else 0.0)
         self._compute()
 
     initialize_outputs = initialize
 
     def _compute(self):
         self.check_inputs()
-        mode = "pure_slip" if self.pure_slip else "stick_slip"
-        if self.quadrature:
-            out = itf.interface_forces_reference(self.U_l, self.U_w, self.delta, self.omega, self.v, self.F_p,
-                                                 self.params, mode=mode, n_theta=int(self.n_theta))
-        else:  # inputs are real numbers here (check_inputs)
-            out = itf.interface_forces_scalar(float(self.U_l), float(self.U_w), float(self.delta),
-                                              float(self.omega), float(self.v), float(self.F_p), self.params, mode,
-                                              jit=None if self.compiled else False)
+        if not self.quadrature:  # inputs are real numbers here (check_inputs)
+            (self.F_d, self.F_N_mean, self.F_N1_sin, self.F_N1_cos, self.F_T1_sin, self.F_T1_cos, self.phi_c,
+             self.stick_fraction) = self._kernel(self.U_l, self.U_w, self.delta, self.omega, self.v, self.F_p,
+                                                 *self._kernel_args)
+            return
+        out = itf.interface_forces_reference(self.U_l, self.U_w, self.delta, self.omega, self.v, self.F_p,
+                                             self.params, mode="pure_slip" if self.pure_slip else "stick_slip",
+                                             n_theta=int(self.n_theta))
         self.F_d, self.F_N_mean = out.F_d_N, out.F_N_mean_N
         self.F_N1_sin, self.F_N1_cos = out.F_N1_sin_N, out.F_N1_cos_N
         self.F_T1_sin, self.F_T1_cos = out.F_T1_sin_N, out.F_T1_cos_N
@@ -453,11 +453,14 @@ class SliderBlock(Block):
         Var("v0", "parameter", "m/s", "initial slider speed", start=0.0, min=-10.0, max=10.0, variability="fixed"),
     ]
 
+    _kernel = None  # the slider's event loop (compiled or Python), looked up at initialisation
+
     def initialize(self):
         self.rebuild_params()
         sp = self.params
         if not sp.s_min_m <= self.s0 <= sp.s_max_m:
             raise SimulationError(f"SliderBlock: s0 [m] = {self.s0} outside the stroke [{sp.s_min_m}, {sp.s_max_m}]")
+        self._kernel = sld.compiled_step() or sld.step_floats  # Python when L1B2_JIT=0
         self.s_state, self.v_state = float(self.s0), float(self.v0)
         self.stuck_state = 1.0 if self.v0 == 0.0 else 0.0
         self.stop_state = 0.0
@@ -475,7 +478,7 @@ class SliderBlock(Block):
         v_old = self.v_state
         new = sld.step(self.params, sld.SliderState(self.v_state, self.s_state, bool(self.stuck_state),
                                                     int(self.stop_state)),
-                       self.F_d, self.F_p, self.m_load, h)
+                       self.F_d, self.F_p, self.m_load, h, self._kernel)
         self.v_state, self.s_state = new.v_m_s, new.s_m
         self.stuck_state, self.stop_state = float(new.stuck), float(new.at_stop)
         self._publish((new.v_m_s - v_old) / h if h > 0 else 0.0)

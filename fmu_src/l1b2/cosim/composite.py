@@ -73,9 +73,6 @@ class MotorBlock(Block):
             start=False, variability="fixed", type="Boolean"),
         Var("Interface.quadrature", "parameter", "", "true: the numerical reference kernel of the interface "
             "(slow) instead of the exact closed form", start=False, variability="fixed", type="Boolean"),
-        Var("Interface.compiled", "parameter", "", "true: the interface's closed form compiled by numba when it "
-            "is available; false: the same closed form in plain Python", start=True, variability="fixed",
-            type="Boolean"),
         Var("Slider.s0", "parameter", "m", "initial slider position", start=0.0, min=-1.0, max=1.0,
             variability="fixed"),
         Var("Slider.v0", "parameter", "m/s", "initial slider speed", start=0.0, min=-10.0, max=10.0,
@@ -160,7 +157,6 @@ class MotorBlock(Block):
                                     pure_slip=bool(self._extra["Interface.pure_slip"]))
         self.motor.b["Stator"].T_st0 = float(self._extra["Stator.T_st0"])
         self.motor.b["Interface"].quadrature = bool(self._extra["Interface.quadrature"])
-        self.motor.b["Interface"].compiled = bool(self._extra["Interface.compiled"])
         self._held = None
         self.motor.initialize(V_s=self.V_s, duty=self.duty, f_s=self.f_s, T=self.T, direction=self.direction,
                               m_load=self.m_load, s0=float(self._extra["Slider.s0"]),

@@ -41,6 +41,7 @@ class InProcessMotor:
         self.b = make_blocks(mp, pure_slip=pure_slip)
         self._inputs: dict = {}
         self._constant = None
+        self._driven = None
 
     @property
     def inputs(self) -> dict:
@@ -50,6 +51,7 @@ class InProcessMotor:
     @inputs.setter
     def inputs(self, values: dict):
         self._inputs = dict(values)
+        self._driven = None  # the constant inputs the driver last stepped with (None: step it)
         # all constant: converted once, not at every step
         self._constant = (None if any(callable(v) for v in self._inputs.values())
                           else {k: float(v) for k, v in self._inputs.items()})
@@ -81,8 +83,10 @@ class InProcessMotor:
         d, stt, itf_, sl = b["Driver"], b["Stator"], b["Interface"], b["Slider"]
         t, h = self.t, self.h
         u = self._inputs_at(t)
-        d.V_s, d.duty, d.f_s, d.T = u["V_s"], u["duty"], u["f_s"], u["T"]
-        d.do_step(t, h)
+        if u is not self._driven:  # the driver is algebraic: with the same constant inputs its outputs stand
+            d.V_s, d.duty, d.f_s, d.T = u["V_s"], u["duty"], u["f_s"], u["T"]
+            d.do_step(t, h)
+            self._driven = u if u is self._constant else None
         stt.V0, stt.omega, stt.s, stt.direction, stt.T = d.V0, d.omega, sl.s, u["direction"], u["T"]
         stt.F_N1_sin, stt.F_N1_cos, stt.F_T1_sin, stt.F_T1_cos = (
             itf_.F_N1_sin, itf_.F_N1_cos, itf_.F_T1_sin, itf_.F_T1_cos)

@@ -57,6 +57,8 @@ from .ssp import (
 )
 
 DEFAULT_STEP_S = 2e-4
+#: fmi2Status values above this one (discard, error, fatal) end a simulation
+FMI2_WARNING = 1
 _EXTRACTED: dict[str, str] = {}
 
 
@@ -483,7 +485,12 @@ class CoSimulation:
             take = operator.itemgetter(*src) if len(src) > 1 else (lambda values, j=src[0] if src else 0: (values[j],))
             nin, nout = len(src), len(i.out_vrs)
             fmu = i.fmu
-            plan.append((n, fmu.component, fmu.fmi2SetReal, fmu.fmi2DoStep, fmu.fmi2GetReal, take if src else None,
+            # fmpy's wrappers add a Python layer per call (argument logging, status check); without a call
+            # logger the ctypes functions they wrap are called directly and the status is checked here
+            raw = getattr(fmu, "_functions", None) if getattr(fmu, "fmiCallLogger", None) is None else None
+            calls = ((raw["fmi2SetReal"], raw["fmi2DoStep"], raw["fmi2GetReal"]) if raw
+                     else (fmu.fmi2SetReal, fmu.fmi2DoStep, fmu.fmi2GetReal))
+            plan.append((n, fmu.component, *calls, take if src else None,
                          (fmi2ValueReference * nin)(*i.in_vrs), (fmi2Real * nin)(), nin,
                          (fmi2ValueReference * nout)(*i.out_vrs), (fmi2Real * nout)(), nout, *spans[n]))
         held: dict[str, tuple] = {}
@@ -496,14 +503,19 @@ class CoSimulation:
                     u = take(flat)
                     if u != held.get(n):  # inputs keep their values in the FMU: set them when they change
                         in_val[:] = u
-                        set_real(comp, in_vr, nin, in_val)
+                        if set_real(comp, in_vr, nin, in_val) > FMI2_WARNING:
+                            raise SimulationError(f"{n}.setReal at t={t:.6g} s failed; see the FMU log above")
                         held[n] = u
                 try:
-                    do_step(comp, t, h, fmi2True)
-                except Exception as exc:  # fmpy raises FMICallException on discard/error
+                    status = do_step(comp, t, h, fmi2True)
+                except Exception as exc:  # fmpy's wrapper raises FMICallException on discard/error
                     raise SimulationError(f"{n}.doStep at t={t:.6g} s failed ({exc}); see the FMU log above") from None
+                if status > FMI2_WARNING:
+                    raise SimulationError(f"{n}.doStep at t={t:.6g} s failed (status {status}); "
+                                          "see the FMU log above")
                 if nout:
-                    get_real(comp, out_vr, nout, out_val)
+                    if get_real(comp, out_vr, nout, out_val) > FMI2_WARNING:
+                        raise SimulationError(f"{n}.getReal at t={t:.6g} s failed; see the FMU log above")
                     flat[lo:hi] = out_val
 
         return step, flat, slot

@@ -61,6 +61,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .jit import cached_kernel, jit_status
 from .params import InterfaceParams
 
 MODES = ("stick_slip", "pure_slip")
@@ -240,7 +241,6 @@ def interface_forces_scalar(U_l, U_w, delta, omega, v, F_p, params: InterfacePar
     kernel = compiled_kernel() if jit is None or jit else None
     if kernel is None:
         if jit:
-            from .jit import jit_status
             raise RuntimeError(f"the compiled interface kernel is not available: {jit_status()}")
         kernel = period_integrals
     return InterfaceOutput(*kernel(U_l, U_w, delta, omega, v, F_p, params.k_e_N_per_m, params.u_m_m,
@@ -251,14 +251,10 @@ _COMPILED: list = []  # [kernel or None], filled on the first call of compiled_k
 
 
 def compiled_kernel():
-    """:func:`period_integrals` compiled by numba (compiled once per process), or None (see :mod:`.jit`)."""
-    if not _COMPILED:
-        from .jit import compile_family
-        family = {"_half_angle_scalar": _half_angle_scalar, "_primitives": _primitives,
-                  "_switch_phase": _switch_phase, "period_integrals": period_integrals}
-        _COMPILED.append(compile_family(family, "period_integrals", "UniTuple(float64, 8)(" +
-                                        ", ".join(["float64"] * 11) + ")"))
-    return _COMPILED[0]
+    """:func:`period_integrals` compiled by numba (once per process), or None (see :mod:`.jit`)."""
+    return cached_kernel(_COMPILED, {"_half_angle_scalar": _half_angle_scalar, "_primitives": _primitives,
+                                     "_switch_phase": _switch_phase, "period_integrals": period_integrals},
+                         "period_integrals", "UniTuple(float64, 8)(" + ", ".join(["float64"] * 11) + ")")
 
 
 def period_integrals(U_l, U_w, delta, omega, v, F_p, k_e, u_m, mu, sigma, pure_slip):

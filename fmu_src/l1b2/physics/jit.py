@@ -7,11 +7,15 @@ compiles such a family of functions; the plain functions stay untouched (they
 are the pure-Python kernel, used when numba is missing or disabled, and the
 "old kernel" of ``bench/bench_kernel.py``).
 
-Whether the compiled kernel is used:
+Kernels compiled this way: the interface's period averages
+(:func:`l1b2.physics.interface.period_integrals`), the stator's envelope step
+(:func:`l1b2.physics.stator.coupled_envelope_step`) and the slider's event loop
+(:func:`l1b2.physics.slider.step_floats`). They are used when
 
-* numba importable (it is a project dependency, installed by ``make``), and
+* numba is importable (it is a project dependency, installed by ``make``), and
 * the environment variable ``L1B2_JIT`` is not ``0`` (``L1B2_JIT=0`` forces
-  the pure-Python kernel, e.g. for a host interpreter without numba).
+  the pure-Python kernels, e.g. for a host interpreter without numba; blocks
+  read it when they are initialised).
 
 Otherwise, or if compilation fails, the pure-Python functions are used and
 :func:`jit_status` says why.
@@ -39,8 +43,6 @@ from pathlib import Path
 
 #: why the compiled kernels are or are not used ("compiled", or the reason for the fallback)
 _STATUS = {"state": "not requested"}
-#: source files whose functions the content-keyed locator serves
-_REGISTERED: set[str] = set()
 
 
 def jit_enabled() -> bool:
@@ -49,8 +51,9 @@ def jit_enabled() -> bool:
 
 
 def jit_status() -> str:
-    """How the last :func:`compile_family` call ended: ``"compiled"`` or why it fell back to Python."""
-    return _STATUS["state"]
+    """``"disabled by L1B2_JIT=0"``, or how the last :func:`compile_family` call ended: ``"compiled"`` or why
+    it fell back to Python (``"not requested"`` before any)."""
+    return "disabled by L1B2_JIT=0" if not jit_enabled() else _STATUS["state"]
 
 
 def cache_root() -> Path:
@@ -62,18 +65,24 @@ def cache_root() -> Path:
     return (Path(xdg) if xdg else Path.home() / ".cache") / "l1b2" / "numba"
 
 
-def _install_locator(numba_caching) -> None:
-    """Put :class:`ContentCacheLocator` first in numba's list of cache locators (once per process)."""
+def _install_locator(numba_caching):
+    """Put the content-keyed locator first in numba's list of cache locators (once per process); returns it.
+
+    Every copy of this module (each FMU bundles one) finds the locator the
+    first copy installed and registers its files there.
+    """
     impl = getattr(numba_caching, "CacheImpl", None) or getattr(numba_caching, "_CacheImpl")
     base = getattr(numba_caching, "_CacheLocator")
     mixin = getattr(numba_caching, "_SourceFileBackedLocatorMixin")
-    if any(getattr(c, "L1B2_CONTENT_KEYED", False) for c in impl._locator_classes):
-        return
+    for cls in impl._locator_classes:
+        if getattr(cls, "L1B2_CONTENT_KEYED", False):
+            return cls
 
     class ContentCacheLocator(mixin, base):
-        """Cache folder named after the source file's content hash, for the files registered here."""
+        """Cache folder named after the module and its source file's content hash, for registered files."""
 
         L1B2_CONTENT_KEYED = True
+        registered: set = set()  # source files (absolute paths) served by this locator
 
         def __init__(self, py_func, py_file):
             self._py_file = py_file
@@ -87,11 +96,12 @@ def _install_locator(numba_caching) -> None:
 
         @classmethod
         def from_function(cls, py_func, py_file):
-            if os.path.abspath(py_file) not in _REGISTERED:
+            if os.path.abspath(py_file) not in cls.registered:
                 return None
             return super().from_function(py_func, py_file)
 
     impl._locator_classes.insert(0, ContentCacheLocator)
+    return ContentCacheLocator
 
 
 def compile_family(functions: dict, entry: str, signature: str):
@@ -116,9 +126,9 @@ def compile_family(functions: dict, entry: str, signature: str):
         _STATUS["state"] = f"numba not importable ({type(exc).__name__}: {exc})"
         return None
     try:
-        _install_locator(caching)
+        locator = _install_locator(caching)
         first = next(iter(functions.values()))
-        _REGISTERED.add(os.path.abspath(first.__code__.co_filename))
+        locator.registered.add(os.path.abspath(first.__code__.co_filename))
         namespace = dict(first.__globals__)
         clones = {name: types.FunctionType(f.__code__, namespace, name, f.__defaults__, f.__closure__)
                   for name, f in functions.items()}
@@ -134,3 +144,17 @@ def compile_family(functions: dict, entry: str, signature: str):
         return None
     _STATUS["state"] = "compiled"
     return compiled
+
+
+def cached_kernel(slot: list, functions: dict, entry: str, signature: str):
+    """The compiled ``entry`` of ``functions``, compiled at the first call and kept in ``slot`` (a module's list).
+
+    ``None`` while ``L1B2_JIT=0`` is set (checked at every call, so a host can
+    switch between the compiled and the Python kernels between simulations) or
+    when compilation is not possible (:func:`jit_status`).
+    """
+    if not jit_enabled():
+        return None
+    if not slot:
+        slot.append(compile_family(functions, entry, signature))
+    return slot[0]

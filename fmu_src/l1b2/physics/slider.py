@@ -31,6 +31,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .jit import cached_kernel
 from .params import G_M_S2, SliderParams
 
 
@@ -100,61 +101,101 @@ class SliderState(NamedTuple):
 
 
 def step(sp: SliderParams, state: SliderState, F_d_N: float, F_p_N: float, m_load_kg: float,
-         h_s: float) -> SliderState:
-    """Advance the slider by ``h_s`` with the inputs held constant (event-exact)."""
-    v, s, stuck, at_stop = float(state.v_m_s), float(state.s_m), bool(state.stuck), int(state.at_stop)
-    m = float(moving_mass_kg(sp, m_load_kg))
-    F_ext = float(F_d_N) - float(load_force_N(m_load_kg))
-    F_path = float(load_path_friction_N(sp, m_load_kg))
-    Fc = float(guide_friction_level_N(sp, F_p_N)) + F_path
-    Fs = float(guide_friction_level_N(sp, F_p_N, static=True)) + F_path
-    c = sp.c_r_N_s_per_m
+         h_s: float, kernel=None) -> SliderState:
+    """Advance the slider by ``h_s`` with the inputs held constant (event-exact).
+
+    The force levels are computed here; the event loop is ``kernel``, by default
+    :func:`step_floats` compiled by numba when available (:func:`compiled_step`).
+    """
+    m_load = float(m_load_kg)
+    F_p = float(F_p_N)
+    F_path = sp.pulley_mu * G_M_S2 * abs(m_load)  # load_path_friction_N, inline
+    kern = kernel or compiled_step() or step_floats
+    v, s, stuck, at_stop = kern(
+        float(state.v_m_s), float(state.s_m), 1.0 if state.stuck else 0.0, float(state.at_stop),
+        sp.mass_kg + sp.load_inertia * abs(m_load), float(F_d_N) - G_M_S2 * m_load,
+        sp.mu_sd * (sp.kappa * F_p + G_M_S2 * sp.mass_kg) + F_path,
+        sp.mu_ss * (sp.kappa * F_p + G_M_S2 * sp.mass_kg) + F_path,
+        sp.c_r_N_s_per_m, sp.s_min_m, sp.s_max_m, float(h_s))
+    return SliderState(v, s, stuck != 0.0, int(at_stop))
+
+
+def step_floats(v, s, stuck, at_stop, m, F_ext, Fc, Fs, c, s_min, s_max, h_s):
+    """The event loop of :func:`step` in plain floats: ``(v, s, stuck, at_stop)`` after ``h_s``.
+
+    ``m`` moving mass [kg], ``F_ext = F_d - F_load`` [N], ``Fc`` / ``Fs`` dynamic /
+    static Coulomb level of guide and load path [N], ``c`` viscous coefficient
+    [N s/m], ``s_min`` / ``s_max`` end stops [m]; ``stuck`` 1.0 or 0.0,
+    ``at_stop`` -1.0, 0.0 or 1.0. Written in the subset of Python numba compiles.
+    """
     t = 0.0
     for _ in range(16):  # a step holds at most a few events
         remaining = h_s - t
         if remaining <= 0:
             break
-        if stuck or v == 0.0:
+        if stuck != 0.0 or v == 0.0:
             if abs(F_ext) <= Fs:
-                return SliderState(0.0, s, True, at_stop)
+                return 0.0, s, 1.0, at_stop
             direction = 1.0 if F_ext > 0 else -1.0
             if at_stop == direction:  # pushed into the stop
-                return SliderState(0.0, s, True, at_stop)
-            stuck, v = False, 0.0
+                return 0.0, s, 1.0, at_stop
+            stuck, v = 0.0, 0.0
         else:
             direction = 1.0 if v > 0 else -1.0
-        at_stop = 0
+        at_stop = 0.0
         F = F_ext - direction * Fc
         # time at which the speed reaches zero (if the net force decelerates it)
         t_zero = math.inf
         if direction * F < 0:  # decelerating: v heads for v_inf of the opposite sign
             t_zero = -v * m / F if c == 0 else (m / c) * math.log((v - F / c) / (-F / c))
         tau = min(remaining, t_zero)
-        v_new, ds = first_order_response(v, F, c, m, tau)
-        s_new = s + float(ds)
-        limit = sp.s_max_m if direction > 0 else sp.s_min_m
+        v_new, ds = first_order_scalar(v, F, c, m, tau)
+        s_new = s + ds
+        limit = s_max if direction > 0 else s_min
         if direction * (s_new - limit) >= 0:  # reaches the end stop within tau
-            tau_hit = _time_to_reach(v, F, c, m, limit - s, tau)
-            t += tau_hit
-            s, v, stuck, at_stop = limit, 0.0, True, int(direction)
+            t += time_to_reach(v, F, c, m, limit - s, tau)
+            s, v, stuck, at_stop = limit, 0.0, 1.0, direction
             continue
         t += tau
         s = s_new
         if tau == t_zero:
             v = 0.0
-            stuck = abs(F_ext) <= Fs
+            stuck = 1.0 if abs(F_ext) <= Fs else 0.0
         else:
-            v = float(v_new)
-    return SliderState(v, s, stuck and v == 0.0, at_stop)
+            v = v_new
+    return v, s, (1.0 if stuck != 0.0 and v == 0.0 else 0.0), at_stop
 
 
-def _time_to_reach(v0: float, F: float, c: float, m: float, distance: float, t_max: float) -> float:
-    """First time at which the travelled distance equals ``distance`` (monotone motion), by bisection."""
+def first_order_scalar(v0, F, c, m, t):
+    """:func:`first_order_response` for plain floats (any ``c >= 0``): ``(v, ds)`` [m/s, m]."""
+    if c == 0:
+        acc = F / m
+        return v0 + acc * t, v0 * t + 0.5 * acc * t * t
+    T = m / c
+    v_inf = F / c
+    decay = -math.expm1(-t / T)  # 1 - exp(-t/T), accurate for small t
+    return v_inf + (v0 - v_inf) * (1 - decay), v_inf * t + (v0 - v_inf) * T * decay
+
+
+_COMPILED: list = []  # [kernel or None], filled on the first call of compiled_step()
+
+
+def compiled_step():
+    """:func:`step_floats` compiled by numba (once per process), or None (see :mod:`.jit`)."""
+    return cached_kernel(
+        _COMPILED, {"first_order_scalar": first_order_scalar, "time_to_reach": time_to_reach,
+                    "step_floats": step_floats},
+        "step_floats", "UniTuple(float64, 4)(" + ", ".join(["float64"] * 12) + ")")
+
+
+def time_to_reach(v0, F, c, m, distance, t_max):
+    """First time at which the travelled distance equals ``distance`` (monotone motion), by bisection [s]."""
     lo, hi = 0.0, t_max
+    sgn = math.copysign(1.0, distance)
     for _ in range(60):
         mid = 0.5 * (lo + hi)
-        _, ds = first_order_response(v0, F, c, m, mid)
-        if (float(ds) - distance) * math.copysign(1.0, distance) < 0:
+        _, ds = first_order_scalar(v0, F, c, m, mid)
+        if (ds - distance) * sgn < 0:
             lo = mid
         else:
             hi = mid

@@ -54,6 +54,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.polynomial import legendre
 
+from .jit import cached_kernel
 from .params import StatorParams
 
 #: beta*L of the second free-free bending mode without axial force (tan = tanh root)
@@ -449,7 +450,8 @@ class ModalTable:
             wb = eta = np.full(deg + 1, np.nan)
         cell = None
         if np.all(np.isfinite(wb)) and np.all(np.isfinite(eta)) and k * w >= 0.0:
-            cell = (_power_coefficients(to_power, wb), _power_coefficients(to_power, eta))
+            cw, ce = _power_coefficients(to_power, wb), _power_coefficients(to_power, eta)
+            cell = (cw[0], ce[0], tuple(zip(cw[1:], ce[1:])))  # leading coefficients, then pairs for Horner
         self.cells[k] = cell
         return cell
 
@@ -461,14 +463,11 @@ class ModalTable:
         if cell is None:  # B2 at T_b: T_degC == T_b, or B2 does not depend on the temperature
             return modal_properties(sp, float(P), T_degC)
         u = 2.0 * (P - k * w) / w - 1.0
-        cw, ce = cell
-        wb = cw[0]
-        for c in cw[1:]:
-            wb = wb * u + c
-        eta = ce[0]
-        for c in ce[1:]:
-            eta = eta * u + c
-        K_l, C_l, w_l0 = self._l1_props(T_degC)
+        wb, eta, pairs = cell
+        for cw, ce in pairs:  # both interpolants by Horner's scheme
+            wb = wb * u + cw
+            eta = eta * u + ce
+        K_l, C_l, w_l0 = self._l1 if T_degC == self._l1_T else self._l1_props(T_degC)
         M_b = self.M_b
         return ModalProperties(M_l=self.M_l, K_l=K_l, C_l=C_l, M_b=M_b, K_b=M_b * wb ** 2,
                                C_b=2 * sp.zeta_b * M_b * wb, eta_T=abs(eta), omega_l0=w_l0, omega_b0=wb)
@@ -568,6 +567,65 @@ def envelope_step(Q, F, Y, omega_rad_s, M, K, C, h_s):
     lam = -Zt / (2j * w * M + C)
     Qs = F / Zt
     return Qs + (Q - Qs) * np.exp(lam * h_s)
+
+
+def coupled_envelope_step(Q_l_re, Q_l_im, Q_b_re, Q_b_im, phase_l, F_N1_sin, F_N1_cos, F_T1_sin, F_T1_cos,
+                          F_l_re, F_b_re, eta_T, omega, M_l, K_l, C_l, M_b, K_b, C_b, h, eta_T_new):
+    """One step of both modal envelopes with the interface's describing functions, in plain floats.
+
+    The co-simulation's per-step stator update (``StatorBlock.do_step``), in the
+    subset of Python that numba compiles (:func:`compiled_envelope_step`):
+
+    * the interface force fundamentals ``F1 = (F1_sin + j F1_cos) e^{j phase_l}``
+      rotated from the normal-displacement frame to the absolute phasor frame;
+    * describing functions ``Y_l = ETA_N F1_N / Q_l`` and ``Y_b = eta_T F1_T / Q_b``
+      (generalised interface force ``-Y Q``), or, for a mode at rest
+      (``|Q| <= 1e-15`` m), the force moved into the excitation;
+    * :func:`envelope_step` for each mode with the real excitation amplitudes
+      ``F_l_re``, ``F_b_re`` [N] (:func:`excitation_phasors` at zero voltage phase);
+    * :func:`tip_motion` of the new phasors with the tip coefficient ``eta_T_new``
+      of the step's end (the axial force may have changed).
+
+    Returns the new ``(Q_l_re, Q_l_im, Q_b_re, Q_b_im)`` [m] and the tip motion
+    ``(U_l, U_w, phase_l, phase_w, delta)`` [m, m, rad, rad, rad].
+    """
+    Q_l = complex(Q_l_re, Q_l_im)
+    Q_b = complex(Q_b_re, Q_b_im)
+    rot = cmath.exp(1j * phase_l)  # interface frame -> absolute phasor frame
+    F1_N = complex(F_N1_sin, F_N1_cos) * rot
+    F1_T = complex(F_T1_sin, F_T1_cos) * rot
+    F_l = complex(F_l_re, 0.0)
+    F_b = complex(F_b_re, 0.0)
+    Y_l = complex(0.0, 0.0)
+    Y_b = complex(0.0, 0.0)
+    if abs(Q_l) > 1e-15:
+        Y_l = ETA_N * F1_N / Q_l
+    else:
+        F_l = F_l - ETA_N * F1_N
+    if abs(Q_b) > 1e-15:
+        Y_b = eta_T * F1_T / Q_b
+    else:
+        F_b = F_b - eta_T * F1_T
+    w = omega
+    Zt = K_l - w * w * M_l + 1j * w * C_l + Y_l
+    Qs = F_l / Zt
+    Q_l = Qs + (Q_l - Qs) * cmath.exp(-Zt / (2j * w * M_l + C_l) * h)
+    Zt = K_b - w * w * M_b + 1j * w * C_b + Y_b
+    Qs = F_b / Zt
+    Q_b = Qs + (Q_b - Qs) * cmath.exp(-Zt / (2j * w * M_b + C_b) * h)
+    N = ETA_N * Q_l
+    W = eta_T_new * Q_b
+    return (Q_l.real, Q_l.imag, Q_b.real, Q_b.imag, abs(N), abs(W), cmath.phase(N), cmath.phase(W),
+            cmath.phase(W * N.conjugate()))
+
+
+_COMPILED: list = []  # [kernel or None], filled on the first call of compiled_envelope_step()
+
+
+def compiled_envelope_step():
+    """:func:`coupled_envelope_step` compiled by numba (once per process), or None (see :mod:`.jit`)."""
+    return cached_kernel(_COMPILED, {"coupled_envelope_step": coupled_envelope_step}, "coupled_envelope_step",
+                         "UniTuple(float64, 9)(" + ", ".join(["float64"] * 21) + ")")
 
 
 class StatorOutput(NamedTuple):
