@@ -14,8 +14,10 @@ Prints, side by side in one run:
   and the final slider speeds of both;
 * the same for the four-FMU co-simulation (``l1b2.cosim.CoSimulation``,
   target <= 0.5) and for ``L1B2Motor.fmu`` alone, stepped through fmpy
-  (``doStep`` and ``getReal`` of its outputs every step, target <= 0.15),
-  unless ``--no-fmu``.
+  (``doStep`` and ``getReal`` of its outputs every step, target <= 0.15), once
+  through fmpy's Python API and once ("ctypes host") through the ctypes
+  functions fmpy loaded, as a host written in C calls them; unless ``--no-fmu``.
+  Each run's time includes instantiating and initialising the FMU.
 
 Old and new runs alternate and the best of ``--repeat`` runs is reported.
 The real-time factor is also given in CPU time of this process
@@ -131,8 +133,13 @@ def _cosims(fmu_dir):
             for c in (False, True)}
 
 
-def _motor_fmu(fmu_path, inputs, sim_time, compiled):
-    """L1B2Motor.fmu alone through fmpy: a host loop of doStep and getReal (speed, position) per step."""
+def _motor_fmu(fmu_path, inputs, sim_time, compiled, raw=False):
+    """L1B2Motor.fmu alone through fmpy: a host loop of doStep and getReal (speed, position) per step.
+
+    ``raw``: the loop calls the FMI functions through the ctypes function pointers fmpy loaded, with
+    preallocated arrays (what a host written in C pays), instead of fmpy's Python API
+    (``FMU2Slave.doStep``/``getReal``, which builds ctypes arrays and checks the status in Python).
+    """
     from fmpy import read_model_description
     from fmpy.fmi2 import FMU2Slave
     from l1b2.cosim.hosting import install_exit_fix
@@ -154,9 +161,19 @@ def _motor_fmu(fmu_path, inputs, sim_time, compiled):
         fmu.exitInitializationMode()
         out = [vr["v"], vr["s"]]
         v = fmu.getReal(out)
-        for k in range(int(round(sim_time / STEP_S))):
-            fmu.doStep(k * STEP_S, STEP_S)
-            v = fmu.getReal(out)
+        n = int(round(sim_time / STEP_S))
+        if raw:
+            import ctypes
+            do_step, get_real = fmu._functions["fmi2DoStep"], fmu._functions["fmi2GetReal"]
+            comp, out_vr, out_val = fmu.component, (ctypes.c_uint * 2)(*out), (ctypes.c_double * 2)()
+            for k in range(n):
+                if do_step(comp, k * STEP_S, STEP_S, 1) > 1 or get_real(comp, out_vr, 2, out_val) > 1:
+                    raise RuntimeError(f"L1B2Motor.fmu failed at step {k}")
+            v = list(out_val)
+        else:
+            for k in range(n):
+                fmu.doStep(k * STEP_S, STEP_S)
+                v = fmu.getReal(out)
         fmu.terminate()
     finally:
         fmu.freeInstance()
@@ -175,7 +192,7 @@ def _engine_rows(run, repeat):
 
 
 #: real-time factor targets (issue #12) per engine
-TARGETS = {"in-process": 0.1, "4 FMUs": 0.5, "L1B2Motor.fmu": 0.15}
+TARGETS = {"in-process": 0.1, "4 FMUs": 0.5, "L1B2Motor.fmu": 0.15, "  ctypes host": 0.15}
 
 
 def _print_engine(name, old, new):
@@ -213,6 +230,9 @@ def main(argv=None):
             motor = build_fmu("L1B2Motor", Path(tmp) / "motor", mp=mp)
             rows.append(("L1B2Motor.fmu",
                          _engine_rows(lambda q: _motor_fmu(motor, inputs, args.sim_time, q), args.repeat)))
+            rows.append(("  ctypes host",
+                         _engine_rows(lambda q: _motor_fmu(motor, inputs, args.sim_time, q, raw=True),
+                                      args.repeat)))
     print(f"\nreal-time factor (wall / simulated time), reference motor, {V0_V:.0f} V, no load, "
           f"{STEP_S * 1e3:.1f} ms step, {args.sim_time} s simulated; old = kernels in plain Python "
           "(L1B2_JIT=0), new = compiled by numba")

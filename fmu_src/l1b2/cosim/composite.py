@@ -8,6 +8,7 @@ predictor. :data:`BLOCKS` maps every FMU name to its block class.
 from __future__ import annotations
 
 import math
+import operator
 from dataclasses import fields, replace
 
 import numpy as np
@@ -93,6 +94,7 @@ class MotorBlock(Block):
         self.internal_step_s = 2e-4
         self.motor = InProcessMotor(params, h_s=self.internal_step_s)
         self._held = None  # system inputs the engine holds (set at the first step after initialisation)
+        self._pub_blocks = None  # the sub-blocks _publish planned its reads for
         self._extra = {v.name: v.start for v in self.EXTRA_PARAMETERS if "." in v.name}
 
     @classmethod
@@ -169,14 +171,24 @@ class MotorBlock(Block):
         self._publish()
 
     def _publish(self):
+        """The outputs from the sub-blocks: one attrgetter per sub-block, one ``__dict__`` update."""
         b = self.motor.b
-        for out, (comp, var) in self._OUT_SOURCE.items():
-            setattr(self, out, float(getattr(b[comp], var)))
+        if self._pub_blocks is not b:
+            self._pub_blocks = b
+            by_comp: dict[str, list] = {}
+            for out, (comp, var) in self._OUT_SOURCE.items():
+                by_comp.setdefault(comp, []).append((out, var))
+            self._pub_plan = [(b[comp], operator.attrgetter(*(v for _, v in pairs)) if len(pairs) > 1
+                               else (lambda blk, v=pairs[0][1]: (getattr(blk, v),)))
+                              for comp, pairs in by_comp.items()]
+            self._pub_names = [out for pairs in by_comp.values() for out, _ in pairs]
+        (b1, g1), (b2, g2), (b3, g3), (b4, g4) = self._pub_plan  # the four sub-blocks (plain floats)
+        self.__dict__.update(zip(self._pub_names, g1(b1) + g2(b2) + g3(b3) + g4(b4)))
 
     def do_step(self, t, h):
-        self.check_inputs()
         u = (self.V_s, self.duty, self.f_s, self.T, self.direction, self.m_load)
-        if u != self._held:  # the engine converts new inputs once
+        if u != self._held:  # new inputs (nan never equals itself): checked, and converted once by the engine
+            self.check_inputs()
             self.motor.inputs = dict(zip(InProcessMotor.INPUTS, u))
             self._held = u
         n = max(1, int(round(h / float(self.internal_step_s))))
