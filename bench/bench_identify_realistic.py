@@ -58,7 +58,7 @@ def dataset(cache: Path) -> Path:
     out = cache / "realistic_motor_11_loads"
     if not (out / "train.csv").exists():
         cmd = [sys.executable, "-m", "l1b2.cli", "rig", "--motor", "realistic_motor", "--engine", "inprocess",
-               "--jobs", "2", "--no-plots", "--quiet", f"--loads={LOADS}", "--out", str(out)]
+               "--workers", "2", "--no-plots", "--quiet", f"--loads={LOADS}", "--out", str(out)]
         env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1] / "fmu_src"))
         subprocess.run(cmd, check=True, env=env)
     return out

@@ -713,3 +713,24 @@ def test_fmu_can_be_rebuilt_after_running_in_the_same_process(tmp_path, motor, i
     V0 = isolated(__file__, "worker_build_after_run", str(tmp_path)).value
     assert V0 == pytest.approx(float(drv.driver_output(motor.driver, op.V_s_V, op.duty, op.f_drive_Hz,
                                                         op.T_degC).V0_V), rel=1e-12)
+
+
+def worker_cosim_refused(fmu_dir, inputs):
+    """A run whose input makes the Stator FMU refuse its step: the master's error, one line."""
+    from l1b2.cosim.master import CoSimulation
+    from l1b2.errors import SimulationError
+    with CoSimulation(fmu_dir=fmu_dir) as cs:
+        try:
+            cs.run(0.002, inputs, record=["Slider.v"])
+        except SimulationError as exc:
+            return str(exc)
+    return None
+
+
+def test_master_turns_a_refused_step_into_a_simulation_error(fmu_dir, motor, isolated):
+    # reference: FMI 2.0 - a step refused with fmi2Discard ends the run; the master calls the FMI functions
+    # through ctypes directly and checks the status itself, naming the component, the time and the status
+    inputs = dict(SYSTEM_INPUTS, V_s=motor.operating.V_s_V, direction=0.5)  # the stator needs +1 or -1
+    msg = isolated(__file__, "worker_cosim_refused", str(fmu_dir), inputs).value
+    assert msg is not None and "\n" not in msg
+    assert re.match(r"Stator\.doStep at t=0 s failed \(fmi2Discard\); see the FMU log above", msg), msg

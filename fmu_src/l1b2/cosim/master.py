@@ -59,6 +59,7 @@ from .ssp import (
 DEFAULT_STEP_S = 2e-4
 #: fmi2Status values above this one (discard, error, fatal) end a simulation
 FMI2_WARNING = 1
+FMI2_STATUS = {2: "fmi2Discard", 3: "fmi2Error", 4: "fmi2Fatal", 5: "fmi2Pending"}
 _EXTRACTED: dict[str, str] = {}
 
 
@@ -511,7 +512,7 @@ class CoSimulation:
                 except Exception as exc:  # fmpy's wrapper raises FMICallException on discard/error
                     raise SimulationError(f"{n}.doStep at t={t:.6g} s failed ({exc}); see the FMU log above") from None
                 if status > FMI2_WARNING:
-                    raise SimulationError(f"{n}.doStep at t={t:.6g} s failed (status {status}); "
+                    raise SimulationError(f"{n}.doStep at t={t:.6g} s failed ({FMI2_STATUS.get(status, status)}); "
                                           "see the FMU log above")
                 if nout:
                     if get_real(comp, out_vr, nout, out_val) > FMI2_WARNING:
