@@ -316,7 +316,8 @@ def test_estimator_takes_measurements_and_stores_settings():
     d = rig_dir("direction_asymmetry_2", injections=["direction_asymmetry"], injection_seed=2,
                 plan=RigPlan(step_s=1e-3, seed=2))
     from l1b2.errors import IdentificationError
-    with pytest.raises(IdentificationError, match="noise_fit must be 'profile' or 'alternate', got 'nope'"):
+    with pytest.raises(IdentificationError,
+                       match=r"noise_fit must be one of \('auto', 'alternate', 'profile'\), got 'nope'"):
         CloseLoop(noise_fit="nope").fit(load_measurements(d / "train.csv"))
     with pytest.raises(IdentificationError, match="noise must be 'per_run' or 'common', got 'white'"):
         CloseLoop(noise="white").fit(load_measurements(d / "train.csv"))

@@ -332,10 +332,10 @@ def _test_figures(est, test: dataio.Measurements, tmp: Path, out: Path) -> list[
 
 def run_identification(train_path, out_dir, test_path=None, *, order=8, criterion="free_run", fix=None,
                        n_starts=8, seed=0, test_abs_loads=TEST_ABS_LOADS, slider_mass_kg=None, plots_on=True,
-                       verbose=False, allow_unusual_units=False, noise_fit="alternate", noise="common") -> dict:
+                       verbose=False, allow_unusual_units=False, noise_fit="auto", noise="common") -> dict:
     """Identify the Eq. 29 predictor on TRAIN by maximum likelihood; report on TRAIN and TEST.
 
-    ``noise_fit``: ``"alternate"`` (default) or ``"profile"``; ``noise``: ``"common"`` (default) or
+    ``noise_fit``: ``"auto"`` (default), ``"alternate"`` or ``"profile"``; ``noise``: ``"common"`` (default) or
     ``"per_run"`` (:class:`l1b2.ident.estimator.PredictorIdentifier`).
 
     Writes (through :func:`output_dir`, so all at once or nothing)

@@ -95,9 +95,10 @@ class CloseLoop:
         Seed of the folds and of the baseline's multi-start.
     n_starts : int
         Multi-start local searches of the baseline identification.
-    noise_fit : {"alternate", "profile"}
-        The baseline identification's search (:class:`l1b2.ident.estimator.PredictorIdentifier`);
-        the refits are warm-started local searches either way.
+    noise_fit : {"alternate", "auto", "profile"}
+        The baseline identification's search (:class:`l1b2.ident.estimator.PredictorIdentifier`;
+        default ``"alternate"``, with which the loop's results were measured); the refits are
+        warm-started local searches either way.
     noise : {"common", "per_run"}
         The noise variances of every identification of the loop (baseline, refits): one common
         variance (default, the paper's single R) or one per run (see ``PredictorIdentifier``).

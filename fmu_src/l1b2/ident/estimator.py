@@ -146,6 +146,10 @@ NUMERICAL_FAILURES = (np.linalg.LinAlgError, FloatingPointError, OverflowError, 
 _NOT_SERIALISED = ("verbose", "extra", "init", "init_extra")
 
 
+#: the searches of ``noise_fit`` (``"auto"``: profile without extra forces, alternate with them)
+NOISE_FITS = ("auto", "alternate", "profile")
+
+
 def clone(estimator, **changes):
     """A new unfitted estimator with the same settings (scikit-learn's ``clone``), ``changes`` applied."""
     return type(estimator)(**{**estimator.get_params(), **changes})
@@ -202,11 +206,14 @@ class PredictorIdentifier:
         its cost (= -log-likelihood + const) decreased by less than ``stat_tol``
         over ``stat_window`` iterations (scipy >= 1.16; 0 disables).
     noise_fit : how Eq. 32's unknown noise variances are fitted with theta.
-        ``"alternate"`` (default): a two-stage multi-start of
-        ``least_squares`` at variances fixed at the start, then fit theta /
-        re-estimate R alternately (``max_outer`` times at most); on data the
-        model does not fit exactly it converges slowly (tens of refits).
-        ``"profile"`` (opt-in): every local search maximises the profile
+        ``"auto"`` (default): ``"profile"`` for the Eq. 29 model alone,
+        ``"alternate"`` when ``extra`` forces are fitted with it (not all of
+        them pinned in ``fixed``); the report's settings give the search used.
+        ``"alternate"``: a two-stage multi-start of ``least_squares`` at
+        variances fixed at the start, then fit theta / re-estimate R
+        alternately (``max_outer`` times at most); on data the model does not
+        fit exactly it converges slowly (tens of refits).
+        ``"profile"``: every local search maximises the profile
         likelihood (variances at their ML values at every point, a damped
         Gauss-Newton iteration with the theta-variance coupling,
         :func:`l1b2.ident.search.profile_refine`) from each start in turn, and
@@ -215,16 +222,18 @@ class PredictorIdentifier:
         sticking) or creep until its iteration limit (common variance, exact
         data); the best start is therefore always continued by least-squares
         refits at the ML variances, kept if they gain
-        (:func:`l1b2.ident.search.polish_stalled`). Before that continuation
-        its stalls ended fits short of the optimum (1.3 log-likelihood units
-        on an order-mismatched test fit; 6e-6 relative in theta on exact
-        data). With the common variance it was about twice as fast as
-        ``"alternate"`` on four data sets of the realistic world, with the
-        same held-out error, and on the 20 000-sample benchmark it reached the
-        32-start reference optimum (``"alternate"``: 5 log-likelihood units
-        short). Not the default: its search can end in a worse local optimum
-        (on a small exact-world test it reported a useless constant force as
-        significant, 10 log-likelihood units below the alternation's fit).
+        (:func:`l1b2.ident.search.polish_stalled`).
+        Why ``"auto"`` chooses so (measured): on the 20 000-sample benchmark of
+        the realistic world (``bench/bench_identify_realistic.py``) the
+        alternation's least-squares runs crept (each start ended at its
+        evaluation limit or statistical stop 4-6 log-likelihood units apart)
+        and its best fit stayed 5.0 units below the 32-start reference, where
+        a Gauss-Newton continuation from it gained 0.007; the profile search
+        reached the reference in 30 % less time. With one extra force
+        confounded with theta (a constant force on exact-world data, variance
+        inflation > 1e3) the profile search ended 9.6 units *below* the
+        alternation, from 2 or 8 starts alike, and reported the useless force
+        as significant; the alternation did not.
     start_agree : profile search: stop the global search once this many starts
         reached the best log-likelihood within ``10 * stat_tol`` (0: run every start).
     stat_window_profile : profile search: a local search stops when its
@@ -314,7 +323,7 @@ class PredictorIdentifier:
         stat_tol: float = 0.01,
         stat_window: int = 10,
         alt_tol: float = 2.0,
-        noise_fit: str = "alternate",
+        noise_fit: str = "auto",
         start_agree: int = 2,
         stat_window_profile: int = 3,
         verbose: bool = False,
@@ -392,8 +401,12 @@ class PredictorIdentifier:
         cfg.n_refine = max(1, int(cfg.n_refine))
         if cfg.criterion not in ("free_run", "one_step"):
             raise IdentificationError(f"criterion must be 'free_run' or 'one_step', got {cfg.criterion!r}")
-        if cfg.noise_fit not in ("profile", "alternate"):
-            raise IdentificationError(f"noise_fit must be 'profile' or 'alternate', got {cfg.noise_fit!r}")
+        if cfg.noise_fit not in NOISE_FITS:
+            raise IdentificationError(f"noise_fit must be one of {NOISE_FITS}, got {cfg.noise_fit!r}")
+        if cfg.noise_fit == "auto":  # the search measured better for the model at hand (class docstring)
+            pinned = cfg.fixed if isinstance(cfg.fixed, Mapping) else {}
+            fitted = [n for n in (cfg.extra.names if isinstance(cfg.extra, ExtraForces) else ()) if n not in pinned]
+            cfg.noise_fit = "alternate" if fitted else "profile"
         if cfg.start_agree < 0 or cfg.stat_window_profile < 1:
             raise IdentificationError("start_agree must be >= 0 and stat_window_profile >= 1")
         if cfg.noise not in ("per_run", "common"):
