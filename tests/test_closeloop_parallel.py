@@ -22,7 +22,7 @@ def test_cv_refits_on_a_local_cluster_equal_the_serial_ones():
     m = load_measurements(d / "train.csv")
     df, mask, m_s = m.df, np.array(m.mask), m.slider_mass_kg
     base = PredictorIdentifier(order=8, criterion="free_run", fixed="recommended", n_starts=1, seed=0,
-                               max_nfev=20).fit(df, slider_mass_kg=m_s, mask=mask)
+                               max_nfev=20, noise_fit="alternate").fit(df, slider_mass_kg=m_s, mask=mask)
     v = base.predict_free_run(df)
     a = analyse_residuals(df, v, mask, alpha=0.01, k=3, seed=0)
     pool = {c.family: c for c in full_library()(candidate_context(base.predict_free_run, m_s, df, mask, a.peak), df)}
