@@ -48,6 +48,10 @@ exact to round-off and continuous in the inputs (needed by the steady-state
 solver), except where the model itself jumps: at ``k_e U_l = F_p`` the
 contact-start reset of ``u_r`` disappears.
 
+The closed form is :func:`period_integrals` (plain floats, the subset of
+Python numba compiles); the co-simulation runs it compiled
+(:mod:`l1b2.physics.jit`), with the same results as the Python function.
+
 :func:`interface_forces_reference` keeps the original numerical kernel
 (midpoint rule, ``n_theta // 3`` cells per segment, switch located by linear
 interpolation inside a cell), which converges to the closed form as
@@ -61,6 +65,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..errors import SimulationError
 from .jit import cached_kernel, jit_status
 from .params import InterfaceParams
 
@@ -241,7 +246,7 @@ def interface_forces_scalar(U_l, U_w, delta, omega, v, F_p, params: InterfacePar
     kernel = compiled_kernel() if jit is None or jit else None
     if kernel is None:
         if jit:
-            raise RuntimeError(f"the compiled interface kernel is not available: {jit_status()}")
+            raise SimulationError(f"the compiled interface kernel is not available: {jit_status()}")
         kernel = period_integrals
     return InterfaceOutput(*kernel(U_l, U_w, delta, omega, v, F_p, params.k_e_N_per_m, params.u_m_m,
                                    params.mu_p, params.sigma_N_s_per_m, 1.0 if mode == "pure_slip" else 0.0))
