@@ -279,6 +279,13 @@ def test_structural_terms_are_the_voltage_dependence_of_eq29s_slopes_and_trace_a
     assert order_traced([pos, s], False, [], evidence=[by["smooth_voltage_x_speed"], d]) == [
         "position", "direction", "voltage", "load", "speed"]
     assert order_traced([], False, ["time"], evidence=[t]) == []
+    # a speed-channel filter found by the channel's own test but not applied is evidence, not an effect: after
+    # the added physical effects, before the immaterial candidates and the structural terms
+    assert order_traced([s], False, ["time"], evidence=[t], speed_evidence=True) == [
+        "speed", "time", "load", "voltage"]
+    assert order_traced([pos, s], False, [], speed_evidence=True) == ["position", "speed", "load", "voltage"]
+    assert order_traced([], False, ["time"], speed_evidence=True) == []  # nothing added: nothing traced
+    assert order_traced([pos], True, [], speed_evidence=True) == ["speed", "position"]
 
 
 def test_materiality_threshold_binds_structural_terms_only():

@@ -233,8 +233,7 @@ class CloseLoop:
                                            {**_data_summary(train, test), "operating_points": _operating_points(dtr)})
         first = it.first_scores or []
         chosen = it.chosen
-        diagnosis = self._diagnosis(it, first, analysis, ext_params)
-        diagnosis["measurement_chain"] = chain_rec
+        diagnosis = self._diagnosis(it, first, analysis, ext_params, chain_rec)
         self.result_ = CloseLoopResult(
             baseline=baseline, diagnosis=diagnosis, scores=first,
             significant=it.significant, chosen=chosen, extended=extended,
@@ -365,16 +364,19 @@ class CloseLoop:
                 and accepts(t, min_gain=self.min_cv_gain, min_drop=-np.inf)]
         return sorted(last, key=lambda t: -t.gain)
 
-    def _diagnosis(self, it: _Iteration, scores: list[Score], a: ResidualAnalysis, ext_params) -> dict:
-        """The report's ``diagnosis`` section."""
+    def _diagnosis(self, it: _Iteration, scores: list[Score], a: ResidualAnalysis, ext_params,
+                   chain_rec: dict) -> dict:
+        """The report's ``diagnosis`` section (``chain_rec``: the measurement chain's record)."""
         effects = it.effects.candidates
         c = effects[0] if effects else None
         below = self._immaterial(it)
         records = ([_filter_record(rec, ext_params) for rec in it.rounds if rec["added"] == "speed_channel_filter"]
                    + [_effect_record(e, rec, ext_params) for e, rec in
                       zip(effects, [r for r in it.rounds[1:] if r["added"] != "speed_channel_filter"])])
+        # the channel's test found a filter that was not applied (it did not lower TRAIN's free-run error)
+        chain_found = "train_free_run_gain" in chain_rec and not chain_rec["accepted"]
         traced_to = order_traced(effects, it.output_filter is not None, a.traced,
-                                 evidence=[t.candidate for t in below])
+                                 evidence=[t.candidate for t in below], speed_evidence=chain_found)
         w = a.whiteness
         labels = "; ".join(f"{e.label} ({', '.join(e.regressors)})" + (", relaxes Eq. 29" if e.structural else "")
                            for e in effects)
@@ -387,7 +389,10 @@ class CloseLoop:
             "effects": records,
             "message": (f"missing effect{'s' if len(effects) > 1 else ''}: {labels}" if c
                         else "no significant missing effect")
-                       + ("; speed channel filtered (measurement chain)" if it.output_filter is not None else ""),
+                       + ("; speed channel filtered (measurement chain)" if it.output_filter is not None else "")
+                       + (f"; the speed column looks filtered (measurement chain, cross-validated gain "
+                          f"{chain_rec['cv_gain']:.3f}) but a model behind the filter did not lower TRAIN's "
+                          "free-run error: not applied" if chain_found and (c is not None) else ""),
             "structural_effects": [{"label": e.label, "regressors": list(e.regressors), "relaxes": e.structural}
                                    for e in effects if e.structural],
             "immaterial_evidence": [t.to_dict() for t in below],
@@ -408,6 +413,7 @@ class CloseLoop:
                                                                 if w else None),
                           "median_rho1": float(np.median([x["rho1"] for x in w])) if w else None},
             "position_spectrum_peak": a.peak,
+            "measurement_chain": chain_rec,
         }
 
 
@@ -450,14 +456,17 @@ class ChainModel:
         return getattr(self.model, name)
 
 
-def order_traced(effects, speed_filter: bool, residual_trace, evidence=()) -> list[str]:
+def order_traced(effects, speed_filter: bool, residual_trace, evidence=(), speed_evidence: bool = False) -> list[str]:
     """``diagnosis.traced_to``: the regressors with significant evidence, strongest first.
 
     ``speed`` first if the speed channel's filter was kept (the measurement
     chain is settled before any physical effect); the added effects in the
     order they were chosen (each round takes the candidate with the largest
     cross-validated gain against the current model, so earlier is stronger);
-    then ``evidence``, the candidates that improve the final model
+    then the evidence not acted on: ``speed`` if ``speed_evidence`` (the
+    channel's own cross-validated test found the filter, but re-identifying
+    behind it did not lower TRAIN's free-run error, so it was not applied),
+    and ``evidence``, the candidates that improve the final model
     in cross-validation but by less than the materiality threshold (largest
     gain first). *Structural* terms (``CandidateForce.structural``: they
     relax an approximation of Eq. 29 itself) come after all of these: they
@@ -473,6 +482,8 @@ def order_traced(effects, speed_filter: bool, residual_trace, evidence=()) -> li
         for c in cands:
             traced.extend(r for r in c.regressors if r not in traced)
     take(e for e in effects if not e.structural)
+    if speed_evidence and "speed" not in traced:
+        traced.append("speed")
     take(e for e in evidence if not e.structural)
     take(e for e in effects if e.structural)
     take(e for e in evidence if e.structural)
