@@ -78,10 +78,7 @@ def first_order_response(v0_m_s, F_N, c_r_N_s_per_m, m_kg, t_s):
     Handles ``c_r = 0`` (uniform acceleration). Returns ``(v, ds)`` [m/s, m].
     """
     if isinstance(v0_m_s, float) and isinstance(F_N, float) and isinstance(t_s, float) and c_r_N_s_per_m != 0:
-        T = m_kg / c_r_N_s_per_m  # scalar fast path, same formulas
-        v_inf = F_N / c_r_N_s_per_m
-        decay = -math.expm1(-t_s / T)
-        return v_inf + (v0_m_s - v_inf) * (1 - decay), v_inf * t_s + (v0_m_s - v_inf) * T * decay
+        return first_order_scalar(v0_m_s, F_N, c_r_N_s_per_m, m_kg, t_s)  # scalar fast path, same formulas
     v0 = np.asarray(v0_m_s, float)
     t = np.asarray(t_s, float)
     if c_r_N_s_per_m == 0:
