@@ -25,7 +25,6 @@ interface force, so steady results do not depend on this choice.
 
 from __future__ import annotations
 
-import cmath
 import math
 import operator
 import sys
@@ -301,14 +300,11 @@ class StatorBlock(Block):
         self.F_p = sp.alpha0 * P
 
     def _publish(self):
-        """Outputs from the modal phasors (the formulas of :func:`l1b2.physics.stator.tip_motion`, inline)."""
+        """Outputs from the modal phasors (:func:`l1b2.physics.stator.tip_motion_scalar`)."""
         props = self._props
         eta_T = props.eta_T
-        N = st.ETA_N * complex(self.Q_l_re, self.Q_l_im)
-        W = eta_T * complex(self.Q_b_re, self.Q_b_im)
-        self.U_l, self.U_w = abs(N), abs(W)
-        self.phase_l, self.phase_w = cmath.phase(N), cmath.phase(W)
-        self.delta = cmath.phase(W * N.conjugate())
+        self.U_l, self.U_w, self.phase_l, self.phase_w, self.delta = st.tip_motion_scalar(
+            complex(self.Q_l_re, self.Q_l_im), complex(self.Q_b_re, self.Q_b_im), eta_T)
         self.f_b = props.omega_b0 / (2 * math.pi)
         self.eta_T = eta_T
         self.v_tip = self.omega * self.U_w

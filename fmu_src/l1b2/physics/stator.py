@@ -558,15 +558,25 @@ def envelope_step(Q, F, Y, omega_rad_s, M, K, C, h_s):
     ``= -Y Q``). Unconditionally stable; exact for constant coefficients.
     """
     if _scalars(Q, F, Y, omega_rad_s, M, K, C, h_s):
-        w = omega_rad_s
-        Zt = K - w * w * M + 1j * w * C + Y
-        Qs = F / Zt
-        return Qs + (Q - Qs) * cmath.exp(-Zt / (2j * w * M + C) * h_s)
+        return envelope_step_scalar(Q, F, Y, omega_rad_s, M, K, C, h_s)
     w = np.asarray(omega_rad_s, float)
     Zt = dynamic_stiffness(w, M, K, C) + Y
     lam = -Zt / (2j * w * M + C)
     Qs = F / Zt
     return Qs + (Q - Qs) * np.exp(lam * h_s)
+
+
+def envelope_step_scalar(Q, F, Y, w, M, K, C, h):
+    """:func:`envelope_step` for plain numbers (complex ``Q``, ``F``, ``Y``; numba compiles it)."""
+    Zt = K - w * w * M + 1j * w * C + Y
+    Qs = F / Zt
+    return Qs + (Q - Qs) * cmath.exp(-Zt / (2j * w * M + C) * h)
+
+
+def tip_motion_scalar(Q_l, Q_b, eta_T):
+    """:func:`tip_motion` for complex phasors: ``(U_l, U_w, phase_l, phase_w, delta)`` [m, m, rad, rad, rad]."""
+    N, W = ETA_N * Q_l, eta_T * Q_b
+    return abs(N), abs(W), cmath.phase(N), cmath.phase(W), cmath.phase(W * N.conjugate())
 
 
 def coupled_envelope_step(Q_l_re, Q_l_im, Q_b_re, Q_b_im, phase_l, F_N1_sin, F_N1_cos, F_T1_sin, F_T1_cos,
@@ -606,17 +616,10 @@ def coupled_envelope_step(Q_l_re, Q_l_im, Q_b_re, Q_b_im, phase_l, F_N1_sin, F_N
         Y_b = eta_T * F1_T / Q_b
     else:
         F_b = F_b - eta_T * F1_T
-    w = omega
-    Zt = K_l - w * w * M_l + 1j * w * C_l + Y_l
-    Qs = F_l / Zt
-    Q_l = Qs + (Q_l - Qs) * cmath.exp(-Zt / (2j * w * M_l + C_l) * h)
-    Zt = K_b - w * w * M_b + 1j * w * C_b + Y_b
-    Qs = F_b / Zt
-    Q_b = Qs + (Q_b - Qs) * cmath.exp(-Zt / (2j * w * M_b + C_b) * h)
-    N = ETA_N * Q_l
-    W = eta_T_new * Q_b
-    return (Q_l.real, Q_l.imag, Q_b.real, Q_b.imag, abs(N), abs(W), cmath.phase(N), cmath.phase(W),
-            cmath.phase(W * N.conjugate()))
+    Q_l = envelope_step_scalar(Q_l, F_l, Y_l, omega, M_l, K_l, C_l, h)
+    Q_b = envelope_step_scalar(Q_b, F_b, Y_b, omega, M_b, K_b, C_b, h)
+    U_l, U_w, ph_l, ph_w, delta = tip_motion_scalar(Q_l, Q_b, eta_T_new)
+    return Q_l.real, Q_l.imag, Q_b.real, Q_b.imag, U_l, U_w, ph_l, ph_w, delta
 
 
 _COMPILED: list = []  # [kernel or None], filled on the first call of compiled_envelope_step()
@@ -624,7 +627,9 @@ _COMPILED: list = []  # [kernel or None], filled on the first call of compiled_e
 
 def compiled_envelope_step():
     """:func:`coupled_envelope_step` compiled by numba (once per process), or None (see :mod:`.jit`)."""
-    return cached_kernel(_COMPILED, {"coupled_envelope_step": coupled_envelope_step}, "coupled_envelope_step",
+    family = {"envelope_step_scalar": envelope_step_scalar, "tip_motion_scalar": tip_motion_scalar,
+              "coupled_envelope_step": coupled_envelope_step}
+    return cached_kernel(_COMPILED, family, "coupled_envelope_step",
                          "UniTuple(float64, 9)(" + ", ".join(["float64"] * 21) + ")")
 
 
@@ -639,9 +644,7 @@ class StatorOutput(NamedTuple):
 def tip_motion(Q_l, Q_b, eta_T) -> StatorOutput:
     """Tip amplitudes and phases from the modal phasors."""
     if _scalars(Q_l, Q_b, eta_T):
-        N, W = ETA_N * complex(Q_l), eta_T * complex(Q_b)
-        return StatorOutput(U_l_m=abs(N), U_w_m=abs(W), phase_l_rad=cmath.phase(N), phase_w_rad=cmath.phase(W),
-                            delta_rad=cmath.phase(W * N.conjugate()))
+        return StatorOutput(*tip_motion_scalar(complex(Q_l), complex(Q_b), eta_T))
     N = ETA_N * np.asarray(Q_l)
     W = eta_T * np.asarray(Q_b)
     return StatorOutput(
