@@ -390,10 +390,9 @@ class InterfaceBlock(Block):
 
     def initialize(self):
         self.rebuild_params()
-        p = self.params
         # the closed form's kernel and its parameter arguments (itf.interface_forces_scalar, unwrapped)
         self._kernel = itf.compiled_kernel() or itf.period_integrals  # Python when L1B2_JIT=0
-        self._kernel_args = (p.k_e_N_per_m, p.u_m_m, p.mu_p, p.sigma_N_s_per_m, 1.0 if self.pure_slip else 0.0)
+        self._kernel_args = itf.kernel_arguments(self.params, "pure_slip" if self.pure_slip else "stick_slip")
         self._compute()
 
     initialize_outputs = initialize

@@ -248,8 +248,12 @@ def interface_forces_scalar(U_l, U_w, delta, omega, v, F_p, params: InterfacePar
         if jit:
             raise SimulationError(f"the compiled interface kernel is not available: {jit_status()}")
         kernel = period_integrals
-    return InterfaceOutput(*kernel(U_l, U_w, delta, omega, v, F_p, params.k_e_N_per_m, params.u_m_m,
-                                   params.mu_p, params.sigma_N_s_per_m, 1.0 if mode == "pure_slip" else 0.0))
+    return InterfaceOutput(*kernel(U_l, U_w, delta, omega, v, F_p, *kernel_arguments(params, mode)))
+
+
+def kernel_arguments(params: InterfaceParams, mode: str) -> tuple:
+    """The parameter arguments of :func:`period_integrals`, after its six tip-motion inputs."""
+    return params.k_e_N_per_m, params.u_m_m, params.mu_p, params.sigma_N_s_per_m, 1.0 if mode == "pure_slip" else 0.0
 
 
 _COMPILED: list = []  # [kernel or None], filled on the first call of compiled_kernel()
