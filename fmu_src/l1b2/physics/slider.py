@@ -106,13 +106,12 @@ def step(sp: SliderParams, state: SliderState, F_d_N: float, F_p_N: float, m_loa
     """
     m_load = float(m_load_kg)
     F_p = float(F_p_N)
-    F_path = sp.pulley_mu * G_M_S2 * abs(m_load)  # load_path_friction_N, inline
+    F_path = load_path_friction_N(sp, m_load)
     kern = kernel or compiled_step() or step_floats
     v, s, stuck, at_stop = kern(
         float(state.v_m_s), float(state.s_m), 1.0 if state.stuck else 0.0, float(state.at_stop),
-        sp.mass_kg + sp.load_inertia * abs(m_load), float(F_d_N) - G_M_S2 * m_load,
-        sp.mu_sd * (sp.kappa * F_p + G_M_S2 * sp.mass_kg) + F_path,
-        sp.mu_ss * (sp.kappa * F_p + G_M_S2 * sp.mass_kg) + F_path,
+        moving_mass_kg(sp, m_load), float(F_d_N) - load_force_N(m_load),
+        guide_friction_level_N(sp, F_p) + F_path, guide_friction_level_N(sp, F_p, static=True) + F_path,
         sp.c_r_N_s_per_m, sp.s_min_m, sp.s_max_m, float(h_s))
     return SliderState(v, s, stuck != 0.0, int(at_stop))
 
