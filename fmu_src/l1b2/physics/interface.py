@@ -228,7 +228,8 @@ def interface_forces(U_l_m, U_w_m, delta_rad, omega_rad_s, v_m_s, F_p_N,
     shape = arrays[0].shape
     if not shape:
         return interface_forces_scalar(*(float(x) for x in arrays), params, mode)
-    rows = [interface_forces_scalar(*row, params, mode) for row in zip(*(x.ravel().tolist() for x in arrays))]
+    kernel, kargs = compiled_kernel() or period_integrals, kernel_arguments(params, mode)  # once per call
+    rows = [kernel(*row, *kargs) for row in zip(*(x.ravel().tolist() for x in arrays))]
     cols = np.array(rows, dtype=float).reshape(shape + (len(InterfaceOutput._fields),))
     return InterfaceOutput(*np.moveaxis(cols, -1, 0))
 
@@ -261,9 +262,10 @@ _COMPILED: list = []  # [kernel or None], filled on the first call of compiled_k
 
 def compiled_kernel():
     """:func:`period_integrals` compiled by numba (once per process), or None (see :mod:`.jit`)."""
-    return cached_kernel(_COMPILED, {"_half_angle_scalar": _half_angle_scalar, "_primitives": _primitives,
-                                     "_switch_phase": _switch_phase, "period_integrals": period_integrals},
-                         "period_integrals", "UniTuple(float64, 8)(" + ", ".join(["float64"] * 11) + ")")
+    return cached_kernel(_COMPILED, lambda: (
+        {"_half_angle_scalar": _half_angle_scalar, "_primitives": _primitives, "_switch_phase": _switch_phase,
+         "period_integrals": period_integrals},
+        "period_integrals", "UniTuple(float64, 8)(" + ", ".join(["float64"] * 11) + ")"))
 
 
 def period_integrals(U_l, U_w, delta, omega, v, F_p, k_e, u_m, mu, sigma, pure_slip):

@@ -146,15 +146,17 @@ def compile_family(functions: dict, entry: str, signature: str):
     return compiled
 
 
-def cached_kernel(slot: list, functions: dict, entry: str, signature: str):
-    """The compiled ``entry`` of ``functions``, compiled at the first call and kept in ``slot`` (a module's list).
+def cached_kernel(slot: list, family):
+    """The compiled kernel of ``family()``, compiled at the first call and kept in ``slot`` (a module's list).
 
-    ``None`` while ``L1B2_JIT=0`` is set (checked at every call, so a host can
-    switch between the compiled and the Python kernels between simulations) or
-    when compilation is not possible (:func:`jit_status`).
+    ``family`` returns ``(functions, entry, signature)`` for :func:`compile_family`;
+    it is called only to compile. ``None`` while ``L1B2_JIT=0`` is set (checked
+    at every call, so a host can switch between the compiled and the Python
+    kernels between simulations) or when compilation is not possible
+    (:func:`jit_status`).
     """
     if not jit_enabled():
         return None
     if not slot:
-        slot.append(compile_family(functions, entry, signature))
+        slot.append(compile_family(*family()))
     return slot[0]

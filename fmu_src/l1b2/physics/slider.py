@@ -178,10 +178,9 @@ _COMPILED: list = []  # [kernel or None], filled on the first call of compiled_s
 
 def compiled_step():
     """:func:`step_floats` compiled by numba (once per process), or None (see :mod:`.jit`)."""
-    return cached_kernel(
-        _COMPILED, {"first_order_scalar": first_order_scalar, "time_to_reach": time_to_reach,
-                    "step_floats": step_floats},
-        "step_floats", "UniTuple(float64, 4)(" + ", ".join(["float64"] * 12) + ")")
+    return cached_kernel(_COMPILED, lambda: (
+        {"first_order_scalar": first_order_scalar, "time_to_reach": time_to_reach, "step_floats": step_floats},
+        "step_floats", "UniTuple(float64, 4)(" + ", ".join(["float64"] * 12) + ")"))
 
 
 def time_to_reach(v0, F, c, m, distance, t_max):

@@ -627,10 +627,10 @@ _COMPILED: list = []  # [kernel or None], filled on the first call of compiled_e
 
 def compiled_envelope_step():
     """:func:`coupled_envelope_step` compiled by numba (once per process), or None (see :mod:`.jit`)."""
-    family = {"envelope_step_scalar": envelope_step_scalar, "tip_motion_scalar": tip_motion_scalar,
-              "coupled_envelope_step": coupled_envelope_step}
-    return cached_kernel(_COMPILED, family, "coupled_envelope_step",
-                         "UniTuple(float64, 9)(" + ", ".join(["float64"] * 21) + ")")
+    return cached_kernel(_COMPILED, lambda: (
+        {"envelope_step_scalar": envelope_step_scalar, "tip_motion_scalar": tip_motion_scalar,
+         "coupled_envelope_step": coupled_envelope_step},
+        "coupled_envelope_step", "UniTuple(float64, 9)(" + ", ".join(["float64"] * 21) + ")"))
 
 
 class StatorOutput(NamedTuple):
