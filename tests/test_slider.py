@@ -290,3 +290,17 @@ def test_compiled_event_loop_equals_the_python_one(motor):
         assert np.allclose(py, jt, rtol=0.0, atol=1e-15), (args, py, jt)
         events.add((py[2], py[3]))
     assert {(1.0, 0.0), (0.0, 0.0), (1.0, 1.0), (1.0, -1.0)} <= events  # stuck, moving, at both stops
+
+
+@pytest.mark.parametrize("m_load", [0.07, -0.05])
+def test_step_force_levels_equal_the_helpers(motor, m_load):
+    # step() writes the helpers' formulas inline (per-step cost); reference: the closed-form response with the
+    # net force built from load_force_N, guide_friction_level_N, load_path_friction_N and moving_mass_kg
+    sp = dataclasses.replace(motor.slider, pulley_mu=0.04)
+    v0, F_d, F_p, h = 0.15, 3.0, 40.0, 2e-4
+    new = sld.step(sp, sld.SliderState(v0, 0.0, False, 0), F_d, F_p, m_load, h)
+    F = (F_d - float(sld.load_force_N(m_load)) - float(sld.guide_friction_level_N(sp, F_p))
+         - float(sld.load_path_friction_N(sp, m_load)))
+    v, ds = sld.first_order_response(v0, F, sp.c_r_N_s_per_m, float(sld.moving_mass_kg(sp, m_load)), h)
+    assert new.v_m_s == pytest.approx(float(v), rel=1e-12) and new.s_m == pytest.approx(float(ds), rel=1e-12)
+    assert not new.stuck and new.at_stop == 0
