@@ -260,12 +260,16 @@ def kernel_arguments(params: InterfaceParams, mode: str) -> tuple:
 _COMPILED: list = []  # [kernel or None], filled on the first call of compiled_kernel()
 
 
+def kernel_family() -> dict:
+    """:func:`period_integrals` and the helpers it calls, by name (for :func:`l1b2.physics.jit.compile_family`)."""
+    return {"_half_angle_scalar": _half_angle_scalar, "_primitives": _primitives, "_switch_phase": _switch_phase,
+            "period_integrals": period_integrals}
+
+
 def compiled_kernel():
     """:func:`period_integrals` compiled by numba (once per process), or None (see :mod:`.jit`)."""
     return cached_kernel(_COMPILED, lambda: (
-        {"_half_angle_scalar": _half_angle_scalar, "_primitives": _primitives, "_switch_phase": _switch_phase,
-         "period_integrals": period_integrals},
-        "period_integrals", "UniTuple(float64, 8)(" + ", ".join(["float64"] * 11) + ")"))
+        kernel_family(), "period_integrals", "UniTuple(float64, 8)(" + ", ".join(["float64"] * 11) + ")"))
 
 
 def period_integrals(U_l, U_w, delta, omega, v, F_p, k_e, u_m, mu, sigma, pure_slip):

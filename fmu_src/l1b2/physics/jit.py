@@ -9,8 +9,10 @@ are the pure-Python kernel, used when numba is missing or disabled, and the
 
 Kernels compiled this way: the interface's period averages
 (:func:`l1b2.physics.interface.period_integrals`), the stator's envelope step
-(:func:`l1b2.physics.stator.coupled_envelope_step`) and the slider's event loop
-(:func:`l1b2.physics.slider.step_floats`). They are used when
+(:func:`l1b2.physics.stator.coupled_envelope_step`), the slider's event loop
+(:func:`l1b2.physics.slider.step_floats`), and the whole coupled step that
+calls them all (:func:`l1b2.physics.coupled.motor_substeps`, used by
+``L1B2Motor.fmu``). They are used when
 
 * numba is importable (it is a project dependency, installed by ``make``), and
 * the environment variable ``L1B2_JIT`` is not ``0`` (``L1B2_JIT=0`` forces
@@ -27,7 +29,8 @@ numba caches compiled code next to the source file, or under
 ours bundles this package and every host extracts an FMU into a fresh
 temporary folder, so a path-keyed cache would compile again (seconds) for
 every FMU instance. The locator installed here keys the cache by the module's
-name and the SHA-256 of its source instead, in ``$L1B2_CACHE_DIR/numba``
+name and the SHA-256 of the sources of every module its family spans
+(:func:`family_digest`; numba itself checks only the entry's file) instead, in ``$L1B2_CACHE_DIR/numba``
 (default ``~/.cache/l1b2/numba``): every extraction of one FMU (its bundle has a
 fixed package name per FMU and version) loads the kernel compiled by the
 first. The name is part of the key because a cached kernel refers to its
@@ -75,20 +78,20 @@ def _install_locator(numba_caching):
     base = getattr(numba_caching, "_CacheLocator")
     mixin = getattr(numba_caching, "_SourceFileBackedLocatorMixin")
     for cls in impl._locator_classes:
-        if getattr(cls, "L1B2_CONTENT_KEYED", False):
+        if getattr(cls, "L1B2_CONTENT_KEYED", 0) == 2:
             return cls
 
     class ContentCacheLocator(mixin, base):
-        """Cache folder named after the module and its source file's content hash, for registered files."""
+        """Cache folder named after the module and the content hash of its family's source files."""
 
-        L1B2_CONTENT_KEYED = True
-        registered: set = set()  # source files (absolute paths) served by this locator
+        L1B2_CONTENT_KEYED = 2  # version of the registration protocol (``registered`` maps path -> digest)
+        registered: dict = {}   # entry source file (absolute path) -> digest of its family's sources
 
         def __init__(self, py_func, py_file):
             self._py_file = py_file
             self._lineno = py_func.__code__.co_firstlineno
             # the module name is part of the key: a cached kernel refers to its module by name
-            digest = hashlib.sha256(Path(py_file).read_bytes()).hexdigest()[:20]
+            digest = self.registered[os.path.abspath(py_file)]
             self._cache_path = str(cache_root() / f"{py_func.__module__}-{digest}")
 
         def get_cache_path(self):
@@ -104,14 +107,30 @@ def _install_locator(numba_caching):
     return ContentCacheLocator
 
 
-def compile_family(functions: dict, entry: str, signature: str):
-    """Compile ``functions`` (name -> plain function of one module) with numba; the compiled ``entry``.
+def family_digest(functions: dict) -> str:
+    """SHA-256 (20 hex digits) of the source files of ``functions``: the key of their compiled code.
 
-    The functions are cloned with a namespace in which every name of the
-    family refers to its compiled clone, so that the compiled entry calls
-    compiled helpers while the module's own functions stay pure Python.
-    ``signature`` (numba's string form) makes the entry compile (or load
-    from the cache) at once, so a failure shows here and not mid-simulation.
+    numba's cache checks only the entry's own file; a kernel that inlines
+    helpers from other modules must be compiled again when any of them changes.
+    """
+    h = hashlib.sha256()
+    for path in sorted({os.path.abspath(f.__code__.co_filename) for f in functions.values()}):
+        h.update(Path(path).read_bytes())
+    return h.hexdigest()[:20]
+
+
+def compile_family(functions: dict, entry: str, signature: str):
+    """Compile ``functions`` (name -> plain function, of one or several modules) with numba; the compiled
+    ``entry``.
+
+    The functions are cloned with namespaces (a copy of each one's module
+    globals) in which every name of the family refers to its compiled clone,
+    so that the compiled entry calls compiled helpers while the modules' own
+    functions stay pure Python. Only the entry is cached on disk, keyed by the
+    content of every source file of the family (:func:`family_digest`); the
+    cached entry holds its helpers' code. ``signature`` (numba's string form)
+    makes the entry compile (or load from the cache) at once, so a failure
+    shows here and not mid-simulation.
 
     Returns ``None`` when numba is missing, disabled by ``L1B2_JIT=0``, or
     fails; :func:`jit_status` then says why.
@@ -127,18 +146,22 @@ def compile_family(functions: dict, entry: str, signature: str):
         return None
     try:
         locator = _install_locator(caching)
-        first = next(iter(functions.values()))
-        locator.registered.add(os.path.abspath(first.__code__.co_filename))
-        namespace = dict(first.__globals__)
-        clones = {name: types.FunctionType(f.__code__, namespace, name, f.__defaults__, f.__closure__)
-                  for name, f in functions.items()}
+        locator.registered[os.path.abspath(functions[entry].__code__.co_filename)] = family_digest(functions)
+        namespaces: dict[int, dict] = {}  # one per module of the family
+        clones = {}
+        for name, f in functions.items():
+            ns = namespaces.setdefault(id(f.__globals__), dict(f.__globals__))
+            clones[name] = types.FunctionType(f.__code__, ns, name, f.__defaults__, f.__closure__)
+            clones[name].__qualname__ = f.__qualname__
+            clones[name].__module__ = f.__module__
         for name, clone in clones.items():
-            clone.__qualname__ = functions[name].__qualname__
-            clone.__module__ = functions[name].__module__
             if name != entry:
-                namespace[name] = numba.njit(cache=True)(clone)
+                compiled = numba.njit(clone)
+                for ns in namespaces.values():
+                    ns[name] = compiled
         compiled = numba.njit(signature, cache=True)(clones[entry])
-        namespace[entry] = compiled
+        for ns in namespaces.values():
+            ns[entry] = compiled
     except Exception as exc:
         _STATUS["state"] = f"compilation failed ({type(exc).__name__}: {exc})"
         return None

@@ -180,11 +180,15 @@ def first_order_scalar(v0, F, c, m, t):
 _COMPILED: list = []  # [kernel or None], filled on the first call of compiled_step()
 
 
+def kernel_family() -> dict:
+    """:func:`step_floats` and the helpers it calls, by name (for :func:`l1b2.physics.jit.compile_family`)."""
+    return {"first_order_scalar": first_order_scalar, "time_to_reach": time_to_reach, "step_floats": step_floats}
+
+
 def compiled_step():
     """:func:`step_floats` compiled by numba (once per process), or None (see :mod:`.jit`)."""
     return cached_kernel(_COMPILED, lambda: (
-        {"first_order_scalar": first_order_scalar, "time_to_reach": time_to_reach, "step_floats": step_floats},
-        "step_floats", "UniTuple(float64, 4)(" + ", ".join(["float64"] * 12) + ")"))
+        kernel_family(), "step_floats", "UniTuple(float64, 4)(" + ", ".join(["float64"] * 12) + ")"))
 
 
 def time_to_reach(v0, F, c, m, distance, t_max):
