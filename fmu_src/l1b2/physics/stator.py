@@ -268,13 +268,7 @@ def bar_deviation_m(sp: StatorParams, s_m):
     local Gaussian bump (a defect or debris).
     """
     if isinstance(s_m, float):  # scalar fast path: the same series in plain floats
-        xi = s_m / sp.bar_half_length_m
-        dev = xi * (sp.bar_dev_1_m + sp.bar_dev_3_m * (2.5 * xi * xi - 1.5)) + sp.bar_dev_2_m * (1.5 * xi * xi - 0.5)
-        if sp.bar_wave_amp_m:
-            dev += sp.bar_wave_amp_m * math.sin(2 * math.pi * s_m / sp.bar_wave_period_m)
-        if sp.bar_bump_amp_m:
-            dev += sp.bar_bump_amp_m * math.exp(-0.5 * ((s_m - sp.bar_bump_center_m) / sp.bar_bump_width_m) ** 2)
-        return dev
+        return bar_deviation_scalar(s_m, *bar_arguments(sp))
     s = np.asarray(s_m, float)
     xi = s / sp.bar_half_length_m
     dev = legendre.legval(xi, [0.0, sp.bar_dev_1_m, sp.bar_dev_2_m, sp.bar_dev_3_m])
@@ -282,6 +276,29 @@ def bar_deviation_m(sp: StatorParams, s_m):
         dev = dev + sp.bar_wave_amp_m * np.sin(2 * np.pi * s / sp.bar_wave_period_m)
     if sp.bar_bump_amp_m:
         dev = dev + sp.bar_bump_amp_m * np.exp(-0.5 * ((s - sp.bar_bump_center_m) / sp.bar_bump_width_m) ** 2)
+    return dev
+
+
+def bar_arguments(sp: StatorParams) -> tuple:
+    """The parameter arguments of :func:`bar_deviation_scalar`, after the position."""
+    return (sp.bar_half_length_m, sp.bar_dev_1_m, sp.bar_dev_2_m, sp.bar_dev_3_m, sp.bar_wave_amp_m,
+            sp.bar_wave_period_m, sp.bar_bump_amp_m, sp.bar_bump_center_m, sp.bar_bump_width_m)
+
+
+def bar_deviation_scalar(s, half, dev_1, dev_2, dev_3, wave_amp, wave_period, bump_amp, bump_center, bump_width):
+    """:func:`bar_deviation_m` at one position ``s`` [m], plain floats (numba compiles it) [m].
+
+    ``half``: half length of the bar [m]; ``dev_1..3``: Legendre coefficients [m];
+    the periodic waviness (amplitude, period) and the Gaussian bump (amplitude,
+    centre, width) [m], each skipped when its amplitude is zero.
+    """
+    xi = s / half
+    dev = xi * (dev_1 + dev_3 * (2.5 * xi * xi - 1.5)) + dev_2 * (1.5 * xi * xi - 0.5)
+    if wave_amp != 0.0:
+        dev += wave_amp * math.sin(2 * math.pi * s / wave_period)
+    if bump_amp != 0.0:
+        z = (s - bump_center) / bump_width
+        dev += bump_amp * math.exp(-0.5 * (z * z))
     return dev
 
 
@@ -293,14 +310,24 @@ def stator_temperature_step(T_st_degC, T_amb_degC, V0_V, sp: StatorParams, h_s):
     relaxed toward the ambient temperature with time constant ``tau``.
     """
     if _scalars(T_st_degC, T_amb_degC, V0_V, h_s):
-        target = T_amb_degC + sp.heating_K_per_V2 * V0_V ** 2
-        if sp.thermal_tau_s <= 0:
-            return float(target if sp.heating_K_per_V2 else T_amb_degC)
-        return float(target + (T_st_degC - target) * math.exp(-h_s / sp.thermal_tau_s))
+        return temperature_step_scalar(float(T_st_degC), float(T_amb_degC), float(V0_V), sp.thermal_tau_s,
+                                       sp.heating_K_per_V2, float(h_s))
     target = np.asarray(T_amb_degC, float) + sp.heating_K_per_V2 * np.asarray(V0_V, float) ** 2
     if sp.thermal_tau_s <= 0:
         return target if sp.heating_K_per_V2 else np.asarray(T_amb_degC, float)
     return target + (np.asarray(T_st_degC, float) - target) * np.exp(-h_s / sp.thermal_tau_s)
+
+
+def temperature_step_scalar(T_st, T_amb, V0, tau, heating, h):
+    """:func:`stator_temperature_step` in plain floats (numba compiles it) [degC].
+
+    ``tau`` thermal time constant [s] (``<= 0``: no thermal lag), ``heating``
+    self-heating coefficient [K/V^2], ``h`` step [s].
+    """
+    target = T_amb + heating * (V0 * V0)  # products, not ** 2: numba's x ** 2 is x * x, Python's is pow()
+    if tau <= 0:
+        return target if heating != 0.0 else T_amb
+    return target + (T_st - target) * math.exp(-h / tau)
 
 
 def axial_force_N(sp: StatorParams, s_m):
@@ -434,6 +461,7 @@ class ModalTable:
     def __init__(self, sp: StatorParams, T_b_degC=None):
         self.sp, self.T_b = sp, T_b_degC
         self.cells: dict[int, tuple | None] = {}
+        self._arrays: dict[int, np.ndarray | None] = {}  # cells as arrays, for compiled code
         self.M_l, self.M_b = modal_mass_l_kg(sp), modal_mass_b_kg(sp)
         self._l1_T: object = object()  # temperature of the cached L1 properties
         self._l1 = (0.0, 0.0, 0.0)
@@ -469,16 +497,41 @@ class ModalTable:
             eta = eta * u + ce
         K_l, C_l, w_l0 = self._l1 if T_degC == self._l1_T else self._l1_props(T_degC)
         M_b = self.M_b
-        return ModalProperties(M_l=self.M_l, K_l=K_l, C_l=C_l, M_b=M_b, K_b=M_b * wb ** 2,
+        return ModalProperties(M_l=self.M_l, K_l=K_l, C_l=C_l, M_b=M_b, K_b=M_b * (wb * wb),
                                C_b=2 * sp.zeta_b * M_b * wb, eta_T=abs(eta), omega_l0=w_l0, omega_b0=wb)
+
+    def cell_array(self, k: int):
+        """Coefficients of cell ``k`` as a ``(TABLE_DEGREE + 1, 2)`` array (B2 frequency [rad/s], tip
+        coefficient), highest power first, for compiled code (:func:`table_lookup`); None when the cell is
+        not tabulated."""
+        arrays = self._arrays
+        if k not in arrays:
+            cell = self.cells[k] if k in self.cells else self._build(k)
+            arrays[k] = None if cell is None else np.array([(cell[0], cell[1])] + list(cell[2]), float)
+        return arrays[k]
 
     def _l1_props(self, T_degC):
         if T_degC != self._l1_T:
             sp = self.sp
             dT = 0.0 if T_degC is None else float(T_degC) - sp.T_ref_degC
             w_l0 = 2 * math.pi * (sp.f_l0_Hz + sp.df_dT_l_Hz_per_K * dT)
-            self._l1_T, self._l1 = T_degC, (self.M_l * w_l0 ** 2, 2 * sp.zeta_l * self.M_l * w_l0, w_l0)
+            # products, not ** 2, as in l1b2.physics.coupled (numba's x ** 2 is x * x, Python's is pow())
+            self._l1_T, self._l1 = T_degC, (self.M_l * (w_l0 * w_l0), 2 * sp.zeta_l * self.M_l * w_l0, w_l0)
         return self._l1
+
+
+def table_lookup(cell, P):
+    """B2 frequency [rad/s] and tip coefficient (signed) at axial force ``P`` [N] from the coefficients of
+    the table cell holding ``P`` (:meth:`ModalTable.cell_array`): the interpolants of
+    :meth:`ModalTable.__call__`, same operations (numba compiles it)."""
+    k = math.floor(P / TABLE_CELL_N)
+    u = 2.0 * (P - k * TABLE_CELL_N) / TABLE_CELL_N - 1.0
+    wb = cell[0, 0]
+    eta = cell[0, 1]
+    for i in range(1, cell.shape[0]):
+        wb = wb * u + cell[i, 0]
+        eta = eta * u + cell[i, 1]
+    return wb, eta
 
 
 @lru_cache(maxsize=1)
@@ -625,11 +678,19 @@ def coupled_envelope_step(Q_l_re, Q_l_im, Q_b_re, Q_b_im, phase_l, F_N1_sin, F_N
 _COMPILED: list = []  # [kernel or None], filled on the first call of compiled_envelope_step()
 
 
+def kernel_family() -> dict:
+    """The stator's plain-float functions that compiled code calls, by name (for
+    :func:`l1b2.physics.jit.compile_family`): the envelope step with its helpers, the temperature step,
+    the bar deviation and the modal table's interpolant."""
+    return {f.__name__: f for f in (envelope_step_scalar, tip_motion_scalar, coupled_envelope_step,
+                                    temperature_step_scalar, bar_deviation_scalar, table_lookup)}
+
+
 def compiled_envelope_step():
     """:func:`coupled_envelope_step` compiled by numba (once per process), or None (see :mod:`.jit`)."""
     return cached_kernel(_COMPILED, lambda: (
-        {"envelope_step_scalar": envelope_step_scalar, "tip_motion_scalar": tip_motion_scalar,
-         "coupled_envelope_step": coupled_envelope_step},
+        {k: f for k, f in kernel_family().items() if k in ("envelope_step_scalar", "tip_motion_scalar",
+                                                             "coupled_envelope_step")},
         "coupled_envelope_step", "UniTuple(float64, 9)(" + ", ".join(["float64"] * 21) + ")"))
 
 
