@@ -299,6 +299,15 @@ class StatorBlock(Block):
         self.P = P
         self.F_p = sp.alpha0 * P
 
+    def modal_state(self) -> tuple:
+        """The modal properties of the last step (:class:`~l1b2.physics.stator.ModalProperties`) and the
+        stator temperature [degC] they were evaluated at: the state the next step starts from."""
+        return self._props, self._props_T
+
+    def set_modal_state(self, props, T_degC: float):
+        """Set what :meth:`modal_state` returns (the fused coupled step hands its state back)."""
+        self._props, self._props_T = props, T_degC
+
     def _publish(self):
         """Outputs from the modal phasors (:func:`l1b2.physics.stator.tip_motion_scalar`)."""
         props = self._props

@@ -28,7 +28,7 @@ from ..predictor.effects import ExtendedPredictor
 from ..predictor.model import PredictorParams
 from ..predictor.setup import PredictorSetup
 from .blocks import SUBSYSTEM_BLOCKS, Block, Var, parameter_vars
-from .engine import InProcessMotor
+from .engine import InProcessMotor, state_getter
 
 
 class MotorBlock(Block):
@@ -40,6 +40,12 @@ class MotorBlock(Block):
     ``Component.parameter`` (same names and values as the SSV of the SSP), and
     every sub-block input, output and state as a ``local`` variable
     ``Component.variable`` so that get/set FMU state captures the whole motor.
+
+    With the compiled kernels (:mod:`l1b2.physics.jit`) the communication steps
+    run through :class:`l1b2.cosim.engine.FusedSteps`: one compiled call per
+    communication step, with the same operations as the blocks and the same
+    numbers (tests/test_fused.py); the blocks catch up whenever a sub-block
+    variable is read or written.
     """
 
     PARAMS_CLASS = MotorParams
@@ -86,6 +92,12 @@ class MotorBlock(Block):
                    "F_d": ("Interface", "F_d"), "phi_c": ("Interface", "phi_c"),
                    "stick_fraction": ("Interface", "stick_fraction"), "T_stator": ("Stator", "T_stator"),
                    "at_stop": ("Slider", "at_stop")}
+    #: the same outputs in the fused state vector (l1b2.physics.coupled.STATE)
+    _OUT_STATE = {"v": "Slider.v_state", "s": "Slider.s_state", "V0": "Driver.V0", "U_l": "Stator.U_l",
+                  "U_w": "Stator.U_w", "delta": "Stator.delta", "F_p": "Stator.F_p", "F_d": "Interface.F_d",
+                  "phi_c": "Interface.phi_c", "stick_fraction": "Interface.stick_fraction",
+                  "T_stator": "Stator.T_st", "at_stop": "Slider.stop_state"}
+    _out_getter = staticmethod(state_getter(list(_OUT_STATE.values())))
 
     def __init__(self, params: MotorParams):
         self.params = params
@@ -133,6 +145,7 @@ class MotorBlock(Block):
         section = SUBSYSTEM_BLOCKS[comp].SECTION
         if var in {f.name for f in fields(getattr(self.params, section))}:
             return getattr(getattr(self.params, section), var)  # parameters: the dataclass is the truth
+        self.motor.sync()  # the blocks catch up with the fused steps
         return getattr(self.motor.b[comp], var)                  # sub-block inputs, outputs, states
 
     def set(self, name: str, value):
@@ -144,6 +157,7 @@ class MotorBlock(Block):
             section = SUBSYSTEM_BLOCKS[comp].SECTION
             if var in {f.name for f in fields(getattr(self.params, section))}:
                 self.params = self.params.replace(**{f"{section}__{var}": value})
+            self.motor.sync()  # the blocks are the authority again until the next step
             setattr(self.motor.b[comp], var, value)
             return
         setattr(self, name, value)
@@ -166,6 +180,7 @@ class MotorBlock(Block):
         self._publish()
 
     def initialize_outputs(self):
+        self.motor.sync()
         for b in self.motor.b.values():
             b.refresh()
         self._publish()
@@ -192,11 +207,14 @@ class MotorBlock(Block):
             self.motor.inputs = dict(zip(InProcessMotor.INPUTS, u))
             self._held = u
         n = max(1, int(round(h / float(self.internal_step_s))))
-        self.motor.h = h / n
-        self.motor.t = t
-        for _ in range(n):
-            self.motor.step()
-        self._publish()
+        motor = self.motor
+        motor.t = t
+        motor.advance(n, h / n)
+        fused = motor.fused_step
+        if fused is not None and fused.ahead:  # outputs straight from the fused state vector
+            self.__dict__.update(zip(self._OUT_STATE, self._out_getter(fused.x.tolist())))
+        else:
+            self._publish()
 
 
 class PredictorBlock(Block):
