@@ -9,9 +9,11 @@ Prints, side by side in one run:
   with the largest output differences;
 * the real-time factor (wall time / simulated time) of the in-process engine
   (``l1b2.cosim.engine.InProcessMotor``, 324 V, 0.2 ms step) with the old kernels
-  (``L1B2_JIT=0``: interface, stator and slider steps in plain Python, as in
-  the previous releases) and the new ones (compiled by numba; target: <= 0.1),
-  and the final slider speeds of both;
+  (``L1B2_JIT=0``: interface, stator and slider steps in plain Python, block
+  by block, as in the releases before the compiled kernels) and the new ones
+  (the fused coupled step compiled by numba; target: <= 0.1), and the final
+  slider speeds of both; then the compiled kernels called block by block
+  (``fused=False``, the release before the fused step) against the fused step;
 * the same for the four-FMU co-simulation (``l1b2.cosim.CoSimulation``,
   target <= 0.5) and for ``L1B2Motor.fmu`` alone, stepped through fmpy
   (``doStep`` and ``getReal`` of its outputs every step, target <= 0.15), once
@@ -106,9 +108,9 @@ def _use_compiled(compiled: bool):
     os.environ["L1B2_JIT"] = "1" if compiled else "0"
 
 
-def _inprocess(mp, inputs, sim_time, compiled):
+def _inprocess(mp, inputs, sim_time, compiled, fused=None):
     _use_compiled(compiled)
-    m = engine.InProcessMotor(mp, h_s=STEP_S)
+    m = engine.InProcessMotor(mp, h_s=STEP_S, fused=fused)
     t0, c0 = time.perf_counter(), time.process_time()
     m.initialize(**inputs)
     m.run(sim_time, record=("Slider.v",))
@@ -230,6 +232,9 @@ def _main(argv=None):
     V_s = float(drv.supply_for_voltage_V(mp.driver, V0_V, 1.0, 48500.0, 25.0))
     inputs = dict(V_s=V_s, duty=1.0, f_s=48500.0, T=25.0, direction=1.0, m_load=0.0)
     rows = [("in-process", _engine_rows(lambda q: _inprocess(mp_wide, inputs, args.sim_time, q), args.repeat))]
+    # the compiled kernels called block by block (the previous release) against the fused step
+    blocks = _engine_rows(lambda q: _inprocess(mp_wide, inputs, args.sim_time, True, fused=None if q else False),
+                          args.repeat)
     if not args.no_fmu:
         from l1b2.fmi.build import build_fmu, build_subsystem_fmus
         with tempfile.TemporaryDirectory(prefix="l1b2_bench_kernel_") as tmp:
@@ -253,6 +258,10 @@ def _main(argv=None):
           f"{'v_end old':>10} {'v_end new':>10} {'rel diff':>9}")
     for name, (old, new) in rows:
         _print_engine(name, old, new)
+    (w_blocks, _, v_blocks), (w_fused, _, v_fused) = blocks
+    print(f"\nin-process, compiled kernels: blocks one after the other (fused=False) {w_blocks:.3f}, fused coupled "
+          f"step {w_fused:.3f} (wall RTF), ratio {w_blocks / w_fused:.1f}; final speeds differ by "
+          f"{abs(v_fused / v_blocks - 1):.1e} (relative)")
 
 
 if __name__ == "__main__":
