@@ -38,8 +38,9 @@ def _block(mp, fused: bool, V0=324.0, internal_step_s=STEP_S, **inputs):
         setattr(b, k, v)
     b.internal_step_s = internal_step_s
     b.initialize()
-    assert (b.motor.fused_step is not None) == fused or not fused
-    if not fused:
+    if fused:
+        assert b.motor.fused_step is not None
+    else:
         b.motor.fused_step = None  # the blocks, step by step (the reference)
     return b
 
@@ -248,3 +249,18 @@ def test_a_family_across_modules_compiles_and_its_cache_key_follows_every_file(t
     (tmp_path / "l1b2_fam_b.py").write_text("def helper(x):\n    return 3.0 * x\n")
     assert jit.family_digest(family) != digest
     assert jit.family_digest({"entry": l1b2_fam_a.entry}) != digest
+
+
+def test_fused_step_checks_the_ranges_the_blocks_declare():
+    # the compiled step hands a step to the blocks when an internal signal leaves the range a block accepts;
+    # its limits are the blocks' Var declarations
+    from l1b2.cosim.blocks import InterfaceBlock, SliderBlock, StatorBlock
+    decl = {(cls.__name__, v.name): (v.min, v.max) for cls in (StatorBlock, InterfaceBlock, SliderBlock)
+            for v in cls.INPUTS}
+    assert decl["StatorBlock", "s"] == (cp.S_MIN, cp.S_MAX)
+    assert decl["InterfaceBlock", "U_l"] == decl["InterfaceBlock", "U_w"] == (0.0, cp.U_MAX)
+    assert decl["InterfaceBlock", "delta"] == (cp.DELTA_MIN, cp.DELTA_MAX)
+    assert decl["InterfaceBlock", "v"] == (cp.V_MIN, cp.V_MAX)
+    assert decl["InterfaceBlock", "F_p"] == decl["SliderBlock", "F_p"] == (cp.FP_MIN, cp.FP_MAX)
+    assert decl["SliderBlock", "F_d"] == (cp.FD_MIN, cp.FD_MAX)
+    assert all(decl["StatorBlock", f] == (None, None) for f in ("F_N1_sin", "F_N1_cos", "F_T1_sin", "F_T1_cos"))

@@ -27,7 +27,7 @@ from ..physics import coupled as cp
 from ..physics import stator as st
 from ..physics.jit import jit_status
 from ..physics.params import MotorParams
-from .blocks import make_blocks, variable_unit
+from .blocks import SliderBlock, StatorBlock, make_blocks, variable_unit
 from .result import CoSimResult
 
 # ---------------------------------------------------------------------------
@@ -186,6 +186,11 @@ class InProcessMotor:
 # The fused coupled step
 # ---------------------------------------------------------------------------
 
+#: the ranges the blocks accept for the inputs the fused step holds (the driver's outputs and the system
+#: inputs), from the stator's and the slider's Var declarations
+_HELD_BOUNDS = {v.name: (v.min, v.max) for v in StatorBlock.INPUTS + SliderBlock.INPUTS
+                if v.name in ("V0", "omega", "T", "direction", "m_load")}
+
 #: block variables copied between the blocks and the state vector: (index in x, component, attribute)
 _BLOCK_VARS = tuple((i, *name.split(".", 1)) for i, name in enumerate(cp.STATE)
                     if name.split(".", 1)[0] in ("Driver", "Stator", "Interface", "Slider"))
@@ -283,8 +288,9 @@ class FusedSteps:
         x[cp.V0], x[cp.OMEGA], x[cp.DIR], x[cp.T_AMB], x[cp.M_LOAD] = (
             d.V0, d.omega, u["direction"], u["T"], u["m_load"])
         self._inputs = u
-        self._inputs_ok = (0.0 <= d.V0 <= 2000.0 and 1e3 <= d.omega <= 1e7 and -100.0 <= u["T"] <= 300.0
-                           and abs(abs(u["direction"]) - 1.0) <= 1e-9 and -100.0 <= u["m_load"] <= 100.0)
+        values = {"V0": d.V0, "omega": d.omega, "T": u["T"], "direction": u["direction"], "m_load": u["m_load"]}
+        self._inputs_ok = (all(lo <= values[k] <= hi for k, (lo, hi) in _HELD_BOUNDS.items())
+                           and abs(abs(u["direction"]) - 1.0) <= 1e-9)
         return self._inputs_ok
 
     def advance(self, n: int, h: float):

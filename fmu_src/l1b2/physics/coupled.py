@@ -14,7 +14,7 @@ vector, calling the same per-subsystem kernels the blocks call:
 
 Compiled by numba as one function (:func:`compiled_substeps`), it replaces
 the per-step Python glue between the blocks: ``L1B2Motor.fmu`` runs it
-(:class:`l1b2.cosim.fused.FusedMotor`). The blocks remain the reference; a
+(:class:`l1b2.cosim.engine.FusedSteps`). The blocks remain the reference; a
 test runs both and compares every state.
 
 The function stops early (returning the number of steps done) and says why
@@ -88,6 +88,15 @@ PARAMS = (
 
 #: values of ``x[REASON]``: all steps done, a new table cell needed, a step for the blocks
 REASON_NONE, REASON_CELL, REASON_BLOCKS = 0.0, 1.0, 2.0
+#: the ranges the blocks accept for the internal signals (their ``Var`` declarations in
+#: :mod:`l1b2.cosim.blocks`; a test compares): stator position [m], interface amplitudes [m], phase [rad],
+#: speed [m/s], static axial force [N], and the slider's driving force [N]
+S_MIN, S_MAX = -1.0, 1.0
+U_MAX = 1e-3
+DELTA_MIN, DELTA_MAX = -10.0, 10.0
+V_MIN, V_MAX = -10.0, 10.0
+FP_MIN, FP_MAX = 0.0, 1e4
+FD_MIN, FD_MAX = -1e4, 1e4
 _BIG = 1.7976931348623157e308  # the bound of the blocks' unbounded inputs: inf and nan fail it
 
 
@@ -120,7 +129,7 @@ def motor_substeps(x, p, cell, cell_k, n, h):
         s_in, v_in = x[S], x[V]
         fn1s, fn1c, ft1s, ft1c = x[FN1S], x[FN1C], x[FT1S], x[FT1C]
         # the stator block's input checks (the driver's outputs were checked by the caller)
-        if not (-1.0 <= s_in <= 1.0 and -_BIG <= fn1s <= _BIG and -_BIG <= fn1c <= _BIG
+        if not (S_MIN <= s_in <= S_MAX and -_BIG <= fn1s <= _BIG and -_BIG <= fn1c <= _BIG
                 and -_BIG <= ft1s <= _BIG and -_BIG <= ft1c <= _BIG):
             x[REASON] = REASON_BLOCKS
             return k
@@ -150,13 +159,13 @@ def motor_substeps(x, p, cell, cell_k, n, h):
             M_l, x[K_L], x[C_L], M_b, x[K_B], x[C_B], h, eta_new)
         F_p = p[ALPHA0] * P
         # the interface block's input checks, then its kernel
-        if not (0.0 <= U_l <= 1e-3 and 0.0 <= U_w <= 1e-3 and -10.0 <= delta <= 10.0 and -10.0 <= v_in <= 10.0
-                and 0.0 <= F_p <= 1e4):
+        if not (0.0 <= U_l <= U_MAX and 0.0 <= U_w <= U_MAX and DELTA_MIN <= delta <= DELTA_MAX
+                and V_MIN <= v_in <= V_MAX and FP_MIN <= F_p <= FP_MAX):
             x[REASON] = REASON_BLOCKS
             return k
         (F_d, F_nm, o_fn1s, o_fn1c, o_ft1s, o_ft1c, phi_c, stick) = period_integrals(
             U_l, U_w, delta, omega, v_in, F_p, p[K_E], p[U_M], p[MU_P], p[SIGMA], p[PURE_SLIP])
-        if not -1e4 <= F_d <= 1e4:  # the slider block's input check
+        if not FD_MIN <= F_d <= FD_MAX:  # the slider block's input check
             x[REASON] = REASON_BLOCKS
             return k
         # slider (slider.step: the force levels, then the event loop)
