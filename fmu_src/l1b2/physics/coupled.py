@@ -91,12 +91,12 @@ REASON_NONE, REASON_CELL, REASON_BLOCKS = 0.0, 1.0, 2.0
 #: the ranges the blocks accept for the internal signals (their ``Var`` declarations in
 #: :mod:`l1b2.cosim.blocks`; a test compares): stator position [m], interface amplitudes [m], phase [rad],
 #: speed [m/s], static axial force [N], and the slider's driving force [N]
-S_MIN, S_MAX = -1.0, 1.0
-U_MAX = 1e-3
-DELTA_MIN, DELTA_MAX = -10.0, 10.0
-V_MIN, V_MAX = -10.0, 10.0
-FP_MIN, FP_MAX = 0.0, 1e4
-FD_MIN, FD_MAX = -1e4, 1e4
+LIM_S = (-1.0, 1.0)
+LIM_U = (0.0, 1e-3)
+LIM_DELTA = (-10.0, 10.0)
+LIM_V = (-10.0, 10.0)
+LIM_FP = (0.0, 1e4)
+LIM_FD = (-1e4, 1e4)
 _BIG = 1.7976931348623157e308  # the bound of the blocks' unbounded inputs: inf and nan fail it
 
 
@@ -129,7 +129,7 @@ def motor_substeps(x, p, cell, cell_k, n, h):
         s_in, v_in = x[S], x[V]
         fn1s, fn1c, ft1s, ft1c = x[FN1S], x[FN1C], x[FT1S], x[FT1C]
         # the stator block's input checks (the driver's outputs were checked by the caller)
-        if not (S_MIN <= s_in <= S_MAX and -_BIG <= fn1s <= _BIG and -_BIG <= fn1c <= _BIG
+        if not (LIM_S[0] <= s_in <= LIM_S[1] and -_BIG <= fn1s <= _BIG and -_BIG <= fn1c <= _BIG
                 and -_BIG <= ft1s <= _BIG and -_BIG <= ft1c <= _BIG):
             x[REASON] = REASON_BLOCKS
             return k
@@ -159,13 +159,13 @@ def motor_substeps(x, p, cell, cell_k, n, h):
             M_l, x[K_L], x[C_L], M_b, x[K_B], x[C_B], h, eta_new)
         F_p = p[ALPHA0] * P
         # the interface block's input checks, then its kernel
-        if not (0.0 <= U_l <= U_MAX and 0.0 <= U_w <= U_MAX and DELTA_MIN <= delta <= DELTA_MAX
-                and V_MIN <= v_in <= V_MAX and FP_MIN <= F_p <= FP_MAX):
+        if not (LIM_U[0] <= U_l <= LIM_U[1] and LIM_U[0] <= U_w <= LIM_U[1] and LIM_DELTA[0] <= delta <= LIM_DELTA[1]
+                and LIM_V[0] <= v_in <= LIM_V[1] and LIM_FP[0] <= F_p <= LIM_FP[1]):
             x[REASON] = REASON_BLOCKS
             return k
         (F_d, F_nm, o_fn1s, o_fn1c, o_ft1s, o_ft1c, phi_c, stick) = period_integrals(
             U_l, U_w, delta, omega, v_in, F_p, p[K_E], p[U_M], p[MU_P], p[SIGMA], p[PURE_SLIP])
-        if not FD_MIN <= F_d <= FD_MAX:  # the slider block's input check
+        if not LIM_FD[0] <= F_d <= LIM_FD[1]:  # the slider block's input check
             x[REASON] = REASON_BLOCKS
             return k
         # slider (slider.step: the force levels, then the event loop)
