@@ -227,3 +227,18 @@ def test_engine_runs_fused_by_default_and_records_what_the_blocks_record(motor):
     m.b["Interface"].quadrature = True
     with pytest.raises(SimulationError, match="fused=True"):
         m.initialize(V_s=60.0)
+
+
+def test_engine_with_inputs_that_are_functions_of_time_fused_equals_blocks(motor):
+    # inputs may be functions of time (held over each step): the fused step takes them step by step
+    V_s = float(drv.supply_for_voltage_V(motor.driver, 300.0, 1.0, 48500.0, 25.0))
+    series = {}
+    for fused in (None, False):
+        m = InProcessMotor(motor, fused=fused)
+        m.initialize(V_s=lambda t: V_s * (0.8 + 0.2 * min(t / 0.05, 1.0)), m_load=lambda t: 0.04 * (t > 0.03),
+                     s0=-0.015)
+        series[fused] = m.run(0.08, record=("Slider.v", "Slider.s", "Driver.V0", "Stator.U_w"))
+        assert (m.fused_step is not None) == (fused is None)
+    for k in ("Slider.v", "Slider.s", "Driver.V0", "Stator.U_w"):
+        np.testing.assert_array_equal(series[None][k], series[False][k], err_msg=k)
+    assert np.ptp(series[None]["Driver.V0"]) > 10.0  # the voltage did ramp
