@@ -353,6 +353,7 @@ class CloseLoop:
                    cv_free_run_nrmse_chain=chain_cv.nrmse, cv_folds_improved=int(np.sum(chain_cv.sse < base_cv.sse)))
         if not gain > 0:
             rec["accepted"] = False
+            rec["refused_by_harm_guard"] = True  # found by the channel's test, not applied
             return rec, dtr
         it.model, it.output_filter = filt.model, ch["filter"]
         it.rounds.append({"round": len(it.rounds), "added": "speed_channel_filter", "effect": "speed_channel_filter",
@@ -385,7 +386,7 @@ class CloseLoop:
                    + [_effect_record(e, rec, ext_params) for e, rec in
                       zip(effects, [r for r in it.rounds[1:] if r["added"] != "speed_channel_filter"])])
         # the channel's test found a filter that was not applied (it did not lower the CV free-run error)
-        chain_found = "cv_free_run_gain" in chain_rec and not chain_rec["accepted"]
+        chain_found = bool(chain_rec.get("refused_by_harm_guard", False))
         traced_to = order_traced(effects, it.output_filter is not None, a.traced,
                                  evidence=[t.candidate for t in below], speed_evidence=chain_found)
         w = a.whiteness
