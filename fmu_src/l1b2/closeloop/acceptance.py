@@ -170,36 +170,20 @@ def materiality(candidate: CandidateForce, min_drop: float) -> float:
 
 
 def fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, init, effects: EffectSet, order: int,
-               seed: int, max_nfev: int, noise: str = "common") -> tuple[float, float, bool]:
+               seed: int, max_nfev: int, noise: str = "common",
+               chain_k: int | None = None) -> tuple[float, float, bool]:
     """One fold: refit on the runs not in ``held_runs``, predict those in free run.
+
+    With ``chain_k`` the model is the measurement chain's
+    (:class:`l1b2.closeloop.loop.ChainModel`): on the training runs the speed
+    channel's output filter (:func:`l1b2.closeloop.chain.speed_channel`, with
+    ``chain_k`` folds) and the physics refitted on the position's derivative;
+    the held-out runs' measured speed is predicted by the filter applied to
+    the physics' free run.
 
     Returns ``(sse, ss_meas, failed)`` on the held-out evaluation mask (a
     failed fit or a diverged prediction: ``sse = inf``). A pure function of
-    its arguments: the unit of work of :func:`cv_errors`.
-    """
-    runs = df[dataio.RUN].to_numpy()
-    v = df[dataio.SPEED].to_numpy(float)
-    held = np.isin(runs, held_runs)
-    m_te = mask[held]
-    ssm = float(np.sum(v[held][m_te] ** 2))
-    try:
-        est = refit(df.loc[~held].reset_index(drop=True), mask[~held], m_s, init, effects, order=order, seed=seed,
-                    max_nfev=max_nfev, noise=noise)
-        e = (v[held] - est.predict_free_run(df.loc[held].reset_index(drop=True)))[m_te]
-    except IdentificationError:
-        return np.inf, ssm, True
-    return (float(np.sum(e ** 2)) if np.all(np.isfinite(e)) else np.inf), ssm, False
-
-
-def chain_fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, init, order: int, seed: int,
-                     max_nfev: int, noise: str = "common", k: int = 5) -> tuple[float, float, bool]:
-    """One fold of the measurement-chain model (:class:`l1b2.closeloop.loop.ChainModel`), as :func:`fold_error`.
-
-    On the runs not in ``held_runs``: the speed channel's output filter
-    (:func:`l1b2.closeloop.chain.speed_channel`) and the physics refitted on
-    the position's derivative; the held-out runs' measured speed is predicted
-    by the filter applied to the physics' free run. Returns ``(sse, ss_meas,
-    failed)`` on the held-out evaluation mask.
+    its arguments: the unit of work of :func:`cv_errors` and :func:`chain_cv_errors`.
     """
     runs = df[dataio.RUN].to_numpy()
     v = df[dataio.SPEED].to_numpy(float)
@@ -207,13 +191,18 @@ def chain_fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, 
     m_te = mask[held]
     ssm = float(np.sum(v[held][m_te] ** 2))
     train, test = df.loc[~held].reset_index(drop=True), df.loc[held].reset_index(drop=True)
-    filt = chain.speed_channel(train, mask[~held], k=k, seed=seed).get("filter")
-    if filt is None:
-        return np.inf, ssm, True
+    filt = None
+    if chain_k is not None:
+        filt = chain.speed_channel(train, mask[~held], k=chain_k, seed=seed).get("filter")
+        if filt is None:
+            return np.inf, ssm, True
+        train, test_in = chain.with_position_speed(train), chain.with_position_speed(test)
+    else:
+        test_in = test
     try:
-        est = refit(chain.with_position_speed(train), mask[~held], m_s, init, EffectSet(), order=order, seed=seed,
-                    max_nfev=max_nfev, noise=noise)
-        e = (v[held] - filt.apply(test, est.predict_free_run(chain.with_position_speed(test))))[m_te]
+        est = refit(train, mask[~held], m_s, init, effects, order=order, seed=seed, max_nfev=max_nfev, noise=noise)
+        pred = est.predict_free_run(test_in)
+        e = (v[held] - (pred if filt is None else filt.apply(test, pred)))[m_te]
     except IdentificationError:
         return np.inf, ssm, True
     return (float(np.sum(e ** 2)) if np.all(np.isfinite(e)) else np.inf), ssm, False
@@ -223,23 +212,16 @@ def chain_cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init_
                     seed: int, max_nfev: int, client=None, noise: str = "common",
                     k: int = 5) -> tuple[FoldErrors, FoldErrors]:
     """:class:`FoldErrors` of the baseline (refitted on the measured speed from ``init_base``) and of the
-    measurement-chain model (:func:`chain_fold_error`, from ``init_chain``) on the same ``folds``; every
-    fold of both is one task of :func:`l1b2.cluster.run_tasks`."""
-    args = [(fold_error, (df, mask, m_s, fold, init_base, EffectSet(), order, seed, max_nfev, noise))
-            for fold in folds]
-    args += [(chain_fold_error, (df, mask, m_s, fold, init_chain, order, seed, max_nfev, noise, k))
-             for fold in folds]
+    measurement-chain model (:func:`fold_error` with ``chain_k=k``, from ``init_chain``) on the same
+    ``folds``; every fold of both is one task of :func:`l1b2.cluster.run_tasks`."""
+    args = [(df, mask, m_s, fold, init, EffectSet(), order, seed, max_nfev, noise, chain_k)
+            for init, chain_k in ((init_base, None), (init_chain, k)) for fold in folds]
     out = [None] * len(args)
-    for i, r in run_tasks(_call, args, client=client, name="l1b2-chain-cv"):
+    for i, r in run_tasks(fold_error, args, client=client, name="l1b2-chain-cv"):
         out[i] = r
     n = len(folds)
     return tuple(FoldErrors(np.array([r[0] for r in rows]), np.array([r[1] for r in rows]),
                             sum(bool(r[2]) for r in rows)) for rows in (out[:n], out[n:]))
-
-
-def _call(fn, args):
-    """``fn(*args)``: one task of :func:`chain_cv_errors` (a module-level function, so that it pickles)."""
-    return fn(*args)
 
 
 def cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init, jobs, *, order: int, seed: int,

@@ -403,8 +403,8 @@ class CloseLoop:
                         else "no significant missing effect")
                        + ("; speed channel filtered (measurement chain)" if it.output_filter is not None else "")
                        + (f"; the speed column looks filtered (measurement chain, cross-validated gain "
-                          f"{chain_rec['cv_gain']:.3f}) but a model behind the filter did not lower the cross-validated "
-                          "free-run error: not applied" if chain_found and (c is not None) else ""),
+                          f"{chain_rec['cv_gain']:.3f}) but a model behind the filter did not lower the "
+                          "cross-validated free-run error: not applied" if chain_found and (c is not None) else ""),
             "structural_effects": [{"label": e.label, "regressors": list(e.regressors), "relaxes": e.structural}
                                    for e in effects if e.structural],
             "immaterial_evidence": [t.to_dict() for t in below],
