@@ -267,7 +267,7 @@ class FusedSteps:
         stt.T_stator = stt.T_st
         itf.U_l, itf.U_w, itf.delta, itf.omega, itf.F_p = stt.U_l, stt.U_w, stt.delta, d.omega, stt.F_p
         sl.F_d, sl.F_p, sl.m_load = itf.F_d, stt.F_p, values[cp.M_LOAD]
-        sl.v, sl.s, sl.stuck, sl.at_stop = sl.v_state, sl.s_state, sl.stuck_state, sl.stop_state  # (a: in x)
+        sl.publish(values[cp.ACC])
         self.ahead = False
 
     def set_inputs(self, t: float, h: float) -> bool:
