@@ -7,7 +7,8 @@ vector, calling the same per-subsystem kernels the blocks call:
 * :func:`l1b2.physics.stator.temperature_step_scalar` and
   :func:`~l1b2.physics.stator.bar_deviation_scalar` (stator temperature,
   axial force ``P(s)``), the modal table's interpolant
-  (:func:`~l1b2.physics.stator.table_lookup`) and
+  (:func:`~l1b2.physics.stator.table_lookup`) and stiffnesses
+  (:func:`~l1b2.physics.stator.stiffness_damping`), and
   :func:`~l1b2.physics.stator.coupled_envelope_step`;
 * :func:`l1b2.physics.interface.period_integrals`;
 * :func:`l1b2.physics.slider.step_floats`.
@@ -45,6 +46,7 @@ from .stator import (
     coupled_envelope_step,
     modal_mass_b_kg,
     modal_mass_l_kg,
+    stiffness_damping,
     table_lookup,
     temperature_step_scalar,
 )
@@ -176,10 +178,8 @@ def motor_substeps(x, p, cell, cell_k, n, h):
             p[MU_SS] * (p[KAPPA] * F_p + G_M_S2 * p[MASS]) + F_path, p[C_R], p[S_MIN], p[S_MAX], h)
         # the step is taken: write it back
         x[T_ST] = T_st
-        x[K_L] = M_l * (w_l0 * w_l0)  # the ModalTable's operations
-        x[C_L] = 2 * p[ZETA_L] * M_l * w_l0
-        x[K_B] = M_b * (wb * wb)
-        x[C_B] = 2 * p[ZETA_B] * M_b * wb
+        x[K_L], x[C_L] = stiffness_damping(M_l, w_l0, p[ZETA_L])  # the ModalTable's operations
+        x[K_B], x[C_B] = stiffness_damping(M_b, wb, p[ZETA_B])
         x[ETA], x[W_L0], x[W_B0], x[PROPS_T] = eta_new, w_l0, wb, T_st
         x[QLR], x[QLI], x[QBR], x[QBI] = qlr, qli, qbr, qbi
         x[U_L], x[U_W], x[PH_L], x[PH_W], x[DELTA], x[F_P], x[P_AX] = U_l, U_w, ph_l, ph_w, delta, F_p, P

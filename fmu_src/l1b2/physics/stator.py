@@ -497,8 +497,9 @@ class ModalTable:
             eta = eta * u + ce
         K_l, C_l, w_l0 = self._l1 if T_degC == self._l1_T else self._l1_props(T_degC)
         M_b = self.M_b
-        return ModalProperties(M_l=self.M_l, K_l=K_l, C_l=C_l, M_b=M_b, K_b=M_b * (wb * wb),
-                               C_b=2 * sp.zeta_b * M_b * wb, eta_T=abs(eta), omega_l0=w_l0, omega_b0=wb)
+        K_b, C_b = stiffness_damping(M_b, wb, sp.zeta_b)
+        return ModalProperties(M_l=self.M_l, K_l=K_l, C_l=C_l, M_b=M_b, K_b=K_b, C_b=C_b, eta_T=abs(eta),
+                               omega_l0=w_l0, omega_b0=wb)
 
     def cell_array(self, k: int):
         """Coefficients of cell ``k`` as a ``(TABLE_DEGREE + 1, 2)`` array (B2 frequency [rad/s], tip
@@ -515,9 +516,16 @@ class ModalTable:
             sp = self.sp
             dT = 0.0 if T_degC is None else float(T_degC) - sp.T_ref_degC
             w_l0 = 2 * math.pi * (sp.f_l0_Hz + sp.df_dT_l_Hz_per_K * dT)
-            # products, not ** 2, as in l1b2.physics.coupled (numba's x ** 2 is x * x, Python's is pow())
-            self._l1_T, self._l1 = T_degC, (self.M_l * (w_l0 * w_l0), 2 * sp.zeta_l * self.M_l * w_l0, w_l0)
+            self._l1_T, self._l1 = T_degC, (*stiffness_damping(self.M_l, w_l0, sp.zeta_l), w_l0)
         return self._l1
+
+
+def stiffness_damping(M, omega0, zeta):
+    """Modal stiffness ``K = M omega0^2`` [N/m] and damping ``C = 2 zeta M omega0`` [N s/m] of mass ``M`` [kg]
+    at natural frequency ``omega0`` [rad/s] (plain floats; numba compiles it: the modal table and the fused
+    coupled step share it). Written with products, not ``** 2``: numba computes ``x ** 2`` as ``x * x``,
+    CPython with ``pow()``, which differ by one ulp in about 1 of 1400 squares."""
+    return M * (omega0 * omega0), 2 * zeta * M * omega0
 
 
 def table_lookup(cell, P):
@@ -683,15 +691,13 @@ def kernel_family() -> dict:
     :func:`l1b2.physics.jit.compile_family`): the envelope step with its helpers, the temperature step,
     the bar deviation and the modal table's interpolant."""
     return {f.__name__: f for f in (envelope_step_scalar, tip_motion_scalar, coupled_envelope_step,
-                                    temperature_step_scalar, bar_deviation_scalar, table_lookup)}
+                                    temperature_step_scalar, bar_deviation_scalar, table_lookup, stiffness_damping)}
 
 
 def compiled_envelope_step():
     """:func:`coupled_envelope_step` compiled by numba (once per process), or None (see :mod:`.jit`)."""
-    return cached_kernel(_COMPILED, lambda: (
-        {k: f for k, f in kernel_family().items() if k in ("envelope_step_scalar", "tip_motion_scalar",
-                                                             "coupled_envelope_step")},
-        "coupled_envelope_step", "UniTuple(float64, 9)(" + ", ".join(["float64"] * 21) + ")"))
+    return cached_kernel(_COMPILED, lambda: (  # helpers it does not call are never compiled (numba is lazy)
+        kernel_family(), "coupled_envelope_step", "UniTuple(float64, 9)(" + ", ".join(["float64"] * 21) + ")"))
 
 
 class StatorOutput(NamedTuple):
