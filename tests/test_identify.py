@@ -478,3 +478,10 @@ def test_auto_noise_fit_is_profile_alone_and_alternate_with_extra_forces():
     assert alone.loglik_ == prof.loglik_  # the same search
     with pytest.raises(IdentificationError, match="noise_fit must be one of"):
         PredictorIdentifier(noise_fit="best", **kw).fit(df, M_S, mask=m)
+
+
+def test_cli_offers_the_estimators_noise_fits():
+    # the CLI keeps its own copy of the choices (it imports no numerical module to build its parser)
+    from l1b2 import cli
+    from l1b2.ident import estimator
+    assert cli.NOISE_FITS == estimator.NOISE_FITS
