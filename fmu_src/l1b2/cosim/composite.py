@@ -92,12 +92,8 @@ class MotorBlock(Block):
                    "F_d": ("Interface", "F_d"), "phi_c": ("Interface", "phi_c"),
                    "stick_fraction": ("Interface", "stick_fraction"), "T_stator": ("Stator", "T_stator"),
                    "at_stop": ("Slider", "at_stop")}
-    #: the same outputs in the fused state vector (l1b2.physics.coupled.STATE)
-    _OUT_STATE = {"v": "Slider.v_state", "s": "Slider.s_state", "V0": "Driver.V0", "U_l": "Stator.U_l",
-                  "U_w": "Stator.U_w", "delta": "Stator.delta", "F_p": "Stator.F_p", "F_d": "Interface.F_d",
-                  "phi_c": "Interface.phi_c", "stick_fraction": "Interface.stick_fraction",
-                  "T_stator": "Stator.T_st", "at_stop": "Slider.stop_state"}
-    _out_getter = staticmethod(state_getter(list(_OUT_STATE.values())))
+    #: the same outputs from the fused state vector
+    _out_getter = staticmethod(state_getter([f"{comp}.{var}" for comp, var in _OUT_SOURCE.values()]))
 
     def __init__(self, params: MotorParams):
         self.params = params
@@ -212,7 +208,7 @@ class MotorBlock(Block):
         motor.advance(n, h / n)
         fused = motor.fused_step
         if fused is not None and fused.ahead:  # outputs straight from the fused state vector
-            self.__dict__.update(zip(self._OUT_STATE, self._out_getter(fused.x.tolist())))
+            self.__dict__.update(zip(self._OUT_SOURCE, self._out_getter(fused.x.tolist())))
         else:
             self._publish()
 

@@ -334,10 +334,14 @@ class FusedSteps:
 
 
 def state_getter(names: list[str]):
-    """A getter of ``names`` (entries of :data:`l1b2.physics.coupled.STATE`) from the fused state vector
-    as a list (``x.tolist()``): a tuple in that order."""
-    index = {name: i for i, name in enumerate(cp.STATE)}
-    return operator.itemgetter(*(index[v] for v in names))
+    """A getter of the block variables ``names`` (``"Component.variable"``, each one the fused state vector
+    holds: the entries :meth:`InProcessMotor.value` reads from it) from the vector as a list
+    (``x.tolist()``): a tuple in that order."""
+    index = [_READERS.get(n) for n in names]
+    missing = [n for n, i in zip(names, index) if type(i) is not int]
+    if missing:
+        raise KeyError(f"not held by the fused state vector: {', '.join(missing)}")
+    return operator.itemgetter(*index)
 
 
 def _readers() -> dict:
