@@ -226,8 +226,9 @@ def test_measurement_chain_filter_is_found_from_position_and_speed_alone():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason="the issue's check passes (speed traced first, TEST 3.03 -> 1.98 %), but the "
-                   "filter is refused: its cross-validated free-run nrmse 4.19 % vs the baseline's 4.15 %")
+@pytest.mark.xfail(strict=True, raises=AssertionError,
+                   reason="the issue's check passes (speed traced first, TEST 3.03 -> 1.98 %), but the filter is "
+                   "refused: its cross-validated free-run nrmse 4.19 % vs the baseline's 4.15 %")
 def test_realistic_measurement_chain_effect(record_property):
     res, truth = _run(("speed_lowpass",), 8)
     _check_effects(res, truth, 8, 2, record_property)
