@@ -5,7 +5,8 @@ that is off in the reference), never declared to the model; its size and
 parameters are drawn from the effect's range with a per-case seed. The test
 set is used only for the before/after report, never for fitting or choosing.
 
-Fast set (``make test``): four effects, one seed each, plus two controls.
+Fast set (``make test``): four effects, one seed each, plus two controls, and thermal drift with the
+stator temperature logged (traced to the temperature).
 Slow set (``make test-slow``, not in CI: it does not fit CI's time): two more
 seeds per effect, the ten-seed control, and the friction-bar waviness (traced to position; its error cut is reported
 separately because it is not always a half).
@@ -32,17 +33,17 @@ SLOW = [(e, s) for e in ("pulley_friction", "direction_asymmetry", "drive_satura
 
 
 @functools.cache
-def _run(effect, seed):
-    d = rig_dir(f"{effect}_{seed}", injections=[effect] if effect else [], injection_seed=seed,
-                plan=RigPlan(step_s=1e-3, seed=seed))
+def _run(effect, seed, record_temperature=False):
+    d = rig_dir(f"{effect}_{seed}_{'T' if record_temperature else ''}", injections=[effect] if effect else [],
+                injection_seed=seed, plan=RigPlan(step_s=1e-3, seed=seed, record_temperature=record_temperature))
     res = close_loop(load_measurements(d / "train.csv"), load_measurements(d / "test.csv"))
     truth = json.loads((d / "rig_truth.json").read_text())
     return res, truth
 
 
-def _check_effect(res, truth, case, record):
+def _check_effect(res, truth, case, record, want=None):
     record("case", case_row("reference", case, res))
-    want = truth["injections"][0]["regressor"]
+    want = want or truth["injections"][0]["regressor"]
     d = res.diagnosis
     assert d["significant"], d["message"]
     assert d["traced_to"][0] == want, (d["traced_to"], truth)
@@ -57,6 +58,15 @@ def test_undeclared_effect_is_traced_and_halves_the_held_out_error(effect, seed,
     # reference: rig_truth.json (what was injected) and the held-out (TEST) free-run nrmse before/after
     res, truth = _run(effect, seed)
     _check_effect(res, truth, f"{effect} {seed}", record_property)
+
+
+def test_logged_stator_temperature_is_traced_and_used(record_property):
+    # reference: data-format's optional temperature_C column (the stator temperature, when the rig measures it):
+    # the self-heating drift of thermal_drift 4 is then traced to the temperature, not to the clock, and modelled
+    # by it (thermal_drift_T); the cut as for the other effects
+    res, truth = _run("thermal_drift", 4, record_temperature=True)
+    _check_effect(res, truth, "thermal_drift 4, temperature logged", record_property, want="temperature")
+    assert res.diagnosis["effects"][0]["effect"] == "thermal_drift_T"
 
 
 def _extended_free_run(model, df):
