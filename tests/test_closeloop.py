@@ -34,7 +34,7 @@ SLOW = [(e, s) for e in ("pulley_friction", "direction_asymmetry", "drive_satura
 
 @functools.cache
 def _run(effect, seed, record_temperature=False):
-    d = rig_dir(f"{effect}_{seed}_{'T' if record_temperature else ''}", injections=[effect] if effect else [],
+    d = rig_dir(f"{effect}_{seed}{'_T' if record_temperature else ''}", injections=[effect] if effect else [],
                 injection_seed=seed, plan=RigPlan(step_s=1e-3, seed=seed, record_temperature=record_temperature))
     res = close_loop(load_measurements(d / "train.csv"), load_measurements(d / "test.csv"))
     truth = json.loads((d / "rig_truth.json").read_text())
