@@ -223,6 +223,31 @@ def test_cli_writes_the_report_files_and_figures(tmp_path, capsys):
     assert "Error before and after" in md and "Candidates" in md
 
 
+def test_close_loop_without_a_test_file_holds_out_the_papers_runs(tmp_path, capsys):
+    # reference: `l1b2 identify`'s rule (data format: one file may hold every run): without --test, TEST is the
+    # runs with |load| 0.05 kg; the result equals the loop on the rig's own train.csv/test.csv (1e-9 relative)
+    from l1b2.workflows import run_close_loop
+    d = rig_dir("direction_asymmetry_2", injections=["direction_asymmetry"], injection_seed=2,
+                plan=RigPlan(step_s=1e-3, seed=2))
+    res_files, _ = _run("direction_asymmetry", 2)
+    res = run_close_loop(d / "all.csv", None, tmp_path / "cl", plots_on=False)
+    assert res.checks["split"] == "paper's split: test = runs with |load| in [0.05] kg"
+    assert json.loads((tmp_path / "cl" / "report.json").read_text())["checks"]["split"] == res.checks["split"]
+    for part in ("before", "after"):
+        for kind in ("one_step", "free_run"):
+            assert getattr(res, part)["test"][kind]["nrmse"] == pytest.approx(
+                getattr(res_files, part)["test"][kind]["nrmse"], rel=1e-9)
+    # every run held out: nothing to train on, one line naming the file, nothing written
+    df = pd.read_csv(d / "all.csv")
+    only = tmp_path / "only_005.csv"
+    df[np.isclose(df["load_kg"].abs(), 0.05)].to_csv(only, index=False)
+    out = tmp_path / "x"
+    assert cli_main(["close-loop", "--train", str(only), "--report-dir", str(out), "--quiet"]) != 0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and str(only) in err and "nothing left to train on" in err
+    assert not out.exists()
+
+
 def test_refuses_bad_input_before_writing(tmp_path, capsys):
     # reference: data-format bad-input rule: one line, nothing written
     bad = tmp_path / "bad.csv"

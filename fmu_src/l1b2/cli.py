@@ -332,7 +332,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("close-loop", help="find the missing effect in the residual, add it, report before/after")
     p.add_argument("--train", type=Path, required=True, help="measured data to fit and diagnose on")
-    p.add_argument("--test", type=Path, required=True, help="held-out data, only for the before/after report")
+    p.add_argument("--test", type=Path, help="held-out data, only for the before/after report (default: the "
+                                              "paper's split of TRAIN by load)")
+    p.add_argument("--test-loads", type=_floats, default=(0.05,), help="|load| [kg] held out when --test is absent")
     p.add_argument("--report-dir", type=Path, required=True)
     p.add_argument("--export", type=Path, metavar="DIR",
                    help="also write DIR/fmus/Predictor.fmu carrying the final extended model, and "
@@ -526,8 +528,9 @@ def cmd_close_loop(args) -> int:
                             slider_mass_kg=args.slider_mass, plots_on=not args.no_plots, progress=say,
                             allow_unusual_units=args.allow_unusual_units, export_dir=args.export,
                             motor=_motor(args) if args.export is not None else None,
-                            workers=args.workers, scheduler=args.scheduler)
+                            workers=args.workers, scheduler=args.scheduler, test_abs_loads=args.test_loads)
     d = result.diagnosis
+    print(f"data: {result.checks['split']}")
     print(f"diagnosis: {d['message']}" + (f"; traced to {', '.join(d['traced_to'])}" if d["traced_to"] else ""))
     print(result.rounds_table())
     print(result.before_after_table())

@@ -595,13 +595,17 @@ def export_from_report(report_dir, out_dir, mp=None) -> dict:
 
 
 def run_close_loop(train_path, test_path, out_dir, *, slider_mass_kg=None, plots_on=True, progress=None,
-                   allow_unusual_units=False, export_dir=None, motor=None, workers=0, scheduler=None, **settings):
+                   allow_unusual_units=False, export_dir=None, motor=None, workers=0, scheduler=None,
+                   test_abs_loads=TEST_ABS_LOADS, **settings):
     """Close the loop on TRAIN/TEST files; write ``report.json``, ``report.md`` and the PNGs into ``out_dir``.
 
     The output folder is checked and locked first (:func:`output_dir`); both
     files are loaded and validated (slider mass: ``slider_mass_kg`` or
     TRAIN's sidecar; unit plausibility unless ``allow_unusual_units``)
-    before any fit; :class:`l1b2.closeloop.loop.CloseLoop` runs with
+    before any fit. Without ``test_path``, TEST is the runs of TRAIN's file with
+    ``|load|`` in ``test_abs_loads`` (the paper's split, as :func:`load_train_test`;
+    none: no held-out report); the report's ``checks.split`` says which.
+    :class:`l1b2.closeloop.loop.CloseLoop` runs with
     ``settings`` (``order``, ``k_folds``, ``alpha``, ``min_gain``, ``seed``,
     ``n_starts``, ``max_rounds``, ``min_cv_gain``, ``min_cv_drop``, ``screen_alpha``, ``noise_fit``, ``noise``,
     ``library``); the result,
@@ -618,12 +622,12 @@ def run_close_loop(train_path, test_path, out_dir, *, slider_mass_kg=None, plots
     from .cluster import optional_client
     t_start = time.perf_counter()
     with output_dir(Path(out_dir), command="close-loop") as tmp:
-        train, test, _ = load_train_test(train_path, test_path, slider_mass_kg=slider_mass_kg,
-                                         allow_unusual_units=allow_unusual_units)
+        train, test, split = load_train_test(train_path, test_path, test_abs_loads=test_abs_loads,
+                                             slider_mass_kg=slider_mass_kg, allow_unusual_units=allow_unusual_units)
         with optional_client(workers or 0, scheduler, serial_up_to=1) as client:
             result = CloseLoop(progress=progress, client=client, **settings).fit(train, test).result_
         result = dataclasses.replace(result, wall_time_s=round(time.perf_counter() - t_start, 2),
-                                     checks=input_checks(train, test))
+                                     checks={"split": split, **input_checks(train, test)})
         if plots_on and progress is not None:
             progress("plots")
         result.save(tmp, plots_on=plots_on)
