@@ -539,3 +539,29 @@ def test_split_by_load():
 def test_split_by_load_empty_part_raises(loads):
     with pytest.raises(IdentificationError, match="empty"):
         split_by_load(_four_runs(), test_abs_loads=loads)
+
+
+# --------------------------------------------------------------------------
+# Runs at different drive frequencies (no model here uses frequency_Hz)
+# --------------------------------------------------------------------------
+
+def test_runs_at_different_drive_frequencies_are_reported(capsys):
+    # reference: data format's optional frequency_Hz; Eq. 29 describes one operating frequency, so a spread of
+    # the runs' frequencies above FREQUENCY_REL_SPREAD of their median is reported (checks.drive_frequency and a
+    # CLI warning), a spread below it is not
+    from l1b2.cli import print_input_checks
+    from l1b2.data.coverage import FREQUENCY_REL_SPREAD, frequency_spread, input_checks
+    train, test = split_by_load(_four_runs())
+    assert "frequency_Hz" not in train.df
+    assert frequency_spread(train, test) == "" and input_checks(train, test)["drive_frequency"] == ""
+    for m in (train, test):
+        m.df["frequency_Hz"] = 48500.0
+    below = 48500.0 * (1 + 0.9 * FREQUENCY_REL_SPREAD)
+    test.df.loc[test.df["run"] == "r2", "frequency_Hz"] = below
+    assert frequency_spread(train, test) == ""
+    test.df.loc[test.df["run"] == "r2", "frequency_Hz"] = 47000.0
+    line = input_checks(train, test)["drive_frequency"]
+    assert "47000-48500 Hz, 2 levels" in line and "frequency_Hz" in line
+    assert frequency_spread(train) == ""  # TRAIN alone is at one frequency
+    print_input_checks({"drive_frequency": line}, {})
+    assert capsys.readouterr().out.strip() == f"warning: {line}"

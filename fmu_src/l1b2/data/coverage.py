@@ -7,8 +7,9 @@ voltages and loads the affine dependence is untested. :func:`data_range`
 records TRAIN's range (it goes into ``identification.json``),
 :func:`outside_range` flags, per run of any data set to be predicted, each
 input that leaves it, and :func:`input_checks` is the ``checks`` section of
-the identify and close-loop reports (these flags and the unit findings of
-both files).
+the identify and close-loop reports (these flags, the unit findings of
+both files, and :func:`frequency_spread`: runs at different drive
+frequencies, which no model here describes).
 
 A run is flagged for a column when one of its samples lies further outside
 the range than ``tolerance`` x the range's width (at least
@@ -20,12 +21,13 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+import numpy as np
 import pandas as pd
 
-from .measurements import LOAD, POSITION, RUN, VOLTAGE, Measurements, run_slices
+from .measurements import FREQUENCY, LOAD, POSITION, RUN, VOLTAGE, Measurements, run_slices
 
 __all__ = ["RANGE_COLUMNS", "DEFAULT_TOLERANCE", "MIN_TOLERANCE", "data_range", "outside_range",
-           "summarize_outside", "input_checks"]
+           "summarize_outside", "FREQUENCY_REL_SPREAD", "frequency_spread", "input_checks"]
 
 #: The prediction inputs whose range is checked (unit in the name).
 RANGE_COLUMNS: tuple[str, ...] = (VOLTAGE, LOAD, POSITION)
@@ -33,6 +35,9 @@ RANGE_COLUMNS: tuple[str, ...] = (VOLTAGE, LOAD, POSITION)
 DEFAULT_TOLERANCE: float = 0.02
 #: Smallest absolute tolerance per column (1 mV, 1 mg, 1 um).
 MIN_TOLERANCE: dict[str, float] = {VOLTAGE: 1e-3, LOAD: 1e-6, POSITION: 1e-6}
+#: Spread of the runs' drive frequencies (max - min, as a share of their median) above which it is reported:
+#: 0.1 % is ~50 Hz at 48.5 kHz, a fraction of the stator's resonance width, which sets the force factor
+FREQUENCY_REL_SPREAD: float = 1e-3
 
 
 def _frame(data: pd.DataFrame | Measurements) -> pd.DataFrame:
@@ -82,6 +87,27 @@ def summarize_outside(flagged: list[dict], n_runs: int) -> str:
     return f"{len(flagged)} of {n_runs} runs outside the training range ({cols}): predictions there extrapolate"
 
 
+def frequency_spread(*data: pd.DataFrame | Measurements | None) -> str:
+    """One line when the runs' drive frequencies [Hz] differ by more than :data:`FREQUENCY_REL_SPREAD`; else "".
+
+    Each run's frequency is the median of its ``frequency_Hz`` column (the
+    loader fills it from the sidecar when the file has none), over every data
+    set given. Eq. 29 describes the motor at one operating frequency, and no
+    candidate of the close loop uses the frequency: data at several
+    frequencies are fitted as one, which the line says.
+    """
+    f = [float(np.median(df[FREQUENCY].to_numpy(float)[sl])) for df in (_frame(d) for d in data if d is not None)
+         if FREQUENCY in df.columns for _, sl in run_slices(df[RUN])]
+    if not f:
+        return ""
+    lo, hi, mid = min(f), max(f), float(np.median(f))
+    if hi - lo <= FREQUENCY_REL_SPREAD * mid:
+        return ""
+    levels = len(np.unique(np.round(f, 0)))
+    return (f"the drive frequency differs between runs ({lo:.0f}-{hi:.0f} Hz, {levels} levels): Eq. 29 describes "
+            "one operating frequency and no model here uses frequency_Hz; fit each frequency on its own")
+
+
 def input_checks(train: Measurements, test: Measurements | None) -> dict:
     """The report's record of the data checks: unit findings (allowed or none) and TEST runs outside TRAIN's range."""
     rng = data_range(train)
@@ -94,4 +120,5 @@ def input_checks(train: Measurements, test: Measurements | None) -> dict:
         "training_range": rng,
         "test_runs_outside_training_range": flagged,
         "extrapolation": summarize_outside(flagged, n_test),
+        "drive_frequency": frequency_spread(train, test),
     }
