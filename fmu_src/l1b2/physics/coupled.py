@@ -11,7 +11,7 @@ vector, calling the same per-subsystem kernels the blocks call:
   (:func:`~l1b2.physics.stator.stiffness_damping`), and
   :func:`~l1b2.physics.stator.coupled_envelope_step`;
 * :func:`l1b2.physics.interface.period_integrals`;
-* :func:`l1b2.physics.slider.step_floats`.
+* :func:`l1b2.physics.slider.force_levels` and :func:`~l1b2.physics.slider.step_floats`.
 
 Compiled by numba as one function (:func:`compiled_substeps`), it replaces
 the per-step Python glue between the blocks: ``L1B2Motor.fmu`` runs it
@@ -38,12 +38,13 @@ import numpy as np
 from . import interface, slider, stator
 from .interface import period_integrals
 from .jit import cached_kernel
-from .params import G_M_S2, MotorParams
-from .slider import step_floats
+from .params import MotorParams
+from .slider import force_levels, step_floats
 from .stator import (
     TABLE_CELL_N,
     bar_deviation_scalar,
     coupled_envelope_step,
+    l1_omega_scalar,
     modal_mass_b_kg,
     modal_mass_l_kg,
     stiffness_damping,
@@ -153,7 +154,7 @@ def motor_substeps(x, p, cell, cell_k, n, h):
             return k
         wb, eta = table_lookup(cell, P)
         eta_new = abs(eta)
-        w_l0 = 2 * math.pi * (p[F_L0] + p[DF_L] * (T_st - p[T_REF]))
+        w_l0 = l1_omega_scalar(p[F_L0], p[DF_L], T_st - p[T_REF])
         M_l, M_b = p[M_L], p[M_B]
         (qlr, qli, qbr, qbi, U_l, U_w, ph_l, ph_w, delta) = coupled_envelope_step(
             x[QLR], x[QLI], x[QBR], x[QBI], x[PH_L], fn1s, fn1c, ft1s, ft1c,
@@ -171,11 +172,10 @@ def motor_substeps(x, p, cell, cell_k, n, h):
             x[REASON] = REASON_BLOCKS
             return k
         # slider (slider.step: the force levels, then the event loop)
-        F_path = p[PULLEY] * G_M_S2 * abs(m_load)
-        v_new, s_new, stuck, stop = step_floats(
-            v_in, s_in, x[STUCK], x[STOP], p[MASS] + p[INERTIA] * abs(m_load), F_d - G_M_S2 * m_load,
-            p[MU_SD] * (p[KAPPA] * F_p + G_M_S2 * p[MASS]) + F_path,
-            p[MU_SS] * (p[KAPPA] * F_p + G_M_S2 * p[MASS]) + F_path, p[C_R], p[S_MIN], p[S_MAX], h)
+        m_mov, F_ext, F_c, F_s = force_levels(F_d, F_p, m_load, p[MASS], p[INERTIA], p[PULLEY], p[MU_SD], p[MU_SS],
+                                              p[KAPPA])
+        v_new, s_new, stuck, stop = step_floats(v_in, s_in, x[STUCK], x[STOP], m_mov, F_ext, F_c, F_s, p[C_R],
+                                                p[S_MIN], p[S_MAX], h)
         # the step is taken: write it back
         x[T_ST] = T_st
         x[K_L], x[C_L] = stiffness_damping(M_l, w_l0, p[ZETA_L])  # the ModalTable's operations

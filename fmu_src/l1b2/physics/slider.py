@@ -104,20 +104,31 @@ def step(sp: SliderParams, state: SliderState, F_d_N: float, F_p_N: float, m_loa
     The force levels are computed here; the event loop is ``kernel``, by default
     :func:`step_floats` compiled by numba when available (:func:`compiled_step`).
     """
-    m_load = float(m_load_kg)
-    F_p = float(F_p_N)
-    # the formulas of moving_mass_kg, load_force_N, load_path_friction_N and guide_friction_level_N, inline:
-    # calling those helpers costs 0.45 us per step (slider step 1.97 -> 2.42 us, in-process real-time factor
-    # 0.096-0.099 -> 0.101-0.104 against the target 0.1); tests/test_slider.py checks step against the helpers
-    F_path = sp.pulley_mu * G_M_S2 * abs(m_load)
+    m, F_ext, Fc, Fs = force_levels(float(F_d_N), float(F_p_N), float(m_load_kg), sp.mass_kg, sp.load_inertia,
+                                    sp.pulley_mu, sp.mu_sd, sp.mu_ss, sp.kappa)
     kern = kernel or compiled_step() or step_floats
-    v, s, stuck, at_stop = kern(
-        float(state.v_m_s), float(state.s_m), 1.0 if state.stuck else 0.0, float(state.at_stop),
-        sp.mass_kg + sp.load_inertia * abs(m_load), float(F_d_N) - G_M_S2 * m_load,
-        sp.mu_sd * (sp.kappa * F_p + G_M_S2 * sp.mass_kg) + F_path,
-        sp.mu_ss * (sp.kappa * F_p + G_M_S2 * sp.mass_kg) + F_path,
-        sp.c_r_N_s_per_m, sp.s_min_m, sp.s_max_m, float(h_s))
+    v, s, stuck, at_stop = kern(float(state.v_m_s), float(state.s_m), 1.0 if state.stuck else 0.0,
+                                float(state.at_stop), m, F_ext, Fc, Fs, sp.c_r_N_s_per_m, sp.s_min_m, sp.s_max_m,
+                                float(h_s))
     return SliderState(v, s, stuck != 0.0, int(at_stop))
+
+
+def force_levels(F_d, F_p, m_load, mass, load_inertia, pulley_mu, mu_sd, mu_ss, kappa):
+    """The force levels of :func:`step` in plain floats (numba compiles it; the fused coupled step calls it too):
+    ``(m, F_ext, Fc, Fs)``, the arguments of :func:`step_floats`.
+
+    The formulas of :func:`moving_mass_kg`, :func:`load_force_N`,
+    :func:`load_path_friction_N` and :func:`guide_friction_level_N` (which take
+    the parameter dataclass; tests/test_slider.py checks :func:`step` against
+    them) in one call: ``F_d`` drive force [N], ``F_p`` preload [N], ``m_load``
+    signed load [kg], ``mass`` slider mass [kg], ``load_inertia`` 1 when the
+    load mass is accelerated with the slider, 0 when not, ``pulley_mu``
+    load-path friction per load weight, ``mu_sd`` / ``mu_ss`` dynamic / static
+    guide friction, ``kappa`` share of the preload loading the guide.
+    """
+    F_path = pulley_mu * G_M_S2 * abs(m_load)
+    return (mass + load_inertia * abs(m_load), F_d - G_M_S2 * m_load,
+            mu_sd * (kappa * F_p + G_M_S2 * mass) + F_path, mu_ss * (kappa * F_p + G_M_S2 * mass) + F_path)
 
 
 def step_floats(v, s, stuck, at_stop, m, F_ext, Fc, Fs, c, s_min, s_max, h_s):
@@ -182,7 +193,8 @@ _COMPILED: list = []  # [kernel or None], filled on the first call of compiled_s
 
 def kernel_family() -> dict:
     """:func:`step_floats` and the helpers it calls, by name (for :func:`l1b2.physics.jit.compile_family`)."""
-    return {"first_order_scalar": first_order_scalar, "time_to_reach": time_to_reach, "step_floats": step_floats}
+    return {"first_order_scalar": first_order_scalar, "time_to_reach": time_to_reach, "step_floats": step_floats,
+            "force_levels": force_levels}
 
 
 def compiled_step():

@@ -429,7 +429,7 @@ def _modal_properties_scalar(sp: StatorParams, P: float, T_degC) -> ModalPropert
     except (ValueError, ZeroDivisionError, OverflowError):
         return None
     M_l, M_b = modal_mass_l_kg(sp), modal_mass_b_kg(sp)
-    w_l0 = 2 * math.pi * (sp.f_l0_Hz + sp.df_dT_l_Hz_per_K * dT)
+    w_l0 = l1_omega_scalar(sp.f_l0_Hz, sp.df_dT_l_Hz_per_K, dT)
     return ModalProperties(
         M_l=M_l, K_l=M_l * w_l0 ** 2, C_l=2 * sp.zeta_l * M_l * w_l0,
         M_b=M_b, K_b=M_b * wb ** 2, C_b=2 * sp.zeta_b * M_b * wb,
@@ -515,9 +515,16 @@ class ModalTable:
         if T_degC != self._l1_T:
             sp = self.sp
             dT = 0.0 if T_degC is None else float(T_degC) - sp.T_ref_degC
-            w_l0 = 2 * math.pi * (sp.f_l0_Hz + sp.df_dT_l_Hz_per_K * dT)
+            w_l0 = l1_omega_scalar(sp.f_l0_Hz, sp.df_dT_l_Hz_per_K, dT)
             self._l1_T, self._l1 = T_degC, (*stiffness_damping(self.M_l, w_l0, sp.zeta_l), w_l0)
         return self._l1
+
+
+def l1_omega_scalar(f_l0, df_dT, dT):
+    """L1 natural angular frequency without contact [rad/s]: :func:`l1_frequency_Hz` in plain floats
+    (``f_l0`` [Hz], ``df_dT`` [Hz/K], ``dT`` temperature above the reference [K]; numba compiles it: the
+    modal properties, the modal table and the fused coupled step share it)."""
+    return 2 * math.pi * (f_l0 + df_dT * dT)
 
 
 def stiffness_damping(M, omega0, zeta):
@@ -691,7 +698,8 @@ def kernel_family() -> dict:
     :func:`l1b2.physics.jit.compile_family`): the envelope step with its helpers, the temperature step,
     the bar deviation and the modal table's interpolant."""
     return {f.__name__: f for f in (envelope_step_scalar, tip_motion_scalar, coupled_envelope_step,
-                                    temperature_step_scalar, bar_deviation_scalar, table_lookup, stiffness_damping)}
+                                    temperature_step_scalar, bar_deviation_scalar, table_lookup, stiffness_damping,
+                                    l1_omega_scalar)}
 
 
 def compiled_envelope_step():
