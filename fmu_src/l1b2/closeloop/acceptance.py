@@ -216,12 +216,18 @@ def chain_cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init_
     ``folds``; every fold of both is one task of :func:`l1b2.cluster.run_tasks`."""
     args = [(df, mask, m_s, fold, init, EffectSet(), order, seed, max_nfev, noise, chain_k)
             for init, chain_k in ((init_base, None), (init_chain, k)) for fold in folds]
+    return tuple(_fold_errors(args, 2, len(folds), client, "l1b2-chain-cv"))
+
+
+def _fold_errors(args: list, n_groups: int, n_folds: int, client, name: str) -> list[FoldErrors]:
+    """Run :func:`fold_error` on every argument tuple (tasks of :func:`l1b2.cluster.run_tasks`); one
+    :class:`FoldErrors` per group of ``n_folds`` consecutive tuples, ``n_groups`` of them."""
     out = [None] * len(args)
-    for i, r in run_tasks(fold_error, args, client=client, name="l1b2-chain-cv"):
+    for i, r in run_tasks(fold_error, args, client=client, name=name):
         out[i] = r
-    n = len(folds)
-    return tuple(FoldErrors(np.array([r[0] for r in rows]), np.array([r[1] for r in rows]),
-                            sum(bool(r[2]) for r in rows)) for rows in (out[:n], out[n:]))
+    groups = [out[j * n_folds:(j + 1) * n_folds] for j in range(n_groups)]
+    return [FoldErrors(np.array([r[0] for r in rows]), np.array([r[1] for r in rows]), sum(bool(r[2]) for r in rows))
+            for rows in groups]
 
 
 def cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init, jobs, *, order: int, seed: int,
@@ -240,16 +246,7 @@ def cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init, jobs,
             eff = effects if fold_phi is None else effects.with_phi(
                 np.concatenate([effects.start()[:-len(fold_phi[i])], fold_phi[i]]))
             args.append((df, mask, m_s, fold, init, eff, order, seed, max_nfev, noise))
-    out = [None] * len(args)
-    for i, r in run_tasks(fold_error, args, client=client, name="l1b2-cv-refit"):
-        out[i] = r
-    k = len(folds)
-    res = []
-    for j in range(len(jobs)):
-        rows = out[j * k:(j + 1) * k]
-        res.append(FoldErrors(np.array([r[0] for r in rows]), np.array([r[1] for r in rows]),
-                              sum(bool(r[2]) for r in rows)))
-    return res
+    return _fold_errors(args, len(jobs), len(folds), client, "l1b2-cv-refit")
 
 
 def fold_start_phi(S: np.ndarray, A: np.ndarray, y: np.ndarray, runs_m: np.ndarray, folds) -> list[np.ndarray]:
