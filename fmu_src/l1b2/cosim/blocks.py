@@ -468,12 +468,12 @@ class SliderBlock(Block):
         self.s_state, self.v_state = float(self.s0), float(self.v0)
         self.stuck_state = 1.0 if self.v0 == 0.0 else 0.0
         self.stop_state = 0.0
-        self.publish(0.0)
+        self._publish(0.0)
 
     def initialize_outputs(self):
-        self.publish(self.a)
+        self._publish(self.a)
 
-    def publish(self, acc):
+    def _publish(self, acc):
         """Outputs from the states, ``acc`` the mean acceleration over the last step [m/s^2]."""
         self.v, self.s, self.a = self.v_state, self.s_state, acc
         self.stuck, self.at_stop = self.stuck_state, self.stop_state
@@ -486,7 +486,7 @@ class SliderBlock(Block):
                        self.F_d, self.F_p, self.m_load, h, self._kernel)
         self.v_state, self.s_state = new.v_m_s, new.s_m
         self.stuck_state, self.stop_state = float(new.stuck), float(new.at_stop)
-        self.publish((new.v_m_s - v_old) / h if h > 0 else 0.0)
+        self._publish((new.v_m_s - v_old) / h if h > 0 else 0.0)
 
 
 #: the four subsystem blocks by component name (the composite blocks are in :mod:`l1b2.cosim.composite`)

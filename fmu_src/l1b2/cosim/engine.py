@@ -250,24 +250,16 @@ class FusedSteps:
         """Copy ``x`` back into the blocks (their states, inputs and outputs, as after ``motor.step``)."""
         if not self.ahead:
             return
-        b, x = self.motor.b, self.x
-        values = x.tolist()
-        for i, comp, var in _BLOCK_VARS:
-            setattr(b[comp], var, values[i])
-        d, stt, itf, sl = b["Driver"], b["Stator"], b["Interface"], b["Slider"]
+        b = self.motor.b
+        values = self.x.tolist()
+        for comp, var, read in _STORE:  # every variable value() reads from the vector, written the same way
+            setattr(b[comp], var, values[read] if type(read) is int else read(values))
+        stt = b["Stator"]
         props = stt.modal_state()[0]
         stt.set_modal_state(st.ModalProperties(
             M_l=props.M_l, K_l=values[cp.K_L], C_l=values[cp.C_L], M_b=props.M_b, K_b=values[cp.K_B],
             C_b=values[cp.C_B], eta_T=values[cp.ETA], omega_l0=values[cp.W_L0], omega_b0=values[cp.W_B0]),
             values[cp.PROPS_T])
-        stt.V0, stt.omega, stt.direction, stt.T = d.V0, d.omega, values[cp.DIR], values[cp.T_AMB]
-        stt.f_b = values[cp.W_B0] / (2 * math.pi)
-        stt.eta_T = values[cp.ETA]
-        stt.v_tip = stt.omega * stt.U_w
-        stt.T_stator = stt.T_st
-        itf.U_l, itf.U_w, itf.delta, itf.omega, itf.F_p = stt.U_l, stt.U_w, stt.delta, d.omega, stt.F_p
-        sl.F_d, sl.F_p, sl.m_load = itf.F_d, stt.F_p, values[cp.M_LOAD]
-        sl.publish(values[cp.ACC])
         self.ahead = False
 
     def set_inputs(self, t: float, h: float) -> bool:
@@ -346,8 +338,9 @@ def state_getter(names: list[str]):
 
 def _readers() -> dict:
     """``"Component.variable"`` -> index in the fused state vector, or a function of the vector, for
-    every block variable the vector holds or gives (what :meth:`InProcessMotor.value` reads without
-    bringing the blocks up to date)."""
+    every block variable the vector holds or gives: what :meth:`InProcessMotor.value` reads without
+    bringing the blocks up to date, and what :meth:`FusedSteps.store` writes back into them (so the two
+    cannot disagree on where a block variable sits)."""
     out: dict = {name: i for i, name in enumerate(cp.STATE) if name.split(".", 1)[0] in
                  ("Driver", "Stator", "Interface", "Slider")}
     out.update({"Slider.v": cp.V, "Slider.s": cp.S, "Slider.stuck": cp.STUCK, "Slider.at_stop": cp.STOP,
@@ -363,3 +356,5 @@ def _readers() -> dict:
 
 
 _READERS = _readers()
+#: what :meth:`FusedSteps.store` writes back into the blocks: (component, variable, reader) for every reader
+_STORE = tuple((*name.split(".", 1), read) for name, read in _READERS.items())
