@@ -1,0 +1,353 @@
+"""Build the native (C) co-simulation FMUs, FMI 2.0 and FMI 3.0, from the Python FMU of the same name.
+
+:func:`build_native_fmu` takes the ``modelDescription.xml`` of the Python FMU
+(:func:`l1b2.fmi.build.build_fmu`) as the declaration of the variables, so the
+native FMU has the same names, value references, units, ranges, start values
+and descriptions; it writes
+
+* ``sources/``: the C sources (``fmu_core.c``, the FMI 2 or FMI 3 glue, the
+  model, the generated ``model_data.h``) and the FMI headers; FMI 3.0 with
+  ``sources/buildDescription.xml``, FMI 2.0 listing them in the
+  ``<SourceFiles>`` of ``modelDescription.xml`` (a source FMU);
+* ``binaries/linux64/<id>.so`` (FMI 2) or ``binaries/x86_64-linux/<id>.so``
+  (FMI 3), compiled here with the system's C compiler (``$CC``, else ``cc`` or
+  ``gcc``): no Python at run time.
+
+The model identifier is ``<name>_native``; the FMU file is named apart from the
+Python one (``Predictor-native.fmu``, ``Predictor-native-fmi3.fmu``).
+FMI 3.0 adds the independent variable ``time`` (FMI 3.0 requires one) with the
+first value reference after the Python FMU's.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import subprocess
+import tempfile
+import xml.etree.ElementTree as ET
+import zipfile
+from pathlib import Path
+
+from ... import __version__
+from ...errors import L1B2Error
+from ..build import AUTHOR, LICENSE, stable_guid
+
+C_DIR = Path(__file__).resolve().parent / "c"
+#: the models with a native implementation: FMU name -> folder of its C model under c/
+MODELS = {"Predictor": "predictor"}
+FMI_PLATFORM = {2: "linux64", 3: "x86_64-linux"}
+#: compiler flags: IEEE arithmetic as written (no contraction into fused multiply-adds, no fast math)
+CFLAGS = ("-O2", "-std=c99", "-fPIC", "-shared", "-fvisibility=hidden", "-ffp-contract=off", "-fno-fast-math")
+GENERATION_TOOL = "l1b2 native FMU builder"
+_CAUSALITY = {"parameter": "VC_PARAMETER", "input": "VC_INPUT", "output": "VC_OUTPUT", "local": "VC_LOCAL",
+              "calculatedParameter": "VC_PARAMETER"}
+
+
+class NativeBuildError(L1B2Error):
+    """The native FMU cannot be built (no C compiler, a compiler error, an unsupported model)."""
+
+
+def native_fmu_name(name: str, fmi_version: int) -> str:
+    """File stem of the native FMU: ``<name>-native`` (FMI 2.0) or ``<name>-native-fmi3``."""
+    return f"{name}-native" if fmi_version == 2 else f"{name}-native-fmi3"
+
+
+def model_identifier(name: str) -> str:
+    """Model identifier (and library name) of the native FMU of ``name``."""
+    return f"{name}_native"
+
+
+def fmi_headers() -> Path:
+    """Folder of the FMI 2.0 and 3.0 headers fmpy ships (copied into every source FMU)."""
+    import fmpy
+    return Path(fmpy.__file__).resolve().parent / "c-code"
+
+
+def find_cc(cc: str | None = None) -> str:
+    """The C compiler: ``cc``, else ``$CC``, else ``cc`` or ``gcc`` on PATH (:class:`NativeBuildError` if none)."""
+    found = cc or os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
+    if not found:
+        raise NativeBuildError("no C compiler found (set CC, or install cc/gcc) to build the native FMUs")
+    return found
+
+
+# ---------------------------------------------------------------------------
+# variables
+# ---------------------------------------------------------------------------
+
+def read_variables(model_description: bytes) -> list[dict]:
+    """The variables of an FMI 2.0 ``modelDescription.xml``: dicts with name, vr, type, causality,
+    variability, start (float; 0 when none), has_start, min, max, unit, description, nominal."""
+    root = ET.fromstring(model_description)
+    out = []
+    for sv in root.find("ModelVariables"):
+        el = sv[0]
+        kind = el.tag
+        if kind not in ("Real", "Boolean"):
+            raise NativeBuildError(f"variable {sv.get('name')}: type {kind} is not supported by the native FMUs")
+        start = el.get("start")
+        if kind == "Boolean":
+            value = 1.0 if start == "true" else 0.0
+        else:
+            value = float(start) if start is not None else 0.0
+        out.append({
+            "name": sv.get("name"), "vr": int(sv.get("valueReference")), "type": kind,
+            "causality": sv.get("causality", "local"), "variability": sv.get("variability", "continuous"),
+            "start": value, "has_start": start is not None, "start_text": start,
+            "min": el.get("min"), "max": el.get("max"), "unit": el.get("unit"), "nominal": el.get("nominal"),
+            "description": sv.get("description", ""),
+        })
+    vrs = [v["vr"] for v in out]
+    if vrs != list(range(len(vrs))):
+        raise NativeBuildError("the value references are not 0..n-1 in order")
+    return out
+
+
+def c_name(name: str) -> str:
+    """A variable name as part of a C identifier (``Stator.f_b0_Hz`` -> ``Stator_f_b0_Hz``)."""
+    return "".join(ch if ch.isalnum() or ch == "_" else "_" for ch in name)
+
+
+def _c_double(x: float) -> str:
+    if x != x:
+        return "NAN"
+    if x in (float("inf"), float("-inf")):
+        return "INFINITY" if x > 0 else "-INFINITY"
+    return x.hex()  # exact
+
+
+def _c_string(s: str) -> str:
+    return '"' + s.replace("\\", "\\\\").replace('"', '\\"') + '"'
+
+
+def model_data_header(name: str, variables: list[dict], guid: str, block: str, fmi_version: int) -> str:
+    """``model_data.h``: the variable table, the inputs' ranges, the identity, and model-specific tables."""
+    n = len(variables)
+    lines = [f"/* model_data.h - generated by l1b2.fmi.native.build for {name} (FMI {fmi_version}.0); do not edit */",
+             "#ifndef L1B2_MODEL_DATA_H", "#define L1B2_MODEL_DATA_H", "#include <math.h>", "",
+             f"#define MODEL_IDENTIFIER {_c_string(model_identifier(name))}",
+             f"#define BLOCK_NAME {_c_string(block)}", f"#define INSTANTIATION_TOKEN {_c_string(guid)}",
+             f"#define NV {n}", "enum { VT_REAL = 0, VT_BOOLEAN = 1 };",
+             "enum { VC_PARAMETER = 0, VC_INPUT = 1, VC_OUTPUT = 2, VC_LOCAL = 3 };", ""]
+    if fmi_version == 3:
+        lines.append(f"#define VR_TIME {n} /* the independent variable of FMI 3.0 */")
+    for v in variables:
+        lines.append(f"#define VR_{c_name(v['name'])} {v['vr']}")
+    lines += ["", "static const int VAR_TYPE[NV] = {" + ", ".join(
+        "VT_BOOLEAN" if v["type"] == "Boolean" else "VT_REAL" for v in variables) + "};",
+        "static const int VAR_CAUS[NV] = {" + ", ".join(_CAUSALITY[v["causality"]] for v in variables) + "};",
+        "static const double VAR_START[NV] = {" + ", ".join(_c_double(v["start"]) for v in variables) + "};",
+        "static const char* const VAR_NAME[NV] = {" + ", ".join(_c_string(v["name"]) for v in variables) + "};",
+        "static const char* const VAR_UNIT[NV] = {" + ", ".join(_c_string(v["unit"] or "") for v in variables) + "};"]
+    inputs = [v for v in variables if v["causality"] == "input"]
+    big = "DBL_MAX"
+    lines += ["#include <float.h>", f"#define N_INPUTS {len(inputs)}",
+              "static const int INPUT_VR[] = {" + ", ".join(str(v["vr"]) for v in inputs) + "};",
+              "static const double INPUT_MIN[] = {" + ", ".join(
+                  "-" + big if v["min"] is None else _c_double(float(v["min"])) for v in inputs) + "};",
+              "static const double INPUT_MAX[] = {" + ", ".join(
+                  big if v["max"] is None else _c_double(float(v["max"])) for v in inputs) + "};"]
+    lines += _model_tables(name, variables)
+    lines += ["", "#endif", ""]
+    return "\n".join(lines)
+
+
+def _model_tables(name: str, variables: list[dict]) -> list[str]:
+    if name != "Predictor":
+        return []
+    names = {v["name"]: v["vr"] for v in variables}
+    np_ = sum(1 for k in names if k.startswith("alpha_"))
+    out = ["", f"#define PRED_NP {np_}"]
+    for group in ("alpha", "beta", "p"):
+        out.append(f"static const int PRED_VR_{group.upper()}[PRED_NP] = {{" + ", ".join(
+            str(names[f"{group}_{j}"]) for j in range(np_)) + "};")
+    return out
+
+
+# ---------------------------------------------------------------------------
+# model descriptions
+# ---------------------------------------------------------------------------
+
+def _source_files(name: str, fmi_version: int) -> list[str]:
+    glue = ["fmi2_glue.c"] if fmi_version == 2 else ["fmi3_glue.c", "fmi3_stubs.c"]
+    model = sorted(p.name for p in (C_DIR / MODELS[name]).glob("*.c"))
+    return ["fmu_core.c", *glue, *model]
+
+
+def fmi2_model_description(python_md: bytes, name: str, guid: str, sources: list[str]) -> bytes:
+    """The Python FMU's ``modelDescription.xml`` (same variables) for the native library and its sources."""
+    root = ET.fromstring(python_md)
+    root.set("guid", guid)
+    root.set("generationTool", GENERATION_TOOL)
+    root.attrib.pop("generationDateAndTime", None)
+    cs = root.find("CoSimulation")
+    for key in list(cs.attrib):
+        del cs.attrib[key]
+    cs.attrib.update({"modelIdentifier": model_identifier(name), "needsExecutionTool": "false",
+                      "canHandleVariableCommunicationStepSize": "true", "canInterpolateInputs": "false",
+                      "canBeInstantiatedOnlyOncePerProcess": "false", "canNotUseMemoryManagementFunctions": "true",
+                      "canGetAndSetFMUstate": "true", "canSerializeFMUstate": "true"})
+    for old in cs.findall("SourceFiles"):
+        cs.remove(old)
+    sf = ET.SubElement(cs, "SourceFiles")
+    for f in sources:
+        ET.SubElement(sf, "File", name=f)
+    ET.indent(root, space="  ")
+    return b'<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="utf-8")
+
+
+def fmi3_model_description(python_md: bytes, name: str, guid: str) -> bytes:
+    """The FMI 3.0 ``modelDescription.xml`` with the variables of the Python FMU's FMI 2.0 one."""
+    src = ET.fromstring(python_md)
+    variables = read_variables(python_md)
+    attrs = {"fmiVersion": "3.0", "modelName": src.get("modelName"), "instantiationToken": guid,
+             "description": src.get("description", ""), "author": src.get("author", AUTHOR),
+             "version": src.get("version", __version__), "copyright": src.get("copyright", ""),
+             "license": src.get("license", LICENSE), "generationTool": GENERATION_TOOL,
+             "variableNamingConvention": src.get("variableNamingConvention", "structured")}
+    root = ET.Element("fmiModelDescription", attrs)
+    ET.SubElement(root, "CoSimulation", {
+        "modelIdentifier": model_identifier(name), "needsExecutionTool": "false",
+        "canBeInstantiatedOnlyOncePerProcess": "false", "canGetAndSetFMUState": "true",
+        "canSerializeFMUState": "true", "canHandleVariableCommunicationStepSize": "true",
+        "providesIntermediateUpdate": "false", "canReturnEarlyAfterIntermediateUpdate": "false",
+        "hasEventMode": "false", "fixedInternalStepSize": "0"} )
+    root[-1].attrib.pop("fixedInternalStepSize")
+    ud = src.find("UnitDefinitions")
+    units = ET.SubElement(root, "UnitDefinitions")
+    for u in ud:
+        ue = ET.SubElement(units, "Unit", name=u.get("name"))
+        ET.SubElement(ue, "BaseUnit", dict(u.find("BaseUnit").attrib))
+    if not any(u.get("name") == "s" for u in ud):
+        ue = ET.SubElement(units, "Unit", name="s")
+        ET.SubElement(ue, "BaseUnit", s="1")
+    cats = ET.SubElement(root, "LogCategories")
+    for c in src.find("LogCategories") if src.find("LogCategories") is not None else []:
+        ET.SubElement(cats, "Category", dict(c.attrib))
+    de = src.find("DefaultExperiment")
+    if de is not None:
+        ET.SubElement(root, "DefaultExperiment", dict(de.attrib))
+    mv = ET.SubElement(root, "ModelVariables")
+    for v in variables:
+        a = {"name": v["name"], "valueReference": str(v["vr"]), "description": v["description"],
+             "causality": v["causality"], "variability": v["variability"]}
+        if v["type"] == "Boolean":
+            if a["variability"] == "continuous":
+                a["variability"] = "discrete"
+            if v["has_start"]:
+                a["start"] = v["start_text"]
+            ET.SubElement(mv, "Boolean", a)
+            continue
+        if v["has_start"]:
+            a["start"] = repr(v["start"])
+        for key in ("unit", "min", "max", "nominal"):
+            if v[key] is not None:
+                a[key] = v[key]
+        ET.SubElement(mv, "Float64", a)
+    ET.SubElement(mv, "Float64", {"name": "time", "valueReference": str(len(variables)),
+                                  "description": "simulation time", "causality": "independent",
+                                  "variability": "continuous", "unit": "s"})
+    ms = ET.SubElement(root, "ModelStructure")
+    outputs = [v for v in variables if v["causality"] == "output"]
+    for v in outputs:
+        ET.SubElement(ms, "Output", valueReference=str(v["vr"]))
+    for v in outputs:
+        ET.SubElement(ms, "InitialUnknown", valueReference=str(v["vr"]))
+    ET.indent(root, space="  ")
+    return b'<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="utf-8")
+
+
+def build_description(name: str, sources: list[str]) -> bytes:
+    """FMI 3.0 ``sources/buildDescription.xml``."""
+    root = ET.Element("fmiBuildDescription", fmiVersion="3.0")
+    bc = ET.SubElement(root, "BuildConfiguration", modelIdentifier=model_identifier(name))
+    fs = ET.SubElement(bc, "SourceFileSet", language="C99")
+    for f in sources:
+        ET.SubElement(fs, "SourceFile", name=f)
+    ET.SubElement(fs, "IncludeDirectory", name=".")
+    ET.indent(root, space="  ")
+    return b'<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="utf-8")
+
+
+# ---------------------------------------------------------------------------
+# build
+# ---------------------------------------------------------------------------
+
+def _block_name(python_md: bytes, name: str) -> str:
+    from ...cosim.composite import BLOCKS
+    return BLOCKS[name].__name__
+
+
+def source_tree(name: str, python_md: bytes, fmi_version: int, guid: str) -> dict[str, bytes]:
+    """``{file name: bytes}`` of the FMU's ``sources/`` folder."""
+    if name not in MODELS:
+        raise NativeBuildError(f"no native model for {name}; native FMUs exist for {', '.join(MODELS)}")
+    files: dict[str, bytes] = {}
+    for f in ("fmu_core.c", "fmu_core.h", "fmi2_glue.c" if fmi_version == 2 else "fmi3_glue.c"):
+        files[f] = (C_DIR / f).read_bytes()
+    if fmi_version == 3:
+        files["fmi3_stubs.c"] = (C_DIR / "fmi3_stubs.c").read_bytes()
+    for p in sorted((C_DIR / MODELS[name]).iterdir()):
+        if p.suffix in (".c", ".h"):
+            files[p.name] = p.read_bytes()
+    headers = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h") if fmi_version == 2 else (
+        "fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
+    for h in headers:
+        files[h] = (fmi_headers() / h).read_bytes()
+    files["model_data.h"] = model_data_header(name, read_variables(python_md), guid, _block_name(python_md, name),
+                                              fmi_version).encode()
+    return files
+
+
+def compile_library(sources_dir: Path, c_files: list[str], out: Path, cc: str | None = None) -> None:
+    """Compile ``c_files`` of ``sources_dir`` into the shared library ``out``."""
+    cmd = [find_cc(cc), *CFLAGS, f"-I{sources_dir}", "-o", str(out), *(str(sources_dir / f) for f in c_files), "-lm"]
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise NativeBuildError(f"compiling {out.name} failed ({' '.join(cmd)}):\n{proc.stderr[-4000:]}")
+
+
+def build_native_fmu(name: str, python_fmu: str | Path, dest_dir: str | Path, fmi_version: int = 2,
+                     cc: str | None = None) -> Path:
+    """Build ``<dest_dir>/<name>-native[-fmi3].fmu`` with the variables of the Python FMU ``python_fmu``.
+
+    Returns the path. Raises :class:`NativeBuildError` when there is no native
+    model for ``name``, no C compiler, or the compilation fails.
+    """
+    if fmi_version not in (2, 3):
+        raise ValueError(f"fmi_version must be 2 or 3, got {fmi_version!r}")
+    with zipfile.ZipFile(python_fmu) as z:
+        python_md = z.read("modelDescription.xml")
+    sources = _source_files(name, fmi_version)
+    # the GUID: stable for identical sources and variables (and different from the Python FMU's)
+    provisional = source_tree(name, python_md, fmi_version, "{}")
+    h = hashlib.sha256(python_md)
+    for f in sorted(provisional):
+        h.update(f.encode() + b"\0" + provisional[f])
+    guid = stable_guid(f"{name}-native-fmi{fmi_version}", __version__, h.hexdigest()[:32])
+    files = source_tree(name, python_md, fmi_version, guid)
+    md = (fmi2_model_description(python_md, name, guid, sources) if fmi_version == 2
+          else fmi3_model_description(python_md, name, guid))
+    dest_dir = Path(dest_dir)
+    dest_dir.mkdir(parents=True, exist_ok=True)
+    dest = dest_dir / f"{native_fmu_name(name, fmi_version)}.fmu"
+    with tempfile.TemporaryDirectory(prefix="l1b2_native_") as td:
+        src_dir = Path(td) / "sources"
+        src_dir.mkdir()
+        for f, data in files.items():
+            (src_dir / f).write_bytes(data)
+        lib = Path(td) / f"{model_identifier(name)}.so"
+        compile_library(src_dir, sources, lib, cc)
+        tmp = dest.with_name(dest.name + ".tmp")
+        with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
+            z.writestr("modelDescription.xml", md)
+            for f in sorted(files):
+                z.writestr(f"sources/{f}", files[f])
+            if fmi_version == 3:
+                z.writestr("sources/buildDescription.xml", build_description(name, sources))
+            z.write(lib, f"binaries/{FMI_PLATFORM[fmi_version]}/{lib.name}")
+        os.replace(tmp, dest)
+    os.chmod(dest, 0o644)
+    return dest
