@@ -27,7 +27,9 @@ H = 2e-4
 
 
 def _fmu_files(out: Path, manifest: dict) -> dict[str, Path]:
-    return {rec["modelName"]: out / rec["path"] for rec in manifest["files"] if rec["kind"] == "fmu"}
+    """The Python FMUs by model name (the native ones, ``*-native*.fmu``, are tested in test_native_fmu.py)."""
+    return {rec["modelName"]: out / rec["path"] for rec in manifest["files"]
+            if rec["kind"] == "fmu" and "-native" not in rec["path"]}
 
 
 # ---------------------------------------------------------------------------
@@ -75,8 +77,11 @@ def test_export_writes_every_deliverable(exported):
     assert manifest["predictor"] == {"included": True, "path": "fmus/Predictor.fmu"}
     assert (out / "fmus" / "Predictor.fmu").is_file()
     paths = sorted(rec["path"] for rec in manifest["files"])
+    natives = [f"{stem}.fmu" for name, info in manifest["native"].items() for stem in info.get("fmus", [])]
+    assert "Predictor-native" in manifest["native"]["Predictor"]["fmus"]
     assert paths == sorted([f"fmus/{n}.fmu" for n in SUBSYSTEMS + ("Predictor",)]
-                           + ["L1B2Motor.fmu", "L1B2Motor.ssp"])
+                           + ["L1B2Motor.fmu", "L1B2Motor.ssp"]
+                           + [f"fmus/{n}" if n.startswith("Predictor") else n for n in natives])
     for rec in manifest["files"]:
         f = out / rec["path"]
         assert rec["bytes"] == f.stat().st_size
@@ -180,7 +185,9 @@ def test_export_without_predictor_says_so(tmp_path, exported, predictor_setup, m
     assert reason in manifest["predictor"]["reason"]
     assert not (tmp_path / "fmus" / "Predictor.fmu").exists()
     assert all("Predictor" not in r["path"] for r in manifest["files"])
-    assert len(manifest["files"]) == 6  # four subsystems, L1B2Motor.fmu, L1B2Motor.ssp
+    assert not list((tmp_path / "fmus").glob("Predictor-native*.fmu"))
+    # four subsystems, L1B2Motor.fmu, L1B2Motor.ssp, and the motor's native FMUs where built
+    assert len(manifest["files"]) == 6 + len(manifest["native"]["L1B2Motor"].get("fmus", []))
 
 
 def test_export_refuses_an_fmu_with_validation_problems(tmp_path, monkeypatch):

@@ -10,6 +10,11 @@
     DIR/L1B2Motor.fmu     the whole coupled motor in one co-simulation FMU
     DIR/manifest.json     files, sizes, SHA-256, GUIDs, versions, validation results
 
+and the native (C, no Python at run time) FMUs of the predictor and the motor
+where :mod:`l1b2.fmi.native` has their model, FMI 2.0 and 3.0, beside the
+Python ones: ``Predictor-native.fmu``, ``Predictor-native-fmi3.fmu`` (in
+``DIR/fmus``), ``L1B2Motor-native.fmu``, ``L1B2Motor-native-fmi3.fmu``.
+
 Every FMU is validated with :func:`fmpy.validation.validate_fmu` and checked
 for a unit on every Real; the SSD and the SSVs inside the archive are
 validated against the SSP 1.0 schemas shipped with fmpy. Any problem raises
@@ -39,6 +44,7 @@ from ..errors import L1B2Error
 from ..physics.params import MotorParams, load_motor
 from .build import SUBSYSTEM_FMUS, build_fmu
 from .calibrate import map_effects
+from .native.build import build_native_set
 from .slaves import SLAVES
 
 MOTOR_FMU = "L1B2Motor"
@@ -219,8 +225,15 @@ def export_all(out_dir: str | Path, mp: MotorParams | None = None, predictor: Ma
                                          extra_defaults={"predictor": _predictor_dict(predictor)})
     if not pred_info["included"]:
         pred_path.unlink(missing_ok=True)  # never leave a stale predictor beside a manifest without it
+        for stale in fmu_dir.glob(f"{PREDICTOR_FMU}-native*.fmu"):
+            stale.unlink()
     paths[MOTOR_FMU] = build_fmu(MOTOR_FMU, out, mp=mp)
     ssp_path = ssp.build_ssp(out / SSP_NAME, {n: paths[n] for n in SUBSYSTEM_FMUS}, mp=mp)
+    native_info = {}
+    for name in (PREDICTOR_FMU, MOTOR_FMU):
+        if name in paths:
+            built, native_info[name] = build_native_set(name, paths[name], paths[name].parent)
+            paths.update(built)
 
     for p in list(paths.values()) + [ssp_path]:
         os.chmod(p, 0o644)  # the build writes through mkstemp (0600); these files are for others to read
@@ -238,6 +251,7 @@ def export_all(out_dir: str | Path, mp: MotorParams | None = None, predictor: Ma
         "fmiVersion": "2.0",
         "files": files,
         "predictor": pred_info,
+        "native": native_info,
         "build": {
             "python": platform.python_version(),
             "platform": f"{sys.platform}-{platform.machine()}",

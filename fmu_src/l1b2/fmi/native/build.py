@@ -351,3 +351,20 @@ def build_native_fmu(name: str, python_fmu: str | Path, dest_dir: str | Path, fm
         os.replace(tmp, dest)
     os.chmod(dest, 0o644)
     return dest
+
+
+def build_native_set(name: str, python_fmu: str | Path, dest_dir: str | Path,
+                     cc: str | None = None) -> tuple[dict[str, Path], dict]:
+    """The FMI 2.0 and FMI 3.0 native FMUs of ``name`` beside its Python FMU, for :func:`l1b2.fmi.export.export_all`.
+
+    Returns ``({file stem: path}, info)``; ``info`` says what was built or why
+    not (no native model for ``name``, no C compiler): the Python FMU is
+    exported either way.
+    """
+    if name not in MODELS:
+        return {}, {"included": False, "reason": f"no native model for {name} (native FMUs: {', '.join(MODELS)})"}
+    try:
+        paths = {native_fmu_name(name, v): build_native_fmu(name, python_fmu, dest_dir, v, cc) for v in (2, 3)}
+    except NativeBuildError as exc:
+        return {}, {"included": False, "reason": str(exc)}
+    return paths, {"included": True, "fmus": sorted(paths), "compiler": find_cc(cc), "cflags": list(CFLAGS)}
