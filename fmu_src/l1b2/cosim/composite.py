@@ -92,6 +92,8 @@ class MotorBlock(Block):
                    "F_d": ("Interface", "F_d"), "phi_c": ("Interface", "phi_c"),
                    "stick_fraction": ("Interface", "stick_fraction"), "T_stator": ("Stator", "T_stator"),
                    "at_stop": ("Slider", "at_stop")}
+    #: where each output comes from, ``{output: (component, variable)}`` (the native FMU publishes the same)
+    OUTPUT_SOURCES = _OUT_SOURCE
     #: the same outputs from the fused state vector
     _out_getter = staticmethod(state_getter([f"{comp}.{var}" for comp, var in _OUT_SOURCE.values()]))
 

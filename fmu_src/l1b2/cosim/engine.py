@@ -356,5 +356,12 @@ def _readers() -> dict:
 
 
 _READERS = _readers()
+
+
+def fused_readers() -> dict:
+    """A copy of the map ``"Component.variable"`` -> index in the fused state vector (or a function of the
+    vector) that :meth:`InProcessMotor.value` reads (the native motor FMU publishes the same variables)."""
+    return dict(_READERS)
+
 #: what :meth:`FusedSteps.store` writes back into the blocks: (component, variable, reader) for every reader
 _STORE = tuple((*name.split(".", 1), read) for name, read in _READERS.items())

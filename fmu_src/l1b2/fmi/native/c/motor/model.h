@@ -1,0 +1,15 @@
+/* model.h - the state of the native L1B2Motor FMU beyond its variables: the fused state vector of
+ * l1b2.physics.coupled (MOTOR_NX entries), its parameter vector, the modal-table cell in use, the
+ * internal step and the driver's outputs (l1b2.cosim.engine.FusedSteps holds the same) */
+#ifndef L1B2_MOTOR_MODEL_H
+#define L1B2_MOTOR_MODEL_H
+
+typedef struct {
+    double x[MOTOR_NX];
+    double p[MOTOR_NP];
+    double cell_k;        /* the modal-table cell the kernel holds (-1: none yet) */
+    double h_int;         /* internal step [s] */
+    double V0_phase, V_inv1, omega0;
+} ModelState;
+
+#endif

@@ -1,0 +1,263 @@
+"""Native (C) L1B2Motor FMU, FMI 2.0 and 3.0: the Python L1B2Motor.fmu's variables and numbers, no Python.
+
+The Python FMU (numba-compiled fused step) is the reference; the native one runs
+the C generated from the same kernels (tests/test_native_translate.py) and is
+compared over runs with input changes, sub-stepped communication steps, loads,
+both directions, an end stop, self-heating, bar waviness and bump, pulley
+friction and the pure-slip interface: every output and every sub-block variable,
+1e-9 relative.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import zipfile
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.fmu
+
+#: per scenario: (Real parameters, Boolean parameters, [(inputs V_s, duty, f_s, T, direction, m_load, h)] )
+_BASE = (67.1, 1.0, 48500.0, 25.0, 1.0, 0.0)
+SCENARIOS = {
+    "inputs change, sub-steps": (
+        {"Slider.s0": -0.015}, {},
+        [(*_BASE, 2e-4)] * 60 + [(67.1, 1.0, 48500.0, 25.0, 1.0, 0.2, 1e-3)] * 20
+        + [(60.0, 0.9, 48300.0, 30.0, -1.0, -0.1, 5e-4)] * 30 + [(40.0, 1.0, 48500.0, 25.0, -1.0, 0.3, 2e-4)] * 30),
+    "end stop": (
+        {"Slider.s0": 0.017, "Slider.v0": 0.05}, {},
+        [(*_BASE, 1e-3)] * 40 + [(67.1, 1.0, 48500.0, 25.0, -1.0, 0.0, 1e-3)] * 20),
+    "effects": (
+        {"Slider.s0": -0.005, "Stator.thermal_tau_s": 0.02, "Stator.heating_K_per_V2": 1e-4,
+         "Stator.df_dT_l_Hz_per_K": -10.0, "Stator.bar_wave_amp_m": 2e-6, "Stator.bar_bump_amp_m": 3e-6,
+         "Stator.bar_bump_center_m": 0.0, "Slider.pulley_mu": 0.05, "Stator.T_st0": 30.0}, {},
+        [(67.1, 1.0, 48500.0, 25.0, 1.0, 0.1, 1e-3)] * 60),
+    "pure slip": (
+        {"Slider.s0": 0.0, "internal_step_s": 1e-4}, {"Interface.pure_slip": True},
+        [(*_BASE, 1e-3)] * 40 + [(67.1, 1.0, 48500.0, 25.0, -1.0, 0.05, 2e-4)] * 30),
+}
+
+
+def worker_motor_runs(path, scenarios):
+    """Per scenario: every Real variable after initialisation and after every step (fmpy, FMI 2 or 3)."""
+    from fmpy import extract, read_model_description
+    md = read_model_description(path)
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    reals = [v.name for v in md.modelVariables
+             if v.type in ("Real", "Float64") and v.causality in ("output", "local")]
+    unz = extract(path)
+    fmi3 = md.fmiVersion.startswith("3")
+    out = {"names": reals, "units": [next(v.unit for v in md.modelVariables if v.name == n) for n in reals]}
+    for name, (params, booleans, run) in scenarios.items():
+        if fmi3:
+            from fmpy.fmi3 import FMU3Slave
+            fmu = FMU3Slave(guid=md.guid, unzipDirectory=unz, modelIdentifier=md.coSimulation.modelIdentifier,
+                            instanceName="m")
+            fmu.instantiate()
+            set_real, get_real, set_bool = fmu.setFloat64, fmu.getFloat64, fmu.setBoolean
+        else:
+            from fmpy.fmi2 import FMU2Slave
+            fmu = FMU2Slave(guid=md.guid, unzipDirectory=unz, modelIdentifier=md.coSimulation.modelIdentifier,
+                            instanceName="m")
+            fmu.instantiate()
+            fmu.setupExperiment(startTime=0.0)
+            set_real, get_real, set_bool = fmu.setReal, fmu.getReal, fmu.setBoolean
+        ins = [vr[k] for k in ("V_s", "duty", "f_s", "T", "direction", "m_load")]
+        rows = []
+        try:
+            if params:
+                set_real([vr[k] for k in params], list(params.values()))
+            if booleans:
+                set_bool([vr[k] for k in booleans], list(booleans.values()))
+            set_real(ins, list(run[0][:6]))
+            fmu.enterInitializationMode()
+            fmu.exitInitializationMode()
+            rows.append(list(get_real([vr[k] for k in reals])))
+            t = 0.0
+            for *u, h in run:
+                set_real(ins, u)
+                fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+                t += h
+                rows.append(list(get_real([vr[k] for k in reals])))
+            fmu.terminate()
+        finally:
+            fmu.freeInstance()
+        out[name] = rows
+    return out
+
+
+@pytest.fixture(scope="module")
+def fmus(tmp_path_factory):
+    from l1b2.fmi.build import build_fmu
+    from l1b2.fmi.native.build import build_native_fmu, find_cc
+    try:
+        find_cc()
+    except Exception as exc:  # noqa: BLE001
+        pytest.skip(str(exc))
+    out = tmp_path_factory.mktemp("native_motor")
+    py = build_fmu("L1B2Motor", out)
+    return {"python": py, 2: build_native_fmu("L1B2Motor", py, out, 2), 3: build_native_fmu("L1B2Motor", py, out, 3)}
+
+
+@pytest.fixture(scope="module")
+def python_runs(fmus, isolated):
+    return isolated(__file__, "worker_motor_runs", str(fmus["python"]), SCENARIOS).value
+
+
+def test_native_motor_validates_and_declares_the_python_variables(fmus):
+    # reference: fmpy validation; the Python FMU's modelDescription.xml read by fmpy
+    from fmpy import read_model_description
+    from fmpy.validation import validate_fmu
+    ref = {v.name: v for v in read_model_description(str(fmus["python"])).modelVariables}
+    for ver in (2, 3):
+        assert validate_fmu(str(fmus[ver])) == []
+        got = {v.name: v for v in read_model_description(str(fmus[ver])).modelVariables
+               if v.causality != "independent"}
+        assert list(got) == list(ref)
+        for name, r in ref.items():
+            g = got[name]
+            assert (g.valueReference, g.causality, g.variability, g.unit, g.min, g.max) == (
+                r.valueReference, r.causality, r.variability, r.unit, r.min, r.max), name
+            assert (g.start is None) == (r.start is None), name
+            if r.start is not None:
+                assert str(g.start).lower() == str(r.start).lower() or float(g.start) == float(r.start), name
+        with zipfile.ZipFile(fmus[ver]) as z:
+            names = z.namelist()
+        assert {"sources/motor_model.c", "sources/motor_kernels.h", "sources/model_data.h"} <= set(names)
+
+
+@pytest.mark.parametrize("ver", [2, 3])
+def test_native_motor_equals_the_python_fmu(fmus, python_runs, ver, isolated):
+    # reference: the Python L1B2Motor.fmu in fmpy (fresh process), same call sequences: every output and
+    # sub-block variable after every step, 1e-9 relative; a quantity that is zero up to round-off (e.g. the cos
+    # component of the normal force, +-1e-14 N) within 1e-12 of the largest value of its unit in the run
+    got = worker_motor_runs(str(fmus[ver]), SCENARIOS)
+    assert got["names"] == python_runs["names"]
+    names, units = got["names"], got["units"]
+    worst = 0.0
+    for scenario in SCENARIOS:
+        a, b = np.array(got[scenario]), np.array(python_runs[scenario])
+        assert a.shape == b.shape
+        for j, name in enumerate(names):
+            same_unit = [i for i, u in enumerate(units) if u == units[j]]
+            atol = 1e-12 * float(np.max(np.abs(b[:, same_unit])))
+            np.testing.assert_allclose(a[:, j], b[:, j], rtol=1e-9, atol=atol, err_msg=f"{scenario}: {name}")
+        big = np.abs(b) > 1e-12
+        worst = max(worst, float(np.max(np.abs(a[big] - b[big]) / np.abs(b[big]))))
+        v = b[:, names.index("v")]
+        assert np.ptp(v) > 0.01, scenario  # the slider moves
+        if scenario == "end stop":
+            assert np.any(b[:, names.index("at_stop")] == 1.0)
+        if scenario == "effects":
+            assert b[-1, names.index("T_stator")] > 31.0
+    assert worst < 1e-9
+
+
+def _slave(path):
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave, defaultCallbacks, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+    md = read_model_description(str(path))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    log = []
+    cb = fmi2CallbackFunctions()
+    cb.logger = fmi2CallbackLoggerTYPE(lambda env, name, status, cat, msg: log.append((status, msg.decode())))
+    cb.allocateMemory, cb.freeMemory = defaultCallbacks.allocateMemory, defaultCallbacks.freeMemory
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(path)), modelIdentifier=md.coSimulation.modelIdentifier,
+                    instanceName="m")
+    fmu.instantiate(callbacks=cb)
+    fmu.cb = cb  # keep the callbacks alive
+    fmu.setupExperiment(startTime=0.0)
+    return md, vr, fmu, log
+
+
+def test_native_motor_status_rules_and_state(fmus):
+    # reference: the Python FMUs' rules (l1b2.fmi.adapter): an input out of range -> Discard, refused until an
+    # earlier FMU state is restored; the restored run repeats the first one exactly
+    from fmpy.fmi1 import FMICallException
+    md, vr, fmu, log = _slave(fmus[2])
+    try:
+        fmu.setReal([vr["V_s"], vr["Slider.s0"]], [67.1, -0.01])
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        for k in range(20):
+            fmu.doStep(k * 2e-4, 2e-4)
+        state = fmu.getFMUstate()
+        blob = fmu.serializeFMUstate(state)
+        first = []
+        for k in range(20, 60):
+            fmu.doStep(k * 2e-4, 2e-4)
+            first.append(fmu.getReal([vr["v"], vr["s"], vr["F_d"], vr["Stator.Q_b_im"]]))
+        fmu.setReal([vr["V_s"]], [5000.0])
+        with pytest.raises(FMICallException) as exc:
+            fmu.doStep(60 * 2e-4, 2e-4)
+        assert exc.value.status == 2 and "V_s" in log[-1][1] and "above" in log[-1][1]
+        fmu.setReal([vr["V_s"]], [67.1])
+        with pytest.raises(FMICallException):
+            fmu.doStep(60 * 2e-4, 2e-4)
+        assert "refusing to step" in log[-1][1]
+        fmu.setFMUstate(fmu.deSerializeFMUstate(blob))
+        again = []
+        for k in range(20, 60):
+            fmu.doStep(k * 2e-4, 2e-4)
+            again.append(fmu.getReal([vr["v"], vr["s"], vr["F_d"], vr["Stator.Q_b_im"]]))
+        assert again == first
+        with pytest.raises(FMICallException):
+            fmu.getReal([100000])
+        assert log[-1][0] == 3 and "100000" in log[-1][1]
+        fmu.freeFMUstate(state)
+    finally:
+        fmu.terminate()
+        fmu.freeInstance()
+
+
+@pytest.mark.parametrize("name, value, words", [
+    ("Slider.s0", 0.5, "outside the stroke"),
+    ("Stator.f_b0_Hz", 47000.0, "modal table was built with"),
+])
+def test_native_motor_refuses_an_initialisation_it_cannot_simulate(fmus, name, value, words):
+    # reference: SliderBlock.initialize (s0 outside the stroke); the baked modal table (l1b2.fmi.native.build)
+    from fmpy.fmi1 import FMICallException
+    md, vr, fmu, log = _slave(fmus[2])
+    try:
+        fmu.setReal([vr[name]], [value])
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        assert log[-1][0] == 3 and "initialisation failed" in log[-1][1] and words in log[-1][1]
+        with pytest.raises(FMICallException) as exc:
+            fmu.doStep(0.0, 2e-4)
+        assert exc.value.status == 2
+    finally:
+        fmu.terminate()
+        fmu.freeInstance()
+
+
+def test_native_motor_runs_in_c_host_with_empty_environment(fmus, tmp_path):
+    # reference: the same call sequence in fmpy (worker_motor_runs), bit-identical: the same library
+    from fmpy import read_model_description
+    from l1b2.fmi.runtime import compile_c_host
+    host = compile_c_host(tmp_path / "fmu_host")
+    unz = tmp_path / "native motor"
+    with zipfile.ZipFile(fmus[2]) as z:
+        z.extractall(unz)
+    md = read_model_description(str(fmus[2]))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    outs = ["v", "s", "F_d", "U_w", "at_stop"]
+    n = 50
+    u = dict(zip(("V_s", "duty", "f_s", "T", "direction", "m_load"), _BASE))
+    args = ["env", "-i", str(host), "-L", "-", "-x", "plain", "-h", "0.0002", "-n", str(n),
+            "-p", f"{vr['Slider.s0']}=-0.01"]
+    for k, x in u.items():
+        args += ["-i", f"{vr[k]}={x!r}"]
+    for k in outs:
+        args += ["-o", str(vr[k])]
+    proc = subprocess.run(args + [str(unz), md.coSimulation.modelIdentifier, md.guid], capture_output=True, text=True,
+                          timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    got = np.array([[float(x) for x in line.split()] for line in proc.stdout.splitlines() if line.strip()])
+    ref = worker_motor_runs(str(fmus[2]), {"run": ({"Slider.s0": -0.01}, {}, [(*_BASE, 2e-4)] * n)})
+    names = ref["names"]
+    want = np.array(ref["run"])[:, [names.index(k) for k in outs]]
+    assert got.shape == (n + 1, len(outs) + 1)
+    assert np.array_equal(got[:, 1:], want)
+    assert got[-1, 1] > 0.05
