@@ -279,3 +279,38 @@ def test_native_fmu_runs_in_c_host_with_empty_environment(fmus, tmp_path):
     want = np.array(worker_run(str(fmus[2]), {}, RUN[:n]))
     assert got.shape == (n + 1, 3)
     assert np.array_equal(got[:, 1:], want)
+
+
+def test_native_refuses_sets_the_python_fmus_refuse(fmus):
+    # reference: the Python FMUs' set rules (FMI 2.0, 3.2.3): an output, a fixed parameter after initialisation,
+    # a parameter value that is not finite or outside its declared range -> Error, the whole call refused
+    from fmpy.fmi1 import FMICallException
+    from l1b2.cosim.composite import PredictorBlock
+    md, vr, fmu, log = _native_slave(fmus[2])
+    fmu.instantiate(callbacks=fmu.cb)
+    try:
+        fmu.setupExperiment(startTime=0.0)
+        for names, values, words in ((["v"], [1.0], "is an output"),
+                                     (["V0", "s_half"], [300.0, math.nan], "not finite"),
+                                     (["kappa"], [1.5], "outside its declared range")):
+            with pytest.raises(FMICallException) as exc:
+                fmu.setReal([vr[n] for n in names], values)
+            assert exc.value.status == 3 and words in log[-1][1]
+        assert fmu.getReal([vr["V0"], vr["s_half"], vr["kappa"]]) == [324.0, 0.02, 0.5]  # nothing was set
+        fmu.setReal([vr["kappa"]], [0.6])                                                 # before initialisation
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        with pytest.raises(FMICallException):
+            fmu.setReal([vr["kappa"]], [0.7])
+        assert "fixed parameter" in log[-1][1]
+        fmu.setReal([vr["V0"]], [250.0])                                                  # inputs may change
+        fmu.doStep(0.0, H)
+        limit = getattr(PredictorBlock, "MAX_STEP_S", None)
+        if limit is not None:  # a step above the FMU's maximum is refused, the instance stays usable
+            with pytest.raises(FMICallException) as exc:
+                fmu.doStep(H, 2 * limit)
+            assert exc.value.status == 2 and "above this FMU's maximum" in log[-1][1]
+            fmu.doStep(H, H)
+    finally:
+        fmu.terminate()
+        fmu.freeInstance()

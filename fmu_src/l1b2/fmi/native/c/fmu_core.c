@@ -109,10 +109,37 @@ int core_get_real(Instance* c, const unsigned* vr, size_t n, double* value)
     return ST_OK;
 }
 
+/* why a Set call must be refused as a whole (nothing set), as the Python FMUs refuse it: an output, a fixed
+ * parameter after initialisation, a parameter value that is not finite or outside its declared range */
+static int set_refused(Instance* c, const unsigned* vr, size_t n, const double* value, int type, const char* call)
+{
+    for (size_t i = 0; i < n; i++) {
+        if (bad_reference(c, vr[i], type, call)) return 1;
+        const unsigned k = vr[i];
+        if (VAR_CAUS[k] == VC_OUTPUT) {
+            core_log(c, ST_ERROR, "%s: %s: %s is an output, computed by the FMU: it cannot be set; nothing done",
+                     MODEL_IDENTIFIER, call, VAR_NAME[k]);
+            return 1;
+        }
+        if (VAR_CAUS[k] != VC_PARAMETER) continue;
+        if (VAR_FIXED[k] && (c->mode == MODE_STEPPING || c->mode == MODE_TERMINATED)) {
+            core_log(c, ST_ERROR, "%s: %s: %s is a fixed parameter: it can only be set before "
+                     "ExitInitializationMode (Reset to change it); nothing done", MODEL_IDENTIFIER, call, VAR_NAME[k]);
+            return 1;
+        }
+        if (type == VT_REAL && !(isfinite(value[i]) && VAR_MIN[k] <= value[i] && value[i] <= VAR_MAX[k])) {
+            core_log(c, ST_ERROR, "%s: %s: parameter %s [%s] = %.17g is %s; the value is unchanged", MODEL_IDENTIFIER,
+                     call, VAR_NAME[k], VAR_UNIT[k][0] ? VAR_UNIT[k] : "1", value[i],
+                     isfinite(value[i]) ? "outside its declared range" : "not finite");
+            return 1;
+        }
+    }
+    return 0;
+}
+
 int core_set_real(Instance* c, const unsigned* vr, size_t n, const double* value)
 {
-    for (size_t i = 0; i < n; i++)
-        if (bad_reference(c, vr[i], VT_REAL, "SetReal")) return ST_ERROR;
+    if (set_refused(c, vr, n, value, VT_REAL, "SetReal")) return ST_ERROR;
     for (size_t i = 0; i < n; i++) c->s.r[vr[i]] = value[i];
     c->outputs_stale = 1;
     return ST_OK;
@@ -129,8 +156,10 @@ int core_get_boolean(Instance* c, const unsigned* vr, size_t n, int* value)
 
 int core_set_boolean(Instance* c, const unsigned* vr, size_t n, const int* value)
 {
-    for (size_t i = 0; i < n; i++)
-        if (bad_reference(c, vr[i], VT_BOOLEAN, "SetBoolean")) return ST_ERROR;
+    for (size_t i = 0; i < n; i++) {
+        double x = value[i] ? 1.0 : 0.0;
+        if (set_refused(c, vr + i, 1, &x, VT_BOOLEAN, "SetBoolean")) return ST_ERROR;
+    }
     for (size_t i = 0; i < n; i++) c->s.r[vr[i]] = value[i] ? 1.0 : 0.0;
     c->outputs_stale = 1;
     return ST_OK;
@@ -198,6 +227,11 @@ int core_do_step(Instance* c, double t, double h)
     if (!(isfinite(h) && h > 0)) {
         snprintf(line, sizeof line, "%s: invalid communication step %.17g s at t=%.17g", MODEL_IDENTIFIER, h, t);
         fail(c, line);
+        return ST_DISCARD;
+    }
+    if (h > MAX_STEP_S) { /* not an error of the instance: a smaller step is accepted */
+        core_log(c, ST_ERROR, "%s: communication step %.17g s at t=%.17g s is above this FMU's maximum %.17g s; step "
+                 "refused, take smaller steps", MODEL_IDENTIFIER, h, t, MAX_STEP_S);
         return ST_DISCARD;
     }
     if (model_do_step(c, t, h, msg)) {

@@ -12,6 +12,9 @@
  *
  * Status rules (the Python FMUs' rules, l1b2.fmi.adapter):
  *  - unknown value reference, wrong type: the call returns Error, one log line;
+ *  - setting an output, a fixed parameter after initialisation, or a parameter to a value that is not
+ *    finite or outside its declared range: the whole call is refused (Error, nothing set);
+ *  - a communication step above MAX_STEP_S: Discard with a log line, the instance stays usable;
  *  - a call in the wrong mode: no effect, one log line with status Error; DoStep
  *    returns Discard, the other calls OK;
  *  - a non-finite or out-of-range input, an invalid step, a failed model step:
