@@ -314,3 +314,22 @@ def test_native_refuses_sets_the_python_fmus_refuse(fmus):
     finally:
         fmu.terminate()
         fmu.freeInstance()
+
+
+def test_calibrated_extended_predictor_stays_a_python_fmu(tmp_path):
+    # reference: the scope of this native model (Eq. 29); an extended predictor's FMU carries variables
+    # (baseline, effects, output filter) the native model does not compute, so none is built, and export says why
+    from l1b2.fmi.build import build_fmu
+    from l1b2.fmi.native.build import NativeBuildError, build_native_fmu, build_native_set
+    from l1b2.predictor.effects import ExtendedPredictor
+    from l1b2.predictor.model import example_params
+    from l1b2.predictor.setup import PredictorSetup
+    base = PredictorSetup(example_params(), 0.1, 1e-3)
+    ext = ExtendedPredictor(base, base, (), {"a": 0.5, "b0": 0.3, "b1": 0.2})
+    py = build_fmu("Predictor", tmp_path, extra_defaults={"predictor": base.to_dict(),
+                                                          "extended_predictor": ext.to_dict()})
+    with pytest.raises(NativeBuildError, match="extended predictor"):
+        build_native_fmu("Predictor", py, tmp_path, 2)
+    built, info = build_native_set("Predictor", py, tmp_path)
+    assert built == {} and info["included"] is False and "extended predictor" in info["reason"]
+    assert not list(tmp_path.glob("*-native*.fmu"))
