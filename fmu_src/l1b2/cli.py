@@ -584,6 +584,9 @@ def cmd_export(args) -> int:
         manifest = export_all(tmp, mp=_motor(args), predictor=predictor)
     for f in manifest.get("files", []):
         print(f"  {f.get('path')}")
+    for name, info in manifest.get("native", {}).items():
+        if not info.get("included"):
+            print(f"  (no native {name} FMU: {info.get('reason')})")
     if not args.identification and not args.no_predictor:
         print("  (Predictor.fmu carries the physical model's linearization; give --identification to ship "
               "identified parameters)")
