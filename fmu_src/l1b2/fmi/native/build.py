@@ -294,8 +294,7 @@ def fmi3_model_description(python_md: bytes, name: str, guid: str) -> bytes:
         "canBeInstantiatedOnlyOncePerProcess": "false", "canGetAndSetFMUState": "true",
         "canSerializeFMUState": "true", "canHandleVariableCommunicationStepSize": "true",
         "providesIntermediateUpdate": "false", "canReturnEarlyAfterIntermediateUpdate": "false",
-        "hasEventMode": "false", "fixedInternalStepSize": "0"} )
-    root[-1].attrib.pop("fixedInternalStepSize")
+        "hasEventMode": "false"})
     ud = src.find("UnitDefinitions")
     units = ET.SubElement(root, "UnitDefinitions")
     for u in ud:
