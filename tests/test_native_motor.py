@@ -323,3 +323,27 @@ def test_native_motor_fmi3_state_round_trip(fmus):
         fmu.terminate()
     finally:
         fmu.freeInstance()
+
+
+def test_native_motor_bounds_the_internal_steps_like_the_python_fmu(fmus):
+    # reference: MotorBlock.MAX_SUBSTEPS where the block declares one (a step needing more internal steps is an
+    # error of the step: Discard, reason logged); without it, a step of 10 internal steps runs
+    from fmpy.fmi1 import FMICallException
+    from l1b2.cosim.composite import MotorBlock
+    md, vr, fmu, log = _slave(fmus[2])
+    limit = getattr(MotorBlock, "MAX_SUBSTEPS", None)
+    try:
+        fmu.setReal([vr["V_s"], vr["internal_step_s"]], [67.1, 1e-5])
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        fmu.doStep(0.0, 1e-4)
+        assert fmu.getReal([vr["v"]])[0] > 0.0
+        if limit is not None:
+            h = min(1e-5 * (limit + 10), getattr(MotorBlock, "MAX_STEP_S", 1.0))
+            if h / 1e-5 > limit:
+                with pytest.raises(FMICallException) as exc:
+                    fmu.doStep(1e-4, h)
+                assert exc.value.status == 2 and f"more than {limit}" in log[-1][1]
+    finally:
+        fmu.terminate()
+        fmu.freeInstance()

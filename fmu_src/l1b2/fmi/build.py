@@ -47,7 +47,7 @@ PACKAGE_DIR = Path(__file__).resolve().parents[1]
 RUNTIME_PARTS = ("__init__.py", "errors.py", "units.py", "physics", "cosim", "predictor", "fmi")
 #: modules of the runtime parts that an FMU never imports (host-side tools)
 HOST_ONLY = ("fmi/build.py", "fmi/cache.py", "fmi/export.py", "cosim/master.py", "predictor/derive.py",
-             "fmi/native/__init__.py", "fmi/native/build.py")
+             "fmi/native/__init__.py", "fmi/native/build.py", "fmi/native/translate.py")
 SUBSYSTEM_FMUS = ("Driver", "Stator", "Interface", "Slider")
 GUID_NAMESPACE = uuid.UUID("6f1f5d4e-2b1a-5c3e-9a57-0b1b2c0ffee0")
 AUTHOR = "L1B2 USM tool team"
@@ -198,7 +198,7 @@ def defaults_document(mp: MotorParams, extra: dict | None = None) -> dict:
 
 def copy_runtime(dest: Path) -> None:
     """Copy the package's runtime part (:data:`RUNTIME_PARTS` less :data:`HOST_ONLY`) into ``dest``."""
-    ignore = shutil.ignore_patterns("__pycache__", "*.pyc", "chost", "native")
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc", "chost")
     dest.mkdir(parents=True)
     for part in RUNTIME_PARTS:
         src = PACKAGE_DIR / part
@@ -208,6 +208,7 @@ def copy_runtime(dest: Path) -> None:
             shutil.copy2(src, dest / part)
     for rel in HOST_ONLY:
         (dest / rel).unlink(missing_ok=True)
+    shutil.rmtree(dest / "fmi" / "native", ignore_errors=True)  # the native FMUs' builder and C sources
 
 
 def runtime_files() -> list[Path]:

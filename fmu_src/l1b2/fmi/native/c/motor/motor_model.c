@@ -217,6 +217,15 @@ int model_do_step(Instance* c, double t, double h, char* msg)
     double* x = m->x;
     if (core_check_inputs(c, msg)) return 1;
     double n_real = nearbyint(h / m->h_int); /* Python's round(): half to even */
+    if (MAX_SUBSTEPS > 0 && n_real > MAX_SUBSTEPS) {
+        snprintf(msg, MSG_LEN, "MotorBlock: a step of %.17g s takes %.17g internal steps of internal_step_s = "
+                 "%.17g s, more than %d", h, n_real, m->h_int, MAX_SUBSTEPS);
+        return 1;
+    }
+    if (!(n_real < 1e15)) {
+        snprintf(msg, MSG_LEN, "MotorBlock: a step of %.17g s takes %.17g internal steps", h, n_real);
+        return 1;
+    }
     long n = n_real > 1.0 ? (long)n_real : 1;
     double hs = h / n;
     if (held_inputs(c, msg)) return 1;

@@ -164,6 +164,11 @@ int model_do_step(Instance* c, double t, double h, char* msg)
     double* r = c->s.r;
     const PredictorParams* q = &c->s.ms.par;
     double n_real = ceil(h / q->T_s - 1e-9);
+    if ((MAX_SUBSTEPS > 0 && n_real > MAX_SUBSTEPS) || !(n_real < 1e15)) {
+        snprintf(msg, MSG_LEN, "PredictorBlock: a step of %.17g s takes %.17g sub-steps of T_s = %.17g s, more than %d",
+                 h, n_real, q->T_s, MAX_SUBSTEPS);
+        return 1;
+    }
     long n = n_real > 1.0 ? (long)n_real : 1;
     double v = r[VR_v_state];
     for (long k = 0; k < n; k++) v = one_step(q, v, r[VR_s], r[VR_V0], r[VR_load], r[VR_direction], h / n);
