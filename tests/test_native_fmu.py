@@ -333,3 +333,41 @@ def test_calibrated_extended_predictor_stays_a_python_fmu(tmp_path):
     built, info = build_native_set("Predictor", py, tmp_path)
     assert built == {} and info["included"] is False and "extended predictor" in info["reason"]
     assert not list(tmp_path.glob("*-native*.fmu"))
+
+
+def test_native_refuses_a_state_of_another_fmu(fmus, tmp_path):
+    # reference: FMI 2.0 fmi2SetFMUstate takes a state of the same FMU; another FMU's state (here a Predictor with
+    # other parameters, hence another GUID) is refused with Error, in memory and serialised, the instance unchanged
+    from fmpy.fmi1 import FMICallException
+    from l1b2.fmi.build import build_fmu
+    from l1b2.fmi.native.build import build_native_fmu
+    from l1b2.predictor.model import example_params
+    from l1b2.predictor.setup import PredictorSetup
+    other_py = build_fmu("Predictor", tmp_path, extra_defaults={
+        "predictor": PredictorSetup(example_params(), 0.1, 1e-3).to_dict()})
+    other = build_native_fmu("Predictor", other_py, tmp_path, 2)
+    _, vr_o, fmu_o, _ = _native_slave(other, "other")
+    md, vr, fmu, log = _native_slave(fmus[2])
+    fmu_o.instantiate(callbacks=fmu_o.cb)
+    fmu.instantiate(callbacks=fmu.cb)
+    try:
+        for f in (fmu, fmu_o):
+            f.setupExperiment(startTime=0.0)
+            f.enterInitializationMode()
+            f.exitInitializationMode()
+            f.doStep(0.0, H)
+        foreign = fmu_o.getFMUstate()
+        blob = fmu_o.serializeFMUstate(foreign)
+        before = fmu.getReal([vr["v"], vr["v_steady"]])
+        with pytest.raises(FMICallException):
+            fmu.setFMUstate(foreign)
+        assert "not one of this FMU" in log[-1][1]
+        with pytest.raises(FMICallException):
+            fmu.deSerializeFMUstate(blob)
+        assert fmu.getReal([vr["v"], vr["v_steady"]]) == before
+        fmu.doStep(H, H)
+        fmu_o.freeFMUstate(foreign)
+    finally:
+        for f in (fmu, fmu_o):
+            f.terminate()
+            f.freeInstance()

@@ -141,7 +141,8 @@ def model_data_header(name: str, variables: list[dict], guid: str, block: str, f
              "#ifndef L1B2_MODEL_DATA_H", "#define L1B2_MODEL_DATA_H", "#include <math.h>", "",
              f"#define MODEL_IDENTIFIER {_c_string(model_identifier(name))}",
              f"#define BLOCK_NAME {_c_string(block)}", f"#define INSTANTIATION_TOKEN {_c_string(guid)}",
-             f"#define NV {n}", "enum { VT_REAL = 0, VT_BOOLEAN = 1 };",
+             f"#define NV {n}", f"#define STATE_TAG 0x{hashlib.sha256(guid.encode()).hexdigest()[:16]}ULL",
+             "enum { VT_REAL = 0, VT_BOOLEAN = 1 };",
              "enum { VC_PARAMETER = 0, VC_INPUT = 1, VC_OUTPUT = 2, VC_LOCAL = 3 };", ""]
     if fmi_version == 3:
         lines.append(f"#define VR_TIME {n} /* the independent variable of FMI 3.0 */")

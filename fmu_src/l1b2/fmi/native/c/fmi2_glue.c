@@ -144,17 +144,14 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate* state)
 {
     Snapshot* s = *state ? (Snapshot*)*state : (Snapshot*)malloc(sizeof(Snapshot));
     if (!s) return fmi2Error;
-    *s = INST->s;
+    core_get_state(INST, s);
     *state = s;
     return fmi2OK;
 }
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 {
-    if (!state) return fmi2Error;
-    INST->s = *(Snapshot*)state;
-    core_after_restore(INST);
-    return fmi2OK;
+    return (fmi2Status)core_set_state(INST, (const Snapshot*)state);
 }
 
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate* state)

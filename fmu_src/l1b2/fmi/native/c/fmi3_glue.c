@@ -149,17 +149,14 @@ fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState* state)
 {
     Snapshot* s = *state ? (Snapshot*)*state : (Snapshot*)malloc(sizeof(Snapshot));
     if (!s) return fmi3Error;
-    *s = INST->s;
+    core_get_state(INST, s);
     *state = s;
     return fmi3OK;
 }
 
 fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState state)
 {
-    if (!state) return fmi3Error;
-    INST->s = *(Snapshot*)state;
-    core_after_restore(INST);
-    return fmi3OK;
+    return (fmi3Status)core_set_state(INST, (const Snapshot*)state);
 }
 
 fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState* state)

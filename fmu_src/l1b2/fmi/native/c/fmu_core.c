@@ -243,6 +243,25 @@ int core_do_step(Instance* c, double t, double h)
     return ST_OK;
 }
 
+int core_get_state(Instance* c, Snapshot* out)
+{
+    c->s.tag = STATE_TAG;
+    *out = c->s;
+    return ST_OK;
+}
+
+int core_set_state(Instance* c, const Snapshot* s)
+{
+    if (!s || s->tag != STATE_TAG) {
+        core_log(c, ST_ERROR, "%s: SetFMUState: the state is not one of this FMU; the instance is unchanged",
+                 MODEL_IDENTIFIER);
+        return ST_ERROR;
+    }
+    c->s = *s;
+    core_after_restore(c);
+    return ST_OK;
+}
+
 void core_after_restore(Instance* c)
 {
     c->outputs_stale = 1;
@@ -270,7 +289,8 @@ int core_deserialize(Instance* c, const char* bytes, size_t size, Snapshot* out)
         return ST_ERROR;
     }
     memcpy(head, bytes, sizeof head);
-    if (head[0] != STATE_MAGIC || head[1] != sizeof(Snapshot)) {
+    if (head[0] != STATE_MAGIC || head[1] != sizeof(Snapshot)
+        || ((const Snapshot*)(const void*)(bytes + sizeof head))->tag != STATE_TAG) {
         core_log(c, ST_ERROR, "DeserializeFMUState: not a serialised state of this %s FMU", MODEL_IDENTIFIER);
         return ST_ERROR;
     }

@@ -38,6 +38,7 @@ enum { MODE_INSTANTIATED = 0, MODE_INITIALIZATION = 1, MODE_STEPPING = 2, MODE_T
 
 /* what an FMU state holds: every variable, the error flag and the model's own state */
 typedef struct {
+    unsigned long long tag;      /* STATE_TAG of the FMU that took it (a state of another FMU is refused) */
     double r[NV];
     int failed;
     char failmsg[MSG_LEN];
@@ -76,6 +77,8 @@ int core_exit_initialization(Instance* c);
 int core_do_step(Instance* c, double t, double h);
 int core_check_inputs(Instance* c, char* msg);
 void core_after_restore(Instance* c);
+int core_get_state(Instance* c, Snapshot* out);
+int core_set_state(Instance* c, const Snapshot* s);
 int core_deserialize(Instance* c, const char* bytes, size_t size, Snapshot* out);
 size_t core_serialized_size(void);
 void core_serialize(const Snapshot* s, char* bytes);
