@@ -51,7 +51,7 @@ void core_reset(Instance* c)
 static void fail(Instance* c, const char* msg)
 {
     c->s.failed = 1;
-    snprintf(c->s.failmsg, MSG_LEN, "%s", msg);
+    snprintf(c->s.failmsg, MSG_LEN, "%.*s", MSG_LEN - 1, msg); /* a long reason is cut */
     core_log(c, ST_ERROR, "%s", msg);
 }
 
