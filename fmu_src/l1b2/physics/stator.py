@@ -561,6 +561,18 @@ def _lobatto_interpolation():
     return x, to_power[::-1].copy()
 
 
+def table_interpolation() -> tuple:
+    """The Chebyshev-Lobatto nodes on [-1, 1] of a :class:`ModalTable` cell and the matrix from node values to
+    the interpolant's power coefficients, highest first (the native motor FMU builds cells with them)."""
+    return _lobatto_interpolation()
+
+
+def b2_slope_ratio() -> float:
+    """``L^2 int phi'^2 / int phi^2`` of the unloaded B2 mode, the constant of the Rayleigh start of
+    :func:`b2_frequency_rad_s` [1]."""
+    return _phi_slope_ratio()
+
+
 def _power_coefficients(to_power, values) -> tuple:
     """Interpolant's power coefficients from node values; the mean is taken out first, so that the
     matrix's large entries act only on the small variation over the cell (no cancellation)."""

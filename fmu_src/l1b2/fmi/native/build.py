@@ -238,6 +238,12 @@ def _motor_tables(variables: list[dict], defaults: dict) -> list[str]:
     if not cells:
         raise NativeBuildError("the modal table of the motor's stator has no cell from 0 N")
     rows = st.TABLE_DEGREE + 1
+    x_nodes, to_power = st.table_interpolation()
+    out += [f"#define TABLE_ROWS {rows}", f"#define BETA_L_B2 {_c_double(st.BETA_L_B2)}",
+            f"#define PHI_SLOPE_RATIO {_c_double(st.b2_slope_ratio())}",
+            "static const double LOBATTO_X[TABLE_ROWS] = {" + ", ".join(_c_double(float(v)) for v in x_nodes) + "};",
+            "static const double TO_POWER[TABLE_ROWS][TABLE_ROWS] = {" + ", ".join(
+                "{" + ", ".join(_c_double(float(v)) for v in row) + "}" for row in to_power) + "};"]
     out += [f"#define TABLE_CELL_N {_c_double(float(st.TABLE_CELL_N))}", "#define TABLE_K0 0",
             f"#define TABLE_NCELL {len(cells)}",
             f"static const double MOTOR_TABLE[TABLE_NCELL][{2 * rows}] = {{"]

@@ -12,8 +12,10 @@
  *
  * The modal table's cells (B2 frequency and tip coefficient against the axial
  * force) are computed at export by l1b2.physics.stator.ModalTable and baked into
- * model_data.h for the stator parameters of the export; an initialisation with
- * other values of those parameters, or a temperature-dependent B2 mode, is refused.
+ * model_data.h for the stator parameters of the export (0 to 60 N); other cells,
+ * or all cells for other stator parameters, are built at run time (modal_cell.c).
+ * A temperature-dependent B2 mode and the interface's numerical reference kernel
+ * are refused at initialisation.
  */
 #include <math.h>
 #include <stdio.h>
@@ -23,10 +25,24 @@
 
 #define PI 3.141592653589793
 
-static const double* cell_of(double k)
+int modal_cell_build(const double* r, double k, double* cell, char* msg); /* modal_cell.c */
+
+/* cell k of the modal table: baked at export when the stator parameters are the export's, else built here
+ * (kept in the state's cache); NULL with the reason in msg when it cannot be built */
+static const double* get_cell(Instance* c, double k, char* msg)
 {
-    long i = (long)k - TABLE_K0;
-    return (k >= TABLE_K0 && i < TABLE_NCELL) ? MOTOR_TABLE[i] : 0;
+    ModelState* m = &c->s.ms;
+    if (m->baked_ok != 0.0 && k >= TABLE_K0 && k < TABLE_K0 + TABLE_NCELL) return MOTOR_TABLE[(long)k - TABLE_K0];
+    if (!(k >= 0.0 && k < 1e15)) {
+        snprintf(msg, MSG_LEN, "StatorBlock: no modal-table cell for the axial force cell %.17g", k);
+        return 0;
+    }
+    int slot = (int)fmod(k, CELL_CACHE_N);
+    if (m->cache_k[slot] != k) {
+        if (modal_cell_build(c->s.r, k, m->cache[slot], msg)) return 0;
+        m->cache_k[slot] = k;
+    }
+    return m->cache[slot];
 }
 
 /* l1b2.physics.driver.driver_output (the tank's exact phasor gain on the fundamental of Eq. 1) */
@@ -112,13 +128,10 @@ static void parameters(Instance* c)
 static int table_applies(Instance* c, char* msg)
 {
     const double* r = c->s.r;
+    c->s.ms.baked_ok = 1.0; /* the baked cells hold for the stator parameters of the export */
     for (int i = 0; i < TABLE_NCHECK; i++)
-        if (r[TABLE_CHECK_VR[i]] != TABLE_CHECK_VALUE[i]) {
-            snprintf(msg, MSG_LEN, "%s = %.17g differs from the value the native FMU's modal table was built with "
-                     "(%.17g): export the FMU again with these parameters", VAR_NAME[TABLE_CHECK_VR[i]],
-                     r[TABLE_CHECK_VR[i]], TABLE_CHECK_VALUE[i]);
-            return 1;
-        }
+        if (r[TABLE_CHECK_VR[i]] != TABLE_CHECK_VALUE[i]) c->s.ms.baked_ok = 0.0;
+    for (int i = 0; i < CELL_CACHE_N; i++) c->s.ms.cache_k[i] = -1.0;
     if (r[VR_Stator_df_dT_b_Hz_per_K] != 0.0) {
         snprintf(msg, MSG_LEN, "Stator.df_dT_b_Hz_per_K = %.17g: a temperature-dependent B2 mode is not in the "
                  "native FMU (use the Python L1B2Motor.fmu)", r[VR_Stator_df_dT_b_Hz_per_K]);
@@ -130,13 +143,6 @@ static int table_applies(Instance* c, char* msg)
         return 1;
     }
     return 0;
-}
-
-static int no_cell(double P, char* msg)
-{
-    snprintf(msg, MSG_LEN, "StatorBlock: axial force P = %.17g N outside the modal table of the native FMU "
-             "[%g, %g) N", P, TABLE_K0 * TABLE_CELL_N, (TABLE_K0 + TABLE_NCELL) * TABLE_CELL_N);
-    return 1;
 }
 
 /* InProcessMotor.initialize, then FusedSteps.load */
@@ -163,8 +169,8 @@ int model_initialize(Instance* c, char* msg)
         s0, p[P_HALF], p[P_DEV1], p[P_DEV2], p[P_DEV3], p[P_WAVE_A], p[P_WAVE_P], p[P_BUMP_A], p[P_BUMP_C],
         p[P_BUMP_W]), 0.0);
     double k = floor(P / TABLE_CELL_N);
-    const double* cell = cell_of(k);
-    if (!cell) return no_cell(P, msg);
+    const double* cell = get_cell(c, k, msg);
+    if (!cell) return 1;
     l1b2_tup2 props = l1b2k_table_lookup(cell, P);
     double wb = props.v[0], eta = fabs(props.v[1]);
     double w_l0 = l1b2k_l1_omega_scalar(p[P_F_L0], p[P_DF_L], T_st - p[P_T_REF]);
@@ -231,13 +237,13 @@ int model_do_step(Instance* c, double t, double h, char* msg)
     if (held_inputs(c, msg)) return 1;
     long done = 0;
     while (done < n) {
-        const double* cell = cell_of(m->cell_k);
-        long k = l1b2k_motor_substeps(x, m->p, cell ? cell : MOTOR_TABLE[0], m->cell_k >= 0 ? (long)m->cell_k : -1,
-                                      n - done, hs);
+        const double* cell = m->cell_k >= 0 ? get_cell(c, m->cell_k, msg) : MOTOR_TABLE[0];
+        if (!cell) return 1;
+        long k = l1b2k_motor_substeps(x, m->p, cell, m->cell_k >= 0 ? (long)m->cell_k : -1, n - done, hs);
         done += k;
         if (done == n) break;
         if (x[X_REASON] == 1.0) { /* REASON_CELL */
-            if (!cell_of(x[X_NEED_CELL])) return no_cell(x[X_P_AX], msg);
+            if (!get_cell(c, x[X_NEED_CELL], msg)) return 1;
             m->cell_k = x[X_NEED_CELL];
             continue;
         }
