@@ -13,6 +13,7 @@ typedef struct {
     double cell_k;        /* the modal-table cell the kernel holds (-1: none yet) */
     double h_int;         /* internal step [s] */
     double V0_phase, V_inv1, omega0;
+    double driven[5];     /* the driver's inputs (V_s, duty, f_s, T) at its last evaluation, and 1 when valid */
     double baked_ok;      /* 1: the baked cells apply (the stator parameters of the export) */
     double cache_k[CELL_CACHE_N];
     double cache[CELL_CACHE_N][2 * TABLE_ROWS];
