@@ -90,7 +90,8 @@ def test_export_of_the_calibrated_model(tmp_path, isolated):
     dte = res.test_df
     want = res.extended_model.predict_free_run(dte)
     np.testing.assert_allclose(_extended_free_run(ep, dte), want, rtol=1e-10, atol=1e-13)
-    manifest = res.export(tmp_path / "exp")
+    from l1b2.workflows import export_close_loop
+    manifest = export_close_loop(res, tmp_path / "exp")
     fam = {e["family"]: e for e in manifest["effects"]}
     assert fam["load_path_friction"]["subsystems"]["home"] == "Slider.pulley_mu"
     assert all(e["predictor_fmu"] == "fmus/Predictor.fmu" for e in manifest["effects"])

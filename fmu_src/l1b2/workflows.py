@@ -529,6 +529,21 @@ def export_calibrated_model(model, out_dir, mp=None, *, test=None, test_predicti
     return manifest
 
 
+def export_close_loop(result, out_dir, mp=None, *, test=None) -> dict:
+    """Write a close-loop result's final model (``result.calibrated_model``) as ``Predictor.fmu``; the manifest.
+
+    :func:`export_calibrated_model` of the result's model (effects with a
+    physical home also go into ``L1B2Motor_calibrated.ssp`` of ``mp``,
+    default the reference motor; with ``test``, its held-out check against
+    the result's own TEST prediction). Raises :class:`OutputError` when there
+    is nothing to export (``result.calibrated_note`` says why).
+    """
+    if result.calibrated_model is None:
+        raise OutputError(f"{out_dir}: nothing to export: {result.calibrated_note or 'no extended model'}")
+    return export_calibrated_model(result.calibrated_model, out_dir, mp=mp, test=test,
+                                   test_prediction=result.test_free_run_after if test is not None else None)
+
+
 def held_out_check(export_dir, test, mp, test_prediction=None) -> tuple[dict, object]:
     """TEST's free-run error of the calibrated SSP in ``export_dir``, of the uncalibrated one and of the predictor.
 

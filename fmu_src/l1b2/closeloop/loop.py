@@ -58,7 +58,7 @@ import pandas as pd
 from ..data import measurements as dataio
 from ..data.metrics import report_metrics
 from ..ident.estimator import PredictorIdentifier
-from ..predictor.effects import Effect, ExtendedPredictor
+from ..predictor.effects import ExtendedPredictor, IdentifiedEffect
 from ..predictor.setup import PredictorSetup
 from . import chain
 from . import residuals as res
@@ -583,7 +583,7 @@ def calibrated_model(base, ext, effects: EffectSet, output_filter, source: dict)
     missing = [c.label for c in effects.candidates if not c.spec]
     if missing:
         return None, f"effects without a serialisable spec (custom candidates): {', '.join(missing)}"
-    recs = tuple(Effect(c.family, c.label, dict(c.spec), tuple(c.names), tuple(c.units),
+    recs = tuple(IdentifiedEffect(c.family, c.label, dict(c.spec), tuple(c.names), tuple(c.units),
                         tuple(float(p) for p in phi), tuple(float(ext.extra_stderr_[n]) for n in c.names),
                         c.description, tuple(c.regressors), c.structural)
                  for c, phi in zip(effects.candidates, effects.phi))

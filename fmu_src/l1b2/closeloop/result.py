@@ -146,22 +146,6 @@ class CloseLoopResult:
             "calibrated_note": self.calibrated_note,
         })
 
-    def export(self, directory, *, mp=None) -> dict:
-        """Write ``Predictor.fmu`` carrying the final extended model and its manifest into ``directory``.
-
-        See :func:`l1b2.fmi.export.export_calibrated` (returns the manifest;
-        effects with a physical home also go into ``L1B2Motor_calibrated.ssp``
-        of ``mp``, default the reference motor). The held-out check of that
-        SSP against TEST is :func:`l1b2.workflows.export_calibrated_model`
-        (what ``l1b2 close-loop --export`` runs). Raises
-        :class:`l1b2.fmi.export.ExportError` when there is nothing to export
-        (``calibrated_note`` says why) or a file fails validation.
-        """
-        from ..fmi.export import ExportError, export_calibrated
-        if self.calibrated_model is None:
-            raise ExportError(f"nothing to export: {self.calibrated_note or 'no extended model'}")
-        return export_calibrated(self.calibrated_model, directory, mp=mp)
-
     def markdown(self) -> str:
         """The report as Markdown (``report.md`` without the figure links)."""
         return markdown_report(self.to_dict())

@@ -37,8 +37,8 @@ from typing import Any, Mapping
 from .. import __version__
 from ..errors import L1B2Error
 from ..physics.params import MotorParams, load_motor
+from ..predictor.effects.homes import map_effects
 from .build import SUBSYSTEM_FMUS, build_fmu
-from .calibrate import map_effects
 from .slaves import SLAVES
 
 MOTOR_FMU = "L1B2Motor"
@@ -290,7 +290,7 @@ def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None)
     -------
     The manifest: the FMU's record (validation results), and per effect its
     parameters and where it went (``Predictor.fmu``; the subsystem FMUs only
-    where mapped, :func:`l1b2.fmi.calibrate.map_effects`, else the reason).
+    where mapped, :func:`l1b2.predictor.effects.homes.map_effects`, else the reason).
     When at least one effect was mapped, also ``L1B2Motor_calibrated.ssp``
     (the four subsystem FMUs with the calibrated parameter set) and the
     parameter set itself, ``calibrated_ssv/<Component>.ssv``.
@@ -300,7 +300,7 @@ def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None)
     ExportError
         if the FMU fails fmpy validation or a Real has no unit (no manifest is written).
     """
-    from ..predictor.effects import ExtendedPredictor
+    from ..predictor.effects import ExtendedPredictor, plugin_sources
 
     if not isinstance(model, ExtendedPredictor):
         raise ExportError(f"export_calibrated needs an l1b2.predictor.effects.ExtendedPredictor, "
@@ -313,7 +313,9 @@ def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None)
     defaults = {"predictor": model.model.to_dict()}
     if model.effects or model.output_filter is not None:   # else the plain Eq. 29 predictor is the model
         defaults["extended_predictor"] = model.to_dict()
-    path = build_fmu(PREDICTOR_FMU, fmu_dir, mp=mp, extra_defaults=defaults)
+    # families defined outside the package travel with the model (imported by the FMU's effects registry)
+    plugins = {f"predictor/effects/plugins/{name}.py": src.encode() for name, src in plugin_sources(model).items()}
+    path = build_fmu(PREDICTOR_FMU, fmu_dir, mp=mp, extra_defaults=defaults, extra_files=plugins or None)
     os.chmod(path, 0o644)
     records = {PREDICTOR_FMU: fmu_record(path, out)}
     mp_cal, mapping = map_effects(model, mp)
