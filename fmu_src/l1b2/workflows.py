@@ -6,7 +6,7 @@ files or a second concurrent run are refused with one line), the job writes
 into a temporary sibling folder, and only a complete result is renamed into
 place, replacing the previous complete result (never mixed with it). Input
 is validated inside, so nothing is left behind when input is refused. JSON
-reports are strict (:func:`l1b2.data.jsonsafe.dumps`: no NaN or Infinity).
+reports are strict (:func:`l1b2.jsonio.dumps`: no NaN or Infinity).
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ import pandas as pd
 from .data import measurements as dataio
 from .data import plots
 from .data.coverage import input_checks, outside_range
-from .data.jsonsafe import dumps
+from .jsonio import dumps
 from .data.metrics import diverged_runs, evaluation_mask, report_metrics, speed_metrics
 from .errors import IdentificationError, OutputError
 from .predictor.setup import PredictorSetup

@@ -2,15 +2,14 @@
 
 :class:`CloseLoopResult` is returned by :func:`l1b2.closeloop.loop.close_loop`
 (and kept as ``CloseLoop.result_``). It computes nothing new: it presents.
-``to_dict()`` is the content of ``report.json`` (strict JSON: non-finite
-numbers become ``None``), ``markdown()`` that of ``report.md``, ``plot()``
+``to_dict()`` is the content of ``report.json`` (strict JSON under the
+package's one rule, :mod:`l1b2.jsonio`: NaN -> ``null``, +-inf -> ``"inf"``/``"-inf"``), ``markdown()`` that of ``report.md``, ``plot()``
 returns the figures, and ``save(dir)`` is the only method that writes files
 (``report.json``, ``report.md`` and the PNGs).
 """
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,7 +20,7 @@ import pandas as pd
 
 from ..data import measurements as dataio
 from ..data import plots
-from ..data.jsonsafe import sig
+from ..jsonio import dumps, sig, strict_json
 from . import residuals as res
 from .selection import Score
 
@@ -131,8 +130,8 @@ class CloseLoopResult:
         return rounds_table(self.to_dict())
 
     def to_dict(self) -> dict:
-        """The report (``report.json`` without ``figures``), strict JSON: non-finite numbers are None."""
-        return _jsonable({
+        """The report (``report.json`` without ``figures``), strict JSON (:func:`l1b2.jsonio.strict_json`)."""
+        return strict_json({
             "baseline": self.baseline,
             "diagnosis": self.diagnosis,
             "extended": self.extended,
@@ -180,34 +179,26 @@ class CloseLoopResult:
             for name, fig in self.plot().items():
                 written.append(plots.save_figure(fig, out / f"{name}.png"))
             report["figures"] = [str(p) for p in written]
-        (out / "report.json").write_text(json.dumps(report, indent=1, allow_nan=False))
+        (out / "report.json").write_text(dumps(report))
         (out / "report.md").write_text(markdown_report(report))
         return [out / "report.json", out / "report.md"] + written
-
-
-def _jsonable(x):
-    """``x`` with numpy scalars/arrays as Python numbers/lists, tuples as lists and non-finite floats as None."""
-    if isinstance(x, dict):
-        return {k: _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple, np.ndarray)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, (bool, np.bool_)):
-        return bool(x)
-    if isinstance(x, (int, np.integer)):
-        return int(x)
-    if isinstance(x, (float, np.floating)):
-        return float(x) if math.isfinite(x) else None
-    return x
 
 
 # ---------------------------------------------------------------------------
 # text
 # ---------------------------------------------------------------------------
 
+def _pct(x, spec: str) -> str:
+    """A report value as a percentage: ``"-"`` for None (NaN), the rule's ``"inf"``/``"-inf"`` as written."""
+    if x is None:
+        return "-"
+    return x if isinstance(x, str) else format(x, spec)
+
+
 def before_after_table(report: dict) -> str:
     """Plain-text table of the error metrics before and after (TEST and TRAIN) of a report dict."""
     def f(x):
-        return f"{x:.2%}" if x is not None else "-"
+        return _pct(x, ".2%")
 
     lines = [f"{'':8s}{'':10s}{'nrmse':>18s}{'mean |rel|':>22s}{'p95 |rel|':>22s}",
              f"{'data':8s}{'kind':10s}{'before':>9s}{'after':>9s}{'before':>11s}{'after':>11s}"
@@ -227,7 +218,7 @@ def before_after_table(report: dict) -> str:
 def rounds_table(report: dict) -> str:
     """Per round: the effect added, its cross-validated (refit) gain and the free-run nrmse before/after it."""
     def f(x):
-        return f"{x:.2%}" if x is not None else "-"
+        return _pct(x, ".2%")
 
     rounds = report.get("rounds") or []
     lines = [f"{'round':6s}{'added':44s}{'CV gain':>9s}{'train before':>14s}{'train after':>13s}"
@@ -277,11 +268,9 @@ def markdown_report(rep: dict) -> str:
                       "| candidate | regressors | linearised gain | CV nrmse current | CV nrmse refit | CV gain "
                       "| folds improved |", "|---|---|---|---|---|---|---|"]
             for t in trials:
-                def pct(x, spec):
-                    return "-" if x is None else format(x, spec)
-                lines.append(f"| {t['label']} | {', '.join(t['regressors'])} | {pct(t['linearised_gain'], '.1%')} | "
-                             f"{pct(t['cv_free_run_nrmse_current'], '.2%')} | "
-                             f"{pct(t['cv_free_run_nrmse_refit'], '.2%')} | {pct(t['cv_gain'], '.1%')} | "
+                lines.append(f"| {t['label']} | {', '.join(t['regressors'])} | {_pct(t['linearised_gain'], '.1%')} | "
+                             f"{_pct(t['cv_free_run_nrmse_current'], '.2%')} | "
+                             f"{_pct(t['cv_free_run_nrmse_refit'], '.2%')} | {_pct(t['cv_gain'], '.1%')} | "
                              f"{t['folds_improved']}/{t['folds']} |")
     lines += ["", "## Error before and after (all rounds)", "", "```", before_after_table(rep), "```", "",
               "## Candidates (best of each family, by held-out gain)", "",

@@ -36,6 +36,7 @@ from typing import Any, Mapping
 
 from .. import __version__
 from ..errors import L1B2Error
+from ..jsonio import dumps
 from ..physics.params import MotorParams, load_motor
 from ..predictor.effects.homes import map_effects
 from .build import SUBSYSTEM_FMUS, build_fmu
@@ -263,7 +264,7 @@ def export_all(out_dir: str | Path, mp: MotorParams | None = None, predictor: Ma
 def write_manifest(path: Path, manifest: dict) -> None:
     """``manifest`` as strict JSON at ``path``, replaced at once (through a temporary sibling)."""
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(manifest, indent=1, allow_nan=False) + "\n")
+    tmp.write_text(dumps(manifest) + "\n")
     os.replace(tmp, path)
 
 

@@ -40,7 +40,6 @@ order on one clock, identical to a serial run; runs that carry state
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -50,6 +49,7 @@ import pandas as pd
 
 from ..data import measurements as dataio
 from ..errors import SimulationError
+from ..jsonio import dumps
 from ..fmi.cache import ensure_fmus
 from ..physics import driver as drv
 from ..physics.params import MotorParams, load_motor
@@ -499,5 +499,5 @@ def write_experiment(df: pd.DataFrame, out_dir, mp: MotorParams, plan: RigPlan, 
     for name, part in (("all", df), ("train", df[~is_test]), ("test", df[is_test])):
         if len(part):  # a plan without the test loads has no test split
             paths[name] = dataio.write_measurements(part.reset_index(drop=True), out / f"{name}.csv", meta)
-    (out / "rig_truth.json").write_text(json.dumps(truth, indent=1, allow_nan=False))
+    (out / "rig_truth.json").write_text(dumps(truth))
     return paths
