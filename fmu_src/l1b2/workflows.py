@@ -588,8 +588,14 @@ def held_out_check(export_dir, test, mp, test_prediction=None) -> tuple[dict, ob
 
 
 def export_from_report(report_dir, out_dir, mp=None) -> dict:
-    """``l1b2 export --from-report``: the calibrated model of a close-loop ``report.json``, exported."""
-    from .predictor.effects import EffectSpecError, ExtendedPredictor
+    """``l1b2 export --from-report``: the calibrated model of a close-loop ``report.json``, exported.
+
+    The report is read through :meth:`l1b2.closeloop.result.CloseLoopResult.from_dict`
+    and exported by :func:`export_close_loop`.
+    """
+    from .closeloop.report import ReportFormatError
+    from .closeloop.result import CloseLoopResult
+    from .predictor.effects import EffectSpecError
     path = Path(report_dir) / "report.json"
     if not path.is_file():
         raise OutputError(f"{path}: no close-loop report here (run 'l1b2 close-loop ... --report-dir {report_dir}')")
@@ -597,16 +603,14 @@ def export_from_report(report_dir, out_dir, mp=None) -> dict:
         rep = json.loads(path.read_text())
     except (OSError, json.JSONDecodeError) as exc:
         raise OutputError(f"{path}: not a readable report.json ({exc})") from None
-    spec = rep.get("calibrated_model") if isinstance(rep, dict) else None
-    if spec is None:
-        note = rep.get("calibrated_note") if isinstance(rep, dict) else None
-        raise OutputError(f"{path}: field 'calibrated_model' is empty or missing"
-                          + (f" ({note})" if note else " (a report of an older version?)"))
     try:
-        model = ExtendedPredictor.from_dict(spec)
-    except EffectSpecError as exc:
-        raise OutputError(f"{path}: field 'calibrated_model': {exc}") from None
-    return export_calibrated_model(model, out_dir, mp=mp)
+        result = CloseLoopResult.from_dict(rep)
+    except (ReportFormatError, EffectSpecError) as exc:
+        raise OutputError(f"{path}: {exc}") from None
+    if result.calibrated_model is None:
+        raise OutputError(f"{path}: field 'calibrated_model' is empty"
+                          + (f" ({result.calibrated_note})" if result.calibrated_note else ""))
+    return export_close_loop(result, out_dir, mp=mp)
 
 
 def run_close_loop(train_path, test_path, out_dir, *, slider_mass_kg=None, plots_on=True, progress=None,
