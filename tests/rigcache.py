@@ -60,3 +60,13 @@ def held_out_nrmse(res) -> tuple[float, float]:
     b = res.before["test"]["free_run"]["nrmse"]
     a = res.after["test"]["free_run"]["nrmse"] if res.after is not None else b
     return b, a
+
+
+def assert_round_trips(res) -> None:
+    """``report.json`` of a close-loop result reads back into an equal result (``from_dict(to_dict(r)) == r``)."""
+    import json
+
+    from l1b2.closeloop.result import CloseLoopResult
+    rep = json.loads(json.dumps(res.to_dict(), allow_nan=False))
+    back = CloseLoopResult.from_dict(rep)
+    assert back == res and back.to_dict() == rep

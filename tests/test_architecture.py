@@ -31,9 +31,8 @@ ALLOWED = {
     "cosim": {"errors", "units", "physics", "predictor"},
     "fmi": {"errors", "units", "physics", "predictor", "cosim"},
     "ident": {"errors", "units", "physics", "predictor", "data"},
-    # closeloop -> fmi: only CloseLoopResult.export (writes the calibrated Predictor.fmu; I/O off the result)
     # closeloop -> cluster: its cross-validated refits are tasks of the parallel engine
-    "closeloop": {"errors", "units", "physics", "predictor", "data", "ident", "fmi", "cluster"},
+    "closeloop": {"errors", "units", "physics", "predictor", "data", "ident", "cluster"},
     "cluster": {"errors", "units"},  # the parallel engine (Dask) under the rig, the sweeps and the closed loop
     "rig": {"errors", "units", "physics", "predictor", "cosim", "fmi", "data", "cluster"},
     "sweep": {"errors", "units", "physics", "predictor", "cosim", "fmi", "data", "rig", "cluster"},
@@ -42,9 +41,11 @@ ALLOWED = {
     "cli": {"errors", "units", "physics", "predictor", "cosim", "fmi", "data", "ident", "closeloop", "rig",
             "cluster", "sweep", "workflows", "__init__"},
     "__init__": set(),
+    "jsonio": set(),
 }
-#: the package's version lives in ``l1b2/__init__.py``; any layer may read it
-ALWAYS = {"__init__"}
+#: the package's version lives in ``l1b2/__init__.py``, the one JSON writer of every report in
+#: ``l1b2/jsonio.py``; any layer may use them
+ALWAYS = {"__init__", "jsonio"}
 
 
 def _modules() -> dict[str, Path]:

@@ -25,7 +25,7 @@ from l1b2.closeloop.loop import CloseLoop, close_loop, order_traced
 from l1b2.closeloop.result import CloseLoopResult
 from l1b2.data.measurements import load_measurements
 from l1b2.rig.experiment import INJECTIONS, RigPlan
-from rigcache import case_row, rig_dir
+from rigcache import assert_round_trips, case_row, rig_dir
 
 FAST = [("pulley_friction", 1), ("direction_asymmetry", 2), ("drive_saturation", 3), ("thermal_drift", 4)]
 SLOW = [(e, s) for e in ("pulley_friction", "direction_asymmetry", "drive_saturation", "thermal_drift")
@@ -37,6 +37,7 @@ def _run(effect, seed, record_temperature=False):
     d = rig_dir(f"{effect}_{seed}{'_T' if record_temperature else ''}", injections=[effect] if effect else [],
                 injection_seed=seed, plan=RigPlan(step_s=1e-3, seed=seed, record_temperature=record_temperature))
     res = close_loop(load_measurements(d / "train.csv"), load_measurements(d / "test.csv"))
+    assert_round_trips(res)
     truth = json.loads((d / "rig_truth.json").read_text())
     return res, truth
 
@@ -90,7 +91,8 @@ def test_export_of_the_calibrated_model(tmp_path, isolated):
     dte = res.test_df
     want = res.extended_model.predict_free_run(dte)
     np.testing.assert_allclose(_extended_free_run(ep, dte), want, rtol=1e-10, atol=1e-13)
-    manifest = res.export(tmp_path / "exp")
+    from l1b2.workflows import export_close_loop
+    manifest = export_close_loop(res, tmp_path / "exp")
     fam = {e["family"]: e for e in manifest["effects"]}
     assert fam["load_path_friction"]["subsystems"]["home"] == "Slider.pulley_mu"
     assert all(e["predictor_fmu"] == "fmus/Predictor.fmu" for e in manifest["effects"])
@@ -386,4 +388,5 @@ def test_result_api_matches_the_saved_report(tmp_path):
     saved = json.loads((tmp_path / "r" / "report.json").read_text())
     assert saved.pop("figures") == [str(tmp_path / "r" / f"{n}.png") for n in figs]
     assert saved == rep
+    assert CloseLoopResult.from_dict(saved) == res   # figures are not part of the result
     assert (tmp_path / "r" / "report.md").read_text().startswith(res.markdown().rstrip())

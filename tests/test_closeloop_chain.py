@@ -19,7 +19,7 @@ from l1b2.data.measurements import load_measurements
 from l1b2.data.metrics import report_metrics
 from l1b2.ident.estimator import PredictorIdentifier
 from l1b2.rig.experiment import RigPlan
-from rigcache import rig_dir
+from rigcache import assert_round_trips, rig_dir
 
 
 def test_low_passed_speed_column_is_settled_first_and_carried_by_the_exported_model():
@@ -31,6 +31,7 @@ def test_low_passed_speed_column_is_settled_first_and_carried_by_the_exported_mo
     train, test = load_measurements(d / "train.csv"), load_measurements(d / "test.csv")
     tau = json.loads((d / "rig_truth.json").read_text())["injections"][0]["parameters"]["DAQ.speed_tau_s"]
     res = close_loop(train, test)
+    assert_round_trips(res)
     diag = res.diagnosis
     assert diag["measurement_chain"]["accepted"], diag["measurement_chain"]
     # kept because the chain model predicts held-out runs better than the baseline, both refitted per fold

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 from l1b2.closeloop import residuals as res
-from l1b2.closeloop.acceptance import EffectSet, cv_errors, fold_error, fold_start_phi, stratified_folds
+from l1b2.closeloop.acceptance import (EffectSet, RefitSettings, cv_errors, fold_error, fold_start_phi,
+                                      stratified_folds)
 from l1b2.closeloop.candidates import full_library
 from l1b2.closeloop.loop import analyse_residuals, candidate_context
 from l1b2.closeloop.selection import design
@@ -32,17 +33,17 @@ def test_cv_refits_on_a_local_cluster_equal_the_serial_ones():
     folds = stratified_folds(df, 3, 0)
     fphi = fold_start_phi(S, A, y, runs_m, folds)
     jobs = [(EffectSet(), None), (EffectSet().add(c, np.zeros(c.n_params)), fphi)]
-    kw = dict(order=8, seed=0, max_nfev=3)
-    serial = cv_errors(df, mask, m_s, folds, base.params_, jobs, **kw)
+    settings = RefitSettings(order=8, seed=0, max_nfev=3)
+    serial = cv_errors(df, mask, m_s, folds, base.params_, jobs, settings)
     with optional_client(2, serial_up_to=1) as client:
         assert len(client.nthreads()) == 2
-        parallel = cv_errors(df, mask, m_s, folds, base.params_, jobs, client=client, **kw)
+        parallel = cv_errors(df, mask, m_s, folds, base.params_, jobs, RefitSettings(8, 0, 3, client=client))
     for s, p in zip(serial, parallel):
         np.testing.assert_allclose(p.sse, s.sse, rtol=1e-12, atol=0)
         np.testing.assert_array_equal(s.ss_meas, p.ss_meas)
         assert s.failed == p.failed == 0
     # each entry is the one-fold refit; the candidate lowers the held-out error (pulley friction is in the data)
-    one = fold_error(df, mask, m_s, folds[1], base.params_, jobs[1][0].with_phi(fphi[1]), **kw)
+    one = fold_error(df, mask, m_s, folds[1], base.params_, jobs[1][0].with_phi(fphi[1]), settings)
     assert one[0] == pytest.approx(serial[1].sse[1], rel=1e-12) and one[1] == serial[1].ss_meas[1]
     assert serial[1].sse.sum() < serial[0].sse.sum()
 

@@ -12,72 +12,12 @@ for fitting or choosing):
 * without one (control): the held-out free-run nrmse never more than 2 %
   (relative) above the baseline; what was added is reported.
 
-Fast set (``make test``): one control seed and the speed-channel detector
-(the load-path case, which also checks the report's per-round fields, moved
-to the slow set in the sixth session: on the noisy rig it took 399 s and
-``make test`` 16 min; the exact world's report test stays fast). Slow set (``make test-slow``, not in CI: it does
-not fit CI's time): ten control seeds, six effect kinds, three pairs of
-effects. Measured on 2026-11-23 (second session, with structural terms traced after
-the missing effects and immaterial evidence traced): the single-effect
-checks pass for direction_asymmetry 2 and 13, bar_waviness 2, pulley_friction
-11, drive_saturation 3 and bar_bump 8, and fail for thermal_drift 4 and 12
-(time not shortlisted by default; see the screened test); pairs 5 and 7 pass,
-pair 6 (with thermal drift) fails; the ten-seed control passes; the
-measurement-chain effect speed_lowpass (seed 8) fails (the speed filter is
-not kept). Re-measured on 2026-11-23 (third session) after the fix that made
-the generic time/speed/temperature terms fittable: thermal_drift 4 unchanged
-(traced to load, voltage; TEST 5.09 -> 2.43 %). Fourth session: with the
-measurement chain settled before the rounds (physics re-identified on the
-position's derivative), speed_lowpass seed 8 passes (traced speed, load,
-voltage; TEST 3.65 -> 3.42 % after the filter, 1.05 % after the load x voltage
-term; it failed with the filter applied after the rounds: 3.65 -> 1.50 %, speed not traced). Fifth
-session, with the uncorrected screen (``screen_alpha=0.01``) on by default: all eight single-effect
-cases pass (thermal_drift 4 and 12 now too), pairs 5 and 7 pass, the ten-seed control and
-speed_lowpass 8 pass; pair 6 (direction_asymmetry + thermal_drift) still fails: after the direction
-and load x voltage terms, the time candidates' linearised held-out gain on TRAIN is 0.055 (p 0.23),
-the self-heating (driven by V0^2) having been taken up by the voltage terms. Each case's figures are
-recorded (``pytest --junitxml=F``, then ``python bench/case_table.py F``).
-
-Sixth session: the realistic world's rig now has measurement noise and run-to-run scatter
-(``rigcache.RIG_NOISE``: 1 mm/s white noise on the speed column, 2 % scatter of the contact's preload
-and friction coefficient per run), so the seeds are different data. Whole file, ``pytest -n 2 -m "slow
-or not slow"``: 11 passed, 5 failed in 81 min. Pass: the ten-seed control (each gets one structural
-term; TEST 2.78-4.36 % -> 1.67-2.46 %), clean 21, the load-path report, direction_asymmetry 2 and 13,
-bar_waviness 2, bar_bump 8, pulley_friction 11, pairs 5 and 7. Fail: thermal_drift 4 and 12 and pair 6
-(time not traced; the cut holds in all three), drive_saturation 3 (nothing significant: with the
-scatter its baseline, 2.25 %, is below the clean one, 2.67 %), speed_lowpass 8 (filter found, CV gain
-0.998, then refused by the 3 % TRAIN gate at 2.3 %; the gate is now "any fall", see
-``CloseLoop._chain``; with it speed_lowpass 8 passes: traced speed, load, voltage, TEST 3.68 -> 2.24 %,
-and the exact world's chain test still passes).
-
-Seventh and eighth sessions (one common noise variance in every fit of the loop, the paper's single R): the
-ten-seed control passes (seeds 30-35 at the seventh, 36-39 at the eighth: TEST 2.72-3.49 % -> 1.30-2.22 %);
-pass: thermal_drift 12, direction_asymmetry 2 and 13, bar_waviness 2, pulley_friction 11, bar_bump 8, pairs
-5 and 7, the load-path report; fail: thermal_drift 4 and pair 6 (time not traced), drive_saturation 3
-(invisible), speed_lowpass 8: the channel's test finds the filter (CV gain 0.998, p 4e-11) but the model
-re-identified behind it predicts TRAIN 1.4 % worse, so it is not applied (TEST 3.03 -> 1.98 % without it;
-b0 3.05 %); since the eighth session ``speed`` is reported in traced_to as evidence, first, but this test
-also requires the filter to be applied.
-
-Ninth session. The speed channel's harm guard is now cross-validated, with both the baseline and the
-chain's physics refitted per fold, as every effect is decided. speed_lowpass 8 is still refused: the
-chain's CV free-run nrmse is 4.19 % against the baseline's 4.15 %, better in 1 of 4 folds (TRAIN
-in-sample -1.38 %; TEST 3.008 % against 3.034 %). So the filter is invisible at this seed. Cases added
-before they were run, all reported: drive_saturation 11 and 12 pass (voltage is traced through the
-structural load x voltage term; the saturation itself is not named; the injected world's baseline is
-below the clean one), speed_lowpass 11 passes the issue's check (speed first, TEST 3.31 -> 2.41 %, b0
-3.37 %), but its filter is refused as at seed 8, so it is not in the measurement-chain test. The pairs
-bar_bump + direction_asymmetry 9 (TEST 7.23 -> 3.56 %, b0 3.15 %; the bump is modelled as a waviness) and
-drive_saturation + bar_waviness 10 (4.64 -> 2.42 %, b0 2.76 %; voltage third, through the load-slope
-term) pass.
-
-Tenth session. The four cases known to fail are strict xfails with their measured reasons (so a
-pass is noticed): thermal_drift 4, pair 6, drive_saturation 3, speed_lowpass 8. With the stator temperature
-logged (the data format's optional ``temperature_C``), thermal_drift 12 is traced to the temperature first
-(thermal_drift_T; TEST 3.59 -> 1.88 %, b0 3.09 %), and a clean file with a constant temperature column gets
-no temperature term (new tests). thermal_drift 4 is not traced even then (TEST 3.99 -> 2.32 %, load and
-voltage terms only). Whole file with ``-m "slow or not slow" -n 2``: 17 passed, 4 xfailed in one run
-(before the two temperature tests were added), and the two new tests passed in another.
+Fast set (``make test``): one control seed, a control with a logged constant temperature and the
+speed-channel detector; slow set (``make test-slow``, not in CI: it does not fit CI's time): ten control
+seeds, the single effects, pairs of effects, the load-path report and the logged-temperature case. The
+cases the loop is known to miss are strict xfails with their measured reasons, so that a pass is noticed.
+Each case's figures are recorded (``pytest --junitxml=F``, then ``python bench/case_table.py F``); what
+was measured, session by session: ``docs/decisions/0005-realistic-world-close-loop-checks.md``.
 """
 
 import dataclasses
@@ -91,7 +31,7 @@ from l1b2.closeloop.loop import close_loop
 from l1b2.data.measurements import load_measurements
 from l1b2.data.metrics import report_metrics
 from l1b2.ident.estimator import PredictorIdentifier
-from rigcache import case_row, held_out_nrmse, rig_dir, world_plan
+from rigcache import assert_round_trips, case_row, held_out_nrmse, rig_dir, world_plan
 
 WORLD = "realistic"
 
@@ -107,6 +47,7 @@ def _dir(effects, seed, record_temperature=False):
 def _run(effects: tuple, seed: int, record_temperature: bool = False):
     d = _dir(effects, seed, record_temperature)
     res = close_loop(load_measurements(d / "train.csv"), load_measurements(d / "test.csv"))
+    assert_round_trips(res)
     truth = json.loads((d / "rig_truth.json").read_text())
     return res, truth
 

@@ -25,7 +25,7 @@ from l1b2.fmi.build import build_fmu
 from l1b2.physics.params import load_motor
 from l1b2.predictor import effects as fx
 from l1b2.predictor.derive import derive_predictor
-from l1b2.predictor.effects import Effect, ExtendedPredictor
+from l1b2.predictor.effects import ExtendedPredictor, IdentifiedEffect
 from l1b2.predictor.setup import PredictorSetup
 
 pytestmark = pytest.mark.fmu
@@ -106,8 +106,9 @@ def models(pool) -> dict[str, ExtendedPredictor]:
         assert cands, f"the library has no candidate of kind {kind}"
         if kind not in ("smooth", "smooth_pair"):   # a defect on the runs' path (centre near 0 mm)
             cands = [min(cands, key=lambda c: abs(c.spec.get("center_m", 0.0)))]
-        effects = tuple(Effect(c.family, c.label, c.spec, c.names, c.units, tuple(_phi(rng, c.features(df))),
-                               (0.01,) * c.n_params, c.description, c.regressors, c.structural) for c in cands)
+        effects = tuple(IdentifiedEffect(c.family, c.label, c.spec, c.names, c.units,
+                                         tuple(_phi(rng, c.features(df))), (0.01,) * c.n_params, c.description,
+                                         c.regressors, c.structural) for c in cands)
         out[kind] = ExtendedPredictor(base, refit, effects, None, {"train": "synthetic test frame"})
     out["output_filter"] = ExtendedPredictor(base, refit, out["load_path_friction"].effects, FILTER,
                                              {"train": "synthetic test frame"})

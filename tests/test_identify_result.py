@@ -57,6 +57,35 @@ def test_settings_protocol():
     assert "order=3" in repr(est) and "criterion" not in repr(est)
 
 
+def test_the_close_loop_follows_the_same_settings_protocol():
+    # reference: one convention (EstimatorSettings): the settings are the constructor's keyword arguments
+    import inspect
+
+    from l1b2.closeloop.loop import CloseLoop
+    sig = [n for n in inspect.signature(CloseLoop.__init__).parameters if n != "self"]
+    est = CloseLoop(order=6)
+    assert list(est.get_params()) == sig and clone(est, seed=4).get_params() == {**est.get_params(), "seed": 4}
+    assert est.set_params(max_rounds=1) is est and est.max_rounds == 1
+    with pytest.raises(ValueError, match="unknown setting 'gamma'"):
+        est.set_params(gamma=1.0)
+    assert repr(est) == "CloseLoop(order=6, max_rounds=1)"
+
+
+def test_fitted_attributes_are_read_only_views_of_the_result(fitted):
+    # reference: the result's own arrays (shared memory, not copies), which cannot be written through the estimator
+    r = fitted.result_
+    p = r.p_theta
+    assert np.shares_memory(fitted.theta_, r.values) and np.array_equal(fitted.theta_, r.values[:p])
+    assert np.shares_memory(fitted.cov_, r.cov) and fitted.cov_.shape == (p, p)
+    for name in ("theta_", "stderr_", "ci95_", "cov_all_", "varied_"):
+        with pytest.raises(ValueError, match="read-only"):
+            getattr(fitted, name)[0] = 0.0
+    with pytest.raises(AttributeError):
+        fitted.theta_ = None
+    assert fitted.params_ is r.params and fitted.loglik_ == r.loglik and fitted.m_s_ == r.slider_mass_kg
+    assert not hasattr(PredictorIdentifier(), "theta_")
+
+
 def test_fit_accepts_measurements(tmp_path, data):
     path = tmp_path / "train.csv"
     write_measurements(data, path, meta={"slider_mass_kg": M_S})

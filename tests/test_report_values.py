@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
-from l1b2.data.jsonsafe import dumps, sig, strict_json
+from l1b2.jsonio import dumps, sig, strict_json
 from l1b2.data.metrics import DIVERGED_FACTOR, diverged_runs, report_metrics
 
 

@@ -99,7 +99,7 @@ def cmd_rig(args) -> int:
         write_experiment,
     )
 
-    from .data.jsonsafe import dumps
+    from .jsonio import dumps
     from .workflows import output_dir
 
     mp = _motor(args)

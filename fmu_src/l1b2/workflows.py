@@ -6,7 +6,7 @@ files or a second concurrent run are refused with one line), the job writes
 into a temporary sibling folder, and only a complete result is renamed into
 place, replacing the previous complete result (never mixed with it). Input
 is validated inside, so nothing is left behind when input is refused. JSON
-reports are strict (:func:`l1b2.data.jsonsafe.dumps`: no NaN or Infinity).
+reports are strict (:func:`l1b2.jsonio.dumps`: no NaN or Infinity).
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ import pandas as pd
 from .data import measurements as dataio
 from .data import plots
 from .data.coverage import input_checks, outside_range
-from .data.jsonsafe import dumps
+from .jsonio import dumps
 from .data.metrics import diverged_runs, evaluation_mask, report_metrics, speed_metrics
 from .errors import IdentificationError, OutputError
 from .predictor.setup import PredictorSetup
@@ -529,6 +529,21 @@ def export_calibrated_model(model, out_dir, mp=None, *, test=None, test_predicti
     return manifest
 
 
+def export_close_loop(result, out_dir, mp=None, *, test=None) -> dict:
+    """Write a close-loop result's final model (``result.calibrated_model``) as ``Predictor.fmu``; the manifest.
+
+    :func:`export_calibrated_model` of the result's model (effects with a
+    physical home also go into ``L1B2Motor_calibrated.ssp`` of ``mp``,
+    default the reference motor; with ``test``, its held-out check against
+    the result's own TEST prediction). Raises :class:`OutputError` when there
+    is nothing to export (``result.calibrated_note`` says why).
+    """
+    if result.calibrated_model is None:
+        raise OutputError(f"{out_dir}: nothing to export: {result.calibrated_note or 'no extended model'}")
+    return export_calibrated_model(result.calibrated_model, out_dir, mp=mp, test=test,
+                                   test_prediction=result.test_free_run_after if test is not None else None)
+
+
 def held_out_check(export_dir, test, mp, test_prediction=None) -> tuple[dict, object]:
     """TEST's free-run error of the calibrated SSP in ``export_dir``, of the uncalibrated one and of the predictor.
 
@@ -573,8 +588,14 @@ def held_out_check(export_dir, test, mp, test_prediction=None) -> tuple[dict, ob
 
 
 def export_from_report(report_dir, out_dir, mp=None) -> dict:
-    """``l1b2 export --from-report``: the calibrated model of a close-loop ``report.json``, exported."""
-    from .predictor.effects import EffectSpecError, ExtendedPredictor
+    """``l1b2 export --from-report``: the calibrated model of a close-loop ``report.json``, exported.
+
+    The report is read through :meth:`l1b2.closeloop.result.CloseLoopResult.from_dict`
+    and exported by :func:`export_close_loop`.
+    """
+    from .closeloop.report import ReportFormatError
+    from .closeloop.result import CloseLoopResult
+    from .predictor.effects import EffectSpecError
     path = Path(report_dir) / "report.json"
     if not path.is_file():
         raise OutputError(f"{path}: no close-loop report here (run 'l1b2 close-loop ... --report-dir {report_dir}')")
@@ -582,16 +603,14 @@ def export_from_report(report_dir, out_dir, mp=None) -> dict:
         rep = json.loads(path.read_text())
     except (OSError, json.JSONDecodeError) as exc:
         raise OutputError(f"{path}: not a readable report.json ({exc})") from None
-    spec = rep.get("calibrated_model") if isinstance(rep, dict) else None
-    if spec is None:
-        note = rep.get("calibrated_note") if isinstance(rep, dict) else None
-        raise OutputError(f"{path}: field 'calibrated_model' is empty or missing"
-                          + (f" ({note})" if note else " (a report of an older version?)"))
     try:
-        model = ExtendedPredictor.from_dict(spec)
-    except EffectSpecError as exc:
-        raise OutputError(f"{path}: field 'calibrated_model': {exc}") from None
-    return export_calibrated_model(model, out_dir, mp=mp)
+        result = CloseLoopResult.from_dict(rep)
+    except (ReportFormatError, EffectSpecError) as exc:
+        raise OutputError(f"{path}: {exc}") from None
+    if result.calibrated_model is None:
+        raise OutputError(f"{path}: field 'calibrated_model' is empty"
+                          + (f" ({result.calibrated_note})" if result.calibrated_note else ""))
+    return export_close_loop(result, out_dir, mp=mp)
 
 
 def run_close_loop(train_path, test_path, out_dir, *, slider_mass_kg=None, plots_on=True, progress=None,

@@ -24,7 +24,8 @@ the joint identification.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -98,18 +99,73 @@ def stratified_folds(df: pd.DataFrame, k: int, seed: int = 0) -> list[np.ndarray
     return [ids[i::k] for i in range(k)]
 
 
-def refit(df: pd.DataFrame, mask: np.ndarray, m_s: float, init, effects: EffectSet, *, order: int, seed: int,
-          max_nfev: int, max_outer: int = 2, noise: str = "common") -> PredictorIdentifier:
+@dataclass(frozen=True)
+class RefitSettings:
+    """How every refit of the loop is identified, in one object.
+
+    ``order``: polynomial order of A, B, P; ``seed``; ``max_nfev``: function
+    evaluations of one warm refit; ``noise``: the identifier's noise
+    variances (``"common"`` or ``"per_run"``); ``client``: where the folds
+    run (a Dask client, None: in this process; not part of a task).
+    """
+
+    order: int = 8
+    seed: int = 0
+    max_nfev: int = DEFAULT_REFIT_NFEV
+    noise: str = "common"
+    client: Any = field(default=None, compare=False, repr=False)
+
+    def budget(self, max_nfev: int) -> RefitSettings:
+        """The same settings with another evaluation budget."""
+        return replace(self, max_nfev=int(max_nfev))
+
+    def task(self) -> RefitSettings:
+        """The settings a task carries (without the client)."""
+        return replace(self, client=None)
+
+
+def validated(df) -> dataio.Measurements:
+    """A frame of the loop's data as :class:`~l1b2.data.measurements.Measurements`: not validated again.
+
+    Every frame the loop hands to the identification is TRAIN or TEST as
+    loaded (validated once, by ``load_measurements``), a subset of their runs,
+    or their speed replaced by the position's derivative
+    (:func:`l1b2.closeloop.chain.with_position_speed`); the identification
+    validates a plain DataFrame on every call, a Measurements never.
+    """
+    return df if isinstance(df, dataio.Measurements) else dataio.Measurements(df, {}, None)
+
+
+class Validated:
+    """A fitted identifier whose predictions take the loop's frames as validated data (:func:`validated`)."""
+
+    def __init__(self, est: PredictorIdentifier):
+        self.est = est
+
+    def predict_free_run(self, df) -> np.ndarray:
+        return self.est.predict_free_run(validated(df))
+
+    def predict_one_step(self, df) -> np.ndarray:
+        return self.est.predict_one_step(validated(df))
+
+    def __getattr__(self, name):
+        if name == "est":
+            raise AttributeError(name)
+        return getattr(self.est, name)
+
+
+def refit(df: pd.DataFrame, mask: np.ndarray, m_s: float, init, effects: EffectSet, settings: RefitSettings, *,
+          max_outer: int = 2) -> Validated:
     """The model with ``effects``, re-identified on ``df`` by one warm local search (bounded budget).
 
-    ``noise``: the identifier's noise variances (``"common"`` or ``"per_run"``); the search is the
-    least-squares alternation (``noise_fit="alternate"``) whatever the baseline's.
+    The search is the least-squares alternation (``noise_fit="alternate"``) whatever the baseline's.
     """
     extra = effects.extra()
-    est = PredictorIdentifier(order=order, criterion="free_run", fixed="recommended", n_starts=1, seed=seed,
-                              extra=extra, init=init, init_extra=effects.start() if extra is not None else None,
-                              max_nfev=max_nfev, max_outer=max_outer, noise=noise, noise_fit="alternate")
-    return est.fit(df, slider_mass_kg=m_s, mask=mask)
+    est = PredictorIdentifier(order=settings.order, criterion="free_run", fixed="recommended", n_starts=1,
+                              seed=settings.seed, extra=extra, init=init,
+                              init_extra=effects.start() if extra is not None else None, max_nfev=settings.max_nfev,
+                              max_outer=max_outer, noise=settings.noise, noise_fit="alternate")
+    return Validated(est.fit(validated(df), slider_mass_kg=m_s, mask=mask))
 
 
 @dataclass
@@ -169,9 +225,8 @@ def materiality(candidate: CandidateForce, min_drop: float) -> float:
     return min_drop if candidate.structural else 0.0
 
 
-def fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, init, effects: EffectSet, order: int,
-               seed: int, max_nfev: int, noise: str = "common",
-               chain_k: int | None = None) -> tuple[float, float, bool]:
+def fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, init, effects: EffectSet,
+               settings: RefitSettings, chain_k: int | None = None) -> tuple[float, float, bool]:
     """One fold: refit on the runs not in ``held_runs``, predict those in free run.
 
     With ``chain_k`` the model is the measurement chain's
@@ -193,14 +248,14 @@ def fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, init, 
     train, test = df.loc[~held].reset_index(drop=True), df.loc[held].reset_index(drop=True)
     filt = None
     if chain_k is not None:
-        filt = chain.speed_channel(train, mask[~held], k=chain_k, seed=seed).get("filter")
+        filt = chain.speed_channel(train, mask[~held], k=chain_k, seed=settings.seed).get("filter")
         if filt is None:
             return np.inf, ssm, True
         train, test_in = chain.with_position_speed(train), chain.with_position_speed(test)
     else:
         test_in = test
     try:
-        est = refit(train, mask[~held], m_s, init, effects, order=order, seed=seed, max_nfev=max_nfev, noise=noise)
+        est = refit(train, mask[~held], m_s, init, effects, settings)
         pred = est.predict_free_run(test_in)
         e = (v[held] - (pred if filt is None else filt.apply(test, pred)))[m_te]
     except IdentificationError:
@@ -208,15 +263,14 @@ def fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, init, 
     return (float(np.sum(e ** 2)) if np.all(np.isfinite(e)) else np.inf), ssm, False
 
 
-def chain_cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init_base, init_chain, *, order: int,
-                    seed: int, max_nfev: int, client=None, noise: str = "common",
-                    k: int = 5) -> tuple[FoldErrors, FoldErrors]:
+def chain_cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init_base, init_chain,
+                    settings: RefitSettings, *, k: int = 5) -> tuple[FoldErrors, FoldErrors]:
     """:class:`FoldErrors` of the baseline (refitted on the measured speed from ``init_base``) and of the
     measurement-chain model (:func:`fold_error` with ``chain_k=k``, from ``init_chain``) on the same
     ``folds``; every fold of both is one task of :func:`l1b2.cluster.run_tasks`."""
-    args = [(df, mask, m_s, fold, init, EffectSet(), order, seed, max_nfev, noise, chain_k)
+    args = [(df, mask, m_s, fold, init, EffectSet(), settings.task(), chain_k)
             for init, chain_k in ((init_base, None), (init_chain, k)) for fold in folds]
-    return tuple(_fold_errors(args, 2, len(folds), client, "l1b2-chain-cv"))
+    return tuple(_fold_errors(args, 2, len(folds), settings.client, "l1b2-chain-cv"))
 
 
 def _fold_errors(args: list, n_groups: int, n_folds: int, client, name: str) -> list[FoldErrors]:
@@ -230,14 +284,14 @@ def _fold_errors(args: list, n_groups: int, n_folds: int, client, name: str) -> 
             for rows in groups]
 
 
-def cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init, jobs, *, order: int, seed: int,
-              max_nfev: int, client=None, noise: str = "common") -> list[FoldErrors]:
+def cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init, jobs,
+              settings: RefitSettings) -> list[FoldErrors]:
     """:class:`FoldErrors` of every job ``(effects, fold_phi)`` on the same ``folds``, all folds as tasks.
 
     ``fold_phi`` (or None): per fold, the start of the last effect's parameters
     (:func:`fold_start_phi`). The ``len(jobs) * len(folds)`` refits are
     independent tasks of :func:`l1b2.cluster.run_tasks`: in this process in
-    order with ``client=None``, else spread over the Dask cluster's workers;
+    order with ``settings.client=None``, else spread over the Dask cluster's workers;
     the result does not depend on where they ran.
     """
     args = []
@@ -245,8 +299,8 @@ def cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init, jobs,
         for i, fold in enumerate(folds):
             eff = effects if fold_phi is None else effects.with_phi(
                 np.concatenate([effects.start()[:-len(fold_phi[i])], fold_phi[i]]))
-            args.append((df, mask, m_s, fold, init, eff, order, seed, max_nfev, noise))
-    return _fold_errors(args, len(jobs), len(folds), client, "l1b2-cv-refit")
+            args.append((df, mask, m_s, fold, init, eff, settings.task()))
+    return _fold_errors(args, len(jobs), len(folds), settings.client, "l1b2-cv-refit")
 
 
 def fold_start_phi(S: np.ndarray, A: np.ndarray, y: np.ndarray, runs_m: np.ndarray, folds) -> list[np.ndarray]:

@@ -1,7 +1,9 @@
 """Close the loop with measured data: residual -> missing effect -> extended model -> error before and after.
 
-:class:`CloseLoop` is the estimator (scikit-learn convention: ``__init__``
-stores the settings, :meth:`CloseLoop.fit` takes validated
+:class:`CloseLoop` is the estimator (scikit-learn convention, shared with
+:class:`~l1b2.ident.estimator.PredictorIdentifier` through
+:class:`~l1b2.ident.convention.EstimatorSettings`: ``__init__`` stores the
+settings, ``get_params``/``set_params`` read and change them), :meth:`CloseLoop.fit` takes validated
 :class:`l1b2.data.measurements.Measurements` and sets ``result_``, a
 :class:`~l1b2.closeloop.result.CloseLoopResult`); :func:`close_loop` is the
 one-call form. No file is read or written and nothing is plotted here
@@ -57,15 +59,16 @@ import pandas as pd
 
 from ..data import measurements as dataio
 from ..data.metrics import report_metrics
+from ..ident.convention import EstimatorSettings
 from ..ident.estimator import PredictorIdentifier
-from ..predictor.effects import Effect, ExtendedPredictor
+from ..predictor.effects import ExtendedPredictor, IdentifiedEffect
 from ..predictor.setup import PredictorSetup
 from . import chain
 from . import residuals as res
 from .candidates import CandidateSource, Context, full_library
 from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT_FOLDS, DEFAULT_REFIT_NFEV,
-                         EffectSet, RefitCV, accepts, chain_cv_errors, cv_errors, fold_start_phi, materiality,
-                         refit, stratified_folds)
+                         EffectSet, RefitCV, RefitSettings, Validated, accepts, chain_cv_errors, cv_errors,
+                         fold_start_phi, materiality, refit, stratified_folds, validated)
 from .result import CloseLoopResult, ResidualAnalysis
 from .selection import (DEFAULT_ALPHA, DEFAULT_PARSIMONY, SHORTLIST_MIN_GAIN, Score, best_per_family, design,
                         score_candidates, shortlist, significance_level)
@@ -75,7 +78,7 @@ def _quiet(msg: str) -> None:
     pass
 
 
-class CloseLoop:
+class CloseLoop(EstimatorSettings):
     """Find the missing effect in the free-run residual of the Eq. 29 predictor, add it, report before/after.
 
     Parameters
@@ -171,17 +174,6 @@ class CloseLoop:
         self.screen_alpha = screen_alpha
         self.client = client
 
-    def get_params(self) -> dict:
-        """The settings given to ``__init__``."""
-        return {k: getattr(self, k) for k in ("order", "k_folds", "alpha", "min_gain", "parsimony", "seed",
-                                              "n_starts", "library", "progress", "max_rounds", "shortlist",
-                                              "refit_folds", "min_cv_gain", "min_cv_drop", "refit_nfev",
-                                              "final_nfev", "screen_alpha", "noise_fit", "noise", "client")}
-
-    def __repr__(self) -> str:
-        args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items() if k not in ("progress", "client"))
-        return f"CloseLoop({args})"
-
     # -- the job -------------------------------------------------------------
     def fit(self, train: dataio.Measurements, test: dataio.Measurements | None = None) -> CloseLoop:
         """Identify, diagnose, extend round by round and re-identify on ``train``; report on ``train`` and ``test``.
@@ -244,11 +236,16 @@ class CloseLoop:
             calibrated_model=calibrated, calibrated_note=why)
         return self
 
-    def _identify(self, df: pd.DataFrame, m_s: float, mask: np.ndarray) -> PredictorIdentifier:
+    def _identify(self, df: pd.DataFrame, m_s: float, mask: np.ndarray) -> Validated:
         """The baseline Eq. 29 predictor identified on ``df`` (free-run maximum likelihood, multi-start)."""
-        return PredictorIdentifier(order=self.order, criterion="free_run", fixed="recommended",
-                                   n_starts=self.n_starts, seed=self.seed, noise_fit=self.noise_fit,
-                                   noise=self.noise).fit(df, slider_mass_kg=m_s, mask=mask)
+        return Validated(PredictorIdentifier(order=self.order, criterion="free_run", fixed="recommended",
+                                             n_starts=self.n_starts, seed=self.seed, noise_fit=self.noise_fit,
+                                             noise=self.noise).fit(validated(df), slider_mass_kg=m_s, mask=mask))
+
+    def refit_settings(self) -> RefitSettings:
+        """The settings of every refit of the loop (order, seed, budget of a fold's refit, noise, client)."""
+        return RefitSettings(order=self.order, seed=self.seed, max_nfev=self.refit_nfev, noise=self.noise,
+                             client=self.client)
 
     def _iterate(self, it: _Iteration, pool, dtr, mask, m_s, report, say) -> None:
         """Rounds of linearised shortlist -> cross-validated refit -> acceptance -> joint re-identification.
@@ -286,8 +283,7 @@ class CloseLoop:
                 labels.append(s.candidate.label)
             say(f"round {n_rnd}: cross-validating {'the current model and ' if cur_err is None else ''}the refit "
                 f"with {', '.join(labels)} over {len(folds)} run folds")
-            errs = cv_errors(dtr, mask, m_s, folds, cur.params_, jobs, order=self.order, seed=self.seed,
-                             max_nfev=self.refit_nfev, client=self.client, noise=self.noise)
+            errs = cv_errors(dtr, mask, m_s, folds, cur.params_, jobs, self.refit_settings())
             if cur_err is None:
                 cur_err, errs = errs[0], errs[1:]
             trials = [RefitCV(s.candidate, cur_err, err, s.cv_gain, s.phi) for s, err in zip(short, errs)]
@@ -304,8 +300,8 @@ class CloseLoop:
                 it.significant = [s for s in short if any(t.candidate is s.candidate for t in ok)]
             say(f"round {n_rnd}: adding {pick.candidate.label}; re-identifying jointly")
             effects = it.effects.add(pick.candidate, pick.phi)
-            model = refit(dtr, mask, m_s, cur.params_, effects, order=self.order, seed=self.seed,
-                          max_nfev=self.final_nfev, max_outer=3, noise=self.noise)
+            model = refit(dtr, mask, m_s, cur.params_, effects, self.refit_settings().budget(self.final_nfev),
+                          max_outer=3)
             it.model, it.effects = model, effects.with_phi(model.phi_)
             cur_err = None
             it.rounds.append({"round": n_rnd, "added": pick.candidate.label, "effect": pick.candidate.family,
@@ -344,8 +340,7 @@ class CloseLoop:
         sse1 = float(np.sum((v - fr1[mask]) ** 2))
         rec["train_free_run_gain"] = 1 - sse1 / sse0 if sse0 > 0 else 0.0   # reported, not deciding
         base_cv, chain_cv = chain_cv_errors(dtr, mask, m_s, stratified_folds(dtr, self.refit_folds, self.seed),
-                                            it.model.params_, filt.model.params_, order=self.order, seed=self.seed,
-                                            max_nfev=self.refit_nfev, client=self.client, noise=self.noise,
+                                            it.model.params_, filt.model.params_, self.refit_settings(),
                                             k=self.k_folds)
         gain = (float(1 - chain_cv.sse.sum() / base_cv.sse.sum())
                 if base_cv.failed == 0 and chain_cv.failed == 0 and base_cv.sse.sum() > 0 else 0.0)
@@ -583,7 +578,7 @@ def calibrated_model(base, ext, effects: EffectSet, output_filter, source: dict)
     missing = [c.label for c in effects.candidates if not c.spec]
     if missing:
         return None, f"effects without a serialisable spec (custom candidates): {', '.join(missing)}"
-    recs = tuple(Effect(c.family, c.label, dict(c.spec), tuple(c.names), tuple(c.units),
+    recs = tuple(IdentifiedEffect(c.family, c.label, dict(c.spec), tuple(c.names), tuple(c.units),
                         tuple(float(p) for p in phi), tuple(float(ext.extra_stderr_[n]) for n in c.names),
                         c.description, tuple(c.regressors), c.structural)
                  for c, phi in zip(effects.candidates, effects.phi))

@@ -2,27 +2,28 @@
 
 :class:`CloseLoopResult` is returned by :func:`l1b2.closeloop.loop.close_loop`
 (and kept as ``CloseLoop.result_``). It computes nothing new: it presents.
-``to_dict()`` is the content of ``report.json`` (strict JSON: non-finite
-numbers become ``None``), ``markdown()`` that of ``report.md``, ``plot()``
+``to_dict()`` is the content of ``report.json`` (strict JSON under the
+package's one rule, :mod:`l1b2.jsonio`: NaN -> ``null``, +-inf -> ``"inf"``/``"-inf"``), ``markdown()`` that of ``report.md``, ``plot()``
 returns the figures, and ``save(dir)`` is the only method that writes files
 (``report.json``, ``report.md`` and the PNGs).
 """
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 import pandas as pd
 
 from ..data import measurements as dataio
 from ..data import plots
-from ..data.jsonsafe import sig
+from ..jsonio import dumps, sig, strict_json
+from ..predictor.effects import ExtendedPredictor
 from . import residuals as res
+from .report import SCHEMA_VERSION, Diagnosis, ReportFormatError, Round
 from .selection import Score
 
 #: file names (without ``.png``) of the figures, in report order
@@ -43,9 +44,14 @@ class ResidualAnalysis:
     rounds: list                  #: per round, the ``residuals.Evidence`` of each regressor
 
 
-@dataclass(eq=False)
+@dataclass
 class CloseLoopResult:
     """Outcome of one close-the-loop fit (TEST never used for fitting or choosing).
+
+    The report's fields (what ``report.json`` holds, :meth:`to_dict`) are
+    JSON-normal values (:mod:`l1b2.jsonio`: NaN as None, infinities as
+    ``"inf"``) and typed records; :meth:`from_dict` rebuilds an equal result
+    from ``report.json`` (equality compares the report's fields only).
 
     Attributes
     ----------
@@ -53,48 +59,59 @@ class CloseLoopResult:
         Error metrics ``{"train": {"one_step": ..., "free_run": ...}, "test": ...}``
         of the baseline and of the extended model (``extended`` is None when
         nothing was significant; ``"test"`` is None without TEST data).
-    diagnosis : dict
-        ``significant``, ``traced_to``, ``effect`` (the chosen candidate's
-        family), ``message``, the best candidate per family, the rules, the
-        regressor evidence, whiteness and the spectral peak (``report.json``'s
-        ``diagnosis``).
-    scores : list of Score
-        Every candidate scored (see :meth:`scores_to_pandas`).
-    significant : list of Score
-        The candidates that passed every selection rule.
-    chosen : Score or None
-        The candidate added to the model.
+    diagnosis : Diagnosis
+        What was found, traced and added (:class:`l1b2.closeloop.report.Diagnosis`).
+    rounds : list of Round
+        Per round: what was added, its CV result, the metrics after.
     extended_parameters, baseline_parameters : dict
         The new parameters (value, stderr, ci95, unit) and the baseline's.
     data : dict
         Files, run and sample counts of TRAIN and TEST.
+    checks : dict or None
+        The data checks (unit findings, TEST runs outside TRAIN's range), set by the caller.
     wall_time_s : float or None
         Wall time of the job [s].
+    calibrated_model : ExtendedPredictor or None
+        The final model as :class:`l1b2.predictor.effects.ExtendedPredictor` (what ``Predictor.fmu``
+        carries; the baseline alone when nothing was added; None when an effect has no serialisable
+        spec), ``calibrated_note`` says which.
+    scores, significant, chosen
+        Every candidate scored in the first round (:class:`~l1b2.closeloop.selection.Score`), those that
+        passed every rule, the one added first (not in the report; None after :meth:`from_dict`).
     """
 
     baseline: dict
-    diagnosis: dict
-    scores: list
-    significant: list
-    chosen: Score | None
+    diagnosis: Diagnosis
     extended: dict | None
     extended_parameters: dict | None
     baseline_parameters: dict
     data: dict
     wall_time_s: float | None = None
-    baseline_model: Any = field(default=None, repr=False)
-    extended_model: Any = field(default=None, repr=False)
-    analysis: ResidualAnalysis | None = field(default=None, repr=False)
-    train_df: pd.DataFrame | None = field(default=None, repr=False)
-    test_df: pd.DataFrame | None = field(default=None, repr=False)
-    test_free_run_before: np.ndarray | None = field(default=None, repr=False)
-    test_free_run_after: np.ndarray | None = field(default=None, repr=False)
-    rounds: list = field(default_factory=list)   #: per round: what was added, its CV result, the metrics after
-    checks: dict | None = None    #: the data checks (unit findings, TEST runs outside TRAIN's range), set by the caller
-    #: the final model as :class:`l1b2.predictor.effects.ExtendedPredictor` (what ``Predictor.fmu`` carries;
-    #: the baseline alone when nothing was added; None when an effect has no serialisable spec), and a note
+    rounds: list = field(default_factory=list)
+    checks: dict | None = None
     calibrated_model: Any = field(default=None, repr=False)
     calibrated_note: str = ""
+    # -- what the fit holds besides the report (not compared, not serialised) --
+    scores: list = field(default_factory=list, repr=False, compare=False)
+    significant: list = field(default_factory=list, repr=False, compare=False)
+    chosen: Score | None = field(default=None, repr=False, compare=False)
+    baseline_model: Any = field(default=None, repr=False, compare=False)
+    extended_model: Any = field(default=None, repr=False, compare=False)
+    analysis: ResidualAnalysis | None = field(default=None, repr=False, compare=False)
+    train_df: pd.DataFrame | None = field(default=None, repr=False, compare=False)
+    test_df: pd.DataFrame | None = field(default=None, repr=False, compare=False)
+    test_free_run_before: np.ndarray | None = field(default=None, repr=False, compare=False)
+    test_free_run_after: np.ndarray | None = field(default=None, repr=False, compare=False)
+
+    def __post_init__(self):
+        # the report's fields in JSON-normal form (NaN -> None, inf -> "inf", numpy -> Python), typed records
+        for name in ("baseline", "extended", "extended_parameters", "baseline_parameters", "data", "checks"):
+            setattr(self, name, strict_json(getattr(self, name)))
+        if not isinstance(self.diagnosis, Diagnosis):
+            self.diagnosis = Diagnosis.from_dict(strict_json(self.diagnosis))
+        self.rounds = [r if isinstance(r, Round) else Round.from_dict(strict_json(r)) for r in self.rounds]
+        if self.wall_time_s is not None:
+            self.wall_time_s = strict_json(self.wall_time_s)
 
     # -- views ---------------------------------------------------------------
     @property
@@ -131,12 +148,13 @@ class CloseLoopResult:
         return rounds_table(self.to_dict())
 
     def to_dict(self) -> dict:
-        """The report (``report.json`` without ``figures``), strict JSON: non-finite numbers are None."""
-        return _jsonable({
+        """The report (``report.json`` without ``figures``), strict JSON (:func:`l1b2.jsonio.strict_json`)."""
+        return strict_json({
+            "schema_version": SCHEMA_VERSION,
             "baseline": self.baseline,
-            "diagnosis": self.diagnosis,
+            "diagnosis": self.diagnosis.to_dict(),
             "extended": self.extended,
-            "rounds": self.rounds,
+            "rounds": [r.to_dict() for r in self.rounds],
             "extended_parameters": self.extended_parameters,
             "baseline_parameters": self.baseline_parameters,
             "data": self.data,
@@ -146,21 +164,28 @@ class CloseLoopResult:
             "calibrated_note": self.calibrated_note,
         })
 
-    def export(self, directory, *, mp=None) -> dict:
-        """Write ``Predictor.fmu`` carrying the final extended model and its manifest into ``directory``.
+    @classmethod
+    def from_dict(cls, d: Mapping) -> CloseLoopResult:
+        """The result of a report dict (``report.json``; ``figures`` ignored), equal to the one that wrote it.
 
-        See :func:`l1b2.fmi.export.export_calibrated` (returns the manifest;
-        effects with a physical home also go into ``L1B2Motor_calibrated.ssp``
-        of ``mp``, default the reference motor). The held-out check of that
-        SSP against TEST is :func:`l1b2.workflows.export_calibrated_model`
-        (what ``l1b2 close-loop --export`` runs). Raises
-        :class:`l1b2.fmi.export.ExportError` when there is nothing to export
-        (``calibrated_note`` says why) or a file fails validation.
+        Raises :class:`l1b2.closeloop.report.ReportFormatError` naming the
+        field when a field is missing or the schema version is not this one.
         """
-        from ..fmi.export import ExportError, export_calibrated
-        if self.calibrated_model is None:
-            raise ExportError(f"nothing to export: {self.calibrated_note or 'no extended model'}")
-        return export_calibrated(self.calibrated_model, directory, mp=mp)
+        if not isinstance(d, Mapping):
+            raise ReportFormatError(f"report: expected an object, got {type(d).__name__}")
+        version = d.get("schema_version")
+        if version != SCHEMA_VERSION:
+            raise ReportFormatError(f"report: schema_version {version!r}, this version reads {SCHEMA_VERSION}")
+        try:
+            cal = d["calibrated_model"]
+            return cls(baseline=d["baseline"], diagnosis=Diagnosis.from_dict(d["diagnosis"]), extended=d["extended"],
+                       extended_parameters=d["extended_parameters"], baseline_parameters=d["baseline_parameters"],
+                       data=d["data"], wall_time_s=d["wall_time_s"],
+                       rounds=[Round.from_dict(r) for r in d["rounds"]], checks=d["checks"],
+                       calibrated_model=None if cal is None else ExtendedPredictor.from_dict(cal),
+                       calibrated_note=d["calibrated_note"])
+        except KeyError as exc:
+            raise ReportFormatError(f"report: field {exc.args[0]!r} missing") from None
 
     def markdown(self) -> str:
         """The report as Markdown (``report.md`` without the figure links)."""
@@ -196,34 +221,26 @@ class CloseLoopResult:
             for name, fig in self.plot().items():
                 written.append(plots.save_figure(fig, out / f"{name}.png"))
             report["figures"] = [str(p) for p in written]
-        (out / "report.json").write_text(json.dumps(report, indent=1, allow_nan=False))
+        (out / "report.json").write_text(dumps(report))
         (out / "report.md").write_text(markdown_report(report))
         return [out / "report.json", out / "report.md"] + written
-
-
-def _jsonable(x):
-    """``x`` with numpy scalars/arrays as Python numbers/lists, tuples as lists and non-finite floats as None."""
-    if isinstance(x, dict):
-        return {k: _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple, np.ndarray)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, (bool, np.bool_)):
-        return bool(x)
-    if isinstance(x, (int, np.integer)):
-        return int(x)
-    if isinstance(x, (float, np.floating)):
-        return float(x) if math.isfinite(x) else None
-    return x
 
 
 # ---------------------------------------------------------------------------
 # text
 # ---------------------------------------------------------------------------
 
+def _pct(x, spec: str) -> str:
+    """A report value as a percentage: ``"-"`` for None (NaN), the rule's ``"inf"``/``"-inf"`` as written."""
+    if x is None:
+        return "-"
+    return x if isinstance(x, str) else format(x, spec)
+
+
 def before_after_table(report: dict) -> str:
     """Plain-text table of the error metrics before and after (TEST and TRAIN) of a report dict."""
     def f(x):
-        return f"{x:.2%}" if x is not None else "-"
+        return _pct(x, ".2%")
 
     lines = [f"{'':8s}{'':10s}{'nrmse':>18s}{'mean |rel|':>22s}{'p95 |rel|':>22s}",
              f"{'data':8s}{'kind':10s}{'before':>9s}{'after':>9s}{'before':>11s}{'after':>11s}"
@@ -243,7 +260,7 @@ def before_after_table(report: dict) -> str:
 def rounds_table(report: dict) -> str:
     """Per round: the effect added, its cross-validated (refit) gain and the free-run nrmse before/after it."""
     def f(x):
-        return f"{x:.2%}" if x is not None else "-"
+        return _pct(x, ".2%")
 
     rounds = report.get("rounds") or []
     lines = [f"{'round':6s}{'added':44s}{'CV gain':>9s}{'train before':>14s}{'train after':>13s}"
@@ -293,11 +310,9 @@ def markdown_report(rep: dict) -> str:
                       "| candidate | regressors | linearised gain | CV nrmse current | CV nrmse refit | CV gain "
                       "| folds improved |", "|---|---|---|---|---|---|---|"]
             for t in trials:
-                def pct(x, spec):
-                    return "-" if x is None else format(x, spec)
-                lines.append(f"| {t['label']} | {', '.join(t['regressors'])} | {pct(t['linearised_gain'], '.1%')} | "
-                             f"{pct(t['cv_free_run_nrmse_current'], '.2%')} | "
-                             f"{pct(t['cv_free_run_nrmse_refit'], '.2%')} | {pct(t['cv_gain'], '.1%')} | "
+                lines.append(f"| {t['label']} | {', '.join(t['regressors'])} | {_pct(t['linearised_gain'], '.1%')} | "
+                             f"{_pct(t['cv_free_run_nrmse_current'], '.2%')} | "
+                             f"{_pct(t['cv_free_run_nrmse_refit'], '.2%')} | {_pct(t['cv_gain'], '.1%')} | "
                              f"{t['folds_improved']}/{t['folds']} |")
     lines += ["", "## Error before and after (all rounds)", "", "```", before_after_table(rep), "```", "",
               "## Candidates (best of each family, by held-out gain)", "",

@@ -246,8 +246,9 @@ def build_fmu(name: str, dest_dir: str | Path, *, mp: MotorParams | None = None,
             py.write_text(rewrite_imports(py.read_text(), package))
         defaults_file = td / "_fmu_defaults.json"  # lands in resources/, read by each instance
         defaults_file.write_text(json.dumps(defaults, indent=1))
-        for rel, data in (extra_files or {}).items():
-            (pkg_dir / rel).write_bytes(data)
+        for rel, data in (extra_files or {}).items():   # a .py file's imports point at the bundle, as above
+            (pkg_dir / rel).write_bytes(rewrite_imports(data.decode(), package).encode() if rel.endswith(".py")
+                                        else data)
         script = td / f"{module}.py"
         script.write_text(rewrite_imports(slave_script(name, author=AUTHOR, license=LICENSE), package))
         dest = dest_dir / f"{name}.fmu"

@@ -41,9 +41,10 @@ from typing import Any, Mapping
 
 from .. import __version__
 from ..errors import L1B2Error
+from ..jsonio import dumps
 from ..physics.params import MotorParams, load_motor
+from ..predictor.effects.homes import map_effects
 from .build import SUBSYSTEM_FMUS, build_fmu
-from .calibrate import map_effects
 from .native.build import build_native_set
 from .slaves import SLAVES
 
@@ -277,7 +278,7 @@ def export_all(out_dir: str | Path, mp: MotorParams | None = None, predictor: Ma
 def write_manifest(path: Path, manifest: dict) -> None:
     """``manifest`` as strict JSON at ``path``, replaced at once (through a temporary sibling)."""
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(manifest, indent=1, allow_nan=False) + "\n")
+    tmp.write_text(dumps(manifest) + "\n")
     os.replace(tmp, path)
 
 
@@ -304,7 +305,7 @@ def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None)
     -------
     The manifest: the FMU's record (validation results), and per effect its
     parameters and where it went (``Predictor.fmu``; the subsystem FMUs only
-    where mapped, :func:`l1b2.fmi.calibrate.map_effects`, else the reason).
+    where mapped, :func:`l1b2.predictor.effects.homes.map_effects`, else the reason).
     When at least one effect was mapped, also ``L1B2Motor_calibrated.ssp``
     (the four subsystem FMUs with the calibrated parameter set) and the
     parameter set itself, ``calibrated_ssv/<Component>.ssv``.
@@ -314,7 +315,7 @@ def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None)
     ExportError
         if the FMU fails fmpy validation or a Real has no unit (no manifest is written).
     """
-    from ..predictor.effects import ExtendedPredictor
+    from ..predictor.effects import ExtendedPredictor, plugin_sources
 
     if not isinstance(model, ExtendedPredictor):
         raise ExportError(f"export_calibrated needs an l1b2.predictor.effects.ExtendedPredictor, "
@@ -327,7 +328,9 @@ def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None)
     defaults = {"predictor": model.model.to_dict()}
     if model.effects or model.output_filter is not None:   # else the plain Eq. 29 predictor is the model
         defaults["extended_predictor"] = model.to_dict()
-    path = build_fmu(PREDICTOR_FMU, fmu_dir, mp=mp, extra_defaults=defaults)
+    # families defined outside the package travel with the model (imported by the FMU's effects registry)
+    plugins = {f"predictor/effects/plugins/{name}.py": src.encode() for name, src in plugin_sources(model).items()}
+    path = build_fmu(PREDICTOR_FMU, fmu_dir, mp=mp, extra_defaults=defaults, extra_files=plugins or None)
     os.chmod(path, 0o644)
     records = {PREDICTOR_FMU: fmu_record(path, out)}
     mp_cal, mapping = map_effects(model, mp)

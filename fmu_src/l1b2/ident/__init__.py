@@ -9,7 +9,8 @@ Modules, in the order a fit uses them:
 * :mod:`~l1b2.ident.noise` -- the noise model (per-run variance, start-speed term);
 * :mod:`~l1b2.ident.uncertainty` -- Fisher / AR(1)-inflated covariance, identifiability directions;
 * :mod:`~l1b2.ident.result` -- :class:`IdentificationResult` (report, strict JSON, plots, save);
-* :mod:`~l1b2.ident.estimator` -- :class:`PredictorIdentifier`, the scikit-learn-style estimator.
+* :mod:`~l1b2.ident.estimator` -- :class:`PredictorIdentifier`, the scikit-learn-style estimator
+  (settings by :class:`~l1b2.ident.convention.EstimatorSettings`, shared with the close loop).
 """
 
 from .estimator import RECOMMENDED_FIXED, PredictorIdentifier, clone, evaluation_mask

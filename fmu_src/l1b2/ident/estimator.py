@@ -1,7 +1,7 @@
 """Maximum-likelihood identification of the reduced predictor (paper Eq. 32, 35).
 
 :class:`PredictorIdentifier` fits theta of :mod:`l1b2.predictor.model` (Eq. 35
-order) to measured traverses in the data format of ``shared/data-format.md``
+order) to measured traverses in the package's data format
 (a :class:`~l1b2.data.measurements.Measurements` or a DataFrame; SI units).
 It follows the scikit-learn convention: the constructor stores the settings,
 :meth:`PredictorIdentifier.fit` returns the estimator with fitted attributes
@@ -24,9 +24,9 @@ The fit runs, in order (one module each):
 4. uncertainty and identifiability (:mod:`l1b2.ident.uncertainty`): Fisher
    covariance with AR(1) inflation, null and weak directions, AIC/BIC.
 
-Identifiability (findings)
---------------------------
-*Structural* (exact for any data with v' > 0 and known m_s). The data
+Identifiability
+---------------
+The data (any data with v' > 0 and known m_s)
 determine the functions D(s), B'(s) and C(s) above (B' via the voltage
 dependence; the absolute force scale via the known load weights and mass).
 Writing ``a = mu g1(k0) - mu_sd kappa`` and ``b = mu (pi/2) G(k0)``::
@@ -43,35 +43,18 @@ is invariant under three one-parameter groups:
    adjusted so that ``a - b alpha_0`` is unchanged;
 3. ``P -> lambda P`` with mu, k0 (and thus a, b) scaled by 1/lambda.
 
-With all 3n+8 parameters varied (the paper's setting) the Fisher matrix has
-exactly three zero singular values (tested on noise-free data: relative
-singular values ~1e-16); only beta (B') and mu_sd are identifiable, c_r,
-sigma, mu, k0, every alpha and every p only in combinations.
-``unidentifiable_`` reports the null directions numerically and the affected
-parameters get ``stderr = inf``.
+With all 3n+8 parameters varied (the paper's setting) the Fisher matrix
+therefore has three null directions: ``unidentifiable_`` reports them
+numerically and the affected parameters get ``stderr = inf``. mu_sd is
+practically unidentifiable (it enters C(s) only as a constant), and the split
+of C(s) into P(s) and (a - b A'(s)) can be bimodal: ``alternative_optima_``
+reports a second optimum the global search finds.
 
-*Practical*. (a) mu_sd enters only through the constant ``9.81 m_s mu_sd``
-in C(s) (its P-proportional part is absorbed by a); it is separable only
-through the polynomial structure of C and has a relative singular value of
-~7e-7 (order 3, 12 runs) to ~5e-8 (order 8, 72 runs): practically not identifiable, and
-its value barely changes the fit. (b) The split of the order-2n polynomial
-C(s) into the factors P(s) and (a - b A'(s)) is informed only by the small
-position variation of D(s) = c_r + sigma (0.5 - A'); with sigma, k0, mu and
-mu_sd pinned the Fisher matrix has full rank (smallest relative singular
-value ~7e-5 at order 3, ~7e-6 at order 8 in the synthetic rig) but the
-likelihood can be *bimodal* in the preload scale / alpha_0 / c_r (two
-factorisations fitting within ~1 log-likelihood unit, e.g. p_0 = 0.7 N vs
-6 N): locally identifiable, not globally. ``alternative_optima_`` reports
-such a second optimum when the global search finds one.
-
-*Recommendation.* ``fixed="recommended"`` pins sigma, k0, mu (one per
-structural direction; any values give the same predictions) and mu_sd
-(practically unidentifiable; use the guide's datasheet value). The fitted
-c_r, alpha, p are then conditional on those pins. Pinning in addition the
-mean preload p_0 (only meaningful when sigma, k0, mu are physical values)
-removes the bimodality; that configuration is well conditioned (relative
-singular value ~3e-4 at order 3) and its 95 % intervals have the nominal
-coverage in simulation (tests/test_identify.py).
+``fixed="recommended"`` pins sigma, k0, mu (one per structural direction; any
+values give the same predictions) and mu_sd (the guide's datasheet value);
+the fitted c_r, alpha, p are then conditional on those pins. The measured
+singular values and coverage behind this choice:
+``docs/decisions/0002-pin-sigma-k0-mu-and-mu_sd.md``.
 
 Extra forces ("closing the loop")
 ---------------------------------
@@ -103,7 +86,6 @@ Direction-dependent or voltage-dependent features are not confounded this way.
 
 from __future__ import annotations
 
-import inspect
 import math
 import time
 from dataclasses import replace
@@ -119,6 +101,7 @@ from ..data.metrics import (
 from ..errors import IdentificationError
 from ..predictor.model import PredictorParams
 from ..predictor.model import steady_state as predictor_steady_state
+from .convention import EstimatorSettings
 from .extra import ExtraForces
 from .noise import NoiseModel
 from .problem import (
@@ -169,7 +152,7 @@ def _slider_mass(slider_mass_kg) -> float:
     return m_s
 
 
-class PredictorIdentifier:
+class PredictorIdentifier(EstimatorSettings):
     """Maximum-likelihood identification of the Eq. 29 predictor (see module docstring).
 
     Parameters
@@ -184,15 +167,9 @@ class PredictorIdentifier:
         ``None`` varies all Eq. 35 parameters (the paper's setting).
     noise : ``"common"`` (default: one variance for all residuals, the paper's
         single R of Eq. 32) or ``"per_run"`` (one variance per run, floored at
-        10 % of the median). Per-run variances are estimated from the
-        residuals, so on data the model does not fit exactly they reward fits
-        that specialise on some runs: the likelihood becomes strongly
-        multimodal (8 profile searches ending up to 1200 log-likelihood units
-        apart on a 20 000-sample TRAIN of the realistic motor) and its higher
-        optima predict held-out runs *worse* (free-run nrmse 2.85 % at
-        log-likelihood 76284, 3.09 % at 77194, against 2.61 % for the common
-        variance; bench/bench_identify_realistic.py). The common variance was
-        better on held-out data on all five mismatched data sets measured.
+        10 % of the median). Per-run variances reward fits that specialise on
+        some runs when the model does not fit the data exactly
+        (``docs/decisions/0003-one-common-noise-variance.md``).
     kappa : share of the preload loading the guide (fixed, not identified).
     include_load_inertia : m_eff = m_s + |m_load| (True) or m_s.
     max_nfev : function evaluations per local optimisation.
@@ -223,17 +200,7 @@ class PredictorIdentifier:
         data); the best start is therefore always continued by least-squares
         refits at the ML variances, kept if they gain
         (:func:`l1b2.ident.search.polish_stalled`).
-        Why ``"auto"`` chooses so (measured): on the 20 000-sample benchmark of
-        the realistic world (``bench/bench_identify_realistic.py``) the
-        alternation's least-squares runs crept (each start ended at its
-        evaluation limit or statistical stop 4-6 log-likelihood units apart)
-        and its best fit stayed 5.0 units below the 32-start reference, where
-        a Gauss-Newton continuation from it gained 0.007; the profile search
-        reached the reference in 30 % less time. With one extra force
-        confounded with theta (a constant force on exact-world data, variance
-        inflation > 1e3) the profile search ended 9.6 units *below* the
-        alternation, from 2 or 8 starts alike, and reported the useless force
-        as significant; the alternation did not.
+        Why ``"auto"`` chooses so: ``docs/decisions/0004-noise-fit-auto.md``.
     start_agree : profile search: stop the global search once this many starts
         reached the best log-likelihood within ``10 * stat_tol`` (0: run every start).
     stat_window_profile : profile search: a local search stops when its
@@ -278,7 +245,8 @@ class PredictorIdentifier:
     Fitted attributes
     -----------------
     ``result_`` (:class:`~l1b2.ident.result.IdentificationResult`: report,
-    JSON, plots) and, for direct use, ``theta_``, ``params_``, ``varied_``,
+    JSON, plots) and, for direct use, read-only views of it (:data:`FITTED_VIEWS`: arrays
+    share its data and cannot be written), ``theta_``, ``params_``, ``varied_``,
     ``identifiable_``, ``stderr_`` (AR(1)-corrected), ``stderr_fisher_``,
     ``ci95_`` (p, 2), ``stderr_robust_`` / ``ci95_robust_`` / ``cov_robust_``
     (cluster-robust sandwich by run, valid under misspecification; see
@@ -300,6 +268,8 @@ class PredictorIdentifier:
     ``cov_fisher_all_``, ``corr_all_`` (theta then phi). Without extras these
     exist and are empty (or equal the theta versions).
     """
+
+    settings_error = IdentificationError
 
     def __init__(
         self,
@@ -359,35 +329,7 @@ class PredictorIdentifier:
         self.init = init
         self.init_extra = init_extra
 
-    # -- settings (scikit-learn protocol) ------------------------------------------------
-    @classmethod
-    def _param_names(cls) -> list[str]:
-        """The constructor's arguments, in signature order."""
-        sig = inspect.signature(cls.__init__)
-        return [p.name for p in sig.parameters.values() if p.name != "self" and p.kind == p.POSITIONAL_OR_KEYWORD]
-
-    def get_params(self, deep: bool = False) -> dict[str, Any]:
-        """The settings, name -> value, as given to the constructor (``deep`` is accepted and ignored)."""
-        return {name: getattr(self, name) for name in self._param_names()}
-
-    def set_params(self, **params) -> "PredictorIdentifier":
-        """Change settings (names of the constructor's arguments); returns self."""
-        known = self._param_names()
-        for name, value in params.items():
-            if name not in known:
-                raise IdentificationError(f"set_params: unknown setting {name!r}; known: {known}")
-            setattr(self, name, value)
-        return self
-
-    def __repr__(self) -> str:
-        defaults = {p.name: p.default for p in inspect.signature(type(self).__init__).parameters.values()}
-        changed = []
-        for k, v in self.get_params().items():
-            d = defaults.get(k)
-            if not (v is d or (type(v) is type(d) and isinstance(v, (int, float, str)) and v == d)):
-                changed.append(f"{k}={v!r}")
-        return f"{type(self).__name__}({', '.join(changed)})"
-
+    # -- settings: the scikit-learn protocol of :class:`l1b2.ident.convention.EstimatorSettings` --------
     def _checked_settings(self) -> SimpleNamespace:
         """The settings with their types normalised; IdentificationError for an invalid one."""
         cfg = SimpleNamespace(**self.get_params())
@@ -665,45 +607,8 @@ class PredictorIdentifier:
         return self
 
     def _publish(self, result: IdentificationResult) -> None:
-        """Set ``result_`` and the fitted attributes derived from it."""
-        p = result.p_theta
-        names = list(result.extra_names)
-        phi = result.values[p:].copy()
-        joint = {
-            "varied": result.varied, "identifiable": result.identifiable, "stderr": result.stderr,
-            "stderr_fisher": result.stderr_fisher, "ci95": result.ci95, "stderr_robust": result.stderr_robust,
-            "ci95_robust": result.ci95_robust,
-        }
-        for key, arr in joint.items():
-            setattr(self, f"{key}_all_", arr)
-            setattr(self, f"{key}_", arr[:p].copy())
-        for key, mat in {"cov": result.cov, "cov_fisher": result.cov_fisher, "cov_robust": result.cov_robust,
-                         "corr": result.corr}.items():
-            setattr(self, f"{key}_all_", mat)
-            setattr(self, f"{key}_", mat[:p, :p].copy())
-        self.extra_varied_ = result.varied[p:].copy()
-        self.extra_identifiable_ = result.identifiable[p:].copy()
-        self.extra_params_ = {n: float(v) for n, v in zip(names, phi)}
-        self.extra_stderr_ = {n: float(v) for n, v in zip(names, result.stderr[p:])}
-        self.extra_stderr_fisher_ = {n: float(v) for n, v in zip(names, result.stderr_fisher[p:])}
-        self.extra_ci95_ = {n: (float(a), float(b)) for n, (a, b) in zip(names, result.ci95[p:])}
-        self.extra_stderr_robust_ = {n: float(v) for n, v in zip(names, result.stderr_robust[p:])}
-        self.extra_ci95_robust_ = {n: (float(a), float(b)) for n, (a, b) in zip(names, result.ci95_robust[p:])}
-        attributes = dict(
-            result_=result, params_=result.params, theta_=result.values[:p].copy(), phi_=phi,
-            param_names_all_=result.names, extra_names_=names, extra_units_=list(result.extra_units),
-            extra_description_=result.extra_description, extra_confounding_=result.extra_confounding,
-            fixed_=result.fixed, m_s_=result.slider_mass_kg, s_center_=result.params.s_center,
-            s_half_=result.params.s_half, T_s_=result.T_s, runs_=result.runs, noise_var_=result.noise_var,
-            ar1_rho_=result.ar1_rho, ar1_factor_=result.ar1_factor, n_obs_=result.n_obs, n_eff_=result.n_eff,
-            dof_=result.dof, t_quantile_=result.t_quantile, k_params_=result.k_params, loglik_=result.loglik,
-            aic_=result.aic, bic_=result.bic, residual_rms_=result.residual_rms,
-            singular_values_=result.singular_values, unidentifiable_=result.unidentifiable,
-            weak_directions_=result.weak_directions, alternative_optima_=result.alternative_optima,
-            convergence_=result.convergence, fit_time_s_=result.fit_time_s,
-        )
-        for key, value in attributes.items():
-            setattr(self, key, value)
+        """Set ``result_``; every fitted attribute derived from it is a read-only view (:data:`FITTED_VIEWS`)."""
+        self.result_ = result
 
     # -- predictions -----------------------------------------------------------------------
     def _check_fitted(self):
@@ -769,3 +674,63 @@ class PredictorIdentifier:
         obj = cls(fixed=fixed or None, extra=extra, **st)
         obj._publish(result)
         return obj
+
+
+# ---------------------------------------------------------------------------
+# fitted attributes: read-only views of result_
+# ---------------------------------------------------------------------------
+
+def _ro(a):
+    """A read-only view of an array (the result's own data, not a copy)."""
+    v = np.asarray(a).view()
+    v.flags.writeable = False
+    return v
+
+
+def _extra(fn):
+    """A dict name -> fn(value) over the extra-force parameters (the phi block) of ``result.<field>``."""
+    return lambda field: (lambda r: {n: fn(v) for n, v in zip(r.extra_names, getattr(r, field)[r.p_theta:])})
+
+
+_scalar, _pair = _extra(float), _extra(lambda ab: (float(ab[0]), float(ab[1])))
+#: fitted attribute -> its value from ``result_`` (:class:`~l1b2.ident.result.IdentificationResult`)
+FITTED_VIEWS = {
+    **{f"{k}_all_": (lambda k: lambda r: _ro(getattr(r, k)))(k)
+       for k in ("varied", "identifiable", "stderr", "stderr_fisher", "ci95", "stderr_robust", "ci95_robust",
+                 "cov", "cov_fisher", "cov_robust", "corr")},
+    **{f"{k}_": (lambda k: lambda r: _ro(getattr(r, k)[: r.p_theta]))(k)
+       for k in ("varied", "identifiable", "stderr", "stderr_fisher", "ci95", "stderr_robust", "ci95_robust")},
+    **{f"{k}_": (lambda k: lambda r: _ro(getattr(r, k)[: r.p_theta, : r.p_theta]))(k)
+       for k in ("cov", "cov_fisher", "cov_robust", "corr")},
+    "extra_varied_": lambda r: _ro(r.varied[r.p_theta:]),
+    "extra_identifiable_": lambda r: _ro(r.identifiable[r.p_theta:]),
+    "extra_params_": lambda r: {n: float(v) for n, v in zip(r.extra_names, r.values[r.p_theta:])},
+    "extra_stderr_": _scalar("stderr"), "extra_stderr_fisher_": _scalar("stderr_fisher"),
+    "extra_stderr_robust_": _scalar("stderr_robust"),
+    "extra_ci95_": _pair("ci95"), "extra_ci95_robust_": _pair("ci95_robust"),
+    "params_": lambda r: r.params, "theta_": lambda r: _ro(r.values[: r.p_theta]),
+    "phi_": lambda r: _ro(r.values[r.p_theta:]),
+    "param_names_all_": lambda r: r.names, "extra_names_": lambda r: list(r.extra_names),
+    "extra_units_": lambda r: list(r.extra_units), "extra_description_": lambda r: r.extra_description,
+    "extra_confounding_": lambda r: r.extra_confounding, "fixed_": lambda r: r.fixed,
+    "m_s_": lambda r: r.slider_mass_kg, "s_center_": lambda r: r.params.s_center,
+    "s_half_": lambda r: r.params.s_half, "T_s_": lambda r: r.T_s,
+    **{f"{k}_": (lambda k: lambda r: getattr(r, k))(k)
+       for k in ("runs", "noise_var", "ar1_rho", "ar1_factor", "n_obs", "n_eff", "dof", "t_quantile", "k_params",
+                 "loglik", "aic", "bic", "residual_rms", "singular_values", "unidentifiable", "weak_directions",
+                 "alternative_optima", "convergence", "fit_time_s")},
+}
+
+
+def _view(name: str, fn):
+    def get(self):
+        try:
+            result = self.__dict__["result_"]
+        except KeyError:
+            raise AttributeError(f"{name}: PredictorIdentifier is not fitted yet (call fit() first)") from None
+        return fn(result)
+    return property(get, doc=f"Fitted: read-only view of ``result_`` ({name}).")
+
+
+for _name, _fn in FITTED_VIEWS.items():
+    setattr(PredictorIdentifier, _name, _view(_name, _fn))

@@ -9,8 +9,8 @@ findings, the noise variances, the convergence record and the settings.
 
 * :meth:`IdentificationResult.fit_report` -- readable text report;
 * :meth:`IdentificationResult.to_dict` / :meth:`IdentificationResult.from_dict`
-  -- strict JSON form (NaN -> ``None``, +-inf -> ``"inf"`` / ``"-inf"``; never
-  a NaN or Infinity token);
+  -- strict JSON form (the package's one rule, :mod:`l1b2.jsonio`: NaN -> ``None``,
+  +-inf -> ``"inf"`` / ``"-inf"``; never a NaN or Infinity token);
 * :meth:`IdentificationResult.predict` and :meth:`IdentificationResult.plot_runs`
   -- predicted speed [m/s] and a figure of measured vs predicted speed per run;
 * :meth:`IdentificationResult.save` -- ``identification.json`` and
@@ -26,7 +26,6 @@ cannot determine and NaN for a pinned one.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,48 +36,11 @@ from scipy import stats
 
 from ..data.measurements import Measurements
 from ..errors import IdentificationError
+from ..jsonio import dumps, from_json_float, json_float, strict_json
 from ..predictor.model import PredictorParams
 from .problem import RECOMMENDED_FIXED, LikelihoodProblem, SampleData
 
 __all__ = ["Parameter", "IdentificationResult"]
-
-
-# ---------------------------------------------------------------------------
-# strict JSON
-# ---------------------------------------------------------------------------
-
-
-def _json_float(x):
-    x = float(x)
-    if math.isnan(x):
-        return None
-    if math.isinf(x):
-        return "inf" if x > 0 else "-inf"
-    return x
-
-
-def _from_json_float(x):
-    if x is None:
-        return float("nan")
-    return float(x)
-
-
-def _jsonify(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonify(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonify(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return [_jsonify(v) for v in x.tolist()]
-    if isinstance(x, (bool, np.bool_)):
-        return bool(x)
-    if isinstance(x, (int, np.integer)):
-        return int(x)
-    if isinstance(x, (float, np.floating)):
-        return _json_float(x)
-    if x is None or isinstance(x, str):
-        return x
-    return str(x)
 
 
 def _diagonal(se):
@@ -494,11 +456,11 @@ class IdentificationResult:
     def _parameter_entry(self, prm: Parameter) -> dict:
         return {
             "value": prm.value,
-            "stderr": _json_float(prm.stderr),
-            "stderr_fisher": _json_float(prm.stderr_fisher),
-            "ci95": [_json_float(prm.ci95[0]), _json_float(prm.ci95[1])],
-            "stderr_robust": _json_float(prm.stderr_robust),
-            "ci95_robust": [_json_float(prm.ci95_robust[0]), _json_float(prm.ci95_robust[1])],
+            "stderr": json_float(prm.stderr),
+            "stderr_fisher": json_float(prm.stderr_fisher),
+            "ci95": [json_float(prm.ci95[0]), json_float(prm.ci95[1])],
+            "stderr_robust": json_float(prm.stderr_robust),
+            "ci95_robust": [json_float(prm.ci95_robust[0]), json_float(prm.ci95_robust[1])],
             "unit": prm.unit,
             "vary": prm.vary,
             "identifiable": prm.identifiable,
@@ -511,7 +473,7 @@ class IdentificationResult:
         extra_sec = {}
         for nm in self.extra_names:
             extra_sec[nm] = {**self._parameter_entry(prms[nm]),
-                             "confounding": _jsonify(self.extra_confounding.get(nm, {}))}
+                             "confounding": strict_json(self.extra_confounding.get(nm, {}))}
         d = {
             "model": "l1b2 reduced predictor (Eq. 29)",
             "settings": dict(self.settings),
@@ -522,7 +484,7 @@ class IdentificationResult:
             "extra_description": self.extra_description or "",
             "paper_monomials": self.params.to_paper_monomials(self.T_s),
             "T_s": self.T_s,
-            "runs": [r if isinstance(r, (int, str)) else _jsonify(r) for r in self.runs],
+            "runs": [r if isinstance(r, (int, str)) else strict_json(r) for r in self.runs],
             "noise_var": [float(x) for x in self.noise_var],
             "ar1_rho": [float(x) for x in self.ar1_rho],
             "n_obs": self.n_obs,
@@ -539,7 +501,7 @@ class IdentificationResult:
             "convergence": self.convergence,
             "fit_time_s": self.fit_time_s,
         }
-        return _jsonify(d)
+        return strict_json(d)
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], extra=None) -> "IdentificationResult":
@@ -565,8 +527,8 @@ class IdentificationResult:
         prm = d["parameters"]
         names = PredictorParams.names(params.order)
         sec = [prm[n] for n in names] + [xsec[n] for n in xnames]
-        stderr = np.array([_from_json_float(s.get("stderr")) for s in sec])
-        stderr_fisher = np.array([_from_json_float(s.get("stderr_fisher", s.get("stderr"))) for s in sec])
+        stderr = np.array([from_json_float(s.get("stderr")) for s in sec])
+        stderr_fisher = np.array([from_json_float(s.get("stderr_fisher", s.get("stderr"))) for s in sec])
         cov, corr = _diagonal(stderr)
         cov_fisher, _ = _diagonal(stderr_fisher)
         n_eff, k_params = float(d["n_eff"]), int(d["k_params"])
@@ -579,21 +541,21 @@ class IdentificationResult:
             varied=np.array([bool(s.get("vary", True)) for s in sec], dtype=bool),
             identifiable=np.array([bool(s.get("identifiable", True)) for s in sec], dtype=bool),
             stderr=stderr, stderr_fisher=stderr_fisher,
-            ci95=np.array([[_from_json_float(x) for x in s["ci95"]] for s in sec]).reshape(-1, 2),
+            ci95=np.array([[from_json_float(x) for x in s["ci95"]] for s in sec]).reshape(-1, 2),
             cov=cov, cov_fisher=cov_fisher, corr=corr,
-            slider_mass_kg=float(d["slider_mass_kg"]), T_s=_from_json_float(d["T_s"]), runs=list(d["runs"]),
+            slider_mass_kg=float(d["slider_mass_kg"]), T_s=from_json_float(d["T_s"]), runs=list(d["runs"]),
             noise_var=np.asarray(d["noise_var"], float), ar1_rho=np.asarray(d["ar1_rho"], float),
             n_obs=int(d["n_obs"]), n_eff=n_eff, k_params=k_params, dof=dof,
-            t_quantile=float(stats.t.ppf(0.975, dof)), loglik=_from_json_float(d["loglik"]),
-            aic=_from_json_float(d["aic"]), bic=_from_json_float(d["bic"]),
-            residual_rms=_from_json_float(d["residual_rms"]),
+            t_quantile=float(stats.t.ppf(0.975, dof)), loglik=from_json_float(d["loglik"]),
+            aic=from_json_float(d["aic"]), bic=from_json_float(d["bic"]),
+            residual_rms=from_json_float(d["residual_rms"]),
             singular_values=np.asarray(d["singular_values"], float),
             unidentifiable=list(d["unidentifiable"]), weak_directions=list(d.get("weak_directions", [])),
             alternative_optima=list(d.get("alternative_optima", [])),
             extra_confounding={n: _confounding_from_json(xsec[n].get("confounding")) for n in xnames},
             convergence=dict(d["convergence"]), fit_time_s=float(d["fit_time_s"]), extra=extra,
-            stderr_robust=np.array([_from_json_float(s.get("stderr_robust")) for s in sec]),
-            ci95_robust=np.array([[_from_json_float(x) for x in s.get("ci95_robust", [None, None])]
+            stderr_robust=np.array([from_json_float(s.get("stderr_robust")) for s in sec]),
+            ci95_robust=np.array([[from_json_float(x) for x in s.get("ci95_robust", [None, None])]
                                   for s in sec]).reshape(-1, 2),
         )
 
@@ -606,8 +568,8 @@ class IdentificationResult:
         """
         out = Path(directory)
         out.mkdir(parents=True, exist_ok=True)
-        payload = {**self.to_dict(), **_jsonify(sections)}
-        (out / "identification.json").write_text(json.dumps(payload, indent=1, allow_nan=False))
+        payload = {**self.to_dict(), **strict_json(sections)}
+        (out / "identification.json").write_text(dumps(payload))
         (out / "fit_report.txt").write_text(self.fit_report())
         return out
 
@@ -635,6 +597,6 @@ def _confounding_from_json(cf) -> dict:
     cf = dict(cf or {})
     for k in ("stderr", "stderr_if_theta_known", "variance_inflation", "explained_by_theta"):
         if k in cf:
-            cf[k] = _from_json_float(cf[k])
+            cf[k] = from_json_float(cf[k])
     cf["most_correlated"] = [(str(a), float(b)) for a, b in cf.get("most_correlated", [])]
     return cf

@@ -2,6 +2,7 @@
 
 :mod:`~l1b2.predictor.model` (parameters and the Eq. 29 step),
 :mod:`~l1b2.predictor.simulate` (free runs over many runs, synthetic data),
-:mod:`~l1b2.predictor.setup` (what a deployed predictor carries) and
-:mod:`~l1b2.predictor.derive` (parameters derived from the physical model).
+:mod:`~l1b2.predictor.setup` (what a deployed predictor carries),
+:mod:`~l1b2.predictor.derive` (parameters derived from the physical model) and
+:mod:`~l1b2.predictor.effects` (the effect families of the extended predictor, one registry).
 """

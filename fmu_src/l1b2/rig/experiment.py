@@ -21,7 +21,8 @@ both off, runs of the same conditions are identical and a different seed
 only reorders the runs.
 
 Injections: named physical effects that the reduced predictor does not
-contain (:data:`INJECTIONS`). Each switches on declared parameters of the FMU
+contain (:data:`INJECTIONS`), each naming the effect family of
+:mod:`l1b2.predictor.effects` with the same physics. Each switches on declared parameters of the FMU
 system that are off in the reference motor; with none injected the rig is
 the plain coupled model. What was injected is written to ``rig_truth.json``,
 never to the data or its sidecar.
@@ -39,7 +40,6 @@ order on one clock, identical to a serial run; runs that carry state
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -49,9 +49,11 @@ import pandas as pd
 
 from ..data import measurements as dataio
 from ..errors import SimulationError
+from ..jsonio import dumps
 from ..fmi.cache import ensure_fmus
 from ..physics import driver as drv
 from ..physics.params import MotorParams, load_motor
+from ..predictor import effects as fx
 
 # ---------------------------------------------------------------------------
 # Injections (the rig's undeclared physical effects)
@@ -61,17 +63,26 @@ from ..physics.params import MotorParams, load_motor
 class Injection:
     """An extra physical effect the rig can switch on (parameters of the FMU system).
 
+    ``effect`` is the family of :mod:`l1b2.predictor.effects` that models the
+    same physics (its kind); the data regressor the injection shows up in is
+    that family's (:attr:`regressor`). An effect of the measurement chain,
+    which no family models, gives ``effect=None`` and its ``chain_regressor``.
     ``params`` maps ``"Component.parameter"`` to a default value; ``ranges``
     gives, for the parameters that vary between seeded draws, ``(low, high)``.
-    ``regressor`` is the data regressor the effect shows up in (for tests).
     """
 
     name: str
     description: str
-    regressor: str
+    effect: str | None
     params: dict
     ranges: dict = field(default_factory=dict)
     stateful: bool = False  # carries state from run to run (cannot run runs in parallel)
+    chain_regressor: str = ""
+
+    @property
+    def regressor(self) -> str:
+        """The data regressor the effect shows up in (the family's; the chain's own without one)."""
+        return fx.family(self.effect).regressor if self.effect else self.chain_regressor
 
     def draw(self, rng: np.random.Generator | None) -> dict:
         """Parameter values: defaults, with the ranged ones drawn uniformly when ``rng`` is given."""
@@ -86,7 +97,7 @@ INJECTIONS: dict[str, Injection] = {e.name: e for e in [
     Injection("thermal_drift",
            "self-heating of the stator (loss ~ V0^2, time constant tens of s) shifts both resonances by "
            "about -10 Hz/K; the speed drifts along the experiment clock",
-           "time",
+           "thermal_drift",
            {"Stator.thermal_tau_s": 30.0, "Stator.heating_K_per_V2": 6e-4,
             "Stator.df_dT_l_Hz_per_K": -10.0, "Stator.df_dT_b_Hz_per_K": -10.0},
            {"Stator.thermal_tau_s": (20.0, 40.0), "Stator.heating_K_per_V2": (4.5e-4, 8e-4)},
@@ -94,28 +105,28 @@ INJECTIONS: dict[str, Injection] = {e.name: e for e in [
     Injection("direction_asymmetry",
            "CH1 and CH2 electrodes excite the B2 mode with different strength (polarisation, electrode "
            "area): forward and backward speeds differ",
-           "direction",
+           "direction_asymmetry",
            {"Stator.asym_b": 0.06}, {"Stator.asym_b": (0.04, 0.09)}),
     Injection("bar_waviness",
            "periodic waviness of the friction bar (grinding marks) modulates the preload with position",
-           "position",
+           "bar_waviness",
            {"Stator.bar_wave_amp_m": 40e-6, "Stator.bar_wave_period_m": 6e-3},
            {"Stator.bar_wave_amp_m": (30e-6, 50e-6), "Stator.bar_wave_period_m": (4e-3, 8e-3)}),
     Injection("bar_bump",
            "a local bump (defect, debris) on the friction bar raises the preload over a few mm",
-           "position",
+           "local_defect",
            {"Stator.bar_bump_amp_m": 80e-6, "Stator.bar_bump_center_m": 0.004, "Stator.bar_bump_width_m": 1.0e-3},
            {"Stator.bar_bump_amp_m": (60e-6, 100e-6), "Stator.bar_bump_center_m": (-0.012, 0.012),
             "Stator.bar_bump_width_m": (0.7e-3, 1.4e-3)}),
     Injection("pulley_friction",
            "Coulomb friction in the load path (pulley bearing), proportional to the load weight and "
            "always opposing the motion",
-           "load",
+           "load_path_friction",
            {"Slider.pulley_mu": 0.4}, {"Slider.pulley_mu": (0.3, 0.5)}),
     Injection("drive_saturation",
            "the drive's output amplitude saturates (transformer / amplifier limit): the actual V0 falls "
            "below the commanded one at high voltage",
-           "voltage",
+           "drive_saturation",
            {"Driver.V0_sat_V": 320.0}, {"Driver.V0_sat_V": (280.0, 360.0)}),
 ]}
 
@@ -124,8 +135,8 @@ DATA_INJECTIONS: dict[str, Injection] = {e.name: e for e in [
     Injection("speed_lowpass",
            "the DAQ's speed channel is low-pass filtered (first order, a few ms): the speed column lags "
            "the position's derivative (a measurement-chain effect, applied to the recorded data)",
-           "speed",
-           {"DAQ.speed_tau_s": 0.004}, {"DAQ.speed_tau_s": (0.003, 0.008)}),
+           None,
+           {"DAQ.speed_tau_s": 0.004}, {"DAQ.speed_tau_s": (0.003, 0.008)}, chain_regressor="speed"),
 ]}
 
 DAQ_PREFIX = "DAQ."
@@ -488,5 +499,5 @@ def write_experiment(df: pd.DataFrame, out_dir, mp: MotorParams, plan: RigPlan, 
     for name, part in (("all", df), ("train", df[~is_test]), ("test", df[is_test])):
         if len(part):  # a plan without the test loads has no test split
             paths[name] = dataio.write_measurements(part.reset_index(drop=True), out / f"{name}.csv", meta)
-    (out / "rig_truth.json").write_text(json.dumps(truth, indent=1, allow_nan=False))
+    (out / "rig_truth.json").write_text(dumps(truth))
     return paths

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from ..jsonio import dumps
 from .analysis import sobol_indices, src_ranking, summarize
 from .sampling import parameter_columns
 from .spec import OPERATING, StudySpec
@@ -86,7 +87,7 @@ class SweepResult:
             paths.update(self.plot(out))
         report = self.to_dict()
         report["files"] = {k: str(v) for k, v in paths.items()}
-        paths["report"].write_text(json.dumps(report, indent=1, default=str))
+        paths["report"].write_text(dumps(report))
         return paths
 
     def plot(self, out_dir) -> dict[str, Path]:

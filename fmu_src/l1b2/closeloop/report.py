@@ -1,0 +1,154 @@
+"""The typed records of a close-the-loop report: :class:`Diagnosis`, :class:`Round`, :class:`EffectRecord`.
+
+Each is a dataclass with ``to_dict()`` (the JSON form, under the package's
+one rule :mod:`l1b2.jsonio`) and ``from_dict()`` (its inverse); the
+loop builds them from JSON-normal values (NaN as None, infinities as
+``"inf"``), so ``from_dict(to_dict(x)) == x``. They also read like the
+dicts they replace (``diagnosis["traced_to"]``, ``record.get("cv_gain")``).
+:data:`SCHEMA_VERSION` is written at the top of ``report.json``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from typing import Any, Mapping
+
+from ..errors import L1B2Error
+
+#: version of ``report.json``'s layout (1: typed records, issue 27)
+SCHEMA_VERSION = 1
+
+
+class ReportFormatError(L1B2Error):
+    """A report dict does not have the fields of its record (names the record and the field)."""
+
+
+class _Record:
+    """Mapping-style read access to a record's fields (``r["name"]``, ``r.get``, ``"name" in r``)."""
+
+    def __getitem__(self, key: str) -> Any:
+        if key not in self._keys():
+            raise KeyError(key)
+        return getattr(self, key)
+
+    def get(self, key: str, default=None) -> Any:
+        return getattr(self, key) if key in self._keys() else default
+
+    def __contains__(self, key) -> bool:
+        return key in self._keys()
+
+    def keys(self):
+        return self.to_dict().keys()
+
+    def _keys(self) -> set:
+        return set(self.to_dict())
+
+    def to_dict(self) -> dict:   # pragma: no cover - every record defines it
+        raise NotImplementedError
+
+
+def _take(cls, d: Mapping, name: str, optional=()):
+    """``{field: d[field]}`` for the dataclass ``cls`` (fields in ``optional`` may be missing)."""
+    if not isinstance(d, Mapping):
+        raise ReportFormatError(f"{name}: expected an object, got {type(d).__name__}")
+    out = {}
+    for f in fields(cls):
+        if f.name in d:
+            out[f.name] = d[f.name]
+        elif f.name not in optional:
+            raise ReportFormatError(f"{name}: field {f.name!r} missing")
+    return out
+
+
+@dataclass(frozen=True)
+class EffectRecord(_Record):
+    """One effect added to the model (``diagnosis.effects[i]``): what, when, its parameters and its CV evidence."""
+
+    round: int
+    effect: str
+    label: str
+    shape: str
+    regressors: list
+    description: str
+    generic: bool
+    structural: str | None
+    parameters: dict
+    cv_gain: Any = None
+    cv_free_run_nrmse_before: Any = None
+    cv_free_run_nrmse_after: Any = None
+    folds_improved: Any = None
+
+    def to_dict(self) -> dict:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> EffectRecord:
+        return cls(**_take(cls, d, "diagnosis.effects[]"))
+
+
+@dataclass(frozen=True)
+class Round(_Record):
+    """One round of the loop (``rounds[i]``): what was added (None in round 0), its CV record and the metrics after."""
+
+    round: int
+    added: str | None
+    metrics: dict
+    effect: str | None = None
+    regressors: list | None = None
+    cv: dict | None = None
+
+    def to_dict(self) -> dict:
+        out = {"round": self.round, "added": self.added}
+        for k in ("effect", "regressors", "cv"):
+            if getattr(self, k) is not None:
+                out[k] = getattr(self, k)
+        out["metrics"] = self.metrics
+        return out
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> Round:
+        return cls(**_take(cls, d, "rounds[]", optional=("effect", "regressors", "cv")))
+
+
+@dataclass(frozen=True)
+class Diagnosis(_Record):
+    """``report.json``'s ``diagnosis``: what was found, traced and added, and the evidence behind it.
+
+    ``effects`` are :class:`EffectRecord` in the order they were added;
+    ``candidates`` the best score per family of the first round;
+    ``refit_trials`` per round the cross-validated refits; ``rules`` the
+    settings that decided; ``regressor_evidence``, ``whiteness`` and
+    ``position_spectrum_peak`` the residual analysis; ``measurement_chain``
+    the speed channel's test. The nested evidence stays JSON-shaped.
+    """
+
+    significant: bool
+    traced_to: list
+    effect: str | None
+    effect_shape: str | None
+    effect_description: str | None
+    effects: list
+    message: str
+    structural_effects: list = field(default_factory=list)
+    immaterial_evidence: list = field(default_factory=list)
+    residual_trace: list = field(default_factory=list)
+    candidates: list = field(default_factory=list)
+    n_candidates_scored: int = 0
+    significance_level: Any = None
+    refit_trials: list = field(default_factory=list)
+    rules: dict = field(default_factory=dict)
+    regressor_evidence: list = field(default_factory=list)
+    whiteness: dict = field(default_factory=dict)
+    position_spectrum_peak: dict = field(default_factory=dict)
+    measurement_chain: dict = field(default_factory=dict)
+
+    def to_dict(self) -> dict:
+        out = {f.name: getattr(self, f.name) for f in fields(self)}
+        out["effects"] = [e.to_dict() for e in self.effects]
+        return out
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> Diagnosis:
+        kw = _take(cls, d, "diagnosis", optional=tuple(f.name for f in fields(cls))[7:])
+        kw["effects"] = [e if isinstance(e, EffectRecord) else EffectRecord.from_dict(e) for e in kw["effects"]]
+        return cls(**kw)

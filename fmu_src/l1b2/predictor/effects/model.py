@@ -1,0 +1,177 @@
+"""The calibrated extended predictor: identified effects, the output filter, and the vectorised free run.
+
+:class:`IdentifiedEffect` is one effect of a fitted model (its family's spec,
+parameter names, units, values and standard errors);
+:class:`ExtendedPredictor` is the whole calibrated model that
+``Predictor.fmu`` carries: the baseline Eq. 29 setup (for ``v_base``), the
+re-identified setup, the effects and an optional output filter of the speed
+channel; :meth:`ExtendedPredictor.free_run` is the vectorised reference of
+the FMU.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Mapping
+
+import numpy as np
+
+from ..setup import PredictorSetup
+from .base import EffectSpecError, effect_features, needs, time_derivative
+
+
+@dataclass(frozen=True)
+class IdentifiedEffect:
+    """One identified effect: its spec, parameter names, units, values and standard errors."""
+
+    family: str
+    label: str
+    spec: dict
+    names: tuple
+    units: tuple
+    phi: tuple
+    stderr: tuple
+    description: str = ""
+    regressors: tuple = ()
+    structural: str = ""
+
+    def to_dict(self) -> dict:
+        return {"family": self.family, "label": self.label, "spec": dict(self.spec), "names": list(self.names),
+                "units": list(self.units), "phi": [float(p) for p in self.phi],
+                "stderr": [None if s is None else float(s) for s in self.stderr], "description": self.description,
+                "regressors": list(self.regressors), "structural": self.structural}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> IdentifiedEffect:
+        try:
+            e = cls(str(d["family"]), str(d.get("label", d["family"])), dict(d["spec"]), tuple(d["names"]),
+                    tuple(d["units"]), tuple(float(p) for p in d["phi"]),
+                    tuple(None if s is None else float(s) for s in d.get("stderr", [None] * len(d["phi"]))),
+                    str(d.get("description", "")), tuple(d.get("regressors", ())), str(d.get("structural") or ""))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise EffectSpecError(f"effect record {d.get('family', '?')!r}: {exc}") from None
+        if not (len(e.names) == len(e.units) == len(e.phi) == len(e.stderr)):
+            raise EffectSpecError(f"effect {e.label}: names, units, phi and stderr differ in length")
+        needs(e.spec)  # the kind is known
+        return e
+
+    def force(self, x: Mapping) -> np.ndarray:
+        """The effect's force per sample [N, drive coordinates]."""
+        return effect_features(self.spec, x) @ np.asarray(self.phi, float)
+
+
+@dataclass(frozen=True)
+class ExtendedPredictor:
+    """A calibrated extended Eq. 29 predictor: what ``Predictor.fmu`` carries after the close-the-loop job.
+
+    ``baseline``: the Eq. 29 setup whose free run gives the signals
+    ``v_base``/``a_base`` (identified first, never refit); ``model``: the
+    re-identified setup that the effects' forces are added to; ``effects``:
+    in the order they were chosen; ``output_filter``: ``{"a", "b0", "b1"}``
+    of the speed channel (``y(k) = a y(k-1) + b0 u(k) + b1 u(k-1)``, steady
+    start) or None; ``source``: where the data came from (free text fields).
+    """
+
+    baseline: PredictorSetup
+    model: PredictorSetup
+    effects: tuple = ()
+    output_filter: dict | None = None
+    source: dict = field(default_factory=dict)
+
+    @property
+    def signals(self) -> set:
+        """Every signal (:data:`SIGNALS`) the effects read."""
+        out: set = set()
+        for e in self.effects:
+            out |= needs(e.spec)
+        return out
+
+    @property
+    def needs_temperature(self) -> bool:
+        return "T" in self.signals
+
+    def to_dict(self) -> dict:
+        return {"baseline": self.baseline.to_dict(), "model": self.model.to_dict(),
+                "effects": [e.to_dict() for e in self.effects],
+                "output_filter": None if self.output_filter is None else {k: float(self.output_filter[k])
+                                                                          for k in ("a", "b0", "b1")},
+                "source": dict(self.source)}
+
+    @classmethod
+    def from_dict(cls, d: Mapping) -> ExtendedPredictor:
+        try:
+            base, model = PredictorSetup.from_dict(d["baseline"]), PredictorSetup.from_dict(d["model"])
+        except (KeyError, TypeError) as exc:
+            raise EffectSpecError(f"extended predictor: missing or bad {exc}") from None
+        filt = d.get("output_filter")
+        return cls(base, model, tuple(IdentifiedEffect.from_dict(e) for e in d.get("effects", [])),
+                   None if filt is None else {k: float(filt[k]) for k in ("a", "b0", "b1")}, dict(d.get("source", {})))
+
+    def extra_force(self, x: Mapping) -> np.ndarray:
+        """Sum of the effects' forces per sample [N]."""
+        n = len(np.asarray(x["V0"]))
+        out = np.zeros(n)
+        for e in self.effects:
+            out = out + e.force(x)
+        return out
+
+    def free_run(self, t, s, V0, load, direction, v_start, run_index=None, temperature=None) -> np.ndarray:
+        """Free-run speed per sample [m/s] along measured inputs (the vectorised reference of the FMU).
+
+        Flat per-sample arrays, runs contiguous and labelled by ``run_index``
+        (None: one run); ``v_start`` [m/s] one value per run (or scalar);
+        ``temperature`` [degC] per sample when an effect needs it.
+        """
+        from ..simulate import RunLayout, free_run
+
+        t = np.asarray(t, float)
+        lay = RunLayout(run_index, len(t))
+        vs = np.broadcast_to(np.asarray(v_start, float).ravel(), (lay.R,)) if np.size(v_start) in (1, lay.R) else None
+        if vs is None:
+            raise EffectSpecError("v_start must be a scalar or one value per run")
+        starts_sorted = np.sort(lay.starts)
+        b = self.baseline
+        x = {"t": t, "s": np.asarray(s, float), "V0": np.broadcast_to(np.asarray(V0, float), t.shape),
+             "load": np.broadcast_to(np.asarray(load, float), t.shape),
+             "d": np.broadcast_to(np.asarray(direction, float), t.shape)}
+        if temperature is not None:
+            x["T"] = np.asarray(temperature, float)
+        sig = self.signals
+        if "T" in sig and "T" not in x:
+            raise EffectSpecError("an effect needs the stator temperature: pass temperature= (degC per sample)")
+        if sig & {"v_base", "a_base"}:
+            x["v_base"] = free_run(b.params, x["s"], x["V0"], x["load"], x["d"], t, vs, b.slider_mass_kg, run_index)
+            x["a_base"] = time_derivative(x["v_base"], t, starts_sorted)
+        F = self.extra_force(x) if self.effects else None
+        m = self.model
+        v = free_run(m.params, x["s"], x["V0"], x["load"], x["d"], t, vs, m.slider_mass_kg, run_index, extra_force=F)
+        if self.output_filter is not None:
+            v = apply_output_filter(self.output_filter, v, starts_sorted)
+        return v
+
+
+def apply_output_filter(filt: Mapping, u, run_starts=None) -> np.ndarray:
+    """``y(k) = a y(k-1) + b0 u(k) + b1 u(k-1)`` run by run, ``y(0) = (b0 + b1)/(1 - a) u(0)`` (steady start)."""
+    filt = {k: float(filt[k]) for k in ("a", "b0", "b1")}
+    u = np.asarray(u, float)
+    y = np.empty_like(u)
+    gain0 = filter_start_gain(filt)
+    starts = [0] if run_starts is None else [int(i) for i in run_starts]
+    for i0, i1 in zip(starts, starts[1:] + [len(u)]):
+        if i1 <= i0:
+            continue
+        y[i0] = gain0 * u[i0]
+        for k in range(i0 + 1, i1):
+            y[k] = filter_step(filt, y[k - 1], u[k], u[k - 1])
+    return y
+
+
+def filter_step(filt: Mapping, y_prev, u, u_prev):
+    """One step of the output filter: ``a y_prev + b0 u + b1 u_prev``."""
+    return filt["a"] * y_prev + filt["b0"] * u + filt["b1"] * u_prev
+
+
+def filter_start_gain(filt: Mapping) -> float:
+    """Steady gain ``(b0 + b1)/(1 - a)`` of the output filter (1 when ``a`` is 1)."""
+    a, b0, b1 = float(filt["a"]), float(filt["b0"]), float(filt["b1"])
+    return (b0 + b1) / (1.0 - a) if abs(1.0 - a) > 1e-9 else 1.0
