@@ -90,19 +90,75 @@ def _foreign_files(out: Path, known: tuple[str, ...]) -> list[str]:
             if not any(fnmatch.fnmatch(rel, pat) for pat in known)]
 
 
-def _check_target(out: Path, known: tuple[str, ...] = ()) -> None:
-    """Refuse a target that is a file, or a folder holding files not written by :func:`output_dir`."""
+def _marker_command(folder: Path) -> str | None:
+    """The command named in ``folder``'s :data:`OUTPUT_MARKER` ("?" when unreadable), None without a marker."""
+    marker = folder / OUTPUT_MARKER
+    if not marker.is_file():
+        return None
+    try:
+        doc = json.loads(marker.read_text()[:10_000])
+        return str(doc["command"]) if isinstance(doc, dict) and isinstance(doc.get("command"), str) else "?"
+    except (OSError, ValueError):
+        return "?"
+
+
+def _check_target(out: Path, known: tuple[str, ...] = (), command: str = "l1b2", inputs=()) -> None:
+    """Refuse a target ``out`` that a run of ``command`` must not replace.
+
+    Refused: a file; the current folder or one of its parents (``--out .``);
+    a folder holding one of the command's ``inputs``; the result of another
+    command (its marker names that command); an unmarked folder holding
+    files other than the command's :data:`KNOWN_OUTPUTS`.
+    """
     if out.exists() or out.is_symlink():
         if not out.is_dir() or out.is_symlink():
             raise OutputError(f"{out}: exists and is not a folder; give a folder (new, empty, or an earlier "
                               "result of the same command) as output")
-        if not (out / OUTPUT_MARKER).is_file():
+        real = out.resolve()
+        cwd = Path.cwd().resolve()
+        if real == cwd or real in cwd.parents:
+            raise OutputError(f"{out}: is the current folder or one of its parents, which a result replaces as "
+                              "a whole: give a new subfolder as output, e.g. --out results")
+        for item in inputs:
+            if item is None:
+                continue
+            p = Path(item).resolve()
+            if p == real or real in p.parents:
+                raise OutputError(f"{out}: holds this command's input {item}, which replacing the folder would "
+                                  "delete: give another folder as output")
+        other = _marker_command(out)
+        if other is not None and other != command:
+            raise OutputError(f"{out}: holds the result of 'l1b2 {other}', which 'l1b2 {command}' would delete: "
+                              "give another folder as output")
+        if other is None:
             foreign = _foreign_files(out, known)
             if foreign:
                 raise OutputError(f"{out}: folder holds files not written by this command (e.g. {foreign[0]}) "
                                   "and would be replaced: give a new or empty folder as output")
     elif out.parent.exists() and not out.parent.is_dir():
         raise OutputError(f"{out.parent}: exists and is not a folder")
+
+
+def _recover_swap(out: Path) -> None:
+    """Finish or roll back a swap that a killed run left half done (call with the lock held).
+
+    :func:`_swap_into_place` renames ``out`` to ``.NAME.old-PID`` and then the
+    complete temporary folder (it holds :data:`OUTPUT_MARKER`, written last)
+    to ``out``. Killed between the two: the complete new result is moved into
+    place when there is one, else the old result is moved back. Killed after
+    both: the left-over old result is removed.
+    """
+    olds = sorted(out.parent.glob(f".{out.name}.old-*"), key=lambda p: p.stat().st_mtime)
+    if not olds:
+        return
+    if not out.exists():
+        done = [t for t in out.parent.glob(f".{out.name}.tmp-*") if (t / OUTPUT_MARKER).is_file()]
+        if done:
+            os.replace(max(done, key=lambda p: (p / OUTPUT_MARKER).stat().st_mtime), out)
+        else:
+            os.replace(olds.pop(), out)
+    for old in olds:
+        shutil.rmtree(old, ignore_errors=True)
 
 
 def _make_parents(folder: Path) -> list[Path]:
@@ -151,11 +207,13 @@ KNOWN_OUTPUTS: dict[str, tuple[str, ...]] = {
 
 
 @contextmanager
-def output_dir(out, *, command: str = "l1b2") -> Iterator[Path]:
+def output_dir(out, *, command: str = "l1b2", inputs=()) -> Iterator[Path]:
     """Write a command's results into ``out`` all at once, or not at all.
 
-    Before the body runs: ``out`` must not be a file nor a non-empty folder
-    without :data:`OUTPUT_MARKER` holding files other than the command's own
+    Before the body runs: ``out`` must not be a file, the current folder, a
+    folder holding one of ``inputs``, the result of another command (its
+    :data:`OUTPUT_MARKER` names the command), nor a non-empty folder without
+    a marker holding files other than the command's own
     (:data:`KNOWN_OUTPUTS`; someone else's files are never replaced);
     a lock file ``.NAME.lock`` beside it refuses a second concurrent writer
     (a lock left by a dead process on this host is taken over), and
@@ -178,7 +236,7 @@ def output_dir(out, *, command: str = "l1b2") -> Iterator[Path]:
     """
     out = Path(out)
     known = KNOWN_OUTPUTS.get(command, ())
-    _check_target(out, known)
+    _check_target(out, known, command, inputs)
     created = _make_parents(out.parent)
     try:
         lock = _acquire_lock(out)
@@ -187,6 +245,8 @@ def output_dir(out, *, command: str = "l1b2") -> Iterator[Path]:
         raise
     tmp = None
     try:
+        _recover_swap(out)  # a killed run's half-done swap, completed or rolled back
+        _check_target(out, known, command, inputs)
         for stale in out.parent.glob(f".{out.name}.tmp-*"):
             shutil.rmtree(stale, ignore_errors=True)
         tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-{os.getpid()}-", dir=out.parent))
@@ -196,7 +256,7 @@ def output_dir(out, *, command: str = "l1b2") -> Iterator[Path]:
         yield tmp
         (tmp / OUTPUT_MARKER).write_text(json.dumps({"command": command, "finished": time.time(),
                                                      "pid": os.getpid()}, allow_nan=False))
-        _check_target(out, known)  # nothing foreign appeared there meanwhile
+        _check_target(out, known, command, inputs)  # nothing foreign appeared there meanwhile
         _swap_into_place(tmp, out)
         tmp = None
     finally:
@@ -348,7 +408,7 @@ def run_identification(train_path, out_dir, test_path=None, *, order=8, criterio
     """
     from .ident.estimator import PredictorIdentifier
     out = Path(out_dir)
-    with output_dir(out, command="identify") as tmp:
+    with output_dir(out, command="identify", inputs=(train_path, test_path)) as tmp:
         train, test, split_note = load_train_test(train_path, test_path, test_abs_loads=test_abs_loads,
                                                   slider_mass_kg=slider_mass_kg,
                                                   allow_unusual_units=allow_unusual_units)
@@ -621,7 +681,7 @@ def run_close_loop(train_path, test_path, out_dir, *, slider_mass_kg=None, plots
     from .closeloop.loop import CloseLoop
     from .cluster import optional_client
     t_start = time.perf_counter()
-    with output_dir(Path(out_dir), command="close-loop") as tmp:
+    with output_dir(Path(out_dir), command="close-loop", inputs=(train_path, test_path)) as tmp:
         train, test, split = load_train_test(train_path, test_path, test_abs_loads=test_abs_loads,
                                              slider_mass_kg=slider_mass_kg, allow_unusual_units=allow_unusual_units)
         with optional_client(workers or 0, scheduler, serial_up_to=1) as client:
