@@ -28,7 +28,7 @@ import pandas as pd
 
 from .data import measurements as dataio
 from .data import plots
-from .data.coverage import input_checks, outside_range
+from .data.coverage import check_same_rig, input_checks, outside_range
 from .data.jsonsafe import dumps
 from .data.metrics import diverged_runs, evaluation_mask, report_metrics, speed_metrics
 from .errors import IdentificationError, OutputError
@@ -309,6 +309,7 @@ def load_train_test(train_path, test_path=None, *, test_abs_loads=TEST_ABS_LOADS
     train = dataio.load_measurements(train_path, **kw)
     if test_path is not None:
         test = dataio.load_measurements(test_path, **kw)
+        check_same_rig(train, test, explicit={"slider_mass_kg": slider_mass_kg})
         note = f"test file {test_path}"
         _check_train_runs(train, train_path, note)
         return train, test, note
@@ -505,7 +506,7 @@ def _write_parquet_atomically(df: pd.DataFrame, path: Path) -> None:
 
 
 def run_sweep(spec_path, out_dir, *, workers: int | None = None, scheduler: str | None = None,
-              progress: bool = True, plots_on: bool = True, traverse=None):
+              progress: bool = True, plots_on: bool = True, traverse=None, max_runs: int | None = None):
     """Run the study of ``spec_path`` into ``out_dir``; returns its :class:`l1b2.sweep.result.SweepResult`.
 
     Resumable: every finished chunk is written at once, atomically, to
@@ -516,6 +517,9 @@ def run_sweep(spec_path, out_dir, *, workers: int | None = None, scheduler: str 
     ``study.json`` and PNGs. ``workers=0`` runs in this process, otherwise
     a local Dask cluster of ``workers`` processes or the one at ``scheduler``.
     For the FMU engine the FMUs are built (or found in the cache) once, here.
+    A study of more than ``max_runs`` runs (default
+    :data:`l1b2.sweep.spec.DEFAULT_MAX_RUNS`) is refused before anything is
+    drawn (:func:`l1b2.sweep.spec.check_size`).
     """
     import time
 
@@ -528,7 +532,7 @@ def run_sweep(spec_path, out_dir, *, workers: int | None = None, scheduler: str 
     from .sweep import runner
     from .sweep.result import SweepResult
     from .sweep.sampling import draw_samples
-    from .sweep.spec import motor_reference, parse_spec
+    from .sweep.spec import DEFAULT_MAX_RUNS, check_size, motor_reference, parse_spec
     from .sweep.tasks import TaskContext
     spec_path, out = Path(spec_path), Path(out_dir)
     try:
@@ -538,6 +542,7 @@ def run_sweep(spec_path, out_dir, *, workers: int | None = None, scheduler: str 
     ref = motor_reference(text, str(spec_path))
     mp = load_motor(spec_path.parent / ref if ref else None)
     spec = parse_spec(text, str(spec_path), mp)
+    check_size(spec, DEFAULT_MAX_RUNS if max_runs is None else max_runs, str(spec_path))  # before drawing
     samples = draw_samples(spec)
     bounds = runner.chunk_bounds(len(samples), spec.chunk_size)
     chunks_dir = out / "chunks"

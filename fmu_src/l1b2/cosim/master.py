@@ -153,6 +153,52 @@ def _remove_extracted():
         shutil.rmtree(folder, ignore_errors=True)
 
 
+_ERRORS_LOGGED: list[str] = []   # the FMUs' error messages (status >= fmi2Error), newest last
+_CALLBACKS = None
+
+
+def _callbacks():
+    """fmpy's callbacks with a logger that prints as fmpy's does and keeps the error messages."""
+    global _CALLBACKS
+    if _CALLBACKS is None:
+        from fmpy.fmi2 import defaultCallbacks, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+
+        def logger(env, instance, status, category, message):
+            text = message.decode("utf-8", "replace") if message else ""
+            label = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"][status] if 0 <= status < 6 else "?"
+            print(f"[{label}] {text}")
+            if status >= 3:
+                _ERRORS_LOGGED.append(" ".join(text.split()))
+                del _ERRORS_LOGGED[:-20]
+        cb = fmi2CallbackFunctions()
+        cb.logger = fmi2CallbackLoggerTYPE(logger)
+        cb.allocateMemory = defaultCallbacks.allocateMemory
+        cb.freeMemory = defaultCallbacks.freeMemory
+        _CALLBACKS = (cb, cb.logger)
+    return _CALLBACKS[0]
+
+
+def _load_slave(path, md, unz: str, name: str):
+    """fmpy's FMU2Slave for an extracted FMU; an FMU without a binary for this platform is a SimulationError."""
+    from fmpy.fmi2 import FMU2Slave
+    try:
+        return FMU2Slave(guid=md.guid, unzipDirectory=unz, modelIdentifier=md.coSimulation.modelIdentifier,
+                         instanceName=name)
+    except Exception as exc:  # noqa: BLE001 - fmpy raises a plain Exception for a missing or unloadable library
+        raise SimulationError(f"{path}: cannot load the FMU's binary for this platform ({' '.join(str(exc).split())}); "
+                              "is the FMU complete (binaries/ folder)?") from None
+
+
+def _instantiate(fmu, path) -> None:
+    """``fmi2Instantiate``; NULL is a SimulationError with the reason the FMU logged."""
+    mark = len(_ERRORS_LOGGED)
+    try:
+        fmu.instantiate(callbacks=_callbacks())
+    except Exception:  # noqa: BLE001 - fmpy raises a plain Exception when fmi2Instantiate returns NULL
+        why = "; ".join(_ERRORS_LOGGED[mark:]) if len(_ERRORS_LOGGED) > mark else "no reason logged"
+        raise SimulationError(f"{path}: fmi2Instantiate failed: {why[:1500]}") from None
+
+
 def _remove_tmp(folder: str) -> None:
     _LIVE_TMP.discard(folder)
     shutil.rmtree(folder, ignore_errors=True)
@@ -378,8 +424,6 @@ class CoSimulation:
         ``start_values`` sets component variables before initialisation
         (e.g. ``{"Slider.s0": -0.02}``).
         """
-        from fmpy.fmi2 import FMU2Slave
-
         from .hosting import install_exit_fix
         install_exit_fix()  # PythonFMU 0.7.0 exit-time use-after-free (see l1b2.fmi.runtime)
         sysst = self.system
@@ -400,10 +444,9 @@ class CoSimulation:
                     continue
                 md = self.model_descriptions[name]
                 unz = extracted(path)
-                fmu = FMU2Slave(guid=md.guid, unzipDirectory=unz, modelIdentifier=md.coSimulation.modelIdentifier,
-                                instanceName=name)
+                fmu = _load_slave(path, md, unz, name)
                 inst[name] = _Instance(name, fmu, md, unz, {v.name: v for v in md.modelVariables})
-                fmu.instantiate()
+                _instantiate(fmu, path)
                 inst[name].state = "instantiated"
             self._lookup(inst, record)
             self._initialize(inst, inputs, start_values or {})

@@ -44,6 +44,7 @@ from .columns import (
     TIME,
     sidecar_path,
 )
+from .plausibility import physics_findings
 from .validate import (
     check_setting,
     format_value,
@@ -64,6 +65,26 @@ _FIELDS_IN_PARSER_ERROR = re.compile(r"Expected (\d+) fields in line (\d+), saw 
 # Settings (sidecar, keywords, defaults)
 # --------------------------------------------------------------------------
 
+#: longest sidecar read [characters]
+MAX_SIDECAR_CHARS = 1_000_000
+
+
+class _DuplicateKey(ValueError):
+    def __init__(self, key: str):
+        super().__init__(key)
+        self.key = key
+
+
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict:
+    """``json.loads`` hook: an object with a key twice is refused (the last one would silently win)."""
+    out: dict = {}
+    for key, value in pairs:
+        if key in out:
+            raise _DuplicateKey(key)
+        out[key] = value
+    return out
+
+
 def read_sidecar(path: Path) -> dict:
     """Read and validate a sidecar JSON file (``{}`` when absent)."""
     if not path.exists():
@@ -72,12 +93,21 @@ def read_sidecar(path: Path) -> dict:
         text = path.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
         raise DataFormatError(path, None, None, f"cannot read sidecar: {exc}") from None
+    if len(text) > MAX_SIDECAR_CHARS:
+        raise DataFormatError(path, None, None, f"sidecar of {len(text)} characters, more than "
+                              f"{MAX_SIDECAR_CHARS}: a sidecar holds a few settings")
     try:
-        data = json.loads(text)
+        data = json.loads(text, object_pairs_hook=_unique_keys)
     except json.JSONDecodeError as exc:
         raise DataFormatError(path, None, None,
                               f"invalid JSON at line {exc.lineno} column {exc.colno}: "
                               f"{exc.msg}") from None
+    except _DuplicateKey as exc:
+        raise DataFormatError(path, exc.key, None, f"the key '{exc.key}' appears twice in the sidecar: which "
+                              "value is meant? (JSON readers disagree: some keep the first, some the last)") from None
+    except RecursionError:
+        raise DataFormatError(path, None, None, "JSON nested too deeply: a sidecar is one flat object "
+                              "of settings") from None
     if not isinstance(data, dict):
         raise DataFormatError(path, None, None,
                               f"sidecar must be a JSON object, got {type(data).__name__}")
@@ -245,6 +275,8 @@ def unit_findings(df: pd.DataFrame, meta: Mapping, path: Path, side: Path,
             found.append(DataFormatError(side, name, None, why))
     for q in unusual_values(df, speed_derived=bool(meta.get("speed_derived"))):
         found.append(DataFormatError(path, q.column, q.row + 1, q.text))
+    for f in physics_findings(df, slider_mass_kg=meta.get("slider_mass_kg")):
+        found.append(DataFormatError(path, f.column, f.row + 1, f.text))
     return found
 
 
