@@ -307,3 +307,24 @@ def test_deeply_nested_study_tables_are_one_line(tmp_path, capsys):
     code = cli_main(["sweep", "--spec", str(path), "--out", str(tmp_path / "out"), "--workers", "0", "--quiet"])
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "nested too deeply" in err, err
+
+
+# ---------------------------------------------------------------------------
+# large files: the typed fast path reads the same table as the text path
+# ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize("ids", ["integers", "text", "mixed"])
+def test_fast_reader_gives_the_text_readers_table(tmp_path, rig_frame, monkeypatch, ids):
+    from l1b2.data import io as dio
+    df = rig_frame.assign(note="x")
+    if ids != "integers":
+        df["run"] = df["run"].astype(object)
+        pick = df.index if ids == "text" else df.index[df.index > len(df) // 2]
+        df.loc[pick, "run"] = df.loc[pick, "run"].map(lambda r: f"run-{r}")
+    path = write(tmp_path, df, sidecar={"slider_mass_kg": 0.12})
+    monkeypatch.setattr(dio, "FAST_CHUNK_ROWS", 500)       # several blocks, ids changing kind between them
+    assert dio._read_fast(path) is not None
+    fast, _ = dio.read_table_and_sidecar(path)
+    monkeypatch.setattr(dio, "_read_fast", lambda p: None)
+    text, _ = dio.read_table_and_sidecar(path)
+    pd.testing.assert_frame_equal(fast, text, check_exact=True)

@@ -216,7 +216,8 @@ def _parse_numeric(col: pd.Series) -> tuple[np.ndarray, int | None, str]:
         Description of the first bad value.
     """
     if pd.api.types.is_numeric_dtype(col.dtype):
-        values = col.to_numpy(dtype=float, na_value=np.nan)
+        # float64 as it is (no copy: a large file is held once); other numbers converted, missing -> NaN
+        values = col.to_numpy() if col.dtype == np.float64 else col.to_numpy(dtype=float, na_value=np.nan)
         i = _first(~np.isfinite(values))
         if i is None:
             return values, None, ""
@@ -440,7 +441,7 @@ def validate_frame(df: pd.DataFrame, path: str | os.PathLike) -> pd.DataFrame:
         rows (positional, header excluded).
     """
     columns = _checked_header(df, path)
-    out = df.copy()
+    out = df.copy(deep=False)  # copy-on-write: the columns replaced below never touch ``df``
     out.columns = columns
     values, run_col = _parse_values(out, path)
     problems = _order_problems(values[TIME], run_col) + _range_problems(values)
