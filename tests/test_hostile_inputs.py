@@ -328,3 +328,20 @@ def test_fast_reader_gives_the_text_readers_table(tmp_path, rig_frame, monkeypat
     monkeypatch.setattr(dio, "_read_fast", lambda p: None)
     text, _ = dio.read_table_and_sidecar(path)
     pd.testing.assert_frame_equal(fast, text, check_exact=True)
+
+
+def test_an_fmu_folder_without_binaries_is_one_line(tmp_path, fmus, capsys):
+    # reference: issue 30 - an FMU folder without binaries was an internal error (exit 3, traceback)
+    import zipfile
+    folder = tmp_path / "fmus"
+    folder.mkdir()
+    for name, src in fmus.items():
+        with zipfile.ZipFile(src) as zin, zipfile.ZipFile(folder / f"{name}.fmu", "w") as zout:
+            for item in zin.infolist():
+                if not item.filename.startswith("binaries/"):
+                    zout.writestr(item, zin.read(item.filename))
+    code = cli_main(["simulate", "--engine", "fmu", "--fmu-dir", str(folder), "--duration", "0.01",
+                     "--out", str(tmp_path / "sim.csv")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "binaries" in err and "Driver.fmu" in err, err
+    assert not (tmp_path / "sim.csv").exists()
