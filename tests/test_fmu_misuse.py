@@ -181,6 +181,22 @@ def worker_case(path, case, other=None):
         out["deser"], _ = h.call("deSerializeFMUstate", garbage)
         out["after_step"], _ = h.call("doStep", H, H)
         g.close()
+    elif case == "setup_after_init":
+        h.init()
+        out["setup"], _ = h.call("setupExperiment", None, 0.0)
+        out["after_step"], _ = h.call("doStep", 0.0, H)
+    elif case == "after_free":
+        h.init()
+        c = h.fmu.component
+        h.fmu.fmi2FreeInstance(c)
+        h.fmu.fmi2FreeInstance(c)                        # twice: nothing
+        out["step_freed"], _ = h.call("fmi2DoStep", c, 0.0, H, 1)
+        out["get_freed"], _ = h.call("getReal", [0])
+        out["log"] = h.errors()
+        h.fmu.freeLibrary()
+        shutil.rmtree(h.dir, ignore_errors=True)
+        out["freed"] = True
+        return out
     elif case == "wrong_guid":
         h.close()
         h = _Host(path, guid="{00000000-0000-0000-0000-000000000000}")
@@ -287,6 +303,16 @@ def test_a_state_of_another_fmu_is_refused(all_fmus, isolated):
     assert r["deser"] == 3, r
     assert r["after_step"] == 0 and r["freed"], r
     assert any("not made by this FMU" in m for m in r["log"]), r["log"]
+
+
+def test_setup_experiment_after_initialisation_is_an_error(all_fmus, isolated):
+    r = _run(isolated, all_fmus["Slider"], "setup_after_init")
+    assert r["setup"] == 3 and r["after_step"] == 0 and r["freed"], r
+
+
+def test_calls_on_a_freed_instance_are_refused_without_a_crash(all_fmus, isolated):
+    r = _run(isolated, all_fmus["Stator"], "after_free")
+    assert r["step_freed"] == 3 and r["get_freed"] == 3 and r["freed"], r
 
 
 @pytest.mark.parametrize("name", ["Slider", "L1B2Motor"])

@@ -397,3 +397,14 @@ def test_voltage_and_load_outside_train_are_flagged(tmp_path):
         if g["load_kg"].iloc[0] > 0:
             expect.add("load_kg")
         assert by_run.get(run, set()) == expect, run
+
+
+def test_a_sweep_never_writes_into_another_commands_result(tmp_path, capsys):
+    res = tmp_path / "ident"
+    _result_of(res, "identify", {"identification.json": "{}"})
+    spec = tmp_path / "study.toml"
+    spec.write_text("[study]\n")
+    code = cli_main(["sweep", "--spec", str(spec), "--out", str(res), "--workers", "0", "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "result of 'l1b2 identify'" in err, err
+    assert sorted(p.name for p in res.iterdir()) == [OUTPUT_MARKER, "identification.json"]

@@ -203,6 +203,8 @@ KNOWN_OUTPUTS: dict[str, tuple[str, ...]] = {
     "export": ("fmus/*.fmu", "*.fmu", "*.ssp", "manifest.json"),
     "close-loop": ("report.json", "report.md", "*.png"),
     "export-calibrated": ("fmus/*.fmu", "calibrated_manifest.json", "*.ssp", "calibrated_ssv/*.ssv", "*.png"),
+    "sweep": ("chunks/*", "samples.parquet", "summary.csv", "sensitivity.csv", "sobol.csv", "study.json",
+              "sweep_*.png"),
 }
 
 
@@ -535,6 +537,9 @@ def run_sweep(spec_path, out_dir, *, workers: int | None = None, scheduler: str 
     from .sweep.spec import DEFAULT_MAX_RUNS, check_size, motor_reference, parse_spec
     from .sweep.tasks import TaskContext
     spec_path, out = Path(spec_path), Path(out_dir)
+    # resumable, so written in place (not through output_dir): never into another command's result,
+    # the current folder or a folder holding the spec
+    _check_target(out, KNOWN_OUTPUTS["sweep"], "sweep", (spec_path,))
     try:
         text = spec_path.read_text()
     except OSError as exc:

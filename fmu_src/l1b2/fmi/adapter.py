@@ -323,6 +323,8 @@ class BlockAdapter:
 
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
         """``fmi2SetupExperiment``: blocks that use the FMU's own time (``set_start_time``) learn its start."""
+        if self.refused("fmi2SetupExperiment", (INSTANTIATED,)):
+            return
         if hasattr(self.block, "set_start_time"):
             try:
                 self.block.set_start_time(float(start_time))

@@ -83,7 +83,17 @@ typedef struct Guard {
     int dead;                     /* PythonFMU returned fmi2Fatal: the instance must not be used or freed */
     int have_time;
     double time;                  /* the next expected communication point */
+    struct Guard* next;           /* live instances of this library */
 } Guard;
+
+static Guard* live = NULL;        /* a component is used only when listed here (never a freed or foreign pointer) */
+
+static int is_live(const Guard* g)
+{
+    for (const Guard* q = live; q; q = q->next)
+        if (q == g) return 1;
+    return 0;
+}
 
 typedef struct State {
     unsigned magic;
@@ -217,7 +227,7 @@ static void guard_logger(fmi2ComponentEnvironment env, fmi2String instance, fmi2
 static Guard* use(fmi2Component c, const char* call)
 {
     Guard* g = (Guard*)c;
-    if (!g || g->magic != STATE_MAGIC) return NULL;
+    if (!g || !is_live(g) || g->magic != STATE_MAGIC) return NULL;
     if (g->dead) {
         host_log(&g->host, g->name, fmi2Error, "%s refused: the instance failed fatally before (see the log); "
                  "only fmi2FreeInstance is possible", call);
@@ -346,21 +356,30 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     g->own.componentEnvironment = g;
     g->name = strdup(name);
     g->host_logging = loggingOn ? 1 : 0;
-    g->inner = p_fmi2Instantiate(instanceName, fmuType, fmuGUID, fmuResourceLocation, &g->own, visible, 1);
+    /* the decoded folder: PythonFMU itself only strips "file://" and decodes "%20" */
+    g->inner = p_fmi2Instantiate(instanceName, fmuType, fmuGUID, dir, &g->own, visible, 1);
     if (!g->inner) {
         host_log(functions, name, fmi2Error, "fmi2Instantiate failed (the reason is logged above)");
         free(g->name);
         free(g);
         return NULL;
     }
+    g->next = live;
+    live = g;
     return g;
 }
 
 void fmi2FreeInstance(fmi2Component c)
 {
     Guard* g = (Guard*)c;
-    if (!g || g->magic != STATE_MAGIC) return;
+    if (!g || !is_live(g) || g->magic != STATE_MAGIC) return; /* NULL, foreign or already freed: nothing */
     if (!g->dead) p_fmi2FreeInstance(g->inner);
+    for (Guard** q = &live; *q; q = &(*q)->next) {
+        if (*q == g) {
+            *q = g->next;
+            break;
+        }
+    }
     g->magic = 0;
     free(g->name);
     free(g);
