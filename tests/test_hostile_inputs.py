@@ -345,3 +345,22 @@ def test_an_fmu_folder_without_binaries_is_one_line(tmp_path, fmus, capsys):
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "binaries" in err and "Driver.fmu" in err, err
     assert not (tmp_path / "sim.csv").exists()
+
+
+@pytest.mark.parametrize("factor, refused", [(1 / 0.45359237, True), (9.80665, True), (10.0, True), (1.0, False)])
+def test_test_loads_in_another_unit_show_another_load_effect(tmp_path, capsys, factor, refused):
+    # reference: campaign - TEST's load in lb stayed inside every range; a kilogram must act the same in both files
+    from rigcache import rig_dir
+    train = pd.read_csv(rig_dir() / "train.csv")
+    test = pd.read_csv(rig_dir() / "test.csv")
+    tr = write(tmp_path, train, "train", {"slider_mass_kg": 0.12})
+    te = write(tmp_path, test.assign(load_kg=test["load_kg"] * factor), "test", {"slider_mass_kg": 0.12})
+    from l1b2.workflows import load_train_test
+    if refused:
+        with pytest.raises(DataFormatError, match="as much as TRAIN's|heavier than the slider") as info:
+            load_train_test(tr, te)    # (N and x10 are already heavier than the slider in TEST alone)
+        assert info.value.column == "load_kg" and "\n" not in str(info.value)
+        _, t, _ = load_train_test(tr, te, allow_unusual_units=True)
+        assert any("as much as TRAIN's" in u for u in t.meta["unusual_units"])
+    else:
+        load_train_test(tr, te)

@@ -311,7 +311,7 @@ def load_train_test(train_path, test_path=None, *, test_abs_loads=TEST_ABS_LOADS
     train = dataio.load_measurements(train_path, **kw)
     if test_path is not None:
         test = dataio.load_measurements(test_path, **kw)
-        check_same_rig(train, test, explicit={"slider_mass_kg": slider_mass_kg})
+        check_same_rig(train, test, explicit={"slider_mass_kg": slider_mass_kg}, allow_unusual_units=allow_unusual_units)
         note = f"test file {test_path}"
         _check_train_runs(train, train_path, note)
         return train, test, note

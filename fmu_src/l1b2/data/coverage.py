@@ -130,7 +130,8 @@ def input_checks(train: Measurements, test: Measurements | None) -> dict:
 RIG_SETTINGS: dict[str, float] = {"slider_mass_kg": 1e-6, "encoder_resolution_m": 1e-6, "drive_frequency_Hz": 1e-6}
 
 
-def check_same_rig(train: Measurements, test: Measurements, *, explicit: Mapping[str, Any] | None = None) -> None:
+def check_same_rig(train: Measurements, test: Measurements, *, explicit: Mapping[str, Any] | None = None,
+                   allow_unusual_units: bool = False) -> None:
     """Refuse TEST whose rig settings (:data:`RIG_SETTINGS`, from its sidecar) differ from TRAIN's.
 
     Both files are measured on one rig: a slider mass of 0.12 kg in TRAIN's
@@ -138,9 +139,21 @@ def check_same_rig(train: Measurements, test: Measurements, *, explicit: Mapping
     and the prediction on TEST would silently use TEST's value. Settings
     given as options (``explicit``) apply to both and are not compared.
     Raises :class:`~l1b2.errors.DataFormatError` naming TEST's sidecar and
-    the field.
+    the field. A TEST whose load effect per kg differs from TRAIN's
+    (:func:`l1b2.data.plausibility.load_effect_mismatch`: loads in another
+    unit) is refused too, unless ``allow_unusual_units`` (then it is listed
+    in TEST's ``unusual_units``).
     """
     explicit = explicit or {}
+    from .plausibility import load_effect_mismatch, run_table
+    found = load_effect_mismatch(run_table(train.df), run_table(test.df))
+    if found is not None:
+        where = test.meta.get("source") or "TEST"
+        if not allow_unusual_units:
+            raise DataFormatError(where, found.column, found.row + 1,
+                                  found.text + " (if the values are right, allow them with --allow-unusual-units)")
+        test.meta.setdefault("unusual_units", []).append(str(DataFormatError(where, found.column, found.row + 1,
+                                                                             found.text)))
     for name, rel in RIG_SETTINGS.items():
         if explicit.get(name) is not None:
             continue

@@ -88,8 +88,10 @@ def run_table(df: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=["run", "row", "direction", "load", "voltage", "u", "n"])
 
 
-def load_sign_finding(runs: pd.DataFrame) -> Finding | None:
-    """The steady speed along the direction rises with ``load * direction`` (t > :data:`SIGN_T_LIMIT`)."""
+def load_effect(runs: pd.DataFrame) -> tuple[float, float, pd.DataFrame, pd.Series, int] | None:
+    """Pooled slope [m/s per kg] of the steady speed along the direction on ``load * direction``, within
+    groups of equal direction and voltage, its t statistic, the moving runs, their ``z`` and the residual
+    degrees of freedom; None when the runs cannot tell (fewer than two loads in any group)."""
     moving = runs[runs["u"] >= MIN_TRAVERSE_SPEED_M_S]
     if moving.empty:
         return None
@@ -100,13 +102,48 @@ def load_sign_finding(runs: pd.DataFrame) -> Finding | None:
     sxx = float(np.sum(zc * zc))
     n_groups = key.nunique()
     dof = len(moving) - n_groups - 1
-    if sxx <= 0 or dof < 2:
+    if sxx <= 0 or dof < 1:
         return None
     slope = float(np.sum(zc * uc)) / sxx
     resid = uc - slope * zc
     se = math.sqrt(float(np.sum(resid * resid)) / dof / sxx)
-    t = slope / se if se > 0 else (math.inf if slope > 0 else 0.0)
-    if slope <= 0 or t <= SIGN_T_LIMIT:
+    t = slope / se if se > 0 else math.copysign(math.inf, slope) if slope else 0.0
+    return slope, t, moving, z, dof
+
+
+#: TEST's load effect per kg may differ from TRAIN's by at most this factor (the same rig, the same gravity)
+MAX_LOAD_EFFECT_RATIO = 1.5
+
+
+def load_effect_mismatch(train_runs: pd.DataFrame, test_runs: pd.DataFrame) -> Finding | None:
+    """TEST's load effect per kg (:func:`load_effect`) off TRAIN's by more than :data:`MAX_LOAD_EFFECT_RATIO`.
+
+    On one rig a kilogram on the pulley changes the steady speed by the same
+    amount in both files (gravity does not change between them); a TEST file
+    whose loads are in lb shows 1/2.2 of TRAIN's effect per "kg", in N 1/9.8.
+    Judged only when both effects are clear (|t| > :data:`SIGN_T_LIMIT`).
+    """
+    a, b = load_effect(train_runs), load_effect(test_runs)
+    if a is None or b is None or abs(a[1]) <= SIGN_T_LIMIT or abs(b[1]) <= SIGN_T_LIMIT or a[0] >= 0 or b[0] >= 0:
+        return None
+    ratio = b[0] / a[0]
+    if 1 / MAX_LOAD_EFFECT_RATIO <= ratio <= MAX_LOAD_EFFECT_RATIO:
+        return None
+    moving, z = b[2], b[3]
+    heavy = moving.loc[z.abs().idxmax()]
+    return Finding(int(heavy["row"]), LOAD,
+                   f"a kilogram of load changes TEST's steady speed {ratio:.3g} x as much as TRAIN's "
+                   f"({b[0] * 0.01:+.3g} vs {a[0] * 0.01:+.3g} m/s per 10 g): on one rig gravity gives both the "
+                   "same effect; is TEST's load_kg in another unit (lb: 0.45, N: 0.10, x10: 0.10)?")
+
+
+def load_sign_finding(runs: pd.DataFrame) -> Finding | None:
+    """The steady speed along the direction rises with ``load * direction`` (t > :data:`SIGN_T_LIMIT`)."""
+    effect = load_effect(runs)
+    if effect is None:
+        return None
+    slope, t, moving, z, dof = effect
+    if dof < 2 or slope <= 0 or t <= SIGN_T_LIMIT:
         return None
     heavy = moving.loc[z.abs().idxmax()]
     return Finding(int(heavy["row"]), LOAD,
