@@ -1,8 +1,9 @@
 """FMI misuse as a host would commit it: every call refused with the right status, no crash, no hang.
 
-Each case runs in a fresh Python process (``isolated``) through fmpy's
-low-level FMI 2.0 API, so a segmentation fault or an abort is seen as the
-worker's exit code and a hang as its timeout. The worker records the status
+The cases of one FMU run in one fresh Python process (``isolated``), each
+on its own instance, through fmpy's low-level FMI 2.0 API, so a
+segmentation fault or an abort is seen as the worker's exit code and a hang
+as its timeout. The worker records the status
 of every call (0 OK, 2 Discard, 3 Error, "null" for an instantiation that
 returned NULL) and the FMU's log lines; the tests check the status FMI 2.0
 requires, that the log names the problem, and that the instance is still
@@ -219,6 +220,22 @@ def worker_case(path, case, other=None):
     return out
 
 
+#: every case, in the order one worker runs them on one FMU ("after_free" unloads the library: last)
+CASES = ("unknown_vr", "nan_parameter", "huge_step", "output_set", "fixed_after_init", "time_backwards",
+         "foreign_state", "setup_after_init", "wrong_guid", "no_resources", "after_free")
+
+
+def worker_all(path, other):
+    """Every case on one FMU in this process (each with its own instance); a Python error is recorded."""
+    out = {}
+    for case in CASES:
+        try:
+            out[case] = worker_case(path, case, other)
+        except Exception as exc:  # noqa: BLE001 - recorded: the test of that case fails with it
+            out[case] = {"error": repr(exc)}
+    return out
+
+
 def _max_step(path):
     import zipfile
     import xml.etree.ElementTree as ET
@@ -238,93 +255,108 @@ def all_fmus(fmus, tmp_path_factory):
     return {**fmus, "Predictor": build_fmu("Predictor", dest), "L1B2Motor": build_fmu("L1B2Motor", dest)}
 
 
-def _run(isolated, path, case, other=None):
-    res = isolated(__file__, "worker_case", str(path), case, None if other is None else str(other),
-                   timeout=TIMEOUT_S, check=False)
+_RESULTS: dict[str, object] = {}
+ALL = ("Driver", "Stator", "Interface", "Slider", "Predictor", "L1B2Motor")
+
+
+def _run(isolated, all_fmus, name, case):
+    """The result of ``case`` on FMU ``name``: all cases run once per FMU in one fresh process."""
+    path = all_fmus[name]
+    key = str(path)
+    if key not in _RESULTS:
+        other = all_fmus["Slider" if name == "Stator" else "Stator"]   # the foreign state's FMU
+        _RESULTS[key] = isolated(__file__, "worker_all", key, str(other), timeout=TIMEOUT_S * len(CASES),
+                                 check=False)
+    res = _RESULTS[key]
     assert res.returncode == 0 and res.value is not None, (
-        f"{case} on {Path(path).name}: worker exited with {res.returncode} (negative = signal, -11 = segfault)\n"
-        f"{res.stderr[-2000:]}")
-    return res.value
+        f"{Path(path).name}: worker exited with {res.returncode} (negative = signal, -11 = segfault, "
+        f"None = hang)\n{res.stderr[-2000:]}")
+    r = res.value[case]
+    assert "error" not in r, r
+    return r
 
 
-@pytest.mark.parametrize("name", ["Driver", "Stator", "Interface", "Slider", "Predictor", "L1B2Motor"])
+@pytest.mark.parametrize("name", ALL)
 def test_unknown_value_references_are_errors_and_the_instance_stays_usable(all_fmus, isolated, name):
-    r = _run(isolated, all_fmus[name], "unknown_vr")
+    r = _run(isolated, all_fmus, name, "unknown_vr")
     assert (r["get1"], r["get2"], r["set"], r["get_int"], r["set_bool"]) == (3, 3, 3, 3, 3), r
     assert r["after_get"] == 0 and math.isfinite(r["after_value"]), r
     assert r["after_step"] == 0 and r["freed"], r
     assert any("unknown value reference 10000" in m for m in r["log"]), r["log"]
 
 
-@pytest.mark.parametrize("name", ["Slider", "L1B2Motor", "Predictor"])
+@pytest.mark.parametrize("name", ALL)
 def test_nan_parameter_in_initialisation_is_an_error_and_leaves_the_value(all_fmus, isolated, name):
-    r = _run(isolated, all_fmus[name], "nan_parameter")
+    r = _run(isolated, all_fmus, name, "nan_parameter")
     assert (r["set1"], r["set2"]) == (3, 3), r
     assert r["after"] == r["before"], r           # the refused value did not stick
     assert r["exit"] == 0 and r["step"] == 0 and r["freed"], r
     assert any(r["param"] in m and "not finite" in m for m in r["log"]), r["log"]
 
 
-@pytest.mark.parametrize("name", ["Predictor", "L1B2Motor", "Slider"])
+@pytest.mark.parametrize("name", ALL)
 def test_a_step_beyond_the_declared_maximum_is_discarded_and_returns(all_fmus, isolated, name):
-    r = _run(isolated, all_fmus[name], "huge_step")
+    r = _run(isolated, all_fmus, name, "huge_step")
     assert r["limit"] < 1e6
     assert r["step"] == 2, r                         # fmi2Discard, at once (the worker has TIMEOUT_S)
     assert r["after_step"] == 0 and r["freed"], r  # a step within the limit still works
     assert any("maximum" in m for m in r["log"]), r["log"]
 
 
-@pytest.mark.parametrize("name", ["Slider", "L1B2Motor"])
+@pytest.mark.parametrize("name", ALL)
 def test_setting_an_output_is_an_error_and_does_not_stick(all_fmus, isolated, name):
-    r = _run(isolated, all_fmus[name], "output_set")
+    r = _run(isolated, all_fmus, name, "output_set")
     assert r["set"] == 3 and not r["changed"], r
     assert r["after_step"] == 0 and r["freed"], r
     assert any("is an output" in m for m in r["log"]), r["log"]
 
 
-@pytest.mark.parametrize("name", ["Slider", "Stator", "L1B2Motor"])
+@pytest.mark.parametrize("name", ALL)
 def test_fixed_parameter_after_initialisation_is_an_error(all_fmus, isolated, name):
-    r = _run(isolated, all_fmus[name], "fixed_after_init")
+    r = _run(isolated, all_fmus, name, "fixed_after_init")
     assert r["set"] == 3 and not r["changed"], r
     assert r["after_step"] == 0 and r["freed"], r
     assert any("fixed parameter" in m for m in r["log"]), r["log"]
 
 
-@pytest.mark.parametrize("name", ["Slider", "Predictor"])
+@pytest.mark.parametrize("name", ALL)
 def test_time_going_backwards_is_an_error(all_fmus, isolated, name):
-    r = _run(isolated, all_fmus[name], "time_backwards")
+    r = _run(isolated, all_fmus, name, "time_backwards")
     assert (r["step1"], r["step2"], r["back"], r["after_step"]) == (0, 0, 3, 0), r
     assert any("backwards" in m for m in r["log"]), r["log"]
 
 
-def test_a_state_of_another_fmu_is_refused(all_fmus, isolated):
-    r = _run(isolated, all_fmus["Slider"], "foreign_state", all_fmus["Stator"])
+@pytest.mark.parametrize("name", ALL)
+def test_a_state_of_another_fmu_is_refused(all_fmus, isolated, name):
+    r = _run(isolated, all_fmus, name, "foreign_state")
     assert r["set"] == 3 and not r["changed"], r
     assert r["deser"] == 3, r
     assert r["after_step"] == 0 and r["freed"], r
     assert any("not made by this FMU" in m for m in r["log"]), r["log"]
 
 
-def test_setup_experiment_after_initialisation_is_an_error(all_fmus, isolated):
-    r = _run(isolated, all_fmus["Slider"], "setup_after_init")
+@pytest.mark.parametrize("name", ALL)
+def test_setup_experiment_after_initialisation_is_an_error(all_fmus, isolated, name):
+    r = _run(isolated, all_fmus, name, "setup_after_init")
     assert r["setup"] == 3 and r["after_step"] == 0 and r["freed"], r
 
 
-def test_calls_on_a_freed_instance_are_refused_without_a_crash(all_fmus, isolated):
-    r = _run(isolated, all_fmus["Stator"], "after_free")
+@pytest.mark.parametrize("name", ALL)
+def test_calls_on_a_freed_instance_are_refused_without_a_crash(all_fmus, isolated, name):
+    r = _run(isolated, all_fmus, name, "after_free")
     assert r["step_freed"] == 3 and r["get_freed"] == 3 and r["freed"], r
 
 
-@pytest.mark.parametrize("name", ["Slider", "L1B2Motor"])
+@pytest.mark.parametrize("name", ALL)
 def test_a_wrong_guid_is_refused_at_instantiation(all_fmus, isolated, name):
-    r = _run(isolated, all_fmus[name], "wrong_guid")
+    r = _run(isolated, all_fmus, name, "wrong_guid")
     assert r["instantiate"] == "null", r
     assert any("GUID" in m and "does not match" in m for m in r["log"]), r["log"]
 
 
-@pytest.mark.parametrize("name", ["Slider", "Predictor"])
+@pytest.mark.parametrize("name", ALL)
 def test_instantiation_without_resources_is_refused_with_a_message(all_fmus, isolated, name):
-    r = _run(isolated, all_fmus[name], "no_resources")
+    r = _run(isolated, all_fmus, name, "no_resources")
     assert r["instantiate"] == "null", r
     assert any("resources" in m for m in r["log"]), r["log"]
 
