@@ -617,7 +617,7 @@ def main(argv=None) -> int:
         return 2
     except OSError as exc:  # full disk, no permission, ...: the output folder is left as it was
         where = f" ({exc.filename})" if exc.filename else ""
-        print(f"l1b2: error: {exc.strerror or exc}{where}; nothing was written (earlier results are untouched)",
+        print(f"l1b2: error: {exc.strerror or exc}{where}; earlier results are untouched",
               file=sys.stderr)
         return 2
     except RecursionError:
@@ -625,8 +625,8 @@ def main(argv=None) -> int:
               "objects or tables?)", file=sys.stderr)
         return 2
     except MemoryError:
-        print("l1b2: error: out of memory; nothing was written (a smaller input or sweep, or a larger machine)",
-              file=sys.stderr)
+        print("l1b2: error: out of memory (a smaller input or study, or a larger machine); "
+              "earlier results are untouched", file=sys.stderr)
         return 2
     except Exception as exc:  # a bug: one line (the traceback with L1B2_TRACEBACK=1)
         if os.environ.get("L1B2_TRACEBACK"):
