@@ -547,7 +547,10 @@ def run_sweep(spec_path, out_dir, *, workers: int | None = None, scheduler: str 
     ref = motor_reference(text, str(spec_path))
     mp = load_motor(spec_path.parent / ref if ref else None)
     spec = parse_spec(text, str(spec_path), mp)
-    check_size(spec, DEFAULT_MAX_RUNS if max_runs is None else max_runs, str(spec_path))  # before drawing
+    size = check_size(spec, DEFAULT_MAX_RUNS if max_runs is None else max_runs, str(spec_path))  # before drawing
+    if progress:
+        print(f"study: {size['runs']} runs ({size['samples']} samples x {size['runs'] // size['samples']} operating "
+              f"points), at most {size['steps_per_run']} steps each, up to {size['cpu_hours']:.2g} CPU hours")
     samples = draw_samples(spec)
     bounds = runner.chunk_bounds(len(samples), spec.chunk_size)
     chunks_dir = out / "chunks"
@@ -573,7 +576,8 @@ def run_sweep(spec_path, out_dir, *, workers: int | None = None, scheduler: str 
     run = len(samples) - skipped
     info = {"engine_workers": n_workers, "scheduler": scheduler, "executed_samples": run,
             "skipped_samples": skipped, "wall_time_s": round(t2 - t0, 3), "startup_s": round(t1 - t0, 3),
-            "worker_seconds_per_traverse": round((t2 - t1) * n_workers / run, 4) if run else None}
+            "worker_seconds_per_traverse": round((t2 - t1) * n_workers / run, 4) if run else None,
+            "estimate": size}
     res = SweepResult(table, spec, ctx, info)
     res.save(out, plots=plots_on)
     return res
