@@ -125,6 +125,13 @@ UNIT_MISTAKES = {
     "temperature in K": (lambda df: df.assign(temperature_C=298.15), None),
     "slider mass in g (sidecar)": (lambda df: df, {"slider_mass_kg": 120.0}),
     "encoder in um (sidecar)": (lambda df: df, {"encoder_resolution_m": 0.05}),
+    # issue 30: mistakes inside the per-column ranges
+    "load in N": (scale("load_kg", 9.80665), None),
+    "load in lb": (scale("load_kg", 1 / 0.45359237), None),
+    "load x10": (scale("load_kg", 10.0), None),
+    "load sign flipped": (scale("load_kg", -1.0), None),
+    "temperature in degF": (lambda df: df.assign(temperature_C=77.0), None),
+    "time x100": (scale("time_s", 100.0), None),
 }
 
 
@@ -276,6 +283,82 @@ class Campaign:
         self.record("--out is an existing file", v, f"{res['seconds']:.1f} s to refuse")
         # valid control
         self.identify("valid control (identify)", "rig data as written", self.all, expect="any")
+        self.run_issue30()
+
+    def run_issue30(self) -> None:
+        """The cases of issue 30 the original campaign lacked (whole-file physics, TEST vs TRAIN, hostile input)."""
+        base = self.all.assign(temperature_C=25.0)
+        runs = list(pd.unique(base["run"]))
+        zero = [r for r in runs if base.loc[base.run == r, "load_kg"].iloc[0] == 0.0]
+        d = base.copy()
+        d.loc[d.run == zero[0], "voltage_V"] = 0.0
+        self.identify("run contradicts its speed (identify)", "one run's voltage zeroed", d)
+        d = base.copy()
+        m = d.run == zero[1]
+        d.loc[m, "direction"] = -d.loc[m, "direction"]
+        self.identify("run contradicts its speed (identify)", "one run's direction flipped", d)
+        d = base.copy()
+        idx = d.index[d.run == runs[2]]
+        d.loc[idx[len(idx) // 2]:, "time_s"] += 1e6
+        self.identify("clock jump (identify)", "1e6 s inside a run", d)
+        test = self.test.assign(temperature_C=25.0)
+        train = self.train.assign(temperature_C=25.0)
+        self.identify("TEST against TRAIN (identify --test)", "TEST direction flipped", train,
+                      test.assign(direction=-test["direction"]))
+        self.identify("TEST against TRAIN (identify --test)", "TEST sidecar slider mass in lb", train, test,
+                      sidecar={"slider_mass_kg": self.sidecar["slider_mass_kg"] / 0.45359237})
+        self.identify("TEST against TRAIN (identify --test)", "TEST directions never seen in TRAIN",
+                      train[train["direction"] == 1], test[test["direction"] == -1], expect="flag")
+        # strict sidecars
+        d = self.case_dir()
+        write_pair(base, d / "train.csv", self.sidecar)
+        (d / "train.json").write_text('{"slider_mass_kg": 0.12, "slider_mass_kg": 0.5}')
+        self._run_dir("strict sidecar", "duplicate key", d, ["identify", "--train", str(d / "train.csv"), "--out",
+                                                             str(d / "out"), *FAST])
+        d = self.case_dir()
+        write_pair(base, d / "train.csv", self.sidecar)
+        (d / "train.json").write_text('{"a":' * 100_000 + "1" + "}" * 100_000)
+        self._run_dir("strict sidecar", "nested 100,000 deep", d, ["identify", "--train", str(d / "train.csv"),
+                                                                   "--out", str(d / "out"), *FAST])
+        big = base.assign(run=[str(int(r) + 2**63 + 5) for r in base["run"]])
+        self.identify("run ids beyond int64", "ids 2^63 + k", big, expect="any")
+
+    def _run_dir(self, cls: str, note: str, d: Path, argv: list[str], expect: str = "refuse") -> None:
+        before = set(p.name for p in d.iterdir())
+        res = run_cli(argv)
+        self.record(cls, judge(res, d / "out", before, d, expect, "identification.json"), note)
+
+    def output_folders(self) -> list[tuple[str, str, int]]:
+        """Output-folder scenarios of issue 30: (scenario, first line of stderr, files lost)."""
+        rows = []
+        d = self.case_dir()
+        rig = d / "rig"
+        shutil.copytree(self.rig, rig)
+        before = {p.name: p.read_bytes() for p in rig.iterdir() if p.is_file()}
+        res = run_cli(["identify", "--train", str(rig / "train.csv"), "--out", str(rig), *FAST])
+        lost = sum(1 for n, b in before.items() if not (rig / n).exists() or (rig / n).read_bytes() != b)
+        rows.append(("identify --out <the rig folder it reads>", res["stderr"].strip()[:110], lost))
+        ident = d / "ident"
+        res = run_cli(["identify", "--train", str(rig / "train.csv"), "--out", str(ident), *FAST])
+        kept = (ident / "identification.json").read_bytes() if res["code"] == 0 else b""
+        res = run_cli(["close-loop", "--train", str(rig / "train.csv"), "--report-dir", str(ident), *CLOSE_FAST])
+        lost = int(bool(kept) and (not (ident / "identification.json").exists()
+                                   or (ident / "identification.json").read_bytes() != kept))
+        rows.append(("close-loop --report-dir <an identify result>", res["stderr"].strip()[:110], lost))
+        import os
+        cwd = os.getcwd()
+        work = d / "cwd"
+        work.mkdir()
+        shutil.copy(rig / "train.csv", work / "train.csv")
+        shutil.copy(rig / "train.json", work / "train.json")
+        os.chdir(work)
+        try:
+            res = run_cli(["identify", "--train", "train.csv", "--out", ".", *FAST])
+        finally:
+            os.chdir(cwd)
+        lost = int(not (work / "train.csv").exists())
+        rows.append(("identify --out .", res["stderr"].strip()[:110], lost))
+        return rows
 
     def table(self) -> str:
         head = f"{'input class':42s} {'tried':>5s} {'refused':>7s} {'traceback':>9s} {'written':>7s} " \
@@ -321,6 +404,10 @@ def main(argv=None) -> int:
                 flag = "WRONG " if r["wrong"] else ("TRACEBACK " if r["traceback"] else "")
                 print(f"[{cls}] {r['note']}: {flag}{'accepted' if r['accepted'] else r['message']}")
     print(c.table())
+    print()
+    print(f"{'output-folder scenario':48s} {'files lost':>10s}  message")
+    for name, msg, lost in c.output_folders():
+        print(f"{name:48s} {lost:10d}  {msg}")
     print(f"({time.perf_counter() - t0:.0f} s; files in {work})")
     if args.work is None:
         shutil.rmtree(work, ignore_errors=True)

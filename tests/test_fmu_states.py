@@ -112,7 +112,7 @@ def test_slave_state_carries_the_error_flag(name, resources):
     bad_input = _first_input(s)
     assert s.do_step(0.0, H)
     good = s._get_fmu_state()
-    assert good[STATE_KEY] == {"failed": None}
+    assert good[STATE_KEY] == {"failed": None, "model": name}
     assert s.do_step(H, H)
     first = _outputs(s)
     s._set_fmu_state(good)
@@ -132,7 +132,7 @@ def test_slave_state_carries_the_error_flag(name, resources):
     assert s.do_step(H, H) is True
     assert _outputs(s) == first
     s._set_fmu_state(good)                               # a state may be restored more than once
-    assert good[STATE_KEY] == {"failed": None} and s.do_step(H, H) is True
+    assert good[STATE_KEY] == {"failed": None, "model": name} and s.do_step(H, H) is True
 
 
 def test_restoring_a_state_before_initialisation_does_not_fail(resources):

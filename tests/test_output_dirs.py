@@ -151,6 +151,133 @@ def test_two_cli_runs_on_one_folder_one_is_refused(tmp_path):
 
 
 # ---------------------------------------------------------------------------
+# whose folder it is (issue 30): another command's result, the command's own input, the current folder
+# ---------------------------------------------------------------------------
+
+def _result_of(folder: Path, command: str, files: dict[str, str]) -> None:
+    with output_dir(folder, command=command) as tmp:
+        for name, text in files.items():
+            (tmp / name).write_text(text)
+
+
+def _contents(folder: Path) -> dict[str, str]:
+    return {p.name: p.read_text() for p in folder.iterdir() if p.is_file()}
+
+
+def test_identify_out_at_the_rig_folder_it_reads_is_refused_nothing_deleted(tmp_path, capsys, monkeypatch):
+    # reference: issue 30 - identify --out <rig folder> deleted train.csv, test.csv, all.csv and rig_truth.json
+    _fit_must_not_run(monkeypatch)
+    rig = tmp_path / "rig"
+    frame = synthetic_frame()
+    _result_of(rig, "rig", {"rig_truth.json": "{}", "all.csv": "x"})
+    train = write(rig, frame, "train")
+    before = _contents(rig)
+    code = cli_main(["identify", "--train", str(train), "--out", str(rig)])
+    err = capsys.readouterr().err
+    assert code != 0 and err.count("\n") == 1, err
+    assert "holds this command's input" in err or "result of 'l1b2 rig'" in err
+    assert _contents(rig) == before
+
+
+def test_a_result_of_another_command_is_never_replaced(tmp_path):
+    # reference: issue 30 - close-loop --report-dir at an identify result deleted identification.json
+    res = tmp_path / "ident"
+    _result_of(res, "identify", {"identification.json": '{"p": 1}'})
+    with pytest.raises(OutputError, match=r"holds the result of 'l1b2 identify'"):
+        with output_dir(res, command="close-loop"):
+            raise AssertionError("body ran")
+    assert _contents(res)["identification.json"] == '{"p": 1}'
+    _result_of(res, "identify", {"identification.json": '{"p": 2}'})  # the same command may replace it
+    assert _contents(res)["identification.json"] == '{"p": 2}'
+
+
+def test_a_folder_holding_an_input_is_refused_even_without_a_marker(tmp_path):
+    data = tmp_path / "data"
+    data.mkdir()
+    (data / "identification.json").write_text("{}")   # only names the command would write ...
+    nested = data / "runs"
+    nested.mkdir()
+    (nested / "fig10_test_run_1.png").write_text("")  # ... and the input deeper inside
+    with pytest.raises(OutputError, match="holds this command's input"):
+        with output_dir(data, command="identify", inputs=(nested / "fig10_test_run_1.png",)):
+            raise AssertionError("body ran")
+    assert (nested / "fig10_test_run_1.png").exists()
+
+
+def test_out_dot_is_refused_in_one_line(tmp_path, capsys, monkeypatch):
+    # reference: issue 30 - `--out .` was an internal error (exit 3, traceback)
+    _fit_must_not_run(monkeypatch)
+    work = tmp_path / "work"
+    work.mkdir()
+    train = write(work, synthetic_frame(), "train")
+    monkeypatch.chdir(work)
+    for out in (".", str(tmp_path)):
+        code = cli_main(["identify", "--train", str(train), "--out", out])
+        err = capsys.readouterr().err
+        assert code == 2 or code == 1, (code, err)
+        assert err.count("\n") == 1 and "current folder" in err, err
+    assert train.exists()
+
+
+@pytest.mark.parametrize("complete", [True, False])
+def test_a_swap_killed_between_its_two_renames_is_finished_or_rolled_back(tmp_path, complete):
+    # reference: issue 30 - dying between the renames left no --out and the old result as a hidden folder
+    out = tmp_path / "res"
+    _result_of(out, "identify", {"identification.json": "old"})
+    os.replace(out, tmp_path / ".res.old-99999")          # first rename done, then killed
+    half = tmp_path / ".res.tmp-99999-x"
+    half.mkdir()
+    (half / "identification.json").write_text("new")
+    if complete:                                        # the marker is written last: the new result was whole
+        (half / OUTPUT_MARKER).write_text(json.dumps({"command": "identify"}))
+    with pytest.raises(ValueError):
+        with output_dir(out, command="identify"):
+            raise ValueError("this run's input refused")
+    assert _contents(out)["identification.json"] == ("new" if complete else "old")
+    assert _names(tmp_path) == ["res"]
+
+
+# ---------------------------------------------------------------------------
+# temporary FMU extractions
+# ---------------------------------------------------------------------------
+
+_SIGTERM_CHILD = """
+import os, signal, sys, time
+from pathlib import Path
+from l1b2.cosim import master
+folder = master.extracted(Path(sys.argv[1]))
+print(folder, flush=True)
+time.sleep(60)
+"""
+
+
+def test_fmu_extractions_are_removed_on_sigterm_and_stale_ones_at_next_start(tmp_path, fmus):
+    import signal
+    tmp_root = tmp_path / "tmp"
+    tmp_root.mkdir()
+    env = {**os.environ, "TMPDIR": str(tmp_root), "OPENBLAS_NUM_THREADS": "1"}
+    child = subprocess.Popen([sys.executable, "-c", _SIGTERM_CHILD, str(fmus["Slider"])], stdout=subprocess.PIPE,
+                             text=True, env=env)
+    folder = Path(child.stdout.readline().strip())
+    assert folder.parent == tmp_root and (folder / "modelDescription.xml").exists()
+    child.send_signal(signal.SIGTERM)
+    assert child.wait(timeout=60) == 128 + signal.SIGTERM
+    assert list(tmp_root.iterdir()) == []
+    # a run killed with SIGKILL cannot clean up: the next process that extracts an FMU does
+    child = subprocess.Popen([sys.executable, "-c", _SIGTERM_CHILD, str(fmus["Slider"])], stdout=subprocess.PIPE,
+                             text=True, env=env)
+    folder = Path(child.stdout.readline().strip())
+    child.kill()
+    child.wait(timeout=60)
+    assert folder.exists()
+    mine = tmp_root / "l1b2-fmu-notapid-x"             # not a pid: not ours to judge, left alone
+    mine.mkdir()
+    from l1b2.cosim.master import remove_stale_extractions
+    assert remove_stale_extractions(str(tmp_root)) == [str(folder)]
+    assert sorted(p.name for p in tmp_root.iterdir()) == ["l1b2-fmu-notapid-x"]
+
+
+# ---------------------------------------------------------------------------
 # the commands
 # ---------------------------------------------------------------------------
 
@@ -270,3 +397,14 @@ def test_voltage_and_load_outside_train_are_flagged(tmp_path):
         if g["load_kg"].iloc[0] > 0:
             expect.add("load_kg")
         assert by_run.get(run, set()) == expect, run
+
+
+def test_a_sweep_never_writes_into_another_commands_result(tmp_path, capsys):
+    res = tmp_path / "ident"
+    _result_of(res, "identify", {"identification.json": "{}"})
+    spec = tmp_path / "study.toml"
+    spec.write_text("[study]\n")
+    code = cli_main(["sweep", "--spec", str(spec), "--out", str(res), "--workers", "0", "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "result of 'l1b2 identify'" in err, err
+    assert sorted(p.name for p in res.iterdir()) == [OUTPUT_MARKER, "identification.json"]

@@ -138,7 +138,7 @@ def cmd_sweep(args) -> int:
     from .workflows import run_sweep
     try:
         res = run_sweep(args.spec, args.out, workers=args.workers, scheduler=args.scheduler,
-                        progress=not args.quiet, plots_on=not args.no_plots)
+                        progress=not args.quiet, plots_on=not args.no_plots, max_runs=args.max_runs)
     except KeyboardInterrupt:
         print(f"l1b2: interrupted; finished chunks are in {Path(args.out) / 'chunks'}: run the same command "
               f"to resume", file=sys.stderr)
@@ -163,6 +163,8 @@ def _add_sweep_parser(sub):
     _engine_args(p, default_workers=default_workers(), what="traverses (0 = serially in this process)")
     p.add_argument("--no-plots", action="store_true")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--max-runs", type=int, default=None, metavar="N",
+                   help="refuse a study of more than N runs (samples x operating points; default 100000)")
     p.set_defaults(func=cmd_sweep)
 
 
@@ -615,6 +617,19 @@ def main(argv=None) -> int:
         return 130
     except FileNotFoundError as exc:
         print(f"l1b2: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # full disk, no permission, ...: the output folder is left as it was
+        where = f" ({exc.filename})" if exc.filename else ""
+        print(f"l1b2: error: {exc.strerror or exc}{where}; earlier results are untouched",
+              file=sys.stderr)
+        return 2
+    except RecursionError:
+        print("l1b2: error: an input is nested too deeply to read (a JSON or TOML file with deeply nested "
+              "objects or tables?)", file=sys.stderr)
+        return 2
+    except MemoryError:
+        print("l1b2: error: out of memory (a smaller input or study, or a larger machine); "
+              "earlier results are untouched", file=sys.stderr)
         return 2
     except Exception as exc:  # a bug: one line (the traceback with L1B2_TRACEBACK=1)
         if os.environ.get("L1B2_TRACEBACK"):

@@ -28,7 +28,7 @@ import pandas as pd
 
 from .data import measurements as dataio
 from .data import plots
-from .data.coverage import input_checks, outside_range
+from .data.coverage import check_same_rig, input_checks, outside_range
 from .jsonio import dumps
 from .data.metrics import diverged_runs, evaluation_mask, report_metrics, speed_metrics
 from .errors import IdentificationError, OutputError
@@ -90,19 +90,75 @@ def _foreign_files(out: Path, known: tuple[str, ...]) -> list[str]:
             if not any(fnmatch.fnmatch(rel, pat) for pat in known)]
 
 
-def _check_target(out: Path, known: tuple[str, ...] = ()) -> None:
-    """Refuse a target that is a file, or a folder holding files not written by :func:`output_dir`."""
+def _marker_command(folder: Path) -> str | None:
+    """The command named in ``folder``'s :data:`OUTPUT_MARKER` ("?" when unreadable), None without a marker."""
+    marker = folder / OUTPUT_MARKER
+    if not marker.is_file():
+        return None
+    try:
+        doc = json.loads(marker.read_text()[:10_000])
+        return str(doc["command"]) if isinstance(doc, dict) and isinstance(doc.get("command"), str) else "?"
+    except (OSError, ValueError):
+        return "?"
+
+
+def _check_target(out: Path, known: tuple[str, ...] = (), command: str = "l1b2", inputs=()) -> None:
+    """Refuse a target ``out`` that a run of ``command`` must not replace.
+
+    Refused: a file; the current folder or one of its parents (``--out .``);
+    a folder holding one of the command's ``inputs``; the result of another
+    command (its marker names that command); an unmarked folder holding
+    files other than the command's :data:`KNOWN_OUTPUTS`.
+    """
     if out.exists() or out.is_symlink():
         if not out.is_dir() or out.is_symlink():
             raise OutputError(f"{out}: exists and is not a folder; give a folder (new, empty, or an earlier "
                               "result of the same command) as output")
-        if not (out / OUTPUT_MARKER).is_file():
+        real = out.resolve()
+        cwd = Path.cwd().resolve()
+        if real == cwd or real in cwd.parents:
+            raise OutputError(f"{out}: is the current folder or one of its parents, which a result replaces as "
+                              "a whole: give a new subfolder as output, e.g. --out results")
+        for item in inputs:
+            if item is None:
+                continue
+            p = Path(item).resolve()
+            if p == real or real in p.parents:
+                raise OutputError(f"{out}: holds this command's input {item}, which replacing the folder would "
+                                  "delete: give another folder as output")
+        other = _marker_command(out)
+        if other is not None and other != command:
+            raise OutputError(f"{out}: holds the result of 'l1b2 {other}', which 'l1b2 {command}' would delete: "
+                              "give another folder as output")
+        if other is None:
             foreign = _foreign_files(out, known)
             if foreign:
                 raise OutputError(f"{out}: folder holds files not written by this command (e.g. {foreign[0]}) "
                                   "and would be replaced: give a new or empty folder as output")
     elif out.parent.exists() and not out.parent.is_dir():
         raise OutputError(f"{out.parent}: exists and is not a folder")
+
+
+def _recover_swap(out: Path) -> None:
+    """Finish or roll back a swap that a killed run left half done (call with the lock held).
+
+    :func:`_swap_into_place` renames ``out`` to ``.NAME.old-PID`` and then the
+    complete temporary folder (it holds :data:`OUTPUT_MARKER`, written last)
+    to ``out``. Killed between the two: the complete new result is moved into
+    place when there is one, else the old result is moved back. Killed after
+    both: the left-over old result is removed.
+    """
+    olds = sorted(out.parent.glob(f".{out.name}.old-*"), key=lambda p: p.stat().st_mtime)
+    if not olds:
+        return
+    if not out.exists():
+        done = [t for t in out.parent.glob(f".{out.name}.tmp-*") if (t / OUTPUT_MARKER).is_file()]
+        if done:
+            os.replace(max(done, key=lambda p: (p / OUTPUT_MARKER).stat().st_mtime), out)
+        else:
+            os.replace(olds.pop(), out)
+    for old in olds:
+        shutil.rmtree(old, ignore_errors=True)
 
 
 def _make_parents(folder: Path) -> list[Path]:
@@ -147,15 +203,19 @@ KNOWN_OUTPUTS: dict[str, tuple[str, ...]] = {
     "export": ("fmus/*.fmu", "*.fmu", "*.ssp", "manifest.json"),
     "close-loop": ("report.json", "report.md", "*.png"),
     "export-calibrated": ("fmus/*.fmu", "calibrated_manifest.json", "*.ssp", "calibrated_ssv/*.ssv", "*.png"),
+    "sweep": ("chunks/*", "samples.parquet", "summary.csv", "sensitivity.csv", "sobol.csv", "study.json",
+              "sweep_*.png"),
 }
 
 
 @contextmanager
-def output_dir(out, *, command: str = "l1b2") -> Iterator[Path]:
+def output_dir(out, *, command: str = "l1b2", inputs=()) -> Iterator[Path]:
     """Write a command's results into ``out`` all at once, or not at all.
 
-    Before the body runs: ``out`` must not be a file nor a non-empty folder
-    without :data:`OUTPUT_MARKER` holding files other than the command's own
+    Before the body runs: ``out`` must not be a file, the current folder, a
+    folder holding one of ``inputs``, the result of another command (its
+    :data:`OUTPUT_MARKER` names the command), nor a non-empty folder without
+    a marker holding files other than the command's own
     (:data:`KNOWN_OUTPUTS`; someone else's files are never replaced);
     a lock file ``.NAME.lock`` beside it refuses a second concurrent writer
     (a lock left by a dead process on this host is taken over), and
@@ -178,7 +238,7 @@ def output_dir(out, *, command: str = "l1b2") -> Iterator[Path]:
     """
     out = Path(out)
     known = KNOWN_OUTPUTS.get(command, ())
-    _check_target(out, known)
+    _check_target(out, known, command, inputs)
     created = _make_parents(out.parent)
     try:
         lock = _acquire_lock(out)
@@ -187,6 +247,8 @@ def output_dir(out, *, command: str = "l1b2") -> Iterator[Path]:
         raise
     tmp = None
     try:
+        _recover_swap(out)  # a killed run's half-done swap, completed or rolled back
+        _check_target(out, known, command, inputs)
         for stale in out.parent.glob(f".{out.name}.tmp-*"):
             shutil.rmtree(stale, ignore_errors=True)
         tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-{os.getpid()}-", dir=out.parent))
@@ -196,7 +258,7 @@ def output_dir(out, *, command: str = "l1b2") -> Iterator[Path]:
         yield tmp
         (tmp / OUTPUT_MARKER).write_text(json.dumps({"command": command, "finished": time.time(),
                                                      "pid": os.getpid()}, allow_nan=False))
-        _check_target(out, known)  # nothing foreign appeared there meanwhile
+        _check_target(out, known, command, inputs)  # nothing foreign appeared there meanwhile
         _swap_into_place(tmp, out)
         tmp = None
     finally:
@@ -249,6 +311,7 @@ def load_train_test(train_path, test_path=None, *, test_abs_loads=TEST_ABS_LOADS
     train = dataio.load_measurements(train_path, **kw)
     if test_path is not None:
         test = dataio.load_measurements(test_path, **kw)
+        check_same_rig(train, test, explicit={"slider_mass_kg": slider_mass_kg}, allow_unusual_units=allow_unusual_units)
         note = f"test file {test_path}"
         _check_train_runs(train, train_path, note)
         return train, test, note
@@ -348,7 +411,7 @@ def run_identification(train_path, out_dir, test_path=None, *, order=8, criterio
     """
     from .ident.estimator import PredictorIdentifier
     out = Path(out_dir)
-    with output_dir(out, command="identify") as tmp:
+    with output_dir(out, command="identify", inputs=(train_path, test_path)) as tmp:
         train, test, split_note = load_train_test(train_path, test_path, test_abs_loads=test_abs_loads,
                                                   slider_mass_kg=slider_mass_kg,
                                                   allow_unusual_units=allow_unusual_units)
@@ -445,7 +508,7 @@ def _write_parquet_atomically(df: pd.DataFrame, path: Path) -> None:
 
 
 def run_sweep(spec_path, out_dir, *, workers: int | None = None, scheduler: str | None = None,
-              progress: bool = True, plots_on: bool = True, traverse=None):
+              progress: bool = True, plots_on: bool = True, traverse=None, max_runs: int | None = None):
     """Run the study of ``spec_path`` into ``out_dir``; returns its :class:`l1b2.sweep.result.SweepResult`.
 
     Resumable: every finished chunk is written at once, atomically, to
@@ -456,6 +519,9 @@ def run_sweep(spec_path, out_dir, *, workers: int | None = None, scheduler: str 
     ``study.json`` and PNGs. ``workers=0`` runs in this process, otherwise
     a local Dask cluster of ``workers`` processes or the one at ``scheduler``.
     For the FMU engine the FMUs are built (or found in the cache) once, here.
+    A study of more than ``max_runs`` runs (default
+    :data:`l1b2.sweep.spec.DEFAULT_MAX_RUNS`) is refused before anything is
+    drawn (:func:`l1b2.sweep.spec.check_size`).
     """
     import time
 
@@ -468,9 +534,12 @@ def run_sweep(spec_path, out_dir, *, workers: int | None = None, scheduler: str 
     from .sweep import runner
     from .sweep.result import SweepResult
     from .sweep.sampling import draw_samples
-    from .sweep.spec import motor_reference, parse_spec
+    from .sweep.spec import DEFAULT_MAX_RUNS, check_size, motor_reference, parse_spec
     from .sweep.tasks import TaskContext
     spec_path, out = Path(spec_path), Path(out_dir)
+    # resumable, so written in place (not through output_dir): never into another command's result,
+    # the current folder or a folder holding the spec
+    _check_target(out, KNOWN_OUTPUTS["sweep"], "sweep", (spec_path,))
     try:
         text = spec_path.read_text()
     except OSError as exc:
@@ -478,6 +547,10 @@ def run_sweep(spec_path, out_dir, *, workers: int | None = None, scheduler: str 
     ref = motor_reference(text, str(spec_path))
     mp = load_motor(spec_path.parent / ref if ref else None)
     spec = parse_spec(text, str(spec_path), mp)
+    size = check_size(spec, DEFAULT_MAX_RUNS if max_runs is None else max_runs, str(spec_path))  # before drawing
+    if progress:
+        print(f"study: {size['runs']} runs ({size['samples']} samples x {size['runs'] // size['samples']} operating "
+              f"points), at most {size['steps_per_run']} steps each, up to {size['cpu_hours']:.2g} CPU hours")
     samples = draw_samples(spec)
     bounds = runner.chunk_bounds(len(samples), spec.chunk_size)
     chunks_dir = out / "chunks"
@@ -503,7 +576,8 @@ def run_sweep(spec_path, out_dir, *, workers: int | None = None, scheduler: str 
     run = len(samples) - skipped
     info = {"engine_workers": n_workers, "scheduler": scheduler, "executed_samples": run,
             "skipped_samples": skipped, "wall_time_s": round(t2 - t0, 3), "startup_s": round(t1 - t0, 3),
-            "worker_seconds_per_traverse": round((t2 - t1) * n_workers / run, 4) if run else None}
+            "worker_seconds_per_traverse": round((t2 - t1) * n_workers / run, 4) if run else None,
+            "estimate": size}
     res = SweepResult(table, spec, ctx, info)
     res.save(out, plots=plots_on)
     return res
@@ -640,7 +714,7 @@ def run_close_loop(train_path, test_path, out_dir, *, slider_mass_kg=None, plots
     from .closeloop.loop import CloseLoop
     from .cluster import optional_client
     t_start = time.perf_counter()
-    with output_dir(Path(out_dir), command="close-loop") as tmp:
+    with output_dir(Path(out_dir), command="close-loop", inputs=(train_path, test_path)) as tmp:
         train, test, split = load_train_test(train_path, test_path, test_abs_loads=test_abs_loads,
                                              slider_mass_kg=slider_mass_kg, allow_unusual_units=allow_unusual_units)
         with optional_client(workers or 0, scheduler, serial_up_to=1) as client:

@@ -88,6 +88,12 @@ class Block:
     OUTPUTS: list[Var] = []
     STATES: list[Var] = []
     EXTRA_PARAMETERS: list[Var] = []
+    #: the largest communication step [s] an FMU of this block accepts (declared in its modelDescription.xml
+    #: as maxCommunicationStepSize; a larger fmi2DoStep is refused with fmi2Discard, so that a step returns
+    #: in bounded time)
+    MAX_STEP_S: float = 1.0
+    #: the most internal sub-steps one communication step may take (blocks that sub-step refuse beyond)
+    MAX_SUBSTEPS: int = 1_000_000
 
     def __init__(self, params):
         self.params = params

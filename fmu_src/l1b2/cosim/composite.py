@@ -205,6 +205,9 @@ class MotorBlock(Block):
             self.motor.inputs = dict(zip(InProcessMotor.INPUTS, u))
             self._held = u
         n = max(1, int(round(h / float(self.internal_step_s))))
+        if n > self.MAX_SUBSTEPS:
+            raise SimulationError(f"MotorBlock: a step of {h} s takes {n} internal steps of internal_step_s = "
+                                  f"{self.internal_step_s} s, more than {self.MAX_SUBSTEPS}")
         motor = self.motor
         motor.t = t
         motor.advance(n, h / n)
@@ -349,6 +352,9 @@ class PredictorBlock(Block):
     def _advance(self, su: PredictorSetup, v: float, h: float, F=None) -> float:
         """Speed after the communication step ``h`` [s]: Eq. 29 iterated at sub-steps of at most ``su.T_s``."""
         n = max(1, int(math.ceil(h / su.T_s - 1e-9)))
+        if n > self.MAX_SUBSTEPS:
+            raise SimulationError(f"PredictorBlock: a step of {h} s takes {n} sub-steps of T_s = {su.T_s} s, "
+                                  f"more than {self.MAX_SUBSTEPS}")
         for _ in range(n):
             v = float(pr.one_step(su.params, v, self.s, self.V0, self.load, self.direction, h / n,
                                   su.slider_mass_kg, extra_force=F))

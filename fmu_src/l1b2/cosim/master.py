@@ -31,7 +31,11 @@ from __future__ import annotations
 import atexit
 import math
 import operator
+import os
 import shutil
+import signal
+import tempfile
+import threading
 import warnings
 import weakref
 from dataclasses import dataclass, field
@@ -63,28 +67,141 @@ FMI2_STATUS = {2: "fmi2Discard", 3: "fmi2Error", 4: "fmi2Fatal", 5: "fmi2Pending
 _EXTRACTED: dict[str, str] = {}
 
 
+#: prefix of the temporary folders this module makes (FMU extractions, unpacked ``.ssp``), then ``<pid>-``
+EXTRACT_PREFIX = "l1b2-fmu-"
+_SSP_PREFIX = "l1b2_ssp_"
+_LIVE_TMP: set[str] = set()   # unpacked .ssp folders of live CoSimulation objects (removed on SIGTERM too)
+_swept = False
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:
+        return True
+    return True
+
+
+def remove_stale_extractions(tmp_root: str | None = None) -> list[str]:
+    """Remove FMU extractions left in the temporary folder by l1b2 processes that no longer run.
+
+    Only folders named ``l1b2-fmu-<pid>-*`` whose process is gone are
+    removed (a killed run cannot clean up after itself). Returns them.
+    """
+    root = Path(tmp_root or tempfile.gettempdir())
+    removed = []
+    try:
+        entries = list(root.glob(f"{EXTRACT_PREFIX}*"))
+    except OSError:
+        return removed
+    for folder in entries:
+        pid_text = folder.name[len(EXTRACT_PREFIX):].split("-", 1)[0]
+        if pid_text.isdigit() and int(pid_text) != os.getpid() and not _pid_alive(int(pid_text)):
+            shutil.rmtree(folder, ignore_errors=True)
+            removed.append(str(folder))
+    return removed
+
+
+def _on_sigterm(signum, frame):  # pragma: no cover - exercised in a subprocess (tests/test_output_dirs.py)
+    """SIGTERM: remove this process's temporary FMU folders, then end as SIGTERM's default would (status 143)."""
+    _remove_extracted()
+    for folder in list(_LIVE_TMP):
+        shutil.rmtree(folder, ignore_errors=True)
+    os._exit(128 + signum)
+
+
+def _install_cleanup() -> None:
+    """Once per process: sweep stale extractions and remove ours on SIGTERM (only where SIGTERM is still default)."""
+    global _swept
+    if _swept:
+        return
+    _swept = True
+    remove_stale_extractions()
+    if os.name == "posix" and threading.current_thread() is threading.main_thread():
+        if signal.getsignal(signal.SIGTERM) in (signal.SIG_DFL, None):
+            signal.signal(signal.SIGTERM, _on_sigterm)
+
+
 def extracted(path: Path) -> str:
     """Folder holding the extracted FMU, one per FMU content and process.
 
     PythonFMU puts each FMU's ``resources`` folder on ``sys.path`` for good and
     its bundled modules stay imported, so an extraction must outlive the run
-    that made it: it is reused by later runs and removed at process exit.
-    The key is the file's SHA-256, so the same FMU reached through another
-    path (e.g. a fresh extraction of the same ``.ssp``) reuses the folder.
+    that made it: it is reused by later runs and removed at process exit, on
+    SIGTERM, or (after a kill) by the next l1b2 process that extracts an FMU
+    (:func:`remove_stale_extractions`). The key is the file's SHA-256, so the
+    same FMU reached through another path (e.g. a fresh extraction of the
+    same ``.ssp``) reuses the folder.
     """
     import hashlib
 
     from fmpy import extract
+    _install_cleanup()
     digest = hashlib.sha256(Path(path).read_bytes()).hexdigest()
     if digest not in _EXTRACTED or not Path(_EXTRACTED[digest]).exists():
-        _EXTRACTED[digest] = extract(str(path))
+        folder = tempfile.mkdtemp(prefix=f"{EXTRACT_PREFIX}{os.getpid()}-")
+        _EXTRACTED[digest] = folder
+        extract(str(path), unzipdir=folder)
     return _EXTRACTED[digest]
 
 
 @atexit.register
 def _remove_extracted():
-    for folder in _EXTRACTED.values():
+    for folder in list(_EXTRACTED.values()):
         shutil.rmtree(folder, ignore_errors=True)
+
+
+_ERRORS_LOGGED: list[str] = []   # the FMUs' error messages (status >= fmi2Error), newest last
+_CALLBACKS = None
+
+
+def _callbacks():
+    """fmpy's callbacks with a logger that prints as fmpy's does and keeps the error messages."""
+    global _CALLBACKS
+    if _CALLBACKS is None:
+        from fmpy.fmi2 import defaultCallbacks, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+
+        def logger(env, instance, status, category, message):
+            text = message.decode("utf-8", "replace") if message else ""
+            label = ["OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING"][status] if 0 <= status < 6 else "?"
+            print(f"[{label}] {text}")
+            if status >= 3:
+                _ERRORS_LOGGED.append(" ".join(text.split()))
+                del _ERRORS_LOGGED[:-20]
+        cb = fmi2CallbackFunctions()
+        cb.logger = fmi2CallbackLoggerTYPE(logger)
+        cb.allocateMemory = defaultCallbacks.allocateMemory
+        cb.freeMemory = defaultCallbacks.freeMemory
+        _CALLBACKS = (cb, cb.logger)
+    return _CALLBACKS[0]
+
+
+def _load_slave(path, md, unz: str, name: str):
+    """fmpy's FMU2Slave for an extracted FMU; an FMU without a binary for this platform is a SimulationError."""
+    from fmpy.fmi2 import FMU2Slave
+    try:
+        return FMU2Slave(guid=md.guid, unzipDirectory=unz, modelIdentifier=md.coSimulation.modelIdentifier,
+                         instanceName=name)
+    except Exception as exc:  # noqa: BLE001 - fmpy raises a plain Exception for a missing or unloadable library
+        raise SimulationError(f"{path}: cannot load the FMU's binary for this platform ({' '.join(str(exc).split())}); "
+                              "is the FMU complete (binaries/ folder)?") from None
+
+
+def _instantiate(fmu, path) -> None:
+    """``fmi2Instantiate``; NULL is a SimulationError with the reason the FMU logged."""
+    mark = len(_ERRORS_LOGGED)
+    try:
+        fmu.instantiate(callbacks=_callbacks())
+    except Exception:  # noqa: BLE001 - fmpy raises a plain Exception when fmi2Instantiate returns NULL
+        why = "; ".join(_ERRORS_LOGGED[mark:]) if len(_ERRORS_LOGGED) > mark else "no reason logged"
+        raise SimulationError(f"{path}: fmi2Instantiate failed: {why[:1500]}") from None
+
+
+def _remove_tmp(folder: str) -> None:
+    _LIVE_TMP.discard(folder)
+    shutil.rmtree(folder, ignore_errors=True)
 
 
 @dataclass
@@ -155,8 +272,10 @@ class CoSimulation:
     def _open(self, system: Path, fmu_dir, parameters):
         label = None
         if system.suffix.lower() == ".ssp":
+            _install_cleanup()
             self._tmp = unpack_ssp(system, self.limits)
-            self._finalizer = weakref.finalize(self, shutil.rmtree, self._tmp, True)
+            _LIVE_TMP.add(str(self._tmp))
+            self._finalizer = weakref.finalize(self, _remove_tmp, str(self._tmp))
             self.archive = system
             label = f"{system}: SystemStructure.ssd"
             system = self._tmp
@@ -305,8 +424,6 @@ class CoSimulation:
         ``start_values`` sets component variables before initialisation
         (e.g. ``{"Slider.s0": -0.02}``).
         """
-        from fmpy.fmi2 import FMU2Slave
-
         from .hosting import install_exit_fix
         install_exit_fix()  # PythonFMU 0.7.0 exit-time use-after-free (see l1b2.fmi.runtime)
         sysst = self.system
@@ -327,10 +444,9 @@ class CoSimulation:
                     continue
                 md = self.model_descriptions[name]
                 unz = extracted(path)
-                fmu = FMU2Slave(guid=md.guid, unzipDirectory=unz, modelIdentifier=md.coSimulation.modelIdentifier,
-                                instanceName=name)
+                fmu = _load_slave(path, md, unz, name)
                 inst[name] = _Instance(name, fmu, md, unz, {v.name: v for v in md.modelVariables})
-                fmu.instantiate()
+                _instantiate(fmu, path)
                 inst[name].state = "instantiated"
             self._lookup(inst, record)
             self._initialize(inst, inputs, start_values or {})

@@ -24,17 +24,19 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .measurements import FREQUENCY, LOAD, POSITION, RUN, VOLTAGE, Measurements, run_slices
+from ..errors import DataFormatError
+from .measurements import DIRECTION, FREQUENCY, LOAD, POSITION, RUN, VOLTAGE, Measurements, run_slices
 
 __all__ = ["RANGE_COLUMNS", "DEFAULT_TOLERANCE", "MIN_TOLERANCE", "data_range", "outside_range",
-           "summarize_outside", "FREQUENCY_REL_SPREAD", "frequency_spread", "input_checks"]
+           "summarize_outside", "FREQUENCY_REL_SPREAD", "frequency_spread", "input_checks", "RIG_SETTINGS",
+           "check_same_rig"]
 
-#: The prediction inputs whose range is checked (unit in the name).
-RANGE_COLUMNS: tuple[str, ...] = (VOLTAGE, LOAD, POSITION)
+#: The prediction inputs whose range is checked (unit in the name); a direction TRAIN never drove is outside.
+RANGE_COLUMNS: tuple[str, ...] = (VOLTAGE, LOAD, POSITION, DIRECTION)
 #: Share of the range's width a value may lie outside it before the run is flagged.
 DEFAULT_TOLERANCE: float = 0.02
 #: Smallest absolute tolerance per column (1 mV, 1 mg, 1 um).
-MIN_TOLERANCE: dict[str, float] = {VOLTAGE: 1e-3, LOAD: 1e-6, POSITION: 1e-6}
+MIN_TOLERANCE: dict[str, float] = {VOLTAGE: 1e-3, LOAD: 1e-6, POSITION: 1e-6, DIRECTION: 1e-6}
 #: Spread of the runs' drive frequencies (max - min, as a share of their median) above which it is reported:
 #: 0.1 % is ~50 Hz at 48.5 kHz, a fraction of the stator's resonance width, which sets the force factor
 FREQUENCY_REL_SPREAD: float = 1e-3
@@ -122,3 +124,48 @@ def input_checks(train: Measurements, test: Measurements | None) -> dict:
         "extrapolation": summarize_outside(flagged, n_test),
         "drive_frequency": frequency_spread(train, test),
     }
+
+
+#: settings that describe the rig itself: TRAIN and TEST must agree on them (relative difference)
+RIG_SETTINGS: dict[str, float] = {"slider_mass_kg": 1e-6, "encoder_resolution_m": 1e-6, "drive_frequency_Hz": 1e-6}
+
+
+def check_same_rig(train: Measurements, test: Measurements, *, explicit: Mapping[str, Any] | None = None,
+                   allow_unusual_units: bool = False) -> None:
+    """Refuse TEST whose rig settings (:data:`RIG_SETTINGS`, from its sidecar) differ from TRAIN's.
+
+    Both files are measured on one rig: a slider mass of 0.12 kg in TRAIN's
+    sidecar and 0.2646 in TEST's is a unit mistake (lb) or a wrong sidecar,
+    and the prediction on TEST would silently use TEST's value. Settings
+    given as options (``explicit``) apply to both and are not compared.
+    Raises :class:`~l1b2.errors.DataFormatError` naming TEST's sidecar and
+    the field. A TEST whose load effect per kg differs from TRAIN's
+    (:func:`l1b2.data.plausibility.load_effect_mismatch`: loads in another
+    unit) is refused too, unless ``allow_unusual_units`` (then it is listed
+    in TEST's ``unusual_units``).
+    """
+    explicit = explicit or {}
+    from .plausibility import load_effect_mismatch, run_table
+    found = load_effect_mismatch(run_table(train.df), run_table(test.df))
+    if found is not None:
+        where = test.meta.get("source") or "TEST"
+        if not allow_unusual_units:
+            raise DataFormatError(where, found.column, found.row + 1,
+                                  found.text + " (if the values are right, allow them with --allow-unusual-units)")
+        test.meta.setdefault("unusual_units", []).append(str(DataFormatError(where, found.column, found.row + 1,
+                                                                             found.text)))
+    for name, rel in RIG_SETTINGS.items():
+        if explicit.get(name) is not None:
+            continue
+        a, b = train.meta.get(name), test.meta.get(name)
+        if a is None or b is None:
+            continue
+        a, b = float(a), float(b)
+        if abs(a - b) > rel * max(abs(a), abs(b)):
+            where = test.meta.get("sidecar") or test.meta.get("source") or "TEST"
+            ratio = b / a if a else float("inf")
+            hint = " (lb?)" if name == "slider_mass_kg" and abs(ratio - 2.2046) < 0.01 else ""
+            raise DataFormatError(where, name, None,
+                                  f"TEST says {name} = {b:.6g} but TRAIN ({train.meta.get('sidecar') or 'defaults'}) "
+                                  f"says {a:.6g}{hint}: both files must come from one rig; correct the sidecar or "
+                                  "give the value as an option")

@@ -216,7 +216,8 @@ def _parse_numeric(col: pd.Series) -> tuple[np.ndarray, int | None, str]:
         Description of the first bad value.
     """
     if pd.api.types.is_numeric_dtype(col.dtype):
-        values = col.to_numpy(dtype=float, na_value=np.nan)
+        # float64 as it is (no copy: a large file is held once); other numbers converted, missing -> NaN
+        values = col.to_numpy() if col.dtype == np.float64 else col.to_numpy(dtype=float, na_value=np.nan)
         i = _first(~np.isfinite(values))
         if i is None:
             return values, None, ""
@@ -270,7 +271,10 @@ def _normalise_run(col: pd.Series) -> tuple[pd.Series, int | None]:
         return col, bad
     if all_str:
         if bool(stripped.str.fullmatch(_CANONICAL_INT.pattern).all()):
-            return stripped.astype("int64"), None
+            try:
+                return stripped.astype("int64"), None
+            except OverflowError:  # beyond int64: identifiers all the same, kept as text
+                return stripped.astype(str), None
         return stripped.astype(str), None
     return stripped, None
 
@@ -437,7 +441,7 @@ def validate_frame(df: pd.DataFrame, path: str | os.PathLike) -> pd.DataFrame:
         rows (positional, header excluded).
     """
     columns = _checked_header(df, path)
-    out = df.copy()
+    out = df.copy(deep=False)  # copy-on-write: the columns replaced below never touch ``df``
     out.columns = columns
     values, run_col = _parse_values(out, path)
     problems = _order_problems(values[TIME], run_col) + _range_problems(values)
@@ -551,7 +555,11 @@ def speed_slopes(df: pd.DataFrame, *, min_travel_m: float = 2e-4,
         with np.errstate(all="ignore"):  # absurd positions (1e308) give inf here and are not judged
             xd = np.gradient(x[sl], t[sl])
             ss = float(np.sum(xd * xd))
-        if not (np.isfinite(ss) and ss > 0) or math.sqrt(ss / xd.size) < min_rms_speed_m_s:
+            vv = float(np.sum(v[sl] * v[sl]))
+        # judged when either speed is a traverse's: a slow derivative with a fast measured speed (time x 100)
+        # is exactly what the slope must catch
+        if not (np.isfinite(ss) and ss > 0) or max(math.sqrt(ss / xd.size),
+                                                   math.sqrt(vv / xd.size)) < min_rms_speed_m_s:
             continue
         out.append((rid, sl.start, float(np.sum(v[sl] * xd)) / ss))
     return out
@@ -697,10 +705,11 @@ def unusual_values(df: pd.DataFrame, *, speed_derived: bool = False) -> list[Dat
         span = f"{float(np.min(mags)):.4g} to {float(np.max(mags)):.4g}"
         problems.append(DataProblem(i, _ORDER[name], name, f"{text} ({label} in this file: {span})"))
     problems += _drive_input_problems(df)
-    for extra in (_interval_problem(df), _peak_speed_problem(df, speed_derived) if SPEED in df.columns else None):
+    interval = _interval_problem(df)
+    for extra in (interval, _peak_speed_problem(df, speed_derived) if SPEED in df.columns else None):
         if extra is not None:
             problems.append(extra)
-    if not speed_derived and SPEED in df.columns:
+    if not speed_derived and SPEED in df.columns and interval is None:  # time in ms: named by time_s already
         lo, hi = SPEED_SLOPE_BAND
         slopes = speed_slopes(df)
         for rid, row, b in slopes:

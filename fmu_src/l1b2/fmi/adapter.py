@@ -117,10 +117,13 @@ class BlockAdapter:
         self._outputs_stale = True
         self._plain: dict[int, str] = {}   # value reference -> attribute, for the fast get_real/set_real
         self._plans: dict[tuple, object] = {}
+        self._decl: dict[int, object] = {}  # value reference -> the block's Var declaration
+        self._set_checks: dict[tuple, tuple] = {}
         for var in block_cls.variables(params):
             vtype, conv = _TYPES[var.type]
+            self._decl[len(slave.vars)] = var  # PythonFMU numbers the variables in this order
             if var.type == "Real" and var.causality != "parameter" and "." not in var.name:
-                self._plain[len(slave.vars)] = var.name  # PythonFMU numbers the variables in this order
+                self._plain[len(slave.vars)] = var.name
             getter = self._output_getter(var.name, conv) if var.causality == "output" else self._getter(var.name, conv)
             kw = dict(causality=_CAUSALITY[var.causality], description=var.description,
                       getter=getter, setter=self._setter(var.name, conv))
@@ -154,7 +157,7 @@ class BlockAdapter:
             self._outputs_stale = True
             try:
                 self.block.set(name, conv(value))
-            except (TypeError, ValueError) as exc:  # never raise out of a callback
+            except Exception as exc:  # noqa: BLE001 - never raise out of a callback
                 self.fail(f"cannot set {name} to {value!r}: {exc}")
         return set_value
 
@@ -175,25 +178,131 @@ class BlockAdapter:
         return plan
 
     def get_real(self, vrs) -> list:
-        """``fmi2GetReal`` (same values as ``Fmi2Slave.get_real``, which serves initialization mode)."""
-        if not self.in_initialization_mode:
-            key = tuple(vrs)
-            plan = self._plans[key] if key in self._plans else self._plan(key)
-            if plan is not None:
-                return list(plan[0](self.block))
-        return Fmi2Slave.get_real(self.slave, vrs)
+        """``fmi2GetReal`` (same values as ``Fmi2Slave.get_real``, which serves initialization mode).
+
+        An unknown value reference or one of another type is logged with
+        status ``fmi2Error`` and gives NaN for every value (never an exception:
+        see the module docstring).
+        """
+        try:
+            if not self.in_initialization_mode:
+                key = tuple(vrs)
+                plan = self._plans[key] if key in self._plans else self._plan(key)
+                if plan is not None:
+                    return list(plan[0](self.block))
+            problem = self._access_problem(vrs, "Real", "fmi2GetReal")
+            if problem:
+                self.log_error(problem)
+                return [math.nan] * len(vrs)
+            return Fmi2Slave.get_real(self.slave, vrs)
+        except Exception as exc:  # noqa: BLE001 - never raise out of a callback
+            self.log_error(f"{self.slave.modelName}: fmi2GetReal failed: {exc}")
+            return [math.nan] * len(vrs)
+
+    def get_other(self, kind: str, vrs) -> list:
+        """``fmi2GetInteger`` / ``fmi2GetBoolean`` / ``fmi2GetString`` (``kind``), checked like :meth:`get_real`."""
+        blank = {"Integer": 0, "Boolean": False, "String": ""}[kind]
+        try:
+            problem = self._access_problem(vrs, kind, f"fmi2Get{kind}")
+            if problem:
+                self.log_error(problem)
+                return [blank] * len(vrs)
+            return getattr(Fmi2Slave, f"get_{kind.lower()}")(self.slave, vrs)
+        except Exception as exc:  # noqa: BLE001 - never raise out of a callback
+            self.log_error(f"{self.slave.modelName}: fmi2Get{kind} failed: {exc}")
+            return [blank] * len(vrs)
 
     def set_real(self, vrs, values):
-        """``fmi2SetReal`` (same effect as ``Fmi2Slave.set_real`` through the setters)."""
-        key = tuple(vrs)
-        plan = self._plans[key] if key in self._plans else self._plan(key)
-        if plan is None:
-            Fmi2Slave.set_real(self.slave, vrs, values)
-            return
-        self._outputs_stale = True
-        block = self.block
-        for name, value in zip(plan[1], values):
-            setattr(block, name, float(value))
+        """``fmi2SetReal`` (same effect as ``Fmi2Slave.set_real`` through the setters), refused as a whole
+        (one ``fmi2Error`` line, nothing set) for :meth:`_set_problem`'s reasons."""
+        try:
+            problem = self._set_problem(vrs, values, "Real")
+            if problem:
+                self.log_error(problem)
+                return
+            key = tuple(vrs)
+            plan = self._plans[key] if key in self._plans else self._plan(key)
+            if plan is None:
+                Fmi2Slave.set_real(self.slave, vrs, values)
+                return
+            self._outputs_stale = True
+            block = self.block
+            for name, value in zip(plan[1], values):
+                setattr(block, name, float(value))
+        except Exception as exc:  # noqa: BLE001 - never raise out of a callback
+            self.log_error(f"{self.slave.modelName}: fmi2SetReal failed: {exc}")
+
+    def set_other(self, kind: str, vrs, values):
+        """``fmi2SetInteger`` / ``fmi2SetBoolean`` / ``fmi2SetString`` (``kind``), checked like :meth:`set_real`."""
+        try:
+            problem = self._set_problem(vrs, values, kind)
+            if problem:
+                self.log_error(problem)
+                return
+            self._outputs_stale = True
+            getattr(Fmi2Slave, f"set_{kind.lower()}")(self.slave, vrs, values)
+        except Exception as exc:  # noqa: BLE001 - never raise out of a callback
+            self.log_error(f"{self.slave.modelName}: fmi2Set{kind} failed: {exc}")
+
+    def _access_problem(self, vrs, kind: str, call: str) -> str | None:
+        """Why ``call`` cannot read or write ``vrs`` as ``kind`` (unknown reference, other type), or None."""
+        for vr in vrs:
+            var = self._decl.get(vr)
+            if var is None:
+                return (f"{self.slave.modelName}: {call}: unknown value reference {vr} (this FMU has 0 to "
+                        f"{len(self._decl) - 1}); nothing done")
+            if var.type != kind:
+                return (f"{self.slave.modelName}: {call}: value reference {vr} ({var.name}) is a {var.type}, "
+                        f"not a {kind}; nothing done")
+        return None
+
+    def _set_problem(self, vrs, values, kind: str) -> str | None:
+        """Why an ``fmi2Set<kind>`` of ``values`` at ``vrs`` must be refused (FMI 2.0, 3.2.3), or None.
+
+        Refused: an unknown reference or one of another type; an output (the
+        FMU computes it); a ``fixed`` parameter after
+        ``fmi2ExitInitializationMode``; a parameter value that is not finite or
+        outside the parameter's declared min/max. Inputs may be non-finite
+        here: the step that would use them is refused (``fmi2Discard``) with
+        the input named.
+        """
+        key = (tuple(vrs), kind, self.mode)
+        checked = self._set_checks.get(key)
+        if checked is None:
+            call = f"fmi2Set{kind}"
+            problem = self._access_problem(vrs, kind, call)
+            params = []
+            for i, vr in enumerate(vrs):
+                if problem:
+                    break
+                var = self._decl[vr]
+                if var.causality == "output":
+                    problem = (f"{self.slave.modelName}: {call}: {var.name} is an output, computed by the FMU: it "
+                               "cannot be set; nothing done")
+                elif var.causality == "parameter":
+                    if var.variability == "fixed" and self.mode in (STEPPING, TERMINATED):
+                        problem = (f"{self.slave.modelName}: {call}: {var.name} is a fixed parameter: it can only "
+                                   "be set before fmi2ExitInitializationMode (fmi2Reset to change it); nothing done")
+                    params.append((i, var))
+            checked = (problem, tuple(params))
+            if len(self._set_checks) >= 256:
+                self._set_checks.clear()
+            self._set_checks[key] = checked
+        problem, params = checked
+        if problem:
+            return problem
+        if len(values) < len(vrs):
+            return f"{self.slave.modelName}: fmi2Set{kind}: {len(vrs)} references but {len(values)} values"
+        for i, var in params:
+            value = values[i]
+            if kind != "Real" or not isinstance(value, (int, float)):
+                continue
+            where = f"{self.slave.modelName}: fmi2SetReal: parameter {var.name} [{var.unit or '1'}] = {value!r}"
+            if not math.isfinite(value):
+                return f"{where} is not finite; the value is unchanged"
+            if (var.min is not None and value < var.min) or (var.max is not None and value > var.max):
+                return f"{where} is outside its declared range [{var.min}, {var.max}]; the value is unchanged"
+        return None
 
     def log_error(self, message: str):
         """One line with status ``fmi2Error`` in the FMU log."""
@@ -214,6 +323,8 @@ class BlockAdapter:
 
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
         """``fmi2SetupExperiment``: blocks that use the FMU's own time (``set_start_time``) learn its start."""
+        if self.refused("fmi2SetupExperiment", (INSTANTIATED,)):
+            return
         if hasattr(self.block, "set_start_time"):
             try:
                 self.block.set_start_time(float(start_time))
@@ -253,6 +364,12 @@ class BlockAdapter:
         if not (math.isfinite(step_size) and step_size > 0):
             self.fail(f"{name}: invalid communication step {step_size!r} s at t={current_time}")
             return False
+        limit = float(getattr(self.block, "MAX_STEP_S", math.inf))
+        if step_size > limit:  # not an error of the instance: a smaller step is accepted
+            self.log_error(f"{name}: communication step {step_size!r} s at t={current_time} s is above this FMU's "
+                           f"maximum {limit!r} s (maxCommunicationStepSize in modelDescription.xml); step refused, "
+                           "take smaller steps")
+            return False
         try:
             self.block.do_step(current_time, step_size)
             return True
@@ -262,11 +379,33 @@ class BlockAdapter:
 
     # -- FMU state (fmi2GetFMUstate / fmi2SetFMUstate / (de)serialisation) ----------
     def fmu_state(self, variables: dict) -> dict:
-        """The FMU state: ``variables`` (name -> value, from ``Fmi2Slave``) plus the error flag.
+        """The FMU state: ``variables`` (name -> value, from ``Fmi2Slave``) plus the error flag and the model name.
 
         JSON-serialisable, as PythonFMU's ``fmi2SerializeFMUstate`` needs.
         """
-        return {**variables, STATE_KEY: {"failed": self.failed}}
+        return {**variables, STATE_KEY: {"failed": self.failed, "model": self.slave.modelName}}
+
+    def get_state(self, get_variables) -> dict:
+        """``fmi2GetFMUstate``: :meth:`fmu_state` of ``get_variables()``; never raises (an empty state on failure)."""
+        try:
+            return self.fmu_state(get_variables())
+        except Exception as exc:  # noqa: BLE001 - never raise out of a callback
+            self.log_error(f"{self.slave.modelName}: fmi2GetFMUstate failed: {exc}")
+            return {}
+
+    def set_state(self, state, set_variables):
+        """``fmi2SetFMUstate``: a state of this model is restored; anything else is refused with ``fmi2Error``."""
+        own = state.get(STATE_KEY) if isinstance(state, dict) else None
+        if not isinstance(own, dict) or own.get("model") != self.slave.modelName:
+            owner = own.get("model") if isinstance(own, dict) else None
+            self.log_error(f"{self.slave.modelName}: fmi2SetFMUstate: the state is not one of this FMU"
+                           + (f" (it is a state of {owner})" if owner else "") + "; the instance is unchanged")
+            return
+        try:
+            set_variables(self.before_state_restore(state))
+            self.after_state_restore()
+        except Exception as exc:  # noqa: BLE001 - never raise out of a callback
+            self.fail(f"{self.slave.modelName}: fmi2SetFMUstate failed: {exc}")
 
     def before_state_restore(self, state: dict) -> dict:
         """Take the error flag from ``state``; return the variables (a copy: the host may restore it again)."""
@@ -284,4 +423,7 @@ class BlockAdapter:
         try:
             self.block.refresh()
         except Exception as exc:  # noqa: BLE001
-            self.fail(f"{self.slave.modelName}: restoring the FMU state failed: {exc}")
+            # the state was restored as asked (e.g. one taken after a non-finite input): the next step is
+            # refused with this message; the restore itself is only a warning
+            self.failed = safe_text(f"{self.slave.modelName}: the restored FMU state cannot be stepped: {exc}")
+            self.slave.log(self.failed, Fmi2Status.warning)

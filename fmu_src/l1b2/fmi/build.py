@@ -96,13 +96,20 @@ def variable_table(slave_name: str, defaults: dict) -> dict:
 
 
 def patch_model_description(xml_bytes: bytes, variables: dict, attributes: dict,
-                            default_experiment: dict | None = None) -> bytes:
-    """Add units, ranges, descriptions, model structure and metadata to a pythonfmu XML."""
+                            default_experiment: dict | None = None, limits: dict | None = None) -> bytes:
+    """Add units, ranges, descriptions, model structure and metadata to a pythonfmu XML.
+
+    ``limits`` (e.g. ``maxCommunicationStepSize``) go into
+    ``VendorAnnotations/Tool[@name="l1b2"]/Limits``.
+    """
     root = ET.fromstring(xml_bytes)
     for key, value in attributes.items():
         root.set(key, str(value))
-    for old in root.findall("UnitDefinitions") + root.findall("DefaultExperiment"):
+    for old in root.findall("UnitDefinitions") + root.findall("DefaultExperiment") + root.findall("VendorAnnotations"):
         root.remove(old)
+    if limits:
+        tool = ET.SubElement(ET.SubElement(root, "VendorAnnotations"), "Tool", name="l1b2")
+        ET.SubElement(tool, "Limits", {k: str(v) for k, v in limits.items()})
     mv = root.find("ModelVariables")
     svs = list(mv)
     index = {sv.get("name"): i + 1 for i, sv in enumerate(svs)}
@@ -198,7 +205,7 @@ def defaults_document(mp: MotorParams, extra: dict | None = None) -> dict:
 
 def copy_runtime(dest: Path) -> None:
     """Copy the package's runtime part (:data:`RUNTIME_PARTS` less :data:`HOST_ONLY`) into ``dest``."""
-    ignore = shutil.ignore_patterns("__pycache__", "*.pyc", "chost")
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc", "chost", "guard")
     dest.mkdir(parents=True)
     for part in RUNTIME_PARTS:
         src = PACKAGE_DIR / part
@@ -222,7 +229,7 @@ def runtime_files() -> list[Path]:
 
 def build_fmu(name: str, dest_dir: str | Path, *, mp: MotorParams | None = None, version: str = __version__,
               extra_defaults: dict | None = None, extra_files: dict[str, bytes] | None = None,
-              vendor_pythonfmu: bool = True) -> Path:
+              vendor_pythonfmu: bool = True, guard_binary: bool = True) -> Path:
     """Build ``<dest_dir>/<name>.fmu`` from the slave template (:mod:`l1b2.fmi.slaves`)."""
     from pythonfmu.builder import FmuBuilder
 
@@ -280,17 +287,63 @@ def build_fmu(name: str, dest_dir: str | Path, *, mp: MotorParams | None = None,
         _rewrite_zip(dest, vendor)
 
     variables = variable_table(name, defaults)
+    guid = stable_guid(name, version, _content_hash(dest))
     attrs = {"author": AUTHOR, "license": LICENSE, "version": version,
-             "copyright": f"{AUTHOR}, {LICENSE} license",
-             "guid": stable_guid(name, version, _content_hash(dest))}
+             "copyright": f"{AUTHOR}, {LICENSE} license", "guid": guid}
+    annotations = {"maxCommunicationStepSize": _fmt(float(BLOCKS[name].MAX_STEP_S))}
+    guard = compile_guard(guid, GUARD_INNER.format(name=name)) if guard_binary else None
+    linux_binary = f"binaries/linux64/{name}.so"
 
     def patch(member: str, data: bytes):
         if member == "modelDescription.xml":
-            return patch_model_description(data, variables, attrs, DEFAULT_EXPERIMENT)
+            return patch_model_description(data, variables, attrs, DEFAULT_EXPERIMENT, annotations)
+        if member == linux_binary and guard is not None:
+            return None  # moved under GUARD_INNER, the guard takes its name
         return data
     patch.extra = {}
+    if guard is not None:
+        with zipfile.ZipFile(dest) as z:
+            patch.extra = {f"binaries/linux64/{GUARD_INNER.format(name=name)}": z.read(linux_binary),
+                           linux_binary: guard}
     _rewrite_zip(dest, patch)
     return dest
+
+
+#: PythonFMU's library in a guarded FMU (``binaries/linux64/``); the guard is ``<modelIdentifier>.so``
+GUARD_INNER = "{name}_pythonfmu.so"
+GUARD_SOURCE = Path(__file__).resolve().parent / "guard" / "fmi2_guard.c"
+
+
+class GuardBuildError(RuntimeError):
+    """The FMI guard library (``fmi/guard/fmi2_guard.c``) could not be compiled."""
+
+
+def compile_guard(guid: str, inner: str) -> bytes:
+    """The guard library (:file:`fmi/guard/fmi2_guard.c`) for one FMU, compiled with the system C compiler.
+
+    It is what hosts load on Linux: it checks the GUID, the resources folder,
+    statuses, time and FMU states before PythonFMU's library sees a call (see
+    the source's header). Raises :class:`GuardBuildError` naming the compiler
+    and its message when there is no C compiler or the build fails.
+    """
+    import subprocess
+
+    cc = os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
+    if not cc:
+        raise GuardBuildError("building an FMU needs a C compiler (cc or gcc, or $CC) for its FMI guard library; "
+                              "none was found on PATH")
+    with tempfile.TemporaryDirectory(prefix="l1b2_guard_") as td:
+        out = Path(td) / "guard.so"
+        cmd = [cc, "-shared", "-fPIC", "-O2", "-Wl,-z,nodelete", f'-DGUARD_GUID="{guid}"', f'-DGUARD_INNER="{inner}"',
+               "-o", str(out), str(GUARD_SOURCE), "-ldl", "-lm"]
+        try:
+            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+        except (OSError, subprocess.TimeoutExpired) as exc:
+            raise GuardBuildError(f"cannot run the C compiler {cc}: {exc}") from None
+        if proc.returncode != 0 or not out.exists():
+            first = (proc.stderr.strip().splitlines() or ["no message"])[0]
+            raise GuardBuildError(f"the C compiler {cc} failed on {GUARD_SOURCE.name}: {first}")
+        return out.read_bytes()
 
 
 def build_subsystem_fmus(dest_dir: str | Path, mp: MotorParams | None = None,

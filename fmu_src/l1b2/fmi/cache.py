@@ -21,7 +21,7 @@ from pathlib import Path
 
 from .. import __version__
 from ..physics.params import MotorParams, load_motor
-from .build import SUBSYSTEM_FMUS, build_fmu, runtime_files
+from .build import GUARD_SOURCE, SUBSYSTEM_FMUS, build_fmu, runtime_files
 
 
 def cache_root() -> Path:
@@ -36,7 +36,7 @@ def cache_key(mp: MotorParams, names=SUBSYSTEM_FMUS) -> str:
     """Version and content hash of the FMUs ``names`` built for motor ``mp``."""
     import pythonfmu
     h = hashlib.sha256()
-    for f in runtime_files():
+    for f in runtime_files() + [GUARD_SOURCE]:  # the guard library is compiled into every FMU
         h.update(f.name.encode())
         h.update(f.read_bytes())
     h.update(json.dumps(asdict(mp), sort_keys=True, default=str).encode())

@@ -73,12 +73,29 @@ class {name}(Fmi2Slave):
     def set_real(self, vrs, values):
         self.adapter.set_real(vrs, values)
 
+    def get_integer(self, vrs):
+        return self.adapter.get_other("Integer", vrs)
+
+    def get_boolean(self, vrs):
+        return self.adapter.get_other("Boolean", vrs)
+
+    def get_string(self, vrs):
+        return self.adapter.get_other("String", vrs)
+
+    def set_integer(self, vrs, values):
+        self.adapter.set_other("Integer", vrs, values)
+
+    def set_boolean(self, vrs, values):
+        self.adapter.set_other("Boolean", vrs, values)
+
+    def set_string(self, vrs, values):
+        self.adapter.set_other("String", vrs, values)
+
     def _get_fmu_state(self):
-        return self.adapter.fmu_state(super()._get_fmu_state())
+        return self.adapter.get_state(super()._get_fmu_state)
 
     def _set_fmu_state(self, state):
-        super()._set_fmu_state(self.adapter.before_state_restore(state))
-        self.adapter.after_state_restore()
+        self.adapter.set_state(state, super()._set_fmu_state)
 '''
 
 

@@ -277,6 +277,14 @@ def _parse_operating(source: str, table: dict, nominal: MotorParams) -> dict:
         _fail(source, "operating_points.V0.values", "V0 is an amplitude and cannot be negative")
     if any(f <= 0 for f in out["frequency"]):
         _fail(source, "operating_points.frequency.values", "the drive frequency must be positive")
+    for k, (lo, hi) in OPERATING_RANGE.items():
+        bad = next((v for v in out[k] if not lo <= v <= hi), None)
+        if bad is not None:
+            _fail(source, f"operating_points.{k}.values", f"{bad:g} {OPERATING[k][1]} is outside the range a linear "
+                  f"USM rig has [{lo:g}, {hi:g}] {OPERATING[k][1]}: a unit mistake?")
+    if _n_operating(out) > DEFAULT_MAX_RUNS:
+        _fail(source, "operating_points", f"{_n_operating(out)} operating points (every combination of the values), "
+              f"more than {DEFAULT_MAX_RUNS}")
     return out
 
 
@@ -310,6 +318,62 @@ def _parse_outputs(source: str, table) -> tuple[tuple, float, tuple]:
     return tuple(n for n in OUTPUT_NAMES if n in names), middle, positions
 
 
+#: longest study specification read [characters]
+MAX_SPEC_CHARS = 1_000_000
+
+
+def _load_toml(text: str, source: str) -> dict:
+    if len(text) > MAX_SPEC_CHARS:
+        raise SpecError(f"{source}: {len(text)} characters, more than {MAX_SPEC_CHARS}: not a study specification?")
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise SpecError(f"{source}: not valid TOML ({exc})") from None
+    except RecursionError:
+        raise SpecError(f"{source}: tables or arrays nested too deeply to be a study specification") from None
+
+
+#: runs (samples x operating points) a study may have unless the user raises the limit (l1b2 sweep --max-runs)
+DEFAULT_MAX_RUNS = 100_000
+#: most simulation steps of one run (max_time_s / step_s): bounds each run's time and memory
+MAX_STEPS_PER_RUN = 100_000
+#: wall time of one simulated step by engine [s], for the estimate before a study starts (order of magnitude,
+#: bench/bench_sweep.py measures the real figure)
+STEP_COST_S = {"inprocess": 3e-5, "fmu": 3e-4}
+#: operating-point values outside these are refused (a linear USM rig's range, as the measured-data checks)
+OPERATING_RANGE = {"V0": (0.0, 1000.0), "load": (-2.0, 2.0), "frequency": (15e3, 1e6), "temperature": (-60.0, 150.0)}
+
+
+def study_size(design: str, draws: int, n_parameters: int, n_operating: int, step_s: float,
+               max_time_s: float, engine: str) -> dict:
+    """Runs, steps per run and the worst-case CPU time [h] of a study, before anything is drawn or run.
+
+    Samples: ``draws`` (Monte Carlo), ``draws * (d + 2)`` (Saltelli with ``d``
+    parameters) or 1 (grid); runs = samples x operating points; every run
+    takes at most ``max_time_s / step_s`` steps.
+    """
+    samples = 1 if design == "grid" else draws * (n_parameters + 2) if design == "saltelli" else draws
+    steps = int(math.ceil(max_time_s / step_s))
+    runs = samples * n_operating
+    return {"samples": samples, "runs": runs, "steps_per_run": steps,
+            "cpu_hours": runs * steps * STEP_COST_S.get(engine, STEP_COST_S["fmu"]) / 3600.0}
+
+
+def check_size(spec: "StudySpec", max_runs: int = DEFAULT_MAX_RUNS, source: str = "study.toml") -> dict:
+    """:func:`study_size` of ``spec``; :class:`SpecError` when it has more than ``max_runs`` runs."""
+    size = study_size(spec.design, spec.draws, len(spec.parameters), _n_operating(spec.operating), spec.step_s,
+                      spec.max_time_s, spec.engine)
+    if size["runs"] > max_runs:
+        raise SpecError(f"{source}: study.draws: the study has {size['runs']:.3g} runs ({size['samples']:.3g} samples "
+                        f"x {_n_operating(spec.operating)} operating points, up to {size['cpu_hours']:.3g} CPU hours), "
+                        f"more than the limit {max_runs}: reduce it, or raise the limit with --max-runs")
+    return size
+
+
+def _n_operating(operating: dict) -> int:
+    return math.prod(len(v) for v in operating.values())
+
+
 def parse_spec(text: str, source: str = "study.toml", nominal: MotorParams | None = None) -> StudySpec:
     """Parse and check a study specification (TOML text); ``nominal`` is the motor it varies.
 
@@ -319,10 +383,7 @@ def parse_spec(text: str, source: str = "study.toml", nominal: MotorParams | Non
         ``"<source>: <key>: <problem>"`` for the first problem found.
     """
     from ..physics.params import load_motor
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise SpecError(f"{source}: not valid TOML ({exc})") from None
+    doc = _load_toml(text, source)
     _known_keys(source, "", doc, ("study", "simulation", "operating_points", "parameters", "fixed", "outputs"))
     study = doc.get("study", {})
     _known_keys(source, "study", study, ("name", "seed", "engine", "design", "draws", "chunk_size", "motor"))
@@ -346,6 +407,10 @@ def parse_spec(text: str, source: str = "study.toml", nominal: MotorParams | Non
     if not (0 < step <= 1e-3 and t_max > step):
         _fail(source, "simulation.step_s" if not 0 < step <= 1e-3 else "simulation.max_time_s",
               "need 0 < step_s <= 1e-3 s (the coupling's stability limit) and max_time_s > step_s")
+    if t_max / step > MAX_STEPS_PER_RUN:
+        _fail(source, "simulation.max_time_s", f"{t_max:g} s at step_s {step:g} s is {t_max / step:.3g} steps per run, "
+              f"more than {MAX_STEPS_PER_RUN} (a traverse takes seconds; a stalled motor would run and grow to the "
+              "end): give a shorter max_time_s")
     if "operating_points" not in doc:
         _fail(source, "operating_points", "missing (at least V0 and load)")
     operating = _parse_operating(source, doc["operating_points"], nominal)
@@ -387,10 +452,7 @@ def motor_reference(text: str, source: str = "study.toml") -> str | None:
     The motor decides the defaults and ranges :func:`parse_spec` checks against,
     so the caller loads it first.
     """
-    try:
-        motor = tomllib.loads(text).get("study", {}).get("motor")
-    except tomllib.TOMLDecodeError as exc:
-        raise SpecError(f"{source}: not valid TOML ({exc})") from None
+    motor = _load_toml(text, source).get("study", {}).get("motor")
     if motor is not None and not isinstance(motor, str):
         _fail(source, "study.motor", "expected the path of a motor TOML file")
     return motor
