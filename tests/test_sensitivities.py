@@ -1,4 +1,4 @@
-"""Exact sensitivities of the Eq. 29 free run (compiled recursions)."""
+"""Exact sensitivities of the Eq. 29 free run (compiled recursions) and the variable-projection search."""
 
 import os
 
@@ -7,9 +7,11 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np
 import pandas as pd
 import pytest
-from l1b2.ident.estimator import evaluation_mask
+from l1b2.ident.estimator import PredictorIdentifier, evaluation_mask
 from l1b2.ident.noise import NoiseModel
 from l1b2.ident.problem import LikelihoodProblem, SampleData, ScaledObjective, param_scale
+from l1b2.ident.reduced import reduced_linear_fit, reduced_of_theta
+from l1b2.ident.varpro import Projection, linear_positions
 from l1b2.predictor import kernels
 from l1b2.predictor.model import G_of_k0, PredictorParams, drive_factor, example_params
 from l1b2.predictor.simulate import RunLayout, design_grid, packed_linear_recursion, packed_recursion, \
@@ -141,3 +143,55 @@ def test_start_gain_sensitivity_matches_central_differences(noisy_world):
         tm[c] -= step
         fd = (prob.start_gain(tp) - prob.start_gain(tm)) / (2 * step)
         assert np.max(np.abs(G[plain, j] - fd[plain])) <= 1e-6 * np.max(np.abs(fd)), c
+
+
+def test_criterion_gradient_is_exact_including_the_start_speed_term(moving_world):
+    # grad phi of Projection.normal against central differences of phi = 0.5 |r_w|^2 + 0.5 sum log(1 + g.g)
+    # with the start-speed gain g re-evaluated at every point (R fixed)
+    prm, df = moving_world
+    theta = prm.to_vector() * (1 + 0.03 * np.cos(np.arange(prm.to_vector().size)))
+    obj = _objective(df, theta)
+    assert not np.any(obj.problem.evaluate(theta)["flags"])
+    proj = Projection(obj, linear_positions(obj, obj.problem.core.p_theta, 4))
+    z = obj.z_of(theta)
+    r, _ = proj.residual(z)
+    _, grad = proj.normal(z, r)
+    fd = np.empty_like(grad)
+    for j in range(z.size):
+        step = 1e-6 * max(abs(z[j]), 1e-2)
+        zp, zm = z.copy(), z.copy()
+        zp[j] += step
+        zm[j] -= step
+        fd[j] = 0.25 * (proj.residual(zp)[1] - proj.residual(zm)[1]) / step
+    np.testing.assert_allclose(grad, fd, rtol=2e-4, atol=2e-4 * np.max(np.abs(fd)))
+    # and the start-speed term matters: without it the gradient is a different vector
+    obj0 = _objective(df, theta, start_noise=False)
+    r0 = obj0.fun(obj0.z_of(theta))
+    assert np.max(np.abs(obj0.jac(obj0.z_of(theta)).T @ r0 - grad)) > 1e-3 * np.max(np.abs(grad))
+
+
+def test_one_step_linear_fit_recovers_the_linear_parameters_exactly_on_noise_free_data():
+    # Eq. 29's one-step form is linear in the coefficients of D(s), B'(s) and C(s): on noise-free data of the
+    # model (moving samples) the linear least-squares solution is the truth to rounding
+    prm = example_params(4)
+    df = simulate_dataset(prm, SMALL, M_S, noise_std=0.0)
+    data = SampleData(df)
+    red = reduced_linear_fit(data, 4, M_S, True, prm.s_center, prm.s_half)
+    truth = reduced_of_theta(prm.to_vector(), 4, M_S, prm.kappa)
+    got = np.concatenate([red["D"], red["B"], red["C"]])
+    np.testing.assert_allclose(got, truth, rtol=1e-7, atol=1e-9 * np.max(np.abs(truth)))
+
+
+def test_varpro_reaches_the_joint_optimum_where_both_converge():
+    # without the start-speed term both searches minimise the same weighted sum of squares; from the same
+    # data-driven starts they must end at the same log-likelihood (and predictions)
+    prm = example_params(2)
+    df = simulate_dataset(prm, SMALL, M_S, noise_std=3e-4, seed=6)
+    common = dict(order=2, n_starts=2, start_noise=False, fixed="recommended", stat_tol=1e-6, max_nfev=400)
+    joint = PredictorIdentifier(solver="joint", noise_fit="alternate", **common).fit(df, slider_mass_kg=M_S)
+    vp = PredictorIdentifier(solver="varpro", **common).fit(df, slider_mass_kg=M_S)
+    assert abs(vp.loglik_ - joint.loglik_) < 1e-3, (vp.loglik_, joint.loglik_)
+    np.testing.assert_allclose(vp.predict_free_run(df), joint.predict_free_run(df), rtol=0, atol=1e-6)
+    stages = [s["stage"] for s in vp.convergence_["stages"]]
+    assert stages[-1] == "uncertainty" and "starts" in stages
+    assert vp.convergence_["solver"] == "varpro" and vp.convergence_["nfev_total"] > 0

@@ -133,9 +133,10 @@ from .problem import (
 )
 from .reduced import data_driven_start, init_theta, reduced_summary
 from .result import IdentificationResult
-from .search import (LocalSolver, alternate_noise, multi_start, polish_stalled, profile_search,
+from .search import (LocalSolver, alternate_noise, multi_start, polish_stalled, profile_search, search_nfev,
                      start_points, warm_prestep)
 from .uncertainty import alternative_optima, extra_confounding, fisher_uncertainty
+from .varpro import linear_positions, varpro_search
 
 __all__ = ["PredictorIdentifier", "clone", "RECOMMENDED_FIXED", "evaluation_mask"]
 
@@ -148,6 +149,9 @@ _NOT_SERIALISED = ("verbose", "extra", "init", "init_extra")
 
 #: the searches of ``noise_fit`` (``"auto"``: profile without extra forces, alternate with them)
 NOISE_FITS = ("auto", "alternate", "profile")
+
+#: the local solvers of the global search (``solver``): variable projection, or the joint multistart
+SOLVERS = ("varpro", "joint")
 
 
 def clone(estimator, **changes):
@@ -269,6 +273,8 @@ class PredictorIdentifier:
         identifier's.
     init_extra : start values of phi for the warm start (default
         ``extra.start``, else zeros). Only used with ``init``.
+    solver : ``"joint"`` (the searches of ``noise_fit``) or ``"varpro"``
+        (variable projection, exact likelihood gradient: :mod:`l1b2.ident.varpro`).
 
     The constructor only stores the settings (scikit-learn convention:
     :meth:`get_params`, :meth:`set_params`, :func:`clone`); they are checked
@@ -330,6 +336,7 @@ class PredictorIdentifier:
         extra: ExtraForces | None = None,
         init: PredictorParams | None = None,
         init_extra=None,
+        solver: str = "joint",
     ):
         self.order = order
         self.criterion = criterion
@@ -358,6 +365,7 @@ class PredictorIdentifier:
         self.extra = extra
         self.init = init
         self.init_extra = init_extra
+        self.solver = solver
 
     # -- settings (scikit-learn protocol) ------------------------------------------------
     @classmethod
@@ -401,6 +409,8 @@ class PredictorIdentifier:
         cfg.n_refine = max(1, int(cfg.n_refine))
         if cfg.criterion not in ("free_run", "one_step"):
             raise IdentificationError(f"criterion must be 'free_run' or 'one_step', got {cfg.criterion!r}")
+        if cfg.solver not in SOLVERS:
+            raise IdentificationError(f"solver must be one of {SOLVERS}, got {cfg.solver!r}")
         if cfg.noise_fit not in NOISE_FITS:
             raise IdentificationError(f"noise_fit must be one of {NOISE_FITS}, got {cfg.noise_fit!r}")
         if cfg.noise_fit == "auto":  # the search measured better for the model at hand (class docstring)
@@ -514,6 +524,7 @@ class PredictorIdentifier:
         red, minima = data_driven_start(sample, space, m_s, cfg.kappa, cfg.include_load_inertia, s_center,
                                         s_half, E, cfg.n_starts, cfg.seed, warm=warm)
         theta0, fixed_final = self._centre(cfg, space, minima, s_center, s_half)
+        t_centre = time.perf_counter()
         self.reduced_ = reduced_summary(red, minima, space.extra_names)
         self.theta_init_ = theta0[: space.p_theta].copy()
         self.extra_init_ = theta0[space.p_theta:].copy()
@@ -542,7 +553,14 @@ class PredictorIdentifier:
             z_centre, self.warm_prestep_ = warm_prestep(obj, z_centre, xv, cfg.tol, cfg.max_nfev, self._log)
         starts = start_points(z_centre, [obj.z_of(th) for _, th in minima[1:]], cfg.n_starts, cfg.seed,
                               cfg.start_spread, obj.zlo, obj.zhi)
-        if cfg.noise_fit == "profile":
+        stages = [{"stage": "start (reduced fit, equation-error minima)", "time_s": t_centre - t_start}]
+        t_search = time.perf_counter()
+        if cfg.solver == "varpro":
+            search, outer, more = varpro_search(obj, linear_positions(obj, space.p_theta, cfg.order + 1), starts,
+                                                cfg.max_nfev, cfg.tol, cfg.stat_tol, cfg.max_outer,
+                                                cfg.n_refine, self._log)
+            stages += more
+        elif cfg.noise_fit == "profile":
             search, outer = profile_search(obj, starts, cfg.max_nfev // 2, cfg.stat_tol, cfg.stat_window_profile,
                                            cfg.start_agree, self._log)
             # always continued by least-squares refits at the ML variances: the damped Gauss-Newton can stop
@@ -554,9 +572,12 @@ class PredictorIdentifier:
             search = multi_start(solver, starts, cfg.max_nfev, cfg.explore_nfev, cfg.n_refine, self._log)
             best = search.results[search.best]
             outer = alternate_noise(solver, best.x, best, cfg.max_outer, cfg.max_nfev, self._log)
+        if cfg.solver != "varpro":
+            stages.append({"stage": f"search ({cfg.noise_fit})", "time_s": time.perf_counter() - t_search,
+                           "nfev": search_nfev(cfg.solver, cfg.noise_fit, search, outer)})
 
         # ---- uncertainty and the result ------------------------------------------
-        result = self._result(cfg, space, sample, obj, search, outer, fixed_final, t_start)
+        result = self._result(cfg, space, sample, obj, search, outer, fixed_final, t_start, stages)
         self._publish(result)
         return self
 
@@ -578,8 +599,12 @@ class PredictorIdentifier:
             theta0[space.index(k)] = v
         return theta0, {k: float(v) for k, v in fixed_final.items()}
 
-    def _result(self, cfg, space, sample, obj, search, outer, fixed, t_start) -> IdentificationResult:
-        """Uncertainty at the optimum and the :class:`IdentificationResult` of the fit."""
+    def _result(self, cfg, space, sample, obj, search, outer, fixed, t_start, stages) -> IdentificationResult:
+        """Uncertainty at the optimum and the :class:`IdentificationResult` of the fit.
+
+        ``stages``: the per-stage records so far (``convergence["stages"]`` gets the uncertainty's too).
+        """
+        t_unc = time.perf_counter()
         problem, noise = obj.problem, obj.noise
         theta_hat = obj.theta_of(outer.z)
         r = problem.residual(theta_hat)
@@ -600,8 +625,9 @@ class PredictorIdentifier:
             "success": bool(final.status > 0 or final.status == -2),
             "optimality": float(final.optimality),
             "cost": float(0.5 * np.sum(noise.weighted(r) ** 2)),
-            "nfev_total": int(sum(rec.get("nfev", 0) for rec in records)  # profile: outer = the best start's
-                              + (0 if cfg.noise_fit == "profile" else sum(h.get("nfev", 0) for h in outer_hist[1:]))),
+            "nfev_total": search_nfev(cfg.solver, cfg.noise_fit, search, outer),
+            "solver": cfg.solver,
+            "stages": stages + [{"stage": "uncertainty", "time_s": time.perf_counter() - t_unc}],
         }
         p = space.p_theta
         extra = cfg.extra
