@@ -508,7 +508,7 @@ class PredictorIdentifier:
         cfg = self._checked_settings()
         if cfg.init is not None and cfg.n_starts >= 2:
             return self._fit_two_tracks(cfg, data, slider_mass_kg, mask)
-        t_start = time.perf_counter()
+        t_start, c_start = time.perf_counter(), time.process_time()
         if isinstance(data, Measurements):
             slider_mass_kg = data.slider_mass_kg if slider_mass_kg is None else slider_mass_kg
             mask = data.mask if mask is None else mask
@@ -522,9 +522,10 @@ class PredictorIdentifier:
 
         # ---- start: data-driven centre and equation-error minima, or init ----
         red, minima = data_driven_start(sample, space, m_s, cfg.kappa, cfg.include_load_inertia, s_center,
-                                        s_half, E, cfg.n_starts, cfg.seed, warm=warm)
+                                        s_half, E, cfg.n_starts, cfg.seed, warm=warm,
+                                        n_ee_starts=4 * cfg.n_starts if cfg.solver == "varpro" else None)
         theta0, fixed_final = self._centre(cfg, space, minima, s_center, s_half)
-        t_centre = time.perf_counter()
+        t_centre, c_centre = time.perf_counter(), time.process_time()
         self.reduced_ = reduced_summary(red, minima, space.extra_names)
         self.theta_init_ = theta0[: space.p_theta].copy()
         self.extra_init_ = theta0[space.p_theta:].copy()
@@ -553,8 +554,8 @@ class PredictorIdentifier:
             z_centre, self.warm_prestep_ = warm_prestep(obj, z_centre, xv, cfg.tol, cfg.max_nfev, self._log)
         starts = start_points(z_centre, [obj.z_of(th) for _, th in minima[1:]], cfg.n_starts, cfg.seed,
                               cfg.start_spread, obj.zlo, obj.zhi)
-        stages = [{"stage": "start (reduced fit, equation-error minima)", "time_s": t_centre - t_start}]
-        t_search = time.perf_counter()
+        stages = [{"stage": "start", "time_s": t_centre - t_start, "cpu_s": c_centre - c_start}]
+        t_search, c_search = time.perf_counter(), time.process_time()
         if cfg.solver == "varpro":
             search, outer, more = varpro_search(obj, linear_positions(obj, space.p_theta, cfg.order + 1), starts,
                                                 cfg.max_nfev, cfg.tol, cfg.stat_tol, cfg.max_outer,
@@ -574,6 +575,7 @@ class PredictorIdentifier:
             outer = alternate_noise(solver, best.x, best, cfg.max_outer, cfg.max_nfev, self._log)
         if cfg.solver != "varpro":
             stages.append({"stage": f"search ({cfg.noise_fit})", "time_s": time.perf_counter() - t_search,
+                           "cpu_s": time.process_time() - c_search,
                            "nfev": search_nfev(cfg.solver, cfg.noise_fit, search, outer)})
 
         # ---- uncertainty and the result ------------------------------------------
@@ -604,7 +606,7 @@ class PredictorIdentifier:
 
         ``stages``: the per-stage records so far (``convergence["stages"]`` gets the uncertainty's too).
         """
-        t_unc = time.perf_counter()
+        t_unc, c_unc = time.perf_counter(), time.process_time()
         problem, noise = obj.problem, obj.noise
         theta_hat = obj.theta_of(outer.z)
         r = problem.residual(theta_hat)
@@ -627,7 +629,8 @@ class PredictorIdentifier:
             "cost": float(0.5 * np.sum(noise.weighted(r) ** 2)),
             "nfev_total": search_nfev(cfg.solver, cfg.noise_fit, search, outer),
             "solver": cfg.solver,
-            "stages": stages + [{"stage": "uncertainty", "time_s": time.perf_counter() - t_unc}],
+            "stages": stages + [{"stage": "uncertainty", "time_s": time.perf_counter() - t_unc, "cpu_s":
+                                 time.process_time() - c_unc}],
         }
         p = space.p_theta
         extra = cfg.extra

@@ -171,7 +171,8 @@ class Projection:
             r_new, c_new = self.residual(z_new)
             if not c_new < cost:
                 break  # a change of step kind the linear model did not see, and it does not pay
-            exact = abs(c_new - predicted) <= 1e-9 * max(cost, 1e-300)
+            # (2 phi units: 1e-3 is 5e-4 log-likelihood units, far below any statistical relevance)
+            exact = abs(c_new - predicted) <= max(1e-9 * cost, 1e-3)
             z, r, cost = z_new, r_new, c_new
             if exact:
                 break  # the affine map held: this is the projection
@@ -293,7 +294,7 @@ def varpro_search(obj, lin, starts, max_nfev, tol, stat_tol, max_outer, n_refine
     saved = dict(vars(noise))
     sv_scale = obj.sv_scale
     records, results, fits = [], {}, {}
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     nfev = njev = 0
     for i, z_init in enumerate(starts):
         vars(noise).update(saved)
@@ -326,9 +327,9 @@ def varpro_search(obj, lin, starts, max_nfev, tol, stat_tol, max_outer, n_refine
                 f"{res.message}, cost history {[round(h, 3) for h in fit.history[-4:]]}")
     if not results:
         raise IdentificationError("global search failed: every start gave a non-finite prediction")
-    stages = [{"stage": "starts", "time_s": time.perf_counter() - t0, "nfev": nfev, "njev": njev,
-               "n_starts": len(starts)}]
-    t1 = time.perf_counter()
+    stages = [{"stage": "starts", "time_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0,
+               "nfev": nfev, "njev": njev, "n_starts": len(starts)}]
+    t1, c1 = time.perf_counter(), time.process_time()
     nfev = njev = 0
     ranked = sorted(results, key=lambda i: results[i].cost)
     refinements = {}
@@ -373,6 +374,6 @@ def varpro_search(obj, lin, starts, max_nfev, tol, stat_tol, max_outer, n_refine
                      + ("until a refit gained < stat_tol log-likelihood units" if ref.converged
                         else f"{max_outer} times (max_outer)"))
     _profile_loglik(obj, ref.z)  # the noise model at the chosen optimum
-    stages.append({"stage": "noise refinement", "time_s": time.perf_counter() - t1, "nfev": nfev, "njev": njev,
-                   "n_refined": len(refinements)})
+    stages.append({"stage": "noise refinement", "time_s": time.perf_counter() - t1,
+                   "cpu_s": time.process_time() - c1, "nfev": nfev, "njev": njev, "n_refined": len(refinements)})
     return SearchOutcome(records, results, ranked, best, 0, list(refinements)), ref, stages
