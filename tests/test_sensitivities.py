@@ -195,3 +195,11 @@ def test_varpro_reaches_the_joint_optimum_where_both_converge():
     stages = [s["stage"] for s in vp.convergence_["stages"]]
     assert stages[-1] == "uncertainty" and "starts" in stages
     assert vp.convergence_["solver"] == "varpro" and vp.convergence_["nfev_total"] > 0
+
+
+def test_an_unknown_solver_is_refused_with_the_known_ones():
+    from l1b2.errors import IdentificationError
+
+    df = simulate_dataset(example_params(2), SMALL, M_S, noise_std=1e-4, seed=1)
+    with pytest.raises(IdentificationError, match="solver must be one of .*varpro"):
+        PredictorIdentifier(order=2, solver="newton").fit(df, slider_mass_kg=M_S)
