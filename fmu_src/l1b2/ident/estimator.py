@@ -273,8 +273,7 @@ class PredictorIdentifier:
         identifier's.
     init_extra : start values of phi for the warm start (default
         ``extra.start``, else zeros). Only used with ``init``.
-    solver : ``"joint"`` (the searches of ``noise_fit``) or ``"varpro"``
-        (variable projection, exact likelihood gradient: :mod:`l1b2.ident.varpro`).
+    solver : ``"joint"`` (the searches of ``noise_fit``) or ``"varpro"`` (:mod:`l1b2.ident.varpro`).
 
     The constructor only stores the settings (scikit-learn convention:
     :meth:`get_params`, :meth:`set_params`, :func:`clone`); they are checked
@@ -554,8 +553,8 @@ class PredictorIdentifier:
             z_centre, self.warm_prestep_ = warm_prestep(obj, z_centre, xv, cfg.tol, cfg.max_nfev, self._log)
         starts = start_points(z_centre, [obj.z_of(th) for _, th in minima[1:]], cfg.n_starts, cfg.seed,
                               cfg.start_spread, obj.zlo, obj.zhi)
-        stages = [{"stage": "start", "time_s": t_centre - t_start, "cpu_s": c_centre - c_start}]
-        t_search, c_search = time.perf_counter(), time.process_time()
+        stages, t_search, c_search = ([{"stage": "start", "time_s": t_centre - t_start, "cpu_s": c_centre - c_start}],
+                                      time.perf_counter(), time.process_time())
         if cfg.solver == "varpro":
             search, outer, more = varpro_search(obj, linear_positions(obj, space.p_theta, cfg.order + 1), starts,
                                                 cfg.max_nfev, cfg.tol, cfg.stat_tol, cfg.max_outer,

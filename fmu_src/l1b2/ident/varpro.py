@@ -12,16 +12,18 @@ projection), found by Gauss-Newton steps with the exact sensitivities: one
 step is exact when no step kind changes, further steps (at most
 :data:`MAX_INNER`) follow the piecewise-affine map when one does.
 
-The outer problem runs over the nonlinear parameters only, with bounds
-(``least_squares``, ``trf``), on the projected residual and Kaufman's
-Jacobian ``(I - Q Q^T) J_N`` (``Q`` an orthonormal basis of the whitened
-linear columns ``J_L``). The linear parameters then cannot create local
-minima or slow valleys; they are never started anywhere.
+The outer problem runs over the nonlinear parameters only, with bounds, by
+Levenberg-Marquardt steps on Kaufman's approximation of the projected
+problem (the Schur complement of the normal equations, :func:`local_fit`).
+The linear parameters then cannot create local minima or slow valleys; they
+are never started anywhere.
 
-The noise model (Eq. 32: the variances R and the start-speed gain g of
-:class:`l1b2.ident.noise.NoiseModel`) is held fixed during a local fit and
-re-estimated after it; the fit is repeated from its optimum until the
-log-likelihood gains less than ``stat_tol`` (:func:`varpro_fit`).
+The criterion is the log-likelihood of Eq. 32 itself: its gradient includes
+the dependence of the start-speed gain g (:class:`l1b2.ident.noise.NoiseModel`)
+on the parameters of D(s) (:meth:`l1b2.ident.problem.LikelihoodProblem.start_gain_sensitivity`),
+which the joint searches leave out of their steps; the variances R are set
+to their ML values at every iteration. :func:`varpro_search` fits every
+start, then refits the best until a refit gains less than ``stat_tol``.
 
 The linear parameters are those that are varied and unbounded (beta, p; an
 extra parameter only when its bounds are infinite); bounded extras stay in
@@ -179,6 +181,12 @@ class Projection:
         return z, r, cost
 
 
+def _nll(noise, cost):
+    """-log-likelihood of the criterion value ``cost`` (= 2 phi) at the noise model's variances."""
+    has = noise.counts > 0
+    return 0.5 * cost + 0.5 * float(np.sum(noise.counts[has] * np.log(2 * np.pi * noise.R[has])))
+
+
 @dataclass
 class LocalFit:
     """One local variable-projection fit: final full z, an OptimizeResult-like record and counts."""
@@ -191,21 +199,26 @@ class LocalFit:
     history: list = field(default_factory=list)
 
 
-def local_fit(obj, lin, z_init, max_iter, tol, stat_tol=0.0, stat_window=3):
-    """Levenberg-Marquardt on the projected problem (Kaufman's step) from ``z_init`` at the noise model as it is.
+def local_fit(obj, lin, z_init, max_iter, tol, stat_tol=0.0, stat_window=3, update_R=True):
+    """Levenberg-Marquardt on the projected problem (Kaufman's step) from ``z_init``.
 
+    The criterion is ``phi = 0.5 |r_w|^2 + 0.5 sum_r log(1 + g_r.g_r)``
+    (minus the log-likelihood at the variances R, up to a constant), with the
+    start-speed gain g re-evaluated at every point (:class:`Projection`).
     The linear parameters are projected at the start; each iteration solves
     the Gauss-Newton system of the nonlinear parameters with the linear ones
     eliminated (Schur complement of the normal equations, i.e. Kaufman's
-    variable-projection step), damped on the nonlinear block only, with the
-    bounds of the nonlinear parameters held (:func:`l1b2.ident.search._bounded_step`
-    rule). The trial point carries the linear parameters the joint
-    Gauss-Newton model predicts; if it does not lower the cost they are
-    projected exactly there before the trial is judged. Stops when a step
-    gains less than ``tol`` relative to the cost, when the cost (log-likelihood
-    units at fixed noise) fell by less than ``stat_tol`` over ``stat_window``
-    accepted steps, when no damping finds a gain, or after ``max_iter``
-    iterations.
+    variable-projection step) and the exact gradient, damped on the
+    nonlinear block only, with the bounds of the nonlinear parameters held
+    (:func:`l1b2.ident.search.bounded_step`). The trial point carries the
+    linear parameters the joint Gauss-Newton model predicts; if it does not
+    lower the criterion they are projected exactly there before the trial is
+    judged. With ``update_R`` the variances are set to their ML values at the
+    start of every iteration (coordinate ascent of the likelihood in R), else
+    they stay as they are. Stops when a step gains less than ``tol`` relative
+    to the criterion, when the log-likelihood gained less than ``stat_tol``
+    over ``stat_window`` accepted steps, when no damping finds a gain, or
+    after ``max_iter`` iterations. ``history``: -log-likelihood per iteration.
     """
     from .search import bounded_step
 
@@ -215,12 +228,17 @@ def local_fit(obj, lin, z_init, max_iter, tol, stat_tol=0.0, stat_window=3):
     z = strictly_inside(np.array(z_init, dtype=float), obj.zlo, obj.zhi)
     r, cost = proj.residual(z)
     z, r, cost = proj.project(z, r, cost)
-    history = [0.5 * cost]
+    history = [_nll(obj.noise, cost)]  # -log-likelihood: comparable across updates of R
     lam, status, message = 1e-3, 0, "iteration limit"
     zlo, zhi = obj.zlo[non], obj.zhi[non]
     g_red = np.zeros(non.size)
     it = 0
     for it in range(1, max_iter + 1):
+        if update_R:  # the variances at their ML values here (coordinate ascent of the likelihood in R)
+            with np.errstate(over="ignore", invalid="ignore"):
+                obj.noise.update_R(obj.problem.residual(obj.theta_of(z)))
+            r, cost = proj.residual(z)
+            history[-1] = _nll(obj.noise, cost)
         H, g = proj.normal(z, r)
         if lin.size:
             HLL, HLN, gL = H[np.ix_(lin, lin)], H[np.ix_(lin, non)], g[lin]
@@ -251,13 +269,13 @@ def local_fit(obj, lin, z_init, max_iter, tol, stat_tol=0.0, stat_window=3):
             break
         gain = cost - c_try
         z, r, cost = z_try, r_try, c_try
-        history.append(0.5 * cost)
+        history.append(_nll(obj.noise, cost))
         if gain <= tol * cost:
             status, message = 1, f"relative cost reduction < {tol:g}"
             break
         if stat_tol > 0 and len(history) > stat_window and history[-1 - stat_window] - history[-1] < stat_tol:
-            status, message = -2, (f"statistical convergence: cost decreased by < {stat_tol:g} (log-likelihood "
-                                   f"units) over the last {stat_window} iterations")
+            status, message = -2, (f"statistical convergence: log-likelihood gained < {stat_tol:g} over the last "
+                                   f"{stat_window} iterations")
             break
     z, r, cost = proj.project(z, r, cost)
     res = SimpleNamespace(x=z, cost=0.5 * cost, status=status, message=message, nit=it,
@@ -277,8 +295,9 @@ def _profile_loglik(obj, z):
 def varpro_search(obj, lin, starts, max_nfev, tol, stat_tol, max_outer, n_refine=2, log=None):
     """Local variable-projection fits from every start, then the noise alternation on the best.
 
-    Each start is fitted at the noise model of the search's centre and scored
-    by its profile log-likelihood (noise re-estimated at its optimum). The
+    Each start is fitted by :func:`local_fit` (from the noise model of the
+    search's centre) and scored by its profile log-likelihood (noise
+    re-estimated at its optimum). The
     ``n_refine`` best are then refitted with the noise model re-estimated
     after each fit until the log-likelihood gains less than ``stat_tol`` (at
     most ``max_outer`` refits); the higher final log-likelihood is kept.
