@@ -1,5 +1,6 @@
 """Exact sensitivities of the Eq. 29 free run (compiled recursions) and the variable-projection search."""
 
+import json
 import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -193,7 +194,12 @@ def test_varpro_reaches_the_joint_optimum_where_both_converge():
     assert abs(vp.loglik_ - joint.loglik_) < 1e-3, (vp.loglik_, joint.loglik_)
     np.testing.assert_allclose(vp.predict_free_run(df), joint.predict_free_run(df), rtol=0, atol=1e-6)
     stages = [s["stage"] for s in vp.convergence_["stages"]]
-    assert stages[-1] == "uncertainty" and "starts" in stages
+    assert stages == ["start", "starts", "noise refinement", "uncertainty"]
+    assert [s["stage"] for s in joint.convergence_["stages"]] == ["start", "search (alternate)", "uncertainty"]
+    for est in (vp, joint):  # every stage's wall and CPU time; the search stages their evaluations
+        assert all(s["time_s"] >= 0 and s["cpu_s"] >= 0 for s in est.convergence_["stages"])
+        assert sum(s.get("nfev", 0) for s in est.convergence_["stages"]) >= est.convergence_["nfev_total"] > 0
+        assert json.loads(json.dumps(est.to_dict()))["convergence"]["stages"] == est.convergence_["stages"]
     assert vp.convergence_["solver"] == "varpro" and vp.convergence_["nfev_total"] > 0
 
 
