@@ -116,9 +116,10 @@ from .problem import (
 )
 from .reduced import data_driven_start, init_theta, reduced_summary
 from .result import IdentificationResult
-from .search import (LocalSolver, alternate_noise, multi_start, polish_stalled, profile_search,
+from .search import (LocalSolver, alternate_noise, multi_start, polish_stalled, profile_search, search_nfev,
                      start_points, warm_prestep)
 from .uncertainty import alternative_optima, extra_confounding, fisher_uncertainty
+from .varpro import linear_positions, varpro_search
 
 __all__ = ["PredictorIdentifier", "clone", "RECOMMENDED_FIXED", "evaluation_mask"]
 
@@ -131,6 +132,9 @@ _NOT_SERIALISED = ("verbose", "extra", "init", "init_extra")
 
 #: the searches of ``noise_fit`` (``"auto"``: profile without extra forces, alternate with them)
 NOISE_FITS = ("auto", "alternate", "profile")
+
+#: the local solvers of the global search (``solver``): variable projection, or the joint multistart
+SOLVERS = ("varpro", "joint")
 
 
 def clone(estimator, **changes):
@@ -236,6 +240,7 @@ class PredictorIdentifier(EstimatorSettings):
         identifier's.
     init_extra : start values of phi for the warm start (default
         ``extra.start``, else zeros). Only used with ``init``.
+    solver : ``"joint"`` (the searches of ``noise_fit``) or ``"varpro"`` (:mod:`l1b2.ident.varpro`).
 
     The constructor only stores the settings (scikit-learn convention:
     :meth:`get_params`, :meth:`set_params`, :func:`clone`); they are checked
@@ -300,6 +305,7 @@ class PredictorIdentifier(EstimatorSettings):
         extra: ExtraForces | None = None,
         init: PredictorParams | None = None,
         init_extra=None,
+        solver: str = "joint",
     ):
         self.order = order
         self.criterion = criterion
@@ -328,6 +334,7 @@ class PredictorIdentifier(EstimatorSettings):
         self.extra = extra
         self.init = init
         self.init_extra = init_extra
+        self.solver = solver
 
     # -- settings: the scikit-learn protocol of :class:`l1b2.ident.convention.EstimatorSettings` --------
     def _checked_settings(self) -> SimpleNamespace:
@@ -343,6 +350,8 @@ class PredictorIdentifier(EstimatorSettings):
         cfg.n_refine = max(1, int(cfg.n_refine))
         if cfg.criterion not in ("free_run", "one_step"):
             raise IdentificationError(f"criterion must be 'free_run' or 'one_step', got {cfg.criterion!r}")
+        if cfg.solver not in SOLVERS:
+            raise IdentificationError(f"solver must be one of {SOLVERS}, got {cfg.solver!r}")
         if cfg.noise_fit not in NOISE_FITS:
             raise IdentificationError(f"noise_fit must be one of {NOISE_FITS}, got {cfg.noise_fit!r}")
         if cfg.noise_fit == "auto":  # the search measured better for the model at hand (class docstring)
@@ -440,7 +449,7 @@ class PredictorIdentifier(EstimatorSettings):
         cfg = self._checked_settings()
         if cfg.init is not None and cfg.n_starts >= 2:
             return self._fit_two_tracks(cfg, data, slider_mass_kg, mask)
-        t_start = time.perf_counter()
+        t_start, c_start = time.perf_counter(), time.process_time()
         if isinstance(data, Measurements):
             slider_mass_kg = data.slider_mass_kg if slider_mass_kg is None else slider_mass_kg
             mask = data.mask if mask is None else mask
@@ -454,8 +463,10 @@ class PredictorIdentifier(EstimatorSettings):
 
         # ---- start: data-driven centre and equation-error minima, or init ----
         red, minima = data_driven_start(sample, space, m_s, cfg.kappa, cfg.include_load_inertia, s_center,
-                                        s_half, E, cfg.n_starts, cfg.seed, warm=warm)
+                                        s_half, E, cfg.n_starts, cfg.seed, warm=warm,
+                                        n_ee_starts=4 * cfg.n_starts if cfg.solver == "varpro" else None)
         theta0, fixed_final = self._centre(cfg, space, minima, s_center, s_half)
+        t_centre, c_centre = time.perf_counter(), time.process_time()
         self.reduced_ = reduced_summary(red, minima, space.extra_names)
         self.theta_init_ = theta0[: space.p_theta].copy()
         self.extra_init_ = theta0[space.p_theta:].copy()
@@ -484,7 +495,14 @@ class PredictorIdentifier(EstimatorSettings):
             z_centre, self.warm_prestep_ = warm_prestep(obj, z_centre, xv, cfg.tol, cfg.max_nfev, self._log)
         starts = start_points(z_centre, [obj.z_of(th) for _, th in minima[1:]], cfg.n_starts, cfg.seed,
                               cfg.start_spread, obj.zlo, obj.zhi)
-        if cfg.noise_fit == "profile":
+        stages, t_search, c_search = ([{"stage": "start", "time_s": t_centre - t_start, "cpu_s": c_centre - c_start}],
+                                      time.perf_counter(), time.process_time())
+        if cfg.solver == "varpro":
+            search, outer, more = varpro_search(obj, linear_positions(obj, space.p_theta, cfg.order + 1), starts,
+                                                cfg.max_nfev, cfg.tol, cfg.stat_tol, cfg.max_outer,
+                                                cfg.n_refine, self._log)
+            stages += more
+        elif cfg.noise_fit == "profile":
             search, outer = profile_search(obj, starts, cfg.max_nfev // 2, cfg.stat_tol, cfg.stat_window_profile,
                                            cfg.start_agree, self._log)
             # always continued by least-squares refits at the ML variances: the damped Gauss-Newton can stop
@@ -496,9 +514,13 @@ class PredictorIdentifier(EstimatorSettings):
             search = multi_start(solver, starts, cfg.max_nfev, cfg.explore_nfev, cfg.n_refine, self._log)
             best = search.results[search.best]
             outer = alternate_noise(solver, best.x, best, cfg.max_outer, cfg.max_nfev, self._log)
+        if cfg.solver != "varpro":
+            stages.append({"stage": f"search ({cfg.noise_fit})", "time_s": time.perf_counter() - t_search,
+                           "cpu_s": time.process_time() - c_search,
+                           "nfev": search_nfev(cfg.solver, cfg.noise_fit, search, outer)})
 
         # ---- uncertainty and the result ------------------------------------------
-        result = self._result(cfg, space, sample, obj, search, outer, fixed_final, t_start)
+        result = self._result(cfg, space, sample, obj, search, outer, fixed_final, t_start, stages)
         self._publish(result)
         return self
 
@@ -520,8 +542,12 @@ class PredictorIdentifier(EstimatorSettings):
             theta0[space.index(k)] = v
         return theta0, {k: float(v) for k, v in fixed_final.items()}
 
-    def _result(self, cfg, space, sample, obj, search, outer, fixed, t_start) -> IdentificationResult:
-        """Uncertainty at the optimum and the :class:`IdentificationResult` of the fit."""
+    def _result(self, cfg, space, sample, obj, search, outer, fixed, t_start, stages) -> IdentificationResult:
+        """Uncertainty at the optimum and the :class:`IdentificationResult` of the fit.
+
+        ``stages``: the per-stage records so far (``convergence["stages"]`` gets the uncertainty's too).
+        """
+        t_unc, c_unc = time.perf_counter(), time.process_time()
         problem, noise = obj.problem, obj.noise
         theta_hat = obj.theta_of(outer.z)
         r = problem.residual(theta_hat)
@@ -542,8 +568,10 @@ class PredictorIdentifier(EstimatorSettings):
             "success": bool(final.status > 0 or final.status == -2),
             "optimality": float(final.optimality),
             "cost": float(0.5 * np.sum(noise.weighted(r) ** 2)),
-            "nfev_total": int(sum(rec.get("nfev", 0) for rec in records)  # profile: outer = the best start's
-                              + (0 if cfg.noise_fit == "profile" else sum(h.get("nfev", 0) for h in outer_hist[1:]))),
+            "nfev_total": search_nfev(cfg.solver, cfg.noise_fit, search, outer),
+            "solver": cfg.solver,
+            "stages": stages + [{"stage": "uncertainty", "time_s": time.perf_counter() - t_unc, "cpu_s":
+                                 time.process_time() - c_unc}],
         }
         p = space.p_theta
         extra = cfg.extra

@@ -292,34 +292,23 @@ class ForceCore:
         G = float(G_of_k0(k0))
         dg1 = float(ddrive_factor_dk0(k0))
         dG = float(dG_dk0(k0))
-        cols = np.asarray(cols)
-        out = np.empty((vp.size, cols.size))
-        group_a = group_p = None
-        for j, c in enumerate(cols):
-            if c == 0:
-                out[:, j] = -vp
-            elif c == 1:
-                out[:, j] = -(0.5 - Ap) * vp
-            elif c == 2:
-                out[:, j] = P * (g1 - 0.5 * np.pi * Ap * G)
-            elif c == 3:
-                out[:, j] = mu * P * (dg1 - 0.5 * np.pi * Ap * dG)
-            elif c == 4:
-                out[:, j] = sg * (G_M_S2 * self.m_s + self.kappa * P)
-            elif c < 5 + n1:
-                if group_a is None:
-                    group_a = sig * vp - mu * P * 0.5 * np.pi * G
-                out[:, j] = L[:, c - 5] * group_a
-            elif c < 5 + 2 * n1:
-                out[:, j] = L[:, c - 5 - n1] * V0
-            elif c >= self.p_theta:
-                # extra force: X += E phi, dF/dphi = E (whatever the speed)
-                out[:, j] = self.E[:, c - self.p_theta] if rows is None else self.E[rows, c - self.p_theta]
-            else:
-                if group_p is None:
-                    group_p = mu * (g1 - 0.5 * np.pi * Ap * G) + sg * musd * self.kappa
-                out[:, j] = L[:, c - 5 - 2 * n1] * group_p
-        return out
+        cols = np.asarray(cols, dtype=int)
+        p_all = self.p_theta + (0 if self.E is None else self.E.shape[1])
+        full = cols.size == p_all and np.array_equal(cols, np.arange(p_all))
+        # all columns, block by block (the cheap way on long data); a subset is taken from them
+        out = np.empty((vp.size, p_all))
+        out[:, 0] = -vp
+        out[:, 1] = -(0.5 - Ap) * vp
+        out[:, 2] = P * (g1 - 0.5 * np.pi * Ap * G)
+        out[:, 3] = mu * P * (dg1 - 0.5 * np.pi * Ap * dG)
+        out[:, 4] = sg * (G_M_S2 * self.m_s + self.kappa * P)
+        np.multiply(L, (sig * vp - mu * P * 0.5 * np.pi * G)[:, None], out=out[:, 5 : 5 + n1])
+        np.multiply(L, V0[:, None], out=out[:, 5 + n1 : 5 + 2 * n1])
+        np.multiply(L, (mu * (g1 - 0.5 * np.pi * Ap * G) + sg * musd * self.kappa)[:, None],
+                    out=out[:, 5 + 2 * n1 : self.p_theta])
+        if self.E is not None:  # extra force: X += E phi, dF/dphi = E (whatever the speed)
+            out[:, self.p_theta :] = self.E if rows is None else self.E[rows]
+        return out if full else out[:, cols]
 
 
 class LikelihoodProblem:
@@ -528,6 +517,45 @@ class LikelihoodProblem:
             g = packed_linear_recursion(self.lay, a, np.zeros((self.lay.n, 1)), S0=1.0)
         g = g[self.sel, 0]
         return np.where(np.isfinite(g), g, 0.0)
+
+    def start_gain_sensitivity(self, theta, cols):
+        """``(g, dg/dtheta[cols])`` on the residual rows (free run; zeros for one_step).
+
+        ``g`` is :meth:`start_gain`; its derivative obeys the linear recursion
+        ``G[k+1] = a[k] G[k] + g[k] da[k]/dtheta`` with ``a = 1 - h D``: only
+        c_r, sigma and alpha (the parameters of D) have non-zero columns. The
+        recursion factor of a step that reverses or sticks is held fixed (its
+        derivative is left out: such steps are rare and isolated).
+        """
+        cols = np.asarray(cols, dtype=int)
+        if self.criterion != "free_run":
+            return np.zeros(self.sel.size), np.zeros((self.sel.size, cols.size))
+        c = self.evaluate(theta)
+        a = c["a"]
+        flags = c["flags"]
+        normal = flags == 0
+        if flags.any():
+            a = a.copy()
+            rev = np.flatnonzero(flags == STEP_REVERSAL)
+            if rev.size:
+                a[rev] = self._sensitivity_rows(theta, c, rev, [0])[0]
+            a[flags == STEP_STUCK] = 0.0
+        core = self.core
+        n1 = core.n1
+        with np.errstate(over="ignore", invalid="ignore"):
+            g = packed_linear_recursion(self.lay, a, np.zeros((self.lay.n, 1)), S0=1.0)[:, 0]
+            dD = np.zeros((self.lay.n, cols.size))
+            for j, col in enumerate(cols):
+                if col == 0:
+                    dD[:, j] = 1.0
+                elif col == 1:
+                    dD[:, j] = 0.5 - c["Ap"]
+                elif 5 <= col < 5 + n1:
+                    dD[:, j] = -theta[1] * core.L[:, col - 5]
+            U = dD * (-(core.h * g * normal))[:, None]
+            G = packed_linear_recursion(self.lay, a, U)
+        g, G = g[self.sel], G[self.sel]
+        return np.where(np.isfinite(g), g, 0.0), np.where(np.isfinite(G), G, 0.0)
 
     def predict_all(self, theta):
         """Predictions for every sample (flat order); one_step: NaN at run starts."""

@@ -343,7 +343,7 @@ def equation_error_fit(theta_start, varied, red, order, m_s, kappa, n_starts, se
 
 
 def data_driven_start(data, space, m_s, kappa, include_load_inertia, s_center, s_half, E, n_starts, seed,
-                      warm=False):
+                      warm=False, n_ee_starts=None):
     """The reduced linear fit and the equation-error minima that seed the global search.
 
     Parameters
@@ -356,7 +356,8 @@ def data_driven_start(data, space, m_s, kappa, include_load_inertia, s_center, s
     E : ndarray or None
         Extra-force features [N per unit phi].
     n_starts, seed : int
-        ``max(16, 4 n_starts)`` equation-error starts from the Sobol sequence of ``seed``.
+        ``max(16, 4 n_starts)`` equation-error starts from the Sobol sequence of ``seed``
+        (``n_ee_starts`` if given).
     warm : bool
         Warm start: no equation-error search; a failing linear fit gives ``red = None``.
 
@@ -382,7 +383,8 @@ def data_driven_start(data, space, m_s, kappa, include_load_inertia, s_center, s
         order, m_s, kappa,
     )
     theta_conv = space.clip(space.with_fixed(np.concatenate([theta_conv, red["E"]])))
-    ee = equation_error_fit(theta_conv, space.varied, red, order, m_s, kappa, max(16, 4 * n_starts), seed, 1.0)
+    n_ee = max(16, 4 * n_starts) if n_ee_starts is None else int(n_ee_starts)
+    ee = equation_error_fit(theta_conv, space.varied, red, order, m_s, kappa, n_ee, seed, 1.0)
     return red, [(c, space.clip(space.with_fixed(th))) for c, th in ee]
 
 

@@ -40,7 +40,7 @@ from .problem import strictly_inside
 __all__ = [
     "HAS_CALLBACK", "StatStop", "sobol_box", "LocalSolver", "start_points", "SearchOutcome", "multi_start",
     "warm_prestep", "NoiseRefinement", "alternate_noise", "ProfileRefinement", "profile_refine", "profile_search",
-    "STALL_MESSAGE", "polish_stalled",
+    "STALL_MESSAGE", "polish_stalled", "bounded_step", "search_nfev",
 ]
 
 
@@ -384,7 +384,7 @@ def _run_sums(run_sel, n_runs, X):
     return out
 
 
-def _bounded_step(H, D, g, lam, z, zlo, zhi):
+def bounded_step(H, D, g, lam, z, zlo, zhi):
     """Damped Newton step ``(H + lam diag D) dz = -g``; coordinates at a bound that the step would
     push further out are held (solved again without them)."""
     d = np.maximum(D, 1e-12 * max(float(np.max(D)), 1e-300))
@@ -470,7 +470,7 @@ def profile_refine(objective, z, max_iter=100, stat_tol=0.01, stat_window=3, log
             Hc = H if c == 0.0 or not at_ml.any() else H - c * (u[at_ml] / s[at_ml, None]).T @ u[at_ml]
             lam_c = lam
             while lam_c < lam_max:
-                dz = _bounded_step(Hc, D, g, lam_c, z, obj.zlo, obj.zhi)
+                dz = bounded_step(Hc, D, g, lam_c, z, obj.zlo, obj.zhi)
                 z_new = strictly_inside(np.clip(z + dz, obj.zlo, obj.zhi), obj.zlo, obj.zhi)
                 if frozen:  # at the variances of the iteration's start
                     with np.errstate(over="ignore", invalid="ignore"):
@@ -607,3 +607,11 @@ def profile_search(objective, starts, max_iter, stat_tol, stat_window, agree, lo
     ref = refinements[best]
     obj.update_noise(obj.theta_of(ref.z))  # the noise model at the chosen optimum (not the last start's)
     return SearchOutcome(records, results, ranked, best, 0, list(ranked)), ref
+
+
+def search_nfev(solver, noise_fit, search, outer) -> int:
+    """Function evaluations of a global search (profile and varpro: the records hold the refinement's)."""
+    own = sum(rec.get("nfev", 0) for rec in search.records)
+    if solver == "varpro" or noise_fit == "profile":
+        return int(own)
+    return int(own + sum(h.get("nfev", 0) for h in outer.history[1:]))

@@ -11,6 +11,7 @@ from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
+from .kernels import compiled_free_run, compiled_linear_recursion
 from .model import (
     PredictorParams,
     add_extra_force,
@@ -70,6 +71,9 @@ class RunLayout:
         # na[k] = number of runs longer than k
         self.na = self.R - np.searchsorted(sorted_len[::-1], np.arange(self.K), side="right")
         self.offs = np.concatenate([[0], np.cumsum(self.na)])
+        #: offs and na as contiguous int64 (the compiled loops' argument types)
+        self.offs_i64 = np.ascontiguousarray(self.offs, dtype=np.int64)
+        self.na_i64 = np.ascontiguousarray(self.na, dtype=np.int64)
         packed_pos = self.offs[self.kk] + rank[self.run_of_sample]
         self.perm = np.empty(n, dtype=int)
         self.perm[packed_pos] = np.arange(n)
@@ -114,7 +118,17 @@ def packed_recursion(lay: RunLayout, a, e, f, nd, z0, v0_sorted, flags=None):
     for the rest of the step (see :func:`step_drive`). ``flags`` (int8,
     packed) if given receives STEP_REVERSAL / STEP_STUCK at the source row
     of such steps. ``v0_sorted``: start speeds in sorted-run order.
+
+    Runs the compiled loop of :mod:`l1b2.predictor.kernels` when numba is
+    available (same operations), else the numpy form below.
     """
+    kernel = compiled_free_run()
+    if kernel is not None:
+        v = np.empty(lay.n)
+        fl = np.zeros(lay.n, dtype=np.int8) if flags is None else flags
+        kernel(lay.offs_i64, lay.na_i64, *(np.ascontiguousarray(x, dtype=float) for x in (a, e, f, nd, z0, v0_sorted)),
+               v, fl)
+        return v
     v = np.empty(lay.n)
     offs, na = lay.offs, lay.na
     v[: na[0]] = v0_sorted
@@ -152,10 +166,18 @@ def packed_recursion(lay: RunLayout, a, e, f, nd, z0, v0_sorted, flags=None):
 
 
 def packed_linear_recursion(lay: RunLayout, a, U, S0=None):
-    """S[k+1] = a[k] S[k] + U[k] (matrix rows) in the packed layout, S[0] = S0 (default 0)."""
+    """S[k+1] = a[k] S[k] + U[k] (matrix rows) in the packed layout, S[0] = S0 (default 0).
+
+    Runs the compiled loop of :mod:`l1b2.predictor.kernels` when numba is
+    available and ``U`` is a matrix, else the numpy form below.
+    """
     S = np.empty((lay.n,) + U.shape[1:])
     offs, na = lay.offs, lay.na
     S[: na[0]] = 0.0 if S0 is None else S0
+    kernel = compiled_linear_recursion() if U.ndim == 2 else None
+    if kernel is not None:
+        kernel(lay.offs_i64, lay.na_i64, np.ascontiguousarray(a, dtype=float), np.ascontiguousarray(U, dtype=float), S)
+        return S
     for k in range(lay.K - 1):
         m = na[k + 1]
         i0 = offs[k]
