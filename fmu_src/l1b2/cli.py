@@ -158,10 +158,10 @@ def cmd_sweep(args) -> int:
 def _add_sweep_parser(sub):
     p = sub.add_parser("sweep", help="design study: operating points x parameter draws on Dask (Parquet, "
                                      "percentiles, sensitivities, PNGs)")
-    p.add_argument("--spec", type=Path, required=True, help="study specification (TOML; see README 'Design studies')")
+    p.add_argument("--spec", type=Path, required=True, help="study specification (TOML; see the docs' how-to 'Design study')")
     p.add_argument("--out", type=Path, required=True, help="output folder (rerun the same command to resume)")
     _engine_args(p, default_workers=default_workers(), what="traverses (0 = serially in this process)")
-    p.add_argument("--no-plots", action="store_true")
+    p.add_argument("--no-plots", action="store_true", help="write no PNG figures")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_sweep)
 
@@ -202,7 +202,7 @@ NOISE_HELP = ("noise variances of Eq. 32: 'common' (default, the paper's single 
 
 def _close_loop_args(p: argparse.ArgumentParser) -> None:
     """The close-loop command's settings (the :class:`l1b2.closeloop.loop.CloseLoop` rules)."""
-    p.add_argument("--order", type=int, default=8)
+    p.add_argument("--order", type=int, default=8, help="polynomial order of A, B, P in position (paper: 8)")
     p.add_argument("--folds", type=int, default=5, help="cross-validation folds over runs")
     p.add_argument("--alpha", type=float, default=0.01, help="significance level (Bonferroni over effects)")
     p.add_argument("--min-gain", type=float, default=0.05, help="smallest linearised held-out share of the "
@@ -218,14 +218,14 @@ def _close_loop_args(p: argparse.ArgumentParser) -> None:
                    "0.01, is still refit and cross-validated (finds drifts in time); 0: off")
     p.add_argument("--max-rounds", type=int, default=3, help="most effects added, one per round")
     p.add_argument("--noise-fit", choices=NOISE_FITS, default="alternate",
-                   help="the baseline identification's search: " + NOISE_FIT_HELP + " (default: alternate, with "
+                   help="the baseline identification's search: " + NOISE_FIT_HELP + " (alternate is the search with "
                    "which the close loop was measured)")
     p.add_argument("--noise", choices=NOISES, default="common", help=NOISE_HELP)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the multi-start and of the fold assignment")
     p.add_argument("--slider-mass", type=float, help="slider mass [kg] (overrides the sidecars)")
     p.add_argument("--allow-unusual-units", action="store_true", help=UNUSUAL_UNITS_HELP)
-    p.add_argument("--no-plots", action="store_true")
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--no-plots", action="store_true", help="write no PNG figures")
+    p.add_argument("--quiet", action="store_true", help="no stage lines and no progress bars")
 
 
 def _add_rig_parser(sub) -> None:
@@ -235,7 +235,8 @@ def _add_rig_parser(sub) -> None:
     p.add_argument("--voltages", type=_floats, default=(220.0, 255.0, 290.0, 324.0), help="V0 levels [V]")
     p.add_argument("--loads", type=_floats, default=(-0.09, -0.07, -0.05, -0.03, 0.0, 0.03, 0.05, 0.07, 0.09),
                    help="signed loads [kg]")
-    p.add_argument("--engine", choices=("fmu", "inprocess"), default="fmu")
+    p.add_argument("--engine", choices=("fmu", "inprocess"), default="fmu",
+                   help="'fmu': the four FMUs through fmpy; 'inprocess': the same blocks without FMI (faster)")
     p.add_argument("--fmu-dir", type=Path, help="folder with the subsystem FMUs (default: built once into the "
                    "per-user cache)")
     _engine_args(p, default_workers=2, what="runs (stateful effects run serially; 1 = serially here)")
@@ -254,10 +255,23 @@ def _add_rig_parser(sub) -> None:
     p.add_argument("--injection-seed", "--effect-seed", dest="injection_seed", type=int,
                    help="draw the injections' sizes at random with this seed")
     p.add_argument("--record-temperature", action="store_true", help="write the stator temperature column")
-    p.add_argument("--no-plots", action="store_true")
+    p.add_argument("--no-plots", action="store_true", help="write no PNG figures")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     _motor_args(p)
     p.set_defaults(func=cmd_rig)
+
+
+class DefaultsFormatter(argparse.HelpFormatter):
+    """Help with every option's default (unless it has none, or the help already says it)."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        default = action.default
+        if (action.option_strings and default is not None and default is not False and default != []
+                and default is not argparse.SUPPRESS and "default" not in text):
+            shown = ",".join(f"{x:g}" for x in default) if isinstance(default, tuple) else default
+            text += f" (default: {shown})"
+        return text
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -268,7 +282,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("fmus", help="build the subsystem FMUs")
     p.add_argument("names", nargs="*", help="Driver Stator Interface Slider (default: all)")
-    p.add_argument("--out", type=Path, default=Path("dist/fmus"))
+    p.add_argument("--out", type=Path, default=Path("dist/fmus"), help="output folder")
     _motor_args(p)
     p.set_defaults(func=cmd_fmus)
 
@@ -282,7 +296,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--full", action="store_true", help="do not stop at the far end stop")
     p.add_argument("--s0", type=float, help="start position [m] (default: the end stop behind)")
     p.add_argument("--step", type=float, default=2e-4, help="communication step [s]")
-    p.add_argument("--engine", choices=("fmu", "inprocess"), default="fmu")
+    p.add_argument("--engine", choices=("fmu", "inprocess"), default="fmu",
+                   help="'fmu': the four FMUs through fmpy; 'inprocess': the same blocks without FMI (faster)")
     p.add_argument("--fmu-dir", type=Path, help="folder with the subsystem FMUs (default: built once into the "
                    "per-user cache)")
     p.add_argument("--iterate", action="store_true", help="fixed-point iteration of each macro step")
@@ -296,37 +311,42 @@ def build_parser() -> argparse.ArgumentParser:
 
     _add_sweep_parser(sub)
     p = sub.add_parser("demo", help="the main job end to end on the reference motor and the virtual rig")
-    p.add_argument("--out", type=Path, default=Path("demo_out"))
-    p.add_argument("--effect", default="pulley_friction", help="effect injected for the close-the-loop stage")
-    p.add_argument("--engine", choices=("fmu", "inprocess"), default="fmu")
-    p.add_argument("--jobs", type=int, default=2)
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--out", type=Path, default=Path("demo_out"), help="output folder")
+    p.add_argument("--effect", default="pulley_friction", help="effect injected for the close-the-loop stage "
+                   "(`l1b2 injections` lists them)")
+    p.add_argument("--engine", choices=("fmu", "inprocess"), default="fmu",
+                   help="'fmu': the rig runs the four FMUs through fmpy; 'inprocess': the same blocks without FMI")
+    p.add_argument("--jobs", type=int, default=2, help="parallel rig runs (Dask worker processes)")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
     _motor_args(p)
     p.set_defaults(func=cmd_demo)
 
     p = sub.add_parser("identify", help="identify the Eq. 29 predictor from measured data (max. likelihood)")
-    p.add_argument("--train", type=Path, required=True, help="measured data (shared/data-format.md)")
+    p.add_argument("--train", type=Path, required=True, help="measured data (CSV in the rig data format)")
     p.add_argument("--test", type=Path, help="held-out data (default: the paper's split of TRAIN by load)")
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--test-loads", type=_floats, default=(0.05,), help="|load| [kg] held out when --test is absent")
     p.add_argument("--order", type=int, default=8, help="polynomial order of A, B, P (paper: 8)")
-    p.add_argument("--criterion", choices=("free_run", "one_step"), default="free_run")
-    p.add_argument("--fix", default=None, help="'none' (paper, default), 'recommended' (pins sigma, k0, mu, "
-                                                "mu_sd) or name=value,...")
+    p.add_argument("--criterion", choices=("free_run", "one_step"), default="free_run",
+                   help="what the likelihood scores: the free-run or the one-step prediction")
+    p.add_argument("--fix", default=None, help="'none' (the paper's full set; the default), 'recommended' (pins "
+                                                "sigma, k0, mu, mu_sd: predictions unchanged) or name=value,...")
     p.add_argument("--starts", type=int, default=8, help="multi-start local searches")
-    p.add_argument("--noise-fit", choices=NOISE_FITS, default="auto", help=NOISE_FIT_HELP + " (default: auto)")
+    p.add_argument("--noise-fit", choices=NOISE_FITS, default="auto", help=NOISE_FIT_HELP)
     p.add_argument("--noise", choices=NOISES, default="common", help=NOISE_HELP)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the multi-start's start points")
     p.add_argument("--slider-mass", type=float, help="slider mass [kg] (overrides the sidecar)")
     p.add_argument("--allow-unusual-units", action="store_true", help=UNUSUAL_UNITS_HELP)
-    p.add_argument("--no-plots", action="store_true")
-    p.add_argument("--verbose", action="store_true")
+    p.add_argument("--no-plots", action="store_true", help="write no PNG figures")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--verbose", action="store_true", help="print every local search and the full fit report "
+                   "(with the unidentifiable directions' tables)")
     p.set_defaults(func=cmd_identify)
 
     p = sub.add_parser("compare", help="predictor vs the co-simulation's steady states (derived and identified)")
-    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--identification", type=Path, help="identification.json from `l1b2 identify`")
-    p.add_argument("--order", type=int, default=8)
+    p.add_argument("--order", type=int, default=8, help="polynomial order of the derived predictor")
     _motor_args(p)
     p.set_defaults(func=cmd_compare)
 
@@ -335,7 +355,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--test", type=Path, help="held-out data, only for the before/after report (default: the "
                                               "paper's split of TRAIN by load)")
     p.add_argument("--test-loads", type=_floats, default=(0.05,), help="|load| [kg] held out when --test is absent")
-    p.add_argument("--report-dir", type=Path, required=True)
+    p.add_argument("--out", "--report-dir", dest="out", type=Path, required=True,
+                   help="output folder: report.json, report.md, PNGs (--report-dir is the former name)")
     p.add_argument("--export", type=Path, metavar="DIR",
                    help="also write DIR/fmus/Predictor.fmu carrying the final extended model, and "
                         "DIR/calibrated_manifest.json (which effect went where); effects with a physical home "
@@ -347,8 +368,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_close_loop)
 
     p = sub.add_parser("export", help="FMUs, L1B2Motor.ssp and L1B2Motor.fmu for other simulators")
-    p.add_argument("--out", type=Path, required=True)
-    p.add_argument("--identification", type=Path, help="identification.json whose predictor Predictor.fmu carries")
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--identification", type=Path, help="identification.json whose predictor Predictor.fmu carries "
+                   "(default: the predictor derived from the motor's physics)")
     p.add_argument("--no-predictor", action="store_true", help="skip Predictor.fmu")
     p.add_argument("--from-report", type=Path, metavar="REPORT_DIR",
                    help="instead: Predictor.fmu carrying the calibrated extended model of a close-loop report "
@@ -358,6 +380,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("injections", aliases=["effects"], help="list the effects the rig can inject")
     p.set_defaults(func=cmd_injections)
+    for parser in sub.choices.values():
+        parser.formatter_class = DefaultsFormatter
     return ap
 
 
@@ -424,7 +448,7 @@ def cmd_demo(args) -> int:
     motor = (["--motor", args.motor] if getattr(args, "motor", None) else []) + \
         (["--params", str(args.params)] if getattr(args, "params", None) else [])
     code = main(["close-loop", "--train", str(eff_dir / "train.csv"), "--test", str(eff_dir / "test.csv"),
-                 "--report-dir", str(out / "close_loop"), "--export", str(out / "close_loop_export")] + motor
+                 "--out", str(out / "close_loop"), "--export", str(out / "close_loop_export")] + motor
                 + (["--quiet"] if args.quiet else []))
     if code:
         return code
@@ -522,7 +546,7 @@ def cmd_close_loop(args) -> int:
     """Residual -> missing effect -> extended model; error before and after on TEST."""
     from .workflows import run_close_loop
     say = (lambda m: None) if args.quiet else (lambda m: print(f"[close-loop] {m}", flush=True))
-    result = run_close_loop(args.train, args.test, args.report_dir, order=args.order, k_folds=args.folds,
+    result = run_close_loop(args.train, args.test, args.out, order=args.order, k_folds=args.folds,
                             alpha=args.alpha, min_gain=args.min_gain, seed=args.seed,
                             max_rounds=args.max_rounds, min_cv_gain=args.min_cv_gain,
                             min_cv_drop=args.min_cv_drop, screen_alpha=args.screen_alpha or None,
@@ -537,7 +561,7 @@ def cmd_close_loop(args) -> int:
     print(result.rounds_table())
     print(result.before_after_table())
     print_input_checks(result.checks, {"baseline " + k: v for k, v in result.baseline.items()})
-    print(f"wrote {Path(args.report_dir) / 'report.json'} and report.md ({result.wall_time_s} s)")
+    print(f"wrote {Path(args.out) / 'report.json'} and report.md ({result.wall_time_s} s)")
     if args.export is not None:
         _print_calibrated(args.export, result.calibrated_note)
     return 0
