@@ -41,7 +41,7 @@ dist: $(STAMP)
 
 # the documentation site into site/ (warnings are errors, as in CI)
 docs: $(STAMP)
-	$(PY) -m mkdocs build --strict --site-dir site
+	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict --site-dir site
 
 bench: $(STAMP)
 	$(PY) bench/run_all.py
