@@ -6,7 +6,7 @@
   the SSP files (``ssd:Units``).
 * :data:`COLUMN_UNITS` and :data:`SIDECAR_FIELD_UNITS`: the unit of every
   column of the measured-data CSV and of every sidecar field
-  (``shared/data-format.md``), defined here once so that both the data layer
+  (the rig data format (docs/reference/data-format.md)), defined here once so that both the data layer
   (:mod:`l1b2.data.columns`) and :class:`l1b2.errors.DataFormatError` (which
   names the unit in its messages) read the same table.
 
@@ -87,7 +87,7 @@ def same_dimension(a: str, b: str) -> bool:
 
 
 # --------------------------------------------------------------------------
-# Units of the measured data (shared/data-format.md)
+# Units of the measured data (the rig data format (docs/reference/data-format.md))
 # --------------------------------------------------------------------------
 
 #: Unit of each known column of the measured-data CSV, in the order of the

@@ -17,7 +17,7 @@ default, :func:`default_library`, is ``named_library() + generic_library()``; th
 Named families (:func:`named_library`; physics, regressor):
 
 * ``thermal_drift`` (time): self-heating of the stator moves its resonances
-  (about -10 Hz/K, physics notes), which changes the force factor of the
+  (about -10 Hz/K, docs/explanation/physics.md), which changes the force factor of the
   drive; ``dF = V0 * f(t)``, f smooth in the experiment clock.
 * ``thermal_drift_T`` (temperature): the same, driven by a measured stator
   temperature: ``dF = V0 (a (T-T0) + b (T-T0)^2)``.
@@ -225,7 +225,7 @@ def interaction_candidates(ctx: Context, df_train: pd.DataFrame) -> list[Candida
 
     Four of them are *structural* (:data:`EQ29_LINEARISATION`): Eq. 29 holds
     the slope of the drive force over speed constant, while the pure-slip
-    closed form behind it (Eq. 25, physics notes:
+    closed form behind it (Eq. 25, docs/explanation/physics.md:
     ``F_d = sigma (omega U_w/pi - v/2) + mu F_p (2 sqrt(1 - k0^2) - 1)``,
     ``k0 = v/(omega U_w)``) has a slope that changes with ``omega U_w``, i.e.
     with V0; so the damping and the load's effect on speed depend on the

@@ -3,7 +3,7 @@
 A run is one traverse of the stroke from rest at one end stop to the other
 at constant drive inputs (V0, frequency, direction, load). The rig records
 what a real rig records, in the measured-data format
-(``shared/data-format.md``): a 50 nm encoder sampled at 1 kHz, the speed the
+(the rig data format (docs/reference/data-format.md)): a 50 nm encoder sampled at 1 kHz, the speed the
 DAQ derives from it, the commanded voltage, load and direction, on one
 continuous experiment clock with pauses between runs. It also records the
 vibrometer's tangential tip velocity amplitude ``omega*U_w`` (paper Fig. 9c)
