@@ -83,7 +83,9 @@ def cmd_simulate(args) -> int:
                     until=(lambda mm: mm.value("Slider.at_stop") == args.direction) if not args.full else None)
     path = res.to_csv(args.out)
     if args.plot:
-        res.plot(columns=("Slider.v", "Slider.s", "Stator.U_w"), path=args.plot)
+        res.plot(columns=("Slider.v", "Slider.s", "Stator.U_w"), path=args.plot,
+                 title=f"l1b2 simulate ({args.engine}): V0 {args.V0:g} V, load {args.load:+g} kg, "
+                       f"direction {args.direction:+d}, step {args.step * 1e3:g} ms")
     v = res.df["Slider.v"].to_numpy()
     print(f"wrote {path}: {len(v)} samples, {res.df['time'].iloc[-1]:.4g} s, peak speed {np.max(np.abs(v)) * 1e3:.1f} mm/s")
     return 0

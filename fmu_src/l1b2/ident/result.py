@@ -351,7 +351,8 @@ class IdentificationResult:
         axes = fig.subplots(nrows, ncols, squeeze=False, sharex=True)
         for ax, r in zip(axes.flat, chosen):
             sl = slice(lay.starts[r], lay.starts[r] + lay.lengths[r])
-            ax.plot(sample.s[sl] * 1e3, sample.v[sl] * 1e3, "k.", ms=2, label="measured")
+            ax.plot(sample.s[sl] * 1e3, sample.v[sl] * 1e3, "k.", ms=2,
+                    label="derived from position" if sample.speed_derived else "measured")
             ax.plot(sample.s[sl] * 1e3, v_pred[sl] * 1e3, "b-", lw=1, label=label)
             ax.set_title(f"run {lay.labels[r]}: {sample.V0[sl.start]:g} V, {sample.load[sl.start]:+g} kg, "
                          f"dir {int(sample.d[sl.start]):+d}", fontsize=8)
