@@ -411,7 +411,7 @@ def run_comparison(out_dir, mp=None, identification: dict | None = None, *, orde
                 cases["identified_vs_stick_slip"]["extrapolation"] = (
                     {c: v["share_outside"] for c, v in flags[0]["outside"].items()} if flags else {})
         for key, df in tables.items():
-            df.to_csv(tmp / f"{key}.csv", index=False)
+            df.to_csv(tmp / f"{key}.csv", index=False, float_format="%.12g")
         plots.steady_comparison(tables, tmp / "predictor_vs_cosim_steady.png")
         report = {"cases": cases, "figure": str(out / "predictor_vs_cosim_steady.png"),
                   "note": "co-simulation steady states from l1b2.physics.steady.steady_state (the fixed point of the "

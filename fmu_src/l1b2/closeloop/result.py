@@ -21,7 +21,7 @@ import pandas as pd
 
 from ..data import measurements as dataio
 from ..data import plots
-from ..data.jsonsafe import sig
+from ..data.jsonsafe import sig, strict_json
 from . import residuals as res
 from .selection import Score
 
@@ -197,7 +197,7 @@ class CloseLoopResult:
             for name, fig in self.plot().items():
                 written.append(plots.save_figure(fig, out / f"{name}.png"))
             report["figures"] = [str(p) for p in written]
-        (out / "report.json").write_text(json.dumps(report, indent=1, allow_nan=False))
+        (out / "report.json").write_text(json.dumps(strict_json(report), indent=1, allow_nan=False))
         (out / "report.md").write_text(markdown_report(report))
         return [out / "report.json", out / "report.md"] + written
 

@@ -16,11 +16,16 @@ from typing import Any
 
 import numpy as np
 
+from ..units import tidy_float
+
 __all__ = ["strict_json", "dumps", "sig"]
 
 
 def strict_json(x: Any) -> Any:
-    """``x`` with every float finite or replaced (NaN -> None, +-inf -> "inf"/"-inf"), numpy -> Python."""
+    """``x`` with every float finite or replaced (NaN -> None, +-inf -> "inf"/"-inf"), numpy -> Python.
+
+    Finite floats are written with 12 significant digits (:func:`l1b2.units.tidy_float`).
+    """
     if isinstance(x, dict):
         return {str(k): strict_json(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
@@ -37,7 +42,7 @@ def strict_json(x: Any) -> Any:
             return None
         if math.isinf(v):
             return "inf" if v > 0 else "-inf"
-        return v
+        return tidy_float(v)
     if x is None or isinstance(x, str):
         return x
     return str(x)

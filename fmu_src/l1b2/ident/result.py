@@ -35,6 +35,7 @@ from typing import Any, Mapping
 import numpy as np
 from scipy import stats
 
+from ..data.jsonsafe import strict_json
 from ..data.measurements import Measurements
 from ..errors import IdentificationError
 from ..predictor.model import PredictorParams
@@ -608,7 +609,7 @@ class IdentificationResult:
         out = Path(directory)
         out.mkdir(parents=True, exist_ok=True)
         payload = {**self.to_dict(), **_jsonify(sections)}
-        (out / "identification.json").write_text(json.dumps(payload, indent=1, allow_nan=False))
+        (out / "identification.json").write_text(json.dumps(strict_json(payload), indent=1, allow_nan=False))
         (out / "fit_report.txt").write_text(self.fit_report())
         return out
 
