@@ -10,6 +10,7 @@ import argparse
 import json
 import os
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -492,14 +493,51 @@ def print_input_checks(checks: dict, metrics: dict) -> None:
                       f"{', '.join(map(str, x['diverged_runs'][:10]))}{', ...' if x['n_diverged_runs'] > 10 else ''}")
 
 
+class StageBar:
+    """A progress bar for work of unknown length: the current stage and the elapsed time, redrawn every second.
+
+    Shown only on a terminal (``sys.stderr.isatty()``) and without ``--quiet``, so logs and captured output
+    keep their lines; stage lines given to :meth:`stage` are printed above it either way (unless quiet).
+    """
+
+    def __init__(self, desc: str, *, quiet: bool = False, prefix: str = ""):
+        from tqdm import tqdm
+        self.quiet, self.prefix = quiet, prefix
+        self.bar = tqdm(total=None, desc=desc, bar_format="{desc} [{elapsed}]", file=sys.stderr, leave=False,
+                        disable=quiet or not sys.stderr.isatty())
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._tick, daemon=True)
+
+    def _tick(self):
+        while not self._stop.wait(1.0):
+            self.bar.refresh()
+
+    def stage(self, text: str) -> None:
+        if not self.quiet:
+            self.bar.write(f"{self.prefix}{text}", file=sys.stdout)
+            sys.stdout.flush()
+        self.bar.set_description_str(text)
+
+    def __enter__(self):
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self._stop.set()
+        self._thread.join()
+        self.bar.close()
+        return False
+
+
 def cmd_identify(args) -> int:
     """Maximum-likelihood identification of the Eq. 29 predictor (paper Eq. 32, 35)."""
     from .workflows import run_identification
-    rep = run_identification(args.train, args.out, args.test, order=args.order, criterion=args.criterion,
+    with StageBar(f"identify: fitting Eq. 29 ({args.starts} starts)", quiet=args.quiet):
+        rep = run_identification(args.train, args.out, args.test, order=args.order, criterion=args.criterion,
                              fix=args.fix, n_starts=args.starts, seed=args.seed, test_abs_loads=args.test_loads,
-                             slider_mass_kg=args.slider_mass, plots_on=not args.no_plots, verbose=args.verbose,
-                             allow_unusual_units=args.allow_unusual_units, noise_fit=args.noise_fit,
-                             noise=args.noise)
+                                 slider_mass_kg=args.slider_mass, plots_on=not args.no_plots,
+                                 verbose=args.verbose, allow_unusual_units=args.allow_unusual_units,
+                                 noise_fit=args.noise_fit, noise=args.noise)
     print(f"identify: {rep['data']['train_runs']} train runs, {rep['data']['test_runs']} test runs "
           f"({rep['data']['split']}); fit {rep['fit_time_s']:.1f} s")
     for part in ("train", "test"):
@@ -544,19 +582,23 @@ def cmd_compare(args) -> int:
     return 0
 
 
+def _run_close_loop(args, say):
+    from .workflows import run_close_loop
+    return run_close_loop(args.train, args.test, args.out, order=args.order, k_folds=args.folds,
+                          alpha=args.alpha, min_gain=args.min_gain, seed=args.seed,
+                          max_rounds=args.max_rounds, min_cv_gain=args.min_cv_gain,
+                          min_cv_drop=args.min_cv_drop, screen_alpha=args.screen_alpha or None,
+                          noise_fit=args.noise_fit, noise=args.noise,
+                          slider_mass_kg=args.slider_mass, plots_on=not args.no_plots, progress=say,
+                          allow_unusual_units=args.allow_unusual_units, export_dir=args.export,
+                          motor=_motor(args) if args.export is not None else None,
+                          workers=args.workers, scheduler=args.scheduler, test_abs_loads=args.test_loads)
+
+
 def cmd_close_loop(args) -> int:
     """Residual -> missing effect -> extended model; error before and after on TEST."""
-    from .workflows import run_close_loop
-    say = (lambda m: None) if args.quiet else (lambda m: print(f"[close-loop] {m}", flush=True))
-    result = run_close_loop(args.train, args.test, args.out, order=args.order, k_folds=args.folds,
-                            alpha=args.alpha, min_gain=args.min_gain, seed=args.seed,
-                            max_rounds=args.max_rounds, min_cv_gain=args.min_cv_gain,
-                            min_cv_drop=args.min_cv_drop, screen_alpha=args.screen_alpha or None,
-                            noise_fit=args.noise_fit, noise=args.noise,
-                            slider_mass_kg=args.slider_mass, plots_on=not args.no_plots, progress=say,
-                            allow_unusual_units=args.allow_unusual_units, export_dir=args.export,
-                            motor=_motor(args) if args.export is not None else None,
-                            workers=args.workers, scheduler=args.scheduler, test_abs_loads=args.test_loads)
+    with StageBar("close-loop", quiet=args.quiet, prefix="[close-loop] ") as bar:
+        result = _run_close_loop(args, bar.stage)
     d = result.diagnosis
     print(f"data: {result.checks['split']}")
     print(f"diagnosis: {d['message']}" + (f"; traced to {', '.join(d['traced_to'])}" if d["traced_to"] else ""))

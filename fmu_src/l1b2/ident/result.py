@@ -418,7 +418,8 @@ class IdentificationResult:
             f"    best start {c['best_start']} of {c['n_starts']}; status {c['status']} ({c['message']}); "
             f"optimality {c['optimality']:.3g}; noise R converged: {c['noise_converged']}; "
             f"total nfev {c['nfev_total']}",
-            "    start costs: " + ", ".join(f"{x:.6g}" for x in costs),
+            "    start costs: " + ", ".join(f"{x:.6g}" if np.isfinite(x) else "-" for x in costs)
+            + ("  (-: start not continued)" if not all(np.isfinite(costs)) else ""),
         ]
 
     def _report_variables(self) -> list[str]:
@@ -427,6 +428,7 @@ class IdentificationResult:
         names_all = self.names
         p = self.p_theta
         w = max(len(nm) for nm in names_all)
+        free = []  # not identifiable: named once below the table, not as rows of infinite errors
         for i, prm in enumerate(self.parameters.values()):
             nm, val, u = prm.name, prm.value, prm.unit
             if i == p and self.extra_names:
@@ -436,7 +438,7 @@ class IdentificationResult:
                 continue
             se = prm.stderr
             if not np.isfinite(se):
-                lines.append(f"    {nm:<{w}} = {val: .6g} [{u}] +/- inf  (not identifiable from these data)")
+                free.append(f"{nm} = {val:.6g} [{u}]")
                 continue
             rel = f" ({100 * se / abs(val):.2f}%)" if val != 0 else ""
             lo, hi = prm.ci95
@@ -450,6 +452,10 @@ class IdentificationResult:
                 f"    {nm:<{w}} = {val: .6g} +/- {se:.3g}{rel} [{u}]  [{prm.stderr_fisher:.3g}]"
                 f"  CI [{lo:.6g}, {hi:.6g}]{sig}{robust}"
             )
+        if free:
+            lines.append(f"    not identifiable from these data ({len(free)} parameters on the "
+                         f"{len(self.unidentifiable)} direction(s) under [[Warnings]]; values only):")
+            lines += ["      " + ", ".join(free[k:k + 4]) for k in range(0, len(free), 4)]
         return lines
 
     def _report_correlations(self, min_correl) -> list[str]:
