@@ -24,7 +24,7 @@ def _scale(col: str) -> tuple[float, str]:
     return 1.0, ""
 
 
-def _name(col: str) -> str:
+def output_name(col: str) -> str:
     """An output's name without its unit suffix (the axis gives the unit shown): mean_speed_m_s -> mean speed."""
     for suffix in ("_m_s", "_s", "_m"):
         if col.endswith(suffix):
@@ -66,7 +66,7 @@ def output_distributions(res, path) -> Path:
             p5, p50, p95 = np.percentile(x, (5, 50, 95))
             ax.errorbar([i + 0.38], [p50], yerr=[[p50 - p5], [p95 - p50]], fmt="s", color="C3", ms=4, capsize=3,
                         label="p50, p5-p95" if i == 0 else None)
-        ax.set_ylabel(f"{_name(c)}\n[{unit}]" if unit else _name(c), fontsize=9)
+        ax.set_ylabel(f"{output_name(c)}\n[{unit}]" if unit else output_name(c), fontsize=9)
         ax.grid(alpha=0.3)
     axes[-1, 0].set_xticks(range(len(ops)), [_op_label(g.iloc[0]).replace(", ", "\n", 2) for _, g in ops],
                            fontsize=7)
@@ -98,7 +98,7 @@ def sensitivity_bars(res, path) -> Path | None:
         ax.barh(y, s["S1"], height=0.2, xerr=s["S1_conf"], label="Sobol' first order S1")
     ax.set_yticks(y, g["parameter"])
     ax.invert_yaxis()
-    ax.set_xlabel(f"sensitivity of {_name(c)} [-]")
+    ax.set_xlabel(f"sensitivity of {output_name(c)} [-]")
     ax.legend(fontsize=7)
     op = res.table[res.table["op_id"] == g["op_id"].iloc[0]].iloc[0]
     ax.set_title(f"{res.spec.name}\nwhich parameter matters most at {_op_label(op)}", fontsize=9)
@@ -125,7 +125,7 @@ def operating_map(res, path) -> Path:
         line, = ax.plot(g[xcol], g["p50"] * k, "o-", label=label)
         ax.fill_between(g[xcol], g["p5"] * k, g["p95"] * k, color=line.get_color(), alpha=0.2)
     ax.set_xlabel(OPERATING_AXES.get(xcol, xcol))
-    ax.set_ylabel(f"{_name(c)} [{unit}]: p50, band p5-p95")
+    ax.set_ylabel(f"{output_name(c)} [{unit}]: p50, band p5-p95")
     ax.legend(fontsize=7)
     ax.grid(alpha=0.3)
     fig.tight_layout()
