@@ -122,6 +122,9 @@ def decisions_index() -> str:
 
 def on_config(config, **kwargs):
     files = decision_files()
+    index = DOCS / "decisions" / "index.md"
+    if index.is_file():
+        files = [index] + files
     for entry in config["nav"] or []:
         if isinstance(entry, dict) and "Decisions" in entry and files:
             first = entry["Decisions"]
