@@ -129,11 +129,5 @@ def test_result_plot_and_save(tmp_path, fitted, data):
     out = fitted.result_.save(tmp_path / "ident", metrics={"nrmse": float("nan")})
     doc = _strict_json((out / "identification.json").read_text())
     assert doc["metrics"] == {"nrmse": None}
-    # the file holds the fitted values to 12 significant digits (l1b2.units.tidy_float), no 17-digit noise
-    saved, fit = doc["parameters"], fitted.to_dict()["parameters"]
-    assert saved.keys() == fit.keys()
-    for name, entry in fit.items():
-        assert saved[name]["value"] == pytest.approx(entry["value"], rel=1e-11, abs=1e-300), name
-        assert saved[name]["unit"] == entry["unit"] and saved[name]["identifiable"] == entry["identifiable"]
-        assert len(repr(saved[name]["value"]).lstrip("-").replace(".", "").lstrip("0").split("e")[0]) <= 12
+    assert doc["parameters"] == fitted.to_dict()["parameters"]
     assert (out / "fit_report.txt").read_text() == fitted.fit_report()

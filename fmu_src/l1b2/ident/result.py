@@ -97,6 +97,10 @@ def _diagonal(se):
 # ---------------------------------------------------------------------------
 
 
+#: sections of identification.json that define the model: written exactly (repr), everything else tidied
+MODEL_SECTIONS = ("predictor_params", "parameters", "paper_monomials", "predictor", "extra")
+
+
 @dataclass(frozen=True)
 class Parameter:
     """One identified parameter.
@@ -615,7 +619,10 @@ class IdentificationResult:
         out = Path(directory)
         out.mkdir(parents=True, exist_ok=True)
         payload = {**self.to_dict(), **_jsonify(sections)}
-        (out / "identification.json").write_text(json.dumps(strict_json(payload), indent=1, allow_nan=False))
+        # the model's own numbers round-trip exactly (export --identification rebuilds it); the rest of the
+        # report is written with the digits it has (l1b2.units.tidy_float: 0.001, not 0.0009999999999998899)
+        payload = {k: (v if k in MODEL_SECTIONS else strict_json(v)) for k, v in payload.items()}
+        (out / "identification.json").write_text(json.dumps(payload, indent=1, allow_nan=False))
         (out / "fit_report.txt").write_text(self.fit_report())
         return out
 
