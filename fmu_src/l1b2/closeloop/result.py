@@ -21,16 +21,13 @@ import pandas as pd
 
 from ..data import measurements as dataio
 from ..data import plots
-from ..data.jsonsafe import sig, strict_json
+from ..data.jsonsafe import sig
 from . import residuals as res
 from .selection import Score
 
 #: file names (without ``.png``) of the figures, in report order
 FIGURES = ("residual_vs_regressors", "residual_spectrum_and_whiteness", "chosen_effect", "before_after_test")
 
-
-#: sections of report.json that define models: written exactly (repr), everything else tidied
-MODEL_SECTIONS = ("calibrated_model", "extended_parameters", "baseline_parameters")
 
 
 @dataclass(eq=False)
@@ -201,8 +198,6 @@ class CloseLoopResult:
             for name, fig in self.plot().items():
                 written.append(plots.save_figure(fig, out / f"{name}.png"))
             report["figures"] = [str(p) for p in written]
-        # the models round-trip exactly (export --from-report rebuilds them); the rest is tidied (tidy_float)
-        report = {k: (v if k in MODEL_SECTIONS else strict_json(v)) for k, v in report.items()}
         (out / "report.json").write_text(json.dumps(report, indent=1, allow_nan=False))
         (out / "report.md").write_text(markdown_report(report))
         return [out / "report.json", out / "report.md"] + written
