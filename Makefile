@@ -9,13 +9,13 @@ export MPLBACKEND ?= Agg
 # pytest-xdist workers for `make test` (the CI machine has 2 cores); modules stay whole on one worker
 TEST_WORKERS ?= 2
 
-.PHONY: venv test test-slow test-all check-install fmus demo dist bench clean
+.PHONY: docs venv test test-slow test-all check-install fmus demo dist bench clean
 
 venv: $(STAMP)
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install -e ".[test]"
+	$(PY) -m pip install -e ".[test,docs]"
 	touch $(STAMP)
 
 fmus: $(STAMP)
@@ -39,8 +39,12 @@ demo: $(STAMP)
 dist: $(STAMP)
 	$(PY) -m l1b2.cli export --out dist
 
+# the documentation site into site/ (warnings are errors, as in CI)
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict --site-dir site
+
 bench: $(STAMP)
 	$(PY) bench/run_all.py
 
 clean:
-	rm -rf dist demo_out build .pytest_cache
+	rm -rf dist demo_out build site .pytest_cache

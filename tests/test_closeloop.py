@@ -129,7 +129,7 @@ def test_calibrated_ssp_carries_the_identified_effect(effect, seed, home, tmp_pa
     pytest.importorskip("libcosimpy")
     inputs = {"V_s": 67.1, "duty": 1.0, "f_s": 48500.0, "T": 25.0, "direction": 1.0, "m_load": 0.0}
     lc = isolated(str(Path(__file__).with_name("test_libcosim.py")), "worker_libcosim",
-                  str(out / "L1B2Motor_calibrated.ssp"), 0.002, inputs, {"Slider.s0": 0.0, "Stator.s": 0.0},
+                  str(out / "L1B2Motor_calibrated_libcosim.ssp"), 0.002, inputs, {"Slider.s0": 0.0, "Stator.s": 0.0},
                   [home], 2e-4).value
     np.testing.assert_allclose(lc[home], got, rtol=1e-12)
 

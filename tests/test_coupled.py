@@ -125,11 +125,11 @@ def test_in_process_motor_steady_speed_does_not_depend_on_step(flat):
 
 
 # ---------------------------------------------------------------------------
-# The reference motor reproduces the paper's qualitative behaviour (physics notes)
+# The reference motor reproduces the paper's qualitative behaviour (docs/explanation/physics.md)
 # ---------------------------------------------------------------------------
 
 def test_no_load_speed_in_range_and_rises_with_voltage(motor):
-    # reference: physics notes - 150-300 mm/s at 324 V, rising with V0
+    # reference: design targets (docs/explanation/physics.md) - 150-300 mm/s at 324 V, rising with V0
     V = [150.0, 200.0, 250.0, 300.0, 324.0, 360.0]
     v = [steady.steady_state(motor, 0.0, V0, 0.0, 1).v_m_s for V0 in V]
     assert np.all(np.diff(v) > 0)
@@ -150,7 +150,7 @@ def test_speed_falls_with_opposing_load(motor, direction):
 @pytest.mark.parametrize("direction", [1, -1])
 @pytest.mark.parametrize("m_load", [m * s for m in PAPER_LOADS for s in (1, -1)])
 def test_every_paper_load_moves_at_324V(motor, m_load, direction):
-    # reference: physics notes - every paper load (0.03-0.09 kg, both signs) still moves at 324 V
+    # reference: design targets (docs/explanation/physics.md) - every paper load (0.03-0.09 kg, both signs) still moves at 324 V
     ss = steady.steady_state(motor, 0.0, 324.0, m_load, direction)
     assert not ss.stuck
     assert ss.converged
@@ -159,7 +159,7 @@ def test_every_paper_load_moves_at_324V(motor, m_load, direction):
 
 
 def test_speed_varies_with_position_by_5_to_20_percent(motor):
-    # reference: physics notes / paper Fig. 9a - 5-20 % variation over a ~40 mm stroke at 324 V, no load
+    # reference: design targets (docs/explanation/physics.md) / paper Fig. 9a - 5-20 % variation over a ~40 mm stroke at 324 V, no load
     s = np.linspace(-0.02, 0.02, 21)
     v = np.array([steady.steady_state(motor, x, 324.0, 0.0, 1).v_m_s for x in s])
     variation = (v.max() - v.min()) / v.mean()
@@ -167,7 +167,7 @@ def test_speed_varies_with_position_by_5_to_20_percent(motor):
 
 
 def test_tip_motion_amplitudes_and_phase(motor):
-    # reference: physics notes - tip amplitudes of order 1 um at 324 V, ~90 deg between the modes
+    # reference: design targets (docs/explanation/physics.md) - tip amplitudes of order 1 um at 324 V, ~90 deg between the modes
     for s in (-0.02, 0.0, 0.02):
         for d in (1, -1):
             ss = steady.steady_state(motor, s, 324.0, 0.0, d)
@@ -180,7 +180,7 @@ def test_tip_motion_amplitudes_and_phase(motor):
 
 
 def test_speed_nearly_proportional_to_tip_velocity(motor):
-    # reference: paper Fig. 9c / physics notes - v_s close to proportional to w U_w across positions and voltages
+    # reference: paper Fig. 9c / design targets (docs/explanation/physics.md) - v_s close to proportional to w U_w across positions and voltages
     w = 2 * math.pi * F_DRIVE
     ratio = []
     for V0 in (250.0, 324.0):

@@ -1,6 +1,6 @@
 """Tests of the data layer (l1b2.data.measurements and the columns / validate / io modules behind it).
 
-The measured-data contract of shared/data-format.md, exercised through the
+The measured-data contract of the rig data format (docs/reference/data-format.md), exercised through the
 public API :mod:`l1b2.data.measurements`.
 """
 

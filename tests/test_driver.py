@@ -89,7 +89,7 @@ def test_tank_gain_equals_direct_phasor_circuit_solve(L, C, R):
 
 @pytest.mark.parametrize("L, C, R", TANKS)
 def test_exact_gain_at_w0_is_Rm_sqrt_C_over_L(L, C, R):
-    # reference: closed form |H(w0)| = R sqrt(C/L) (physics notes), with the independent divider
+    # reference: closed form |H(w0)| = R sqrt(C/L) (docs/explanation/physics.md), with the independent divider
     w0 = float(drv.tank_resonance_rad_s(L, C, R))
     assert abs(_phasor_divider(w0, L, C, R)) == pytest.approx(R * np.sqrt(C / L), rel=1e-10)
     assert abs(drv.tank_gain(w0, L, C, R)) == pytest.approx(R * np.sqrt(C / L), rel=1e-10)

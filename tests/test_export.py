@@ -80,7 +80,7 @@ def test_export_writes_every_deliverable(exported):
     natives = [f"{stem}.fmu" for name, info in manifest["native"].items() for stem in info.get("fmus", [])]
     assert "Predictor-native" in manifest["native"]["Predictor"]["fmus"]
     assert paths == sorted([f"fmus/{n}.fmu" for n in SUBSYSTEMS + ("Predictor",)]
-                           + ["L1B2Motor.fmu", "L1B2Motor.ssp"]
+                           + ["L1B2Motor.fmu", "L1B2Motor.ssp", "L1B2Motor_libcosim.ssp"]
                            + [f"fmus/{n}" if n.startswith("Predictor") else n for n in natives])
     for rec in manifest["files"]:
         f = out / rec["path"]
@@ -157,14 +157,24 @@ def test_ssp_archive_layout_and_schemas(exported):
         assert names == ({"SystemStructure.ssd"} | {f"resources/{n}.fmu" for n in SUBSYSTEMS}
                          | {f"resources/reference_motor/{n}.ssv" for n in SUBSYSTEMS})
         ssd = z.read("SystemStructure.ssd")
-        assert ssd == ssp.SSD_FILE.read_bytes()
+        # system connections as standard SSP connections (what fmucontainer, pyssp, ecos read)
+        assert ssd.decode() == ssp.standard_ssd_text(ssp.SSD_FILE.read_text())
+        assert b"<ssd:Connection startConnector=\"V_s\" endElement=\"Driver\"" in ssd
+        assert ssp.SYSTEM_CONNECTIONS_ANNOTATION.encode() not in ssd
         assert ssd_schema.validate(etree.fromstring(ssd)), ssd_schema.error_log
         for n in SUBSYSTEMS:
             ssv = z.read(f"resources/reference_motor/{n}.ssv")
             assert ssv_schema.validate(etree.fromstring(ssv)), ssv_schema.error_log
             assert ssv.decode() == (ssp.SSV_DIR / f"{n}.ssv").read_text()
             assert z.read(f"resources/{n}.fmu") == (out / "fmus" / f"{n}.fmu").read_bytes()
-    rec = next(r for r in manifest["files"] if r["kind"] == "ssp")
+    with zipfile.ZipFile(out / "L1B2Motor_libcosim.ssp") as z:  # the layout libcosim loads: the SSD as written
+        assert z.read("SystemStructure.ssd") == ssp.SSD_FILE.read_bytes()
+        assert ssd_schema.validate(etree.fromstring(z.read("SystemStructure.ssd"))), ssd_schema.error_log
+    recs = [r for r in manifest["files"] if r["kind"] == "ssp"]
+    assert [(r["path"], r["system_connections"]) for r in recs] == [("L1B2Motor.ssp", "standard"),
+                                                                    ("L1B2Motor_libcosim.ssp", "annotation")]
+    rec = recs[0]
+    assert recs[1]["validation"] == {"schema": {}} and recs[1]["system_inputs"] == rec["system_inputs"]
     assert rec["validation"] == {"schema": {}}
     assert rec["system_inputs"] == ["V_s", "duty", "f_s", "T", "direction", "m_load"]
     assert rec["default_step_size_s"] == H
@@ -185,9 +195,8 @@ def test_export_without_predictor_says_so(tmp_path, exported, predictor_setup, m
     assert reason in manifest["predictor"]["reason"]
     assert not (tmp_path / "fmus" / "Predictor.fmu").exists()
     assert all("Predictor" not in r["path"] for r in manifest["files"])
-    assert not list((tmp_path / "fmus").glob("Predictor-native*.fmu"))
-    # four subsystems, L1B2Motor.fmu, L1B2Motor.ssp, and the motor's native FMUs where built
-    assert len(manifest["files"]) == 6 + len(manifest["native"]["L1B2Motor"].get("fmus", []))
+    # four subsystems, L1B2Motor.fmu, L1B2Motor.ssp, L1B2Motor_libcosim.ssp, and the motor's native FMUs where built
+    assert len(manifest["files"]) == 7 + len(manifest["native"]["L1B2Motor"].get("fmus", []))
 
 
 def test_export_refuses_an_fmu_with_validation_problems(tmp_path, monkeypatch):

@@ -41,7 +41,7 @@ def test_paper_split_and_report_contents(identified):
 
 @pytest.mark.parametrize("problem", ["missing_column", "mm_positions", "bad_direction", "time_backwards"])
 def test_bad_input_is_refused_with_one_line_and_nothing_written(tmp_path, capsys, problem):
-    # reference: shared/data-format.md "Bad input": one clear message, nothing written
+    # reference: the rig data format (docs/reference/data-format.md) "Bad input": one clear message, nothing written
     df = pd.read_csv(rig_dir() / "all.csv").iloc[:3000].copy()
     if problem == "missing_column":
         df = df.drop(columns=["voltage_V"])

@@ -115,7 +115,7 @@ def test_contact_half_angle_limits(ip):
 
 
 # ---------------------------------------------------------------------------
-# Pure slip: closed form at phi_c = pi (physics notes) and Eq. 23
+# Pure slip: closed form at phi_c = pi (docs/explanation/physics.md) and Eq. 23
 # ---------------------------------------------------------------------------
 
 def _pure_slip_reference(U_w, v, F_p, sigma, mu):
@@ -160,7 +160,7 @@ def test_pure_slip_numerics_equal_independent_closed_form(ip, v):
 
 @pytest.mark.parametrize("v", V_NONNEG)
 def test_pure_slip_numerics_equal_physics_notes_closed_form(ip, v):
-    # reference: physics notes closed form (pure_slip_drive_force_N) at phi_c = pi, within 0.5 %
+    # reference: closed form of docs/explanation/physics.md (pure_slip_drive_force_N) at phi_c = pi, within 0.5 %
     U_w, F_p = 1.4e-6, 5.6
     out = itf.interface_forces(1.2e-6, U_w, -np.pi / 2, W, v, F_p, ip, mode="pure_slip")
     closed = float(itf.pure_slip_drive_force_N(U_w, W, v, F_p, ip.sigma_N_s_per_m, ip.mu_p))

@@ -143,7 +143,7 @@ def worker_initialization_mode_outputs(fmu_dir):
 
 @pytest.fixture(scope="module")
 def ssp_path(exported):
-    return exported[0] / "L1B2Motor.ssp"
+    return exported[0] / "L1B2Motor_libcosim.ssp"
 
 
 @pytest.fixture(scope="module")
@@ -185,7 +185,8 @@ def test_libcosim_loads_ssp_and_applies_component_parameter_sets(exported, tmp_p
     from l1b2.cosim import ssp
     out, _ = exported
     fmus = {n: out / "fmus" / f"{n}.fmu" for n in ("Driver", "Stator", "Interface", "Slider")}
-    other = ssp.build_ssp(tmp_path / "other.ssp", fmus, mp=motor.replace(interface__mu_p=0.2, slider__mass_kg=0.15))
+    other = ssp.build_ssp(tmp_path / "other.ssp", fmus, mp=motor.replace(interface__mu_p=0.2, slider__mass_kg=0.15),
+                          standard=False)
     inputs = dict(operating, direction=1.0, m_load=0.0)
     res = isolated(__file__, "worker_libcosim", str(other), 0.002, inputs, {"Slider.s0": 0.0, "Stator.s": 0.0},
                    ["Interface.mu_p", "Slider.mass_kg", "Stator.s"]).value
@@ -242,6 +243,29 @@ def test_libcosim_agrees_with_our_master(runs, motor, case):
     shifted = np.abs(va[LAG_STEPS:] - vb[:n - LAG_STEPS])
     assert np.max(shifted) <= 0.015 * peak
     assert np.max(shifted[int(round(1e-3 / H)):]) <= 0.005 * peak
+
+
+def worker_libcosim_loads(ssp_path):
+    """Whether libcosim creates an execution from the archive (and its slaves' names)."""
+    from libcosimpy.CosimExecution import CosimExecution
+    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+    log_output_level(CosimLogLevel.ERROR)
+    try:
+        ex = CosimExecution.from_ssp_file(str(ssp_path), step_size=200_000)
+    except Exception as exc:  # libcosimpy raises a bare AssertionError with a generic message
+        return {"loaded": False, "error": str(exc)}
+    return {"loaded": True, "slaves": sorted(i.name.decode() for i in ex.slave_infos())}
+
+
+def test_libcosim_needs_its_own_archive(exported, isolated):
+    # reference: measured with libcosimpy 0.0.6 - it refuses an SSD with standard connections to system connectors
+    # (no startElement/endElement), which L1B2Motor.ssp has so that standard SSP tools drive the system inputs;
+    # the export therefore also writes L1B2Motor_libcosim.ssp (the SSD as written, wiring in the annotation)
+    out, _ = exported
+    std = isolated(__file__, "worker_libcosim_loads", str(out / "L1B2Motor.ssp")).value
+    lc = isolated(__file__, "worker_libcosim_loads", str(out / "L1B2Motor_libcosim.ssp")).value
+    assert std["loaded"] is False, std
+    assert lc == {"loaded": True, "slaves": ["Driver", "Interface", "Slider", "Stator"]}
 
 
 def test_ssd_is_loadable_by_libcosim_as_written():

@@ -1,4 +1,4 @@
-"""Tests of l1b2.data.metrics: the error metrics of shared/data-format.md."""
+"""Tests of l1b2.data.metrics: the error metrics of the rig data format (docs/reference/data-format.md)."""
 
 from __future__ import annotations
 

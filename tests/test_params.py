@@ -199,7 +199,7 @@ def test_every_field_declares_a_known_unit():
 # ---------------------------------------------------------------------------
 
 def test_drive_frequency_lies_between_the_resonances(motor):
-    # reference: physics notes - drive 48.5 kHz between the B2 and L1 resonances
+    # reference: design targets (docs/explanation/physics.md) - drive 48.5 kHz between the B2 and L1 resonances
     f = motor.operating.f_drive_Hz
     assert f == pytest.approx(48500.0)
     assert motor.stator.f_b0_Hz < f < motor.stator.f_l0_Hz
@@ -208,7 +208,7 @@ def test_drive_frequency_lies_between_the_resonances(motor):
 
 
 def test_preload_in_the_papers_range(motor):
-    # reference: physics notes - preload F_p = alpha0 P of order 5-8 N (paper Table 1: p(0) = 6.06 N)
+    # reference: design targets (docs/explanation/physics.md) - preload F_p = alpha0 P of order 5-8 N (paper Table 1: p(0) = 6.06 N)
     sp = motor.stator
     assert sp.alpha0 != 1.0  # Eq. 16 asks alpha0 != 1
     assert 5.0 <= sp.alpha0 * sp.P0_N <= 8.0
@@ -218,7 +218,7 @@ def test_preload_in_the_papers_range(motor):
 
 
 def test_time_scales_match_physics_notes(motor):
-    # reference: physics notes - envelopes settle in ~1/(zeta w) ~ 0.3 ms, slider m/c_r tens of ms
+    # reference: design targets (docs/explanation/physics.md) - envelopes settle in ~1/(zeta w) ~ 0.3 ms, slider m/c_r tens of ms
     w = 2 * np.pi * motor.operating.f_drive_Hz
     for zeta in (motor.stator.zeta_l, motor.stator.zeta_b):
         assert 0.1e-3 < 1.0 / (zeta * w) < 1.0e-3

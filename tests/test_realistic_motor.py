@@ -1,7 +1,7 @@
 """The realistic motor variant (``system_models/realistic_motor.toml``).
 
 The variant exists so that the close-the-loop workflow can be exercised on a
-motor on which the paper's Eq. 29 is *not* almost exact (docs/reference_motor.md,
+motor on which the paper's Eq. 29 is *not* almost exact (docs/explanation/reference-motor.md,
 "A realistic variant"). These tests check, with the coupled steady-state
 solver, the physical properties the variant is meant to have: the paper's
 qualitative behaviour (speed rises with V0, falls with opposing load, every

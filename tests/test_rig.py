@@ -62,7 +62,7 @@ def test_speed_rises_with_voltage_and_falls_with_opposing_load(rig_data):
 
 
 def test_speed_varies_with_position(rig_data):
-    # reference: paper Fig. 9(a), physics notes: 5-20 % over the stroke at constant input
+    # reference: paper Fig. 9(a), docs/explanation/physics.md: 5-20 % over the stroke at constant input
     df, _ = rig_data
     g = df[(df.voltage_V == 324.0) & (df.load_kg == 0.0) & (df.direction == 1)].reset_index(drop=True)
     m = evaluation_mask(g) & (g.position_m.to_numpy() > -0.01)  # after the acceleration
@@ -105,7 +105,7 @@ def test_experiment_clock_is_continuous_with_pauses(rig_data):
 
 
 def test_written_files_follow_the_data_format(rig_data, tmp_path):
-    # reference: shared/data-format.md; the paper's split: test = runs with |load| = 0.05 kg
+    # reference: the rig data format (docs/reference/data-format.md); the paper's split: test = runs with |load| = 0.05 kg
     df, truth = rig_data
     mp = load_motor()
     paths = write_experiment(df, tmp_path, mp, PLAN, truth)

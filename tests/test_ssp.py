@@ -211,7 +211,7 @@ def test_build_ssp_archive(tmp_path, motor):
     with zipfile.ZipFile(out) as z:
         names = set(z.namelist())
         assert "SystemStructure.ssd" in names
-        assert z.read("SystemStructure.ssd") == ssp.SSD_FILE.read_bytes()
+        assert z.read("SystemStructure.ssd").decode() == ssp.standard_ssd_text(ssp.SSD_FILE.read_text())
         assert {f"resources/{n}.fmu" for n in fake} <= names
         for comp in COMPONENTS:
             assert z.read(f"resources/reference_motor/{comp}.ssv").decode() == (ssp.SSV_DIR / f"{comp}.ssv").read_text()

@@ -216,7 +216,7 @@ def test_allow_unusual_units_is_recorded_in_the_report(tmp_path, capsys):
 
 @pytest.mark.parametrize("column, value", [("voltage_V", 0.0), ("load_kg", 0.05), ("direction", -1)])
 def test_a_drive_input_changing_within_a_run_is_refused(tmp_path, column, value):
-    # reference: shared/data-format.md - "a run is one continuous traverse of the slider at constant drive
+    # reference: the rig data format (docs/reference/data-format.md) - "a run is one continuous traverse of the slider at constant drive
     # inputs"; one corrupted cell of a set value passed every range check before
     df = synthetic_frame()
     row = int(np.flatnonzero(df["run"].to_numpy() == 2)[10])   # run 2: 220 V, no load, +1

@@ -10,6 +10,7 @@ import argparse
 import json
 import os
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -83,7 +84,9 @@ def cmd_simulate(args) -> int:
                     until=(lambda mm: mm.value("Slider.at_stop") == args.direction) if not args.full else None)
     path = res.to_csv(args.out)
     if args.plot:
-        res.plot(columns=("Slider.v", "Slider.s", "Stator.U_w"), path=args.plot)
+        res.plot(columns=("Slider.v", "Slider.s", "Stator.U_w"), path=args.plot,
+                 title=f"l1b2 simulate ({args.engine}): V0 {args.V0:g} V, load {args.load:+g} kg, "
+                       f"direction {args.direction:+d}, step {args.step * 1e3:g} ms")
     v = res.df["Slider.v"].to_numpy()
     print(f"wrote {path}: {len(v)} samples, {res.df['time'].iloc[-1]:.4g} s, peak speed {np.max(np.abs(v)) * 1e3:.1f} mm/s")
     return 0
@@ -125,7 +128,7 @@ def cmd_rig(args) -> int:
             plots.fig9b_speed_vs_position_by_load(df, tmp / "fig9b_speed_vs_position_by_load.png")
             _, fit = plots.fig9c_speed_vs_tip_velocity(df, tmp / "fig9c_speed_vs_tip_velocity.png")
             summary["fig9c"] = fit
-        (tmp / "rig_summary.json").write_text(dumps(summary))
+        (tmp / "rig_summary.json").write_text(dumps(summary, digits=12))
     print(f"rig: {summary['runs']} runs, {summary['samples']} samples in {summary['wall_time_s']} s -> {out}")
     if "fig9c" in summary:
         print(f"fig9c: v_s = {summary['fig9c']['k0']:.3f} * omega*U_w + {summary['fig9c']['intercept_m_s'] * 1e3:.1f} mm/s,"
@@ -158,10 +161,10 @@ def cmd_sweep(args) -> int:
 def _add_sweep_parser(sub):
     p = sub.add_parser("sweep", help="design study: operating points x parameter draws on Dask (Parquet, "
                                      "percentiles, sensitivities, PNGs)")
-    p.add_argument("--spec", type=Path, required=True, help="study specification (TOML; see README 'Design studies')")
+    p.add_argument("--spec", type=Path, required=True, help="study specification (TOML; see the docs' how-to 'Design study')")
     p.add_argument("--out", type=Path, required=True, help="output folder (rerun the same command to resume)")
     _engine_args(p, default_workers=default_workers(), what="traverses (0 = serially in this process)")
-    p.add_argument("--no-plots", action="store_true")
+    p.add_argument("--no-plots", action="store_true", help="write no PNG figures")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--max-runs", type=int, default=None, metavar="N",
                    help="refuse a study of more than N runs (samples x operating points; default 100000)")
@@ -204,7 +207,7 @@ NOISE_HELP = ("noise variances of Eq. 32: 'common' (default, the paper's single 
 
 def _close_loop_args(p: argparse.ArgumentParser) -> None:
     """The close-loop command's settings (the :class:`l1b2.closeloop.loop.CloseLoop` rules)."""
-    p.add_argument("--order", type=int, default=8)
+    p.add_argument("--order", type=int, default=8, help="polynomial order of A, B, P in position (paper: 8)")
     p.add_argument("--folds", type=int, default=5, help="cross-validation folds over runs")
     p.add_argument("--alpha", type=float, default=0.01, help="significance level (Bonferroni over effects)")
     p.add_argument("--min-gain", type=float, default=0.05, help="smallest linearised held-out share of the "
@@ -220,14 +223,14 @@ def _close_loop_args(p: argparse.ArgumentParser) -> None:
                    "0.01, is still refit and cross-validated (finds drifts in time); 0: off")
     p.add_argument("--max-rounds", type=int, default=3, help="most effects added, one per round")
     p.add_argument("--noise-fit", choices=NOISE_FITS, default="alternate",
-                   help="the baseline identification's search: " + NOISE_FIT_HELP + " (default: alternate, with "
+                   help="the baseline identification's search: " + NOISE_FIT_HELP + " (alternate is the search with "
                    "which the close loop was measured)")
     p.add_argument("--noise", choices=NOISES, default="common", help=NOISE_HELP)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the multi-start and of the fold assignment")
     p.add_argument("--slider-mass", type=float, help="slider mass [kg] (overrides the sidecars)")
     p.add_argument("--allow-unusual-units", action="store_true", help=UNUSUAL_UNITS_HELP)
-    p.add_argument("--no-plots", action="store_true")
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--no-plots", action="store_true", help="write no PNG figures")
+    p.add_argument("--quiet", action="store_true", help="no stage lines and no progress bars")
 
 
 def _add_rig_parser(sub) -> None:
@@ -237,7 +240,8 @@ def _add_rig_parser(sub) -> None:
     p.add_argument("--voltages", type=_floats, default=(220.0, 255.0, 290.0, 324.0), help="V0 levels [V]")
     p.add_argument("--loads", type=_floats, default=(-0.09, -0.07, -0.05, -0.03, 0.0, 0.03, 0.05, 0.07, 0.09),
                    help="signed loads [kg]")
-    p.add_argument("--engine", choices=("fmu", "inprocess"), default="fmu")
+    p.add_argument("--engine", choices=("fmu", "inprocess"), default="fmu",
+                   help="'fmu': the four FMUs through fmpy; 'inprocess': the same blocks without FMI (faster)")
     p.add_argument("--fmu-dir", type=Path, help="folder with the subsystem FMUs (default: built once into the "
                    "per-user cache)")
     _engine_args(p, default_workers=2, what="runs (stateful effects run serially; 1 = serially here)")
@@ -256,10 +260,23 @@ def _add_rig_parser(sub) -> None:
     p.add_argument("--injection-seed", "--effect-seed", dest="injection_seed", type=int,
                    help="draw the injections' sizes at random with this seed")
     p.add_argument("--record-temperature", action="store_true", help="write the stator temperature column")
-    p.add_argument("--no-plots", action="store_true")
+    p.add_argument("--no-plots", action="store_true", help="write no PNG figures")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     _motor_args(p)
     p.set_defaults(func=cmd_rig)
+
+
+class DefaultsFormatter(argparse.HelpFormatter):
+    """Help with every option's default (unless it has none, or the help already says it)."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        default = action.default
+        if (action.option_strings and default is not None and default is not False and default != []
+                and default is not argparse.SUPPRESS and "default" not in text):
+            shown = ",".join(f"{x:g}" for x in default) if isinstance(default, tuple) else default
+            text += f" (default: {shown})"
+        return text
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -270,7 +287,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("fmus", help="build the subsystem FMUs")
     p.add_argument("names", nargs="*", help="Driver Stator Interface Slider (default: all)")
-    p.add_argument("--out", type=Path, default=Path("dist/fmus"))
+    p.add_argument("--out", type=Path, default=Path("dist/fmus"), help="output folder")
     _motor_args(p)
     p.set_defaults(func=cmd_fmus)
 
@@ -284,7 +301,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--full", action="store_true", help="do not stop at the far end stop")
     p.add_argument("--s0", type=float, help="start position [m] (default: the end stop behind)")
     p.add_argument("--step", type=float, default=2e-4, help="communication step [s]")
-    p.add_argument("--engine", choices=("fmu", "inprocess"), default="fmu")
+    p.add_argument("--engine", choices=("fmu", "inprocess"), default="fmu",
+                   help="'fmu': the four FMUs through fmpy; 'inprocess': the same blocks without FMI (faster)")
     p.add_argument("--fmu-dir", type=Path, help="folder with the subsystem FMUs (default: built once into the "
                    "per-user cache)")
     p.add_argument("--iterate", action="store_true", help="fixed-point iteration of each macro step")
@@ -298,37 +316,42 @@ def build_parser() -> argparse.ArgumentParser:
 
     _add_sweep_parser(sub)
     p = sub.add_parser("demo", help="the main job end to end on the reference motor and the virtual rig")
-    p.add_argument("--out", type=Path, default=Path("demo_out"))
-    p.add_argument("--effect", default="pulley_friction", help="effect injected for the close-the-loop stage")
-    p.add_argument("--engine", choices=("fmu", "inprocess"), default="fmu")
-    p.add_argument("--jobs", type=int, default=2)
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--out", type=Path, default=Path("demo_out"), help="output folder")
+    p.add_argument("--effect", default="pulley_friction", help="effect injected for the close-the-loop stage "
+                   "(`l1b2 injections` lists them)")
+    p.add_argument("--engine", choices=("fmu", "inprocess"), default="fmu",
+                   help="'fmu': the rig runs the four FMUs through fmpy; 'inprocess': the same blocks without FMI")
+    p.add_argument("--jobs", type=int, default=2, help="parallel rig runs (Dask worker processes)")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
     _motor_args(p)
     p.set_defaults(func=cmd_demo)
 
     p = sub.add_parser("identify", help="identify the Eq. 29 predictor from measured data (max. likelihood)")
-    p.add_argument("--train", type=Path, required=True, help="measured data (shared/data-format.md)")
+    p.add_argument("--train", type=Path, required=True, help="measured data (CSV in the rig data format)")
     p.add_argument("--test", type=Path, help="held-out data (default: the paper's split of TRAIN by load)")
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--test-loads", type=_floats, default=(0.05,), help="|load| [kg] held out when --test is absent")
     p.add_argument("--order", type=int, default=8, help="polynomial order of A, B, P (paper: 8)")
-    p.add_argument("--criterion", choices=("free_run", "one_step"), default="free_run")
-    p.add_argument("--fix", default=None, help="'none' (paper, default), 'recommended' (pins sigma, k0, mu, "
-                                                "mu_sd) or name=value,...")
+    p.add_argument("--criterion", choices=("free_run", "one_step"), default="free_run",
+                   help="what the likelihood scores: the free-run or the one-step prediction")
+    p.add_argument("--fix", default=None, help="'none' (the paper's full set; the default), 'recommended' (pins "
+                                                "sigma, k0, mu, mu_sd: predictions unchanged) or name=value,...")
     p.add_argument("--starts", type=int, default=8, help="multi-start local searches")
-    p.add_argument("--noise-fit", choices=NOISE_FITS, default="auto", help=NOISE_FIT_HELP + " (default: auto)")
+    p.add_argument("--noise-fit", choices=NOISE_FITS, default="auto", help=NOISE_FIT_HELP)
     p.add_argument("--noise", choices=NOISES, default="common", help=NOISE_HELP)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the multi-start's start points")
     p.add_argument("--slider-mass", type=float, help="slider mass [kg] (overrides the sidecar)")
     p.add_argument("--allow-unusual-units", action="store_true", help=UNUSUAL_UNITS_HELP)
-    p.add_argument("--no-plots", action="store_true")
-    p.add_argument("--verbose", action="store_true")
+    p.add_argument("--no-plots", action="store_true", help="write no PNG figures")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--verbose", action="store_true", help="print every local search and the full fit report "
+                   "(with the unidentifiable directions' tables)")
     p.set_defaults(func=cmd_identify)
 
     p = sub.add_parser("compare", help="predictor vs the co-simulation's steady states (derived and identified)")
-    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--identification", type=Path, help="identification.json from `l1b2 identify`")
-    p.add_argument("--order", type=int, default=8)
+    p.add_argument("--order", type=int, default=8, help="polynomial order of the derived predictor")
     _motor_args(p)
     p.set_defaults(func=cmd_compare)
 
@@ -337,7 +360,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--test", type=Path, help="held-out data, only for the before/after report (default: the "
                                               "paper's split of TRAIN by load)")
     p.add_argument("--test-loads", type=_floats, default=(0.05,), help="|load| [kg] held out when --test is absent")
-    p.add_argument("--report-dir", type=Path, required=True)
+    p.add_argument("--out", "--report-dir", dest="out", type=Path, required=True,
+                   help="output folder: report.json, report.md, PNGs (--report-dir is the former name)")
     p.add_argument("--export", type=Path, metavar="DIR",
                    help="also write DIR/fmus/Predictor.fmu carrying the final extended model, and "
                         "DIR/calibrated_manifest.json (which effect went where); effects with a physical home "
@@ -349,8 +373,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_close_loop)
 
     p = sub.add_parser("export", help="FMUs, L1B2Motor.ssp and L1B2Motor.fmu for other simulators")
-    p.add_argument("--out", type=Path, required=True)
-    p.add_argument("--identification", type=Path, help="identification.json whose predictor Predictor.fmu carries")
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--identification", type=Path, help="identification.json whose predictor Predictor.fmu carries "
+                   "(default: the predictor derived from the motor's physics)")
     p.add_argument("--no-predictor", action="store_true", help="skip Predictor.fmu")
     p.add_argument("--from-report", type=Path, metavar="REPORT_DIR",
                    help="instead: Predictor.fmu carrying the calibrated extended model of a close-loop report "
@@ -360,6 +385,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("injections", aliases=["effects"], help="list the effects the rig can inject")
     p.set_defaults(func=cmd_injections)
+    for parser in sub.choices.values():
+        parser.formatter_class = DefaultsFormatter
     return ap
 
 
@@ -426,7 +453,7 @@ def cmd_demo(args) -> int:
     motor = (["--motor", args.motor] if getattr(args, "motor", None) else []) + \
         (["--params", str(args.params)] if getattr(args, "params", None) else [])
     code = main(["close-loop", "--train", str(eff_dir / "train.csv"), "--test", str(eff_dir / "test.csv"),
-                 "--report-dir", str(out / "close_loop"), "--export", str(out / "close_loop_export")] + motor
+                 "--out", str(out / "close_loop"), "--export", str(out / "close_loop_export")] + motor
                 + (["--quiet"] if args.quiet else []))
     if code:
         return code
@@ -468,14 +495,51 @@ def print_input_checks(checks: dict, metrics: dict) -> None:
                       f"{', '.join(map(str, x['diverged_runs'][:10]))}{', ...' if x['n_diverged_runs'] > 10 else ''}")
 
 
+class StageBar:
+    """A progress bar for work of unknown length: the current stage and the elapsed time, redrawn every second.
+
+    Shown only on a terminal (``sys.stderr.isatty()``) and without ``--quiet``, so logs and captured output
+    keep their lines; stage lines given to :meth:`stage` are printed above it either way (unless quiet).
+    """
+
+    def __init__(self, desc: str, *, quiet: bool = False, prefix: str = ""):
+        from tqdm import tqdm
+        self.quiet, self.prefix = quiet, prefix
+        self.bar = tqdm(total=None, desc=desc, bar_format="{desc} [{elapsed}]", file=sys.stderr, leave=False,
+                        disable=quiet or not sys.stderr.isatty())
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._tick, daemon=True)
+
+    def _tick(self):
+        while not self._stop.wait(1.0):
+            self.bar.refresh()
+
+    def stage(self, text: str) -> None:
+        if not self.quiet:
+            self.bar.write(f"{self.prefix}{text}", file=sys.stdout)
+            sys.stdout.flush()
+        self.bar.set_description_str(text)
+
+    def __enter__(self):
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self._stop.set()
+        self._thread.join()
+        self.bar.close()
+        return False
+
+
 def cmd_identify(args) -> int:
     """Maximum-likelihood identification of the Eq. 29 predictor (paper Eq. 32, 35)."""
     from .workflows import run_identification
-    rep = run_identification(args.train, args.out, args.test, order=args.order, criterion=args.criterion,
+    with StageBar(f"identify: fitting Eq. 29 ({args.starts} starts)", quiet=args.quiet):
+        rep = run_identification(args.train, args.out, args.test, order=args.order, criterion=args.criterion,
                              fix=args.fix, n_starts=args.starts, seed=args.seed, test_abs_loads=args.test_loads,
-                             slider_mass_kg=args.slider_mass, plots_on=not args.no_plots, verbose=args.verbose,
-                             allow_unusual_units=args.allow_unusual_units, noise_fit=args.noise_fit,
-                             noise=args.noise)
+                                 slider_mass_kg=args.slider_mass, plots_on=not args.no_plots,
+                                 verbose=args.verbose, allow_unusual_units=args.allow_unusual_units,
+                                 noise_fit=args.noise_fit, noise=args.noise)
     print(f"identify: {rep['data']['train_runs']} train runs, {rep['data']['test_runs']} test runs "
           f"({rep['data']['split']}); fit {rep['fit_time_s']:.1f} s")
     for part in ("train", "test"):
@@ -520,26 +584,30 @@ def cmd_compare(args) -> int:
     return 0
 
 
+def _run_close_loop(args, say):
+    from .workflows import run_close_loop
+    return run_close_loop(args.train, args.test, args.out, order=args.order, k_folds=args.folds,
+                          alpha=args.alpha, min_gain=args.min_gain, seed=args.seed,
+                          max_rounds=args.max_rounds, min_cv_gain=args.min_cv_gain,
+                          min_cv_drop=args.min_cv_drop, screen_alpha=args.screen_alpha or None,
+                          noise_fit=args.noise_fit, noise=args.noise,
+                          slider_mass_kg=args.slider_mass, plots_on=not args.no_plots, progress=say,
+                          allow_unusual_units=args.allow_unusual_units, export_dir=args.export,
+                          motor=_motor(args) if args.export is not None else None,
+                          workers=args.workers, scheduler=args.scheduler, test_abs_loads=args.test_loads)
+
+
 def cmd_close_loop(args) -> int:
     """Residual -> missing effect -> extended model; error before and after on TEST."""
-    from .workflows import run_close_loop
-    say = (lambda m: None) if args.quiet else (lambda m: print(f"[close-loop] {m}", flush=True))
-    result = run_close_loop(args.train, args.test, args.report_dir, order=args.order, k_folds=args.folds,
-                            alpha=args.alpha, min_gain=args.min_gain, seed=args.seed,
-                            max_rounds=args.max_rounds, min_cv_gain=args.min_cv_gain,
-                            min_cv_drop=args.min_cv_drop, screen_alpha=args.screen_alpha or None,
-                            noise_fit=args.noise_fit, noise=args.noise,
-                            slider_mass_kg=args.slider_mass, plots_on=not args.no_plots, progress=say,
-                            allow_unusual_units=args.allow_unusual_units, export_dir=args.export,
-                            motor=_motor(args) if args.export is not None else None,
-                            workers=args.workers, scheduler=args.scheduler, test_abs_loads=args.test_loads)
+    with StageBar("close-loop", quiet=args.quiet, prefix="[close-loop] ") as bar:
+        result = _run_close_loop(args, bar.stage)
     d = result.diagnosis
     print(f"data: {result.checks['split']}")
     print(f"diagnosis: {d['message']}" + (f"; traced to {', '.join(d['traced_to'])}" if d["traced_to"] else ""))
     print(result.rounds_table())
     print(result.before_after_table())
     print_input_checks(result.checks, {"baseline " + k: v for k, v in result.baseline.items()})
-    print(f"wrote {Path(args.report_dir) / 'report.json'} and report.md ({result.wall_time_s} s)")
+    print(f"wrote {Path(args.out) / 'report.json'} and report.md ({result.wall_time_s} s)")
     if args.export is not None:
         _print_calibrated(args.export, result.calibrated_note)
     return 0

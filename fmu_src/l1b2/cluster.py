@@ -63,7 +63,36 @@ def dask_client(workers: int | None = None, scheduler: str | None = None):
         The scheduler cannot be reached, has no workers, or its workers run
         another version of ``l1b2`` (or do not have it installed).
     """
+    import dask
     from dask.distributed import Client, LocalCluster
+    with dask.config.set(QUIET_DASK), _quiet_loggers():
+        yield from _client(Client, LocalCluster, workers, scheduler)
+
+
+#: Dask settings for a busy machine: the engine's own logs only when fatal, no "event loop unresponsive"
+#: warnings, and time-outs long enough that a loaded machine's slow heartbeat is not reported as a failure
+#: (each with a traceback, from every worker) while the tasks go on. Task errors still reach the caller.
+QUIET_DASK = {"distributed.admin.tick.limit": "60s", "distributed.comm.timeouts.connect": "60s",
+              "distributed.comm.timeouts.tcp": "120s", "distributed.scheduler.worker-ttl": "15 minutes"}
+
+
+@contextlib.contextmanager
+def _quiet_loggers(level: int = logging.CRITICAL):
+    """The ``distributed`` loggers of this process at ``level`` for the block (restored after)."""
+    names = ("distributed", "distributed.worker", "distributed.nanny", "distributed.scheduler", "distributed.core",
+             "distributed.comm", "distributed.client", "tornado")
+    loggers = [logging.getLogger(n) for n in names]
+    before = [lg.level for lg in loggers]
+    for lg in loggers:
+        lg.setLevel(level)
+    try:
+        yield
+    finally:
+        for lg, lv in zip(loggers, before):
+            lg.setLevel(lv)
+
+
+def _client(Client, LocalCluster, workers, scheduler):
     cluster = None
     if scheduler:
         try:
@@ -75,7 +104,7 @@ def dask_client(workers: int | None = None, scheduler: str | None = None):
         if n < 1:
             raise ClusterError(f"--workers must be at least 1 for a local cluster, got {n}")
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-                               silence_logs=logging.ERROR)
+                               silence_logs=logging.CRITICAL)
         client = Client(cluster)
     try:
         if scheduler:

@@ -21,7 +21,7 @@ class ParameterError(L1B2Error):
 
 
 class DataFormatError(L1B2Error):
-    """A measured-data file breaks the contract of ``shared/data-format.md``.
+    """A measured-data file breaks the contract of the rig data format (docs/reference/data-format.md).
 
     The message names the file, the column with its unit, and the first
     offending row both as 1-based data row (header excluded) and as file

@@ -26,17 +26,19 @@ from typing import Any
 
 import numpy as np
 
+from .units import tidy_float
+
 __all__ = ["strict_json", "json_float", "from_json_float", "dumps", "sig"]
 
 
-def json_float(x) -> float | str | None:
-    """One float under the rule: finite as is, NaN -> None, +-inf -> ``"inf"``/``"-inf"``."""
+def json_float(x, digits: int | None = None) -> float | str | None:
+    """One float under the rule: finite as is (or to ``digits`` significant digits), NaN -> None, +-inf -> ``"inf"``/``"-inf"``."""
     v = float(x)
     if math.isnan(v):
         return None
     if math.isinf(v):
         return "inf" if v > 0 else "-inf"
-    return v
+    return v if digits is None else tidy_float(v, digits)
 
 
 def from_json_float(x) -> float:
@@ -46,28 +48,33 @@ def from_json_float(x) -> float:
     return float(x)
 
 
-def strict_json(x: Any) -> Any:
-    """``x`` with every float finite or replaced by the rule, numpy -> Python, tuples -> lists."""
+def strict_json(x: Any, digits: int | None = None) -> Any:
+    """``x`` with every float finite or replaced by the rule, numpy -> Python, tuples -> lists.
+
+    ``digits``: finite floats rounded to that many significant digits
+    (:func:`l1b2.units.tidy_float`), for reports people read; ``None`` keeps
+    them exact (results that are read back, e.g. ``report.json``).
+    """
     if isinstance(x, dict):
-        return {str(k): strict_json(v) for k, v in x.items()}
+        return {str(k): strict_json(v, digits) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
-        return [strict_json(v) for v in x]
+        return [strict_json(v, digits) for v in x]
     if isinstance(x, np.ndarray):
-        return [strict_json(v) for v in x.tolist()]
+        return [strict_json(v, digits) for v in x.tolist()]
     if isinstance(x, (bool, np.bool_)):
         return bool(x)
     if isinstance(x, (int, np.integer)):
         return int(x)
     if isinstance(x, (float, np.floating)):
-        return json_float(x)
+        return json_float(x, digits)
     if x is None or isinstance(x, str):
         return x
     return str(x)
 
 
-def dumps(x: Any, indent: int | None = 1) -> str:
-    """Strict JSON text of ``x`` (:func:`strict_json`, then ``json.dumps(..., allow_nan=False)``)."""
-    return json.dumps(strict_json(x), indent=indent, allow_nan=False)
+def dumps(x: Any, indent: int | None = 1, digits: int | None = None) -> str:
+    """Strict JSON text of ``x`` (:func:`strict_json` with ``digits``, then ``json.dumps(..., allow_nan=False)``)."""
+    return json.dumps(strict_json(x, digits), indent=indent, allow_nan=False)
 
 
 def sig(x: Any, digits: int = 4) -> str:

@@ -6,7 +6,7 @@
   the SSP files (``ssd:Units``).
 * :data:`COLUMN_UNITS` and :data:`SIDECAR_FIELD_UNITS`: the unit of every
   column of the measured-data CSV and of every sidecar field
-  (``shared/data-format.md``), defined here once so that both the data layer
+  (the rig data format (docs/reference/data-format.md)), defined here once so that both the data layer
   (:mod:`l1b2.data.columns`) and :class:`l1b2.errors.DataFormatError` (which
   names the unit in its messages) read the same table.
 
@@ -14,6 +14,8 @@ This is the bottom layer: it imports nothing of the package.
 """
 
 from __future__ import annotations
+
+import math
 
 from dataclasses import dataclass
 
@@ -87,7 +89,7 @@ def same_dimension(a: str, b: str) -> bool:
 
 
 # --------------------------------------------------------------------------
-# Units of the measured data (shared/data-format.md)
+# Units of the measured data (the rig data format (docs/reference/data-format.md))
 # --------------------------------------------------------------------------
 
 #: Unit of each known column of the measured-data CSV, in the order of the
@@ -129,3 +131,17 @@ def data_unit(name: str | None) -> str | None:
     if name in COLUMN_UNITS:
         return COLUMN_UNITS[name]
     return SIDECAR_FIELD_UNITS.get(name)  # type: ignore[arg-type]
+
+
+def tidy_float(x: float, digits: int = 12) -> float:
+    """``x`` rounded to ``digits`` significant digits, for files people read.
+
+    Values derived by arithmetic carry round-off in their last bits
+    (``-0.021`` computed as ``-0.020999999999999998``, ``67.1`` as
+    ``67.09999999999999``); written with ``repr`` they show 17 digits that
+    mean nothing. Twelve significant digits change a value by less than
+    5e-12 relative, far below any measured or identified uncertainty here.
+    Non-finite values are returned unchanged.
+    """
+    v = float(x)
+    return float(f"{v:.{digits}g}") if math.isfinite(v) else v

@@ -388,7 +388,8 @@ def _test_figures(est, test: dataio.Measurements, tmp: Path, out: Path) -> list[
         title = (f"run {run}: V0 {g[dataio.VOLTAGE].iloc[0]:g} V, load {g[dataio.LOAD].iloc[0]:+g} kg, "
                  f"dir {int(g[dataio.DIRECTION].iloc[0]):+d}; {note}")
         name = f"fig10_test_run_{run}.png"
-        plots.prediction_vs_measured(g, f, tmp / name, title, v_pred_alt=o, labels=("free run", "one step"))
+        plots.prediction_vs_measured(g, f, tmp / name, title, v_pred_alt=o, labels=("free run", "one step"),
+                                     measured=plots.data_speed_label(bool(test.meta.get("speed_derived"))))
         figs.append(str(out / name))
     return figs
 
@@ -473,12 +474,12 @@ def run_comparison(out_dir, mp=None, identification: dict | None = None, *, orde
                 cases["identified_vs_stick_slip"]["extrapolation"] = (
                     {c: v["share_outside"] for c, v in flags[0]["outside"].items()} if flags else {})
         for key, df in tables.items():
-            df.to_csv(tmp / f"{key}.csv", index=False)
+            df.to_csv(tmp / f"{key}.csv", index=False, float_format="%.12g")
         plots.steady_comparison(tables, tmp / "predictor_vs_cosim_steady.png")
         report = {"cases": cases, "figure": str(out / "predictor_vs_cosim_steady.png"),
                   "note": "co-simulation steady states from l1b2.physics.steady.steady_state (the fixed point of the "
                           "time-domain co-simulation); relative error against the co-simulation's speed"}
-        (tmp / "comparison.json").write_text(dumps(report))
+        (tmp / "comparison.json").write_text(dumps(report, digits=12))
     return report
 
 
@@ -649,14 +650,18 @@ def held_out_check(export_dir, test, mp, test_prediction=None) -> tuple[dict, ob
                                         if test_prediction is not None else None)}
     plt = plots.pyplot()
     fig, ax = plt.subplots(figsize=(7, 4))
-    first = dataio.run_slices(df[dataio.RUN])[0][1]
+    run0, first = dataio.run_slices(df[dataio.RUN])[0]
     t = df[dataio.TIME].to_numpy(float)[first]
-    ax.plot(t, 1e3 * v[first], "k.", ms=2, label="measured (TEST)")
+    what = plots.data_speed_label(bool(test.meta.get("speed_derived")))
+    ax.plot(t, 1e3 * v[first], "k.", ms=2, label=f"{what} (TEST)")
     if test_prediction is not None:
         ax.plot(t, 1e3 * np.asarray(test_prediction)[first], label="extended predictor")
     ax.plot(t, 1e3 * v_cal[first], label="calibrated SSP (4 FMUs)")
     ax.plot(t, 1e3 * v_unc[first], "--", label="uncalibrated SSP")
-    ax.set(xlabel="time [s]", ylabel="speed [mm/s]", title="first held-out run, free run")
+    g0 = df.iloc[first]
+    ax.set(xlabel="time [s]", ylabel="speed [mm/s]",
+           title=f"held-out run {run0} (the first of {out['runs']}): V0 {g0[dataio.VOLTAGE].iloc[0]:g} V, "
+                 f"load {g0[dataio.LOAD].iloc[0]:+g} kg, dir {int(g0[dataio.DIRECTION].iloc[0]):+d}; free run")
     ax.legend()
     return out, fig
 

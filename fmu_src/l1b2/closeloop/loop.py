@@ -606,4 +606,7 @@ def _data_summary(train: dataio.Measurements, test: dataio.Measurements | None) 
         return str(m.path) if m is not None and m.path is not None else None
     return {"train": where(train), "test": where(test), "train_runs": len(train.runs),
             "test_runs": len(test.runs) if test is not None else 0, "train_samples": train.n_samples,
-            "test_samples": test.n_samples if test is not None else 0}
+            "test_samples": test.n_samples if test is not None else 0,
+            # no speed column: the speed is the position's derivative (figures say "derived", not "measured")
+            "train_speed_derived": bool(train.meta.get("speed_derived")),
+            "test_speed_derived": bool(test.meta.get("speed_derived")) if test is not None else False}

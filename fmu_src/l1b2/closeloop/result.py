@@ -30,6 +30,7 @@ from .selection import Score
 FIGURES = ("residual_vs_regressors", "residual_spectrum_and_whiteness", "chosen_effect", "before_after_test")
 
 
+
 @dataclass(eq=False)
 class ResidualAnalysis:
     """The TRAIN residual and what :mod:`l1b2.closeloop.residuals` found in it."""
@@ -208,7 +209,8 @@ class CloseLoopResult:
             figs["chosen_effect"] = _fig_chosen(plt, self.train_df, a.mask, self.chosen)
         if self.test_df is not None and self.test_free_run_before is not None:
             figs["before_after_test"] = _fig_before_after(plt, self.test_df, self.test_free_run_before,
-                                                          self.test_free_run_after)
+                                                          self.test_free_run_after,
+                                                          bool((self.data or {}).get("test_speed_derived")))
         return figs
 
     def save(self, directory, *, plots_on: bool = True) -> list[Path]:
@@ -347,16 +349,27 @@ def markdown_report(rep: dict) -> str:
 # figures (each returns an open Figure)
 # ---------------------------------------------------------------------------
 
+#: regressor -> (factor to the unit shown, axis label): mm and mm/s as in every other figure
+REGRESSOR_AXES = {"time": (1.0, "time [s]"), "position": (1e3, "position [mm]"), "direction": (1.0, "direction [-]"),
+                  "load": (1.0, "load [kg]"), "voltage": (1.0, "V0 [V]"), "speed": (1e3, "|speed| [mm/s]"),
+                  "acceleration": (1.0, "acceleration [m/s²]"), "temperature": (1.0, "temperature [°C]")}
+
+
+def _regressor_axis(name: str) -> tuple[float, str]:
+    return REGRESSOR_AXES.get(name, (1.0, name))
+
+
 def _fig_residual_vs_regressors(plt, dtr: pd.DataFrame, a: ResidualAnalysis):
     vals = res.regressor_values(dtr)
     names = [n for n in res.REGRESSORS if n in vals]
     ncol = 4
     nrow = math.ceil(len(names) / ncol)
-    fig, axes = plt.subplots(nrow, ncol, figsize=(3.4 * ncol, 2.8 * nrow), squeeze=False)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(3.4 * ncol, 2.8 * nrow), squeeze=False, layout="constrained")
     for ax, n in zip(axes.flat, names):
-        x = vals[n][a.mask]
-        ax.plot(x, a.residual[a.mask] * 1e3, ".", ms=1, alpha=0.3)
-        ax.set_xlabel(n)
+        k, label = _regressor_axis(n)
+        x = vals[n][a.mask] * k
+        ax.plot(x, a.residual[a.mask] * 1e3, ".", ms=2, alpha=0.4)
+        ax.set_xlabel(label)
         ax.set_ylabel("residual [mm/s]")
         ax.grid(alpha=0.3)
     for ax in list(axes.flat)[len(names):]:
@@ -366,13 +379,13 @@ def _fig_residual_vs_regressors(plt, dtr: pd.DataFrame, a: ResidualAnalysis):
 
 
 def _fig_spectrum_and_whiteness(plt, a: ResidualAnalysis):
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.6))
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.6), layout="constrained")
     freq, power, whiteness = a.frequency, a.power, a.whiteness
     if len(freq):
         a1.semilogy(freq[1:] ** -1 * 1e3, power[1:])
         a1.set_xscale("log")
         a1.set_xlabel("period over position [mm]")
-        a1.set_ylabel("residual power")
+        a1.set_ylabel("residual power [relative]")
         a1.set_title("residual spectrum over position")
         a1.grid(alpha=0.3)
     if whiteness:
@@ -394,23 +407,27 @@ def _fig_chosen(plt, dtr: pd.DataFrame, mask: np.ndarray, chosen: Score):
     c = chosen.candidate
     vals = res.regressor_values(dtr)
     F = np.asarray(c.features(dtr), float).reshape(len(dtr), -1) @ chosen.phi
-    x = vals.get(c.regressor, vals["position"])
-    fig, ax = plt.subplots(figsize=(6, 4))
-    ax.plot(x[mask], F[mask], ".", ms=1)
-    ax.set_xlabel(c.regressor)
+    name = c.regressor if c.regressor in vals else "position"
+    k, label = _regressor_axis(name)
+    x = vals[name] * k
+    fig, ax = plt.subplots(figsize=(6, 4), layout="constrained")
+    ax.plot(x[mask], F[mask], "o", ms=3, alpha=0.5)
+    ax.set_xlabel(label)
     ax.set_ylabel("extra force [N]")
     ax.set_title(f"chosen effect: {c.label}")
     ax.grid(alpha=0.3)
     return fig
 
 
-def _fig_before_after(plt, dte: pd.DataFrame, v_te: np.ndarray, v_te_ext: np.ndarray | None):
+def _fig_before_after(plt, dte: pd.DataFrame, v_te: np.ndarray, v_te_ext: np.ndarray | None,
+                      speed_derived: bool = False):
     runs = [r for r, _ in dataio.run_slices(dte[dataio.RUN])]
     pick = runs[:: max(1, len(runs) // 4)][:4]
-    fig, axes = plt.subplots(len(pick), 1, figsize=(7, 2.6 * len(pick)), squeeze=False)
+    fig, axes = plt.subplots(len(pick), 1, figsize=(7, 2.6 * len(pick)), squeeze=False, layout="constrained")
+    what = "derived from position (TEST)" if speed_derived else "measured (TEST)"
     for ax, (run, sl) in zip(axes[:, 0], [(r, s) for r, s in dataio.run_slices(dte[dataio.RUN]) if r in pick]):
         g = dte.iloc[sl]
-        ax.plot(g[dataio.POSITION] * 1e3, np.abs(g[dataio.SPEED]) * 1e3, "k.", ms=1.5, label="measured (TEST)")
+        ax.plot(g[dataio.POSITION] * 1e3, np.abs(g[dataio.SPEED]) * 1e3, "k.", ms=1.5, label=what)
         ax.plot(g[dataio.POSITION] * 1e3, np.abs(v_te[sl]) * 1e3, "b-", label="baseline")
         if v_te_ext is not None:
             ax.plot(g[dataio.POSITION] * 1e3, np.abs(v_te_ext[sl]) * 1e3, "r--", label="extended")

@@ -14,7 +14,7 @@ that table for ``modelDescription.xml``.
 Communication between blocks (periodic steady state over a vibration period)
 ---------------------------------------------------------------------------
 The blocks exchange amplitudes, phases and period-averaged forces, not 48 kHz
-signals (physics notes). The stator receives the interface force
+signals (docs/explanation/physics.md). The stator receives the interface force
 fundamentals computed from its own outputs at the start of the step and
 treats them over the step as a describing function (an equivalent complex
 stiffness ``Y = eta F1 / Q``); its envelope ODE stays linear over the step and

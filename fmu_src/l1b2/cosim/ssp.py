@@ -20,7 +20,9 @@ Layout rules, so that the same ``SystemStructure.ssd`` runs in our master
   annotation :data:`SYSTEM_CONNECTIONS_ANNOTATION` of the system (elements
   with the attributes of ``ssd:Connection``); standard system-level
   connections in ``ssd:Connections`` are read too, for SSDs written for other
-  engines.
+  engines. :func:`build_ssp` packs that standard form by default
+  (:func:`standard_ssd_text`, for every SSP tool but libcosim) and the SSD as
+  written with ``standard=False`` (for libcosim).
 
 An ``.ssp`` archive is untrusted input (its FMUs are native code):
 
@@ -43,6 +45,7 @@ An ``.ssp`` archive is untrusted input (its FMUs are native code):
 from __future__ import annotations
 
 import math
+import re
 import shutil
 import tempfile
 import xml.etree.ElementTree as ET
@@ -632,9 +635,45 @@ def opened_ssp(archive: str | Path, limits: ArchiveLimits = DEFAULT_LIMITS):
         shutil.rmtree(folder, ignore_errors=True)
 
 
+_ANNOTATED = re.compile(r"\s*<ssd:Annotations>\s*<ssc:Annotation type=\"" + re.escape(SYSTEM_CONNECTIONS_ANNOTATION)
+                        + r"\">\s*<l1b2:SystemConnections>(?P<body>.*?)</l1b2:SystemConnections>\s*</ssc:Annotation>"
+                        r"\s*</ssd:Annotations>", re.S)
+
+
+def standard_ssd_text(text: str) -> str:
+    """The SSD with its system connections as standard SSP 1.0 ``ssd:Connection`` elements.
+
+    The vendor annotation :data:`SYSTEM_CONNECTIONS_ANNOTATION` (the wiring of
+    the system connectors, which libcosim needs out of ``ssd:Connections``) is
+    moved into ``ssd:Connections``, where SSP puts a connection to or from a
+    system connector (no ``startElement`` or ``endElement``), so that tools
+    that only read the standard (``fmucontainer``, pyssp, ecos) drive the
+    system inputs and read its outputs. Text is edited in place: prefixes,
+    comments and layout stay as written.
+    """
+    m = _ANNOTATED.search(text)
+    if m is None:
+        return text
+    rows = re.findall(r"<l1b2:Connection\b([^>]*)/>", m.group("body"))
+    text = text[:m.start()] + text[m.end():]
+    # the source's header comment explains the annotation; this file has none
+    text = re.sub(r"<!--.*?-->", "<!-- The coupled L1B2 motor (l1b2-usm), made from its system_models/L1B2Motor.ssd: "
+                  "the system connectors are wired by standard SSP 1.0 connections. -->", text, count=1, flags=re.S)
+    close = text.index("</ssd:Connections>")
+    indent = "  " * 3
+    added = "".join(f"{indent}<ssd:Connection{attrs}/>\n" for attrs in rows)
+    line_start = text.rindex("\n", 0, close) + 1
+    return text[:line_start] + added + text[line_start:]
+
+
 def build_ssp(out_path: str | Path, fmu_paths: dict[str, Path], ssd_path: str | Path = SSD_FILE,
-              mp: MotorParams | None = None) -> Path:
+              mp: MotorParams | None = None, *, standard: bool = True) -> Path:
     """Zip the SSD (as ``SystemStructure.ssd``), its parameter sets and the FMUs into an ``.ssp`` archive.
+
+    ``standard`` (default): the system connections as standard SSP 1.0
+    connections (:func:`standard_ssd_text`), for every SSP tool but libcosim;
+    ``standard=False``: the SSD as written (system connections in the vendor
+    annotation), the layout libcosim loads.
 
     ``mp`` given: the component parameter sets are generated from it
     (:func:`motor_to_ssv`); otherwise the files the SSD binds are copied from
@@ -648,7 +687,9 @@ def build_ssp(out_path: str | Path, fmu_paths: dict[str, Path], ssd_path: str | 
     missing = [c.source for c in system.components.values() if Path(c.source).stem not in fmu_paths]
     if missing:
         raise SystemStructureError(f"{ssd_path}: no FMU given for {missing}")
-    members: dict[str, bytes] = {"SystemStructure.ssd": ssd_path.read_bytes()}
+    ssd_text = ssd_path.read_text(encoding="utf-8")
+    members: dict[str, bytes] = {"SystemStructure.ssd": (standard_ssd_text(ssd_text) if standard else ssd_text)
+                                 .encode("utf-8")}
     bindings = [(comp.name, src) for comp in system.components.values() for src in comp.parameter_sources]
     bindings += [(None, src) for src in system.parameter_sources]
     for comp, src in bindings:

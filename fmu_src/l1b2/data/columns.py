@@ -1,4 +1,4 @@
-"""The vocabulary of the measured-data contract (``shared/data-format.md``).
+"""The vocabulary of the measured-data contract (the rig data format (docs/reference/data-format.md)).
 
 Declarations only, no file access: the column names of the CSV and their
 specifications (:data:`KNOWN_COLUMNS`), the sidecar fields
@@ -64,7 +64,7 @@ class ColumnSpec(NamedTuple):
         SI unit (``"-"`` for dimensionless / identifiers), from
         :data:`l1b2.units.COLUMN_UNITS`.
     meaning : str
-        Short description, from ``shared/data-format.md``.
+        Short description, from the rig data format (docs/reference/data-format.md).
     """
 
     name: str

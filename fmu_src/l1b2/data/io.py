@@ -1,6 +1,6 @@
 """Files of measured data: reading and writing the CSV and its sidecar JSON.
 
-The file side of the contract in ``shared/data-format.md``: one CSV file (one
+The file side of the contract in the rig data format (docs/reference/data-format.md): one CSV file (one
 row per sample, header line first) plus an optional sidecar ``NAME.json``
 beside ``NAME.csv`` with the rig settings. :func:`read_table_and_sidecar`
 reads both, applies :func:`~l1b2.data.validate.validate_frame`, merges the

@@ -1,6 +1,6 @@
 """Measured data of an L1B2 test rig: the public API of the data layer.
 
-Implements the contract of ``shared/data-format.md``: one CSV file with one
+Implements the contract of the rig data format (docs/reference/data-format.md): one CSV file with one
 row per sample (SI units, unit in the column name), optionally accompanied by
 a sidecar ``NAME.json`` beside ``NAME.csv`` holding rig settings.
 

@@ -1,6 +1,6 @@
 """Speed-prediction error metrics used in every report.
 
-Implements "Error metrics" of ``shared/data-format.md``. Samples are
+Implements "Error metrics" of the rig data format (docs/reference/data-format.md). Samples are
 evaluated when the measured speed is at least :data:`MIN_EVAL_SPEED_M_S` in
 magnitude and the sample is not within the first or last
 :data:`END_EXCLUSION_M` of travel of its run (end-stop collisions, as the

@@ -23,7 +23,8 @@ def save_figure(fig, path) -> Path:
     """Write ``fig`` as a PNG (120 dpi, tight layout; parent folders created), close it, return the path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
+    if fig.get_layout_engine() is None:
+        fig.tight_layout()
     fig.savefig(path, dpi=120)
     pyplot().close(fig)
     return path
@@ -95,19 +96,25 @@ def fig9c_speed_vs_tip_velocity(df: pd.DataFrame, path, load_kg: float = 0.0) ->
     return save_figure(fig, path), {k: v for k, v in fit.items() if k not in ("x", "y")}
 
 
+def data_speed_label(speed_derived: bool) -> str:
+    """How figures name the data's speed: "measured", or "derived from position" when the file had none."""
+    return "derived from position" if speed_derived else "measured"
+
+
 def prediction_vs_measured(run_df: pd.DataFrame, v_pred: np.ndarray, path, title: str,
-                           v_pred_alt: np.ndarray | None = None, labels=("predicted", "alternative")) -> Path:
-    """Paper Fig. 10: predicted and measured speed over position, with the relative error."""
+                           v_pred_alt: np.ndarray | None = None, labels=("predicted", "alternative"),
+                           measured: str = "measured") -> Path:
+    """Paper Fig. 10: predicted and measured (or derived, ``measured``) speed over position, with the relative error."""
     plt = pyplot()
     s = run_df[dataio.POSITION].to_numpy() * 1e3
     v = run_df[dataio.SPEED].to_numpy()
     fig, (ax1, ax2) = plt.subplots(2, 1, sharex=True, figsize=(7, 5.5), gridspec_kw={"height_ratios": [2, 1]})
-    ax1.plot(s, np.abs(v) * 1e3, "k.", ms=2, label="measured")
+    ax1.plot(s, np.abs(v) * 1e3, "k.", ms=2, label=measured)
     ax1.plot(s, np.abs(v_pred) * 1e3, "b-", label=labels[0])
     if v_pred_alt is not None:
         ax1.plot(s, np.abs(v_pred_alt) * 1e3, "r--", label=labels[1])
     ax1.set_ylabel("speed [mm/s]")
-    ax1.set_title(title)
+    ax1.set_title(title, fontsize=10)
     ax1.legend(fontsize=8)
     ax1.grid(alpha=0.3)
     mask = evaluation_mask(run_df.reset_index(drop=True))
@@ -128,8 +135,13 @@ def steady_comparison(tables: dict, path) -> Path:
     """Predicted against co-simulated steady speed, one panel per comparison, with the error range."""
     plt = pyplot()
     n = len(tables)
-    fig, axes = plt.subplots(1, n, figsize=(3.6 * n, 3.8), squeeze=False)
-    for ax, (key, df) in zip(axes[0], tables.items()):
+    ncol = min(n, 3)
+    nrow = -(-n // ncol)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(4.6 * ncol, 4.4 * nrow), squeeze=False, layout="constrained")
+    for ax in axes.flat[n:]:
+        ax.set_visible(False)
+    fig.suptitle("Predictor against co-simulation: steady speed at each grid point")
+    for ax, (key, df) in zip(axes.flat, tables.items()):
         moving = df.v_cosim_m_s.abs() > 5e-3
         x = df.v_cosim_m_s[moving].abs() * 1e3
         y = df.v_pred_m_s[moving].abs() * 1e3
@@ -138,8 +150,8 @@ def steady_comparison(tables: dict, path) -> Path:
         ax.plot(lim, lim, "k-", lw=0.8)
         e = df.rel_error[moving].abs()
         ax.set_title(f"{key.replace('_', ' ')}\nmax |err| {e.max():.1%}, rms {np.sqrt(np.mean(e ** 2)):.1%}",
-                     fontsize=8)
-        ax.set_xlabel("co-simulation [mm/s]")
-        ax.set_ylabel("predictor [mm/s]")
+                     fontsize=10)
+        ax.set_xlabel("co-simulation steady speed [mm/s]")
+        ax.set_ylabel("predictor steady speed [mm/s]")
         ax.grid(alpha=0.3)
     return save_figure(fig, path)

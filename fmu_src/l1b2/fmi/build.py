@@ -39,7 +39,7 @@ from .. import __version__
 from ..cosim.blocks import motor_defaults
 from ..cosim.composite import BLOCKS
 from ..physics.params import MotorParams, load_motor
-from ..units import UNITS
+from ..units import UNITS, tidy_float
 from .slaves import slave_script
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
@@ -86,7 +86,7 @@ def stable_guid(model_name: str, version: str, content: str) -> str:
 def _fmt(x) -> str:
     if isinstance(x, bool):
         return str(x).lower()
-    return repr(float(x)) if isinstance(x, float) else str(x)
+    return repr(tidy_float(x)) if isinstance(x, float) else str(x)
 
 
 def variable_table(slave_name: str, defaults: dict) -> dict:

@@ -6,7 +6,10 @@
     DIR/fmus/Driver.fmu, Stator.fmu, Interface.fmu, Slider.fmu   the four subsystems
     DIR/fmus/Predictor.fmu                                       the Eq. 29 predictor (when given)
     DIR/L1B2Motor.ssp     SSP 1.0 archive: SystemStructure.ssd, the four FMUs and the
-                          motor's parameter set (one .ssv per component)
+                          motor's parameter set (one .ssv per component); the system's
+                          inputs and outputs as standard SSP system connections
+    DIR/L1B2Motor_libcosim.ssp   the same for libcosim, which refuses those: system
+                          connections in the vendor annotation (l1b2.cosim.ssp)
     DIR/L1B2Motor.fmu     the whole coupled motor in one co-simulation FMU
     DIR/manifest.json     files, sizes, SHA-256, GUIDs, versions, validation results
 
@@ -51,6 +54,9 @@ from .slaves import SLAVES
 MOTOR_FMU = "L1B2Motor"
 PREDICTOR_FMU = "Predictor"
 SSP_NAME = "L1B2Motor.ssp"
+#: the same system for libcosim, which refuses standard system connections (measured with libcosimpy 0.0.6:
+#: "Unable to create execution from path"): system connections in the vendor annotation, as the source SSD
+LIBCOSIM_SSP_NAME = "L1B2Motor_libcosim.ssp"
 MANIFEST = "manifest.json"
 
 
@@ -132,7 +138,8 @@ def ssp_record(path: Path, root: Path, fmu_records: Mapping[str, dict]) -> dict:
     problems: dict[str, list[str]] = {}
     with zipfile.ZipFile(path) as z:
         members = sorted(z.namelist())
-        ssd_doc = etree.fromstring(z.read("SystemStructure.ssd"))
+        ssd_bytes = z.read("SystemStructure.ssd")
+        ssd_doc = etree.fromstring(ssd_bytes)
         if not ssd_schema.validate(ssd_doc):
             problems["SystemStructure.ssd"] = [str(e) for e in ssd_schema.error_log]
         for name in members:
@@ -164,6 +171,9 @@ def ssp_record(path: Path, root: Path, fmu_records: Mapping[str, dict]) -> dict:
         "system_inputs": [c for c, k in system.connectors.items() if k.kind == "input"],
         "system_outputs": [c for c, k in system.connectors.items() if k.kind == "output"],
         "default_step_size_s": system.default_step_size,
+        # where the system connectors are wired: standard ssd:Connections, or the annotation libcosim needs
+        "system_connections": ("annotation" if f'type="{ssp.SYSTEM_CONNECTIONS_ANNOTATION}"'.encode() in ssd_bytes
+                               else "standard"),
         "validation": {"schema": problems},
     }
 
@@ -235,12 +245,15 @@ def export_all(out_dir: str | Path, mp: MotorParams | None = None, predictor: Ma
         if name in paths:
             built, native_info[name] = build_native_set(name, paths[name], paths[name].parent)
             paths.update(built)
+    libcosim_path = ssp.build_ssp(out / LIBCOSIM_SSP_NAME, {n: paths[n] for n in SUBSYSTEM_FMUS}, mp=mp,
+                                  standard=False)
 
-    for p in list(paths.values()) + [ssp_path]:
+    for p in list(paths.values()) + [ssp_path, libcosim_path]:
         os.chmod(p, 0o644)  # the build writes through mkstemp (0600); these files are for others to read
     records = {name: fmu_record(p, out) for name, p in paths.items()}
     files = [records[n] for n in paths]
     files.append(ssp_record(ssp_path, out, records))
+    files.append(ssp_record(libcosim_path, out, records))
     import fmpy
     import numpy
     import pythonfmu
@@ -288,6 +301,7 @@ def write_manifest(path: Path, manifest: dict) -> None:
 
 CALIBRATED_MANIFEST = "calibrated_manifest.json"
 CALIBRATED_SSP = "L1B2Motor_calibrated.ssp"
+CALIBRATED_LIBCOSIM_SSP = "L1B2Motor_calibrated_libcosim.ssp"   # see LIBCOSIM_SSP_NAME
 CALIBRATED_SSV_DIR = "calibrated_ssv"
 
 
@@ -340,15 +354,18 @@ def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None)
         from ..cosim import ssp
         paths = {name: build_fmu(name, fmu_dir, mp=mp_cal) for name in SUBSYSTEM_FMUS}
         ssp_path = ssp.build_ssp(out / CALIBRATED_SSP, paths, mp=mp_cal)
-        for p in list(paths.values()) + [ssp_path]:
+        lc_path = ssp.build_ssp(out / CALIBRATED_LIBCOSIM_SSP, paths, mp=mp_cal, standard=False)
+        for p in list(paths.values()) + [ssp_path, lc_path]:
             os.chmod(p, 0o644)
         records.update({name: fmu_record(p, out) for name, p in paths.items()})
-        files = [records[n] for n in records] + [ssp_record(ssp_path, out, records)]
+        files = [records[n] for n in records] + [ssp_record(ssp_path, out, records),
+                                                 ssp_record(lc_path, out, records)]
         ssv_dir = out / CALIBRATED_SSV_DIR
         ssv_dir.mkdir(exist_ok=True)
         for comp, text in ssp.motor_to_ssvs(mp_cal).items():
             (ssv_dir / f"{comp}.ssv").write_text(text)
-        ssp_info = {"included": True, "path": CALIBRATED_SSP, "parameter_sets": CALIBRATED_SSV_DIR,
+        ssp_info = {"included": True, "path": CALIBRATED_SSP, "libcosim_path": CALIBRATED_LIBCOSIM_SSP,
+                    "parameter_sets": CALIBRATED_SSV_DIR,
                     "motor": mp.name, "changed": {k: v for m in mapping for k, v in m["parameters"].items()}}
     problems = _all_problems({"files": files})
     if problems:

@@ -1,7 +1,7 @@
 """Maximum-likelihood identification of the reduced predictor (paper Eq. 32, 35).
 
 :class:`PredictorIdentifier` fits theta of :mod:`l1b2.predictor.model` (Eq. 35
-order) to measured traverses in the package's data format
+order) to measured traverses in the rig data format (docs/reference/data-format.md)
 (a :class:`~l1b2.data.measurements.Measurements` or a DataFrame; SI units).
 It follows the scikit-learn convention: the constructor stores the settings,
 :meth:`PredictorIdentifier.fit` returns the estimator with fitted attributes

@@ -3,7 +3,7 @@
 The identification fits theta of :mod:`l1b2.predictor.model` (Eq. 35 order,
 ``3 n + 8`` entries for polynomial order n) and optionally the parameters phi
 of :class:`l1b2.ident.extra.ExtraForces` to measured traverses in the data
-format (SI units: s, m, m/s, V, kg).
+format (docs/reference/data-format.md; SI units: s, m, m/s, V, kg).
 
 Criteria (:class:`LikelihoodProblem`)
 -------------------------------------

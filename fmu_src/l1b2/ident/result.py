@@ -58,6 +58,10 @@ def _diagonal(se):
 # ---------------------------------------------------------------------------
 
 
+#: sections of identification.json that define the model: written exactly (repr), everything else tidied
+MODEL_SECTIONS = ("predictor_params", "parameters", "paper_monomials", "predictor", "extra")
+
+
 @dataclass(frozen=True)
 class Parameter:
     """One identified parameter.
@@ -313,7 +317,8 @@ class IdentificationResult:
         axes = fig.subplots(nrows, ncols, squeeze=False, sharex=True)
         for ax, r in zip(axes.flat, chosen):
             sl = slice(lay.starts[r], lay.starts[r] + lay.lengths[r])
-            ax.plot(sample.s[sl] * 1e3, sample.v[sl] * 1e3, "k.", ms=2, label="measured")
+            ax.plot(sample.s[sl] * 1e3, sample.v[sl] * 1e3, "k.", ms=2,
+                    label="derived from position" if sample.speed_derived else "measured")
             ax.plot(sample.s[sl] * 1e3, v_pred[sl] * 1e3, "b-", lw=1, label=label)
             ax.set_title(f"run {lay.labels[r]}: {sample.V0[sl.start]:g} V, {sample.load[sl.start]:+g} kg, "
                          f"dir {int(sample.d[sl.start]):+d}", fontsize=8)
@@ -378,7 +383,8 @@ class IdentificationResult:
             f"    best start {c['best_start']} of {c['n_starts']}; status {c['status']} ({c['message']}); "
             f"optimality {c['optimality']:.3g}; noise R converged: {c['noise_converged']}; "
             f"total nfev {c['nfev_total']}",
-            "    start costs: " + ", ".join(f"{x:.6g}" for x in costs),
+            "    start costs: " + ", ".join(f"{x:.6g}" if np.isfinite(x) else "-" for x in costs)
+            + ("  (-: start not continued)" if not all(np.isfinite(costs)) else ""),
         ]
 
     def _report_variables(self) -> list[str]:
@@ -387,6 +393,7 @@ class IdentificationResult:
         names_all = self.names
         p = self.p_theta
         w = max(len(nm) for nm in names_all)
+        free = []  # not identifiable: named once below the table, not as rows of infinite errors
         for i, prm in enumerate(self.parameters.values()):
             nm, val, u = prm.name, prm.value, prm.unit
             if i == p and self.extra_names:
@@ -396,7 +403,7 @@ class IdentificationResult:
                 continue
             se = prm.stderr
             if not np.isfinite(se):
-                lines.append(f"    {nm:<{w}} = {val: .6g} [{u}] +/- inf  (not identifiable from these data)")
+                free.append(f"{nm} = {val:.6g} [{u}]")
                 continue
             rel = f" ({100 * se / abs(val):.2f}%)" if val != 0 else ""
             lo, hi = prm.ci95
@@ -410,6 +417,10 @@ class IdentificationResult:
                 f"    {nm:<{w}} = {val: .6g} +/- {se:.3g}{rel} [{u}]  [{prm.stderr_fisher:.3g}]"
                 f"  CI [{lo:.6g}, {hi:.6g}]{sig}{robust}"
             )
+        if free:
+            lines.append(f"    not identifiable from these data ({len(free)} parameters on the "
+                         f"{len(self.unidentifiable)} direction(s) under [[Warnings]]; values only):")
+            lines += ["      " + ", ".join(free[k:k + 4]) for k in range(0, len(free), 4)]
         return lines
 
     def _report_correlations(self, min_correl) -> list[str]:
@@ -569,6 +580,9 @@ class IdentificationResult:
         out = Path(directory)
         out.mkdir(parents=True, exist_ok=True)
         payload = {**self.to_dict(), **strict_json(sections)}
+        # the model's own numbers round-trip exactly (export --identification rebuilds it); the rest of the
+        # report is written with the digits it has (12 significant: 0.001, not 0.0009999999999998899)
+        payload = {k: (v if k in MODEL_SECTIONS else strict_json(v, digits=12)) for k, v in payload.items()}
         (out / "identification.json").write_text(dumps(payload))
         (out / "fit_report.txt").write_text(self.fit_report())
         return out

@@ -148,7 +148,7 @@ def mean_normal_force_N(U_l_m, a_rad, k_e_N_per_m):
 
 
 def pure_slip_drive_force_N(U_w_m, omega_rad_s, v_m_s, F_p_N, sigma_N_s_per_m, mu_p):
-    """Closed-form period-mean driving force for pure slip, phi_c = pi, ideal phase (physics notes).
+    """Closed-form period-mean driving force for pure slip, phi_c = pi, ideal phase (docs/explanation/physics.md).
 
     ``F_d = sigma (w U_w / pi - v / 2) + mu F_p (2 sqrt(1 - k0^2) - 1)``, ``k0 = v / (w U_w)``
     for ``0 <= k0 < 1``. Outside, the relative velocity keeps one sign over the

@@ -8,7 +8,7 @@ Coulomb level; it is off in the reference motor.
 
 Conventions and decisions
 -------------------------
-* Load sign as in ``shared/data-format.md``: a positive ``m_load`` hangs on the
+* Load sign as in the rig data format (docs/reference/data-format.md): a positive ``m_load`` hangs on the
   pulley pulling toward -position, so ``F_load > 0`` opposes +direction runs.
 * Moving mass ``m_s + load_inertia * |m_load|``: the hanging weight moves
   with the slider (``load_inertia = 1`` for the pulley rig; the paper writes m).

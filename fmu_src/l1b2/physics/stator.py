@@ -1,6 +1,6 @@
 """Stator: L1 and B2 modal dynamics, axially loaded B2 mode shape (paper Sect. 3.2, Eq. 5-16).
 
-Conventions (decisions where the paper is ambiguous; see ``shared/physics-notes.md``)
+Conventions (decisions where the paper is ambiguous; see docs/explanation/physics.md)
 ---------------------------------------------------------------------------------------
 * Phasors: a harmonic signal is ``x(t) = Im[X exp(j w t)]`` (the paper writes
   ``sin(w t)``), so ``|X|`` is the amplitude and ``angle(X)`` the phase.
@@ -26,7 +26,7 @@ Conventions (decisions where the paper is ambiguous; see ``shared/physics-notes.
   (``beta L = 7.853`` without axial force).
 * Axial force: ``P >= 0`` is the magnitude of the compressive preload the
   stator carries (as the paper uses it in Eq. 16 and Table 1, ``p(0) = 6 N``).
-  Eq. 10-11 are written for a tensile force (physics notes), so the beam
+  Eq. 10-11 are written for a tensile force (docs/explanation/physics.md), so the beam
   sees the tension ``N = -P``; the square brackets of Eq. 10-11 are a square
   root. Free-end conditions from the energy ``1/2 int EI w''^2 + N w'^2``:
   ``w'' = 0`` and ``EI w''' - N w' = 0``.

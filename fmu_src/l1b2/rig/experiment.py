@@ -2,8 +2,8 @@
 
 A run is one traverse of the stroke from rest at one end stop to the other
 at constant drive inputs (V0, frequency, direction, load). The rig records
-what a real rig records, in the measured-data format
-(``shared/data-format.md``): a 50 nm encoder sampled at 1 kHz, the speed the
+what a real rig records, in the rig data format
+(docs/reference/data-format.md): a 50 nm encoder sampled at 1 kHz, the speed the
 DAQ derives from it, the commanded voltage, load and direction, on one
 continuous experiment clock with pauses between runs. It also records the
 vibrometer's tangential tip velocity amplitude ``omega*U_w`` (paper Fig. 9c)
@@ -313,10 +313,11 @@ def simulate_run(mp: MotorParams, spec: RunSpec, plan: RigPlan = RigPlan(), engi
         raise SimulationError(f"step {plan.step_s} s does not divide the sampling period 1/{plan.sample_rate_Hz} s")
     idx = np.arange(0, len(r["time"]), every)
     t = r["time"][idx]
-    pos = np.round(r["Slider.s"][idx] / plan.encoder_resolution_m) * plan.encoder_resolution_m
-    speed = np.gradient(pos, t) if len(t) > 1 else np.zeros_like(t)
+    # encoder counts times the resolution, written with the digits they have (1 pm, 1 nm/s, 1 ns)
+    pos = np.round(np.round(r["Slider.s"][idx] / plan.encoder_resolution_m) * plan.encoder_resolution_m, 12)
+    speed = np.round(np.gradient(pos, t), 9) if len(t) > 1 else np.zeros_like(t)
     out = pd.DataFrame({
-        dataio.TIME: spec.t_start_s + t,
+        dataio.TIME: np.round(spec.t_start_s + t, 9),
         dataio.RUN: spec.run,
         dataio.POSITION: pos,
         dataio.VOLTAGE: spec.V0_V,
@@ -327,7 +328,7 @@ def simulate_run(mp: MotorParams, spec: RunSpec, plan: RigPlan = RigPlan(), engi
     })
     if plan.record_temperature:
         out[dataio.TEMPERATURE] = np.round(r["Stator.T_stator"][idx], 2)
-    out["tip_velocity_amp_m_s"] = r["Stator.v_tip"][idx]
+    out["tip_velocity_amp_m_s"] = np.round(r["Stator.v_tip"][idx], 9)
     out.attrs["T_stator_end"] = float(r["Stator.T_stator"][-1])
     return out
 
@@ -470,7 +471,7 @@ def _run_on_cluster(motors, nominal, conditions, plan, engine, fmu_dir, bar, wor
                 bar.update()
     t_next = 0.0
     for f in frames:  # lay the runs on one experiment clock with pauses, as the serial rig does
-        f[dataio.TIME] += t_next
+        f[dataio.TIME] = np.round(f[dataio.TIME] + t_next, 9)
         t_next = float(f[dataio.TIME].iloc[-1]) + plan.pause_s
     return frames
 

@@ -19,7 +19,23 @@ def _scale(col: str) -> tuple[float, str]:
         return 1e3, "mm/s"
     if col.endswith("_s"):
         return 1.0, "s"
+    if col.endswith("_m"):
+        return 1e3, "mm"
     return 1.0, ""
+
+
+def output_name(col: str) -> str:
+    """An output's name without its unit suffix (the axis gives the unit shown): mean_speed_m_s -> mean speed."""
+    for suffix in ("_m_s", "_s", "_m"):
+        if col.endswith(suffix):
+            col = col[: -len(suffix)]
+            break
+    return col.replace("_", " ")
+
+
+#: operating variable -> axis label
+OPERATING_AXES = {"V0_V": "V0 [V]", "load_kg": "load [kg]", "frequency_Hz": "drive frequency [Hz]",
+                  "temperature_degC": "temperature [°C]", "direction": "direction [-]"}
 
 
 def _op_label(row) -> str:
@@ -28,13 +44,12 @@ def _op_label(row) -> str:
 
 
 def output_distributions(res, path) -> Path:
-    """Every sample's outputs per operating point (jittered dots), with p5-p95 bars and the p50 marked."""
+    """Every sample's outputs per operating point: their distribution (violin), p5-p95 bars and the p50."""
     plt = _plt()
     cols = [c for c in res.outputs if c != "stalled"]
     ops = list(res.table.groupby("op_id", sort=True))
     fig, axes = plt.subplots(len(cols), 1, figsize=(max(6.0, 1.2 * len(ops) + 3), 2.3 * len(cols) + 0.6),
                              squeeze=False, sharex=True)
-    jitter = np.random.default_rng(0)
     for ax, c in zip(axes[:, 0], cols):
         k, unit = _scale(c)
         for i, (_, g) in enumerate(ops):
@@ -42,11 +57,16 @@ def output_distributions(res, path) -> Path:
             x = x[np.isfinite(x)]
             if not len(x):
                 continue
-            ax.plot(i + jitter.uniform(-0.25, 0.25, len(x)), x, ".", ms=3, alpha=0.35, color="C0")
+            if np.ptp(x) > 0:
+                parts = ax.violinplot([x], positions=[i], widths=0.6, showextrema=False)
+                for body in parts["bodies"]:
+                    body.set_alpha(0.35)
+            ax.plot(np.full(len(x), i), x, "_", ms=8, alpha=0.3, color="C0",
+                    label="samples (violin: their density)" if i == 0 else None)
             p5, p50, p95 = np.percentile(x, (5, 50, 95))
-            ax.errorbar([i + 0.35], [p50], yerr=[[p50 - p5], [p95 - p50]], fmt="s", color="C3", ms=4, capsize=3,
+            ax.errorbar([i + 0.38], [p50], yerr=[[p50 - p5], [p95 - p50]], fmt="s", color="C3", ms=4, capsize=3,
                         label="p50, p5-p95" if i == 0 else None)
-        ax.set_ylabel(f"{c}\n[{unit}]" if unit else c, fontsize=8)
+        ax.set_ylabel(f"{output_name(c)}\n[{unit}]" if unit else output_name(c), fontsize=9)
         ax.grid(alpha=0.3)
     axes[-1, 0].set_xticks(range(len(ops)), [_op_label(g.iloc[0]).replace(", ", "\n", 2) for _, g in ops],
                            fontsize=7)
@@ -78,7 +98,7 @@ def sensitivity_bars(res, path) -> Path | None:
         ax.barh(y, s["S1"], height=0.2, xerr=s["S1_conf"], label="Sobol' first order S1")
     ax.set_yticks(y, g["parameter"])
     ax.invert_yaxis()
-    ax.set_xlabel(f"sensitivity of {c}")
+    ax.set_xlabel(f"sensitivity of {output_name(c)} [-]")
     ax.legend(fontsize=7)
     op = res.table[res.table["op_id"] == g["op_id"].iloc[0]].iloc[0]
     ax.set_title(f"{res.spec.name}\nwhich parameter matters most at {_op_label(op)}", fontsize=9)
@@ -104,8 +124,8 @@ def operating_map(res, path) -> Path:
         label = ", ".join(f"{n} {v:g}" for n, v in zip(groups, np.atleast_1d(key))) or c
         line, = ax.plot(g[xcol], g["p50"] * k, "o-", label=label)
         ax.fill_between(g[xcol], g["p5"] * k, g["p95"] * k, color=line.get_color(), alpha=0.2)
-    ax.set_xlabel(xcol)
-    ax.set_ylabel(f"{c} [{unit}]: p50, band p5-p95")
+    ax.set_xlabel(OPERATING_AXES.get(xcol, xcol))
+    ax.set_ylabel(f"{output_name(c)} [{unit}]: p50, band p5-p95")
     ax.legend(fontsize=7)
     ax.grid(alpha=0.3)
     fig.tight_layout()

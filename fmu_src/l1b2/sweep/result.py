@@ -11,6 +11,7 @@ import pandas as pd
 
 from ..jsonio import dumps
 from .analysis import sobol_indices, src_ranking, summarize
+from .plots import output_name
 from .sampling import parameter_columns
 from .spec import OPERATING, StudySpec
 from .tasks import TaskContext, output_columns
@@ -113,7 +114,7 @@ class SweepResult:
             if len(row) and np.isfinite(row["p50"].iloc[0]):
                 r = row.iloc[0]
                 scale, unit = (1e3, "mm/s") if key.endswith("_m_s") else (1.0, key.rsplit("_", 1)[-1])
-                head += (f" {key} p5 {r['p5'] * scale:.1f}, p50 {r['p50'] * scale:.1f}, "
+                head += (f" {output_name(key)} p5 {r['p5'] * scale:.1f}, p50 {r['p50'] * scale:.1f}, "
                          f"p95 {r['p95'] * scale:.1f} {unit} (n={int(r['n'])})")
             st = g[g["output"] == "stalled"]
             if len(st):
