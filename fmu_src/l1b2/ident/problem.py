@@ -44,7 +44,6 @@ as it is, or checks a DataFrame against the same contract
 
 from __future__ import annotations
 
-import weakref
 from collections.abc import Mapping
 
 import numpy as np
@@ -138,35 +137,6 @@ def _derived_speed(s, t, layout) -> np.ndarray:
     return v
 
 
-# Per-sample arrays of each Measurements, read once per instance (the instance is immutable and
-# validated when read); dropped with the instance.
-_BASE_ARRAYS: "weakref.WeakKeyDictionary[Measurements, dict]" = weakref.WeakKeyDictionary()
-
-
-def _read_arrays(frame: pd.DataFrame, checked: pd.DataFrame) -> dict:
-    """Read-only per-sample arrays [SI] of a contract-checked frame (see :class:`SampleData`)."""
-    run = checked[RUN].to_numpy()
-    layout = RunLayout(run)
-    out = {"frame": frame, "run": run, "layout": layout, "speed_derived": SPEED not in checked.columns}
-    for key, col in (("t", TIME), ("s", POSITION), ("V0", VOLTAGE), ("d", DIRECTION), ("load", LOAD)):
-        out[key] = checked[col].to_numpy(dtype=float)
-    out["v"] = (_derived_speed(out["s"], out["t"], layout) if out["speed_derived"]
-                else checked[SPEED].to_numpy(dtype=float))
-    for key in ("run", "t", "s", "V0", "d", "load", "v"):
-        out[key].setflags(write=False)  # shared by every SampleData of the instance
-    return out
-
-
-def _base_arrays(data) -> dict:
-    """The arrays of ``data``: once per :class:`Measurements` instance, each call for a DataFrame."""
-    if isinstance(data, Measurements):
-        base = _BASE_ARRAYS.get(data)
-        if base is None:
-            base = _BASE_ARRAYS[data] = _read_arrays(data.df, data.df)
-        return base
-    return _read_arrays(*_checked_frame(data))
-
-
 class SampleData:
     """Flat per-sample arrays of measured data in the data format.
 
@@ -195,13 +165,21 @@ class SampleData:
     """
 
     def __init__(self, data, mask=None):
-        base = _base_arrays(data)
-        self.frame = base["frame"]
-        self.run, self.layout = base["run"], base["layout"]
-        self.t, self.s, self.V0 = base["t"], base["s"], base["V0"]
-        self.d, self.load, self.v = base["d"], base["load"], base["v"]
-        self.speed_derived = base["speed_derived"]
-        n = len(self.t)
+        frame, checked = _checked_frame(data)
+        self.frame = frame
+        self.run = checked[RUN].to_numpy()
+        self.layout = RunLayout(self.run)
+        self.t = checked[TIME].to_numpy(dtype=float)
+        self.s = checked[POSITION].to_numpy(dtype=float)
+        self.V0 = checked[VOLTAGE].to_numpy(dtype=float)
+        self.d = checked[DIRECTION].to_numpy(dtype=float)
+        self.load = checked[LOAD].to_numpy(dtype=float)
+        self.speed_derived = SPEED not in checked.columns
+        if self.speed_derived:
+            self.v = _derived_speed(self.s, self.t, self.layout)
+        else:
+            self.v = checked[SPEED].to_numpy(dtype=float)
+        n = len(checked)
         if mask is None:
             self.mask = np.ones(n, dtype=bool)
         else:
