@@ -178,4 +178,4 @@ def test_the_clean_file_is_accepted_with_its_metrics(tmp_path):
     (tmp_path / "data.json").write_text(json.dumps({"slider_mass_kg": M_S}))
     meas = load_measurements(path)
     assert meas.meta["unusual_units"] == []
-    assert _metrics(meas.df) == CLEAN and CLEAN["n"] > 100
+    assert _metrics(meas.df) == CLEAN and CLEAN["n_samples"] > 100
