@@ -155,13 +155,14 @@ class Validated:
 
 
 def refit(df: pd.DataFrame, mask: np.ndarray, m_s: float, init, effects: EffectSet, settings: RefitSettings, *,
-          max_outer: int = 2) -> Validated:
+          max_outer: int = 2, n_starts: int = 1) -> Validated:
     """The model with ``effects``, re-identified on ``df`` by one warm local search (bounded budget).
 
-    The search is the least-squares alternation (``noise_fit="alternate"``) whatever the baseline's.
+    The search is the least-squares alternation (``noise_fit="alternate"``) whatever the baseline's;
+    ``n_starts >= 2`` adds the identifier's data-driven multistart track to the warm one (the better is kept).
     """
     extra = effects.extra()
-    est = PredictorIdentifier(order=settings.order, criterion="free_run", fixed="recommended", n_starts=1,
+    est = PredictorIdentifier(order=settings.order, criterion="free_run", fixed="recommended", n_starts=n_starts,
                               seed=settings.seed, extra=extra, init=init,
                               init_extra=effects.start() if extra is not None else None, max_nfev=settings.max_nfev,
                               max_outer=max_outer, noise=settings.noise, noise_fit="alternate")

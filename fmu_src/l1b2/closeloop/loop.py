@@ -69,6 +69,7 @@ from .candidates import CandidateSource, Context, full_library
 from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT_FOLDS, DEFAULT_REFIT_NFEV,
                          EffectSet, RefitCV, RefitSettings, Validated, accepts, chain_cv_errors, cv_errors,
                          fold_start_phi, materiality, refit, stratified_folds, validated)
+from .guard import checked_fit
 from .result import CloseLoopResult, ResidualAnalysis
 from .selection import (DEFAULT_ALPHA, DEFAULT_PARSIMONY, SHORTLIST_MIN_GAIN, Score, best_per_family, design,
                         score_candidates, shortlist, significance_level)
@@ -193,7 +194,9 @@ class CloseLoop(EstimatorSettings):
         mask_tr = np.array(train.mask)
 
         say("baseline: identifying the Eq. 29 predictor on TRAIN")
-        base = self._identify(dtr, m_s, mask_tr)
+        base = checked_fit(lambda: self._identify(dtr, m_s, mask_tr),
+                           lambda: self._identify(dtr, m_s, mask_tr, retry=True), dtr, mask_tr,
+                           "the baseline identification on TRAIN")
         v_te = base.predict_free_run(dte) if dte is not None else None
         baseline = _metrics(base, dtr, dte)
         it = _Iteration(model=base, effects=EffectSet(), rounds=[{"round": 0, "added": None, "metrics": baseline}])
@@ -236,10 +239,14 @@ class CloseLoop(EstimatorSettings):
             calibrated_model=calibrated, calibrated_note=why)
         return self
 
-    def _identify(self, df: pd.DataFrame, m_s: float, mask: np.ndarray) -> Validated:
-        """The baseline Eq. 29 predictor identified on ``df`` (free-run maximum likelihood, multi-start)."""
+    def _identify(self, df: pd.DataFrame, m_s: float, mask: np.ndarray, retry: bool = False) -> Validated:
+        """The baseline Eq. 29 predictor identified on ``df`` (free-run maximum likelihood, multi-start).
+
+        ``retry``: the identifier's multistart again with twice the starts (at least 8) and the next seed.
+        """
+        n_starts, seed = (max(2 * self.n_starts, 8), self.seed + 1) if retry else (self.n_starts, self.seed)
         return Validated(PredictorIdentifier(order=self.order, criterion="free_run", fixed="recommended",
-                                             n_starts=self.n_starts, seed=self.seed, noise_fit=self.noise_fit,
+                                             n_starts=n_starts, seed=seed, noise_fit=self.noise_fit,
                                              noise=self.noise).fit(validated(df), slider_mass_kg=m_s, mask=mask))
 
     def refit_settings(self) -> RefitSettings:
@@ -300,8 +307,12 @@ class CloseLoop(EstimatorSettings):
                 it.significant = [s for s in short if any(t.candidate is s.candidate for t in ok)]
             say(f"round {n_rnd}: adding {pick.candidate.label}; re-identifying jointly")
             effects = it.effects.add(pick.candidate, pick.phi)
-            model = refit(dtr, mask, m_s, cur.params_, effects, self.refit_settings().budget(self.final_nfev),
-                          max_outer=3)
+            settings = self.refit_settings().budget(self.final_nfev)
+            model = checked_fit(
+                lambda: refit(dtr, mask, m_s, cur.params_, effects, settings, max_outer=3),
+                lambda: refit(dtr, mask, m_s, cur.params_, effects, settings, max_outer=3,
+                              n_starts=max(self.n_starts, 2)),
+                dtr, mask, f"the joint re-identification with {pick.candidate.label} (round {n_rnd})")
             it.model, it.effects = model, effects.with_phi(model.phi_)
             cur_err = None
             it.rounds.append({"round": n_rnd, "added": pick.candidate.label, "effect": pick.candidate.family,
