@@ -5,9 +5,10 @@ was fitted to is non-finite, or when its free-run nrmse there (on the
 evaluation mask) is at least :data:`MAX_FIT_NRMSE`: a model that misses half
 the measured speed's rms on its own training data has not fitted (an
 overflowing recursion, a search that left the basin: the diverged baselines
-seen so far had 97 % held-out error), whatever its likelihood said. :func:`checked_fit` fits, checks, retries once from the
-identifier's multistart and raises :class:`~l1b2.errors.FitDivergedError`
-when the retry is broken too (or fails outright).
+seen so far had 97 % held-out error), whatever its likelihood said.
+:func:`checked_fit` fits, checks, retries once from the identifier's
+multistart and raises :class:`~l1b2.errors.FitDivergedError` when the retry
+is broken too (or fails outright).
 """
 
 from __future__ import annotations
@@ -46,7 +47,8 @@ def broken(model, df: pd.DataFrame, mask: np.ndarray) -> str | None:
     ss = float(np.sum(df[dataio.SPEED].to_numpy(float)[m] ** 2))
     nrmse = float(np.sqrt(np.sum(e ** 2) / max(ss, 1e-300)))
     if not nrmse < MAX_FIT_NRMSE:
-        return f"its free-run nrmse on its own training data is {100 * nrmse:.1f} % (broken from {100 * MAX_FIT_NRMSE:.0f} %)"
+        return (f"its free-run nrmse on its own training data is {100 * nrmse:.1f} % "
+                f"(broken from {100 * MAX_FIT_NRMSE:.0f} %)")
     return None
 
 

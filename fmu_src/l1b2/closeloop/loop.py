@@ -65,7 +65,7 @@ from ..predictor.effects import ExtendedPredictor, IdentifiedEffect
 from ..predictor.setup import PredictorSetup
 from . import chain
 from . import residuals as res
-from .candidates import CandidateSource, Context, full_library
+from .candidates import CandidateSource, Context, full_library, training_summary
 from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT_FOLDS, DEFAULT_REFIT_NFEV,
                          EffectSet, RefitCV, RefitSettings, Validated, accepts, chain_cv_errors, cv_errors,
                          fold_start_phi, materiality, refit, stratified_folds, validated)
@@ -213,6 +213,7 @@ class CloseLoop(EstimatorSettings):
         ctx = candidate_context(start.predict_free_run, m_s, fit_tr, mask_tr, analysis.peak)
         library = self.library if self.library is not None else full_library()
         pool = library(ctx, fit_tr)
+        it.channels = training_summary(ctx, fit_tr).channels
         self._iterate(it, pool, fit_tr, mask_tr, m_s, lambda mdl: _metrics(wrap(mdl), dtr, dte), say)
         it.model = wrap(it.model)
 
@@ -432,6 +433,8 @@ class CloseLoop(EstimatorSettings):
                           "median_rho1": float(np.median([x["rho1"] for x in w])) if w else None},
             "position_spectrum_peak": a.peak,
             "measurement_chain": chain_rec,
+            "channels_considered": channels_considered(it.channels, scores, it.level, self.min_gain,
+                                                       it.effects.families),
         }
 
 
@@ -448,6 +451,7 @@ class _Iteration:
     significant: list = field(default_factory=list)
     level: float = float("nan")
     output_filter: chain.OutputFilter | None = None
+    channels: tuple = ()
 
 
 class ChainModel:
@@ -506,6 +510,36 @@ def order_traced(effects, speed_filter: bool, residual_trace, evidence=(), speed
     take(e for e in effects if e.structural)
     take(e for e in evidence if e.structural)
     return traced + [r for r in residual_trace if r not in traced]
+
+
+def channels_considered(channels, scores: list[Score], level: float, min_gain: float, added) -> list[dict]:
+    """``diagnosis.channels_considered``: every candidate channel with its first-round evidence.
+
+    Per channel (:func:`l1b2.closeloop.candidates.channels_of`): its kind,
+    the regressor it is traced to, whether it varies within runs, the best
+    form of its family ``channel_<name>`` by linearised held-out gain with
+    that gain and its run-level p-value, ``significant`` (it passes the
+    Bonferroni screen: gain >= ``min_gain``, p < ``level``, AIC improved)
+    and ``added`` (the loop added it). A constant channel has no evidence (``note``).
+    """
+    from ..predictor.effects.channels import regressor_of
+    best = {s.candidate.family: s for s in best_per_family(scores)}
+    out = []
+    for ch in channels:
+        fam = f"channel_{ch['name']}"
+        s = best.get(fam)
+        rec = {"channel": ch["name"], "kind": ch["kind"], "regressor": regressor_of(ch["name"]),
+               "varies_within_runs": bool(ch["within_run"]), "best": None, "cv_gain": None, "p_value": None,
+               "significant": False, "added": fam in added, "note": ""}
+        if not ch["sd"] > 0:
+            rec["note"] = "constant on TRAIN: no evidence possible"
+        elif s is None:
+            rec["note"] = "not scored (not in the candidate library)"
+        else:
+            rec.update(best=s.candidate.label, cv_gain=float(s.cv_gain), p_value=float(s.p_value),
+                       significant=bool(s.cv_gain >= min_gain and s.p_value < level and s.delta_aic < 0))
+        out.append(rec)
+    return out
 
 
 def _filter_record(rec: dict, params: dict | None) -> dict:
@@ -589,6 +623,10 @@ def calibrated_model(base, ext, effects: EffectSet, output_filter, source: dict)
     missing = [c.label for c in effects.candidates if not c.spec]
     if missing:
         return None, f"effects without a serialisable spec (custom candidates): {', '.join(missing)}"
+    from ..predictor.effects import SIGNALS, needs
+    logged = [c.label for c in effects.candidates if not needs(c.spec) <= set(SIGNALS)]
+    if logged:
+        return None, (f"effects reading logged channels that Predictor.fmu has no input for: {', '.join(logged)}")
     recs = tuple(IdentifiedEffect(c.family, c.label, dict(c.spec), tuple(c.names), tuple(c.units),
                         tuple(float(p) for p in phi), tuple(float(ext.extra_stderr_[n]) for n in c.names),
                         c.description, tuple(c.regressors), c.structural)
