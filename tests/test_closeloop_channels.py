@@ -74,9 +74,10 @@ def test_every_numeric_column_beyond_the_required_ones_is_a_channel():
     from l1b2.closeloop.candidates import channels_of, signals
     df = pd.DataFrame({"time_s": [0.0, 0.1, 5.0, 5.1], "run": [1, 1, 2, 2], "position_m": 0.0, "voltage_V": 200.0,
                        "direction": 1, "load_kg": 0.0, "speed_m_s": 0.1, "frequency_Hz": 48500.0,
-                       "aux": [1.0, 1.0, 3.0, 3.0], "note": ["a", "b", "c", "d"]})
+                       "aux": [1.0, 1.0, 3.0, 3.0], "note": ["a", "b", "c", "d"], "tip_velocity_amp_m_s": 1.0})
     ch = {c["name"]: c for c in channels_of(df)}
-    assert list(ch) == ["frequency_Hz", "aux", "time_s"]     # text columns and the required ones are not
+    assert list(ch) == ["frequency_Hz", "aux", "tip_velocity_amp_m_s", "time_s"]  # not text nor the required ones
+    assert ch["tip_velocity_amp_m_s"]["kind"] == "response"
     assert ch["frequency_Hz"]["sd"] == 0 and ch["aux"]["sd"] == pytest.approx(1.0)
     assert not ch["aux"]["within_run"] and ch["time_s"]["within_run"] and ch["time_s"]["kind"] == "protocol"
     x = signals(df, None, {"run:time_s", "col:aux"})
@@ -99,7 +100,8 @@ def test_an_effect_through_a_logged_channel_is_traced_and_a_noise_channel_is_not
     considered = {c["channel"]: c for c in d["channels_considered"]}
     assert {"aux_relay", "ambient_noise", "time_s", "frequency_Hz"} <= set(considered), considered
     assert considered["frequency_Hz"]["note"].startswith("constant")
-    assert considered["aux_relay"]["significant"] and considered["aux_relay"]["added"], json.dumps(considered)
+    assert considered["tip_velocity_amp_m_s"]["kind"] == "response" and not considered["tip_velocity_amp_m_s"]["added"]
+    assert considered["aux_relay"]["added"] and considered["aux_relay"]["cv_gain"] > 0, json.dumps(considered)
     assert "aux_relay" in d["traced_to"][:2], (d["traced_to"], d["message"])
     assert not considered["ambient_noise"]["added"] and "ambient_noise" not in d["traced_to"]
     assert considered["ambient_noise"]["cv_gain"] is not None     # considered: scored, with its evidence

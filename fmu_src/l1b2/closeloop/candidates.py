@@ -127,7 +127,9 @@ def channels_of(df: pd.DataFrame) -> tuple:
     """The candidate channels of a frame: every numeric column beyond the required ones and the speed, then the clock.
 
     One ``{"name", "kind", "mean", "sd", "within_run"}`` each (``kind``:
-    ``"logged"``, or ``"protocol"`` for the session clock ``time_s``;
+    ``"logged"``, ``"protocol"`` for the session clock ``time_s``, or
+    ``"response"`` for a measured response of the motor
+    (:data:`l1b2.predictor.effects.channels.RESPONSE_COLUMNS`: listed, no hypothesis);
     ``sd`` 0 for a constant column, which is listed but gets no hypothesis;
     ``within_run``: it varies inside some run).
     """
@@ -140,7 +142,9 @@ def channels_of(df: pd.DataFrame) -> tuple:
         if not np.all(np.isfinite(c)):
             continue
         within = bool((df.groupby(dataio.RUN, sort=False)[name].agg(np.ptp) > 0).any())
-        out.append({"name": str(name), "kind": "protocol" if name == dataio.TIME else "logged",
+        kind = ("protocol" if name == dataio.TIME else "response" if name in fx.channels.RESPONSE_COLUMNS
+                else "logged")
+        out.append({"name": str(name), "kind": kind,
                     "mean": float(np.mean(c)), "sd": float(np.std(c)), "within_run": within})
     return tuple(out)
 

@@ -531,7 +531,9 @@ def channels_considered(channels, scores: list[Score], level: float, min_gain: f
         rec = {"channel": ch["name"], "kind": ch["kind"], "regressor": regressor_of(ch["name"]),
                "varies_within_runs": bool(ch["within_run"]), "best": None, "cv_gain": None, "p_value": None,
                "significant": False, "added": fam in added, "note": ""}
-        if not ch["sd"] > 0:
+        if ch["kind"] == "response":
+            rec["note"] = "a measured response of the motor, not a cause: not a candidate"
+        elif not ch["sd"] > 0:
             rec["note"] = "constant on TRAIN: no evidence possible"
         elif s is None:
             rec["note"] = "not scored (not in the candidate library)"

@@ -3,7 +3,8 @@ physical forms.
 
 Any numeric column of the measurements beyond the required ones (the data
 format's optional ``frequency_Hz`` and ``temperature_C`` included, and
-whatever else the rig logs) is a candidate channel; so is the recording
+whatever else the rig logs, but the measured responses of
+:data:`RESPONSE_COLUMNS`) is a candidate channel; so is the recording
 protocol's own clock, the session time ``time_s`` (which also orders the
 runs). Nothing about a channel's physics is assumed: its standardised value
 ``z = (c - mean) / sd`` (TRAIN's mean and standard deviation of the samples)
@@ -37,6 +38,10 @@ FORMS = ("friction", "force_factor", "force")
 LEVELS = ("run", "sample")
 #: the session clock's column: the recording protocol's signal, always a candidate
 SESSION_TIME = "time_s"
+#: logged columns that are measured *responses* of the motor, not causes: listed, never candidates. A regressor
+#: that is the motor's own response (the vibrometer's tip-velocity amplitude follows the drive force the model
+#: predicts) would stand in for the model instead of explaining it, and a predictor needing it could not predict
+RESPONSE_COLUMNS = ("tip_velocity_amp_m_s",)
 #: report regressor of the channels that have a name in the rest of the loop (others: the column itself)
 REGRESSOR_NAMES = {"time_s": "time", "temperature_C": "temperature", "frequency_Hz": "frequency"}
 
@@ -93,8 +98,8 @@ class Channel(Effect):
                           "sd": (t1 - t0) / np.sqrt(12.0), "within_run": True})
         out = []
         for ch in chans:
-            if not ch.get("sd", 0) > 0:
-                continue   # constant on TRAIN: considered, no evidence possible
+            if not ch.get("sd", 0) > 0 or ch.get("kind") == "response":
+                continue   # constant on TRAIN (no evidence possible) or a measured response: considered, not a cause
             name, reg = ch["name"], regressor_of(ch["name"])
             for level in LEVELS if ch.get("within_run", True) else ("run",):
                 for form in FORMS:
