@@ -60,6 +60,16 @@ class CandidateForce:
     #: than adding an effect the paper's physics lacks; such terms are traced after the missing effects
     structural: str = ""
     spec: dict = field(default_factory=dict, repr=False, compare=False)
+    #: physical ranges of the parameters (``((lo, hi), ...)``, empty: unbounded), kept by the identification
+    bounds: tuple = ()
+
+    def clip(self, phi) -> np.ndarray:
+        """``phi`` inside :attr:`bounds` (unchanged when unbounded)."""
+        phi = np.asarray(phi, float).ravel()
+        if not self.bounds:
+            return phi
+        lo, hi = np.array(self.bounds, float).T
+        return np.clip(phi, lo, hi)
 
     @property
     def regressors(self) -> tuple:
@@ -120,7 +130,8 @@ def candidate(ctx: Context, h: fx.Hypothesis) -> CandidateForce:
     def features(df):
         return fx.effect_features(spec, signals(df, ctx, wanted))
     return CandidateForce(h.family, h.regressor, h.shape, tuple(h.names), tuple(h.units), features, h.description,
-                          generic=h.generic, also=tuple(h.also), structural=h.structural, spec=spec)
+                          generic=h.generic, also=tuple(h.also), structural=h.structural, spec=spec,
+                          bounds=tuple(tuple(b) for b in h.bounds))
 
 
 def channels_of(df: pd.DataFrame) -> tuple:

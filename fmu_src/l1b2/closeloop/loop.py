@@ -26,7 +26,8 @@ Procedure (TEST is never used for fitting or choosing):
 
    a. *shortlist*: every candidate of the library (default
       :func:`l1b2.closeloop.candidates.full_library`; families already added
-      excluded) scored exactly against the fixed current model
+      excluded, and candidates that could reproduce an added force,
+      :func:`~l1b2.closeloop.acceptance.collinear`) scored exactly against the fixed current model
       (:mod:`l1b2.closeloop.selection`: linearised held-out gain over runs,
       run-level Wilcoxon p-value, AIC); the best of each family passing
       ``min_gain``, ``alpha`` / number of families and an AIC improvement,
@@ -67,7 +68,7 @@ from . import chain
 from . import residuals as res
 from .candidates import CandidateSource, Context, full_library, training_summary
 from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT_FOLDS, DEFAULT_REFIT_NFEV,
-                         EffectSet, RefitCV, RefitSettings, Validated, accepts, chain_cv_errors, cv_errors,
+                         EffectSet, RefitCV, RefitSettings, Validated, accepts, chain_cv_errors, collinear, cv_errors,
                          fold_start_phi, materiality, refit, stratified_folds, validated)
 from .guard import checked_fit
 from .result import CloseLoopResult, ResidualAnalysis
@@ -267,7 +268,8 @@ class CloseLoop(EstimatorSettings):
             cur = it.model
             v_cur = cur.predict_free_run(dtr)
             r = res.drive_residual(dtr, v_cur)
-            cands = [c for c in pool if c.family not in it.effects.families]
+            cands = [c for c in pool if c.family not in it.effects.families
+                     and not collinear(c, it.effects, dtr, mask)]
             say(f"round {n_rnd}: scoring {len(cands)} candidate effects (linearised)")
             scores = score_candidates(cands, r, dtr, mask, cur.params_, m_s, v_pred=v_cur, k=self.k_folds,
                                       seed=self.seed)
@@ -563,10 +565,22 @@ def _metrics(model, dtr, dte, train_free_run=None) -> dict:
 
 
 def _parameters(model, effects: EffectSet) -> dict:
-    """Every added parameter of the final model: value, stderr, 95 % interval, unit."""
-    return {n: {"value": float(model.extra_params_[n]), "stderr": float(model.extra_stderr_[n]),
-                "ci95": [float(x) for x in model.extra_ci95_[n]], "unit": u}
-            for c in effects.candidates for n, u in zip(c.names, c.units)}
+    """Every added parameter of the final model: value, stderr, 95 % interval, unit, and whether it is identified.
+
+    A parameter without a finite standard error is named unidentifiable and
+    reported without a value (``value``, ``stderr``, ``ci95`` None,
+    ``unidentifiable`` True): the data do not determine it.
+    """
+    out = {}
+    for c in effects.candidates:
+        for n, u in zip(c.names, c.units):
+            se = float(model.extra_stderr_[n])
+            if np.isfinite(se):
+                out[n] = {"value": float(model.extra_params_[n]), "stderr": se,
+                          "ci95": [float(x) for x in model.extra_ci95_[n]], "unit": u, "unidentifiable": False}
+            else:
+                out[n] = {"value": None, "stderr": None, "ci95": None, "unit": u, "unidentifiable": True}
+    return out
 
 
 def _effect_record(c, rec: dict, params: dict | None) -> dict:

@@ -343,6 +343,10 @@ def markdown_report(rep: dict) -> str:
         lines += ["## Extended model's new parameters", "", "| name | value | stderr | 95 % interval | unit |",
                   "|---|---|---|---|---|"]
         for n, p in rep["extended_parameters"].items():
+            if p.get("unidentifiable"):
+                lines.append(f"| {n} | unidentifiable (no standard error: the data do not determine it) | | | "
+                             f"{p['unit']} |")
+                continue
             ci = p.get("ci95") or [None, None]
             lines.append(f"| {n} | {sig(p['value'])} | {sig(p['stderr'])} | [{sig(ci[0])}, {sig(ci[1])}] | "
                          f"{p['unit']} |")

@@ -163,6 +163,9 @@ class Hypothesis:
     generic: bool = False
     also: tuple = ()
     structural: str = ""
+    #: physical ranges of the parameters, ``((lo, hi), ...)`` one per name (empty: unbounded); the identification
+    #: keeps each value inside its range
+    bounds: tuple = ()
 
 
 # ---------------------------------------------------------------------------
