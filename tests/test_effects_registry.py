@@ -19,7 +19,9 @@ def _signals(n=50, seed=0):
     rng = np.random.default_rng(seed)
     return {"t": np.linspace(0, 300, n), "s": rng.uniform(-0.012, 0.012, n), "V0": rng.uniform(220, 324, n),
             "load": rng.uniform(-0.09, 0.09, n), "d": rng.choice([-1.0, 1.0], n), "T": rng.uniform(25, 40, n),
-            "v_base": rng.uniform(-0.3, 0.3, n), "a_base": rng.normal(0, 1, n)}
+            "v_base": rng.uniform(-0.3, 0.3, n), "a_base": rng.normal(0, 1, n),
+            # the protocol clock as a logged channel (l1b2.predictor.effects.channels): samples and run means
+            "col:time_s": np.linspace(0, 300, n), "run:time_s": np.repeat(np.linspace(0, 300, 5), n // 5)}
 
 
 @pytest.mark.parametrize("kind", fx.kinds())

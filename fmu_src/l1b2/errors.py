@@ -92,6 +92,15 @@ class IdentificationError(L1B2Error):
     """Identification failed or was asked something the data cannot answer."""
 
 
+class FitDivergedError(IdentificationError):
+    """An identification ended non-finite or diverged, also after its retry from the identifier's multistart.
+
+    Raised instead of drawing any conclusion from the broken fit (the
+    close-the-loop baseline or the joint re-identification after a round);
+    the message names the fit, what was wrong with it and the retry.
+    """
+
+
 class SpecError(L1B2Error):
     """A study specification (``l1b2 sweep --spec``) is invalid; the message names the key.
 

@@ -26,8 +26,6 @@ from typing import Any
 
 import numpy as np
 
-from .units import tidy_float
-
 __all__ = ["strict_json", "json_float", "from_json_float", "dumps", "sig"]
 
 
@@ -38,7 +36,7 @@ def json_float(x, digits: int | None = None) -> float | str | None:
         return None
     if math.isinf(v):
         return "inf" if v > 0 else "-inf"
-    return v if digits is None else tidy_float(v, digits)
+    return v if digits is None else float(f"{v:.{digits}g}")
 
 
 def from_json_float(x) -> float:
@@ -52,7 +50,7 @@ def strict_json(x: Any, digits: int | None = None) -> Any:
     """``x`` with every float finite or replaced by the rule, numpy -> Python, tuples -> lists.
 
     ``digits``: finite floats rounded to that many significant digits
-    (:func:`l1b2.units.tidy_float`), for reports people read; ``None`` keeps
+    (as :func:`l1b2.units.tidy_float`), for reports people read; ``None`` keeps
     them exact (results that are read back, e.g. ``report.json``).
     """
     if isinstance(x, dict):

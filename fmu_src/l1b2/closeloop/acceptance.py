@@ -60,7 +60,19 @@ class EffectSet:
         return {c.family for c in self.candidates}
 
     def start(self) -> np.ndarray:
-        return np.concatenate(self.phi) if self.phi else np.zeros(0)
+        """The parameters' start values, each candidate's inside its physical range."""
+        return np.concatenate([c.clip(p) for c, p in zip(self.candidates, self.phi)]) if self.phi else np.zeros(0)
+
+    def bounds(self) -> tuple[tuple, tuple] | None:
+        """``(lower, upper)`` of every parameter in order (None when no candidate is bounded)."""
+        if not any(c.bounds for c in self.candidates):
+            return None
+        lo, hi = [], []
+        for c in self.candidates:
+            b = c.bounds or ((-np.inf, np.inf),) * c.n_params
+            lo.extend(float(x[0]) for x in b)
+            hi.extend(float(x[1]) for x in b)
+        return tuple(lo), tuple(hi)
 
     def extra(self) -> ExtraForces | None:
         """The joint extra forces (None when empty)."""
@@ -73,8 +85,9 @@ class EffectSet:
         names = tuple(n for c in cands for n in c.names)
         units = tuple(u for c in cands for u in c.units)
         desc = "; ".join(c.description for c in cands)
+        lo, hi = self.bounds() or (None, None)
         return ExtraForces(names=names, units=units, features=features, start=tuple(self.start()),
-                           description=desc)
+                           lower=lo, upper=hi, description=desc)
 
     def with_phi(self, phi_all) -> EffectSet:
         """The same candidates with the parameter values ``phi_all`` (flat, in order)."""
@@ -83,6 +96,37 @@ class EffectSet:
             out.append(np.asarray(phi_all[i:i + c.n_params], float))
             i += c.n_params
         return EffectSet(self.candidates, tuple(out))
+
+
+#: relative residual below which an added effect's force lies in a candidate's span (collinear, :func:`collinear`)
+COLLINEAR_RTOL = 1e-3
+
+
+def collinear(candidate: CandidateForce, effects: EffectSet, df: pd.DataFrame, mask: np.ndarray,
+              rtol: float = COLLINEAR_RTOL) -> bool:
+    """Whether ``candidate`` can reproduce a force already added: some added column lies in its span.
+
+    Each column ``f`` of the added effects' features (on the masked samples) is
+    fitted by least squares on the candidate's columns; collinear when the
+    residual's norm is below ``rtol`` of ``|f|``. Both in one model would trade
+    their parameters against each other (a pulley coefficient of -22.9
+    cancelled by a generic load term of -20.4), so such a candidate is not
+    offered once the effect is in.
+    """
+    if not effects.candidates:
+        return False
+    m = np.asarray(mask, bool)
+    C = np.asarray(candidate.features(df), float).reshape(len(df), -1)[m]
+    for c in effects.candidates:
+        F = np.asarray(c.features(df), float).reshape(len(df), -1)[m]
+        for f in F.T:
+            nf = float(np.linalg.norm(f))
+            if nf == 0:
+                continue
+            coef = np.linalg.lstsq(C, f, rcond=None)[0]
+            if float(np.linalg.norm(f - C @ coef)) < rtol * nf:
+                return True
+    return False
 
 
 def stratified_folds(df: pd.DataFrame, k: int, seed: int = 0) -> list[np.ndarray]:
@@ -155,13 +199,14 @@ class Validated:
 
 
 def refit(df: pd.DataFrame, mask: np.ndarray, m_s: float, init, effects: EffectSet, settings: RefitSettings, *,
-          max_outer: int = 2) -> Validated:
+          max_outer: int = 2, n_starts: int = 1) -> Validated:
     """The model with ``effects``, re-identified on ``df`` by one warm local search (bounded budget).
 
-    The search is the least-squares alternation (``noise_fit="alternate"``) whatever the baseline's.
+    The search is the least-squares alternation (``noise_fit="alternate"``) whatever the baseline's;
+    ``n_starts >= 2`` adds the identifier's data-driven multistart track to the warm one (the better is kept).
     """
     extra = effects.extra()
-    est = PredictorIdentifier(order=settings.order, criterion="free_run", fixed="recommended", n_starts=1,
+    est = PredictorIdentifier(order=settings.order, criterion="free_run", fixed="recommended", n_starts=n_starts,
                               seed=settings.seed, extra=extra, init=init,
                               init_extra=effects.start() if extra is not None else None, max_nfev=settings.max_nfev,
                               max_outer=max_outer, noise=settings.noise, noise_fit="alternate")

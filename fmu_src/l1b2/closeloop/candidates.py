@@ -60,6 +60,16 @@ class CandidateForce:
     #: than adding an effect the paper's physics lacks; such terms are traced after the missing effects
     structural: str = ""
     spec: dict = field(default_factory=dict, repr=False, compare=False)
+    #: physical ranges of the parameters (``((lo, hi), ...)``, empty: unbounded), kept by the identification
+    bounds: tuple = ()
+
+    def clip(self, phi) -> np.ndarray:
+        """``phi`` inside :attr:`bounds` (unchanged when unbounded)."""
+        phi = np.asarray(phi, float).ravel()
+        if not self.bounds:
+            return phi
+        lo, hi = np.array(self.bounds, float).T
+        return np.clip(phi, lo, hi)
 
     @property
     def regressors(self) -> tuple:
@@ -100,6 +110,11 @@ def signals(df: pd.DataFrame, ctx: Context, wanted) -> dict:
          "d": df[dataio.DIRECTION].to_numpy(float)}
     if "T" in wanted:
         x["T"] = df[dataio.TEMPERATURE].to_numpy(float)
+    for key in wanted:   # logged channels (l1b2.predictor.effects.channels): samples, or each run's mean
+        if key.startswith("col:"):
+            x[key] = df[key[4:]].to_numpy(float)
+        elif key.startswith("run:"):
+            x[key] = df.groupby(dataio.RUN, sort=False)[key[4:]].transform("mean").to_numpy(float)
     if {"v_base", "a_base"} & set(wanted):
         x["v_base"] = np.asarray(ctx.baseline_free_run(df), float)
         starts = [sl.start for _, sl in dataio.run_slices(df[dataio.RUN])]
@@ -115,7 +130,34 @@ def candidate(ctx: Context, h: fx.Hypothesis) -> CandidateForce:
     def features(df):
         return fx.effect_features(spec, signals(df, ctx, wanted))
     return CandidateForce(h.family, h.regressor, h.shape, tuple(h.names), tuple(h.units), features, h.description,
-                          generic=h.generic, also=tuple(h.also), structural=h.structural, spec=spec)
+                          generic=h.generic, also=tuple(h.also), structural=h.structural, spec=spec,
+                          bounds=tuple(tuple(b) for b in h.bounds))
+
+
+def channels_of(df: pd.DataFrame) -> tuple:
+    """The candidate channels of a frame: every numeric column beyond the required ones and the speed, then the clock.
+
+    One ``{"name", "kind", "mean", "sd", "within_run"}`` each (``kind``:
+    ``"logged"``, ``"protocol"`` for the session clock ``time_s``, or
+    ``"response"`` for a measured response of the motor
+    (:data:`l1b2.predictor.effects.channels.RESPONSE_COLUMNS`: listed, no hypothesis);
+    ``sd`` 0 for a constant column, which is listed but gets no hypothesis;
+    ``within_run``: it varies inside some run).
+    """
+    required = (set(dataio.REQUIRED_COLUMNS) | {dataio.SPEED}) - {dataio.TIME}   # speed: the measured output
+    out = []
+    names = [c for c in df.columns if c not in required and c != dataio.TIME
+             and pd.api.types.is_numeric_dtype(df[c]) and not pd.api.types.is_bool_dtype(df[c])]
+    for name in names + [dataio.TIME]:
+        c = df[name].to_numpy(float)
+        if not np.all(np.isfinite(c)):
+            continue
+        within = bool((df.groupby(dataio.RUN, sort=False)[name].agg(np.ptp) > 0).any())
+        kind = ("protocol" if name == dataio.TIME else "response" if name in fx.channels.RESPONSE_COLUMNS
+                else "logged")
+        out.append({"name": str(name), "kind": kind,
+                    "mean": float(np.mean(c)), "sd": float(np.std(c)), "within_run": within})
+    return tuple(out)
 
 
 def training_summary(ctx: Context, df_train: pd.DataFrame) -> fx.TrainingSummary:
@@ -136,7 +178,7 @@ def training_summary(ctx: Context, df_train: pd.DataFrame) -> fx.TrainingSummary
                              voltage_median=float(np.median(V)), ranges=ranges,
                              temperature_ref=ctx.temperature_ref,
                              temperature_range=None if T is None else (float(T.min()), float(T.max())),
-                             spectral_period_m=ctx.spectral_period_m)
+                             spectral_period_m=ctx.spectral_period_m, channels=channels_of(df_train))
     ctx.summaries[key] = (df_train, out)
     return out
 

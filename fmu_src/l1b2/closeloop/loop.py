@@ -26,7 +26,8 @@ Procedure (TEST is never used for fitting or choosing):
 
    a. *shortlist*: every candidate of the library (default
       :func:`l1b2.closeloop.candidates.full_library`; families already added
-      excluded) scored exactly against the fixed current model
+      excluded, and candidates that could reproduce an added force,
+      :func:`~l1b2.closeloop.acceptance.collinear`) scored exactly against the fixed current model
       (:mod:`l1b2.closeloop.selection`: linearised held-out gain over runs,
       run-level Wilcoxon p-value, AIC); the best of each family passing
       ``min_gain``, ``alpha`` / number of families and an AIC improvement,
@@ -65,10 +66,11 @@ from ..predictor.effects import ExtendedPredictor, IdentifiedEffect
 from ..predictor.setup import PredictorSetup
 from . import chain
 from . import residuals as res
-from .candidates import CandidateSource, Context, full_library
+from .candidates import CandidateSource, Context, full_library, training_summary
 from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT_FOLDS, DEFAULT_REFIT_NFEV,
-                         EffectSet, RefitCV, RefitSettings, Validated, accepts, chain_cv_errors, cv_errors,
+                         EffectSet, RefitCV, RefitSettings, Validated, accepts, chain_cv_errors, collinear, cv_errors,
                          fold_start_phi, materiality, refit, stratified_folds, validated)
+from .guard import checked_fit
 from .result import CloseLoopResult, ResidualAnalysis
 from .selection import (DEFAULT_ALPHA, DEFAULT_PARSIMONY, SHORTLIST_MIN_GAIN, Score, best_per_family, design,
                         score_candidates, shortlist, significance_level)
@@ -193,7 +195,9 @@ class CloseLoop(EstimatorSettings):
         mask_tr = np.array(train.mask)
 
         say("baseline: identifying the Eq. 29 predictor on TRAIN")
-        base = self._identify(dtr, m_s, mask_tr)
+        base = checked_fit(lambda: self._identify(dtr, m_s, mask_tr),
+                           lambda: self._identify(dtr, m_s, mask_tr, retry=True), dtr, mask_tr,
+                           "the baseline identification on TRAIN")
         v_te = base.predict_free_run(dte) if dte is not None else None
         baseline = _metrics(base, dtr, dte)
         it = _Iteration(model=base, effects=EffectSet(), rounds=[{"round": 0, "added": None, "metrics": baseline}])
@@ -210,6 +214,7 @@ class CloseLoop(EstimatorSettings):
         ctx = candidate_context(start.predict_free_run, m_s, fit_tr, mask_tr, analysis.peak)
         library = self.library if self.library is not None else full_library()
         pool = library(ctx, fit_tr)
+        it.channels = training_summary(ctx, fit_tr).channels
         self._iterate(it, pool, fit_tr, mask_tr, m_s, lambda mdl: _metrics(wrap(mdl), dtr, dte), say)
         it.model = wrap(it.model)
 
@@ -236,10 +241,14 @@ class CloseLoop(EstimatorSettings):
             calibrated_model=calibrated, calibrated_note=why)
         return self
 
-    def _identify(self, df: pd.DataFrame, m_s: float, mask: np.ndarray) -> Validated:
-        """The baseline Eq. 29 predictor identified on ``df`` (free-run maximum likelihood, multi-start)."""
+    def _identify(self, df: pd.DataFrame, m_s: float, mask: np.ndarray, retry: bool = False) -> Validated:
+        """The baseline Eq. 29 predictor identified on ``df`` (free-run maximum likelihood, multi-start).
+
+        ``retry``: the identifier's multistart again with twice the starts (at least 8) and the next seed.
+        """
+        n_starts, seed = (max(2 * self.n_starts, 8), self.seed + 1) if retry else (self.n_starts, self.seed)
         return Validated(PredictorIdentifier(order=self.order, criterion="free_run", fixed="recommended",
-                                             n_starts=self.n_starts, seed=self.seed, noise_fit=self.noise_fit,
+                                             n_starts=n_starts, seed=seed, noise_fit=self.noise_fit,
                                              noise=self.noise).fit(validated(df), slider_mass_kg=m_s, mask=mask))
 
     def refit_settings(self) -> RefitSettings:
@@ -259,7 +268,8 @@ class CloseLoop(EstimatorSettings):
             cur = it.model
             v_cur = cur.predict_free_run(dtr)
             r = res.drive_residual(dtr, v_cur)
-            cands = [c for c in pool if c.family not in it.effects.families]
+            cands = [c for c in pool if c.family not in it.effects.families
+                     and not collinear(c, it.effects, dtr, mask)]
             say(f"round {n_rnd}: scoring {len(cands)} candidate effects (linearised)")
             scores = score_candidates(cands, r, dtr, mask, cur.params_, m_s, v_pred=v_cur, k=self.k_folds,
                                       seed=self.seed)
@@ -300,8 +310,12 @@ class CloseLoop(EstimatorSettings):
                 it.significant = [s for s in short if any(t.candidate is s.candidate for t in ok)]
             say(f"round {n_rnd}: adding {pick.candidate.label}; re-identifying jointly")
             effects = it.effects.add(pick.candidate, pick.phi)
-            model = refit(dtr, mask, m_s, cur.params_, effects, self.refit_settings().budget(self.final_nfev),
-                          max_outer=3)
+            settings = self.refit_settings().budget(self.final_nfev)
+            model = checked_fit(
+                lambda: refit(dtr, mask, m_s, cur.params_, effects, settings, max_outer=3),
+                lambda: refit(dtr, mask, m_s, cur.params_, effects, settings, max_outer=3,
+                              n_starts=max(self.n_starts, 2)),
+                dtr, mask, f"the joint re-identification with {pick.candidate.label} (round {n_rnd})")
             it.model, it.effects = model, effects.with_phi(model.phi_)
             cur_err = None
             it.rounds.append({"round": n_rnd, "added": pick.candidate.label, "effect": pick.candidate.family,
@@ -421,6 +435,8 @@ class CloseLoop(EstimatorSettings):
                           "median_rho1": float(np.median([x["rho1"] for x in w])) if w else None},
             "position_spectrum_peak": a.peak,
             "measurement_chain": chain_rec,
+            "channels_considered": channels_considered(it.channels, scores, it.level, self.min_gain,
+                                                       it.effects.families),
         }
 
 
@@ -437,6 +453,7 @@ class _Iteration:
     significant: list = field(default_factory=list)
     level: float = float("nan")
     output_filter: chain.OutputFilter | None = None
+    channels: tuple = ()
 
 
 class ChainModel:
@@ -497,6 +514,38 @@ def order_traced(effects, speed_filter: bool, residual_trace, evidence=(), speed
     return traced + [r for r in residual_trace if r not in traced]
 
 
+def channels_considered(channels, scores: list[Score], level: float, min_gain: float, added) -> list[dict]:
+    """``diagnosis.channels_considered``: every candidate channel with its first-round evidence.
+
+    Per channel (:func:`l1b2.closeloop.candidates.channels_of`): its kind,
+    the regressor it is traced to, whether it varies within runs, the best
+    form of its family ``channel_<name>`` by linearised held-out gain with
+    that gain and its run-level p-value, ``significant`` (it passes the
+    Bonferroni screen: gain >= ``min_gain``, p < ``level``, AIC improved)
+    and ``added`` (the loop added it). A constant channel has no evidence (``note``).
+    """
+    from ..predictor.effects.channels import regressor_of
+    best = {s.candidate.family: s for s in best_per_family(scores)}
+    out = []
+    for ch in channels:
+        fam = f"channel_{ch['name']}"
+        s = best.get(fam)
+        rec = {"channel": ch["name"], "kind": ch["kind"], "regressor": regressor_of(ch["name"]),
+               "varies_within_runs": bool(ch["within_run"]), "best": None, "cv_gain": None, "p_value": None,
+               "significant": False, "added": fam in added, "note": ""}
+        if ch["kind"] == "response":
+            rec["note"] = "a measured response of the motor, not a cause: not a candidate"
+        elif not ch["sd"] > 0:
+            rec["note"] = "constant on TRAIN: no evidence possible"
+        elif s is None:
+            rec["note"] = "not scored (not in the candidate library)"
+        else:
+            rec.update(best=s.candidate.label, cv_gain=float(s.cv_gain), p_value=float(s.p_value),
+                       significant=bool(s.cv_gain >= min_gain and s.p_value < level and s.delta_aic < 0))
+        out.append(rec)
+    return out
+
+
 def _filter_record(rec: dict, params: dict | None) -> dict:
     return {"round": rec["round"], "effect": "speed_channel_filter", "label": "speed_channel_filter", "shape": "",
             "regressors": ["speed"], "generic": False, "structural": None,
@@ -516,10 +565,22 @@ def _metrics(model, dtr, dte, train_free_run=None) -> dict:
 
 
 def _parameters(model, effects: EffectSet) -> dict:
-    """Every added parameter of the final model: value, stderr, 95 % interval, unit."""
-    return {n: {"value": float(model.extra_params_[n]), "stderr": float(model.extra_stderr_[n]),
-                "ci95": [float(x) for x in model.extra_ci95_[n]], "unit": u}
-            for c in effects.candidates for n, u in zip(c.names, c.units)}
+    """Every added parameter of the final model: value, stderr, 95 % interval, unit, and whether it is identified.
+
+    A parameter without a finite standard error is named unidentifiable and
+    reported without a value (``value``, ``stderr``, ``ci95`` None,
+    ``unidentifiable`` True): the data do not determine it.
+    """
+    out = {}
+    for c in effects.candidates:
+        for n, u in zip(c.names, c.units):
+            se = float(model.extra_stderr_[n])
+            if np.isfinite(se):
+                out[n] = {"value": float(model.extra_params_[n]), "stderr": se,
+                          "ci95": [float(x) for x in model.extra_ci95_[n]], "unit": u, "unidentifiable": False}
+            else:
+                out[n] = {"value": None, "stderr": None, "ci95": None, "unit": u, "unidentifiable": True}
+    return out
 
 
 def _effect_record(c, rec: dict, params: dict | None) -> dict:
@@ -578,6 +639,10 @@ def calibrated_model(base, ext, effects: EffectSet, output_filter, source: dict)
     missing = [c.label for c in effects.candidates if not c.spec]
     if missing:
         return None, f"effects without a serialisable spec (custom candidates): {', '.join(missing)}"
+    from ..predictor.effects import SIGNALS, needs
+    logged = [c.label for c in effects.candidates if not needs(c.spec) <= set(SIGNALS)]
+    if logged:
+        return None, (f"effects reading logged channels that Predictor.fmu has no input for: {', '.join(logged)}")
     recs = tuple(IdentifiedEffect(c.family, c.label, dict(c.spec), tuple(c.names), tuple(c.units),
                         tuple(float(p) for p in phi), tuple(float(ext.extra_stderr_[n]) for n in c.names),
                         c.description, tuple(c.regressors), c.structural)

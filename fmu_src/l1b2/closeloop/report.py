@@ -119,7 +119,9 @@ class Diagnosis(_Record):
     ``refit_trials`` per round the cross-validated refits; ``rules`` the
     settings that decided; ``regressor_evidence``, ``whiteness`` and
     ``position_spectrum_peak`` the residual analysis; ``measurement_chain``
-    the speed channel's test. The nested evidence stays JSON-shaped.
+    the speed channel's test; ``channels_considered`` every logged channel
+    and protocol signal with its first-round evidence, significant or not.
+    The nested evidence stays JSON-shaped.
     """
 
     significant: bool
@@ -141,6 +143,7 @@ class Diagnosis(_Record):
     whiteness: dict = field(default_factory=dict)
     position_spectrum_peak: dict = field(default_factory=dict)
     measurement_chain: dict = field(default_factory=dict)
+    channels_considered: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
         out = {f.name: getattr(self, f.name) for f in fields(self)}

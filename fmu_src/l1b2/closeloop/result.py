@@ -324,6 +324,15 @@ def markdown_report(rep: dict) -> str:
         lines.append(f"| {c['label']} | {c['regressor']} | {c['n_params']} | {c['cv_gain']:.1%} | "
                      f"{c['p_value']:.2g} | {c['runs_improved']:.0%} | {c['delta_aic']:.1f} | "
                      f"{c['delta_bic']:.1f} |")
+    if d.get("channels_considered"):
+        lines += ["", "## Channels and protocol signals considered (first round, best form of each)", "",
+                  "| channel | kind | traced as | best form | held-out gain | p (runs) | significant | added |",
+                  "|---|---|---|---|---|---|---|---|"]
+        for c in d["channels_considered"]:
+            p = "-" if c["p_value"] is None else format(c["p_value"], ".2g")
+            lines.append(f"| {c['channel']} | {c['kind']} | {c['regressor']} | {c['best'] or c['note']} | "
+                         f"{_pct(c['cv_gain'], '.1%')} | {p} | "
+                         f"{'yes' if c['significant'] else 'no'} | {'yes' if c['added'] else 'no'} |")
     lines += ["", "## Residual evidence per regressor (first round, cross-validated over runs)", "",
               "| regressor | held-out gain | p (runs) |", "|---|---|---|"]
     for e in d["regressor_evidence"][0] if d["regressor_evidence"] else []:
@@ -336,6 +345,10 @@ def markdown_report(rep: dict) -> str:
         lines += ["## Extended model's new parameters", "", "| name | value | stderr | 95 % interval | unit |",
                   "|---|---|---|---|---|"]
         for n, p in rep["extended_parameters"].items():
+            if p.get("unidentifiable"):
+                lines.append(f"| {n} | unidentifiable (no standard error: the data do not determine it) | | | "
+                             f"{p['unit']} |")
+                continue
             ci = p.get("ci95") or [None, None]
             lines.append(f"| {n} | {sig(p['value'])} | {sig(p['stderr'])} | [{sig(ci[0])}, {sig(ci[1])}] | "
                          f"{p['unit']} |")

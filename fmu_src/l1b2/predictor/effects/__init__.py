@@ -16,7 +16,8 @@ Families (registration order = the library's candidate order):
 :mod:`~.drive` (``drive_saturation``), :mod:`~.motion`
 (``speed_dependent_friction``, ``inertia_mismatch``), :mod:`~.interactions`
 (``load_slope_voltage``, ``damping_voltage``, ``position_load``) and
-:mod:`~.generic` (``smooth``, ``smooth_pair``).
+:mod:`~.generic` (``smooth``, ``smooth_pair``) and :mod:`~.channels` (``channel``: every
+logged channel and the protocol's clock in generic forms).
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ from .model import (ExtendedPredictor, IdentifiedEffect, apply_output_filter, fi
 from .plugins import load_all as _load_plugins
 
 #: the package's family modules, imported (and so registered) in this order: the candidate library's order
-FAMILY_MODULES = ("thermal", "direction", "bar", "load_path", "drive", "motion", "interactions", "generic")
+FAMILY_MODULES = ("thermal", "direction", "bar", "load_path", "drive", "motion", "interactions", "generic", "channels")
 for _m in FAMILY_MODULES:
     importlib.import_module(f"{__name__}.{_m}")
 _load_plugins()

@@ -124,7 +124,7 @@ class TrainingSummary:
     ``ranges``: the TRAIN scalars of the generic terms (``t_lo``/``t_hi``,
     ``s_lo``/``s_hi``, ``V_lo``/``V_hi``, ``load_abs``, ``v_lo``/``v_hi`` of
     the baseline's |free-run speed|); ``temperature_range`` (min, max) [degC]
-    when the data log a temperature.
+    when the data log a temperature; ``channels`` the candidate channels.
     """
 
     m_s: float
@@ -135,6 +135,9 @@ class TrainingSummary:
     temperature_ref: float | None = None
     temperature_range: tuple | None = None
     spectral_period_m: float | None = None
+    #: the logged channels (:mod:`l1b2.predictor.effects.channels`): ``{"name", "kind", "mean", "sd",
+    #: "within_run"}`` per numeric column beyond the required ones, and the session clock
+    channels: tuple = ()
 
     @property
     def has_temperature(self) -> bool:
@@ -160,6 +163,9 @@ class Hypothesis:
     generic: bool = False
     also: tuple = ()
     structural: str = ""
+    #: physical ranges of the parameters, ``((lo, hi), ...)`` one per name (empty: unbounded); the identification
+    #: keeps each value inside its range
+    bounds: tuple = ()
 
 
 # ---------------------------------------------------------------------------

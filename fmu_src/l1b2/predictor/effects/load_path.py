@@ -2,7 +2,8 @@
 
 ``dF = -a g |m_load|``, opposing the motion. Home: ``Slider.pulley_mu``,
 the same law in both models (``pulley_mu g |m_load|``): the identified
-coefficient is copied, clipped at 0.
+coefficient is copied. It is identified inside its physical range
+(:data:`MU_RANGE`).
 """
 
 from __future__ import annotations
@@ -11,6 +12,11 @@ import numpy as np
 
 from ...units import G_M_S2
 from .base import Effect, register, signal
+
+
+#: the physical range of a Coulomb coefficient: friction opposes the motion (>= 0) and is below sliding on dry
+#: metal (1); the identification keeps ``pulley_mu`` inside it
+MU_RANGE = (0.0, 1.0)
 
 
 @register
@@ -25,7 +31,7 @@ class LoadPathFriction(Effect):
         return (-G_M_S2 * np.abs(signal(x, "load")))[:, None]
 
     def grid(self, train):
-        return [self.hypothesis(("pulley_mu",), ("1",), {})]
+        return [self.hypothesis(("pulley_mu",), ("1",), {}, bounds=(MU_RANGE,))]
 
     def calibrate(self, effect, model, mp):
         from dataclasses import replace

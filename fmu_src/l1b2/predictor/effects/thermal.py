@@ -1,4 +1,4 @@
-"""Self-heating of the stator: its resonances move (about -10 Hz/K, physics notes), the drive's force factor drifts.
+"""Self-heating of the stator: its resonances move (about -10 Hz/K, docs/explanation/physics.md), the drive's force factor drifts.
 
 * ``thermal_drift`` (time): ``dF = V0/V_ref * f(t)``, f a cubic spline in
   the session clock over TRAIN's time range (2 or 4 inner knots).

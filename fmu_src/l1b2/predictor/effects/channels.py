@@ -1,0 +1,117 @@
+"""``channel`` (an open set of regressors): a logged channel or a signal of the recording protocol, in generic
+physical forms.
+
+Any numeric column of the measurements beyond the required ones (the data
+format's optional ``frequency_Hz`` and ``temperature_C`` included, and
+whatever else the rig logs, but the measured responses of
+:data:`RESPONSE_COLUMNS`) is a candidate channel; so is the recording
+protocol's own clock, the session time ``time_s`` (which also orders the
+runs). Nothing about a channel's physics is assumed: its standardised value
+``z = (c - mean) / sd`` (TRAIN's mean and standard deviation of the samples)
+enters in one of three generic forms, each linear in one parameter ``a``
+[N per standard deviation]:
+
+* ``friction``: it scales the friction level, ``dF = -a z`` (drive
+  coordinates: a force opposing the motion, whichever the direction);
+* ``force_factor``: it scales the drive's force factor, ``dF = a (V0/V_ref) z``;
+* ``force``: it adds a force fixed in the lab frame, ``dF = a d z`` (``d`` the direction).
+
+and at one of two levels: ``run`` (``c`` is the run's mean of the channel:
+an effect that differs between runs, not along the stroke) or ``sample``
+(``c`` is the sample's value: along the stroke; listed only for a channel
+that varies within runs). Every form and level of one channel is one
+family for the significance correction (``channel_<column>``).
+
+Signals: ``col:<column>`` (the sample values) and ``run:<column>`` (each
+run's mean, per sample), taken from the data frame by
+:func:`l1b2.closeloop.candidates.signals`. They are not inputs of
+``Predictor.fmu``: a model with a channel effect is not exported.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .base import V_REF, Effect, EffectSpecError, num, register, signal
+
+FORMS = ("friction", "force_factor", "force")
+LEVELS = ("run", "sample")
+#: the session clock's column: the recording protocol's signal, always a candidate
+SESSION_TIME = "time_s"
+#: logged columns that are measured *responses* of the motor, not causes: listed, never candidates. A regressor
+#: that is the motor's own response (the vibrometer's tip-velocity amplitude follows the drive force the model
+#: predicts) would stand in for the model instead of explaining it, and a predictor needing it could not predict
+RESPONSE_COLUMNS = ("tip_velocity_amp_m_s",)
+#: report regressor of the channels that have a name in the rest of the loop (others: the column itself)
+REGRESSOR_NAMES = {"time_s": "time", "temperature_C": "temperature", "frequency_Hz": "frequency"}
+
+
+def regressor_of(column: str) -> str:
+    """The regressor name a channel is traced to (``diagnosis.traced_to``)."""
+    return REGRESSOR_NAMES.get(column, column)
+
+
+def signal_key(column: str, level: str) -> str:
+    """The signal of a channel at a level: ``col:<column>`` (samples) or ``run:<column>`` (run means)."""
+    if level not in LEVELS:
+        raise EffectSpecError(f"channel level {level!r} is not one of {', '.join(LEVELS)}")
+    return ("col:" if level == "sample" else "run:") + column
+
+
+def form_factor(form: str, x) -> np.ndarray:
+    """The generic physical form's factor per sample: ``-1`` (friction), ``V0/V_ref`` (force factor), ``d`` (force)."""
+    if form == "friction":
+        return -np.ones(len(signal(x, "d")))
+    if form == "force_factor":
+        return signal(x, "V0") / V_REF
+    if form == "force":
+        return signal(x, "d")
+    raise EffectSpecError(f"channel form {form!r} is not one of {', '.join(FORMS)}")
+
+
+@register
+class Channel(Effect):
+    kind = "channel"
+    regressor = "channel"
+    group = "generic"
+    description = "a logged channel or protocol signal in a generic physical form"
+
+    def needs(self, spec):
+        return super().needs(spec) | {signal_key(str(spec.get("channel")), str(spec.get("level")))}
+
+    def features(self, spec, x):
+        c = signal(x, signal_key(str(spec.get("channel")), str(spec.get("level"))))
+        sd = num(spec, "sd")
+        if not sd > 0:
+            raise EffectSpecError(f"channel {spec.get('channel')!r}: standard deviation {sd} is not positive")
+        z = (c - num(spec, "mean")) / sd
+        return (form_factor(str(spec.get("form")), x) * z)[:, None]
+
+    def width(self, spec):
+        return 1
+
+    def grid(self, train):
+        chans = list(train.channels)
+        if not any(ch["name"] == SESSION_TIME for ch in chans):   # the protocol's clock, from TRAIN's time range
+            t0, t1 = train.time_range
+            chans.append({"name": SESSION_TIME, "kind": "protocol", "mean": 0.5 * (t0 + t1),
+                          "sd": (t1 - t0) / np.sqrt(12.0), "within_run": True})
+        out = []
+        for ch in chans:
+            if not ch.get("sd", 0) > 0 or ch.get("kind") == "response":
+                continue   # constant on TRAIN (no evidence possible) or a measured response: considered, not a cause
+            name, reg = ch["name"], regressor_of(ch["name"])
+            for level in LEVELS if ch.get("within_run", True) else ("run",):
+                for form in FORMS:
+                    out.append(self.hypothesis(
+                        [f"{name}_{form}_{level}"], ["N"],
+                        {"channel": name, "form": form, "level": level, "mean": float(ch["mean"]),
+                         "sd": float(ch["sd"])}, f"{form}, {level}", family=f"channel_{name}", regressor=reg,
+                        generic=True, description=f"{ch.get('kind', 'logged')} channel {name} "
+                                                  f"({'run mean' if level == 'run' else 'per sample'}) "
+                                                  f"{_FORM_TEXT[form]}"))
+        return out
+
+
+_FORM_TEXT = {"friction": "scaling the friction level", "force_factor": "scaling the drive's force factor",
+              "force": "adding a force"}

@@ -1,0 +1,109 @@
+"""An open set of regressors (issue 28, item 2): every logged channel and the protocol's clock is a candidate.
+
+Realistic world (Eq. 29 not exact), seed 21's clean rig data, post-processed with two extra logged columns:
+``aux_relay`` (0 or 1 per run, a switch the rig logs and no document names) whose runs at 1 move 5 % faster
+(speed and position scaled together about the run's start, so the position stays the integral of the speed),
+and ``ambient_noise`` (pure noise: a random level per run plus white noise per sample, acting on nothing).
+"""
+
+import functools
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+from l1b2.closeloop.loop import close_loop
+from l1b2.data.measurements import load_measurements, write_measurements
+from l1b2.data.metrics import report_metrics
+from l1b2.ident.estimator import PredictorIdentifier
+from rigcache import assert_round_trips, case_row, held_out_nrmse, rig_dir, world_plan
+
+SEED = 21
+GAIN = 0.05
+
+
+def _with_channels(m, rng, effect=True):
+    """The measurements with the two logged columns; runs with ``aux_relay`` 1 scaled by 1 + GAIN (if ``effect``)."""
+    df = m.df.copy()
+    runs = pd.unique(df["run"])
+    relay = dict(zip(runs, rng.integers(0, 2, len(runs)).astype(float)))
+    level = dict(zip(runs, rng.normal(0, 1, len(runs))))
+    df["aux_relay"] = df["run"].map(relay).to_numpy(float)
+    df["ambient_noise"] = df["run"].map(level).to_numpy(float) + rng.normal(0, 0.5, len(df))
+    if effect:
+        f = 1.0 + GAIN * df["aux_relay"].to_numpy()
+        s0 = df.groupby("run", sort=False)["position_m"].transform("first").to_numpy()
+        df["position_m"] = s0 + f * (df["position_m"].to_numpy() - s0)
+        df["speed_m_s"] = f * df["speed_m_s"].to_numpy()
+    return df
+
+
+@functools.cache
+def _data(tmp):
+    d = rig_dir(f"realistic_clean_{SEED}", injection_seed=SEED, plan=world_plan("realistic", SEED), world="realistic")
+    rng = np.random.default_rng(SEED)
+    out = {}
+    for part in ("train", "test"):
+        m = load_measurements(d / f"{part}.csv")
+        path = write_measurements(_with_channels(m, rng), f"{tmp}/{part}.csv", {"slider_mass_kg": m.slider_mass_kg})
+        out[part] = load_measurements(path)
+    tr, te = load_measurements(d / "train.csv"), load_measurements(d / "test.csv")
+    return out["train"], out["test"], tr, te
+
+
+def test_channel_features_are_the_generic_forms_of_the_standardised_channel():
+    # reference: the forms written out: friction -z, force factor V0/300 z, force d z; z = (c - mean)/sd, c the
+    # sample value or the run's mean
+    from l1b2.predictor import effects as fx
+    c = np.array([1.0, 3.0, 2.0, 6.0])
+    run_mean = np.array([2.0, 2.0, 4.0, 4.0])
+    V0, d = np.array([300.0, 150.0, 240.0, 330.0]), np.array([1.0, -1.0, 1.0, -1.0])
+    x = {"V0": V0, "d": d, "col:aux": c, "run:aux": run_mean}
+    spec = {"kind": "channel", "channel": "aux", "mean": 2.0, "sd": 0.5}
+    z, zr = (c - 2.0) / 0.5, (run_mean - 2.0) / 0.5
+    F = {(f, lv): fx.effect_features({**spec, "form": f, "level": lv}, x)[:, 0]
+         for f in ("friction", "force_factor", "force") for lv in ("run", "sample")}
+    np.testing.assert_allclose(F["friction", "sample"], -z)
+    np.testing.assert_allclose(F["friction", "run"], -zr)
+    np.testing.assert_allclose(F["force_factor", "sample"], V0 / 300.0 * z)
+    np.testing.assert_allclose(F["force", "run"], d * zr)
+    assert fx.needs({**spec, "form": "force", "level": "run"}) == {"V0", "d", "run:aux"}
+
+
+def test_every_numeric_column_beyond_the_required_ones_is_a_channel():
+    from l1b2.closeloop.candidates import channels_of, signals
+    df = pd.DataFrame({"time_s": [0.0, 0.1, 5.0, 5.1], "run": [1, 1, 2, 2], "position_m": 0.0, "voltage_V": 200.0,
+                       "direction": 1, "load_kg": 0.0, "speed_m_s": 0.1, "frequency_Hz": 48500.0,
+                       "aux": [1.0, 1.0, 3.0, 3.0], "note": ["a", "b", "c", "d"], "tip_velocity_amp_m_s": 1.0})
+    ch = {c["name"]: c for c in channels_of(df)}
+    assert list(ch) == ["frequency_Hz", "aux", "tip_velocity_amp_m_s", "time_s"]  # not text nor the required ones
+    assert ch["tip_velocity_amp_m_s"]["kind"] == "response"
+    assert ch["frequency_Hz"]["sd"] == 0 and ch["aux"]["sd"] == pytest.approx(1.0)
+    assert not ch["aux"]["within_run"] and ch["time_s"]["within_run"] and ch["time_s"]["kind"] == "protocol"
+    x = signals(df, None, {"run:time_s", "col:aux"})
+    np.testing.assert_allclose(x["run:time_s"], [0.05, 0.05, 5.05, 5.05])
+    np.testing.assert_allclose(x["col:aux"], [1, 1, 3, 3])
+
+
+@pytest.mark.slow
+def test_an_effect_through_a_logged_channel_is_traced_and_a_noise_channel_is_not_added(tmp_path, record_property):
+    train, test, clean_tr, clean_te = _data(str(tmp_path))
+    res = close_loop(train, test)
+    assert_round_trips(res)
+    d = res.diagnosis
+    est = PredictorIdentifier(order=8, criterion="free_run", fixed="recommended", n_starts=4, seed=0,
+                              noise_fit="alternate").fit(clean_tr.df, slider_mass_kg=clean_tr.slider_mass_kg,
+                                                         mask=np.array(clean_tr.mask))
+    b0 = report_metrics(clean_te.df, est.predict_one_step(clean_te.df), est.predict_free_run(clean_te.df))
+    b0 = b0["free_run"]["nrmse"]
+    record_property("case", case_row("realistic", f"aux_relay x{1 + GAIN} {SEED}", res, b0))
+    considered = {c["channel"]: c for c in d["channels_considered"]}
+    assert {"aux_relay", "ambient_noise", "time_s", "frequency_Hz"} <= set(considered), considered
+    assert considered["frequency_Hz"]["note"].startswith("constant")
+    assert considered["tip_velocity_amp_m_s"]["kind"] == "response" and not considered["tip_velocity_amp_m_s"]["added"]
+    assert considered["aux_relay"]["added"] and considered["aux_relay"]["cv_gain"] > 0, json.dumps(considered)
+    assert "aux_relay" in d["traced_to"][:2], (d["traced_to"], d["message"])
+    assert not considered["ambient_noise"]["added"] and "ambient_noise" not in d["traced_to"]
+    assert considered["ambient_noise"]["cv_gain"] is not None     # considered: scored, with its evidence
+    b, a = held_out_nrmse(res)
+    assert a ** 2 <= b0 ** 2 + (b ** 2 - b0 ** 2) / 4, (b0, b, a, d["message"])

@@ -1,0 +1,101 @@
+"""A fit that fails says so (issue 28, item 5): a broken identification is retried, then refused in one line."""
+
+import numpy as np
+import pandas as pd
+import pytest
+from l1b2.cli import main as cli_main
+from l1b2.closeloop import guard
+from l1b2.errors import FitDivergedError, IdentificationError
+
+
+def _frame(n_runs=4, n=60):
+    rows = []
+    for r in range(n_runs):
+        d = 1 if r % 2 == 0 else -1
+        t = np.arange(n) * 1e-3 + r
+        v = d * (0.1 + 0.02 * r) * np.ones(n)
+        s = d * np.cumsum(np.abs(v)) * 1e-3 - d * 0.03
+        rows.append(pd.DataFrame({"time_s": t, "run": r, "position_m": s, "voltage_V": 200.0 + 20 * r,
+                                  "direction": d, "load_kg": 0.0 if r < 2 else 0.05, "speed_m_s": v}))
+    return pd.concat(rows, ignore_index=True)
+
+
+class _Pred:
+    def __init__(self, f):
+        self.f = f
+
+    def predict_free_run(self, df):
+        return self.f(df["speed_m_s"].to_numpy(float))
+
+
+def test_broken_is_non_finite_or_half_the_speeds_rms_missed():
+    df = _frame()
+    mask = np.ones(len(df), bool)
+    assert guard.broken(_Pred(lambda v: v * 1.01), df, mask) is None
+    # nrmse = |1 - g| exactly for a prediction g v: 0.49 passes, 0.5 and 1 (a zero prediction) do not
+    assert guard.broken(_Pred(lambda v: 0.51 * v), df, mask) is None
+    assert "50.0 %" in guard.broken(_Pred(lambda v: 0.5 * v), df, mask)
+    assert "100.0 %" in guard.broken(_Pred(lambda v: 0 * v), df, mask)
+    nan_one = _Pred(lambda v: np.where(np.arange(len(v)) == 7, np.nan, v))
+    assert "non-finite on 1 of" in guard.broken(nan_one, df, mask)
+    # only the mask counts
+    mask2 = mask.copy()
+    mask2[7] = False
+    assert guard.broken(nan_one, df, mask2) is None
+
+
+def test_checked_fit_retries_once_then_raises_naming_both():
+    df = _frame()
+    mask = np.ones(len(df), bool)
+    good, bad = _Pred(lambda v: v), _Pred(lambda v: np.full_like(v, np.inf))
+    calls = []
+
+    def fit_bad():
+        calls.append("fit")
+        return bad
+
+    def fails():
+        calls.append("retry")
+        raise IdentificationError("singular matrix")
+    assert guard.checked_fit(fit_bad, lambda: good, df, mask, "x") is good
+    assert guard.checked_fit(lambda: good, fails, df, mask, "x") is good   # no retry when the first is fine
+    calls.clear()
+    with pytest.raises(FitDivergedError) as exc:
+        guard.checked_fit(fit_bad, fails, df, mask, "the baseline identification on TRAIN")
+    assert calls == ["fit", "retry"]
+    msg = str(exc.value)
+    assert msg.startswith("the baseline identification on TRAIN diverged: its free run is non-finite")
+    assert "singular matrix" in msg and "\n" not in msg
+    assert isinstance(exc.value, IdentificationError)
+
+
+def test_close_loop_exits_non_zero_in_one_line_when_the_baseline_diverges(tmp_path, capsys, monkeypatch):
+    # the identification's solver ends non-finite (here: every fit predicts overflow); the loop retries from the
+    # identifier's multistart (more starts, the next seed), then refuses without writing a diagnosis
+    import l1b2.closeloop.loop as loop
+    fits = []
+
+    class Diverging:
+        def __init__(self, **kw):
+            self.kw = kw
+
+        def fit(self, data, slider_mass_kg=None, mask=None):
+            fits.append((self.kw["n_starts"], self.kw["seed"]))
+            return self
+
+        def predict_free_run(self, data):
+            return np.full(len(getattr(data, "df", data)), np.inf)
+
+    monkeypatch.setattr(loop, "PredictorIdentifier", Diverging)
+    df = _frame(8)
+    train, test = tmp_path / "train.csv", tmp_path / "test.csv"
+    df[df["run"] < 6].to_csv(train, index=False)
+    df[df["run"] >= 6].to_csv(test, index=False)
+    out = tmp_path / "cl"
+    code = cli_main(["close-loop", "--train", str(train), "--test", str(test), "--slider-mass", "0.3",
+                     "--report-dir", str(out), "--quiet", "--no-plots"])
+    err = capsys.readouterr().err
+    assert code != 0 and err.count("\n") == 1, err
+    assert "baseline identification on TRAIN diverged" in err and "retried from the identifier's multistart" in err
+    assert fits == [(4, 0), (8, 1)]   # the default 4 starts, then twice as many (at least 8), next seed
+    assert not (out / "report.json").exists()

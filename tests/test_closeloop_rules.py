@@ -1,0 +1,205 @@
+"""The close loop's selection rules and every effect's features, each against a formula written out here.
+
+Fast unit tests (seconds): a wrong fold split, a CV gain taken as 1 - sqrt(SSE1/SSE0), a dropped Bonferroni
+correction or a wrong sign in an effect's features fails one of them.
+"""
+
+import numpy as np
+import pandas as pd
+import pytest
+from l1b2.closeloop import acceptance as acc
+from l1b2.closeloop import residuals as res
+from l1b2.closeloop import selection as sel
+from l1b2.closeloop.candidates import CandidateForce
+from l1b2.predictor import effects as fx
+
+G = 9.81
+
+
+def _runs_frame(n_runs=23, seed=3):
+    rng = np.random.default_rng(seed)
+    rows = []
+    for r in range(n_runs):
+        rows.append(pd.DataFrame({"run": r, "direction": rng.choice([-1, 1]),
+                                  "voltage_V": rng.choice([220.0, 255.0, 290.0]), "time_s": r + np.arange(3) * 0.1}))
+    return pd.concat(rows, ignore_index=True)
+
+
+@pytest.mark.parametrize("k", [2, 4, 5])
+def test_stratified_folds_hold_out_every_run_exactly_once_and_balance_each_stratum(k):
+    df = _runs_frame()
+    folds = acc.stratified_folds(df, k, seed=7)
+    assert len(folds) == k
+    held = np.concatenate(folds)
+    assert sorted(held.tolist()) == sorted(pd.unique(df["run"]).tolist())   # each run once, none missing
+    first = df.groupby("run")[["direction", "voltage_V"]].first()
+    for _, stratum in first.groupby(["direction", "voltage_V"]):
+        counts = [int(np.isin(stratum.index, f).sum()) for f in folds]
+        assert max(counts) - min(counts) <= 1, counts
+    assert [f.tolist() for f in acc.stratified_folds(df, k, seed=7)] == [f.tolist() for f in folds]  # seeded
+
+
+@pytest.mark.parametrize("k", [3, 5])
+def test_run_folds_hold_out_every_run_exactly_once(k):
+    runs = np.repeat(np.arange(17), 4)
+    folds = res.run_folds(runs, k, seed=2)
+    assert len(folds) == k and sorted(np.concatenate(folds).tolist()) == list(range(17))
+    assert max(map(len, folds)) - min(map(len, folds)) <= 1
+
+
+def test_refit_cv_gain_is_one_minus_the_ratio_of_sums_of_squares():
+    c = CandidateForce("x", "time", "", ("a",), ("N",), features=None)
+    cur = acc.FoldErrors(np.array([4.0, 4.0, 2.0]), np.array([100.0, 100.0, 100.0]))
+    ext = acc.FoldErrors(np.array([1.0, 3.0, 1.0]), np.array([100.0, 100.0, 100.0]))
+    r = acc.RefitCV(c, cur, ext)
+    assert r.gain == pytest.approx(1 - 5.0 / 10.0)             # not 1 - sqrt(0.5)
+    assert r.folds_improved == 3
+    assert cur.nrmse == pytest.approx(np.sqrt(10.0 / 300.0))
+    assert acc.accepts(r, min_gain=0.5, min_drop=0.0) and not acc.accepts(r, min_gain=0.51, min_drop=0.0)
+    # most folds must improve: 1 of 3 is not enough, whatever the pooled gain
+    worse = acc.RefitCV(c, cur, acc.FoldErrors(np.array([0.1, 5.0, 3.0]), cur.ss_meas))
+    assert worse.gain == pytest.approx(1 - 8.1 / 10.0) and not acc.accepts(worse, min_gain=0.01, min_drop=0.0)
+    failed = acc.RefitCV(c, cur, acc.FoldErrors(ext.sse, ext.ss_meas, failed=1))
+    assert not acc.accepts(failed, min_gain=0.0, min_drop=0.0)
+
+
+def _held_out_sse(y, X, runs, folds):
+    """Per-run held-out SSE of least squares on X, fitted on the other folds (written out)."""
+    out = {}
+    for fold in folds:
+        te = np.isin(runs, fold)
+        beta = np.linalg.lstsq(X[~te], y[~te], rcond=None)[0]
+        e = y[te] - X[te] @ beta
+        for r in fold:
+            out[r] = float(np.sum(e[runs[te] == r] ** 2))
+    return out
+
+
+def test_linearised_cv_gain_is_one_minus_held_out_sse_ratio():
+    rng = np.random.default_rng(0)
+    runs = np.repeat(np.arange(12), 30)
+    n = len(runs)
+    N = rng.normal(size=(n, 2))
+    S = rng.normal(size=(n, 1))
+    y = 0.5 * N[:, 0] + 0.8 * S[:, 0] + rng.normal(0, 0.5, n)
+    folds = res.run_folds(runs, 4, 0)
+    solver = sel.FoldSolver(y, N, runs, folds)
+    gain, per_run = solver.gain(S)
+    A = np.column_stack([np.ones(n), N])
+    s0 = _held_out_sse(y, A, runs, folds)
+    s1 = _held_out_sse(y, np.column_stack([A, S]), runs, folds)
+    keys = sorted(s0)
+    sse0, sse1 = sum(s0[k] for k in keys), sum(s1[k] for k in keys)
+    assert gain == pytest.approx(1 - sse1 / sse0, rel=1e-6)
+    assert 0.2 < gain < 0.9 and abs(gain - (1 - np.sqrt(sse1 / sse0))) > 0.05   # the sqrt form is far off
+    np.testing.assert_allclose(sorted(per_run), sorted((np.array([s0[k] - s1[k] for k in keys]))
+                                                        / np.mean([s0[k] for k in keys])), rtol=1e-6)
+    # the residual analysis' gain follows the same formula (its ridge is negligible at lam=1e-12)
+    g2, _, _ = res.cv_gain(y, S, runs, folds, base=N, lam=1e-12)
+    assert g2 == pytest.approx(1 - sse1 / sse0, rel=1e-6)
+
+
+def _score(family, p, gain=0.3, aic=-5.0, generic=False, n=1):
+    c = CandidateForce(family, "time", "", tuple(f"p{i}" for i in range(n)), ("N",) * n, features=None,
+                       generic=generic)
+    return sel.Score(c, gain, p, 1.0, 0.0, np.zeros(n), aic)
+
+
+def test_significance_is_bonferroni_over_the_families_tested():
+    scores = [_score("a", 0.001), _score("a", 0.2), _score("b", 0.004), _score("c", 0.5), _score("d", 0.02)]
+    level = sel.significance_level(scores, alpha=0.02)
+    assert level == pytest.approx(0.02 / 4)                    # four families, not five candidates, not one
+    short = sel.shortlist(scores, level=level, min_gain=0.05, size=5)
+    assert [s.candidate.family for s in short] == ["a", "b"]   # p 0.02 < alpha but > alpha/4: out
+    assert [s.candidate.family for s in sel.shortlist(scores, level=0.02, min_gain=0.05, size=5)] == ["a", "b"]
+    assert not sel.shortlist([_score("a", 0.001, aic=1.0)], level=level, min_gain=0.05, size=5)  # AIC must improve
+    assert not sel.shortlist([_score("a", 0.001, gain=0.04)], level=level, min_gain=0.05, size=5)
+    choice = sel.choose(scores, alpha=0.02, min_gain=0.2)
+    assert choice.level == pytest.approx(0.005) and {s.candidate.family for s in choice.significant} == {"a", "b"}
+
+
+def test_trace_corrects_for_the_regressors_tested(monkeypatch):
+    # residuals.trace: a regressor enters only below alpha / number of regressors tested
+    ev = [res.Evidence("time", 0.5, 0.004, 1.0, 20), res.Evidence("load", 0.4, 0.0005, 1.0, 20)]
+    ev += [res.Evidence(f"r{i}", 0.0, 1.0, 0.0, 20) for i in range(6)]
+    calls = []
+
+    def fake(r, df, mask, *, k, seed, given=(), regressors=None):
+        calls.append(given)
+        return [e for e in ev if e.regressor not in given]
+    monkeypatch.setattr(res, "regressor_evidence", fake)
+    chosen, _ = res.trace(None, None, None, alpha=0.01)
+    assert chosen == ["load"]            # time's p 0.004 < 0.01 but > 0.01/8 (then 0.01/7): not traced
+
+
+# ---------------------------------------------------------------------------
+# every effect's features, written out
+# ---------------------------------------------------------------------------
+
+def _x(n=40, seed=1):
+    rng = np.random.default_rng(seed)
+    return {"t": np.linspace(0, 300, n), "s": rng.uniform(-0.012, 0.012, n), "V0": rng.uniform(220, 324, n),
+            "load": rng.uniform(-0.09, 0.09, n), "d": rng.choice([-1.0, 1.0], n), "T": rng.uniform(25, 40, n),
+            "v_base": rng.uniform(-0.3, 0.3, n), "a_base": rng.normal(0, 1, n)}
+
+
+def test_speed_dependent_friction_opposes_the_motion():
+    x = _x()
+    x["v_base"] = x["d"] * np.abs(x["v_base"])            # moving the way it is driven (data sign = d)
+    F = fx.effect_features({"kind": "speed_dependent_friction"}, x)
+    vp = np.abs(x["v_base"])
+    np.testing.assert_allclose(F, np.column_stack([-vp / 0.2, -vp ** 2 / 0.04]))
+    assert np.all(F <= 0)                                  # positive coefficients: a drag, whatever the direction
+    x["v_base"] = -x["v_base"]                             # moving against the drive: the drag changes sign
+    np.testing.assert_allclose(fx.effect_features({"kind": "speed_dependent_friction"}, x),
+                               np.column_stack([vp / 0.2, vp ** 2 / 0.04]))
+
+
+def test_named_effects_features_against_their_formulas():
+    x = _x()
+    d, V0, m, s, v, a = x["d"], x["V0"], x["load"], x["s"], x["v_base"], x["a_base"]
+    g = V0 / 300.0
+
+    def F(spec):
+        return fx.effect_features(spec, x)
+    np.testing.assert_allclose(F({"kind": "load_path_friction"}), (-G * np.abs(m))[:, None])
+    np.testing.assert_allclose(F({"kind": "direction_asymmetry"}), np.column_stack([d * g, d]))
+    np.testing.assert_allclose(F({"kind": "drive_saturation"}), np.column_stack([g ** 2, g ** 3]))
+    np.testing.assert_allclose(F({"kind": "inertia_mismatch", "m_s": 0.12}), (-0.12 * d * a)[:, None])
+    np.testing.assert_allclose(F({"kind": "thermal_drift_T", "T_ref": 30.0}),
+                               np.column_stack([g * (x["T"] - 30), g * (x["T"] - 30) ** 2 / 10]))
+    np.testing.assert_allclose(F({"kind": "load_slope_voltage", "V_ref": 270.0}),
+                               (-d * m * G * (V0 - 270.0) / 300.0)[:, None])
+    np.testing.assert_allclose(F({"kind": "damping_voltage", "V_ref": 270.0}),
+                               (-d * v / 0.2 * (V0 - 270.0) / 300.0)[:, None])
+    xp = 2 * np.clip((s + 0.012) / 0.024, 0, 1) - 1
+    np.testing.assert_allclose(F({"kind": "position_load", "s_lo": -0.012, "s_hi": 0.012}),
+                               np.column_stack([-d * m * G * xp, -d * m * G * xp ** 2]))
+    np.testing.assert_allclose(F({"kind": "local_defect", "center_m": 0.002, "width_m": 0.001}),
+                               np.exp(-0.5 * ((s - 0.002) / 0.001) ** 2)[:, None])
+    ph = 2 * np.pi * s / 0.004
+    u = d * v / 0.2
+    np.testing.assert_allclose(F({"kind": "bar_waviness", "period_m": 0.004}), np.column_stack(
+        [np.cos(ph), np.sin(ph), g * np.cos(ph), g * np.sin(ph), u * np.cos(ph), u * np.sin(ph),
+         np.cos(2 * ph), np.sin(2 * ph)]))
+    # spline families: a partition of unity times their factor (B-splines sum to 1 on the range)
+    th = F({"kind": "thermal_drift", "t_lo": 0.0, "t_hi": 300.0, "n_inner": 2})
+    assert th.shape[1] == 6
+    np.testing.assert_allclose(th.sum(axis=1), g)
+
+
+def test_generic_terms_against_their_formulas():
+    x = _x()
+    d, m, V0 = x["d"], x["load"], x["V0"]
+    rng = {"t_lo": 0.0, "t_hi": 300.0, "s_lo": -0.012, "s_hi": 0.012, "V_lo": 220.0, "V_hi": 324.0,
+           "load_abs": 0.09, "v_lo": 0.0, "v_hi": 0.3, "m_s": 0.12, "n_inner": 8}
+    load = fx.effect_features({"kind": "smooth", "regressor": "load", **rng}, x)
+    np.testing.assert_allclose(load, np.column_stack([d * m / 0.09, np.abs(m) / 0.09, (d * m / 0.09) ** 2]))
+    u = 2 * (V0 - 220.0) / 104.0 - 1
+    np.testing.assert_allclose(fx.effect_features({"kind": "smooth", "regressor": "voltage", **rng}, x),
+                               np.column_stack([u, u ** 2]))
+    acc_ = fx.effect_features({"kind": "smooth", "regressor": "acceleration", **rng}, x)
+    np.testing.assert_allclose(acc_, np.column_stack([0.12 * d * x["a_base"], np.abs(0.12 * d * x["a_base"])]))
+    pair = fx.effect_features({"kind": "smooth_pair", "a": "direction", "b": "voltage", **rng}, x)
+    np.testing.assert_allclose(pair, np.column_stack([d * u, d * u ** 2]))
+    np.testing.assert_allclose(fx.effect_features({"kind": "smooth", "regressor": "time", **rng}, x).sum(axis=1), 1.0)
