@@ -33,7 +33,9 @@ pytestmark = pytest.mark.fmu
 N = 90
 DT = 1e-3
 T0 = 5.0                      # session time of the runs' start [s]
-KINDS = fx.KINDS + ("output_filter",)
+#: the kinds Predictor.fmu carries: every signal they read is an FMU signal (a logged channel's is not)
+CARRIED = tuple(k for k in fx.KINDS if k != "channel")
+KINDS = CARRIED + ("output_filter",)
 FILTER = {"a": 0.3, "b0": 0.5, "b1": 0.2}
 
 
@@ -101,7 +103,7 @@ def models(pool) -> dict[str, ExtendedPredictor]:
     df = _frame()
     rng = np.random.default_rng(7)
     out = {}
-    for kind in fx.KINDS:
+    for kind in CARRIED:
         cands = [c for c in pool if c.spec["kind"] == kind]
         assert cands, f"the library has no candidate of kind {kind}"
         if kind not in ("smooth", "smooth_pair"):   # a defect on the runs' path (centre near 0 mm)
@@ -191,6 +193,19 @@ def test_extended_predictor_fmu_declares_every_parameter_with_unit_and_provenanc
                 assert "standard error 0.01" in var[n].description and "synthetic test frame" in var[n].description
         assert ("T" in var) == models[kind].needs_temperature, kind
         assert {"baseline_c_r", "c_r", "v_baseline", "F_extra"} <= set(var), kind
+
+
+def test_a_model_reading_a_logged_channel_is_refused_by_the_export(pool, tmp_path):
+    # reference: fx.SIGNALS, the signals Predictor.fmu computes; a channel's run mean is not among them
+    from l1b2.fmi.export import ExportError, export_calibrated
+    base, refit = _setups()
+    c = next(c for c in pool if c.spec["kind"] == "channel")
+    assert not fx.needs(c.spec) <= set(fx.SIGNALS)
+    eff = IdentifiedEffect(c.family, c.label, c.spec, c.names, c.units, (0.1,) * c.n_params, (0.01,) * c.n_params,
+                           c.description, c.regressors, c.structural)
+    with pytest.raises(ExportError, match="no input for the logged channels"):
+        export_calibrated(ExtendedPredictor(base, refit, (eff,), None, {}), tmp_path / "out")
+    assert not (tmp_path / "out" / "fmus" / "Predictor.fmu").exists()
 
 
 def test_extended_model_spec_roundtrips_through_json(models):

@@ -329,11 +329,14 @@ def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None)
     ExportError
         if the FMU fails fmpy validation or a Real has no unit (no manifest is written).
     """
-    from ..predictor.effects import ExtendedPredictor, plugin_sources
+    from ..predictor.effects import SIGNALS, ExtendedPredictor, needs, plugin_sources
 
     if not isinstance(model, ExtendedPredictor):
         raise ExportError(f"export_calibrated needs an l1b2.predictor.effects.ExtendedPredictor, "
                           f"got {type(model).__name__}")
+    logged = [e.label for e in model.effects if not needs(e.spec) <= set(SIGNALS)]
+    if logged:
+        raise ExportError(f"Predictor.fmu has no input for the logged channels these effects read: {', '.join(logged)}")
     mp = mp or load_motor()
     out = Path(out_dir)
     fmu_dir = out / "fmus"
