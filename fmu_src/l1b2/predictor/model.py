@@ -103,9 +103,11 @@ from numpy.polynomial import Legendre, Polynomial
 from numpy.polynomial.legendre import legvander
 
 from ..units import G_M_S2
+from .pureslip import inverse_tip_speed, slip_force, steady_drive_speed
 
 __all__ = [
     "SCALAR_NAMES",
+    "DRIVE_LAWS",
     "PredictorParams",
     "G_of_k0",
     "drive_factor",
@@ -124,6 +126,10 @@ SCALAR_NAMES = ("c_r", "sigma", "mu", "k0", "mu_sd")
 _SCALAR_UNITS = {"c_r": "N s/m", "sigma": "N s/m", "mu": "-", "k0": "-", "mu_sd": "-"}
 _GROUP_UNITS = {"alpha": "-", "beta": "N/V", "p": "N"}
 _PAPER_UNITS = {"alpha": "s", "beta": "N s/V", "p": "N"}
+
+#: the predictor's model families: Eq. 29 as published (slip ratio frozen at k0) and the pure-slip drive
+#: force whose slip ratio follows the state (:mod:`l1b2.predictor.pureslip`, same parameters; k0 unused)
+DRIVE_LAWS = ("eq29", "pure_slip")
 
 #: upper bound used for k0 (k0 < 1 strictly; G'(k0) diverges at 1)
 K0_MAX = 0.999
@@ -173,7 +179,11 @@ class PredictorParams:
     ``alpha``, ``beta`` and ``p`` are Legendre coefficients (lowest degree
     first) of A'(s) [-], B'(s) [N/V] and P(s) [N] in the scaled position
     ``x = (s - s_center) / s_half``. ``kappa`` and ``include_load_inertia``
-    are model settings, not identified (see module docstring).
+    are model settings, not identified (see module docstring). ``drive_law``
+    is the model family (:data:`DRIVE_LAWS`): ``"eq29"`` (default, the
+    paper's Eq. 29) or ``"pure_slip"`` (the drive force of
+    :mod:`l1b2.predictor.pureslip`, slip ratio ``k = sigma v'/(pi B' V0)``
+    instead of the constant k0, which it does not use).
     """
 
     c_r: float
@@ -188,8 +198,11 @@ class PredictorParams:
     s_half: float = 0.02
     kappa: float = 0.5
     include_load_inertia: bool = True
+    drive_law: str = "eq29"
 
     def __post_init__(self):
+        if self.drive_law not in DRIVE_LAWS:
+            raise ValueError(f"PredictorParams.drive_law must be one of {DRIVE_LAWS}, got {self.drive_law!r}")
         for name in SCALAR_NAMES + ("s_center", "s_half", "kappa"):
             val = float(getattr(self, name))
             if not math.isfinite(val):
@@ -260,6 +273,7 @@ class PredictorParams:
         s_half: float = 0.02,
         kappa: float = 0.5,
         include_load_inertia: bool = True,
+        drive_law: str = "eq29",
     ) -> "PredictorParams":
         """Build from theta in Eq. 35 order; the order follows from its length."""
         theta = np.asarray(theta, dtype=float).ravel()
@@ -275,6 +289,7 @@ class PredictorParams:
             s_half=s_half,
             kappa=kappa,
             include_load_inertia=include_load_inertia,
+            drive_law=drive_law,
         )
 
     def replace(self, **changes) -> "PredictorParams":
@@ -472,6 +487,27 @@ def force_parts(params: PredictorParams, s, V0, m_load_p, m_s):
     return D, X, Fr
 
 
+def slip_terms(params: PredictorParams, s, V0):
+    """Pure-slip inputs at s: ``mu P`` [N], ``A'`` [-], ``c_k`` [s/m] and Eq. 29's frozen term ``mu P [g1(k0) - pi/2 A' G(k0)]``."""
+    Ap, Bp, P = position_terms(params, s)
+    muP = params.mu * P
+    frozen = muP * (drive_factor(params.k0) - 0.5 * np.pi * Ap * G_of_k0(params.k0))
+    return muP, Ap, inverse_tip_speed(params.sigma, Bp, V0), frozen
+
+
+def drive_force(params: PredictorParams, s, V0, X, vp):
+    """The drive force at drive speed ``vp``: X itself for Eq. 29, the slip ratio of the state for pure slip.
+
+    ``X`` is :func:`force_parts`' X (plus any extra force); for
+    ``drive_law="pure_slip"`` its frozen-k0 term is replaced by
+    :func:`l1b2.predictor.pureslip.slip_force` at ``k = c_k vp``.
+    """
+    if params.drive_law == "eq29":
+        return X
+    muP, Ap, c_k, frozen = slip_terms(params, s, V0)
+    return X - frozen + slip_force(vp, muP, Ap, c_k)[0]
+
+
 def rest_sign(X, Fr):
     """Effective sign(-v') at rest: -clip(X/Fr, -1, 1) (static friction opposes X, capped)."""
     X = np.asarray(X, dtype=float)
@@ -511,7 +547,7 @@ def derivative(params: PredictorParams, v, s, V0, load, direction, m_s, extra_fo
     d = np.asarray(direction, dtype=float)
     vp = d * np.asarray(v, dtype=float)
     D, X, Fr = force_parts(params, s, V0, d * np.asarray(load, float), m_s)
-    X = add_extra_force(X, extra_force)
+    X = drive_force(params, s, V0, add_extra_force(X, extra_force), vp)
     F = _force(D, X, Fr, vp)
     return d * F / effective_mass(params, load, m_s)
 
@@ -548,7 +584,7 @@ def one_step(params: PredictorParams, v, s, V0, load, direction, dt, m_s, extra_
     d = np.asarray(direction, dtype=float)
     vp = d * np.asarray(v, dtype=float)
     D, X, Fr = force_parts(params, s, V0, d * np.asarray(load, float), m_s)
-    X = add_extra_force(X, extra_force)
+    X = drive_force(params, s, V0, add_extra_force(X, extra_force), vp)
     h = np.asarray(dt, float) / effective_mass(params, load, m_s)
     return d * step_drive(vp, D, X, Fr, h)
 
@@ -560,11 +596,16 @@ def steady_state(params: PredictorParams, s, V0, load, direction, m_s, extra_for
     else backward branch (v' < 0): v'* = (X + Fr)/D, consistent if X + Fr < 0;
     else the slider is stuck (|X| <= Fr): v* = 0. Returns NaN where D <= 0
     (no stable equilibrium). Signed data convention. ``extra_force`` [N,
-    drive coordinates] is added to X (default None: none).
+    drive coordinates] is added to X (default None: none). For
+    ``drive_law="pure_slip"`` the forward branch is the root of the
+    non-linear force (:func:`l1b2.predictor.pureslip.steady_drive_speed`).
     """
     d = np.asarray(direction, dtype=float)
     D, X, Fr = force_parts(params, s, V0, d * np.asarray(load, float), m_s)
     X = add_extra_force(X, extra_force)
+    if params.drive_law == "pure_slip":
+        muP, Ap, c_k, frozen = slip_terms(params, s, V0)
+        return d * steady_drive_speed(D, X - frozen, muP, Ap, c_k, Fr)
     D, X, Fr = np.broadcast_arrays(D, X, Fr)
     fwd = X - Fr
     bwd = X + Fr

@@ -19,7 +19,10 @@ from .model import (
     force_parts,
     one_step,
     rest_sign,
+    slip_terms,
+    step_drive,
 )
+from .pureslip import packed_slip_recursion
 
 # ---------------------------------------------------------------------------
 # run layout: flat samples <-> padded (time, run) arrays
@@ -225,7 +228,8 @@ def free_run(
     each run is used). Runs are aligned on a common time index internally
     (packed time-major layout, see :class:`RunLayout`: padding without
     computing on the pads) and the recursion loops over the time index
-    only, vectorised across runs. ``extra_force`` (scalar or one value per
+    only, vectorised across runs (``params.drive_law="pure_slip"``: the
+    non-linear step of :func:`l1b2.predictor.pureslip.packed_slip_recursion`). ``extra_force`` (scalar or one value per
     sample) [N, drive coordinates] is added to X (default None: none).
     Returns the predicted speed per sample [m/s], signed data convention.
     """
@@ -249,8 +253,15 @@ def free_run(
     dt = lay.step_dt(t)
     if extra_force is not None:
         extra_force = _broadcast_flat(extra_force, n, "extra_force")
-    a, e, f, z0 = free_run_coefficients(params, s, V0, load, d, dt, m_s_arr, extra_force)
     pk = lay.to_packed
+    if params.drive_law == "pure_slip":   # non-linear in the speed: stepped with the state's slip ratio
+        D, X, Fr = force_parts(params, s, V0, d * load, m_s_arr)
+        muP, Ap, c_k, frozen = slip_terms(params, s, V0)
+        h = dt / effective_mass(params, load, m_s_arr)
+        vpk = packed_slip_recursion(lay.offs, lay.na, step_drive, *(pk(np.broadcast_to(x, (n,))) for x in (
+            D, add_extra_force(X, extra_force) - frozen, muP, Ap, c_k, Fr, h, d)), v0[lay.run_order])[0]
+        return lay.from_packed(vpk)
+    a, e, f, z0 = free_run_coefficients(params, s, V0, load, d, dt, m_s_arr, extra_force)
     vpk = packed_recursion(lay, pk(a), pk(e), pk(f), pk(-d), pk(z0), v0[lay.run_order])
     return lay.from_packed(vpk)
 

@@ -1,0 +1,169 @@
+"""The pure-slip drive force without Eq. 29's linearisation: the slip ratio follows the state.
+
+Contract
+--------
+Under the paper's Sect. 4 assumptions (contact angle phi_c = pi, pure slip,
+tangential tip velocity ``W sin(omega t)`` with ``W = omega U_w``, a half-sine
+normal force whose period mean is the preload F_p) the period-mean drive
+force on a slider moving at ``v`` is (:func:`pure_slip_drive_force`)::
+
+    F_d = sigma (W/pi - v/2) + mu F_p g1(k),   g1(k) = 2 sqrt(1 - k^2) - 1,   k = v / W
+
+Eq. 29 freezes ``k`` at the constant ``k0``, so its drive force has one
+speed slope at every voltage. Here ``k`` is the slip ratio of the state:
+with the tip speed of the open-loop drive (Eq. 25/30 without the interface
+feedback, ``sigma W / pi = B'(s) V0``)::
+
+    k = c_k v',   c_k = sigma / (pi B'(s) V0)   [s/m]   (:func:`inverse_tip_speed`)
+
+and the drive force of the predictor keeps Eq. 29's form with ``k0 -> k``::
+
+    X(v') = X_lin + mu P [g1(k) - (pi/2) A' G(k)]          (:func:`slip_force`)
+
+``W`` is proportional to V0 (times the position profile ``pi B'(s)/sigma``),
+so the slope ``dX/dv' = mu P [g1'(k) - (pi/2) A' G'(k)] c_k`` shrinks as V0
+grows: the V0-dependence of the load slope that Eq. 29 lacks.
+
+Outside the pure-slip range the factors are continued by their physics: for
+``k <= 0`` (slider at rest or pushed backwards) the tip is faster than the
+slider over the whole contact, ``g1 = 1``, ``G = pi/2``; for ``k >= 1`` (slider
+as fast as the tip) the friction always brakes, ``g1 = -1``, ``G = -pi/2``;
+both are the values of the closed forms at k = 0 and k = 1, so X is continuous
+in v'. The derivatives are 0 outside (0, 1) and the slope near k = 1 is capped
+at :data:`K_SLOPE_MAX` (g1' diverges there).
+
+All functions are pure and vectorised over arrays (SI units); nothing here
+knows a parameter class (:mod:`l1b2.predictor.model` assembles the inputs).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .kernels import FLAG_REVERSAL, FLAG_STUCK
+
+__all__ = ["K_SLOPE_MAX", "inverse_tip_speed", "slip_ratio", "slip_factors", "slip_force",
+           "pure_slip_drive_force", "steady_drive_speed", "packed_slip_recursion"]
+
+#: slip ratio above which the slopes g1'(k), G'(k) are held at their value here (they diverge at k = 1)
+K_SLOPE_MAX = 0.999
+
+
+def inverse_tip_speed(sigma, Bp, V0):
+    """``c_k = sigma / (pi B' V0)`` [s/m], 1/W of the open-loop tip speed; ``inf`` where B' V0 <= 0."""
+    w = np.pi * np.asarray(Bp, float) * np.asarray(V0, float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(w > 0, np.asarray(sigma, float) / np.where(w > 0, w, 1.0), np.inf)
+
+
+def slip_ratio(vp, c_k):
+    """``k = c_k v'`` clipped into [0, 1] (v' > 0 with c_k = inf gives 1, v' <= 0 gives 0)."""
+    vp = np.asarray(vp, float)
+    with np.errstate(invalid="ignore", over="ignore"):
+        k = np.where(vp > 0, np.asarray(c_k, float) * vp, 0.0)
+    return np.clip(np.nan_to_num(k, nan=0.0, posinf=1.0), 0.0, 1.0)
+
+
+def slip_factors(k):
+    """``g1(k), G(k), g1'(k), G'(k)`` with the continuation outside (0, 1) of the module docstring."""
+    k = np.clip(np.asarray(k, float), 0.0, 1.0)
+    r = np.sqrt(1.0 - k * k)
+    g1 = 2.0 * r - 1.0
+    G = 2.0 * k * r - 2.0 * np.arcsin(k) + 0.5 * np.pi
+    ks = np.minimum(k, K_SLOPE_MAX)
+    rs = np.sqrt(1.0 - ks * ks)
+    inside = (k > 0.0) & (k < 1.0)
+    dg1 = np.where(inside, -2.0 * ks / rs, 0.0)
+    dG = np.where(inside, -4.0 * ks * ks / rs, 0.0)
+    return g1, G, dg1, dG
+
+
+def slip_force(vp, muP, Ap, c_k):
+    """``(mu P [g1(k) - pi/2 A' G(k)], its derivative in v', k)`` at drive speed ``vp`` [N, N s/m, -]."""
+    k = slip_ratio(vp, c_k)
+    g1, G, dg1, dG = slip_factors(k)
+    muP = np.asarray(muP, float)
+    Ap = np.asarray(Ap, float)
+    Xs = muP * (g1 - 0.5 * np.pi * Ap * G)
+    with np.errstate(invalid="ignore"):
+        dX = np.where((k > 0.0) & (k < 1.0), muP * (dg1 - 0.5 * np.pi * Ap * dG) * c_k, 0.0)
+    return Xs, dX, k
+
+
+def pure_slip_drive_force(W, v, F_p, sigma, mu):
+    """The physics notes' closed form ``sigma (W/pi - v/2) + mu F_p (2 sqrt(1 - k^2) - 1)``, k = v/W in [0, 1]."""
+    W = np.asarray(W, float)
+    v = np.asarray(v, float)
+    g1 = slip_factors(slip_ratio(v, 1.0 / W))[0]
+    return sigma * (W / np.pi - 0.5 * v) + mu * np.asarray(F_p, float) * g1
+
+
+def steady_drive_speed(D, X_lin, muP, Ap, c_k, Fr, n_iter: int = 80):
+    """Steady drive speed v'* of ``-D v' + X_lin + Xs(v') + sign(-v') Fr = 0`` (stuck: 0; D <= 0: NaN).
+
+    Forward branch (v' > 0): the root of the force, bracketed in
+    ``[0, v_hi]`` and found by bisection (the force decreases in v' where
+    the pure-slip slope is negative, the case of every physical parameter
+    set: ``pi A' k < 1``); backward branch (v' < 0): k = 0, the force is
+    affine, ``v' = (X(0) + Fr)/D``; stuck when ``|X(0)| <= Fr``.
+    """
+    D, X_lin, muP, Ap, c_k, Fr = np.broadcast_arrays(*(np.asarray(x, float) for x in (D, X_lin, muP, Ap, c_k, Fr)))
+    X0 = X_lin + slip_force(0.0 * D, muP, Ap, c_k)[0]
+
+    def fwd(v):
+        return -D * v + X_lin + slip_force(v, muP, Ap, c_k)[0] - Fr
+
+    with np.errstate(divide="ignore", invalid="ignore"):
+        span = (np.abs(X_lin) + np.abs(muP) * (1.0 + 0.25 * np.pi ** 2 * np.abs(Ap)) + np.abs(Fr)) / D
+        hi = np.where(D > 0, 2.0 * span + 1e-9, 0.0)
+    lo = np.zeros_like(hi)
+    for _ in range(n_iter):
+        mid = 0.5 * (lo + hi)
+        pos = fwd(mid) > 0
+        lo = np.where(pos, mid, lo)
+        hi = np.where(pos, hi, mid)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        vp = np.where(X0 - Fr > 0, 0.5 * (lo + hi), np.where(X0 + Fr < 0, (X0 + Fr) / D, 0.0))
+    return np.where(D > 0, vp, np.nan)
+
+
+def packed_slip_recursion(offs, na, step, D, X_lin, muP, Ap, c_k, Fr, h, d, v0_sorted, flags=None):
+    """Free run of the pure-slip predictor in the packed time-major layout; returns (v, X, dX/dv').
+
+    Same layout as :func:`l1b2.predictor.simulate.packed_recursion` (``offs``,
+    ``na``; runs alive at k + 1 are a prefix of those at k). ``step`` is the
+    drive-coordinate Euler step with the rest and reversal rules
+    (:func:`l1b2.predictor.model.step_drive`), called with the drive force
+    ``X = X_lin + Xs(v'[k])`` of the step's start. Returns the speed
+    (data convention), the X used at each row and its slope dX/dv'; ``flags``
+    (int8) if given receives the step codes of
+    :mod:`l1b2.predictor.kernels`.
+    """
+    n = int(offs[-1]) if len(offs) else 0
+    v = np.empty(n)
+    X = np.empty(n)
+    dX = np.zeros(n)
+    v[: na[0]] = v0_sorted
+    K = len(na)
+    for kk in range(K):
+        i0 = offs[kk]
+        m_all = na[kk]
+        sl = slice(i0, i0 + m_all)
+        vp = d[sl] * v[sl]
+        xs, dxs, _ = slip_force(vp, muP[sl], Ap[sl], c_k[sl])
+        X[sl] = X_lin[sl] + xs
+        dX[sl] = dxs
+        if kk == K - 1:
+            break
+        m = na[kk + 1]
+        s2 = slice(i0, i0 + m)
+        vp = vp[:m]
+        new = step(vp, D[s2], X[s2], Fr[s2], h[s2])
+        if flags is not None:
+            eul = vp + h[s2] * (-D[s2] * vp + X[s2] + np.sign(-vp) * Fr[s2])
+            X0 = X_lin[s2] + slip_force(0.0 * vp, muP[s2], Ap[s2], c_k[s2])[0]
+            stuck = np.abs(X0) <= Fr[s2]
+            cross = (vp != 0) & (vp * eul < 0)
+            flags[s2] = np.where(cross & ~stuck, FLAG_REVERSAL, np.where((cross | (vp == 0)) & stuck, FLAG_STUCK, 0))
+        v[offs[kk + 1] : offs[kk + 1] + m] = d[s2] * new
+    return v, X, dX
