@@ -99,14 +99,13 @@ from ..data.metrics import (
     evaluation_mask,  # re-exported: the data-format evaluation mask
 )
 from ..errors import IdentificationError
-from ..predictor.model import PredictorParams
+from ..predictor.model import DRIVE_LAWS, PredictorParams
 from ..predictor.model import steady_state as predictor_steady_state
 from .convention import EstimatorSettings
 from .extra import ExtraForces
 from .noise import NoiseModel
 from .problem import (
     RECOMMENDED_FIXED,
-    LikelihoodProblem,
     ParameterSpace,
     SampleData,
     ScaledObjective,
@@ -116,6 +115,7 @@ from .problem import (
 )
 from .reduced import data_driven_start, init_theta, reduced_summary
 from .result import IdentificationResult
+from .slipproblem import RECOMMENDED_FIXED_PURE_SLIP, make_problem
 from .search import (LocalSolver, alternate_noise, multi_start, polish_stalled, profile_search, search_nfev,
                      start_points, warm_prestep)
 from .uncertainty import alternative_optima, extra_confounding, fisher_uncertainty
@@ -241,6 +241,12 @@ class PredictorIdentifier(EstimatorSettings):
     init_extra : start values of phi for the warm start (default
         ``extra.start``, else zeros). Only used with ``init``.
     solver : ``"joint"`` (the searches of ``noise_fit``) or ``"varpro"`` (:mod:`l1b2.ident.varpro`).
+    model : the predictor family: ``"eq29"`` (default, the paper's Eq. 29) or
+        ``"pure_slip"`` (the slip ratio follows the state,
+        :mod:`l1b2.predictor.pureslip`; same parameters, likelihood, noise
+        model and uncertainty; ``fixed="recommended"`` then pins
+        :data:`~l1b2.ident.slipproblem.RECOMMENDED_FIXED_PURE_SLIP`; the
+        variable projection (``solver="varpro"``) is Eq. 29's only).
 
     The constructor only stores the settings (scikit-learn convention:
     :meth:`get_params`, :meth:`set_params`, :func:`clone`); they are checked
@@ -306,6 +312,7 @@ class PredictorIdentifier(EstimatorSettings):
         init: PredictorParams | None = None,
         init_extra=None,
         solver: str = "joint",
+        model: str = "eq29",
     ):
         self.order = order
         self.criterion = criterion
@@ -335,6 +342,7 @@ class PredictorIdentifier(EstimatorSettings):
         self.init = init
         self.init_extra = init_extra
         self.solver = solver
+        self.model = model
 
     # -- settings: the scikit-learn protocol of :class:`l1b2.ident.convention.EstimatorSettings` --------
     def _checked_settings(self) -> SimpleNamespace:
@@ -352,6 +360,14 @@ class PredictorIdentifier(EstimatorSettings):
             raise IdentificationError(f"criterion must be 'free_run' or 'one_step', got {cfg.criterion!r}")
         if cfg.solver not in SOLVERS:
             raise IdentificationError(f"solver must be one of {SOLVERS}, got {cfg.solver!r}")
+        if cfg.model not in DRIVE_LAWS:
+            raise IdentificationError(f"model must be one of {DRIVE_LAWS}, got {cfg.model!r}")
+        if cfg.model == "pure_slip":
+            if cfg.solver == "varpro":
+                raise IdentificationError("solver 'varpro' needs the Eq. 29 model (its speed is linear in B'); "
+                                          "use solver='joint' with model='pure_slip'")
+            if isinstance(cfg.fixed, str) and cfg.fixed == "recommended":
+                cfg.fixed = {k: None for k in RECOMMENDED_FIXED_PURE_SLIP}
         if cfg.noise_fit not in NOISE_FITS:
             raise IdentificationError(f"noise_fit must be one of {NOISE_FITS}, got {cfg.noise_fit!r}")
         if cfg.noise_fit == "auto":  # the search measured better for the model at hand (class docstring)
@@ -472,8 +488,8 @@ class PredictorIdentifier(EstimatorSettings):
         self.extra_init_ = theta0[space.p_theta:].copy()
 
         # ---- the likelihood problem in scaled coordinates --------------------
-        problem = LikelihoodProblem(sample, cfg.order, cfg.kappa, cfg.include_load_inertia, cfg.criterion,
-                                    s_center, s_half, m_s, E=E)
+        problem = make_problem(cfg.model, sample, cfg.order, cfg.kappa, cfg.include_load_inertia, cfg.criterion,
+                               s_center, s_half, m_s, E=E)
         scale = param_scale(theta0, cfg.order)
         if space.extra_names:
             scale[space.p_theta:] = extra_parameter_scale(problem, theta0, E, sample.mask, m_s)
@@ -578,7 +594,7 @@ class PredictorIdentifier(EstimatorSettings):
         return IdentificationResult(
             settings=self._settings_record(cfg, fixed),
             params=PredictorParams.from_vector(theta_hat[:p], problem.s_center, problem.s_half, cfg.kappa,
-                                               cfg.include_load_inertia),
+                                               cfg.include_load_inertia, cfg.model),
             values=theta_hat, extra_names=list(space.extra_names),
             extra_units=[] if extra is None else list(extra.units),
             extra_description="" if extra is None else extra.description,

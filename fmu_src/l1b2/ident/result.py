@@ -38,7 +38,8 @@ from ..data.measurements import Measurements
 from ..errors import IdentificationError
 from ..jsonio import dumps, from_json_float, json_float, strict_json
 from ..predictor.model import PredictorParams
-from .problem import RECOMMENDED_FIXED, LikelihoodProblem, SampleData
+from .problem import RECOMMENDED_FIXED, SampleData
+from .slipproblem import make_problem
 
 __all__ = ["Parameter", "IdentificationResult"]
 
@@ -277,8 +278,8 @@ class IdentificationResult:
         sample = SampleData(data)
         E = self._extra_matrix(sample.frame)
         prm = self.params
-        prob = LikelihoodProblem(sample, self.order, prm.kappa, prm.include_load_inertia, criterion,
-                                 prm.s_center, prm.s_half, self.slider_mass_kg, E=E)
+        prob = make_problem(prm.drive_law, sample, self.order, prm.kappa, prm.include_load_inertia, criterion,
+                            prm.s_center, prm.s_half, self.slider_mass_kg, E=E)
         return prob.predict_all(self.values)
 
     def plot_runs(self, data, runs=None, criterion: str = "free_run", predicted=None, ncols: int = 4):

@@ -161,8 +161,7 @@ def packed_slip_recursion(offs, na, step, D, X_lin, muP, Ap, c_k, Fr, h, d, v0_s
         new = step(vp, D[s2], X[s2], Fr[s2], h[s2])
         if flags is not None:
             eul = vp + h[s2] * (-D[s2] * vp + X[s2] + np.sign(-vp) * Fr[s2])
-            X0 = X_lin[s2] + slip_force(0.0 * vp, muP[s2], Ap[s2], c_k[s2])[0]
-            stuck = np.abs(X0) <= Fr[s2]
+            stuck = np.abs(X[s2]) < Fr[s2]     # the static rule of ``step`` at the X it was given
             cross = (vp != 0) & (vp * eul < 0)
             flags[s2] = np.where(cross & ~stuck, FLAG_REVERSAL, np.where((cross | (vp == 0)) & stuck, FLAG_STUCK, 0))
         v[offs[kk + 1] : offs[kk + 1] + m] = d[s2] * new
