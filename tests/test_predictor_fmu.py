@@ -74,3 +74,31 @@ def test_predictor_fmu_equals_the_predictor_functions(fmu, setup, isolated, h):
         assert v_ss == pytest.approx(float(pr.steady_state(p, s, V0, load, d, m_s)), rel=1e-12)
     assert got[39][0] == pytest.approx(got[39][1], rel=2e-2)   # settles toward its steady state (m/D ~ 8 ms)
     assert got[-1][0] < 0                                      # CH2 drives toward -position
+
+
+@pytest.fixture(scope="module")
+def slip_setup(setup):
+    # the pure-slip family with physical parameters (the paper's reduction): slip ratio ~0.4 on these inputs
+    from l1b2.predictor.derive import derive_predictor
+    mp = load_motor()
+    return PredictorSetup(derive_predictor(mp, method="paper", n_grid=9).replace(drive_law="pure_slip"),
+                          mp.slider.mass_kg, 1e-3)
+
+
+def test_pure_slip_predictor_fmu_equals_its_functions_and_has_no_native_twin(tmp_path, slip_setup, isolated):
+    # reference: one_step / steady_state of the pure-slip family; the native build says why it is skipped
+    from l1b2.fmi.native.build import build_native_set
+    path = build_fmu("Predictor", tmp_path, extra_defaults={"predictor": slip_setup.to_dict()})
+    got = isolated(__file__, "worker_predictor", str(path), INPUTS, 1e-3).value
+    p, m_s = slip_setup.params, slip_setup.slider_mass_kg
+    e = p.replace(drive_law="eq29")
+    v = 0.0
+    differs = False
+    for (V0, s, load, d), (v_fmu, v_ss) in zip(INPUTS, got):
+        v = float(pr.one_step(p, v, s, V0, load, d, 1e-3, m_s))
+        assert v_fmu == pytest.approx(v, rel=1e-12, abs=1e-15)
+        assert v_ss == pytest.approx(float(pr.steady_state(p, s, V0, load, d, m_s)), rel=1e-9)
+        differs |= abs(v_ss - float(pr.steady_state(e, s, V0, load, d, m_s))) > 1e-3
+    assert differs                                  # it is not Eq. 29 under another name
+    built, info = build_native_set("Predictor", path, tmp_path)
+    assert built == {} and not info["included"] and "pure-slip" in info["reason"]

@@ -372,7 +372,8 @@ def _setup_from_values(vals: dict, template: PredictorSetup, prefix: str = "") -
     theta = np.array([vals[prefix + n] for n in p0.names(p0.order)])
     pp = PredictorParams.from_vector(theta, s_center=vals[prefix + "s_center"], s_half=vals[prefix + "s_half"],
                                      kappa=vals[prefix + "kappa"],
-                                     include_load_inertia=vals[prefix + "load_inertia"] >= 0.5)
+                                     include_load_inertia=vals[prefix + "load_inertia"] >= 0.5,
+                                     drive_law=p0.drive_law)   # the model family is structural, not a variable
     m_s, T_s = vals[prefix + "slider_mass_kg"], vals[prefix + "T_s"]
     if not (m_s > 0 and T_s > 0):
         raise SimulationError(f"PredictorBlock: {prefix}slider_mass_kg [kg] and {prefix}T_s [s] must be positive")

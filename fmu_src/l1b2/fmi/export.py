@@ -245,6 +245,9 @@ def export_all(out_dir: str | Path, mp: MotorParams | None = None, predictor: Ma
         if name in paths:
             built, native_info[name] = build_native_set(name, paths[name], paths[name].parent)
             paths.update(built)
+            if not native_info[name]["included"]:   # e.g. the pure-slip predictor: no stale native beside it
+                for stale in paths[name].parent.glob(f"{name}-native*.fmu"):
+                    stale.unlink()
     libcosim_path = ssp.build_ssp(out / LIBCOSIM_SSP_NAME, {n: paths[n] for n in SUBSYSTEM_FMUS}, mp=mp,
                                   standard=False)
 

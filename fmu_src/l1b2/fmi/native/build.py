@@ -417,6 +417,9 @@ def build_native_fmu(name: str, python_fmu: str | Path, dest_dir: str | Path, fm
     if name == "Predictor" and "extended_predictor" in defaults:
         raise NativeBuildError("the calibrated extended predictor (effects, output filter) has no native model: "
                                "its Predictor.fmu stays a Python FMU")
+    if name == "Predictor" and defaults.get("predictor", {}).get("params", {}).get("drive_law", "eq29") != "eq29":
+        raise NativeBuildError("the native predictor implements Eq. 29 only; the pure-slip family's drive force "
+                               "(slip ratio of the state) stays in the Python Predictor.fmu")
     sources = _source_files(name, fmi_version)
     # the GUID: stable for identical sources and variables (and different from the Python FMU's)
     provisional = source_tree(name, python_md, fmi_version, "{}", defaults)
