@@ -145,3 +145,31 @@ def test_pure_slip_follows_the_coupled_models_voltage_dependence_of_the_load_slo
         assert eq29 == pytest.approx(1.0, abs=1e-9)
         assert ref > 1.03                        # the coupled model's slope does grow with V0
         assert pure > 1.03 and abs(pure - ref) < 0.7 * abs(eq29 - ref), (ref, eq29, pure)
+
+
+def test_compiled_slip_run_equals_the_numpy_loop():
+    # reference: the numpy loop over model.step_drive; runs of different lengths, rest starts, reversals, stuck steps
+    from l1b2.predictor.pureslip import compiled_slip_run, packed_slip_recursion
+    from l1b2.predictor.simulate import RunLayout
+    if compiled_slip_run() is None:
+        pytest.skip("numba not available")
+    rng = np.random.default_rng(4)
+    lay = RunLayout(np.repeat(np.arange(6), [50, 80, 80, 30, 65, 5]))
+    n = lay.n
+    D = rng.uniform(3, 8, n)
+    X_lin = rng.uniform(-2.0, 2.0, n)
+    muP = rng.uniform(0.5, 1.5, n)
+    Ap = rng.uniform(0.0, 0.3, n)
+    c_k = np.where(rng.random(n) < 0.1, np.inf, rng.uniform(1, 5, n))
+    Fr = rng.uniform(0.0, 1.2, n)
+    h = np.full(n, 1e-3 / 0.12)
+    d = np.repeat(rng.choice([-1.0, 1.0], lay.R), lay.lengths)[lay.perm]
+    v0 = np.array([0.0, 0.1, -0.05, 0.0, 0.2, 0.0])
+    args = (lay.offs, lay.na, pr.step_drive, D, X_lin, muP, Ap, c_k, Fr, h, d, v0)
+    f1, f2 = np.zeros(n, np.int8), np.zeros(n, np.int8)
+    a = packed_slip_recursion(*args, flags=f1, compiled=False)
+    b = packed_slip_recursion(*args, flags=f2, compiled=True)
+    assert (f1 == 1).any() and (f1 == 2).any()
+    for x, y in zip(a, b):
+        np.testing.assert_allclose(y, x, rtol=1e-12, atol=1e-15)
+    np.testing.assert_array_equal(f1, f2)

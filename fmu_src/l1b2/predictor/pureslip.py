@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..physics.jit import cached_kernel
 from .kernels import FLAG_REVERSAL, FLAG_STUCK
 
 __all__ = ["K_SLOPE_MAX", "inverse_tip_speed", "slip_ratio", "slip_factors", "slip_force",
@@ -127,14 +128,17 @@ def steady_drive_speed(D, X_lin, muP, Ap, c_k, Fr, n_iter: int = 80):
     return np.where(D > 0, vp, np.nan)
 
 
-def packed_slip_recursion(offs, na, step, D, X_lin, muP, Ap, c_k, Fr, h, d, v0_sorted, flags=None):
+def packed_slip_recursion(offs, na, step, D, X_lin, muP, Ap, c_k, Fr, h, d, v0_sorted, flags=None, compiled=True):
     """Free run of the pure-slip predictor in the packed time-major layout; returns (v, X, dX/dv').
 
     Same layout as :func:`l1b2.predictor.simulate.packed_recursion` (``offs``,
     ``na``; runs alive at k + 1 are a prefix of those at k). ``step`` is the
     drive-coordinate Euler step with the rest and reversal rules
     (:func:`l1b2.predictor.model.step_drive`), called with the drive force
-    ``X = X_lin + Xs(v'[k])`` of the step's start. Returns the speed
+    ``X = X_lin + Xs(v'[k])`` of the step's start. With ``compiled`` (default)
+    the compiled :func:`slip_run_loop` (the same rules written out, numba)
+    runs when numba is available; otherwise, or with ``compiled=False``, the
+    numpy loop over ``step``. Returns the speed
     (data convention), the X used at each row and its slope dX/dv'; ``flags``
     (int8) if given receives the step codes of
     :mod:`l1b2.predictor.kernels`.
@@ -143,6 +147,14 @@ def packed_slip_recursion(offs, na, step, D, X_lin, muP, Ap, c_k, Fr, h, d, v0_s
     v = np.empty(n)
     X = np.empty(n)
     dX = np.zeros(n)
+    kernel = compiled_slip_run() if compiled else None
+    if kernel is not None:
+        fl = np.zeros(n, dtype=np.int8) if flags is None else flags
+        kernel(np.ascontiguousarray(offs, dtype=np.int64), np.ascontiguousarray(na, dtype=np.int64),
+               *(np.require(np.broadcast_to(x, (n,)), float, ["C", "W"])
+                 for x in (D, X_lin, muP, Ap, c_k, Fr, h, d)), np.require(v0_sorted, float, ["C", "W"]),
+               v, X, dX, fl)
+        return v, X, dX
     v[: na[0]] = v0_sorted
     K = len(na)
     for kk in range(K):
@@ -166,3 +178,71 @@ def packed_slip_recursion(offs, na, step, D, X_lin, muP, Ap, c_k, Fr, h, d, v0_s
             flags[s2] = np.where(cross & ~stuck, FLAG_REVERSAL, np.where((cross | (vp == 0)) & stuck, FLAG_STUCK, 0))
         v[offs[kk + 1] : offs[kk + 1] + m] = d[s2] * new
     return v, X, dX
+
+
+def slip_run_loop(offs, na, D, X_lin, muP, Ap, c_k, Fr, h, d, v0_sorted, v, X, dX, flags):
+    """:func:`packed_slip_recursion` as a scalar loop (the same rules; compiled by numba, see :func:`compiled_slip_run`).
+
+    The step is :func:`l1b2.predictor.model.step_drive` written out for one
+    row; the flags are those of :func:`packed_slip_recursion`.
+    """
+    half_pi = 0.5 * np.pi
+    for i in range(na[0]):
+        v[i] = v0_sorted[i]
+    K = na.size
+    for kk in range(K):
+        i0 = offs[kk]
+        m_next = na[kk + 1] if kk + 1 < K else 0
+        for i in range(na[kk]):
+            j = i0 + i
+            vp = d[j] * v[j]
+            k = 0.0
+            if vp > 0.0:
+                k = min(c_k[j] * vp, 1.0)
+            r = np.sqrt(1.0 - k * k)
+            xs = muP[j] * ((2.0 * r - 1.0) - half_pi * Ap[j] * (2.0 * k * r - 2.0 * np.arcsin(k) + half_pi))
+            x = X_lin[j] + xs
+            X[j] = x
+            slope = 0.0
+            if 0.0 < k < 1.0:
+                ks = min(k, K_SLOPE_MAX)
+                rs = np.sqrt(1.0 - ks * ks)
+                slope = muP[j] * (-2.0 * ks / rs + half_pi * Ap[j] * 4.0 * ks * ks / rs) * c_k[j]
+            dX[j] = slope
+            if i >= m_next:
+                continue
+            fr = Fr[j]
+            if fr > 0.0:
+                z0 = -min(max(x / fr, -1.0), 1.0)
+            else:
+                z0 = -1.0 if x > 0.0 else (1.0 if x < 0.0 else 0.0)
+            stuck = abs(z0) < 1.0
+            sg = -1.0 if vp > 0.0 else (1.0 if vp < 0.0 else z0)
+            new = vp + h[j] * (-D[j] * vp + x + sg * fr)
+            if vp == 0.0 and stuck:
+                new = 0.0
+            if vp * new < 0.0:
+                frac = vp / (vp - new)
+                from_rest = 0.0 if stuck else h[j] * (x + z0 * fr)
+                new = (1.0 - frac) * from_rest
+            sgm = -1.0 if vp > 0.0 else (1.0 if vp < 0.0 else 0.0)
+            eul = vp + h[j] * (-D[j] * vp + x + sgm * fr)
+            st2 = abs(x) < fr
+            cross = vp != 0.0 and vp * eul < 0.0
+            if cross and not st2:
+                flags[j] = FLAG_REVERSAL
+            elif (cross or vp == 0.0) and st2:
+                flags[j] = FLAG_STUCK
+            else:
+                flags[j] = 0
+            v[offs[kk + 1] + i] = d[j] * new
+
+
+_SLIP_RUN: list = []
+
+
+def compiled_slip_run():
+    """:func:`slip_run_loop` compiled by numba (once per process, cached on disk), or None without numba."""
+    return cached_kernel(_SLIP_RUN, lambda: (
+        {"slip_run_loop": slip_run_loop}, "slip_run_loop",
+        "void(int64[::1], int64[::1], " + ", ".join(["float64[::1]"] * 12) + ", int8[::1])"))
