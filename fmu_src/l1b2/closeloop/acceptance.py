@@ -207,6 +207,7 @@ def refit(df: pd.DataFrame, mask: np.ndarray, m_s: float, init, effects: EffectS
     """
     extra = effects.extra()
     est = PredictorIdentifier(order=settings.order, criterion="free_run", fixed="recommended", n_starts=n_starts,
+                              model=getattr(init, "drive_law", "eq29"),   # the refit keeps the baseline's family
                               seed=settings.seed, extra=extra, init=init,
                               init_extra=effects.start() if extra is not None else None, max_nfev=settings.max_nfev,
                               max_outer=max_outer, noise=settings.noise, noise_fit="alternate")

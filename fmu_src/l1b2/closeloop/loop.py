@@ -63,6 +63,7 @@ from ..data.metrics import report_metrics
 from ..ident.convention import EstimatorSettings
 from ..ident.estimator import PredictorIdentifier
 from ..predictor.effects import ExtendedPredictor, IdentifiedEffect
+from ..predictor.model import DRIVE_LAWS
 from ..predictor.setup import PredictorSetup
 from . import chain
 from . import residuals as res
@@ -70,6 +71,7 @@ from .candidates import CandidateSource, Context, full_library, training_summary
 from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT_FOLDS, DEFAULT_REFIT_NFEV,
                          EffectSet, RefitCV, RefitSettings, Validated, accepts, chain_cv_errors, collinear, cv_errors,
                          fold_start_phi, materiality, refit, stratified_folds, validated)
+from .baselines import choose_baseline, retag_structural
 from .guard import checked_fit
 from .result import CloseLoopResult, ResidualAnalysis
 from .selection import (DEFAULT_ALPHA, DEFAULT_PARSIMONY, SHORTLIST_MIN_GAIN, Score, best_per_family, design,
@@ -141,6 +143,13 @@ class CloseLoop(EstimatorSettings):
         cross-validated refits of the current model and of one candidate (and, if it is accepted, the
         next round).
 
+    baseline : {"best", "eq29", "pure_slip"}
+        The predictor family the loop starts from: ``"best"`` (default) identifies both on TRAIN and
+        keeps the one with the lower cross-validated free-run nrmse over the refit folds
+        (:func:`l1b2.closeloop.baselines.choose_baseline`; both figures in ``diagnosis.baseline_choice``);
+        with the pure-slip family no candidate counts as relaxing Eq. 29 (a load x voltage term is a
+        missing effect).
+
     Attributes
     ----------
     result_ : CloseLoopResult
@@ -154,7 +163,7 @@ class CloseLoop(EstimatorSettings):
                  min_cv_gain: float = DEFAULT_MIN_CV_GAIN, min_cv_drop: float = DEFAULT_MIN_CV_DROP,
                  refit_nfev: int = DEFAULT_REFIT_NFEV,
                  final_nfev: int = 60, screen_alpha: float | None = 0.01, noise_fit: str = "alternate",
-                 noise: str = "common", client=None):
+                 noise: str = "common", client=None, baseline: str = "best"):
         self.order = order
         self.k_folds = k_folds
         self.alpha = alpha
@@ -175,6 +184,7 @@ class CloseLoop(EstimatorSettings):
         self.final_nfev = final_nfev
         self.screen_alpha = screen_alpha
         self.client = client
+        self.baseline = baseline
 
     # -- the job -------------------------------------------------------------
     def fit(self, train: dataio.Measurements, test: dataio.Measurements | None = None) -> CloseLoop:
@@ -194,10 +204,20 @@ class CloseLoop(EstimatorSettings):
         dte = test.df if test is not None else None
         mask_tr = np.array(train.mask)
 
-        say("baseline: identifying the Eq. 29 predictor on TRAIN")
-        base = checked_fit(lambda: self._identify(dtr, m_s, mask_tr),
-                           lambda: self._identify(dtr, m_s, mask_tr, retry=True), dtr, mask_tr,
-                           "the baseline identification on TRAIN")
+        if self.baseline not in ("best",) + DRIVE_LAWS:
+            raise ValueError(f"baseline must be 'best' or one of {DRIVE_LAWS}, got {self.baseline!r}")
+        fits = {}
+        for family in (DRIVE_LAWS if self.baseline == "best" else (self.baseline,)):
+            say(f"baseline: identifying the {family} predictor on TRAIN")
+            fits[family] = checked_fit(lambda: self._identify(dtr, m_s, mask_tr, model=family),
+                                       lambda: self._identify(dtr, m_s, mask_tr, retry=True, model=family), dtr,
+                                       mask_tr, f"the {family} baseline identification on TRAIN")
+        family, self.baseline_choice_ = next(iter(fits)), {"chosen": next(iter(fits)), "families": {}}
+        if len(fits) > 1:
+            say("baseline: cross-validating both families on TRAIN's run folds")
+            family, self.baseline_choice_ = choose_baseline(
+                fits, dtr, mask_tr, m_s, stratified_folds(dtr, self.refit_folds, self.seed), self.refit_settings())
+        base = fits[family]
         v_te = base.predict_free_run(dte) if dte is not None else None
         baseline = _metrics(base, dtr, dte)
         it = _Iteration(model=base, effects=EffectSet(), rounds=[{"round": 0, "added": None, "metrics": baseline}])
@@ -213,7 +233,7 @@ class CloseLoop(EstimatorSettings):
                                      k=self.k_folds, seed=self.seed)
         ctx = candidate_context(start.predict_free_run, m_s, fit_tr, mask_tr, analysis.peak)
         library = self.library if self.library is not None else full_library()
-        pool = library(ctx, fit_tr)
+        pool = retag_structural(library(ctx, fit_tr), start.params_.drive_law)
         it.channels = training_summary(ctx, fit_tr).channels
         self._iterate(it, pool, fit_tr, mask_tr, m_s, lambda mdl: _metrics(wrap(mdl), dtr, dte), say)
         it.model = wrap(it.model)
@@ -241,7 +261,8 @@ class CloseLoop(EstimatorSettings):
             calibrated_model=calibrated, calibrated_note=why)
         return self
 
-    def _identify(self, df: pd.DataFrame, m_s: float, mask: np.ndarray, retry: bool = False) -> Validated:
+    def _identify(self, df: pd.DataFrame, m_s: float, mask: np.ndarray, retry: bool = False,
+                  model: str = "eq29") -> Validated:
         """The baseline Eq. 29 predictor identified on ``df`` (free-run maximum likelihood, multi-start).
 
         ``retry``: the identifier's multistart again with twice the starts (at least 8) and the next seed.
@@ -249,7 +270,8 @@ class CloseLoop(EstimatorSettings):
         n_starts, seed = (max(2 * self.n_starts, 8), self.seed + 1) if retry else (self.n_starts, self.seed)
         return Validated(PredictorIdentifier(order=self.order, criterion="free_run", fixed="recommended",
                                              n_starts=n_starts, seed=seed, noise_fit=self.noise_fit,
-                                             noise=self.noise).fit(validated(df), slider_mass_kg=m_s, mask=mask))
+                                             noise=self.noise, model=model).fit(validated(df), slider_mass_kg=m_s,
+                                                                                mask=mask))
 
     def refit_settings(self) -> RefitSettings:
         """The settings of every refit of the loop (order, seed, budget of a fold's refit, noise, client)."""
@@ -422,6 +444,7 @@ class CloseLoop(EstimatorSettings):
             "n_candidates_scored": len(scores),
             "significance_level": it.level,
             "refit_trials": [[t.to_dict() for t in rnd] for rnd in it.trials],
+            "baseline_choice": getattr(self, "baseline_choice_", {}),
             "rules": {"min_gain": self.min_gain, "alpha": self.alpha, "parsimony": self.parsimony,
                       "k_folds": self.k_folds, "shortlist": self.shortlist,
                       "refit_folds": self.refit_folds, "min_cv_gain": self.min_cv_gain,

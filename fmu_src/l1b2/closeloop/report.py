@@ -144,6 +144,7 @@ class Diagnosis(_Record):
     position_spectrum_peak: dict = field(default_factory=dict)
     measurement_chain: dict = field(default_factory=dict)
     channels_considered: list = field(default_factory=list)
+    baseline_choice: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         out = {f.name: getattr(self, f.name) for f in fields(self)}

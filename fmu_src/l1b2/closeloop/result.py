@@ -304,6 +304,14 @@ def markdown_report(rep: dict) -> str:
         lines.append(f"* evidence below the materiality threshold: `{t['label']}` ({', '.join(t['regressors'])}), "
                      f"CV nrmse {t['cv_free_run_nrmse_current']:.2%} -> {t['cv_free_run_nrmse_refit']:.2%} "
                      f"(< {d['rules'].get('min_cv_drop', 0):.2%} drop: not added)")
+    bc = d.get("baseline_choice") or {}
+    if bc.get("families"):
+        lines += ["", f"## Baseline family (chosen: `{bc['chosen']}`, by TRAIN's cross-validated free-run nrmse over "
+                  f"{bc.get('folds')} run folds)", "", "| family | CV nrmse | TRAIN nrmse | failed folds |",
+                  "|---|---|---|---|"]
+        for fam, r in bc["families"].items():
+            lines.append(f"| {fam} | {_pct(r['cv_free_run_nrmse'], '.2%')} | {_pct(r['train_free_run_nrmse'], '.2%')} "
+                         f"| {r['folds_failed']} |")
     lines += ["", "## Rounds (free-run nrmse before/after each added effect; CV gain = held-out free-run "
               "sum of squares of the re-identified model over run folds)", "", "```", rounds_table(rep), "```"]
     for i, trials in enumerate(d.get("refit_trials", []), 1):

@@ -1,0 +1,55 @@
+"""The loop's choice of baseline family (closeloop.baselines): the CV rule and what counts as structural."""
+
+import numpy as np
+import pandas as pd
+import pytest
+from l1b2.closeloop import baselines
+from l1b2.closeloop.acceptance import FoldErrors
+from l1b2.closeloop.candidates import CandidateForce
+from l1b2.predictor.effects import family, kinds
+
+
+class _Fit:
+    """A fitted model as the rule sees it: parameters to warm-start from and a free-run prediction."""
+
+    def __init__(self, family, pred):
+        self.params_ = family
+        self._pred = pred
+
+    def predict_free_run(self, df):
+        return self._pred
+
+
+def _frame():
+    return pd.DataFrame({"speed_m_s": [0.1, 0.2, 0.3, 0.4]})
+
+
+@pytest.mark.parametrize("sse, want", [((4.0, 1.0), "pure_slip"), ((1.0, 4.0), "eq29"), ((2.0, 2.0), "eq29"),
+                                        ((1.0, np.inf), "eq29"), ((np.inf, 1.0), "pure_slip")])
+def test_the_lower_cv_error_wins_and_eq29_on_a_tie(monkeypatch, sse, want):
+    errs = dict(zip(("eq29", "pure_slip"), sse))
+    monkeypatch.setattr(baselines, "cv_errors", lambda df, mask, m_s, folds, init, jobs, settings: [
+        FoldErrors(np.array([errs[init], 0.0]), np.array([50.0, 50.0]))])
+    df = _frame()
+    fits = {"eq29": _Fit("eq29", df.speed_m_s.to_numpy() * 1.1), "pure_slip": _Fit("pure_slip", df.speed_m_s.to_numpy())}
+    chosen, rec = baselines.choose_baseline(fits, df, np.ones(4, bool), 0.1, [[0], [1]], None)
+    assert chosen == want and rec["chosen"] == want and rec["folds"] == 2
+    for fam, e in errs.items():
+        r = rec["families"][fam]
+        assert r["cv_free_run_nrmse"] == (pytest.approx(np.sqrt(e / 100.0)) if np.isfinite(e) else None)
+        assert r["folds_failed"] == int(not np.isfinite(e))
+    assert rec["families"]["eq29"]["train_free_run_nrmse"] == pytest.approx(0.1)
+    assert rec["families"]["pure_slip"]["train_free_run_nrmse"] == 0.0
+
+
+def test_voltage_dependent_slope_is_structural_only_for_eq29():
+    # Eq. 29 freezes the slip ratio, so its load x voltage and damping x voltage terms relax it; the pure-slip
+    # baseline has that slope, so the same terms are missing effects
+    structural = {k for k in kinds() if family(k).structural}
+    assert {"load_slope_voltage", "damping_voltage"} <= structural
+    pool = [CandidateForce("load_slope_voltage", "load", "", ("a",), ("1",), lambda df: None,
+                           structural="Eq. 29 holds the slope"),
+            CandidateForce("load_path_friction", "load", "", ("pulley_mu",), ("1",), lambda df: None)]
+    assert [c.structural for c in baselines.retag_structural(pool, "eq29")] == ["Eq. 29 holds the slope", ""]
+    assert [c.structural for c in baselines.retag_structural(pool, "pure_slip")] == ["", ""]
+    assert baselines.retag_structural(pool, "pure_slip")[1] is pool[1]
