@@ -658,7 +658,7 @@ def calibrated_model(base, ext, effects: EffectSet, output_filter, source: dict)
     base_setup = PredictorSetup(base.params_, base.m_s_, base.T_s_)
     if ext is None:
         return (ExtendedPredictor(base_setup, base_setup, (), None, dict(source)),
-                "nothing was added: the baseline Eq. 29 predictor is the model")
+                f"nothing was added: the baseline predictor ({base.params_.drive_law}) is the model")
     missing = [c.label for c in effects.candidates if not c.spec]
     if missing:
         return None, f"effects without a serialisable spec (custom candidates): {', '.join(missing)}"

@@ -5,7 +5,9 @@ the four-FMU co-simulation has physical parameters for some of the same
 effects (each family's :attr:`~l1b2.predictor.effects.base.Effect.home`).
 :func:`map_effects` asks each family to carry its identified effect there
 (:meth:`~l1b2.predictor.effects.base.Effect.calibrate`); every other effect
-is listed with the reason it is not mapped. The helpers here are what a
+is listed with the reason it is not mapped, and so is an effect with a home
+whose parameters are not identified (a standard error that is missing or not
+finite): the calibrated motor carries only identified values. The helpers here are what a
 calibration against steady-state speeds needs: TRAIN's operating grid, the
 predictor's steady-speed change of one effect and the physical model's speeds.
 """
@@ -63,6 +65,12 @@ def map_effects(model: ExtendedPredictor, mp) -> tuple:
         fam = family(e.spec.get("kind"))
         home = ", ".join(fam.home) if fam.home and fam.kind == e.family else None
         rec = {"label": e.label, "family": e.family, "home": home, "mapped": False, "parameters": {}}
+        unidentified = [n for n, se in zip(e.names, e.stderr) if se is None or not np.isfinite(se)]
+        if home is not None and unidentified:   # only identified values go into the calibrated motor
+            rec["reason"] = (f"not identified ({', '.join(unidentified)} without a standard error): the subsystem "
+                             "FMUs keep their own value")
+            records.append(rec)
+            continue
         done = fam.calibrate(e, model, out) if home is not None else None
         if done is not None:
             out, upd = done
