@@ -53,3 +53,11 @@ def test_voltage_dependent_slope_is_structural_only_for_eq29():
     assert [c.structural for c in baselines.retag_structural(pool, "eq29")] == ["Eq. 29 holds the slope", ""]
     assert [c.structural for c in baselines.retag_structural(pool, "pure_slip")] == ["", ""]
     assert baselines.retag_structural(pool, "pure_slip")[1] is pool[1]
+
+
+def test_the_command_line_offers_the_families_of_the_model(tmp_path):
+    from l1b2 import cli
+    from l1b2.predictor.model import DRIVE_LAWS
+    assert cli.DRIVE_LAWS == DRIVE_LAWS
+    with pytest.raises(SystemExit):   # an unknown family is refused by the parser, before any file is read
+        cli.main(["identify", "--train", str(tmp_path / "x.csv"), "--out", str(tmp_path / "o"), "--model", "linear"])

@@ -195,6 +195,8 @@ UNUSUAL_UNITS_HELP = ("accept values a linear USM rig does not produce in SI uni
 
 
 NOISE_FITS = ("auto", "alternate", "profile")
+#: the predictor families (:data:`l1b2.predictor.model.DRIVE_LAWS`, repeated so that parsing imports no numpy)
+DRIVE_LAWS = ("eq29", "pure_slip")
 NOISE_FIT_HELP = ("'alternate': least squares at fixed noise variances, re-estimated alternately; 'profile': "
                   "profile-likelihood search (faster, reached the reference optimum on the 20 000-sample benchmark "
                   "where the alternation stopped 5 log-likelihood units short, but ended in a worse optimum with a "
@@ -226,6 +228,9 @@ def _close_loop_args(p: argparse.ArgumentParser) -> None:
                    help="the baseline identification's search: " + NOISE_FIT_HELP + " (alternate is the search with "
                    "which the close loop was measured)")
     p.add_argument("--noise", choices=NOISES, default="common", help=NOISE_HELP)
+    p.add_argument("--baseline", choices=("best",) + DRIVE_LAWS, default="best",
+                   help="the predictor family the loop starts from: best (the lower cross-validated free-run "
+                   "error on TRAIN, both reported), eq29 or pure_slip")
     p.add_argument("--seed", type=int, default=0, help="seed of the multi-start and of the fold assignment")
     p.add_argument("--slider-mass", type=float, help="slider mass [kg] (overrides the sidecars)")
     p.add_argument("--allow-unusual-units", action="store_true", help=UNUSUAL_UNITS_HELP)
@@ -337,6 +342,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fix", default=None, help="'none' (the paper's full set; the default), 'recommended' (pins "
                                                 "sigma, k0, mu, mu_sd: predictions unchanged) or name=value,...")
     p.add_argument("--starts", type=int, default=8, help="multi-start local searches")
+    p.add_argument("--model", choices=DRIVE_LAWS, default="eq29", help="the predictor family: eq29 (the paper's) "
+                   "or pure_slip (the slip ratio follows the speed; 'recommended' then pins k0, mu, mu_sd)")
     p.add_argument("--noise-fit", choices=NOISE_FITS, default="auto", help=NOISE_FIT_HELP)
     p.add_argument("--noise", choices=NOISES, default="common", help=NOISE_HELP)
     p.add_argument("--seed", type=int, default=0, help="seed of the multi-start's start points")
@@ -539,7 +546,7 @@ def cmd_identify(args) -> int:
                              fix=args.fix, n_starts=args.starts, seed=args.seed, test_abs_loads=args.test_loads,
                                  slider_mass_kg=args.slider_mass, plots_on=not args.no_plots,
                                  verbose=args.verbose, allow_unusual_units=args.allow_unusual_units,
-                                 noise_fit=args.noise_fit, noise=args.noise)
+                                 noise_fit=args.noise_fit, noise=args.noise, model=args.model)
     print(f"identify: {rep['data']['train_runs']} train runs, {rep['data']['test_runs']} test runs "
           f"({rep['data']['split']}); fit {rep['fit_time_s']:.1f} s")
     for part in ("train", "test"):
@@ -590,7 +597,7 @@ def _run_close_loop(args, say):
                           alpha=args.alpha, min_gain=args.min_gain, seed=args.seed,
                           max_rounds=args.max_rounds, min_cv_gain=args.min_cv_gain,
                           min_cv_drop=args.min_cv_drop, screen_alpha=args.screen_alpha or None,
-                          noise_fit=args.noise_fit, noise=args.noise,
+                          noise_fit=args.noise_fit, noise=args.noise, baseline=args.baseline,
                           slider_mass_kg=args.slider_mass, plots_on=not args.no_plots, progress=say,
                           allow_unusual_units=args.allow_unusual_units, export_dir=args.export,
                           motor=_motor(args) if args.export is not None else None,

@@ -396,11 +396,13 @@ def _test_figures(est, test: dataio.Measurements, tmp: Path, out: Path) -> list[
 
 def run_identification(train_path, out_dir, test_path=None, *, order=8, criterion="free_run", fix=None,
                        n_starts=8, seed=0, test_abs_loads=TEST_ABS_LOADS, slider_mass_kg=None, plots_on=True,
-                       verbose=False, allow_unusual_units=False, noise_fit="auto", noise="common") -> dict:
+                       verbose=False, allow_unusual_units=False, noise_fit="auto", noise="common",
+                       model="eq29") -> dict:
     """Identify the Eq. 29 predictor on TRAIN by maximum likelihood; report on TRAIN and TEST.
 
     ``noise_fit``: ``"auto"`` (default), ``"alternate"`` or ``"profile"``; ``noise``: ``"common"`` (default) or
-    ``"per_run"`` (:class:`l1b2.ident.estimator.PredictorIdentifier`).
+    ``"per_run"``; ``model``: the predictor family, ``"eq29"`` (default) or ``"pure_slip"``
+    (:class:`l1b2.ident.estimator.PredictorIdentifier`).
 
     Writes (through :func:`output_dir`, so all at once or nothing)
     ``out_dir/identification.json`` (parameters with value, stderr, 95 %
@@ -417,7 +419,7 @@ def run_identification(train_path, out_dir, test_path=None, *, order=8, criterio
                                                   slider_mass_kg=slider_mass_kg,
                                                   allow_unusual_units=allow_unusual_units)
         est = PredictorIdentifier(order=order, criterion=criterion, fixed=_parse_fix(fix), n_starts=n_starts,
-                                  seed=seed, verbose=verbose, noise_fit=noise_fit, noise=noise)
+                                  seed=seed, verbose=verbose, noise_fit=noise_fit, noise=noise, model=model)
         _fit_naming_file(est, train, train_path)
         sections = {
             "data": {"train": str(train_path), "test": str(test_path) if test_path else None,
