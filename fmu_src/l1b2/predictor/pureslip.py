@@ -92,7 +92,7 @@ def slip_force(vp, muP, Ap, c_k):
 
 
 def pure_slip_drive_force(W, v, F_p, sigma, mu):
-    """The physics notes' closed form ``sigma (W/pi - v/2) + mu F_p (2 sqrt(1 - k^2) - 1)``, k = v/W in [0, 1]."""
+    """The closed form of docs/explanation/physics.md, ``sigma (W/pi - v/2) + mu F_p (2 sqrt(1 - k^2) - 1)``, k = v/W in [0, 1]."""
     W = np.asarray(W, float)
     v = np.asarray(v, float)
     g1 = slip_factors(slip_ratio(v, 1.0 / W))[0]
