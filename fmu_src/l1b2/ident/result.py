@@ -41,6 +41,9 @@ from ..predictor.model import PredictorParams
 from .problem import RECOMMENDED_FIXED, SampleData
 from .slipproblem import make_problem
 
+#: how the report names each predictor family (``PredictorParams.drive_law``)
+_FAMILY_TEXT = {"eq29": "Eq. 29", "pure_slip": "pure slip, slip ratio of the state"}
+
 __all__ = ["Parameter", "IdentificationResult"]
 
 
@@ -346,7 +349,9 @@ class IdentificationResult:
         st = self.settings
         lines = [
             "[[Model]]",
-            f"    L1B2 reduced predictor (paper Eq. 29), order {st['order']}, criterion {st['criterion']}, "
+            f"    L1B2 reduced predictor ({'paper ' if self.params.drive_law == 'eq29' else ''}"
+            f"{_FAMILY_TEXT[self.params.drive_law]}), order {st['order']}, "
+            f"criterion {st['criterion']}, "
             f"noise {st['noise']}, kappa {st['kappa']}, "
             f"m_eff = m_s{' + |m_load|' if st['include_load_inertia'] else ''}",
         ]
@@ -487,7 +492,7 @@ class IdentificationResult:
             extra_sec[nm] = {**self._parameter_entry(prms[nm]),
                              "confounding": strict_json(self.extra_confounding.get(nm, {}))}
         d = {
-            "model": "l1b2 reduced predictor (Eq. 29)",
+            "model": f"l1b2 reduced predictor ({_FAMILY_TEXT[self.params.drive_law]})",
             "settings": dict(self.settings),
             "slider_mass_kg": self.slider_mass_kg,
             "predictor_params": self.params.to_dict(),

@@ -20,7 +20,9 @@ and the drive force of the predictor keeps Eq. 29's form with ``k0 -> k``::
 
     X(v') = X_lin + mu P [g1(k) - (pi/2) A' G(k)]          (:func:`slip_force`)
 
-``W`` is proportional to V0 (times the position profile ``pi B'(s)/sigma``),
+``W`` is the open-loop tip speed: Eq. 25's feedback of the interface on the
+tip amplitude is not modelled. It is proportional to V0 (times the position
+profile ``pi B'(s)/sigma``),
 so the slope ``dX/dv' = mu P [g1'(k) - (pi/2) A' G'(k)] c_k`` shrinks as V0
 grows: the V0-dependence of the load slope that Eq. 29 lacks.
 
