@@ -61,3 +61,25 @@ def test_the_command_line_offers_the_families_of_the_model(tmp_path):
     assert cli.DRIVE_LAWS == DRIVE_LAWS
     with pytest.raises(SystemExit):   # an unknown family is refused by the parser, before any file is read
         cli.main(["identify", "--train", str(tmp_path / "x.csv"), "--out", str(tmp_path / "o"), "--model", "linear"])
+
+
+def test_linear_response_of_the_pure_slip_baseline_includes_the_slip_slope():
+    # reference: the free run's change under a small extra force, by finite differences; the screen's linear
+    # response must follow the pure-slip family's own damping D - dX/dv', not Eq. 29's D
+    from l1b2.closeloop.selection import linear_response
+    from l1b2.predictor.model import example_params
+    from l1b2.predictor.simulate import design_grid, free_run, simulate_dataset
+    p = example_params(2).replace(sigma=8.0, c_r=5.0, alpha=(0.05, 0.005, 0.0), drive_law="pure_slip")
+    df = simulate_dataset(p, design_grid(voltages=(200.0, 300.0), loads=(0.0, 0.03)), 0.1)
+    cols = [df[c].to_numpy(float) for c in ("position_m", "voltage_V", "load_kg", "direction", "time_s")]
+    v = df["speed_m_s"].to_numpy(float)
+    run = df["run"].to_numpy()
+    base = free_run(p, *cols[:4], cols[4], v, 0.1, run)
+    F = np.full(len(df), 1.0)
+    eps = 1e-4
+    fd = cols[3] * (free_run(p, *cols[:4], cols[4], v, 0.1, run, extra_force=eps * F) - base) / eps
+    lin = linear_response(p, df, 0.1, F[:, None], v_pred=base)[:, 0]
+    eq29_like = linear_response(p, df, 0.1, F[:, None])[:, 0]
+    moving = np.abs(base) > 0.02
+    err = np.max(np.abs(lin - fd)[moving]) / np.max(np.abs(fd))
+    assert err < 0.02 < np.max(np.abs(eq29_like - fd)[moving]) / np.max(np.abs(fd))

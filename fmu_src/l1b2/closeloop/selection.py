@@ -49,13 +49,17 @@ SHORTLIST_MIN_GAIN = 0.05
 # exact linear response of the baseline free run to extra forces
 # ---------------------------------------------------------------------------
 
-def linear_response(params: pr.PredictorParams, df: pd.DataFrame, m_s: float, F: np.ndarray) -> np.ndarray:
+def linear_response(params: pr.PredictorParams, df: pd.DataFrame, m_s: float, F: np.ndarray,
+                    v_pred=None) -> np.ndarray:
     """Drive-coordinate free-run speed response to drive-coordinate forces ``F`` (n x k) [m/s per unit].
 
     ``S(k+1) = (1 - h_k D_k) S(k) + h_k F_k`` with ``h = dt / m_eff`` and ``D``
     the baseline's damping at the measured position, ``S = 0`` at each
     run's first sample (the free run starts from the measured speed).
-    Exact for a moving slider (constant sign of the guide friction).
+    Exact for a moving slider (constant sign of the guide friction). For the
+    pure-slip family the damping is ``D - dX/dv'`` at the baseline's free-run
+    speed ``v_pred`` (data convention; the drive force's own slope,
+    :func:`l1b2.predictor.model.speed_slope`), to first order.
     """
     d = df[dataio.DIRECTION].to_numpy(float)
     s = df[dataio.POSITION].to_numpy(float)
@@ -63,6 +67,8 @@ def linear_response(params: pr.PredictorParams, df: pd.DataFrame, m_s: float, F:
     load = df[dataio.LOAD].to_numpy(float)
     t = df[dataio.TIME].to_numpy(float)
     D, _, _ = pr.force_parts(params, s, V0, d * load, m_s)
+    if v_pred is not None:
+        D = D - pr.speed_slope(params, s, V0, d * np.asarray(v_pred, float))
     D = np.broadcast_to(D, s.shape)
     m_eff = pr.effective_mass(params, load, m_s)
     F = np.asarray(F, float).reshape(len(df), -1)
@@ -193,9 +199,9 @@ class FoldSolver:
 def design(candidate: CandidateForce, r_drive, df, mask, params, m_s, *, v_pred):
     """``(y, A, S, runs)`` on the masked samples: residual, intercept + nuisance responses, candidate response."""
     idx = np.flatnonzero(mask)
-    N = linear_response(params, df, m_s, nuisance_forces(params, df, v_pred))[idx]
+    N = linear_response(params, df, m_s, nuisance_forces(params, df, v_pred), v_pred=v_pred)[idx]
     F = np.asarray(candidate.features(df), float).reshape(len(df), -1)
-    S = linear_response(params, df, m_s, F)[idx]
+    S = linear_response(params, df, m_s, F, v_pred=v_pred)[idx]
     A = np.column_stack([np.ones(len(idx)), N])
     return r_drive[idx], A, S, df[dataio.RUN].to_numpy()[idx]
 
@@ -222,8 +228,8 @@ def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5,
     n_eff = _effective_n(y, runs_m)
     feats = [np.asarray(c.features(df), float).reshape(len(df), -1) for c in candidates]
     widths = [f.shape[1] for f in feats]
-    N = linear_response(params, df, m_s, nuisance_forces(params, df, v_pred))[idx]
-    S_all = linear_response(params, df, m_s, np.column_stack(feats))[idx]
+    N = linear_response(params, df, m_s, nuisance_forces(params, df, v_pred), v_pred=v_pred)[idx]
+    S_all = linear_response(params, df, m_s, np.column_stack(feats), v_pred=v_pred)[idx]
     solver = FoldSolver(y, N, runs_m, folds)
     A = solver.A
     coef0 = np.linalg.lstsq(A, y, rcond=None)[0]

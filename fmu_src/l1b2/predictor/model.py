@@ -508,6 +508,14 @@ def drive_force(params: PredictorParams, s, V0, X, vp):
     return X - frozen + slip_force(vp, muP, Ap, c_k)[0]
 
 
+def speed_slope(params: PredictorParams, s, V0, vp):
+    """``dX/dv'`` of the drive force at drive speed ``vp`` [N s/m]: 0 for Eq. 29, the slip force's slope for pure slip."""
+    if params.drive_law == "eq29":
+        return np.zeros(np.broadcast(np.asarray(s, float), np.asarray(V0, float), np.asarray(vp, float)).shape)
+    muP, Ap, c_k, _ = slip_terms(params, s, V0)
+    return slip_force(vp, muP, Ap, c_k)[1]
+
+
 def rest_sign(X, Fr):
     """Effective sign(-v') at rest: -clip(X/Fr, -1, 1) (static friction opposes X, capped)."""
     X = np.asarray(X, dtype=float)
