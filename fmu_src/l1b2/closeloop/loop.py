@@ -143,12 +143,13 @@ class CloseLoop(EstimatorSettings):
         cross-validated refits of the current model and of one candidate (and, if it is accepted, the
         next round).
 
-    baseline : {"best", "eq29", "pure_slip"}
-        The predictor family the loop starts from: ``"best"`` (default) identifies both on TRAIN and
-        keeps the one with the lower cross-validated free-run nrmse over the refit folds
-        (:func:`l1b2.closeloop.baselines.choose_baseline`; both figures in ``diagnosis.baseline_choice``);
-        with the pure-slip family no candidate counts as relaxing Eq. 29 (a load x voltage term is a
-        missing effect).
+    baseline : {"eq29", "best", "pure_slip"}
+        The predictor family the loop starts from: ``"eq29"`` (default), ``"pure_slip"``, or ``"best"``,
+        which identifies both on TRAIN and keeps the one with the lower cross-validated free-run nrmse
+        over the refit folds (:func:`l1b2.closeloop.baselines.choose_baseline`; both figures in
+        ``diagnosis.baseline_choice``). With the pure-slip family no candidate counts as relaxing Eq. 29
+        (a load x voltage term is a missing effect). Why ``"best"`` is not yet the default:
+        ``docs/decisions/0019-pure-slip-baseline.md``.
 
     Attributes
     ----------
@@ -163,7 +164,7 @@ class CloseLoop(EstimatorSettings):
                  min_cv_gain: float = DEFAULT_MIN_CV_GAIN, min_cv_drop: float = DEFAULT_MIN_CV_DROP,
                  refit_nfev: int = DEFAULT_REFIT_NFEV,
                  final_nfev: int = 60, screen_alpha: float | None = 0.01, noise_fit: str = "alternate",
-                 noise: str = "common", client=None, baseline: str = "best"):
+                 noise: str = "common", client=None, baseline: str = "eq29"):
         self.order = order
         self.k_folds = k_folds
         self.alpha = alpha
