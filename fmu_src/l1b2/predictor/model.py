@@ -60,6 +60,16 @@ Decisions (and where they deviate from the paper)
   the same friction-bar point whichever way it drives. Speeds are returned in
   the data's signed convention ``v = d v'``.
 
+Families
+--------
+``PredictorParams.drive_law`` selects the model family: ``"eq29"`` (default,
+everything above) or ``"pure_slip"``, the same force with the slip ratio of
+the state ``k = sigma v' / (pi B'(s) V0)`` in place of k0
+(:mod:`l1b2.predictor.pureslip`; :func:`drive_force`, :func:`speed_slope`).
+:func:`derivative`, :func:`one_step`, :func:`steady_state` and the free run of
+:mod:`l1b2.predictor.simulate` dispatch on it; :func:`force_parts` is always
+Eq. 29's split.
+
 Extra forces
 ------------
 :func:`derivative`, :func:`one_step`, :func:`free_run`,
