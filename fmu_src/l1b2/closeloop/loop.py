@@ -67,6 +67,7 @@ from ..predictor.setup import PredictorSetup
 from . import chain
 from . import residuals as res
 from .candidates import CandidateSource, Context, full_library, training_summary
+from .stages import StageClock
 from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT_FOLDS, DEFAULT_REFIT_NFEV,
                          EffectSet, RefitCV, RefitSettings, Validated, accepts, chain_cv_errors, collinear, cv_errors,
                          fold_start_phi, materiality, refit, stratified_folds, validated)
@@ -187,7 +188,7 @@ class CloseLoop(EstimatorSettings):
         _check_measurements(train, "train")
         if test is not None:
             _check_measurements(test, "test")
-        say = self.progress or _quiet
+        say = StageClock(self.progress or _quiet)  # times every stage it announces (report.json "stages")
         t_start = time.perf_counter()
         m_s = train.slider_mass_kg
         dtr = train.df
@@ -198,6 +199,7 @@ class CloseLoop(EstimatorSettings):
         base = checked_fit(lambda: self._identify(dtr, m_s, mask_tr),
                            lambda: self._identify(dtr, m_s, mask_tr, retry=True), dtr, mask_tr,
                            "the baseline identification on TRAIN")
+        say.count(1, base.convergence_.get("nfev_total", 0))
         v_te = base.predict_free_run(dte) if dte is not None else None
         baseline = _metrics(base, dtr, dte)
         it = _Iteration(model=base, effects=EffectSet(), rounds=[{"round": 0, "added": None, "metrics": baseline}])
@@ -238,7 +240,7 @@ class CloseLoop(EstimatorSettings):
             data=_data_summary(train, test), wall_time_s=round(time.perf_counter() - t_start, 2),
             baseline_model=base, extended_model=ext, analysis=analysis, train_df=dtr, test_df=dte,
             test_free_run_before=v_te, test_free_run_after=v_te_ext, rounds=it.rounds,
-            calibrated_model=calibrated, calibrated_note=why)
+            calibrated_model=calibrated, calibrated_note=why, stages=say.close())
         return self
 
     def _identify(self, df: pd.DataFrame, m_s: float, mask: np.ndarray, retry: bool = False) -> Validated:
@@ -294,6 +296,7 @@ class CloseLoop(EstimatorSettings):
             say(f"round {n_rnd}: cross-validating {'the current model and ' if cur_err is None else ''}the refit "
                 f"with {', '.join(labels)} over {len(folds)} run folds")
             errs = cv_errors(dtr, mask, m_s, folds, cur.params_, jobs, self.refit_settings())
+            getattr(say, "count", _quiet)(len(jobs) * len(folds))
             if cur_err is None:
                 cur_err, errs = errs[0], errs[1:]
             trials = [RefitCV(s.candidate, cur_err, err, s.cv_gain, s.phi) for s, err in zip(short, errs)]
@@ -317,6 +320,7 @@ class CloseLoop(EstimatorSettings):
                               n_starts=max(self.n_starts, 2)),
                 dtr, mask, f"the joint re-identification with {pick.candidate.label} (round {n_rnd})")
             it.model, it.effects = model, effects.with_phi(model.phi_)
+            getattr(say, "count", _quiet)(1, model.convergence_.get("nfev_total", 0))
             cur_err = None
             it.rounds.append({"round": n_rnd, "added": pick.candidate.label, "effect": pick.candidate.family,
                               "regressors": list(pick.candidate.regressors), "cv": pick.to_dict(),
