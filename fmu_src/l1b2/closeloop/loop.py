@@ -261,7 +261,8 @@ class CloseLoop(EstimatorSettings):
     def _iterate(self, it: _Iteration, pool, dtr, mask, m_s, report, say) -> None:
         """Rounds of linearised shortlist -> cross-validated refit -> acceptance -> joint re-identification.
 
-        Extends ``it`` in place; ``report(model)`` gives a round's metrics (on the measured speed).
+        Extends ``it`` in place; ``report(model)`` gives a round's metrics (on the measured speed); ``say`` is
+        the job's :class:`~l1b2.closeloop.stages.StageClock` (refits and evaluations are counted on it).
         """
         folds = stratified_folds(dtr, self.refit_folds, self.seed)
         cur_err = None
@@ -296,7 +297,7 @@ class CloseLoop(EstimatorSettings):
             say(f"round {n_rnd}: cross-validating {'the current model and ' if cur_err is None else ''}the refit "
                 f"with {', '.join(labels)} over {len(folds)} run folds")
             errs = cv_errors(dtr, mask, m_s, folds, cur.params_, jobs, self.refit_settings())
-            getattr(say, "count", _quiet)(len(jobs) * len(folds))
+            say.count(len(jobs) * len(folds))
             if cur_err is None:
                 cur_err, errs = errs[0], errs[1:]
             trials = [RefitCV(s.candidate, cur_err, err, s.cv_gain, s.phi) for s, err in zip(short, errs)]
@@ -320,7 +321,7 @@ class CloseLoop(EstimatorSettings):
                               n_starts=max(self.n_starts, 2)),
                 dtr, mask, f"the joint re-identification with {pick.candidate.label} (round {n_rnd})")
             it.model, it.effects = model, effects.with_phi(model.phi_)
-            getattr(say, "count", _quiet)(1, model.convergence_.get("nfev_total", 0))
+            say.count(1, model.convergence_.get("nfev_total", 0))
             cur_err = None
             it.rounds.append({"round": n_rnd, "added": pick.candidate.label, "effect": pick.candidate.family,
                               "regressors": list(pick.candidate.regressors), "cv": pick.to_dict(),
