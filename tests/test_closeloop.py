@@ -390,3 +390,31 @@ def test_result_api_matches_the_saved_report(tmp_path):
     assert saved == rep
     assert CloseLoopResult.from_dict(saved) == res   # figures are not part of the result
     assert (tmp_path / "r" / "report.md").read_text().startswith(res.markdown().rstrip())
+    # time and evaluations per stage: the loop's stages in order, the baseline's evaluations and the refits counted
+    stages = rep["stages"]
+    assert stages[0]["stage"].startswith("baseline") and stages[0]["identifications"] == 1
+    assert stages[0]["nfev"] == res.baseline_model.convergence_["nfev_total"] > 0
+    cv = [s for s in stages if "cross-validating" in s["stage"]]
+    assert cv and all(s["identifications"] >= 4 for s in cv)   # every fold of every trial is one refit
+    assert all(s["wall_s"] >= 0 and s["cpu_s"] >= 0 for s in stages)
+    assert "## Time per stage" in res.markdown() and CloseLoopResult.from_dict(saved).stages == stages
+
+
+def test_stage_clock_times_each_announced_stage():
+    # reference: a stage runs from its message to the next one; counts go to the stage open when they are added
+    import time
+    from l1b2.closeloop.stages import StageClock
+    said = []
+    clock = StageClock(said.append)
+    clock("a")
+    clock.count(2, 30)
+    t0 = time.process_time()
+    while time.process_time() - t0 < 0.05:
+        pass
+    clock("b")
+    clock.count(1)
+    recs = clock.close()
+    assert said == ["a", "b"] and [r["stage"] for r in recs] == ["a", "b"]
+    assert (recs[0]["identifications"], recs[0]["nfev"], recs[1]["identifications"], recs[1]["nfev"]) == (2, 30, 1, 0)
+    assert recs[0]["cpu_s"] >= 0.045 and recs[0]["wall_s"] >= recs[0]["cpu_s"] - 0.01 and recs[1]["cpu_s"] < 0.045
+    assert clock.close() == recs   # closing again adds nothing

@@ -68,6 +68,7 @@ from ..predictor.setup import PredictorSetup
 from . import chain
 from . import residuals as res
 from .candidates import CandidateSource, Context, full_library, training_summary
+from .stages import StageClock
 from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT_FOLDS, DEFAULT_REFIT_NFEV,
                          EffectSet, RefitCV, RefitSettings, Validated, accepts, chain_cv_errors, collinear, cv_errors,
                          fold_start_phi, materiality, refit, stratified_folds, validated)
@@ -198,7 +199,7 @@ class CloseLoop(EstimatorSettings):
         _check_measurements(train, "train")
         if test is not None:
             _check_measurements(test, "test")
-        say = self.progress or _quiet
+        say = StageClock(self.progress or _quiet)  # times every stage it announces (report.json "stages")
         t_start = time.perf_counter()
         m_s = train.slider_mass_kg
         dtr = train.df
@@ -213,6 +214,7 @@ class CloseLoop(EstimatorSettings):
             fits[family] = checked_fit(lambda: self._identify(dtr, m_s, mask_tr, model=family),
                                        lambda: self._identify(dtr, m_s, mask_tr, retry=True, model=family), dtr,
                                        mask_tr, f"the {family} baseline identification on TRAIN")
+            say.count(1, fits[family].convergence_.get("nfev_total", 0))
         family, self.baseline_choice_ = next(iter(fits)), {"chosen": next(iter(fits)), "families": {}}
         if len(fits) > 1:
             say("baseline: cross-validating both families on TRAIN's run folds")
@@ -259,7 +261,7 @@ class CloseLoop(EstimatorSettings):
             data=_data_summary(train, test), wall_time_s=round(time.perf_counter() - t_start, 2),
             baseline_model=base, extended_model=ext, analysis=analysis, train_df=dtr, test_df=dte,
             test_free_run_before=v_te, test_free_run_after=v_te_ext, rounds=it.rounds,
-            calibrated_model=calibrated, calibrated_note=why)
+            calibrated_model=calibrated, calibrated_note=why, stages=say.close())
         return self
 
     def _identify(self, df: pd.DataFrame, m_s: float, mask: np.ndarray, retry: bool = False,
@@ -282,7 +284,8 @@ class CloseLoop(EstimatorSettings):
     def _iterate(self, it: _Iteration, pool, dtr, mask, m_s, report, say) -> None:
         """Rounds of linearised shortlist -> cross-validated refit -> acceptance -> joint re-identification.
 
-        Extends ``it`` in place; ``report(model)`` gives a round's metrics (on the measured speed).
+        Extends ``it`` in place; ``report(model)`` gives a round's metrics (on the measured speed); ``say`` is
+        the job's :class:`~l1b2.closeloop.stages.StageClock` (refits and evaluations are counted on it).
         """
         folds = stratified_folds(dtr, self.refit_folds, self.seed)
         cur_err = None
@@ -317,6 +320,7 @@ class CloseLoop(EstimatorSettings):
             say(f"round {n_rnd}: cross-validating {'the current model and ' if cur_err is None else ''}the refit "
                 f"with {', '.join(labels)} over {len(folds)} run folds")
             errs = cv_errors(dtr, mask, m_s, folds, cur.params_, jobs, self.refit_settings())
+            say.count(len(jobs) * len(folds))
             if cur_err is None:
                 cur_err, errs = errs[0], errs[1:]
             trials = [RefitCV(s.candidate, cur_err, err, s.cv_gain, s.phi) for s, err in zip(short, errs)]
@@ -340,6 +344,7 @@ class CloseLoop(EstimatorSettings):
                               n_starts=max(self.n_starts, 2)),
                 dtr, mask, f"the joint re-identification with {pick.candidate.label} (round {n_rnd})")
             it.model, it.effects = model, effects.with_phi(model.phi_)
+            say.count(1, model.convergence_.get("nfev_total", 0))
             cur_err = None
             it.rounds.append({"round": n_rnd, "added": pick.candidate.label, "effect": pick.candidate.family,
                               "regressors": list(pick.candidate.regressors), "cv": pick.to_dict(),

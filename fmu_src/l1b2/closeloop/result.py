@@ -72,6 +72,9 @@ class CloseLoopResult:
         The data checks (unit findings, TEST runs outside TRAIN's range), set by the caller.
     wall_time_s : float or None
         Wall time of the job [s].
+    stages : list of dict
+        Time and evaluations per stage of the fit (:class:`l1b2.closeloop.stages.StageClock`): stage,
+        wall_s, cpu_s (this process), identifications, nfev; not compared (timings differ between runs).
     calibrated_model : ExtendedPredictor or None
         The final model as :class:`l1b2.predictor.effects.ExtendedPredictor` (what ``Predictor.fmu``
         carries; the baseline alone when nothing was added; None when an effect has no serialisable
@@ -92,6 +95,7 @@ class CloseLoopResult:
     checks: dict | None = None
     calibrated_model: Any = field(default=None, repr=False)
     calibrated_note: str = ""
+    stages: list = field(default_factory=list, compare=False)
     # -- what the fit holds besides the report (not compared, not serialised) --
     scores: list = field(default_factory=list, repr=False, compare=False)
     significant: list = field(default_factory=list, repr=False, compare=False)
@@ -163,6 +167,7 @@ class CloseLoopResult:
             "wall_time_s": self.wall_time_s,
             "calibrated_model": self.calibrated_model.to_dict() if self.calibrated_model is not None else None,
             "calibrated_note": self.calibrated_note,
+            "stages": self.stages,
         })
 
     @classmethod
@@ -184,7 +189,7 @@ class CloseLoopResult:
                        data=d["data"], wall_time_s=d["wall_time_s"],
                        rounds=[Round.from_dict(r) for r in d["rounds"]], checks=d["checks"],
                        calibrated_model=None if cal is None else ExtendedPredictor.from_dict(cal),
-                       calibrated_note=d["calibrated_note"])
+                       calibrated_note=d["calibrated_note"], stages=list(d.get("stages", [])))
         except KeyError as exc:
             raise ReportFormatError(f"report: field {exc.args[0]!r} missing") from None
 
@@ -279,6 +284,16 @@ def rounds_table(report: dict) -> str:
     return "\n".join(lines)
 
 
+def stages_table(stages: list) -> str:
+    """Markdown table of the stage records (:class:`l1b2.closeloop.stages.StageClock`) with their total."""
+    rows = ["| stage | wall [s] | CPU [s] | identifications | evaluations |", "|---|---|---|---|---|"]
+    for r in stages:
+        rows.append(f"| {r['stage']} | {r['wall_s']:.1f} | {r['cpu_s']:.1f} | {r['identifications']} | {r['nfev']} |")
+    rows.append(f"| total | {sum(r['wall_s'] for r in stages):.1f} | {sum(r['cpu_s'] for r in stages):.1f} | "
+                f"{sum(r['identifications'] for r in stages)} | {sum(r['nfev'] for r in stages)} |")
+    return "\n".join(rows)
+
+
 def markdown_report(rep: dict) -> str:
     """``report.md`` from a report dict (:meth:`CloseLoopResult.to_dict`, plus ``figures`` when saved)."""
     d = rep["diagnosis"]
@@ -360,6 +375,9 @@ def markdown_report(rep: dict) -> str:
             ci = p.get("ci95") or [None, None]
             lines.append(f"| {n} | {sig(p['value'])} | {sig(p['stderr'])} | [{sig(ci[0])}, {sig(ci[1])}] | "
                          f"{p['unit']} |")
+    if rep.get("stages"):
+        lines += ["", "## Time per stage (CPU of this process; refits on Dask workers count as identifications)",
+                  "", stages_table(rep["stages"])]
     if rep.get("figures"):
         lines += ["", "## Figures", ""] + [f"![{Path(f).stem}]({Path(f).name})" for f in rep["figures"]]
     lines.append("")

@@ -142,58 +142,109 @@ def _effective_n(r: np.ndarray, runs: np.ndarray) -> float:
     return max(n_eff, 1.0)
 
 
+def _basis(A, rcond=1e-12):
+    """Thin SVD of ``A`` restricted to the directions above ``rcond`` (relative): ``(U, V / s)``."""
+    U, sv, Vt = np.linalg.svd(A, full_matrices=False)
+    keep = sv > rcond * max(float(sv[0]) if sv.size else 0.0, 1e-300)
+    return U[:, keep], Vt[keep].T / sv[keep]
+
+
+def _solve_small(M, b, scale):
+    """Least-squares solution of the small symmetric system ``M x = b`` (directions below 1e-10 ``scale`` cut)."""
+    w, V = np.linalg.eigh(M)
+    keep = w > 1e-10 * max(scale, 1e-300)
+    return V[:, keep] @ ((V[:, keep].T @ b) / w[keep])
+
+
 class FoldSolver:
-    """Cross-validated least squares over runs with a fixed nuisance block (Gram matrices precomputed).
+    """Cross-validated least squares over runs with a fixed nuisance block (its factorisations precomputed).
 
     ``y`` the residual, ``N`` the nuisance responses (an intercept is added),
     ``runs`` the run id per sample and ``folds`` the held-out run ids per
     fold. :meth:`gain` scores one candidate response ``S`` against the
-    nuisance-only model.
+    nuisance-only model, :meth:`gains` many at once.
+
+    The nuisance block's SVD on each fold's training rows is computed once;
+    a candidate's columns are projected off it (one matrix product for all
+    candidates), so each candidate costs only its own small normal
+    equations: the least-squares fit of ``[A, S]`` exactly, by the
+    Frisch-Waugh-Lovell theorem.
     """
 
-    def __init__(self, y, N, runs, folds, lam=1e-10):
-        self.y, self.runs, self.folds, self.lam = y, runs, folds, lam
+    def __init__(self, y, N, runs, folds):
+        self.y, self.runs, self.folds = y, runs, folds
         self.A = np.column_stack([np.ones(len(y)), N])
+        self.keys = []
         self.parts = []
         for fold in folds:
             test = np.isin(runs, fold)
             tr = ~test
-            A_tr = self.A[tr]
-            G = A_tr.T @ A_tr
-            self.parts.append((test, tr, G, A_tr.T @ y[tr]))
-        self.sse0 = self.held_out_sse(None)
+            U, W = _basis(self.A[tr])
+            beta0 = W @ (U.T @ y[tr])
+            yp = y[tr] - U @ (U.T @ y[tr])
+            e0 = y[test] - self.A[test] @ beta0
+            labels, code = np.unique(runs[test], return_inverse=True)
+            order = pd.unique(runs[test])
+            self.keys += list(order)
+            self.parts.append((test, tr, U, W, yp, e0, code, [int(np.searchsorted(labels, r)) for r in order]))
+        self.sse0 = self._run_sse([(np.bincount(p[6], weights=p[5] ** 2), p) for p in self.parts])
 
-    def _solve(self, G, g):
-        reg = self.lam * (np.trace(G) / len(G)) * np.eye(len(G))
-        return np.linalg.solve(G + reg, g)
+    def _run_sse(self, per_fold) -> dict:
+        out = {}
+        for sums, part in per_fold:
+            labels = pd.unique(self.runs[part[0]])
+            out.update({run: float(sums[k]) for run, k in zip(labels, part[7])})
+        return out
 
-    def held_out_sse(self, S) -> dict:
-        """Held-out residual sum of squares per run, with the responses ``S`` added (None: nuisance only)."""
-        sse = {}
-        for test, tr, G, g in self.parts:
-            if S is None:
-                beta = self._solve(G, g)
-                pred = self.A[test] @ beta
-            else:
-                S_tr = S[tr]
-                AS = self.A[tr].T @ S_tr
-                Gf = np.block([[G, AS], [AS.T, S_tr.T @ S_tr]])
-                gf = np.concatenate([g, S_tr.T @ self.y[tr]])
-                beta = self._solve(Gf, gf)
-                pred = np.column_stack([self.A[test], S[test]]) @ beta
-            e = self.y[test] - pred
-            for run in pd.unique(self.runs[test]):
-                sse[run] = float(np.sum(e[self.runs[test] == run] ** 2))
-        return sse
+    def gains(self, S_all, widths) -> list:
+        """:meth:`gain` of every candidate: ``S_all`` holds their columns side by side, ``widths`` their counts."""
+        bounds = np.cumsum([0] + list(widths))
+        sums = [[] for _ in widths]
+        for part in self.parts:
+            test, tr, U, W, yp, e0, code, _ = part
+            S_tr = S_all[tr]
+            C = U.T @ S_tr
+            Sp = S_tr - U @ C
+            Spy = Sp.T @ yp
+            T_te = S_all[test] - self.A[test] @ (W @ C)
+            norms = np.einsum("ij,ij->j", S_tr, S_tr)
+            for j, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])):
+                Spj = Sp[:, a:b]
+                coef = _solve_small(Spj.T @ Spj, Spy[a:b], float(np.max(norms[a:b])))
+                e = e0 - T_te[:, a:b] @ coef
+                sums[j].append((np.bincount(code, weights=e * e, minlength=len(part[7])), part))
+        keys = self.keys
+        s0 = np.array([self.sse0[k] for k in keys])
+        out = []
+        for per_fold in sums:
+            sse1 = self._run_sse(per_fold)
+            s1 = np.array([sse1[k] for k in keys])
+            gain = 1 - s1.sum() / s0.sum() if s0.sum() > 0 else 0.0
+            out.append((float(gain), (s0 - s1) / max(s0.mean(), 1e-300)))
+        return out
 
     def gain(self, S):
         """Pooled held-out gain of ``S`` and the per-run reductions (scaled by the mean null SSE)."""
-        sse1 = self.held_out_sse(S)
-        keys = list(self.sse0)
-        s0 = np.array([self.sse0[k] for k in keys])
-        s1 = np.array([sse1[k] for k in keys])
-        gain = 1 - s1.sum() / s0.sum() if s0.sum() > 0 else 0.0
-        return float(gain), (s0 - s1) / max(s0.mean(), 1e-300)
+        S = np.asarray(S, float).reshape(len(self.y), -1)
+        return self.gains(S, [S.shape[1]])[0]
+
+
+def insample_fits(A, y, S_all, widths):
+    """Least squares of ``y`` on ``[A, S_j]`` for every candidate j on all rows: ``(sse0, [(sse1, coef_S)])``."""
+    U, _ = _basis(A)
+    yp = y - U @ (U.T @ y)
+    Sp = S_all - U @ (U.T @ S_all)
+    Spy = Sp.T @ yp
+    norms = np.einsum("ij,ij->j", S_all, S_all)
+    sse0 = float(yp @ yp)
+    out = []
+    bounds = np.cumsum([0] + list(widths))
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        Spj = Sp[:, a:b]
+        coef = _solve_small(Spj.T @ Spj, Spy[a:b], float(np.max(norms[a:b])))
+        r = yp - Spj @ coef
+        out.append((float(r @ r), coef))
+    return sse0, out
 
 
 def design(candidate: CandidateForce, r_drive, df, mask, params, m_s, *, v_pred):
@@ -232,23 +283,25 @@ def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5,
     S_all = linear_response(params, df, m_s, np.column_stack(feats), v_pred=v_pred)[idx]
     solver = FoldSolver(y, N, runs_m, folds)
     A = solver.A
-    coef0 = np.linalg.lstsq(A, y, rcond=None)[0]
-    sse0 = float(np.sum((y - A @ coef0) ** 2))
+    usable = [bool(np.all(np.isfinite(S_all[:, a:a + w])) and not np.allclose(S_all[:, a:a + w], 0))
+              for a, w in zip(np.cumsum([0] + widths[:-1]), widths)]
+    cols = np.concatenate([np.arange(a, a + w) for a, w, u in zip(np.cumsum([0] + widths[:-1]), widths, usable) if u]
+                          + [np.zeros(0, int)]).astype(int)
+    w_ok = [w for w, u in zip(widths, usable) if u]
+    S_ok = np.ascontiguousarray(S_all[:, cols])
+    cv = iter(solver.gains(S_ok, w_ok)) if w_ok else iter(())
+    sse0, fits = insample_fits(A, y, S_ok, w_ok) if w_ok else (0.0, [])
+    fits = iter(fits)
     out = []
-    col = 0
-    for c, w in zip(candidates, widths):
-        S = S_all[:, col:col + w]
-        col += w
-        if not np.all(np.isfinite(S)) or np.allclose(S, 0):
+    for c, w, u in zip(candidates, widths, usable):
+        if not u:
             out.append(Score(c, 0.0, 1.0, 0.0, 0.0, np.zeros(w)))
             continue
-        gain, per_run = solver.gain(S)
-        Xf = np.column_stack([A, S])
-        coef = np.linalg.lstsq(Xf, y, rcond=None)[0]
-        sse1 = float(np.sum((y - Xf @ coef) ** 2))
+        gain, per_run = next(cv)
+        sse1, coef = next(fits)
         dll = n_eff * math.log(max(sse1, 1e-300) / max(sse0, 1e-300))
         out.append(Score(c, gain, res.wilcoxon_greater(per_run), float(np.mean(per_run > 0)),
-                         dll + w * math.log(n_eff), coef[A.shape[1]:], dll + 2 * w))
+                         dll + w * math.log(n_eff), coef, dll + 2 * w))
     return out
 
 
