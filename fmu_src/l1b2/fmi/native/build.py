@@ -184,10 +184,58 @@ def _model_tables(name: str, variables: list[dict], defaults: dict | None = None
     names = {v["name"]: v["vr"] for v in variables}
     np_ = sum(1 for k in names if k.startswith("alpha_"))
     out = ["", f"#define PRED_NP {np_}"]
-    for group in ("alpha", "beta", "p"):
-        out.append(f"static const int PRED_VR_{group.upper()}[PRED_NP] = {{" + ", ".join(
-            str(names[f"{group}_{j}"]) for j in range(np_)) + "};")
+    ext = (defaults or {}).get("extended_predictor")
+    for prefix in ("", "baseline_") if ext else ("",):
+        tag = "BASE_" if prefix else ""
+        if prefix and sum(1 for k in names if k.startswith(prefix + "alpha_")) != np_:
+            raise NativeBuildError("the baseline and the re-identified predictor have different polynomial orders")
+        for group in ("alpha", "beta", "p"):
+            out.append(f"static const int PRED_VR_{tag}{group.upper()}[PRED_NP] = {{" + ", ".join(
+                str(names[f"{prefix}{group}_{j}"]) for j in range(np_)) + "};")
+        out.append(f"static const int PRED_VR_{tag}SCALARS[{len(PREDICTOR_SCALARS)}] = {{" + ", ".join(
+            str(names[prefix + n]) for n in PREDICTOR_SCALARS) + "};")
+    if ext:
+        out += _extended_tables(ext, names)
     return out
+
+
+#: the scalar parameters of one Eq. 29 setup in the order predictor_model.c reads them
+PREDICTOR_SCALARS = ("c_r", "sigma", "mu", "k0", "mu_sd", "s_center", "s_half", "kappa", "load_inertia",
+                     "slider_mass_kg", "T_s")
+
+
+def _extended_tables(ext: dict, vr: dict) -> list[str]:
+    """The calibrated extended predictor's effects (kind codes, spec scalars, parameter value references) and
+    output filter for ``predictor_model.c`` (the kernels: :mod:`l1b2.predictor.effects.kernels`)."""
+    from ...predictor.effects import EffectSpecError
+    from ...predictor.effects.kernels import spec_scalars
+    kinds, qs, phis = [], [], []
+    for e in ext.get("effects", []):
+        try:
+            kind, q = spec_scalars(e["spec"])
+        except EffectSpecError as exc:
+            raise NativeBuildError(f"effect {e.get('label', e.get('family'))}: {exc}; its Predictor.fmu stays a "
+                                   "Python FMU") from None
+        kinds.append(kind)
+        qs.append(q)
+        phis.append([vr[n] for n in e["names"]])
+
+    def offsets(groups):
+        o = [0]
+        for g in groups:
+            o.append(o[-1] + len(g))
+        return o
+
+    def arr(ctype, name, values, fmt=str):
+        return f"static const {ctype} {name}[{max(1, len(values))}] = {{" + ", ".join(
+            fmt(v) for v in values or [0.0 if fmt is _c_double else 0]) + "};"
+
+    return ["#define PRED_EXTENDED 1", f"#define PRED_HAS_T {int('T' in vr)}",
+            f"#define PRED_HAS_FILTER {int(ext.get('output_filter') is not None)}",
+            f"#define EFF_N {len(kinds)}", f"#define EFF_NPHI {max(1, sum(map(len, phis)))}",
+            arr("int", "EFF_KIND", kinds), arr("int", "EFF_Q_OFF", offsets(qs)),
+            arr("double", "EFF_Q", [v for q in qs for v in q], _c_double), arr("int", "EFF_PHI_OFF", offsets(phis)),
+            arr("int", "EFF_PHI_VR", [v for p in phis for v in p])]
 
 
 def _unpacked_names(module, length_name: str) -> list[str]:
@@ -391,6 +439,9 @@ def source_tree(name: str, python_md: bytes, fmi_version: int, guid: str,
     if name == "L1B2Motor":
         from .translate import translate_kernels
         files["motor_kernels.h"] = translate_kernels().encode()
+    if name == "Predictor" and "extended_predictor" in (defaults or {}):
+        from .translate import translate_effect_kernels
+        files["effect_kernels.h"] = translate_effect_kernels().encode()
     return files
 
 
@@ -414,9 +465,6 @@ def build_native_fmu(name: str, python_fmu: str | Path, dest_dir: str | Path, fm
     with zipfile.ZipFile(python_fmu) as z:
         python_md = z.read("modelDescription.xml")
         defaults = json.loads(z.read("resources/_fmu_defaults.json"))
-    if name == "Predictor" and "extended_predictor" in defaults:
-        raise NativeBuildError("the calibrated extended predictor (effects, output filter) has no native model: "
-                               "its Predictor.fmu stays a Python FMU")
     sources = _source_files(name, fmi_version)
     # the GUID: stable for identical sources and variables (and different from the Python FMU's)
     provisional = source_tree(name, python_md, fmi_version, "{}", defaults)
