@@ -14,6 +14,7 @@ own prediction is checked on a real close-the-loop result in
 from __future__ import annotations
 
 import json
+from pathlib import Path
 import subprocess
 
 import numpy as np
@@ -404,3 +405,20 @@ def test_native_extended_predictor_fmus_validate(native_built):
         assert validate_fmu(path) == [], key
         with zipfile.ZipFile(path) as z:
             assert "sources/effect_kernels.h" in z.namelist()
+
+
+def test_export_of_a_calibrated_model_writes_the_native_fmus(models, tmp_path):
+    # reference: the manifest's file records and the native FMUs beside Predictor.fmu (FMI 2.0 and 3.0), which
+    # carry the model's effect parameters with their identified values
+    from fmpy import read_model_description
+    from l1b2.fmi.export import export_calibrated
+    ep = models["bar_waviness"]
+    man = export_calibrated(ep, tmp_path / "out")
+    names = {Path(f["path"]).name for f in man["files"]}
+    assert {"Predictor.fmu", "Predictor-native.fmu", "Predictor-native-fmi3.fmu"} <= names
+    assert man["native"]["Predictor"]["included"] is True
+    for stem in ("Predictor-native", "Predictor-native-fmi3"):
+        md = read_model_description(str(tmp_path / "out" / "fmus" / f"{stem}.fmu"))
+        var = {v.name: v for v in md.modelVariables}
+        for n, p in zip(ep.effects[0].names, ep.effects[0].phi):
+            assert float(var[n].start) == pytest.approx(p, rel=1e-15)

@@ -350,8 +350,14 @@ def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None)
     path = build_fmu(PREDICTOR_FMU, fmu_dir, mp=mp, extra_defaults=defaults, extra_files=plugins or None)
     os.chmod(path, 0o644)
     records = {PREDICTOR_FMU: fmu_record(path, out)}
+    for stale in fmu_dir.glob(f"{PREDICTOR_FMU}-native*.fmu"):
+        stale.unlink()
+    native, native_info = build_native_set(PREDICTOR_FMU, path, fmu_dir)   # the effects' kernels in C
+    for name, p in native.items():
+        os.chmod(p, 0o644)
+        records[name] = fmu_record(p, out)
     mp_cal, mapping = map_effects(model, mp)
-    files = [records[PREDICTOR_FMU]]
+    files = list(records.values())
     ssp_info = {"included": False, "reason": "no effect was mapped into the subsystem FMUs"}
     if any(m["mapped"] for m in mapping):
         from ..cosim import ssp
@@ -382,6 +388,7 @@ def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None)
     manifest = {
         "tool": "l1b2-usm", "version": __version__, "kind": "calibrated extended predictor",
         "source": model.source, "files": files, "effects": effects, "calibrated_ssp": ssp_info,
+        "native": {PREDICTOR_FMU: native_info},
         "output_filter": model.output_filter,
         "inputs": ["V0", "s", "load", "direction"] + (["T"] if model.needs_temperature else []),
         "time": "the FMU's own time is the session clock the effects use (start the simulation at the run's "
