@@ -422,3 +422,19 @@ def test_export_of_a_calibrated_model_writes_the_native_fmus(models, tmp_path):
         var = {v.name: v for v in md.modelVariables}
         for n, p in zip(ep.effects[0].names, ep.effects[0].phi):
             assert float(var[n].start) == pytest.approx(p, rel=1e-15)
+
+
+def test_voltage_interactions_are_their_written_out_forms():
+    # reference: the two structural interactions written out, -(d m g) dv and -(d v)/v_ref dv with
+    # dv = (V0 - V_ref)/V_ref: bit-identical (one helper computes both)
+    from l1b2.units import G_M_S2
+    rng = np.random.default_rng(5)
+    n = 200
+    x = {"V0": rng.uniform(0, 500, n), "d": rng.choice([-1.0, 1.0], n), "load": rng.normal(0, 0.2, n),
+         "v_base": rng.normal(0, 0.1, n)}
+    spec = {"V_ref": 287.5}
+    dv = (x["V0"] - spec["V_ref"]) / fx.V_REF
+    np.testing.assert_array_equal(fx.effect_features({"kind": "load_slope_voltage", **spec}, x)[:, 0],
+                                  -(x["d"] * x["load"] * G_M_S2) * dv)
+    np.testing.assert_array_equal(fx.effect_features({"kind": "damping_voltage", **spec}, x)[:, 0],
+                                  -(x["d"] * x["v_base"]) / fx.SPEED_REF * dv)

@@ -72,15 +72,11 @@ def worker_run(path, params, run):
 @pytest.fixture(scope="module")
 def fmus(tmp_path_factory):
     """``{"python": path, 2: path, 3: path}`` of the Predictor FMUs (physical linearisation of the reference motor)."""
-    from l1b2.fmi.build import build_fmu
-    from l1b2.fmi.native.build import build_native_fmu, find_cc
+    from l1b2.fmi.native.build import NoCompilerError, python_and_native_fmus
     try:
-        find_cc()
-    except Exception as exc:  # noqa: BLE001
+        return python_and_native_fmus("Predictor", tmp_path_factory.mktemp("native"))
+    except NoCompilerError as exc:
         pytest.skip(str(exc))
-    out = tmp_path_factory.mktemp("native")
-    py = build_fmu("Predictor", out)
-    return {"python": py, 2: build_native_fmu("Predictor", py, out, 2), 3: build_native_fmu("Predictor", py, out, 3)}
 
 
 @pytest.fixture(scope="module")

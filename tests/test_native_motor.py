@@ -92,15 +92,11 @@ def worker_motor_runs(path, scenarios):
 
 @pytest.fixture(scope="module")
 def fmus(tmp_path_factory):
-    from l1b2.fmi.build import build_fmu
-    from l1b2.fmi.native.build import build_native_fmu, find_cc
+    from l1b2.fmi.native.build import NoCompilerError, python_and_native_fmus
     try:
-        find_cc()
-    except Exception as exc:  # noqa: BLE001
+        return python_and_native_fmus("L1B2Motor", tmp_path_factory.mktemp("native_motor"))
+    except NoCompilerError as exc:
         pytest.skip(str(exc))
-    out = tmp_path_factory.mktemp("native_motor")
-    py = build_fmu("L1B2Motor", out)
-    return {"python": py, 2: build_native_fmu("L1B2Motor", py, out, 2), 3: build_native_fmu("L1B2Motor", py, out, 3)}
 
 
 @pytest.fixture(scope="module")

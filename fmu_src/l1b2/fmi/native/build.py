@@ -57,6 +57,10 @@ class NativeBuildError(L1B2Error):
     """The native FMU cannot be built (no C compiler, a compiler error, an unsupported model)."""
 
 
+class NoCompilerError(NativeBuildError):
+    """No C compiler was found to build the native FMUs."""
+
+
 def native_fmu_name(name: str, fmi_version: int) -> str:
     """File stem of the native FMU: ``<name>-native`` (FMI 2.0) or ``<name>-native-fmi3``."""
     return f"{name}-native" if fmi_version == 2 else f"{name}-native-fmi3"
@@ -77,7 +81,7 @@ def find_cc(cc: str | None = None) -> str:
     """The C compiler: ``cc``, else ``$CC``, else ``cc`` or ``gcc`` on PATH (:class:`NativeBuildError` if none)."""
     found = cc or os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
     if not found:
-        raise NativeBuildError("no C compiler found (set CC, or install cc/gcc) to build the native FMUs")
+        raise NoCompilerError("no C compiler found (set CC, or install cc/gcc) to build the native FMUs")
     return found
 
 
@@ -513,3 +517,15 @@ def build_native_set(name: str, python_fmu: str | Path, dest_dir: str | Path,
     except NativeBuildError as exc:
         return {}, {"included": False, "reason": str(exc)}
     return paths, {"included": True, "fmus": sorted(paths), "compiler": find_cc(cc), "cflags": list(CFLAGS)}
+
+
+def python_and_native_fmus(name: str, dest_dir: str | Path, **build_kw) -> dict:
+    """``{"python": path, 2: path, 3: path}``: the Python FMU ``name`` (:func:`l1b2.fmi.build.build_fmu` with
+    ``build_kw``) and its native FMI 2.0 and 3.0 FMUs, all in ``dest_dir``.
+
+    Raises :class:`NoCompilerError` first when there is no C compiler (nothing is built then).
+    """
+    from ..build import build_fmu
+    find_cc()
+    py = build_fmu(name, dest_dir, **build_kw)
+    return {"python": py, 2: build_native_fmu(name, py, dest_dir, 2), 3: build_native_fmu(name, py, dest_dir, 3)}
