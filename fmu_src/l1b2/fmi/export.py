@@ -317,7 +317,9 @@ def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None)
 
     Returns
     -------
-    The manifest: the FMU's record (validation results), and per effect its
+    The manifest: the FMU's record (validation results), those of the native
+    FMI 2.0 and 3.0 ``Predictor-native[-fmi3].fmu`` written beside it (the
+    effects' kernels in C; ``native`` says what was built or why not), and per effect its
     parameters and where it went (``Predictor.fmu``; the subsystem FMUs only
     where mapped, :func:`l1b2.predictor.effects.homes.map_effects`, else the reason).
     When at least one effect was mapped, also ``L1B2Motor_calibrated.ssp``
