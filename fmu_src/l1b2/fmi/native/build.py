@@ -275,9 +275,6 @@ def _motor_tables(variables: list[dict], defaults: dict) -> list[str]:
             "static const int MOTOR_MAP_X[MOTOR_NMAP] = {" + ", ".join(str(b) for _, b in pairs) + "};"]
     mp = MotorBlock.params_from_defaults(defaults)
     sp = mp.stator
-    if sp.df_dT_b_Hz_per_K != 0.0:
-        raise NativeBuildError("a temperature-dependent B2 mode (stator df_dT_b_Hz_per_K != 0) is not in the "
-                               "native L1B2Motor FMU")
     s = [mp.slider.s_min_m + (mp.slider.s_max_m - mp.slider.s_min_m) * i / 4000 for i in range(4001)]
     p_max = max(st.axial_force_N(sp, float(x)) for x in s)
     table = st.ModalTable(sp, None)
