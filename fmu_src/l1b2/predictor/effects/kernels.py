@@ -17,8 +17,9 @@ accepts. Each kernel returns one effect's force ``features(spec, x) @ phi``
 
 :data:`KERNEL_KINDS` lists the kinds with a kernel (every family of the package
 but ``channel``, whose logged channel is no input of ``Predictor.fmu``); a
-family registered outside the package has none. tests/test_native_effects.py
-checks every kernel against its family's vectorised features.
+family registered outside the package has none (its model stays a Python
+FMU). A change of a family's features needs the same change in its kernel:
+the tests compare every kernel with its family's vectorised features.
 """
 
 from __future__ import annotations
