@@ -14,6 +14,7 @@ own prediction is checked on a real close-the-loop result in
 from __future__ import annotations
 
 import json
+from pathlib import Path
 import subprocess
 
 import numpy as np
@@ -277,3 +278,176 @@ def test_extended_predictor_fmu_equals_the_extended_model_through_the_c_host(kin
     t = np.arange(N) * DT
     np.testing.assert_allclose(rows[:, 0], t, rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(rows[:, 1], _free_run(models[kind], r, t=t), rtol=1e-10, atol=1e-14)
+
+
+# ---------------------------------------------------------------------------
+# the native Predictor FMU of an extended model (C generated from l1b2.predictor.effects.kernels)
+# ---------------------------------------------------------------------------
+
+def test_effect_kernels_equal_the_families_features(pool):
+    # reference: each family's vectorised features @ phi (l1b2.predictor.effects), sample by sample, for every
+    # candidate the library proposes on the test frame (random phi), 1e-12 relative to the force's scale
+    from l1b2.predictor.effects import kernels as ek
+    df = _frame()
+    rng = np.random.default_rng(11)
+    x = {"t": df[dataio.TIME].to_numpy(copy=True), "s": df[dataio.POSITION].to_numpy(copy=True),
+         "V0": df[dataio.VOLTAGE].to_numpy(), "load": df[dataio.LOAD].to_numpy(), "d": df[dataio.DIRECTION].to_numpy(),
+         "T": df[dataio.TEMPERATURE].to_numpy(), "v_base": rng.normal(0.0, 0.1, len(df)),
+         "a_base": rng.normal(0.0, 2.0, len(df))}
+    # the samples at the ranges' ends and beyond (clipping), and at the B-spline knots
+    x["t"][:6] = [T0 - 1.0, T0, T0 + 0.5, T0 + 1.0, T0 + 2.0, T0 + 1.0 / 3.0]
+    x["s"][:6] = [-0.05, -0.02, 0.0, 0.02, 0.05, 0.01]
+    seen = set()
+    for c in pool:
+        if c.spec["kind"] not in ek.KERNEL_KINDS:
+            continue
+        seen.add(c.spec["kind"])
+        phi = rng.normal(0.0, 1.0, c.n_params)
+        want = fx.effect_features(c.spec, x) @ phi
+        kind, q = ek.spec_scalars(c.spec)
+        rows = np.column_stack([x[s] for s in fx.SIGNALS])
+        got = np.array([ek.effect_force(kind, row.tolist(), q, phi.tolist()) for row in rows])
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * max(1.0, np.max(np.abs(want))), err_msg=c.label)
+    assert seen == set(ek.KERNEL_KINDS)
+
+
+def test_every_family_of_the_package_has_a_kernel():
+    # reference: the registry's kinds that Predictor.fmu carries; a family without a per-sample kernel would keep
+    # its calibrated models Python FMUs (the export says so)
+    from l1b2.predictor.effects import kernels as ek
+    assert set(CARRIED) - set(ek.KERNEL_KINDS) == set(), "families without a kernel in l1b2.predictor.effects.kernels"
+
+
+OUTPUTS = ("v", "v_steady", "v_baseline", "F_extra")
+
+
+def _native_kinds() -> tuple:
+    """The kinds of :data:`KINDS` whose model has a native FMU (a per-sample kernel), and the output filter."""
+    from l1b2.predictor.effects.kernels import KERNEL_KINDS
+    return tuple(k for k in KINDS if k in KERNEL_KINDS or k == "output_filter")
+
+
+def worker_outputs(paths: dict, runs: list, t0: float):
+    """Each FMU (FMI 2.0 or 3.0) through fmpy over each run: ``OUTPUTS`` after initialisation and after each step."""
+    from fmpy import extract, read_model_description
+    out = {}
+    for key, path in paths.items():
+        md = read_model_description(path)
+        vr = {v.name: v.valueReference for v in md.modelVariables}
+        names = ["V0", "s", "load", "direction"] + (["T"] if "T" in vr else [])
+        unzipped = extract(path)
+        fmi3 = md.fmiVersion.startswith("3")
+        out[key] = []
+        for r in runs:
+            cols = [r["V0"], r["s"], r["load"], r["d"]] + ([r["T"]] if "T" in vr else [])
+            if fmi3:
+                from fmpy.fmi3 import FMU3Slave
+                fmu = FMU3Slave(guid=md.guid, unzipDirectory=unzipped,
+                                modelIdentifier=md.coSimulation.modelIdentifier, instanceName=key)
+                fmu.instantiate()
+                set_real, get_real = fmu.setFloat64, fmu.getFloat64
+            else:
+                from fmpy.fmi2 import FMU2Slave
+                fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipped,
+                                modelIdentifier=md.coSimulation.modelIdentifier, instanceName=key)
+                fmu.instantiate()
+                fmu.setupExperiment(startTime=t0)
+                set_real, get_real = fmu.setReal, fmu.getReal
+            rows = []
+            outs = [vr[n] for n in OUTPUTS]
+            try:
+                set_real([vr["v0"]], [r["v_start"]])
+                set_real([vr[n] for n in names], [c[0] for c in cols])
+                if fmi3:
+                    fmu.enterInitializationMode(startTime=t0)
+                else:
+                    fmu.enterInitializationMode()
+                fmu.exitInitializationMode()
+                rows.append(list(get_real(outs)))
+                for k in range(len(r["t"]) - 1):
+                    set_real([vr[n] for n in names], [c[k] for c in cols])
+                    fmu.doStep(r["t"][k], r["t"][k + 1] - r["t"][k])
+                    rows.append(list(get_real(outs)))
+                fmu.terminate()
+            finally:
+                fmu.freeInstance()
+            out[key].append(rows)
+    return out
+
+
+@pytest.fixture(scope="module")
+def native_built(built, tmp_path_factory):
+    """``{(kind, 2 or 3): path}`` of the native Predictor FMUs of the extended models."""
+    from l1b2.fmi.native.build import build_native_fmu, find_cc
+    try:
+        find_cc()
+    except Exception as exc:  # noqa: BLE001
+        pytest.skip(str(exc))
+    root = tmp_path_factory.mktemp("extended_native")
+    return {f"{k}/{v}": str(build_native_fmu("Predictor", p, root / f"{k}-{v}", v)) for k, p in built.items()
+            if k in _native_kinds() for v in (2, 3)}
+
+
+@pytest.fixture(scope="module")
+def native_outputs(built, native_built, isolated):
+    runs = [{k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in r.items()} for r in RUNS]
+    return isolated(__file__, "worker_outputs", {**{f"{k}/py": p for k, p in built.items() if k in _native_kinds()},
+                                                 **native_built}, runs, T0).value
+
+
+@pytest.mark.parametrize("kind", _native_kinds())
+def test_native_extended_predictor_fmu_equals_the_python_fmu(kind, native_outputs):
+    # reference: the Python Predictor.fmu of the same extended model in fmpy, same call sequence: every output
+    # (v, v_steady, v_baseline, F_extra) after initialisation and after every step within 1e-9 relative, FMI 2.0
+    # and 3.0; the effect's force is not zero (the comparison is not vacuous)
+    for ver in (2, 3):
+        for want, got in zip(native_outputs[f"{kind}/py"], native_outputs[f"{kind}/{ver}"]):
+            want, got = np.array(want), np.array(got)
+            assert want.shape == got.shape == (N, len(OUTPUTS))
+            scale = np.max(np.abs(want), axis=0)
+            np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12 * float(np.max(scale)), err_msg=f"FMI {ver}")
+            assert scale[OUTPUTS.index("F_extra")] > 1e-3 or kind == "output_filter"
+
+
+def test_native_extended_predictor_fmus_validate(native_built):
+    # reference: fmpy validation (FMI 2.0 and 3.0), and the generated effect kernels among the sources
+    import zipfile
+
+    from fmpy.validation import validate_fmu
+    for key, path in native_built.items():
+        assert validate_fmu(path) == [], key
+        with zipfile.ZipFile(path) as z:
+            assert "sources/effect_kernels.h" in z.namelist()
+
+
+def test_export_of_a_calibrated_model_writes_the_native_fmus(models, tmp_path):
+    # reference: the manifest's file records and the native FMUs beside Predictor.fmu (FMI 2.0 and 3.0), which
+    # carry the model's effect parameters with their identified values
+    from fmpy import read_model_description
+    from l1b2.fmi.export import export_calibrated
+    ep = models["bar_waviness"]
+    man = export_calibrated(ep, tmp_path / "out")
+    names = {Path(f["path"]).name for f in man["files"]}
+    assert {"Predictor.fmu", "Predictor-native.fmu", "Predictor-native-fmi3.fmu"} <= names
+    assert man["native"]["Predictor"]["included"] is True
+    for stem in ("Predictor-native", "Predictor-native-fmi3"):
+        md = read_model_description(str(tmp_path / "out" / "fmus" / f"{stem}.fmu"))
+        var = {v.name: v for v in md.modelVariables}
+        for n, p in zip(ep.effects[0].names, ep.effects[0].phi):
+            assert float(var[n].start) == pytest.approx(p, rel=1e-15)
+
+
+def test_voltage_interactions_are_their_written_out_forms():
+    # reference: the two structural interactions written out, -(d m g) dv and -(d v)/v_ref dv with
+    # dv = (V0 - V_ref)/V_ref: bit-identical (one helper computes both)
+    from l1b2.units import G_M_S2
+    rng = np.random.default_rng(5)
+    n = 200
+    x = {"V0": rng.uniform(0, 500, n), "d": rng.choice([-1.0, 1.0], n), "load": rng.normal(0, 0.2, n),
+         "v_base": rng.normal(0, 0.1, n)}
+    spec = {"V_ref": 287.5}
+    dv = (x["V0"] - spec["V_ref"]) / fx.V_REF
+    np.testing.assert_array_equal(fx.effect_features({"kind": "load_slope_voltage", **spec}, x)[:, 0],
+                                  -(x["d"] * x["load"] * G_M_S2) * dv)
+    np.testing.assert_array_equal(fx.effect_features({"kind": "damping_voltage", **spec}, x)[:, 0],
+                                  -(x["d"] * x["v_base"]) / fx.SPEED_REF * dv)

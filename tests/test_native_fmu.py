@@ -72,15 +72,11 @@ def worker_run(path, params, run):
 @pytest.fixture(scope="module")
 def fmus(tmp_path_factory):
     """``{"python": path, 2: path, 3: path}`` of the Predictor FMUs (physical linearisation of the reference motor)."""
-    from l1b2.fmi.build import build_fmu
-    from l1b2.fmi.native.build import build_native_fmu, find_cc
+    from l1b2.fmi.native.build import NoCompilerError, python_and_native_fmus
     try:
-        find_cc()
-    except Exception as exc:  # noqa: BLE001
+        return python_and_native_fmus("Predictor", tmp_path_factory.mktemp("native"))
+    except NoCompilerError as exc:
         pytest.skip(str(exc))
-    out = tmp_path_factory.mktemp("native")
-    py = build_fmu("Predictor", out)
-    return {"python": py, 2: build_native_fmu("Predictor", py, out, 2), 3: build_native_fmu("Predictor", py, out, 3)}
 
 
 @pytest.fixture(scope="module")
@@ -316,23 +312,39 @@ def test_native_refuses_sets_the_python_fmus_refuse(fmus):
         fmu.freeInstance()
 
 
-def test_calibrated_extended_predictor_stays_a_python_fmu(tmp_path):
-    # reference: the issue's scope of this native model (Eq. 29); an extended predictor's FMU carries variables
-    # (baseline, effects, output filter) the native model does not compute, so none is built, and export says why
+def test_extended_predictor_of_a_family_without_kernel_stays_a_python_fmu(tmp_path):
+    # reference: l1b2.predictor.effects.kernels.KERNEL_KINDS; a family registered outside the package (a toy one
+    # here) has no per-sample kernel, so no native FMU is built and the export says which effect and why
+    import numpy as np
     from l1b2.fmi.build import build_fmu
     from l1b2.fmi.native.build import NativeBuildError, build_native_fmu, build_native_set
-    from l1b2.predictor.effects import ExtendedPredictor
+    from l1b2.predictor import effects as fx
+    from l1b2.predictor.effects import ExtendedPredictor, IdentifiedEffect
     from l1b2.predictor.model import example_params
     from l1b2.predictor.setup import PredictorSetup
-    base = PredictorSetup(example_params(), 0.1, 1e-3)
-    ext = ExtendedPredictor(base, base, (), {"a": 0.5, "b0": 0.3, "b1": 0.2})
-    py = build_fmu("Predictor", tmp_path, extra_defaults={"predictor": base.to_dict(),
-                                                          "extended_predictor": ext.to_dict()})
-    with pytest.raises(NativeBuildError, match="extended predictor"):
-        build_native_fmu("Predictor", py, tmp_path, 2)
-    built, info = build_native_set("Predictor", py, tmp_path)
-    assert built == {} and info["included"] is False and "extended predictor" in info["reason"]
-    assert not list(tmp_path.glob("*-native*.fmu"))
+
+    toy_src = ("import numpy as np\nfrom ..base import Effect, drive_gain\n\n\nclass Toy(Effect):\n"
+               "    kind = 'toy_native_test'\n    regressor = 'voltage'\n\n    def features(self, spec, x):\n"
+               "        return drive_gain(x)[:, None] ** 4\n")
+    scope = {}
+    exec(toy_src.replace("from ..base import", "from l1b2.predictor.effects.base import"), scope)
+    fx.register(scope["Toy"])
+    try:
+        base = PredictorSetup(example_params(), 0.1, 1e-3)
+        eff = IdentifiedEffect("toy_native_test", "toy", {"kind": "toy_native_test"}, ("toy_N",), ("N",), (0.1,),
+                               (0.01,))
+        ext = ExtendedPredictor(base, base, (eff,), {"a": 0.5, "b0": 0.3, "b1": 0.2})
+        py = build_fmu("Predictor", tmp_path, extra_defaults={"predictor": base.to_dict(),
+                                                              "extended_predictor": ext.to_dict()},
+                       extra_files={"predictor/effects/plugins/toy_native.py": toy_src.encode()})
+        with pytest.raises(NativeBuildError, match="effect toy: .*no per-sample kernel"):
+            build_native_fmu("Predictor", py, tmp_path, 2)
+        built, info = build_native_set("Predictor", py, tmp_path)
+        assert built == {} and info["included"] is False and "toy_native_test" in info["reason"]
+        assert not list(tmp_path.glob("*-native*.fmu"))
+        assert np.isfinite(fx.effect_features(eff.spec, {"V0": np.ones(2)})).all()
+    finally:
+        fx.unregister("toy_native_test")
 
 
 def test_native_refuses_a_state_of_another_fmu(fmus, tmp_path):

@@ -36,6 +36,13 @@ SCENARIOS = {
     "stator changed, forces beyond the baked cells": (
         {"Slider.s0": 0.004, "Stator.f_b0_Hz": 47900.0, "Stator.P0_N": 75.0, "Stator.density_kg_m3": 7900.0}, {},
         [(120.0, 1.0, 48500.0, 25.0, 1.0, 0.0, 1e-3)] * 30 + [(120.0, 1.0, 48500.0, 25.0, -1.0, 0.0, 1e-3)] * 20),
+    "temperature-dependent B2, self-heating then a constant temperature": (
+        {"Slider.s0": -0.006, "Stator.df_dT_b_Hz_per_K": -8.0, "Stator.thermal_tau_s": 0.02,
+         "Stator.heating_K_per_V2": 1e-4, "Stator.df_dT_l_Hz_per_K": -10.0, "Stator.T_st0": 28.0}, {},
+        [(67.1, 1.0, 48500.0, 25.0, 1.0, 0.05, 1e-3)] * 40 + [(67.1, 1.0, 48500.0, 31.0, -1.0, 0.0, 5e-4)] * 20),
+    "temperature-dependent B2, constant temperature": (
+        {"Slider.s0": 0.003, "Stator.df_dT_b_Hz_per_K": -8.0}, {},
+        [(67.1, 1.0, 48500.0, 35.0, 1.0, 0.0, 1e-3)] * 30),
     "pure slip": (
         {"Slider.s0": 0.0, "internal_step_s": 1e-4}, {"Interface.pure_slip": True},
         [(*_BASE, 1e-3)] * 40 + [(67.1, 1.0, 48500.0, 25.0, -1.0, 0.05, 2e-4)] * 30),
@@ -92,15 +99,11 @@ def worker_motor_runs(path, scenarios):
 
 @pytest.fixture(scope="module")
 def fmus(tmp_path_factory):
-    from l1b2.fmi.build import build_fmu
-    from l1b2.fmi.native.build import build_native_fmu, find_cc
+    from l1b2.fmi.native.build import NoCompilerError, python_and_native_fmus
     try:
-        find_cc()
-    except Exception as exc:  # noqa: BLE001
+        return python_and_native_fmus("L1B2Motor", tmp_path_factory.mktemp("native_motor"))
+    except NoCompilerError as exc:
         pytest.skip(str(exc))
-    out = tmp_path_factory.mktemp("native_motor")
-    py = build_fmu("L1B2Motor", out)
-    return {"python": py, 2: build_native_fmu("L1B2Motor", py, out, 2), 3: build_native_fmu("L1B2Motor", py, out, 3)}
 
 
 @pytest.fixture(scope="module")
@@ -161,6 +164,11 @@ def test_native_motor_equals_the_python_fmu(fmus, python_runs, ver, isolated):
             assert np.any(b[:, names.index("at_stop")] == 1.0)
         if scenario == "effects":
             assert b[-1, names.index("T_stator")] > 31.0
+        if scenario.startswith("temperature-dependent B2, constant"):   # B2 at 35 degC: -8 Hz/K * 10 K
+            ref = np.array(python_runs["end stop"])[0, names.index("Stator.f_b")]
+            assert b[-1, names.index("Stator.f_b")] - ref == pytest.approx(-80.0, abs=5.0)
+        if scenario.startswith("temperature-dependent B2, self-heating"):
+            assert np.ptp(b[:, names.index("T_stator")]) > 1.0
     assert worst < 1e-9
 
 
@@ -223,7 +231,6 @@ def test_native_motor_status_rules_and_state(fmus):
 
 @pytest.mark.parametrize("name, value, words", [
     ("Slider.s0", 0.5, "outside the stroke"),
-    ("Stator.df_dT_b_Hz_per_K", -10.0, "temperature-dependent B2 mode"),
 ])
 def test_native_motor_refuses_an_initialisation_it_cannot_simulate(fmus, name, value, words):
     # reference: SliderBlock.initialize (s0 outside the stroke); the scope of the native motor (l1b2.fmi.native.build)

@@ -195,3 +195,57 @@ def test_translator_refuses_python_outside_its_subset(fn, what):
     # reference: the subset listed in l1b2.fmi.native.translate's docstring
     with pytest.raises(TranslationError, match=rf"{fn.__name__} \(line \d+ .*\): .*{what}"):
         _translate(fn)
+
+
+def _effect_specs():
+    """One spec per kernel kind, and the generic terms over every regressor and pair (scalars as the library's)."""
+    from l1b2.predictor.effects.generic import PAIR_REGRESSORS, REGRESSORS
+    ranges = {"t_lo": 5.0, "t_hi": 65.0, "s_lo": -0.018, "s_hi": 0.019, "n_inner": 24, "load_abs": 0.3,
+              "V_lo": 200.0, "V_hi": 330.0, "v_lo": 0.01, "v_hi": 0.35, "m_s": 0.12, "T_lo": 24.0, "T_hi": 41.0}
+    specs = [{"kind": "thermal_drift", "t_lo": 5.0, "t_hi": 65.0, "n_inner": n} for n in (2, 4)]
+    specs += [{"kind": "thermal_drift_T", "T_ref": 31.0}, {"kind": "direction_asymmetry"},
+              {"kind": "bar_waviness", "period_m": 4.2e-3}, {"kind": "local_defect", "center_m": 2e-3, "width_m": 1.2e-3},
+              {"kind": "load_path_friction"}, {"kind": "drive_saturation"}, {"kind": "speed_dependent_friction"},
+              {"kind": "inertia_mismatch", "m_s": 0.12}, {"kind": "load_slope_voltage", "V_ref": 280.0},
+              {"kind": "damping_voltage", "V_ref": 280.0}, {"kind": "position_load", "s_lo": -0.018, "s_hi": 0.019}]
+    specs += [{"kind": "smooth", "regressor": r, **ranges} for r in REGRESSORS]
+    specs += [{"kind": "smooth_pair", "a": a, "b": b, **ranges}
+              for i, a in enumerate(PAIR_REGRESSORS) for b in PAIR_REGRESSORS[i + 1:]]
+    return specs
+
+
+def test_effect_kernels_in_c_equal_the_python_kernels_bit_for_bit(tmp_path):
+    # reference: l1b2.predictor.effects.kernels run as plain Python (Python floats): the generated C
+    # (l1b2k_effect_force) gives the same force bit for bit, for every kind, regressor and pair, over samples inside,
+    # at the ends of and beyond the ranges (the B-spline knots included)
+    from l1b2.fmi.native.translate import translate_effect_kernels
+    from l1b2.predictor import effects as fx
+    from l1b2.predictor.effects import kernels as ek
+    lib = _compile(translate_effect_kernels(), tmp_path, "effect_kernels")
+    f = lib.l1b2k_effect_force
+    dbl = ctypes.POINTER(ctypes.c_double)
+    f.argtypes = [ctypes.c_long, dbl, dbl, dbl]
+    f.restype = ctypes.c_double
+    rng = random.Random(4)
+    specs = _effect_specs()
+    assert {s["kind"] for s in specs} == set(ek.KERNEL_KINDS)
+    samples = []
+    for k in range(300):
+        x = [rng.uniform(0.0, 70.0), rng.uniform(-0.025, 0.025), rng.uniform(0.0, 400.0), rng.uniform(-0.4, 0.4),
+             rng.choice([-1.0, 1.0]), rng.uniform(20.0, 45.0), rng.uniform(-0.4, 0.4), rng.uniform(-5.0, 5.0)]
+        if k < 20:   # on the knots of the time spline and the ranges' ends
+            x[0] = 5.0 + 60.0 * (k % 7) / 7
+            x[1] = (-0.018, 0.019, 0.0)[k % 3]
+        samples.append(x)
+    n_cmp = 0
+    for spec in specs:
+        kind, q = ek.spec_scalars(spec)
+        width = fx.family(spec["kind"]).width(spec)
+        phi = [rng.gauss(0.0, 1.0) for _ in range(width)]
+        qa, pa = (ctypes.c_double * len(q))(*q), (ctypes.c_double * len(phi))(*phi)
+        for x in samples:
+            want = ek.effect_force(kind, x, q, phi)
+            got = f(kind, (ctypes.c_double * 8)(*x), qa, pa)
+            assert got == want or (math.isnan(got) and math.isnan(want)), (spec, x)
+            n_cmp += 1
+    assert n_cmp == len(specs) * len(samples)

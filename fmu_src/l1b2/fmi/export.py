@@ -320,7 +320,9 @@ def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None)
 
     Returns
     -------
-    The manifest: the FMU's record (validation results), and per effect its
+    The manifest: the FMU's record (validation results), those of the native
+    FMI 2.0 and 3.0 ``Predictor-native[-fmi3].fmu`` written beside it (the
+    effects' kernels in C; ``native`` says what was built or why not), and per effect its
     parameters and where it went (``Predictor.fmu``; the subsystem FMUs only
     where mapped, :func:`l1b2.predictor.effects.homes.map_effects`, else the reason).
     When at least one effect was mapped, also ``L1B2Motor_calibrated.ssp``
@@ -353,8 +355,14 @@ def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None)
     path = build_fmu(PREDICTOR_FMU, fmu_dir, mp=mp, extra_defaults=defaults, extra_files=plugins or None)
     os.chmod(path, 0o644)
     records = {PREDICTOR_FMU: fmu_record(path, out)}
+    for stale in fmu_dir.glob(f"{PREDICTOR_FMU}-native*.fmu"):
+        stale.unlink()
+    native, native_info = build_native_set(PREDICTOR_FMU, path, fmu_dir)   # the effects' kernels in C
+    for name, p in native.items():
+        os.chmod(p, 0o644)
+        records[name] = fmu_record(p, out)
     mp_cal, mapping = map_effects(model, mp)
-    files = [records[PREDICTOR_FMU]]
+    files = list(records.values())
     ssp_info = {"included": False, "reason": "no effect was mapped into the subsystem FMUs"}
     if any(m["mapped"] for m in mapping):
         from ..cosim import ssp
@@ -385,6 +393,7 @@ def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None)
     manifest = {
         "tool": "l1b2-usm", "version": __version__, "kind": "calibrated extended predictor",
         "source": model.source, "files": files, "effects": effects, "calibrated_ssp": ssp_info,
+        "native": {PREDICTOR_FMU: native_info},
         "output_filter": model.output_filter,
         "inputs": ["V0", "s", "load", "direction"] + (["T"] if model.needs_temperature else []),
         "time": "the FMU's own time is the session clock the effects use (start the simulation at the run's "

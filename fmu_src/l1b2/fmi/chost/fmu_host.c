@@ -12,6 +12,10 @@
  *   -b <vr>=<0|1>    Boolean parameter, set before initialisation (repeatable)
  *   -i <vr>=<value>  Real input, set before initialisation and before every step (repeatable)
  *   -o <vr>          Real to print after initialisation and after every step (repeatable)
+ *   -e <k>           print (and read the outputs) only at every k-th communication point and the last
+ *                    (default 1: every point)
+ *   -T <0|1>         1: time the stepping loop (set inputs, doStep, read outputs at the output points) and
+ *                    print "fmu_host: timing <steps> <wall s> <CPU s of the process>" on stderr
  *   -x <mode>        exit: "finalize" (default) calls the library's finalizePythonInterpreter()
  *                    after fmi2FreeInstance; "plain" just returns from main (shows the
  *                    PythonFMU 0.7.0 exit-time use-after-free)
@@ -28,6 +32,7 @@
  */
 #define _GNU_SOURCE
 #include <dlfcn.h>
+#include <time.h>
 #include <limits.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -83,6 +88,8 @@ int main(int argc, char** argv)
     const char* exit_mode = "finalize";
     double h = 2e-4;
     long nsteps = 10;
+    long every = 1;
+    int timing = 0;
     fmi2ValueReference pvr[MAXV], bvr[MAXV], ivr[MAXV], ovr[MAXV];
     double pval[MAXV], ival[MAXV], out[MAXV];
     fmi2Boolean bval[MAXV];
@@ -99,6 +106,8 @@ int main(int argc, char** argv)
         case 'h': h = atof(v); break;
         case 'n': nsteps = atol(v); break;
         case 'x': exit_mode = v; break;
+        case 'e': every = atol(v); break;
+        case 'T': timing = atoi(v); break;
         case 'p': case 'b': case 'i':
             if (parse_assignment(v, &r, &x) != 0 || np >= MAXV || nb >= MAXV || ni >= MAXV) {
                 fprintf(stderr, "fmu_host: bad assignment '%s' (expected vr=value)\n", v);
@@ -115,9 +124,10 @@ int main(int argc, char** argv)
         default: fprintf(stderr, "fmu_host: unknown option -%c\n", opt); return 2;
         }
     }
-    if (argc - a != 3 || !(h > 0.0) || nsteps < 0) {
+    if (argc - a != 3 || !(h > 0.0) || nsteps < 0 || every < 1) {
         fprintf(stderr, "usage: %s [-L libpython] [-h step] [-n steps] [-p vr=x].. [-b vr=0|1].. "
-                        "[-i vr=x].. [-o vr].. [-x finalize|plain] <fmu-dir> <modelIdentifier> <guid>\n", argv[0]);
+                        "[-i vr=x].. [-o vr].. [-e k] [-T 0|1] [-x finalize|plain] <fmu-dir> <modelIdentifier> "
+                        "<guid>\n", argv[0]);
         return 2;
     }
     const char* dir = argv[a];
@@ -172,17 +182,27 @@ int main(int argc, char** argv)
     if (ni) CHECK(set_real(c, ivr, ni, ival));
     CHECK(enter(c));
     CHECK(exit_init(c));
+    struct timespec w0, w1, c0, c1;
+    clock_gettime(CLOCK_MONOTONIC, &w0);
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &c0);
     for (long k = 0; k <= nsteps; k++) {
         if (k > 0) {
             if (ni) CHECK(set_real(c, ivr, ni, ival));
             CHECK(do_step(c, t, h, fmi2True));
             t = k * h;
         }
+        if (k % every != 0 && k != nsteps) continue;
         if (no) CHECK(get_real(c, ovr, no, out));
         printf("%.17g", t);
         for (int j = 0; j < no; j++) printf(" %.17g", out[j]);
         printf("\n");
     }
+    clock_gettime(CLOCK_MONOTONIC, &w1);
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &c1);
+    if (timing)
+        fprintf(stderr, "fmu_host: timing %ld %.9f %.9f\n", nsteps,
+                (double)(w1.tv_sec - w0.tv_sec) + 1e-9 * (double)(w1.tv_nsec - w0.tv_nsec),
+                (double)(c1.tv_sec - c0.tv_sec) + 1e-9 * (double)(c1.tv_nsec - c0.tv_nsec));
     CHECK(terminate(c));
 done:
     free_instance(c);

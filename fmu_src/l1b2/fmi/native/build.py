@@ -57,6 +57,10 @@ class NativeBuildError(L1B2Error):
     """The native FMU cannot be built (no C compiler, a compiler error, an unsupported model)."""
 
 
+class NoCompilerError(NativeBuildError):
+    """No C compiler was found to build the native FMUs."""
+
+
 def native_fmu_name(name: str, fmi_version: int) -> str:
     """File stem of the native FMU: ``<name>-native`` (FMI 2.0) or ``<name>-native-fmi3``."""
     return f"{name}-native" if fmi_version == 2 else f"{name}-native-fmi3"
@@ -77,7 +81,7 @@ def find_cc(cc: str | None = None) -> str:
     """The C compiler: ``cc``, else ``$CC``, else ``cc`` or ``gcc`` on PATH (:class:`NativeBuildError` if none)."""
     found = cc or os.environ.get("CC") or shutil.which("cc") or shutil.which("gcc")
     if not found:
-        raise NativeBuildError("no C compiler found (set CC, or install cc/gcc) to build the native FMUs")
+        raise NoCompilerError("no C compiler found (set CC, or install cc/gcc) to build the native FMUs")
     return found
 
 
@@ -184,10 +188,68 @@ def _model_tables(name: str, variables: list[dict], defaults: dict | None = None
     names = {v["name"]: v["vr"] for v in variables}
     np_ = sum(1 for k in names if k.startswith("alpha_"))
     out = ["", f"#define PRED_NP {np_}"]
-    for group in ("alpha", "beta", "p"):
-        out.append(f"static const int PRED_VR_{group.upper()}[PRED_NP] = {{" + ", ".join(
-            str(names[f"{group}_{j}"]) for j in range(np_)) + "};")
+    ext = (defaults or {}).get("extended_predictor")
+    for prefix in ("", "baseline_") if ext else ("",):
+        tag = "BASE_" if prefix else ""
+        if prefix and sum(1 for k in names if k.startswith(prefix + "alpha_")) != np_:
+            raise NativeBuildError("the baseline and the re-identified predictor have different polynomial orders")
+        for group in ("alpha", "beta", "p"):
+            out.append(f"static const int PRED_VR_{tag}{group.upper()}[PRED_NP] = {{" + ", ".join(
+                str(names[f"{prefix}{group}_{j}"]) for j in range(np_)) + "};")
+        out.append(f"static const int PRED_VR_{tag}SCALARS[{len(PREDICTOR_SCALARS)}] = {{" + ", ".join(
+            str(names[prefix + n]) for n in PREDICTOR_SCALARS) + "};")
+    if ext:
+        out += _extended_tables(ext, names)
     return out
+
+
+#: the scalar parameters of one Eq. 29 setup in the order predictor_model.c reads them
+PREDICTOR_SCALARS = ("c_r", "sigma", "mu", "k0", "mu_sd", "s_center", "s_half", "kappa", "load_inertia",
+                     "slider_mass_kg", "T_s")
+
+
+def _drive_laws(tree) -> list[str]:
+    """Every ``drive_law`` named anywhere in an FMU's defaults (the predictor's and an extended model's setups)."""
+    if isinstance(tree, dict):
+        return [str(v) for k, v in tree.items() if k == "drive_law"] + [
+            law for v in tree.values() for law in _drive_laws(v)]
+    if isinstance(tree, list):
+        return [law for v in tree for law in _drive_laws(v)]
+    return []
+
+
+def _extended_tables(ext: dict, vr: dict) -> list[str]:
+    """The calibrated extended predictor's effects (kind codes, spec scalars, parameter value references) and
+    output filter for ``predictor_model.c`` (the kernels: :mod:`l1b2.predictor.effects.kernels`)."""
+    from ...predictor.effects import EffectSpecError
+    from ...predictor.effects.kernels import spec_scalars
+    kinds, qs, phis = [], [], []
+    for e in ext.get("effects", []):
+        try:
+            kind, q = spec_scalars(e["spec"])
+        except EffectSpecError as exc:
+            raise NativeBuildError(f"effect {e.get('label', e.get('family'))}: {exc}; its Predictor.fmu stays a "
+                                   "Python FMU") from None
+        kinds.append(kind)
+        qs.append(q)
+        phis.append([vr[n] for n in e["names"]])
+
+    def offsets(groups):
+        o = [0]
+        for g in groups:
+            o.append(o[-1] + len(g))
+        return o
+
+    def arr(ctype, name, values, fmt=str):
+        return f"static const {ctype} {name}[{max(1, len(values))}] = {{" + ", ".join(
+            fmt(v) for v in values or [0.0 if fmt is _c_double else 0]) + "};"
+
+    return ["#define PRED_EXTENDED 1", f"#define PRED_HAS_T {int('T' in vr)}",
+            f"#define PRED_HAS_FILTER {int(ext.get('output_filter') is not None)}",
+            f"#define EFF_N {len(kinds)}", f"#define EFF_NPHI {max(1, sum(map(len, phis)))}",
+            arr("int", "EFF_KIND", kinds), arr("int", "EFF_Q_OFF", offsets(qs)),
+            arr("double", "EFF_Q", [v for q in qs for v in q], _c_double), arr("int", "EFF_PHI_OFF", offsets(phis)),
+            arr("int", "EFF_PHI_VR", [v for p in phis for v in p])]
 
 
 def _unpacked_names(module, length_name: str) -> list[str]:
@@ -223,9 +285,6 @@ def _motor_tables(variables: list[dict], defaults: dict) -> list[str]:
             "static const int MOTOR_MAP_X[MOTOR_NMAP] = {" + ", ".join(str(b) for _, b in pairs) + "};"]
     mp = MotorBlock.params_from_defaults(defaults)
     sp = mp.stator
-    if sp.df_dT_b_Hz_per_K != 0.0:
-        raise NativeBuildError("a temperature-dependent B2 mode (stator df_dT_b_Hz_per_K != 0) is not in the "
-                               "native L1B2Motor FMU")
     s = [mp.slider.s_min_m + (mp.slider.s_max_m - mp.slider.s_min_m) * i / 4000 for i in range(4001)]
     p_max = max(st.axial_force_N(sp, float(x)) for x in s)
     table = st.ModalTable(sp, None)
@@ -391,6 +450,9 @@ def source_tree(name: str, python_md: bytes, fmi_version: int, guid: str,
     if name == "L1B2Motor":
         from .translate import translate_kernels
         files["motor_kernels.h"] = translate_kernels().encode()
+    if name == "Predictor" and "extended_predictor" in (defaults or {}):
+        from .translate import translate_effect_kernels
+        files["effect_kernels.h"] = translate_effect_kernels().encode()
     return files
 
 
@@ -414,10 +476,7 @@ def build_native_fmu(name: str, python_fmu: str | Path, dest_dir: str | Path, fm
     with zipfile.ZipFile(python_fmu) as z:
         python_md = z.read("modelDescription.xml")
         defaults = json.loads(z.read("resources/_fmu_defaults.json"))
-    if name == "Predictor" and "extended_predictor" in defaults:
-        raise NativeBuildError("the calibrated extended predictor (effects, output filter) has no native model: "
-                               "its Predictor.fmu stays a Python FMU")
-    if name == "Predictor" and defaults.get("predictor", {}).get("params", {}).get("drive_law", "eq29") != "eq29":
+    if name == "Predictor" and set(_drive_laws(defaults)) - {"eq29"}:
         raise NativeBuildError("the native predictor implements Eq. 29 only; the pure-slip family's drive force "
                                "(slip ratio of the state) stays in the Python Predictor.fmu")
     sources = _source_files(name, fmi_version)
@@ -468,3 +527,15 @@ def build_native_set(name: str, python_fmu: str | Path, dest_dir: str | Path,
     except NativeBuildError as exc:
         return {}, {"included": False, "reason": str(exc)}
     return paths, {"included": True, "fmus": sorted(paths), "compiler": find_cc(cc), "cflags": list(CFLAGS)}
+
+
+def python_and_native_fmus(name: str, dest_dir: str | Path, **build_kw) -> dict:
+    """``{"python": path, 2: path, 3: path}``: the Python FMU ``name`` (:func:`l1b2.fmi.build.build_fmu` with
+    ``build_kw``) and its native FMI 2.0 and 3.0 FMUs, all in ``dest_dir``.
+
+    Raises :class:`NoCompilerError` first when there is no C compiler (nothing is built then).
+    """
+    from ..build import build_fmu
+    find_cc()
+    py = build_fmu(name, dest_dir, **build_kw)
+    return {"python": py, 2: build_native_fmu(name, py, dest_dir, 2), 3: build_native_fmu(name, py, dest_dir, 3)}

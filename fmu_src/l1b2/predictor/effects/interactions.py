@@ -31,6 +31,18 @@ def _voltage_offset(spec, x) -> np.ndarray:
     return (signal(x, "V0") - num(spec, "V_ref")) / V_REF
 
 
+#: the drive-coordinate term ``d r`` of each regressor a structural voltage interaction scales: the load's
+#: weight ``d m g`` [N] and the speed ``d v / SPEED_REF`` [1]
+_SLOPE_TERMS = {"load": lambda x: signal(x, "d") * signal(x, "load") * G_M_S2,
+                "speed": lambda x: signal(x, "d") * signal(x, "v_base") / SPEED_REF}
+
+
+def voltage_slope_feature(regressor: str, spec, x) -> np.ndarray:
+    """``-(d r) (V0 - V_ref)/V_REF`` as one feature column: the structural interaction of ``regressor``'s
+    drive-coordinate term (:data:`_SLOPE_TERMS`) with the voltage."""
+    return (-_SLOPE_TERMS[regressor](x) * _voltage_offset(spec, x))[:, None]
+
+
 @register
 class LoadSlopeVoltage(Effect):
     kind = "load_slope_voltage"
@@ -42,8 +54,7 @@ class LoadSlopeVoltage(Effect):
     structural = EQ29_LINEARISATION
 
     def features(self, spec, x):
-        dv = _voltage_offset(spec, x)
-        return (-(signal(x, "d") * signal(x, "load") * G_M_S2) * dv)[:, None]
+        return voltage_slope_feature(self.regressor, spec, x)
 
     def grid(self, train):
         return [self.hypothesis(("load_V_gain",), ("1",), {"V_ref": train.voltage_median})]
@@ -60,8 +71,7 @@ class DampingVoltage(Effect):
     structural = EQ29_LINEARISATION
 
     def features(self, spec, x):
-        dv = _voltage_offset(spec, x)
-        return (-(signal(x, "d") * signal(x, "v_base")) / SPEED_REF * dv)[:, None]
+        return voltage_slope_feature(self.regressor, spec, x)
 
     def grid(self, train):
         return [self.hypothesis(("damping_V_N",), ("N",), {"V_ref": train.voltage_median})]

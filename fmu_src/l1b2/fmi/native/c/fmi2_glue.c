@@ -1,6 +1,5 @@
 /* fmi2_glue.c - the FMI 2.0 co-simulation API of the l1b2 native FMUs over fmu_core */
 #include <stdlib.h>
-#include <string.h>
 
 #include "fmi2Functions.h"
 #include "fmu_core.h"
@@ -42,20 +41,16 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
                               fmi2Boolean visible, fmi2Boolean loggingOn)
 {
     (void)fmuResourceLocation; (void)visible;
-    Fmi2Instance* f = (Fmi2Instance*)calloc(1, sizeof(Fmi2Instance));
+    Fmi2Instance* f = (Fmi2Instance*)core_new(sizeof(Fmi2Instance), instanceName, loggingOn);
     if (!f) return NULL;
-    core_init(&f->core, instanceName);
     if (functions) f->cb = *functions;
     f->core.log = fmi2_log;
-    f->core.logging_on = loggingOn;
     if (fmuType != fmi2CoSimulation) {
         core_log(&f->core, ST_ERROR, "%s: fmi2Instantiate: only co-simulation is supported", MODEL_IDENTIFIER);
         free(f);
         return NULL;
     }
-    if (!fmuGUID || strcmp(fmuGUID, INSTANTIATION_TOKEN) != 0) {
-        core_log(&f->core, ST_ERROR, "%s: fmi2Instantiate: GUID %s does not match this FMU's %s",
-                 MODEL_IDENTIFIER, fmuGUID ? fmuGUID : "(null)", INSTANTIATION_TOKEN);
+    if (core_check_token(&f->core, "fmi2Instantiate", "GUID", fmuGUID)) {
         free(f);
         return NULL;
     }
@@ -68,8 +63,7 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
                                fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime)
 {
     (void)toleranceDefined; (void)tolerance; (void)stopTimeDefined; (void)stopTime;
-    INST->time = startTime;
-    model_set_start_time(INST, startTime);
+    core_start_time(INST, startTime);
     return fmi2OK;
 }
 
@@ -78,7 +72,7 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c) { return (fmi2Status)core
 
 fmi2Status fmi2Terminate(fmi2Component c)
 {
-    INST->mode = MODE_TERMINATED;
+    core_terminate(INST);
     return fmi2OK;
 }
 
@@ -142,9 +136,8 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
 
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate* state)
 {
-    Snapshot* s = *state ? (Snapshot*)*state : (Snapshot*)malloc(sizeof(Snapshot));
+    void* s = core_state_get(INST, *state);
     if (!s) return fmi2Error;
-    core_get_state(INST, s);
     *state = s;
     return fmi2OK;
 }
@@ -157,10 +150,7 @@ fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state)
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate* state)
 {
     (void)c;
-    if (state) {
-        free(*state);
-        *state = NULL;
-    }
+    core_state_free(state);
     return fmi2OK;
 }
 
@@ -173,30 +163,20 @@ fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size)
 {
-    if (!state || size < core_serialized_size()) {
-        core_log(INST, ST_ERROR, "fmi2SerializeFMUstate: buffer of %zu bytes, %zu needed", size,
-                 core_serialized_size());
-        return fmi2Error;
-    }
-    core_serialize((const Snapshot*)state, bytes);
-    return fmi2OK;
+    return (fmi2Status)core_state_serialize(INST, "fmi2SerializeFMUstate", state, bytes, size);
 }
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte bytes[], size_t size, fmi2FMUstate* state)
 {
-    Snapshot tmp;
-    if (core_deserialize(INST, bytes, size, &tmp) != ST_OK) return fmi2Error;
-    Snapshot* s = *state ? (Snapshot*)*state : (Snapshot*)malloc(sizeof(Snapshot));
+    void* s = core_state_deserialize(INST, bytes, size, *state);
     if (!s) return fmi2Error;
-    *s = tmp;
     *state = s;
     return fmi2OK;
 }
 
 static fmi2Status unsupported(fmi2Component c, const char* call)
 {
-    core_log(INST, ST_ERROR, "%s: %s is not supported", MODEL_IDENTIFIER, call);
-    return fmi2Error;
+    return (fmi2Status)core_unsupported(INST, call, "");
 }
 
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference u[], size_t nu,

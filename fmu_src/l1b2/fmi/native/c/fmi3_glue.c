@@ -1,7 +1,6 @@
 /* fmi3_glue.c - the FMI 3.0 co-simulation API of the l1b2 native FMUs over fmu_core
  * (the calls of other interfaces and types are in fmi3_stubs.c: they return fmi3Error) */
 #include <stdlib.h>
-#include <string.h>
 
 #include "fmi3Functions.h"
 #include "fmu_core.h"
@@ -22,8 +21,7 @@ static void fmi3_log(Instance* c, int status, const char* category, const char* 
 
 void l1b2_fmi3_log(fmi3Instance instance, const char* call)
 {
-    core_log(INST, ST_ERROR, "%s: %s is not supported (co-simulation, Float64 and Boolean variables only)",
-             MODEL_IDENTIFIER, call);
+    core_unsupported(INST, call, " (co-simulation, Float64 and Boolean variables only)");
 }
 
 const char* fmi3GetVersion(void) { return fmi3Version; }
@@ -46,17 +44,12 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
 {
     (void)resourcePath; (void)visible; (void)earlyReturnAllowed; (void)requiredIntermediateVariables;
     (void)nRequiredIntermediateVariables; (void)intermediateUpdate;
-    Fmi3Instance* f = (Fmi3Instance*)calloc(1, sizeof(Fmi3Instance));
+    Fmi3Instance* f = (Fmi3Instance*)core_new(sizeof(Fmi3Instance), instanceName, loggingOn);
     if (!f) return NULL;
-    core_init(&f->core, instanceName);
     f->env = instanceEnvironment;
     f->logMessage = logMessage;
     f->core.log = fmi3_log;
-    f->core.logging_on = loggingOn;
-    if (!instantiationToken || strcmp(instantiationToken, INSTANTIATION_TOKEN) != 0) {
-        core_log(&f->core, ST_ERROR, "%s: fmi3InstantiateCoSimulation: instantiation token %s does not match "
-                 "this FMU's %s", MODEL_IDENTIFIER, instantiationToken ? instantiationToken : "(null)",
-                 INSTANTIATION_TOKEN);
+    if (core_check_token(&f->core, "fmi3InstantiateCoSimulation", "instantiation token", instantiationToken)) {
         free(f);
         return NULL;
     }
@@ -75,10 +68,7 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean tolera
                                        fmi3Float64 startTime, fmi3Boolean stopTimeDefined, fmi3Float64 stopTime)
 {
     (void)toleranceDefined; (void)tolerance; (void)stopTimeDefined; (void)stopTime;
-    if (INST->mode == MODE_INSTANTIATED) {
-        INST->time = startTime;
-        model_set_start_time(INST, startTime);
-    }
+    if (INST->mode == MODE_INSTANTIATED) core_start_time(INST, startTime);
     return (fmi3Status)core_enter_initialization(INST);
 }
 
@@ -89,7 +79,7 @@ fmi3Status fmi3ExitInitializationMode(fmi3Instance instance)
 
 fmi3Status fmi3Terminate(fmi3Instance instance)
 {
-    INST->mode = MODE_TERMINATED;
+    core_terminate(INST);
     return fmi3OK;
 }
 
@@ -147,9 +137,8 @@ fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReference vr[], 
 
 fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState* state)
 {
-    Snapshot* s = *state ? (Snapshot*)*state : (Snapshot*)malloc(sizeof(Snapshot));
+    void* s = core_state_get(INST, *state);
     if (!s) return fmi3Error;
-    core_get_state(INST, s);
     *state = s;
     return fmi3OK;
 }
@@ -162,10 +151,7 @@ fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState state)
 fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState* state)
 {
     (void)instance;
-    if (state) {
-        free(*state);
-        *state = NULL;
-    }
+    core_state_free(state);
     return fmi3OK;
 }
 
@@ -178,23 +164,14 @@ fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState state,
 
 fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState state, fmi3Byte serializedState[], size_t size)
 {
-    if (!state || size < core_serialized_size()) {
-        core_log(INST, ST_ERROR, "fmi3SerializeFMUState: buffer of %zu bytes, %zu needed", size,
-                 core_serialized_size());
-        return fmi3Error;
-    }
-    core_serialize((const Snapshot*)state, (char*)serializedState);
-    return fmi3OK;
+    return (fmi3Status)core_state_serialize(INST, "fmi3SerializeFMUState", state, (char*)serializedState, size);
 }
 
 fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte serializedState[], size_t size,
                                    fmi3FMUState* state)
 {
-    Snapshot tmp;
-    if (core_deserialize(INST, (const char*)serializedState, size, &tmp) != ST_OK) return fmi3Error;
-    Snapshot* s = *state ? (Snapshot*)*state : (Snapshot*)malloc(sizeof(Snapshot));
+    void* s = core_state_deserialize(INST, (const char*)serializedState, size, *state);
     if (!s) return fmi3Error;
-    *s = tmp;
     *state = s;
     return fmi3OK;
 }

@@ -5,6 +5,7 @@
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 static const char* const MODE_NAME[] = {"instantiated", "initialization mode", "stepping", "terminated"};
@@ -296,4 +297,71 @@ int core_deserialize(Instance* c, const char* bytes, size_t size, Snapshot* out)
     }
     memcpy(out, bytes + sizeof head, sizeof *out);
     return ST_OK;
+}
+
+/* ---- instance and FMU state handling shared by the FMI 2.0 and FMI 3.0 glue ---- */
+
+Instance* core_new(size_t size, const char* name, int logging_on)
+{
+    Instance* c = (Instance*)calloc(1, size);
+    if (!c) return NULL;
+    core_init(c, name);
+    c->logging_on = logging_on;
+    return c;
+}
+
+int core_check_token(Instance* c, const char* call, const char* what, const char* token)
+{
+    if (token && strcmp(token, INSTANTIATION_TOKEN) == 0) return 0;
+    core_log(c, ST_ERROR, "%s: %s: %s %s does not match this FMU's %s", MODEL_IDENTIFIER, call, what,
+             token ? token : "(null)", INSTANTIATION_TOKEN);
+    return 1;
+}
+
+void core_start_time(Instance* c, double t0)
+{
+    c->time = t0;
+    model_set_start_time(c, t0);
+}
+
+void core_terminate(Instance* c) { c->mode = MODE_TERMINATED; }
+
+int core_unsupported(Instance* c, const char* call, const char* what)
+{
+    core_log(c, ST_ERROR, "%s: %s is not supported%s", MODEL_IDENTIFIER, call, what);
+    return ST_ERROR;
+}
+
+void* core_state_get(Instance* c, void* state)
+{
+    Snapshot* s = state ? (Snapshot*)state : (Snapshot*)malloc(sizeof(Snapshot));
+    if (s) core_get_state(c, s);
+    return s;
+}
+
+void core_state_free(void** state)
+{
+    if (state) {
+        free(*state);
+        *state = NULL;
+    }
+}
+
+int core_state_serialize(Instance* c, const char* call, const void* state, char* bytes, size_t size)
+{
+    if (!state || size < core_serialized_size()) {
+        core_log(c, ST_ERROR, "%s: buffer of %zu bytes, %zu needed", call, size, core_serialized_size());
+        return ST_ERROR;
+    }
+    core_serialize((const Snapshot*)state, bytes);
+    return ST_OK;
+}
+
+void* core_state_deserialize(Instance* c, const char* bytes, size_t size, void* state)
+{
+    Snapshot tmp;
+    if (core_deserialize(c, bytes, size, &tmp) != ST_OK) return NULL;
+    Snapshot* s = state ? (Snapshot*)state : (Snapshot*)malloc(sizeof(Snapshot));
+    if (s) *s = tmp;
+    return s;
 }

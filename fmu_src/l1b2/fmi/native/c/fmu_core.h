@@ -83,6 +83,18 @@ int core_deserialize(Instance* c, const char* bytes, size_t size, Snapshot* out)
 size_t core_serialized_size(void);
 void core_serialize(const Snapshot* s, char* bytes);
 
+/* shared by the FMI 2.0 and FMI 3.0 glue: instances (size: the glue's struct, Instance first), start time,
+ * refusals, FMU states (a state is a Snapshot; NULL from get/deserialize: out of memory or refused) */
+Instance* core_new(size_t size, const char* name, int logging_on);
+int core_check_token(Instance* c, const char* call, const char* what, const char* token); /* 0: this FMU's */
+void core_start_time(Instance* c, double t0);
+void core_terminate(Instance* c);
+int core_unsupported(Instance* c, const char* call, const char* what);  /* logs, returns ST_ERROR */
+void* core_state_get(Instance* c, void* state);                         /* into state, or a new one */
+void core_state_free(void** state);
+int core_state_serialize(Instance* c, const char* call, const void* state, char* bytes, size_t size);
+void* core_state_deserialize(Instance* c, const char* bytes, size_t size, void* state);
+
 #define MASK(m) (1 << (m))
 
 #endif

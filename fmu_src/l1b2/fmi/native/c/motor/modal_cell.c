@@ -38,11 +38,11 @@ static double characteristic(const B2* b, double w)
             + b2 * tanh(b2 * b->half) * cos(b1 * b->half) * (b->EI * pow(b1, 2.0) + b->N)) / (b->EI * pow(b1, 3.0));
 }
 
-/* omega_b0 [rad/s] and eta_T at axial force P [N] (B2 without thermal drift); 0, or 1 when the iteration fails */
-static int b2_properties(const double* r, double P, double* wb_out, double* eta_out)
+/* omega_b0 [rad/s] and eta_T at axial force P [N], dT [K] from the reference temperature (0 for the table cells:
+ * ModalTable(sp, None)); 0, or 1 when the iteration fails */
+static int b2_properties(const double* r, double P, double dT, double* wb_out, double* eta_out)
 {
     B2 b;
-    double dT = 0.0; /* ModalTable(sp, None): the B2 mode at the reference temperature */
     double area = r[VR_Stator_width_m] * r[VR_Stator_thickness_m];
     b.rhoS = r[VR_Stator_density_kg_m3] * area;
     b.L = r[VR_Stator_length_m];
@@ -124,7 +124,7 @@ int modal_cell_build(const double* r, double k, double* cell, char* msg)
     }
     for (int i = 0; i < TABLE_ROWS; i++) {
         double P = k * w + 0.5 * (LOBATTO_X[i] + 1.0) * w;
-        if (b2_properties(r, P, &wb[i], &eta[i])) {
+        if (b2_properties(r, P, 0.0, &wb[i], &eta[i])) {
             snprintf(msg, MSG_LEN, "StatorBlock: the B2 frequency at the axial force P = %.17g N did not converge "
                      "in the native FMU (near buckling; the Python L1B2Motor.fmu searches further)", P);
             return 1;
@@ -135,6 +135,19 @@ int modal_cell_build(const double* r, double k, double* cell, char* msg)
     for (int i = 0; i < TABLE_ROWS; i++) {
         cell[2 * i] = cw[i];
         cell[2 * i + 1] = ce[i];
+    }
+    return 0;
+}
+
+/* the B2 frequency and tip coefficient at axial force P [N] and stator temperature T [degC], evaluated directly
+ * (StatorBlock._update_props with a temperature-dependent B2 mode: modal_properties(sp, P, T)); 0, or 1 */
+int modal_b2_direct(const double* r, double P, double T, double* wb, double* eta, char* msg)
+{
+    if (b2_properties(r, P, T - r[VR_Stator_T_ref_degC], wb, eta)) {
+        snprintf(msg, MSG_LEN, "StatorBlock: the B2 frequency at the axial force P = %.17g N and the stator "
+                 "temperature %.17g degC did not converge in the native FMU (near buckling; the Python "
+                 "L1B2Motor.fmu searches further)", P, T);
+        return 1;
     }
     return 0;
 }

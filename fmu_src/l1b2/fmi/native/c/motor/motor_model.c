@@ -14,8 +14,9 @@
  * force) are computed at export by l1b2.physics.stator.ModalTable and baked into
  * model_data.h for the stator parameters of the export (0 to 60 N); other cells,
  * or all cells for other stator parameters, are built at run time (modal_cell.c).
- * A temperature-dependent B2 mode and the interface's numerical reference kernel
- * are refused at initialisation.
+ * With a temperature-dependent B2 mode the B2 properties are evaluated directly at every internal step
+ * (thermal_substep), as the stator block does; the interface's numerical reference kernel is refused at
+ * initialisation.
  */
 #include <math.h>
 #include <stdio.h>
@@ -26,6 +27,7 @@
 #define PI 3.141592653589793
 
 int modal_cell_build(const double* r, double k, double* cell, char* msg); /* modal_cell.c */
+int modal_b2_direct(const double* r, double P, double T, double* wb, double* eta, char* msg);
 
 /* cell k of the modal table: baked at export when the stator parameters are the export's, else built here
  * (kept in the state's cache); NULL with the reason in msg when it cannot be built */
@@ -141,11 +143,6 @@ static int table_applies(Instance* c, char* msg)
     for (int i = 0; i < TABLE_NCHECK; i++)
         if (r[TABLE_CHECK_VR[i]] != TABLE_CHECK_VALUE[i]) c->s.ms.baked_ok = 0.0;
     for (int i = 0; i < CELL_CACHE_N; i++) c->s.ms.cache_k[i] = -1.0;
-    if (r[VR_Stator_df_dT_b_Hz_per_K] != 0.0) {
-        snprintf(msg, MSG_LEN, "Stator.df_dT_b_Hz_per_K = %.17g: a temperature-dependent B2 mode is not in the "
-                 "native FMU (use the Python L1B2Motor.fmu)", r[VR_Stator_df_dT_b_Hz_per_K]);
-        return 1;
-    }
     if (r[VR_Interface_quadrature] != 0.0) {
         snprintf(msg, MSG_LEN, "Interface.quadrature = true: the numerical reference kernel is not in the native "
                  "FMU (use the Python L1B2Motor.fmu)");
@@ -178,11 +175,18 @@ int model_initialize(Instance* c, char* msg)
     double P = l1b2_max(p[P_P0] + p[P_K_PRE] * l1b2k_bar_deviation_scalar(
         s0, p[P_HALF], p[P_DEV1], p[P_DEV2], p[P_DEV3], p[P_WAVE_A], p[P_WAVE_P], p[P_BUMP_A], p[P_BUMP_C],
         p[P_BUMP_W]), 0.0);
-    double k = floor(P / TABLE_CELL_N);
-    const double* cell = get_cell(c, k, msg);
-    if (!cell) return 1;
-    l1b2_tup2 props = l1b2k_table_lookup(cell, P);
-    double wb = props.v[0], eta = fabs(props.v[1]);
+    double wb, eta;
+    if (p[P_B2_THERMAL] != 0.0) { /* modal_properties(sp, P, T_st) */
+        if (modal_b2_direct(r, P, T_st, &wb, &eta, msg)) return 1;
+        eta = fabs(eta);
+    } else {
+        double k = floor(P / TABLE_CELL_N);
+        const double* cell = get_cell(c, k, msg);
+        if (!cell) return 1;
+        l1b2_tup2 props = l1b2k_table_lookup(cell, P);
+        wb = props.v[0];
+        eta = fabs(props.v[1]);
+    }
     double w_l0 = l1b2k_l1_omega_scalar(p[P_F_L0], p[P_DF_L], T_st - p[P_T_REF]);
     l1b2_tup2 kl = l1b2k_stiffness_damping(p[P_M_L], w_l0, p[P_ZETA_L]);
     l1b2_tup2 kb = l1b2k_stiffness_damping(p[P_M_B], wb, p[P_ZETA_B]);
@@ -225,6 +229,33 @@ int model_initialize(Instance* c, char* msg)
     return 0;
 }
 
+/* A temperature-dependent B2 mode: the stator block evaluates the modal properties directly at the step's axial
+ * force and stator temperature (where the fused kernel hands the step to the blocks). One internal step of the
+ * kernel with them: a cell whose interpolant is the constant (omega_b0, eta_T) (Horner gives the constant
+ * exactly), the kernel's thermal hand-over switched off. 0: done; 1: failed, the reason in msg; 2: an internal
+ * signal left the blocks' ranges (the state is that before the step). */
+static int thermal_substep(Instance* c, double hs, char* msg)
+{
+    ModelState* m = &c->s.ms;
+    double* x = m->x;
+    const double* p = m->p;
+    double T_st = x[X_T_ST];
+    if (p[P_TAU] > 0.0 || p[P_HEAT] != 0.0)
+        T_st = l1b2k_temperature_step_scalar(T_st, x[X_T_AMB], x[X_V0], p[P_TAU], p[P_HEAT], hs);
+    else
+        T_st = x[X_T_AMB];
+    double P = l1b2_max(p[P_P0] + p[P_K_PRE] * l1b2k_bar_deviation_scalar(
+        x[X_S], p[P_HALF], p[P_DEV1], p[P_DEV2], p[P_DEV3], p[P_WAVE_A], p[P_WAVE_P], p[P_BUMP_A], p[P_BUMP_C],
+        p[P_BUMP_W]), 0.0);
+    double wb, eta, cell[2 * TABLE_ROWS] = {0.0}, q[MOTOR_NP];
+    if (modal_b2_direct(c->s.r, P, T_st, &wb, &eta, msg)) return 1;
+    cell[2 * (TABLE_ROWS - 1)] = wb;
+    cell[2 * (TABLE_ROWS - 1) + 1] = eta;
+    for (int i = 0; i < MOTOR_NP; i++) q[i] = p[i];
+    q[P_B2_THERMAL] = 0.0;
+    return l1b2k_motor_substeps(x, q, cell, (long)floor(P / TABLE_CELL_N), 1, hs) == 1 ? 0 : 2;
+}
+
 /* MotorBlock.do_step through FusedSteps.advance */
 int model_do_step(Instance* c, double t, double h, char* msg)
 {
@@ -246,6 +277,12 @@ int model_do_step(Instance* c, double t, double h, char* msg)
     double hs = h / n;
     if (held_inputs(c, msg)) return 1;
     long done = 0;
+    while (done < n && m->p[P_B2_THERMAL] != 0.0) {
+        int rc = thermal_substep(c, hs, msg);
+        if (rc == 1) return 1;
+        if (rc == 2) break; /* the kernel below reports the ranges */
+        done++;
+    }
     while (done < n) {
         const double* cell = m->cell_k >= 0 ? get_cell(c, m->cell_k, msg) : MOTOR_TABLE[0];
         if (!cell) return 1;

@@ -9,8 +9,17 @@ typedef struct {
     double s_center, s_half, kappa, load_inertia, m_s, T_s;
 } PredictorParams;
 
+#ifndef PRED_EXTENDED
+#define PRED_EXTENDED 0
+#endif
+
 typedef struct {
     PredictorParams par;
+#if PRED_EXTENDED
+    PredictorParams base; /* the baseline setup (gives v_base, a_base) */
+    double phi[EFF_NPHI]; /* the effects' parameters, EFF_PHI_OFF[e] on for effect e */
+    double filt[3];       /* the output filter's a, b0, b1 */
+#endif
 } ModelState;
 
 #endif

@@ -11,6 +11,9 @@
 #include <stdio.h>
 
 #include "fmu_core.h"
+#if PRED_EXTENDED
+#include "effect_kernels.h"
+#endif
 
 #define G_M_S2 9.81
 #define PI 3.141592653589793
@@ -76,20 +79,25 @@ static double step_drive(double vp, double D, double X, double Fr, double h)
     return nw;
 }
 
-static double one_step(const PredictorParams* q, double v, double s, double V0, double load, double d, double dt)
+/* has_F: the extra force F is added to X (l1b2.predictor.model.add_extra_force; without one X stays as it is) */
+static double one_step(const PredictorParams* q, double v, double s, double V0, double load, double d, double dt,
+                       int has_F, double F)
 {
     double vp = d * v;
     double D, X, Fr;
     force_parts(q, s, V0, d * load, q->m_s, &D, &X, &Fr);
+    if (has_F) X = X + F;
     double m_eff = q->load_inertia >= 0.5 ? q->m_s + fabs(load) : q->m_s + 0.0 * load;
     double h = dt / m_eff;
     return d * step_drive(vp, D, X, Fr, h);
 }
 
-static double steady_state(const PredictorParams* q, double s, double V0, double load, double d)
+static double steady_state(const PredictorParams* q, double s, double V0, double load, double d, int has_F,
+                           double F)
 {
     double D, X, Fr;
     force_parts(q, s, V0, d * load, q->m_s, &D, &X, &Fr);
+    if (has_F) X = X + F;
     double fwd = X - Fr, bwd = X + Fr;
     double vp = fwd > 0 ? fwd / D : (bwd < 0 ? bwd / D : 0.0);
     if (!(D > 0)) vp = NAN;
@@ -100,69 +108,81 @@ static void outputs(Instance* c)
 {
     double* r = c->s.r;
     r[VR_v] = r[VR_v_state];
-    r[VR_v_steady] = steady_state(&c->s.ms.par, r[VR_s], r[VR_V0], r[VR_load], r[VR_direction]);
+#if PRED_EXTENDED
+    r[VR_v_steady] = steady_state(&c->s.ms.par, r[VR_s], r[VR_V0], r[VR_load], r[VR_direction], 1, r[VR_F_extra]);
+    r[VR_v_baseline] = r[VR_v_base];
+#else
+    r[VR_v_steady] = steady_state(&c->s.ms.par, r[VR_s], r[VR_V0], r[VR_load], r[VR_direction], 0, 0.0);
+#endif
 }
 
-/* the parameters from the variables, checked as PredictorParams and PredictorBlock check them */
-static int rebuild_params(Instance* c, char* msg)
+/* one Eq. 29 setup from the variables (value references vs: PREDICTOR_SCALARS of l1b2.fmi.native.build),
+ * checked as PredictorParams and PredictorBlock check them */
+static int read_setup(const double* r, const int* vs, const int* va, const int* vb, const int* vp, const char* prefix,
+                      PredictorParams* q, char* msg)
 {
-    const double* r = c->s.r;
-    PredictorParams* q = &c->s.ms.par;
-    q->c_r = r[VR_c_r];
-    q->sigma = r[VR_sigma];
-    q->mu = r[VR_mu];
-    q->k0 = r[VR_k0];
-    q->mu_sd = r[VR_mu_sd];
+    q->c_r = r[vs[0]];
+    q->sigma = r[vs[1]];
+    q->mu = r[vs[2]];
+    q->k0 = r[vs[3]];
+    q->mu_sd = r[vs[4]];
     for (int i = 0; i < PRED_NP; i++) {
-        q->alpha[i] = r[PRED_VR_ALPHA[i]];
-        q->beta[i] = r[PRED_VR_BETA[i]];
-        q->p[i] = r[PRED_VR_P[i]];
+        q->alpha[i] = r[va[i]];
+        q->beta[i] = r[vb[i]];
+        q->p[i] = r[vp[i]];
     }
-    q->s_center = r[VR_s_center];
-    q->s_half = r[VR_s_half];
-    q->kappa = r[VR_kappa];
-    q->load_inertia = r[VR_load_inertia];
-    q->m_s = r[VR_slider_mass_kg];
-    q->T_s = r[VR_T_s];
+    q->s_center = r[vs[5]];
+    q->s_half = r[vs[6]];
+    q->kappa = r[vs[7]];
+    q->load_inertia = r[vs[8]];
+    q->m_s = r[vs[9]];
+    q->T_s = r[vs[10]];
     const char* names[] = {"c_r", "sigma", "mu", "k0", "mu_sd", "s_center", "s_half", "kappa"};
     const double vals[] = {q->c_r, q->sigma, q->mu, q->k0, q->mu_sd, q->s_center, q->s_half, q->kappa};
     for (int i = 0; i < 8; i++)
         if (!isfinite(vals[i])) {
-            snprintf(msg, MSG_LEN, "PredictorParams.%s must be finite, got %.17g", names[i], vals[i]);
+            snprintf(msg, MSG_LEN, "PredictorParams.%s%s must be finite, got %.17g", prefix, names[i], vals[i]);
             return 1;
         }
     for (int i = 0; i < PRED_NP; i++)
         if (!(isfinite(q->alpha[i]) && isfinite(q->beta[i]) && isfinite(q->p[i]))) {
-            snprintf(msg, MSG_LEN, "%s contains non-finite values",
+            snprintf(msg, MSG_LEN, "%s%s contains non-finite values", prefix,
                      !isfinite(q->alpha[i]) ? "alpha" : (!isfinite(q->beta[i]) ? "beta" : "p"));
             return 1;
         }
     if (q->s_half <= 0) {
-        snprintf(msg, MSG_LEN, "s_half must be > 0 [m]");
+        snprintf(msg, MSG_LEN, "%ss_half must be > 0 [m]", prefix);
         return 1;
     }
     if (!(q->m_s > 0 && q->T_s > 0)) {
-        snprintf(msg, MSG_LEN, "PredictorBlock: slider_mass_kg [kg] and T_s [s] must be positive");
+        snprintf(msg, MSG_LEN, "PredictorBlock: %sslider_mass_kg [kg] and %sT_s [s] must be positive", prefix, prefix);
         return 1;
     }
     return 0;
 }
 
-int model_initialize(Instance* c, char* msg)
+static int rebuild_params(Instance* c, char* msg)
 {
-    if (rebuild_params(c, msg)) return 1;
-    if (core_check_inputs(c, msg)) return 1;
-    c->s.r[VR_v_state] = c->s.r[VR_v0];
-    outputs(c);
+    const double* r = c->s.r;
+    ModelState* ms = &c->s.ms;
+    if (read_setup(r, PRED_VR_SCALARS, PRED_VR_ALPHA, PRED_VR_BETA, PRED_VR_P, "", &ms->par, msg)) return 1;
+#if PRED_EXTENDED
+    if (read_setup(r, PRED_VR_BASE_SCALARS, PRED_VR_BASE_ALPHA, PRED_VR_BASE_BETA, PRED_VR_BASE_P, "baseline_",
+                   &ms->base, msg))
+        return 1;
+    for (int i = 0; i < EFF_PHI_OFF[EFF_N]; i++) ms->phi[i] = r[EFF_PHI_VR[i]];
+#if PRED_HAS_FILTER
+    ms->filt[0] = r[VR_speed_filter_a];
+    ms->filt[1] = r[VR_speed_filter_b0];
+    ms->filt[2] = r[VR_speed_filter_b1];
+#endif
+#endif
     return 0;
 }
 
-int model_do_step(Instance* c, double t, double h, char* msg)
+/* Eq. 29 iterated at sub-steps of at most T_s over the communication step h (PredictorBlock._advance) */
+static int advance(const PredictorParams* q, const double* r, double* v, double h, int has_F, double F, char* msg)
 {
-    (void)t;
-    if (core_check_inputs(c, msg)) return 1;
-    double* r = c->s.r;
-    const PredictorParams* q = &c->s.ms.par;
     double n_real = ceil(h / q->T_s - 1e-9);
     if ((MAX_SUBSTEPS > 0 && n_real > MAX_SUBSTEPS) || !(n_real < 1e15)) {
         snprintf(msg, MSG_LEN, "PredictorBlock: a step of %.17g s takes %.17g sub-steps of T_s = %.17g s, more than %d",
@@ -170,13 +190,108 @@ int model_do_step(Instance* c, double t, double h, char* msg)
         return 1;
     }
     long n = n_real > 1.0 ? (long)n_real : 1;
+    double w = *v;
+    for (long k = 0; k < n; k++)
+        w = one_step(q, w, r[VR_s], r[VR_V0], r[VR_load], r[VR_direction], h / n, has_F, F);
+    *v = w;
+    return 0;
+}
+
+#if PRED_EXTENDED
+/* the effects' force at the current inputs and time (ExtendedPredictorBlock._force: their sum in order) */
+static double extra_force(const Instance* c, double a_base)
+{
+    const double* r = c->s.r;
+#if PRED_HAS_T
+    const double T = r[VR_T];
+#else
+    const double T = NAN; /* no effect reads it */
+#endif
+    const double x[8] = {r[VR_t_now], r[VR_s], r[VR_V0], r[VR_load], r[VR_direction], T, r[VR_v_base], a_base};
+    double F = 0.0;
+    for (int e = 0; e < EFF_N; e++)
+        F = F + l1b2k_effect_force(EFF_KIND[e], x, EFF_Q + EFF_Q_OFF[e], c->s.ms.phi + EFF_PHI_OFF[e]);
+    return F;
+}
+
+/* second-order derivative at the middle of three samples (l1b2.predictor.effects.derivative_step) */
+static double derivative_step(double v_prev, double v, double v_next, double h_prev, double h)
+{
+    return (-(h / (h_prev * (h_prev + h))) * v_prev + ((h - h_prev) / (h_prev * h)) * v
+            + (h_prev / (h * (h_prev + h))) * v_next);
+}
+#endif
+
+int model_initialize(Instance* c, char* msg)
+{
+    if (rebuild_params(c, msg)) return 1;
+    if (core_check_inputs(c, msg)) return 1;
+    double* r = c->s.r;
+#if PRED_EXTENDED
+    r[VR_v_base] = r[VR_v_raw] = r[VR_v_base_prev] = r[VR_v0];
+    r[VR_h_prev] = 0.0;
+#if PRED_HAS_FILTER
+    {
+        const double* f = c->s.ms.filt; /* filter_start_gain */
+        const double gain = fabs(1.0 - f[0]) > 1e-9 ? (f[1] + f[2]) / (1.0 - f[0]) : 1.0;
+        r[VR_v_state] = r[VR_v_raw] * gain;
+    }
+#else
+    r[VR_v_state] = r[VR_v_raw] * 1.0;
+#endif
+    r[VR_F_extra] = extra_force(c, 0.0); /* a_base is not known before the first step */
+#else
+    r[VR_v_state] = r[VR_v0];
+#endif
+    outputs(c);
+    return 0;
+}
+
+int model_do_step(Instance* c, double t, double h, char* msg)
+{
+    if (core_check_inputs(c, msg)) return 1;
+    double* r = c->s.r;
+#if PRED_EXTENDED
+    const ModelState* ms = &c->s.ms;
+    r[VR_t_now] = t;
+    const double vb = r[VR_v_base];
+    double vb_next = vb;
+    if (advance(&ms->base, r, &vb_next, h, 0, 0.0, msg)) return 1;
+    const double a_base = r[VR_h_prev] <= 0.0 ? (vb_next - vb) / h
+                                              : derivative_step(r[VR_v_base_prev], vb, vb_next, r[VR_h_prev], h);
+    const double F = extra_force(c, a_base);
+    const double u_prev = r[VR_v_raw];
+    double v_raw = u_prev;
+    if (advance(&ms->par, r, &v_raw, h, EFF_N > 0, F, msg)) return 1;
+    r[VR_F_extra] = F;
+    r[VR_v_raw] = v_raw;
+#if PRED_HAS_FILTER
+    r[VR_v_state] = ms->filt[0] * r[VR_v_state] + ms->filt[1] * v_raw + ms->filt[2] * u_prev; /* filter_step */
+#else
+    r[VR_v_state] = v_raw;
+#endif
+    r[VR_v_base_prev] = vb;
+    r[VR_v_base] = vb_next;
+    r[VR_h_prev] = h;
+    r[VR_t_now] = t + h;
+#else
+    (void)t;
     double v = r[VR_v_state];
-    for (long k = 0; k < n; k++) v = one_step(q, v, r[VR_s], r[VR_V0], r[VR_load], r[VR_direction], h / n);
+    if (advance(&c->s.ms.par, r, &v, h, 0, 0.0, msg)) return 1;
     r[VR_v_state] = v;
+#endif
     outputs(c);
     return 0;
 }
 
 void model_refresh(Instance* c) { outputs(c); }
 
-void model_set_start_time(Instance* c, double t0) { (void)c; (void)t0; }
+void model_set_start_time(Instance* c, double t0)
+{
+#if PRED_EXTENDED
+    c->s.r[VR_t_now] = t0;
+#else
+    (void)c;
+    (void)t0;
+#endif
+}
