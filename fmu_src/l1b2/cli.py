@@ -485,8 +485,6 @@ def print_input_checks(checks: dict, metrics: dict) -> None:
         runs = [str(f["run"]) for f in checks.get("test_runs_outside_training_range", [])]
         print(f"  warning: TEST {checks['extrapolation']} (runs {', '.join(runs[:10])}"
               f"{', ...' if len(runs) > 10 else ''})")
-    if checks.get("drive_frequency"):
-        print(f"  warning: {checks['drive_frequency']}")
     for part, m in metrics.items():
         for kind, x in (m or {}).items():
             if x.get("n_diverged_runs"):
