@@ -426,7 +426,7 @@ def run_identification(train_path, out_dir, test_path=None, *, order=8, criterio
             "checks": input_checks(train, test),
             "metrics": {"train": metrics_for(est, train),
                         "test": metrics_for(est, test) if test is not None else None},
-            "predictor": PredictorSetup(est.params_, est.m_s_, est.T_s_).to_dict(),
+            "predictor": PredictorSetup(est.params_, est.m_s_, est.T_s_, est.result_.frequency_response).to_dict(),
         }
         sections["figures"] = _test_figures(est, test, tmp, out) if plots_on and test is not None else []
         est.result_.save(tmp, **sections)  # identification.json (strict JSON) and fit_report.txt

@@ -417,6 +417,9 @@ def build_native_fmu(name: str, python_fmu: str | Path, dest_dir: str | Path, fm
     if name == "Predictor" and "extended_predictor" in defaults:
         raise NativeBuildError("the calibrated extended predictor (effects, output filter) has no native model: "
                                "its Predictor.fmu stays a Python FMU")
+    if name == "Predictor" and (defaults.get("predictor") or {}).get("frequency"):
+        raise NativeBuildError("a predictor with a drive-frequency response has no native model (its C code has "
+                               "no frequency response): its Predictor.fmu stays a Python FMU")
     sources = _source_files(name, fmi_version)
     # the GUID: stable for identical sources and variables (and different from the Python FMU's)
     provisional = source_tree(name, python_md, fmi_version, "{}", defaults)
