@@ -355,17 +355,7 @@ def build_parser() -> argparse.ArgumentParser:
     _motor_args(p)
     p.set_defaults(func=cmd_compare)
 
-    p = sub.add_parser("frequency-map", help="design study: steady speed over drive frequency and V0, identified "
-                                             "predictor vs the coupled physics (PNG, CSV, agreement)")
-    p.add_argument("--identification", type=Path, required=True, help="identification.json from `l1b2 identify`")
-    p.add_argument("--out", type=Path, required=True, help="output folder")
-    p.add_argument("--frequencies", type=float, nargs="+", metavar="HZ",
-                   help="drive frequencies [Hz] (default: 41 over TRAIN's range, else +-500 Hz around the nominal)")
-    p.add_argument("--voltages", type=float, nargs="+", default=[220.0, 324.0], metavar="V", help="V0 values [V]")
-    p.add_argument("--load", type=float, default=0.0, help="load [kg] (default 0)")
-    p.add_argument("--position", type=float, default=0.0, help="slider position [m] (default 0)")
-    _motor_args(p)
-    p.set_defaults(func=cmd_frequency_map)
+    _add_frequency_map_parser(sub)
 
     p = sub.add_parser("close-loop", help="find the missing effect in the residual, add it, report before/after")
     p.add_argument("--train", type=Path, required=True, help="measured data to fit and diagnose on")
@@ -576,6 +566,21 @@ def _read_identification(path: Path) -> dict:
     if not isinstance(doc, dict) or "predictor" not in doc:
         raise L1B2Error(f"{path}: not an identification.json of `l1b2 identify` (no 'predictor' section)")
     return doc
+
+
+def _add_frequency_map_parser(sub) -> None:
+    """The ``frequency-map`` subcommand's arguments."""
+    p = sub.add_parser("frequency-map", help="design study: steady speed over drive frequency and V0, identified "
+                                             "predictor vs the coupled physics (PNG, CSV, agreement)")
+    p.add_argument("--identification", type=Path, required=True, help="identification.json from `l1b2 identify`")
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--frequencies", type=float, nargs="+", metavar="HZ",
+                   help="drive frequencies [Hz] (default: 41 over TRAIN's range, else +-500 Hz around the nominal)")
+    p.add_argument("--voltages", type=float, nargs="+", default=[220.0, 324.0], metavar="V", help="V0 values [V]")
+    p.add_argument("--load", type=float, default=0.0, help="load [kg] (default 0)")
+    p.add_argument("--position", type=float, default=0.0, help="slider position [m] (default 0)")
+    _motor_args(p)
+    p.set_defaults(func=cmd_frequency_map)
 
 
 def cmd_frequency_map(args) -> int:
