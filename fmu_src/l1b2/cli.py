@@ -108,7 +108,8 @@ def cmd_rig(args) -> int:
     mp = _motor(args)
     plan = RigPlan(voltages_V=args.voltages, loads_kg=args.loads, step_s=args.step, seed=args.seed,
                    record_temperature=args.record_temperature, pause_s=args.pause, max_run_s=args.max_run,
-                   speed_noise_m_s=args.speed_noise, run_scatter=args.run_scatter)
+                   speed_noise_m_s=args.speed_noise, run_scatter=args.run_scatter,
+                   frequencies_Hz=tuple(args.frequencies or ()), frequency_jitter_Hz=args.frequency_jitter)
     injections = [parse_injection(s) for s in args.inject]
     if args.jobs is not None:
         print("l1b2: warning: --jobs is deprecated, use --workers", file=sys.stderr)
@@ -260,6 +261,10 @@ def _add_rig_parser(sub) -> None:
     p.add_argument("--injection-seed", "--effect-seed", dest="injection_seed", type=int,
                    help="draw the injections' sizes at random with this seed")
     p.add_argument("--record-temperature", action="store_true", help="write the stator temperature column")
+    p.add_argument("--frequencies", type=_floats, metavar="HZ,HZ,...",
+                   help="drive frequencies [Hz] the (V0, load) conditions take in turn (default: one, 48.5 kHz)")
+    p.add_argument("--frequency-jitter", type=float, default=0.0, metavar="HZ",
+                   help="half-width of a uniform per-run frequency offset [Hz] (a drive that tracks resonance)")
     p.add_argument("--no-plots", action="store_true", help="write no PNG figures")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     _motor_args(p)
