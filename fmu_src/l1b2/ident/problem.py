@@ -256,10 +256,8 @@ class ForceCore:
         Extra-force features [N per unit phi] (drive coordinates).
     """
 
-    def __init__(self, L, V0, mp, h, d, m_s, kappa, E=None, LA=None):
+    def __init__(self, L, V0, mp, h, d, m_s, kappa, E=None):
         self.L = np.ascontiguousarray(L)
-        #: the basis of A' (L, or L scaled per sample by the frequency response's gain)
-        self.LA = self.L if LA is None else np.ascontiguousarray(LA)
         self.V0 = V0
         self.mp = mp
         self.h = h
@@ -277,7 +275,7 @@ class ForceCore:
         """A'(s) [-], P(s) [N], D [N s/m], drive force X [N] and guide friction Fr [N] at ``theta``."""
         n1 = self.n1
         c_r, sig, mu, k0, musd = theta[:5]
-        Ap = self.LA @ theta[5 : 5 + n1]
+        Ap = self.L @ theta[5 : 5 + n1]
         Bp = self.L @ theta[5 + n1 : 5 + 2 * n1]
         P = self.L @ theta[5 + 2 * n1 : 5 + 3 * n1]
         g1 = float(drive_factor(k0))
@@ -296,7 +294,6 @@ class ForceCore:
         """
         n1 = self.n1
         L = self.L if rows is None else self.L[rows]
-        LA = self.LA if rows is None else self.LA[rows]
         V0 = self.V0 if rows is None else self.V0[rows]
         c_r, sig, mu, k0, musd = theta[:5]
         g1 = float(drive_factor(k0))
@@ -313,7 +310,7 @@ class ForceCore:
         out[:, 2] = P * (g1 - 0.5 * np.pi * Ap * G)
         out[:, 3] = mu * P * (dg1 - 0.5 * np.pi * Ap * dG)
         out[:, 4] = sg * (G_M_S2 * self.m_s + self.kappa * P)
-        np.multiply(LA, (sig * vp - mu * P * 0.5 * np.pi * G)[:, None], out=out[:, 5 : 5 + n1])
+        np.multiply(L, (sig * vp - mu * P * 0.5 * np.pi * G)[:, None], out=out[:, 5 : 5 + n1])
         np.multiply(L, V0[:, None], out=out[:, 5 + n1 : 5 + 2 * n1])
         np.multiply(L, (mu * (g1 - 0.5 * np.pi * Ap * G) + sg * musd * self.kappa)[:, None],
                     out=out[:, 5 + 2 * n1 : self.p_theta])
@@ -363,8 +360,6 @@ class LikelihoodProblem:
         self.s_half = s_half
         x = (data.s - s_center) / s_half
         L = legvander(x, order)
-        ga = getattr(data, "A_gain", None)
-        LA = None if ga is None else L * np.asarray(ga, float)[:, None]
         m_eff = m_s + (np.abs(data.load) if include_load_inertia else 0.0)
         dt = lay.step_dt(data.t)
         h = dt / m_eff
@@ -373,7 +368,7 @@ class LikelihoodProblem:
         if criterion == "free_run":
             pk = lay.to_packed
             self.core = ForceCore(pk(L), pk(data.V0), pk(mp), pk(h), pk(data.d), m_s, kappa,
-                              None if E is None else pk(E), None if LA is None else pk(LA))
+                              None if E is None else pk(E))
             self.nd = -self.core.d
             self.v0 = data.v[lay.starts][lay.run_order]
             mask_p = pk(data.mask)
@@ -385,7 +380,7 @@ class LikelihoodProblem:
             idx = np.flatnonzero(~lay.is_last)
             self.idx = idx
             self.core = ForceCore(L[idx], data.V0[idx], mp[idx], h[idx], data.d[idx], m_s, kappa,
-                              None if E is None else E[idx], None if LA is None else LA[idx])
+                              None if E is None else E[idx])
             self.vprev = data.v[idx]
             keep = data.mask[idx + 1]
             self.sel = np.flatnonzero(keep)
@@ -564,7 +559,7 @@ class LikelihoodProblem:
                 elif col == 1:
                     dD[:, j] = 0.5 - c["Ap"]
                 elif 5 <= col < 5 + n1:
-                    dD[:, j] = -theta[1] * core.LA[:, col - 5]
+                    dD[:, j] = -theta[1] * core.L[:, col - 5]
             U = dD * (-(core.h * g * normal))[:, None]
             G = packed_linear_recursion(self.lay, a, U)
         g, G = g[self.sel], G[self.sel]
