@@ -131,3 +131,53 @@ def test_speed_over_frequency_agrees_with_the_coupled_physics():
     assert without["rms_rel"] > 2 * with_resp["rms_rel"]
     df = frequency_map(replace(base, frequency=resp), mp, f, [324.0])
     assert np.all(np.diff(df["v_physics_m_s"]) < 0) and np.all(np.diff(df["v_predictor_m_s"]) < 0)
+
+
+def test_rig_frequency_plan():
+    # reference: the conditions take the listed frequencies in turn (both directions share one), the per-run
+    # offset stays within +-jitter, 0.1 Hz resolution; without a list every run is at f_drive_Hz
+    from l1b2.errors import SimulationError
+    from l1b2.rig.experiment import RigPlan, run_frequencies
+    plan = RigPlan(frequencies_Hz=(48000.0, 48500.0, 49000.0))
+    f = run_frequencies(plan, 12)
+    assert f.tolist() == [48000.0] * 2 + [48500.0] * 2 + [49000.0] * 2 + [48000.0] * 2 + [48500.0] * 2 + [49000.0] * 2
+    fj = run_frequencies(RigPlan(frequencies_Hz=(48000.0, 49000.0), frequency_jitter_Hz=50.0, seed=4), 40)
+    base = np.where((np.arange(40) // 2) % 2 == 0, 48000.0, 49000.0)
+    assert np.all(np.abs(fj - base) <= 50.0) and np.ptp(fj - base) > 50.0
+    assert np.allclose(fj, np.round(fj, 1))
+    assert np.all(run_frequencies(RigPlan(), 5) == 48500.0)
+    with pytest.raises(SimulationError, match="frequencies_Hz"):
+        RigPlan(frequencies_Hz=(48000.0, -1.0))
+    with pytest.raises(SimulationError, match="frequency_jitter_Hz"):
+        RigPlan(frequency_jitter_Hz=-5.0)
+
+
+def test_frequency_map_command(tmp_path, capsys):
+    # reference: the command writes the table, the PNG and the agreement (the same numbers as map_agreement of
+    # the table); a file that is not an identification exits non-zero with one line
+    import json
+
+    from l1b2.cli import main
+    from l1b2.physics.params import load_motor
+    from l1b2.predictor.derive import derive_predictor_setup
+    from l1b2.sweep.frequency_map import map_agreement
+    from dataclasses import replace
+    mp = load_motor()
+    setup = replace(derive_predictor_setup(mp, order=3),
+                    frequency=FrequencyResponse(48500.0, mp.stator.f_b0_Hz, mp.stator.zeta_b))
+    ident = tmp_path / "identification.json"
+    ident.write_text(json.dumps({"predictor": setup.to_dict(),
+                                 "checks": {"training_range": {"frequency_Hz": [48200.0, 48800.0]}}}))
+    out = tmp_path / "map"
+    assert main(["frequency-map", "--identification", str(ident), "--out", str(out), "--voltages", "300"]) == 0
+    rep = json.loads((out / "frequency_map.json").read_text())
+    table = pd.read_csv(out / "frequency_map.csv")
+    assert (out / "frequency_map.png").stat().st_size > 0
+    assert table["frequency_Hz"].min() == 48200.0 and table["frequency_Hz"].max() == 48800.0 and len(table) == 41
+    assert rep["agreement"]["rms_rel"] == pytest.approx(map_agreement(table)["rms_rel"], rel=1e-9)
+    assert "rms" in capsys.readouterr().out
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({"predictor": {"params": {}}}))
+    assert main(["frequency-map", "--identification", str(bad), "--out", str(tmp_path / "m2")]) != 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "identification" in err[0]
