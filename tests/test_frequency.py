@@ -181,3 +181,19 @@ def test_frequency_map_command(tmp_path, capsys):
     assert main(["frequency-map", "--identification", str(bad), "--out", str(tmp_path / "m2")]) != 0
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "identification" in err[0]
+
+
+def test_predictor_fmu_with_a_response_stays_a_python_fmu(tmp_path):
+    # reference: the native Predictor's C code has no frequency response, so its build refuses such a predictor
+    # (the Python FMU is exported either way) and names the reason; the Python FMU declares frequency_Hz
+    import zipfile
+
+    from l1b2.fmi.build import build_fmu
+    from l1b2.fmi.native.build import build_native_set
+    setup = PredictorSetup(example_params(3), 0.1, 1e-3, FrequencyResponse(48500.0, 47800.0, 0.0125))
+    path = build_fmu("Predictor", tmp_path, extra_defaults={"predictor": setup.to_dict()})
+    with zipfile.ZipFile(path) as z:
+        md = z.read("modelDescription.xml").decode()
+    assert 'name="frequency_Hz"' in md and 'name="f_b0_Hz"' in md
+    built, info = build_native_set("Predictor", path, tmp_path)
+    assert built == {} and not info["included"] and "frequency response" in info["reason"]
