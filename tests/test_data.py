@@ -542,26 +542,35 @@ def test_split_by_load_empty_part_raises(loads):
 
 
 # --------------------------------------------------------------------------
-# Runs at different drive frequencies (no model here uses frequency_Hz)
+# Runs at different drive frequencies: an input like voltage and load
 # --------------------------------------------------------------------------
 
-def test_runs_at_different_drive_frequencies_are_reported(capsys):
-    # reference: data format's optional frequency_Hz; Eq. 29 describes one operating frequency, so a spread of
-    # the runs' frequencies above FREQUENCY_REL_SPREAD of their median is reported (checks.drive_frequency and a
-    # CLI warning), a spread below it is not
+def test_test_runs_outside_trains_frequency_range_are_flagged(capsys):
+    # reference: the drive frequency is a prediction input (the predictor's frequency response): a TEST run at a
+    # frequency outside TRAIN's range is flagged like voltage and load; frequency_varies says whether TRAIN's
+    # runs spread by more than FREQUENCY_REL_SPREAD of their median (then the response is identified)
     from l1b2.cli import print_input_checks
-    from l1b2.data.coverage import FREQUENCY_REL_SPREAD, frequency_spread, input_checks
+    from l1b2.data.coverage import FREQUENCY_REL_SPREAD, MIN_TOLERANCE, frequency_varies, input_checks
     train, test = split_by_load(_four_runs())
     assert "frequency_Hz" not in train.df
-    assert frequency_spread(train, test) == "" and input_checks(train, test)["drive_frequency"] == ""
+    def freq_flagged(checks):
+        return [f["run"] for f in checks["test_runs_outside_training_range"] if "frequency_Hz" in f["outside"]]
+
+    assert not frequency_varies(train, test) and freq_flagged(input_checks(train, test)) == []
     for m in (train, test):
         m.df["frequency_Hz"] = 48500.0
     below = 48500.0 * (1 + 0.9 * FREQUENCY_REL_SPREAD)
     test.df.loc[test.df["run"] == "r2", "frequency_Hz"] = below
-    assert frequency_spread(train, test) == ""
+    assert not frequency_varies(train, test)
+    assert below - 48500.0 > MIN_TOLERANCE["frequency_Hz"]   # not a spread to identify, but outside TRAIN's point
+    checks = input_checks(train, test)
+    assert freq_flagged(checks) == ["r2"]
     test.df.loc[test.df["run"] == "r2", "frequency_Hz"] = 47000.0
-    line = input_checks(train, test)["drive_frequency"]
-    assert "47000-48500 Hz, 2 levels" in line and "frequency_Hz" in line
-    assert frequency_spread(train) == ""  # TRAIN alone is at one frequency
-    print_input_checks({"drive_frequency": line}, {})
-    assert capsys.readouterr().out.strip() == f"warning: {line}"
+    assert frequency_varies(train, test) and not frequency_varies(train)
+    checks = input_checks(train, test)
+    assert freq_flagged(checks) == ["r2"]
+    flag = [f for f in checks["test_runs_outside_training_range"] if f["run"] == "r2"][0]["outside"]["frequency_Hz"]
+    assert flag["min"] == 47000.0 and flag["train"] == [48500.0, 48500.0]
+    assert "frequency_Hz 1" in checks["extrapolation"]
+    print_input_checks(checks, {})
+    assert "frequency_Hz" in capsys.readouterr().out

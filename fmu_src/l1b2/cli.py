@@ -108,7 +108,8 @@ def cmd_rig(args) -> int:
     mp = _motor(args)
     plan = RigPlan(voltages_V=args.voltages, loads_kg=args.loads, step_s=args.step, seed=args.seed,
                    record_temperature=args.record_temperature, pause_s=args.pause, max_run_s=args.max_run,
-                   speed_noise_m_s=args.speed_noise, run_scatter=args.run_scatter)
+                   speed_noise_m_s=args.speed_noise, run_scatter=args.run_scatter,
+                   frequencies_Hz=tuple(args.frequencies or ()), frequency_jitter_Hz=args.frequency_jitter)
     injections = [parse_injection(s) for s in args.inject]
     if args.jobs is not None:
         print("l1b2: warning: --jobs is deprecated, use --workers", file=sys.stderr)
@@ -265,6 +266,10 @@ def _add_rig_parser(sub) -> None:
     p.add_argument("--injection-seed", "--effect-seed", dest="injection_seed", type=int,
                    help="draw the injections' sizes at random with this seed")
     p.add_argument("--record-temperature", action="store_true", help="write the stator temperature column")
+    p.add_argument("--frequencies", type=_floats, metavar="HZ,HZ,...",
+                   help="drive frequencies [Hz] the (V0, load) conditions take in turn (default: one, 48.5 kHz)")
+    p.add_argument("--frequency-jitter", type=float, default=0.0, metavar="HZ",
+                   help="half-width of a uniform per-run frequency offset [Hz] (a drive that tracks resonance)")
     p.add_argument("--no-plots", action="store_true", help="write no PNG figures")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     _motor_args(p)
@@ -361,6 +366,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--order", type=int, default=8, help="polynomial order of the derived predictor")
     _motor_args(p)
     p.set_defaults(func=cmd_compare)
+
+    _add_frequency_map_parser(sub)
 
     p = sub.add_parser("close-loop", help="find the missing effect in the residual, add it, report before/after")
     p.add_argument("--train", type=Path, required=True, help="measured data to fit and diagnose on")
@@ -492,8 +499,6 @@ def print_input_checks(checks: dict, metrics: dict) -> None:
         runs = [str(f["run"]) for f in checks.get("test_runs_outside_training_range", [])]
         print(f"  warning: TEST {checks['extrapolation']} (runs {', '.join(runs[:10])}"
               f"{', ...' if len(runs) > 10 else ''})")
-    if checks.get("drive_frequency"):
-        print(f"  warning: {checks['drive_frequency']}")
     for part, m in metrics.items():
         for kind, x in (m or {}).items():
             if x.get("n_diverged_runs"):
@@ -573,6 +578,37 @@ def _read_identification(path: Path) -> dict:
     if not isinstance(doc, dict) or "predictor" not in doc:
         raise L1B2Error(f"{path}: not an identification.json of `l1b2 identify` (no 'predictor' section)")
     return doc
+
+
+def _add_frequency_map_parser(sub) -> None:
+    """The ``frequency-map`` subcommand's arguments."""
+    p = sub.add_parser("frequency-map", help="design study: steady speed over drive frequency and V0, identified "
+                                             "predictor vs the coupled physics (PNG, CSV, agreement)")
+    p.add_argument("--identification", type=Path, required=True, help="identification.json from `l1b2 identify`")
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--frequencies", type=float, nargs="+", metavar="HZ",
+                   help="drive frequencies [Hz] (default: 41 over TRAIN's range, else +-500 Hz around the nominal)")
+    p.add_argument("--voltages", type=float, nargs="+", default=[220.0, 324.0], metavar="V", help="V0 values [V]")
+    p.add_argument("--load", type=float, default=0.0, help="load [kg] (default 0)")
+    p.add_argument("--position", type=float, default=0.0, help="slider position [m] (default 0)")
+    _motor_args(p)
+    p.set_defaults(func=cmd_frequency_map)
+
+
+def cmd_frequency_map(args) -> int:
+    """Steady speed over drive frequency and V0: the identified predictor against the coupled physics."""
+    from .workflows import run_frequency_map
+    rep = run_frequency_map(_read_identification(args.identification), args.out, _motor(args),
+                            frequencies_Hz=args.frequencies, voltages_V=tuple(args.voltages), s_m=args.position,
+                            load_kg=args.load)
+    a = rep["agreement"]
+    print(f"  predictor vs physics over {a['points']} points: rms {a['rms_rel']:.2%} (shape only "
+          f"{a['shape_rms_rel']:.2%}), max |difference| {a['max_abs_m_s'] * 1e3:.1f} mm/s")
+    if rep["frequency_response"] is None:
+        print("  warning: the identification has no frequency response (TRAIN at one drive frequency): the "
+              "predictor's speed does not change with frequency")
+    print(f"  figure: {rep['figure']}")
+    return 0
 
 
 def cmd_compare(args) -> int:

@@ -150,13 +150,16 @@ class RefitSettings:
     ``order``: polynomial order of A, B, P; ``seed``; ``max_nfev``: function
     evaluations of one warm refit; ``noise``: the identifier's noise
     variances (``"common"`` or ``"per_run"``); ``client``: where the folds
-    run (a Dask client, None: in this process; not part of a task).
+    run (a Dask client, None: in this process; not part of a task);
+    ``frequency``: the drive-frequency response every refit holds fixed (the
+    baseline's, :mod:`l1b2.ident.frequency`; ``"off"``: none).
     """
 
     order: int = 8
     seed: int = 0
     max_nfev: int = DEFAULT_REFIT_NFEV
     noise: str = "common"
+    frequency: Any = "off"
     client: Any = field(default=None, compare=False, repr=False)
 
     def budget(self, max_nfev: int) -> RefitSettings:
@@ -210,7 +213,8 @@ def refit(df: pd.DataFrame, mask: np.ndarray, m_s: float, init, effects: EffectS
                               model=getattr(init, "drive_law", "eq29"),   # the refit keeps the baseline's family
                               seed=settings.seed, extra=extra, init=init,
                               init_extra=effects.start() if extra is not None else None, max_nfev=settings.max_nfev,
-                              max_outer=max_outer, noise=settings.noise, noise_fit="alternate")
+                              max_outer=max_outer, noise=settings.noise, noise_fit="alternate",
+                              frequency=settings.frequency)
     return Validated(est.fit(validated(df), slider_mass_kg=m_s, mask=mask))
 
 

@@ -208,6 +208,7 @@ class CloseLoop(EstimatorSettings):
 
         if self.baseline not in ("best",) + DRIVE_LAWS:
             raise ValueError(f"baseline must be 'best' or one of {DRIVE_LAWS}, got {self.baseline!r}")
+        self.frequency_ = None
         fits = {}
         for family in (DRIVE_LAWS if self.baseline == "best" else (self.baseline,)):
             say(f"baseline: identifying the {family} predictor on TRAIN")
@@ -221,6 +222,8 @@ class CloseLoop(EstimatorSettings):
             family, self.baseline_choice_ = choose_baseline(
                 fits, dtr, mask_tr, m_s, stratified_folds(dtr, self.refit_folds, self.seed), self.refit_settings())
         base = fits[family]
+        #: the baseline's drive-frequency response (estimated when TRAIN's frequency varies): every refit holds it
+        self.frequency_ = base.result_.frequency_response
         v_te = base.predict_free_run(dte) if dte is not None else None
         baseline = _metrics(base, dtr, dte)
         it = _Iteration(model=base, effects=EffectSet(), rounds=[{"round": 0, "added": None, "metrics": baseline}])
@@ -271,15 +274,16 @@ class CloseLoop(EstimatorSettings):
         ``retry``: the identifier's multistart again with twice the starts (at least 8) and the next seed.
         """
         n_starts, seed = (max(2 * self.n_starts, 8), self.seed + 1) if retry else (self.n_starts, self.seed)
+        freq = getattr(self, "frequency_", None) or "auto"   # once the baseline's is known, it is held
         return Validated(PredictorIdentifier(order=self.order, criterion="free_run", fixed="recommended",
                                              n_starts=n_starts, seed=seed, noise_fit=self.noise_fit,
-                                             noise=self.noise, model=model).fit(validated(df), slider_mass_kg=m_s,
-                                                                                mask=mask))
+                                             noise=self.noise, model=model, frequency=freq).fit(
+                                                 validated(df), slider_mass_kg=m_s, mask=mask))
 
     def refit_settings(self) -> RefitSettings:
         """The settings of every refit of the loop (order, seed, budget of a fold's refit, noise, client)."""
         return RefitSettings(order=self.order, seed=self.seed, max_nfev=self.refit_nfev, noise=self.noise,
-                             client=self.client)
+                             client=self.client, frequency=getattr(self, "frequency_", None) or "off")
 
     def _iterate(self, it: _Iteration, pool, dtr, mask, m_s, report, say) -> None:
         """Rounds of linearised shortlist -> cross-validated refit -> acceptance -> joint re-identification.
@@ -661,7 +665,7 @@ def calibrated_model(base, ext, effects: EffectSet, output_filter, source: dict)
     effect has no spec (a user's candidate with a Python feature function
     only), the note says which.
     """
-    base_setup = PredictorSetup(base.params_, base.m_s_, base.T_s_)
+    base_setup = PredictorSetup(base.params_, base.m_s_, base.T_s_, base.result_.frequency_response)
     if ext is None:
         return (ExtendedPredictor(base_setup, base_setup, (), None, dict(source)),
                 f"nothing was added: the baseline predictor ({base.params_.drive_law}) is the model")
@@ -677,7 +681,8 @@ def calibrated_model(base, ext, effects: EffectSet, output_filter, source: dict)
                         c.description, tuple(c.regressors), c.structural)
                  for c, phi in zip(effects.candidates, effects.phi))
     filt = None if output_filter is None else {"a": output_filter.a, "b0": output_filter.b0, "b1": output_filter.b1}
-    model = ExtendedPredictor(base_setup, PredictorSetup(ext.params_, ext.m_s_, ext.T_s_), recs, filt, dict(source))
+    ext_setup = PredictorSetup(ext.params_, ext.m_s_, ext.T_s_, ext.result_.frequency_response)
+    model = ExtendedPredictor(base_setup, ext_setup, recs, filt, dict(source))
     return model, "the final extended model"
 
 

@@ -25,6 +25,7 @@ from ..physics.params import (
 from ..predictor import effects as fx
 from ..predictor import model as pr
 from ..predictor.effects import ExtendedPredictor
+from ..predictor.frequency import FrequencyResponse, effective_voltage
 from ..predictor.model import PredictorParams
 from ..predictor.setup import PredictorSetup
 from .blocks import SUBSYSTEM_BLOCKS, Block, Var, parameter_vars
@@ -234,6 +235,8 @@ class PredictorBlock(Block):
         Var("s", "input", "m", "slider position", min=-1.0, max=1.0),
         Var("load", "input", "kg", "signed load mass; > 0 pulls toward -position", min=-100.0, max=100.0),
         Var("direction", "input", "1", "+1 CH1 (toward +position), -1 CH2", start=1.0, min=-1.0, max=1.0),
+        Var("frequency_Hz", "input", "Hz", "drive frequency; scales the force factor by the identified frequency "
+            "response (none identified: no effect)", start=48500.0, min=1.0, max=1e7),
     ]
     OUTPUTS = [
         Var("v", "output", "m/s", "predicted slider speed (Eq. 29 iterated at T_s)"),
@@ -256,6 +259,7 @@ class PredictorBlock(Block):
             setattr(self, var.name, var.start)
         for var in self.INPUTS + self.OUTPUTS + self.STATES:
             setattr(self, var.name, 0.0 if var.start is None else var.start)
+        self.frequency_Hz = setup.f_nominal_Hz if isinstance(setup, PredictorSetup) else 48500.0
         self._values = self._param_values(setup)
 
     @staticmethod
@@ -264,7 +268,17 @@ class PredictorBlock(Block):
         vals = dict(zip(p.names(p.order), p.to_vector().tolist()))
         vals.update(s_center=p.s_center, s_half=p.s_half, kappa=p.kappa, load_inertia=float(p.include_load_inertia),
                     slider_mass_kg=setup.slider_mass_kg, T_s=setup.T_s)
+        if setup.frequency is not None:
+            vals.update(f_ref_Hz=setup.frequency.f_ref_Hz, f_b0_Hz=setup.frequency.f_b0_Hz,
+                        zeta_b=setup.frequency.zeta_b)
         return vals
+
+    @classmethod
+    def inputs(cls, params) -> list[Var]:
+        """The inputs, ``frequency_Hz`` starting at the nominal drive frequency of ``params``'s response."""
+        setup = getattr(params, "model", params)
+        f0 = getattr(setup, "f_nominal_Hz", 48500.0) if setup is not None else 48500.0
+        return [replace(v, start=f0) if v.name == "frequency_Hz" else v for v in cls.INPUTS]
 
     @classmethod
     def params_from_defaults(cls, defaults: dict) -> PredictorSetup | ExtendedPredictor:
@@ -290,7 +304,7 @@ class PredictorBlock(Block):
         if cls is PredictorBlock and isinstance(params, ExtendedPredictor):
             sub = ExtendedPredictorTBlock if params.needs_temperature else ExtendedPredictorBlock
             return sub.variables(params)
-        return cls._setup_vars(params) + list(cls.EXTRA_PARAMETERS) + cls.INPUTS + cls.OUTPUTS + cls.STATES
+        return cls._setup_vars(params) + list(cls.EXTRA_PARAMETERS) + cls.inputs(params) + cls.OUTPUTS + cls.STATES
 
     @staticmethod
     def _setup_vars(params: PredictorSetup | None, prefix: str = "", what: str = "Eq. 35 parameter") -> list[Var]:
@@ -316,6 +330,16 @@ class PredictorBlock(Block):
                 Var("T_s", "parameter", "s", "sampling time the predictor was identified with", start=params.T_s,
                     min=1e-7, variability="fixed"),
             ]
+            fr = params.frequency
+            if fr is not None:
+                pars += [
+                    Var("f_ref_Hz", "parameter", "Hz", "drive frequency at which the force factor's gain is 1",
+                        start=fr.f_ref_Hz, min=1.0, variability="fixed"),
+                    Var("f_b0_Hz", "parameter", "Hz", "B2 resonance of the identified frequency response (Eq. 26)",
+                        start=fr.f_b0_Hz, min=1.0, variability="fixed"),
+                    Var("zeta_b", "parameter", "1", "B2 damping of the identified frequency response (Eq. 26)",
+                        start=fr.zeta_b, min=1e-9, variability="fixed"),
+                ]
         return [replace(v, name=prefix + v.name) for v in pars]
 
     def get(self, name: str):
@@ -346,8 +370,14 @@ class PredictorBlock(Block):
     def initialize_outputs(self):
         su = self.setup
         self.v = float(self.v_state)
-        self.v_steady = float(pr.steady_state(su.params, self.s, self.V0, self.load, self.direction,
+        self.v_steady = float(pr.steady_state(su.params, self.s, self._drive(su), self.load, self.direction,
                                               su.slider_mass_kg))
+
+    def _drive(self, su: PredictorSetup) -> float:
+        """The effective drive amplitude ``V0 g(frequency_Hz)`` [V] of a setup (V0 without a frequency response)."""
+        if su.frequency is None:
+            return float(self.V0)
+        return float(effective_voltage(self.V0, self.frequency_Hz, su.frequency))
 
     def _advance(self, su: PredictorSetup, v: float, h: float, F=None) -> float:
         """Speed after the communication step ``h`` [s]: Eq. 29 iterated at sub-steps of at most ``su.T_s``."""
@@ -356,7 +386,7 @@ class PredictorBlock(Block):
             raise SimulationError(f"PredictorBlock: a step of {h} s takes {n} sub-steps of T_s = {su.T_s} s, "
                                   f"more than {self.MAX_SUBSTEPS}")
         for _ in range(n):
-            v = float(pr.one_step(su.params, v, self.s, self.V0, self.load, self.direction, h / n,
+            v = float(pr.one_step(su.params, v, self.s, self._drive(su), self.load, self.direction, h / n,
                                   su.slider_mass_kg, extra_force=F))
         return v
 
@@ -377,7 +407,13 @@ def _setup_from_values(vals: dict, template: PredictorSetup, prefix: str = "") -
     m_s, T_s = vals[prefix + "slider_mass_kg"], vals[prefix + "T_s"]
     if not (m_s > 0 and T_s > 0):
         raise SimulationError(f"PredictorBlock: {prefix}slider_mass_kg [kg] and {prefix}T_s [s] must be positive")
-    return PredictorSetup(pp, m_s, T_s)
+    fr = None
+    if prefix + "f_b0_Hz" in vals:
+        try:
+            fr = FrequencyResponse(vals[prefix + "f_ref_Hz"], vals[prefix + "f_b0_Hz"], vals[prefix + "zeta_b"])
+        except ValueError as exc:
+            raise SimulationError(f"PredictorBlock: {prefix}frequency response: {exc}") from None
+    return PredictorSetup(pp, m_s, T_s, fr)
 
 
 def _unit(u: str) -> str:
@@ -449,7 +485,7 @@ class ExtendedPredictorBlock(PredictorBlock):
                 out.append(Var(f"speed_filter_{k}", "parameter", "1",
                                f"speed channel output filter y(k) = a y(k-1) + b0 u(k) + b1 u(k-1): {k}",
                                start=float(params.output_filter[k]), variability="fixed"))
-        return (out + list(cls.EXTRA_PARAMETERS) + cls.INPUTS + cls.OUTPUTS + cls.EXT_OUTPUTS + cls.STATES
+        return (out + list(cls.EXTRA_PARAMETERS) + cls.inputs(params) + cls.OUTPUTS + cls.EXT_OUTPUTS + cls.STATES
                 + cls.EXT_STATES)
 
     def set_start_time(self, t0: float):

@@ -8,8 +8,10 @@ records TRAIN's range (it goes into ``identification.json``),
 :func:`outside_range` flags, per run of any data set to be predicted, each
 input that leaves it, and :func:`input_checks` is the ``checks`` section of
 the identify and close-loop reports (these flags, the unit findings of
-both files, and :func:`frequency_spread`: runs at different drive
-frequencies, which no model here describes).
+both files). The drive frequency is a prediction input like the others
+(the predictor's frequency response, :mod:`l1b2.predictor.frequency`): a
+TEST run at a frequency outside TRAIN's is flagged; :func:`frequency_varies`
+says whether TRAIN's frequencies spread enough to identify the response.
 
 A run is flagged for a column when one of its samples lies further outside
 the range than ``tolerance`` x the range's width (at least
@@ -28,18 +30,20 @@ from ..errors import DataFormatError
 from .measurements import DIRECTION, FREQUENCY, LOAD, POSITION, RUN, VOLTAGE, Measurements, run_slices
 
 __all__ = ["RANGE_COLUMNS", "DEFAULT_TOLERANCE", "MIN_TOLERANCE", "data_range", "outside_range",
-           "summarize_outside", "FREQUENCY_REL_SPREAD", "frequency_spread", "input_checks", "RIG_SETTINGS",
+           "summarize_outside", "FREQUENCY_REL_SPREAD", "run_frequencies", "frequency_varies", "input_checks", "RIG_SETTINGS",
            "check_same_rig"]
 
 #: The prediction inputs whose range is checked (unit in the name); a direction TRAIN never drove is outside.
-RANGE_COLUMNS: tuple[str, ...] = (VOLTAGE, LOAD, POSITION, DIRECTION)
+RANGE_COLUMNS: tuple[str, ...] = (VOLTAGE, LOAD, POSITION, DIRECTION, FREQUENCY)
 #: Share of the range's width a value may lie outside it before the run is flagged.
 DEFAULT_TOLERANCE: float = 0.02
-#: Smallest absolute tolerance per column (1 mV, 1 mg, 1 um).
-MIN_TOLERANCE: dict[str, float] = {VOLTAGE: 1e-3, LOAD: 1e-6, POSITION: 1e-6, DIRECTION: 1e-6}
-#: Spread of the runs' drive frequencies (max - min, as a share of their median) above which it is reported:
-#: 0.1 % is ~50 Hz at 48.5 kHz, a fraction of the stator's resonance width, which sets the force factor
+#: Spread of the runs' drive frequencies (max - min, as a share of their median) above which the frequency
+#: response is identified: 0.1 % is ~50 Hz at 48.5 kHz, a fraction of the stator's resonance width, which sets
+#: the force factor
 FREQUENCY_REL_SPREAD: float = 1e-3
+#: Smallest absolute tolerance per column (1 mV, 1 mg, 1 um, 25 Hz = half the frequency spread that counts at
+#: 48.5 kHz: a TRAIN at one frequency flags TEST runs beyond it).
+MIN_TOLERANCE: dict[str, float] = {VOLTAGE: 1e-3, LOAD: 1e-6, POSITION: 1e-6, DIRECTION: 1e-6, FREQUENCY: 25.0}
 
 
 def _frame(data: pd.DataFrame | Measurements) -> pd.DataFrame:
@@ -89,25 +93,20 @@ def summarize_outside(flagged: list[dict], n_runs: int) -> str:
     return f"{len(flagged)} of {n_runs} runs outside the training range ({cols}): predictions there extrapolate"
 
 
-def frequency_spread(*data: pd.DataFrame | Measurements | None) -> str:
-    """One line when the runs' drive frequencies [Hz] differ by more than :data:`FREQUENCY_REL_SPREAD`; else "".
+def run_frequencies(*data: pd.DataFrame | Measurements | None) -> np.ndarray:
+    """Each run's drive frequency [Hz] (median of its ``frequency_Hz``) over every data set given (empty: none).
 
-    Each run's frequency is the median of its ``frequency_Hz`` column (the
-    loader fills it from the sidecar when the file has none), over every data
-    set given. Eq. 29 describes the motor at one operating frequency, and no
-    candidate of the close loop uses the frequency: data at several
-    frequencies are fitted as one, which the line says.
+    The loader fills ``frequency_Hz`` from the sidecar when the file has none.
     """
-    f = [float(np.median(df[FREQUENCY].to_numpy(float)[sl])) for df in (_frame(d) for d in data if d is not None)
-         if FREQUENCY in df.columns for _, sl in run_slices(df[RUN])]
-    if not f:
-        return ""
-    lo, hi, mid = min(f), max(f), float(np.median(f))
-    if hi - lo <= FREQUENCY_REL_SPREAD * mid:
-        return ""
-    levels = len(np.unique(np.round(f, 0)))
-    return (f"the drive frequency differs between runs ({lo:.0f}-{hi:.0f} Hz, {levels} levels): Eq. 29 describes "
-            "one operating frequency and no model here uses frequency_Hz; fit each frequency on its own")
+    return np.array([float(np.median(df[FREQUENCY].to_numpy(float)[sl]))
+                     for df in (_frame(d) for d in data if d is not None)
+                     if FREQUENCY in df.columns for _, sl in run_slices(df[RUN])], dtype=float)
+
+
+def frequency_varies(*data: pd.DataFrame | Measurements | None) -> bool:
+    """Whether the runs' drive frequencies differ by more than :data:`FREQUENCY_REL_SPREAD` of their median."""
+    f = run_frequencies(*data)
+    return bool(f.size and np.ptp(f) > FREQUENCY_REL_SPREAD * float(np.median(f)))
 
 
 def input_checks(train: Measurements, test: Measurements | None) -> dict:
@@ -122,7 +121,6 @@ def input_checks(train: Measurements, test: Measurements | None) -> dict:
         "training_range": rng,
         "test_runs_outside_training_range": flagged,
         "extrapolation": summarize_outside(flagged, n_test),
-        "drive_frequency": frequency_spread(train, test),
     }
 
 

@@ -103,6 +103,8 @@ from ..predictor.model import DRIVE_LAWS, PredictorParams
 from ..predictor.model import steady_state as predictor_steady_state
 from .convention import EstimatorSettings
 from .extra import ExtraForces
+from .frequency import fit_frequency_response, response_setting
+from .frequency import resolve as resolve_frequency
 from .noise import NoiseModel
 from .problem import (
     RECOMMENDED_FIXED,
@@ -127,7 +129,7 @@ __all__ = ["PredictorIdentifier", "clone", "RECOMMENDED_FIXED", "evaluation_mask
 NUMERICAL_FAILURES = (np.linalg.LinAlgError, FloatingPointError, OverflowError, ZeroDivisionError, ValueError)
 
 #: constructor arguments that are not part of the serialised settings
-_NOT_SERIALISED = ("verbose", "extra", "init", "init_extra")
+_NOT_SERIALISED = ("verbose", "extra", "init", "init_extra", "frequency")
 
 
 #: the searches of ``noise_fit`` (``"auto"``: profile without extra forces, alternate with them)
@@ -247,6 +249,11 @@ class PredictorIdentifier(EstimatorSettings):
         model and uncertainty; ``fixed="recommended"`` then pins
         :data:`~l1b2.ident.slipproblem.RECOMMENDED_FIXED_PURE_SLIP`; the
         variable projection (``solver="varpro"``) is Eq. 29's only).
+    frequency : the drive-frequency response of the force factor (:mod:`l1b2.ident.frequency`):
+        ``"auto"`` (default) estimates it when the data's drive frequency varies
+        between runs and holds it fixed at gain 1 when it does not; ``"off"``;
+        or a :class:`~l1b2.predictor.frequency.FrequencyResponse` held fixed.
+        ``result_.frequency`` records which (fit report, ``identification.json``).
 
     The constructor only stores the settings (scikit-learn convention:
     :meth:`get_params`, :meth:`set_params`, :func:`clone`); they are checked
@@ -313,6 +320,7 @@ class PredictorIdentifier(EstimatorSettings):
         init_extra=None,
         solver: str = "joint",
         model: str = "eq29",
+        frequency="auto",
     ):
         self.order = order
         self.criterion = criterion
@@ -343,6 +351,7 @@ class PredictorIdentifier(EstimatorSettings):
         self.init_extra = init_extra
         self.solver = solver
         self.model = model
+        self.frequency = frequency
 
     # -- settings: the scikit-learn protocol of :class:`l1b2.ident.convention.EstimatorSettings` --------
     def _checked_settings(self) -> SimpleNamespace:
@@ -356,6 +365,7 @@ class PredictorIdentifier(EstimatorSettings):
         for name in ("include_load_inertia", "start_noise", "verbose"):
             setattr(cfg, name, bool(getattr(cfg, name)))
         cfg.n_refine = max(1, int(cfg.n_refine))
+        cfg.frequency = response_setting(cfg.frequency)
         if cfg.criterion not in ("free_run", "one_step"):
             raise IdentificationError(f"criterion must be 'free_run' or 'one_step', got {cfg.criterion!r}")
         if cfg.solver not in SOLVERS:
@@ -453,6 +463,8 @@ class PredictorIdentifier(EstimatorSettings):
             residuals), as "the data do not determine ... because ...".
         """
         try:
+            if resolve_frequency(self, data)[2]:   # TRAIN's frequency varies: estimate the response
+                return fit_frequency_response(self, data, slider_mass_kg, mask)
             return self._fit(data, slider_mass_kg, mask)
         except NUMERICAL_FAILURES as exc:
             text = " ".join(str(exc).split()) or type(exc).__name__
@@ -470,7 +482,8 @@ class PredictorIdentifier(EstimatorSettings):
             slider_mass_kg = data.slider_mass_kg if slider_mass_kg is None else slider_mass_kg
             mask = data.mask if mask is None else mask
         m_s = _slider_mass(slider_mass_kg)
-        sample = SampleData(data, mask)
+        response, frequency_rec, _ = resolve_frequency(self, data)
+        sample = SampleData(data, mask, frequency=response)
         E = None if cfg.extra is None else cfg.extra.evaluate(sample.frame)  # features, once, flat order
         space = ParameterSpace(cfg.order, cfg.extra, cfg.fixed)
         sample.check_sufficient(int(space.varied.sum()), cfg.order)
@@ -537,6 +550,7 @@ class PredictorIdentifier(EstimatorSettings):
 
         # ---- uncertainty and the result ------------------------------------------
         result = self._result(cfg, space, sample, obj, search, outer, fixed_final, t_start, stages)
+        result.frequency = frequency_rec
         self._publish(result)
         return self
 

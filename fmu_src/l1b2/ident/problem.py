@@ -72,6 +72,7 @@ from ..predictor.model import (
     rest_sign,
     step_drive,
 )
+from ..predictor.frequency import effective_voltage, sample_frequency
 from ..predictor.simulate import (
     STEP_REVERSAL,
     STEP_STUCK,
@@ -149,6 +150,10 @@ class SampleData:
         breach raises :class:`~l1b2.errors.IdentificationError`.
     mask : array_like of bool, shape (n_samples,), optional
         Samples whose residuals enter the likelihood; default all.
+    frequency : FrequencyResponse, optional
+        The predictor's drive-frequency response (:mod:`l1b2.predictor.frequency`):
+        ``V0`` is then the effective amplitude ``V0 g(frequency_Hz)`` (the
+        commanded one is ``V0_commanded``); default None: ``V0`` as logged.
 
     Attributes
     ----------
@@ -164,14 +169,17 @@ class SampleData:
         the boolean mask and the number of samples.
     """
 
-    def __init__(self, data, mask=None):
+    def __init__(self, data, mask=None, frequency=None):
         frame, checked = _checked_frame(data)
         self.frame = frame
         self.run = checked[RUN].to_numpy()
         self.layout = RunLayout(self.run)
         self.t = checked[TIME].to_numpy(dtype=float)
         self.s = checked[POSITION].to_numpy(dtype=float)
-        self.V0 = checked[VOLTAGE].to_numpy(dtype=float)
+        self.V0_commanded = checked[VOLTAGE].to_numpy(dtype=float)
+        self.frequency = frequency
+        self.V0 = effective_voltage(self.V0_commanded, sample_frequency(checked, None if frequency is None
+                                                                        else frequency.f_ref_Hz), frequency)
         self.d = checked[DIRECTION].to_numpy(dtype=float)
         self.load = checked[LOAD].to_numpy(dtype=float)
         self.speed_derived = SPEED not in checked.columns

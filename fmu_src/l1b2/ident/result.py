@@ -37,7 +37,9 @@ from scipy import stats
 from ..data.measurements import Measurements
 from ..errors import IdentificationError
 from ..jsonio import dumps, from_json_float, json_float, strict_json
+from ..predictor.frequency import FrequencyResponse
 from ..predictor.model import PredictorParams
+from .frequency import frequency_report_lines
 from .problem import RECOMMENDED_FIXED, SampleData
 from .slipproblem import make_problem
 
@@ -164,6 +166,14 @@ class IdentificationResult:
     stderr_robust: np.ndarray | None = None
     ci95_robust: np.ndarray | None = None
     cov_robust: np.ndarray | None = None
+    #: the drive-frequency response and how it was treated (:func:`l1b2.ident.frequency.frequency_record`):
+    #: ``{"status": "estimated" | "fixed", "reason", "response": FrequencyResponse dict or None, ...}``
+    frequency: dict | None = None
+
+    @property
+    def frequency_response(self):
+        """The :class:`~l1b2.predictor.frequency.FrequencyResponse` of the model (None: gain 1 at every frequency)."""
+        return FrequencyResponse.from_dict((self.frequency or {}).get("response"))
 
     def __post_init__(self):
         p = len(self.values)
@@ -278,7 +288,7 @@ class IdentificationResult:
         v(k+1 | measured v(k)), NaN at the first sample of each run. Extra
         forces are computed on ``data``.
         """
-        sample = SampleData(data)
+        sample = SampleData(data, frequency=self.frequency_response)
         E = self._extra_matrix(sample.frame)
         prm = self.params
         prob = make_problem(prm.drive_law, sample, self.order, prm.kappa, prm.include_load_inertia, criterion,
@@ -355,6 +365,7 @@ class IdentificationResult:
             f"noise {st['noise']}, kappa {st['kappa']}, "
             f"m_eff = m_s{' + |m_load|' if st['include_load_inertia'] else ''}",
         ]
+        lines += frequency_report_lines(self.frequency)
         if self.extra_names:
             desc = self.extra_description or ""
             lines.append(
@@ -517,6 +528,7 @@ class IdentificationResult:
             "alternative_optima": self.alternative_optima,
             "convergence": self.convergence,
             "fit_time_s": self.fit_time_s,
+            "frequency": self.frequency,
         }
         return strict_json(d)
 
@@ -574,6 +586,7 @@ class IdentificationResult:
             stderr_robust=np.array([from_json_float(s.get("stderr_robust")) for s in sec]),
             ci95_robust=np.array([[from_json_float(x) for x in s.get("ci95_robust", [None, None])]
                                   for s in sec]).reshape(-1, 2),
+            frequency=d.get("frequency"),
         )
 
     def save(self, directory, **sections) -> Path:

@@ -213,12 +213,21 @@ class RigPlan:
     #: contact re-seats, debris, wear, humidity: a real rig's run-to-run repeatability); two independent
     #: factors per run drawn from ``seed``. 0: every run alike
     run_scatter: float = 0.0
+    #: drive frequencies [Hz] the rig records at (empty: every run at ``f_drive_Hz``): the (V0, load)
+    #: conditions, in rig order, take them in turn, both directions of a condition at the same frequency
+    frequencies_Hz: tuple = ()
+    #: half-width [Hz] of a per-run frequency offset, uniform, drawn from ``seed`` (a drive that tracks the
+    #: resonance settles at a slightly different frequency each run); 0: none
+    frequency_jitter_Hz: float = 0.0
 
     def __post_init__(self):
-        for name in ("speed_noise_m_s", "run_scatter"):
+        for name in ("speed_noise_m_s", "run_scatter", "frequency_jitter_Hz"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise SimulationError(f"RigPlan.{name} = {value!r}: must be a finite number >= 0")
+        for f in self.frequencies_Hz:
+            if not (math.isfinite(f) and f > 0):
+                raise SimulationError(f"RigPlan.frequencies_Hz contains {f!r}: every frequency must be > 0 [Hz]")
         if self.run_scatter >= 0.25:
             raise SimulationError(f"RigPlan.run_scatter = {self.run_scatter!r} (relative contact std): "
                                   "must be below 0.25 (a contact factor must stay positive)")
@@ -232,6 +241,8 @@ class RunSpec:
     direction: int
     t_start_s: float = 0.0
     T_stator0_degC: float | None = None
+    #: the run's drive frequency [Hz] (None: the plan's ``f_drive_Hz``)
+    f_Hz: float | None = None
 
 
 def _simulate_inprocess(mp: MotorParams, spec: RunSpec, plan: RigPlan, V_s: float, s0: float):
@@ -239,7 +250,7 @@ def _simulate_inprocess(mp: MotorParams, spec: RunSpec, plan: RigPlan, V_s: floa
     m = InProcessMotor(mp, h_s=plan.step_s)
     if spec.T_stator0_degC is not None:
         m.b["Stator"].T_st0 = spec.T_stator0_degC
-    m.initialize(V_s=V_s, f_s=plan.f_drive_Hz, T=plan.ambient_degC, direction=spec.direction,
+    m.initialize(V_s=V_s, f_s=run_frequency(spec, plan), T=plan.ambient_degC, direction=spec.direction,
                  m_load=spec.load_kg, s0=s0)
     rec = ("Slider.s", "Slider.v", "Stator.v_tip", "Stator.T_stator", "Slider.at_stop")
     res = m.run(plan.max_run_s, record=rec, until=lambda mm: mm.value("Slider.at_stop") == spec.direction)
@@ -256,8 +267,9 @@ def _simulate_fmu(mp: MotorParams, spec: RunSpec, plan: RigPlan, V_s: float, s0:
         start["Stator.T_st0"] = spec.T_stator0_degC
     rec = ["Slider.s", "Slider.v", "Stator.v_tip", "Stator.T_stator", "Slider.at_stop"]
     with CoSimulation(fmu_dir=fmu_dir, step_s=plan.step_s, parameters=overrides) as cs:
-        res = cs.run(plan.max_run_s, inputs=dict(V_s=V_s, duty=1.0, f_s=plan.f_drive_Hz, T=plan.ambient_degC,
-                                                 direction=float(spec.direction), m_load=spec.load_kg),
+        res = cs.run(plan.max_run_s, inputs=dict(V_s=V_s, duty=1.0, f_s=run_frequency(spec, plan),
+                                                 T=plan.ambient_degC, direction=float(spec.direction),
+                                                 m_load=spec.load_kg),
                      record=rec, start_values=start,
                      stop_when=lambda v: v["Slider.at_stop"] == spec.direction)
     return {k: res[k] for k in ["time"] + rec}
@@ -291,7 +303,8 @@ def simulate_traverse(mp: MotorParams, spec: RunSpec, plan: RigPlan = RigPlan(),
     so an injected drive effect or a drawn driver tolerance is not compensated.
     """
     nominal = nominal or mp
-    V_s = float(drv.supply_for_voltage_V(nominal.driver, spec.V0_V, 1.0, plan.f_drive_Hz, plan.ambient_degC))
+    V_s = float(drv.supply_for_voltage_V(nominal.driver, spec.V0_V, 1.0, run_frequency(spec, plan),
+                                         plan.ambient_degC))
     s0 = mp.slider.s_min_m if spec.direction > 0 else mp.slider.s_max_m
     if engine == "inprocess":
         return _simulate_inprocess(mp, spec, plan, V_s, s0)
@@ -324,7 +337,7 @@ def simulate_run(mp: MotorParams, spec: RunSpec, plan: RigPlan = RigPlan(), engi
         dataio.DIRECTION: spec.direction,
         dataio.LOAD: spec.load_kg,
         dataio.SPEED: speed,
-        dataio.FREQUENCY: plan.f_drive_Hz,
+        dataio.FREQUENCY: run_frequency(spec, plan),
     })
     if plan.record_temperature:
         out[dataio.TEMPERATURE] = np.round(r["Stator.T_stator"][idx], 2)
@@ -340,6 +353,28 @@ def plan_runs(plan: RigPlan) -> list[tuple[float, float, int]]:
         rng = np.random.default_rng(plan.seed)
         conds = [conds[i] for i in rng.permutation(len(conds))]
     return [(V, L, d) for V, L in conds for d in plan.directions]
+
+
+def run_frequency(spec: RunSpec, plan: RigPlan) -> float:
+    """The drive frequency of a run [Hz]: its own, else the plan's ``f_drive_Hz``."""
+    return float(plan.f_drive_Hz if spec.f_Hz is None else spec.f_Hz)
+
+
+def run_frequencies(plan: RigPlan, n_runs: int) -> np.ndarray:
+    """Each run's drive frequency [Hz] in rig order (runs as :func:`plan_runs` gives them).
+
+    The (V0, load) conditions take ``plan.frequencies_Hz`` in turn (both
+    directions of a condition share it; the plan's ``f_drive_Hz`` without a
+    list), plus a per-run offset uniform in +-``frequency_jitter_Hz`` from its
+    own stream of ``plan.seed``. Rounded to 0.1 Hz (what the drive logs).
+    """
+    per_cond = max(1, len(plan.directions))
+    cond = np.arange(n_runs) // per_cond
+    freqs = np.asarray(plan.frequencies_Hz, float) if plan.frequencies_Hz else np.array([plan.f_drive_Hz])
+    f = freqs[cond % freqs.size]
+    if plan.frequency_jitter_Hz > 0:
+        f = f + np.random.default_rng([plan.seed, 3]).uniform(-1.0, 1.0, n_runs) * plan.frequency_jitter_Hz
+    return np.round(f, 1)
 
 
 def run_contact_factors(plan: RigPlan, n_runs: int) -> np.ndarray:
@@ -417,6 +452,7 @@ def run_experiment(plan: RigPlan = RigPlan(), mp: MotorParams | None = None, inj
     motor = apply_overrides(nominal, {k: v for k, v in overrides.items() if not k.startswith(DAQ_PREFIX)})
     conditions = plan_runs(plan)
     factors = run_contact_factors(plan, len(conditions))
+    freqs = run_frequencies(plan, len(conditions))
     motors = [motor if plan.run_scatter == 0 else scattered_motor(motor, f) for f in factors]
     bar = None
     if progress:
@@ -424,9 +460,10 @@ def run_experiment(plan: RigPlan = RigPlan(), mp: MotorParams | None = None, inj
         bar = tqdm(total=len(conditions), desc=f"rig ({engine})", unit="run")
     try:
         if is_stateful(motor, injected) or (workers <= 1 and not scheduler):
-            frames = _run_serially(motors, nominal, conditions, plan, engine, fmu_dir, bar)
+            frames = _run_serially(motors, nominal, conditions, plan, engine, fmu_dir, bar, freqs)
         else:
-            frames = _run_on_cluster(motors, nominal, conditions, plan, engine, fmu_dir, bar, workers, scheduler)
+            frames = _run_on_cluster(motors, nominal, conditions, plan, engine, fmu_dir, bar, workers, scheduler,
+                                     freqs)
     finally:
         if bar:
             bar.close()
@@ -440,12 +477,13 @@ def run_experiment(plan: RigPlan = RigPlan(), mp: MotorParams | None = None, inj
     return df, truth
 
 
-def _run_serially(motors, nominal, conditions, plan, engine, fmu_dir, bar) -> list:
+def _run_serially(motors, nominal, conditions, plan, engine, fmu_dir, bar, freqs=None) -> list:
     """The runs one after the other on one experiment clock; the stator temperature carried over."""
     frames, t_next, T_st = [], 0.0, plan.ambient_degC
     for k, (V, L, d) in enumerate(conditions):
         motor = motors[k]
-        spec = RunSpec(k + 1, V, L, d, t_next, T_st if motor.stator.thermal_tau_s > 0 else None)
+        spec = RunSpec(k + 1, V, L, d, t_next, T_st if motor.stator.thermal_tau_s > 0 else None,
+                       None if freqs is None else float(freqs[k]))
         f = simulate_run(motor, spec, plan, engine, fmu_dir, nominal)
         frames.append(f)
         t_next = float(f[dataio.TIME].iloc[-1]) + plan.pause_s
@@ -457,10 +495,11 @@ def _run_serially(motors, nominal, conditions, plan, engine, fmu_dir, bar) -> li
     return frames
 
 
-def _run_on_cluster(motors, nominal, conditions, plan, engine, fmu_dir, bar, workers, scheduler) -> list:
+def _run_on_cluster(motors, nominal, conditions, plan, engine, fmu_dir, bar, workers, scheduler, freqs=None) -> list:
     """Independent runs on the Dask engine, then laid on one experiment clock in rig order."""
     from ..cluster import dask_client, run_tasks
-    specs = [RunSpec(k + 1, V, L, d) for k, (V, L, d) in enumerate(conditions)]
+    specs = [RunSpec(k + 1, V, L, d, f_Hz=None if freqs is None else float(freqs[k]))
+             for k, (V, L, d) in enumerate(conditions)]
     frames = [None] * len(specs)
     with dask_client(workers, scheduler) as client:
         where = None if fmu_dir is None else str(fmu_dir)

@@ -208,14 +208,20 @@ PREDICTOR_SCALARS = ("c_r", "sigma", "mu", "k0", "mu_sd", "s_center", "s_half", 
                      "slider_mass_kg", "T_s")
 
 
-def _drive_laws(tree) -> list[str]:
-    """Every ``drive_law`` named anywhere in an FMU's defaults (the predictor's and an extended model's setups)."""
+def _keyed(tree, key: str) -> list:
+    """Every non-null value stored under ``key`` anywhere in an FMU's defaults (the predictor's setup and an
+    extended model's setups alike)."""
     if isinstance(tree, dict):
-        return [str(v) for k, v in tree.items() if k == "drive_law"] + [
-            law for v in tree.values() for law in _drive_laws(v)]
+        return [v for k, v in tree.items() if k == key and v is not None] + [
+            found for v in tree.values() for found in _keyed(v, key)]
     if isinstance(tree, list):
-        return [law for v in tree for law in _drive_laws(v)]
+        return [found for v in tree for found in _keyed(v, key)]
     return []
+
+
+def _drive_laws(tree) -> list[str]:
+    """Every ``drive_law`` named anywhere in an FMU's defaults."""
+    return [str(v) for v in _keyed(tree, "drive_law")]
 
 
 def _extended_tables(ext: dict, vr: dict) -> list[str]:
@@ -479,6 +485,9 @@ def build_native_fmu(name: str, python_fmu: str | Path, dest_dir: str | Path, fm
     if name == "Predictor" and set(_drive_laws(defaults)) - {"eq29"}:
         raise NativeBuildError("the native predictor implements Eq. 29 only; the pure-slip family's drive force "
                                "(slip ratio of the state) stays in the Python Predictor.fmu")
+    if name == "Predictor" and _keyed(defaults, "frequency"):
+        raise NativeBuildError("a predictor with a drive-frequency response has no native model (its C code has "
+                               "no frequency response): its Predictor.fmu stays a Python FMU")
     sources = _source_files(name, fmi_version)
     # the GUID: stable for identical sources and variables (and different from the Python FMU's)
     provisional = source_tree(name, python_md, fmi_version, "{}", defaults)

@@ -16,6 +16,7 @@ from typing import Mapping
 
 import numpy as np
 
+from ..frequency import effective_voltage
 from ..setup import PredictorSetup
 from .base import EffectSpecError, effect_features, needs, time_derivative
 
@@ -115,12 +116,16 @@ class ExtendedPredictor:
             out = out + e.force(x)
         return out
 
-    def free_run(self, t, s, V0, load, direction, v_start, run_index=None, temperature=None) -> np.ndarray:
+    def free_run(self, t, s, V0, load, direction, v_start, run_index=None, temperature=None,
+                 frequency=None) -> np.ndarray:
         """Free-run speed per sample [m/s] along measured inputs (the vectorised reference of the FMU).
 
         Flat per-sample arrays, runs contiguous and labelled by ``run_index``
         (None: one run); ``v_start`` [m/s] one value per run (or scalar);
-        ``temperature`` [degC] per sample when an effect needs it.
+        ``temperature`` [degC] per sample when an effect needs it;
+        ``frequency`` [Hz] the drive frequency per sample (None: each setup's
+        nominal one, gain 1), which scales the setups' force factors by their
+        frequency response (:mod:`l1b2.predictor.frequency`; effects see the commanded V0).
         """
         from ..simulate import RunLayout, free_run
 
@@ -140,14 +145,23 @@ class ExtendedPredictor:
         if "T" in sig and "T" not in x:
             raise EffectSpecError("an effect needs the stator temperature: pass temperature= (degC per sample)")
         if sig & {"v_base", "a_base"}:
-            x["v_base"] = free_run(b.params, x["s"], x["V0"], x["load"], x["d"], t, vs, b.slider_mass_kg, run_index)
+            x["v_base"] = free_run(b.params, x["s"], _drive(b, x["V0"], frequency), x["load"], x["d"], t, vs,
+                                   b.slider_mass_kg, run_index)
             x["a_base"] = time_derivative(x["v_base"], t, starts_sorted)
         F = self.extra_force(x) if self.effects else None
         m = self.model
-        v = free_run(m.params, x["s"], x["V0"], x["load"], x["d"], t, vs, m.slider_mass_kg, run_index, extra_force=F)
+        v = free_run(m.params, x["s"], _drive(m, x["V0"], frequency), x["load"], x["d"], t, vs, m.slider_mass_kg,
+                     run_index, extra_force=F)
         if self.output_filter is not None:
             v = apply_output_filter(self.output_filter, v, starts_sorted)
         return v
+
+
+def _drive(setup: PredictorSetup, V0, frequency) -> np.ndarray:
+    """The setup's effective drive amplitude ``V0 g(f)`` [V] (``V0`` at the nominal frequency or without a response)."""
+    if frequency is None or setup.frequency is None:
+        return np.asarray(V0, float)
+    return effective_voltage(V0, frequency, setup.frequency)
 
 
 def apply_output_filter(filt: Mapping, u, run_starts=None) -> np.ndarray:
