@@ -177,9 +177,10 @@ def cmd_study(args) -> int:
     from .workflows import run_study
     world = World(motor=args.world)
     seeds = range(args.first_seed, args.first_seed + args.seeds)
-    say = None if args.quiet else (lambda row: print(f"  done: {row.get('injection', 'clean')} seed {row['seed']} "
-                                                     f"({row['wall_s']:.0f} s)", flush=True))
-    res = run_study(args.study, args.out, seeds, world=world,
+    from .jsonio import dumps
+    say = None if args.quiet else (lambda row: print(f"row {dumps(row, indent=None)}", flush=True))
+    from .study.recovery import FitSettings
+    res = run_study(args.study, args.out, seeds, world=world, fit=FitSettings(n_starts=args.starts),
                     injections=[s for s in args.injections.split(",") if s] if args.injections else None,
                     workers=args.workers, scheduler=args.scheduler, clean_fit=not args.no_clean_fit,
                     plots_on=not args.no_plots, progress=say)
@@ -201,6 +202,8 @@ def _add_study_parser(sub) -> None:
                    help="the rig's motor (both with 1 mm/s speed noise and 2 %% run-to-run contact scatter)")
     p.add_argument("--injections", default="", help="coverage: comma-separated injections (default: every one "
                    "whose family has a physical parameter)")
+    p.add_argument("--starts", type=int, default=4, help="coverage: starts of the identification's global search "
+                   "(the close loop's baseline uses 4)")
     p.add_argument("--no-clean-fit", action="store_true",
                    help="coverage: skip the fit of the same seed without the injection (the bias diagnosis)")
     _engine_args(p, default_workers=2, what="seeds (0 = serially in this process)")

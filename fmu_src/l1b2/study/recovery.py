@@ -13,7 +13,7 @@ For every rig injection whose effect family has a physical parameter
    are carried into ``Stator.asym_b`` by the family's calibration
    (:func:`l1b2.predictor.effects.direction.calibrate_asymmetry`), its interval
    by the delta method (the calibration's gradient over the force parameters,
-   by central differences, times their covariance).
+   by forward differences, times their covariance).
 
 Each interval the identification offers is checked: the AR(1)-inflated
 Fisher one (``ci95``, what the close-the-loop report shows) and the
@@ -93,7 +93,10 @@ def family_forces(kind: str) -> tuple[ExtraForces, fx.Hypothesis]:
     signals (no baseline speed, no TRAIN-dependent shape) qualify.
     """
     fam = fx.family(kind)
-    hyps = fam.grid(None)
+    try:
+        hyps = fam.grid(None)   # a grid that reads TRAIN's summary is a shape search, not one hypothesis
+    except (AttributeError, TypeError):
+        hyps = []
     if len(hyps) != 1 or not fx.needs(hyps[0].spec) <= {"t", "s", "V0", "load", "d"}:
         raise IdentificationError(f"family {kind!r}: a recovery fit needs one hypothesis over t, s, V0, load, d")
     h = hyps[0]
@@ -153,7 +156,7 @@ def read_parameter(target: RecoveryTarget, est, h, train: dataio.Measurements, m
 
 def calibration_gradient(est, h, phi: np.ndarray, train: dataio.Measurements, mp,
                          rel_step: float = 0.05) -> tuple[np.ndarray, float]:
-    """``(d asym_b / d phi, asym_b)``: the direction calibration's value and its gradient (central differences).
+    """``(d asym_b / d phi, asym_b)``: the direction calibration's value and its gradient (forward differences).
 
     The step per parameter is ``rel_step`` of its magnitude (or of the largest
     magnitude when it is 0).
@@ -179,7 +182,7 @@ def calibration_gradient(est, h, phi: np.ndarray, train: dataio.Measurements, mp
         step = rel_step * (abs(phi[j]) or scale)
         e = np.zeros(len(phi))
         e[j] = step
-        grad[j] = (asym(phi + e) - asym(phi - e)) / (2 * step)
+        grad[j] = (asym(phi + e) - value) / step
     return grad, value
 
 
