@@ -135,10 +135,9 @@ class StudyResult:
             for ax, inj in zip(axes[0], injections):
                 g = df[df["injection"] == inj].sort_values("injected")
                 x = g["injected"].to_numpy()
-                for kind, colour, dx in (("robust", "tab:orange", 0.0), ("ar1", "tab:blue", 0.0)):
-                    ax.errorbar(x + dx, g["estimate"], yerr=[g["estimate"] - g[f"lo_{kind}"],
-                                                              g[f"hi_{kind}"] - g["estimate"]],
-                                fmt="none", ecolor=colour, alpha=0.7, capsize=2, label=f"95 % interval ({kind})")
+                for kind, colour, lw in (("robust", "tab:orange", 4.0), ("ar1", "tab:blue", 1.5)):
+                    ax.vlines(x, g[f"lo_{kind}"], g[f"hi_{kind}"], colors=colour, lw=lw, alpha=0.7,
+                              label=f"95 % interval ({kind})")
                 ax.plot(x, g["estimate"], "k.", label="estimate")
                 lim = [min(x.min(), g["estimate"].min()), max(x.max(), g["estimate"].max())]
                 ax.plot(lim, lim, "k:", lw=1, label="estimate = injected")
