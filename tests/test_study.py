@@ -178,24 +178,25 @@ def test_the_close_loop_reports_the_run_robust_interval_and_keeps_the_model_base
 
 @pytest.mark.slow
 def test_coverage_study_small():
-    # reference: issue 28 (parameter recovery), three seeds of the realistic world per injection with the
-    # identification's global search at 2 starts. The run-robust intervals cover the injected value and no
-    # estimate has the wrong sign; the model-based (AR(1)) interval of pulley_mu is several times narrower than the
-    # robust one and misses; the pulley estimate's error is what the same family finds on the same seed's data
-    # without the injection (the baseline's structural error), within 3 robust standard errors
+    # reference: issue 28 (parameter recovery), three realistic seeds per injection (those of decision 0021's
+    # study), the identification's global search at 2 starts. The run-robust intervals cover the injected value
+    # and no estimate has the wrong sign; the model-based (AR(1)) interval of pulley_mu is several times narrower
+    # than the robust one and misses; the pulley estimate's error is what the same family finds on the same
+    # seed's data without the injection (the baseline's structural error), within 3 robust standard errors
     from l1b2.study.recovery import FitSettings
     from l1b2.study.runner import run_study
-    res = run_study("coverage", [0, 1, 2], fit=FitSettings(n_starts=2), clean_fit=True)
-    df = res.to_pandas()
+    fit = FitSettings(n_starts=2)
+    pulley = run_study("coverage", [0, 1, 2], injections=["pulley_friction"], fit=fit, clean_fit=True)
+    asym = run_study("coverage", [10, 11, 12], injections=["direction_asymmetry"], fit=fit, clean_fit=False)
+    df = pd.concat([pulley.to_pandas(), asym.to_pandas()], ignore_index=True)
     assert len(df) == 6 and not df["wrong_sign"].any()
     assert df["covered_robust"].all(), df[["injection", "seed", "injected", "estimate", "lo_robust", "hi_robust"]]
     p = df[df["injection"] == "pulley_friction"]
-    assert (p["se_robust"] > 2 * p["se_ar1"]).all() and not p["covered_ar1"].all()
+    assert (p["se_robust"] > 2 * p["se_ar1"]).all() and not p["covered_ar1"].any()
     assert (p["clean_estimate"] > 0).all()
     bias = p["estimate"] - p["injected"]
     assert (np.abs(bias - p["clean_estimate"]) <= 3 * p["se_robust"]).all(), (bias, p["clean_estimate"])
-    summary = {(r["injection"], r["interval"]): r for r in res.summary()["coverage"]}
-    assert summary[("pulley_friction", "robust")]["covered"] == 3
+    assert pulley.summary()["coverage"][1]["covered"] == 3          # the robust record of pulley_friction
 
 
 @pytest.mark.slow
