@@ -194,7 +194,9 @@ def cmd_study(args) -> int:
 def _add_study_parser(sub) -> None:
     p = sub.add_parser("study", help="multi-seed study on the virtual rig: 95 %% interval coverage of injected "
                                      "parameters, or the close loop's control (Dask)")
-    p.add_argument("study", choices=("coverage", "control"))
+    p.add_argument("study", choices=("coverage", "control"),
+                   help="coverage: 95 %% intervals of injected physical parameters against their true values; "
+                        "control: the close loop on data without an injected effect")
     p.add_argument("--out", type=Path, required=True, help="output folder (study.json, rows.csv, PNG)")
     p.add_argument("--seeds", type=int, default=20, help="number of seeds")
     p.add_argument("--first-seed", type=int, default=0, help="first seed")
