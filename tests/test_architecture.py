@@ -36,10 +36,13 @@ ALLOWED = {
     "cluster": {"errors", "units"},  # the parallel engine (Dask) under the rig, the sweeps and the closed loop
     "rig": {"errors", "units", "physics", "predictor", "cosim", "fmi", "data", "cluster"},
     "sweep": {"errors", "units", "physics", "predictor", "cosim", "fmi", "data", "rig", "cluster"},
+    # multi-seed studies: rig data in memory, identified and closed-loop seed by seed on the parallel engine
+    "study": {"errors", "units", "physics", "predictor", "cosim", "fmi", "data", "ident", "closeloop", "rig",
+              "cluster"},
     "workflows": {"errors", "units", "physics", "predictor", "cosim", "fmi", "data", "ident", "closeloop", "rig",
-                  "cluster", "sweep", "__init__"},
+                  "cluster", "sweep", "study", "__init__"},
     "cli": {"errors", "units", "physics", "predictor", "cosim", "fmi", "data", "ident", "closeloop", "rig",
-            "cluster", "sweep", "workflows", "__init__"},
+            "cluster", "sweep", "study", "workflows", "__init__"},
     "__init__": set(),
     "jsonio": set(),
 }

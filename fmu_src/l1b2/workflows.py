@@ -205,6 +205,7 @@ KNOWN_OUTPUTS: dict[str, tuple[str, ...]] = {
     "export-calibrated": ("fmus/*.fmu", "calibrated_manifest.json", "*.ssp", "calibrated_ssv/*.ssv", "*.png"),
     "sweep": ("chunks/*", "samples.parquet", "summary.csv", "sensitivity.csv", "sobol.csv", "study.json",
               "sweep_*.png"),
+    "study": ("study.json", "rows.csv", "study_*.png"),
 }
 
 
@@ -782,3 +783,36 @@ def run_close_loop(train_path, test_path, out_dir, *, slider_mass_kg=None, plots
         export_calibrated_model(result.calibrated_model, export_dir, mp=motor, test=test,
                                 test_prediction=result.test_free_run_after)
     return result
+
+
+def run_study(study: str, out_dir, seeds, *, world=None, injections=None, workers: int | None = 2,
+              scheduler: str | None = None, clean_fit: bool = True, fit=None, loop_settings: dict | None = None,
+              plots_on: bool = True, progress=None):
+    """A multi-seed study (:mod:`l1b2.study`) into ``out_dir``; returns its :class:`l1b2.study.result.StudyResult`.
+
+    Writes ``study.json`` (settings, engine figures, summary and rows; strict
+    JSON), ``rows.csv`` (one row per seed) and ``study_<study>.png``, all at
+    once (:func:`output_dir`). The seeds run on a local Dask cluster of
+    ``workers`` single-thread processes, on the cluster at ``scheduler``, or in
+    this process with ``workers=0``.
+    """
+    from .cluster import optional_client
+    from .study.recovery import FitSettings
+    from .study.runner import run_study as run
+    from .study.runner import study_tasks
+    from .study.world import World
+    world = world or World()
+    fit = fit or FitSettings()
+    study_tasks(study, seeds, world, injections)  # refuse a bad study before any output folder or cluster
+    with output_dir(out_dir, command="study") as tmp:
+        with optional_client(workers, scheduler) as client:
+            res = run(study, seeds, world=world, injections=injections, client=client, clean_fit=clean_fit,
+                      fit=fit, loop_settings=loop_settings, progress=progress)
+        (tmp / "study.json").write_text(dumps(res.to_dict()))
+        res.to_pandas().to_csv(tmp / "rows.csv", index=False)
+        if plots_on:
+            import matplotlib.pyplot as plt
+            fig = res.figure()
+            fig.savefig(tmp / f"study_{study}.png", dpi=110)
+            plt.close(fig)
+    return res

@@ -602,18 +602,41 @@ def _parameters(model, effects: EffectSet) -> dict:
 
     A parameter without a finite standard error is named unidentifiable and
     reported without a value (``value``, ``stderr``, ``ci95`` None,
-    ``unidentifiable`` True): the data do not determine it.
+    ``unidentifiable`` True): the data do not determine it. ``stderr`` and
+    ``ci95`` are the cluster-by-run robust ones (:func:`reported_uncertainty`)
+    when the fit has them, with the model-based (AR(1)-inflated Fisher) ones
+    beside them as ``stderr_model`` / ``ci95_model``.
     """
     out = {}
     for c in effects.candidates:
         for n, u in zip(c.names, c.units):
             se = float(model.extra_stderr_[n])
             if np.isfinite(se):
-                out[n] = {"value": float(model.extra_params_[n]), "stderr": se,
-                          "ci95": [float(x) for x in model.extra_ci95_[n]], "unit": u, "unidentifiable": False}
+                out[n] = {"value": float(model.extra_params_[n]), "unit": u, "unidentifiable": False,
+                          **reported_uncertainty(model, n)}
             else:
                 out[n] = {"value": None, "stderr": None, "ci95": None, "unit": u, "unidentifiable": True}
     return out
+
+
+def reported_uncertainty(model, name: str) -> dict:
+    """``{"stderr", "ci95"}`` the close loop reports for the added parameter ``name`` of a fitted model.
+
+    The loop's premise is a model that misses something, so its residuals
+    carry errors correlated within each run (and shared by runs of the same
+    conditions) that the model-based intervals treat as independent noise:
+    the cluster-by-run robust (sandwich) interval is reported
+    (:mod:`l1b2.ident.uncertainty`), the model-based one kept beside it
+    (``stderr_model``, ``ci95_model``). A fit without a finite robust value
+    (or without robust attributes) reports the model-based one alone.
+    """
+    se = float(model.extra_stderr_[name])
+    ci = [float(x) for x in model.extra_ci95_[name]]
+    se_rob = float(getattr(model, "extra_stderr_robust_", {}).get(name, float("nan")))
+    if not np.isfinite(se_rob):
+        return {"stderr": se, "ci95": ci}
+    return {"stderr": se_rob, "ci95": [float(x) for x in model.extra_ci95_robust_[name]],
+            "stderr_model": se, "ci95_model": ci}
 
 
 def _effect_record(c, rec: dict, params: dict | None) -> dict:
@@ -677,7 +700,7 @@ def calibrated_model(base, ext, effects: EffectSet, output_filter, source: dict)
     if logged:
         return None, (f"effects reading logged channels that Predictor.fmu has no input for: {', '.join(logged)}")
     recs = tuple(IdentifiedEffect(c.family, c.label, dict(c.spec), tuple(c.names), tuple(c.units),
-                        tuple(float(p) for p in phi), tuple(float(ext.extra_stderr_[n]) for n in c.names),
+                        tuple(float(p) for p in phi), tuple(reported_uncertainty(ext, n)["stderr"] for n in c.names),
                         c.description, tuple(c.regressors), c.structural)
                  for c, phi in zip(effects.candidates, effects.phi))
     filt = None if output_filter is None else {"a": output_filter.a, "b0": output_filter.b0, "b1": output_filter.b1}
