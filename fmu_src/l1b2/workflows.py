@@ -488,43 +488,20 @@ def run_comparison(out_dir, mp=None, identification: dict | None = None, *, orde
 
 def run_frequency_map(identification: dict, out_dir, mp=None, *, frequencies_Hz=None, voltages_V=(220.0, 324.0),
                       s_m: float = 0.0, load_kg: float = 0.0, direction: int = 1) -> dict:
-    """Design study: steady speed over drive frequency and V0, the identified predictor against the physics.
+    """:func:`l1b2.sweep.frequency_map.frequency_map_study` written to ``out_dir``; returns its JSON report.
 
-    ``identification``: the report of `l1b2 identify` (its ``predictor``
-    section, with the frequency response when TRAIN's frequency varied);
-    ``frequencies_Hz`` default: 41 points over TRAIN's frequency range
-    (``checks.training_range``) or +-500 Hz around the nominal frequency.
     Writes ``frequency_map.csv``, ``frequency_map.png`` and ``frequency_map.json``
-    (the figure of agreement, :func:`l1b2.sweep.frequency_map.map_agreement`) through
-    :func:`output_dir`. Returns the JSON report.
+    (the figure of agreement, :func:`l1b2.sweep.frequency_map.map_agreement`) through :func:`output_dir`.
     """
     from .physics.params import load_motor
-    from .sweep.frequency_map import frequency_map, map_agreement, plot_frequency_map
-    mp = mp or load_motor()
-    try:
-        setup = PredictorSetup.from_dict(identification["predictor"])
-    except (KeyError, TypeError, ValueError) as exc:
-        raise IdentificationError(f"--identification: not an identification.json of `l1b2 identify` "
-                                  f"({type(exc).__name__}: {exc})") from None
-    if frequencies_Hz is None:
-        rng = ((identification.get("checks") or {}).get("training_range") or {}).get("frequency_Hz")
-        lo, hi = rng if rng and rng[1] > rng[0] else (setup.f_nominal_Hz - 500.0, setup.f_nominal_Hz + 500.0)
-        frequencies_Hz = np.linspace(lo, hi, 41)
+    from .sweep.frequency_map import frequency_map_study
+    res = frequency_map_study(identification, mp or load_motor(), frequencies_Hz=frequencies_Hz,
+                              voltages_V=voltages_V, s_m=s_m, load_kg=load_kg, direction=direction)
     out = Path(out_dir)
     with output_dir(out, command="frequency-map") as tmp:
-        df = frequency_map(setup, mp, frequencies_Hz, voltages_V, s_m=s_m, load_kg=load_kg, direction=direction)
-        agreement = map_agreement(df)
-        df.to_csv(tmp / "frequency_map.csv", index=False, float_format="%.12g")
-        fig = plot_frequency_map(df, f"position {s_m * 1e3:g} mm, load {load_kg:+g} kg, direction {direction:+d}: "
-                                     f"rms difference {agreement['rms_rel']:.1%}")
-        fig.savefig(tmp / "frequency_map.png", dpi=120)
-        report = {"agreement": agreement, "operating_point": {"position_m": s_m, "load_kg": load_kg,
-                                                              "direction": direction},
-                  "frequency_response": None if setup.frequency is None else setup.frequency.to_dict(),
-                  "figure": str(out / "frequency_map.png"), "table": str(out / "frequency_map.csv"),
-                  "note": "physics: the coupled periodic steady state (l1b2.physics.steady.steady_state), the fixed "
-                          "point of the co-simulation; predictor: the closed-form steady speed of Eq. 29 with the "
-                          "force factor scaled by its frequency response"}
+        res.to_pandas().to_csv(tmp / "frequency_map.csv", index=False, float_format="%.12g")
+        res.figure().savefig(tmp / "frequency_map.png", dpi=120)
+        report = dict(res.to_dict(), figure=str(out / "frequency_map.png"), table=str(out / "frequency_map.csv"))
         (tmp / "frequency_map.json").write_text(dumps(report, digits=12))
     return report
 

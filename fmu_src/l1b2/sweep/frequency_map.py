@@ -14,16 +14,19 @@ figure of agreement, :func:`plot_frequency_map` the PNG figure.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import pandas as pd
 
+from ..errors import IdentificationError
 from ..physics.params import MotorParams
 from ..physics.steady import steady_state as physics_steady_state
 from ..predictor.frequency import effective_voltage
 from ..predictor.model import steady_state as predictor_steady_state
 from ..predictor.setup import PredictorSetup
 
-__all__ = ["frequency_map", "map_agreement", "plot_frequency_map"]
+__all__ = ["frequency_map", "map_agreement", "plot_frequency_map", "FrequencyMap", "frequency_map_study"]
 
 
 def frequency_map(setup: PredictorSetup, mp: MotorParams, frequencies_Hz, voltages_V, *, s_m: float = 0.0,
@@ -84,3 +87,61 @@ def plot_frequency_map(df: pd.DataFrame, title: str = ""):
     if title:
         ax.set_title(title, fontsize=9)
     return fig
+
+
+@dataclass(frozen=True)
+class FrequencyMap:
+    """A speed-over-frequency design study: the grid (:func:`frequency_map`), its agreement and operating point."""
+
+    table: pd.DataFrame
+    setup: PredictorSetup
+    s_m: float
+    load_kg: float
+    direction: int
+
+    @property
+    def agreement(self) -> dict:
+        """:func:`map_agreement` of the grid."""
+        return map_agreement(self.table)
+
+    def to_pandas(self) -> pd.DataFrame:
+        """The grid: frequency [Hz], V0 [V], predicted and physical steady speed [m/s], stuck flag."""
+        return self.table.copy()
+
+    def figure(self):
+        """:func:`plot_frequency_map` titled with the operating point and the rms difference."""
+        return plot_frequency_map(self.table, f"position {self.s_m * 1e3:g} mm, load {self.load_kg:+g} kg, direction "
+                                              f"{self.direction:+d}: rms difference {self.agreement['rms_rel']:.1%}")
+
+    def to_dict(self) -> dict:
+        """The JSON report: agreement, operating point, the predictor's frequency response and what is compared."""
+        fr = self.setup.frequency
+        return {"agreement": self.agreement,
+                "operating_point": {"position_m": self.s_m, "load_kg": self.load_kg, "direction": self.direction},
+                "frequency_response": None if fr is None else fr.to_dict(),
+                "note": "physics: the coupled periodic steady state (l1b2.physics.steady.steady_state), the fixed "
+                        "point of the co-simulation; predictor: the closed-form steady speed of Eq. 29 with the "
+                        "force factor scaled by its frequency response"}
+
+
+def frequency_map_study(identification: dict, mp: MotorParams, *, frequencies_Hz=None,
+                        voltages_V=(220.0, 324.0), s_m: float = 0.0, load_kg: float = 0.0,
+                        direction: int = 1) -> FrequencyMap:
+    """The design study of an identification report (``l1b2 identify``'s ``identification.json`` as a dict).
+
+    ``frequencies_Hz`` default: 41 points over TRAIN's frequency range
+    (``checks.training_range``) or +-500 Hz around the nominal frequency.
+    Raises :class:`~l1b2.errors.IdentificationError` when the report has no
+    readable ``predictor`` section.
+    """
+    try:
+        setup = PredictorSetup.from_dict(identification["predictor"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise IdentificationError(f"--identification: not an identification.json of `l1b2 identify` "
+                                  f"({type(exc).__name__}: {exc})") from None
+    if frequencies_Hz is None:
+        rng = ((identification.get("checks") or {}).get("training_range") or {}).get("frequency_Hz")
+        lo, hi = rng if rng and rng[1] > rng[0] else (setup.f_nominal_Hz - 500.0, setup.f_nominal_Hz + 500.0)
+        frequencies_Hz = np.linspace(lo, hi, 41)
+    table = frequency_map(setup, mp, frequencies_Hz, voltages_V, s_m=s_m, load_kg=load_kg, direction=direction)
+    return FrequencyMap(table, setup, s_m, load_kg, direction)
