@@ -36,6 +36,7 @@ import pandas as pd
 from ..data import measurements as dataio
 from ..predictor import model as pr
 from . import residuals as res
+from .acceptance import time_dependent
 from .candidates import CandidateForce
 
 DEFAULT_MIN_GAIN = 0.5
@@ -206,12 +207,15 @@ def shortlist(scores: list[Score], *, level: float, min_gain: float, size: int) 
     return ok[:size]
 
 
-def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5, seed=0) -> list[Score]:
+def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5, seed=0,
+                     time_folds=None) -> list[Score]:
     """Cross-validated gain, run-level p-value and AIC/BIC change of every candidate.
 
     The regression of the TRAIN residual on a candidate's free-run response
     includes the nuisance responses (:func:`nuisance_forces`) in both the
-    null and the candidate model; folds are whole runs.
+    null and the candidate model; folds are whole runs (``time_folds``, run ids per fold, when given: the
+    folds of the candidates that depend on the session clock,
+    :func:`l1b2.closeloop.acceptance.time_dependent`, e.g. contiguous blocks of the session).
     """
     if not candidates:
         return []
@@ -225,6 +229,7 @@ def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5,
     N = linear_response(params, df, m_s, nuisance_forces(params, df, v_pred))[idx]
     S_all = linear_response(params, df, m_s, np.column_stack(feats))[idx]
     solver = FoldSolver(y, N, runs_m, folds)
+    time_solver = FoldSolver(y, N, runs_m, time_folds) if time_folds is not None else solver
     A = solver.A
     coef0 = np.linalg.lstsq(A, y, rcond=None)[0]
     sse0 = float(np.sum((y - A @ coef0) ** 2))
@@ -236,7 +241,7 @@ def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5,
         if not np.all(np.isfinite(S)) or np.allclose(S, 0):
             out.append(Score(c, 0.0, 1.0, 0.0, 0.0, np.zeros(w)))
             continue
-        gain, per_run = solver.gain(S)
+        gain, per_run = (time_solver if time_dependent(c) else solver).gain(S)
         Xf = np.column_stack([A, S])
         coef = np.linalg.lstsq(Xf, y, rcond=None)[0]
         sse1 = float(np.sum((y - Xf @ coef) ** 2))
