@@ -107,6 +107,11 @@ def test_design_rows_put_each_component_on_its_own_intercept_and_slope():
     D = rl.design_rows(z, 2, 2)
     np.testing.assert_array_equal(D[0], [[1, 0.5, 0, 0], [0, 0, 1, 0.5]])
     np.testing.assert_array_equal(D[1], [[1, -1.0, 0, 0], [0, 0, 1, -1.0]])
+    w = np.array([0.2, -0.4])          # the signal's design: the offset also scales with the run's load
+    S = rl.signal_design(z, w)
+    np.testing.assert_array_equal(S[0], [[1, 0.5, 0, 0, 0], [0, 0, 1, 0.5, 0.1]])
+    np.testing.assert_array_equal(S[1], [[1, -1.0, 0, 0, 0], [0, 0, 1, -1.0, 0.4]])
+    np.testing.assert_array_equal(rl.signal_design(z), D)
 
 
 def test_heterogeneity_is_cochrans_q():
@@ -143,6 +148,22 @@ def test_a_signal_explaining_the_runs_deviations_is_significant_and_noise_is_not
     for e in ev.values():                      # Bonferroni over the three signals, and a positive held-out gain
         assert e.significant == (e.p_value < 0.01 / 3 and e.cv_gain > 0)
     assert ev["time_s"].blocked_folds and not ev["aux"].blocked_folds
+    # with the runs' loads the Wald test has three degrees of freedom (gain, offset, offset x load)
+    dev.load = np.where(np.arange(len(z)) % 2 == 0, 0.5, -1.0)
+    e = rl.signal_evidence(dev, sigs[:1], alpha=0.01, k=4, seed=0)[0]
+    assert e.significant and e.coef[2] == pytest.approx(0.0, abs=0.1)
+
+
+def test_run_level_offers_a_candidate_of_another_regressor_when_the_shortlist_has_its_regressor():
+    def cand(fam, reg):
+        return CandidateForce(fam, reg, "", ("a",), ("N",), None)
+    short = [types.SimpleNamespace(candidate=CandidateForce("load_slope_voltage", "load", "", ("a",), ("N",), None,
+                                                           also=("voltage",)))]
+    found = [cand("run_level_voltage_V", "voltage"), cand("run_level_d*load_kg", "load"), cand("run_level_time_s", "time")]
+    assert [c.family for c in rl.offer(found, short, lambda c: True)] == ["run_level_voltage_V", "run_level_time_s"]
+    assert [c.family for c in rl.offer(found[2:], short, lambda c: True)] == ["run_level_time_s"]
+    assert [c.family for c in rl.offer(found, [], lambda c: True)] == ["run_level_voltage_V"]
+    assert rl.offer(found, short, lambda c: False) == []
 
 
 def test_one_step_force_deviations_are_recovered_per_run():
@@ -182,13 +203,14 @@ def test_one_step_force_deviations_are_recovered_per_run():
 def test_run_level_features_are_the_standardised_run_signal_times_the_drive_gain_and_one():
     V0, d = np.array([300.0, 150.0, 240.0, 330.0]), np.array([1.0, -1.0, 1.0, -1.0])
     run_mean = np.array([2.0, 2.0, -4.0, -4.0])
-    x = {"V0": V0, "d": d, "run:load_kg": run_mean}
+    load = np.array([0.05, 0.05, -0.02, -0.02])
+    x = {"V0": V0, "d": d, "load": load, "run:load_kg": run_mean}
     spec = {"kind": "run_level", "channel": "load_kg", "mean": 1.0, "sd": 2.0}
     for tr, c in (("none", run_mean), ("drive", d * run_mean), ("abs", np.abs(run_mean))):
         z = (c - 1.0) / 2.0
         np.testing.assert_allclose(fx.effect_features({**spec, "transform": tr}, x),
-                                   np.column_stack([V0 / 300.0 * z, z]))
-    assert fx.needs({**spec, "transform": "drive"}) == {"V0", "d", "run:load_kg"}
+                                   np.column_stack([V0 / 300.0 * z, z, 9.81 * d * load * z]))
+    assert fx.needs({**spec, "transform": "drive"}) == {"V0", "d", "load", "run:load_kg"}
     h = fx.family("run_level").hypotheses([{"channel": "load_kg", "transform": "drive", "mean": 0.0, "sd": 1.0}])[0]
     assert h.family == "run_level_d*load_kg" and h.regressor == "load" and h.generic
 

@@ -305,11 +305,10 @@ class CloseLoop(EstimatorSettings):
             if self.run_level and ctx is not None:
                 say(f"round {n_rnd}: run-level deviations and the signals that explain them")
                 rl = runlevel.analyse(dtr, cur, mask, it.channels, alpha=self.alpha, k=self.k_folds, seed=self.seed)
-                offered = [c for c in runlevel.candidates(rl, ctx) if c.family not in it.effects.families
-                           and not collinear(c, it.effects, dtr, mask)][:1]
-                if offered and offered[0].family not in {s.candidate.family for s in short}:
-                    short = short + score_candidates(offered, r, dtr, mask, cur.params_, m_s, v_pred=v_cur,
-                                                     k=self.k_folds, seed=self.seed, time_folds=screen_blocks)
+                offered = runlevel.offer(runlevel.candidates(rl, ctx), short, lambda c: (
+                    c.family not in it.effects.families and not collinear(c, it.effects, dtr, mask)))
+                short = short + score_candidates(offered, r, dtr, mask, cur.params_, m_s, v_pred=v_cur,
+                                                 k=self.k_folds, seed=self.seed, time_folds=screen_blocks)
             if rnd == 1:
                 it.first_scores, it.level, it.run_level = scores, level, rl
             if not short:

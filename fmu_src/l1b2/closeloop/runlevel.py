@@ -14,9 +14,11 @@ estimates and explains:
    ``theta_r = X_r beta + u_r + e_r``, ``u_r ~ N(0, T)`` between runs, ``e_r ~ N(0, S_r)`` the sampling error;
    ``T`` (2 x 2) is estimated by restricted maximum likelihood (EM iterations) and each run's deviation is its
    best linear unbiased prediction ``X_r beta + T W_r (theta_r - X_r beta)``, ``W_r = (T + S_r)^-1``.
-3. **Explanation** (:func:`signal_evidence`): each run-level signal ``z`` (standardised) enters the mean,
-   ``X_r = I_2 (x) [1, z_r]``; its evidence is the Wald test of its two coefficients (chi-square, 2 degrees of
-   freedom) and the cross-validated share of the runs' weighted held-out deviation it removes (folds over runs:
+3. **Explanation** (:func:`signal_evidence`): each run-level signal ``z`` (standardised) enters the mean
+   (:func:`signal_design`): the gain as ``g0 + g1 z_r``, the offset as ``o0 + o1 z_r + o2 z_r w_r`` with
+   ``w_r = d m / max|m|`` the run's drive-coordinate load (a signal that changes the contact changes the load's
+   slope as well as the drive); its evidence is the Wald test of ``(g1, o1, o2)`` (chi-square, 3 degrees of
+   freedom; 2 without load variation) and the cross-validated share of the runs' weighted held-out deviation it removes (folds over runs:
    contiguous blocks of the session for the session clock, :func:`l1b2.closeloop.acceptance.session_blocks`).
    A signal is significant when its p-value is below ``alpha`` / number of signals tested (Bonferroni) and its
    cross-validated gain is positive. The loop offers the strongest significant one as a
@@ -48,12 +50,14 @@ REML_TOL = 1e-8
 @dataclass
 class RunDeviations:
     """Each run's least-squares deviation from the model: ``theta`` (n_runs, 2) = (gain [1], offset [N]),
-    ``cov`` (n_runs, 2, 2) its sampling covariance, ``runs`` the run ids, ``n`` the samples used per run."""
+    ``cov`` (n_runs, 2, 2) its sampling covariance, ``runs`` the run ids, ``n`` the samples used per run,
+    ``load`` each run's drive-coordinate load ``d m / max|m|`` (None: no load varies)."""
 
     runs: np.ndarray
     theta: np.ndarray
     cov: np.ndarray
     n: np.ndarray
+    load: np.ndarray | None = None
 
 
 def one_step_force(df: pd.DataFrame, model, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -84,7 +88,8 @@ def one_step_force(df: pd.DataFrame, model, mask: np.ndarray) -> tuple[np.ndarra
 def run_deviations(df: pd.DataFrame, model, mask: np.ndarray) -> RunDeviations:
     """Per-run least squares of the one-step force on (relative drive force, 1): see the module's step 1."""
     f, g, used = one_step_force(df, model, mask)
-    runs, th, cv, ns = [], [], [], []
+    runs, th, cv, ns, w = [], [], [], [], []
+    dm = df[dataio.DIRECTION].to_numpy(float) * df[dataio.LOAD].to_numpy(float)
     for run, sl in dataio.run_slices(df[dataio.RUN]):
         u = used[sl]
         if u.sum() < 8:
@@ -102,8 +107,11 @@ def run_deviations(df: pd.DataFrame, model, mask: np.ndarray) -> RunDeviations:
         th.append(beta)
         cv.append(s2 * np.linalg.inv(XtX))
         ns.append(int(u.sum()))
+        w.append(float(np.mean(dm[sl])))
+    w = np.array(w, float)
+    scale = float(np.max(np.abs(w))) if len(w) else 0.0
     return RunDeviations(np.array(runs), np.array(th, float).reshape(-1, 2), np.array(cv, float).reshape(-1, 2, 2),
-                         np.array(ns))
+                         np.array(ns), w / scale if scale > 0 else None)
 
 
 @dataclass
@@ -124,6 +132,20 @@ def design_rows(z: np.ndarray | None, n: int, p: int) -> np.ndarray:
     return np.einsum("ij,rk->rijk", np.eye(p), x).reshape(n, p, p * x.shape[1])
 
 
+def signal_design(z: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
+    """The mean's design of a signal, ``(n, 2, 5)`` (``(n, 2, 4)`` without ``w``): gain row ``[1, z, 0, 0, 0]``,
+    offset row ``[0, 0, 1, z, z w]``; coefficients ``(g0, g1, o0, o1, o2)``."""
+    z = np.asarray(z, float)
+    n = len(z)
+    one, zero = np.ones(n), np.zeros(n)
+    gain = [one, z, zero, zero]
+    off = [zero, zero, one, z]
+    if w is not None:
+        gain.append(zero)
+        off.append(z * np.asarray(w, float))
+    return np.stack([np.column_stack(gain), np.column_stack(off)], axis=1)
+
+
 def reml(theta: np.ndarray, cov: np.ndarray, X: np.ndarray | None = None, *, n_iter: int = REML_ITER,
          tol: float = REML_TOL) -> REMLFit:
     """Restricted maximum likelihood of ``theta_r = X_r beta + u_r + e_r`` by EM (``theta`` (n, p), ``cov``
@@ -137,8 +159,10 @@ def reml(theta: np.ndarray, cov: np.ndarray, X: np.ndarray | None = None, *, n_i
     n, p = theta.shape
     X = design_rows(None, n, p) if X is None else np.asarray(X, float)
     S = np.asarray(cov, float)
-    T = np.diag(np.maximum(np.var(theta, axis=0, ddof=1) - np.mean(np.diagonal(S, axis1=1, axis2=2), axis=0),
-                           1e-6 * np.var(theta, axis=0) + 1e-300))
+    # start from above (the residuals' spread about the unweighted mean fit): EM moves a variance component
+    # started near zero only very slowly
+    r0 = theta - np.einsum("rpk,k->rp", X, np.linalg.lstsq(X.reshape(-1, X.shape[2]), theta.ravel(), rcond=None)[0])
+    T = np.diag(np.maximum(np.mean(r0 ** 2, axis=0), 1e-300))
     it = 0
     for it in range(1, n_iter + 1):
         W = np.linalg.inv(T[None] + S)
@@ -179,7 +203,8 @@ def heterogeneity(theta: np.ndarray, cov: np.ndarray) -> tuple[float, float]:
 @dataclass
 class SignalEvidence:
     """One run-level signal's evidence: Wald p-value of its coefficients, cross-validated gain, the coefficients
-    (gain [1 per sd], offset [N per sd]) and whether it passed (Bonferroni level and a positive gain)."""
+    (gain [1 per sd], offset [N per sd], offset per unit drive-coordinate load [N per sd]) and whether it passed
+    (Bonferroni level and a positive gain)."""
 
     channel: str
     transform: str
@@ -189,14 +214,15 @@ class SignalEvidence:
     sd: float
     p_value: float = 1.0
     cv_gain: float = 0.0
-    coef: tuple = (0.0, 0.0)
+    coef: tuple = (0.0, 0.0, 0.0)
     significant: bool = False
     blocked_folds: bool = False
     per_run: np.ndarray = field(default=None, repr=False)
 
     def to_dict(self) -> dict:
         return {"signal": self.label, "regressor": self.regressor, "p_value": self.p_value, "cv_gain": self.cv_gain,
-                "gain_per_sd": self.coef[0], "offset_per_sd_N": self.coef[1], "significant": self.significant,
+                "gain_per_sd": self.coef[0], "offset_per_sd_N": self.coef[1],
+                "load_offset_per_sd_N": self.coef[2], "significant": self.significant,
                 "folds": "session blocks" if self.blocked_folds else "runs"}
 
 
@@ -224,7 +250,7 @@ def _weighted_sse(theta, cov, T, X, beta) -> np.ndarray:
     return np.einsum("rp,rpq,rq->r", r, np.linalg.inv(T[None] + cov), r)
 
 
-def cv_signal_gain(theta, cov, z, folds_idx) -> tuple[float, np.ndarray]:
+def cv_signal_gain(theta, cov, z, folds_idx, w=None) -> tuple[float, np.ndarray]:
     """Held-out share of the runs' weighted deviation that the signal ``z`` removes, and the per-run reductions.
 
     For each fold (indices of held-out runs) the null (intercepts) and the signal's model are fitted by REML on
@@ -232,7 +258,7 @@ def cv_signal_gain(theta, cov, z, folds_idx) -> tuple[float, np.ndarray]:
     the same for both) are compared: gain ``1 - sum SSE1 / sum SSE0``.
     """
     n, p = theta.shape
-    X0, X1 = design_rows(None, n, p), design_rows(z, n, p)
+    X0, X1 = design_rows(None, n, p), signal_design(z, w)
     s0, s1 = np.zeros(n), np.zeros(n)
     for te in folds_idx:
         tr = np.setdiff1d(np.arange(n), te)
@@ -263,21 +289,21 @@ def signal_evidence(dev: RunDeviations, signals_, *, alpha: float, k: int, seed:
         v = np.asarray(sg["values"], float)
         mean, sd = float(np.mean(v)), float(np.std(v))
         z = (v - mean) / sd
-        fit = reml(dev.theta, dev.cov, design_rows(z, n, 2))
-        # coefficients of z: beta = (gain_0, gain_z, offset_0, offset_z)
-        idx = [1, 3]
+        fit = reml(dev.theta, dev.cov, signal_design(z, dev.load))
+        idx = [1, 3, 4] if dev.load is not None else [1, 3]     # (g1, o1[, o2]) of signal_design
         b = fit.beta[idx]
         C = fit.beta_cov[np.ix_(idx, idx)]
         try:
             wald = float(b @ np.linalg.solve(C, b))
-            p = float(stats.chi2.sf(wald, 2))
+            p = float(stats.chi2.sf(wald, len(idx)))
         except np.linalg.LinAlgError:
             p = 1.0
         blocked = sg["channel"] == fx.channels.SESSION_TIME
-        gain, per_run = cv_signal_gain(dev.theta, dev.cov, z, blocks if blocked else rand)
+        gain, per_run = cv_signal_gain(dev.theta, dev.cov, z, blocks if blocked else rand, dev.load)
         label = fx.channels.signal_label(sg["channel"], sg["transform"])
         out.append(SignalEvidence(sg["channel"], sg["transform"], label, fx.channels.regressor_of(sg["channel"]),
-                                  mean, sd, p, gain, (float(b[0]), float(b[1])), bool(p < level and gain > 0),
+                                  mean, sd, p, gain, tuple(float(x) for x in b) + (0.0,) * (3 - len(b)),
+                                  bool(p < level and gain > 0),
                                   blocked, per_run))
     return sorted(out, key=lambda e: (e.p_value, -e.cv_gain))
 
@@ -338,3 +364,22 @@ def is_run_level(c) -> bool:
     """Whether a candidate is constant along the stroke by construction (a run-level family or a channel's run mean)."""
     spec = c.spec or {}
     return spec.get("kind") == "run_level" or (spec.get("kind") == "channel" and spec.get("level") == "run")
+
+
+def offer(found: list, short: list, allowed) -> list:
+    """The run-level candidates offered to a round's cross-validated refit (at most two, strongest first).
+
+    ``found``: :func:`candidates` (strongest first); ``short``: the round's shortlisted scores; ``allowed(c)``:
+    not added yet and not collinear with what is. The strongest allowed one whose family is not shortlisted;
+    when its regressor is already among the shortlist's, also the strongest allowed one of another regressor
+    (the run-level evidence then points somewhere the linearised screen did not look).
+    """
+    fams = {s.candidate.family for s in short}
+    regs = {r for s in short for r in s.candidate.regressors}
+    ok = [c for c in found if c.family not in fams and allowed(c)]
+    if not ok:
+        return []
+    out = ok[:1]
+    if out[0].regressor in regs:
+        out += [c for c in ok[1:] if c.regressor not in regs and c.regressor != out[0].regressor][:1]
+    return out
