@@ -159,7 +159,8 @@ def test_run_level_offers_a_candidate_of_another_regressor_when_the_shortlist_ha
         return CandidateForce(fam, reg, "", ("a",), ("N",), None)
     short = [types.SimpleNamespace(candidate=CandidateForce("load_slope_voltage", "load", "", ("a",), ("N",), None,
                                                            also=("voltage",)))]
-    found = [cand("run_level_voltage_V", "voltage"), cand("run_level_d*load_kg", "load"), cand("run_level_time_s", "time")]
+    found = [cand("run_level_voltage_V", "voltage"), cand("run_level_d*load_kg", "load"),
+             cand("run_level_time_s", "time")]
     assert [c.family for c in rl.offer(found, short, lambda c: True)] == ["run_level_voltage_V", "run_level_time_s"]
     assert [c.family for c in rl.offer(found[2:], short, lambda c: True)] == ["run_level_time_s"]
     assert [c.family for c in rl.offer(found, [], lambda c: True)] == ["run_level_voltage_V"]

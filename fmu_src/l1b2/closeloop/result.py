@@ -339,7 +339,8 @@ def markdown_report(rep: dict) -> str:
     if d.get("run_level"):
         r = d["run_level"]
         lines += ["", f"Run-level deviations (first round, {r['runs']} runs, shrunk by REML): between-run sd of the "
-                  f"drive-force gain {r['between_run_sd_gain']:.2%}, of the offset {r['between_run_sd_offset_N']:.3g} N; "
+                  f"drive-force gain {r['between_run_sd_gain']:.2%}, of the offset "
+                  f"{r['between_run_sd_offset_N']:.3g} N; "
                   f"heterogeneity p {r['heterogeneity_p']:.2g}; signals explaining them (Bonferroni level "
                   f"{r['significance_level']:.2g}): {', '.join(r['significant_signals']) or 'none'}."]
     lines += ["", "## Residual evidence per regressor (first round, cross-validated over runs)", "",

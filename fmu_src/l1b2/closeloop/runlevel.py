@@ -18,10 +18,11 @@ estimates and explains:
    (:func:`signal_design`): the gain as ``g0 + g1 z_r``, the offset as ``o0 + o1 z_r + o2 z_r w_r`` with
    ``w_r = d m / max|m|`` the run's drive-coordinate load (a signal that changes the contact changes the load's
    slope as well as the drive); its evidence is the Wald test of ``(g1, o1, o2)`` (chi-square, 3 degrees of
-   freedom; 2 without load variation) and the cross-validated share of the runs' weighted held-out deviation it removes (folds over runs:
-   contiguous blocks of the session for the session clock, :func:`l1b2.closeloop.acceptance.session_blocks`).
+   freedom; 2 without load variation) and the cross-validated share of the runs' weighted held-out deviation
+   it removes (folds over runs: contiguous blocks of the session for the session clock,
+   :func:`l1b2.closeloop.acceptance.session_blocks`).
    A signal is significant when its p-value is below ``alpha`` / number of signals tested (Bonferroni) and its
-   cross-validated gain is positive. The loop offers the strongest significant one as a
+   cross-validated gain is positive. The loop offers the strongest significant one (:func:`offer`) as a
    :class:`~l1b2.predictor.effects.channels.RunLevel` candidate to the same cross-validated refit acceptance as
    every other candidate.
 
@@ -331,7 +332,8 @@ class RunLevelAnalysis:
                 "between_run_sd_offset_N": float(np.sqrt(max(T[1, 1], 0.0))),
                 "mean_gain": float(self.fit.beta[0]) if self.fit is not None else None,
                 "mean_offset_N": float(self.fit.beta[1]) if self.fit is not None else None,
-                "heterogeneity_Q": self.q if np.isfinite(self.q) else None, "heterogeneity_p": self.q_p, "significance_level": self.level,
+                "heterogeneity_Q": self.q if np.isfinite(self.q) else None, "heterogeneity_p": self.q_p,
+                "significance_level": self.level,
                 "significant_signals": [e.label for e in self.significant]}
 
 

@@ -413,7 +413,8 @@ def run_effects(plan: RigPlan, n_runs: int, values: dict) -> dict:
         supply = 1.0 + float(values["Rig.supply_sd_rel"]) * z
     preload = np.ones(n_runs)
     if "Rig.settling_depth_rel" in values:
-        preload = 1.0 - float(values["Rig.settling_depth_rel"]) * (1.0 - np.exp(-k / float(values["Rig.settling_runs"])))
+        depth, runs = float(values["Rig.settling_depth_rel"]), float(values["Rig.settling_runs"])
+        preload = 1.0 - depth * (1.0 - np.exp(-k / runs))
     return {"supply": supply, "preload": preload}
 
 

@@ -153,8 +153,9 @@ class RunLevel(Effect):
     ``dF = z (a V0/V_ref + b + c g d m)`` with ``z = (c - mean) / sd`` (TRAIN's run values), ``g d m`` the load's
     weight in drive coordinates: it scales the drive force, adds a force and scales the load's force (a signal
     that changes the contact changes the load's slope too); constant along the stroke, three parameters
-    (``a``, ``b`` [N per standard deviation], ``c`` [1 per standard deviation]). Not listed by any candidate library: the loop offers the
-    hypotheses of this family whose run-level evidence is significant (report family ``run_level_<signal>``).
+    (``a``, ``b`` [N per standard deviation], ``c`` [1 per standard deviation]). Not listed by any candidate
+    library: the loop offers the hypotheses of this family whose run-level evidence is significant (report
+    family ``run_level_<signal>``).
     """
 
     kind = "run_level"
