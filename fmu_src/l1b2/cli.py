@@ -268,6 +268,10 @@ def _close_loop_args(p: argparse.ArgumentParser) -> None:
                    "corrected screen, the best one with a run-level p-value below this (uncorrected) level, e.g. "
                    "0.01, is still refit and cross-validated (finds drifts in time); 0: off")
     p.add_argument("--max-rounds", type=int, default=3, help="most effects added, one per round")
+    p.add_argument("--response-column", action="append", dest="response_columns", metavar="NAME",
+                   help="a logged column that is a measured response of the motor, listed but never offered as a "
+                   "cause (repeatable; replaces the default list, tip_velocity_amp_m_s, the vibrometer's tip "
+                   "velocity the virtual rig logs)")
     p.add_argument("--noise-fit", choices=NOISE_FITS, default="alternate",
                    help="the baseline identification's search: " + NOISE_FIT_HELP + " (alternate is the search with "
                    "which the close loop was measured)")
@@ -678,6 +682,7 @@ def _run_close_loop(args, say):
                           max_rounds=args.max_rounds, min_cv_gain=args.min_cv_gain,
                           min_cv_drop=args.min_cv_drop, screen_alpha=args.screen_alpha or None,
                           noise_fit=args.noise_fit, noise=args.noise, baseline=args.baseline,
+                          **({"response_columns": tuple(args.response_columns)} if args.response_columns else {}),
                           slider_mass_kg=args.slider_mass, plots_on=not args.no_plots, progress=say,
                           allow_unusual_units=args.allow_unusual_units, export_dir=args.export,
                           motor=_motor(args) if args.export is not None else None,
@@ -752,8 +757,8 @@ def cmd_export(args) -> int:
 
 
 def cmd_injections(args) -> int:
-    from .rig.experiment import DATA_INJECTIONS, INJECTIONS
-    for e in list(INJECTIONS.values()) + list(DATA_INJECTIONS.values()):
+    from .rig.experiment import DATA_INJECTIONS, INJECTIONS, RUN_INJECTIONS
+    for e in list(INJECTIONS.values()) + list(DATA_INJECTIONS.values()) + list(RUN_INJECTIONS.values()):
         params = ", ".join(f"{k}={v:g}" for k, v in e.params.items())
         print(f"{e.name}  [{e.regressor}]\n    {e.description}\n    {params}")
     return 0

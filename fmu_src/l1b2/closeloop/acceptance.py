@@ -34,6 +34,7 @@ from ..cluster import run_tasks
 from ..data import measurements as dataio
 from ..errors import IdentificationError
 from ..ident.estimator import ExtraForces, PredictorIdentifier
+from ..predictor import effects as fx
 from . import chain
 from .candidates import CandidateForce
 
@@ -141,6 +142,33 @@ def stratified_folds(df: pd.DataFrame, k: int, seed: int = 0) -> list[np.ndarray
     ids = ranked.index.to_numpy()
     k = min(k, len(ids))
     return [ids[i::k] for i in range(k)]
+
+
+def session_blocks(df: pd.DataFrame, k: int) -> list[np.ndarray]:
+    """Run ids in ``k`` contiguous blocks of the session: runs ordered by their first time, split in order.
+
+    The folds of a candidate that depends on the session clock (:func:`time_dependent`): a held-out block is a
+    stretch of the session the fit has not seen, so a term that only interpolates a drift between neighbouring
+    runs gains nothing. Block sizes differ by at most one run; every run is in exactly one block.
+    """
+    start = df.groupby(dataio.RUN, sort=False)[dataio.TIME].min()
+    ids = start.index.to_numpy()[np.argsort(start.to_numpy(float), kind="stable")]
+    return [b for b in np.array_split(ids, min(k, len(ids))) if len(b)]
+
+
+#: the signals of the session clock (:data:`l1b2.predictor.effects.SIGNALS` and the channel family's)
+SESSION_SIGNALS = frozenset({"t", "col:time_s", "run:time_s"})
+
+
+def time_dependent(candidate: CandidateForce) -> bool:
+    """Whether a candidate's force depends on the session clock (its spec reads ``t`` or the ``time_s`` channel;
+    a candidate without a spec: ``time`` among its regressors)."""
+    if candidate.spec:
+        try:
+            return bool(fx.needs(candidate.spec) & SESSION_SIGNALS)
+        except fx.EffectSpecError:
+            pass
+    return "time" in candidate.regressors
 
 
 @dataclass(frozen=True)

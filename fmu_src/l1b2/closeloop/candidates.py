@@ -97,6 +97,9 @@ class Context:
     spectral_period_m: float | None = None
     #: :func:`training_summary` per training frame (by identity), computed once per fit
     summaries: dict = field(default_factory=dict, repr=False, compare=False)
+    #: logged columns that are measured responses of the motor (listed, never candidates; the user's setting
+    #: ``CloseLoop(response_columns=...)``, default :data:`l1b2.predictor.effects.channels.RESPONSE_COLUMNS`)
+    response_columns: tuple = fx.channels.RESPONSE_COLUMNS
 
 
 def signals(df: pd.DataFrame, ctx: Context, wanted) -> dict:
@@ -134,17 +137,18 @@ def candidate(ctx: Context, h: fx.Hypothesis) -> CandidateForce:
                           bounds=tuple(tuple(b) for b in h.bounds))
 
 
-def channels_of(df: pd.DataFrame) -> tuple:
+def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
     """The candidate channels of a frame: every numeric column beyond the required ones and the speed, then the clock.
 
     One ``{"name", "kind", "mean", "sd", "within_run"}`` each (``kind``:
     ``"logged"``, ``"protocol"`` for the session clock ``time_s``, or
-    ``"response"`` for a measured response of the motor
-    (:data:`l1b2.predictor.effects.channels.RESPONSE_COLUMNS`: listed, no hypothesis);
+    ``"response"`` for a measured response of the motor (``response_columns``, default
+    :data:`l1b2.predictor.effects.channels.RESPONSE_COLUMNS`: listed, no hypothesis);
     ``sd`` 0 for a constant column, which is listed but gets no hypothesis;
     ``within_run``: it varies inside some run).
     """
     required = (set(dataio.REQUIRED_COLUMNS) | {dataio.SPEED}) - {dataio.TIME}   # speed: the measured output
+    responses = set(fx.channels.RESPONSE_COLUMNS if response_columns is None else response_columns)
     out = []
     names = [c for c in df.columns if c not in required and c != dataio.TIME
              and pd.api.types.is_numeric_dtype(df[c]) and not pd.api.types.is_bool_dtype(df[c])]
@@ -153,8 +157,7 @@ def channels_of(df: pd.DataFrame) -> tuple:
         if not np.all(np.isfinite(c)):
             continue
         within = bool((df.groupby(dataio.RUN, sort=False)[name].agg(np.ptp) > 0).any())
-        kind = ("protocol" if name == dataio.TIME else "response" if name in fx.channels.RESPONSE_COLUMNS
-                else "logged")
+        kind = "protocol" if name == dataio.TIME else "response" if name in responses else "logged"
         out.append({"name": str(name), "kind": kind,
                     "mean": float(np.mean(c)), "sd": float(np.std(c)), "within_run": within})
     return tuple(out)
@@ -178,7 +181,8 @@ def training_summary(ctx: Context, df_train: pd.DataFrame) -> fx.TrainingSummary
                              voltage_median=float(np.median(V)), ranges=ranges,
                              temperature_ref=ctx.temperature_ref,
                              temperature_range=None if T is None else (float(T.min()), float(T.max())),
-                             spectral_period_m=ctx.spectral_period_m, channels=channels_of(df_train))
+                             spectral_period_m=ctx.spectral_period_m,
+                             channels=channels_of(df_train, ctx.response_columns))
     ctx.summaries[key] = (df_train, out)
     return out
 

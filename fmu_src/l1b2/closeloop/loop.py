@@ -67,11 +67,13 @@ from ..predictor.model import DRIVE_LAWS
 from ..predictor.setup import PredictorSetup
 from . import chain
 from . import residuals as res
+from . import runlevel
 from .candidates import CandidateSource, Context, full_library, training_summary
 from .stages import StageClock
 from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT_FOLDS, DEFAULT_REFIT_NFEV,
                          EffectSet, RefitCV, RefitSettings, Validated, accepts, chain_cv_errors, collinear, cv_errors,
-                         fold_start_phi, materiality, refit, stratified_folds, validated)
+                         fold_start_phi, materiality, refit, session_blocks, stratified_folds, time_dependent,
+                         validated)
 from .baselines import choose_baseline, retag_structural
 from .guard import checked_fit
 from .result import CloseLoopResult, ResidualAnalysis
@@ -143,6 +145,18 @@ class CloseLoop(EstimatorSettings):
         held-out runs; what is added is decided by the acceptance rule. A screened round costs the
         cross-validated refits of the current model and of one candidate (and, if it is accepted, the
         next round).
+    run_level : bool
+        Each round, estimate every run's own deviation from the current model (a drive-force gain and an
+        offset, shrunk as random effects) and offer the run-level signal that best explains them
+        (:mod:`l1b2.closeloop.runlevel`, Bonferroni over the signals) as one more candidate of the
+        cross-validated refit; among accepted candidates within ``parsimony`` of the best, a form constant along
+        the stroke is preferred over a within-run form when the run-level evidence names its regressor.
+        Candidates that depend on the session clock are cross-validated on contiguous blocks of the session
+        (:func:`~l1b2.closeloop.acceptance.session_blocks`) whatever this setting.
+    response_columns : tuple of str or None
+        Logged columns that are measured responses of the motor: listed in ``channels_considered``, never
+        offered as a cause. None: :data:`l1b2.predictor.effects.channels.RESPONSE_COLUMNS` (the virtual rig's
+        ``tip_velocity_amp_m_s``); a tuple replaces that list (``()``: every logged column is a candidate).
 
     baseline : {"eq29", "best", "pure_slip"}
         The predictor family the loop starts from: ``"eq29"`` (default), ``"pure_slip"``, or ``"best"``,
@@ -165,7 +179,8 @@ class CloseLoop(EstimatorSettings):
                  min_cv_gain: float = DEFAULT_MIN_CV_GAIN, min_cv_drop: float = DEFAULT_MIN_CV_DROP,
                  refit_nfev: int = DEFAULT_REFIT_NFEV,
                  final_nfev: int = 60, screen_alpha: float | None = 0.01, noise_fit: str = "alternate",
-                 noise: str = "common", client=None, baseline: str = "eq29"):
+                 noise: str = "common", client=None, baseline: str = "eq29", run_level: bool = True,
+                 response_columns: tuple | None = None):
         self.order = order
         self.k_folds = k_folds
         self.alpha = alpha
@@ -187,6 +202,8 @@ class CloseLoop(EstimatorSettings):
         self.screen_alpha = screen_alpha
         self.client = client
         self.baseline = baseline
+        self.run_level = run_level
+        self.response_columns = response_columns
 
     # -- the job -------------------------------------------------------------
     def fit(self, train: dataio.Measurements, test: dataio.Measurements | None = None) -> CloseLoop:
@@ -237,11 +254,12 @@ class CloseLoop(EstimatorSettings):
         say("residual analysis on TRAIN")
         analysis = analyse_residuals(fit_tr, start.predict_free_run(fit_tr), mask_tr, alpha=self.alpha,
                                      k=self.k_folds, seed=self.seed)
-        ctx = candidate_context(start.predict_free_run, m_s, fit_tr, mask_tr, analysis.peak)
+        ctx = candidate_context(start.predict_free_run, m_s, fit_tr, mask_tr, analysis.peak,
+                                response_columns=self.response_columns)
         library = self.library if self.library is not None else full_library()
         pool = retag_structural(library(ctx, fit_tr), start.params_.drive_law)
         it.channels = training_summary(ctx, fit_tr).channels
-        self._iterate(it, pool, fit_tr, mask_tr, m_s, lambda mdl: _metrics(wrap(mdl), dtr, dte), say)
+        self._iterate(it, pool, fit_tr, mask_tr, m_s, lambda mdl: _metrics(wrap(mdl), dtr, dte), say, ctx)
         it.model = wrap(it.model)
 
         ext = it.model if (it.effects.candidates or it.output_filter is not None) else None
@@ -285,14 +303,19 @@ class CloseLoop(EstimatorSettings):
         return RefitSettings(order=self.order, seed=self.seed, max_nfev=self.refit_nfev, noise=self.noise,
                              client=self.client, frequency=getattr(self, "frequency_", None) or "off")
 
-    def _iterate(self, it: _Iteration, pool, dtr, mask, m_s, report, say) -> None:
+    def _iterate(self, it: _Iteration, pool, dtr, mask, m_s, report, say, ctx=None) -> None:
         """Rounds of linearised shortlist -> cross-validated refit -> acceptance -> joint re-identification.
 
         Extends ``it`` in place; ``report(model)`` gives a round's metrics (on the measured speed); ``say`` is
         the job's :class:`~l1b2.closeloop.stages.StageClock` (refits and evaluations are counted on it).
+        Candidates that depend on the session clock are scored and cross-validated on contiguous session
+        blocks, the others on the stratified run folds; the current model is cross-validated on the same
+        folds as each.
         """
-        folds = stratified_folds(dtr, self.refit_folds, self.seed)
-        cur_err = None
+        schemes = {False: stratified_folds(dtr, self.refit_folds, self.seed),
+                   True: session_blocks(dtr, self.refit_folds)}
+        screen_blocks = session_blocks(dtr, self.k_folds)
+        cur_err: dict = {}
         for rnd in range(1, self.max_rounds + 1):
             n_rnd = len(it.rounds)
             cur = it.model
@@ -302,40 +325,35 @@ class CloseLoop(EstimatorSettings):
                      and not collinear(c, it.effects, dtr, mask)]
             say(f"round {n_rnd}: scoring {len(cands)} candidate effects (linearised)")
             scores = score_candidates(cands, r, dtr, mask, cur.params_, m_s, v_pred=v_cur, k=self.k_folds,
-                                      seed=self.seed)
+                                      seed=self.seed, time_folds=screen_blocks)
             level = significance_level(scores, self.alpha)
             short = shortlist(scores, level=level, min_gain=self.min_gain, size=self.shortlist)
             if not short and self.screen_alpha:
                 # nothing passes the corrected screen: the best candidate at the uncorrected level is still
                 # cross-validated (the refit's acceptance rule, not this screen, decides what is added)
                 short = shortlist(scores, level=self.screen_alpha, min_gain=self.min_gain, size=1)
+            rl = None
+            if self.run_level and ctx is not None:
+                say(f"round {n_rnd}: run-level deviations and the signals that explain them")
+                rl = runlevel.analyse(dtr, cur, mask, it.channels, alpha=self.alpha, k=self.k_folds, seed=self.seed)
+                offered = runlevel.offer(runlevel.candidates(rl, ctx), short, lambda c: (
+                    c.family not in it.effects.families and not collinear(c, it.effects, dtr, mask)))
+                short = short + score_candidates(offered, r, dtr, mask, cur.params_, m_s, v_pred=v_cur,
+                                                 k=self.k_folds, seed=self.seed, time_folds=screen_blocks)
             if rnd == 1:
-                it.first_scores, it.level = scores, level
+                it.first_scores, it.level, it.run_level = scores, level, rl
             if not short:
                 it.trials.append([])
                 break
-            jobs, labels = [], []
-            if cur_err is None:
-                jobs.append((it.effects, None))
-            for s in short:
-                y, A, S, runs_m = design(s.candidate, r, dtr, mask, cur.params_, m_s, v_pred=v_cur)
-                jobs.append((it.effects.add(s.candidate, s.phi), fold_start_phi(S, A, y, runs_m, folds)))
-                labels.append(s.candidate.label)
-            say(f"round {n_rnd}: cross-validating {'the current model and ' if cur_err is None else ''}the refit "
-                f"with {', '.join(labels)} over {len(folds)} run folds")
-            errs = cv_errors(dtr, mask, m_s, folds, cur.params_, jobs, self.refit_settings())
-            say.count(len(jobs) * len(folds))
-            if cur_err is None:
-                cur_err, errs = errs[0], errs[1:]
-            trials = [RefitCV(s.candidate, cur_err, err, s.cv_gain, s.phi) for s, err in zip(short, errs)]
+            errs = self._cross_validate(it, short, cur, cur_err, schemes, r, dtr, mask, m_s, v_cur, say, n_rnd)
+            trials = [RefitCV(s.candidate, cur_err[time_dependent(s.candidate)], err, s.cv_gain, s.phi)
+                      for s, err in zip(short, errs)]
             it.trials.append(trials)
             ok = [t for t in trials if accepts(t, min_gain=self.min_cv_gain,
                                                min_drop=materiality(t.candidate, self.min_cv_drop))]
             if not ok:
                 break
-            best_gain = max(t.gain for t in ok)
-            ok.sort(key=lambda t: (t.candidate.generic, t.candidate.n_params, -t.gain))
-            pick = next(t for t in ok if t.gain >= self.parsimony * best_gain)
+            pick = prefer(ok, self.parsimony, rl)
             if rnd == 1:
                 it.chosen = next(s for s in short if s.candidate is pick.candidate)
                 it.significant = [s for s in short if any(t.candidate is s.candidate for t in ok)]
@@ -349,10 +367,36 @@ class CloseLoop(EstimatorSettings):
                 dtr, mask, f"the joint re-identification with {pick.candidate.label} (round {n_rnd})")
             it.model, it.effects = model, effects.with_phi(model.phi_)
             say.count(1, model.convergence_.get("nfev_total", 0))
-            cur_err = None
+            cur_err = {}
             it.rounds.append({"round": n_rnd, "added": pick.candidate.label, "effect": pick.candidate.family,
                               "regressors": list(pick.candidate.regressors), "cv": pick.to_dict(),
                               "metrics": report(model)})
+
+    def _cross_validate(self, it, short, cur, cur_err: dict, schemes: dict, r, dtr, mask, m_s, v_cur, say,
+                        n_rnd) -> list:
+        """The shortlist's cross-validated refits (:class:`FoldErrors` per candidate, in order), each on its folds
+        (``schemes[time_dependent(c)]``); the current model's errors on a scheme's folds are computed once per
+        round into ``cur_err``."""
+        errs: list = [None] * len(short)
+        for blocked, folds in schemes.items():
+            which = [i for i, s in enumerate(short) if time_dependent(s.candidate) == blocked]
+            if not which:
+                continue
+            jobs = [] if blocked in cur_err else [(it.effects, None)]
+            for i in which:
+                s = short[i]
+                y, A, S, runs_m = design(s.candidate, r, dtr, mask, cur.params_, m_s, v_pred=v_cur)
+                jobs.append((it.effects.add(s.candidate, s.phi), fold_start_phi(S, A, y, runs_m, folds)))
+            labels = ", ".join(short[i].candidate.label for i in which)
+            say(f"round {n_rnd}: cross-validating {'the current model and ' if blocked not in cur_err else ''}the "
+                f"refit with {labels} over {len(folds)} {'session blocks' if blocked else 'run folds'}")
+            out = cv_errors(dtr, mask, m_s, folds, cur.params_, jobs, self.refit_settings())
+            say.count(len(jobs) * len(folds))
+            if blocked not in cur_err:
+                cur_err[blocked], out = out[0], out[1:]
+            for i, e in zip(which, out):
+                errs[i] = e
+        return errs
 
     def _chain(self, it: _Iteration, dtr, dte, mask, m_s):
         """The speed channel first (:mod:`l1b2.closeloop.chain`): ``(record, the TRAIN frame the rounds fit)``.
@@ -460,7 +504,9 @@ class CloseLoop(EstimatorSettings):
                       "refit_folds": self.refit_folds, "min_cv_gain": self.min_cv_gain,
                       "min_cv_drop": self.min_cv_drop, "screen_alpha": self.screen_alpha,
                       "noise_fit": self.noise_fit, "noise": self.noise,
-                      "max_rounds": self.max_rounds},
+                      "max_rounds": self.max_rounds, "run_level": self.run_level,
+                      "response_columns": (list(self.response_columns) if self.response_columns is not None
+                                           else None)},
             "regressor_evidence": [[e.to_dict() for e in rnd] for rnd in a.rounds],
             "whiteness": {"runs": len(w),
                           "share_runs_ljung_box_p_below_0.05": (float(np.mean([x["ljung_box_p"] < 0.05 for x in w]))
@@ -469,7 +515,8 @@ class CloseLoop(EstimatorSettings):
             "position_spectrum_peak": a.peak,
             "measurement_chain": chain_rec,
             "channels_considered": channels_considered(it.channels, scores, it.level, self.min_gain,
-                                                       it.effects.families),
+                                                       it.effects.families, it.run_level),
+            "run_level": it.run_level.to_dict() if it.run_level is not None else None,
         }
 
 
@@ -487,6 +534,7 @@ class _Iteration:
     level: float = float("nan")
     output_filter: chain.OutputFilter | None = None
     channels: tuple = ()
+    run_level: runlevel.RunLevelAnalysis | None = None
 
 
 class ChainModel:
@@ -547,18 +595,27 @@ def order_traced(effects, speed_filter: bool, residual_trace, evidence=(), speed
     return traced + [r for r in residual_trace if r not in traced]
 
 
-def channels_considered(channels, scores: list[Score], level: float, min_gain: float, added) -> list[dict]:
-    """``diagnosis.channels_considered``: every candidate channel with its first-round evidence.
+def channels_considered(channels, scores: list[Score], level: float, min_gain: float, added,
+                        run_level: runlevel.RunLevelAnalysis | None = None) -> list[dict]:
+    """``diagnosis.channels_considered``: every candidate channel and run-level signal with its first-round evidence.
 
     Per channel (:func:`l1b2.closeloop.candidates.channels_of`): its kind,
     the regressor it is traced to, whether it varies within runs, the best
     form of its family ``channel_<name>`` by linearised held-out gain with
     that gain and its run-level p-value, ``significant`` (it passes the
     Bonferroni screen: gain >= ``min_gain``, p < ``level``, AIC improved)
-    and ``added`` (the loop added it). A constant channel has no evidence (``note``).
+    and ``added`` (the loop added it or its run-level form). A constant channel has no evidence (``note``).
+    ``run_level``: the evidence of its run mean as an explanation of the runs' own deviations from the model
+    (:class:`l1b2.closeloop.runlevel.SignalEvidence` as dicts; empty when not tested). The model's inputs
+    that are run-level signals (V0, the drive-coordinate load and its size, the direction) follow as rows of
+    kind ``"input"`` with their run-level evidence only (their within-run forms are the named and generic
+    families of the candidate table).
     """
-    from ..predictor.effects.channels import regressor_of
+    from ..predictor.effects.channels import INPUT_SIGNALS, regressor_of
     best = {s.candidate.family: s for s in best_per_family(scores)}
+    ev: dict = {}
+    for e in (run_level.evidence if run_level is not None else []):
+        ev.setdefault(e.channel, []).append(e)
     out = []
     for ch in channels:
         fam = f"channel_{ch['name']}"
@@ -575,8 +632,33 @@ def channels_considered(channels, scores: list[Score], level: float, min_gain: f
         else:
             rec.update(best=s.candidate.label, cv_gain=float(s.cv_gain), p_value=float(s.p_value),
                        significant=bool(s.cv_gain >= min_gain and s.p_value < level and s.delta_aic < 0))
+        rec["run_level"] = [e.to_dict() for e in ev.get(ch["name"], [])]
+        rec["added"] = rec["added"] or any(f"run_level_{e.label}" in added for e in ev.get(ch["name"], []))
         out.append(rec)
+    for col in dict.fromkeys(c for c, _ in INPUT_SIGNALS):
+        rows = ev.get(col, [])
+        out.append({"channel": col, "kind": "input", "regressor": regressor_of(col), "varies_within_runs": False,
+                    "best": None, "cv_gain": None, "p_value": None,
+                    "significant": any(e.significant for e in rows),
+                    "added": any(f"run_level_{e.label}" in added for e in rows),
+                    "note": "an input of the model: run-level evidence only" if rows
+                    else "constant on TRAIN or not tested: no run-level evidence",
+                    "run_level": [e.to_dict() for e in rows]})
     return out
+
+
+def prefer(accepted: list[RefitCV], parsimony: float, run_level: runlevel.RunLevelAnalysis | None = None) -> RefitCV:
+    """The candidate added among the accepted ones: within ``parsimony`` of the best CV gain, named before
+    generic, then a form constant along the stroke (:func:`l1b2.closeloop.runlevel.is_run_level`) whose
+    regressor the run-level evidence names (when the evidence is run-level, the simpler run-level form), then
+    the fewest parameters, then the largest gain."""
+    best_gain = max(t.gain for t in accepted)
+    named = {e.regressor for e in run_level.significant} if run_level is not None else set()
+
+    def key(t):
+        c = t.candidate
+        return (c.generic, not (runlevel.is_run_level(c) and c.regressor in named), c.n_params, -t.gain)
+    return min((t for t in accepted if t.gain >= parsimony * best_gain), key=key)
 
 
 def _filter_record(rec: dict, params: dict | None) -> dict:
@@ -670,15 +752,18 @@ def analyse_residuals(df: pd.DataFrame, v_pred: np.ndarray, mask: np.ndarray, *,
                             traced=traced, rounds=rounds)
 
 
-def candidate_context(baseline_free_run, m_s: float, df: pd.DataFrame, mask: np.ndarray, peak: dict) -> Context:
-    """What candidate features may use: the baseline's free run, the mass, TRAIN's ranges, the spectral peak."""
+def candidate_context(baseline_free_run, m_s: float, df: pd.DataFrame, mask: np.ndarray, peak: dict,
+                      response_columns=None) -> Context:
+    """What candidate features may use: the baseline's free run, the mass, TRAIN's ranges, the spectral peak
+    (``response_columns``: the measured responses, never candidates; None: the default list)."""
     pos = df[dataio.POSITION].to_numpy(float)[mask]
     return Context(
         baseline_free_run=baseline_free_run, m_s=float(m_s),
         time_range=(float(df[dataio.TIME].min()), float(df[dataio.TIME].max())),
         position_range=(float(pos.min()), float(pos.max())),
         temperature_ref=float(df[dataio.TEMPERATURE].median()) if dataio.TEMPERATURE in df.columns else None,
-        spectral_period_m=peak.get("period_m") if peak.get("power_ratio_to_median", 0) > 4 else None)
+        spectral_period_m=peak.get("period_m") if peak.get("power_ratio_to_median", 0) > 4 else None,
+        **({} if response_columns is None else {"response_columns": tuple(response_columns)}))
 
 
 def calibrated_model(base, ext, effects: EffectSet, output_filter, source: dict):

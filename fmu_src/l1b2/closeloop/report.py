@@ -120,7 +120,9 @@ class Diagnosis(_Record):
     settings that decided; ``regressor_evidence``, ``whiteness`` and
     ``position_spectrum_peak`` the residual analysis; ``measurement_chain``
     the speed channel's test; ``channels_considered`` every logged channel
-    and protocol signal with its first-round evidence, significant or not.
+    and protocol signal with its first-round evidence, significant or not (its ``run_level`` entries: the
+    evidence of its run mean for the runs' own deviations); ``run_level`` the first round's run-level
+    deviations (:meth:`l1b2.closeloop.runlevel.RunLevelAnalysis.to_dict`; None when not estimated).
     The nested evidence stays JSON-shaped.
     """
 
@@ -145,6 +147,7 @@ class Diagnosis(_Record):
     measurement_chain: dict = field(default_factory=dict)
     channels_considered: list = field(default_factory=list)
     baseline_choice: dict = field(default_factory=dict)
+    run_level: Any = None
 
     def to_dict(self) -> dict:
         out = {f.name: getattr(self, f.name) for f in fields(self)}

@@ -349,13 +349,23 @@ def markdown_report(rep: dict) -> str:
                      f"{c['delta_bic']:.1f} |")
     if d.get("channels_considered"):
         lines += ["", "## Channels and protocol signals considered (first round, best form of each)", "",
-                  "| channel | kind | traced as | best form | held-out gain | p (runs) | significant | added |",
-                  "|---|---|---|---|---|---|---|---|"]
+                  "| channel | kind | traced as | best form | held-out gain | p (runs) | run-level evidence | "
+                  "significant | added |",
+                  "|---|---|---|---|---|---|---|---|---|"]
         for c in d["channels_considered"]:
             p = "-" if c["p_value"] is None else format(c["p_value"], ".2g")
+            runl = "; ".join(f"{e['signal']}: p {e['p_value']:.2g}, gain {e['cv_gain']:.1%}"
+                             for e in c.get("run_level") or []) or "-"
             lines.append(f"| {c['channel']} | {c['kind']} | {c['regressor']} | {c['best'] or c['note']} | "
-                         f"{_pct(c['cv_gain'], '.1%')} | {p} | "
+                         f"{_pct(c['cv_gain'], '.1%')} | {p} | {runl} | "
                          f"{'yes' if c['significant'] else 'no'} | {'yes' if c['added'] else 'no'} |")
+    if d.get("run_level"):
+        r = d["run_level"]
+        lines += ["", f"Run-level deviations (first round, {r['runs']} runs, shrunk by REML): between-run sd of the "
+                  f"drive-force gain {r['between_run_sd_gain']:.2%}, of the offset "
+                  f"{r['between_run_sd_offset_N']:.3g} N; "
+                  f"heterogeneity p {r['heterogeneity_p']:.2g}; signals explaining them (Bonferroni level "
+                  f"{r['significance_level']:.2g}): {', '.join(r['significant_signals']) or 'none'}."]
     lines += ["", "## Residual evidence per regressor (first round, cross-validated over runs)", "",
               "| regressor | held-out gain | p (runs) |", "|---|---|---|"]
     for e in d["regressor_evidence"][0] if d["regressor_evidence"] else []:

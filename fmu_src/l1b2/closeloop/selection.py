@@ -36,6 +36,7 @@ import pandas as pd
 from ..data import measurements as dataio
 from ..predictor import model as pr
 from . import residuals as res
+from .acceptance import time_dependent
 from .candidates import CandidateForce
 
 DEFAULT_MIN_GAIN = 0.5
@@ -263,12 +264,15 @@ def shortlist(scores: list[Score], *, level: float, min_gain: float, size: int) 
     return ok[:size]
 
 
-def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5, seed=0) -> list[Score]:
+def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5, seed=0,
+                     time_folds=None) -> list[Score]:
     """Cross-validated gain, run-level p-value and AIC/BIC change of every candidate.
 
     The regression of the TRAIN residual on a candidate's free-run response
     includes the nuisance responses (:func:`nuisance_forces`) in both the
-    null and the candidate model; folds are whole runs.
+    null and the candidate model; folds are whole runs (``time_folds``, run ids per fold, when given: the
+    folds of the candidates that depend on the session clock,
+    :func:`l1b2.closeloop.acceptance.time_dependent`, e.g. contiguous blocks of the session).
     """
     if not candidates:
         return []
@@ -282,6 +286,7 @@ def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5,
     N = linear_response(params, df, m_s, nuisance_forces(params, df, v_pred), v_pred=v_pred)[idx]
     S_all = linear_response(params, df, m_s, np.column_stack(feats), v_pred=v_pred)[idx]
     solver = FoldSolver(y, N, runs_m, folds)
+    time_solver = FoldSolver(y, N, runs_m, time_folds) if time_folds is not None else solver
     A = solver.A
     usable = [bool(np.all(np.isfinite(S_all[:, a:a + w])) and not np.allclose(S_all[:, a:a + w], 0))
               for a, w in zip(np.cumsum([0] + widths[:-1]), widths)]
@@ -293,12 +298,14 @@ def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5,
     sse0, fits = insample_fits(A, y, S_ok, w_ok) if w_ok else (0.0, [])
     fits = iter(fits)
     out = []
-    for c, w, u in zip(candidates, widths, usable):
+    for c, w, u, start in zip(candidates, widths, usable, np.cumsum([0] + widths[:-1])):
         if not u:
             out.append(Score(c, 0.0, 1.0, 0.0, 0.0, np.zeros(w)))
             continue
         gain, per_run = next(cv)
         sse1, coef = next(fits)
+        if time_solver is not solver and time_dependent(c):   # scored on session blocks
+            gain, per_run = time_solver.gain(np.ascontiguousarray(S_all[:, start:start + w]))
         dll = n_eff * math.log(max(sse1, 1e-300) / max(sse0, 1e-300))
         out.append(Score(c, gain, res.wilcoxon_greater(per_run), float(np.mean(per_run > 0)),
                          dll + w * math.log(n_eff), coef, dll + 2 * w))

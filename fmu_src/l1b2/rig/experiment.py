@@ -78,10 +78,15 @@ class Injection:
     ranges: dict = field(default_factory=dict)
     stateful: bool = False  # carries state from run to run (cannot run runs in parallel)
     chain_regressor: str = ""
+    #: the regressor when the family's is a placeholder (the ``channel`` and ``run_level`` families act through
+    #: a signal they are given): the logged column or the protocol signal the effect shows up in
+    signal: str = ""
 
     @property
     def regressor(self) -> str:
-        """The data regressor the effect shows up in (the family's; the chain's own without one)."""
+        """The data regressor the effect shows up in (the family's, or :attr:`signal`; the chain's own without one)."""
+        if self.signal:
+            return fx.channels.regressor_of(self.signal)
         return fx.family(self.effect).regressor if self.effect else self.chain_regressor
 
     def draw(self, rng: np.random.Generator | None) -> dict:
@@ -141,6 +146,27 @@ DATA_INJECTIONS: dict[str, Injection] = {e.name: e for e in [
 
 DAQ_PREFIX = "DAQ."
 
+#: effects that differ from run to run, applied by the rig per run ("Rig." parameters; not FMU parameters)
+RUN_INJECTIONS: dict[str, Injection] = {e.name: e for e in [
+    Injection("supply_sag",
+           "the drive's DC bus differs from run to run (a shared supply, the mains); the amplifier's output "
+           "amplitude follows the bus, which the rig logs as supply_V (a column no model of the loop names)",
+           "channel",
+           {"Rig.supply_nominal_V": 48.0, "Rig.supply_sd_rel": 0.04}, {"Rig.supply_sd_rel": (0.03, 0.05)},
+           signal="supply_V"),
+    Injection("preload_settling",
+           "the clamp's preload settles traverse by traverse (creep of the clamp and the contact bedding in): "
+           "each run's preload is lower than the last, constant along the stroke, not logged",
+           "run_level",
+           {"Rig.settling_depth_rel": 0.12, "Rig.settling_runs": 40.0},
+           {"Rig.settling_depth_rel": (0.09, 0.15), "Rig.settling_runs": (25.0, 60.0)},
+           signal="time_s"),
+]}
+RIG_PREFIX = "Rig."
+#: the logged column of ``supply_sag`` and its sensor's noise [V] (one standard deviation per sample)
+SUPPLY_COLUMN = "supply_V"
+SUPPLY_SENSOR_SD_V = 0.05
+
 
 def lowpass_speed(df: pd.DataFrame, tau_s: float) -> pd.DataFrame:
     """The speed column passed through a first-order low-pass (time constant ``tau_s``), run by run."""
@@ -170,7 +196,7 @@ def apply_overrides(mp: MotorParams, overrides: dict) -> MotorParams:
 def parse_injection(spec: str) -> tuple[str, dict]:
     """``"name"`` or ``"name:Component.param=value,..."`` -> (name, overrides)."""
     name, _, rest = spec.partition(":")
-    known = {**INJECTIONS, **DATA_INJECTIONS}
+    known = {**INJECTIONS, **DATA_INJECTIONS, **RUN_INJECTIONS}
     if name not in known:
         raise SimulationError(f"unknown injection '{name}'; known: {', '.join(known)}")
     values = {}
@@ -243,6 +269,8 @@ class RunSpec:
     T_stator0_degC: float | None = None
     #: the run's drive frequency [Hz] (None: the plan's ``f_drive_Hz``)
     f_Hz: float | None = None
+    #: the drive's supply relative to the operator's setting (``supply_sag``); 1: as set
+    supply_factor: float = 1.0
 
 
 def _simulate_inprocess(mp: MotorParams, spec: RunSpec, plan: RigPlan, V_s: float, s0: float):
@@ -305,6 +333,7 @@ def simulate_traverse(mp: MotorParams, spec: RunSpec, plan: RigPlan = RigPlan(),
     nominal = nominal or mp
     V_s = float(drv.supply_for_voltage_V(nominal.driver, spec.V0_V, 1.0, run_frequency(spec, plan),
                                          plan.ambient_degC))
+    V_s *= float(spec.supply_factor)
     s0 = mp.slider.s_min_m if spec.direction > 0 else mp.slider.s_max_m
     if engine == "inprocess":
         return _simulate_inprocess(mp, spec, plan, V_s, s0)
@@ -404,6 +433,36 @@ def add_speed_noise(df: pd.DataFrame, plan: RigPlan) -> pd.DataFrame:
     return out
 
 
+def run_effects(plan: RigPlan, n_runs: int, values: dict) -> dict:
+    """Per-run factors of the run injections (:data:`RUN_INJECTIONS`), from their ``"Rig."`` parameter values.
+
+    Returns ``{"supply": (n_runs,) supply factors, "preload": (n_runs,) preload factors}`` (ones when off):
+    the supply factor of run ``k`` is ``1 + supply_sd_rel z_k`` (``z`` standard normal from its own stream of
+    ``plan.seed``); the preload factor of the ``k``-th traverse (0-based, rig order) is
+    ``1 - depth (1 - exp(-k / settling_runs))``.
+    """
+    k = np.arange(n_runs, dtype=float)
+    supply = np.ones(n_runs)
+    if "Rig.supply_sd_rel" in values:
+        z = np.random.default_rng([plan.seed, 3]).standard_normal(n_runs)
+        supply = 1.0 + float(values["Rig.supply_sd_rel"]) * z
+    preload = np.ones(n_runs)
+    if "Rig.settling_depth_rel" in values:
+        depth, runs = float(values["Rig.settling_depth_rel"]), float(values["Rig.settling_runs"])
+        preload = 1.0 - depth * (1.0 - np.exp(-k / runs))
+    return {"supply": supply, "preload": preload}
+
+
+def log_supply(df: pd.DataFrame, plan: RigPlan, supply: np.ndarray, nominal_V: float) -> pd.DataFrame:
+    """The frame with the logged bus voltage ``supply_V``: each run's ``nominal_V x factor`` plus sensor noise."""
+    out = df.copy()
+    runs = out[dataio.RUN].to_numpy()
+    factor = supply[np.searchsorted(np.unique(runs), runs)]
+    z = np.random.default_rng([plan.seed, 4]).standard_normal(len(out))
+    out[SUPPLY_COLUMN] = np.round(nominal_V * factor + SUPPLY_SENSOR_SD_V * z, 3)
+    return out
+
+
 def is_stateful(motor: MotorParams, injected=()) -> bool:
     """Whether runs carry state from one to the next (then they run serially, in rig order).
 
@@ -440,7 +499,7 @@ def run_experiment(plan: RigPlan = RigPlan(), mp: MotorParams | None = None, inj
         fmu_dir = ensure_fmus()
     rng = np.random.default_rng(injection_seed) if injection_seed is not None else None
     overrides, injected = {}, []
-    known = {**INJECTIONS, **DATA_INJECTIONS}
+    known = {**INJECTIONS, **DATA_INJECTIONS, **RUN_INJECTIONS}
     for e in injections:
         name, user = (e, {}) if isinstance(e, str) else e
         if name not in known:
@@ -449,41 +508,50 @@ def run_experiment(plan: RigPlan = RigPlan(), mp: MotorParams | None = None, inj
         overrides.update(values)
         injected.append({"name": name, "regressor": known[name].regressor, "parameters": values})
     daq = {k[len(DAQ_PREFIX):]: v for k, v in overrides.items() if k.startswith(DAQ_PREFIX)}
-    motor = apply_overrides(nominal, {k: v for k, v in overrides.items() if not k.startswith(DAQ_PREFIX)})
+    motor = apply_overrides(nominal, {k: v for k, v in overrides.items()
+                                      if not k.startswith((DAQ_PREFIX, RIG_PREFIX))})
     conditions = plan_runs(plan)
     factors = run_contact_factors(plan, len(conditions))
     freqs = run_frequencies(plan, len(conditions))
+    per_run = run_effects(plan, len(conditions), overrides)
     motors = [motor if plan.run_scatter == 0 else scattered_motor(motor, f) for f in factors]
+    motors = [m if p == 1.0 else m.replace(stator__P0_N=m.stator.P0_N * float(p))
+              for m, p in zip(motors, per_run["preload"])]
     bar = None
     if progress:
         from tqdm import tqdm
         bar = tqdm(total=len(conditions), desc=f"rig ({engine})", unit="run")
     try:
         if is_stateful(motor, injected) or (workers <= 1 and not scheduler):
-            frames = _run_serially(motors, nominal, conditions, plan, engine, fmu_dir, bar, freqs)
+            frames = _run_serially(motors, nominal, conditions, plan, engine, fmu_dir, bar, per_run["supply"],
+                                   freqs)
         else:
             frames = _run_on_cluster(motors, nominal, conditions, plan, engine, fmu_dir, bar, workers, scheduler,
-                                     freqs)
+                                     per_run["supply"], freqs)
     finally:
         if bar:
             bar.close()
     df = pd.concat(frames, ignore_index=True)
+    if "Rig.supply_sd_rel" in overrides:
+        df = log_supply(df, plan, per_run["supply"], float(overrides["Rig.supply_nominal_V"]))
     df = add_speed_noise(df, plan)  # the sensor's noise, then the DAQ's filter (if injected) acts on it
     if "speed_tau_s" in daq:
         df = lowpass_speed(df, daq["speed_tau_s"])
     truth = {"injections": injected, "plan": asdict(plan), "engine": engine, "motor": nominal.name}
     if plan.run_scatter > 0:
         truth["run_contact_factors"] = {"P0": factors[:, 0].tolist(), "mu_p": factors[:, 1].tolist()}
+    if any(k.startswith(RIG_PREFIX) for k in overrides):
+        truth["run_factors"] = {"supply": per_run["supply"].tolist(), "preload": per_run["preload"].tolist()}
     return df, truth
 
 
-def _run_serially(motors, nominal, conditions, plan, engine, fmu_dir, bar, freqs=None) -> list:
+def _run_serially(motors, nominal, conditions, plan, engine, fmu_dir, bar, supply, freqs=None) -> list:
     """The runs one after the other on one experiment clock; the stator temperature carried over."""
     frames, t_next, T_st = [], 0.0, plan.ambient_degC
     for k, (V, L, d) in enumerate(conditions):
         motor = motors[k]
         spec = RunSpec(k + 1, V, L, d, t_next, T_st if motor.stator.thermal_tau_s > 0 else None,
-                       None if freqs is None else float(freqs[k]))
+                       None if freqs is None else float(freqs[k]), float(supply[k]))
         f = simulate_run(motor, spec, plan, engine, fmu_dir, nominal)
         frames.append(f)
         t_next = float(f[dataio.TIME].iloc[-1]) + plan.pause_s
@@ -495,11 +563,12 @@ def _run_serially(motors, nominal, conditions, plan, engine, fmu_dir, bar, freqs
     return frames
 
 
-def _run_on_cluster(motors, nominal, conditions, plan, engine, fmu_dir, bar, workers, scheduler, freqs=None) -> list:
+def _run_on_cluster(motors, nominal, conditions, plan, engine, fmu_dir, bar, workers, scheduler, supply,
+                    freqs=None) -> list:
     """Independent runs on the Dask engine, then laid on one experiment clock in rig order."""
     from ..cluster import dask_client, run_tasks
-    specs = [RunSpec(k + 1, V, L, d, f_Hz=None if freqs is None else float(freqs[k]))
-             for k, (V, L, d) in enumerate(conditions)]
+    specs = [RunSpec(k + 1, V, L, d, f_Hz=None if freqs is None else float(freqs[k]),
+                     supply_factor=float(supply[k])) for k, (V, L, d) in enumerate(conditions)]
     frames = [None] * len(specs)
     with dask_client(workers, scheduler) as client:
         where = None if fmu_dir is None else str(fmu_dir)

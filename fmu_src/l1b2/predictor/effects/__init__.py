@@ -17,7 +17,8 @@ Families (registration order = the library's candidate order):
 (``speed_dependent_friction``, ``inertia_mismatch``), :mod:`~.interactions`
 (``load_slope_voltage``, ``damping_voltage``, ``position_load``) and
 :mod:`~.generic` (``smooth``, ``smooth_pair``) and :mod:`~.channels` (``channel``: every
-logged channel and the protocol's clock in generic forms).
+logged channel and the protocol's clock in generic forms; ``run_level``: a run-level signal explaining the runs'
+own deviations, offered by the close loop's run-level analysis, not by a library).
 """
 
 from __future__ import annotations

@@ -115,3 +115,91 @@ class Channel(Effect):
 
 _FORM_TEXT = {"friction": "scaling the friction level", "force_factor": "scaling the drive's force factor",
               "force": "adding a force"}
+
+
+#: the required inputs that are run-level signals of the recording protocol: ``(column, transform)``; ``drive``
+#: multiplies the run's value by the direction (the load in drive coordinates, opposing > 0), ``abs`` takes its size
+#: standard gravity [m/s^2]: the load's weight per kg in the run-level family's load column
+G_N_PER_KG = 9.81
+INPUT_SIGNALS = (("voltage_V", "none"), ("load_kg", "drive"), ("load_kg", "abs"), ("direction", "none"))
+TRANSFORMS = ("none", "drive", "abs")
+REGRESSOR_NAMES.update({"voltage_V": "voltage", "load_kg": "load", "direction": "direction"})
+
+
+def signal_label(column: str, transform: str = "none") -> str:
+    """The report's name of a run-level signal: the column, ``d*<column>`` or ``|<column>|``."""
+    return {"none": column, "drive": f"d*{column}", "abs": f"|{column}|"}[transform]
+
+
+def run_signal(x, column: str, transform: str) -> np.ndarray:
+    """Each sample's run-level value of a signal: the run's mean of ``column``, times ``d`` (``drive``) or its size."""
+    c = signal(x, signal_key(column, "run"))
+    if transform == "drive":
+        return c * signal(x, "d")
+    if transform == "abs":
+        return np.abs(c)
+    if transform == "none":
+        return c
+    raise EffectSpecError(f"run-level transform {transform!r} is not one of {', '.join(TRANSFORMS)}")
+
+
+@register
+class RunLevel(Effect):
+    """``run_level``: a run's deviation from the model, a force gain and an offset, explained by a run-level signal.
+
+    Each run's own deviation from the current model is estimated as a gain of the drive force and an offset
+    (:mod:`l1b2.closeloop.runlevel`); a run-level signal ``c`` (a channel's run mean, the session clock's run mean,
+    V0, the drive-coordinate load, its size, the direction) that explains them enters as
+    ``dF = z (a V0/V_ref + b + c g d m)`` with ``z = (c - mean) / sd`` (TRAIN's run values), ``g d m`` the load's
+    weight in drive coordinates: it scales the drive force, adds a force and scales the load's force (a signal
+    that changes the contact changes the load's slope too); constant along the stroke, three parameters
+    (``a``, ``b`` [N per standard deviation], ``c`` [1 per standard deviation]). Not listed by any candidate
+    library: the loop offers the hypotheses of this family whose run-level evidence is significant (report
+    family ``run_level_<signal>``).
+    """
+
+    kind = "run_level"
+    regressor = "run"
+    group = "run_level"
+    description = "a run-level signal scaling the drive force and adding a force (constant along the stroke)"
+
+    signals = ("load",)
+
+    def needs(self, spec):
+        return super().needs(spec) | {signal_key(str(spec.get("channel")), "run")}
+
+    def features(self, spec, x):
+        c = run_signal(x, str(spec.get("channel")), str(spec.get("transform", "none")))
+        sd = num(spec, "sd")
+        if not sd > 0:
+            raise EffectSpecError(f"run-level signal {spec.get('channel')!r}: standard deviation {sd} is not positive")
+        z = (c - num(spec, "mean")) / sd
+        return np.column_stack([signal(x, "V0") / V_REF * z, z, G_N_PER_KG * signal(x, "d") * signal(x, "load") * z])
+
+    def width(self, spec):
+        return 3
+
+    def hypotheses(self, signals_: list) -> list:
+        """One hypothesis per run-level signal ``{"channel", "transform", "mean", "sd"}`` (``sd`` > 0)."""
+        out = []
+        for sg in signals_:
+            col, tr = sg["channel"], sg.get("transform", "none")
+            label = signal_label(col, tr)
+            out.append(self.hypothesis(
+                [f"{label}_run_gain", f"{label}_run_offset", f"{label}_run_load"], ["N", "N", "1"],
+                {"channel": col, "transform": tr, "mean": float(sg["mean"]), "sd": float(sg["sd"])}, "run",
+                family=f"run_level_{label}", regressor=regressor_of(col), generic=True,
+                description=f"run-level {label} scaling the drive force, adding a force and scaling the "
+                            "load's force (run mean, constant along the stroke)"))
+        return out
+
+    def grid(self, train):
+        """The run-level hypothesis of every candidate channel (standardised by TRAIN's sample mean and sd) and
+        of the session clock. The loop does not list these: its run-level analysis offers :meth:`hypotheses`
+        standardised by the runs' own values, for the signals whose evidence is significant."""
+        chans = [ch for ch in train.channels if ch.get("sd", 0) > 0 and ch.get("kind") != "response"]
+        if not any(ch["name"] == SESSION_TIME for ch in chans):
+            t0, t1 = train.time_range
+            chans.append({"name": SESSION_TIME, "mean": 0.5 * (t0 + t1), "sd": (t1 - t0) / np.sqrt(12.0)})
+        return self.hypotheses([{"channel": ch["name"], "transform": "none", "mean": ch["mean"], "sd": ch["sd"]}
+                                for ch in chans])

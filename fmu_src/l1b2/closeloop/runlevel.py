@@ -1,0 +1,387 @@
+"""Run-level evidence: each run's own deviation from the current model, shrunk as random effects, and the
+run-level signals that explain it.
+
+Many rig effects change between runs, not along the stroke (a supply that differs from run to run, a contact
+that re-seats, a clamp that settles). They show in each run's *own* deviation from the model, which this module
+estimates and explains:
+
+1. **Per-run deviations** (:func:`run_deviations`): the model's one-step residual in drive coordinates, as a
+   force, ``f_k = d (v_k - v^_k) m_eff / dt`` [N] (``v^_k`` predicted from the measured sample before), is fitted
+   per run by least squares on ``[B'(s) V0 / <B' V0>, 1]``: a gain of the model's drive force (a share of it)
+   and an offset [N]. Their sampling covariance is the least-squares one with the residual variance inflated
+   for lag-1 autocorrelation (``(1 + rho) / (1 - rho)``).
+2. **Shrinkage** (:func:`reml`): the runs' ``theta_r`` (gain, offset) are a random-effects model
+   ``theta_r = X_r beta + u_r + e_r``, ``u_r ~ N(0, T)`` between runs, ``e_r ~ N(0, S_r)`` the sampling error;
+   ``T`` (2 x 2) is estimated by restricted maximum likelihood (EM iterations) and each run's deviation is its
+   best linear unbiased prediction ``X_r beta + T W_r (theta_r - X_r beta)``, ``W_r = (T + S_r)^-1``.
+3. **Explanation** (:func:`signal_evidence`): each run-level signal ``z`` (standardised) enters the mean
+   (:func:`signal_design`): the gain as ``g0 + g1 z_r``, the offset as ``o0 + o1 z_r + o2 z_r w_r`` with
+   ``w_r = d m / max|m|`` the run's drive-coordinate load (a signal that changes the contact changes the load's
+   slope as well as the drive); its evidence is the Wald test of ``(g1, o1, o2)`` (chi-square, 3 degrees of
+   freedom; 2 without load variation) and the cross-validated share of the runs' weighted held-out deviation
+   it removes (folds over runs: contiguous blocks of the session for the session clock,
+   :func:`l1b2.closeloop.acceptance.session_blocks`).
+   A signal is significant when its p-value is below ``alpha`` / number of signals tested (Bonferroni) and its
+   cross-validated gain is positive. The loop offers the strongest significant one (:func:`offer`) as a
+   :class:`~l1b2.predictor.effects.channels.RunLevel` candidate to the same cross-validated refit acceptance as
+   every other candidate.
+
+Signals (:func:`run_signals`): each candidate channel's run mean (the logged columns, the session clock
+``time_s``, which also orders the runs), V0, the drive-coordinate load ``d m``, its size and the direction.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+from ..data import measurements as dataio
+from ..predictor import effects as fx
+from ..predictor import model as pr
+from . import residuals as res
+
+#: EM iterations of the REML fit and its relative tolerance on T
+REML_ITER = 400
+REML_TOL = 1e-8
+
+
+@dataclass
+class RunDeviations:
+    """Each run's least-squares deviation from the model: ``theta`` (n_runs, 2) = (gain [1], offset [N]),
+    ``cov`` (n_runs, 2, 2) its sampling covariance, ``runs`` the run ids, ``n`` the samples used per run,
+    ``load`` each run's drive-coordinate load ``d m / max|m|`` (None: no load varies)."""
+
+    runs: np.ndarray
+    theta: np.ndarray
+    cov: np.ndarray
+    n: np.ndarray
+    load: np.ndarray | None = None
+
+
+def one_step_force(df: pd.DataFrame, model, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(f, gain_regressor, used)``: the one-step residual as a force [N] (drive coordinates), the model's drive
+    force relative to its TRAIN mean, and the samples used (masked, not a run's first)."""
+    p = model.params_
+    d = df[dataio.DIRECTION].to_numpy(float)
+    v = df[dataio.SPEED].to_numpy(float)
+    t = df[dataio.TIME].to_numpy(float)
+    load = df[dataio.LOAD].to_numpy(float)
+    e = d * (v - np.asarray(model.predict_one_step(df), float))
+    dt = np.zeros(len(df))
+    dt[1:] = np.diff(t)
+    first = np.zeros(len(df), bool)
+    for _, sl in dataio.run_slices(df[dataio.RUN]):
+        first[sl.start] = True
+    used = np.asarray(mask, bool) & ~first & (dt > 0)
+    m_eff = np.broadcast_to(pr.effective_mass(p, load, model.m_s_), (len(df),))
+    f = np.zeros(len(df))
+    f[used] = e[used] * m_eff[used] / dt[used]
+    s_prev = np.roll(df[dataio.POSITION].to_numpy(float), 1)
+    _, Bp, _ = pr.position_terms(p, s_prev)
+    drive = np.asarray(Bp, float) * df[dataio.VOLTAGE].to_numpy(float)
+    scale = float(np.mean(np.abs(drive[used]))) if used.any() else 1.0
+    return f, drive / (scale if scale > 0 else 1.0), used
+
+
+def run_deviations(df: pd.DataFrame, model, mask: np.ndarray) -> RunDeviations:
+    """Per-run least squares of the one-step force on (relative drive force, 1): see the module's step 1."""
+    f, g, used = one_step_force(df, model, mask)
+    runs, th, cv, ns, w = [], [], [], [], []
+    dm = df[dataio.DIRECTION].to_numpy(float) * df[dataio.LOAD].to_numpy(float)
+    for run, sl in dataio.run_slices(df[dataio.RUN]):
+        u = used[sl]
+        if u.sum() < 8:
+            continue
+        X = np.column_stack([g[sl][u], np.ones(int(u.sum()))])
+        y = f[sl][u]
+        XtX = X.T @ X
+        if np.linalg.cond(XtX) > 1e12:
+            continue
+        beta = np.linalg.solve(XtX, X.T @ y)
+        r = y - X @ beta
+        rho = float(np.clip(res.acf(r, 1)[1], 0.0, 0.98)) if len(r) > 2 else 0.0
+        s2 = float(r @ r) / max(len(r) - 2, 1) * (1 + rho) / (1 - rho)
+        runs.append(run)
+        th.append(beta)
+        cv.append(s2 * np.linalg.inv(XtX))
+        ns.append(int(u.sum()))
+        w.append(float(np.mean(dm[sl])))
+    w = np.array(w, float)
+    scale = float(np.max(np.abs(w))) if len(w) else 0.0
+    return RunDeviations(np.array(runs), np.array(th, float).reshape(-1, 2), np.array(cv, float).reshape(-1, 2, 2),
+                         np.array(ns), w / scale if scale > 0 else None)
+
+
+@dataclass
+class REMLFit:
+    """A random-effects fit: ``T`` between-run covariance, ``beta`` the mean's coefficients with covariance
+    ``beta_cov``, ``blup`` each run's shrunk deviation, ``iterations`` of the EM."""
+
+    T: np.ndarray
+    beta: np.ndarray
+    beta_cov: np.ndarray
+    blup: np.ndarray
+    iterations: int
+
+
+def design_rows(z: np.ndarray | None, n: int, p: int) -> np.ndarray:
+    """The mean's design per run, ``(n, p, p * q)``: ``I_p (x) [1, z_r...]`` (``z`` (n, q) or None: intercepts)."""
+    x = np.ones((n, 1)) if z is None else np.column_stack([np.ones(n), np.asarray(z, float).reshape(n, -1)])
+    return np.einsum("ij,rk->rijk", np.eye(p), x).reshape(n, p, p * x.shape[1])
+
+
+def signal_design(z: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
+    """The mean's design of a signal, ``(n, 2, 5)`` (``(n, 2, 4)`` without ``w``): gain row ``[1, z, 0, 0, 0]``,
+    offset row ``[0, 0, 1, z, z w]``; coefficients ``(g0, g1, o0, o1, o2)``."""
+    z = np.asarray(z, float)
+    n = len(z)
+    one, zero = np.ones(n), np.zeros(n)
+    gain = [one, z, zero, zero]
+    off = [zero, zero, one, z]
+    if w is not None:
+        gain.append(zero)
+        off.append(z * np.asarray(w, float))
+    return np.stack([np.column_stack(gain), np.column_stack(off)], axis=1)
+
+
+def reml(theta: np.ndarray, cov: np.ndarray, X: np.ndarray | None = None, *, n_iter: int = REML_ITER,
+         tol: float = REML_TOL) -> REMLFit:
+    """Restricted maximum likelihood of ``theta_r = X_r beta + u_r + e_r`` by EM (``theta`` (n, p), ``cov``
+    (n, p, p) the sampling covariances, ``X`` (n, p, k) the mean's design, default intercepts).
+
+    EM step: ``T <- mean_r (b_r b_r' + T - T W_r T + T W_r X_r C X_r' W_r T)`` with ``W_r = (T + S_r)^-1``,
+    ``C = (sum X' W X)^-1`` and ``b_r = T W_r (theta_r - X_r beta)`` (the last term is REML's correction for
+    the estimated mean). Scalar, equal ``S_r = s2``, intercept only: ``T = max(0, var(theta, ddof=1) - s2)``.
+    """
+    theta = np.asarray(theta, float)
+    n, p = theta.shape
+    X = design_rows(None, n, p) if X is None else np.asarray(X, float)
+    S = np.asarray(cov, float)
+    # start from above (the residuals' spread about the unweighted mean fit): EM moves a variance component
+    # started near zero only very slowly
+    r0 = theta - np.einsum("rpk,k->rp", X, np.linalg.lstsq(X.reshape(-1, X.shape[2]), theta.ravel(), rcond=None)[0])
+    T = np.diag(np.maximum(np.mean(r0 ** 2, axis=0), 1e-300))
+    it = 0
+    for it in range(1, n_iter + 1):
+        W = np.linalg.inv(T[None] + S)
+        XtW = np.einsum("rpk,rpq->rkq", X, W)
+        C = np.linalg.inv(np.einsum("rkq,rqj->kj", XtW, X))
+        beta = C @ np.einsum("rkq,rq->k", XtW, theta)
+        resid = theta - np.einsum("rpk,k->rp", X, beta)
+        TW = np.einsum("pq,rqs->rps", T, W)
+        b = np.einsum("rps,rs->rp", TW, resid)
+        TWX = np.einsum("rps,rsk->rpk", TW, X)
+        corr = np.einsum("rpk,kj,rqj->rpq", TWX, C, TWX)
+        T_new = np.mean(b[:, :, None] * b[:, None, :] + T[None] - np.einsum("rps,qs->rpq", TW, T) + corr, axis=0)
+        T_new = 0.5 * (T_new + T_new.T)
+        done = np.max(np.abs(T_new - T)) <= tol * max(np.max(np.abs(T)), 1e-300)
+        T = T_new
+        if done:
+            break
+    W = np.linalg.inv(T[None] + S)
+    XtW = np.einsum("rpk,rpq->rkq", X, W)
+    C = np.linalg.inv(np.einsum("rkq,rqj->kj", XtW, X))
+    beta = C @ np.einsum("rkq,rq->k", XtW, theta)
+    mean = np.einsum("rpk,k->rp", X, beta)
+    blup = mean + np.einsum("pq,rqs,rs->rp", T, W, theta - mean)
+    return REMLFit(T, beta, C, blup, it)
+
+
+def heterogeneity(theta: np.ndarray, cov: np.ndarray) -> tuple[float, float]:
+    """Cochran's Q of the runs' deviations about their precision-weighted mean and its chi-square p-value
+    (``p (n - 1)`` degrees of freedom): small p, the runs differ by more than their sampling error."""
+    W = np.linalg.inv(cov)
+    mu = np.linalg.solve(W.sum(axis=0), np.einsum("rpq,rq->p", W, theta))
+    r = theta - mu
+    q = float(np.einsum("rp,rpq,rq->", r, W, r))
+    dof = theta.shape[1] * (len(theta) - 1)
+    return q, float(stats.chi2.sf(q, dof)) if dof > 0 else 1.0
+
+
+@dataclass
+class SignalEvidence:
+    """One run-level signal's evidence: Wald p-value of its coefficients, cross-validated gain, the coefficients
+    (gain [1 per sd], offset [N per sd], offset per unit drive-coordinate load [N per sd]) and whether it passed
+    (Bonferroni level and a positive gain)."""
+
+    channel: str
+    transform: str
+    label: str
+    regressor: str
+    mean: float
+    sd: float
+    p_value: float = 1.0
+    cv_gain: float = 0.0
+    coef: tuple = (0.0, 0.0, 0.0)
+    significant: bool = False
+    blocked_folds: bool = False
+    per_run: np.ndarray = field(default=None, repr=False)
+
+    def to_dict(self) -> dict:
+        return {"signal": self.label, "regressor": self.regressor, "p_value": self.p_value, "cv_gain": self.cv_gain,
+                "gain_per_sd": self.coef[0], "offset_per_sd_N": self.coef[1],
+                "load_offset_per_sd_N": self.coef[2], "significant": self.significant,
+                "folds": "session blocks" if self.blocked_folds else "runs"}
+
+
+def run_signals(df: pd.DataFrame, channels) -> list[dict]:
+    """The run-level signals of a frame: each candidate channel's run mean (not the responses, not constant ones)
+    and the inputs of :data:`~l1b2.predictor.effects.channels.INPUT_SIGNALS`; ``{"channel", "transform", "values"}``
+    with one value per run (in run order)."""
+    out = []
+    first = df.groupby(dataio.RUN, sort=False)
+    for ch in channels:
+        if ch.get("kind") == "response" or ch["name"] not in df.columns:
+            continue
+        out.append({"channel": ch["name"], "transform": "none", "values": first[ch["name"]].mean().to_numpy(float)})
+    d = first[dataio.DIRECTION].first().to_numpy(float)
+    for col, tr in fx.channels.INPUT_SIGNALS:
+        v = first[col].mean().to_numpy(float)
+        out.append({"channel": col, "transform": tr, "values": v * d if tr == "drive" else np.abs(v) if tr == "abs"
+                    else v})
+    return [s for s in out if np.all(np.isfinite(s["values"])) and np.std(s["values"]) > 0]
+
+
+def _weighted_sse(theta, cov, T, X, beta) -> np.ndarray:
+    """Per run ``(theta_r - X_r beta)' (T + S_r)^-1 (theta_r - X_r beta)``."""
+    r = theta - np.einsum("rpk,k->rp", X, beta)
+    return np.einsum("rp,rpq,rq->r", r, np.linalg.inv(T[None] + cov), r)
+
+
+def cv_signal_gain(theta, cov, z, folds_idx, w=None) -> tuple[float, np.ndarray]:
+    """Held-out share of the runs' weighted deviation that the signal ``z`` removes, and the per-run reductions.
+
+    For each fold (indices of held-out runs) the null (intercepts) and the signal's model are fitted by REML on
+    the other runs; the held-out runs' weighted squared deviations (weights ``(T0 + S_r)^-1`` of the null fit,
+    the same for both) are compared: gain ``1 - sum SSE1 / sum SSE0``.
+    """
+    n, p = theta.shape
+    X0, X1 = design_rows(None, n, p), signal_design(z, w)
+    s0, s1 = np.zeros(n), np.zeros(n)
+    for te in folds_idx:
+        tr = np.setdiff1d(np.arange(n), te)
+        f0 = reml(theta[tr], cov[tr], X0[tr], n_iter=100)
+        f1 = reml(theta[tr], cov[tr], X1[tr], n_iter=100)
+        s0[te] = _weighted_sse(theta[te], cov[te], f0.T, X0[te], f0.beta)
+        s1[te] = _weighted_sse(theta[te], cov[te], f0.T, X1[te], f1.beta)
+    gain = float(1 - s1.sum() / s0.sum()) if s0.sum() > 0 else 0.0
+    return gain, (s0 - s1) / max(s0.mean(), 1e-300)
+
+
+def signal_evidence(dev: RunDeviations, signals_, *, alpha: float, k: int, seed: int,
+                    session_order: np.ndarray | None = None) -> list[SignalEvidence]:
+    """Every signal's evidence (:class:`SignalEvidence`), strongest first (smallest p-value).
+
+    ``signals_`` as :func:`run_signals` (values in ``dev.runs``' order); ``session_order``: each run's start
+    time (its rank orders the contiguous session blocks of the session clock's folds).
+    """
+    n = len(dev.runs)
+    out = []
+    if n < 6:
+        return out
+    level = alpha / max(len(signals_), 1)
+    rand = [np.flatnonzero(np.isin(dev.runs, f)) for f in res.run_folds(dev.runs, k, seed)]
+    order = np.argsort(session_order) if session_order is not None else np.arange(n)
+    blocks = [np.sort(b) for b in np.array_split(order, min(k, n))]
+    for sg in signals_:
+        v = np.asarray(sg["values"], float)
+        mean, sd = float(np.mean(v)), float(np.std(v))
+        z = (v - mean) / sd
+        fit = reml(dev.theta, dev.cov, signal_design(z, dev.load))
+        idx = [1, 3, 4] if dev.load is not None else [1, 3]     # (g1, o1[, o2]) of signal_design
+        b = fit.beta[idx]
+        C = fit.beta_cov[np.ix_(idx, idx)]
+        try:
+            wald = float(b @ np.linalg.solve(C, b))
+            p = float(stats.chi2.sf(wald, len(idx)))
+        except np.linalg.LinAlgError:
+            p = 1.0
+        blocked = sg["channel"] == fx.channels.SESSION_TIME
+        gain, per_run = cv_signal_gain(dev.theta, dev.cov, z, blocks if blocked else rand, dev.load)
+        label = fx.channels.signal_label(sg["channel"], sg["transform"])
+        out.append(SignalEvidence(sg["channel"], sg["transform"], label, fx.channels.regressor_of(sg["channel"]),
+                                  mean, sd, p, gain, tuple(float(x) for x in b) + (0.0,) * (3 - len(b)),
+                                  bool(p < level and gain > 0),
+                                  blocked, per_run))
+    return sorted(out, key=lambda e: (e.p_value, -e.cv_gain))
+
+
+@dataclass
+class RunLevelAnalysis:
+    """The run-level analysis against one model: the deviations, their REML fit, heterogeneity, signal evidence."""
+
+    deviations: RunDeviations
+    fit: REMLFit | None
+    q: float
+    q_p: float
+    evidence: list
+    level: float
+
+    @property
+    def significant(self) -> list:
+        return [e for e in self.evidence if e.significant]
+
+    def to_dict(self) -> dict:
+        """The report's ``diagnosis.run_level`` summary (the per-signal evidence is in ``channels_considered``)."""
+        T = self.fit.T if self.fit is not None else np.full((2, 2), np.nan)
+        return {"runs": int(len(self.deviations.runs)),
+                "between_run_sd_gain": float(np.sqrt(max(T[0, 0], 0.0))),
+                "between_run_sd_offset_N": float(np.sqrt(max(T[1, 1], 0.0))),
+                "mean_gain": float(self.fit.beta[0]) if self.fit is not None else None,
+                "mean_offset_N": float(self.fit.beta[1]) if self.fit is not None else None,
+                "heterogeneity_Q": self.q if np.isfinite(self.q) else None, "heterogeneity_p": self.q_p,
+                "significance_level": self.level,
+                "significant_signals": [e.label for e in self.significant]}
+
+
+def analyse(df: pd.DataFrame, model, mask: np.ndarray, channels, *, alpha: float, k: int,
+            seed: int) -> RunLevelAnalysis:
+    """Deviations of every run from ``model``, their REML shrinkage and every run-level signal's evidence."""
+    dev = run_deviations(df, model, mask)
+    sigs = run_signals(df, channels)
+    keep = pd.Index(pd.unique(df[dataio.RUN])).get_indexer(dev.runs)
+    sigs = [{**s, "values": s["values"][keep]} for s in sigs]
+    start = df.groupby(dataio.RUN, sort=False)[dataio.TIME].min().to_numpy(float)[keep]
+    level = alpha / max(len(sigs), 1)
+    if len(dev.runs) < 6:
+        return RunLevelAnalysis(dev, None, float("nan"), 1.0, [], level)
+    q, qp = heterogeneity(dev.theta, dev.cov)
+    return RunLevelAnalysis(dev, reml(dev.theta, dev.cov), q, qp,
+                            signal_evidence(dev, sigs, alpha=alpha, k=k, seed=seed, session_order=start), level)
+
+
+def candidates(analysis: RunLevelAnalysis, ctx) -> list:
+    """The :class:`~l1b2.closeloop.candidates.CandidateForce` of every significant signal, strongest first."""
+    from .candidates import candidate
+    fam = fx.family("run_level")
+    hyps = fam.hypotheses([{"channel": e.channel, "transform": e.transform, "mean": e.mean, "sd": e.sd}
+                           for e in analysis.significant])
+    return [candidate(ctx, h) for h in hyps]
+
+
+def is_run_level(c) -> bool:
+    """Whether a candidate is constant along the stroke by construction (a run-level family or a channel's run mean)."""
+    spec = c.spec or {}
+    return spec.get("kind") == "run_level" or (spec.get("kind") == "channel" and spec.get("level") == "run")
+
+
+def offer(found: list, short: list, allowed) -> list:
+    """The run-level candidates offered to a round's cross-validated refit (at most two, strongest first).
+
+    ``found``: :func:`candidates` (strongest first); ``short``: the round's shortlisted scores; ``allowed(c)``:
+    not added yet and not collinear with what is. The strongest allowed one whose family is not shortlisted;
+    when its regressor is already among the shortlist's, also the strongest allowed one of another regressor
+    (the run-level evidence then points somewhere the linearised screen did not look).
+    """
+    fams = {s.candidate.family for s in short}
+    regs = {r for s in short for r in s.candidate.regressors}
+    ok = [c for c in found if c.family not in fams and allowed(c)]
+    if not ok:
+        return []
+    out = ok[:1]
+    if out[0].regressor in regs:
+        out += [c for c in ok[1:] if c.regressor not in regs and c.regressor != out[0].regressor][:1]
+    return out

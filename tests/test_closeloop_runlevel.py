@@ -1,0 +1,286 @@
+"""Run-level evidence, folds that respect the session, the response-column option and the run-level rig
+injections (issue 28, items 3 and 7), each against a formula written out here.
+
+Fast unit tests (seconds): a fold split that is not contiguous in the session, a block never held out, a REML
+estimate without its restricted correction, a dropped Bonferroni correction over the run-level signals or a
+wrong run-level feature fails one of them. The realistic-world cases of the two rig injections are in
+``tests/test_closeloop_runlevel_slow.py``.
+"""
+
+import types
+
+import numpy as np
+import pandas as pd
+import pytest
+from l1b2.cli import build_parser
+from l1b2.closeloop import acceptance as acc
+from l1b2.closeloop import runlevel as rl
+from l1b2.closeloop.candidates import CandidateForce, channels_of
+from l1b2.closeloop.loop import CloseLoop, prefer
+from l1b2.predictor import effects as fx
+from l1b2.rig import experiment as rig
+
+
+# ---------------------------------------------------------------------------
+# folds that are blocks of the session
+# ---------------------------------------------------------------------------
+
+def _session(n_runs=23, seed=4):
+    """Runs whose ids are NOT in session order (a shuffled numbering), 3 samples each, 1 s apart."""
+    rng = np.random.default_rng(seed)
+    ids = rng.permutation(np.arange(100, 100 + n_runs))
+    rows = [pd.DataFrame({"run": r, "time_s": 10.0 * k + np.arange(3) * 0.1}) for k, r in enumerate(ids)]
+    return pd.concat(rows, ignore_index=True), ids            # ids[k]: the k-th run of the session
+
+
+@pytest.mark.parametrize("k", [2, 4, 5])
+def test_session_blocks_are_contiguous_stretches_of_the_session_each_held_out_once(k):
+    df, order = _session()
+    blocks = acc.session_blocks(df, k)
+    assert len(blocks) == k
+    assert sorted(np.concatenate(blocks).tolist()) == sorted(order.tolist())          # every run exactly once
+    sizes = [len(b) for b in blocks]
+    assert max(sizes) - min(sizes) <= 1                                              # balanced
+    # written out: block j is the session's runs from sum(sizes[:j]) to sum(sizes[:j+1]), in session order
+    edges = np.cumsum([0] + sizes)
+    for j, b in enumerate(blocks):
+        assert b.tolist() == order[edges[j]:edges[j + 1]].tolist()
+    # the same split whatever the frame's row order (runs are ordered by their first time, not by id or row)
+    shuffled = df.sample(frac=1.0, random_state=1).sort_values(["run", "time_s"])
+    assert [b.tolist() for b in acc.session_blocks(shuffled, k)] == [b.tolist() for b in blocks]
+
+
+def test_time_dependent_candidates_are_those_reading_the_session_clock():
+    train = fx.TrainingSummary(m_s=0.12, time_range=(0.0, 300.0), position_range=(-0.012, 0.012),
+                               voltage_median=270.0, ranges={"t_lo": 0.0, "t_hi": 300.0, "s_lo": -0.012,
+                                                             "s_hi": 0.012, "V_lo": 220.0, "V_hi": 324.0,
+                                                             "load_abs": 0.09, "v_lo": 0.0, "v_hi": 0.3},
+                               channels=({"name": "aux", "kind": "logged", "mean": 1.0, "sd": 0.5,
+                                          "within_run": False},))
+
+    def cands(kind):
+        return [CandidateForce(h.family, h.regressor, h.shape, h.names, h.units, None, also=h.also, spec=h.spec)
+                for h in fx.family(kind).grid(train)]
+    smooth = {c.family: acc.time_dependent(c) for c in cands("smooth")}
+    assert smooth["smooth_time"] and not smooth["smooth_load"] and not smooth["smooth_position"]
+    chan = {(c.spec["channel"], c.spec["level"]): acc.time_dependent(c) for c in cands("channel")}
+    assert chan["time_s", "run"] and chan["time_s", "sample"] and not chan["aux", "run"]
+    runl = {c.spec["channel"]: acc.time_dependent(c) for c in cands("run_level")}
+    assert runl == {"aux": False, "time_s": True}
+    assert not any(acc.time_dependent(c) for c in cands("load_path_friction"))
+    assert all(acc.time_dependent(c) for c in cands("thermal_drift"))
+
+
+# ---------------------------------------------------------------------------
+# REML shrinkage and the run-level evidence
+# ---------------------------------------------------------------------------
+
+def test_reml_of_equal_variances_is_the_sample_variance_less_the_sampling_variance():
+    # written out: theta_r = mu + u_r + e_r, var(e) = s2 for every run: REML tau2 = var(theta, ddof=1) - s2
+    # (ML would use ddof=0); BLUP = mu + tau2/(tau2 + s2) (theta - mu)
+    rng = np.random.default_rng(0)
+    n, s2 = 30, 0.25
+    theta = rng.normal(2.0, 1.0, n)
+    fit = rl.reml(theta[:, None], np.full((n, 1, 1), s2))
+    tau2 = np.var(theta, ddof=1) - s2
+    assert fit.T[0, 0] == pytest.approx(tau2, rel=1e-6)
+    assert fit.beta[0] == pytest.approx(theta.mean(), rel=1e-9)
+    assert fit.beta_cov[0, 0] == pytest.approx((tau2 + s2) / n, rel=1e-6)
+    np.testing.assert_allclose(fit.blup[:, 0], theta.mean() + tau2 / (tau2 + s2) * (theta - theta.mean()), rtol=1e-6)
+
+
+def test_reml_with_a_covariate_uses_the_residual_degrees_of_freedom():
+    # written out: equal variances, mean a + b z: tau2 = RSS/(n - 2) - s2, (a, b) the least-squares line
+    rng = np.random.default_rng(1)
+    n, s2 = 40, 0.1
+    z = rng.normal(size=n)
+    theta = 1.0 + 0.7 * z + rng.normal(0, 0.8, n)
+    X = np.column_stack([np.ones(n), z])
+    coef, rss = np.linalg.lstsq(X, theta, rcond=None)[:2]
+    fit = rl.reml(theta[:, None], np.full((n, 1, 1), s2), rl.design_rows(z, n, 1))
+    assert fit.T[0, 0] == pytest.approx(float(rss[0]) / (n - 2) - s2, rel=1e-6)
+    np.testing.assert_allclose(fit.beta, coef, rtol=1e-8)
+
+
+def test_design_rows_put_each_component_on_its_own_intercept_and_slope():
+    z = np.array([0.5, -1.0])
+    D = rl.design_rows(z, 2, 2)
+    np.testing.assert_array_equal(D[0], [[1, 0.5, 0, 0], [0, 0, 1, 0.5]])
+    np.testing.assert_array_equal(D[1], [[1, -1.0, 0, 0], [0, 0, 1, -1.0]])
+    w = np.array([0.2, -0.4])          # the signal's design: the offset also scales with the run's load
+    S = rl.signal_design(z, w)
+    np.testing.assert_array_equal(S[0], [[1, 0.5, 0, 0, 0], [0, 0, 1, 0.5, 0.1]])
+    np.testing.assert_array_equal(S[1], [[1, -1.0, 0, 0, 0], [0, 0, 1, -1.0, 0.4]])
+    np.testing.assert_array_equal(rl.signal_design(z), D)
+
+
+def test_heterogeneity_is_cochrans_q():
+    theta = np.array([[1.0], [2.0], [4.0], [3.0]])
+    cov = np.full((4, 1, 1), 0.5)
+    q, p = rl.heterogeneity(theta, cov)
+    assert q == pytest.approx(np.sum((theta - 2.5) ** 2) / 0.5)
+    from scipy import stats
+    assert p == pytest.approx(stats.chi2.sf(q, 3))
+
+
+def _deviations(n=48, seed=2, slope=(0.04, 0.3)):
+    """Runs' (gain, offset) with a between-run spread, a part explained by ``z`` and sampling noise."""
+    rng = np.random.default_rng(seed)
+    z = rng.normal(size=n)
+    S = np.array([[4e-4, 0.0], [0.0, 0.01]])
+    theta = (np.array([1.0, 0.0]) + np.outer(z, slope) + rng.multivariate_normal([0, 0], np.diag([1e-4, 4e-3]), n)
+             + rng.multivariate_normal([0, 0], S, n))
+    return rl.RunDeviations(np.arange(n), theta, np.repeat(S[None], n, axis=0), np.full(n, 500)), z, rng
+
+
+def test_a_signal_explaining_the_runs_deviations_is_significant_and_noise_is_not_bonferroni_over_signals():
+    dev, z, rng = _deviations()
+    sigs = [{"channel": "aux", "transform": "none", "values": 3.0 + 2.0 * z},
+            {"channel": "noise", "transform": "none", "values": rng.normal(size=len(z))},
+            {"channel": "time_s", "transform": "none", "values": np.arange(len(z), dtype=float)}]
+    ev = {e.channel: e for e in rl.signal_evidence(dev, sigs, alpha=0.01, k=4, seed=0,
+                                                   session_order=np.arange(len(z), dtype=float))}
+    assert ev["aux"].significant and ev["aux"].p_value < 1e-6 and ev["aux"].cv_gain > 0.3
+    # the coefficients are per standard deviation of the signal: (gain, offset) slope x sd(z) / sd(values) x sd
+    assert ev["aux"].coef[0] == pytest.approx(0.04 * np.std(z), rel=0.3)
+    assert ev["aux"].coef[1] == pytest.approx(0.3 * np.std(z), rel=0.3)
+    assert not ev["noise"].significant
+    for e in ev.values():                      # Bonferroni over the three signals, and a positive held-out gain
+        assert e.significant == (e.p_value < 0.01 / 3 and e.cv_gain > 0)
+    assert ev["time_s"].blocked_folds and not ev["aux"].blocked_folds
+    # with the runs' loads the Wald test has three degrees of freedom (gain, offset, offset x load)
+    dev.load = np.where(np.arange(len(z)) % 2 == 0, 0.5, -1.0)
+    e = rl.signal_evidence(dev, sigs[:1], alpha=0.01, k=4, seed=0)[0]
+    assert e.significant and e.coef[2] == pytest.approx(0.0, abs=0.1)
+
+
+def test_run_level_offers_a_candidate_of_another_regressor_when_the_shortlist_has_its_regressor():
+    def cand(fam, reg):
+        return CandidateForce(fam, reg, "", ("a",), ("N",), None)
+    short = [types.SimpleNamespace(candidate=CandidateForce("load_slope_voltage", "load", "", ("a",), ("N",), None,
+                                                           also=("voltage",)))]
+    found = [cand("run_level_voltage_V", "voltage"), cand("run_level_d*load_kg", "load"),
+             cand("run_level_time_s", "time")]
+    assert [c.family for c in rl.offer(found, short, lambda c: True)] == ["run_level_voltage_V", "run_level_time_s"]
+    assert [c.family for c in rl.offer(found[2:], short, lambda c: True)] == ["run_level_time_s"]
+    assert [c.family for c in rl.offer(found, [], lambda c: True)] == ["run_level_voltage_V"]
+    assert rl.offer(found, short, lambda c: False) == []
+
+
+def test_one_step_force_deviations_are_recovered_per_run():
+    # a stub model whose one-step prediction misses, in run r, the force g_r x (model drive force / its mean) + o_r
+    n_runs, n = 5, 60
+    rng = np.random.default_rng(3)
+    rows = []
+    for r in range(n_runs):
+        d = 1.0 if r % 2 == 0 else -1.0
+        rows.append(pd.DataFrame({"run": r, "time_s": 100.0 * r + 1e-3 * np.arange(n),
+                                  "position_m": d * np.linspace(-0.01, 0.01, n), "voltage_V": 220.0 + 20 * r,
+                                  "direction": d, "load_kg": 0.02 * r, "speed_m_s": d * 0.1}))
+    df = pd.concat(rows, ignore_index=True)
+    params = types.SimpleNamespace(order=1, alpha=[0.0, 0.0], beta=[1.0, 0.5], p=[0.0, 0.0],
+                                   include_load_inertia=True, scaled_position=lambda s: np.asarray(s) / 0.012)
+    g_true, o_true = rng.normal(0.0, 0.05, n_runs), rng.normal(0.0, 0.2, n_runs)
+    runs = df["run"].to_numpy()
+    s_prev = np.roll(df["position_m"].to_numpy(), 1)
+    drive = (1.0 + 0.5 * s_prev / 0.012) * df["voltage_V"].to_numpy()
+    first = np.r_[True, runs[1:] != runs[:-1]]
+    drive_rel = drive / np.mean(np.abs(drive[~first]))
+    m_eff = 0.12 + np.abs(df["load_kg"].to_numpy())
+    force = g_true[runs] * drive_rel + o_true[runs]
+    d = df["direction"].to_numpy()
+    pred = df["speed_m_s"].to_numpy() - d * force * 1e-3 / m_eff      # v - v^ = d dF dt / m_eff
+    model = types.SimpleNamespace(params_=params, m_s_=0.12, predict_one_step=lambda _df: pred)
+    dev = rl.run_deviations(df, model, np.ones(len(df), bool))
+    np.testing.assert_allclose(dev.theta[:, 0], g_true, atol=1e-6)
+    np.testing.assert_allclose(dev.theta[:, 1], o_true, atol=1e-6)
+    assert dev.n.tolist() == [n - 1] * n_runs                        # each run's first sample has no one-step
+
+
+# ---------------------------------------------------------------------------
+# the run-level family, the preference rule, the response columns
+# ---------------------------------------------------------------------------
+
+def test_run_level_features_are_the_standardised_run_signal_times_the_drive_gain_and_one():
+    V0, d = np.array([300.0, 150.0, 240.0, 330.0]), np.array([1.0, -1.0, 1.0, -1.0])
+    run_mean = np.array([2.0, 2.0, -4.0, -4.0])
+    load = np.array([0.05, 0.05, -0.02, -0.02])
+    x = {"V0": V0, "d": d, "load": load, "run:load_kg": run_mean}
+    spec = {"kind": "run_level", "channel": "load_kg", "mean": 1.0, "sd": 2.0}
+    for tr, c in (("none", run_mean), ("drive", d * run_mean), ("abs", np.abs(run_mean))):
+        z = (c - 1.0) / 2.0
+        np.testing.assert_allclose(fx.effect_features({**spec, "transform": tr}, x),
+                                   np.column_stack([V0 / 300.0 * z, z, 9.81 * d * load * z]))
+    assert fx.needs({**spec, "transform": "drive"}) == {"V0", "d", "load", "run:load_kg"}
+    h = fx.family("run_level").hypotheses([{"channel": "load_kg", "transform": "drive", "mean": 0.0, "sd": 1.0}])[0]
+    assert h.family == "run_level_d*load_kg" and h.regressor == "load" and h.generic
+
+
+def _trial(family, gain, n=1, generic=True, spec=None, regressor="time"):
+    c = CandidateForce(family, regressor, "", tuple(f"p{i}" for i in range(n)), ("N",) * n, None, generic=generic,
+                       spec=spec or {})
+    cur = acc.FoldErrors(np.ones(4), np.full(4, 100.0))
+    return acc.RefitCV(c, cur, acc.FoldErrors(np.full(4, 1.0 - gain), np.full(4, 100.0)))
+
+
+def test_the_run_level_form_is_preferred_when_the_run_level_evidence_names_its_regressor():
+    spline = _trial("smooth_time", 0.50, n=6, spec={"kind": "smooth", "regressor": "time"})
+    runlev = _trial("run_level_time_s", 0.46, n=2, spec={"kind": "run_level", "channel": "time_s"})
+    sample = _trial("channel_time_s", 0.47, n=1, spec={"kind": "channel", "channel": "time_s", "level": "sample"})
+    named = _trial("thermal_drift", 0.46, n=6, generic=False, spec={"kind": "thermal_drift"})
+    ev = types.SimpleNamespace(significant=[types.SimpleNamespace(regressor="time")])
+    assert prefer([spline, runlev, sample], 0.9, ev) is runlev         # run-level evidence: the run-level form
+    assert prefer([spline, runlev, sample], 0.9, None) is sample       # otherwise the fewest parameters
+    assert prefer([spline, runlev, sample, named], 0.9, ev) is named   # a named family first
+    far = _trial("run_level_time_s", 0.40, n=2, spec={"kind": "run_level", "channel": "time_s"})
+    assert prefer([spline, far], 0.9, ev) is spline                    # outside the parsimony band: the best
+
+
+def test_response_columns_are_a_setting_default_the_vibrometer():
+    df = pd.DataFrame({"time_s": [0.0, 0.1, 5.0, 5.1], "run": [1, 1, 2, 2], "position_m": 0.0, "voltage_V": 200.0,
+                       "direction": 1, "load_kg": 0.0, "speed_m_s": 0.1, "aux": [1.0, 1.0, 3.0, 3.0],
+                       "tip_velocity_amp_m_s": [1.0, 1.1, 1.2, 1.3]})
+    kinds = {c["name"]: c["kind"] for c in channels_of(df)}
+    assert kinds["tip_velocity_amp_m_s"] == "response" and kinds["aux"] == "logged"
+    kinds = {c["name"]: c["kind"] for c in channels_of(df, ("aux",))}
+    assert kinds["tip_velocity_amp_m_s"] == "logged" and kinds["aux"] == "response"
+    assert CloseLoop().get_params()["response_columns"] is None
+    assert CloseLoop(response_columns=("aux",)).get_params()["response_columns"] == ("aux",)
+    args = build_parser().parse_args(["close-loop", "--train", "a.csv", "--out", "o", "--response-column", "x",
+                                      "--response-column", "y"])
+    assert args.response_columns == ["x", "y"]
+    assert build_parser().parse_args(["close-loop", "--train", "a.csv", "--out", "o"]).response_columns is None
+
+
+# ---------------------------------------------------------------------------
+# the rig's run-level injections
+# ---------------------------------------------------------------------------
+
+def test_run_injections_name_their_family_and_the_regressor_they_show_in():
+    sup, pre = rig.RUN_INJECTIONS["supply_sag"], rig.RUN_INJECTIONS["preload_settling"]
+    assert fx.family(sup.effect).kind == "channel" and sup.regressor == "supply_V"
+    assert fx.family(pre.effect).kind == "run_level" and pre.regressor == "time"
+
+
+def test_run_effects_follow_their_formulas():
+    plan = rig.RigPlan(seed=5)
+    vals = {"Rig.supply_sd_rel": 0.04, "Rig.settling_depth_rel": 0.1, "Rig.settling_runs": 20.0}
+    f = rig.run_effects(plan, 30, vals)
+    z = np.random.default_rng([5, 3]).standard_normal(30)
+    np.testing.assert_allclose(f["supply"], 1 + 0.04 * z)
+    np.testing.assert_allclose(f["preload"], 1 - 0.1 * (1 - np.exp(-np.arange(30) / 20.0)))
+    off = rig.run_effects(plan, 3, {})
+    assert off["supply"].tolist() == [1.0] * 3 and off["preload"].tolist() == [1.0] * 3
+
+
+def test_a_sagging_supply_is_logged_and_slows_its_runs():
+    plan = rig.RigPlan(voltages_V=(290.0,), loads_kg=(0.0,), directions=(1, -1), step_s=1e-3, seed=3)
+    clean, _ = rig.run_experiment(plan, injections=[])
+    sag, truth = rig.run_experiment(plan, injections=[("supply_sag", {"Rig.supply_sd_rel": 0.05})])
+    factors = np.array(truth["run_factors"]["supply"])
+    logged = sag.groupby("run")["supply_V"].mean().to_numpy()
+    np.testing.assert_allclose(logged, 48.0 * factors, atol=0.02)
+    assert "supply_V" not in clean.columns
+    ratio = (sag.groupby("run")["speed_m_s"].apply(lambda v: np.abs(v).max()).to_numpy()
+             / clean.groupby("run")["speed_m_s"].apply(lambda v: np.abs(v).max()).to_numpy())
+    assert np.all(np.sign(ratio - 1) == np.sign(factors - 1)), (ratio, factors)
