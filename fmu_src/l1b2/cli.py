@@ -10,13 +10,13 @@ import argparse
 import json
 import os
 import sys
-import threading
 import time
 from pathlib import Path
 
 from . import __version__
 from .cluster import default_workers
 from .errors import L1B2Error
+from .console import StageBar, pct, print_input_checks
 
 
 def _floats(text: str) -> tuple[float, ...]:
@@ -534,63 +534,6 @@ def cmd_demo(args) -> int:
     return 0
 
 
-def _pct(x) -> str:
-    return "-" if x is None or x != x else f"{x:.2%}"
-
-
-def print_input_checks(checks: dict, metrics: dict) -> None:
-    """Warnings of a report's input checks and diverged runs (shared by identify and close-loop)."""
-    found = [m for part in ("train", "test") for m in checks.get("unusual_units", {}).get(part, [])]
-    if checks.get("allow_unusual_units") and found:
-        print(f"  warning: --allow-unusual-units accepted {len(found)} likely unit mistake(s), e.g.: {found[0]}")
-    if checks.get("extrapolation"):
-        runs = [str(f["run"]) for f in checks.get("test_runs_outside_training_range", [])]
-        print(f"  warning: TEST {checks['extrapolation']} (runs {', '.join(runs[:10])}"
-              f"{', ...' if len(runs) > 10 else ''})")
-    for part, m in metrics.items():
-        for kind, x in (m or {}).items():
-            if x.get("n_diverged_runs"):
-                print(f"  warning: {part} {kind}: {x['n_diverged_runs']} of {x['n_runs']} runs diverged "
-                      f"(non-finite or absurd prediction; excluded from the metrics): runs "
-                      f"{', '.join(map(str, x['diverged_runs'][:10]))}{', ...' if x['n_diverged_runs'] > 10 else ''}")
-
-
-class StageBar:
-    """A progress bar for work of unknown length: the current stage and the elapsed time, redrawn every second.
-
-    Shown only on a terminal (``sys.stderr.isatty()``) and without ``--quiet``, so logs and captured output
-    keep their lines; stage lines given to :meth:`stage` are printed above it either way (unless quiet).
-    """
-
-    def __init__(self, desc: str, *, quiet: bool = False, prefix: str = ""):
-        from tqdm import tqdm
-        self.quiet, self.prefix = quiet, prefix
-        self.bar = tqdm(total=None, desc=desc, bar_format="{desc} [{elapsed}]", file=sys.stderr, leave=False,
-                        disable=quiet or not sys.stderr.isatty())
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._tick, daemon=True)
-
-    def _tick(self):
-        while not self._stop.wait(1.0):
-            self.bar.refresh()
-
-    def stage(self, text: str) -> None:
-        if not self.quiet:
-            self.bar.write(f"{self.prefix}{text}", file=sys.stdout)
-            sys.stdout.flush()
-        self.bar.set_description_str(text)
-
-    def __enter__(self):
-        self._thread.start()
-        return self
-
-    def __exit__(self, *exc):
-        self._stop.set()
-        self._thread.join()
-        self.bar.close()
-        return False
-
-
 def cmd_identify(args) -> int:
     """Maximum-likelihood identification of the Eq. 29 predictor (paper Eq. 32, 35)."""
     from .workflows import run_identification
@@ -608,8 +551,8 @@ def cmd_identify(args) -> int:
             continue
         for kind in ("one_step", "free_run"):
             x = m[kind]
-            print(f"  {part:5s} {kind:8s} nrmse {_pct(x['nrmse'])}  mean |rel| {_pct(x['mean_abs_rel_error'])}  "
-                  f"p95 |rel| {_pct(x['p95_abs_rel_error'])}  (n={x['n_samples']})")
+            print(f"  {part:5s} {kind:8s} nrmse {pct(x['nrmse'])}  mean |rel| {pct(x['mean_abs_rel_error'])}  "
+                  f"p95 |rel| {pct(x['p95_abs_rel_error'])}  (n={x['n_samples']})")
     print_input_checks(rep["checks"], rep["metrics"])
     if rep.get("unidentifiable"):
         print(f"  warning: {len(rep['unidentifiable'])} parameter combination(s) the data cannot separate; "

@@ -204,7 +204,7 @@ def interaction_candidates(ctx: Context, df_train: pd.DataFrame) -> list[Candida
     See :mod:`l1b2.predictor.effects.interactions` and
     :mod:`l1b2.predictor.effects.generic`; the structural ones relax
     Eq. 29's own linearisation (:data:`EQ29_LINEARISATION`) and are traced
-    after the effects the model lacks (:func:`l1b2.closeloop.loop.order_traced`).
+    after the effects the model lacks (:func:`l1b2.closeloop.evidence.order_traced`).
     """
     return group_candidates(("interaction", "generic_interaction"), ctx, df_train)
 

@@ -47,7 +47,7 @@ Procedure (TEST is never used for fitting or choosing):
 5. Both the baseline and the final model are reported on TEST, with the
    metrics after every round. ``diagnosis.traced_to`` lists the regressors of
    the added effects strongest first, the terms that only relax Eq. 29's own
-   linearisation after the missing effects (:func:`order_traced`).
+   linearisation after the missing effects (:func:`l1b2.closeloop.evidence.order_traced`).
 """
 
 from __future__ import annotations
@@ -75,6 +75,7 @@ from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT
                          fold_start_phi, materiality, refit, session_blocks, stratified_folds, time_dependent,
                          validated)
 from .baselines import choose_baseline, retag_structural
+from .evidence import channels_considered, order_traced
 from .guard import checked_fit
 from .result import CloseLoopResult, ResidualAnalysis
 from .selection import (DEFAULT_ALPHA, DEFAULT_PARSIMONY, SHORTLIST_MIN_GAIN, Score, best_per_family, design,
@@ -559,92 +560,6 @@ class ChainModel:
         if name == "model":
             raise AttributeError(name)
         return getattr(self.model, name)
-
-
-def order_traced(effects, speed_filter: bool, residual_trace, evidence=(), speed_evidence: bool = False) -> list[str]:
-    """``diagnosis.traced_to``: the regressors with significant evidence, strongest first.
-
-    ``speed`` first if the speed channel's filter was kept (the measurement
-    chain is settled before any physical effect); the added effects in the
-    order they were chosen (each round takes the candidate with the largest
-    cross-validated gain against the current model, so earlier is stronger);
-    then the evidence not acted on: ``speed`` if ``speed_evidence`` (the
-    channel's own cross-validated test found the filter, but re-identifying
-    behind it did not lower the cross-validated free-run error, so it was not applied),
-    and ``evidence``, the candidates that improve the final model
-    in cross-validation but by less than the materiality threshold (largest
-    gain first). *Structural* terms (``CandidateForce.structural``: they
-    relax an approximation of Eq. 29 itself) come after all of these: they
-    are the paper model's own error, present on clean data too, and the first
-    regressors should point at what the data hold beyond it. Then the rest of
-    the baseline residual's regressor trace. Empty when nothing was added.
-    """
-    if not effects and not speed_filter:
-        return []
-    traced: list[str] = ["speed"] if speed_filter else []
-
-    def take(cands):
-        for c in cands:
-            traced.extend(r for r in c.regressors if r not in traced)
-    take(e for e in effects if not e.structural)
-    if speed_evidence and "speed" not in traced:
-        traced.append("speed")
-    take(e for e in evidence if not e.structural)
-    take(e for e in effects if e.structural)
-    take(e for e in evidence if e.structural)
-    return traced + [r for r in residual_trace if r not in traced]
-
-
-def channels_considered(channels, scores: list[Score], level: float, min_gain: float, added,
-                        run_level: runlevel.RunLevelAnalysis | None = None) -> list[dict]:
-    """``diagnosis.channels_considered``: every candidate channel and run-level signal with its first-round evidence.
-
-    Per channel (:func:`l1b2.closeloop.candidates.channels_of`): its kind,
-    the regressor it is traced to, whether it varies within runs, the best
-    form of its family ``channel_<name>`` by linearised held-out gain with
-    that gain and its run-level p-value, ``significant`` (it passes the
-    Bonferroni screen: gain >= ``min_gain``, p < ``level``, AIC improved)
-    and ``added`` (the loop added it or its run-level form). A constant channel has no evidence (``note``).
-    ``run_level``: the evidence of its run mean as an explanation of the runs' own deviations from the model
-    (:class:`l1b2.closeloop.runlevel.SignalEvidence` as dicts; empty when not tested). The model's inputs
-    that are run-level signals (V0, the drive-coordinate load and its size, the direction) follow as rows of
-    kind ``"input"`` with their run-level evidence only (their within-run forms are the named and generic
-    families of the candidate table).
-    """
-    from ..predictor.effects.channels import INPUT_SIGNALS, regressor_of
-    best = {s.candidate.family: s for s in best_per_family(scores)}
-    ev: dict = {}
-    for e in (run_level.evidence if run_level is not None else []):
-        ev.setdefault(e.channel, []).append(e)
-    out = []
-    for ch in channels:
-        fam = f"channel_{ch['name']}"
-        s = best.get(fam)
-        rec = {"channel": ch["name"], "kind": ch["kind"], "regressor": regressor_of(ch["name"]),
-               "varies_within_runs": bool(ch["within_run"]), "best": None, "cv_gain": None, "p_value": None,
-               "significant": False, "added": fam in added, "note": ""}
-        if ch["kind"] == "response":
-            rec["note"] = "a measured response of the motor, not a cause: not a candidate"
-        elif not ch["sd"] > 0:
-            rec["note"] = "constant on TRAIN: no evidence possible"
-        elif s is None:
-            rec["note"] = "not scored (not in the candidate library)"
-        else:
-            rec.update(best=s.candidate.label, cv_gain=float(s.cv_gain), p_value=float(s.p_value),
-                       significant=bool(s.cv_gain >= min_gain and s.p_value < level and s.delta_aic < 0))
-        rec["run_level"] = [e.to_dict() for e in ev.get(ch["name"], [])]
-        rec["added"] = rec["added"] or any(f"run_level_{e.label}" in added for e in ev.get(ch["name"], []))
-        out.append(rec)
-    for col in dict.fromkeys(c for c, _ in INPUT_SIGNALS):
-        rows = ev.get(col, [])
-        out.append({"channel": col, "kind": "input", "regressor": regressor_of(col), "varies_within_runs": False,
-                    "best": None, "cv_gain": None, "p_value": None,
-                    "significant": any(e.significant for e in rows),
-                    "added": any(f"run_level_{e.label}" in added for e in rows),
-                    "note": "an input of the model: run-level evidence only" if rows
-                    else "constant on TRAIN or not tested: no run-level evidence",
-                    "run_level": [e.to_dict() for e in rows]})
-    return out
 
 
 def prefer(accepted: list[RefitCV], parsimony: float, run_level: runlevel.RunLevelAnalysis | None = None) -> RefitCV:
