@@ -34,8 +34,9 @@ pytestmark = pytest.mark.fmu
 N = 90
 DT = 1e-3
 T0 = 5.0                      # session time of the runs' start [s]
-#: the kinds Predictor.fmu carries: every signal they read is an FMU signal (a logged channel's is not)
-CARRIED = tuple(k for k in fx.KINDS if k != "channel")
+#: the kinds Predictor.fmu carries: every signal they read is an FMU signal (a logged channel's is not, nor a
+#: run-level signal's run mean, which ``run_level`` reads; the export refuses both, tested below)
+CARRIED = tuple(k for k in fx.KINDS if k not in ("channel", "run_level"))
 KINDS = CARRIED + ("output_filter",)
 FILTER = {"a": 0.3, "b0": 0.5, "b1": 0.2}
 
@@ -196,14 +197,22 @@ def test_extended_predictor_fmu_declares_every_parameter_with_unit_and_provenanc
         assert {"baseline_c_r", "c_r", "v_baseline", "F_extra"} <= set(var), kind
 
 
-def test_a_model_reading_a_logged_channel_is_refused_by_the_export(pool, tmp_path):
-    # reference: fx.SIGNALS, the signals Predictor.fmu computes; a channel's run mean is not among them
+@pytest.mark.parametrize("kind", ["channel", "run_level"])
+def test_a_model_reading_a_logged_channel_is_refused_by_the_export(pool, tmp_path, kind):
+    # reference: fx.SIGNALS, the signals Predictor.fmu computes; a channel's run mean is not among them, nor the
+    # session clock's run mean that a run-level effect reads (the loop offers those from its run-level analysis)
     from l1b2.fmi.export import ExportError, export_calibrated
     base, refit = _setups()
-    c = next(c for c in pool if c.spec["kind"] == "channel")
-    assert not fx.needs(c.spec) <= set(fx.SIGNALS)
-    eff = IdentifiedEffect(c.family, c.label, c.spec, c.names, c.units, (0.1,) * c.n_params, (0.01,) * c.n_params,
-                           c.description, c.regressors, c.structural)
+    if kind == "channel":
+        c = next(c for c in pool if c.spec["kind"] == "channel")
+        eff = IdentifiedEffect(c.family, c.label, c.spec, c.names, c.units, (0.1,) * c.n_params,
+                               (0.01,) * c.n_params, c.description, c.regressors, c.structural)
+    else:
+        h = fx.family("run_level").hypotheses([{"channel": "time", "transform": "none", "mean": T0 + 0.5,
+                                                "sd": 0.3}])[0]
+        eff = IdentifiedEffect(h.family, h.family, h.spec, h.names, h.units, (0.1,) * len(h.names),
+                               (0.01,) * len(h.names), h.description, (h.regressor,), h.structural)
+    assert not fx.needs(eff.spec) <= set(fx.SIGNALS)
     with pytest.raises(ExportError, match="no input for the logged channels"):
         export_calibrated(ExtendedPredictor(base, refit, (eff,), None, {}), tmp_path / "out")
     assert not (tmp_path / "out" / "fmus" / "Predictor.fmu").exists()
