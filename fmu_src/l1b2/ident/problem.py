@@ -433,6 +433,11 @@ class LikelihoodProblem:
             cross = (~rest) & (vp0 * eul < 0)
             flags[cross] = STEP_REVERSAL
             flags[(cross | rest) & stuck] = STEP_STUCK
+        return self._store(theta, core, v, a, vsrc, flags, Ap, P, D, X, Fr, z0)
+
+    def _store(self, theta, core, v, a, vsrc, flags, Ap, P, D, X, Fr, z0) -> dict:
+        """Cache and return one evaluation: the Coulomb sign at each step's start state (the static rule's
+        ``z0`` at rest), with the speeds, sensitivities and forces of the recursion."""
         vp = core.d * vsrc
         sg = np.sign(-vp)
         rest = vp == 0

@@ -131,16 +131,7 @@ class PureSlipProblem(LikelihoodProblem):
             cross = (vp0 != 0) & (vp0 * eul < 0)
             flags[cross] = STEP_REVERSAL
             flags[(cross | (vp0 == 0)) & stuck] = STEP_STUCK
-        vp = core.d * vsrc
-        sg = np.sign(-vp)
-        rest = vp == 0
-        if rest.any():
-            sg[rest] = z0[rest]
-        res = {"v": v, "a": a, "Ap": Ap, "P": P, "sg": sg, "flags": flags, "D": D, "X": X, "Fr": Fr,
-               "z0": z0, "vp": vp}
-        self._cache_theta = np.array(theta, copy=True)
-        self._cache = res
-        return res
+        return self._store(theta, core, v, a, vsrc, flags, Ap, P, D, X, Fr, z0)
 
 
 def make_problem(drive_law: str, *args, **kwargs) -> LikelihoodProblem:
