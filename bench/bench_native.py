@@ -50,6 +50,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "fmu_src"))
 
+from l1b2.fmi.fmpy_slave import open_slave  # noqa: E402
 from l1b2.physics import driver as drv  # noqa: E402
 from l1b2.physics.params import load_motor  # noqa: E402
 
@@ -61,38 +62,12 @@ TARGETS = {("L1B2Motor", "native"): 0.01, ("L1B2Motor", "native-fmi3"): 0.01, ("
 KINDS = ("python", "native", "native-fmi3")
 
 
-def _slave(path, unz, params, inputs):
-    """``(fmu, vr, fmi3, set_real, get_real)``: an fmpy slave instantiated, parameters and inputs set, initialised."""
-    from fmpy import read_model_description
-    md = read_model_description(str(path))
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    fmi3 = md.fmiVersion.startswith("3")
-    if fmi3:
-        from fmpy.fmi3 import FMU3Slave
-        fmu = FMU3Slave(guid=md.guid, unzipDirectory=unz, modelIdentifier=md.coSimulation.modelIdentifier,
-                        instanceName="b")
-        fmu.instantiate()
-        set_real, get_real = fmu.setFloat64, fmu.getFloat64
-    else:
-        from fmpy.fmi2 import FMU2Slave
-        fmu = FMU2Slave(guid=md.guid, unzipDirectory=unz, modelIdentifier=md.coSimulation.modelIdentifier,
-                        instanceName="b")
-        fmu.instantiate()
-        fmu.setupExperiment(startTime=0.0)
-        set_real, get_real = fmu.setReal, fmu.getReal
-    set_real([vr[k] for k in params], list(params.values()))
-    set_real([vr[k] for k in inputs], list(inputs.values()))
-    fmu.enterInitializationMode()
-    fmu.exitInitializationMode()
-    return fmu, vr, fmi3, set_real, get_real
-
-
 def master(path, unz, params, inputs, outputs, sim_time, raw):
     """Wall and CPU RTF of the stepping loop of the minimal fmpy master (``raw``: the ctypes functions), and the
     final outputs."""
-    fmu, vr, fmi3, set_real, get_real = _slave(path, unz, params, inputs)
-    try:
-        out = [vr[k] for k in outputs]
+    with open_slave(path, unzipdir=unz, instance_name="b", params=params, inputs=inputs) as sl:
+        fmu, fmi3 = sl.fmu, sl.fmi3
+        out = sl.refs(outputs)
         n, every = int(round(sim_time / STEP_S)), int(round(OUTPUT_S / STEP_S))
         comp = fmu.component
         out_vr, out_val = (ctypes.c_uint * len(out))(*out), (ctypes.c_double * len(out))()
@@ -117,30 +92,23 @@ def master(path, unz, params, inputs, outputs, sim_time, raw):
                     raise RuntimeError(f"{path.name} failed at step {k}")
             values = list(out_val)
         else:
-            do_step = fmu.doStep
+            do_step, get_real = fmu.doStep, sl.get_real
             for k in range(n):
                 do_step(k * STEP_S, STEP_S)
                 if (k + 1) % every == 0:
                     values = get_real(out)
         wall, cpu = (time.perf_counter() - t0) / sim_time, (time.process_time() - c0) / sim_time
-        fmu.terminate()
-    finally:
-        fmu.freeInstance()
     return wall, cpu, list(values)
 
 
 def call_floor(path, unz, params, inputs, n=20000):
     """CPU seconds per ctypes call of an FMI function that does nothing, in a Python loop of ``n`` calls."""
-    fmu, vr, fmi3, _, _ = _slave(path, unz, params, inputs)
-    try:
-        f = fmu._functions["fmi3GetVersion" if fmi3 else "fmi2GetTypesPlatform"]
+    with open_slave(path, unzipdir=unz, instance_name="b", params=params, inputs=inputs) as sl:
+        f = sl.fmu._functions["fmi3GetVersion" if sl.fmi3 else "fmi2GetTypesPlatform"]
         c0 = time.process_time()
         for _ in range(n):
             f()
         return (time.process_time() - c0) / n
-    finally:
-        fmu.terminate()
-        fmu.freeInstance()
 
 
 def simulate(path, unz, params, inputs, outputs, sim_time):

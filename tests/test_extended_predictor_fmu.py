@@ -339,47 +339,23 @@ def _native_kinds() -> tuple:
 def worker_outputs(paths: dict, runs: list, t0: float):
     """Each FMU (FMI 2.0 or 3.0) through fmpy over each run: ``OUTPUTS`` after initialisation and after each step."""
     from fmpy import extract, read_model_description
+    from l1b2.fmi.fmpy_slave import open_slave
     out = {}
     for key, path in paths.items():
         md = read_model_description(path)
-        vr = {v.name: v.valueReference for v in md.modelVariables}
-        names = ["V0", "s", "load", "direction"] + (["T"] if "T" in vr else [])
+        has_t = any(v.name == "T" for v in md.modelVariables)
+        names = ["V0", "s", "load", "direction"] + (["T"] if has_t else [])
         unzipped = extract(path)
-        fmi3 = md.fmiVersion.startswith("3")
         out[key] = []
         for r in runs:
-            cols = [r["V0"], r["s"], r["load"], r["d"]] + ([r["T"]] if "T" in vr else [])
-            if fmi3:
-                from fmpy.fmi3 import FMU3Slave
-                fmu = FMU3Slave(guid=md.guid, unzipDirectory=unzipped,
-                                modelIdentifier=md.coSimulation.modelIdentifier, instanceName=key)
-                fmu.instantiate()
-                set_real, get_real = fmu.setFloat64, fmu.getFloat64
-            else:
-                from fmpy.fmi2 import FMU2Slave
-                fmu = FMU2Slave(guid=md.guid, unzipDirectory=unzipped,
-                                modelIdentifier=md.coSimulation.modelIdentifier, instanceName=key)
-                fmu.instantiate()
-                fmu.setupExperiment(startTime=t0)
-                set_real, get_real = fmu.setReal, fmu.getReal
-            rows = []
-            outs = [vr[n] for n in OUTPUTS]
-            try:
-                set_real([vr["v0"]], [r["v_start"]])
-                set_real([vr[n] for n in names], [c[0] for c in cols])
-                if fmi3:
-                    fmu.enterInitializationMode(startTime=t0)
-                else:
-                    fmu.enterInitializationMode()
-                fmu.exitInitializationMode()
-                rows.append(list(get_real(outs)))
+            cols = [r["V0"], r["s"], r["load"], r["d"]] + ([r["T"]] if has_t else [])
+            with open_slave(path, unzipdir=unzipped, instance_name=key, start_time_s=t0,
+                            params={"v0": r["v_start"]}, inputs={n: c[0] for n, c in zip(names, cols)}) as sl:
+                rows = [sl.get(OUTPUTS)]
                 for k in range(len(r["t"]) - 1):
-                    set_real([vr[n] for n in names], [c[k] for c in cols])
-                    fmu.doStep(r["t"][k], r["t"][k + 1] - r["t"][k])
-                    rows.append(list(get_real(outs)))
-                fmu.terminate()
-            finally:
-                fmu.freeInstance()
+                    sl.set({n: c[k] for n, c in zip(names, cols)})
+                    sl.step(r["t"][k], r["t"][k + 1] - r["t"][k])
+                    rows.append(sl.get(OUTPUTS))
             out[key].append(rows)
     return out
 

@@ -12,7 +12,6 @@ import math
 import shutil
 import subprocess
 import zipfile
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -30,42 +29,16 @@ PARAMS = [{}, {"v0": -0.12, "load_inertia": 0.0, "kappa": 0.8}, {"v0": 0.3, "T_s
 
 def worker_run(path, params, run):
     """Outputs ``v, v_steady`` after initialisation and after every step of ``run`` (fmpy, FMI 2 or 3)."""
-    from fmpy import extract, read_model_description
-    md = read_model_description(path)
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    unz = extract(path)
-    if md.fmiVersion.startswith("3"):
-        from fmpy.fmi3 import FMU3Slave
-        fmu = FMU3Slave(guid=md.guid, unzipDirectory=unz, modelIdentifier=md.coSimulation.modelIdentifier,
-                        instanceName="p")
-        fmu.instantiate()
-        set_real, get_real = fmu.setFloat64, fmu.getFloat64
-    else:
-        from fmpy.fmi2 import FMU2Slave
-        fmu = FMU2Slave(guid=md.guid, unzipDirectory=unz, modelIdentifier=md.coSimulation.modelIdentifier,
-                        instanceName="p")
-        fmu.instantiate()
-        fmu.setupExperiment(startTime=0.0)
-        set_real, get_real = fmu.setReal, fmu.getReal
-    ins = [vr[k] for k in ("V0", "s", "load", "direction")]
-    outs = [vr["v"], vr["v_steady"]]
-    rows = []
-    try:
-        if params:
-            set_real([vr[k] for k in params], list(params.values()))
-        set_real(ins, list(run[0][:4]))
-        fmu.enterInitializationMode()
-        fmu.exitInitializationMode()
-        rows.append(list(get_real(outs)))
+    from l1b2.fmi.fmpy_slave import open_slave
+    ins = ("V0", "s", "load", "direction")
+    with open_slave(path, instance_name="p", params=params, inputs=dict(zip(ins, run[0][:4]))) as sl:
+        rows = [sl.get(("v", "v_steady"))]
         t = 0.0
         for V0, s, load, d, h in run:
-            set_real(ins, [V0, s, load, d])
-            fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+            sl.set(dict(zip(ins, (V0, s, load, d))))
+            sl.step(t, h)
             t += h
-            rows.append(list(get_real(outs)))
-        fmu.terminate()
-    finally:
-        fmu.freeInstance()
+            rows.append(sl.get(("v", "v_steady")))
     return rows
 
 
@@ -383,3 +356,26 @@ def test_native_refuses_a_state_of_another_fmu(fmus, tmp_path):
         for f in (fmu, fmu_o):
             f.terminate()
             f.freeInstance()
+
+
+def test_open_slave_terminates_on_success_and_frees_on_every_path(fmus, monkeypatch):
+    from fmpy.fmi2 import FMU2Slave
+    from l1b2.fmi.fmpy_slave import open_slave
+    calls = []
+    for name in ("terminate", "freeInstance"):
+        orig = getattr(FMU2Slave, name)
+        monkeypatch.setattr(FMU2Slave, name, lambda self, _o=orig, _n=name: (calls.append(_n), _o(self))[1])
+    with open_slave(fmus[2], params={"v0": 0.05}, inputs={"V0": 324.0}) as sl:
+        assert sl.get(["v"]) == [pytest.approx(0.05)]
+        sl.step(0.0, 1e-3)
+    assert calls == ["terminate", "freeInstance"]
+    calls.clear()
+    with pytest.raises(RuntimeError, match="master failed"):
+        with open_slave(fmus[2]) as sl:
+            sl.step(0.0, 1e-3)
+            raise RuntimeError("master failed")
+    assert calls == ["freeInstance"]                # not terminated after an error, but freed
+    with pytest.raises(KeyError, match="no_such_input"):
+        with open_slave(fmus[2], inputs={"no_such_input": 1.0}):
+            pass
+    assert calls == ["freeInstance"] * 2

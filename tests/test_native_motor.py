@@ -52,47 +52,23 @@ SCENARIOS = {
 def worker_motor_runs(path, scenarios):
     """Per scenario: every Real variable after initialisation and after every step (fmpy, FMI 2 or 3)."""
     from fmpy import extract, read_model_description
+    from l1b2.fmi.fmpy_slave import open_slave
     md = read_model_description(path)
-    vr = {v.name: v.valueReference for v in md.modelVariables}
     reals = [v.name for v in md.modelVariables
              if v.type in ("Real", "Float64") and v.causality in ("output", "local")]
     unz = extract(path)
-    fmi3 = md.fmiVersion.startswith("3")
     out = {"names": reals, "units": [next(v.unit for v in md.modelVariables if v.name == n) for n in reals]}
+    ins = ("V_s", "duty", "f_s", "T", "direction", "m_load")
     for name, (params, booleans, run) in scenarios.items():
-        if fmi3:
-            from fmpy.fmi3 import FMU3Slave
-            fmu = FMU3Slave(guid=md.guid, unzipDirectory=unz, modelIdentifier=md.coSimulation.modelIdentifier,
-                            instanceName="m")
-            fmu.instantiate()
-            set_real, get_real, set_bool = fmu.setFloat64, fmu.getFloat64, fmu.setBoolean
-        else:
-            from fmpy.fmi2 import FMU2Slave
-            fmu = FMU2Slave(guid=md.guid, unzipDirectory=unz, modelIdentifier=md.coSimulation.modelIdentifier,
-                            instanceName="m")
-            fmu.instantiate()
-            fmu.setupExperiment(startTime=0.0)
-            set_real, get_real, set_bool = fmu.setReal, fmu.getReal, fmu.setBoolean
-        ins = [vr[k] for k in ("V_s", "duty", "f_s", "T", "direction", "m_load")]
-        rows = []
-        try:
-            if params:
-                set_real([vr[k] for k in params], list(params.values()))
-            if booleans:
-                set_bool([vr[k] for k in booleans], list(booleans.values()))
-            set_real(ins, list(run[0][:6]))
-            fmu.enterInitializationMode()
-            fmu.exitInitializationMode()
-            rows.append(list(get_real([vr[k] for k in reals])))
+        with open_slave(path, unzipdir=unz, instance_name="m", params=params, booleans=booleans,
+                        inputs=dict(zip(ins, run[0][:6]))) as sl:
+            rows = [sl.get(reals)]
             t = 0.0
             for *u, h in run:
-                set_real(ins, u)
-                fmu.doStep(currentCommunicationPoint=t, communicationStepSize=h)
+                sl.set(dict(zip(ins, u)))
+                sl.step(t, h)
                 t += h
-                rows.append(list(get_real([vr[k] for k in reals])))
-            fmu.terminate()
-        finally:
-            fmu.freeInstance()
+                rows.append(sl.get(reals))
         out[name] = rows
     return out
 
