@@ -121,7 +121,7 @@ from .slipproblem import RECOMMENDED_FIXED_PURE_SLIP, make_problem
 from .search import (LocalSolver, alternate_noise, multi_start, polish_stalled, profile_search, search_nfev,
                      start_points, warm_prestep)
 from .uncertainty import alternative_optima, extra_confounding, fisher_uncertainty
-from .varpro import linear_positions, varpro_search
+from .offset import projected_search
 
 __all__ = ["PredictorIdentifier", "clone", "RECOMMENDED_FIXED", "evaluation_mask"]
 
@@ -136,7 +136,7 @@ _NOT_SERIALISED = ("verbose", "extra", "init", "init_extra", "frequency")
 NOISE_FITS = ("auto", "alternate", "profile")
 
 #: the local solvers of the global search (``solver``): variable projection, or the joint multistart
-SOLVERS = ("varpro", "joint")
+SOLVERS = ("varpro", "joint", "offset")
 
 
 def clone(estimator, **changes):
@@ -242,7 +242,8 @@ class PredictorIdentifier(EstimatorSettings):
         identifier's.
     init_extra : start values of phi for the warm start (default
         ``extra.start``, else zeros). Only used with ``init``.
-    solver : ``"joint"`` (the searches of ``noise_fit``) or ``"varpro"`` (:mod:`l1b2.ident.varpro`).
+    solver : ``"joint"`` (the searches of ``noise_fit``), ``"varpro"`` (:mod:`l1b2.ident.varpro`) or
+        ``"offset"`` (the drive offset as a search coordinate, then varpro; :mod:`l1b2.ident.offset`).
     model : the predictor family: ``"eq29"`` (default, the paper's Eq. 29) or
         ``"pure_slip"`` (the slip ratio follows the state,
         :mod:`l1b2.predictor.pureslip`; same parameters, likelihood, noise
@@ -373,9 +374,9 @@ class PredictorIdentifier(EstimatorSettings):
         if cfg.model not in DRIVE_LAWS:
             raise IdentificationError(f"model must be one of {DRIVE_LAWS}, got {cfg.model!r}")
         if cfg.model == "pure_slip":
-            if cfg.solver == "varpro":
-                raise IdentificationError("solver 'varpro' needs the Eq. 29 model (its speed is linear in B'); "
-                                          "use solver='joint' with model='pure_slip'")
+            if cfg.solver != "joint":
+                raise IdentificationError(f"solver {cfg.solver!r} needs the Eq. 29 model (its speed is linear "
+                                          "in B'); use solver='joint' with model='pure_slip'")
             if isinstance(cfg.fixed, str) and cfg.fixed == "recommended":
                 cfg.fixed = {k: None for k in RECOMMENDED_FIXED_PURE_SLIP}
         if cfg.noise_fit not in NOISE_FITS:
@@ -493,7 +494,7 @@ class PredictorIdentifier(EstimatorSettings):
         # ---- start: data-driven centre and equation-error minima, or init ----
         red, minima = data_driven_start(sample, space, m_s, cfg.kappa, cfg.include_load_inertia, s_center,
                                         s_half, E, cfg.n_starts, cfg.seed, warm=warm,
-                                        n_ee_starts=4 * cfg.n_starts if cfg.solver == "varpro" else None)
+                                        n_ee_starts={"varpro": 4 * cfg.n_starts, "offset": 4}.get(cfg.solver))
         theta0, fixed_final = self._centre(cfg, space, minima, s_center, s_half)
         t_centre, c_centre = time.perf_counter(), time.process_time()
         self.reduced_ = reduced_summary(red, minima, space.extra_names)
@@ -526,10 +527,8 @@ class PredictorIdentifier(EstimatorSettings):
                               cfg.start_spread, obj.zlo, obj.zhi)
         stages, t_search, c_search = ([{"stage": "start", "time_s": t_centre - t_start, "cpu_s": c_centre - c_start}],
                                       time.perf_counter(), time.process_time())
-        if cfg.solver == "varpro":
-            search, outer, more = varpro_search(obj, linear_positions(obj, space.p_theta, cfg.order + 1), starts,
-                                                cfg.max_nfev, cfg.tol, cfg.stat_tol, cfg.max_outer,
-                                                cfg.n_refine, self._log)
+        if cfg.solver != "joint":
+            search, outer, more = projected_search(cfg, obj, starts, theta0, space.p_theta, self._log)
             stages += more
         elif cfg.noise_fit == "profile":
             search, outer = profile_search(obj, starts, cfg.max_nfev // 2, cfg.stat_tol, cfg.stat_window_profile,
@@ -543,7 +542,7 @@ class PredictorIdentifier(EstimatorSettings):
             search = multi_start(solver, starts, cfg.max_nfev, cfg.explore_nfev, cfg.n_refine, self._log)
             best = search.results[search.best]
             outer = alternate_noise(solver, best.x, best, cfg.max_outer, cfg.max_nfev, self._log)
-        if cfg.solver != "varpro":
+        if cfg.solver == "joint":
             stages.append({"stage": f"search ({cfg.noise_fit})", "time_s": time.perf_counter() - t_search,
                            "cpu_s": time.process_time() - c_search,
                            "nfev": search_nfev(cfg.solver, cfg.noise_fit, search, outer)})

@@ -610,8 +610,8 @@ def profile_search(objective, starts, max_iter, stat_tol, stat_window, agree, lo
 
 
 def search_nfev(solver, noise_fit, search, outer) -> int:
-    """Function evaluations of a global search (profile and varpro: the records hold the refinement's)."""
+    """Function evaluations of a global search (profile, varpro and offset: the records hold the refinement's)."""
     own = sum(rec.get("nfev", 0) for rec in search.records)
-    if solver == "varpro" or noise_fit == "profile":
+    if solver != "joint" or noise_fit == "profile":
         return int(own)
     return int(own + sum(h.get("nfev", 0) for h in outer.history[1:]))

@@ -1,0 +1,125 @@
+"""The drive offset of Eq. 29 as a search coordinate (:mod:`l1b2.ident.offset`, ``solver="offset"``)."""
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np
+import pytest
+from l1b2.ident.estimator import PredictorIdentifier
+from l1b2.ident.offset import (
+    GAUGE_K0,
+    d_coefficients,
+    drive_offset,
+    gauge,
+    multiplier,
+    offset_of_omega,
+    omega_of_offset,
+    point,
+    with_offset,
+)
+from l1b2.predictor.model import G_of_k0, PredictorParams, drive_factor, example_params
+from l1b2.predictor.simulate import design_grid, simulate_dataset
+
+M_S = 0.1
+SMALL = design_grid(voltages=(220.0, 324.0), loads=(-0.07, 0.0, 0.07))
+X = np.linspace(-1.0, 1.0, 401)
+
+
+def _theta(seed, order=3):
+    """A random admissible theta: c_r, sigma, mu > 0, 0 < k0 < 1, D(s) spread of a few N s/m."""
+    rng = np.random.default_rng(seed)
+    th = example_params(order).to_vector()
+    th[:5] = [rng.uniform(2, 20), rng.uniform(1, 15), rng.uniform(0.1, 2), rng.uniform(0.05, 0.9),
+              rng.uniform(0, 0.3)]
+    th[5:5 + order + 1] = rng.normal(0, 0.3, order + 1)
+    return th
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_offset_coordinates_round_trip_exactly(seed):
+    n1, kappa = 4, 0.5
+    th = _theta(seed)
+    dco = d_coefficients(th, n1)
+    # D(s) of theta is c_r + sigma (0.5 - A'(s)), evaluated independently on the stroke
+    A = np.polynomial.legendre.legval(X, th[5:5 + n1])
+    np.testing.assert_allclose(np.polynomial.legendre.legval(X, dco), th[0] + th[1] * (0.5 - A), rtol=1e-13)
+    # the drive multiplier a - b A'(s) is (b / sigma)(kappa0 + D(s)) (the offset's definition)
+    c_r, sigma, mu, k0, mu_sd = th[:5]
+    b = mu * 0.5 * np.pi * G_of_k0(k0)
+    np.testing.assert_allclose(multiplier(th, n1, kappa),
+                               (b / sigma) * (drive_offset(th, n1, kappa) + th[0] + th[1] * (0.5 - A)),
+                               rtol=1e-10, atol=1e-12)
+    assert multiplier(th, n1, kappa)[0] == pytest.approx(mu * drive_factor(k0) - mu_sd * kappa - b * A[0])
+    # theta -> (omega, D) -> theta is the identity
+    om = omega_of_offset(drive_offset(th, n1, kappa), dco)
+    back = with_offset(th, n1, kappa, offset_of_omega(om, dco), dco)
+    np.testing.assert_allclose(back, th, rtol=1e-12, atol=1e-12)
+    # and (omega, D) -> theta -> (omega, D) too, for any omega in (-1, 1)
+    for w in (-0.9, -0.3, 0.2, 0.8):
+        th2 = with_offset(th, n1, kappa, offset_of_omega(w, dco), dco)
+        np.testing.assert_allclose(d_coefficients(th2, n1), dco, rtol=1e-12, atol=1e-12)
+        assert omega_of_offset(drive_offset(th2, n1, kappa), dco) == pytest.approx(w, rel=1e-12)
+        np.testing.assert_array_equal(th2[1:5], th[1:5])
+
+
+def test_omega_below_one_in_magnitude_is_exactly_no_sign_change_of_the_multiplier():
+    n1, kappa = 4, 0.5
+    th = _theta(7)
+    dco = d_coefficients(th, n1)
+    for w in (-1.5, -0.99, -0.5, 0.05, 0.5, 0.99, 1.5):
+        m = multiplier(with_offset(th, n1, kappa, offset_of_omega(w, dco), dco), n1, kappa)
+        assert (abs(w) < 1) == (np.all(m > 0) or np.all(m < 0)), w
+
+
+def test_the_gauge_keeps_the_damping_b_and_the_offset_moves_only_c_r_and_alpha():
+    n1, kappa = 4, 0.5
+    th = _theta(3)
+    g = gauge(th, n1, kappa)
+    assert g[3] == GAUGE_K0
+    np.testing.assert_allclose(d_coefficients(g, n1), d_coefficients(th, n1), rtol=1e-13)
+    b = lambda t: t[2] * G_of_k0(t[3])  # noqa: E731
+    assert b(g) == pytest.approx(b(th), rel=1e-13)
+    p = point(g, n1, kappa, -0.5, d_coefficients(g, n1))
+    assert omega_of_offset(drive_offset(p, n1, kappa), d_coefficients(p, n1)) == pytest.approx(-0.5, rel=1e-12)
+    # at theta's own offset the drive multiplier is unchanged, and so are P(s) and the whole vector
+    own = omega_of_offset(drive_offset(g, n1, kappa), d_coefficients(g, n1))
+    np.testing.assert_allclose(point(g, n1, kappa, own, d_coefficients(g, n1)), g, rtol=1e-9, atol=1e-12)
+    # elsewhere P(s) changes by the ratio of the multipliers (a least-squares polynomial of it)
+    L = np.polynomial.legendre.legvander(X, n1 - 1)
+    ratio = multiplier(g, n1, kappa) / multiplier(p, n1, kappa)
+    assert np.all(np.isfinite(ratio))
+    fitted = np.polyval(np.polyfit(X, (L @ g[5 + 2 * n1:]) * ratio, n1 - 1), X)
+    np.testing.assert_allclose(L @ p[5 + 2 * n1:], fitted, rtol=1e-8, atol=1e-10 * np.max(np.abs(fitted)))
+
+
+def test_offset_search_ends_above_its_profile_and_the_one_start_variable_projection():
+    # small synthetic world. The offset search continues from its profile's best point, so it cannot end
+    # below it, and it should not end below the one-start variable-projection search from the same data-driven
+    # start. (It does not reach the optimum of a fit started at the truth here, 15201.36 against 15199.49:
+    # decision 0023, why the search stays opt-in.)
+    prm = example_params(3)
+    df = simulate_dataset(prm, SMALL, M_S, noise_std=1e-3, seed=11)
+    vp = PredictorIdentifier(order=3, solver="varpro", n_starts=1).fit(df, slider_mass_kg=M_S)
+    est = PredictorIdentifier(order=3, solver="offset").fit(df, slider_mass_kg=M_S)
+    assert est.loglik_ >= vp.loglik_, (est.loglik_, vp.loglik_)
+    prof = est.convergence_["stages"][1]["profile"]
+    assert est.loglik_ >= max(r["loglik"] for r in prof) - 1e-6
+    stages = [s["stage"] for s in est.convergence_["stages"]]
+    assert stages == ["start", "offset profile", "starts", "noise refinement", "uncertainty"]
+    assert len(prof) >= 6 and est.convergence_["nfev_total"] >= sum(r["nfev"] for r in prof) > 0
+    assert est.convergence_["solver"] == "offset"
+    # the result is an Eq. 35 vector inside the paper's bounds, with the usual uncertainty
+    lo, hi = PredictorParams.bounds(3)
+    assert np.all(est.theta_ >= lo) and np.all(est.theta_ <= hi)
+    assert np.all(np.isfinite(est.stderr_[est.identifiable_]))
+
+
+def test_offset_search_with_a_pinned_structural_direction_is_the_variable_projection_search():
+    prm = example_params(2)
+    df = simulate_dataset(prm, SMALL, M_S, noise_std=1e-3, seed=5)
+    common = dict(order=2, n_starts=1, fixed="recommended")
+    off = PredictorIdentifier(solver="offset", **common).fit(df, slider_mass_kg=M_S)
+    vp = PredictorIdentifier(solver="varpro", **common).fit(df, slider_mass_kg=M_S)
+    assert off.loglik_ == vp.loglik_
+    assert "offset profile" not in [s["stage"] for s in off.convergence_["stages"]]
