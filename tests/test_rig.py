@@ -241,3 +241,25 @@ def test_rig_cli_refuses_a_negative_speed_noise_with_one_line(capsys, tmp_path):
     err = capsys.readouterr().err
     assert code != 0 and "speed_noise_m_s" in err and err.count("\n") == 1
     assert not (tmp_path / "r").exists()
+
+
+def test_rig_cli_sample_rate_records_every_step_of_the_same_traverse(tmp_path, capsys):
+    # reference: stated behaviour: at a step h, the DAQ samples every 1/(rate h)-th step of the same simulation, so the
+    # 1 kHz file is every 2nd row of the 2 kHz one (time, position); a step that does not divide the period is refused
+    def rig(rate, step, name):
+        return cli_main(["rig", "--out", str(tmp_path / name), "--engine", "inprocess", "--voltages", "324",
+                         "--loads", "0", "--step", str(step), "--sample-rate", str(rate), "--quiet", "--workers", "1",
+                         "--no-plots"])
+    assert rig(1000, 5e-4, "r1") == 0 and rig(2000, 5e-4, "r2") == 0
+    slow, fast = (pd.read_csv(tmp_path / n / "all.csv") for n in ("r1", "r2"))
+    for run, g in slow.groupby("run"):
+        f = fast[fast.run == run]
+        assert abs(np.median(np.diff(f.time_s)) - 5e-4) < 1e-9 and abs(np.median(np.diff(g.time_s)) - 1e-3) < 1e-9
+        n = len(g)
+        np.testing.assert_array_equal(f.time_s.to_numpy()[::2][:n], g.time_s.to_numpy())
+        np.testing.assert_array_equal(f.position_m.to_numpy()[::2][:n], g.position_m.to_numpy())
+        assert len(f) in (2 * n - 1, 2 * n)
+    capsys.readouterr()
+    assert rig(3000, 1e-3, "r3") != 0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "sampling period" in err and not (tmp_path / "r3").exists()
