@@ -263,3 +263,14 @@ def test_rig_cli_sample_rate_records_every_step_of_the_same_traverse(tmp_path, c
     assert rig(3000, 1e-3, "r3") != 0
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "sampling period" in err and not (tmp_path / "r3").exists()
+
+
+@pytest.mark.parametrize("n,limit", [(0, 5), (7, 20), (20, 20), (21, 20), (100_000, 20_000), (124_999, 20_000)])
+def test_display_rows_are_evenly_spaced_and_bounded(n, limit):
+    # reference: stated behaviour: at most `limit` rows, the first one, one stride ceil(n / limit), reaching the last
+    rows = plots.display_rows(n, limit)
+    assert len(rows) <= limit and len(rows) == min(n, len(rows))
+    if n:
+        step = -(-n // limit)
+        assert rows[0] == 0 and np.all(np.diff(rows) == step) and rows[-1] >= n - step
+        assert len(rows) == n if n <= limit else len(rows) > limit // 2
