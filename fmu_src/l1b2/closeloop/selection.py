@@ -35,7 +35,6 @@ import pandas as pd
 
 from ..data import measurements as dataio
 from ..predictor import model as pr
-from ..predictor.simulate import RunLayout, packed_linear_recursion
 from . import residuals as res
 from .acceptance import time_dependent
 from .candidates import CandidateForce
@@ -74,14 +73,19 @@ def linear_response(params: pr.PredictorParams, df: pd.DataFrame, m_s: float, F:
     D = np.broadcast_to(D, s.shape)
     m_eff = pr.effective_mass(params, load, m_s)
     F = np.asarray(F, float).reshape(len(df), -1)
-    lay = RunLayout(df[dataio.RUN].to_numpy())
-    h = lay.step_dt(t) / m_eff
+    S = np.zeros_like(F)
+    slices = [sl for _, sl in dataio.run_slices(df[dataio.RUN])]
+    starts = np.array([sl.start for sl in slices])
+    lengths = np.array([sl.stop - sl.start for sl in slices])
+    dt = np.zeros(len(df))
+    dt[:-1] = np.diff(t)
+    h = dt / m_eff
     a = 1.0 - h * D
-    U = F[lay.perm]
-    U *= h[lay.perm, None]
-    S = packed_linear_recursion(lay, lay.to_packed(a), U)   # the compiled loop over time, all runs and columns
-    del U
-    return lay.from_packed(S)
+    for k in range(int(lengths.max()) - 1):
+        act = lengths > k + 1
+        cur = starts[act] + k
+        S[cur + 1] = a[cur, None] * S[cur] + h[cur, None] * F[cur]
+    return S
 
 
 def nuisance_forces(params: pr.PredictorParams, df: pd.DataFrame, v_pred: np.ndarray) -> np.ndarray:
