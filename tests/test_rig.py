@@ -274,3 +274,10 @@ def test_display_rows_are_evenly_spaced_and_bounded(n, limit):
         step = -(-n // limit)
         assert rows[0] == 0 and np.all(np.diff(rows) == step) and rows[-1] >= n - step
         assert len(rows) == n if n <= limit else len(rows) > limit // 2
+
+
+@pytest.mark.parametrize("rate", [0.0, -1000.0, float("nan"), float("inf")])
+def test_a_sampling_rate_that_is_not_a_positive_number_is_refused(rate):
+    # reference: stated behaviour: RigPlan refuses it when built, naming the field
+    with pytest.raises(SimulationError, match="sample_rate_Hz"):
+        RigPlan(sample_rate_Hz=rate)
