@@ -6,7 +6,8 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 export OPENBLAS_NUM_THREADS ?= 1
 export MPLBACKEND ?= Agg
-# pytest-xdist workers for `make test` (the CI machine has 2 cores); modules stay whole on one worker
+# pytest-xdist workers for `make test` (the CI machine has 2 cores); modules stay whole on one worker.
+# `make test` runs the not-slow tests and the slow ones marked ci_slow (decision 0027)
 TEST_WORKERS ?= 2
 
 .PHONY: docs venv test test-slow test-all check-install fmus demo dist bench clean
@@ -22,7 +23,7 @@ fmus: $(STAMP)
 	$(PY) build_fmu.py
 
 test: $(STAMP)
-	$(PY) -m pytest -q -m "not slow" -n $(TEST_WORKERS) --dist loadscope --durations=25
+	$(PY) -m pytest -q -m "not slow or ci_slow" -n $(TEST_WORKERS) --dist loadscope --durations=25
 
 test-slow: $(STAMP)
 	$(PY) -m pytest -q -m slow

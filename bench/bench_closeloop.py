@@ -33,6 +33,7 @@ Usage: python bench/bench_closeloop.py [--effect pulley_friction] [--train-sampl
 """
 import argparse
 import math
+import shutil
 import sys
 import tempfile
 import time
@@ -64,6 +65,8 @@ def main(argv=None):
                          "a comma-separated list times each")
     ap.add_argument("--compare", action="store_true", help="the former scoring and the current side by side")
     ap.add_argument("--sample-rate", type=float, default=None, help="rig sampling rate [Hz] (default 1000)")
+    ap.add_argument("--data", help="folder with train.csv/test.csv (and sidecars) of an earlier run: no rig run "
+                                   "(each run writes its files to a printed folder)")
     args = ap.parse_args(argv)
     if args.large:
         mp = load_motor()
@@ -77,20 +80,26 @@ def main(argv=None):
                        step_s=min(plan.step_s, 1.0 / args.sample_rate))
     target = 120.0 if args.large else 180.0
     t0 = time.perf_counter()
-    df, truth = run_experiment(plan, mp, injections=[args.effect], engine="inprocess", jobs=2, injection_seed=0)
+    if args.data:
+        df = pd.concat([pd.read_csv(Path(args.data) / f) for f in ("train.csv", "test.csv")], ignore_index=True)
+    else:
+        df, truth = run_experiment(plan, mp, injections=[args.effect], engine="inprocess", jobs=2, injection_seed=0)
+        if args.train_samples:
+            df = _cut_train(df, args.train_samples)
+        args.data = tempfile.mkdtemp(prefix="bench_closeloop_")
+        write_experiment(df, args.data, mp, plan, truth)
     t_rig = time.perf_counter() - t0
-    if args.train_samples:
-        df = _cut_train(df, args.train_samples)
     variants = [("former scoring", reference_score_candidates), ("current", None)] if args.compare else \
         [("current", None)]
     runs = []
     with tempfile.TemporaryDirectory() as td:
-        write_experiment(df, td, mp, plan, truth)
+        for f in ("train.csv", "train.json", "test.csv", "test.json"):
+            shutil.copy(Path(args.data) / f, Path(td) / f)
         n_train = dataio.load_measurements(Path(td) / "train.csv").n_samples
         for workers in (int(w) for w in str(args.workers).split(",")):
             for name, scorer in variants:
                 runs.append((f"{name}, workers {workers}",) + _timed(td, args, workers, scorer))
-    print(f"rig data: {len(df)} samples ({n_train} in TRAIN, {plan.sample_rate_Hz:g} Hz), generated in {t_rig:.1f} s "
+    print(f"rig data in {args.data}: {len(df)} samples ({n_train} in TRAIN), made or read in {t_rig:.1f} s "
           f"(not part of the target)")
     for name, result, t_total, c_total in runs:
         print(f"\n== {name}: close-loop {t_total:.1f} s wall, {c_total:.1f} s CPU (this process); target < "

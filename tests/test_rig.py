@@ -241,3 +241,43 @@ def test_rig_cli_refuses_a_negative_speed_noise_with_one_line(capsys, tmp_path):
     err = capsys.readouterr().err
     assert code != 0 and "speed_noise_m_s" in err and err.count("\n") == 1
     assert not (tmp_path / "r").exists()
+
+
+def test_rig_cli_sample_rate_records_every_step_of_the_same_traverse(tmp_path, capsys):
+    # reference: stated behaviour: at a step h, the DAQ samples every 1/(rate h)-th step of the same simulation, so the
+    # 1 kHz file is every 2nd row of the 2 kHz one (time, position); a step that does not divide the period is refused
+    def rig(rate, step, name):
+        return cli_main(["rig", "--out", str(tmp_path / name), "--engine", "inprocess", "--voltages", "324",
+                         "--loads", "0", "--step", str(step), "--sample-rate", str(rate), "--quiet", "--workers", "1",
+                         "--no-plots"])
+    assert rig(1000, 5e-4, "r1") == 0 and rig(2000, 5e-4, "r2") == 0
+    slow, fast = (pd.read_csv(tmp_path / n / "all.csv") for n in ("r1", "r2"))
+    for run, g in slow.groupby("run"):
+        f = fast[fast.run == run]
+        assert abs(np.median(np.diff(f.time_s)) - 5e-4) < 1e-9 and abs(np.median(np.diff(g.time_s)) - 1e-3) < 1e-9
+        n = len(g)
+        np.testing.assert_array_equal(f.time_s.to_numpy()[::2][:n], g.time_s.to_numpy())
+        np.testing.assert_array_equal(f.position_m.to_numpy()[::2][:n], g.position_m.to_numpy())
+        assert len(f) in (2 * n - 1, 2 * n)
+    capsys.readouterr()
+    assert rig(3000, 1e-3, "r3") != 0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "sampling period" in err and not (tmp_path / "r3").exists()
+
+
+@pytest.mark.parametrize("n,limit", [(0, 5), (7, 20), (20, 20), (21, 20), (100_000, 20_000), (124_999, 20_000)])
+def test_display_rows_are_evenly_spaced_and_bounded(n, limit):
+    # reference: stated behaviour: at most `limit` rows, the first one, one stride ceil(n / limit), reaching the last
+    rows = plots.display_rows(n, limit)
+    assert len(rows) <= limit and len(rows) == min(n, len(rows))
+    if n:
+        step = -(-n // limit)
+        assert rows[0] == 0 and np.all(np.diff(rows) == step) and rows[-1] >= n - step
+        assert len(rows) == n if n <= limit else len(rows) > limit // 2
+
+
+@pytest.mark.parametrize("rate", [0.0, -1000.0, float("nan"), float("inf")])
+def test_a_sampling_rate_that_is_not_a_positive_number_is_refused(rate):
+    # reference: stated behaviour: RigPlan refuses it when built, naming the field
+    with pytest.raises(SimulationError, match="sample_rate_Hz"):
+        RigPlan(sample_rate_Hz=rate)

@@ -107,6 +107,7 @@ def cmd_rig(args) -> int:
 
     mp = _motor(args)
     plan = RigPlan(voltages_V=args.voltages, loads_kg=args.loads, step_s=args.step, seed=args.seed,
+                   sample_rate_Hz=args.sample_rate,
                    record_temperature=args.record_temperature, pause_s=args.pause, max_run_s=args.max_run,
                    speed_noise_m_s=args.speed_noise, run_scatter=args.run_scatter,
                    frequencies_Hz=tuple(args.frequencies or ()), frequency_jitter_Hz=args.frequency_jitter)
@@ -300,6 +301,8 @@ def _add_rig_parser(sub) -> None:
     _engine_args(p, default_workers=2, what="runs (stateful effects run serially; 1 = serially here)")
     p.add_argument("--jobs", type=int, help="deprecated alias of --workers")
     p.add_argument("--step", type=float, default=2e-4, help="communication step [s]")
+    p.add_argument("--sample-rate", type=float, default=1000.0, metavar="HZ",
+                   help="the DAQ's sampling rate [Hz] (default 1000; the step must divide its period)")
     p.add_argument("--pause", type=float, default=1.0, help="pause between runs [s]")
     p.add_argument("--max-run", type=float, default=4.0, help="longest run [s]")
     p.add_argument("--seed", type=int, default=0, help="seed of the run order, the speed noise and the run scatter")

@@ -104,7 +104,7 @@ COLLINEAR_RTOL = 1e-3
 
 
 def collinear(candidate: CandidateForce, effects: EffectSet, df: pd.DataFrame, mask: np.ndarray,
-              rtol: float = COLLINEAR_RTOL) -> bool:
+              rtol: float = COLLINEAR_RTOL, added: np.ndarray | None = None) -> bool:
     """Whether ``candidate`` can reproduce a force already added: some added column lies in its span.
 
     Each column ``f`` of the added effects' features (on the masked samples) is
@@ -112,22 +112,26 @@ def collinear(candidate: CandidateForce, effects: EffectSet, df: pd.DataFrame, m
     residual's norm is below ``rtol`` of ``|f|``. Both in one model would trade
     their parameters against each other (a pulley coefficient of -22.9
     cancelled by a generic load term of -20.4), so such a candidate is not
-    offered once the effect is in.
+    offered once the effect is in. ``added``: :func:`added_columns` of ``effects``, computed once for many
+    candidates (default: computed here).
     """
     if not effects.candidates:
         return False
+    F = added_columns(effects, df, mask) if added is None else added
+    nf = np.linalg.norm(F, axis=0)
+    F = F[:, nf > 0]
+    if not F.shape[1]:
+        return False
+    C = np.asarray(candidate.features(df), float).reshape(len(df), -1)[np.asarray(mask, bool)]
+    coef = np.linalg.lstsq(C, F, rcond=None)[0]   # one factorisation of C for every added column
+    return bool(np.any(np.linalg.norm(F - C @ coef, axis=0) < rtol * nf[nf > 0]))
+
+
+def added_columns(effects: EffectSet, df: pd.DataFrame, mask: np.ndarray) -> np.ndarray:
+    """The added effects' feature columns side by side on the masked samples (:func:`collinear`'s ``added``)."""
     m = np.asarray(mask, bool)
-    C = np.asarray(candidate.features(df), float).reshape(len(df), -1)[m]
-    for c in effects.candidates:
-        F = np.asarray(c.features(df), float).reshape(len(df), -1)[m]
-        for f in F.T:
-            nf = float(np.linalg.norm(f))
-            if nf == 0:
-                continue
-            coef = np.linalg.lstsq(C, f, rcond=None)[0]
-            if float(np.linalg.norm(f - C @ coef)) < rtol * nf:
-                return True
-    return False
+    return np.column_stack([np.asarray(c.features(df), float).reshape(len(df), -1)[m] for c in effects.candidates]
+                           + [np.zeros((int(m.sum()), 0))])
 
 
 def stratified_folds(df: pd.DataFrame, k: int, seed: int = 0) -> list[np.ndarray]:

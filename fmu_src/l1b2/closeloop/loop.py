@@ -71,9 +71,9 @@ from . import runlevel
 from .candidates import CandidateSource, Context, full_library, training_summary
 from .stages import StageClock
 from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT_FOLDS, DEFAULT_REFIT_NFEV,
-                         EffectSet, RefitCV, RefitSettings, Validated, accepts, chain_cv_errors, collinear, cv_errors,
-                         fold_start_phi, materiality, refit, session_blocks, stratified_folds, time_dependent,
-                         validated)
+                         EffectSet, RefitCV, RefitSettings, Validated, accepts, added_columns, chain_cv_errors,
+                         collinear, cv_errors, fold_start_phi, materiality, refit, session_blocks, stratified_folds,
+                         time_dependent, validated)
 from .baselines import choose_baseline, retag_structural
 from .evidence import channels_considered, order_traced
 from .guard import checked_fit
@@ -322,8 +322,9 @@ class CloseLoop(EstimatorSettings):
             cur = it.model
             v_cur = cur.predict_free_run(dtr)
             r = res.drive_residual(dtr, v_cur)
+            added = added_columns(it.effects, dtr, mask) if it.effects.candidates else None
             cands = [c for c in pool if c.family not in it.effects.families
-                     and not collinear(c, it.effects, dtr, mask)]
+                     and not collinear(c, it.effects, dtr, mask, added=added)]
             say(f"round {n_rnd}: scoring {len(cands)} candidate effects (linearised)")
             scores = score_candidates(cands, r, dtr, mask, cur.params_, m_s, v_pred=v_cur, k=self.k_folds,
                                       seed=self.seed, time_folds=screen_blocks)
@@ -338,7 +339,7 @@ class CloseLoop(EstimatorSettings):
                 say(f"round {n_rnd}: run-level deviations and the signals that explain them")
                 rl = runlevel.analyse(dtr, cur, mask, it.channels, alpha=self.alpha, k=self.k_folds, seed=self.seed)
                 offered = runlevel.offer(runlevel.candidates(rl, ctx), short, lambda c: (
-                    c.family not in it.effects.families and not collinear(c, it.effects, dtr, mask)))
+                    c.family not in it.effects.families and not collinear(c, it.effects, dtr, mask, added=added)))
                 short = short + score_candidates(offered, r, dtr, mask, cur.params_, m_s, v_pred=v_cur,
                                                  k=self.k_folds, seed=self.seed, time_folds=screen_blocks)
             if rnd == 1:

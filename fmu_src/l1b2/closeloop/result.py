@@ -414,10 +414,11 @@ def _fig_residual_vs_regressors(plt, dtr: pd.DataFrame, a: ResidualAnalysis):
     ncol = 4
     nrow = math.ceil(len(names) / ncol)
     fig, axes = plt.subplots(nrow, ncol, figsize=(3.4 * ncol, 2.8 * nrow), squeeze=False, layout="constrained")
+    rows = np.flatnonzero(a.mask)
+    rows = rows[plots.display_rows(len(rows))]  # drawing only
     for ax, n in zip(axes.flat, names):
         k, label = _regressor_axis(n)
-        x = vals[n][a.mask] * k
-        ax.plot(x, a.residual[a.mask] * 1e3, ".", ms=2, alpha=0.4)
+        ax.plot(vals[n][rows] * k, a.residual[rows] * 1e3, ".", ms=2, alpha=0.4)
         ax.set_xlabel(label)
         ax.set_ylabel("residual [mm/s]")
         ax.grid(alpha=0.3)
@@ -460,7 +461,9 @@ def _fig_chosen(plt, dtr: pd.DataFrame, mask: np.ndarray, chosen: Score):
     k, label = _regressor_axis(name)
     x = vals[name] * k
     fig, ax = plt.subplots(figsize=(6, 4), layout="constrained")
-    ax.plot(x[mask], F[mask], "o", ms=3, alpha=0.5)
+    rows = np.flatnonzero(mask)
+    rows = rows[plots.display_rows(len(rows))]  # drawing only
+    ax.plot(x[rows], F[rows], "o", ms=3, alpha=0.5)
     ax.set_xlabel(label)
     ax.set_ylabel("extra force [N]")
     ax.set_title(f"chosen effect: {c.label}")

@@ -19,6 +19,19 @@ def pyplot():
     return plt
 
 
+#: most points a scatter panel draws (a display limit: the data and every figure computed from them stay whole)
+DISPLAY_POINTS = 20000
+
+
+def display_rows(n: int, limit: int = DISPLAY_POINTS) -> np.ndarray:
+    """Indices of at most ``limit`` of ``n`` rows, evenly spaced in row order, for drawing only.
+
+    A scatter of every sample costs time linear in the samples and shows nothing more once the
+    points overlap; the figures of a large file draw every ``ceil(n / limit)``-th row.
+    """
+    return np.arange(0, n, max(1, -(-n // max(int(limit), 1))))
+
+
 def save_figure(fig, path) -> Path:
     """Write ``fig`` as a PNG (120 dpi, tight layout; parent folders created), close it, return the path."""
     path = Path(path)

@@ -257,6 +257,8 @@ class RigPlan:
         if self.run_scatter >= 0.25:
             raise SimulationError(f"RigPlan.run_scatter = {self.run_scatter!r} (relative contact std): "
                                   "must be below 0.25 (a contact factor must stay positive)")
+        if not (math.isfinite(self.sample_rate_Hz) and self.sample_rate_Hz > 0):
+            raise SimulationError(f"RigPlan.sample_rate_Hz = {self.sample_rate_Hz!r}: must be a finite number > 0 [Hz]")
 
 
 @dataclass(frozen=True)
@@ -342,6 +344,18 @@ def simulate_traverse(mp: MotorParams, spec: RunSpec, plan: RigPlan = RigPlan(),
     raise SimulationError(f"unknown engine '{engine}' (use 'inprocess' or 'fmu')")
 
 
+def sampling_every(plan: RigPlan) -> int:
+    """Simulation steps per DAQ sample (``1 / (sample_rate_Hz * step_s)``, an integer >= 1).
+
+    Raises :class:`~l1b2.errors.SimulationError` when the step does not divide the sampling period.
+    """
+    every = round(1.0 / (plan.sample_rate_Hz * plan.step_s)) if plan.step_s > 0 else 0
+    if every < 1 or abs(every * plan.sample_rate_Hz * plan.step_s - 1.0) > 1e-9:
+        raise SimulationError(f"RigPlan.step_s = {plan.step_s!r} s does not divide the sampling period "
+                              f"1/{plan.sample_rate_Hz:g} Hz: choose a step of 1/(k * sample rate), k = 1, 2, ...")
+    return int(every)
+
+
 def simulate_run(mp: MotorParams, spec: RunSpec, plan: RigPlan = RigPlan(), engine: str = "inprocess",
                  fmu_dir=None, nominal: MotorParams | None = None) -> pd.DataFrame:
     """One traverse; returns the rig's samples of this run (data-format columns plus extras).
@@ -349,10 +363,8 @@ def simulate_run(mp: MotorParams, spec: RunSpec, plan: RigPlan = RigPlan(), engi
     The supply is set from the *nominal* motor's small-signal drive gain (what
     the operator calibrated), so an injected drive effect is not compensated.
     """
+    every = sampling_every(plan)
     r = simulate_traverse(mp, spec, plan, engine, fmu_dir, nominal)
-    every = int(round(1.0 / (plan.sample_rate_Hz * plan.step_s)))
-    if abs(every * plan.sample_rate_Hz * plan.step_s - 1.0) > 1e-9:
-        raise SimulationError(f"step {plan.step_s} s does not divide the sampling period 1/{plan.sample_rate_Hz} s")
     idx = np.arange(0, len(r["time"]), every)
     t = r["time"][idx]
     # encoder counts times the resolution, written with the digits they have (1 pm, 1 nm/s, 1 ns)
@@ -494,6 +506,7 @@ def run_experiment(plan: RigPlan = RigPlan(), mp: MotorParams | None = None, inj
     """
     if jobs is not None:
         workers = jobs
+    sampling_every(plan)  # refuse a step that does not divide the sampling period before any run
     nominal = mp or load_motor()
     if engine == "fmu" and fmu_dir is None:
         fmu_dir = ensure_fmus()
