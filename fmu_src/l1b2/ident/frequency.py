@@ -7,16 +7,23 @@ the model is the Eq. 29 model at the effective amplitude ``V0 g(f)``, so
 every search, Jacobian and uncertainty of :mod:`l1b2.ident` applies unchanged
 (:class:`~l1b2.ident.problem.SampleData` takes the response).
 
-Estimation (:func:`fit_frequency_response`) maximises the *profile*
-likelihood over the two response parameters: every trial ``(f_b0, zeta_b)``
-is one warm local identification of theta at that response (the identifier's
-own search, started from the best theta so far). A coarse grid over
-resonances on both sides of the drive (0.4-3 % of ``f_ref`` away) and three
-dampings finds the basin, a Nelder-Mead search in ``(f_b0 [Hz], ln zeta_b)``
-refines it, and the final model is identified at the optimum with the
-identifier's full search. Standard errors of ``f_b0`` and ``zeta_b`` come
-from the curvature of the profile log-likelihood (central differences; the
-profile's Hessian is the inverse of the parameters' covariance block).
+Estimation (:func:`fit_frequency_response`): the response's coordinates
+``q = (f_b0 / f_ref, ln zeta_b)`` are parameters of the joint least squares
+with theta. A coarse grid over resonances on both sides of the drive (0.4-3 %
+of ``f_ref`` away) and three dampings, one warm identification of theta at
+each point, finds the basin; Gauss-Newton steps of the joint problem in q
+(:class:`ResponseLinearisation`: the sensitivities of the weighted residuals
+in q by central differences, theta's analytic Jacobian projected out, so the
+step is the joint step with theta re-optimised to first order; each step is
+followed by a warm refit of theta and a line search) refine it, and the final
+model is identified at the optimum with the identifier's full search.
+Standard errors of ``f_b0`` and ``zeta_b``: q's block of the joint Fisher
+covariance, ``(J_q^T P J_q)^-1`` (the Schur complement), inflated by the
+fit's median AR(1) factor like theta's. The former estimation (a Nelder-Mead
+search of the profile likelihood, standard errors from its curvature) is
+kept as :func:`fit_frequency_response_profile`, the benchmark's reference
+(``bench/bench_frequency.py``; measured figures in
+docs/decisions/0024-frequency-response-form-and-joint-estimation.md).
 
 Settings (``PredictorIdentifier(frequency=...)``): ``"auto"`` (default)
 estimates the response when TRAIN's runs spread over more than
@@ -40,6 +47,8 @@ from ..data.coverage import FREQUENCY_REL_SPREAD, frequency_varies, run_frequenc
 from ..data.measurements import Measurements
 from ..errors import IdentificationError
 from ..predictor.frequency import FrequencyResponse
+from .problem import SampleData
+from .slipproblem import make_problem
 
 __all__ = ["FREQUENCY_SETTINGS", "response_setting", "reference_frequency", "frequency_record",
            "frequency_report_lines", "fit_frequency_response", "GRID_OFFSETS", "GRID_ZETAS"]
@@ -111,10 +120,157 @@ def _clone(est, **changes):
     return type(est)(**{**est.get_params(), **changes})
 
 
+#: finite-difference steps of the response coordinates q = (f_b0 / f_ref, ln zeta_b)
+Q_STEPS = (1e-4, 0.02)
+#: bounds of q: the resonance within +-20 % of f_ref, zeta_b in [1e-3, 0.2]
+Q_LO, Q_HI = np.array([0.8, math.log(1e-3)]), np.array([1.2, math.log(0.2)])
+
+
+def response_of(f_ref: float, q) -> FrequencyResponse:
+    """The response at coordinates ``q = (f_b0 / f_ref, ln zeta_b)``."""
+    return FrequencyResponse(f_ref, float(q[0]) * f_ref, math.exp(float(q[1])))
+
+
+class ResponseLinearisation:
+    """A fitted model's weighted residuals as a function of the response q, theta held at the fit.
+
+    ``r(q) = (v_pred(theta_hat, q) - v_meas) / sqrt(R_run)`` on the likelihood's
+    samples (R_run the fit's noise variance of each run); ``J_theta`` its
+    analytic Jacobian in the varied theta (and phi) at ``q_fit``, ``J_q`` the
+    central differences in q (steps :data:`Q_STEPS`). With ``P`` the projector
+    onto the orthogonal complement of ``J_theta``'s columns, the joint
+    least squares' Gauss-Newton step in q (theta re-optimised to first order)
+    is ``-(J_q^T P J_q)^-1 J_q^T P r`` and ``(J_q^T P J_q)^-1`` is q's block of
+    the joint Fisher covariance (the Schur complement).
+    """
+
+    def __init__(self, result, data, mask, f_ref: float, q_fit):
+        self.result, self.data, self.mask, self.f_ref = result, data, mask, float(f_ref)
+        self.q_fit = np.asarray(q_fit, float)
+        prob = self.problem(self.q_fit)
+        self.w = 1.0 / np.sqrt(np.asarray(result.noise_var, float)[prob.run_sel])
+        cols = np.flatnonzero(result.varied)
+        J = prob.jacobian(result.values, cols) * self.w[:, None]
+        J = J[:, np.all(np.isfinite(J), axis=0) & np.any(J != 0, axis=0)]
+        self.Q = np.linalg.qr(J)[0]
+        self.r_fit = self.residual(self.q_fit, prob)
+
+    def problem(self, q):
+        res, prm = self.result, self.result.params
+        sample = SampleData(self.data, self.mask, frequency=response_of(self.f_ref, q))
+        E = None if res.extra is None else res.extra.evaluate(sample.frame)
+        return make_problem(prm.drive_law, sample, res.order, prm.kappa, prm.include_load_inertia,
+                            res.settings.get("criterion", "free_run"), prm.s_center, prm.s_half,
+                            res.slider_mass_kg, E=E)
+
+    def residual(self, q, prob=None) -> np.ndarray:
+        """Weighted residuals at response q, theta held (non-finite values as a large residual)."""
+        prob = self.problem(q) if prob is None else prob
+        with np.errstate(all="ignore"):
+            r = prob.residual(self.result.values) * (self.w if hasattr(self, "w") else 1.0)
+        return np.where(np.isfinite(r), r, 1e3)
+
+    def project(self, x: np.ndarray) -> np.ndarray:
+        """``P x``: x without its part in the span of J_theta."""
+        return x - self.Q @ (self.Q.T @ x)
+
+    def projected_sse(self, q) -> float:
+        """``|P r(q)|^2``: the sum of squares after theta's first-order refit at q."""
+        return float(np.sum(self.project(self.residual(q)) ** 2))
+
+    def step_and_information(self):
+        """``(Gauss-Newton step in q, J_q^T P J_q)`` at q_fit."""
+        cols = []
+        for i, h in enumerate(Q_STEPS):
+            e = np.zeros(2)
+            e[i] = h
+            cols.append((self.residual(self.q_fit + e) - self.residual(self.q_fit - e)) / (2 * h))
+        PJ = self.project(np.column_stack(cols))
+        S = PJ.T @ PJ
+        g = PJ.T @ self.project(self.r_fit)
+        try:
+            step = -np.linalg.solve(S + 1e-9 * np.trace(S) * np.eye(2), g)
+        except np.linalg.LinAlgError:
+            step = np.zeros(2)
+        return step, S
+
+
+def _gauss_newton(data, mask, f_ref, loglik, best, max_outer=8):
+    """Gauss-Newton steps of the joint least squares in q from the best fit so far, each with a line search.
+
+    ``loglik(x)`` is the warm refit's log-likelihood at ``x = (f_b0 [Hz], ln zeta_b)`` (it updates ``best``).
+    A step is tried at full length, then 0.3 and 0.1 of it; the search stops when no trial raises the
+    log-likelihood by more than 0.01 or the step is below 2e-5 f_ref and 0.01 in ln zeta_b.
+    """
+    for _ in range(max_outer):
+        q = np.array([best["x"][0] / f_ref, best["x"][1]])
+        step = ResponseLinearisation(best["result"], data, mask, f_ref, q).step_and_information()[0]
+        if abs(step[0]) < 2e-5 and abs(step[1]) < 0.01:
+            return
+        l0 = best["loglik"]
+        for frac in (1.0, 0.3, 0.1):
+            qn = np.clip(q + frac * step, Q_LO, Q_HI)
+            if loglik(np.array([qn[0] * f_ref, qn[1]])) > l0 + 0.01:
+                break
+        else:
+            return
+
+
+def fit_frequency_response(est, data, slider_mass_kg=None, mask=None):
+    """Identify the model with its frequency response (``est.frequency == "auto"``, TRAIN's frequency varies).
+
+    The response's coordinates ``q = (f_b0 / f_ref, ln zeta_b)`` are parameters of the joint least squares
+    with theta. The basin: the grid :data:`GRID_OFFSETS` x :data:`GRID_ZETAS`, one warm identification of
+    theta at each point (started from the best theta so far). Then Gauss-Newton steps of the joint least
+    squares in q (:class:`ResponseLinearisation`: theta re-optimised to first order by the projection, then
+    exactly by a warm refit at the new q, with a line search; :func:`_gauss_newton`), and a final
+    identification at the optimum with the identifier's full search. Standard errors of ``f_b0`` and
+    ``zeta_b``: q's block of the joint Fisher covariance (the Schur complement), inflated by the fit's
+    median AR(1) factor like theta's. Returns the fitted identifier (``est`` itself) whose result carries
+    the estimated response and the record ``status="estimated"``.
+    """
+    log = est._log
+    m_s = slider_mass_kg if slider_mass_kg is not None else getattr(data, "slider_mass_kg", None)
+    if mask is None and isinstance(data, Measurements):
+        mask = data.mask
+    f_ref = reference_frequency(data)
+    loglik, best = _profile(est, data, m_s, mask, f_ref, log)
+    grid = [np.array([f_ref * (1 + o), math.log(z)]) for o in GRID_OFFSETS for z in GRID_ZETAS]
+    vals = [loglik(x) for x in grid]
+    if not np.isfinite(max(vals)):
+        raise IdentificationError("frequency response: no trial response gave a finite fit")
+    n_grid = len(best["seen"])
+    _gauss_newton(data, mask, f_ref, loglik, best)
+    resp = FrequencyResponse(f_ref, float(best["x"][0]), math.exp(float(best["x"][1])))
+    final = _clone(est, frequency=resp, init=best["params"]).fit(data, slider_mass_kg=m_s, mask=mask)
+    q_hat = np.array([resp.f_b0_Hz / f_ref, math.log(resp.zeta_b)])
+    stderr = response_stderr(ResponseLinearisation(final.result_, data, mask, f_ref, q_hat), resp)
+    rec = frequency_record(
+        "estimated", f"TRAIN's runs spread over more than {FREQUENCY_REL_SPREAD:.1%} of their frequency: joint "
+        "maximum likelihood", resp, data, stderr=stderr,
+        joint={"grid_fits": n_grid, "gauss_newton_fits": len(best["seen"]) - n_grid,
+               "loglik": float(final.loglik_),
+               "stderr_from": "Schur complement of the joint Fisher information" if stderr else "singular"})
+    est._publish(replace(final.result_, frequency=rec, settings={**final.result_.settings, "frequency": "auto"}))
+    return est
+
+
+def response_stderr(lin: "ResponseLinearisation", resp: FrequencyResponse) -> dict | None:
+    """Standard errors of ``f_b0_Hz`` and ``zeta_b``: ``(J_q^T P J_q)^-1`` x the median AR(1) factor (None if singular)."""
+    S = lin.step_and_information()[1]
+    try:
+        cov = np.linalg.inv(S) * float(np.median(lin.result.ar1_factor))
+    except np.linalg.LinAlgError:
+        return None
+    if not (np.all(np.isfinite(cov)) and np.all(np.diag(cov) > 0)):
+        return None
+    return {"f_b0_Hz": float(resp.f_ref_Hz * math.sqrt(cov[0, 0])), "zeta_b": float(resp.zeta_b * math.sqrt(cov[1, 1]))}
+
+
 def _profile(est, data, m_s, mask, f_ref, log):
     """The profile log-likelihood l(f_b0, ln zeta) with warm inner fits (the best theta so far as start)."""
-    best: dict[str, Any] = {"loglik": -np.inf, "params": None, "x": None}
     seen: dict = {}
+    best: dict[str, Any] = {"loglik": -np.inf, "params": None, "x": None, "result": None, "seen": seen}
 
     def loglik(x):
         key = (round(float(x[0]), 3), round(float(x[1]), 6))
@@ -131,7 +287,7 @@ def _profile(est, data, m_s, mask, f_ref, log):
             ll = -np.inf
         seen[key] = ll
         if ll > best["loglik"]:
-            best.update(loglik=ll, params=fit.params_, x=np.array(x, float))
+            best.update(loglik=ll, params=fit.params_, x=np.array(x, float), result=fit.result_)
         log(f"frequency response: f_b0 {x[0]:.1f} Hz, zeta {math.exp(x[1]):.5f}: loglik {ll:.2f}")
         return ll
     return loglik, best
@@ -159,11 +315,12 @@ def _profile_stderr(loglik, x_hat, steps) -> tuple[np.ndarray | None, np.ndarray
     return cov, H
 
 
-def fit_frequency_response(est, data, slider_mass_kg=None, mask=None):
-    """Identify the model with its frequency response (``est.frequency == "auto"``, TRAIN's frequency varies).
+def fit_frequency_response_profile(est, data, slider_mass_kg=None, mask=None):
+    """The former estimation (decision 0017), kept as the benchmark's reference: profile likelihood.
 
-    Returns the fitted identifier (``est`` itself) whose result carries the
-    estimated response and the record ``status="estimated"``.
+    Every trial response is one warm identification of theta; a grid (:data:`GRID_OFFSETS` x
+    :data:`GRID_ZETAS`), then Nelder-Mead in ``(f_b0, ln zeta_b)``; standard errors from the profile's
+    curvature. Same result record as :func:`fit_frequency_response` (``profile`` instead of ``joint``).
     """
     log = est._log
     m_s = slider_mass_kg if slider_mass_kg is not None else getattr(data, "slider_mass_kg", None)
