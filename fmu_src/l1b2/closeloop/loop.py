@@ -160,12 +160,12 @@ class CloseLoop(EstimatorSettings):
         ``tip_velocity_amp_m_s``); a tuple replaces that list (``()``: every logged column is a candidate).
 
     baseline : {"eq29", "best", "pure_slip"}
-        The predictor family the loop starts from: ``"eq29"`` (default), ``"pure_slip"``, or ``"best"``,
-        which identifies both on TRAIN and keeps the one with the lower cross-validated free-run nrmse
-        over the refit folds (:func:`l1b2.closeloop.baselines.choose_baseline`; both figures in
-        ``diagnosis.baseline_choice``). With the pure-slip family no candidate counts as relaxing Eq. 29
-        (a load x voltage term is a missing effect). Why ``"best"`` is not yet the default:
-        ``docs/decisions/0019-pure-slip-baseline.md``.
+        The predictor family the loop starts from: ``"best"`` (default) identifies both on TRAIN and keeps
+        Eq. 29 unless the pure-slip family's cross-validated free-run nrmse over the refit folds is lower by
+        at least ``min_cv_drop`` (:func:`l1b2.closeloop.baselines.choose_baseline`; both figures in
+        ``diagnosis.baseline_choice``); ``"eq29"`` or ``"pure_slip"`` fix the family. With the pure-slip
+        family no candidate counts as relaxing Eq. 29 (a load x voltage term is a missing effect).
+        ``docs/decisions/0019-pure-slip-baseline.md``, ``docs/decisions/0026-best-baseline-by-default.md``.
 
     Attributes
     ----------
@@ -180,7 +180,7 @@ class CloseLoop(EstimatorSettings):
                  min_cv_gain: float = DEFAULT_MIN_CV_GAIN, min_cv_drop: float = DEFAULT_MIN_CV_DROP,
                  refit_nfev: int = DEFAULT_REFIT_NFEV,
                  final_nfev: int = 60, screen_alpha: float | None = 0.01, noise_fit: str = "alternate",
-                 noise: str = "common", client=None, baseline: str = "eq29", run_level: bool = True,
+                 noise: str = "common", client=None, baseline: str = "best", run_level: bool = True,
                  response_columns: tuple | None = None):
         self.order = order
         self.k_folds = k_folds
@@ -238,7 +238,8 @@ class CloseLoop(EstimatorSettings):
         if len(fits) > 1:
             say("baseline: cross-validating both families on TRAIN's run folds")
             family, self.baseline_choice_ = choose_baseline(
-                fits, dtr, mask_tr, m_s, stratified_folds(dtr, self.refit_folds, self.seed), self.refit_settings())
+                fits, dtr, mask_tr, m_s, stratified_folds(dtr, self.refit_folds, self.seed), self.refit_settings(),
+                min_drop=self.min_cv_drop)
         base = fits[family]
         #: the baseline's drive-frequency response (estimated when TRAIN's frequency varies): every refit holds it
         self.frequency_ = base.result_.frequency_response
