@@ -103,3 +103,25 @@ def test_leaving_eq29_needs_the_materiality_threshold(monkeypatch, nrmse, min_dr
         fits = {f: _Fit(f, df.speed_m_s.to_numpy()) for f in order}
         chosen, rec = baselines.choose_baseline(fits, df, np.ones(4, bool), 0.1, [[0]], None, min_drop=min_drop)
         assert chosen == want and rec["chosen"] == want and rec["min_drop"] == min_drop
+
+
+def test_a_diverged_pure_slip_fit_leaves_eq29_and_is_recorded():
+    # reference: a realistic-world control seed whose pure-slip fit diverged twice aborted the whole loop; with
+    # both families identified, that family is left out with its message, Eq. 29's own failure still stops
+    from l1b2.errors import FitDivergedError
+
+    def fit(bad):
+        def f(family):
+            if family in bad:
+                raise FitDivergedError(f"the {family} baseline identification on TRAIN diverged")
+            return f"fitted {family}"
+        return f
+
+    fits, failed = baselines.identify_families(("eq29", "pure_slip"), fit({"pure_slip"}))
+    assert fits == {"eq29": "fitted eq29"} and list(failed) == ["pure_slip"] and "diverged" in failed["pure_slip"]
+    fits, failed = baselines.identify_families(("eq29", "pure_slip"), fit(set()))
+    assert list(fits) == ["eq29", "pure_slip"] and failed == {}
+    with pytest.raises(FitDivergedError):
+        baselines.identify_families(("eq29", "pure_slip"), fit({"eq29"}))
+    with pytest.raises(FitDivergedError):      # a family given alone: its failure is the loop's
+        baselines.identify_families(("pure_slip",), fit({"pure_slip"}))

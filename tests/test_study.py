@@ -269,3 +269,18 @@ def test_control_study_small_writes_its_files(tmp_path):
     rep = json.loads((out / "study.json").read_text())
     assert rep["summary"]["control"]["max_ratio"] == pytest.approx(df["ratio"].max())
     assert len(pd.read_csv(out / "rows.csv")) == 2 and (out / "study_control.png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("given, want", [([], None), (["--baseline", "best"], {"baseline": "best"})])
+def test_cli_passes_the_baseline_family_to_the_control_loop(monkeypatch, tmp_path, given, want):
+    import l1b2.workflows as wf
+    seen = {}
+
+    def fake(study, out, seeds, **kw):
+        seen.update(kw)
+        return StudyResult("control", [{"seed": 30, "nrmse_before": 0.03, "nrmse_after": 0.03, "ratio": 1.0,
+                                        "p95_before": 0.06, "p95_after": 0.06, "within_tolerance": True,
+                                        "added": ""}], {}, {"tasks": 1, "wall_time_s": 1.0, "workers": 0})
+    monkeypatch.setattr(wf, "run_study", fake)
+    assert cli_main(["study", "control", "--out", str(tmp_path / "c"), "--seeds", "1", "--workers", "0"] + given) == 0
+    assert seen["loop_settings"] == want

@@ -28,13 +28,29 @@ import dataclasses
 
 import numpy as np
 
+from ..errors import FitDivergedError
 from .acceptance import EffectSet, cv_errors
 
-__all__ = ["choose_baseline", "retag_structural"]
+__all__ = ["identify_families", "choose_baseline", "retag_structural"]
 
 
 #: the family kept unless another is materially better in cross-validation
 DEFAULT_FAMILY = "eq29"
+
+
+def identify_families(families, fit) -> tuple[dict, dict]:
+    """``(fits, failed)``: ``fit(family)`` for each family; with more than one family, a family other than
+    Eq. 29 whose fit raises :class:`l1b2.errors.FitDivergedError` is left out and its message kept in
+    ``failed`` (the loop then starts from Eq. 29); Eq. 29's failure, or the only family's, is raised."""
+    fits, failed = {}, {}
+    for family in families:
+        try:
+            fits[family] = fit(family)
+        except FitDivergedError as e:
+            if len(families) == 1 or family == DEFAULT_FAMILY:
+                raise
+            failed[family] = str(e)
+    return fits, failed
 
 
 def choose_baseline(fits: dict, df, mask, m_s, folds, settings, min_drop: float = 0.0) -> tuple[str, dict]:
