@@ -83,3 +83,45 @@ def test_linear_response_of_the_pure_slip_baseline_includes_the_slip_slope():
     moving = np.abs(base) > 0.02
     err = np.max(np.abs(lin - fd)[moving]) / np.max(np.abs(fd))
     assert err < 0.02 < np.max(np.abs(eq29_like - fd)[moving]) / np.max(np.abs(fd))
+
+
+@pytest.mark.parametrize("nrmse, min_drop, want", [
+    ((0.0036, 0.0024), 0.005, "eq29"),        # the reference world's clean figures: better, but not materially
+    ((0.0381, 0.0234), 0.005, "pure_slip"),   # the realistic world's: a fall of 1.5 points
+    ((0.0300, 0.0245), 0.005, "pure_slip"),   # just above the threshold
+    ((0.0300, 0.0251), 0.005, "eq29"),        # just below it
+    ((np.inf, 0.0300), 0.005, "pure_slip"),   # Eq. 29's CV failed
+    ((0.0300, np.inf), 0.0, "eq29"),          # the other's CV failed: never chosen
+    ((0.0250, 0.0300), 0.0, "eq29")])
+def test_leaving_eq29_needs_the_materiality_threshold(monkeypatch, nrmse, min_drop, want):
+    # CV nrmse = sqrt(sum SSE / sum (held-out speed^2)); with one fold of ss = 1 the SSE is nrmse^2
+    errs = dict(zip(("eq29", "pure_slip"), nrmse))
+    monkeypatch.setattr(baselines, "cv_errors", lambda df, mask, m_s, folds, init, jobs, settings: [
+        FoldErrors(np.array([errs[init] ** 2]), np.array([1.0]))])
+    df = _frame()
+    for order in (("eq29", "pure_slip"), ("pure_slip", "eq29")):   # the answer does not depend on the order
+        fits = {f: _Fit(f, df.speed_m_s.to_numpy()) for f in order}
+        chosen, rec = baselines.choose_baseline(fits, df, np.ones(4, bool), 0.1, [[0]], None, min_drop=min_drop)
+        assert chosen == want and rec["chosen"] == want and rec["min_drop"] == min_drop
+
+
+def test_a_diverged_pure_slip_fit_leaves_eq29_and_is_recorded():
+    # reference: a realistic-world control seed whose pure-slip fit diverged twice aborted the whole loop; with
+    # both families identified, that family is left out with its message, Eq. 29's own failure still stops
+    from l1b2.errors import FitDivergedError
+
+    def fit(bad):
+        def f(family):
+            if family in bad:
+                raise FitDivergedError(f"the {family} baseline identification on TRAIN diverged")
+            return f"fitted {family}"
+        return f
+
+    fits, failed = baselines.identify_families(("eq29", "pure_slip"), fit({"pure_slip"}))
+    assert fits == {"eq29": "fitted eq29"} and list(failed) == ["pure_slip"] and "diverged" in failed["pure_slip"]
+    fits, failed = baselines.identify_families(("eq29", "pure_slip"), fit(set()))
+    assert list(fits) == ["eq29", "pure_slip"] and failed == {}
+    with pytest.raises(FitDivergedError):
+        baselines.identify_families(("eq29", "pure_slip"), fit({"eq29"}))
+    with pytest.raises(FitDivergedError):      # a family given alone: its failure is the loop's
+        baselines.identify_families(("pure_slip",), fit({"pure_slip"}))

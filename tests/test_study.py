@@ -91,6 +91,62 @@ def test_control_summary_by_hand():
     assert c["p95_before_median"] == 0.07 and c["p95_after_median"] == 0.07 and c["p95_after_max"] == 0.08
 
 
+def test_control_summary_carries_the_reference_p95_and_the_families():
+    df = pd.DataFrame([{"seed": s, "nrmse_before": 0.03, "nrmse_after": 0.03, "ratio": 1.0, "p95_before": 0.06,
+                        "p95_after": 0.05, "within_tolerance": True, "added": "", "baseline": fam,
+                        "p95_nominal": nom, "p95_run_gain_after": g}
+                       for s, fam, nom, g in ((30, "pure_slip", 0.04, 0.02), (31, "eq29", 0.03, 0.01),
+                                              (32, "pure_slip", 0.05, 0.03))])
+    c = control_summary(df)
+    assert c["p95_nominal_median"] == 0.04 and c["p95_run_gain_after_median"] == 0.02
+    assert c["baselines"] == {"pure_slip": 2, "eq29": 1}
+
+
+def _runs_frame(v, runs, pos):
+    return pd.DataFrame({"run": runs, "speed_m_s": v, "position_m": pos})
+
+
+def test_run_gain_p95_removes_exactly_a_gain_per_run():
+    # reference: a prediction wrong by one factor per run has a zero p95 after the best per-run gain; wrong by a
+    # factor per run plus a known relative error e on every sample, the p95 is that of |e| (up to the fitted gain)
+    pos = np.tile(np.linspace(-0.02, 0.02, 200), 3)
+    runs = np.repeat([0, 1, 2], 200)
+    v = np.repeat([0.1, -0.15, 0.2], 200)
+    df = _runs_frame(v, runs, pos)
+    from l1b2.study.control import run_gain_p95
+    assert run_gain_p95(v * np.repeat([1.05, 0.9, 1.2], 200), df) == pytest.approx(0.0, abs=1e-12)
+    e = np.tile(np.where(np.arange(200) % 10 == 0, 0.05, 0.0), 3)   # 10 % of the samples 5 % off
+    # the least-squares gain g of a run solves sum (g (1+e) - 1)(1+e) = 0
+    g = np.sum(1 + e[:200]) / np.sum((1 + e[:200]) ** 2)
+    want = np.percentile(np.abs(g * (1 + e) - 1), 95)
+    assert run_gain_p95(v * (1 + e) * np.repeat([0.8, 1.1, 1.0], 200), df) == pytest.approx(want, rel=1e-9)
+
+
+def test_speed_at_positions_interpolates_each_run_on_its_own():
+    from l1b2.study.control import speed_at_positions
+    pos = np.linspace(-0.02, 0.02, 41)
+    other = _runs_frame(np.r_[1 + 10 * pos, 2 - 5 * pos[::-1]], np.repeat([7, 8], 41), np.r_[pos, pos[::-1]])
+    x = np.r_[np.linspace(-0.015, 0.015, 13), np.linspace(0.019, -0.019, 9)]
+    df = _runs_frame(np.ones(22), np.repeat([7, 8], [13, 9]), x)
+    np.testing.assert_allclose(speed_at_positions(df, other), np.r_[1 + 10 * x[:13], 2 - 5 * x[13:]], rtol=1e-12)
+
+
+def test_nominal_p95_of_a_scatter_free_world_is_the_noise_alone():
+    # reference: without run scatter the noisy rig and the noise-free rig follow the same trajectory, so the
+    # nominal p95 is the p95 of |noise| / |measured speed| sample by sample; without noise it is zero
+    from l1b2.data.measurements import evaluation_mask
+    from l1b2.study.control import nominal_p95
+    from l1b2.study.world import world_data
+    w = World(run_scatter=0.0, voltages_V=(255.0, 324.0))
+    _, test, _ = world_data(w, 3)
+    _, clean, _ = world_data(World(run_scatter=0.0, speed_noise_m_s=0.0, voltages_V=(255.0, 324.0)), 3)
+    m = evaluation_mask(test.df)
+    v, vc = test.df["speed_m_s"].to_numpy(), clean.df["speed_m_s"].to_numpy()
+    assert nominal_p95(w, 3, test.df) == pytest.approx(np.percentile(np.abs(v - vc)[m] / np.abs(v[m]), 95), rel=1e-9)
+    assert nominal_p95(World(run_scatter=0.0, speed_noise_m_s=0.0, voltages_V=(255.0, 324.0)), 3,
+                       clean.df) == pytest.approx(0.0, abs=1e-12)
+
+
 def test_study_result_round_trips_through_strict_json():
     from l1b2.jsonio import dumps
     res = StudyResult("coverage", _coverage_rows(), {"seeds": [0, 1, 2, 3]}, {"workers": 2})
@@ -213,3 +269,18 @@ def test_control_study_small_writes_its_files(tmp_path):
     rep = json.loads((out / "study.json").read_text())
     assert rep["summary"]["control"]["max_ratio"] == pytest.approx(df["ratio"].max())
     assert len(pd.read_csv(out / "rows.csv")) == 2 and (out / "study_control.png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("given, want", [([], None), (["--baseline", "best"], {"baseline": "best"})])
+def test_cli_passes_the_baseline_family_to_the_control_loop(monkeypatch, tmp_path, given, want):
+    import l1b2.workflows as wf
+    seen = {}
+
+    def fake(study, out, seeds, **kw):
+        seen.update(kw)
+        return StudyResult("control", [{"seed": 30, "nrmse_before": 0.03, "nrmse_after": 0.03, "ratio": 1.0,
+                                        "p95_before": 0.06, "p95_after": 0.06, "within_tolerance": True,
+                                        "added": ""}], {}, {"tasks": 1, "wall_time_s": 1.0, "workers": 0})
+    monkeypatch.setattr(wf, "run_study", fake)
+    assert cli_main(["study", "control", "--out", str(tmp_path / "c"), "--seeds", "1", "--workers", "0"] + given) == 0
+    assert seen["loop_settings"] == want

@@ -185,6 +185,7 @@ def cmd_study(args) -> int:
     res = run_study(args.study, args.out, seeds, world=world, fit=FitSettings(n_starts=args.starts),
                     injections=[s for s in args.injections.split(",") if s] if args.injections else None,
                     workers=args.workers, scheduler=args.scheduler, clean_fit=not args.no_clean_fit,
+                    loop_settings={"baseline": args.baseline} if args.baseline else None,
                     plots_on=not args.no_plots, progress=say)
     for line in res.report_lines():
         print(line)
@@ -210,6 +211,8 @@ def _add_study_parser(sub) -> None:
                    "(the close loop's baseline uses 4)")
     p.add_argument("--no-clean-fit", action="store_true",
                    help="coverage: skip the fit of the same seed without the injection (the bias diagnosis)")
+    p.add_argument("--baseline", choices=DRIVE_LAWS + ("best",), default=None,
+                   help="control: the close loop's baseline family (default: the close loop's, eq29)")
     _engine_args(p, default_workers=2, what="seeds (0 = serially in this process)")
     p.add_argument("--no-plots", action="store_true", help="write no PNG figure")
     p.add_argument("--quiet", action="store_true", help="no line per finished seed")
@@ -278,8 +281,9 @@ def _close_loop_args(p: argparse.ArgumentParser) -> None:
                    "which the close loop was measured)")
     p.add_argument("--noise", choices=NOISES, default="common", help=NOISE_HELP)
     p.add_argument("--baseline", choices=DRIVE_LAWS + ("best",), default="eq29",
-                   help="the predictor family the loop starts from: eq29, pure_slip, or best (the lower "
-                   "cross-validated free-run error on TRAIN, both reported)")
+                   help="the predictor family the loop starts from: eq29 (default), pure_slip, or best (Eq. 29 "
+                   "unless the pure-slip family's cross-validated free-run error on TRAIN is lower by the "
+                   "materiality threshold --min-cv-drop; both reported)")
     p.add_argument("--seed", type=int, default=0, help="seed of the multi-start and of the fold assignment")
     p.add_argument("--slider-mass", type=float, help="slider mass [kg] (overrides the sidecars)")
     p.add_argument("--allow-unusual-units", action="store_true", help=UNUSUAL_UNITS_HELP)

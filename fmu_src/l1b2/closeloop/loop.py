@@ -74,7 +74,7 @@ from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT
                          EffectSet, RefitCV, RefitSettings, Validated, accepts, added_columns, chain_cv_errors,
                          collinear, cv_errors, fold_start_phi, materiality, refit, session_blocks, stratified_folds,
                          time_dependent, validated)
-from .baselines import choose_baseline, retag_structural
+from .baselines import choose_baseline, identify_families, retag_structural
 from .evidence import channels_considered, order_traced
 from .guard import checked_fit
 from .result import CloseLoopResult, ResidualAnalysis
@@ -161,11 +161,12 @@ class CloseLoop(EstimatorSettings):
 
     baseline : {"eq29", "best", "pure_slip"}
         The predictor family the loop starts from: ``"eq29"`` (default), ``"pure_slip"``, or ``"best"``,
-        which identifies both on TRAIN and keeps the one with the lower cross-validated free-run nrmse
-        over the refit folds (:func:`l1b2.closeloop.baselines.choose_baseline`; both figures in
-        ``diagnosis.baseline_choice``). With the pure-slip family no candidate counts as relaxing Eq. 29
-        (a load x voltage term is a missing effect). Why ``"best"`` is not yet the default:
-        ``docs/decisions/0019-pure-slip-baseline.md``.
+        which identifies both on TRAIN and keeps Eq. 29 unless the pure-slip family's cross-validated
+        free-run nrmse over the refit folds is lower by at least ``min_cv_drop``
+        (:func:`l1b2.closeloop.baselines.choose_baseline`; both figures in ``diagnosis.baseline_choice``;
+        a pure-slip fit that diverges is recorded there and the loop starts from Eq. 29). With the
+        pure-slip family no candidate counts as relaxing Eq. 29 (a load x voltage term is a missing
+        effect). Why ``"best"`` is not yet the default: ``docs/decisions/0026-best-baseline-by-default.md``.
 
     Attributes
     ----------
@@ -227,18 +228,21 @@ class CloseLoop(EstimatorSettings):
         if self.baseline not in ("best",) + DRIVE_LAWS:
             raise ValueError(f"baseline must be 'best' or one of {DRIVE_LAWS}, got {self.baseline!r}")
         self.frequency_ = None
-        fits = {}
-        for family in (DRIVE_LAWS if self.baseline == "best" else (self.baseline,)):
+        def fit_family(family):
             say(f"baseline: identifying the {family} predictor on TRAIN")
-            fits[family] = checked_fit(lambda: self._identify(dtr, m_s, mask_tr, model=family),
-                                       lambda: self._identify(dtr, m_s, mask_tr, retry=True, model=family), dtr,
-                                       mask_tr, f"the {family} baseline identification on TRAIN")
-            say.count(1, fits[family].convergence_.get("nfev_total", 0))
+            est = checked_fit(lambda: self._identify(dtr, m_s, mask_tr, model=family),
+                              lambda: self._identify(dtr, m_s, mask_tr, retry=True, model=family), dtr,
+                              mask_tr, f"the {family} baseline identification on TRAIN")
+            say.count(1, est.convergence_.get("nfev_total", 0))
+            return est
+        fits, failed = identify_families(DRIVE_LAWS if self.baseline == "best" else (self.baseline,), fit_family)
         family, self.baseline_choice_ = next(iter(fits)), {"chosen": next(iter(fits)), "families": {}}
         if len(fits) > 1:
             say("baseline: cross-validating both families on TRAIN's run folds")
             family, self.baseline_choice_ = choose_baseline(
-                fits, dtr, mask_tr, m_s, stratified_folds(dtr, self.refit_folds, self.seed), self.refit_settings())
+                fits, dtr, mask_tr, m_s, stratified_folds(dtr, self.refit_folds, self.seed), self.refit_settings(),
+                min_drop=self.min_cv_drop)
+        self.baseline_choice_["families"].update({f: {"fit_failed": why} for f, why in failed.items()})
         base = fits[family]
         #: the baseline's drive-frequency response (estimated when TRAIN's frequency varies): every refit holds it
         self.frequency_ = base.result_.frequency_response

@@ -71,7 +71,8 @@ class SlipForceCore(ForceCore):
         c_r, sig, mu, k0, musd = theta[:5]
         Bp = L @ theta[5 + n1 : 5 + 2 * n1]
         c_k = inverse_tip_speed(sig, Bp, V0)
-        k = np.clip(np.where(vp > 0, np.nan_to_num(c_k * vp, posinf=1.0), 0.0), 0.0, 1.0)
+        with np.errstate(invalid="ignore", over="ignore"):   # inf * 0 (no tip speed, at rest): k = 0 below
+            k = np.clip(np.where(vp > 0, np.nan_to_num(c_k * vp, posinf=1.0), 0.0), 0.0, 1.0)
         g1, G, dg1, dG = slip_factors(k)
         inside = (k > 0) & (k < 1)
         dXs_dk = np.where(inside, mu * P * (dg1 - 0.5 * np.pi * Ap * dG), 0.0)

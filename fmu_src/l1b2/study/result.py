@@ -11,7 +11,9 @@ them:
   against the median standard error (an interval too narrow for the
   seed-to-seed scatter has ``spread / median se`` above 1);
 * control: the largest ratio of the loop's held-out nrmse to the baseline's,
-  the seeds above the 2 % rule, and the held-out p95 before and after.
+  the seeds above the 2 % rule, the held-out p95 before and after, the
+  medians of the two reference p95 (:mod:`l1b2.study.control`) and how often
+  each baseline family was chosen.
 """
 
 from __future__ import annotations
@@ -68,7 +70,10 @@ def control_summary(df: pd.DataFrame) -> dict:
             "nrmse_before_median": float(df["nrmse_before"].median()),
             "nrmse_after_median": float(df["nrmse_after"].median()),
             "p95_before_median": float(df["p95_before"].median()), "p95_after_median": float(df["p95_after"].median()),
-            "p95_after_max": float(df["p95_after"].max())}
+            "p95_after_max": float(df["p95_after"].max()),
+            **{f"{k}_median": float(df[k].median()) for k in ("p95_nominal", "p95_run_gain_after") if k in df},
+            **({"baselines": {str(k): int(n) for k, n in df["baseline"].value_counts().items()}}
+               if "baseline" in df else {})}
 
 
 @dataclass
@@ -120,7 +125,11 @@ class StudyResult:
                 f"{c['seeds_with_effects'] or 'none'}",
                 f"held-out free-run nrmse median {100 * c['nrmse_before_median']:.2f} -> "
                 f"{100 * c['nrmse_after_median']:.2f} %; p95 median {100 * c['p95_before_median']:.2f} -> "
-                f"{100 * c['p95_after_median']:.2f} % (max after {100 * c['p95_after_max']:.2f} %)"]
+                f"{100 * c['p95_after_median']:.2f} % (max after {100 * c['p95_after_max']:.2f} %)"
+                + (f"; the scatter-free rig's p95 median {100 * c['p95_nominal_median']:.2f} %, the final model's "
+                   f"with the best gain per run {100 * c['p95_run_gain_after_median']:.2f} %"
+                   if "p95_nominal_median" in c else "")
+                + (f"; baselines {c['baselines']}" if "baselines" in c else "")]
 
     def figure(self):
         """A matplotlib figure: coverage -- estimate against injected value with the intervals, per injection;
@@ -159,6 +168,8 @@ class StudyResult:
             pos = np.arange(len(df))
             a2.bar(pos - w / 2, 100 * df["p95_before"], w, label="baseline")
             a2.bar(pos + w / 2, 100 * df["p95_after"], w, label="after the loop")
+            if "p95_nominal" in df:
+                a2.plot(pos, 100 * df["p95_nominal"], "kv", label="scatter-free rig (no model does better)")
             a2.axhline(3.0, color="k", ls="--", lw=1, label="3 % target")
             a2.set_xticks(pos, df["seed"].astype(str))
             a2.set_xlabel("seed")
