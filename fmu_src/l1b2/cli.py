@@ -207,8 +207,8 @@ def _add_study_parser(sub) -> None:
                    "whose family has a physical parameter)")
     p.add_argument("--starts", type=int, default=4, help="coverage: starts of the identification's global search "
                    "(the close loop's baseline uses 4)")
-    p.add_argument("--model", choices=("pure_slip", "eq29"), default="pure_slip",
-                   help="coverage: the predictor family of the fits (default pure_slip, the realistic world's better)")
+    p.add_argument("--model", choices=("eq29", "pure_slip"), default="eq29",
+                   help="coverage: the predictor family of the fits (the close loop's default baseline: eq29)")
     p.add_argument("--no-clean-fit", action="store_true",
                    help="coverage: skip the fit of the same seed without the injection (the bias diagnosis)")
     _engine_args(p, default_workers=2, what="seeds (0 = serially in this process)")

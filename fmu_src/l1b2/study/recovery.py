@@ -5,19 +5,30 @@ For every rig injection whose effect family has a physical parameter
 
 1. runs the rig world with that injection, its size drawn from the seed in
    :attr:`RecoveryTarget.sizes` (the sign too, where the physics allows both),
-2. identifies the Eq. 29 predictor *with* that family on TRAIN (the close
-   loop's baseline settings: order 8, free-run maximum likelihood, the
-   family's physical bounds), and
+2. identifies the predictor (:attr:`FitSettings.model`: Eq. 29, the close
+   loop's default baseline, or the pure-slip family) *with* that family on
+   TRAIN (the close loop's baseline settings: order 8, free-run maximum
+   likelihood, the family's physical bounds), and
 3. expresses the estimate in the rig's parameter: ``pulley_mu`` is the same
    law in both models (copied); the direction asymmetry's force parameters
    are carried into ``Stator.asym_b`` by the family's calibration
    (:func:`l1b2.predictor.effects.direction.calibrate_asymmetry`), its interval
    by the delta method (the calibration's gradient over the force parameters,
-   by forward differences, times their covariance).
+   by forward differences, times their covariance); the drive frequency's
+   target reads the identified response's ``f_b0_Hz`` (no effect family: the
+   response is estimated because TRAIN's frequencies vary) against the
+   stator's ``f_b0_Hz`` set for the seed. That response is an *effective*
+   resonance (it absorbs the interface's damping, :mod:`l1b2.predictor.frequency`),
+   so the target measures how far the effective value is from the physical
+   one until a calibration maps one onto the other.
 
-Each interval the identification offers is checked: the AR(1)-inflated
-Fisher one (``ci95``, what the close-the-loop report shows) and the
-cluster-by-run robust one (``ci95_robust``). Optionally the same family is also
+Each interval kind of :data:`INTERVALS` is checked (:func:`covariances`): the
+AR(1)-inflated Fisher one (the close-the-loop report's ``ci95_model``), the
+cluster-by-run robust one (its ``ci95``), and the cluster-robust ones whose
+clusters are the two runs of one operating condition (the rig's, or its
+mirror image). Each row also holds the correlation of the paired runs' mean
+residuals (:func:`paired_residual_correlation`), the evidence for the level
+at which errors are shared. Optionally the same family is also
 fitted on the same seed's data *without* the injection (``clean_fit``): its
 estimate there is what the model's structural error alone makes of the
 family's parameter (the estimate's bias, for the study's diagnosis).
@@ -100,7 +111,7 @@ class FitSettings:
 
     order: int = 8
     n_starts: int = 4
-    model: str = "pure_slip"
+    model: str = "eq29"
     noise: str = "common"
     noise_fit: str = "alternate"
 
