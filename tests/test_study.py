@@ -200,9 +200,12 @@ def test_condition_clusters_are_the_runs_at_one_voltage_and_load():
     # every run is its own cluster: 4/3 sum_r u_r u_r^T
     u = _Influence.run_influence_
     np.testing.assert_allclose(covs["mirror"], 4 / 3 * u.T @ u, rtol=1e-12)
-    assert run_conditions(_Influence(), train, mirror=True) == [(220.0, 0.03), (220.0, -0.03), (324.0, -0.05),
-                                                                 (324.0, 0.05)]
-    assert dof == {"ar1": 100.0, "robust": 3.0, "condition": 1.0, "mirror": 3.0}
+    assert run_conditions(_Influence(), train, "mirror") == [(220.0, 0.03), (220.0, -0.03), (324.0, -0.05),
+                                                             (324.0, 0.05)]
+    assert run_conditions(_Influence(), train, "level") == [(220.0, 0.03), (220.0, 0.03), (324.0, 0.05),
+                                                            (324.0, 0.05)]
+    np.testing.assert_allclose(covs["level"], covs["condition"], atol=1e-12)   # here the same two clusters
+    assert dof == {"ar1": 100.0, "robust": 3.0, "condition": 1.0, "mirror": 3.0, "level": 1.0}
     assert covs["robust"] is _Influence.cov_robust_all_
 
 
@@ -211,7 +214,8 @@ def test_an_interval_the_fit_does_not_offer_counts_for_nothing():
     rows = [{"injection": "drive_frequency", "parameter": "f_b0_Hz", "seed": s, "injected": 47800.0,
              "estimate": 47790.0 + s, "se_ar1": 5.0, "covered_ar1": s < 3, "se_robust": float("nan"),
              "covered_robust": None, "se_condition": float("nan"), "covered_condition": None,
-             "se_mirror": float("nan"), "covered_mirror": None, "wrong_sign": False}
+             "se_mirror": float("nan"), "covered_mirror": None, "se_level": float("nan"), "covered_level": None,
+             "wrong_sign": False}
             for s in range(4)]
     recs = coverage_summary(pd.DataFrame(rows))
     assert [(r["interval"], r["covered"], r["seeds"]) for r in recs] == [("ar1", 3, 4)]
@@ -227,7 +231,7 @@ def test_the_frequency_target_reads_the_identified_response():
     got = frequency_parameter(SimpleNamespace(result_=SimpleNamespace(frequency=rec)), "f_b0_Hz")
     lo, hi, se = got["ar1"]
     assert got["estimate"] == 47000.0 and se == 10.0 and hi - lo == pytest.approx(2 * 1.959964 * 10.0, rel=1e-6)
-    assert all(np.isnan(got[k][2]) for k in ("robust", "condition", "mirror"))
+    assert all(np.isnan(got[k][2]) for k in ("robust", "condition", "mirror", "level"))
     fixed = SimpleNamespace(result_=SimpleNamespace(frequency={"status": "fixed", "reason": "one frequency"}))
     with pytest.raises(IdentificationError, match="one frequency"):
         frequency_parameter(fixed, "f_b0_Hz")

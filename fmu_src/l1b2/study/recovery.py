@@ -25,8 +25,7 @@ For every rig injection whose effect family has a physical parameter
 Each interval kind of :data:`INTERVALS` is checked (:func:`covariances`): the
 AR(1)-inflated Fisher one (the close-the-loop report's ``ci95_model``), the
 cluster-by-run robust one (its ``ci95``), and the cluster-robust ones whose
-clusters are the two runs of one operating condition (the rig's, or its
-mirror image). Each row also holds the correlation of the paired runs' mean
+clusters are the runs of one operating condition (:data:`GROUPINGS`). Each row also holds the correlation of the paired runs' mean
 residuals (:func:`paired_residual_correlation`), the evidence for the level
 at which errors are shared. Optionally the same family is also
 fitted on the same seed's data *without* the injection (``clean_fit``): its
@@ -54,7 +53,7 @@ from ..predictor.setup import PredictorSetup
 from .world import World, world_data
 
 #: the interval kinds of every row (:func:`covariances`)
-INTERVALS = ("ar1", "robust", "condition", "mirror")
+INTERVALS = ("ar1", "robust", "condition", "mirror", "level")
 
 
 @dataclass(frozen=True)
@@ -159,17 +158,17 @@ def _phi_block(est, cov) -> np.ndarray:
     return np.asarray(cov, float)[-p:, -p:]
 
 
-def run_conditions(est, train: dataio.Measurements, mirror: bool = False) -> list:
-    """Each of the fit's runs' operating condition, in the fit's run order.
+#: the groupings of runs into clusters: the rig's condition (V0, signed load: one run opposing, one aiding the
+#: motion), its mirror image (V0, direction x load: the same load relative to the motion, both directions) and
+#: both together (V0, |load|: the four runs of one voltage and load size)
+GROUPINGS = ("condition", "mirror", "level")
 
-    ``mirror=False``: the rig's condition ``(V0, load)`` (its two runs: the same
-    signed load, one opposing and one aiding the motion); ``mirror=True``:
-    ``(V0, direction x load)`` (its two runs: the same load relative to the
-    motion, in opposite directions: mirror images of each other).
-    """
+
+def run_conditions(est, train: dataio.Measurements, grouping: str = "condition") -> list:
+    """Each of the fit's runs' cluster label under ``grouping`` (:data:`GROUPINGS`), in the fit's run order."""
     first = train.df.groupby(dataio.RUN, sort=False)[[dataio.VOLTAGE, dataio.LOAD, dataio.DIRECTION]].first()
-    cond = {k: (round(float(v), 6), round(float(m * (d if mirror else 1.0)), 9))
-            for k, (v, m, d) in zip(first.index, first.to_numpy())}
+    load = {"condition": lambda m, d: m, "mirror": lambda m, d: m * d, "level": lambda m, d: abs(m)}[grouping]
+    cond = {k: (round(float(v), 6), round(float(load(m, d)), 9)) for k, (v, m, d) in zip(first.index, first.to_numpy())}
     return [cond[r] for r in est.runs_]
 
 
@@ -177,15 +176,15 @@ def covariances(est, train: dataio.Measurements) -> tuple[dict, dict]:
     """``({kind: joint covariance}, {kind: degrees of freedom})`` of the interval kinds (:data:`INTERVALS`).
 
     ``"ar1"``: the AR(1)-inflated Fisher covariance (t with the fit's dof);
-    ``"robust"``: cluster-robust by run (t with runs - 1); ``"condition"`` and
-    ``"mirror"``: cluster-robust with the two runs of one condition as one
+    ``"robust"``: cluster-robust by run (t with runs - 1); each of
+    :data:`GROUPINGS`: cluster-robust with the runs of one group as one
     cluster (:func:`run_conditions`; :func:`l1b2.ident.uncertainty.grouped_sandwich`,
     CR1 factor, t with clusters - 1).
     """
     covs = {"ar1": est.cov_all_, "robust": est.cov_robust_all_}
     dof = {"ar1": float(est.dof_), "robust": float(len(est.runs_) - 1)}
-    for kind, mirror in (("condition", False), ("mirror", True)):
-        covs[kind], n = grouped_sandwich(est.run_influence_, run_conditions(est, train, mirror))
+    for kind in GROUPINGS:
+        covs[kind], n = grouped_sandwich(est.run_influence_, run_conditions(est, train, kind))
         dof[kind] = float(n - 1)
     return covs, dof
 
@@ -203,9 +202,9 @@ def paired_residual_correlation(est, train: dataio.Measurements) -> dict:
     mean = pd.Series(resid[keep]).groupby(df[dataio.RUN].to_numpy()[keep]).mean()
     first = df.groupby(dataio.RUN, sort=False)[dataio.DIRECTION].first()
     out = {}
-    for kind, mirror in (("condition", False), ("mirror", True)):
+    for kind in ("condition", "mirror"):
         pairs: dict = {}
-        for run, c in zip(est.runs_, run_conditions(est, train, mirror)):
+        for run, c in zip(est.runs_, run_conditions(est, train, kind)):
             if run in mean.index:
                 pairs.setdefault(c, {})[int(np.sign(first[run]))] = float(mean[run])
         both = np.array([(p[1], p[-1]) for p in pairs.values() if 1 in p and -1 in p])
