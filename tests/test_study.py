@@ -238,7 +238,7 @@ def test_the_frequency_target_reads_the_identified_response():
 
 
 # ---------------------------------------------------------------------------
-# smaller versions of the two studies (the full ones: decision 0021)
+# smaller versions of the two studies (the full ones: decisions 0021 and 0025)
 # ---------------------------------------------------------------------------
 
 @pytest.mark.slow
@@ -262,6 +262,12 @@ def test_coverage_study_small():
     bias = p["estimate"] - p["injected"]
     assert (np.abs(bias - p["clean_estimate"]) <= 3 * p["se_robust"]).all(), (bias, p["clean_estimate"])
     assert pulley.summary()["coverage"][1]["covered"] == 3          # the robust record of pulley_friction
+    # decision 0025: the asymmetry's paired runs share errors -- positively within the rig's condition (the same
+    # signed load), negatively within its mirror image -- and the interval clustered on both (voltage and load
+    # size) lies between the model-based and the run-robust one and covers
+    a = df[df["injection"] == "direction_asymmetry"]
+    assert (a["pair_corr_condition"] > 0).all() and (a["pair_corr_mirror"] < 0).all()
+    assert ((a["se_ar1"] < a["se_level"]) & (a["se_level"] < a["se_robust"])).all() and a["covered_level"].all()
 
 
 @pytest.mark.slow
