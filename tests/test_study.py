@@ -157,7 +157,8 @@ def test_study_result_round_trips_through_strict_json():
 
 
 def test_targets_draw_their_sizes_from_the_seed():
-    pulley, asym = TARGETS["pulley_friction"], TARGETS["direction_asymmetry"]
+    pulley, asym, freq = TARGETS["pulley_friction"], TARGETS["direction_asymmetry"], TARGETS["drive_frequency"]
+    assert all(47500.0 <= freq.draw(s) <= 48100.0 for s in range(40))
     p = [pulley.draw(s) for s in range(40)]
     a = [asym.draw(s) for s in range(40)]
     assert all(0.05 <= v <= 0.5 for v in p) and p == [pulley.draw(s) for s in range(40)]
@@ -228,8 +229,72 @@ def test_the_close_loop_reports_the_run_robust_interval_and_keeps_the_model_base
     assert p["b"]["ci95"] == [0.8, 1.2] and not p["b"]["unidentifiable"]
 
 
+class _Influence:
+    """A fit's run views: four runs, two operating conditions (both directions of each), two parameters."""
+
+    runs_ = [10, 11, 12, 13]
+    param_names_all_ = ["alpha_0", "pulley_mu"]
+    run_influence_ = np.array([[1.0, 0.5], [-1.0, 0.5], [2.0, -1.0], [-2.0, 0.0]])
+    cov_all_ = np.diag([0.1, 0.2])
+    cov_robust_all_ = np.diag([0.3, 0.4])
+    dof_ = 100.0
+
+
+def test_condition_clusters_are_the_runs_at_one_voltage_and_load():
+    # reference: runs 10/11 are 220 V, +0.03 kg in both directions, 12/13 324 V, -0.05 kg: two clusters with the
+    # summed influence rows (0, 1) and (0, -1); cov = 2/1 * ((0,1)(0,1)^T + (0,-1)(0,-1)^T) = diag(0, 4)
+    from types import SimpleNamespace
+
+    from l1b2.study.recovery import covariances, run_conditions
+    df = pd.DataFrame({"run": [13, 13, 12, 12, 11, 10], "voltage_V": [324.0, 324.0, 324.0, 324.0, 220.0, 220.0],
+                       "load_kg": [-0.05, -0.05, -0.05, -0.05, 0.03, 0.03], "direction": [-1, -1, 1, 1, -1, 1]})
+    train = SimpleNamespace(df=df)
+    assert run_conditions(_Influence(), train) == [(220.0, 0.03), (220.0, 0.03), (324.0, -0.05), (324.0, -0.05)]
+    covs, dof = covariances(_Influence(), train)
+    np.testing.assert_allclose(covs["condition"], np.diag([0.0, 4.0]), atol=1e-12)
+    # mirrored: (V0, direction x load) pairs a run with the other direction's run at the opposite load; here
+    # every run is its own cluster: 4/3 sum_r u_r u_r^T
+    u = _Influence.run_influence_
+    np.testing.assert_allclose(covs["mirror"], 4 / 3 * u.T @ u, rtol=1e-12)
+    assert run_conditions(_Influence(), train, "mirror") == [(220.0, 0.03), (220.0, -0.03), (324.0, -0.05),
+                                                             (324.0, 0.05)]
+    assert run_conditions(_Influence(), train, "level") == [(220.0, 0.03), (220.0, 0.03), (324.0, 0.05),
+                                                            (324.0, 0.05)]
+    np.testing.assert_allclose(covs["level"], covs["condition"], atol=1e-12)   # here the same two clusters
+    assert dof == {"ar1": 100.0, "robust": 3.0, "condition": 1.0, "mirror": 3.0, "level": 1.0}
+    assert covs["robust"] is _Influence.cov_robust_all_
+
+
+def test_an_interval_the_fit_does_not_offer_counts_for_nothing():
+    # the frequency response has only the profile's (model-based) interval: its rows carry None for the others
+    rows = [{"injection": "drive_frequency", "parameter": "f_b0_Hz", "seed": s, "injected": 47800.0,
+             "estimate": 47790.0 + s, "se_ar1": 5.0, "covered_ar1": s < 3, "se_robust": float("nan"),
+             "covered_robust": None, "se_condition": float("nan"), "covered_condition": None,
+             "se_mirror": float("nan"), "covered_mirror": None, "se_level": float("nan"), "covered_level": None,
+             "wrong_sign": False}
+            for s in range(4)]
+    recs = coverage_summary(pd.DataFrame(rows))
+    assert [(r["interval"], r["covered"], r["seeds"]) for r in recs] == [("ar1", 3, 4)]
+
+
+def test_the_frequency_target_reads_the_identified_response():
+    from types import SimpleNamespace
+
+    from l1b2.errors import IdentificationError
+    from l1b2.study.recovery import frequency_parameter
+    rec = {"status": "estimated", "response": {"f_ref_Hz": 48500.0, "f_b0_Hz": 47000.0, "zeta_b": 0.012},
+           "stderr": {"f_b0_Hz": 10.0, "zeta_b": 0.001}}
+    got = frequency_parameter(SimpleNamespace(result_=SimpleNamespace(frequency=rec)), "f_b0_Hz")
+    lo, hi, se = got["ar1"]
+    assert got["estimate"] == 47000.0 and se == 10.0 and hi - lo == pytest.approx(2 * 1.959964 * 10.0, rel=1e-6)
+    assert all(np.isnan(got[k][2]) for k in ("robust", "condition", "mirror", "level"))
+    fixed = SimpleNamespace(result_=SimpleNamespace(frequency={"status": "fixed", "reason": "one frequency"}))
+    with pytest.raises(IdentificationError, match="one frequency"):
+        frequency_parameter(fixed, "f_b0_Hz")
+
+
 # ---------------------------------------------------------------------------
-# smaller versions of the two studies (the full ones: decision 0021)
+# smaller versions of the two studies (the full ones: decisions 0021 and 0025)
 # ---------------------------------------------------------------------------
 
 @pytest.mark.slow
@@ -253,6 +318,12 @@ def test_coverage_study_small():
     bias = p["estimate"] - p["injected"]
     assert (np.abs(bias - p["clean_estimate"]) <= 3 * p["se_robust"]).all(), (bias, p["clean_estimate"])
     assert pulley.summary()["coverage"][1]["covered"] == 3          # the robust record of pulley_friction
+    # decision 0025: the asymmetry's paired runs share errors -- positively within the rig's condition (the same
+    # signed load), negatively within its mirror image -- and the interval clustered on both (voltage and load
+    # size) lies between the model-based and the run-robust one and covers
+    a = df[df["injection"] == "direction_asymmetry"]
+    assert (a["pair_corr_condition"] > 0).all() and (a["pair_corr_mirror"] < 0).all()
+    assert ((a["se_ar1"] < a["se_level"]) & (a["se_level"] < a["se_robust"])).all() and a["covered_level"].all()
 
 
 @pytest.mark.slow

@@ -16,7 +16,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
 import pytest
-from l1b2.ident.uncertainty import cluster_sandwich
+from l1b2.ident.uncertainty import cluster_sandwich, grouped_sandwich, run_influence
 from scipy import stats
 
 
@@ -43,6 +43,29 @@ def test_cluster_sandwich_is_the_textbook_formula():
     meat = sum(np.outer(X[g == k].T @ e[g == k], X[g == k].T @ e[g == k]) for k in range(12)) * 12 / 11
     np.testing.assert_allclose(cov, bread @ meat @ bread, rtol=1e-10)
     assert G == 12
+
+
+def test_grouped_sandwich_merges_clusters_by_summing_their_scores():
+    # reference: the same textbook formula with the clusters of a coarser level (pairs of runs of one
+    # operating condition): V = (X'X)^-1 (H/(H-1) sum_h X_h' e_h e_h' X_h) (X'X)^-1, h over the 6 pairs
+    rng = np.random.default_rng(3)
+    x, y, g = _clustered_world(rng, n_clusters=12, per=15)
+    X = np.column_stack([np.ones_like(x), x])
+    e = y - X @ np.linalg.lstsq(X, y, rcond=None)[0]
+    scale = np.array([2.0, 0.5])
+    infl = run_influence(-X * scale, e, g, scale, 1e-12)
+    # one group per run: the run-clustered sandwich
+    np.testing.assert_allclose(grouped_sandwich(infl, np.arange(12))[0],
+                               cluster_sandwich(-X * scale, e, g, scale, 1e-12)[0], rtol=1e-10)
+    pair = np.arange(12) // 2
+    cov, H = grouped_sandwich(infl, pair)
+    bread = np.linalg.inv(X.T @ X)
+    h = pair[g]
+    meat = sum(np.outer(X[h == k].T @ e[h == k], X[h == k].T @ e[h == k]) for k in range(6)) * 6 / 5
+    np.testing.assert_allclose(cov, bread @ meat @ bread, rtol=1e-10)
+    assert H == 6
+    with pytest.raises(ValueError, match="group labels"):
+        grouped_sandwich(infl, pair[:5])
 
 
 def test_sandwich_covers_where_fisher_does_not_least_squares():
@@ -117,3 +140,33 @@ def test_sandwich_covers_where_fisher_does_not_identification(noise, min_robust,
     assert share["robust"] >= min_robust, share
     assert share["fisher"] <= max_fisher and share["ar1"] <= max_fisher, share
     assert np.median(ratio) > 2.5, ratio  # the report shows the misspecification: robust >> Fisher
+
+
+def test_the_fit_reports_each_runs_influence_that_regroups_to_its_robust_covariance():
+    # reference: cov_robust = G/(G-1) sum_r u_r u_r^T over the runs' influence rows u_r (the sandwich written
+    # with the influence A^+ s_r); merging all runs into one cluster leaves a score sum of ~0 (the fit's
+    # stationarity: sum_r s_r = J^T w = 0 at the optimum)
+    from l1b2.ident.estimator import PredictorIdentifier, evaluation_mask
+    from l1b2.ident.extra import ExtraForces
+    from l1b2.predictor.model import PredictorParams, example_params
+    from l1b2.predictor.simulate import design_grid, simulate_dataset
+
+    prm = example_params(2)
+    th, names = prm.to_vector(), PredictorParams.names(2)
+    fixed = {n: th[names.index(n)] for n in names if n not in ("c_r", "alpha_0", "beta_0")}
+    design = design_grid(voltages=(250.0, 324.0), loads=(-0.06, -0.04, -0.02, 0.02, 0.04, 0.06))
+    df = simulate_dataset(prm, design, 0.1, noise_std=5e-5, seed=3, max_duration=1.0,
+                          extra_force=lambda c: PHI_TRUE * _pulley(c))
+    idf = PredictorIdentifier(order=2, n_starts=1, fixed=fixed, noise="common", seed=0,
+                              extra=ExtraForces(names=("pulley_mu",), units=("-",), features=_pulley))
+    idf.fit(df, 0.1, mask=evaluation_mask(df))
+    infl = np.asarray(idf.run_influence_)
+    varied = np.asarray(idf.varied_all_)
+    assert infl.shape == (len(idf.runs_), len(idf.param_names_all_))
+    assert np.all(infl[:, ~varied] == 0)
+    cov, G = grouped_sandwich(infl, np.arange(len(idf.runs_)))
+    assert G == len(idf.runs_)
+    np.testing.assert_allclose(cov[np.ix_(varied, varied)], np.asarray(idf.cov_robust_all_)[np.ix_(varied, varied)],
+                               rtol=1e-9)
+    one, H = grouped_sandwich(infl, np.zeros(len(idf.runs_)))
+    assert H == 1 and np.all(np.abs(infl.sum(axis=0))[varied] < 1e-3 * np.sqrt(np.diag(cov))[varied])

@@ -182,7 +182,7 @@ def cmd_study(args) -> int:
     from .jsonio import dumps
     say = None if args.quiet else (lambda row: print(f"row {dumps(row, indent=None)}", flush=True))
     from .study.recovery import FitSettings
-    res = run_study(args.study, args.out, seeds, world=world, fit=FitSettings(n_starts=args.starts),
+    res = run_study(args.study, args.out, seeds, world=world, fit=FitSettings(n_starts=args.starts, model=args.model),
                     injections=[s for s in args.injections.split(",") if s] if args.injections else None,
                     workers=args.workers, scheduler=args.scheduler, clean_fit=not args.no_clean_fit,
                     loop_settings={"baseline": args.baseline} if args.baseline else None,
@@ -209,6 +209,8 @@ def _add_study_parser(sub) -> None:
                    "whose family has a physical parameter)")
     p.add_argument("--starts", type=int, default=4, help="coverage: starts of the identification's global search "
                    "(the close loop's baseline uses 4)")
+    p.add_argument("--model", choices=("eq29", "pure_slip"), default="eq29",
+                   help="coverage: the predictor family of the fits (the close loop's default baseline: eq29)")
     p.add_argument("--no-clean-fit", action="store_true",
                    help="coverage: skip the fit of the same seed without the injection (the bias diagnosis)")
     p.add_argument("--baseline", choices=DRIVE_LAWS + ("best",), default=None,

@@ -614,7 +614,7 @@ class PredictorIdentifier(EstimatorSettings):
             varied=space.varied.copy(), identifiable=unc.identifiable, stderr=unc.stderr,
             stderr_fisher=unc.stderr_fisher, ci95=unc.ci95, cov=unc.cov, cov_fisher=unc.cov_fisher, corr=unc.corr,
             stderr_robust=unc.stderr_robust, ci95_robust=unc.ci95_robust, cov_robust=unc.cov_robust,
-            slider_mass_kg=problem.m_s, T_s=sample.sample_period(),
+            run_influence=unc.run_influence, slider_mass_kg=problem.m_s, T_s=sample.sample_period(),
             runs=[run_label(x) for x in sample.layout.labels], noise_var=noise.R.copy(), ar1_rho=unc.ar1_rho,
             n_obs=int(problem.run_sel.size), n_eff=unc.n_eff, k_params=unc.k_params, dof=unc.dof,
             t_quantile=unc.t_quantile, loglik=unc.loglik, aic=unc.aic, bic=unc.bic,
@@ -775,7 +775,7 @@ FITTED_VIEWS = {
     **{f"{k}_": (lambda k: lambda r: getattr(r, k))(k)
        for k in ("runs", "noise_var", "ar1_rho", "ar1_factor", "n_obs", "n_eff", "dof", "t_quantile", "k_params",
                  "loglik", "aic", "bic", "residual_rms", "singular_values", "unidentifiable", "weak_directions",
-                 "alternative_optima", "convergence", "fit_time_s")},
+                 "alternative_optima", "convergence", "fit_time_s", "run_influence")},
 }
 
 

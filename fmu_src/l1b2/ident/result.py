@@ -166,6 +166,10 @@ class IdentificationResult:
     stderr_robust: np.ndarray | None = None
     ci95_robust: np.ndarray | None = None
     cov_robust: np.ndarray | None = None
+    #: each run's influence on the joint estimate, ``(runs, p)`` in the order of ``runs``
+    #: (:func:`l1b2.ident.uncertainty.run_influence`): regrouping its rows gives the cluster-robust covariance
+    #: by coarser clusters (:func:`l1b2.ident.uncertainty.grouped_sandwich`); None when not computed
+    run_influence: np.ndarray | None = None
     #: the drive-frequency response and how it was treated (:func:`l1b2.ident.frequency.frequency_record`):
     #: ``{"status": "estimated" | "fixed", "reason", "response": FrequencyResponse dict or None, ...}``
     frequency: dict | None = None

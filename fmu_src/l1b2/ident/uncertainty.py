@@ -78,7 +78,7 @@ from scipy.linalg import qr
 
 __all__ = [
     "NULL_TOL", "describe_direction", "ar1_factors", "Uncertainty", "fisher_uncertainty", "extra_confounding",
-    "alternative_optima", "cluster_sandwich",
+    "alternative_optima", "cluster_sandwich", "run_influence", "grouped_sandwich",
 ]
 
 #: a parameter with a component above this in a null direction is not identifiable
@@ -154,6 +154,7 @@ class Uncertainty:
     cov_robust: np.ndarray | None = None
     stderr_robust: np.ndarray | None = None
     ci95_robust: np.ndarray | None = None
+    run_influence: np.ndarray | None = None
 
 
 def _covariance(J, sv_scale, svd_rtol):
@@ -163,6 +164,50 @@ def _covariance(J, sv_scale, svd_rtol):
     Vr = Vt_[keep].T
     cz = (Vr / s_[keep] ** 2) @ Vr.T
     return cz * np.outer(sv_scale, sv_scale)
+
+
+def run_influence(J, w, clusters, sv_scale, svd_rtol):
+    """Each cluster's influence on the estimate: row g is ``A^+ s_g * scale`` (physical units).
+
+    ``A = J^T J`` (restricted to the identified subspace) and ``s_g = J_g^T w_g``
+    the summed score of cluster g (arguments as :func:`cluster_sandwich`). The
+    cluster-robust covariance is ``G/(G-1) sum_g u_g u_g^T`` of these rows, and
+    merging clusters (e.g. the runs of one operating condition) merges rows by
+    summing them (:func:`grouped_sandwich`). Shape ``(G, p)``; a cluster without
+    residuals has a row of zeros.
+    """
+    _, s_, Vt_ = np.linalg.svd(J, full_matrices=False)
+    keep = s_ > svd_rtol * s_[0]
+    Vr = Vt_[keep].T
+    a_inv = (Vr / s_[keep] ** 2) @ Vr.T
+    G = int(np.max(clusters)) + 1 if clusters.size else 0
+    scores = np.zeros((G, J.shape[1]))
+    np.add.at(scores, clusters, J * w[:, None])
+    return (scores @ a_inv) * sv_scale[None, :]
+
+
+def grouped_sandwich(influence, groups):
+    """Cluster-robust covariance with the clusters of ``influence`` merged by ``groups``: ``(cov, n_groups)``.
+
+    ``influence``: ``(G, p)`` rows of :func:`run_influence`; ``groups``: one
+    label per row (rows of the same label form one cluster; a row of zeros
+    counts for nothing). ``cov = H/(H-1) sum_h v_h v_h^T``, ``v_h`` the sum of
+    the rows of group h and H the number of groups with a non-zero row (the
+    CR1 small-sample factor). With one row per group this is
+    :func:`cluster_sandwich`.
+    """
+    infl = np.asarray(influence, float)
+    labels = [g.item() if isinstance(g, np.generic) else g for g in groups]   # any hashable label, e.g. (V0, load)
+    if len(labels) != infl.shape[0]:
+        raise ValueError(f"grouped_sandwich: {len(labels)} group labels for {infl.shape[0]} clusters")
+    live = np.any(infl != 0, axis=1)
+    codes: dict = {}
+    idx = np.array([codes.setdefault(g, len(codes)) for g, ok in zip(labels, live) if ok], dtype=int)
+    H = len(codes)
+    v = np.zeros((H, infl.shape[1]))
+    if H:
+        np.add.at(v, idx, infl[live])
+    return v.T @ v * (H / max(H - 1, 1)), H
 
 
 def cluster_sandwich(J, w, clusters, sv_scale, svd_rtol):
@@ -189,18 +234,11 @@ def cluster_sandwich(J, w, clusters, sv_scale, svd_rtol):
     n_clusters : int
         G, the number of clusters with residuals.
     """
-    _, s_, Vt_ = np.linalg.svd(J, full_matrices=False)
-    keep = s_ > svd_rtol * s_[0]
-    Vr = Vt_[keep].T
-    a_inv = (Vr / s_[keep] ** 2) @ Vr.T
-    G = int(np.max(clusters)) + 1 if clusters.size else 0
-    scores = np.zeros((G, J.shape[1]))
-    np.add.at(scores, clusters, J * w[:, None])
-    used = np.bincount(clusters, minlength=G) > 0
+    infl = run_influence(J, w, clusters, sv_scale, svd_rtol)
+    used = np.bincount(clusters, minlength=infl.shape[0]) > 0
     g_eff = int(np.sum(used))
-    meat = scores[used].T @ scores[used] * (g_eff / max(g_eff - 1, 1))
-    cz = a_inv @ meat @ a_inv
-    return cz * np.outer(sv_scale, sv_scale), g_eff
+    cov = infl[used].T @ infl[used] * (g_eff / max(g_eff - 1, 1))
+    return cov, g_eff
 
 
 def _embed(cv, p_all, vidx, affected_v):
@@ -300,6 +338,9 @@ def fisher_uncertainty(Jz, r_raw, problem, noise, vidx, sv_scale, theta_hat, var
     combos, weak = _directions(Vn, sv, Vt, ident, vidx, sv_scale, list(names), weak_rtol)
     cov_rob_v, n_clusters = cluster_sandwich(Jz, noise.weighted(r_raw), run_sel, sv_scale, svd_rtol)
     cov_rob = _embed(cov_rob_v, p_all, vidx, affected_v)
+    infl = np.zeros((n_runs, p_all))
+    infl[:, vidx] = run_influence(Jz, noise.weighted(r_raw), run_sel, sv_scale, svd_rtol)[:n_runs]
+    infl[:, vidx[affected_v]] = np.nan
     se_rob = np.sqrt(np.diag(cov_rob))
     tq_rob = float(stats.t.ppf(0.975, max(n_clusters - 1, 1)))
     ci_rob = np.column_stack([theta_hat - tq_rob * se_rob, theta_hat + tq_rob * se_rob])
@@ -310,6 +351,7 @@ def fisher_uncertainty(Jz, r_raw, problem, noise, vidx, sv_scale, theta_hat, var
         identifiable=identifiable, k_params=k_ident, loglik=loglik, aic=2 * k_ident - 2 * loglik,
         bic=k_ident * math.log(max(n_res, 1)) - 2 * loglik, unidentifiable=combos, null_space=Vn,
         weak_directions=weak, jac_ar1=Jc, cov_robust=cov_rob, stderr_robust=se_rob, ci95_robust=ci_rob,
+        run_influence=infl,
     )
 
 

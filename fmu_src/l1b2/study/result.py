@@ -25,10 +25,10 @@ import pandas as pd
 from scipy import stats
 
 from .control import CONTROL_TOLERANCE
+from .recovery import INTERVALS
 
 #: the issue's band for the share of seeds covered by a 95 % interval
 COVERAGE_BAND = (0.90, 0.99)
-INTERVALS = ("ar1", "robust")
 
 
 def clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
@@ -44,15 +44,18 @@ def coverage_summary(df: pd.DataFrame) -> list[dict]:
     out = []
     for inj, g in df.groupby("injection", sort=True):
         err = g["estimate"] - g["injected"]
-        for kind in INTERVALS:
-            k, n = int(g[f"covered_{kind}"].sum()), int(len(g))
+        for kind in (k for k in INTERVALS if f"covered_{k}" in g):   # rows of older studies lack "condition"
+            has = g[f"covered_{kind}"].notna()   # an interval that the fit does not offer counts for nothing
+            if not has.any():
+                continue
+            k, n = int(g.loc[has, f"covered_{kind}"].astype(bool).sum()), int(has.sum())
             share = k / n
             rec = {"injection": inj, "parameter": str(g["parameter"].iloc[0]), "interval": kind, "seeds": n,
                    "covered": k, "share": share, "share_ci95": clopper_pearson(k, n),
                    "in_band": bool(COVERAGE_BAND[0] <= share <= COVERAGE_BAND[1]),
                    "wrong_sign_seeds": [int(s) for s in g.loc[g["wrong_sign"], "seed"]],
-                   "mean_error": float(err.mean()), "error_sd": float(err.std(ddof=1)) if n > 1 else float("nan"),
-                   "median_se": float(g[f"se_{kind}"].median())}
+                   "mean_error": float(err.mean()), "error_sd": float(err.std(ddof=1)) if len(g) > 1 else float("nan"),
+                   "median_se": float(g.loc[has, f"se_{kind}"].median())}
             rec["error_sd_over_median_se"] = rec["error_sd"] / rec["median_se"]
             if "clean_estimate" in g:
                 rec["mean_clean_estimate"] = float(g["clean_estimate"].mean())
@@ -144,15 +147,19 @@ class StudyResult:
             for ax, inj in zip(axes[0], injections):
                 g = df[df["injection"] == inj].sort_values("injected")
                 x = g["injected"].to_numpy()
-                for kind, colour, lw in (("robust", "tab:orange", 4.0), ("ar1", "tab:blue", 1.5)):
+                for kind, colour, lw in (("robust", "tab:orange", 5.0), ("condition", "tab:green", 3.0),
+                                         ("ar1", "tab:blue", 1.5)):
+                    if f"lo_{kind}" not in g:
+                        continue
                     ax.vlines(x, g[f"lo_{kind}"], g[f"hi_{kind}"], colors=colour, lw=lw, alpha=0.7,
                               label=f"95 % interval ({kind})")
                 ax.plot(x, g["estimate"], "k.", label="estimate")
                 lim = [min(x.min(), g["estimate"].min()), max(x.max(), g["estimate"].max())]
                 ax.plot(lim, lim, "k:", lw=1, label="estimate = injected")
-                share = {k: g[f"covered_{k}"].mean() for k in INTERVALS}
-                ax.set_title(f"{inj}: covered {100 * share['ar1']:.0f} % (ar1), {100 * share['robust']:.0f} % "
-                             f"(robust), {len(g)} seeds", fontsize=9)
+                share = {k: g[f"covered_{k}"].dropna().astype(bool).mean() for k in INTERVALS
+                         if f"covered_{k}" in g and g[f"covered_{k}"].notna().any()}
+                ax.set_title(f"{inj}, {len(g)} seeds, covered: "
+                             + ", ".join(f"{k} {100 * v:.0f} %" for k, v in share.items()), fontsize=9)
                 ax.set_xlabel(f"injected {g['parameter'].iloc[0]}")
                 ax.set_ylabel("identified")
                 ax.legend(fontsize=7)
