@@ -164,7 +164,7 @@ def main(argv=None):
         cells = [f"{part[nm][k]:8.2f} ({1000 * part[nm][k] / n_train:6.3f})" for nm in names for k in keys]
         print(f"{rate:8g} {n_train:8d} " + " ".join(f"{c:>26s}" for c in cells))
     if len(table) > 1:
-        (r0, n0, p0), (r1, n1, p1) = table[0], table[-1]
+        (_, n0, p0), (_, n1, p1) = table[0], table[-1]
         for nm in names:
             for k in keys:
                 print(f"{nm} {k}: {p1[nm][k] / p0[nm][k]:.2f} x the CPU for {n1 / n0:.2f} x the samples "
