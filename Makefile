@@ -7,7 +7,7 @@ STAMP  := $(VENV)/.installed
 export OPENBLAS_NUM_THREADS ?= 1
 export MPLBACKEND ?= Agg
 # pytest-xdist workers for `make test` (the CI machine has 2 cores); modules stay whole on one worker.
-# `make test` runs the not-slow tests and the slow ones marked ci_slow (decision 0027)
+# `make test` runs the not-slow tests and any slow one marked ci_slow (none today, decision 0027)
 TEST_WORKERS ?= 2
 
 .PHONY: docs venv test test-slow test-all check-install fmus demo dist bench clean
