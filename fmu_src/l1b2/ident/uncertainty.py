@@ -210,7 +210,7 @@ def grouped_sandwich(influence, groups):
     return v.T @ v * (H / max(H - 1, 1)), H
 
 
-def cluster_sandwich(J, w, clusters, sv_scale, svd_rtol):
+def cluster_sandwich(J, w, clusters, sv_scale, svd_rtol, influence=None):
     """Cluster-robust (Huber-White) covariance of the scaled parameters, clustered by run.
 
     Parameters
@@ -225,6 +225,8 @@ def cluster_sandwich(J, w, clusters, sv_scale, svd_rtol):
         Scales of the parameters (the result is in physical units).
     svd_rtol : float
         Relative singular-value threshold of the identified subspace.
+    influence : ndarray, shape (G, p), optional
+        :func:`run_influence` of the same arguments, when the caller has it (computed here when None).
 
     Returns
     -------
@@ -234,7 +236,7 @@ def cluster_sandwich(J, w, clusters, sv_scale, svd_rtol):
     n_clusters : int
         G, the number of clusters with residuals.
     """
-    infl = run_influence(J, w, clusters, sv_scale, svd_rtol)
+    infl = run_influence(J, w, clusters, sv_scale, svd_rtol) if influence is None else influence
     used = np.bincount(clusters, minlength=infl.shape[0]) > 0
     g_eff = int(np.sum(used))
     cov = infl[used].T @ infl[used] * (g_eff / max(g_eff - 1, 1))
@@ -336,10 +338,12 @@ def fisher_uncertainty(Jz, r_raw, problem, noise, vidx, sv_scale, theta_hat, var
     identifiable[vidx[~affected_v]] = True
     loglik = noise.loglik(r_raw)
     combos, weak = _directions(Vn, sv, Vt, ident, vidx, sv_scale, list(names), weak_rtol)
-    cov_rob_v, n_clusters = cluster_sandwich(Jz, noise.weighted(r_raw), run_sel, sv_scale, svd_rtol)
+    w_rob = noise.weighted(r_raw)
+    infl_v = run_influence(Jz, w_rob, run_sel, sv_scale, svd_rtol)    # one SVD for the sandwich and the record
+    cov_rob_v, n_clusters = cluster_sandwich(Jz, w_rob, run_sel, sv_scale, svd_rtol, influence=infl_v)
     cov_rob = _embed(cov_rob_v, p_all, vidx, affected_v)
     infl = np.zeros((n_runs, p_all))
-    infl[:, vidx] = run_influence(Jz, noise.weighted(r_raw), run_sel, sv_scale, svd_rtol)[:n_runs]
+    infl[:, vidx] = infl_v[:n_runs]
     infl[:, vidx[affected_v]] = np.nan
     se_rob = np.sqrt(np.diag(cov_rob))
     tq_rob = float(stats.t.ppf(0.975, max(n_clusters - 1, 1)))
