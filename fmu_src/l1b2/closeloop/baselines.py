@@ -13,7 +13,7 @@ threshold. TEST is never used.
 Why a threshold: leaving Eq. 29 relaxes its frozen slip ratio, which is what
 the loop's *structural* candidates do (:func:`l1b2.closeloop.acceptance.materiality`);
 clean data favour the relaxation a little even where Eq. 29 fits the motor
-(reference world: CV 0.36 % -> 0.24 %), and the small structural difference
+(decision 0026), and the small structural difference
 of the other family is then traced as missing effects. The family switch
 therefore needs the same material fall as a structural term.
 

@@ -28,9 +28,7 @@ offset their start allows. This search makes the offset a coordinate:
 3. the best grid point seeds :func:`l1b2.ident.varpro.varpro_search` with every parameter varied again
    (the paper's parameters, their bounds and the covariance machinery unchanged).
 
-Measured (decision 0023): it ends within about 1-2 log-likelihood units of long reference fits on the
-realistic benchmark, far above the one-start variable projection, but not within 0.1 on every world and
-not in 2 s of CPU, so it is opt-in.
+Why it is opt-in, with the measurements: decision 0023.
 
 The mapping back to the paper's parameters is exact: every point of the search is an Eq. 35 vector.
 """
@@ -43,10 +41,10 @@ import numpy as np
 
 from ..predictor.model import G_of_k0, drive_factor
 from .problem import ScaledObjective
-from .varpro import linear_positions, local_fit, varpro_search
+from .varpro import linear_positions, local_fit, profile_loglik, varpro_search
 
 __all__ = ["OMEGA_GRID", "GAUGE_K0", "drive_offset", "offset_of_omega", "omega_of_offset", "d_coefficients",
-           "gauge", "multiplier", "point", "c_r_of_omega", "with_offset", "profile_loglik", "profile",
+           "gauge", "multiplier", "point", "c_r_of_omega", "with_offset", "profile",
            "offset_search", "offset_grid", "projected_search"]
 
 #: the profile's grid of omega (both branches of the offset, the barrier |omega| -> 1 approached)
@@ -151,14 +149,6 @@ def with_offset(theta, n1: int, kappa: float, kappa0: float, dco) -> np.ndarray:
 
 #: the structural directions pinned during the profile (the gauge and the offset coordinate c_r)
 _PROFILE_PINS = (0, 1, 2, 3, 4)
-
-
-def profile_loglik(obj, z) -> float:
-    """Log-likelihood at ``z`` of ``obj`` with the noise model re-estimated there (g and R at their ML values)."""
-    theta = obj.theta_of(z)
-    with np.errstate(over="ignore", invalid="ignore"):
-        obj.update_noise(theta)
-        return float(obj.noise.loglik(obj.problem.residual(theta)))
 
 
 def _profile_objective(obj, theta, scale_full):

@@ -41,7 +41,7 @@ import numpy as np
 from ..errors import IdentificationError
 from .problem import strictly_inside
 
-__all__ = ["MAX_INNER", "linear_positions", "Projection", "LocalFit", "local_fit", "varpro_search"]
+__all__ = ["MAX_INNER", "linear_positions", "Projection", "LocalFit", "local_fit", "profile_loglik", "varpro_search"]
 
 #: most Gauss-Newton steps of the linear parameters per projection (one is exact without a change of step kind)
 MAX_INNER = 4
@@ -284,12 +284,12 @@ def local_fit(obj, lin, z_init, max_iter, tol, stat_tol=0.0, stat_window=3, upda
     return LocalFit(z, res, proj.nfev, proj.njev, time.perf_counter() - t0, history)
 
 
-def _profile_loglik(obj, z):
-    """Log-likelihood at ``z`` with the noise model re-estimated there (g and R at their ML values)."""
+def profile_loglik(obj, z) -> float:
+    """Log-likelihood at ``z`` of ``obj`` with the noise model re-estimated there (g and R at their ML values)."""
     theta = obj.theta_of(z)
     with np.errstate(over="ignore", invalid="ignore"):
         obj.update_noise(theta)
-        return obj.noise.loglik(obj.problem.residual(theta))
+        return float(obj.noise.loglik(obj.problem.residual(theta)))
 
 
 def varpro_search(obj, lin, starts, max_nfev, tol, stat_tol, max_outer, n_refine=2, log=None):
@@ -331,7 +331,7 @@ def varpro_search(obj, lin, starts, max_nfev, tol, stat_tol, max_outer, n_refine
                             "nfev": 0, "njev": 0, "time_s": 0.0, "x0": (z_init * sv_scale).tolist(),
                             "refined": False})
             continue
-        ll = _profile_loglik(obj, fit.z)
+        ll = profile_loglik(obj, fit.z)
         nfev += fit.nfev + 1
         njev += fit.njev
         res = fit.result
@@ -359,9 +359,9 @@ def varpro_search(obj, lin, starts, max_nfev, tol, stat_tol, max_outer, n_refine
         converged = False
         final = results[i]
         for it in range(1, max_outer + 1):
-            _profile_loglik(obj, z)  # the noise model at z
+            profile_loglik(obj, z)  # the noise model at z
             fit = local_fit(obj, lin, z, max_nfev, tol, stat_tol)
-            ll_new = _profile_loglik(obj, fit.z)
+            ll_new = profile_loglik(obj, fit.z)
             if log is not None:
                 log(f"  refit {it}: loglik {ll_new:.4f} ({fit.result.message}, {fit.result.nit} iterations, "
                     f"cost history {[round(h, 3) for h in fit.history[-4:]]})")
@@ -392,7 +392,7 @@ def varpro_search(obj, lin, starts, max_nfev, tol, stat_tol, max_outer, n_refine
     final.message = (f"variable projection: {final.message}; noise model re-estimated "
                      + ("until a refit gained < stat_tol log-likelihood units" if ref.converged
                         else f"{max_outer} times (max_outer)"))
-    _profile_loglik(obj, ref.z)  # the noise model at the chosen optimum
+    profile_loglik(obj, ref.z)  # the noise model at the chosen optimum
     stages.append({"stage": "noise refinement", "time_s": time.perf_counter() - t1,
                    "cpu_s": time.process_time() - c1, "nfev": nfev, "njev": njev, "n_refined": len(refinements)})
     return SearchOutcome(records, results, ranked, best, 0, list(refinements)), ref, stages
