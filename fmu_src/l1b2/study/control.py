@@ -32,6 +32,7 @@ import pandas as pd
 
 from ..closeloop.loop import close_loop
 from ..data.measurements import POSITION, RUN, SPEED, evaluation_mask
+from ..data.metrics import speed_metrics
 from .world import World, world_data
 
 #: the issue's rule: the loop's held-out nrmse at most this much (relative) above the baseline's
@@ -39,7 +40,7 @@ CONTROL_TOLERANCE = 0.02
 
 
 def _p95(v_pred: np.ndarray, v: np.ndarray, mask: np.ndarray) -> float:
-    return float(np.percentile(np.abs(v_pred[mask] - v[mask]) / np.abs(v[mask]), 95))
+    return speed_metrics(v_pred, v, mask)["p95_abs_rel_error"]
 
 
 def run_gain_p95(v_pred, df: pd.DataFrame) -> float:
