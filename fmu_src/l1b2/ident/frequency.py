@@ -229,16 +229,7 @@ def fit_frequency_response(est, data, slider_mass_kg=None, mask=None):
     median AR(1) factor like theta's. Returns the fitted identifier (``est`` itself) whose result carries
     the estimated response and the record ``status="estimated"``.
     """
-    log = est._log
-    m_s = slider_mass_kg if slider_mass_kg is not None else getattr(data, "slider_mass_kg", None)
-    if mask is None and isinstance(data, Measurements):
-        mask = data.mask
-    f_ref = reference_frequency(data)
-    loglik, best = _profile(est, data, m_s, mask, f_ref, log)
-    grid = [np.array([f_ref * (1 + o), math.log(z)]) for o in GRID_OFFSETS for z in GRID_ZETAS]
-    vals = [loglik(x) for x in grid]
-    if not np.isfinite(max(vals)):
-        raise IdentificationError("frequency response: no trial response gave a finite fit")
+    m_s, mask, f_ref, loglik, best, _, _ = _grid_basin(est, data, slider_mass_kg, mask)
     n_grid = len(best["seen"])
     _gauss_newton(data, mask, f_ref, loglik, best)
     resp = FrequencyResponse(f_ref, float(best["x"][0]), math.exp(float(best["x"][1])))
@@ -265,6 +256,22 @@ def response_stderr(lin: "ResponseLinearisation", resp: FrequencyResponse) -> di
     if not (np.all(np.isfinite(cov)) and np.all(np.diag(cov) > 0)):
         return None
     return {"f_b0_Hz": float(resp.f_ref_Hz * math.sqrt(cov[0, 0])), "zeta_b": float(resp.zeta_b * math.sqrt(cov[1, 1]))}
+
+
+def _grid_basin(est, data, slider_mass_kg, mask):
+    """``(m_s, mask, f_ref, loglik, best, grid, vals)``: the profile log-likelihood (:func:`_profile`) evaluated on
+    the basin's grid, :data:`GRID_OFFSETS` resonances on both sides of the drive x :data:`GRID_ZETAS` dampings;
+    :class:`IdentificationError` when no grid point gives a finite fit."""
+    m_s = slider_mass_kg if slider_mass_kg is not None else getattr(data, "slider_mass_kg", None)
+    if mask is None and isinstance(data, Measurements):
+        mask = data.mask
+    f_ref = reference_frequency(data)
+    loglik, best = _profile(est, data, m_s, mask, f_ref, est._log)
+    grid = [np.array([f_ref * (1 + o), math.log(z)]) for o in GRID_OFFSETS for z in GRID_ZETAS]
+    vals = [loglik(x) for x in grid]
+    if not np.isfinite(max(vals)):
+        raise IdentificationError("frequency response: no trial response gave a finite fit")
+    return m_s, mask, f_ref, loglik, best, grid, vals
 
 
 def _profile(est, data, m_s, mask, f_ref, log):
@@ -322,17 +329,7 @@ def fit_frequency_response_profile(est, data, slider_mass_kg=None, mask=None):
     :data:`GRID_ZETAS`), then Nelder-Mead in ``(f_b0, ln zeta_b)``; standard errors from the profile's
     curvature. Same result record as :func:`fit_frequency_response` (``profile`` instead of ``joint``).
     """
-    log = est._log
-    m_s = slider_mass_kg if slider_mass_kg is not None else getattr(data, "slider_mass_kg", None)
-    if mask is None and isinstance(data, Measurements):
-        mask = data.mask
-    f_ref = reference_frequency(data)
-    loglik, best = _profile(est, data, m_s, mask, f_ref, log)
-    # the basin: a coarse grid of resonances on both sides of the drive and three dampings
-    grid = [np.array([f_ref * (1 + o), math.log(z)]) for o in GRID_OFFSETS for z in GRID_ZETAS]
-    vals = [loglik(x) for x in grid]
-    if not np.isfinite(max(vals)):
-        raise IdentificationError("frequency response: no trial response gave a finite fit")
+    m_s, mask, f_ref, loglik, best, grid, vals = _grid_basin(est, data, slider_mass_kg, mask)
     x0 = grid[int(np.argmax(vals))]
     simplex = np.array([x0, x0 + [0.004 * f_ref, 0.0], x0 + [0.0, 0.4]])
     opt = optimize.minimize(lambda x: -loglik(x), x0, method="Nelder-Mead",
