@@ -494,7 +494,8 @@ class PredictorIdentifier(EstimatorSettings):
         # ---- start: data-driven centre and equation-error minima, or init ----
         red, minima = data_driven_start(sample, space, m_s, cfg.kappa, cfg.include_load_inertia, s_center,
                                         s_half, E, cfg.n_starts, cfg.seed, warm=warm,
-                                        n_ee_starts={"varpro": 4 * cfg.n_starts, "offset": 4}.get(cfg.solver))
+                                        n_ee_starts={"varpro": 4 * cfg.n_starts, "offset": 4}.get(cfg.solver),
+                                        drive_law=cfg.model)
         theta0, fixed_final = self._centre(cfg, space, minima, s_center, s_half)
         t_centre, c_centre = time.perf_counter(), time.process_time()
         self.reduced_ = reduced_summary(red, minima, space.extra_names)

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from itertools import zip_longest
 
 import numpy as np
 import numpy.polynomial.legendre as npleg
@@ -48,7 +49,7 @@ from .search import sobol_box
 
 __all__ = [
     "CONVENTIONAL", "reduced_linear_fit", "reduced_of_theta", "map_reduced_to_theta", "equation_error_fit",
-    "data_driven_start", "reduced_summary", "init_theta",
+    "data_driven_start", "slip_sigma_start", "reduced_summary", "init_theta",
 ]
 
 #: conventional values for the directions the data cannot determine (the pin
@@ -342,8 +343,27 @@ def equation_error_fit(theta_start, varied, red, order, m_s, kappa, n_starts, se
     return out
 
 
+def slip_sigma_start(data: SampleData, bco, s_center, s_half, k_ref: float = CONVENTIONAL["k0"]) -> float | None:
+    """The pure-slip family's start for sigma [N s/m]: the slip ratio ``k = sigma v' / (pi B'(s) V0)`` equals
+    ``k_ref`` (Eq. 29's conventional k0) at the median moving sample.
+
+    In Eq. 29's reduced form sigma is a direction the data cannot determine (only D carries it), so the
+    equation-error fit leaves it where its convention puts it (spread of D); in the pure-slip family sigma
+    sets the tip speed of the slip ratio, and a start where ``k`` saturates at 1 on most samples is not
+    in the basin of the likelihood. ``bco``: B'(s)'s Legendre coefficients [N/V] in the scaled position;
+    moving samples: inside the mask, ``v' = d v > 0`` and ``B' V0 > 0``. None without such samples.
+    """
+    x = (np.asarray(data.s, float) - s_center) / s_half
+    w = np.pi * npleg.legval(x, np.asarray(bco, float)) * np.asarray(data.V0, float)
+    vp = np.asarray(data.d, float) * np.asarray(data.v, float)
+    use = np.asarray(data.mask, bool) & (vp > 0) & (w > 0) & np.isfinite(vp)
+    if not np.any(use):
+        return None
+    return float(k_ref / np.median(vp[use] / w[use]))
+
+
 def data_driven_start(data, space, m_s, kappa, include_load_inertia, s_center, s_half, E, n_starts, seed,
-                      warm=False, n_ee_starts=None):
+                      warm=False, n_ee_starts=None, drive_law="eq29"):
     """The reduced linear fit and the equation-error minima that seed the global search.
 
     Parameters
@@ -360,6 +380,9 @@ def data_driven_start(data, space, m_s, kappa, include_load_inertia, s_center, s
         (``n_ee_starts`` if given).
     warm : bool
         Warm start: no equation-error search; a failing linear fit gives ``red = None``.
+    drive_law : ``"pure_slip"`` with sigma varied: the minima of a second equation-error fit with sigma held
+        at :func:`slip_sigma_start` (Eq. 29's reduced form cannot move it meaningfully) come first, then
+        alternate with those of the convention (the likelihood search tries both); ``"eq29"``: the convention.
 
     Returns
     -------
@@ -378,13 +401,20 @@ def data_driven_start(data, space, m_s, kappa, include_load_inertia, s_center, s
     if warm:
         return red, []
     theta_names = set(space.theta_names)
-    theta_conv = map_reduced_to_theta(
-        red["D"], red["B"], red["C"], {k: v for k, v in space.fixed_values.items() if k in theta_names},
-        order, m_s, kappa,
-    )
-    theta_conv = space.clip(space.with_fixed(np.concatenate([theta_conv, red["E"]])))
+    pins = {k: v for k, v in space.fixed_values.items() if k in theta_names}
     n_ee = max(16, 4 * n_starts) if n_ee_starts is None else int(n_ee_starts)
-    ee = equation_error_fit(theta_conv, space.varied, red, order, m_s, kappa, n_ee, seed, 1.0)
+
+    def minima(pins, varied):
+        theta_conv = map_reduced_to_theta(red["D"], red["B"], red["C"], pins, order, m_s, kappa)
+        theta_conv = space.clip(space.with_fixed(np.concatenate([theta_conv, red["E"]])))
+        return equation_error_fit(theta_conv, varied, red, order, m_s, kappa, n_ee, seed, 1.0)
+    ee = minima(pins, space.varied)
+    sig = slip_sigma_start(data, red["B"], s_center, s_half) if drive_law == "pure_slip" else None
+    if sig is not None and "sigma" not in pins:
+        varied = space.varied.copy()
+        varied[space.theta_names.index("sigma")] = False
+        slip = minima({**pins, "sigma": sig}, varied)
+        ee = [slip[0], ee[0]] + [m for pair in zip_longest(slip[1:], ee[1:]) for m in pair if m is not None]
     return red, [(c, space.clip(space.with_fixed(th))) for c, th in ee]
 
 
