@@ -51,7 +51,8 @@ from .problem import SampleData
 from .slipproblem import make_problem
 
 __all__ = ["FREQUENCY_SETTINGS", "response_setting", "reference_frequency", "frequency_record",
-           "frequency_report_lines", "fit_frequency_response", "GRID_OFFSETS", "GRID_ZETAS"]
+           "frequency_report_lines", "fit_frequency_response", "GRID_OFFSETS", "GRID_ZETAS", "ZETA_B_RANGE",
+           "bounds_hit"]
 
 FREQUENCY_SETTINGS = ("auto", "off")
 #: resonance offsets of the coarse grid, as shares of f_ref (both sides of the drive)
@@ -111,9 +112,12 @@ def frequency_report_lines(rec: Mapping | None) -> list[str]:
     def pm(name, fmt):
         s = se.get(name)
         return f"{r[name]:{fmt}}" + (f" +/- {s:{fmt}}" if s is not None else "")
-    return [f"    drive frequency: response {rec['status'].upper()} ({rec.get('reason', '')}): "
-            f"B' x g(f), B2 f_b0 = {pm('f_b0_Hz', '.1f')} Hz, zeta_b = {pm('zeta_b', '.5f')}, "
-            f"g(f_ref = {r['f_ref_Hz']:.1f} Hz) = 1"]
+    lines = [f"    drive frequency: response {rec['status'].upper()} ({rec.get('reason', '')}): "
+             f"B' x g(f), B2 f_b0 = {pm('f_b0_Hz', '.1f')} Hz, zeta_b = {pm('zeta_b', '.5f')}, "
+             f"g(f_ref = {r['f_ref_Hz']:.1f} Hz) = 1"]
+    if rec.get("at_bound"):
+        lines.append(f"    drive frequency: AT A BOUND, not an estimate: {'; '.join(rec['at_bound'])}")
+    return lines
 
 
 def _clone(est, **changes):
@@ -122,8 +126,34 @@ def _clone(est, **changes):
 
 #: finite-difference steps of the response coordinates q = (f_b0 / f_ref, ln zeta_b)
 Q_STEPS = (1e-4, 0.02)
-#: bounds of q: the resonance within +-20 % of f_ref, zeta_b in [1e-3, 0.2]
-Q_LO, Q_HI = np.array([0.8, math.log(1e-3)]), np.array([1.2, math.log(0.2)])
+#: the physical range of the effective B2 damping ratio: Q from 100 down to 5. The interface only adds damping
+#: to the mode (Eq. 24/30: the term 0.5 eta_T sigma omega U_w), so the effective zeta_b is at least the mode's
+#: own, which for a mounted, preloaded stator is of order 0.01 (the project's motors: Q 30 and 40 for B2,
+#: zeta_b 0.0165 and 0.0125); the lower end leaves a factor 2.5 below the lighter of the two for other
+#: stators. Below it the fit can put a nearly undamped resonance just outside TRAIN's frequencies (decision
+#: 0029); above 0.1 the B2 response is flat within +-1 kHz of the drive.
+ZETA_B_RANGE = (0.005, 0.1)
+#: the resonance within +-20 % of f_ref
+F_B0_REL_RANGE = (0.8, 1.2)
+#: bounds of q = (f_b0 / f_ref, ln zeta_b)
+Q_LO = np.array([F_B0_REL_RANGE[0], math.log(ZETA_B_RANGE[0])])
+Q_HI = np.array([F_B0_REL_RANGE[1], math.log(ZETA_B_RANGE[1])])
+#: a coordinate of q this close to its bound (relative to the bound's width) is reported as at the bound
+Q_AT_BOUND = 1e-3
+
+
+def bounds_hit(q) -> list[str]:
+    """The response's parameters that end at a bound of :data:`Q_LO`/:data:`Q_HI` ("zeta_b lower bound 0.005", ...)."""
+    q = np.asarray(q, float)
+    out = []
+    for i, (name, lo, hi, show) in enumerate((("f_b0_Hz", Q_LO[0], Q_HI[0], lambda x: f"{x:g} f_ref"),
+                                              ("zeta_b", Q_LO[1], Q_HI[1], lambda x: f"{math.exp(x):g}"))):
+        tol = Q_AT_BOUND * (hi - lo)
+        if q[i] <= lo + tol:
+            out.append(f"{name} lower bound {show(lo)}")
+        elif q[i] >= hi - tol:
+            out.append(f"{name} upper bound {show(hi)}")
+    return out
 
 
 def response_of(f_ref: float, q) -> FrequencyResponse:
@@ -178,14 +208,18 @@ class ResponseLinearisation:
         """``|P r(q)|^2``: the sum of squares after theta's first-order refit at q."""
         return float(np.sum(self.project(self.residual(q)) ** 2))
 
-    def step_and_information(self):
-        """``(Gauss-Newton step in q, J_q^T P J_q)`` at q_fit."""
+    def jacobian_q(self) -> np.ndarray:
+        """``J_q``: the weighted residuals' central differences in q at q_fit (steps :data:`Q_STEPS`), theta held."""
         cols = []
         for i, h in enumerate(Q_STEPS):
             e = np.zeros(2)
             e[i] = h
             cols.append((self.residual(self.q_fit + e) - self.residual(self.q_fit - e)) / (2 * h))
-        PJ = self.project(np.column_stack(cols))
+        return np.column_stack(cols)
+
+    def step_and_information(self):
+        """``(Gauss-Newton step in q, J_q^T P J_q)`` at q_fit."""
+        PJ = self.project(self.jacobian_q())
         S = PJ.T @ PJ
         g = PJ.T @ self.project(self.r_fit)
         try:
@@ -226,8 +260,10 @@ def fit_frequency_response(est, data, slider_mass_kg=None, mask=None):
     exactly by a warm refit at the new q, with a line search; :func:`_gauss_newton`), and a final
     identification at the optimum with the identifier's full search. Standard errors of ``f_b0`` and
     ``zeta_b``: q's block of the joint Fisher covariance (the Schur complement), inflated by the fit's
-    median AR(1) factor like theta's. Returns the fitted identifier (``est`` itself) whose result carries
-    the estimated response and the record ``status="estimated"``.
+    median AR(1) factor like theta's. q stays within :data:`Q_LO`/:data:`Q_HI` (zeta_b in
+    :data:`ZETA_B_RANGE`); a parameter that ends at its bound is named in the record's ``at_bound`` (and the
+    fit report) and has no standard error. Returns the fitted identifier (``est`` itself) whose result
+    carries the estimated response and the record ``status="estimated"``.
     """
     m_s, mask, f_ref, loglik, best, _, _ = _grid_basin(est, data, slider_mass_kg, mask)
     n_grid = len(best["seen"])
@@ -236,9 +272,12 @@ def fit_frequency_response(est, data, slider_mass_kg=None, mask=None):
     final = _clone(est, frequency=resp, init=best["params"]).fit(data, slider_mass_kg=m_s, mask=mask)
     q_hat = np.array([resp.f_b0_Hz / f_ref, math.log(resp.zeta_b)])
     stderr = response_stderr(ResponseLinearisation(final.result_, data, mask, f_ref, q_hat), resp)
+    at_bound = bounds_hit(q_hat)
+    if at_bound and stderr is not None:   # a value held by its bound has no standard error
+        stderr = {k: v for k, v in stderr.items() if not any(h.startswith(k) for h in at_bound)} or None
     rec = frequency_record(
         "estimated", f"TRAIN's runs spread over more than {FREQUENCY_REL_SPREAD:.1%} of their frequency: joint "
-        "maximum likelihood", resp, data, stderr=stderr,
+        "maximum likelihood", resp, data, stderr=stderr, at_bound=at_bound,
         joint={"grid_fits": n_grid, "gauss_newton_fits": len(best["seen"]) - n_grid,
                "loglik": float(final.loglik_),
                "stderr_from": "Schur complement of the joint Fisher information" if stderr else "singular"})
