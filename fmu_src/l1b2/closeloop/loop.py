@@ -700,10 +700,10 @@ def calibrated_model(base, ext, effects: EffectSet, output_filter, source: dict)
     missing = [c.label for c in effects.candidates if not c.spec]
     if missing:
         return None, f"effects without a serialisable spec (custom candidates): {', '.join(missing)}"
-    from ..predictor.effects import SIGNALS, needs
-    logged = [c.label for c in effects.candidates if not needs(c.spec) <= set(SIGNALS)]
+    from ..predictor.effects.channels import export_problem
+    logged = [f"{c.label} ({why})" for c in effects.candidates if (why := export_problem(c.spec))]
     if logged:
-        return None, (f"effects reading logged channels that Predictor.fmu has no input for: {', '.join(logged)}")
+        return None, f"effects Predictor.fmu cannot evaluate as identified: {', '.join(logged)}"
     recs = tuple(IdentifiedEffect(c.family, c.label, dict(c.spec), tuple(c.names), tuple(c.units),
                         tuple(float(p) for p in phi), tuple(reported_uncertainty(ext, n)["stderr"] for n in c.names),
                         c.description, tuple(c.regressors), c.structural)
