@@ -423,6 +423,8 @@ def test_run_level_kernels_equal_the_features_on_runs_that_hold_their_inputs(poo
             for sg in run_signals(df, channels_of(df))]
     hyps = [h for h in fx.family("run_level").hypotheses(sigs) if ek.fmu_signal("run:" + h.spec["channel"])]
     assert {h.spec["channel"] for h in hyps} == {dataio.VOLTAGE, dataio.LOAD, dataio.DIRECTION, dataio.TEMPERATURE}
+    import re   # the parameters are FMU variables: legal structured FMI names (fmpy refused "|load_kg|_run_gain")
+    assert all(re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", n) for h in hyps for n in h.names), [h.names for h in hyps]
     chans = fx.family("channel").grid(fx.TrainingSummary(1.0, (T0, T0 + 1), (-0.02, 0.02), 300.0, {},
                                                          channels=channels_of(df)))
     rows = np.column_stack([x[sg] for sg in fx.SIGNALS])

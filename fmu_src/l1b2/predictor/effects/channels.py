@@ -207,6 +207,12 @@ def signal_label(column: str, transform: str = "none") -> str:
     return {"none": column, "drive": f"d*{column}", "abs": f"|{column}|"}[transform]
 
 
+def parameter_stem(column: str, transform: str = "none") -> str:
+    """The stem of a run-level signal's parameter names: the column, ``d_<column>`` or ``abs_<column>`` (a legal
+    FMI structured name, unlike the report's :func:`signal_label`: the parameters are FMU variables)."""
+    return {"none": column, "drive": f"d_{column}", "abs": f"abs_{column}"}[transform]
+
+
 def run_signal(x, column: str, transform: str) -> np.ndarray:
     """Each sample's run-level value of a signal: the run's mean of ``column``, times ``d`` (``drive``) or its size."""
     c = signal(x, signal_key(column, "run"))
@@ -267,9 +273,9 @@ class RunLevel(Effect):
         out = []
         for sg in signals_:
             col, tr = sg["channel"], sg.get("transform", "none")
-            label = signal_label(col, tr)
+            label, stem = signal_label(col, tr), parameter_stem(col, tr)
             out.append(self.hypothesis(
-                [f"{label}_run_gain", f"{label}_run_offset", f"{label}_run_load"], ["N", "N", "1"],
+                [f"{stem}_run_gain", f"{stem}_run_offset", f"{stem}_run_load"], ["N", "N", "1"],
                 {"channel": col, "transform": tr, "mean": float(sg["mean"]), "sd": float(sg["sd"]), **_spread(sg)},
                 "run",
                 family=f"run_level_{label}", regressor=regressor_of(col), generic=True,
