@@ -34,9 +34,10 @@ pytestmark = pytest.mark.fmu
 N = 90
 DT = 1e-3
 T0 = 5.0                      # session time of the runs' start [s]
-#: the kinds Predictor.fmu carries: every signal they read is an FMU signal (a logged channel's is not, nor a
-#: run-level signal's run mean, which ``run_level`` reads; the export refuses both, tested below)
-CARRIED = tuple(k for k in fx.KINDS if k not in ("channel", "run_level"))
+#: the kinds Predictor.fmu carries: every signal they read is given by an FMU input (``channel`` of the logged
+#: stator temperature, ``run_level`` of the inputs held constant per run; a logged channel that is no input and a
+#: run mean of one the runs did not hold constant are refused, tested below)
+CARRIED = tuple(fx.KINDS)
 KINDS = CARRIED + ("output_filter",)
 FILTER = {"a": 0.3, "b0": 0.5, "b1": 0.2}
 
@@ -87,7 +88,22 @@ def pool():
         return plain.free_run(frame[dataio.TIME], frame[dataio.POSITION], frame[dataio.VOLTAGE], frame[dataio.LOAD],
                               frame[dataio.DIRECTION], firsts, frame[dataio.RUN].to_numpy())
     ctx = Context(baseline_free_run, base.slider_mass_kg, (T0, T0 + 1.0), (-0.02, 0.02), temperature_ref=31.0)
-    return full_library()(ctx, _frame())
+    return full_library()(ctx, _frame()) + _run_level_candidates(ctx, _frame())
+
+
+def _run_level_candidates(ctx, df) -> list:
+    """The run-level candidates of every input signal, as the loop's run-level analysis offers them (run values'
+    mean and sd, TRAIN's within-run spread)."""
+    from l1b2.closeloop.candidates import candidate, channels_of
+    from l1b2.closeloop.runlevel import run_signals
+    sigs = [{**sg, "mean": float(np.mean(sg["values"])), "sd": float(np.std(sg["values"]))}
+            for sg in run_signals(df, channels_of(df))]
+    return [candidate(ctx, h) for h in fx.family("run_level").hypotheses(sigs)]
+
+
+def _exportable(c) -> bool:
+    from l1b2.predictor.effects.channels import export_problem
+    return export_problem(c.spec) is None
 
 
 def test_every_candidate_has_one_parameter_per_feature_column_and_a_spec(pool):
@@ -106,9 +122,12 @@ def models(pool) -> dict[str, ExtendedPredictor]:
     rng = np.random.default_rng(7)
     out = {}
     for kind in CARRIED:
-        cands = [c for c in pool if c.spec["kind"] == kind]
+        cands = [c for c in pool if c.spec["kind"] == kind and _exportable(c)]
         assert cands, f"the library has no candidate of kind {kind}"
-        if kind not in ("smooth", "smooth_pair"):   # a defect on the runs' path (centre near 0 mm)
+        if kind == "run_level":   # two of the four input signals (with two runs their z are all +-1: collinear)
+            cands = [c for c in cands if (c.spec["channel"], c.spec["transform"]) in (("voltage_V", "none"),
+                                                                                       ("load_kg", "drive"))]
+        elif kind not in ("smooth", "smooth_pair", "channel"):   # a defect on the runs' path (centre near 0 mm)
             cands = [min(cands, key=lambda c: abs(c.spec.get("center_m", 0.0)))]
         effects = tuple(IdentifiedEffect(c.family, c.label, c.spec, c.names, c.units,
                                          tuple(_phi(rng, c.features(df))), (0.01,) * c.n_params, c.description,
@@ -197,25 +216,78 @@ def test_extended_predictor_fmu_declares_every_parameter_with_unit_and_provenanc
         assert {"baseline_c_r", "c_r", "v_baseline", "F_extra"} <= set(var), kind
 
 
-@pytest.mark.parametrize("kind", ["channel", "run_level"])
+def _run_level_effect(channel: str, **spec) -> IdentifiedEffect:
+    h = fx.family("run_level").hypotheses([{"channel": channel, "transform": "none", **spec}])[0]
+    return IdentifiedEffect(h.family, h.family, h.spec, h.names, h.units, (0.1,) * len(h.names),
+                            (0.01,) * len(h.names), h.description, (h.regressor,), h.structural)
+
+
+@pytest.mark.parametrize("kind", ["channel", "run_level", "session_clock"])
 def test_a_model_reading_a_logged_channel_is_refused_by_the_export(pool, tmp_path, kind):
-    # reference: fx.SIGNALS, the signals Predictor.fmu computes; a channel's run mean is not among them, nor the
-    # session clock's run mean that a run-level effect reads (the loop offers those from its run-level analysis)
+    # reference: the inputs of Predictor.fmu (V0, s, load, direction, T): a logged channel that is none of them
+    # has no input, nor the session clock's run mean (the FMU's time changes within a run), nor a column unknown to it
     from l1b2.fmi.export import ExportError, export_calibrated
     base, refit = _setups()
     if kind == "channel":
-        c = next(c for c in pool if c.spec["kind"] == "channel")
+        c = next(c for c in pool if c.spec["kind"] == "channel" and c.spec["channel"] == dataio.TIME)
         eff = IdentifiedEffect(c.family, c.label, c.spec, c.names, c.units, (0.1,) * c.n_params,
                                (0.01,) * c.n_params, c.description, c.regressors, c.structural)
     else:
-        h = fx.family("run_level").hypotheses([{"channel": "time", "transform": "none", "mean": T0 + 0.5,
-                                                "sd": 0.3}])[0]
-        eff = IdentifiedEffect(h.family, h.family, h.spec, h.names, h.units, (0.1,) * len(h.names),
-                               (0.01,) * len(h.names), h.description, (h.regressor,), h.structural)
+        col = dataio.TIME if kind == "session_clock" else "supply_V"
+        eff = _run_level_effect(col, mean=T0 + 0.5, sd=0.3, run_spread=0.0)
     assert not fx.needs(eff.spec) <= set(fx.SIGNALS)
-    with pytest.raises(ExportError, match="no input for the logged channels"):
+    with pytest.raises(ExportError, match="^Predictor.fmu has no input for the logged channels these effects read: "
+                                          + eff.label.replace("[", r"\[").replace("]", r"\]") + "$"):
         export_calibrated(ExtendedPredictor(base, refit, (eff,), None, {}), tmp_path / "out")
     assert not (tmp_path / "out" / "fmus" / "Predictor.fmu").exists()
+
+
+@pytest.mark.parametrize("spread,refused", [(None, True), (0.0, False), (0.01 * 7.0, False), (0.0101 * 7.0, True)])
+def test_a_run_level_input_the_runs_did_not_hold_constant_is_refused(spread, refused, tmp_path):
+    # reference: the run-level contract of Predictor.fmu (l1b2.predictor.effects.channels.export_problem): the FMU
+    # reads the run's voltage as the input's current value, so the export needs TRAIN's largest within-run deviation
+    # (run_spread) at most RUN_CONSTANT_TOL = 0.01 standard deviations of the run-level signal (sd 7 V here)
+    from l1b2.fmi.export import ExportError, export_calibrated
+    from l1b2.predictor.effects.channels import RUN_CONSTANT_TOL, export_problem
+    assert RUN_CONSTANT_TOL == 0.01
+    eff = _run_level_effect(dataio.VOLTAGE, mean=290.0, sd=7.0, **({} if spread is None else {"run_spread": spread}))
+    assert (export_problem(eff.spec) is not None) == refused
+    if not refused:
+        return   # the export of such a model is tested through fmpy below
+    base, refit = _setups()
+    with pytest.raises(ExportError, match="TRAIN's runs held that input constant: run_level_voltage_V: not constant"):
+        export_calibrated(ExtendedPredictor(base, refit, (eff,), None, {}), tmp_path / "out")
+    assert not (tmp_path / "out" / "fmus").exists() or not any((tmp_path / "out" / "fmus").iterdir())
+
+
+def test_exported_run_level_voltage_model_reproduces_the_identifications_prediction(pool, tmp_path, isolated):
+    # reference: the identification's own free run of a model with a run-level voltage effect (the re-identified
+    # setup's l1b2.predictor.simulate.free_run with the candidate's force, whose run-level voltage is each run's
+    # mean by groupby), against export_calibrated's Predictor.fmu and its native FMU through fmpy, 1e-10 relative
+    from l1b2.fmi.export import export_calibrated
+    from l1b2.predictor.simulate import free_run
+    base, refit = _setups()
+    df = _frame()
+    c = next(c for c in pool if c.spec["kind"] == "run_level" and c.spec["channel"] == dataio.VOLTAGE)
+    phi = np.array([0.3, -0.2, 0.5]) * 0.1 / np.sqrt(np.mean(np.asarray(c.features(df)) ** 2, axis=0))
+    force = np.asarray(c.features(df)) @ phi
+    want = free_run(refit.params, df[dataio.POSITION], df[dataio.VOLTAGE], df[dataio.LOAD], df[dataio.DIRECTION],
+                    df[dataio.TIME], [r["v_start"] for r in RUNS], refit.slider_mass_kg, df[dataio.RUN].to_numpy(),
+                    extra_force=force)
+    plain = free_run(refit.params, df[dataio.POSITION], df[dataio.VOLTAGE], df[dataio.LOAD], df[dataio.DIRECTION],
+                     df[dataio.TIME], [r["v_start"] for r in RUNS], refit.slider_mass_kg, df[dataio.RUN].to_numpy())
+    assert np.max(np.abs(want - plain)) > 1e-4   # not vacuous: the run-level voltage effect moves the speed
+    eff = IdentifiedEffect(c.family, c.label, c.spec, c.names, c.units, tuple(phi), (0.01,) * 3, c.description,
+                           c.regressors, c.structural)
+    man = export_calibrated(ExtendedPredictor(base, refit, (eff,), None, {"train": "synthetic"}), tmp_path / "out")
+    assert man["native"]["Predictor"]["included"], man["native"]
+    assert man["inputs"] == ["V0", "s", "load", "direction"]
+    fmus = tmp_path / "out" / "fmus"
+    runs = [{k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in r.items()} for r in RUNS]
+    got = isolated(__file__, "worker_fmpy", {"py": str(fmus / "Predictor.fmu"),
+                                             "native": str(fmus / "Predictor-native.fmu")}, runs, T0).value
+    for key in ("py", "native"):
+        np.testing.assert_allclose(np.concatenate(got[key]), want, rtol=1e-10, atol=1e-14, err_msg=key)
 
 
 def test_extended_model_spec_roundtrips_through_json(models):
@@ -306,9 +378,14 @@ def test_effect_kernels_equal_the_families_features(pool):
     # the samples at the ranges' ends and beyond (clipping), and at the B-spline knots
     x["t"][:6] = [T0 - 1.0, T0, T0 + 0.5, T0 + 1.0, T0 + 2.0, T0 + 1.0 / 3.0]
     x["s"][:6] = [-0.05, -0.02, 0.0, 0.02, 0.05, 0.01]
+    x.update({k: v for k, v in _identification_signals(df).items() if k not in x})   # channels, run means
     seen = set()
     for c in pool:
         if c.spec["kind"] not in ek.KERNEL_KINDS:
+            continue
+        if not _exportable(c):   # a channel that is no input, or a run mean the runs did not hold constant
+            with pytest.raises(fx.EffectSpecError, match="no input|not constant within runs"):
+                ek.spec_scalars(c.spec)
             continue
         seen.add(c.spec["kind"])
         phi = rng.normal(0.0, 1.0, c.n_params)
@@ -318,6 +395,53 @@ def test_effect_kernels_equal_the_families_features(pool):
         got = np.array([ek.effect_force(kind, row.tolist(), q, phi.tolist()) for row in rows])
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * max(1.0, np.max(np.abs(want))), err_msg=c.label)
     assert seen == set(ek.KERNEL_KINDS)
+
+
+def _identification_signals(df) -> dict:
+    """Every ``col:``/``run:`` signal of the frame's columns as the identification computes it (run means by
+    groupby), not as the FMU reads it."""
+    from l1b2.closeloop.candidates import signals
+    cols = [dataio.VOLTAGE, dataio.LOAD, dataio.DIRECTION, dataio.TEMPERATURE, dataio.TIME]
+    return signals(df, None, [f"{p}{c}" for c in cols for p in ("col:", "run:")])
+
+
+def test_run_level_kernels_equal_the_features_on_runs_that_hold_their_inputs(pool):
+    # reference: RunLevel.features and Channel.features @ phi over the identification's signals (each run's mean by
+    # groupby), on runs that hold V0, load, direction and temperature constant: the kernel, reading the inputs'
+    # current values, gives the same force (1e-12 relative); a spec recording within-run variation is refused
+    from l1b2.predictor.effects import kernels as ek
+    df = _frame()
+    df[dataio.TEMPERATURE] = np.where(df[dataio.RUN] == 0, 31.5, 27.25)
+    rng = np.random.default_rng(5)
+    x = {"t": df[dataio.TIME].to_numpy(), "s": df[dataio.POSITION].to_numpy(), "V0": df[dataio.VOLTAGE].to_numpy(),
+         "load": df[dataio.LOAD].to_numpy(), "d": df[dataio.DIRECTION].to_numpy(),
+         "T": df[dataio.TEMPERATURE].to_numpy(), "v_base": rng.normal(0.0, 0.1, len(df)),
+         "a_base": rng.normal(0.0, 2.0, len(df)), **_identification_signals(df)}
+    from l1b2.closeloop.candidates import channels_of
+    from l1b2.closeloop.runlevel import run_signals
+    sigs = [{**sg, "mean": float(np.mean(sg["values"])) + 0.1, "sd": float(np.std(sg["values"]))}
+            for sg in run_signals(df, channels_of(df))]
+    hyps = [h for h in fx.family("run_level").hypotheses(sigs) if ek.fmu_signal("run:" + h.spec["channel"])]
+    assert {h.spec["channel"] for h in hyps} == {dataio.VOLTAGE, dataio.LOAD, dataio.DIRECTION, dataio.TEMPERATURE}
+    import re   # the parameters are FMU variables: legal structured FMI names (fmpy refused "|load_kg|_run_gain")
+    assert all(re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", n) for h in hyps for n in h.names), [h.names for h in hyps]
+    chans = fx.family("channel").grid(fx.TrainingSummary(1.0, (T0, T0 + 1), (-0.02, 0.02), 300.0, {},
+                                                         channels=channels_of(df)))
+    rows = np.column_stack([x[sg] for sg in fx.SIGNALS])
+    n_checked = 0
+    for h in hyps + [h for h in chans if h.spec["channel"] == dataio.TEMPERATURE]:
+        assert h.spec.get("level") == "sample" or h.spec["run_spread"] == pytest.approx(0.0, abs=1e-12), h.family
+        phi = rng.normal(0.0, 1.0, len(h.names))
+        want = fx.effect_features(h.spec, x) @ phi
+        kind, q = ek.spec_scalars(h.spec)
+        got = np.array([ek.effect_force(kind, row.tolist(), q, phi.tolist()) for row in rows])
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * max(1.0, np.max(np.abs(want))), err_msg=h.family)
+        assert np.max(np.abs(want)) > 1e-3, h.family
+        n_checked += 1
+    assert n_checked == 4 + 1 + 3   # V0, d*load, |load|, direction, temperature; its channel's 3 forms (run level)
+    varied = dict(hyps[0].spec, run_spread=0.02 * hyps[0].spec["sd"])
+    with pytest.raises(fx.EffectSpecError, match="not constant within runs"):
+        ek.spec_scalars(varied)
 
 
 def test_every_family_of_the_package_has_a_kernel():

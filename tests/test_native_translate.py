@@ -211,6 +211,13 @@ def _effect_specs():
     specs += [{"kind": "smooth", "regressor": r, **ranges} for r in REGRESSORS]
     specs += [{"kind": "smooth_pair", "a": a, "b": b, **ranges}
               for i, a in enumerate(PAIR_REGRESSORS) for b in PAIR_REGRESSORS[i + 1:]]
+    # a channel and a run-level signal of each input (the FMU's current value), every form and transform
+    specs += [{"kind": "channel", "channel": "temperature_C", "form": f, "level": lv, "mean": 31.0, "sd": 4.0,
+               "run_spread": 0.0} for f in ("friction", "force_factor", "force") for lv in ("run", "sample")]
+    specs += [{"kind": "run_level", "channel": c, "transform": tr, "mean": m, "sd": sd, "run_spread": 0.0}
+              for c, tr, m, sd in (("voltage_V", "none", 280.0, 40.0), ("load_kg", "drive", 0.01, 0.2),
+                                   ("load_kg", "abs", 0.15, 0.1), ("direction", "none", 0.0, 1.0),
+                                   ("temperature_C", "none", 30.0, 3.0))]
     return specs
 
 

@@ -166,7 +166,8 @@ class CloseLoop(EstimatorSettings):
         (:func:`l1b2.closeloop.baselines.choose_baseline`; both figures in ``diagnosis.baseline_choice``;
         a pure-slip fit that diverges is recorded there and the loop starts from Eq. 29). With the
         pure-slip family no candidate counts as relaxing Eq. 29 (a load x voltage term is a missing
-        effect). Why ``"best"`` is not yet the default: ``docs/decisions/0026-best-baseline-by-default.md``.
+        effect). Why ``"best"`` is not yet the default: ``docs/decisions/0026-best-baseline-by-default.md``
+        and ``0032-run-level-effects-in-predictor-fmu.md``.
 
     Attributes
     ----------
@@ -700,10 +701,10 @@ def calibrated_model(base, ext, effects: EffectSet, output_filter, source: dict)
     missing = [c.label for c in effects.candidates if not c.spec]
     if missing:
         return None, f"effects without a serialisable spec (custom candidates): {', '.join(missing)}"
-    from ..predictor.effects import SIGNALS, needs
-    logged = [c.label for c in effects.candidates if not needs(c.spec) <= set(SIGNALS)]
+    from ..predictor.effects.channels import export_problem
+    logged = [f"{c.label} ({why})" for c in effects.candidates if (why := export_problem(c.spec))]
     if logged:
-        return None, (f"effects reading logged channels that Predictor.fmu has no input for: {', '.join(logged)}")
+        return None, f"effects Predictor.fmu cannot evaluate as identified: {', '.join(logged)}"
     recs = tuple(IdentifiedEffect(c.family, c.label, dict(c.spec), tuple(c.names), tuple(c.units),
                         tuple(float(p) for p in phi), tuple(reported_uncertainty(ext, n)["stderr"] for n in c.names),
                         c.description, tuple(c.regressors), c.structural)

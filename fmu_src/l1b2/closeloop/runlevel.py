@@ -219,6 +219,8 @@ class SignalEvidence:
     significant: bool = False
     blocked_folds: bool = False
     per_run: np.ndarray = field(default=None, repr=False)
+    #: TRAIN's largest deviation of a sample's value from its run's (0: constant within every run; None: unknown)
+    run_spread: float | None = None
 
     def to_dict(self) -> dict:
         return {"signal": self.label, "regressor": self.regressor, "p_value": self.p_value, "cv_gain": self.cv_gain,
@@ -229,19 +231,24 @@ class SignalEvidence:
 
 def run_signals(df: pd.DataFrame, channels) -> list[dict]:
     """The run-level signals of a frame: each candidate channel's run mean (not the responses, not constant ones)
-    and the inputs of :data:`~l1b2.predictor.effects.channels.INPUT_SIGNALS`; ``{"channel", "transform", "values"}``
-    with one value per run (in run order)."""
+    and the inputs of :data:`~l1b2.predictor.effects.channels.INPUT_SIGNALS`; ``{"channel", "transform", "values",
+    "run_spread"}`` with one value per run (in run order) and the largest deviation of a sample's value from its
+    run's (:func:`l1b2.closeloop.candidates.run_spread`: what the export checks)."""
+    from .candidates import run_spread
     out = []
     first = df.groupby(dataio.RUN, sort=False)
     for ch in channels:
         if ch.get("kind") == "response" or ch["name"] not in df.columns:
             continue
-        out.append({"channel": ch["name"], "transform": "none", "values": first[ch["name"]].mean().to_numpy(float)})
+        out.append({"channel": ch["name"], "transform": "none", "values": first[ch["name"]].mean().to_numpy(float),
+                    "run_spread": run_spread(df[ch["name"]], df[dataio.RUN])})
     d = first[dataio.DIRECTION].first().to_numpy(float)
     for col, tr in fx.channels.INPUT_SIGNALS:
         v = first[col].mean().to_numpy(float)
+        c = df[col].to_numpy(float)
+        c = c * df[dataio.DIRECTION].to_numpy(float) if tr == "drive" else np.abs(c) if tr == "abs" else c
         out.append({"channel": col, "transform": tr, "values": v * d if tr == "drive" else np.abs(v) if tr == "abs"
-                    else v})
+                    else v, "run_spread": run_spread(c, df[dataio.RUN])})
     return [s for s in out if np.all(np.isfinite(s["values"])) and np.std(s["values"]) > 0]
 
 
@@ -305,7 +312,7 @@ def signal_evidence(dev: RunDeviations, signals_, *, alpha: float, k: int, seed:
         out.append(SignalEvidence(sg["channel"], sg["transform"], label, fx.channels.regressor_of(sg["channel"]),
                                   mean, sd, p, gain, tuple(float(x) for x in b) + (0.0,) * (3 - len(b)),
                                   bool(p < level and gain > 0),
-                                  blocked, per_run))
+                                  blocked, per_run, sg.get("run_spread")))
     return sorted(out, key=lambda e: (e.p_value, -e.cv_gain))
 
 
@@ -357,7 +364,8 @@ def candidates(analysis: RunLevelAnalysis, ctx) -> list:
     """The :class:`~l1b2.closeloop.candidates.CandidateForce` of every significant signal, strongest first."""
     from .candidates import candidate
     fam = fx.family("run_level")
-    hyps = fam.hypotheses([{"channel": e.channel, "transform": e.transform, "mean": e.mean, "sd": e.sd}
+    hyps = fam.hypotheses([{"channel": e.channel, "transform": e.transform, "mean": e.mean, "sd": e.sd,
+                            **({} if e.run_spread is None else {"run_spread": float(e.run_spread)})}
                            for e in analysis.significant])
     return [candidate(ctx, h) for h in hyps]
 

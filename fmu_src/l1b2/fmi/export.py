@@ -332,16 +332,26 @@ def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None)
     Raises
     ------
     ExportError
-        if the FMU fails fmpy validation or a Real has no unit (no manifest is written).
+        if the FMU fails fmpy validation or a Real has no unit (no manifest is written); before building
+        anything, if an effect reads a signal that no input of ``Predictor.fmu`` gives (a logged channel that
+        is no input, the session clock's run mean), or the run-level value of an input that TRAIN's runs did not
+        hold constant (:func:`l1b2.predictor.effects.channels.export_problem`: the FMU reads a run-level signal
+        of V0, the load, the direction or the temperature as the input's current value).
     """
-    from ..predictor.effects import SIGNALS, ExtendedPredictor, needs, plugin_sources
+    from ..predictor.effects import ExtendedPredictor, plugin_sources
+    from ..predictor.effects.channels import export_problem
 
     if not isinstance(model, ExtendedPredictor):
         raise ExportError(f"export_calibrated needs an l1b2.predictor.effects.ExtendedPredictor, "
                           f"got {type(model).__name__}")
-    logged = [e.label for e in model.effects if not needs(e.spec) <= set(SIGNALS)]
+    problems = [(e.label, export_problem(e.spec)) for e in model.effects]
+    logged = [label for label, why in problems if why and why.startswith("no input")]
     if logged:
         raise ExportError(f"Predictor.fmu has no input for the logged channels these effects read: {', '.join(logged)}")
+    varied = [f"{label}: {why}" for label, why in problems if why]
+    if varied:
+        raise ExportError("Predictor.fmu reads a run-level signal as its input's current value, exact only when "
+                          f"TRAIN's runs held that input constant: {'; '.join(varied)}")
     mp = mp or load_motor()
     out = Path(out_dir)
     fmu_dir = out / "fmus"

@@ -606,7 +606,9 @@ EFFECT_PARAM_TYPES = {
     **{name: {"x": _VEC, "q": _VEC, "phi": _VEC} for name in (
         "thermal_drift_force", "thermal_drift_t_force", "direction_asymmetry_force", "bar_waviness_force",
         "local_defect_force", "load_path_friction_force", "drive_saturation_force", "speed_dependent_friction_force",
-        "inertia_mismatch_force", "position_load_force", "smooth_force", "smooth_pair_force")},
+        "inertia_mismatch_force", "position_load_force", "smooth_force", "smooth_pair_force", "channel_force",
+        "run_level_force")},
+    "input_signal": {"x": _VEC, "sig": LONG},
     "voltage_slope_force": {"x": _VEC, "q": _VEC, "phi": _VEC, "regressor": LONG},
     "knot": {"i": LONG},
     "bspline1": {"j": LONG, "k": LONG},

@@ -24,15 +24,29 @@ family for the significance correction (``channel_<column>``).
 
 Signals: ``col:<column>`` (the sample values) and ``run:<column>`` (each
 run's mean, per sample), taken from the data frame by
-:func:`l1b2.closeloop.candidates.signals`. They are not inputs of
-``Predictor.fmu``: a model with a channel effect is not exported.
+:func:`l1b2.closeloop.candidates.signals`.
+
+What ``Predictor.fmu`` evaluates (:func:`fmu_signal`, :func:`export_problem`): a
+signal of a column that is an input of the FMU (:data:`INPUT_COLUMNS`:
+``voltage_V`` -> ``V0``, ``load_kg`` -> ``load``, ``direction`` -> ``d``,
+``temperature_C`` -> ``T``) is that input's **current value**, at both levels.
+For ``col:`` that is the signal itself; for ``run:`` (the run's mean) it is
+exact only when the input is constant within a run, which the rig's protocol
+does for V0, the load and the direction: the run-level contract. Each
+run-level hypothesis records how far TRAIN's runs were from it
+(``run_spread``: the largest deviation of a sample's value from its run's
+mean, in the signal's units) and the export refuses one whose spread exceeds
+:data:`RUN_CONSTANT_TOL` standard deviations of the signal. Any other column
+(a logged channel that is no FMU input, the session clock ``time_s``, the drive
+frequency, which scales the force factor but is no effect signal) has no
+input: a model reading it is not exported.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .base import V_REF, Effect, EffectSpecError, num, register, signal
+from .base import SIGNALS, V_REF, Effect, EffectSpecError, needs, num, register, signal
 
 FORMS = ("friction", "force_factor", "force")
 LEVELS = ("run", "sample")
@@ -49,6 +63,63 @@ REGRESSOR_NAMES = {"time_s": "time", "temperature_C": "temperature", "frequency_
 def regressor_of(column: str) -> str:
     """The regressor name a channel is traced to (``diagnosis.traced_to``)."""
     return REGRESSOR_NAMES.get(column, column)
+
+
+#: the columns whose signals ``Predictor.fmu`` gives from its inputs: column -> the input's signal (:data:`SIGNALS`)
+INPUT_COLUMNS = {"voltage_V": "V0", "load_kg": "load", "direction": "d", "temperature_C": "T"}
+#: the largest deviation of an input from its run's value within a TRAIN run, in standard deviations of the
+#: run-level signal, that the export accepts for a run-level effect (the FMU's force then differs from the
+#: identified one by at most 1 % of one standard deviation's force)
+RUN_CONSTANT_TOL = 0.01
+
+
+def fmu_signal(key: str) -> str | None:
+    """The signal of :data:`SIGNALS` that ``Predictor.fmu`` gives for a signal key (None: it has no input for it).
+
+    A signal of :data:`SIGNALS` is itself; ``col:<column>`` and ``run:<column>`` of a column of
+    :data:`INPUT_COLUMNS` are that input (its current value: for ``run:`` exact when the input is constant within
+    a run); any other key has no input.
+    """
+    if key in SIGNALS:
+        return key
+    if key[:4] in ("col:", "run:"):
+        return INPUT_COLUMNS.get(key[4:])
+    return None
+
+
+def with_input_signals(x, keys) -> dict:
+    """``x`` with every ``col:``/``run:`` key of ``keys`` that an input gives (:func:`fmu_signal`) and ``x`` lacks,
+    set to that input's values: the FMU's reading of a run-level signal (the current value, not the run's mean)."""
+    out = dict(x)
+    for key in keys:
+        sig = fmu_signal(key)
+        if key not in out and sig is not None and sig != key and sig in out:
+            out[key] = out[sig]
+    return out
+
+
+def export_problem(spec) -> str | None:
+    """Why ``Predictor.fmu`` cannot evaluate an effect spec as identified (None: it can).
+
+    ``"no input: <keys>"`` when a signal has no FMU input (:func:`fmu_signal`); for a run-level signal of an input,
+    ``"not constant within runs: ..."`` when the spec does not record TRAIN's ``run_spread`` or it exceeds
+    :data:`RUN_CONSTANT_TOL` standard deviations (``sd``) of the signal.
+    """
+    keys = needs(spec)
+    missing = sorted(k for k in keys if fmu_signal(k) is None)
+    if missing:
+        return "no input: " + ", ".join(missing)
+    for key in sorted(k for k in keys if k.startswith("run:")):
+        col = key[4:]
+        if "run_spread" not in spec:
+            return (f"not constant within runs: the spec does not record how far TRAIN's runs held {col} constant "
+                    "(run_spread)")
+        spread, sd = float(spec["run_spread"]), float(spec.get("sd", 0.0))
+        if not spread <= RUN_CONSTANT_TOL * sd:
+            return (f"not constant within runs: {col} deviates from its run's mean by up to {spread:.4g} within a "
+                    f"TRAIN run ({spread / sd if sd > 0 else float('inf'):.3g} standard deviations of the run-level "
+                    f"signal, more than {RUN_CONSTANT_TOL}); the FMU reads the input's current value")
+    return None
 
 
 def signal_key(column: str, level: str) -> str:
@@ -106,11 +177,16 @@ class Channel(Effect):
                     out.append(self.hypothesis(
                         [f"{name}_{form}_{level}"], ["N"],
                         {"channel": name, "form": form, "level": level, "mean": float(ch["mean"]),
-                         "sd": float(ch["sd"])}, f"{form}, {level}", family=f"channel_{name}", regressor=reg,
+                         "sd": float(ch["sd"]), **_spread(ch, level)}, f"{form}, {level}", family=f"channel_{name}", regressor=reg,
                         generic=True, description=f"{ch.get('kind', 'logged')} channel {name} "
                                                   f"({'run mean' if level == 'run' else 'per sample'}) "
                                                   f"{_FORM_TEXT[form]}"))
         return out
+
+
+def _spread(sg, level: str = "run") -> dict:
+    """``{"run_spread": ...}`` of a run-level signal that records it (:func:`export_problem` reads it), else ``{}``."""
+    return {"run_spread": float(sg["run_spread"])} if level == "run" and "run_spread" in sg else {}
 
 
 _FORM_TEXT = {"friction": "scaling the friction level", "force_factor": "scaling the drive's force factor",
@@ -129,6 +205,12 @@ REGRESSOR_NAMES.update({"voltage_V": "voltage", "load_kg": "load", "direction": 
 def signal_label(column: str, transform: str = "none") -> str:
     """The report's name of a run-level signal: the column, ``d*<column>`` or ``|<column>|``."""
     return {"none": column, "drive": f"d*{column}", "abs": f"|{column}|"}[transform]
+
+
+def parameter_stem(column: str, transform: str = "none") -> str:
+    """The stem of a run-level signal's parameter names: the column, ``d_<column>`` or ``abs_<column>`` (a legal
+    FMI structured name, unlike the report's :func:`signal_label`: the parameters are FMU variables)."""
+    return {"none": column, "drive": f"d_{column}", "abs": f"abs_{column}"}[transform]
 
 
 def run_signal(x, column: str, transform: str) -> np.ndarray:
@@ -156,6 +238,12 @@ class RunLevel(Effect):
     (``a``, ``b`` [N per standard deviation], ``c`` [1 per standard deviation]). Not listed by any candidate
     library: the loop offers the hypotheses of this family whose run-level evidence is significant (report
     family ``run_level_<signal>``).
+
+    In ``Predictor.fmu`` (and :meth:`~l1b2.predictor.effects.model.ExtendedPredictor.free_run`) the run-level
+    value of an input's signal (V0, the load, the direction, the temperature: :data:`INPUT_COLUMNS`) is the
+    input's current value: exact when the input is constant within a run, as the rig's protocol holds V0, the
+    load and the direction (:func:`export_problem` checks the spec's ``run_spread``). A run mean of any other
+    column (a logged channel that is no input, the session clock) is not exported.
     """
 
     kind = "run_level"
@@ -180,14 +268,16 @@ class RunLevel(Effect):
         return 3
 
     def hypotheses(self, signals_: list) -> list:
-        """One hypothesis per run-level signal ``{"channel", "transform", "mean", "sd"}`` (``sd`` > 0)."""
+        """One hypothesis per run-level signal ``{"channel", "transform", "mean", "sd"}`` (``sd`` > 0; with
+        ``run_spread``, TRAIN's largest deviation from the run's value, when known: the export checks it)."""
         out = []
         for sg in signals_:
             col, tr = sg["channel"], sg.get("transform", "none")
-            label = signal_label(col, tr)
+            label, stem = signal_label(col, tr), parameter_stem(col, tr)
             out.append(self.hypothesis(
-                [f"{label}_run_gain", f"{label}_run_offset", f"{label}_run_load"], ["N", "N", "1"],
-                {"channel": col, "transform": tr, "mean": float(sg["mean"]), "sd": float(sg["sd"])}, "run",
+                [f"{stem}_run_gain", f"{stem}_run_offset", f"{stem}_run_load"], ["N", "N", "1"],
+                {"channel": col, "transform": tr, "mean": float(sg["mean"]), "sd": float(sg["sd"]), **_spread(sg)},
+                "run",
                 family=f"run_level_{label}", regressor=regressor_of(col), generic=True,
                 description=f"run-level {label} scaling the drive force, adding a force and scaling the "
                             "load's force (run mean, constant along the stroke)"))
@@ -201,5 +291,5 @@ class RunLevel(Effect):
         if not any(ch["name"] == SESSION_TIME for ch in chans):
             t0, t1 = train.time_range
             chans.append({"name": SESSION_TIME, "mean": 0.5 * (t0 + t1), "sd": (t1 - t0) / np.sqrt(12.0)})
-        return self.hypotheses([{"channel": ch["name"], "transform": "none", "mean": ch["mean"], "sd": ch["sd"]}
-                                for ch in chans])
+        return self.hypotheses([{"channel": ch["name"], "transform": "none", "mean": ch["mean"], "sd": ch["sd"],
+                                 **_spread(ch)} for ch in chans])

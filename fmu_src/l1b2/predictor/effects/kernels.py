@@ -15,8 +15,10 @@ accepts. Each kernel returns one effect's force ``features(spec, x) @ phi``
   :data:`REGRESSOR_INDEX`);
 * ``phi``: the effect's parameters, one per feature column.
 
-:data:`KERNEL_KINDS` lists the kinds with a kernel (every family of the package
-but ``channel``, whose logged channel is no input of ``Predictor.fmu``); a
+:data:`KERNEL_KINDS` lists the kinds with a kernel: every family of the package
+(``channel`` and ``run_level`` for a signal that an input of ``Predictor.fmu``
+gives, :func:`l1b2.predictor.effects.channels.fmu_signal`: a run-level signal is
+the input's current value, exact when the input is constant within a run); a
 family registered outside the package has none (its model stays a Python
 FMU). A change of a family's features needs the same change in its kernel:
 the tests compare every kernel with its family's vectorised features.
@@ -28,6 +30,7 @@ import math
 
 from ...units import G_M_S2
 from .base import SIGNALS, SPEED_REF, V_REF, EffectSpecError
+from .channels import FORMS, G_N_PER_KG, TRANSFORMS, export_problem, fmu_signal, signal_key
 
 #: index of each signal in ``x``
 SIG_T, SIG_S, SIG_V0, SIG_LOAD, SIG_D, SIG_TEMP, SIG_VB, SIG_AB = range(len(SIGNALS))
@@ -55,10 +58,16 @@ SPEC_KEYS = {
     "position_load": ("s_lo", "s_hi"),
     "smooth": ("regressor",) + RANGE_KEYS,
     "smooth_pair": ("a", "b") + RANGE_KEYS,
+    "channel": ("channel", "form", "mean", "sd"),
+    "run_level": ("channel", "transform", "mean", "sd"),
 }
 KERNEL_KINDS = tuple(SPEC_KEYS)
 (K_THERMAL, K_THERMAL_T, K_DIRECTION, K_BAR, K_DEFECT, K_LOAD_PATH, K_SATURATION, K_DRAG, K_INERTIA,
- K_LOAD_V, K_DAMPING_V, K_POSITION_LOAD, K_SMOOTH, K_PAIR) = range(len(KERNEL_KINDS))
+ K_LOAD_V, K_DAMPING_V, K_POSITION_LOAD, K_SMOOTH, K_PAIR, K_CHANNEL, K_RUN_LEVEL) = range(len(KERNEL_KINDS))
+#: the codes of a channel's form and of a run-level signal's transform in ``q``
+#: (:data:`l1b2.predictor.effects.channels.FORMS` and ``TRANSFORMS``)
+FORM_FRICTION, FORM_FORCE_FACTOR, FORM_FORCE = range(len(FORMS))
+TR_NONE, TR_DRIVE, TR_ABS = range(len(TRANSFORMS))
 #: the offsets of the range scalars in ``q`` (smooth: after the regressor; pair: after both)
 R_T_LO, R_T_HI, R_S_LO, R_S_HI, R_N_INNER, R_LOAD_ABS, R_V_LO, R_V_HI, R_VB_LO, R_VB_HI, R_M_S, R_TEMP_LO, \
     R_TEMP_HI = range(len(RANGE_KEYS))
@@ -75,6 +84,8 @@ def spec_scalars(spec) -> tuple[int, list[float]]:
     if kind not in SPEC_KEYS:
         raise EffectSpecError(f"effect kind {kind!r} has no per-sample kernel (l1b2.predictor.effects.kernels); "
                               f"kernels exist for {', '.join(KERNEL_KINDS)}")
+    if kind in ("channel", "run_level"):
+        return KERNEL_KINDS.index(kind), _signal_scalars(spec)
     q = []
     for key in SPEC_KEYS[kind]:
         if key in ("regressor", "a", "b"):
@@ -88,6 +99,30 @@ def spec_scalars(spec) -> tuple[int, list[float]]:
         else:
             raise EffectSpecError(f"effect spec {kind!r} lacks the scalar {key!r}")
     return KERNEL_KINDS.index(kind), q
+
+
+def _signal_scalars(spec) -> list[float]:
+    """``q`` of a ``channel`` or ``run_level`` spec: the index of the input giving its signal, the form's or
+    transform's code, mean and sd (:class:`EffectSpecError` when no input gives it or TRAIN's runs did not hold
+    it constant: :func:`l1b2.predictor.effects.channels.export_problem`)."""
+    why = export_problem(spec)
+    if why:
+        raise EffectSpecError(f"effect spec {spec.get('kind')!r} of {spec.get('channel')!r}: {why}")
+    kind = spec["kind"]
+    level = "run" if kind == "run_level" else str(spec.get("level"))
+    sig = fmu_signal(signal_key(str(spec.get("channel")), level))
+    code = (TRANSFORMS.index(spec.get("transform", "none")) if kind == "run_level"
+            else FORMS.index(spec.get("form")) if spec.get("form") in FORMS else -1)
+    if code < 0:
+        raise EffectSpecError(f"effect spec 'channel': form {spec.get('form')!r} is not one of {', '.join(FORMS)}")
+    try:
+        mean, sd = float(spec["mean"]), float(spec["sd"])
+    except (KeyError, TypeError, ValueError):
+        raise EffectSpecError(f"effect spec {kind!r} lacks a numeric 'mean' or 'sd'") from None
+    if not sd > 0:
+        raise EffectSpecError(f"effect spec {kind!r} of {spec.get('channel')!r}: standard deviation {sd} is not "
+                              "positive")
+    return [float(SIGNAL_INDEX[sig]), float(code), mean, sd]
 
 
 # ---------------------------------------------------------------------------
@@ -275,6 +310,42 @@ def smooth_pair_force(x, q, phi):
     return out
 
 
+# ---------------------------------------------------------------------------
+# a logged channel or a run-level signal of an input (l1b2.predictor.effects.channels)
+# ---------------------------------------------------------------------------
+
+def input_signal(x, sig):
+    """The sample's value of the signal of index ``sig``: the FMU's input giving a channel's or a run-level
+    signal (for a run-level signal its current value, the run's value when the input is constant within a run)."""
+    return x[sig]
+
+
+def channel_force(x, q, phi):
+    """``Channel.features`` @ phi: ``z`` = (input - mean)/sd (``q[0]`` the input, ``q[2:4]`` mean and sd) times
+    the form's factor (``q[1]``: -1, ``V0/V_REF`` or ``d``)."""
+    z = (input_signal(x, int(q[0])) - q[2]) / q[3]
+    form = int(q[1])
+    if form == FORM_FRICTION:
+        return -z * phi[0]
+    if form == FORM_FORCE_FACTOR:
+        return x[SIG_V0] / V_REF * z * phi[0]
+    return x[SIG_D] * z * phi[0]
+
+
+def run_level_force(x, q, phi):
+    """``RunLevel.features`` @ phi: ``z (a V0/V_REF + b + c g d m)``, ``z`` = (c - mean)/sd of the input ``q[0]``
+    transformed by ``q[1]`` (none, times the direction, its size)."""
+    c = input_signal(x, int(q[0]))
+    tr = int(q[1])
+    if tr == TR_DRIVE:
+        c = c * x[SIG_D]
+    elif tr == TR_ABS:
+        c = abs(c)
+    z = (c - q[2]) / q[3]
+    return (x[SIG_V0] / V_REF * z * phi[0] + z * phi[1]
+            + G_N_PER_KG * x[SIG_D] * x[SIG_LOAD] * z * phi[2])
+
+
 def effect_force(kind, x, q, phi):
     """The force [N] of one effect of kind index ``kind`` (:data:`KERNEL_KINDS`) at one sample."""
     if kind == K_THERMAL:
@@ -305,6 +376,10 @@ def effect_force(kind, x, q, phi):
         return smooth_force(x, q, phi)
     if kind == K_PAIR:
         return smooth_pair_force(x, q, phi)
+    if kind == K_CHANNEL:
+        return channel_force(x, q, phi)
+    if kind == K_RUN_LEVEL:
+        return run_level_force(x, q, phi)
     return math.nan
 
 
@@ -314,6 +389,6 @@ def kernel_family() -> dict:
              "direction_asymmetry_force", "bar_waviness_force", "local_defect_force", "load_path_friction_force",
              "drive_saturation_force", "speed_dependent_friction_force", "inertia_mismatch_force",
              "voltage_slope_force", "position_load_force", "pair_width", "pair_factor", "smooth_force",
-             "smooth_pair_force", "effect_force")
+             "smooth_pair_force", "input_signal", "channel_force", "run_level_force", "effect_force")
     g = globals()
     return {n: g[n] for n in names}

@@ -81,10 +81,13 @@ class ExtendedPredictor:
 
     @property
     def signals(self) -> set:
-        """Every signal (:data:`SIGNALS`) the effects read."""
+        """Every signal the effects read, as ``Predictor.fmu`` gives it: a signal of :data:`SIGNALS`, the input
+        that gives a ``col:``/``run:`` signal of an input column (:func:`~l1b2.predictor.effects.channels.fmu_signal`),
+        or the key itself when no input gives it."""
+        from .channels import fmu_signal
         out: set = set()
         for e in self.effects:
-            out |= needs(e.spec)
+            out |= {fmu_signal(k) or k for k in needs(e.spec)}
         return out
 
     @property
@@ -109,11 +112,17 @@ class ExtendedPredictor:
                    None if filt is None else {k: float(filt[k]) for k in ("a", "b0", "b1")}, dict(d.get("source", {})))
 
     def extra_force(self, x: Mapping) -> np.ndarray:
-        """Sum of the effects' forces per sample [N]."""
+        """Sum of the effects' forces per sample [N].
+
+        A ``col:``/``run:`` signal of an input column that ``x`` lacks is that input's value
+        (:func:`~l1b2.predictor.effects.channels.with_input_signals`): a run-level signal is the input's current
+        value, as in ``Predictor.fmu`` (exact when the input is constant within a run).
+        """
+        from .channels import with_input_signals
         n = len(np.asarray(x["V0"]))
         out = np.zeros(n)
         for e in self.effects:
-            out = out + e.force(x)
+            out = out + e.force(with_input_signals(x, needs(e.spec)))
         return out
 
     def free_run(self, t, s, V0, load, direction, v_start, run_index=None, temperature=None,
@@ -126,6 +135,9 @@ class ExtendedPredictor:
         ``frequency`` [Hz] the drive frequency per sample (None: each setup's
         nominal one, gain 1), which scales the setups' force factors by their
         frequency response (:mod:`l1b2.predictor.frequency`; effects see the commanded V0).
+        A run-level signal of an input (a run-level voltage effect) is the
+        input's value per sample, as in the FMU: the identified model's run
+        mean when the input is constant within each run (the rig's protocol).
         """
         from ..simulate import RunLayout, free_run
 
