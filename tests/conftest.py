@@ -47,9 +47,10 @@ COSTLY_FIRST = (
     "test_readme_examples.py",           # 173 s (the pages' commands: rig, identify, close loop, export)
     "test_extended_predictor_fmu.py",    # 149 s (native FMUs compiled per effect kind, FMI 2.0 and 3.0)
     "test_closeloop_realistic.py",       # two realistic-world close loops (about 90 s each, decision 0027)
+    "test_export.py",                    # 72 s
     "test_fmus.py",                      # 65 s
     "test_identify.py",                  # 57 s
-    "test_chost.py",                     # 42 s
+    "test_chost.py",                     # 41 s
     "test_closeloop_chain.py",           # one reference-world close loop
     "test_sweep.py",                     # 38 s
     "test_fmu_misuse.py",                # 37 s
