@@ -6,7 +6,8 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 export OPENBLAS_NUM_THREADS ?= 1
 export MPLBACKEND ?= Agg
-# pytest-xdist workers for `make test` (the CI machine has 2 cores); modules stay whole on one worker.
+# pytest-xdist workers for `make test` (the CI machine has 2 cores); modules stay whole on one worker and are
+# handed out in collection order, the costliest modules first (tests/conftest.py COSTLY_FIRST, decision 0030).
 # `make test` runs the not-slow tests and any slow one marked ci_slow (none today, decision 0027)
 TEST_WORKERS ?= 2
 
@@ -23,7 +24,7 @@ fmus: $(STAMP)
 	$(PY) build_fmu.py
 
 test: $(STAMP)
-	$(PY) -m pytest -q -m "not slow or ci_slow" -n $(TEST_WORKERS) --dist loadscope --durations=25
+	$(PY) -m pytest -q -m "not slow or ci_slow" -n $(TEST_WORKERS) --dist loadscope --no-loadscope-reorder --durations=25
 
 test-slow: $(STAMP)
 	$(PY) -m pytest -q -m slow

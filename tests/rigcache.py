@@ -28,12 +28,17 @@ def world_plan(world: str, seed: int) -> RigPlan:
 
 def rig_dir(name: str = "clean", injections=(), injection_seed=None, plan: RigPlan | None = None,
             world: str = "reference") -> Path:
-    """Folder with all/train/test.csv of a rig experiment (the paper's 72-run plan by default)."""
+    """Folder with all/train/test.csv of a rig experiment (the paper's 72-run plan by default).
+
+    The runs are simulated in this process, one after the other: a local Dask cluster would give the same
+    data (``run_experiment``'s contract, checked in ``test_sweep.py``) but its start-up costs about 20 times
+    the CPU of the 72 runs themselves, and the test workers already use the machine's cores.
+    """
     key = (name, tuple(injections), injection_seed, plan, world)
     if key not in _CACHE:
         plan = plan or RigPlan(step_s=1e-3)
         mp = load_motor(SYSTEM_MODELS_DIR / WORLDS[world]) if WORLDS[world] else load_motor()
-        df, truth = run_experiment(plan, mp, injections=list(injections), engine="inprocess", workers=2,
+        df, truth = run_experiment(plan, mp, injections=list(injections), engine="inprocess", workers=1,
                                    injection_seed=injection_seed)
         out = _ROOT / f"{name}_{len(_CACHE)}"
         write_experiment(df, out, mp, plan, truth)
