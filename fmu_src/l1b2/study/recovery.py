@@ -44,6 +44,7 @@ from scipy import stats
 
 from ..data import measurements as dataio
 from ..errors import IdentificationError
+from ..ident.clusters import RUN_GROUPINGS, run_groups
 from ..ident.estimator import PredictorIdentifier
 from ..ident.extra import ExtraForces
 from ..ident.uncertainty import grouped_sandwich
@@ -158,18 +159,15 @@ def _phi_block(est, cov) -> np.ndarray:
     return np.asarray(cov, float)[-p:, -p:]
 
 
-#: the groupings of runs into clusters: the rig's condition (V0, signed load: one run opposing, one aiding the
-#: motion), its mirror image (V0, direction x load: the same load relative to the motion, both directions) and
-#: both together (V0, |load|: the four runs of one voltage and load size)
-GROUPINGS = ("condition", "mirror", "level")
+#: the groupings of runs into clusters (:data:`l1b2.ident.clusters.RUN_GROUPINGS`): the rig's condition (V0,
+#: signed load: one run opposing, one aiding the motion), its mirror image (V0, direction x load: the same load
+#: relative to the motion, both directions) and both together (V0, |load|: the four runs of one voltage and load size)
+GROUPINGS = RUN_GROUPINGS
 
 
 def run_conditions(est, train: dataio.Measurements, grouping: str = "condition") -> list:
     """Each of the fit's runs' cluster label under ``grouping`` (:data:`GROUPINGS`), in the fit's run order."""
-    first = train.df.groupby(dataio.RUN, sort=False)[[dataio.VOLTAGE, dataio.LOAD, dataio.DIRECTION]].first()
-    load = {"condition": lambda m, d: m, "mirror": lambda m, d: m * d, "level": lambda m, d: abs(m)}[grouping]
-    cond = {k: (round(float(v), 6), round(float(load(m, d)), 9)) for k, (v, m, d) in zip(first.index, first.to_numpy())}
-    return [cond[r] for r in est.runs_]
+    return run_groups(train.df, est.runs_, grouping)
 
 
 def covariances(est, train: dataio.Measurements) -> tuple[dict, dict]:
