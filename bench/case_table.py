@@ -22,6 +22,11 @@ def rows(paths):
                     yield {**json.loads(prop.get("value")), "test": outcome}
 
 
+def cell(text: str) -> str:
+    """A markdown table cell: a ``|`` in a name (``|load_kg|``, the load size) escaped, not a column break."""
+    return text.replace("|", "\\|")
+
+
 def channels_cell(ch) -> str:
     """The column "channels considered": how many channels and run-level signals, and which were significant."""
     if ch is None:
@@ -36,9 +41,9 @@ def main(argv):
     print("|---|---|---|---|---|---|---|---|")
     for r in sorted(rows(argv), key=lambda r: (r["world"], r["case"])):
         b0 = f"{100 * r['b0']:.2f} %" if r.get("b0") is not None else ""
-        print(f"| {r['world']} | {r['case']} | {r['test']} | {', '.join(r['traced_to']) or '-'} | "
-              f"{', '.join(r['added']) or '-'} | {100 * r['before']:.2f} -> {100 * r['after']:.2f} % | {b0} | "
-              f"{channels_cell(r.get('channels'))} |")
+        print(f"| {r['world']} | {cell(r['case'])} | {r['test']} | {cell(', '.join(r['traced_to']) or '-')} | "
+              f"{cell(', '.join(r['added']) or '-')} | {100 * r['before']:.2f} -> {100 * r['after']:.2f} % | {b0} | "
+              f"{cell(channels_cell(r.get('channels')))} |")
 
 
 if __name__ == "__main__":
