@@ -24,8 +24,9 @@ For every rig injection whose effect family has a physical parameter
 
 Each interval kind of :data:`INTERVALS` is checked (:func:`covariances`): the
 AR(1)-inflated Fisher one (the close-the-loop report's ``ci95_model``), the
-cluster-by-run robust one (its ``ci95``), and the cluster-robust ones whose
-clusters are the runs of one operating condition (:data:`GROUPINGS`). Each row also holds the correlation of the paired runs' mean
+cluster-by-run robust one (its ``ci95_run``), and the cluster-robust ones whose
+clusters are the runs of one operating condition (:data:`GROUPINGS`; ``level`` is
+the report's ``ci95``, decision 0031). Each row also holds the correlation of the paired runs' mean
 residuals (:func:`paired_residual_correlation`), the evidence for the level
 at which errors are shared. Optionally the same family is also
 fitted on the same seed's data *without* the injection (``clean_fit``): its
@@ -221,8 +222,8 @@ def _intervals(value: float, se: dict, dof: dict) -> dict:
 def read_parameter(target: RecoveryTarget, est, h, train: dataio.Measurements, mp) -> dict:
     """The target's value and intervals from a fitted estimator: ``{"estimate", kind: (lo, hi, se)}``.
 
-    Interval kinds: :func:`covariances` (``"ar1"`` is the report's model-based
-    ``ci95_model``, ``"robust"`` the run-robust ``ci95``).
+    Interval kinds: :func:`covariances` (``"ar1"`` is the close-loop report's model-based
+    ``ci95_model``, ``"robust"`` its run-robust ``ci95_run``, ``"level"`` its ``ci95``).
     """
     if target.mapping == "frequency":
         return frequency_parameter(est, target.parameter)
