@@ -22,13 +22,28 @@ def rows(paths):
                     yield {**json.loads(prop.get("value")), "test": outcome}
 
 
+def cell(text: str) -> str:
+    """A markdown table cell: a ``|`` in a name (``|load_kg|``, the load size) escaped, not a column break."""
+    return text.replace("|", "\\|")
+
+
+def channels_cell(ch) -> str:
+    """The column "channels considered": how many channels and run-level signals, and which were significant."""
+    if ch is None:
+        return "-"  # a case recorded before the column existed
+    sig = ", ".join(ch["significant"]) or "none"
+    return f"{ch['channels']} channels + {ch['run_signals']} run-level signals; significant: {sig}"
+
+
 def main(argv):
-    print("| world | case | test | traced_to | effects added | TEST free-run nrmse before -> after | b0 |")
-    print("|---|---|---|---|---|---|---|")
+    print("| world | case | test | traced_to | effects added | TEST free-run nrmse before -> after | b0 "
+          "| channels considered |")
+    print("|---|---|---|---|---|---|---|---|")
     for r in sorted(rows(argv), key=lambda r: (r["world"], r["case"])):
         b0 = f"{100 * r['b0']:.2f} %" if r.get("b0") is not None else ""
-        print(f"| {r['world']} | {r['case']} | {r['test']} | {', '.join(r['traced_to']) or '-'} | "
-              f"{', '.join(r['added']) or '-'} | {100 * r['before']:.2f} -> {100 * r['after']:.2f} % | {b0} |")
+        print(f"| {r['world']} | {cell(r['case'])} | {r['test']} | {cell(', '.join(r['traced_to']) or '-')} | "
+              f"{cell(', '.join(r['added']) or '-')} | {100 * r['before']:.2f} -> {100 * r['after']:.2f} % | {b0} | "
+              f"{cell(channels_cell(r.get('channels')))} |")
 
 
 if __name__ == "__main__":

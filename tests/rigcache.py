@@ -57,7 +57,23 @@ def case_row(world: str, case: str, res, b0: float | None = None) -> str:
     b, a = held_out_nrmse(res)
     return json.dumps({"world": world, "case": case, "traced_to": d["traced_to"],
                        "added": [e["label"] for e in d["effects"]], "before": b, "after": a, "b0": b0,
-                       "wall_s": res.wall_time_s})
+                       "wall_s": res.wall_time_s, "channels": channels_summary(d.get("channels_considered") or [])})
+
+
+def channels_summary(considered: list[dict]) -> dict:
+    """What the loop considered beyond its fixed regressors, from ``diagnosis.channels_considered``.
+
+    ``channels``: the logged and protocol channels that were candidates (rows of kind ``"response"`` are
+    listed by the loop but are not candidates); ``run_signals``: the run-level signals tested (each
+    channel's run mean and the model's inputs, one per row of ``run_level``); ``significant``: the channels
+    that passed the within-run screen, by name (an input row's ``significant`` is its run-level evidence), then the run-level signals that passed theirs, as
+    ``"<signal> (run)"``.
+    """
+    rows = [c for c in considered if c["kind"] != "response"]
+    runl = [e for c in rows for e in c.get("run_level") or []]
+    sig = [c["channel"] for c in rows if c["significant"] and c["kind"] != "input"]  # an input's is its run level
+    sig += [f"{e['signal']} (run)" for e in runl if e["significant"]]
+    return {"channels": sum(c["kind"] != "input" for c in rows), "run_signals": len(runl), "significant": sig}
 
 
 def held_out_nrmse(res) -> tuple[float, float]:

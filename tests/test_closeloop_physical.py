@@ -6,7 +6,7 @@ import pandas as pd
 import pytest
 from l1b2.closeloop.acceptance import EffectSet, collinear
 from l1b2.closeloop.candidates import candidate
-from l1b2.closeloop.loop import _parameters
+from l1b2.closeloop.intervals import added_parameters
 from l1b2.predictor import effects as fx
 from test_effects_registry import TRAIN
 
@@ -55,9 +55,10 @@ class _Fitted:
 
 def test_a_parameter_without_standard_error_is_named_unidentifiable_not_reported_as_a_value():
     c = candidate(None, fx.Hypothesis("x", "load", "", ("a", "b"), ("1", "N"), {"kind": "drive_saturation"}))
-    p = _parameters(_Fitted(), EffectSet().add(c, [0.2, -22.9]))
-    assert p["a"] == {"value": 0.2, "stderr": 0.01, "ci95": [0.18, 0.22], "unit": "1", "unidentifiable": False}
+    p = added_parameters(_Fitted(), EffectSet().add(c, [0.2, -22.9]))
+    assert p["a"] == {"value": 0.2, "stderr": 0.01, "ci95": [0.18, 0.22], "unit": "1", "unidentifiable": False,
+                      "interval": "model"}
     assert p["b"] == {"value": None, "stderr": None, "ci95": None, "unit": "N", "unidentifiable": True}
     with pytest.raises(KeyError):
-        _parameters(type("M", (), {"extra_params_": {}, "extra_stderr_": {}, "extra_ci95_": {}})(),
+        added_parameters(type("M", (), {"extra_params_": {}, "extra_stderr_": {}, "extra_ci95_": {}})(),
                     EffectSet().add(c, [0.0, 0.0]))

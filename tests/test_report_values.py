@@ -55,12 +55,11 @@ def test_strict_json_and_significant_digits():
     assert sig(float("nan")) == "-" and sig(123456.789) == "1.235e+05"
 
 
-def test_close_loop_report_md_prints_parameters_with_4_significant_digits():
-    # reference: issue 14 item 7 - report.md printed a stderr with 17 digits
-    from l1b2.closeloop.result import markdown_report
+def minimal_report() -> dict:
+    """A minimal close-loop report dict (what :func:`l1b2.closeloop.result.markdown_report` reads)."""
     metrics = {"nrmse": 0.1, "mean_abs_rel_error": 0.1, "p95_abs_rel_error": 0.2, "n_samples": 10}
     part = {"one_step": metrics, "free_run": metrics}
-    rep = {
+    return {
         "data": {"train": "train.csv", "test": "test.csv", "train_runs": 4, "test_runs": 2},
         "diagnosis": {"message": "missing effect: pulley", "significant": True, "traced_to": ["load"],
                       "effect": "pulley_friction", "effect_shape": "", "effect_description": "load path",
@@ -70,9 +69,15 @@ def test_close_loop_report_md_prints_parameters_with_4_significant_digits():
                                                               "runs": 4}},
         "baseline": {"train": part, "test": part},
         "extended": {"train": part, "test": part},
-        "extended_parameters": {"pulley_mu": {"value": 0.38651234567890123, "stderr": 0.0012345678901234567,
-                                              "ci95": [0.38409876543210987, 0.38898765432101234], "unit": "-"}},
     }
+
+
+def test_close_loop_report_md_prints_parameters_with_4_significant_digits():
+    # reference: issue 14 item 7 - report.md printed a stderr with 17 digits
+    from l1b2.closeloop.result import markdown_report
+    rep = {**minimal_report(),
+           "extended_parameters": {"pulley_mu": {"value": 0.38651234567890123, "stderr": 0.0012345678901234567,
+                                                 "ci95": [0.38409876543210987, 0.38898765432101234], "unit": "-"}}}
     text = markdown_report(rep)
     row = next(line for line in text.splitlines() if line.startswith("| pulley_mu"))
-    assert row == "| pulley_mu | 0.3865 | 0.001235 | [0.3841, 0.389] | - |"
+    assert row == "| pulley_mu | 0.3865 | 0.001235 | [0.3841, 0.389] | - | - |"   # no interval kind recorded

@@ -214,17 +214,18 @@ class _Fit:
     extra_ci95_robust_ = {"pulley_mu": (0.396, 0.524), "b": (float("nan"), float("nan"))}
 
 
-def test_the_close_loop_reports_the_run_robust_interval_and_keeps_the_model_based_one():
-    # reference: decision 0021 -- the loop reports the cluster-by-run interval; without a finite one, the model-based
+def test_without_run_influences_the_close_loop_reports_the_run_robust_interval_and_keeps_the_model_based_one():
+    # reference: decision 0021 -- the cluster-by-run interval; without a finite one, the model-based (a fit
+    # with run influences reports the level-clustered one, decision 0031: tests/test_closeloop_intervals.py)
     from l1b2.closeloop.acceptance import EffectSet
     from l1b2.closeloop.candidates import candidate
-    from l1b2.closeloop.loop import _parameters, reported_uncertainty
+    from l1b2.closeloop.intervals import added_parameters, reported_uncertainty
     from l1b2.predictor import effects as fx
-    assert reported_uncertainty(_Fit(), "pulley_mu") == {"stderr": 0.032, "ci95": [0.396, 0.524],
+    assert reported_uncertainty(_Fit(), "pulley_mu") == {"stderr": 0.032, "ci95": [0.396, 0.524], "interval": "run",
                                                          "stderr_model": 0.007, "ci95_model": [0.446, 0.474]}
-    assert reported_uncertainty(_Fit(), "b") == {"stderr": 0.1, "ci95": [0.8, 1.2]}
+    assert reported_uncertainty(_Fit(), "b") == {"stderr": 0.1, "ci95": [0.8, 1.2], "interval": "model"}
     c = candidate(None, fx.Hypothesis("x", "load", "", ("pulley_mu", "b"), ("1", "N"), {"kind": "drive_saturation"}))
-    p = _parameters(_Fit(), EffectSet().add(c, [0.46, 1.0]))
+    p = added_parameters(_Fit(), EffectSet().add(c, [0.46, 1.0]))
     assert p["pulley_mu"]["stderr"] == 0.032 and p["pulley_mu"]["value"] == 0.46
     assert p["b"]["ci95"] == [0.8, 1.2] and not p["b"]["unidentifiable"]
 

@@ -77,6 +77,7 @@ from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT
 from .baselines import choose_baseline, identify_families, retag_structural
 from .evidence import channels_considered, order_traced
 from .guard import checked_fit
+from .intervals import added_parameters, reported_uncertainty, train_levels
 from .result import CloseLoopResult, ResidualAnalysis
 from .selection import (DEFAULT_ALPHA, DEFAULT_PARSIMONY, SHORTLIST_MIN_GAIN, Score, best_per_family, design,
                         score_candidates, shortlist, significance_level)
@@ -271,13 +272,15 @@ class CloseLoop(EstimatorSettings):
         ext = it.model if (it.effects.candidates or it.output_filter is not None) else None
         v_te_ext = ext.predict_free_run(dte) if (ext is not None and dte is not None) else None
         extended = it.rounds[-1]["metrics"] if ext is not None else None
-        ext_params = _parameters(ext, it.effects) if ext is not None else None
+        levels = train_levels(ext, fit_tr) if ext is not None else None    # the reported interval's clusters
+        ext_params = added_parameters(ext, it.effects, levels) if ext is not None else None
         if it.output_filter is not None:
             ext_params.update({f"speed_filter_{k}": {"value": v, "stderr": None, "ci95": None, "unit": "1"}
                                for k, v in (("a", it.output_filter.a), ("b0", it.output_filter.b0),
                                             ("b1", it.output_filter.b1))})
         calibrated, why = calibrated_model(start, ext, it.effects, it.output_filter,
-                                           {**_data_summary(train, test), "operating_points": _operating_points(dtr)})
+                                           {**_data_summary(train, test), "operating_points": _operating_points(dtr)},
+                                           levels)
         first = it.first_scores or []
         chosen = it.chosen
         diagnosis = self._diagnosis(it, first, analysis, ext_params, chain_rec)
@@ -600,48 +603,6 @@ def _metrics(model, dtr, dte, train_free_run=None) -> dict:
                      if dte is not None else None)}
 
 
-def _parameters(model, effects: EffectSet) -> dict:
-    """Every added parameter of the final model: value, stderr, 95 % interval, unit, and whether it is identified.
-
-    A parameter without a finite standard error is named unidentifiable and
-    reported without a value (``value``, ``stderr``, ``ci95`` None,
-    ``unidentifiable`` True): the data do not determine it. ``stderr`` and
-    ``ci95`` are the cluster-by-run robust ones (:func:`reported_uncertainty`)
-    when the fit has them, with the model-based (AR(1)-inflated Fisher) ones
-    beside them as ``stderr_model`` / ``ci95_model``.
-    """
-    out = {}
-    for c in effects.candidates:
-        for n, u in zip(c.names, c.units):
-            se = float(model.extra_stderr_[n])
-            if np.isfinite(se):
-                out[n] = {"value": float(model.extra_params_[n]), "unit": u, "unidentifiable": False,
-                          **reported_uncertainty(model, n)}
-            else:
-                out[n] = {"value": None, "stderr": None, "ci95": None, "unit": u, "unidentifiable": True}
-    return out
-
-
-def reported_uncertainty(model, name: str) -> dict:
-    """``{"stderr", "ci95"}`` the close loop reports for the added parameter ``name`` of a fitted model.
-
-    The loop's premise is a model that misses something, so its residuals
-    carry errors correlated within each run (and shared by runs of the same
-    conditions) that the model-based intervals treat as independent noise:
-    the cluster-by-run robust (sandwich) interval is reported
-    (:mod:`l1b2.ident.uncertainty`), the model-based one kept beside it
-    (``stderr_model``, ``ci95_model``). A fit without a finite robust value
-    (or without robust attributes) reports the model-based one alone.
-    """
-    se = float(model.extra_stderr_[name])
-    ci = [float(x) for x in model.extra_ci95_[name]]
-    se_rob = float(getattr(model, "extra_stderr_robust_", {}).get(name, float("nan")))
-    if not np.isfinite(se_rob):
-        return {"stderr": se, "ci95": ci}
-    return {"stderr": se_rob, "ci95": [float(x) for x in model.extra_ci95_robust_[name]],
-            "stderr_model": se, "ci95_model": ci}
-
-
 def _effect_record(c, rec: dict, params: dict | None) -> dict:
     cv = rec.get("cv", {})
     return {"round": rec["round"], "effect": c.family, "label": c.label, "shape": c.shape,
@@ -687,8 +648,11 @@ def candidate_context(baseline_free_run, m_s: float, df: pd.DataFrame, mask: np.
         **({} if response_columns is None else {"response_columns": tuple(response_columns)}))
 
 
-def calibrated_model(base, ext, effects: EffectSet, output_filter, source: dict):
+def calibrated_model(base, ext, effects: EffectSet, output_filter, source: dict, groups=None):
     """``(ExtendedPredictor or None, note)``: the final model in the serialisable form ``Predictor.fmu`` carries.
+
+    Each effect's standard errors are the report's (:func:`l1b2.closeloop.intervals.reported_uncertainty`,
+    ``groups`` its runs' level labels).
 
     When nothing was added it is the baseline (no effects); None when an
     effect has no spec (a user's candidate with a Python feature function
@@ -706,7 +670,8 @@ def calibrated_model(base, ext, effects: EffectSet, output_filter, source: dict)
     if logged:
         return None, f"effects Predictor.fmu cannot evaluate as identified: {', '.join(logged)}"
     recs = tuple(IdentifiedEffect(c.family, c.label, dict(c.spec), tuple(c.names), tuple(c.units),
-                        tuple(float(p) for p in phi), tuple(reported_uncertainty(ext, n)["stderr"] for n in c.names),
+                        tuple(float(p) for p in phi),
+                        tuple(reported_uncertainty(ext, n, groups)["stderr"] for n in c.names),
                         c.description, tuple(c.regressors), c.structural)
                  for c, phi in zip(effects.candidates, effects.phi))
     filt = None if output_filter is None else {"a": output_filter.a, "b0": output_filter.b0, "b1": output_filter.b1}

@@ -244,6 +244,14 @@ def _pct(x, spec: str) -> str:
     return x if isinstance(x, str) else format(x, spec)
 
 
+def _interval_kind(p: dict) -> str:
+    """The report's name of the clustering behind a parameter's interval (``interval`` of its record)."""
+    kind = p.get("interval")
+    if kind == "level":
+        return f"level (V0, load size; {p['clusters']} clusters of runs)"
+    return {"run": "run", "model": "none (model-based)"}.get(kind, "-")
+
+
 def before_after_table(report: dict) -> str:
     """Plain-text table of the error metrics before and after (TEST and TRAIN) of a report dict."""
     def f(x):
@@ -375,16 +383,16 @@ def markdown_report(rep: dict) -> str:
               f"{w['share_runs_ljung_box_p_below_0.05']:.0%} of {w['runs']} runs (free-run residuals are "
               "coloured by the slider's low-pass even without a missing effect; evidence is judged per run).", ""]
     if rep.get("extended_parameters"):
-        lines += ["## Extended model's new parameters", "", "| name | value | stderr | 95 % interval | unit |",
-                  "|---|---|---|---|---|"]
+        lines += ["## Extended model's new parameters", "",
+                  "| name | value | stderr | 95 % interval | clustered by | unit |", "|---|---|---|---|---|---|"]
         for n, p in rep["extended_parameters"].items():
             if p.get("unidentifiable"):
-                lines.append(f"| {n} | unidentifiable (no standard error: the data do not determine it) | | | "
+                lines.append(f"| {n} | unidentifiable (no standard error: the data do not determine it) | | | | "
                              f"{p['unit']} |")
                 continue
             ci = p.get("ci95") or [None, None]
             lines.append(f"| {n} | {sig(p['value'])} | {sig(p['stderr'])} | [{sig(ci[0])}, {sig(ci[1])}] | "
-                         f"{p['unit']} |")
+                         f"{_interval_kind(p)} | {p['unit']} |")
     if rep.get("stages"):
         lines += ["", "## Time per stage (CPU of this process; refits on Dask workers count as identifications)",
                   "", stages_table(rep["stages"])]

@@ -24,8 +24,9 @@ For every rig injection whose effect family has a physical parameter
 
 Each interval kind of :data:`INTERVALS` is checked (:func:`covariances`): the
 AR(1)-inflated Fisher one (the close-the-loop report's ``ci95_model``), the
-cluster-by-run robust one (its ``ci95``), and the cluster-robust ones whose
-clusters are the runs of one operating condition (:data:`GROUPINGS`). Each row also holds the correlation of the paired runs' mean
+cluster-by-run robust one (its ``ci95_run``), and the cluster-robust ones whose
+clusters are the runs of one operating condition (:data:`GROUPINGS`; ``level`` is
+the report's ``ci95``, decision 0031). Each row also holds the correlation of the paired runs' mean
 residuals (:func:`paired_residual_correlation`), the evidence for the level
 at which errors are shared. Optionally the same family is also
 fitted on the same seed's data *without* the injection (``clean_fit``): its
@@ -44,6 +45,7 @@ from scipy import stats
 
 from ..data import measurements as dataio
 from ..errors import IdentificationError
+from ..ident.clusters import RUN_GROUPINGS, run_groups
 from ..ident.estimator import PredictorIdentifier
 from ..ident.extra import ExtraForces
 from ..ident.uncertainty import grouped_sandwich
@@ -158,18 +160,15 @@ def _phi_block(est, cov) -> np.ndarray:
     return np.asarray(cov, float)[-p:, -p:]
 
 
-#: the groupings of runs into clusters: the rig's condition (V0, signed load: one run opposing, one aiding the
-#: motion), its mirror image (V0, direction x load: the same load relative to the motion, both directions) and
-#: both together (V0, |load|: the four runs of one voltage and load size)
-GROUPINGS = ("condition", "mirror", "level")
+#: the groupings of runs into clusters (:data:`l1b2.ident.clusters.RUN_GROUPINGS`): the rig's condition (V0,
+#: signed load: one run opposing, one aiding the motion), its mirror image (V0, direction x load: the same load
+#: relative to the motion, both directions) and both together (V0, |load|: the four runs of one voltage and load size)
+GROUPINGS = RUN_GROUPINGS
 
 
 def run_conditions(est, train: dataio.Measurements, grouping: str = "condition") -> list:
     """Each of the fit's runs' cluster label under ``grouping`` (:data:`GROUPINGS`), in the fit's run order."""
-    first = train.df.groupby(dataio.RUN, sort=False)[[dataio.VOLTAGE, dataio.LOAD, dataio.DIRECTION]].first()
-    load = {"condition": lambda m, d: m, "mirror": lambda m, d: m * d, "level": lambda m, d: abs(m)}[grouping]
-    cond = {k: (round(float(v), 6), round(float(load(m, d)), 9)) for k, (v, m, d) in zip(first.index, first.to_numpy())}
-    return [cond[r] for r in est.runs_]
+    return run_groups(train.df, est.runs_, grouping)
 
 
 def covariances(est, train: dataio.Measurements) -> tuple[dict, dict]:
@@ -223,8 +222,8 @@ def _intervals(value: float, se: dict, dof: dict) -> dict:
 def read_parameter(target: RecoveryTarget, est, h, train: dataio.Measurements, mp) -> dict:
     """The target's value and intervals from a fitted estimator: ``{"estimate", kind: (lo, hi, se)}``.
 
-    Interval kinds: :func:`covariances` (``"ar1"`` is the report's model-based
-    ``ci95_model``, ``"robust"`` the run-robust ``ci95``).
+    Interval kinds: :func:`covariances` (``"ar1"`` is the close-loop report's model-based
+    ``ci95_model``, ``"robust"`` its run-robust ``ci95_run``, ``"level"`` its ``ci95``).
     """
     if target.mapping == "frequency":
         return frequency_parameter(est, target.parameter)

@@ -1,0 +1,95 @@
+"""The standard errors and 95 % intervals the close loop reports for its added effects' parameters (decision 0031).
+
+The loop's premise is a model that misses something, so its residuals carry
+errors shared within each run and between runs of one operating level; the
+model-based (AR(1)-inflated Fisher) interval treats them as independent noise
+and the run-robust one treats the runs as independent. Decision 0025 measured
+the paired runs' residuals on the realistic world: the two runs of one rig
+condition correlate (+0.32), the two mirror runs anti-correlate (-0.85). The
+reported interval clusters the runs by level (V0 and load size, the four
+runs of both pairs: :func:`l1b2.ident.clusters.run_groups`); the run-robust
+and model-based ones are kept beside it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..ident.clusters import grouped_interval, run_groups
+
+__all__ = ["REPORTED_GROUPING", "added_parameters", "reported_uncertainty", "train_levels"]
+
+#: the clustering of TRAIN's runs behind the reported interval (:data:`l1b2.ident.clusters.RUN_GROUPINGS`)
+REPORTED_GROUPING = "level"
+
+
+def train_levels(model, df) -> list | None:
+    """Cluster labels of a fitted model's runs (its ``runs_``) by :data:`REPORTED_GROUPING`, read from ``df``.
+
+    ``df``: the frame the model was fitted on. None when the model has no
+    runs or no run influences (nothing to regroup).
+    """
+    runs = getattr(model, "runs_", None)
+    if runs is None or getattr(model, "run_influence_", None) is None:
+        return None
+    return run_groups(df, runs, REPORTED_GROUPING)
+
+
+def reported_uncertainty(model, name: str, groups=None) -> dict:
+    """``{"stderr", "ci95", "interval", ...}`` the close loop reports for the added parameter ``name``.
+
+    In order of preference (``interval`` names the one reported as
+    ``stderr``/``ci95``):
+
+    - ``"level"``: cluster-robust with the runs merged by ``groups`` (one
+      label per run of ``model.runs_``, :func:`train_levels`), t with
+      clusters - 1 degrees of freedom, ``clusters`` their number; needs the
+      fit's ``run_influence_`` and a finite value. The run-robust interval is
+      kept as ``stderr_run``/``ci95_run`` when finite.
+    - ``"run"``: the cluster-by-run robust interval of the fit.
+    - ``"model"``: the model-based one (a fit without finite robust values).
+
+    Unless ``"model"`` is reported, the model-based one is kept as ``stderr_model``/``ci95_model``.
+    """
+    se = float(model.extra_stderr_[name])
+    ci = [float(x) for x in model.extra_ci95_[name]]
+    se_run = float(getattr(model, "extra_stderr_robust_", {}).get(name, float("nan")))
+    run = ({"stderr": se_run, "ci95": [float(x) for x in model.extra_ci95_robust_[name]]}
+           if np.isfinite(se_run) else None)
+    level = None
+    if groups is not None and getattr(model, "run_influence_", None) is not None:
+        names = list(model.param_names_all_)
+        extras = list(model.extra_names_)
+        index = len(names) - len(extras) + extras.index(name)
+        level = grouped_interval(float(model.extra_params_[name]), model.run_influence_, groups, index)
+    model_based = {"stderr_model": se, "ci95_model": ci}
+    if level is not None:
+        out = {**level, "interval": "level"}
+        if run is not None:
+            out.update(stderr_run=run["stderr"], ci95_run=run["ci95"])
+        return {**out, **model_based}
+    if run is not None:
+        return {**run, "interval": "run", **model_based}
+    return {"stderr": se, "ci95": ci, "interval": "model"}
+
+
+def added_parameters(model, effects, groups=None) -> dict:
+    """Every added parameter of the final model: value, stderr, 95 % interval, unit, and whether it is identified.
+
+    A parameter without a finite standard error is named unidentifiable and
+    reported without a value (``value``, ``stderr``, ``ci95`` None,
+    ``unidentifiable`` True): the data do not determine it. The others carry
+    :func:`reported_uncertainty` (``groups``: the runs' level labels,
+    :func:`train_levels`). ``effects``: the loop's
+    :class:`~l1b2.closeloop.acceptance.EffectSet`.
+    """
+    out = {}
+    for c in effects.candidates:
+        for n, u in zip(c.names, c.units):
+            se = float(model.extra_stderr_[n])
+            if np.isfinite(se):
+                out[n] = {"value": float(model.extra_params_[n]), "unit": u, "unidentifiable": False,
+                          **reported_uncertainty(model, n, groups)}
+            else:
+                out[n] = {"value": None, "stderr": None, "ci95": None, "unit": u, "unidentifiable": True}
+    return out
