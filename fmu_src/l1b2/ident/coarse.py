@@ -10,12 +10,11 @@ warm local search on all samples from its optimum (the identifier with ``init`` 
 ``n_starts=1``: the same likelihood and stopping rules, few evaluations). The number
 of full-data evaluations then no longer grows with the sampling rate.
 
-The warm search of the Eq. 29 model is the variable projection (``solver="varpro"``,
-:mod:`l1b2.ident.varpro`): the decimated optimum differs from the full one mostly by the
-re-balancing of the parameters that enter linearly (the discretisation step changes), which the
-projection solves exactly at every step. Measured on the 5 kHz realistic-world file of decision 0028
-(100,099 TRAIN samples): the joint warm search from the coarse optimum took 118 evaluations
-(33 s of CPU), the variable projection 83 (9 s) and ended higher.
+The warm search is the identifier's own (same solver). Measured on the 5 kHz realistic-world file
+of decision 0028 (100,099 TRAIN samples): the baseline's search on all samples took 245
+evaluations; coarse to fine 133 on 20,037 samples and 118 on all, and ended 83 log-likelihood units
+higher. A variable-projection warm search ended higher still, but at a baseline whose residual
+traced two more channels (a different diagnosis), so it is not used.
 
 :data:`COARSE_PERIOD_S` is 1 ms: the virtual rig's default rate, at which every identification of
 this package was developed and measured (``docs/decisions/0027-...``: the same diagnosis at 1 and
@@ -81,10 +80,9 @@ def coarse_to_fine(est, data, slider_mass_kg=None, mask=None, period_s: float = 
 
     With ``q = decimation(data, period_s) >= 2``, no warm start (``init``) and no drive-frequency response
     to estimate: the identifier's search on :func:`decimate` ``(data, mask, q)``, then one warm local
-    search on all samples from that optimum (``init``, ``init_extra``: the coarse fit's; ``n_starts=1``;
-    ``solver="varpro"`` for the Eq. 29 model searched jointly).
+    search on all samples from that optimum (``init``, ``init_extra``: the coarse fit's; ``n_starts=1``).
     Otherwise ``est.fit(data, slider_mass_kg, mask)``, unchanged. The fitted identifier is the fine
-    stage's, with every setting of ``est`` but ``init``/``n_starts``/``solver``; its ``coarse_`` attribute records
+    stage's, with every setting of ``est`` but ``init``/``n_starts``; its ``coarse_`` attribute records
     ``{"decimation", "samples", "nfev", "cpu_s", "loglik"}`` of the coarse stage (log-likelihood on the
     decimated samples), or None when there was none. ``nfev_of(fitted)`` counts both stages.
     """
@@ -103,9 +101,8 @@ def coarse_to_fine(est, data, slider_mass_kg=None, mask=None, period_s: float = 
     coarse = clone(est).fit(dataio.Measurements(sub, {}, None), slider_mass_kg, sub_mask)
     rec = {"decimation": q, "samples": int(len(sub)), "nfev": int(coarse.convergence_.get("nfev_total", 0)),
            "cpu_s": time.process_time() - c0, "loglik": float(coarse.loglik_)}
-    polish = {"solver": "varpro"} if est.model == "eq29" and est.solver == "joint" else {}
     fine = clone(est, init=coarse.params_, n_starts=1,
-                 init_extra=np.asarray(coarse.phi_) if est.extra is not None else None, **polish)
+                 init_extra=np.asarray(coarse.phi_) if est.extra is not None else None)
     fine.fit(data, slider_mass_kg, mask)
     fine.coarse_ = rec
     return fine
