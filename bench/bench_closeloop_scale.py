@@ -1,26 +1,29 @@
 #!/usr/bin/env python
-"""Benchmark: the close loop's cost per sample, former and current per-sample code side by side.
+"""Benchmark: the close loop's cost per sample, former and current code side by side.
 
 The data: rig files made once per sampling rate (realistic motor, pulley_friction injected,
 injection seed 0, the paper's 72-run plan; TRAIN cut to whole runs totalling at least ``N`` samples,
 as ``bench/bench_closeloop.py --train-samples N``) and cached in ``--cache``; the default compares
 1 kHz / 20,000 TRAIN samples with 5 kHz / 100,000 (a fast DAQ: ``l1b2 rig --sample-rate 5000``).
 
-Former per-sample code (kept here as the reference, patched in for the "former" column):
+Former code (the state before decision 0028, patched in for the "former" column):
 
-* the collinearity screen (:func:`l1b2.closeloop.acceptance.collinear`) with one least-squares
-  solve per added column and the added effects' features recomputed for every candidate, instead
-  of one solve for all columns with the features computed once per round;
-* the report's scatter panels drawing every TRAIN sample instead of at most
-  :data:`l1b2.data.plots.DISPLAY_POINTS` (display only: the data and every figure computed from
-  them stay whole).
+* every local ``least_squares`` of the identification on the full residual vector
+  (``LocalSolver.compressed = False``) instead of its (p+1)-row QR compression;
+* the baseline identification's whole search on all samples instead of coarse to fine
+  (:func:`l1b2.ident.coarse.coarse_to_fine`: the search at one sample per millisecond, then one
+  warm local search on all samples);
+* the cross-validated fold refits on all training samples instead of one per millisecond
+  (:func:`l1b2.closeloop.acceptance.fold_fit_data`).
 
-Default (``--part scoring``): what these change, on a fixed model (the Eq. 29 predictor
-identified once per file, a short search): the candidates' scores of a round with one effect
-added (collinearity screen, then :func:`~l1b2.closeloop.selection.score_candidates`), CPU
-per variant. ``--part whole``: the whole close-loop job (:func:`l1b2.workflows.run_close_loop`,
-in this process) per variant, with the CPU of each stage side by side and whether the
-diagnoses agree. ``--variants current`` (or ``former``) runs one column only.
+At 1 kHz the last two change nothing (no decimation).
+
+Default (``--part scoring``): one round's collinearity screen and candidate scoring on a fixed
+model (the Eq. 29 predictor identified once per file, a short search), CPU per variant.
+``--part whole``: the whole close-loop job (:func:`l1b2.workflows.run_close_loop`, in this
+process) per variant: CPU of each stage with its evaluations, the TEST free-run nrmse before and
+after, the log-likelihoods of the baseline and final models, and whether the diagnoses agree.
+``--variants current`` (or ``former``) runs one column only.
 
 Usage: python bench/bench_closeloop_scale.py [--sizes 1000:20000,5000:100000] [--part scoring|whole]
        [--variants former,current] [--cache DIR]
@@ -47,42 +50,31 @@ from l1b2.closeloop import selection as sel  # noqa: E402
 from l1b2.closeloop.candidates import full_library  # noqa: E402
 from l1b2.closeloop.loop import candidate_context  # noqa: E402
 from l1b2.data import measurements as dataio  # noqa: E402
-from l1b2.data import plots  # noqa: E402
 from l1b2.ident.estimator import PredictorIdentifier  # noqa: E402
+from l1b2.ident.search import LocalSolver  # noqa: E402
 from l1b2.physics.params import SYSTEM_MODELS_DIR, load_motor  # noqa: E402
 from l1b2.rig.experiment import RigPlan, run_experiment, write_experiment  # noqa: E402
 from l1b2.workflows import run_close_loop  # noqa: E402
 
 
-def former_collinear(candidate, effects, df, mask, rtol=acceptance.COLLINEAR_RTOL, added=None):
-    """The former collinearity screen: one solve per added column, the added features recomputed (the reference)."""
-    if not effects.candidates:
-        return False
-    m = np.asarray(mask, bool)
-    C = np.asarray(candidate.features(df), float).reshape(len(df), -1)[m]
-    for c in effects.candidates:
-        F = np.asarray(c.features(df), float).reshape(len(df), -1)[m]
-        for f in F.T:
-            nf = float(np.linalg.norm(f))
-            if nf == 0:
-                continue
-            coef = np.linalg.lstsq(C, f, rcond=None)[0]
-            if float(np.linalg.norm(f - C @ coef)) < rtol * nf:
-                return True
-    return False
-
-
 @contextlib.contextmanager
 def variant(name):
-    """The former per-sample code patched in (``"former"``) or the package's (``"current"``)."""
-    saved = (acceptance.collinear, closeloop_loop.collinear, plots.display_rows)
+    """The former code patched in (``"former"``, see the module docstring) or the package's (``"current"``)."""
+    saved = (LocalSolver.compressed, closeloop_loop.coarse_to_fine, acceptance.fold_fit_data)
     if name == "former":
-        acceptance.collinear = closeloop_loop.collinear = former_collinear
-        plots.display_rows = lambda n, limit=None: np.arange(n)
+        LocalSolver.compressed = False
+        closeloop_loop.coarse_to_fine = lambda est, data, m_s=None, mask=None: _full_fit(est, data, m_s, mask)
+        acceptance.fold_fit_data = lambda df, mask: (df, mask)
     try:
         yield
     finally:
-        acceptance.collinear, closeloop_loop.collinear, plots.display_rows = saved
+        LocalSolver.compressed, closeloop_loop.coarse_to_fine, acceptance.fold_fit_data = saved
+
+
+def _full_fit(est, data, m_s, mask):
+    est.fit(data, m_s, mask)
+    est.coarse_ = None
+    return est
 
 
 def rig_files(rate: float, n_train: int, cache: Path) -> Path:
@@ -126,17 +118,32 @@ def scoring_part(folder: Path, names) -> dict:
     return out
 
 
+def warm_up() -> None:
+    """Compile the kernels once before any column is timed (a small synthetic identification)."""
+    from l1b2.predictor.model import example_params
+    from l1b2.predictor.simulate import design_grid, simulate_dataset
+    df = simulate_dataset(example_params(3), design_grid(voltages=(220.0, 324.0), loads=(0.0, 0.07)), 0.1,
+                          noise_std=1e-3, seed=0)
+    est = PredictorIdentifier(order=3, fixed="recommended", n_starts=1, max_nfev=5).fit(df, slider_mass_kg=0.1)
+    est.predict_one_step(df)
+
+
 def whole_part(folder: Path, names) -> dict:
     """The whole close-loop job per variant: CPU [s], the stages' CPU, the diagnosis."""
+    warm_up()
     out = {}
     for name in names:
         with variant(name), tempfile.TemporaryDirectory() as td:
             c0 = time.process_time()
             result = run_close_loop(folder / "train.csv", folder / "test.csv", Path(td) / "report", workers=0)
             cpu = time.process_time() - c0
-        out[name] = {"cpu": cpu, "n": result.data["n_train"] if "n_train" in (result.data or {}) else None,
-                     "stages": [(s["stage"], s["cpu_s"]) for s in result.stages],
-                     "diagnosis": result.diagnosis["message"], "added": [r.to_dict()["added"] for r in result.rounds]}
+        rounds = [r.to_dict() for r in result.rounds]
+        test = [r["metrics"]["test"]["free_run"]["nrmse"] for r in rounds]
+        final = result.extended_model if result.extended_model is not None else result.baseline_model
+        out[name] = {"cpu": cpu, "stages": [(s["stage"], s["cpu_s"], s["nfev"]) for s in result.stages],
+                     "diagnosis": result.diagnosis["message"], "added": [r["added"] for r in rounds],
+                     "traced": result.diagnosis["traced_to"], "test": (test[0], test[-1]),
+                     "loglik": (result.baseline_model.loglik_, final.loglik_)}
     return out
 
 
@@ -175,10 +182,14 @@ def main(argv=None):
             print(f"  same scores: {len({str(part[nm]['best']) for nm in names}) == 1}")
         else:
             for nm in names:
-                print(f"{rate:g} Hz {nm}: {part[nm]['diagnosis']} rounds {part[nm]['added']}")
-                for st, c in part[nm]["stages"]:
-                    print(f"    {st[:76]:76s} {c:7.1f}")
-            print(f"  same diagnosis: {len({part[nm]['diagnosis'] for nm in names}) == 1}")
+                p = part[nm]
+                print(f"{rate:g} Hz {nm}: {p['diagnosis']} rounds {p['added']} traced {p['traced']}; TEST free-run "
+                      f"nrmse {100 * p['test'][0]:.2f} -> {100 * p['test'][1]:.2f} %; log-likelihood baseline "
+                      f"{p['loglik'][0]:.3f}, final {p['loglik'][1]:.3f}")
+                print(f"    {'stage':76s} {'CPU [s]':>8s} {'nfev':>6s}")
+                for st, c, nf in p["stages"]:
+                    print(f"    {st[:76]:76s} {c:8.1f} {nf:6d}")
+            print(f"  same diagnosis: {len({(part[nm]['diagnosis'], str(part[nm]['traced'])) for nm in names}) == 1}")
 
 
 if __name__ == "__main__":

@@ -396,6 +396,7 @@ def test_result_api_matches_the_saved_report(tmp_path):
     assert stages[0]["nfev"] == res.baseline_model.convergence_["nfev_total"] > 0
     cv = [s for s in stages if "cross-validating" in s["stage"]]
     assert cv and all(s["identifications"] >= 4 for s in cv)   # every fold of every trial is one refit
+    assert all(s["nfev"] >= s["identifications"] for s in cv)  # ... and returns its evaluations (at least one each)
     assert all(s["wall_s"] >= 0 and s["cpu_s"] >= 0 for s in stages)
     assert "## Time per stage" in res.markdown() and CloseLoopResult.from_dict(saved).stages == stages
 

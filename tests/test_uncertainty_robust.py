@@ -170,3 +170,17 @@ def test_the_fit_reports_each_runs_influence_that_regroups_to_its_robust_covaria
                                rtol=1e-9)
     one, H = grouped_sandwich(infl, np.zeros(len(idf.runs_)))
     assert H == 1 and np.all(np.abs(infl.sum(axis=0))[varied] < 1e-3 * np.sqrt(np.diag(cov))[varied])
+
+
+def test_singular_values_and_vectors_through_the_r_factor_are_the_svds():
+    # reference: numpy's SVD of the tall matrix itself (vectors compared as projectors: signs are free)
+    from l1b2.ident.uncertainty import singular
+    rng = np.random.default_rng(3)
+    J = rng.normal(size=(500, 6)) @ np.diag([1.0, 3.0, 1e-3, 10.0, 1e-6, 1.0])
+    s_ref, Vt_ref = np.linalg.svd(J, full_matrices=False)[1:]
+    s, Vt = singular(J)
+    np.testing.assert_allclose(s, s_ref, rtol=1e-10)
+    for k in range(6):
+        np.testing.assert_allclose(np.outer(Vt[k], Vt[k]), np.outer(Vt_ref[k], Vt_ref[k]), atol=1e-8)
+    s_w, Vt_w = singular(J[:4])   # wide: the SVD itself
+    np.testing.assert_allclose(s_w, np.linalg.svd(J[:4], compute_uv=False), rtol=1e-12)

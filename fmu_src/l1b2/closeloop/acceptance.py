@@ -33,6 +33,7 @@ import pandas as pd
 from ..cluster import run_tasks
 from ..data import measurements as dataio
 from ..errors import IdentificationError
+from ..ident.coarse import decimate, decimation
 from ..ident.estimator import ExtraForces, PredictorIdentifier
 from ..predictor import effects as fx
 from . import chain
@@ -257,6 +258,7 @@ class FoldErrors:
     sse: np.ndarray
     ss_meas: np.ndarray
     failed: int = 0
+    nfev: int = 0        #: function evaluations of the folds' refits (all folds)
 
     @property
     def nrmse(self) -> float:
@@ -318,8 +320,11 @@ def fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, init, 
     the held-out runs' measured speed is predicted by the filter applied to
     the physics' free run.
 
-    Returns ``(sse, ss_meas, failed)`` on the held-out evaluation mask (a
-    failed fit or a diverged prediction: ``sse = inf``). A pure function of
+    The refit sees the training runs at one sample per millisecond at most (:func:`fold_fit_data`); the
+    held-out runs are predicted at their own rate.
+
+    Returns ``(sse, ss_meas, failed, nfev)`` on the held-out evaluation mask (a
+    failed fit or a diverged prediction: ``sse = inf``; ``nfev``: the refit's evaluations). A pure function of
     its arguments: the unit of work of :func:`cv_errors` and :func:`chain_cv_errors`.
     """
     runs = df[dataio.RUN].to_numpy()
@@ -332,17 +337,28 @@ def fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, init, 
     if chain_k is not None:
         filt = chain.speed_channel(train, mask[~held], k=chain_k, seed=settings.seed).get("filter")
         if filt is None:
-            return np.inf, ssm, True
+            return np.inf, ssm, True, 0
         train, test_in = chain.with_position_speed(train), chain.with_position_speed(test)
     else:
         test_in = test
     try:
-        est = refit(train, mask[~held], m_s, init, effects, settings)
+        est = refit(*fold_fit_data(train, mask[~held]), m_s, init, effects, settings)
         pred = est.predict_free_run(test_in)
         e = (v[held] - (pred if filt is None else filt.apply(test, pred)))[m_te]
     except IdentificationError:
-        return np.inf, ssm, True
-    return (float(np.sum(e ** 2)) if np.all(np.isfinite(e)) else np.inf), ssm, False
+        return np.inf, ssm, True, 0
+    nfev = int(est.convergence_.get("nfev_total", 0))
+    return (float(np.sum(e ** 2)) if np.all(np.isfinite(e)) else np.inf), ssm, False, nfev
+
+
+def fold_fit_data(train: pd.DataFrame, mask: np.ndarray) -> tuple[pd.DataFrame, np.ndarray]:
+    """The samples a fold's refit is fitted on: the training runs decimated to one sample per millisecond at most
+    (:func:`l1b2.ident.coarse.decimate`; unchanged at 1 kHz or slower) and their mask.
+
+    The fold refits only compare the current model with a candidate on held-out runs, both refitted the same
+    way; on a fast DAQ the extra samples of each millisecond cost evaluations without moving that comparison.
+    """
+    return decimate(train, mask, decimation(train))
 
 
 def chain_cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init_base, init_chain,
@@ -362,8 +378,8 @@ def _fold_errors(args: list, n_groups: int, n_folds: int, client, name: str) -> 
     for i, r in run_tasks(fold_error, args, client=client, name=name):
         out[i] = r
     groups = [out[j * n_folds:(j + 1) * n_folds] for j in range(n_groups)]
-    return [FoldErrors(np.array([r[0] for r in rows]), np.array([r[1] for r in rows]), sum(bool(r[2]) for r in rows))
-            for rows in groups]
+    return [FoldErrors(np.array([r[0] for r in rows]), np.array([r[1] for r in rows]), sum(bool(r[2]) for r in rows),
+                       sum(int(r[3]) for r in rows)) for rows in groups]
 
 
 def cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init, jobs,

@@ -60,6 +60,7 @@ import pandas as pd
 
 from ..data import measurements as dataio
 from ..data.metrics import report_metrics
+from ..ident.coarse import coarse_to_fine, nfev_of
 from ..ident.convention import EstimatorSettings
 from ..ident.estimator import PredictorIdentifier
 from ..predictor.effects import ExtendedPredictor, IdentifiedEffect
@@ -235,7 +236,7 @@ class CloseLoop(EstimatorSettings):
             est = checked_fit(lambda: self._identify(dtr, m_s, mask_tr, model=family),
                               lambda: self._identify(dtr, m_s, mask_tr, retry=True, model=family), dtr,
                               mask_tr, f"the {family} baseline identification on TRAIN")
-            say.count(1, est.convergence_.get("nfev_total", 0))
+            say.count(1, nfev_of(est))
             return est
         fits, failed = identify_families(DRIVE_LAWS if self.baseline == "best" else (self.baseline,), fit_family)
         family, self.baseline_choice_ = next(iter(fits)), {"chosen": next(iter(fits)), "families": {}}
@@ -296,16 +297,16 @@ class CloseLoop(EstimatorSettings):
 
     def _identify(self, df: pd.DataFrame, m_s: float, mask: np.ndarray, retry: bool = False,
                   model: str = "eq29") -> Validated:
-        """The baseline Eq. 29 predictor identified on ``df`` (free-run maximum likelihood, multi-start).
+        """The baseline Eq. 29 predictor identified on ``df`` (free-run maximum likelihood, multi-start; coarse
+        to fine on data sampled faster than once per millisecond, :func:`l1b2.ident.coarse.coarse_to_fine`).
 
         ``retry``: the identifier's multistart again with twice the starts (at least 8) and the next seed.
         """
         n_starts, seed = (max(2 * self.n_starts, 8), self.seed + 1) if retry else (self.n_starts, self.seed)
         freq = getattr(self, "frequency_", None) or "auto"   # once the baseline's is known, it is held
-        return Validated(PredictorIdentifier(order=self.order, criterion="free_run", fixed="recommended",
-                                             n_starts=n_starts, seed=seed, noise_fit=self.noise_fit,
-                                             noise=self.noise, model=model, frequency=freq).fit(
-                                                 validated(df), slider_mass_kg=m_s, mask=mask))
+        return Validated(coarse_to_fine(PredictorIdentifier(
+            order=self.order, criterion="free_run", fixed="recommended", n_starts=n_starts, seed=seed,
+            noise_fit=self.noise_fit, noise=self.noise, model=model, frequency=freq), validated(df), m_s, mask))
 
     def refit_settings(self) -> RefitSettings:
         """The settings of every refit of the loop (order, seed, budget of a fold's refit, noise, client)."""
@@ -401,7 +402,7 @@ class CloseLoop(EstimatorSettings):
             say(f"round {n_rnd}: cross-validating {'the current model and ' if blocked not in cur_err else ''}the "
                 f"refit with {labels} over {len(folds)} {'session blocks' if blocked else 'run folds'}")
             out = cv_errors(dtr, mask, m_s, folds, cur.params_, jobs, self.refit_settings())
-            say.count(len(jobs) * len(folds))
+            say.count(len(jobs) * len(folds), sum(e.nfev for e in out))
             if blocked not in cur_err:
                 cur_err[blocked], out = out[0], out[1:]
             for i, e in zip(which, out):

@@ -13,8 +13,9 @@ class StageClock:
     Calling the clock with a message closes the stage running (if any) and
     opens one named by the message, then passes the message on to ``say``.
     :meth:`count` adds identifications and their function evaluations to the
-    open stage (evaluations of refits that ran on Dask workers are not
-    returned to this process: such a stage counts its identifications only).
+    open stage (a fold refit returns its evaluations with its errors, also
+    from a Dask worker; a coarse-to-fine identification counts both stages'
+    evaluations, the coarse ones on fewer samples).
     :meth:`close` ends the last stage and returns the records, in order:
     ``{"stage", "wall_s", "cpu_s", "identifications", "nfev"}``, ``cpu_s``
     being this process' CPU time (workers' not included).

@@ -38,7 +38,7 @@ from ..errors import IdentificationError
 from .problem import strictly_inside
 
 __all__ = [
-    "HAS_CALLBACK", "StatStop", "sobol_box", "LocalSolver", "start_points", "SearchOutcome", "multi_start",
+    "HAS_CALLBACK", "StatStop", "sobol_box", "CompressedObjective", "LocalSolver", "start_points", "SearchOutcome", "multi_start",
     "warm_prestep", "NoiseRefinement", "alternate_noise", "ProfileRefinement", "profile_refine", "profile_search",
     "STALL_MESSAGE", "polish_stalled", "bounded_step", "search_nfev",
 ]
@@ -103,6 +103,41 @@ def sobol_box(z0, n, seed, spread, floor=0.05):
     return [z0 + (2.0 * row - 1.0) * hw for row in u]
 
 
+class CompressedObjective:
+    """The residuals and Jacobian of an objective in the ``(p+1)``-row form that ``least_squares`` needs.
+
+    At a point z with residuals r (n) and Jacobian J (n x p), one Householder
+    QR of ``[J r]`` (R factor only) gives ``[[R, c], [0, rho]]``: the compressed
+    residual ``f = (c, rho)`` and Jacobian ``[R; 0]`` have the same norm
+    ``|f| = |r|``, gradient ``J_c^T f = J^T r`` and Gauss-Newton matrix
+    ``J_c^T J_c = J^T J``, and every trust-region step of ``trf`` (its SVD of
+    the scaled Jacobian, the predicted and actual reductions) depends on
+    (r, J) only through these: the steps are those of the full problem, while
+    the SVD inside each step is of a (p+1) x p matrix instead of n x p.
+    Each point costs one Jacobian (also at a rejected trial point); the last
+    point's factors are kept for :meth:`jac`, which ``least_squares`` calls at
+    the point it just evaluated.
+    """
+
+    def __init__(self, objective):
+        self.objective = objective
+        self._z = None
+        self._R = None
+
+    def _factor(self, z):
+        if self._z is None or not np.array_equal(z, self._z):
+            obj = self.objective
+            A = np.column_stack([obj.jac(z), obj.fun(z)])
+            self._R, self._z = np.linalg.qr(A, mode="r"), np.array(z, copy=True)
+        return self._R
+
+    def fun(self, z):
+        return self._factor(z)[:, -1].copy()
+
+    def jac(self, z, *_):
+        return self._factor(z)[:, :-1].copy()
+
+
 class LocalSolver:
     """One local ``least_squares`` run (``trf``, bounds) of a :class:`~l1b2.ident.problem.ScaledObjective`.
 
@@ -116,7 +151,13 @@ class LocalSolver:
     warm : bool
         Warm start: also stop a creep whose projected gain over the remaining
         budget is < 50 * ``stat_tol``.
+
+    ``least_squares`` sees the objective through :class:`CompressedObjective` (the same steps, each step's
+    SVD on p+1 rows instead of n) when the class attribute ``compressed`` is True (the default; False: the
+    full residual vector, the former path).
     """
+
+    compressed = True
 
     def __init__(self, objective, tol, stat_tol, stat_window, warm=False):
         self.objective = objective
@@ -136,12 +177,13 @@ class LocalSolver:
             stop = StatStop(self.stat_tol, self.stat_window, budget=max_nfev if self.warm else None,
                             budget_tol=50 * self.stat_tol)
             kw["callback"] = stop
+        fun = CompressedObjective(obj) if self.compressed and obj.vidx.size else obj
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             res = least_squares(
-                obj.fun,
+                fun.fun,
                 z_init,
-                jac=obj.jac,
+                jac=fun.jac,
                 bounds=(obj.zlo, obj.zhi),
                 method="trf",
                 x_scale=1.0,

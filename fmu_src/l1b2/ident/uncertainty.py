@@ -78,7 +78,7 @@ from scipy.linalg import qr
 
 __all__ = [
     "NULL_TOL", "describe_direction", "ar1_factors", "Uncertainty", "fisher_uncertainty", "extra_confounding",
-    "alternative_optima", "cluster_sandwich", "run_influence", "grouped_sandwich",
+    "alternative_optima", "cluster_sandwich", "run_influence", "grouped_sandwich", "singular",
 ]
 
 #: a parameter with a component above this in a null direction is not identifiable
@@ -157,16 +157,31 @@ class Uncertainty:
     run_influence: np.ndarray | None = None
 
 
-def _covariance(J, sv_scale, svd_rtol):
-    """Pseudo-inverse covariance of the scaled parameters restricted to the identified subspace."""
-    _, s_, Vt_ = np.linalg.svd(J, full_matrices=False)
+def singular(J):
+    """``(s, Vt)``: the singular values and right singular vectors of ``J`` (n x p).
+
+    With more rows than columns, those of the R factor of ``J = QR`` (the same values and vectors, up to the
+    vectors' signs, which no use here depends on: they enter as ``V V^T`` or scaled by a pivot entry); one QR of
+    n x p and an SVD of p x p cost about half the SVD of n x p.
+    """
+    J = np.asarray(J, float)
+    if J.shape[0] > J.shape[1]:
+        J = np.linalg.qr(J, mode="r")
+    _, s, Vt = np.linalg.svd(J, full_matrices=False)
+    return s, Vt
+
+
+def _covariance(J, sv_scale, svd_rtol, sv_vt=None):
+    """Pseudo-inverse covariance of the scaled parameters restricted to the identified subspace
+    (``sv_vt``: :func:`singular` of ``J`` when the caller has it)."""
+    s_, Vt_ = singular(J) if sv_vt is None else sv_vt
     keep = s_ > svd_rtol * s_[0]
     Vr = Vt_[keep].T
     cz = (Vr / s_[keep] ** 2) @ Vr.T
     return cz * np.outer(sv_scale, sv_scale)
 
 
-def run_influence(J, w, clusters, sv_scale, svd_rtol):
+def run_influence(J, w, clusters, sv_scale, svd_rtol, sv_vt=None):
     """Each cluster's influence on the estimate: row g is ``A^+ s_g * scale`` (physical units).
 
     ``A = J^T J`` (restricted to the identified subspace) and ``s_g = J_g^T w_g``
@@ -174,9 +189,9 @@ def run_influence(J, w, clusters, sv_scale, svd_rtol):
     cluster-robust covariance is ``G/(G-1) sum_g u_g u_g^T`` of these rows, and
     merging clusters (e.g. the runs of one operating condition) merges rows by
     summing them (:func:`grouped_sandwich`). Shape ``(G, p)``; a cluster without
-    residuals has a row of zeros.
+    residuals has a row of zeros. ``sv_vt``: :func:`singular` of ``J`` when the caller has it.
     """
-    _, s_, Vt_ = np.linalg.svd(J, full_matrices=False)
+    s_, Vt_ = singular(J) if sv_vt is None else sv_vt
     keep = s_ > svd_rtol * s_[0]
     Vr = Vt_[keep].T
     a_inv = (Vr / s_[keep] ** 2) @ Vr.T
@@ -310,7 +325,7 @@ def fisher_uncertainty(Jz, r_raw, problem, noise, vidx, sv_scale, theta_hat, var
     r = noise.W(r_raw)  # residuals decorrelated from the start-speed noise
     rho, f_ar = ar1_factors(r, run_sel, problem.sample_sel, n_runs)
 
-    U, sv, Vt = np.linalg.svd(Jz, full_matrices=False)
+    sv, Vt = singular(Jz)
     thr = svd_rtol * (sv[0] if sv.size else 0.0)
     ident = sv > thr
     Vn = Vt[~ident].T  # (p_var, q) null directions in z
@@ -318,7 +333,7 @@ def fisher_uncertainty(Jz, r_raw, problem, noise, vidx, sv_scale, theta_hat, var
     affected_v = null_norm > NULL_TOL
     k_ident = int(np.sum(ident))
 
-    cov_plain = _embed(_covariance(Jz, sv_scale, svd_rtol), p_all, vidx, affected_v)
+    cov_plain = _embed(_covariance(Jz, sv_scale, svd_rtol, (sv, Vt)), p_all, vidx, affected_v)
     Jc = Jz / np.sqrt(f_ar[run_sel])[:, None]
     cov_corr = _embed(_covariance(Jc, sv_scale, svd_rtol), p_all, vidx, affected_v)
     se_plain = np.sqrt(np.diag(cov_plain))
@@ -339,7 +354,7 @@ def fisher_uncertainty(Jz, r_raw, problem, noise, vidx, sv_scale, theta_hat, var
     loglik = noise.loglik(r_raw)
     combos, weak = _directions(Vn, sv, Vt, ident, vidx, sv_scale, list(names), weak_rtol)
     w_rob = noise.weighted(r_raw)
-    infl_v = run_influence(Jz, w_rob, run_sel, sv_scale, svd_rtol)    # one SVD for the sandwich and the record
+    infl_v = run_influence(Jz, w_rob, run_sel, sv_scale, svd_rtol, (sv, Vt))   # Jz's one SVD, for both records
     cov_rob_v, n_clusters = cluster_sandwich(Jz, w_rob, run_sel, sv_scale, svd_rtol, influence=infl_v)
     cov_rob = _embed(cov_rob_v, p_all, vidx, affected_v)
     infl = np.zeros((n_runs, p_all))
@@ -374,7 +389,7 @@ def extra_confounding(unc: Uncertainty, p_theta, vidx, sv_scale, names_all, svd_
     if not xcols.size:
         return conf
     Je = unc.jac_ar1[:, xcols]
-    _, s_, Vt_ = np.linalg.svd(Je, full_matrices=False)
+    s_, Vt_ = singular(Je)
     keep = s_ > svd_rtol * (s_[0] if s_.size and s_[0] > 0 else 1.0)
     keep &= s_ > 0
     Vr = Vt_[keep].T
