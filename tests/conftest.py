@@ -43,21 +43,21 @@ print({_RESULT_TAG!r} + json.dumps(result), flush=True)
 #: first and the short ones, in their usual order after them, fill the gaps, so that both workers finish at
 #: about the same time. (xdist's own order, by number of tests, started the few long close-loop modules last.)
 COSTLY_FIRST = (
-    "test_closeloop.py",                 # 548 s of CPU (reference-world close loops, their exports)
-    "test_readme_examples.py",           # 173 s (the pages' commands: rig, identify, close loop, export)
-    "test_extended_predictor_fmu.py",    # 149 s (native FMUs compiled per effect kind, FMI 2.0 and 3.0)
-    "test_closeloop_realistic.py",       # 111 s (two realistic-world control close loops)
-    "test_export.py",                    # 72 s
-    "test_fmus.py",                      # 65 s
-    "test_identify.py",                  # 57 s
-    "test_chost.py",                     # 41 s
-    "test_closeloop_chain.py",           # one reference-world close loop
-    "test_sweep.py",                     # 38 s
-    "test_fmu_misuse.py",                # 37 s
-    "test_identify_workflow.py",         # 35 s
-    "test_hostile_inputs.py",            # 30 s
-    "test_interface.py",                 # 26 s
-    "test_output_dirs.py",               # 26 s
+    "test_closeloop.py",  # reference-world close loops, their exports
+    "test_readme_examples.py",  # the pages' commands: rig, identify, close loop, export
+    "test_extended_predictor_fmu.py",  # native FMUs compiled per effect kind, FMI 2.0 and 3.0
+    "test_closeloop_realistic.py",  # two realistic-world control close loops
+    "test_export.py",
+    "test_fmus.py",
+    "test_identify.py",
+    "test_chost.py",
+    "test_closeloop_chain.py",  # one reference-world close loop
+    "test_sweep.py",
+    "test_fmu_misuse.py",
+    "test_identify_workflow.py",
+    "test_hostile_inputs.py",
+    "test_interface.py",
+    "test_output_dirs.py",
 )
 
 

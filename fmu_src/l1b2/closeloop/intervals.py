@@ -3,12 +3,11 @@
 The loop's premise is a model that misses something, so its residuals carry
 errors shared within each run and between runs of one operating level; the
 model-based (AR(1)-inflated Fisher) interval treats them as independent noise
-and the run-robust one treats the runs as independent. Decision 0025 measured
-the paired runs' residuals on the realistic world: the two runs of one rig
-condition correlate (+0.32), the two mirror runs anti-correlate (-0.85). The
-reported interval clusters the runs by level (V0 and load size, the four
-runs of both pairs: :func:`l1b2.ident.clusters.run_groups`); the run-robust
-and model-based ones are kept beside it.
+and the run-robust one treats the runs as independent, while the paired
+runs of one rig condition, and the mirror runs, share errors (decision
+0025). The reported interval clusters the runs by level (V0 and load size,
+the four runs of both pairs: :func:`l1b2.ident.clusters.run_groups`); the
+run-robust and model-based ones are kept beside it.
 """
 
 from __future__ import annotations

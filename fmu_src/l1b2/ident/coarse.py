@@ -10,11 +10,8 @@ warm local search on all samples from its optimum (the identifier with ``init`` 
 ``n_starts=1``: the same likelihood and stopping rules, few evaluations). The number
 of full-data evaluations then no longer grows with the sampling rate.
 
-The warm search is the identifier's own (same solver). Measured on the 5 kHz realistic-world file
-of decision 0028 (100,099 TRAIN samples): the baseline's search on all samples took 245
-evaluations; coarse to fine 133 on 20,037 samples and 118 on all, and ended 83 log-likelihood units
-higher. A variable-projection warm search ended higher still, but at a baseline whose residual
-traced two more channels (a different diagnosis), so it is not used.
+The warm search is the identifier's own (same solver, same likelihood); decision 0028 records
+the measured search variants and why this one is used.
 
 :data:`COARSE_PERIOD_S` is 1 ms: the virtual rig's default rate, at which every identification of
 this package was developed and measured (``docs/decisions/0027-...``: the same diagnosis at 1 and
