@@ -244,11 +244,10 @@ def run_signals(df: pd.DataFrame, channels) -> list[dict]:
                     "run_spread": run_spread(df[ch["name"]], df[dataio.RUN])})
     d = first[dataio.DIRECTION].first().to_numpy(float)
     for col, tr in fx.channels.INPUT_SIGNALS:
-        v = first[col].mean().to_numpy(float)
-        c = df[col].to_numpy(float)
-        c = c * df[dataio.DIRECTION].to_numpy(float) if tr == "drive" else np.abs(c) if tr == "abs" else c
-        out.append({"channel": col, "transform": tr, "values": v * d if tr == "drive" else np.abs(v) if tr == "abs"
-                    else v, "run_spread": run_spread(c, df[dataio.RUN])})
+        values = fx.channels.transformed(first[col].mean().to_numpy(float), d, tr)
+        samples = fx.channels.transformed(df[col].to_numpy(float), df[dataio.DIRECTION].to_numpy(float), tr)
+        out.append({"channel": col, "transform": tr, "values": values,
+                    "run_spread": run_spread(samples, df[dataio.RUN])})
     return [s for s in out if np.all(np.isfinite(s["values"])) and np.std(s["values"]) > 0]
 
 

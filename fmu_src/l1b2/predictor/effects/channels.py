@@ -213,16 +213,22 @@ def parameter_stem(column: str, transform: str = "none") -> str:
     return {"none": column, "drive": f"d_{column}", "abs": f"abs_{column}"}[transform]
 
 
-def run_signal(x, column: str, transform: str) -> np.ndarray:
-    """Each sample's run-level value of a signal: the run's mean of ``column``, times ``d`` (``drive``) or its size."""
-    c = signal(x, signal_key(column, "run"))
+def transformed(c, d, transform: str) -> np.ndarray:
+    """A signal's values ``c`` under a run-level transform (:data:`TRANSFORMS`): as they are (``none``), times the
+    direction ``d`` (``drive``) or their size (``abs``)."""
     if transform == "drive":
-        return c * signal(x, "d")
+        return np.asarray(c, float) * np.asarray(d, float)
     if transform == "abs":
         return np.abs(c)
     if transform == "none":
         return c
     raise EffectSpecError(f"run-level transform {transform!r} is not one of {', '.join(TRANSFORMS)}")
+
+
+def run_signal(x, column: str, transform: str) -> np.ndarray:
+    """Each sample's run-level value of a signal: the run's mean of ``column``, times ``d`` (``drive``) or its size."""
+    return transformed(signal(x, signal_key(column, "run")), signal(x, "d") if transform == "drive" else None,
+                       transform)
 
 
 @register
