@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""Benchmark: ``identify`` on ~20 000 samples of several worlds, the former default, the new one and a long reference.
+"""Benchmark: ``identify`` on ~20 000 samples of several worlds, the default, the offset searches and a long reference.
 
 Worlds (the virtual rig, in-process engine, 11 loads -0.09 ... 0.09 kg, TRAIN = |load| != 0.05 kg,
 about 19.7k samples; made once and cached):
@@ -11,12 +11,13 @@ about 19.7k samples; made once and cached):
 * ``reference/s0``: the reference motor (Eq. 29 nearly exact), noise-free.
 
 For each world, side by side in one run (same process, same data), with CPU time (``time.process_time``),
-evaluations and log-likelihood: the former default (``solver="joint"``, 8 starts), the variable-projection
-search from one start (``solver="varpro"``), the drive-offset profile (``solver="offset"``,
-:mod:`l1b2.ident.offset`) and the long reference: the best of the variable-projection search from 8
+evaluations and log-likelihood: the default (``solver="joint"``, 8 starts), the variable-projection
+search from one start (``solver="varpro"``), the drive-offset search on the grid profile (``solver="offset"``,
+decision 0023), the drive-offset search on the bracketed profile (``solver="offset_bracket"``, decision 0036;
+both :mod:`l1b2.ident.offset`) and the long reference: the best of the variable-projection search from 8
 starts (stat_tol 1e-4) and the offset profile on a fine grid (made once per world and cached; ``--reference``
 makes them again). Targets: CPU <= 2 s, log-likelihood within 0.1 of the reference (and >= 1000 units
-above the former default where that falls short).
+above the default where that falls short). ``--fits`` picks the compared fits by name (separated by ;).
 
 Usage: python bench/bench_identify_worlds.py [--worlds realistic/s0,...] [--reference] [--cache DIR] [--skip-old]
 """
@@ -49,9 +50,10 @@ REFERENCES = {"varpro, 8 starts": {"solver": "varpro", "n_starts": 8, "stat_tol"
                                    "max_nfev": 600, "max_outer": 10, "n_refine": 3},
               "offset, fine grid": {"solver": "offset", "n_starts": 24, "stat_tol": 1e-4, "tol": 1e-12}}
 #: the fits compared
-FITS = {"joint (former default)": {"solver": "joint"},
+FITS = {"joint (default)": {"solver": "joint"},
         "varpro, 1 start": {"solver": "varpro", "n_starts": 1},
-        "offset (new)": {"solver": "offset"}}
+        "offset, grid profile": {"solver": "offset"},
+        "offset, bracketed profile": {"solver": "offset_bracket"}}
 
 
 def dataset(cache: Path, world: str) -> Path:
@@ -94,14 +96,16 @@ def main(argv=None):
     ap.add_argument("--reference", action="store_true", help="make the reference fits again")
     ap.add_argument("--data-only", action="store_true", help="only make the worlds' data")
     ap.add_argument("--references-only", help="only make these reference fits (names separated by ;)")
-    ap.add_argument("--skip-old", action="store_true", help="leave out the former default (slow)")
+    ap.add_argument("--skip-old", action="store_true", help="leave out the default joint search (slow)")
+    ap.add_argument("--fits", help="only these compared fits (names separated by ;)")
     ap.add_argument("--cache", default=str(Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
                                          / "l1b2" / "bench"))
     args = ap.parse_args(argv)
     cache = Path(args.cache)
     cache.mkdir(parents=True, exist_ok=True)
     worlds = args.worlds.split(",")
-    fits = {k: v for k, v in FITS.items() if not (args.skip_old and v["solver"] == "joint")}
+    fits = {k: v for k, v in FITS.items() if not (args.skip_old and v["solver"] == "joint")
+            and (args.fits is None or k in args.fits.split(";"))}
     rows = []
     for world in worlds:
         data = dataset(cache, world)
@@ -118,7 +122,7 @@ def main(argv=None):
             rows.append((world, len(train.df), name, r, best))
             print(f"{world}: {name}: {r['cpu_s']:.2f} s CPU, {r['nfev']} evaluations, loglik {r['loglik']:.3f} "
                   f"({r['loglik'] - best:+.3f} to the reference)", flush=True)
-            if settings["solver"] == "offset":
+            if settings["solver"].startswith("offset"):
                 print("    stages (CPU s): " + ", ".join(f"{st['stage']} {st.get('cpu_s', float('nan')):.2f}"
                                                     for st in r["stages"]), flush=True)
                 prof = next((st["profile"] for st in r["stages"] if "profile" in st), [])

@@ -9,6 +9,7 @@ import pytest
 from l1b2.ident.estimator import PredictorIdentifier
 from l1b2.ident.offset import (
     GAUGE_K0,
+    bracket_search,
     d_coefficients,
     drive_offset,
     gauge,
@@ -123,3 +124,125 @@ def test_offset_search_with_a_pinned_structural_direction_is_the_variable_projec
     vp = PredictorIdentifier(solver="varpro", **common).fit(df, slider_mass_kg=M_S)
     assert off.loglik_ == vp.loglik_
     assert "offset profile" not in [s["stage"] for s in off.convergence_["stages"]]
+
+
+# ---- the bracketed profile (solver="offset_bracket", decision 0036) ------------------------------------------
+
+
+def _record(f):
+    """f(x) as the ``f(x, warm) -> (value, state)`` of bracket_search (state: x itself), with every call kept."""
+    calls = []
+
+    def g(x, warm):
+        calls.append((x, warm))
+        v = f(x)
+        return v, (x if np.isfinite(v) else None)
+
+    return g, calls
+
+
+def test_bracket_search_brackets_and_narrows_to_the_maximum_of_a_written_out_likelihood():
+    # a profile log-likelihood on the branch omega in (-1, 0): a quadratic peak at -0.62, infeasible (-inf) for
+    # omega > -0.15 (c_r would leave its bounds). The coarse points bracket the peak; the bracketed search must
+    # then end with the best point within the bracket width tol of the peak, inside the points' budget.
+    peak, tol = -0.62, 0.02
+
+    def loglik(x):
+        return -np.inf if x > -0.15 else 100.0 - 50.0 * (x - peak) ** 2
+
+    f, calls = _record(loglik)
+    pts = bracket_search(f, (-0.95, -0.7, -0.4, -0.1), -1.0, 0.0, tol, 20)
+    assert len(pts) == len(calls) <= 20
+    xs = [p[0] for p in pts]
+    assert xs[:4] == [-0.95, -0.7, -0.4, -0.1] and all(-1.0 < x < 0.0 for x in xs)
+    best = max(pts, key=lambda p: p[1])
+    assert abs(best[0] - peak) < tol
+    # the bracket around the best point (its evaluated neighbours) holds the peak and is narrower than tol
+    finite = sorted(x for x, v, _ in pts if np.isfinite(v))
+    i = finite.index(best[0])
+    assert finite[i - 1] <= peak <= finite[i + 1] or abs(best[0] - peak) < 1e-9
+    # every point after the first is warm-started from the evaluated finite point nearest to it
+    for k, (x, warm) in enumerate(calls[1:], start=1):
+        earlier = [p[0] for p in pts[:k] if np.isfinite(p[1])]
+        assert warm == min(earlier, key=lambda e: abs(e - x))
+
+
+def test_bracket_search_reaches_a_maximum_next_to_the_barrier_and_stops_on_its_budget():
+    # the peak lies between the last coarse point and the barrier omega = 1 (an end counted as -inf)
+    peak = 0.97
+
+    def loglik(x):
+        return -((x - peak) ** 2)
+
+    f, _ = _record(loglik)
+    pts = bracket_search(f, (0.95, 0.7, 0.4), 0.0, 1.0, 0.01, 12)
+    assert len(pts) <= 12 and all(0.0 < p[0] < 1.0 for p in pts)
+    assert abs(max(pts, key=lambda p: p[1])[0] - peak) < 0.01
+    # with a budget of the coarse points alone nothing else is evaluated, and `seen` points are continued
+    f, calls = _record(loglik)
+    first = bracket_search(f, (0.95, 0.7, 0.4), 0.0, 1.0, 0.01, 3)
+    assert [p[0] for p in first] == [0.95, 0.7, 0.4]
+    more = bracket_search(f, (), 0.0, 1.0, 0.01, 12, seen=first)
+    assert more[:3] == first and len(calls) == len(more) <= 12
+    assert abs(max(more, key=lambda p: p[1])[0] - peak) < 0.01
+
+
+def test_bracket_search_finds_the_higher_of_two_peaks_seen_by_the_coarse_points():
+    # two optima along the offset: the coarse points see both; the search narrows on the higher one (-0.3)
+    def loglik(x):
+        return max(10.0 - 200.0 * (x + 0.8) ** 2, 12.0 - 200.0 * (x + 0.3) ** 2)
+
+    f, _ = _record(loglik)
+    pts = bracket_search(f, (-0.9, -0.7, -0.5, -0.3, -0.1), -1.0, 0.0, 0.01, 15)
+    best = max(pts, key=lambda p: p[1])
+    assert abs(best[0] + 0.3) < 0.01 and best[1] > 11.9
+
+
+def _small_world(seed):
+    prm = example_params(3)
+    return (simulate_dataset(prm, SMALL, M_S, noise_std=1e-3, seed=seed),
+            simulate_dataset(prm, SMALL, M_S, noise_std=0.0, seed=seed))
+
+
+def test_bracketed_offset_search_recovers_the_small_world():
+    # the fitted model's free run against the noise-free motor that made the data (noise 1 mm/s): the
+    # search has to find the motor, not just a likelihood optimum somewhere along the offset
+    df, clean = _small_world(11)
+    est = PredictorIdentifier(order=3, solver="offset_bracket").fit(df, slider_mass_kg=M_S)
+    err = est.predict_free_run(clean) - clean["speed_m_s"].to_numpy()
+    assert np.sqrt(np.nanmean(err ** 2)) < 1e-4  # a tenth of the noise
+    stages = est.convergence_["stages"]
+    assert [s["stage"] for s in stages] == ["start", "offset profile", "starts", "noise refinement", "uncertainty"]
+    prof = stages[1]["profile"]
+    assert any(r["omega"] < 0 for r in prof) and any(r["omega"] > 0 for r in prof)
+    assert all(-1 < r["omega"] < 1 for r in prof)
+    assert est.loglik_ >= max(r["loglik"] for r in prof) - 1e-6
+    assert est.convergence_["solver"] == "offset_bracket"
+    lo, hi = PredictorParams.bounds(3)
+    assert np.all(est.theta_ >= lo) and np.all(est.theta_ <= hi)
+
+
+def test_bracketed_offset_search_never_ends_below_its_best_profile_point(monkeypatch):
+    # a free search that ends badly (here: one iteration from the data-driven start instead of the profile's
+    # best point) must not be the result: the profile's best point is kept, with its log-likelihood
+    import l1b2.ident.offset as off
+
+    real = off.varpro_search
+    ended = []
+
+    def poor(obj, lin, starts, max_nfev, *args, **kwargs):
+        search, outer, stages = real(obj, lin, [obj.z_of(obj.theta0)], 0, *args, **kwargs)
+        ended.append(-search.results[search.best].cost)
+        return search, outer, stages
+
+    monkeypatch.setattr(off, "varpro_search", poor)
+    df, _ = _small_world(11)
+    est = PredictorIdentifier(order=3, solver="offset_bracket").fit(df, slider_mass_kg=M_S)
+    best = max(r["loglik"] for r in est.convergence_["stages"][1]["profile"])
+    assert ended and ended[0] < best - 1.0  # the free search did end below the profile's best point
+    assert est.loglik_ == pytest.approx(best, abs=1e-6)
+    assert "profile's best point kept" in est.convergence_["message"]
+    monkeypatch.setattr(off, "varpro_search", real)
+    free = PredictorIdentifier(order=3, solver="offset_bracket").fit(df, slider_mass_kg=M_S)
+    assert "profile's best point kept" not in free.convergence_["message"]
+    assert free.loglik_ >= best - 1e-6

@@ -136,7 +136,7 @@ _NOT_SERIALISED = ("verbose", "extra", "init", "init_extra", "frequency")
 NOISE_FITS = ("auto", "alternate", "profile")
 
 #: the local solvers of the global search (``solver``): variable projection, or the joint multistart
-SOLVERS = ("varpro", "joint", "offset")
+SOLVERS = ("varpro", "joint", "offset", "offset_bracket")
 
 
 def clone(estimator, **changes):
@@ -242,8 +242,10 @@ class PredictorIdentifier(EstimatorSettings):
         identifier's.
     init_extra : start values of phi for the warm start (default
         ``extra.start``, else zeros). Only used with ``init``.
-    solver : ``"joint"`` (the searches of ``noise_fit``), ``"varpro"`` (:mod:`l1b2.ident.varpro`) or
-        ``"offset"`` (the drive offset as a search coordinate, then varpro; :mod:`l1b2.ident.offset`).
+    solver : ``"joint"`` (the searches of ``noise_fit``), ``"varpro"`` (:mod:`l1b2.ident.varpro`),
+        ``"offset"`` (the drive offset as a search coordinate: a profile on a grid of offsets, then varpro;
+        :mod:`l1b2.ident.offset`) or ``"offset_bracket"`` (the same with a bracketed search over the offset
+        on each side of the barrier, warm-started points, and a result never below the profile's best point).
     model : the predictor family: ``"eq29"`` (default, the paper's Eq. 29) or
         ``"pure_slip"`` (the slip ratio follows the state,
         :mod:`l1b2.predictor.pureslip`; same parameters, likelihood, noise
@@ -494,7 +496,8 @@ class PredictorIdentifier(EstimatorSettings):
         # ---- start: data-driven centre and equation-error minima, or init ----
         red, minima = data_driven_start(sample, space, m_s, cfg.kappa, cfg.include_load_inertia, s_center,
                                         s_half, E, cfg.n_starts, cfg.seed, warm=warm,
-                                        n_ee_starts={"varpro": 4 * cfg.n_starts, "offset": 4}.get(cfg.solver),
+                                        n_ee_starts={"varpro": 4 * cfg.n_starts, "offset": 4,
+                                                     "offset_bracket": 4}.get(cfg.solver),
                                         drive_law=cfg.model)
         theta0, fixed_final = self._centre(cfg, space, minima, s_center, s_half)
         t_centre, c_centre = time.perf_counter(), time.process_time()

@@ -28,7 +28,13 @@ offset their start allows. This search makes the offset a coordinate:
 3. the best grid point seeds :func:`l1b2.ident.varpro.varpro_search` with every parameter varied again
    (the paper's parameters, their bounds and the covariance machinery unchanged).
 
-Why it is opt-in, with the measurements: decision 0023.
+``solver="offset_bracket"`` (:func:`bracketed_offset_search`) replaces the grid of step 2 by a bracketed
+search over omega on each side of omega = 0 (:func:`bracket_search`: a few coarse points from the barrier
+inwards, then parabolic or golden-section points inside the bracket of the best one), each point warm-started
+from the optimum of its nearest evaluated neighbour and fitted with a smaller budget; step 3 starts with the
+noise model of the profile's best point, and when it ends below that point the point itself is the result.
+
+Why both are opt-in, with the measurements: decisions 0023 and 0036.
 
 The mapping back to the paper's parameters is exact: every point of the search is an Eq. 35 vector.
 """
@@ -36,6 +42,7 @@ The mapping back to the paper's parameters is exact: every point of the search i
 from __future__ import annotations
 
 import time
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -45,7 +52,8 @@ from .varpro import linear_positions, local_fit, profile_loglik, varpro_search
 
 __all__ = ["OMEGA_GRID", "GAUGE_K0", "drive_offset", "offset_of_omega", "omega_of_offset", "d_coefficients",
            "gauge", "multiplier", "point", "c_r_of_omega", "with_offset", "profile",
-           "offset_search", "offset_grid", "projected_search"]
+           "offset_search", "offset_grid", "projected_search", "BRACKET", "bracket_search", "bracketed_profile",
+           "bracketed_offset_search"]
 
 #: the profile's grid of omega (both branches of the offset, the barrier |omega| -> 1 approached)
 OMEGA_GRID = (-0.95, -0.85, -0.7, -0.5, -0.3, -0.1, 0.3, 0.6, 0.85, 0.95)
@@ -163,9 +171,10 @@ def _profile_objective(obj, theta, scale_full):
     return ScaledObjective(obj.problem, obj.noise, theta.copy(), varied, scale_full, lo, hi, obj.start_noise)
 
 
-def _point_fit(obj, theta, omega, n1, kappa, p_theta, scale_full, c_hi, max_iter, stat_tol, saved):
+def _point_fit(obj, theta, omega, n1, kappa, p_theta, scale_full, c_hi, max_iter, stat_tol, saved, min_gain=0.0):
     """One point of the profile: theta moved to ``omega`` (its own D(s)), c_r, sigma, mu, k0, mu_sd pinned, the
-    rest fitted by at most ``max_iter`` variable-projection iterations (0: B'(s), P(s) projected only)."""
+    rest fitted by at most ``max_iter`` variable-projection iterations (0: B'(s), P(s) projected only;
+    ``min_gain``: that of :func:`l1b2.ident.varpro.local_fit`)."""
     th = point(theta, n1, kappa, omega, d_coefficients(theta, n1))
     rec = {"omega": float(omega), "c_r": float(th[0]), "loglik": -np.inf, "theta": th, "nfev": 0, "njev": 0}
     if not (0.0 <= th[0] < c_hi):
@@ -173,7 +182,8 @@ def _point_fit(obj, theta, omega, n1, kappa, p_theta, scale_full, c_hi, max_iter
     vars(obj.noise).update(saved)
     op = _profile_objective(obj, th, scale_full)
     try:
-        fit = local_fit(op, linear_positions(op, p_theta, n1), op.z_of(th), max_iter, 1e-8, stat_tol)
+        fit = local_fit(op, linear_positions(op, p_theta, n1), op.z_of(th), max_iter, 1e-8, stat_tol,
+                        min_gain=min_gain)
     except (np.linalg.LinAlgError, ValueError) as exc:
         return {**rec, "message": str(exc)}
     rec.update(loglik=profile_loglik(op, fit.z), theta=op.theta_of(fit.z), nfev=fit.nfev + 1, njev=fit.njev)
@@ -214,6 +224,119 @@ def profile(obj, theta_start, n1, kappa, p_theta, grid=OMEGA_GRID, settings=None
     return records, max(records, key=lambda r: r["loglik"])
 
 
+#: the golden-section fraction (3 - sqrt 5) / 2
+_GOLDEN = 0.5 * (3.0 - 5.0 ** 0.5)
+
+
+def _bracket(pts, lo, hi):
+    """``(a, b, c)`` with values: the best evaluated point b and its evaluated neighbours (lo / hi with
+    value -inf where b has none on that side)."""
+    xs = sorted(pts, key=lambda p: p[0])
+    i = max(range(len(xs)), key=lambda k: xs[k][1])
+    a = xs[i - 1][:2] if i > 0 else (lo, -np.inf)
+    c = xs[i + 1][:2] if i + 1 < len(xs) else (hi, -np.inf)
+    return a, xs[i][:2], c
+
+
+def _probe(a, b, c, last_step, tol):
+    """The next point inside the bracket (Brent's rule): the vertex of the parabola through a, b, c when their
+    values are finite, the vertex is at least ``tol / 4`` from them and moves less than half ``last_step``;
+    else the golden-section point of the larger side. ``None`` when no point is ``tol / 4`` from the others."""
+    (xa, fa), (xb, fb), (xc, fc) = a, b, c
+    if np.isfinite(fa) and np.isfinite(fc):
+        den = (xb - xa) * (fb - fc) - (xb - xc) * (fb - fa)
+        if den != 0:
+            u = xb - 0.5 * ((xb - xa) ** 2 * (fb - fc) - (xb - xc) ** 2 * (fb - fa)) / den
+            if xa < u < xc and min(abs(u - xa), abs(u - xb), abs(u - xc)) >= 0.25 * tol \
+                    and abs(u - xb) < 0.5 * last_step:
+                return u
+    u = xb + _GOLDEN * (xc - xb) if xc - xb >= xb - xa else xb - _GOLDEN * (xb - xa)
+    return u if min(abs(u - xa), abs(u - xb), abs(u - xc)) >= 0.25 * tol else None
+
+
+def bracket_search(f, coarse, lo, hi, tol, max_points, seen=()):
+    """Maximise a function of one variable on the open interval (lo, hi): coarse points, then a bracketed search.
+
+    ``f(x, warm) -> (value, state)``: ``value`` may be -inf (x infeasible), ``warm`` is the ``state`` of the
+    evaluated point nearest to x with a finite value (``None`` before there is one), so that each point can
+    start from its neighbour's optimum. The ``coarse`` points are evaluated in their order; then, while fewer
+    than ``max_points`` points (``seen`` included) were evaluated and the bracket (a, b, c) around the best
+    point b (its evaluated neighbours, ``lo`` / ``hi`` counted as -inf) is at least ``tol`` wide, one point of
+    :func:`_probe` (parabolic or golden section) is evaluated. Returns the evaluated points
+    ``[(x, value, state), ...]`` (``seen`` first, then in the order visited).
+    """
+    pts = list(seen)
+
+    def visit(x):
+        near = [p for p in pts if np.isfinite(p[1])]
+        warm = min(near, key=lambda p: (abs(p[0] - x), -p[1]))[2] if near else None
+        value, state = f(x, warm)
+        pts.append((float(x), float(value), state))
+
+    for x in coarse:
+        if len(pts) < max_points:
+            visit(x)
+    last_step = step = hi - lo
+    while len(pts) < max_points and any(np.isfinite(p[1]) for p in pts):
+        a, b, c = _bracket([p for p in pts if lo < p[0] < hi], lo, hi)
+        if c[0] - a[0] < tol:
+            break
+        u = _probe(a, b, c, last_step, tol)
+        if u is None:
+            break
+        last_step, step = step, abs(u - b[0])
+        visit(u)
+    return pts
+
+
+#: the bracketed profile (``solver="offset_bracket"``): the coarse |omega| of each branch (from the barrier
+#: inwards), the bracket width that ends a branch's search, the most points of the better branch (the other
+#: branch is searched as well when its best coarse point is within ``margin`` log-likelihood units), and each
+#: point's fit (iterations from a neighbour's optimum, ``cold_iter`` from the gauged start, statistical
+#: tolerance, least gain a step must promise: ``local_fit``'s min_gain)
+BRACKET = {"coarse": (0.95, 0.7, 0.4), "tol": 0.08, "max_points": 6, "margin": 3.0, "max_iter": 4,
+           "cold_iter": 12, "stat_tol": 0.05, "min_gain": 0.01, "final_min_gain": 0.01}
+
+
+def bracketed_profile(obj, theta_start, n1, kappa, p_theta, settings=None, log=None):
+    """The profile over omega by a bracketed search on each side of omega = 0 (:func:`bracket_search`):
+    ``(records, best)`` as :func:`profile`.
+
+    The coarse points of :data:`BRACKET` on both branches (omega < 0 and omega > 0; the barrier |omega| = 1
+    and omega = 0 are the ends of each interval), then the bracketed search on the branch with the best
+    point, and on the other one when its best is within ``margin`` of it. Each point is fitted as in
+    :func:`profile`, starting from the optimum of the evaluated point nearest to it moved to its omega
+    (the first of each branch from the gauged start).
+    """
+    cfg = {**BRACKET, **(settings or {})}
+    th_g = gauge(theta_start, n1, kappa)
+    scale_full = np.ones(th_g.size)
+    scale_full[obj.vidx] = obj.sv_scale
+    c_hi = obj.zhi[0] * obj.sv_scale[0] if obj.vidx[0] == 0 else np.inf
+    saved = dict(vars(obj.noise))
+    records = []
+
+    def f(om, warm):
+        rec = _point_fit(obj, th_g if warm is None else warm, om, n1, kappa, p_theta, scale_full, c_hi,
+                         cfg["cold_iter" if warm is None else "max_iter"], cfg["stat_tol"], saved, cfg["min_gain"])
+        records.append(rec)
+        if log is not None:
+            log(f"offset profile: omega {om:+.3f} (c_r {rec['c_r']:.3f}): loglik {rec['loglik']:.3f}, "
+                f"{rec['nfev']} evaluations")
+        return rec["loglik"], (rec["theta"] if np.isfinite(rec["loglik"]) else None)
+
+    ends = {-1: (-1.0, 0.0), 1: (0.0, 1.0)}
+    pts = {sign: bracket_search(f, [sign * w for w in cfg["coarse"]], *ends[sign], cfg["tol"], len(cfg["coarse"]))
+           for sign in (-1, 1)}
+    top = {sign: max((p[1] for p in pts[sign]), default=-np.inf) for sign in pts}
+    first = max(top, key=top.get)
+    for sign in (first, -first):
+        if sign == first or top[sign] >= top[first] - cfg["margin"]:
+            bracket_search(f, (), *ends[sign], cfg["tol"], cfg["max_points"], seen=pts[sign])
+    vars(obj.noise).update(saved)
+    return records, max(records, key=lambda r: r["loglik"])
+
+
 def offset_search(obj, theta_start, order, kappa, p_theta, max_nfev, tol, stat_tol, max_outer, grid=OMEGA_GRID,
                   log=None):
     """The drive-offset search (module docstring): the profile over omega, then the full search from its best.
@@ -237,6 +360,57 @@ def offset_search(obj, theta_start, order, kappa, p_theta, max_nfev, tol, stat_t
     return search, outer, [stage] + more
 
 
+def _keep_profile_point(obj, search, outer, best, log=None):
+    """``(search, outer)`` of the free search, or of the profile's ``best`` point when the free search ended
+    below it (the offset search never ends below its best profile point); the noise model at the kept point."""
+    from .search import ProfileRefinement
+
+    ll = -search.results[search.best].cost
+    if not ll < best["loglik"]:
+        return search, outer
+    z = obj.z_of(best["theta"])
+    ll_best = profile_loglik(obj, z)  # the noise model at the point kept
+    final = SimpleNamespace(x=z, cost=-ll_best, status=-2, optimality=float("nan"), nfev=0, njev=0,
+                            message=f"offset profile's best point kept (the free search ended {best['loglik'] - ll:.3g} "
+                                    "log-likelihood units below it)")
+    search.results[search.best] = final
+    rec = search.records[[r["start"] for r in search.records].index(search.best)]
+    rec.update(cost=-ll_best, loglik=ll_best)
+    if log is not None:
+        log(final.message)
+    return search, ProfileRefinement(z, final, outer.history + [{"iteration": len(outer.history), "loglik": ll_best,
+                                                                  "profile_point": True}], outer.converged)
+
+
+def bracketed_offset_search(obj, theta_start, order, kappa, p_theta, max_nfev, tol, stat_tol, max_outer, log=None):
+    """The drive-offset search with the bracketed profile (``solver="offset_bracket"``).
+
+    :func:`bracketed_profile`, then the free variable-projection search from its best point (the noise model
+    set at that point, every local fit with :data:`BRACKET`'s ``min_gain``); the result is the profile's best
+    point itself when the free search ends below it (:func:`_keep_profile_point`). Returns
+    ``(SearchOutcome, refinement, stages)`` as :func:`offset_search`.
+    """
+    n1 = order + 1
+    t0, c0 = time.perf_counter(), time.process_time()
+    records, best = bracketed_profile(obj, theta_start, n1, kappa, p_theta, log=log)
+    stage = {"stage": "offset profile", "time_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0,
+             "nfev": int(sum(r["nfev"] for r in records)), "njev": int(sum(r.get("njev", 0) for r in records)),
+             "profile": [{"omega": r["omega"], "c_r": r["c_r"], "loglik": r["loglik"], "nfev": r["nfev"]}
+                         for r in records]}
+    lin = linear_positions(obj, p_theta, n1)
+    if not np.isfinite(best["loglik"]):
+        search, outer, more = varpro_search(obj, lin, [obj.z_of(theta_start)], max_nfev, tol, stat_tol, max_outer, 1,
+                                            log, BRACKET["final_min_gain"])
+    else:
+        z0 = obj.z_of(best["theta"])
+        profile_loglik(obj, z0)  # the free search starts with the noise model of its start
+        search, outer, more = varpro_search(obj, lin, [z0], max_nfev, tol, stat_tol, max_outer, 1, log,
+                                            BRACKET["final_min_gain"])
+        search, outer = _keep_profile_point(obj, search, outer, best, log)
+    search.records[0]["nfev"] += stage["nfev"]  # the profile's evaluations count with the search's
+    return search, outer, [stage] + more
+
+
 def offset_grid(n_starts: int) -> tuple:
     """The omega grid of ``n_starts``: :data:`OMEGA_GRID` up to its size, else ``n_starts`` points evenly
     spaced in (-0.97, 0.97) without 0 (both branches)."""
@@ -247,16 +421,21 @@ def offset_grid(n_starts: int) -> tuple:
 
 
 def projected_search(cfg, obj, starts, theta_centre, p_theta, log=None):
-    """The search of ``cfg.solver`` ("varpro" or "offset") on ``obj``: ``(SearchOutcome, refinement, stages)``.
+    """The search of ``cfg.solver`` ("varpro", "offset" or "offset_bracket") on ``obj``: ``(SearchOutcome,
+    refinement, stages)``.
 
-    "offset" needs c_r, sigma, mu, k0 varied (they carry the gauge and the offset); with any of them pinned
+    The offset searches need c_r, sigma, mu, k0 varied (they carry the gauge and the offset); with any of them pinned
     it is the variable-projection search from ``starts[0]`` (the pins already fix the offset's range).
     """
     n1 = cfg.order + 1
     lin = linear_positions(obj, p_theta, n1)
-    if cfg.solver == "offset" and np.isin([0, 1, 2, 3, 5], obj.vidx).all():
+    offset = cfg.solver in ("offset", "offset_bracket")
+    if offset and np.isin([0, 1, 2, 3, 5], obj.vidx).all():
+        if cfg.solver == "offset_bracket":
+            return bracketed_offset_search(obj, theta_centre, cfg.order, cfg.kappa, p_theta, cfg.max_nfev, cfg.tol,
+                                           cfg.stat_tol, cfg.max_outer, log)
         return offset_search(obj, theta_centre, cfg.order, cfg.kappa, p_theta, cfg.max_nfev, cfg.tol,
                              cfg.stat_tol, cfg.max_outer, offset_grid(cfg.n_starts), log)
-    if cfg.solver == "offset":
+    if offset:
         starts = starts[:1]
     return varpro_search(obj, lin, starts, cfg.max_nfev, cfg.tol, cfg.stat_tol, cfg.max_outer, cfg.n_refine, log)

@@ -199,7 +199,7 @@ class LocalFit:
     history: list = field(default_factory=list)
 
 
-def local_fit(obj, lin, z_init, max_iter, tol, stat_tol=0.0, stat_window=3, update_R=True):
+def local_fit(obj, lin, z_init, max_iter, tol, stat_tol=0.0, stat_window=3, update_R=True, min_gain=0.0):
     """Levenberg-Marquardt on the projected problem (Kaufman's step) from ``z_init``.
 
     The criterion is ``phi = 0.5 |r_w|^2 + 0.5 sum_r log(1 + g_r.g_r)``
@@ -219,6 +219,9 @@ def local_fit(obj, lin, z_init, max_iter, tol, stat_tol=0.0, stat_window=3, upda
     to the criterion, when the log-likelihood gained less than ``stat_tol``
     over ``stat_window`` accepted steps, when no damping finds a gain, or
     after ``max_iter`` iterations. ``history``: -log-likelihood per iteration.
+    With ``min_gain > 0`` the damping also stops once the quadratic model of the step predicts a gain
+    below ``min_gain`` log-likelihood units (a step that small cannot matter; without it a step that
+    fails at every damping is tried until the damping reaches 1e10, each trial with a projection).
     """
     from .search import bounded_step
 
@@ -248,9 +251,12 @@ def local_fit(obj, lin, z_init, max_iter, tol, stat_tol=0.0, stat_window=3, upda
             g_red = g[non] - HLN.T @ X[:, -1]
         else:
             S, g_red, X = H, g, None
-        accepted = False
+        accepted = small = False
         while lam < 1e10:
             dn = bounded_step(S, np.diag(S).copy(), g_red, lam, z[non], zlo, zhi)
+            if min_gain > 0 and -(g_red @ dn + 0.5 * dn @ S @ dn) < min_gain:  # (phi = -log-likelihood)
+                small = True
+                break
             z_try = z.copy()
             z_try[non] = strictly_inside(z[non] + dn, zlo, zhi)
             if X is not None:
@@ -265,7 +271,8 @@ def local_fit(obj, lin, z_init, max_iter, tol, stat_tol=0.0, stat_window=3, upda
                 break
             lam *= 4.0
         if not accepted:
-            status, message = 2, "no damped step lowers the cost"
+            status, message = 2, ("no damped step predicted to gain min_gain lowers the cost" if small
+                                  else "no damped step lowers the cost")
             break
         gain = cost - c_try
         z, r, cost = z_try, r_try, c_try
@@ -292,7 +299,7 @@ def profile_loglik(obj, z) -> float:
         return float(obj.noise.loglik(obj.problem.residual(theta)))
 
 
-def varpro_search(obj, lin, starts, max_nfev, tol, stat_tol, max_outer, n_refine=2, log=None):
+def varpro_search(obj, lin, starts, max_nfev, tol, stat_tol, max_outer, n_refine=2, log=None, min_gain=0.0):
     """Local variable-projection fits from every start, then the noise alternation on the best.
 
     Each start is fitted by :func:`local_fit` (from the noise model of the
@@ -305,7 +312,7 @@ def varpro_search(obj, lin, starts, max_nfev, tol, stat_tol, max_outer, n_refine
     Returns ``(SearchOutcome, refinement, stages)`` shaped like
     :func:`l1b2.ident.search.profile_search`'s (``cost`` = -log-likelihood),
     ``stages`` a list of per-stage records (``stage``, ``time_s``, ``nfev``,
-    ``njev``).
+    ``njev``). ``min_gain``: that of every :func:`local_fit`.
     """
     from .search import ProfileRefinement, SearchOutcome
 
@@ -325,7 +332,7 @@ def varpro_search(obj, lin, starts, max_nfev, tol, stat_tol, max_outer, n_refine
                             "x0": (z_init * sv_scale).tolist(), "refined": False})
             continue
         try:
-            fit = local_fit(obj, lin, z_init, max_nfev, tol, stat_tol)
+            fit = local_fit(obj, lin, z_init, max_nfev, tol, stat_tol, min_gain=min_gain)
         except (np.linalg.LinAlgError, ValueError) as exc:
             records.append({"start": i, "status": None, "message": f"failed: {exc}", "cost": float("inf"),
                             "nfev": 0, "njev": 0, "time_s": 0.0, "x0": (z_init * sv_scale).tolist(),
@@ -360,7 +367,7 @@ def varpro_search(obj, lin, starts, max_nfev, tol, stat_tol, max_outer, n_refine
         final = results[i]
         for it in range(1, max_outer + 1):
             profile_loglik(obj, z)  # the noise model at z
-            fit = local_fit(obj, lin, z, max_nfev, tol, stat_tol)
+            fit = local_fit(obj, lin, z, max_nfev, tol, stat_tol, min_gain=min_gain)
             ll_new = profile_loglik(obj, fit.z)
             if log is not None:
                 log(f"  refit {it}: loglik {ll_new:.4f} ({fit.result.message}, {fit.result.nit} iterations, "
