@@ -290,10 +290,10 @@ def bracket_search(f, coarse, lo, hi, tol, max_points, seen=()):
 
 
 #: the bracketed profile (``solver="offset_bracket"``): the coarse |omega| of each branch (from the barrier
-#: inwards), the bracket width that ends a branch's search, the most points of the better branch (the other
-#: branch is searched as well when its best coarse point is within ``margin`` log-likelihood units), and each
+#: inwards), the bracket width that ends a branch's search, the most points of a branch (the branch with the
+#: best coarse point is searched, the other as well when its best is within ``margin`` log-likelihood units), each
 #: point's fit (iterations from a neighbour's optimum, ``cold_iter`` from the gauged start, statistical
-#: tolerance, least gain a step must promise: ``local_fit``'s min_gain)
+#: tolerance, least gain a step must promise: ``local_fit``'s min_gain) and the final free search's min_gain
 BRACKET = {"coarse": (0.95, 0.7, 0.4), "tol": 0.08, "max_points": 6, "margin": 3.0, "max_iter": 4,
            "cold_iter": 12, "stat_tol": 0.05, "min_gain": 0.01, "final_min_gain": 0.01}
 
