@@ -34,6 +34,22 @@ both are the values of the closed forms at k = 0 and k = 1, so X is continuous
 in v'. The derivatives are 0 outside (0, 1) and the slope near k = 1 is capped
 at :data:`K_SLOPE_MAX` (g1' diverges there).
 
+Finite contact (:func:`contact_drive_force`): with a contact of half angle
+``a`` centred on the tangential speed's peak (Eq. 17-18: ``F_N = K (sin theta
+- cos a)`` inside, period mean ``F_p``, so ``K = pi F_p / rho(a)`` with
+``rho(a) = sin a - a cos a``) the same period mean is::
+
+    F_d = sigma (W sin a - a v) / pi + mu F_p h(k, a)
+    h(k, a) = 1 - 2 I(k, a) / rho(a),   I = 0 for k <= cos a, else
+    I = sin a - sqrt(1 - k^2) - cos a (arcsin k - pi/2 + a)
+
+(the braking edges of the contact, where the tip is slower than the slider);
+``a = pi/2`` gives the form above (``rho = 1``, ``h = g1``). A shorter
+contact (larger normal amplitude U_l, Eq. 18) brakes only once ``k > cos a``.
+This is the contact's dependence on the normal (L1) amplitude that the
+predictor's drive force above holds at ``a = pi/2``; it is not used by the
+predictor's free run (decision 0034 records how far it carries).
+
 All functions are pure and vectorised over arrays (SI units); nothing here
 knows a parameter class (:mod:`l1b2.predictor.model` assembles the inputs).
 """
@@ -46,7 +62,8 @@ from ..physics.jit import cached_kernel
 from .kernels import FLAG_REVERSAL, FLAG_STUCK
 
 __all__ = ["K_SLOPE_MAX", "inverse_tip_speed", "slip_ratio", "slip_factors", "slip_force",
-           "pure_slip_drive_force", "steady_drive_speed", "packed_slip_recursion"]
+           "pure_slip_drive_force", "contact_shape", "contact_slip_factor", "contact_drive_force",
+           "steady_drive_speed", "packed_slip_recursion"]
 
 #: slip ratio above which the slopes g1'(k), G'(k) are held at their value here (they diverge at k = 1)
 K_SLOPE_MAX = 0.999
@@ -99,6 +116,35 @@ def pure_slip_drive_force(W, v, F_p, sigma, mu):
     v = np.asarray(v, float)
     g1 = slip_factors(slip_ratio(v, 1.0 / W))[0]
     return sigma * (W / np.pi - 0.5 * v) + mu * np.asarray(F_p, float) * g1
+
+
+def contact_shape(a):
+    """``rho(a) = sin a - a cos a`` [-]: ``pi F_p / (k_e U_l)`` of Eq. 18 for half contact angle ``a`` in (0, pi]."""
+    a = np.asarray(a, float)
+    return np.sin(a) - a * np.cos(a)
+
+
+def contact_slip_factor(k, a):
+    """``h(k, a)``: the Coulomb share of the drive force (times mu F_p) for half contact angle ``a`` (module docstring).
+
+    ``k`` is clipped into [0, 1] as in :func:`slip_ratio`; ``h(k, pi/2) = g1(k)``, ``h(1, a) = -1``, and
+    ``h = 1`` while the whole contact is faster than the slider (``k <= cos a``).
+    """
+    k = np.clip(np.asarray(k, float), 0.0, 1.0)
+    a = np.asarray(a, float)
+    c = np.cos(a)
+    with np.errstate(invalid="ignore"):
+        edge = np.sin(a) - np.sqrt(1.0 - k * k) - c * (np.arcsin(k) - 0.5 * np.pi + a)
+    return 1.0 - 2.0 * np.where(k > c, edge, 0.0) / contact_shape(a)
+
+
+def contact_drive_force(W, v, F_p, sigma, mu, a):
+    """``sigma (W sin a - a v)/pi + mu F_p h(v/W, a)`` [N]: pure slip with a contact of half angle ``a`` [rad]."""
+    W = np.asarray(W, float)
+    v = np.asarray(v, float)
+    a = np.asarray(a, float)
+    k = slip_ratio(v, 1.0 / W)
+    return sigma * (W * np.sin(a) - a * v) / np.pi + mu * np.asarray(F_p, float) * contact_slip_factor(k, a)
 
 
 def steady_drive_speed(D, X_lin, muP, Ap, c_k, Fr, n_iter: int = 80):
