@@ -173,8 +173,8 @@ class CloseLoop(EstimatorSettings):
         (:func:`l1b2.closeloop.baselines.choose_baseline`; both figures in ``diagnosis.baseline_choice``;
         a pure-slip fit that diverges is recorded there and the loop starts from Eq. 29). With the
         pure-slip family no candidate counts as relaxing Eq. 29 (a load x voltage term is a missing
-        effect). Why ``"best"`` is not yet the default: ``docs/decisions/0026-best-baseline-by-default.md``
-        and ``0032-run-level-effects-in-predictor-fmu.md``.
+        effect). Why ``"best"`` is not yet the default: ``docs/decisions/0026-best-baseline-by-default.md``,
+        ``0032-run-level-effects-in-predictor-fmu.md`` and ``0033-named-before-collinear-generic.md``.
 
     Attributes
     ----------
