@@ -135,6 +135,68 @@ def added_columns(effects: EffectSet, df: pd.DataFrame, mask: np.ndarray) -> np.
                            + [np.zeros((int(m.sum()), 0))])
 
 
+#: squared canonical correlation at and above which a named effect and a generic term share a direction (after the
+#: nuisance directions): a variance inflation factor ``1 / (1 - r2)`` of 10 or more, the usual limit beyond which
+#: one coefficient is not identified apart from the other's (:func:`max_canonical_r2`)
+SHARED_R2 = 0.9
+#: share of a generic term's fitted force that a named family's span must explain for the named form to be read as
+#: what the generic term models: more than half ("most of it", :func:`explained_share`)
+NAMED_SHARE = 0.5
+
+
+def _orth(X: np.ndarray, rtol: float = 1e-9) -> np.ndarray:
+    """Orthonormal basis of the column span of ``X`` (directions below ``rtol`` of the largest singular value cut)."""
+    X = np.asarray(X, float)
+    if not X.size:
+        return np.zeros((X.shape[0], 0))
+    U, sv, _ = np.linalg.svd(X, full_matrices=False)
+    return U[:, sv > rtol * max(float(sv[0]), 1e-300)]
+
+
+def off_nuisance(X: np.ndarray, N: np.ndarray | None) -> np.ndarray:
+    """``X`` with its least-squares projection on ``[1, N]`` removed (the part no re-fit of the nuisance absorbs).
+
+    A column whose remainder is below 1e-9 of its own norm lies in the nuisance's span: its remainder is
+    round-off and is returned as zeros.
+    """
+    X = np.asarray(X, float).reshape(len(X), -1)
+    A = np.ones((len(X), 1)) if N is None else np.column_stack([np.ones(len(X)), np.asarray(N, float)])
+    return _project_off(X, _orth(A))
+
+
+def _project_off(X: np.ndarray, U: np.ndarray) -> np.ndarray:
+    """``X - U U' X`` (``U`` orthonormal), columns left with less than 1e-9 of their norm set to zero."""
+    R = X - U @ (U.T @ X)
+    R[:, np.linalg.norm(R, axis=0) <= 1e-9 * np.linalg.norm(X, axis=0)] = 0.0
+    return R
+
+
+def max_canonical_r2(X: np.ndarray, Y: np.ndarray, N: np.ndarray | None = None) -> float:
+    """The largest squared canonical correlation of the columns of ``X`` and ``Y`` after ``[1, N]`` (0 to 1).
+
+    The squared cosine of the smallest principal angle between the two spans once the nuisance is projected off:
+    1 when some combination of ``X`` is a combination of ``Y`` (plus nuisance), so that a model with both trades
+    their coefficients along that direction; 0 when the spans are orthogonal. A term with no direction left
+    after the nuisance has 0.
+    """
+    Qx, Qy = _orth(off_nuisance(X, N)), _orth(off_nuisance(Y, N))
+    if not (Qx.shape[1] and Qy.shape[1]):
+        return 0.0
+    return float(min(np.linalg.norm(Qx.T @ Qy, 2) ** 2, 1.0))
+
+
+def explained_share(x: np.ndarray, Y: np.ndarray, N: np.ndarray | None = None) -> float:
+    """The share of the force ``x`` (one column) that the span of ``Y`` explains after ``[1, N]``: the R^2 of the
+    least-squares fit of ``x`` on ``[1, N, Y]`` beyond ``[1, N]`` (0 to 1; 0 when nothing of ``x`` is left)."""
+    xp = off_nuisance(np.asarray(x, float).reshape(-1, 1), N)[:, 0]
+    nx = float(xp @ xp)
+    Q = _orth(off_nuisance(Y, N))
+    if not nx > 0 or not Q.shape[1]:
+        return 0.0
+    c = Q.T @ xp
+    return float(min(c @ c / nx, 1.0))
+
+
 def stratified_folds(df: pd.DataFrame, k: int, seed: int = 0) -> list[np.ndarray]:
     """Run ids in ``k`` folds: seeded shuffle, then dealt in turn within each (direction, voltage) stratum."""
     first = df.groupby(dataio.RUN, sort=False)[[dataio.DIRECTION, dataio.VOLTAGE]].first()
@@ -307,6 +369,83 @@ def materiality(candidate: CandidateForce, min_drop: float) -> float:
     adds one. Any other candidate needs only the relative rule of :func:`accepts` (returns 0).
     """
     return min_drop if candidate.structural else 0.0
+
+
+def one_se_gap(named: RefitCV, generic: RefitCV) -> tuple[float, float] | None:
+    """``(gap, se)``: how far the generic trial's pooled CV gain is above the named one's, and the standard error of
+    that gap over the folds; None when the two were not cross-validated against the same current model's errors
+    on the same folds.
+
+    Per fold ``f``, ``delta_f = (SSE_named_f - SSE_generic_f) / mean_f SSE_current_f``: their mean is the gap of
+    the pooled gains exactly, and ``se = sd(delta) / sqrt(k)`` (0 with one fold).
+    """
+    cur, other = named.current, generic.current
+    if cur is not other and not (np.array_equal(cur.sse, other.sse) and np.array_equal(cur.ss_meas, other.ss_meas)):
+        return None
+    k = len(cur.sse)
+    delta = (named.extended.sse - generic.extended.sse) / max(float(np.mean(cur.sse)), 1e-300)
+    if not np.all(np.isfinite(delta)):
+        return None
+    return float(np.mean(delta)), (float(np.std(delta, ddof=1) / np.sqrt(k)) if k > 1 else 0.0)
+
+
+def named_reading(pick: RefitCV, accepted: list, share, min_share: float = NAMED_SHARE) -> RefitCV:
+    """The named physical form instead of a generic pick when the evidence does not clearly favour the generic one.
+
+    When ``pick`` is generic, an accepted named trial replaces it if (a) the named family's span explains at least
+    ``min_share`` of the generic term's fitted force (``share(named, generic)``, :func:`explained_share` after the
+    nuisance: they model the same thing) and (b) the generic term's CV gain exceeds the named one's by no more
+    than one standard error of that gap over the folds (:func:`one_se_gap`; the one-standard-error rule of
+    cross-validated model choice: the simpler model unless the richer one is better beyond the selection's own
+    noise). Among several such named trials, the largest CV gain, then the fewest parameters. Otherwise ``pick``.
+    """
+    if not pick.candidate.generic:
+        return pick
+    best = None
+    for t in accepted:
+        if t.candidate.generic:
+            continue
+        gap = one_se_gap(t, pick)
+        if gap is None or gap[0] > gap[1] or share(t, pick) < min_share:
+            continue
+        if best is None or (t.gain, -t.candidate.n_params) > (best.gain, -best.candidate.n_params):
+            best = t
+    return pick if best is None else best
+
+
+class Directions:
+    """The candidates' forces on the masked samples with the current model's nuisance directions projected off.
+
+    ``nuisance``: forces spanning the current model's own re-identification (n x q on every row of ``df``,
+    :func:`l1b2.closeloop.selection.nuisance_forces`); an intercept is added. One object per round; each
+    candidate's columns are computed once.
+    """
+
+    def __init__(self, df: pd.DataFrame, mask: np.ndarray, nuisance: np.ndarray):
+        self.df, self.m = df, np.asarray(mask, bool)
+        self.U = _orth(np.column_stack([np.ones(int(self.m.sum())), np.asarray(nuisance, float)[self.m]]))
+        self._cols: dict = {}
+
+    def columns(self, c: CandidateForce) -> np.ndarray:
+        """``c``'s feature columns on the masked samples, off the nuisance (zeros when a feature is not finite)."""
+        key = (c.family, c.label)
+        if key not in self._cols:
+            X = np.asarray(c.features(self.df), float).reshape(len(self.df), -1)[self.m]
+            self._cols[key] = _project_off(X, self.U) if np.all(np.isfinite(X)) else np.zeros_like(X)
+        return self._cols[key]
+
+    def shared_r2(self, a: CandidateForce, b: CandidateForce) -> float:
+        """:func:`max_canonical_r2` of two candidates after the nuisance."""
+        return max_canonical_r2(self.columns(a), self.columns(b))
+
+    def share(self, named: CandidateForce, generic: CandidateForce, phi) -> float:
+        """:func:`explained_share` of the generic candidate's force with parameters ``phi`` by the named one's span."""
+        return explained_share(self.columns(generic) @ np.asarray(phi, float).ravel(), self.columns(named))
+
+    def conflicts(self, c: CandidateForce, effects: EffectSet, r2: float = SHARED_R2) -> bool:
+        """Whether ``c`` shares a direction (:data:`SHARED_R2`) with an added effect of the other kind (a named effect
+        with a generic term or the reverse): such a pair is never in one model, whichever came first."""
+        return any(e.generic != c.generic and self.shared_r2(c, e) >= r2 for e in effects.candidates)
 
 
 def fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, init, effects: EffectSet,

@@ -26,19 +26,24 @@ Procedure (TEST is never used for fitting or choosing):
 
    a. *shortlist*: every candidate of the library (default
       :func:`l1b2.closeloop.candidates.full_library`; families already added
-      excluded, and candidates that could reproduce an added force,
-      :func:`~l1b2.closeloop.acceptance.collinear`) scored exactly against the fixed current model
+      excluded, candidates that could reproduce an added force,
+      :func:`~l1b2.closeloop.acceptance.collinear`, and a generic term sharing a direction with an added named
+      effect or the reverse, :meth:`~l1b2.closeloop.acceptance.Directions.conflicts`) scored exactly against the
+      fixed current model
       (:mod:`l1b2.closeloop.selection`: linearised held-out gain over runs,
       run-level Wilcoxon p-value, AIC); the best of each family passing
       ``min_gain``, ``alpha`` / number of families and an AIC improvement,
       the best ``shortlist`` of them (when none passes and ``screen_alpha``
-      is set: the best one at that uncorrected level);
+      is set: the best one at that uncorrected level), and for a shortlisted generic term the named family that
+      explains most of its force (:func:`~l1b2.closeloop.selection.named_alternatives`);
    b. *acceptance* (:mod:`l1b2.closeloop.acceptance`): current model and
       current model + candidate re-identified on ``refit_folds`` - 1 run folds
       (warm start, bounded budget) and predicting the held-out fold in free
       run; accepted when the pooled held-out sum of squares falls by
       ``min_cv_gain`` in most folds; the most parsimonious within
-      ``parsimony`` of the best CV gain is added;
+      ``parsimony`` of the best CV gain is added, a named family instead of a generic term it explains
+      unless the generic one is better by more than one standard error
+      (:func:`~l1b2.closeloop.acceptance.named_reading`);
    c. *joint re-identification* of the model with every accepted effect
       (warm start).
 
@@ -72,16 +77,16 @@ from . import runlevel
 from .candidates import CandidateSource, Context, full_library, training_summary
 from .stages import StageClock
 from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT_FOLDS, DEFAULT_REFIT_NFEV,
-                         EffectSet, RefitCV, RefitSettings, Validated, accepts, added_columns, chain_cv_errors,
-                         collinear, cv_errors, fold_start_phi, materiality, refit, session_blocks, stratified_folds,
-                         time_dependent, validated)
+                         Directions, EffectSet, RefitCV, RefitSettings, Validated, accepts, added_columns,
+                         chain_cv_errors, collinear, cv_errors, fold_start_phi, materiality, named_reading, refit,
+                         session_blocks, stratified_folds, time_dependent, validated)
 from .baselines import choose_baseline, identify_families, retag_structural
 from .evidence import channels_considered, order_traced
 from .guard import checked_fit
 from .intervals import added_parameters, reported_uncertainty, train_levels
 from .result import CloseLoopResult, ResidualAnalysis
 from .selection import (DEFAULT_ALPHA, DEFAULT_PARSIMONY, SHORTLIST_MIN_GAIN, Score, best_per_family, design,
-                        score_candidates, shortlist, significance_level)
+                        named_alternatives, nuisance_forces, score_candidates, shortlist, significance_level)
 
 
 def _quiet(msg: str) -> None:
@@ -168,8 +173,8 @@ class CloseLoop(EstimatorSettings):
         (:func:`l1b2.closeloop.baselines.choose_baseline`; both figures in ``diagnosis.baseline_choice``;
         a pure-slip fit that diverges is recorded there and the loop starts from Eq. 29). With the
         pure-slip family no candidate counts as relaxing Eq. 29 (a load x voltage term is a missing
-        effect). Why ``"best"`` is not yet the default: ``docs/decisions/0026-best-baseline-by-default.md``
-        and ``0032-run-level-effects-in-predictor-fmu.md``.
+        effect). Why ``"best"`` is not yet the default: ``docs/decisions/0026-best-baseline-by-default.md``,
+        ``0032-run-level-effects-in-predictor-fmu.md`` and ``0033-named-before-collinear-generic.md``.
 
     Attributes
     ----------
@@ -332,8 +337,9 @@ class CloseLoop(EstimatorSettings):
             v_cur = cur.predict_free_run(dtr)
             r = res.drive_residual(dtr, v_cur)
             added = added_columns(it.effects, dtr, mask) if it.effects.candidates else None
+            geo = Directions(dtr, mask, nuisance_forces(cur.params_, dtr, v_cur))   # named vs generic, issue 28
             cands = [c for c in pool if c.family not in it.effects.families
-                     and not collinear(c, it.effects, dtr, mask, added=added)]
+                     and not collinear(c, it.effects, dtr, mask, added=added) and not geo.conflicts(c, it.effects)]
             say(f"round {n_rnd}: scoring {len(cands)} candidate effects (linearised)")
             scores = score_candidates(cands, r, dtr, mask, cur.params_, m_s, v_pred=v_cur, k=self.k_folds,
                                       seed=self.seed, time_folds=screen_blocks)
@@ -348,9 +354,12 @@ class CloseLoop(EstimatorSettings):
                 say(f"round {n_rnd}: run-level deviations and the signals that explain them")
                 rl = runlevel.analyse(dtr, cur, mask, it.channels, alpha=self.alpha, k=self.k_folds, seed=self.seed)
                 offered = runlevel.offer(runlevel.candidates(rl, ctx), short, lambda c: (
-                    c.family not in it.effects.families and not collinear(c, it.effects, dtr, mask, added=added)))
+                    c.family not in it.effects.families and not collinear(c, it.effects, dtr, mask, added=added)
+                    and not geo.conflicts(c, it.effects)))
                 short = short + score_candidates(offered, r, dtr, mask, cur.params_, m_s, v_pred=v_cur,
                                                  k=self.k_folds, seed=self.seed, time_folds=screen_blocks)
+            short = short + named_alternatives(short, scores, lambda n, g: geo.share(n, g.candidate, g.phi),
+                                               min_gain=self.min_gain)
             if rnd == 1:
                 it.first_scores, it.level, it.run_level = scores, level, rl
             if not short:
@@ -364,7 +373,8 @@ class CloseLoop(EstimatorSettings):
                                                min_drop=materiality(t.candidate, self.min_cv_drop))]
             if not ok:
                 break
-            pick = prefer(ok, self.parsimony, rl)
+            pick = named_reading(prefer(ok, self.parsimony, rl), ok,
+                                 lambda n, g: geo.share(n.candidate, g.candidate, g.phi))
             if rnd == 1:
                 it.chosen = next(s for s in short if s.candidate is pick.candidate)
                 it.significant = [s for s in short if any(t.candidate is s.candidate for t in ok)]

@@ -264,6 +264,31 @@ def shortlist(scores: list[Score], *, level: float, min_gain: float, size: int) 
     return ok[:size]
 
 
+def named_alternatives(short: list[Score], scores: list[Score], share, *, min_gain: float,
+                       min_share: float | None = None) -> list[Score]:
+    """Named families to cross-validate beside the shortlist's generic terms that they may be the physics of.
+
+    For each generic candidate of ``short``, the best-gain named family of ``scores`` (best of its family, not in
+    ``short``, linearised gain at least ``min_gain``) whose span explains at least ``min_share`` of the generic
+    term's linearised force (``share(named_candidate, generic_score)``;
+    default :data:`l1b2.closeloop.acceptance.NAMED_SHARE`); each at most once. The acceptance then compares
+    them on the same folds (:func:`l1b2.closeloop.acceptance.named_reading`).
+    """
+    from .acceptance import NAMED_SHARE
+    min_share = NAMED_SHARE if min_share is None else min_share
+    taken = {s.candidate.family for s in short}
+    named = [s for s in best_per_family(scores) if not s.candidate.generic and s.candidate.family not in taken
+             and s.cv_gain >= min_gain]
+    out = []
+    for g in (s for s in short if s.candidate.generic):
+        for s in named:     # by decreasing gain
+            if s.candidate.family not in taken and share(s.candidate, g) >= min_share:
+                out.append(s)
+                taken.add(s.candidate.family)
+                break
+    return out
+
+
 def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5, seed=0,
                      time_folds=None) -> list[Score]:
     """Cross-validated gain, run-level p-value and AIC/BIC change of every candidate.
