@@ -1,7 +1,7 @@
-"""The identification's compiled Jacobian loops and the blocked R factor.
+"""The identification's compiled Jacobian loops, the blocked R factor and the close loop's signal cache.
 
-Each is a faster form of a computation that stays in the package (the numpy forms, one Householder QR): the
-reference of every test here.
+Each is a faster form of a computation that stays in the package (the numpy forms, one Householder QR, the
+uncached signals): the reference of every test here.
 """
 
 import os
@@ -10,6 +10,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
 import pytest
+from l1b2.closeloop.candidates import Context, signals
 from l1b2.ident import kernels
 from l1b2.ident.estimator import evaluation_mask
 from l1b2.ident.noise import NoiseModel
@@ -103,3 +104,30 @@ def test_blocked_r_factor_is_an_r_of_the_same_matrix(n, p, block):
     assert R.shape == (p, p) and np.allclose(np.tril(R, -1), 0.0)
     np.testing.assert_allclose(np.abs(R), np.abs(R0), rtol=1e-10, atol=1e-12 * np.abs(R0).max())
     np.testing.assert_allclose(R.T @ R, A.T @ A, rtol=1e-10, atol=1e-12 * np.abs(A.T @ A).max())
+
+
+def test_signals_are_computed_once_per_frame_and_equal_the_uncached_ones(problem):
+    # reference: the same signals computed on a fresh context (nothing cached) and a counter of free runs
+    _, _, df = problem
+    calls = []
+
+    def free_run(frame):
+        calls.append(1)
+        return np.linspace(0.0, 1.0, len(frame)) * frame["direction"].to_numpy(float)
+
+    def ctx():
+        return Context(baseline_free_run=free_run, m_s=M_S, time_range=(0.0, 1.0), position_range=(-0.02, 0.02))
+    c = ctx()
+    first = signals(df, c, {"v_base", "a_base", "s"})
+    again = signals(df, c, {"a_base", "V0"})
+    assert len(calls) == 1                                   # one free run for both calls on the same frame
+    fresh = signals(df, ctx(), {"v_base", "a_base"})
+    for k in ("v_base", "a_base", "t", "s", "V0", "load", "d"):
+        assert np.array_equal(first[k], fresh[k])
+    assert again["a_base"] is first["a_base"] and not again["a_base"].flags.writeable
+    other = df.copy()
+    signals(other, c, {"v_base"})
+    assert len(calls) == 3                                   # a new frame (another object) is computed anew
+    import pickle
+    assert pickle.loads(pickle.dumps(Context(baseline_free_run=np.sin, m_s=M_S, time_range=(0.0, 1.0),
+                                             position_range=(0.0, 1.0)))).signal_cache == {}
