@@ -6,7 +6,19 @@ injection seed 0, the paper's 72-run plan; TRAIN cut to whole runs totalling at 
 as ``bench/bench_closeloop.py --train-samples N``) and cached in ``--cache``; the default compares
 1 kHz / 20,000 TRAIN samples with 5 kHz / 100,000 (a fast DAQ: ``l1b2 rig --sample-rate 5000``).
 
-Former code (the state before decision 0028, patched in for the "former" column):
+Former code (the state before decision 0035, patched in for the ``former`` column):
+
+* the free run's forcing ``h d dF/dtheta`` and the whitening of the Jacobian by their numpy forms
+  (``ForceCore.compiled_dF = False``, ``NoiseModel.compiled = False``) instead of the compiled loops of
+  :mod:`l1b2.ident.kernels` (the same numbers to the last bit);
+* the compressed trust-region problem's R factor by one Householder QR (``CompressedObjective.block_rows = 0``)
+  instead of blocks of rows (:func:`l1b2.ident.tallqr.r_factor`);
+* the candidates' signals computed anew for every candidate (:func:`former_signals`) instead of once per
+  frame (``Context.signal_cache``);
+* the report's figures laid out by matplotlib's constrained layout instead of fixed margins
+  (:func:`l1b2.data.plots.fixed_margins`).
+
+``d0027`` (not run by default): the former code and, besides, the state before decision 0028:
 
 * every local ``least_squares`` of the identification on the full residual vector
   (``LocalSolver.compressed = False``) instead of its (p+1)-row QR compression;
@@ -26,7 +38,7 @@ after, the log-likelihoods of the baseline and final models, and whether the dia
 ``--variants current`` (or ``former``) runs one column only.
 
 Usage: python bench/bench_closeloop_scale.py [--sizes 1000:20000,5000:100000] [--part scoring|whole]
-       [--variants former,current] [--cache DIR]
+       [--variants former,current[,d0027]] [--cache DIR]
 """
 import argparse
 import contextlib
@@ -44,6 +56,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_closeloop import _cut_train  # noqa: E402
 from l1b2.closeloop import acceptance  # noqa: E402
+from l1b2.closeloop import candidates as candidates_mod  # noqa: E402
 from l1b2.closeloop import loop as closeloop_loop  # noqa: E402
 from l1b2.closeloop import residuals as res  # noqa: E402
 from l1b2.closeloop import selection as sel  # noqa: E402
@@ -51,7 +64,11 @@ from l1b2.closeloop.candidates import full_library  # noqa: E402
 from l1b2.closeloop.loop import candidate_context  # noqa: E402
 from l1b2.data import measurements as dataio  # noqa: E402
 from l1b2.ident.estimator import PredictorIdentifier  # noqa: E402
-from l1b2.ident.search import LocalSolver  # noqa: E402
+from l1b2.data import plots  # noqa: E402
+from l1b2.ident.noise import NoiseModel  # noqa: E402
+from l1b2.ident.problem import ForceCore  # noqa: E402
+from l1b2.ident.search import CompressedObjective, LocalSolver  # noqa: E402
+from l1b2.predictor import effects as fx  # noqa: E402
 from l1b2.physics.params import SYSTEM_MODELS_DIR, load_motor  # noqa: E402
 from l1b2.rig.experiment import RigPlan, run_experiment, write_experiment  # noqa: E402
 from l1b2.workflows import run_close_loop  # noqa: E402
@@ -59,16 +76,44 @@ from l1b2.workflows import run_close_loop  # noqa: E402
 
 @contextlib.contextmanager
 def variant(name):
-    """The former code patched in (``"former"``, see the module docstring) or the package's (``"current"``)."""
-    saved = (LocalSolver.compressed, closeloop_loop.coarse_to_fine, acceptance.fold_fit_data)
-    if name == "former":
+    """The former code patched in (``"former"`` or ``"d0027"``, see the module docstring) or the package's
+    (``"current"``)."""
+    saved = (LocalSolver.compressed, closeloop_loop.coarse_to_fine, acceptance.fold_fit_data,
+             CompressedObjective.block_rows, ForceCore.compiled_dF, NoiseModel.compiled, candidates_mod.signals,
+             plots.fixed_margins)
+    if name in ("former", "d0027"):
+        CompressedObjective.block_rows, ForceCore.compiled_dF, NoiseModel.compiled = 0, False, False
+        candidates_mod.signals = former_signals
+        plots.fixed_margins = lambda fig, **kw: fig.set_layout_engine("constrained") or fig
+    if name == "d0027":
         LocalSolver.compressed = False
         closeloop_loop.coarse_to_fine = lambda est, data, m_s=None, mask=None: _full_fit(est, data, m_s, mask)
         acceptance.fold_fit_data = lambda df, mask: (df, mask)
     try:
         yield
     finally:
-        LocalSolver.compressed, closeloop_loop.coarse_to_fine, acceptance.fold_fit_data = saved
+        (LocalSolver.compressed, closeloop_loop.coarse_to_fine, acceptance.fold_fit_data,
+         CompressedObjective.block_rows, ForceCore.compiled_dF, NoiseModel.compiled, candidates_mod.signals,
+         plots.fixed_margins) = saved
+
+
+def former_signals(df, ctx, wanted) -> dict:
+    """The candidates' signals as before decision 0035: computed anew at every call (the baseline's free run too)."""
+    x = {"t": df[dataio.TIME].to_numpy(float), "s": df[dataio.POSITION].to_numpy(float),
+         "V0": df[dataio.VOLTAGE].to_numpy(float), "load": df[dataio.LOAD].to_numpy(float),
+         "d": df[dataio.DIRECTION].to_numpy(float)}
+    if "T" in wanted:
+        x["T"] = df[dataio.TEMPERATURE].to_numpy(float)
+    for key in wanted:
+        if key.startswith("col:"):
+            x[key] = df[key[4:]].to_numpy(float)
+        elif key.startswith("run:"):
+            x[key] = df.groupby(dataio.RUN, sort=False)[key[4:]].transform("mean").to_numpy(float)
+    if {"v_base", "a_base"} & set(wanted):
+        x["v_base"] = np.asarray(ctx.baseline_free_run(df), float)
+        starts = [sl.start for _, sl in dataio.run_slices(df[dataio.RUN])]
+        x["a_base"] = fx.time_derivative(x["v_base"], x["t"], sorted(starts))
+    return x
 
 
 def _full_fit(est, data, m_s, mask):

@@ -100,29 +100,67 @@ class Context:
     #: logged columns that are measured responses of the motor (listed, never candidates; the user's setting
     #: ``CloseLoop(response_columns=...)``, default :data:`l1b2.predictor.effects.channels.RESPONSE_COLUMNS`)
     response_columns: tuple = fx.channels.RESPONSE_COLUMNS
+    #: :func:`signals` of the last few frames (by identity; their arrays read-only), not pickled with the context
+    signal_cache: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def __getstate__(self):
+        return {**self.__dict__, "signal_cache": {}}
+
+
+#: frames whose signals :func:`signals` keeps (the training frame and the few a round predicts on)
+SIGNAL_FRAMES = 4
 
 
 def signals(df: pd.DataFrame, ctx: Context, wanted) -> dict:
     """The signals of :data:`l1b2.predictor.effects.SIGNALS` in ``wanted``, from a data frame.
 
     ``v_base`` is the baseline's free run on ``df`` and ``a_base`` its time
-    derivative per run (:func:`l1b2.predictor.effects.time_derivative`).
+    derivative per run (:func:`l1b2.predictor.effects.time_derivative`). Every signal is computed once per
+    frame (the same object) and kept in ``ctx.signal_cache`` for the last :data:`SIGNAL_FRAMES` frames, read-only:
+    a round scores a few hundred candidates on the same frame, and ``v_base`` costs a free run.
     """
-    x = {"t": df[dataio.TIME].to_numpy(float), "s": df[dataio.POSITION].to_numpy(float),
-         "V0": df[dataio.VOLTAGE].to_numpy(float), "load": df[dataio.LOAD].to_numpy(float),
-         "d": df[dataio.DIRECTION].to_numpy(float)}
-    if "T" in wanted:
-        x["T"] = df[dataio.TEMPERATURE].to_numpy(float)
-    for key in wanted:   # logged channels (l1b2.predictor.effects.channels): samples, or each run's mean
-        if key.startswith("col:"):
-            x[key] = df[key[4:]].to_numpy(float)
-        elif key.startswith("run:"):
-            x[key] = df.groupby(dataio.RUN, sort=False)[key[4:]].transform("mean").to_numpy(float)
-    if {"v_base", "a_base"} & set(wanted):
-        x["v_base"] = np.asarray(ctx.baseline_free_run(df), float)
-        starts = [sl.start for _, sl in dataio.run_slices(df[dataio.RUN])]
-        x["a_base"] = fx.time_derivative(x["v_base"], x["t"], sorted(starts))
-    return x
+    memo = _frame_memo(df, ctx)
+    keys = ["t", "s", "V0", "load", "d"] + (["T"] if "T" in wanted else [])
+    keys += [k for k in wanted if k.startswith(("col:", "run:"))]
+    keys += ["v_base", "a_base"] if {"v_base", "a_base"} & set(wanted) else []
+    for key in keys:
+        if key not in memo:
+            memo[key] = _signal(df, ctx, key, memo)
+            memo[key].setflags(write=False)
+    return {k: memo[k] for k in keys}
+
+
+_COLUMNS = {"t": dataio.TIME, "s": dataio.POSITION, "V0": dataio.VOLTAGE, "load": dataio.LOAD,
+            "d": dataio.DIRECTION, "T": dataio.TEMPERATURE}
+
+
+def _signal(df: pd.DataFrame, ctx: Context, key: str, memo: dict) -> np.ndarray:
+    """One signal of :func:`signals` (``memo``: the frame's signals so far; ``a_base`` after ``v_base``)."""
+    if key in _COLUMNS:
+        return df[_COLUMNS[key]].to_numpy(float).copy()
+    if key.startswith("col:"):
+        return df[key[4:]].to_numpy(float).copy()
+    if key.startswith("run:"):
+        return df.groupby(dataio.RUN, sort=False)[key[4:]].transform("mean").to_numpy(float)
+    if key == "v_base":
+        return np.array(ctx.baseline_free_run(df), float)
+    starts = [sl.start for _, sl in dataio.run_slices(df[dataio.RUN])]
+    return np.asarray(fx.time_derivative(memo["v_base"], memo["t"], sorted(starts)), float)
+
+
+def _frame_memo(df: pd.DataFrame, ctx: Context) -> dict:
+    """The signals computed so far on the frame ``df`` (a new entry, the oldest dropped, for a new frame; no
+    context: nothing kept)."""
+    if ctx is None:
+        return {}
+    cache = ctx.signal_cache
+    hit = cache.get(id(df))
+    if hit is not None and hit[0] is df:
+        return hit[1]
+    while cache and len(cache) >= SIGNAL_FRAMES:
+        cache.pop(next(iter(cache)))
+    cache[id(df)] = (df, {})
+    return cache[id(df)][1]
 
 
 def candidate(ctx: Context, h: fx.Hypothesis) -> CandidateForce:

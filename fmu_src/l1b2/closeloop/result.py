@@ -421,7 +421,8 @@ def _fig_residual_vs_regressors(plt, dtr: pd.DataFrame, a: ResidualAnalysis):
     names = [n for n in res.REGRESSORS if n in vals]
     ncol = 4
     nrow = math.ceil(len(names) / ncol)
-    fig, axes = plt.subplots(nrow, ncol, figsize=(3.4 * ncol, 2.8 * nrow), squeeze=False, layout="constrained")
+    fig, axes = plt.subplots(nrow, ncol, figsize=(3.4 * ncol, 2.8 * nrow), squeeze=False)
+    plots.fixed_margins(fig, top=0.45, wspace=0.35, hspace=0.45)
     rows = np.flatnonzero(a.mask)
     rows = rows[plots.display_rows(len(rows))]  # drawing only
     for ax, n in zip(axes.flat, names):
@@ -437,7 +438,8 @@ def _fig_residual_vs_regressors(plt, dtr: pd.DataFrame, a: ResidualAnalysis):
 
 
 def _fig_spectrum_and_whiteness(plt, a: ResidualAnalysis):
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.6), layout="constrained")
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.6))
+    plots.fixed_margins(fig, left=0.8, top=0.35, wspace=0.25)
     freq, power, whiteness = a.frequency, a.power, a.whiteness
     if len(freq):
         a1.semilogy(freq[1:] ** -1 * 1e3, power[1:])
@@ -468,7 +470,8 @@ def _fig_chosen(plt, dtr: pd.DataFrame, mask: np.ndarray, chosen: Score):
     name = c.regressor if c.regressor in vals else "position"
     k, label = _regressor_axis(name)
     x = vals[name] * k
-    fig, ax = plt.subplots(figsize=(6, 4), layout="constrained")
+    fig, ax = plt.subplots(figsize=(6, 4))
+    plots.fixed_margins(fig, top=0.35)
     rows = np.flatnonzero(mask)
     rows = rows[plots.display_rows(len(rows))]  # drawing only
     ax.plot(x[rows], F[rows], "o", ms=3, alpha=0.5)
@@ -483,7 +486,8 @@ def _fig_before_after(plt, dte: pd.DataFrame, v_te: np.ndarray, v_te_ext: np.nda
                       speed_derived: bool = False):
     runs = [r for r, _ in dataio.run_slices(dte[dataio.RUN])]
     pick = runs[:: max(1, len(runs) // 4)][:4]
-    fig, axes = plt.subplots(len(pick), 1, figsize=(7, 2.6 * len(pick)), squeeze=False, layout="constrained")
+    fig, axes = plt.subplots(len(pick), 1, figsize=(7, 2.6 * len(pick)), squeeze=False)
+    plots.fixed_margins(fig, top=0.3, hspace=0.45)
     what = "derived from position (TEST)" if speed_derived else "measured (TEST)"
     for ax, (run, sl) in zip(axes[:, 0], [(r, s) for r, s in dataio.run_slices(dte[dataio.RUN]) if r in pick]):
         g = dte.iloc[sl]

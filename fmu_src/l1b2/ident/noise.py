@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .kernels import whitened
+
 __all__ = ["NoiseModel"]
 
 
@@ -52,6 +54,9 @@ class NoiseModel:
     gg : ndarray
         ``g.g`` per run.
     """
+
+    #: whether :meth:`weighted` whitens a matrix by the compiled loop (:func:`l1b2.ident.kernels.whitened`)
+    compiled = True
 
     def __init__(self, run_sel, n_runs, mode):
         self.run_sel = run_sel
@@ -88,6 +93,10 @@ class NoiseModel:
 
     def weighted(self, x):
         """Whitened and scaled: ``R^(-1/2) (I + g g^T)^(-1/2) x`` (residual rows)."""
+        if x.ndim == 2 and self.g is not None and self.compiled:   # a matrix: the compiled loop if there is one
+            y = whitened(x, self.run_sel, self.g, self.cg, self._sqrtR, self.n_runs)
+            if y is not None:
+                return y
         y = self.W(x)
         if y.ndim == 1:
             return y / self._sqrtR

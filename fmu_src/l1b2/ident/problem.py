@@ -81,6 +81,7 @@ from ..predictor.simulate import (
     packed_recursion,
 )
 from ..units import G_M_S2
+from .kernels import drive_derivative
 
 __all__ = [
     "RECOMMENDED_FIXED", "run_label", "SampleData", "ForceCore", "LikelihoodProblem", "clip_theta",
@@ -318,6 +319,17 @@ class ForceCore:
             out[:, self.p_theta :] = self.E if rows is None else self.E[rows]
         return out if full else out[:, cols]
 
+    #: whether :meth:`weighted_dF` may use the compiled loop of this class's :meth:`dF` (Eq. 29's force)
+    compiled_dF = True
+
+    def weighted_dF(self, theta, vp, sg, Ap, P, cols, w):
+        """``w[:, None] * dF(theta, vp, sg, Ap, P, cols)`` on all rows (:func:`l1b2.ident.kernels.drive_derivative`)."""
+        U = drive_derivative(self, theta, vp, sg, Ap, P, cols, w) if self.compiled_dF else None
+        if U is None:
+            U = self.dF(theta, vp, sg, Ap, P, cols)
+            U *= w[:, None]
+        return U
+
 
 class LikelihoodProblem:
     """Residuals and analytic Jacobian of one criterion on one data set.
@@ -484,8 +496,7 @@ class LikelihoodProblem:
         core = self.core
         flags = c["flags"]
         if self.criterion == "free_run":
-            U = core.dF(theta, c["vp"], c["sg"], c["Ap"], c["P"], cols)
-            U *= core.hd[:, None]
+            U = core.weighted_dF(theta, c["vp"], c["sg"], c["Ap"], c["P"], cols, core.hd)
             a = c["a"]
             if flags.any():
                 a = a.copy()

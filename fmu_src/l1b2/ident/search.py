@@ -36,6 +36,7 @@ from scipy.optimize import least_squares
 
 from ..errors import IdentificationError
 from .problem import strictly_inside
+from .tallqr import BLOCK_ROWS, r_factor
 
 __all__ = [
     "HAS_CALLBACK", "StatStop", "sobol_box", "CompressedObjective", "LocalSolver", "start_points", "SearchOutcome", "multi_start",
@@ -116,8 +117,11 @@ class CompressedObjective:
     the SVD inside each step is of a (p+1) x p matrix instead of n x p.
     Each point costs one Jacobian (also at a rejected trial point); the last
     point's factors are kept for :meth:`jac`, which ``least_squares`` calls at
-    the point it just evaluated.
+    the point it just evaluated. The R factor is computed by blocks of ``block_rows`` rows
+    (:func:`l1b2.ident.tallqr.r_factor`: the same R up to the signs of its rows; 0: one Householder QR).
     """
+
+    block_rows = BLOCK_ROWS
 
     def __init__(self, objective):
         self.objective = objective
@@ -128,7 +132,7 @@ class CompressedObjective:
         if self._z is None or not np.array_equal(z, self._z):
             obj = self.objective
             A = np.column_stack([obj.jac(z), obj.fun(z)])
-            self._R, self._z = np.linalg.qr(A, mode="r"), np.array(z, copy=True)
+            self._R, self._z = r_factor(A, self.block_rows), np.array(z, copy=True)
         return self._R
 
     def fun(self, z):

@@ -42,6 +42,8 @@ RECOMMENDED_FIXED_PURE_SLIP = ("k0", "mu", "mu_sd")
 class SlipForceCore(ForceCore):
     """Force terms of the pure-slip family: :meth:`terms` gives X without the slip force, :meth:`slip` the rest."""
 
+    compiled_dF = False     # the compiled loop is Eq. 29's force
+
     def slip(self, theta, rows=None):
         """``mu P`` [N], ``A'`` [-], ``B'`` [N/V], ``c_k`` [s/m] and ``P`` [N] at ``theta`` (on ``rows``)."""
         n1 = self.n1
