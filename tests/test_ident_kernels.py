@@ -14,7 +14,7 @@ from l1b2.closeloop.candidates import Context, signals
 from l1b2.ident import kernels
 from l1b2.ident.estimator import evaluation_mask
 from l1b2.ident.noise import NoiseModel
-from l1b2.ident.problem import ForceCore, LikelihoodProblem, SampleData, ScaledObjective, param_scale
+from l1b2.ident.problem import LikelihoodProblem, SampleData, ScaledObjective, param_scale
 from l1b2.ident.tallqr import r_factor
 from l1b2.physics.jit import jit_enabled
 from l1b2.predictor.model import PredictorParams, example_params
