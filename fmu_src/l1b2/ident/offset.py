@@ -194,6 +194,15 @@ def _point_fit(obj, theta, omega, n1, kappa, p_theta, scale_full, c_hi, max_iter
 PROFILE = {"max_iter": 12, "stat_tol": 0.05}
 
 
+def _profile_frame(obj, theta_start, n1, kappa):
+    """The gauged start, the full parameter scale and the upper bound of c_r shared by both profiles."""
+    th_g = gauge(theta_start, n1, kappa)
+    scale_full = np.ones(th_g.size)
+    scale_full[obj.vidx] = obj.sv_scale
+    c_hi = obj.zhi[0] * obj.sv_scale[0] if obj.vidx[0] == 0 else np.inf
+    return th_g, scale_full, c_hi
+
+
 def profile(obj, theta_start, n1, kappa, p_theta, grid=OMEGA_GRID, settings=None, log=None):
     """The profile log-likelihood over omega (module docstring, step 2): ``(records, best)``.
 
@@ -203,10 +212,7 @@ def profile(obj, theta_start, n1, kappa, p_theta, grid=OMEGA_GRID, settings=None
     vector), ``nfev``, ``njev``; points whose c_r would leave its bounds have ``loglik = -inf``.
     """
     cfg = {**PROFILE, **(settings or {})}
-    th_g = gauge(theta_start, n1, kappa)
-    scale_full = np.ones(th_g.size)
-    scale_full[obj.vidx] = obj.sv_scale
-    c_hi = obj.zhi[0] * obj.sv_scale[0] if obj.vidx[0] == 0 else np.inf
+    th_g, scale_full, c_hi = _profile_frame(obj, theta_start, n1, kappa)
     saved = dict(vars(obj.noise))
     records = []
     for branch in (sorted(w for w in grid if w < 0), sorted((w for w in grid if w > 0), reverse=True)):
@@ -309,10 +315,7 @@ def bracketed_profile(obj, theta_start, n1, kappa, p_theta, settings=None, log=N
     (the first of each branch from the gauged start).
     """
     cfg = {**BRACKET, **(settings or {})}
-    th_g = gauge(theta_start, n1, kappa)
-    scale_full = np.ones(th_g.size)
-    scale_full[obj.vidx] = obj.sv_scale
-    c_hi = obj.zhi[0] * obj.sv_scale[0] if obj.vidx[0] == 0 else np.inf
+    th_g, scale_full, c_hi = _profile_frame(obj, theta_start, n1, kappa)
     saved = dict(vars(obj.noise))
     records = []
 
