@@ -46,7 +46,7 @@ COSTLY_FIRST = (
     "test_closeloop.py",  # reference-world close loops, their exports
     "test_readme_examples.py",  # the pages' commands: rig, identify, close loop, export
     "test_extended_predictor_fmu.py",  # native FMUs compiled per effect kind, FMI 2.0 and 3.0
-    "test_closeloop_realistic.py",  # two realistic-world control close loops
+    "test_closeloop_realistic.py",  # two realistic-world control close loops, one injected case (ci_slow)
     "test_export.py",
     "test_fmus.py",
     "test_identify.py",
