@@ -36,7 +36,7 @@ import pandas as pd
 from ..data import measurements as dataio
 from ..predictor import model as pr
 from . import residuals as res
-from .acceptance import time_dependent
+from .acceptance import NAMED_SHARE, time_dependent
 from .candidates import CandidateForce
 
 DEFAULT_MIN_GAIN = 0.5
@@ -274,7 +274,6 @@ def named_alternatives(short: list[Score], scores: list[Score], share, *, min_ga
     default :data:`l1b2.closeloop.acceptance.NAMED_SHARE`); each at most once. The acceptance then compares
     them on the same folds (:func:`l1b2.closeloop.acceptance.named_reading`).
     """
-    from .acceptance import NAMED_SHARE
     min_share = NAMED_SHARE if min_share is None else min_share
     taken = {s.candidate.family for s in short}
     named = [s for s in best_per_family(scores) if not s.candidate.generic and s.candidate.family not in taken
