@@ -8,12 +8,11 @@ import numpy as np
 import pandas as pd
 import pytest
 from l1b2.ident.coarse import coarse_to_fine, decimate, decimation, nfev_of
-from l1b2.ident.estimator import PredictorIdentifier, evaluation_mask
-from l1b2.ident.noise import NoiseModel
-from l1b2.ident.problem import LikelihoodProblem, SampleData, ScaledObjective, param_scale
+from l1b2.ident.estimator import PredictorIdentifier
 from l1b2.ident.search import CompressedObjective, LocalSolver
-from l1b2.predictor.model import PredictorParams, example_params
+from l1b2.predictor.model import example_params
 from l1b2.predictor.simulate import design_grid, simulate_dataset
+from objectives import scaled_objective
 
 M_S = 0.1
 SMALL = design_grid(voltages=(220.0, 324.0), loads=(-0.07, 0.0, 0.07))
@@ -25,16 +24,10 @@ def world():
     return prm, simulate_dataset(prm, SMALL, M_S, noise_std=1e-3, seed=11)
 
 
-def _objective(df, theta, order=3):
-    data = SampleData(df, evaluation_mask(df))
-    prob = LikelihoodProblem(data, order, 0.5, True, "free_run", 0.0, 0.02, M_S)
-    lo, hi = PredictorParams.bounds(order)
-    noise = NoiseModel(prob.run_sel, data.layout.R, "common")
+def _objective(df, theta):
     varied = np.ones(theta.size, bool)
     varied[[1, 3, 4]] = False     # sigma, mu, k0 pinned (one per structural direction): J has full rank
-    obj = ScaledObjective(prob, noise, theta, varied, param_scale(theta, order), lo, hi, True)
-    obj.update_noise(theta)
-    return obj
+    return scaled_objective(df, theta, M_S, varied=varied)
 
 
 def test_compressed_problem_has_the_norm_gradient_and_gauss_newton_matrix_of_the_full_one(world):

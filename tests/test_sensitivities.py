@@ -8,16 +8,16 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import numpy as np
 import pandas as pd
 import pytest
-from l1b2.ident.estimator import PredictorIdentifier, evaluation_mask
-from l1b2.ident.noise import NoiseModel
-from l1b2.ident.problem import LikelihoodProblem, SampleData, ScaledObjective, param_scale
+from l1b2.ident.estimator import PredictorIdentifier
+from l1b2.ident.problem import LikelihoodProblem, SampleData
 from l1b2.ident.reduced import reduced_linear_fit, reduced_of_theta
 from l1b2.ident.varpro import Projection, linear_positions
 from l1b2.predictor import kernels
-from l1b2.predictor.model import G_of_k0, PredictorParams, drive_factor, example_params
+from l1b2.predictor.model import G_of_k0, drive_factor, example_params
 from l1b2.predictor.simulate import RunLayout, design_grid, packed_linear_recursion, packed_recursion, \
     simulate_dataset
 from l1b2.units import G_M_S2
+from objectives import scaled_objective
 
 M_S = 0.1
 SMALL = design_grid(voltages=(220.0, 324.0), loads=(-0.07, 0.0, 0.07))
@@ -113,21 +113,10 @@ def moving_world():
     return prm, df
 
 
-def _objective(df, theta, order=3, start_noise=True, criterion="free_run"):
-    data = SampleData(df, evaluation_mask(df))
-    prob = LikelihoodProblem(data, order, 0.5, True, criterion, 0.0, 0.02, M_S)
-    lo, hi = PredictorParams.bounds(order)
-    noise = NoiseModel(prob.run_sel, data.layout.R, "common")
-    obj = ScaledObjective(prob, noise, theta, np.ones(theta.size, bool), param_scale(theta, order), lo, hi,
-                          start_noise)
-    obj.update_noise(theta)
-    return obj
-
-
 def test_start_gain_sensitivity_matches_central_differences(noisy_world):
     prm, df = noisy_world
     theta = prm.to_vector() * (1 + 0.05 * np.sin(np.arange(prm.to_vector().size)))
-    obj = _objective(df, theta)
+    obj = scaled_objective(df, theta, M_S)
     prob = obj.problem
     cols = np.array([0, 1, 5, 6, 7, 8])  # c_r, sigma, alpha_0..3: the parameters of D(s)
     g, G = prob.start_gain_sensitivity(theta, cols)
@@ -151,7 +140,7 @@ def test_criterion_gradient_is_exact_including_the_start_speed_term(moving_world
     # with the start-speed gain g re-evaluated at every point (R fixed)
     prm, df = moving_world
     theta = prm.to_vector() * (1 + 0.03 * np.cos(np.arange(prm.to_vector().size)))
-    obj = _objective(df, theta)
+    obj = scaled_objective(df, theta, M_S)
     assert not np.any(obj.problem.evaluate(theta)["flags"])
     proj = Projection(obj, linear_positions(obj, obj.problem.core.p_theta, 4))
     z = obj.z_of(theta)
@@ -166,7 +155,7 @@ def test_criterion_gradient_is_exact_including_the_start_speed_term(moving_world
         fd[j] = 0.25 * (proj.residual(zp)[1] - proj.residual(zm)[1]) / step
     np.testing.assert_allclose(grad, fd, rtol=2e-4, atol=2e-4 * np.max(np.abs(fd)))
     # and the start-speed term matters: without it the gradient is a different vector
-    obj0 = _objective(df, theta, start_noise=False)
+    obj0 = scaled_objective(df, theta, M_S, start_noise=False)
     r0 = obj0.fun(obj0.z_of(theta))
     assert np.max(np.abs(obj0.jac(obj0.z_of(theta)).T @ r0 - grad)) > 1e-3 * np.max(np.abs(grad))
 
