@@ -99,15 +99,21 @@ def test_response_jacobian_matches_the_chain_rule_through_the_force_factor(drive
     assert np.abs(got - want).max(axis=0).max() < 2e-3 * scale.max(), np.abs(got - want).max(axis=0) / scale
 
 
+def _fitted(truth):
+    """A one-start pure-slip fit (order 2, recommended pins) on the family's own world with response ``truth``."""
+    _, df = _slip_world(truth)
+    est = PredictorIdentifier(order=2, fixed="recommended", n_starts=1, seed=0, model="pure_slip").fit(
+        df, slider_mass_kg=M_S)
+    return est
+
+
 @pytest.mark.slow
 def test_pure_slip_recovers_its_frequency_response():
     # reference: the pure-slip family's own traverses with B2 at 47.8 kHz, zeta 0.0125 over 48.0-49.0 kHz: the
     # joint estimate lies within 4 standard errors of it or within the Gauss-Newton's stopping step (2e-5 f_ref,
     # 0.01 in ln zeta_b; on these nearly exact data the standard errors are smaller), and is not at a bound
     truth = FrequencyResponse(F_REF, 47800.0, 0.0125)
-    _, df = _slip_world(truth)
-    est = PredictorIdentifier(order=2, fixed="recommended", n_starts=1, seed=0, model="pure_slip").fit(
-        df, slider_mass_kg=M_S)
+    est = _fitted(truth)
     rec = est.result_.frequency
     got, se = rec["response"], rec["stderr"]
     print("recovered", got, se)
@@ -121,9 +127,7 @@ def test_a_response_beyond_the_physical_damping_ends_at_its_bound_and_says_so():
     # reference: the same world with zeta_b 0.002 (Q 250, below ZETA_B_RANGE): the estimate stops at the lower
     # bound, the record and the fit report name it, and zeta_b gets no standard error
     truth = FrequencyResponse(F_REF, 47800.0, 0.002)
-    _, df = _slip_world(truth)
-    est = PredictorIdentifier(order=2, fixed="recommended", n_starts=1, seed=0, model="pure_slip").fit(
-        df, slider_mass_kg=M_S)
+    est = _fitted(truth)
     rec = est.result_.frequency
     print("at bound", rec["response"], rec["stderr"], rec["at_bound"])
     assert rec["response"]["zeta_b"] == pytest.approx(ZETA_B_RANGE[0], rel=2e-3)
