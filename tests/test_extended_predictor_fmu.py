@@ -260,6 +260,18 @@ def test_a_run_level_input_the_runs_did_not_hold_constant_is_refused(spread, ref
     assert not (tmp_path / "out" / "fmus").exists() or not any((tmp_path / "out" / "fmus").iterdir())
 
 
+def test_run_spread_is_the_largest_deviation_from_the_runs_mean():
+    # reference: written out per run: run 7 holds 3.0 (spread 0); run 2 has mean 2.0 and deviations -1, +1, 0;
+    # run 5 has mean 10.5 and deviations -0.5, +0.5: the largest |deviation| is 1.0, whatever the run order
+    from l1b2.predictor.effects.channels import run_spread
+    values = np.array([3.0, 3.0, 1.0, 3.0, 2.0, 10.0, 11.0])
+    run = np.array([7, 7, 2, 2, 2, 5, 5])
+    assert run_spread(values, run) == pytest.approx(1.0, abs=1e-15)
+    assert run_spread(values[:2], run[:2]) == 0.0
+    assert run_spread(values[5:], run[5:]) == pytest.approx(0.5, abs=1e-15)
+    assert run_spread(np.array([]), np.array([])) == 0.0
+
+
 def test_exported_run_level_voltage_model_reproduces_the_identifications_prediction(pool, tmp_path, isolated):
     # reference: the identification's own free run of a model with a run-level voltage effect (the re-identified
     # setup's l1b2.predictor.simulate.free_run with the candidate's force, whose run-level voltage is each run's

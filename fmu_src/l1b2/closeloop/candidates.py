@@ -183,7 +183,8 @@ def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
     ``"response"`` for a measured response of the motor (``response_columns``, default
     :data:`l1b2.predictor.effects.channels.RESPONSE_COLUMNS`: listed, no hypothesis);
     ``sd`` 0 for a constant column, which is listed but gets no hypothesis;
-    ``within_run``: it varies inside some run; ``run_spread``: :func:`run_spread`).
+    ``within_run``: it varies inside some run; ``run_spread``:
+    :func:`l1b2.predictor.effects.channels.run_spread`).
     """
     required = (set(dataio.REQUIRED_COLUMNS) | {dataio.SPEED}) - {dataio.TIME}   # speed: the measured output
     responses = set(fx.channels.RESPONSE_COLUMNS if response_columns is None else response_columns)
@@ -198,18 +199,8 @@ def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
         kind = "protocol" if name == dataio.TIME else "response" if name in responses else "logged"
         out.append({"name": str(name), "kind": kind,
                     "mean": float(np.mean(c)), "sd": float(np.std(c)), "within_run": within,
-                    "run_spread": run_spread(c, df[dataio.RUN])})
+                    "run_spread": fx.channels.run_spread(c, df[dataio.RUN])})
     return tuple(out)
-
-
-def run_spread(values, run) -> float:
-    """The largest deviation of a sample's value from its run's mean [the values' unit]: 0 when every run holds it
-    constant (the run-level contract of ``Predictor.fmu``, :func:`l1b2.predictor.effects.channels.fmu_signal`)."""
-    c = np.asarray(values, float)
-    if len(c) == 0:
-        return 0.0
-    means = pd.Series(c).groupby(np.asarray(run), sort=False).transform("mean").to_numpy(float)
-    return float(np.max(np.abs(c - means)))
 
 
 def training_summary(ctx: Context, df_train: pd.DataFrame) -> fx.TrainingSummary:

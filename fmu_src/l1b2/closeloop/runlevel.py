@@ -233,21 +233,20 @@ def run_signals(df: pd.DataFrame, channels) -> list[dict]:
     """The run-level signals of a frame: each candidate channel's run mean (not the responses, not constant ones)
     and the inputs of :data:`~l1b2.predictor.effects.channels.INPUT_SIGNALS`; ``{"channel", "transform", "values",
     "run_spread"}`` with one value per run (in run order) and the largest deviation of a sample's value from its
-    run's (:func:`l1b2.closeloop.candidates.run_spread`: what the export checks)."""
-    from .candidates import run_spread
+    run's (:func:`l1b2.predictor.effects.channels.run_spread`: what the export checks)."""
     out = []
     first = df.groupby(dataio.RUN, sort=False)
     for ch in channels:
         if ch.get("kind") == "response" or ch["name"] not in df.columns:
             continue
         out.append({"channel": ch["name"], "transform": "none", "values": first[ch["name"]].mean().to_numpy(float),
-                    "run_spread": run_spread(df[ch["name"]], df[dataio.RUN])})
+                    "run_spread": fx.channels.run_spread(df[ch["name"]], df[dataio.RUN])})
     d = first[dataio.DIRECTION].first().to_numpy(float)
     for col, tr in fx.channels.INPUT_SIGNALS:
         values = fx.channels.transformed(first[col].mean().to_numpy(float), d, tr)
         samples = fx.channels.transformed(df[col].to_numpy(float), df[dataio.DIRECTION].to_numpy(float), tr)
         out.append({"channel": col, "transform": tr, "values": values,
-                    "run_spread": run_spread(samples, df[dataio.RUN])})
+                    "run_spread": fx.channels.run_spread(samples, df[dataio.RUN])})
     return [s for s in out if np.all(np.isfinite(s["values"])) and np.std(s["values"]) > 0]
 
 

@@ -45,6 +45,7 @@ input: a model reading it is not exported.
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 
 from .base import SIGNALS, V_REF, Effect, EffectSpecError, needs, num, register, signal
 
@@ -96,6 +97,16 @@ def with_input_signals(x, keys) -> dict:
         if key not in out and sig is not None and sig != key and sig in out:
             out[key] = out[sig]
     return out
+
+
+def run_spread(values, run) -> float:
+    """The largest deviation of a sample's value from its run's mean [the values' unit] (``run``: each sample's run
+    id): 0 when every run holds it constant, the run-level contract that :func:`export_problem` checks."""
+    c = np.asarray(values, float)
+    if len(c) == 0:
+        return 0.0
+    means = pd.Series(c).groupby(np.asarray(run), sort=False).transform("mean").to_numpy(float)
+    return float(np.max(np.abs(c - means)))
 
 
 def export_problem(spec) -> str | None:
