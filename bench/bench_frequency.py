@@ -16,10 +16,13 @@ Eq. 29's single-frequency figure of the seed, and any response parameter that en
 error (drive direction positive; both in % of TEST's rms speed, on the samples the nrmse evaluates) per
 drive-frequency level (runs rounded to 250 Hz), V0 and load, and the fitted model's steady speed (s = 0, no
 load) against the coupled physics' (:func:`l1b2.physics.steady.steady_state`, the realistic world's truth)
-over frequency at 220 and 324 V.
+over frequency at 220 and 324 V. With ``--contact`` the pure-slip family's multi-frequency identification
+also runs with the contact law (``fit_frequency_response(contact=True)``, the setting ``frequency="contact"``,
+decision 0038) on the same data in the same process, printed after the existing form's line: its held-out
+nrmse, ratio to the single-frequency figure, CPU time, the estimates and whether the law was kept.
 
 Usage: python bench/bench_frequency.py [--seeds 1,2,3] [--models eq29,pure_slip] [--joint-models pure_slip]
-       [--skip-profile] [--diagnose] [--cache DIR]
+       [--skip-profile] [--diagnose] [--contact] [--cache DIR]
 """
 import argparse
 import dataclasses
@@ -38,7 +41,8 @@ from l1b2.ident.estimator import PredictorIdentifier  # noqa: E402
 from l1b2.ident.frequency import fit_frequency_response, fit_frequency_response_profile  # noqa: E402
 from l1b2.physics.params import SYSTEM_MODELS_DIR, load_motor  # noqa: E402
 from l1b2.physics.steady import steady_state  # noqa: E402
-from l1b2.predictor.frequency import FrequencyResponse  # noqa: E402
+from l1b2.predictor.frequency import FrequencyResponse, contact_angle  # noqa: E402
+from l1b2.predictor.model import steady_state as model_steady_state  # noqa: E402
 from l1b2.rig.experiment import RigPlan, run_experiment, write_experiment  # noqa: E402
 
 FREQS = (48000.0, 48250.0, 48500.0, 48750.0, 49000.0)
@@ -84,7 +88,9 @@ def diagnose(est, te) -> None:
         cells = []
         for f in (47950.0, 48250.0, 48500.0, 48750.0, 49050.0):
             truth = steady_state(mp, 0.0, V0, 0.0, 1, f_Hz=f).v_m_s
-            model = float(est.steady_state(0.0, V0 * (1.0 if resp is None else float(resp.gain(f))), 0.0, 1))
+            a = None if resp is None or not resp.has_contact else contact_angle(V0, f, resp)
+            model = float(model_steady_state(est.params_, 0.0, V0 * (1.0 if resp is None else float(resp.gain(f))),
+                                             0.0, 1, est.m_s_, contact=a))
             cells.append(f"{f / 1e3:.2f} kHz {1e3 * truth:.1f}/{1e3 * model:.1f} ({100 * (model / truth - 1):+.1f} %)")
         print(f"       steady speed physics/model mm/s, {V0:.0f} V: " + "  ".join(cells))
 
@@ -112,6 +118,8 @@ def main() -> None:
                          "give their single-frequency figure only)")
     ap.add_argument("--skip-profile", action="store_true", help="leave out the former (slow) estimation")
     ap.add_argument("--diagnose", action="store_true", help="where the joint fit's held-out error lies (docstring)")
+    ap.add_argument("--contact", action="store_true",
+                    help="pure slip: also the multi-frequency identification with the contact law (docstring)")
     ap.add_argument("--cache", default=str(Path(os.environ.get("TMPDIR", "/tmp")) / "l1b2_bench_frequency"))
     a = ap.parse_args()
     cache = Path(a.cache)
@@ -134,6 +142,17 @@ def main() -> None:
             print(f"{seed:>4} {model:>9} | {e1:8.2f} {c1:6.1f} | {ep:9.2f} {ep / e1:5.2f} {cp:6.1f} | "
                   f"{ej:7.2f} {ej / e1:5.2f} {cj:6.1f} | {ej / eq29_single:5.2f} | "
                   f"{r.get('f_b0_Hz', float('nan')):.0f}, {r.get('zeta_b', float('nan')):.4f}{bound}", flush=True)
+            if a.contact and model == "pure_slip":
+                ec, cc, rec = identify(multi, model, lambda est, tr: fit_frequency_response(est, tr, contact=True),
+                                       show=a.diagnose)
+                r, kept = rec.get("response") or {}, rec.get("contact") or {}
+                bound = f" AT BOUND: {'; '.join(rec['at_bound'])}" if rec.get("at_bound") else ""
+                print(f"{seed:>4} {'+contact':>9} | {e1:8.2f} {c1:6.1f} | {'':>9} {'':>5} {'':>6} | "
+                      f"{ec:7.2f} {ec / e1:5.2f} {cc:6.1f} | {ec / eq29_single:5.2f} | "
+                      f"{r.get('f_b0_Hz', float('nan')):.0f}, {r.get('zeta_b', float('nan')):.4f}; f_l0 "
+                      f"{r.get('f_l0_Hz', float('nan')):.0f} Hz, contact_V {r.get('contact_V', float('nan')):.1f} V; "
+                      f"kept {kept.get('kept')} (loglik B2 {kept.get('b2_loglik', float('nan')):.1f}, contact "
+                      f"{kept.get('contact_loglik') or float('nan'):.1f}){bound}", flush=True)
     print(f"target: joint ratio <= {TARGET_RATIO} on every seed (ratio: to the same family's single-frequency figure; "
           "/eq29: to Eq. 29's single-frequency figure of the seed)")
 

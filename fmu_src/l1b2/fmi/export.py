@@ -75,7 +75,11 @@ def _predictor_dict(predictor: Any) -> dict:
     if not isinstance(predictor, Mapping):
         raise ExportError(f"predictor must be a dict from an identification result (or have .to_dict()), "
                           f"got {type(predictor).__name__}")
-    return json.loads(json.dumps(dict(predictor)))  # JSON-safe copy, as baked into the FMU
+    d = json.loads(json.dumps(dict(predictor)))  # JSON-safe copy, as baked into the FMU
+    if (d.get("frequency") or {}).get("f_l0_Hz") is not None:
+        raise ExportError("Predictor.fmu does not carry the pure-slip family's contact law (frequency f_l0_Hz, "
+                          "contact_V; identified with frequency='contact'): identify with frequency='auto' to export")
+    return d
 
 
 def _sha256(path: Path) -> str:
@@ -344,6 +348,7 @@ def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None)
     if not isinstance(model, ExtendedPredictor):
         raise ExportError(f"export_calibrated needs an l1b2.predictor.effects.ExtendedPredictor, "
                           f"got {type(model).__name__}")
+    _predictor_dict(model.model)     # refuses what the FMU cannot carry (the contact law)
     problems = [(e.label, export_problem(e.spec)) for e in model.effects]
     logged = [label for label, why in problems if why and why.startswith("no input")]
     if logged:

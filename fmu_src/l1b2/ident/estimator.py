@@ -254,8 +254,9 @@ class PredictorIdentifier(EstimatorSettings):
         variable projection (``solver="varpro"``) is Eq. 29's only).
     frequency : the drive-frequency response of the force factor (:mod:`l1b2.ident.frequency`):
         ``"auto"`` (default) estimates it when the data's drive frequency varies
-        between runs and holds it fixed at gain 1 when it does not; ``"off"``;
-        or a :class:`~l1b2.predictor.frequency.FrequencyResponse` held fixed.
+        between runs and holds it fixed at gain 1 when it does not (``"contact"``: the
+        pure-slip family estimates the contact law too); ``"off"``; or a
+        :class:`~l1b2.predictor.frequency.FrequencyResponse` held fixed.
         ``result_.frequency`` records which (fit report, ``identification.json``).
 
     The constructor only stores the settings (scikit-learn convention:
@@ -467,7 +468,8 @@ class PredictorIdentifier(EstimatorSettings):
         """
         try:
             if resolve_frequency(self, data)[2]:   # TRAIN's frequency varies: estimate the response
-                return fit_frequency_response(self, data, slider_mass_kg, mask)
+                return fit_frequency_response(self, data, slider_mass_kg, mask,
+                                              contact=self.frequency == "contact" and self.model == "pure_slip")
             return self._fit(data, slider_mass_kg, mask)
         except NUMERICAL_FAILURES as exc:
             text = " ".join(str(exc).split()) or type(exc).__name__

@@ -25,7 +25,8 @@ kept as :func:`fit_frequency_response_profile`, the benchmark's reference
 (``bench/bench_frequency.py``; measured figures in
 docs/decisions/0024-frequency-response-form-and-joint-estimation.md).
 
-Settings (``PredictorIdentifier(frequency=...)``): ``"auto"`` (default)
+Settings (``PredictorIdentifier(frequency=...)``): ``"auto"`` (default; ``"contact"`` the same plus the
+contact law for the pure-slip family, :func:`fit_frequency_response`)
 estimates the response when TRAIN's runs spread over more than
 :data:`~l1b2.data.coverage.FREQUENCY_REL_SPREAD` of their median frequency
 and holds it fixed at gain 1 otherwise; ``"off"`` never uses it; a
@@ -54,7 +55,8 @@ __all__ = ["FREQUENCY_SETTINGS", "response_setting", "reference_frequency", "fre
            "frequency_report_lines", "fit_frequency_response", "GRID_OFFSETS", "GRID_ZETAS", "ZETA_B_RANGE",
            "bounds_hit"]
 
-FREQUENCY_SETTINGS = ("auto", "off")
+#: "contact": as "auto", and the pure-slip family estimates the contact law as well (decision 0038)
+FREQUENCY_SETTINGS = ("auto", "off", "contact")
 #: resonance offsets of the coarse grid, as shares of f_ref (both sides of the drive)
 GRID_OFFSETS = (-0.03, -0.02, -0.014, -0.008, -0.004, 0.004, 0.008, 0.014, 0.02, 0.03)
 #: dampings of the coarse grid
@@ -124,8 +126,8 @@ def _clone(est, **changes):
     return type(est)(**{**est.get_params(), **changes})
 
 
-#: finite-difference steps of the response coordinates q = (f_b0 / f_ref, ln zeta_b)
-Q_STEPS = (1e-4, 0.02)
+#: finite-difference steps of the response coordinates q = (f_b0 / f_ref, ln zeta_b[, f_l0 / f_ref, ln contact_V])
+Q_STEPS = (1e-4, 0.02, 1e-4, 0.02)
 #: the physical range of the effective B2 damping ratio: Q from 100 down to 5. The interface only adds damping
 #: to the mode (Eq. 24/30: the term 0.5 eta_T sigma omega U_w), so the effective zeta_b is at least the mode's
 #: own, which for a mounted, preloaded stator is of order 0.01 (the project's motors: Q 30 and 40 for B2,
@@ -138,6 +140,15 @@ F_B0_REL_RANGE = (0.8, 1.2)
 #: bounds of q = (f_b0 / f_ref, ln zeta_b)
 Q_LO = np.array([F_B0_REL_RANGE[0], math.log(ZETA_B_RANGE[0])])
 Q_HI = np.array([F_B0_REL_RANGE[1], math.log(ZETA_B_RANGE[1])])
+#: the contact law's L1 resonance: above the drive (the motor is driven between B2 and L1) within +20 %
+F_L0_REL_RANGE = (1.0, 1.2)
+#: the contact law's half-period amplitude contact_V [V]
+CONTACT_V_RANGE = (10.0, 1e4)
+#: bounds of the contact law's coordinates (f_l0 / f_ref, ln contact_V), appended to Q_LO / Q_HI
+QC_LO = np.array([F_L0_REL_RANGE[0], math.log(CONTACT_V_RANGE[0])])
+QC_HI = np.array([F_L0_REL_RANGE[1], math.log(CONTACT_V_RANGE[1])])
+#: the contact stage's start grid: f_l0 / f_ref and contact_V / (TRAIN's median V0)
+CONTACT_GRID = tuple((fl, c) for fl in (1.03, 1.06) for c in (0.9, 1.4, 2.2))
 #: a coordinate of q this close to its bound (relative to the bound's width) is reported as at the bound
 Q_AT_BOUND = 1e-3
 
@@ -146,8 +157,11 @@ def bounds_hit(q) -> list[str]:
     """The response's parameters that end at a bound of :data:`Q_LO`/:data:`Q_HI` ("zeta_b lower bound 0.005", ...)."""
     q = np.asarray(q, float)
     out = []
-    for i, (name, lo, hi, show) in enumerate((("f_b0_Hz", Q_LO[0], Q_HI[0], lambda x: f"{x:g} f_ref"),
-                                              ("zeta_b", Q_LO[1], Q_HI[1], lambda x: f"{math.exp(x):g}"))):
+    names = (("f_b0_Hz", Q_LO[0], Q_HI[0], lambda x: f"{x:g} f_ref"),
+             ("zeta_b", Q_LO[1], Q_HI[1], lambda x: f"{math.exp(x):g}"),
+             ("f_l0_Hz", QC_LO[0], QC_HI[0], lambda x: f"{x:g} f_ref"),
+             ("contact_V", QC_LO[1], QC_HI[1], lambda x: f"{math.exp(x):g}"))
+    for i, (name, lo, hi, show) in enumerate(names[: q.size]):
         tol = Q_AT_BOUND * (hi - lo)
         if q[i] <= lo + tol:
             out.append(f"{name} lower bound {show(lo)}")
@@ -157,8 +171,18 @@ def bounds_hit(q) -> list[str]:
 
 
 def response_of(f_ref: float, q) -> FrequencyResponse:
-    """The response at coordinates ``q = (f_b0 / f_ref, ln zeta_b)``."""
-    return FrequencyResponse(f_ref, float(q[0]) * f_ref, math.exp(float(q[1])))
+    """The response at coordinates ``q = (f_b0 / f_ref, ln zeta_b)`` or, with the contact law,
+    ``q = (f_b0 / f_ref, ln zeta_b, f_l0 / f_ref, ln contact_V)`` (:mod:`l1b2.predictor.frequency`)."""
+    more = {} if len(q) == 2 else {"f_l0_Hz": float(q[2]) * f_ref, "contact_V": math.exp(float(q[3]))}
+    return FrequencyResponse(f_ref, float(q[0]) * f_ref, math.exp(float(q[1])), **more)
+
+
+def coordinates(resp: FrequencyResponse) -> np.ndarray:
+    """``q`` of :func:`response_of` for ``resp`` (four coordinates with the contact law)."""
+    q = [resp.f_b0_Hz / resp.f_ref_Hz, math.log(resp.zeta_b)]
+    if resp.has_contact:
+        q += [resp.f_l0_Hz / resp.f_ref_Hz, math.log(resp.contact_V)]
+    return np.array(q)
 
 
 class ResponseLinearisation:
@@ -211,8 +235,8 @@ class ResponseLinearisation:
     def jacobian_q(self) -> np.ndarray:
         """``J_q``: the weighted residuals' central differences in q at q_fit (steps :data:`Q_STEPS`), theta held."""
         cols = []
-        for i, h in enumerate(Q_STEPS):
-            e = np.zeros(2)
+        for i, h in enumerate(Q_STEPS[: self.q_fit.size]):
+            e = np.zeros(self.q_fit.size)
             e[i] = h
             cols.append((self.residual(self.q_fit + e) - self.residual(self.q_fit - e)) / (2 * h))
         return np.column_stack(cols)
@@ -223,34 +247,98 @@ class ResponseLinearisation:
         S = PJ.T @ PJ
         g = PJ.T @ self.project(self.r_fit)
         try:
-            step = -np.linalg.solve(S + 1e-9 * np.trace(S) * np.eye(2), g)
+            step = -np.linalg.solve(S + 1e-9 * np.trace(S) * np.eye(S.shape[0]), g)
         except np.linalg.LinAlgError:
-            step = np.zeros(2)
+            step = np.zeros(S.shape[0])
         return step, S
 
 
-def _gauss_newton(data, mask, f_ref, loglik, best, max_outer=8):
+def _gauss_newton(data, mask, f_ref, loglik, best, max_outer=8, damping=(0.0,)):
     """Gauss-Newton steps of the joint least squares in q from the best fit so far, each with a line search.
 
     ``loglik(x)`` is the warm refit's log-likelihood at ``x = (f_b0 [Hz], ln zeta_b)`` (it updates ``best``).
     A step is tried at full length, then 0.3 and 0.1 of it; the search stops when no trial raises the
-    log-likelihood by more than 0.01 or the step is below 2e-5 f_ref and 0.01 in ln zeta_b.
+    log-likelihood by more than 0.01 or the step is below 2e-5 f_ref and 0.01 in ln zeta_b. ``damping``:
+    Levenberg-Marquardt factors ``lam`` tried in turn when no trial of the plain step helps (the step of
+    ``J^T P J + lam diag(J^T P J)``; the contact stage's four coordinates; ``(0,)``: plain Gauss-Newton).
     """
     for _ in range(max_outer):
-        q = np.array([best["x"][0] / f_ref, best["x"][1]])
+        if len(damping) > 1:
+            if not _damped_step(data, mask, f_ref, loglik, best, damping):
+                return
+            continue
+        x = np.asarray(best["x"], float)
+        scale = np.where(np.arange(x.size) % 2 == 0, f_ref, 1.0)   # x: Hz and logs; q: shares of f_ref and logs
+        q = x / scale
+        lo, hi = (Q_LO, Q_HI) if x.size == 2 else (np.r_[Q_LO, QC_LO], np.r_[Q_HI, QC_HI])
         step = ResponseLinearisation(best["result"], data, mask, f_ref, q).step_and_information()[0]
-        if abs(step[0]) < 2e-5 and abs(step[1]) < 0.01:
+        if np.all(np.abs(step[0::2]) < 2e-5) and np.all(np.abs(step[1::2]) < 0.01):
             return
         l0 = best["loglik"]
         for frac in (1.0, 0.3, 0.1):
-            qn = np.clip(q + frac * step, Q_LO, Q_HI)
-            if loglik(np.array([qn[0] * f_ref, qn[1]])) > l0 + 0.01:
+            qn = np.clip(q + frac * step, lo, hi)
+            if loglik(qn * scale) > l0 + 0.01:
                 break
         else:
             return
 
 
-def fit_frequency_response(est, data, slider_mass_kg=None, mask=None):
+def _damped_step(data, mask, f_ref, loglik, best, damping) -> bool:
+    """One Levenberg-Marquardt step of :func:`_gauss_newton` in x's coordinates: True when a trial raised the
+    log-likelihood by more than 0.01 (``best`` moved), False when none did or the step is below the stopping size."""
+    x = np.asarray(best["x"], float)
+    scale = np.where(np.arange(x.size) % 2 == 0, f_ref, 1.0)
+    q = x / scale
+    lo, hi = (Q_LO, Q_HI) if x.size == 2 else (np.r_[Q_LO, QC_LO], np.r_[Q_HI, QC_HI])
+    lin = ResponseLinearisation(best["result"], data, mask, f_ref, q)
+    PJ = lin.project(lin.jacobian_q())
+    S, g = PJ.T @ PJ, PJ.T @ lin.project(lin.r_fit)
+    l0 = best["loglik"]
+    for lam in damping:
+        try:
+            step = -np.linalg.solve(S + (lam + 1e-9) * np.diag(np.diag(S)), g)
+        except np.linalg.LinAlgError:
+            continue
+        if np.all(np.abs(step[0::2]) < 2e-5) and np.all(np.abs(step[1::2]) < 0.01):
+            return False
+        for frac in (1.0, 0.3):
+            if loglik(np.clip(q + frac * step, lo, hi) * scale) > l0 + 0.01:
+                return True
+    return False
+
+
+#: the contact stage's Levenberg-Marquardt factors (:func:`_gauss_newton`'s ``damping``)
+CONTACT_DAMPING = (0.0, 0.3, 3.0, 30.0)
+
+
+def _contact_stage(data, mask, f_ref, loglik, best) -> dict:
+    """The contact law's estimation after the B2 response's (``fit_frequency_response(contact=True)``).
+
+    From the B2 optimum: warm identifications at :data:`CONTACT_GRID` (f_l0 / f_ref x contact_V / TRAIN's
+    median V0), then Levenberg-Marquardt steps of the joint problem in all four coordinates
+    (:func:`_gauss_newton` with :data:`CONTACT_DAMPING`) from the best of them. The contact law is kept only if it ends above the B2 optimum's log-likelihood;
+    otherwise ``best`` returns to the B2 response. Returns the stage's record (both log-likelihoods, kept).
+    """
+    v_med = float(np.median(np.asarray((data.df if isinstance(data, Measurements) else data)["voltage_V"], float)))
+    b2 = {k: best[k] for k in ("loglik", "params", "x", "result")}
+    trials = [np.r_[b2["x"], fl * f_ref, math.log(c * v_med)] for fl, c in CONTACT_GRID]
+    lls = [loglik(x) for x in trials]
+    if not np.isfinite(max(lls)):
+        return {"kept": False, "b2_loglik": float(b2["loglik"]), "contact_loglik": None}
+    if len(best["x"]) == 2:     # no contact start beat the B2 optimum: refit the best one as the current best
+        x = trials[int(np.argmax(lls))]
+        best["seen"].pop(_key(x), None)
+        best["loglik"] = -np.inf
+        loglik(x)
+    _gauss_newton(data, mask, f_ref, loglik, best, max_outer=12, damping=CONTACT_DAMPING)
+    rec = {"b2_loglik": float(b2["loglik"]), "contact_loglik": float(best["loglik"]),
+           "kept": bool(best["loglik"] > b2["loglik"])}
+    if not rec["kept"]:
+        best.update(b2)
+    return rec
+
+
+def fit_frequency_response(est, data, slider_mass_kg=None, mask=None, contact=False):
     """Identify the model with its frequency response (``est.frequency == "auto"``, TRAIN's frequency varies).
 
     The response's coordinates ``q = (f_b0 / f_ref, ln zeta_b)`` are parameters of the joint least squares
@@ -264,13 +352,19 @@ def fit_frequency_response(est, data, slider_mass_kg=None, mask=None):
     :data:`ZETA_B_RANGE`); a parameter that ends at its bound is named in the record's ``at_bound`` (and the
     fit report) and has no standard error. Returns the fitted identifier (``est`` itself) whose result
     carries the estimated response and the record ``status="estimated"``.
+
+    ``contact=True`` (the setting ``frequency="contact"``, pure-slip family only) adds the contact law of
+    :mod:`l1b2.predictor.frequency` (``f_l0_Hz``, ``contact_V``) after the B2 optimum
+    (:func:`_contact_stage`, q of four coordinates, bounds :data:`QC_LO`/:data:`QC_HI`); the record's
+    ``contact`` says whether it was kept (it must raise the log-likelihood over the B2 optimum).
     """
     m_s, mask, f_ref, loglik, best, _, _ = _grid_basin(est, data, slider_mass_kg, mask)
     n_grid = len(best["seen"])
     _gauss_newton(data, mask, f_ref, loglik, best)
-    resp = FrequencyResponse(f_ref, float(best["x"][0]), math.exp(float(best["x"][1])))
+    contact_rec = _contact_stage(data, mask, f_ref, loglik, best) if contact else None
+    resp = response_of(f_ref, np.asarray(best["x"], float) / np.where(np.arange(len(best["x"])) % 2 == 0, f_ref, 1.0))
     final = _clone(est, frequency=resp, init=best["params"]).fit(data, slider_mass_kg=m_s, mask=mask)
-    q_hat = np.array([resp.f_b0_Hz / f_ref, math.log(resp.zeta_b)])
+    q_hat = coordinates(resp)
     stderr = response_stderr(ResponseLinearisation(final.result_, data, mask, f_ref, q_hat), resp)
     at_bound = bounds_hit(q_hat)
     if at_bound and stderr is not None:   # a value held by its bound has no standard error
@@ -280,8 +374,10 @@ def fit_frequency_response(est, data, slider_mass_kg=None, mask=None):
         "maximum likelihood", resp, data, stderr=stderr, at_bound=at_bound,
         joint={"grid_fits": n_grid, "gauss_newton_fits": len(best["seen"]) - n_grid,
                "loglik": float(final.loglik_),
-               "stderr_from": "Schur complement of the joint Fisher information" if stderr else "singular"})
-    est._publish(replace(final.result_, frequency=rec, settings={**final.result_.settings, "frequency": "auto"}))
+               "stderr_from": "Schur complement of the joint Fisher information" if stderr else "singular"},
+        **({} if contact_rec is None else {"contact": contact_rec}))
+    est._publish(replace(final.result_, frequency=rec, settings={**final.result_.settings,
+                                                                 "frequency": "contact" if contact else "auto"}))
     return est
 
 
@@ -294,7 +390,11 @@ def response_stderr(lin: "ResponseLinearisation", resp: FrequencyResponse) -> di
         return None
     if not (np.all(np.isfinite(cov)) and np.all(np.diag(cov) > 0)):
         return None
-    return {"f_b0_Hz": float(resp.f_ref_Hz * math.sqrt(cov[0, 0])), "zeta_b": float(resp.zeta_b * math.sqrt(cov[1, 1]))}
+    out = {"f_b0_Hz": float(resp.f_ref_Hz * math.sqrt(cov[0, 0])), "zeta_b": float(resp.zeta_b * math.sqrt(cov[1, 1]))}
+    if cov.shape[0] == 4:
+        out.update(f_l0_Hz=float(resp.f_ref_Hz * math.sqrt(cov[2, 2])),
+                   contact_V=float(resp.contact_V * math.sqrt(cov[3, 3])))
+    return out
 
 
 def _grid_basin(est, data, slider_mass_kg, mask):
@@ -313,17 +413,22 @@ def _grid_basin(est, data, slider_mass_kg, mask):
     return m_s, mask, f_ref, loglik, best, grid, vals
 
 
+def _key(x) -> tuple:
+    """The profile's cache key of a trial ``x`` (Hz to 1e-3, logs to 1e-6)."""
+    return tuple(round(float(v), 3 if i % 2 == 0 else 6) for i, v in enumerate(x))
+
+
 def _profile(est, data, m_s, mask, f_ref, log):
     """The profile log-likelihood l(f_b0, ln zeta) with warm inner fits (the best theta so far as start)."""
     seen: dict = {}
     best: dict[str, Any] = {"loglik": -np.inf, "params": None, "x": None, "result": None, "seen": seen}
 
     def loglik(x):
-        key = (round(float(x[0]), 3), round(float(x[1]), 6))
+        key = _key(x)
         if key in seen:
             return seen[key]
         try:
-            resp = FrequencyResponse(f_ref, float(x[0]), math.exp(float(x[1])))
+            resp = response_of(f_ref, np.asarray(x, float) / np.where(np.arange(len(x)) % 2 == 0, f_ref, 1.0))
             fit = _clone(est, frequency=resp, init=best["params"], n_starts=1 if best["params"] is not None
                          else est.n_starts, verbose=False).fit(data, slider_mass_kg=m_s, mask=mask)
             ll = float(fit.loglik_)
@@ -334,7 +439,8 @@ def _profile(est, data, m_s, mask, f_ref, log):
         seen[key] = ll
         if ll > best["loglik"]:
             best.update(loglik=ll, params=fit.params_, x=np.array(x, float), result=fit.result_)
-        log(f"frequency response: f_b0 {x[0]:.1f} Hz, zeta {math.exp(x[1]):.5f}: loglik {ll:.2f}")
+        log(f"frequency response: f_b0 {x[0]:.1f} Hz, zeta {math.exp(x[1]):.5f}"
+            + (f", f_l0 {x[2]:.1f} Hz, contact_V {math.exp(x[3]):.1f} V" if len(x) > 2 else "") + f": loglik {ll:.2f}")
         return ll
     return loglik, best
 
@@ -399,6 +505,8 @@ def resolve(est, data) -> tuple[FrequencyResponse | None, dict | None, bool]:
         return None, None, False
     if frequency_varies(data):
         return None, None, True
+    if setting == "contact":
+        setting = "auto"
     return None, frequency_record(
         "fixed", f"TRAIN's runs at one drive frequency (spread within {FREQUENCY_REL_SPREAD:.1%}): not identifiable, "
         "gain 1", None, data), False

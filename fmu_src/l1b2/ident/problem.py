@@ -72,7 +72,7 @@ from ..predictor.model import (
     rest_sign,
     step_drive,
 )
-from ..predictor.frequency import effective_voltage, sample_frequency
+from ..predictor.frequency import contact_angle, effective_voltage, sample_frequency
 from ..predictor.simulate import (
     STEP_REVERSAL,
     STEP_STUCK,
@@ -154,7 +154,7 @@ class SampleData:
     frequency : FrequencyResponse, optional
         The predictor's drive-frequency response (:mod:`l1b2.predictor.frequency`):
         ``V0`` is then the effective amplitude ``V0 g(frequency_Hz)`` (the
-        commanded one is ``V0_commanded``); default None: ``V0`` as logged.
+        commanded one is ``V0_commanded``); default None: ``V0`` as logged (``contact_a``: contact angles).
 
     Attributes
     ----------
@@ -179,8 +179,10 @@ class SampleData:
         self.s = checked[POSITION].to_numpy(dtype=float)
         self.V0_commanded = checked[VOLTAGE].to_numpy(dtype=float)
         self.frequency = frequency
-        self.V0 = effective_voltage(self.V0_commanded, sample_frequency(checked, None if frequency is None
-                                                                        else frequency.f_ref_Hz), frequency)
+        f_s = sample_frequency(checked, None if frequency is None else frequency.f_ref_Hz)
+        self.V0 = effective_voltage(self.V0_commanded, f_s, frequency)
+        self.contact_a = (contact_angle(self.V0_commanded, f_s, frequency)
+                          if frequency is not None and frequency.has_contact else None)
         self.d = checked[DIRECTION].to_numpy(dtype=float)
         self.load = checked[LOAD].to_numpy(dtype=float)
         self.speed_derived = SPEED not in checked.columns

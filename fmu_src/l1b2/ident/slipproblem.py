@@ -17,6 +17,12 @@ force differs (:mod:`l1b2.predictor.pureslip`): its slip ratio
   pinned, which :data:`RECOMMENDED_FIXED_PURE_SLIP` does), while sigma, which
   sets the tip-speed scale of k, is determined by the data.
 
+With the response's contact law (:func:`l1b2.predictor.frequency.contact_angle`,
+``SampleData.contact_a``) each row has its half contact angle ``a``: ``D = c_r + sigma (a/pi - A')``,
+the drive term ``B' V0 sin a`` and the Coulomb share ``h(k, a)`` in place of ``g1(k)``
+(:mod:`l1b2.predictor.pureslip`); ``a`` depends on the response only, not on theta, so the Jacobian
+in theta keeps its form with these factors.
+
 Approximation (gradient only, never the likelihood): the derivative of the
 start-speed gain keeps only D's parameters, as for Eq. 29, and a step that
 reverses the motion uses the slip force at its start.
@@ -27,7 +33,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..predictor.model import rest_sign, step_drive
-from ..predictor.pureslip import inverse_tip_speed, packed_slip_recursion, slip_factors, slip_force
+from ..predictor.pureslip import (contact_slip_factor, contact_slip_slope, inverse_tip_speed, packed_slip_recursion,
+                                  slip_factors, slip_force)
 from ..predictor.simulate import STEP_REVERSAL, STEP_STUCK
 from ..units import G_M_S2
 from .problem import ForceCore, LikelihoodProblem
@@ -43,6 +50,15 @@ class SlipForceCore(ForceCore):
     """Force terms of the pure-slip family: :meth:`terms` gives X without the slip force, :meth:`slip` the rest."""
 
     compiled_dF = False     # the compiled loop is Eq. 29's force
+    #: half contact angle per row [rad] (the contact law), or None: pi/2
+    contact = None
+
+    def _contact(self, rows):
+        """``(a/pi, sin a)`` on ``rows`` (``(0.5, 1.0)`` without the contact law)."""
+        if self.contact is None:
+            return 0.5, 1.0
+        a = self.contact if rows is None else self.contact[rows]
+        return a / np.pi, np.sin(a)
 
     def slip(self, theta, rows=None):
         """``mu P`` [N], ``A'`` [-], ``B'`` [N/V], ``c_k`` [s/m] and ``P`` [N] at ``theta`` (on ``rows``)."""
@@ -60,10 +76,11 @@ class SlipForceCore(ForceCore):
         c_r, sig, _, _, musd = theta[:5]
         Ap = self.L @ theta[5 : 5 + n1]
         P = self.L @ theta[5 + 2 * n1 : 5 + 3 * n1]
-        X = (self.L @ theta[5 + n1 : 5 + 2 * n1]) * self.V0 - G_M_S2 * self.mp
+        a_pi, sin_a = self._contact(None)
+        X = (self.L @ theta[5 + n1 : 5 + 2 * n1]) * self.V0 * sin_a - G_M_S2 * self.mp
         if self.E is not None:
             X = X + self.E @ theta[self.p_theta :]
-        return Ap, P, c_r + sig * (0.5 - Ap), X, musd * (G_M_S2 * self.m_s + self.kappa * P)
+        return Ap, P, c_r + sig * (a_pi - Ap), X, musd * (G_M_S2 * self.m_s + self.kappa * P)
 
     def dF(self, theta, vp, sg, Ap, P, cols, rows=None):
         """dF/dtheta[cols] at drive speed ``vp`` with the slip ratio of that speed (chain through k included)."""
@@ -76,19 +93,23 @@ class SlipForceCore(ForceCore):
         with np.errstate(invalid="ignore", over="ignore"):   # inf * 0 (no tip speed, at rest): k = 0 below
             k = np.clip(np.where(vp > 0, np.nan_to_num(c_k * vp, posinf=1.0), 0.0), 0.0, 1.0)
         g1, G, dg1, dG = slip_factors(k)
+        a_pi, sin_a = self._contact(rows)
+        if self.contact is not None:
+            a = self.contact if rows is None else self.contact[rows]
+            g1, dg1 = contact_slip_factor(k, a), contact_slip_slope(k, a)
         inside = (k > 0) & (k < 1)
         dXs_dk = np.where(inside, mu * P * (dg1 - 0.5 * np.pi * Ap * dG), 0.0)
         p_all = self.p_theta + (0 if self.E is None else self.E.shape[1])
         out = np.empty((vp.size, p_all))
         out[:, 0] = -vp
         with np.errstate(divide="ignore", invalid="ignore"):
-            out[:, 1] = -(0.5 - Ap) * vp + np.where(inside, dXs_dk * k / sig, 0.0)
+            out[:, 1] = -(a_pi - Ap) * vp + np.where(inside, dXs_dk * k / sig, 0.0)
             kb = np.where(inside, -dXs_dk * k / np.where(Bp != 0, Bp, 1.0), 0.0)
         out[:, 2] = P * (g1 - 0.5 * np.pi * Ap * G)
         out[:, 3] = 0.0
         out[:, 4] = sg * (G_M_S2 * self.m_s + self.kappa * P)
         out[:, 5 : 5 + n1] = L * (sig * vp - mu * P * 0.5 * np.pi * G)[:, None]
-        out[:, 5 + n1 : 5 + 2 * n1] = L * (V0 + kb)[:, None]
+        out[:, 5 + n1 : 5 + 2 * n1] = L * (V0 * sin_a + kb)[:, None]
         out[:, 5 + 2 * n1 : self.p_theta] = L * (mu * (g1 - 0.5 * np.pi * Ap * G) + sg * musd * self.kappa)[:, None]
         if self.E is not None:
             out[:, self.p_theta :] = self.E if rows is None else self.E[rows]
@@ -103,6 +124,9 @@ class PureSlipProblem(LikelihoodProblem):
         super().__init__(*args, **kwargs)
         c = self.core
         self.core = SlipForceCore(c.L, c.V0, c.mp, c.h, c.d, c.m_s, c.kappa, c.E)
+        a = getattr(self.data, "contact_a", None)
+        if a is not None:
+            self.core.contact = self.lay.to_packed(a) if self.criterion == "free_run" else a[self.idx]
 
     def evaluate(self, theta):
         """As :meth:`LikelihoodProblem.evaluate`; ``X`` is the drive force at each row's speed, ``a`` its step slope."""
@@ -111,18 +135,19 @@ class PureSlipProblem(LikelihoodProblem):
         core = self.core
         Ap, P, D, X_lin, Fr = core.terms(theta)
         muP, _, _, c_k, _ = core.slip(theta)
-        X_rest = X_lin + slip_force(np.zeros_like(X_lin), muP, Ap, c_k)[0]
+        ca = core.contact
+        X_rest = X_lin + slip_force(np.zeros_like(X_lin), muP, Ap, c_k, ca)[0]
         z0 = rest_sign(X_rest, Fr)
         if self.criterion == "free_run":
             flags = np.zeros(self.lay.n, dtype=np.int8)
             with np.errstate(over="ignore", invalid="ignore"):
                 v, X, dX = packed_slip_recursion(self.lay.offs, self.lay.na, step_drive, D, X_lin, muP, Ap, c_k, Fr,
-                                                 core.h, core.d, self.v0, flags)
+                                                 core.h, core.d, self.v0, flags, a=ca)
                 a = 1.0 - core.h * (D - dX)
             vsrc = v
         else:
             vp0 = core.d * self.vprev
-            Xs, dX, _ = slip_force(vp0, muP, Ap, c_k)
+            Xs, dX, _ = slip_force(vp0, muP, Ap, c_k, ca)
             X = X_lin + Xs
             with np.errstate(over="ignore", invalid="ignore"):
                 v = core.d * step_drive(vp0, D, X, Fr, core.h)

@@ -479,18 +479,23 @@ def position_terms(params: PredictorParams, s):
     return V @ np.asarray(params.alpha), V @ np.asarray(params.beta), V @ np.asarray(params.p)
 
 
-def force_parts(params: PredictorParams, s, V0, m_load_p, m_s):
+def force_parts(params: PredictorParams, s, V0, m_load_p, m_s, contact=None):
     """Split F(v') = -D v' + X + sign(-v') * Fr (drive coordinates).
 
     D  = c_r + sigma*(0.5 - A')                     [N s/m]
     X  = B' V0 + mu P [g1 - (pi/2) A' G] - 9.81 m'  [N]
     Fr = mu_sd (9.81 m_s + kappa P)                 [N]
+
+    ``contact`` (pure-slip family with the contact law: the half contact angle a per sample [rad],
+    :func:`l1b2.predictor.frequency.contact_angle`): ``0.5 -> a/pi`` in D and ``B' V0 -> B' V0 sin a``
+    in X (:mod:`l1b2.predictor.pureslip`); None is a = pi/2.
     """
     Ap, Bp, P = position_terms(params, s)
     g1 = drive_factor(params.k0)
     G = G_of_k0(params.k0)
-    D = params.c_r + params.sigma * (0.5 - Ap)
-    X = Bp * np.asarray(V0, float) + params.mu * P * (g1 - 0.5 * np.pi * Ap * G) - G_M_S2 * np.asarray(
+    a_pi, sin_a = (0.5, 1.0) if contact is None else (np.asarray(contact, float) / np.pi, np.sin(contact))
+    D = params.c_r + params.sigma * (a_pi - Ap)
+    X = Bp * np.asarray(V0, float) * sin_a + params.mu * P * (g1 - 0.5 * np.pi * Ap * G) - G_M_S2 * np.asarray(
         m_load_p, float
     )
     Fr = params.mu_sd * (G_M_S2 * np.asarray(m_s, float) + params.kappa * P)
@@ -607,7 +612,7 @@ def one_step(params: PredictorParams, v, s, V0, load, direction, dt, m_s, extra_
     return d * step_drive(vp, D, X, Fr, h)
 
 
-def steady_state(params: PredictorParams, s, V0, load, direction, m_s, extra_force=None):
+def steady_state(params: PredictorParams, s, V0, load, direction, m_s, extra_force=None, contact=None):
     """Closed-form fixed point v* = b/(1-a) of the affine map (m_eff and T_s cancel).
 
     Forward branch (v' > 0): v'* = (X - Fr)/D, consistent if X - Fr > 0;
@@ -616,14 +621,15 @@ def steady_state(params: PredictorParams, s, V0, load, direction, m_s, extra_for
     (no stable equilibrium). Signed data convention. ``extra_force`` [N,
     drive coordinates] is added to X (default None: none). For
     ``drive_law="pure_slip"`` the forward branch is the root of the
-    non-linear force (:func:`l1b2.predictor.pureslip.steady_drive_speed`).
+    non-linear force (:func:`l1b2.predictor.pureslip.steady_drive_speed`); ``contact`` as in
+    :func:`force_parts` (pure-slip family only).
     """
     d = np.asarray(direction, dtype=float)
-    D, X, Fr = force_parts(params, s, V0, d * np.asarray(load, float), m_s)
+    D, X, Fr = force_parts(params, s, V0, d * np.asarray(load, float), m_s, contact)
     X = add_extra_force(X, extra_force)
     if params.drive_law == "pure_slip":
         muP, Ap, c_k, frozen = slip_terms(params, s, V0)
-        return d * steady_drive_speed(D, X - frozen, muP, Ap, c_k, Fr)
+        return d * steady_drive_speed(D, X - frozen, muP, Ap, c_k, Fr, contact=contact)
     D, X, Fr = np.broadcast_arrays(D, X, Fr)
     fwd = X - Fr
     bwd = X + Fr

@@ -47,8 +47,15 @@ Finite contact (:func:`contact_drive_force`): with a contact of half angle
 ``a = pi/2`` gives the form above (``rho = 1``, ``h = g1``). A shorter
 contact (larger normal amplitude U_l, Eq. 18) brakes only once ``k > cos a``.
 This is the contact's dependence on the normal (L1) amplitude that the
-predictor's drive force above holds at ``a = pi/2``; it is not used by the
-predictor's free run (decision 0034 records how far it carries).
+predictor's drive force above holds at ``a = pi/2``. With a per-sample
+half angle ``a`` (:func:`l1b2.predictor.frequency.contact_angle`, from the
+drive frequency and V0) the predictor's force becomes::
+
+    D = c_r + sigma (a/pi - A'),   X_lin = B' V0 sin a - 9.81 m' + extras
+    X(v') = X_lin + mu P [h(k, a) - (pi/2) A' G(k)]   (:func:`slip_force` with ``a``)
+
+(``a = pi/2``: the form above exactly; the interface's speed feedback A' G(k)
+is kept as it is, the form measured in decision 0034).
 
 All functions are pure and vectorised over arrays (SI units); nothing here
 knows a parameter class (:mod:`l1b2.predictor.model` assembles the inputs).
@@ -62,7 +69,7 @@ from ..physics.jit import cached_kernel
 from .kernels import FLAG_REVERSAL, FLAG_STUCK
 
 __all__ = ["K_SLOPE_MAX", "inverse_tip_speed", "slip_ratio", "slip_factors", "slip_force",
-           "pure_slip_drive_force", "contact_shape", "contact_slip_factor", "contact_drive_force",
+           "pure_slip_drive_force", "contact_shape", "contact_slip_factor", "contact_slip_slope", "contact_drive_force",
            "steady_drive_speed", "packed_slip_recursion"]
 
 #: slip ratio above which the slopes g1'(k), G'(k) are held at their value here (they diverge at k = 1)
@@ -98,10 +105,16 @@ def slip_factors(k):
     return g1, G, dg1, dG
 
 
-def slip_force(vp, muP, Ap, c_k):
-    """``(mu P [g1(k) - pi/2 A' G(k)], its derivative in v', k)`` at drive speed ``vp`` [N, N s/m, -]."""
+def slip_force(vp, muP, Ap, c_k, a=None):
+    """``(mu P [g1(k) - pi/2 A' G(k)], its derivative in v', k)`` at drive speed ``vp`` [N, N s/m, -].
+
+    With ``a`` (half contact angle per row [rad]) ``g1(k)`` is the finite contact's ``h(k, a)``
+    (:func:`contact_slip_factor`, slope :func:`contact_slip_slope`); ``a = None`` is ``a = pi/2``.
+    """
     k = slip_ratio(vp, c_k)
     g1, G, dg1, dG = slip_factors(k)
+    if a is not None:
+        g1, dg1 = contact_slip_factor(k, a), contact_slip_slope(k, a)
     muP = np.asarray(muP, float)
     Ap = np.asarray(Ap, float)
     Xs = muP * (g1 - 0.5 * np.pi * Ap * G)
@@ -138,6 +151,15 @@ def contact_slip_factor(k, a):
     return 1.0 - 2.0 * np.where(k > c, edge, 0.0) / contact_shape(a)
 
 
+def contact_slip_slope(k, a):
+    """``dh/dk = -2 (k - cos a) / (rho(a) sqrt(1 - k^2))`` for ``cos a < k < 1``, else 0 (k capped at :data:`K_SLOPE_MAX`)."""
+    k = np.clip(np.asarray(k, float), 0.0, 1.0)
+    a = np.asarray(a, float)
+    c = np.cos(a)
+    ks = np.minimum(k, K_SLOPE_MAX)
+    return np.where((k > c) & (k > 0.0) & (k < 1.0), -2.0 * (ks - c) / (np.sqrt(1.0 - ks * ks) * contact_shape(a)), 0.0)
+
+
 def contact_drive_force(W, v, F_p, sigma, mu, a):
     """``sigma (W sin a - a v)/pi + mu F_p h(v/W, a)`` [N]: pure slip with a contact of half angle ``a`` [rad]."""
     W = np.asarray(W, float)
@@ -147,20 +169,21 @@ def contact_drive_force(W, v, F_p, sigma, mu, a):
     return sigma * (W * np.sin(a) - a * v) / np.pi + mu * np.asarray(F_p, float) * contact_slip_factor(k, a)
 
 
-def steady_drive_speed(D, X_lin, muP, Ap, c_k, Fr, n_iter: int = 80):
+def steady_drive_speed(D, X_lin, muP, Ap, c_k, Fr, n_iter: int = 80, contact=None):
     """Steady drive speed v'* of ``-D v' + X_lin + Xs(v') + sign(-v') Fr = 0`` (stuck: 0; D <= 0: NaN).
 
     Forward branch (v' > 0): the root of the force, bracketed in
     ``[0, v_hi]`` and found by bisection (the force decreases in v' where
     the pure-slip slope is negative, the case of every physical parameter
     set: ``pi A' k < 1``); backward branch (v' < 0): k = 0, the force is
-    affine, ``v' = (X(0) + Fr)/D``; stuck when ``|X(0)| <= Fr``.
+    affine, ``v' = (X(0) + Fr)/D``; stuck when ``|X(0)| <= Fr``. ``contact``: the half contact angle
+    (the Coulomb share h(k, a), :func:`slip_force`; D and X_lin carry the rest), None: pi/2.
     """
     D, X_lin, muP, Ap, c_k, Fr = np.broadcast_arrays(*(np.asarray(x, float) for x in (D, X_lin, muP, Ap, c_k, Fr)))
-    X0 = X_lin + slip_force(0.0 * D, muP, Ap, c_k)[0]
+    X0 = X_lin + slip_force(0.0 * D, muP, Ap, c_k, contact)[0]
 
     def fwd(v):
-        return -D * v + X_lin + slip_force(v, muP, Ap, c_k)[0] - Fr
+        return -D * v + X_lin + slip_force(v, muP, Ap, c_k, contact)[0] - Fr
 
     with np.errstate(divide="ignore", invalid="ignore"):
         span = (np.abs(X_lin) + np.abs(muP) * (1.0 + 0.25 * np.pi ** 2 * np.abs(Ap)) + np.abs(Fr)) / D
@@ -176,7 +199,8 @@ def steady_drive_speed(D, X_lin, muP, Ap, c_k, Fr, n_iter: int = 80):
     return np.where(D > 0, vp, np.nan)
 
 
-def packed_slip_recursion(offs, na, step, D, X_lin, muP, Ap, c_k, Fr, h, d, v0_sorted, flags=None, compiled=True):
+def packed_slip_recursion(offs, na, step, D, X_lin, muP, Ap, c_k, Fr, h, d, v0_sorted, flags=None, compiled=True,
+                          a=None):
     """Free run of the pure-slip predictor in the packed time-major layout; returns (v, X, dX/dv').
 
     Same layout as :func:`l1b2.predictor.simulate.packed_recursion` (``offs``,
@@ -189,7 +213,9 @@ def packed_slip_recursion(offs, na, step, D, X_lin, muP, Ap, c_k, Fr, h, d, v0_s
     numpy loop over ``step``. Returns the speed
     (data convention), the X used at each row and its slope dX/dv'; ``flags``
     (int8) if given receives the step codes of
-    :mod:`l1b2.predictor.kernels`.
+    :mod:`l1b2.predictor.kernels`. ``a`` (per row, packed) is the half
+    contact angle of the finite-contact force (module docstring; ``D`` and
+    ``X_lin`` already carry its ``a/pi`` and ``sin a``); None is ``pi/2``.
     """
     n = int(offs[-1]) if len(offs) else 0
     v = np.empty(n)
@@ -200,7 +226,8 @@ def packed_slip_recursion(offs, na, step, D, X_lin, muP, Ap, c_k, Fr, h, d, v0_s
         fl = np.zeros(n, dtype=np.int8) if flags is None else flags
         kernel(np.ascontiguousarray(offs, dtype=np.int64), np.ascontiguousarray(na, dtype=np.int64),
                *(np.require(np.broadcast_to(x, (n,)), float, ["C", "W"])
-                 for x in (D, X_lin, muP, Ap, c_k, Fr, h, d)), np.require(v0_sorted, float, ["C", "W"]),
+                 for x in (D, X_lin, muP, Ap, c_k, Fr, h, d, 0.5 * np.pi if a is None else a)),
+               np.require(v0_sorted, float, ["C", "W"]),
                v, X, dX, fl)
         return v, X, dX
     v[: na[0]] = v0_sorted
@@ -210,7 +237,7 @@ def packed_slip_recursion(offs, na, step, D, X_lin, muP, Ap, c_k, Fr, h, d, v0_s
         m_all = na[kk]
         sl = slice(i0, i0 + m_all)
         vp = d[sl] * v[sl]
-        xs, dxs, _ = slip_force(vp, muP[sl], Ap[sl], c_k[sl])
+        xs, dxs, _ = slip_force(vp, muP[sl], Ap[sl], c_k[sl], None if a is None else a[sl])
         X[sl] = X_lin[sl] + xs
         dX[sl] = dxs
         if kk == K - 1:
@@ -228,11 +255,13 @@ def packed_slip_recursion(offs, na, step, D, X_lin, muP, Ap, c_k, Fr, h, d, v0_s
     return v, X, dX
 
 
-def slip_run_loop(offs, na, D, X_lin, muP, Ap, c_k, Fr, h, d, v0_sorted, v, X, dX, flags):
+def slip_run_loop(offs, na, D, X_lin, muP, Ap, c_k, Fr, h, d, a, v0_sorted, v, X, dX, flags):
     """:func:`packed_slip_recursion` as a scalar loop (the same rules; compiled by numba, see :func:`compiled_slip_run`).
 
     The step is :func:`l1b2.predictor.model.step_drive` written out for one
-    row; the flags are those of :func:`packed_slip_recursion`.
+    row; the flags are those of :func:`packed_slip_recursion`. A row whose
+    half contact angle ``a`` is exactly pi/2 takes g1(k) itself, any other
+    h(k, a) of :func:`contact_slip_factor`.
     """
     half_pi = 0.5 * np.pi
     for i in range(na[0]):
@@ -248,14 +277,26 @@ def slip_run_loop(offs, na, D, X_lin, muP, Ap, c_k, Fr, h, d, v0_sorted, v, X, d
             if vp > 0.0:
                 k = min(c_k[j] * vp, 1.0)
             r = np.sqrt(1.0 - k * k)
-            xs = muP[j] * ((2.0 * r - 1.0) - half_pi * Ap[j] * (2.0 * k * r - 2.0 * np.arcsin(k) + half_pi))
+            aj = a[j]
+            full = aj == half_pi
+            ca = np.cos(aj)
+            rho = np.sin(aj) - aj * ca
+            hk = 2.0 * r - 1.0
+            if not full:
+                hk = 1.0
+                if k > ca:
+                    hk = 1.0 - 2.0 * (np.sin(aj) - r - ca * (np.arcsin(k) - half_pi + aj)) / rho
+            xs = muP[j] * (hk - half_pi * Ap[j] * (2.0 * k * r - 2.0 * np.arcsin(k) + half_pi))
             x = X_lin[j] + xs
             X[j] = x
             slope = 0.0
             if 0.0 < k < 1.0:
                 ks = min(k, K_SLOPE_MAX)
                 rs = np.sqrt(1.0 - ks * ks)
-                slope = muP[j] * (-2.0 * ks / rs + half_pi * Ap[j] * 4.0 * ks * ks / rs) * c_k[j]
+                dh = -2.0 * ks / rs
+                if not full:
+                    dh = -2.0 * (ks - ca) / (rs * rho) if k > ca else 0.0
+                slope = muP[j] * (dh + half_pi * Ap[j] * 4.0 * ks * ks / rs) * c_k[j]
             dX[j] = slope
             if i >= m_next:
                 continue
@@ -293,4 +334,4 @@ def compiled_slip_run():
     """:func:`slip_run_loop` compiled by numba (once per process, cached on disk), or None without numba."""
     return cached_kernel(_SLIP_RUN, lambda: (
         {"slip_run_loop": slip_run_loop}, "slip_run_loop",
-        "void(int64[::1], int64[::1], " + ", ".join(["float64[::1]"] * 12) + ", int8[::1])"))
+        "void(int64[::1], int64[::1], " + ", ".join(["float64[::1]"] * 13) + ", int8[::1])"))

@@ -216,6 +216,7 @@ def free_run(
     m_s,
     run_index=None,
     extra_force=None,
+    contact=None,
 ):
     """Free-run prediction along a MEASURED position trajectory.
 
@@ -231,6 +232,9 @@ def free_run(
     only, vectorised across runs (``params.drive_law="pure_slip"``: the
     non-linear step of :func:`l1b2.predictor.pureslip.packed_slip_recursion`). ``extra_force`` (scalar or one value per
     sample) [N, drive coordinates] is added to X (default None: none).
+    ``contact`` (pure-slip family; scalar or per sample [rad]) is the half
+    contact angle of the contact law (:func:`l1b2.predictor.frequency.contact_angle`;
+    default None: pi/2).
     Returns the predicted speed per sample [m/s], signed data convention.
     """
     s = np.asarray(s, dtype=float).ravel()
@@ -255,11 +259,13 @@ def free_run(
         extra_force = _broadcast_flat(extra_force, n, "extra_force")
     pk = lay.to_packed
     if params.drive_law == "pure_slip":   # non-linear in the speed: stepped with the state's slip ratio
-        D, X, Fr = force_parts(params, s, V0, d * load, m_s_arr)
+        ca = None if contact is None else _broadcast_flat(contact, n, "contact")
+        D, X, Fr = force_parts(params, s, V0, d * load, m_s_arr, ca)
         muP, Ap, c_k, frozen = slip_terms(params, s, V0)
         h = dt / effective_mass(params, load, m_s_arr)
         vpk = packed_slip_recursion(lay.offs, lay.na, step_drive, *(pk(np.broadcast_to(x, (n,))) for x in (
-            D, add_extra_force(X, extra_force) - frozen, muP, Ap, c_k, Fr, h, d)), v0[lay.run_order])[0]
+            D, add_extra_force(X, extra_force) - frozen, muP, Ap, c_k, Fr, h, d)), v0[lay.run_order],
+            a=None if ca is None else pk(ca))[0]
         return lay.from_packed(vpk)
     a, e, f, z0 = free_run_coefficients(params, s, V0, load, d, dt, m_s_arr, extra_force)
     vpk = packed_recursion(lay, pk(a), pk(e), pk(f), pk(-d), pk(z0), v0[lay.run_order])

@@ -16,7 +16,7 @@ from typing import Mapping
 
 import numpy as np
 
-from ..frequency import effective_voltage
+from ..frequency import contact_angle, effective_voltage
 from ..setup import PredictorSetup
 from .base import EffectSpecError, effect_features, needs, time_derivative
 
@@ -158,15 +158,24 @@ class ExtendedPredictor:
             raise EffectSpecError("an effect needs the stator temperature: pass temperature= (degC per sample)")
         if sig & {"v_base", "a_base"}:
             x["v_base"] = free_run(b.params, x["s"], _drive(b, x["V0"], frequency), x["load"], x["d"], t, vs,
-                                   b.slider_mass_kg, run_index)
+                                   b.slider_mass_kg, run_index, contact=_contact(b, x["V0"], frequency))
             x["a_base"] = time_derivative(x["v_base"], t, starts_sorted)
         F = self.extra_force(x) if self.effects else None
         m = self.model
         v = free_run(m.params, x["s"], _drive(m, x["V0"], frequency), x["load"], x["d"], t, vs, m.slider_mass_kg,
-                     run_index, extra_force=F)
+                     run_index, extra_force=F, contact=_contact(m, x["V0"], frequency))
         if self.output_filter is not None:
             v = apply_output_filter(self.output_filter, v, starts_sorted)
         return v
+
+
+def _contact(setup: PredictorSetup, V0, frequency) -> np.ndarray | None:
+    """The half contact angle per sample [rad] of a pure-slip setup whose response carries the contact law, else None."""
+    fr = setup.frequency
+    if frequency is None or fr is None or not fr.has_contact or setup.params.drive_law != "pure_slip":
+        return None
+    V0, f = np.broadcast_arrays(np.asarray(V0, float), np.asarray(frequency, float))
+    return contact_angle(V0, f, fr)
 
 
 def _drive(setup: PredictorSetup, V0, frequency) -> np.ndarray:
