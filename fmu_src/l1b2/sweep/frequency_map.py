@@ -22,7 +22,7 @@ import pandas as pd
 from ..errors import IdentificationError
 from ..physics.params import MotorParams
 from ..physics.steady import steady_state as physics_steady_state
-from ..predictor.frequency import effective_voltage
+from ..predictor.frequency import contact_angle, effective_voltage
 from ..predictor.model import steady_state as predictor_steady_state
 from ..predictor.setup import PredictorSetup
 
@@ -36,12 +36,15 @@ def frequency_map(setup: PredictorSetup, mp: MotorParams, frequencies_Hz, voltag
     Columns: ``frequency_Hz``, ``voltage_V``, ``v_predictor_m_s``,
     ``v_physics_m_s`` (signed, data convention), ``stuck_physics``. A
     predictor without a frequency response predicts the same speed at every
-    frequency.
+    frequency; a pure-slip predictor whose response carries the contact law
+    (:func:`l1b2.predictor.frequency.contact_angle`) uses its contact angles.
     """
     F, V = np.meshgrid(np.asarray(frequencies_Hz, float), np.asarray(voltages_V, float), indexing="ij")
     f, v0 = F.ravel(), V.ravel()
     V_eff = effective_voltage(v0, f, setup.frequency)
-    v_pred = predictor_steady_state(setup.params, s_m, V_eff, load_kg, direction, setup.slider_mass_kg)
+    fr = setup.frequency
+    a = contact_angle(v0, f, fr) if fr is not None and fr.has_contact and setup.params.drive_law == "pure_slip" else None
+    v_pred = predictor_steady_state(setup.params, s_m, V_eff, load_kg, direction, setup.slider_mass_kg, contact=a)
     phys = [physics_steady_state(mp, s_m, float(V0), load_kg, direction, f_Hz=float(fr)) for fr, V0 in zip(f, v0)]
     return pd.DataFrame({"frequency_Hz": f, "voltage_V": v0, "v_predictor_m_s": np.asarray(v_pred, float),
                          "v_physics_m_s": [direction * p.v_m_s for p in phys],
