@@ -19,7 +19,11 @@ load) against the coupled physics' (:func:`l1b2.physics.steady.steady_state`, th
 over frequency at 220 and 324 V. With ``--contact`` the pure-slip family's multi-frequency identification
 also runs with the contact law (``fit_frequency_response(contact=True)``, the setting ``frequency="contact"``,
 decision 0038) on the same data in the same process, printed after the existing form's line: its held-out
-nrmse, ratio to the single-frequency figure, CPU time, the estimates and whether the law was kept.
+nrmse, ratio to the single-frequency figure, CPU time, the estimates and whether the law was kept. With
+``--contact-from-0029`` (a shorter run) the existing form is the identification at decision 0029's joint B2
+estimate of the seed held fixed (:data:`B2_0029`; the joint estimation's own last step, without its grid) and
+the contact stage starts from that fit (``fit_frequency_response(contact=True, b2=...)``); its CPU time is
+then the contact stage's alone.
 
 Usage: python bench/bench_frequency.py [--seeds 1,2,3] [--models eq29,pure_slip] [--joint-models pure_slip]
        [--skip-profile] [--diagnose] [--contact] [--cache DIR]
@@ -38,7 +42,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "fmu_src"))
 from l1b2.data.measurements import load_measurements  # noqa: E402
 from l1b2.data.metrics import evaluation_mask, report_metrics  # noqa: E402
 from l1b2.ident.estimator import PredictorIdentifier  # noqa: E402
-from l1b2.ident.frequency import fit_frequency_response, fit_frequency_response_profile  # noqa: E402
+from l1b2.ident.frequency import (fit_frequency_response, fit_frequency_response_profile,  # noqa: E402
+                                  reference_frequency)
 from l1b2.physics.params import SYSTEM_MODELS_DIR, load_motor  # noqa: E402
 from l1b2.physics.steady import steady_state  # noqa: E402
 from l1b2.predictor.frequency import FrequencyResponse, contact_angle  # noqa: E402
@@ -46,6 +51,8 @@ from l1b2.predictor.model import steady_state as model_steady_state  # noqa: E40
 from l1b2.rig.experiment import RigPlan, run_experiment, write_experiment  # noqa: E402
 
 FREQS = (48000.0, 48250.0, 48500.0, 48750.0, 49000.0)
+#: the pure-slip family's joint B2 estimates of decision 0029 on these data (seeds 1-3): f_b0 [Hz], zeta_b
+B2_0029 = {1: (46303.0, 0.0149), 2: (46215.0, 0.0135), 3: (46456.0, 0.0170)}
 TARGET_RATIO = 1.2
 
 
@@ -95,6 +102,12 @@ def diagnose(est, te) -> None:
         print(f"       steady speed physics/model mm/s, {V0:.0f} V: " + "  ".join(cells))
 
 
+def fixed_b2(est, tr, seed):
+    """Identify with decision 0029's joint B2 estimate of ``seed`` held fixed."""
+    est.frequency = FrequencyResponse(reference_frequency(tr), *B2_0029[seed])
+    return est.fit(tr)
+
+
 def identify(folder: Path, model: str, how=None, show=False):
     tr, te = load_measurements(folder / "train.csv"), load_measurements(folder / "test.csv")
     est = PredictorIdentifier(order=8, fixed="recommended", n_starts=4, seed=0, model=model)
@@ -106,7 +119,7 @@ def identify(folder: Path, model: str, how=None, show=False):
     cpu = time.process_time() - c0
     if show:
         diagnose(est, te)
-    return held_out(est, te), cpu, (est.result_.frequency or {})
+    return held_out(est, te), cpu, (est.result_.frequency or {}), est
 
 
 def main() -> None:
@@ -120,6 +133,9 @@ def main() -> None:
     ap.add_argument("--diagnose", action="store_true", help="where the joint fit's held-out error lies (docstring)")
     ap.add_argument("--contact", action="store_true",
                     help="pure slip: also the multi-frequency identification with the contact law (docstring)")
+    ap.add_argument("--contact-from-0029", action="store_true",
+                    help="pure slip: the existing form at decision 0029's joint estimate held fixed, and the contact "
+                         "stage from it (docstring)")
     ap.add_argument("--cache", default=str(Path(os.environ.get("TMPDIR", "/tmp")) / "l1b2_bench_frequency"))
     a = ap.parse_args()
     cache = Path(a.cache)
@@ -135,16 +151,20 @@ def main() -> None:
             if a.skip_profile:
                 ep, cp = float("nan"), float("nan")
             else:
-                ep, cp, _ = identify(multi, model, fit_frequency_response_profile)
-            ej, cj, rec = identify(multi, model, fit_frequency_response, show=a.diagnose)
+                ep, cp, _, _ = identify(multi, model, fit_frequency_response_profile)
+            b2_given = a.contact_from_0029 and model == "pure_slip"
+            if b2_given:      # the existing form at decision 0029's joint estimate, held fixed (one identification)
+                ej, cj, rec, b2 = identify(multi, model, lambda est, tr: fixed_b2(est, tr, seed), show=a.diagnose)
+            else:
+                ej, cj, rec, b2 = identify(multi, model, fit_frequency_response, show=a.diagnose)
             r = rec.get("response") or {}
             bound = f" AT BOUND: {'; '.join(rec['at_bound'])}" if rec.get("at_bound") else ""
             print(f"{seed:>4} {model:>9} | {e1:8.2f} {c1:6.1f} | {ep:9.2f} {ep / e1:5.2f} {cp:6.1f} | "
                   f"{ej:7.2f} {ej / e1:5.2f} {cj:6.1f} | {ej / eq29_single:5.2f} | "
                   f"{r.get('f_b0_Hz', float('nan')):.0f}, {r.get('zeta_b', float('nan')):.4f}{bound}", flush=True)
             if a.contact and model == "pure_slip":
-                ec, cc, rec = identify(multi, model, lambda est, tr: fit_frequency_response(est, tr, contact=True),
-                                       show=a.diagnose)
+                ec, cc, rec, _ = identify(multi, model, lambda est, tr: fit_frequency_response(
+                    est, tr, contact=True, b2=b2 if b2_given else None), show=a.diagnose)
                 r, kept = rec.get("response") or {}, rec.get("contact") or {}
                 bound = f" AT BOUND: {'; '.join(rec['at_bound'])}" if rec.get("at_bound") else ""
                 print(f"{seed:>4} {'+contact':>9} | {e1:8.2f} {c1:6.1f} | {'':>9} {'':>5} {'':>6} | "

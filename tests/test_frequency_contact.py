@@ -259,3 +259,13 @@ def test_contact_setting_at_one_drive_frequency_holds_the_response_fixed_without
     rec = fits["contact"].result_.frequency
     assert rec["status"] == "fixed" and rec["response"] is None
     assert fits["contact"].loglik_ == pytest.approx(fits["auto"].loglik_, rel=1e-12)
+
+
+def test_report_lines_name_the_contact_law_or_that_it_was_not_kept():
+    from l1b2.ident.frequency import frequency_record, frequency_report_lines
+    resp = FrequencyResponse(F_REF, 47800.0, 0.0125, f_l0_Hz=50400.0, contact_V=300.0)
+    lines = frequency_report_lines(frequency_record("estimated", "r", resp, stderr={"f_l0_Hz": 3.0, "contact_V": 0.2}))
+    assert any("f_l0 = 50400.0 +/- 3.0 Hz" in x and "contact_V = 300.00 +/- 0.20 V" in x for x in lines)
+    b2 = FrequencyResponse(F_REF, 47800.0, 0.0125)
+    lines = frequency_report_lines(frequency_record("estimated", "r", b2, contact={"kept": False}))
+    assert any("NOT kept" in x for x in lines)

@@ -117,6 +117,11 @@ def frequency_report_lines(rec: Mapping | None) -> list[str]:
     lines = [f"    drive frequency: response {rec['status'].upper()} ({rec.get('reason', '')}): "
              f"B' x g(f), B2 f_b0 = {pm('f_b0_Hz', '.1f')} Hz, zeta_b = {pm('zeta_b', '.5f')}, "
              f"g(f_ref = {r['f_ref_Hz']:.1f} Hz) = 1"]
+    if r.get("f_l0_Hz") is not None:
+        lines.append(f"    drive frequency: contact law (decision 0038): L1 f_l0 = {pm('f_l0_Hz', '.1f')} Hz "
+                     f"(zeta_l {r['zeta_l']:g} held), contact_V = {pm('contact_V', '.2f')} V")
+    elif rec.get("contact"):
+        lines.append("    drive frequency: contact law tried, NOT kept (no higher log-likelihood than the B2 response)")
     if rec.get("at_bound"):
         lines.append(f"    drive frequency: AT A BOUND, not an estimate: {'; '.join(rec['at_bound'])}")
     return lines
@@ -338,7 +343,7 @@ def _contact_stage(data, mask, f_ref, loglik, best) -> dict:
     return rec
 
 
-def fit_frequency_response(est, data, slider_mass_kg=None, mask=None, contact=False):
+def fit_frequency_response(est, data, slider_mass_kg=None, mask=None, contact=False, b2=None):
     """Identify the model with its frequency response (``est.frequency == "auto"``, TRAIN's frequency varies).
 
     The response's coordinates ``q = (f_b0 / f_ref, ln zeta_b)`` are parameters of the joint least squares
@@ -356,11 +361,20 @@ def fit_frequency_response(est, data, slider_mass_kg=None, mask=None, contact=Fa
     ``contact=True`` (the setting ``frequency="contact"``, pure-slip family only) adds the contact law of
     :mod:`l1b2.predictor.frequency` (``f_l0_Hz``, ``contact_V``) after the B2 optimum
     (:func:`_contact_stage`, q of four coordinates, bounds :data:`QC_LO`/:data:`QC_HI`); the record's
-    ``contact`` says whether it was kept (it must raise the log-likelihood over the B2 optimum).
+    ``contact`` says whether it was kept (it must raise the log-likelihood over the B2 optimum). ``b2``: a
+    fitted identifier whose response (held fixed, ``result_.frequency["response"]``) is taken as the B2
+    optimum instead of estimating it here (the contact stage alone, e.g. after an ``"auto"`` identification).
     """
-    m_s, mask, f_ref, loglik, best, _, _ = _grid_basin(est, data, slider_mass_kg, mask)
+    if b2 is None:
+        m_s, mask, f_ref, loglik, best, _, _ = _grid_basin(est, data, slider_mass_kg, mask)
+        _gauss_newton(data, mask, f_ref, loglik, best)
+    else:                           # the contact stage from a given B2 identification
+        m_s, mask, f_ref = _prepared(data, slider_mass_kg, mask)
+        loglik, best = _profile(est, data, m_s, mask, f_ref, est._log)
+        x = np.array([b2.result_.frequency["response"]["f_b0_Hz"], math.log(b2.result_.frequency["response"]["zeta_b"])])
+        best.update(loglik=float(b2.loglik_), params=b2.params_, x=x, result=b2.result_)
+        best["seen"][_key(x)] = float(b2.loglik_)
     n_grid = len(best["seen"])
-    _gauss_newton(data, mask, f_ref, loglik, best)
     contact_rec = _contact_stage(data, mask, f_ref, loglik, best) if contact else None
     resp = response_of(f_ref, np.asarray(best["x"], float) / np.where(np.arange(len(best["x"])) % 2 == 0, f_ref, 1.0))
     final = _clone(est, frequency=resp, init=best["params"]).fit(data, slider_mass_kg=m_s, mask=mask)
@@ -397,14 +411,19 @@ def response_stderr(lin: "ResponseLinearisation", resp: FrequencyResponse) -> di
     return out
 
 
+def _prepared(data, slider_mass_kg, mask) -> tuple:
+    """``(slider mass, mask, f_ref)`` of an identification on ``data`` (the Measurements' own when not given)."""
+    m_s = slider_mass_kg if slider_mass_kg is not None else getattr(data, "slider_mass_kg", None)
+    if mask is None and isinstance(data, Measurements):
+        mask = data.mask
+    return m_s, mask, reference_frequency(data)
+
+
 def _grid_basin(est, data, slider_mass_kg, mask):
     """``(m_s, mask, f_ref, loglik, best, grid, vals)``: the profile log-likelihood (:func:`_profile`) evaluated on
     the basin's grid, :data:`GRID_OFFSETS` resonances on both sides of the drive x :data:`GRID_ZETAS` dampings;
     :class:`IdentificationError` when no grid point gives a finite fit."""
-    m_s = slider_mass_kg if slider_mass_kg is not None else getattr(data, "slider_mass_kg", None)
-    if mask is None and isinstance(data, Measurements):
-        mask = data.mask
-    f_ref = reference_frequency(data)
+    m_s, mask, f_ref = _prepared(data, slider_mass_kg, mask)
     loglik, best = _profile(est, data, m_s, mask, f_ref, est._log)
     grid = [np.array([f_ref * (1 + o), math.log(z)]) for o in GRID_OFFSETS for z in GRID_ZETAS]
     vals = [loglik(x) for x in grid]
