@@ -138,15 +138,17 @@ def test_each_family_is_cross_validated_with_its_own_frequency_response(monkeypa
 
     def cv(df, mask, m_s, folds, init, jobs, settings):
         seen[init] = settings.frequency
-        return [FoldErrors(np.array([1.0]), np.array([100.0]))]
+        return [FoldErrors(np.array([1.0]), np.array([100.0]), nfev=7)]
     monkeypatch.setattr(baselines, "cv_errors", cv)
     df = _frame()
     fits = {f: _Fit(f, df.speed_m_s.to_numpy()) for f in ("eq29", "pure_slip")}
     fits["eq29"].result_ = SimpleNamespace(frequency_response="response of eq29")
     fits["pure_slip"].result_ = SimpleNamespace(frequency_response="response of pure_slip")
     settings = RefitSettings(order=3, frequency="off")
-    baselines.choose_baseline(fits, df, np.ones(4, bool), 0.1, [[0]], settings)
+    _, rec = baselines.choose_baseline(fits, df, np.ones(4, bool), 0.1, [[0]], settings)
     assert seen == {"eq29": "response of eq29", "pure_slip": "response of pure_slip"}
+    # the fold refits and their evaluations are recorded (the loop counts them on its stage clock)
+    assert all(rec["families"][f]["refits"] == 1 and rec["families"][f]["nfev"] == 7 for f in fits)
     fits["pure_slip"].result_ = SimpleNamespace(frequency_response=None)   # one frequency: nothing to hold
     baselines.choose_baseline(fits, df, np.ones(4, bool), 0.1, [[0]], settings)
     assert seen["pure_slip"] == "off" and settings.frequency == "off"

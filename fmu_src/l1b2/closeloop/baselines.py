@@ -9,7 +9,7 @@ returns Eq. 29 unless another family's CV free-run nrmse is lower by at
 least ``min_drop`` (absolute; the loop's materiality threshold
 ``min_cv_drop``), then the lowest such family; a family whose CV failed is
 never chosen over Eq. 29. Record: family, CV nrmse, folds, TRAIN nrmse, the
-threshold. TEST is never used.
+fold refits and their evaluations, the threshold. TEST is never used.
 
 Why a threshold: leaving Eq. 29 relaxes its frozen slip ratio, which is what
 the loop's *structural* candidates do (:func:`l1b2.closeloop.acceptance.materiality`);
@@ -65,6 +65,7 @@ def choose_baseline(fits: dict, df, mask, m_s, folds, settings, min_drop: float 
         cv[family] = nrmse if np.isfinite(nrmse) else np.inf
         rec["families"][family] = {"cv_free_run_nrmse": nrmse if np.isfinite(nrmse) else None,
                                    "folds_failed": int(np.sum(~np.isfinite(err.sse))),
+                                   "refits": len(folds), "nfev": int(err.nfev),
                                    "train_free_run_nrmse": _train_nrmse(est, df, mask)}
     best = DEFAULT_FAMILY if DEFAULT_FAMILY in cv else next(iter(cv))
     lowest = min(cv, key=cv.get)
