@@ -125,3 +125,31 @@ def test_a_diverged_pure_slip_fit_leaves_eq29_and_is_recorded():
         baselines.identify_families(("eq29", "pure_slip"), fit({"eq29"}))
     with pytest.raises(FitDivergedError):      # a family given alone: its failure is the loop's
         baselines.identify_families(("pure_slip",), fit({"pure_slip"}))
+
+
+def test_each_family_is_cross_validated_with_its_own_frequency_response(monkeypatch):
+    # reference: on a TRAIN whose drive frequency varies, each family's identification estimates its own response
+    # (l1b2.ident.frequency); the choice used to cross-validate both with the loop's settings before any response
+    # was known ("off"), i.e. both families without their frequency dependence
+    from types import SimpleNamespace
+
+    from l1b2.closeloop.acceptance import RefitSettings
+    seen = {}
+
+    def cv(df, mask, m_s, folds, init, jobs, settings):
+        seen[init] = settings.frequency
+        return [FoldErrors(np.array([1.0]), np.array([100.0]), nfev=7)]
+    monkeypatch.setattr(baselines, "cv_errors", cv)
+    df = _frame()
+    fits = {f: _Fit(f, df.speed_m_s.to_numpy()) for f in ("eq29", "pure_slip")}
+    fits["eq29"].result_ = SimpleNamespace(frequency_response="response of eq29")
+    fits["pure_slip"].result_ = SimpleNamespace(frequency_response="response of pure_slip")
+    settings = RefitSettings(order=3, frequency="off")
+    _, rec = baselines.choose_baseline(fits, df, np.ones(4, bool), 0.1, [[0]], settings)
+    assert seen == {"eq29": "response of eq29", "pure_slip": "response of pure_slip"}
+    # the fold refits and their evaluations are recorded (the loop counts them on its stage clock)
+    assert all(rec["families"][f]["refits"] == 1 and rec["families"][f]["nfev"] == 7 for f in fits)
+    fits["pure_slip"].result_ = SimpleNamespace(frequency_response=None)   # one frequency: nothing to hold
+    baselines.choose_baseline(fits, df, np.ones(4, bool), 0.1, [[0]], settings)
+    assert seen["pure_slip"] == "off" and settings.frequency == "off"
+    assert baselines.family_settings(None, fits["eq29"]) is None

@@ -4,11 +4,12 @@ Contract: :func:`choose_baseline` takes the baselines already identified on
 TRAIN (one per family), cross-validates each by the loop's own refit folds
 (:func:`l1b2.closeloop.acceptance.cv_errors`: warm refits on the training
 folds, free-run error on the held-out runs; the refits keep each baseline's
-family) and returns Eq. 29 unless another family's CV free-run nrmse is lower
-by at least ``min_drop`` (absolute; the loop's materiality threshold
+family and its own drive-frequency response, :func:`family_settings`) and
+returns Eq. 29 unless another family's CV free-run nrmse is lower by at
+least ``min_drop`` (absolute; the loop's materiality threshold
 ``min_cv_drop``), then the lowest such family; a family whose CV failed is
 never chosen over Eq. 29. Record: family, CV nrmse, folds, TRAIN nrmse, the
-threshold. TEST is never used.
+fold refits and their evaluations, the threshold. TEST is never used.
 
 Why a threshold: leaving Eq. 29 relaxes its frozen slip ratio, which is what
 the loop's *structural* candidates do (:func:`l1b2.closeloop.acceptance.materiality`);
@@ -31,7 +32,7 @@ import numpy as np
 from ..errors import FitDivergedError
 from .acceptance import EffectSet, cv_errors
 
-__all__ = ["identify_families", "choose_baseline", "retag_structural"]
+__all__ = ["identify_families", "choose_baseline", "family_settings", "retag_structural"]
 
 
 #: the family kept unless another is materially better in cross-validation
@@ -59,11 +60,12 @@ def choose_baseline(fits: dict, df, mask, m_s, folds, settings, min_drop: float 
     rec = {"folds": len(folds), "min_drop": float(min_drop), "families": {}}
     cv = {}
     for family, est in fits.items():
-        err = cv_errors(df, mask, m_s, folds, est.params_, [(EffectSet(), None)], settings)[0]
+        err = cv_errors(df, mask, m_s, folds, est.params_, [(EffectSet(), None)], family_settings(settings, est))[0]
         nrmse = float(err.nrmse)
         cv[family] = nrmse if np.isfinite(nrmse) else np.inf
         rec["families"][family] = {"cv_free_run_nrmse": nrmse if np.isfinite(nrmse) else None,
                                    "folds_failed": int(np.sum(~np.isfinite(err.sse))),
+                                   "refits": len(folds), "nfev": int(err.nfev),
                                    "train_free_run_nrmse": _train_nrmse(est, df, mask)}
     best = DEFAULT_FAMILY if DEFAULT_FAMILY in cv else next(iter(cv))
     lowest = min(cv, key=cv.get)
@@ -71,6 +73,16 @@ def choose_baseline(fits: dict, df, mask, m_s, folds, settings, min_drop: float 
         best = lowest
     rec["chosen"] = best
     return best, rec
+
+
+def family_settings(settings, est):
+    """``settings`` with ``est``'s own drive-frequency response held by every refit (``settings`` unchanged when
+    ``est`` has none, or when ``settings`` is None): each family is cross-validated as the loop would extend it,
+    its response estimated on TRAIN when TRAIN's frequency varies (decision 0040)."""
+    resp = getattr(getattr(est, "result_", None), "frequency_response", None)
+    if settings is None or resp is None:
+        return settings
+    return dataclasses.replace(settings, frequency=resp)
 
 
 def _train_nrmse(est, df, mask) -> float:

@@ -174,7 +174,8 @@ class CloseLoop(EstimatorSettings):
         a pure-slip fit that diverges is recorded there and the loop starts from Eq. 29). With the
         pure-slip family no candidate counts as relaxing Eq. 29 (a load x voltage term is a missing
         effect). Why ``"best"`` is not yet the default: ``docs/decisions/0026-best-baseline-by-default.md``,
-        ``0032-run-level-effects-in-predictor-fmu.md`` and ``0033-named-before-collinear-generic.md``.
+        ``0032-run-level-effects-in-predictor-fmu.md``, ``0033-named-before-collinear-generic.md`` and
+        ``0040-why-the-named-pulley-form-loses-from-pure-slip.md``.
 
     Attributes
     ----------
@@ -250,6 +251,7 @@ class CloseLoop(EstimatorSettings):
             family, self.baseline_choice_ = choose_baseline(
                 fits, dtr, mask_tr, m_s, stratified_folds(dtr, self.refit_folds, self.seed), self.refit_settings(),
                 min_drop=self.min_cv_drop)
+            say.count(*(sum(r[k] for r in self.baseline_choice_["families"].values()) for k in ("refits", "nfev")))
         self.baseline_choice_["families"].update({f: {"fit_failed": why} for f, why in failed.items()})
         base = fits[family]
         #: the baseline's drive-frequency response (estimated when TRAIN's frequency varies): every refit holds it
