@@ -70,6 +70,55 @@ def test_channel_features_are_the_generic_forms_of_the_standardised_channel():
     assert fx.needs({**spec, "form": "force", "level": "run"}) == {"V0", "d", "run:aux"}
 
 
+def test_quadratic_channel_shape_is_the_clipped_z_and_its_square_minus_one():
+    # reference: the quadratic shape written out: zc = z clipped to TRAIN's range [(lo - mean)/sd, (hi - mean)/sd],
+    # columns (zc, zc^2 - 1) times the form's factor; the per-sample kernel of Predictor.fmu gives the same force,
+    # also for a value beyond TRAIN's range (flat there)
+    from l1b2.predictor import effects as fx
+    from l1b2.predictor.effects import kernels as ek
+    c = np.array([1.0, 3.0, 2.0, 9.0])                  # 9 lies beyond TRAIN's hi = 6
+    V0, d, T = np.array([300.0, 150.0, 240.0, 330.0]), np.array([1.0, -1.0, 1.0, -1.0]), c
+    spec = {"kind": "channel", "channel": "temperature_C", "mean": 2.0, "sd": 0.5, "lo": 1.0, "hi": 6.0,
+            "shape": "quadratic", "level": "sample"}
+    zc = np.clip((c - 2.0) / 0.5, -2.0, 8.0)
+    np.testing.assert_allclose(zc, [-2.0, 2.0, 0.0, 8.0])
+    x = {"V0": V0, "d": d, "T": T, "col:temperature_C": c, "s": np.zeros(4), "load": np.zeros(4),
+         "t": np.zeros(4), "v_base": np.zeros(4), "a_base": np.zeros(4)}
+    want = {"friction": -np.column_stack([zc, zc ** 2 - 1]),
+            "force_factor": (V0 / 300.0)[:, None] * np.column_stack([zc, zc ** 2 - 1]),
+            "force": d[:, None] * np.column_stack([zc, zc ** 2 - 1])}
+    phi = np.array([0.7, -0.3])
+    rows = np.column_stack([x[sg] if sg in x else np.zeros(4) for sg in fx.SIGNALS])
+    for form, F in want.items():
+        s = {**spec, "form": form}
+        np.testing.assert_allclose(fx.effect_features(s, x), F)
+        kind, q = ek.spec_scalars(s)
+        got = [ek.effect_force(kind, row.tolist(), q, phi.tolist()) for row in rows]
+        np.testing.assert_allclose(got, F @ phi, rtol=0, atol=1e-12)
+    # the linear shape keeps its one column and its four kernel scalars
+    lin = {k: v for k, v in spec.items() if k != "shape"} | {"form": "friction"}
+    np.testing.assert_allclose(fx.effect_features(lin, x)[:, 0], -(c - 2.0) / 0.5)
+    assert len(ek.spec_scalars(lin)[1]) == 4
+
+
+def test_a_channel_gets_both_shapes_with_its_training_range():
+    from l1b2.closeloop.candidates import channels_of
+    from l1b2.predictor import effects as fx
+    df = pd.DataFrame({"time_s": [0.0, 0.1, 5.0, 5.1], "run": [1, 1, 2, 2], "position_m": 0.0, "voltage_V": 200.0,
+                       "direction": 1, "load_kg": 0.0, "speed_m_s": 0.1, "aux": [1.0, 1.0, 3.0, 3.0]})
+    ch = {c["name"]: c for c in channels_of(df)}
+    assert (ch["aux"]["lo"], ch["aux"]["hi"]) == (1.0, 3.0)
+    hyps = [h for h in fx.family("channel").grid(fx.TrainingSummary(0.1, (0.0, 5.1), (-0.02, 0.02), 200.0, {},
+                                                                     channels=tuple(ch.values())))
+            if h.spec["channel"] == "aux"]
+    # constant within runs: the run level only, 3 forms x 2 shapes; the quadratic ones carry TRAIN's range
+    assert sorted((h.spec["form"], h.spec.get("shape", "linear")) for h in hyps) == sorted(
+        (f, s) for f in ("friction", "force_factor", "force") for s in ("linear", "quadratic"))
+    quad = [h for h in hyps if h.spec.get("shape") == "quadratic"]
+    assert all(len(h.names) == 2 and (h.spec["lo"], h.spec["hi"]) == (1.0, 3.0) for h in quad)
+    assert {h.family for h in hyps} == {"channel_aux"}   # one family for the significance correction
+
+
 def test_every_numeric_column_beyond_the_required_ones_is_a_channel():
     from l1b2.closeloop.candidates import channels_of, signals
     df = pd.DataFrame({"time_s": [0.0, 0.1, 5.0, 5.1], "run": [1, 1, 2, 2], "position_m": 0.0, "voltage_V": 200.0,

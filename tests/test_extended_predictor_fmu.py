@@ -450,7 +450,7 @@ def test_run_level_kernels_equal_the_features_on_runs_that_hold_their_inputs(poo
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * max(1.0, np.max(np.abs(want))), err_msg=h.family)
         assert np.max(np.abs(want)) > 1e-3, h.family
         n_checked += 1
-    assert n_checked == 4 + 1 + 3   # V0, d*load, |load|, direction, temperature; its channel's 3 forms (run level)
+    assert n_checked == 4 + 1 + 6   # V0, d*load, |load|, direction, temperature; its channel's 3 forms x 2 shapes (run)
     varied = dict(hyps[0].spec, run_spread=0.02 * hyps[0].spec["sd"])
     with pytest.raises(fx.EffectSpecError, match="not constant within runs"):
         ek.spec_scalars(varied)

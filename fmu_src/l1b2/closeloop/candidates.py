@@ -178,7 +178,8 @@ def candidate(ctx: Context, h: fx.Hypothesis) -> CandidateForce:
 def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
     """The candidate channels of a frame: every numeric column beyond the required ones and the speed, then the clock.
 
-    One ``{"name", "kind", "mean", "sd", "within_run", "run_spread"}`` each (``kind``:
+    One ``{"name", "kind", "mean", "sd", "lo", "hi", "within_run", "run_spread"}`` each (``lo``/``hi``: the
+    smallest and largest value; ``kind``:
     ``"logged"``, ``"protocol"`` for the session clock ``time_s``, or
     ``"response"`` for a measured response of the motor (``response_columns``, default
     :data:`l1b2.predictor.effects.channels.RESPONSE_COLUMNS`: listed, no hypothesis);
@@ -197,8 +198,8 @@ def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
             continue
         within = bool((df.groupby(dataio.RUN, sort=False)[name].agg(np.ptp) > 0).any())
         kind = "protocol" if name == dataio.TIME else "response" if name in responses else "logged"
-        out.append({"name": str(name), "kind": kind,
-                    "mean": float(np.mean(c)), "sd": float(np.std(c)), "within_run": within,
+        out.append({"name": str(name), "kind": kind, "mean": float(np.mean(c)), "sd": float(np.std(c)),
+                    "lo": float(np.min(c)), "hi": float(np.max(c)), "within_run": within,
                     "run_spread": fx.channels.run_spread(c, df[dataio.RUN])})
     return tuple(out)
 

@@ -135,7 +135,7 @@ class TrainingSummary:
     temperature_ref: float | None = None
     temperature_range: tuple | None = None
     spectral_period_m: float | None = None
-    #: the logged channels (:mod:`l1b2.predictor.effects.channels`): ``{"name", "kind", "mean", "sd",
+    #: the logged channels (:mod:`l1b2.predictor.effects.channels`): ``{"name", "kind", "mean", "sd", "lo", "hi",
     #: "within_run"}`` per numeric column beyond the required ones, and the session clock
     channels: tuple = ()
 

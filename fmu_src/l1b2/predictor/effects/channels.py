@@ -16,7 +16,9 @@ enters in one of three generic forms, each linear in one parameter ``a``
 * ``force_factor``: it scales the drive's force factor, ``dF = a (V0/V_ref) z``;
 * ``force``: it adds a force fixed in the lab frame, ``dF = a d z`` (``d`` the direction).
 
-and at one of two levels: ``run`` (``c`` is the run's mean of the channel:
+in one of two shapes: ``linear`` (the factor times ``a z``, one parameter) or ``quadratic`` (the factor times
+``a zc + b (zc^2 - 1)``, ``zc`` = ``z`` clipped to TRAIN's range of the channel: a response that saturates or peaks
+inside the range, flat beyond it), and at one of two levels: ``run`` (``c`` is the run's mean of the channel:
 an effect that differs between runs, not along the stroke) or ``sample``
 (``c`` is the sample's value: along the stroke; listed only for a channel
 that varies within runs). Every form and level of one channel is one
@@ -51,6 +53,8 @@ from .base import SIGNALS, V_REF, Effect, EffectSpecError, needs, num, register,
 
 FORMS = ("friction", "force_factor", "force")
 LEVELS = ("run", "sample")
+#: a channel's shapes: linear in ``z``, or ``z`` and ``z^2 - 1`` with ``z`` clipped to TRAIN's range (:func:`shape_basis`)
+SHAPES = ("linear", "quadratic")
 #: the session clock's column: the recording protocol's signal, always a candidate
 SESSION_TIME = "time_s"
 #: logged columns that are measured *responses* of the motor, not causes: listed, never candidates. A regressor
@@ -167,32 +171,54 @@ class Channel(Effect):
         if not sd > 0:
             raise EffectSpecError(f"channel {spec.get('channel')!r}: standard deviation {sd} is not positive")
         z = (c - num(spec, "mean")) / sd
-        return (form_factor(str(spec.get("form")), x) * z)[:, None]
+        return form_factor(str(spec.get("form")), x)[:, None] * shape_basis(spec, z)
 
     def width(self, spec):
-        return 1
+        return 2 if spec.get("shape", "linear") == "quadratic" else 1
 
     def grid(self, train):
         chans = list(train.channels)
         if not any(ch["name"] == SESSION_TIME for ch in chans):   # the protocol's clock, from TRAIN's time range
             t0, t1 = train.time_range
             chans.append({"name": SESSION_TIME, "kind": "protocol", "mean": 0.5 * (t0 + t1),
-                          "sd": (t1 - t0) / np.sqrt(12.0), "within_run": True})
+                          "sd": (t1 - t0) / np.sqrt(12.0), "within_run": True, "lo": t0, "hi": t1})
         out = []
         for ch in chans:
             if not ch.get("sd", 0) > 0 or ch.get("kind") == "response":
                 continue   # constant on TRAIN (no evidence possible) or a measured response: considered, not a cause
             name, reg = ch["name"], regressor_of(ch["name"])
             for level in LEVELS if ch.get("within_run", True) else ("run",):
-                for form in FORMS:
-                    out.append(self.hypothesis(
-                        [f"{name}_{form}_{level}"], ["N"],
-                        {"channel": name, "form": form, "level": level, "mean": float(ch["mean"]),
-                         "sd": float(ch["sd"]), **_spread(ch, level)}, f"{form}, {level}", family=f"channel_{name}", regressor=reg,
-                        generic=True, description=f"{ch.get('kind', 'logged')} channel {name} "
-                                                  f"({'run mean' if level == 'run' else 'per sample'}) "
-                                                  f"{_FORM_TEXT[form]}"))
+                for shape in SHAPES if "lo" in ch and "hi" in ch else SHAPES[:1]:
+                    for form in FORMS:
+                        out.append(self._hypothesis(ch, reg, form, level, shape))
         return out
+
+    def _hypothesis(self, ch, reg, form, level, shape):
+        name = ch["name"]
+        spec = {"channel": name, "form": form, "level": level, "mean": float(ch["mean"]), "sd": float(ch["sd"]),
+                **_spread(ch, level)}
+        names = [f"{name}_{form}_{level}"]
+        if shape == "quadratic":
+            spec.update(shape=shape, lo=float(ch["lo"]), hi=float(ch["hi"]))
+            names = [f"{name}_{form}_{level}_lin", f"{name}_{form}_{level}_sq"]
+        return self.hypothesis(
+            names, ["N"] * len(names), spec, f"{form}, {level}" + (", quadratic" if shape == "quadratic" else ""),
+            family=f"channel_{name}", regressor=reg, generic=True,
+            description=f"{ch.get('kind', 'logged')} channel {name} ({'run mean' if level == 'run' else 'per sample'}"
+                        f"{', quadratic' if shape == 'quadratic' else ''}) {_FORM_TEXT[form]}")
+
+
+def shape_basis(spec, z) -> np.ndarray:
+    """The columns of a channel's shape for its standardised values ``z``: ``z`` (``linear``), or ``zc`` and
+    ``zc^2 - 1`` (``quadratic``; ``zc`` = ``z`` clipped to TRAIN's range ``[(lo - mean)/sd, (hi - mean)/sd]``)."""
+    shape = spec.get("shape", "linear")
+    if shape == "linear":
+        return np.asarray(z, float)[:, None]
+    if shape != "quadratic":
+        raise EffectSpecError(f"channel shape {shape!r} is not one of {', '.join(SHAPES)}")
+    mean, sd = num(spec, "mean"), num(spec, "sd")
+    zc = np.clip(z, (num(spec, "lo") - mean) / sd, (num(spec, "hi") - mean) / sd)
+    return np.column_stack([zc, zc ** 2 - 1.0])
 
 
 def _spread(sg, level: str = "run") -> dict:

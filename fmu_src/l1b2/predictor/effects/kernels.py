@@ -30,7 +30,7 @@ import math
 
 from ...units import G_M_S2
 from .base import SIGNALS, SPEED_REF, V_REF, EffectSpecError
-from .channels import FORMS, G_N_PER_KG, TRANSFORMS, export_problem, fmu_signal, signal_key
+from .channels import FORMS, G_N_PER_KG, SHAPES, TRANSFORMS, export_problem, fmu_signal, signal_key
 
 #: index of each signal in ``x``
 SIG_T, SIG_S, SIG_V0, SIG_LOAD, SIG_D, SIG_TEMP, SIG_VB, SIG_AB = range(len(SIGNALS))
@@ -67,6 +67,8 @@ KERNEL_KINDS = tuple(SPEC_KEYS)
 #: the codes of a channel's form and of a run-level signal's transform in ``q``
 #: (:data:`l1b2.predictor.effects.channels.FORMS` and ``TRANSFORMS``)
 FORM_FRICTION, FORM_FORCE_FACTOR, FORM_FORCE = range(len(FORMS))
+#: added to a channel's form code in ``q[1]`` for the quadratic shape (then ``q[4:6]``: TRAIN's range of ``z``)
+QUADRATIC = len(FORMS)
 TR_NONE, TR_DRIVE, TR_ABS = range(len(TRANSFORMS))
 #: the offsets of the range scalars in ``q`` (smooth: after the regressor; pair: after both)
 R_T_LO, R_T_HI, R_S_LO, R_S_HI, R_N_INNER, R_LOAD_ABS, R_V_LO, R_V_HI, R_VB_LO, R_VB_HI, R_M_S, R_TEMP_LO, \
@@ -122,6 +124,15 @@ def _signal_scalars(spec) -> list[float]:
     if not sd > 0:
         raise EffectSpecError(f"effect spec {kind!r} of {spec.get('channel')!r}: standard deviation {sd} is not "
                               "positive")
+    if kind == "channel" and spec.get("shape", "linear") != "linear":
+        if spec.get("shape") != "quadratic":
+            raise EffectSpecError(f"effect spec 'channel': shape {spec.get('shape')!r} is not one of "
+                                  f"{', '.join(SHAPES)}")
+        try:
+            z_lo, z_hi = (float(spec["lo"]) - mean) / sd, (float(spec["hi"]) - mean) / sd
+        except (KeyError, TypeError, ValueError):
+            raise EffectSpecError("effect spec 'channel' of shape 'quadratic' lacks a numeric 'lo' or 'hi'") from None
+        return [float(SIGNAL_INDEX[sig]), float(code + QUADRATIC), mean, sd, z_lo, z_hi]
     return [float(SIGNAL_INDEX[sig]), float(code), mean, sd]
 
 
@@ -321,15 +332,21 @@ def input_signal(x, sig):
 
 
 def channel_force(x, q, phi):
-    """``Channel.features`` @ phi: ``z`` = (input - mean)/sd (``q[0]`` the input, ``q[2:4]`` mean and sd) times
-    the form's factor (``q[1]``: -1, ``V0/V_REF`` or ``d``)."""
+    """``Channel.features`` @ phi: ``z`` = (input - mean)/sd (``q[0]`` the input, ``q[2:4]`` mean and sd) in its
+    shape (``z phi[0]``; quadratic, ``q[1]`` >= ``QUADRATIC``: ``zc phi[0] + (zc^2 - 1) phi[1]``, ``zc`` = ``z``
+    clipped to ``q[4:6]``) times the form's factor (``q[1]`` modulo ``QUADRATIC``: -1, ``V0/V_REF`` or ``d``)."""
     z = (input_signal(x, int(q[0])) - q[2]) / q[3]
     form = int(q[1])
+    g = z * phi[0]
+    if form >= QUADRATIC:
+        form = form - QUADRATIC
+        zc = min(max(z, q[4]), q[5])
+        g = zc * phi[0] + (zc * zc - 1.0) * phi[1]
     if form == FORM_FRICTION:
-        return -z * phi[0]
+        return -g
     if form == FORM_FORCE_FACTOR:
-        return x[SIG_V0] / V_REF * z * phi[0]
-    return x[SIG_D] * z * phi[0]
+        return x[SIG_V0] / V_REF * g
+    return x[SIG_D] * g
 
 
 def run_level_force(x, q, phi):

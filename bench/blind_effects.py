@@ -1,0 +1,200 @@
+#!/usr/bin/env python
+"""A blind audit of the close loop: effects of kinds that no injection of the rig and no candidate of the loop names.
+
+Every kind here lives in this script only (nothing in the package knows it) and acts through the co-simulation of
+the realistic world (``system_models/realistic_motor.toml``, the rig's 72-run plan at a 1 ms step, 1 mm/s speed
+noise and a 2 % run-to-run contact scatter, as ``tests/test_closeloop_realistic.py`` makes its data): it sets FMU
+parameters or inputs per run or per sample, never the recorded speed. The kinds, their physics and the channel the
+data carries them in:
+
+* ``humidity_friction`` -- logged auxiliary column ``humidity_pct`` (one value per run plus sensor noise, a column no
+  code of the package names). Adsorbed water lubricates the ceramic tip on the lining: the Coulomb slip friction
+  coefficient is ``mu_p (1 - A tanh((RH - 45 %) / 8 %))``, saturating once the film is formed. RH per run
+  ``45 + 15 z`` (z standard normal, clipped to 20-80 %), A drawn in 0.08-0.12.
+* ``chamber_temperature`` -- logged ``temperature_C``, constant within a run and different between runs (a thermal
+  chamber at a new set point per condition, 18-34 degC uniform). The stator's B2 resonance moves with its
+  temperature (``Stator.df_dT_b_Hz_per_K`` drawn in -30..-20 Hz/K; L1 does not move); the operator set the supply
+  at 25 degC, so the drive's tank also drifts (its inductor's temperature coefficient, part of the world).
+* ``lining_wear`` -- no channel. The lining wears by Archard's law: wear grows with the tip's sliding distance,
+  ``S_k`` summed over the runs before run k (tip speed ~ 0.2 m/s x V0/324 V times the run's duration), and the
+  friction coefficient glazes, ``mu_p (1 - W (1 - exp(-S/S0)))`` (W 0.10-0.16, S0 1.5-3 m; a session slides ~4 m).
+* ``vco_warmup`` -- logged ``frequency_Hz`` per sample. The drive's oscillator starts each run off its set point and
+  settles, ``f(t) = f0 + D exp(-t/tau)`` (D drawn per run in +150..+400 Hz, tau 0.08-0.15 s for the session), t from
+  the run's start; the operator's supply setting is for f0.
+* ``humidity_capillary`` -- the same logged ``humidity_pct``, a non-monotone law: water menisci at the contact's
+  asperities add an adhesive normal force that is largest at intermediate humidity and vanishes when the film
+  floods them, ``mu_p (1 + B (exp(-((RH - 50 %) / 12 %)^2) - 1/2))`` (B 0.15-0.20; RH as above). A probe of the
+  channel forms' shape: its run-level correlation with RH itself is weak.
+* ``cable_preload`` -- the load's own column, acting through the preload: the pulley's cable leaves the slider at an
+  angle (drawn 15-25 deg) toward the bar, so the load's weight adds ``|m| g sin(angle)`` to the preload (the
+  cable pulls the slider onto the bar whichever way the load hangs).
+
+Usage: python bench/blind_effects.py KIND SEED [--cache DIR]       (KIND: one of the above or clean)
+Prints one JSON line: traced (first two), added, TEST free-run nrmse before and after, the channels considered,
+whether the effect's channel was among them, and the CPU time of the close loop (``time.process_time``).
+"""
+import argparse
+import json
+import math
+import os
+import shutil
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "fmu_src"))
+
+from l1b2.closeloop.loop import close_loop  # noqa: E402
+from l1b2.cosim.engine import InProcessMotor  # noqa: E402
+from l1b2.data import measurements as dataio  # noqa: E402
+from l1b2.data.measurements import load_measurements  # noqa: E402
+from l1b2.physics import driver as drv  # noqa: E402
+from l1b2.physics.params import SYSTEM_MODELS_DIR, load_motor  # noqa: E402
+from l1b2.rig.experiment import (RigPlan, add_speed_noise, plan_runs, run_contact_factors,  # noqa: E402
+                                 sampling_every, scattered_motor, write_experiment)
+
+KINDS = ("humidity_friction", "chamber_temperature", "lining_wear", "vco_warmup", "cable_preload",
+         "humidity_capillary")
+#: the channel each kind acts through (as the loop's report names channels), None: none logged
+CHANNEL = {"humidity_friction": "humidity_pct", "chamber_temperature": "temperature_C", "lining_wear": None,
+           "vco_warmup": "frequency_Hz", "cable_preload": "load_kg", "humidity_capillary": "humidity_pct"}
+#: the regressor the loop should trace (its report's name of the channel; the session clock for the unlogged wear)
+WANT = {"humidity_friction": "humidity_pct", "chamber_temperature": "temperature", "lining_wear": "time",
+        "vco_warmup": "frequency", "cable_preload": "load", "humidity_capillary": "humidity_pct"}
+TIP_SPEED_M_S = 0.2   # tip sliding speed at 324 V (order of omega U_w), for the wear's sliding distance
+
+
+def plan_of(seed: int) -> RigPlan:
+    """The realistic tests' plan (``tests/rigcache.world_plan``): 1 ms step, 1 mm/s speed noise, 2 % scatter."""
+    return RigPlan(step_s=1e-3, seed=seed, speed_noise_m_s=1e-3, run_scatter=0.02)
+
+
+def draw(kind: str, seed: int, n_runs: int) -> dict:
+    """The kind's parameters and per-run values (its own random stream of ``seed``)."""
+    rng = np.random.default_rng([seed, 77, KINDS.index(kind) if kind in KINDS else 99])
+    if kind == "humidity_capillary":
+        return {"B": float(rng.uniform(0.15, 0.20)),
+                "RH": np.clip(45 + 15 * rng.standard_normal(n_runs), 20, 80)}
+    if kind == "humidity_friction":
+        return {"A": float(rng.uniform(0.08, 0.12)),
+                "RH": np.clip(45 + 15 * rng.standard_normal(n_runs), 20, 80)}
+    if kind == "chamber_temperature":
+        return {"df_dT_b": float(rng.uniform(-30, -20)), "T": rng.uniform(18, 34, n_runs)}
+    if kind == "lining_wear":
+        return {"W": float(rng.uniform(0.10, 0.16)), "S0": float(rng.uniform(1.5, 3.0))}
+    if kind == "vco_warmup":
+        return {"D": rng.uniform(150, 400, n_runs), "tau": float(rng.uniform(0.08, 0.15))}
+    if kind == "cable_preload":
+        return {"angle_deg": float(rng.uniform(15, 25))}
+    return {}
+
+
+def traverse(mp, nominal, plan, V0, load, d, T=None, f_of_t=None):
+    """One traverse of the co-simulation (in-process engine) with the ambient ``T`` and drive frequency ``f_of_t``
+    (a function of the run's time, or None: the plan's); the operator's supply is set at 25 degC and f0."""
+    T = plan.ambient_degC if T is None else float(T)
+    V_s = float(drv.supply_for_voltage_V(nominal.driver, V0, 1.0, plan.f_drive_Hz, plan.ambient_degC))
+    s0 = mp.slider.s_min_m if d > 0 else mp.slider.s_max_m
+    m = InProcessMotor(mp, h_s=plan.step_s)
+    m.initialize(V_s=V_s, f_s=f_of_t if f_of_t is not None else plan.f_drive_Hz, T=T, direction=d, m_load=load,
+                 s0=s0)
+    rec = ("Slider.s", "Stator.T_stator")
+    return m.run(plan.max_run_s, record=rec, until=lambda mm: mm.value("Slider.at_stop") == d)
+
+
+def experiment(kind: str, seed: int):
+    """The 72-run experiment of one kind (``"clean"``: none) and its truth."""
+    plan = plan_of(seed)
+    nominal = load_motor(SYSTEM_MODELS_DIR / "realistic_motor.toml")
+    conds = plan_runs(plan)
+    factors = run_contact_factors(plan, len(conds))
+    p = draw(kind, seed, len(conds))
+    every = sampling_every(plan)
+    frames, t_next, S = [], 0.0, 0.0
+    per_run = []
+    for k, (V, L, d) in enumerate(conds):
+        mp = scattered_motor(nominal, factors[k])
+        T, f_of_t, extra = None, None, {}
+        if kind == "humidity_friction":
+            mp = mp.replace(interface__mu_p=mp.interface.mu_p * (1 - p["A"] * math.tanh((p["RH"][k] - 45) / 8)))
+        elif kind == "humidity_capillary":
+            bump = math.exp(-((p["RH"][k] - 50) / 12) ** 2) - 0.5
+            mp = mp.replace(interface__mu_p=mp.interface.mu_p * (1 + p["B"] * bump))
+        elif kind == "chamber_temperature":
+            mp = mp.replace(stator__df_dT_b_Hz_per_K=p["df_dT_b"])
+            T = float(p["T"][k])
+        elif kind == "lining_wear":
+            mp = mp.replace(interface__mu_p=mp.interface.mu_p * (1 - p["W"] * (1 - math.exp(-S / p["S0"]))))
+        elif kind == "vco_warmup":
+            D, tau, f0 = float(p["D"][k]), p["tau"], plan.f_drive_Hz
+            f_of_t = lambda t, D=D, tau=tau, f0=f0: f0 + D * math.exp(-t / tau)  # noqa: E731
+        elif kind == "cable_preload":
+            mp = mp.replace(stator__P0_N=mp.stator.P0_N + abs(L) * 9.81 * math.sin(math.radians(p["angle_deg"])))
+        r = traverse(mp, nominal, plan, V, L, d, T, f_of_t)
+        idx = np.arange(0, len(r["time"]), every)
+        t = r["time"][idx]
+        pos = np.round(np.round(r["Slider.s"][idx] / plan.encoder_resolution_m) * plan.encoder_resolution_m, 12)
+        f = (np.round([f_of_t(x) for x in t], 1) if f_of_t is not None else np.full(len(t), plan.f_drive_Hz))
+        out = pd.DataFrame({dataio.TIME: np.round(t_next + t, 9), dataio.RUN: k + 1, dataio.POSITION: pos,
+                            dataio.VOLTAGE: V, dataio.DIRECTION: d, dataio.LOAD: L,
+                            dataio.SPEED: np.round(np.gradient(pos, t), 9), dataio.FREQUENCY: f})
+        noise = np.random.default_rng([seed, 78, k]).standard_normal(len(t))
+        if kind == "chamber_temperature":
+            out[dataio.TEMPERATURE] = np.round(r["Stator.T_stator"][idx] + 0.05 * noise, 2)
+        if kind in ("humidity_friction", "humidity_capillary"):
+            out["humidity_pct"] = np.round(p["RH"][k] + 0.5 * noise, 2)
+        frames.append(out)
+        per_run.append({"run": k + 1, "mu_p": mp.interface.mu_p, "P0_N": mp.stator.P0_N, "S_m": S})
+        S += TIP_SPEED_M_S * V / 324.0 * float(t[-1])
+        t_next = float(out[dataio.TIME].iloc[-1]) + plan.pause_s
+    df = add_speed_noise(pd.concat(frames, ignore_index=True), plan)
+    params = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in p.items()}
+    truth = {"blind_kind": kind, "parameters": params, "per_run": per_run, "plan": plan.__dict__}
+    return df, truth, nominal, plan
+
+
+def data_dir(kind: str, seed: int, cache: Path) -> Path:
+    out = cache / f"{kind}_{seed}"
+    if not (out / "train.csv").exists():
+        df, truth, mp, plan = experiment(kind, seed)
+        tmp = out.with_name(out.name + ".partial")
+        shutil.rmtree(tmp, ignore_errors=True)
+        write_experiment(df, tmp, mp, plan, truth)
+        os.replace(tmp, out)
+    return out
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("kind", choices=KINDS + ("clean",))
+    ap.add_argument("seed", type=int)
+    ap.add_argument("--cache", default=str(Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
+                                           / "l1b2" / "blind_effects"))
+    ap.add_argument("--report", default="", help="write the close loop's whole result (report.json's content) here")
+    args = ap.parse_args(argv)
+    d = data_dir(args.kind, args.seed, Path(args.cache))
+    c0 = time.process_time()
+    res = close_loop(load_measurements(d / "train.csv"), load_measurements(d / "test.csv"))
+    cpu = time.process_time() - c0
+    diag = res.diagnosis
+    b = res.before["test"]["free_run"]["nrmse"]
+    a = res.after["test"]["free_run"]["nrmse"] if res.after is not None else b
+    considered = diag.get("channels_considered") or []
+    names = [c.get("channel") for c in considered]
+    ch = CHANNEL.get(args.kind)
+    row = {"kind": args.kind, "seed": args.seed, "traced": diag["traced_to"][:2],
+           "added": [e["label"] for e in diag["effects"]], "before": round(100 * b, 3), "after": round(100 * a, 3),
+           "channel_considered": None if ch is None else ch in names, "channels": names,
+           "significant": [c.get("channel") for c in considered if c.get("significant")]
+           + [f"{e['signal']} (run)" for c in considered for e in c.get("run_level") or [] if e.get("significant")],
+           "message": diag["message"], "cpu_s": round(cpu, 1)}
+    print(json.dumps(row))
+    if args.report:
+        Path(args.report).write_text(json.dumps(res.to_dict(), default=str))
+
+
+if __name__ == "__main__":
+    main()
