@@ -117,7 +117,7 @@ def experiment(kind: str, seed: int):
     per_run = []
     for k, (V, L, d) in enumerate(conds):
         mp = scattered_motor(nominal, factors[k])
-        T, f_of_t, extra = None, None, {}
+        T, f_of_t = None, None
         if kind == "humidity_friction":
             mp = mp.replace(interface__mu_p=mp.interface.mu_p * (1 - p["A"] * math.tanh((p["RH"][k] - 45) / 8)))
         elif kind == "humidity_capillary":

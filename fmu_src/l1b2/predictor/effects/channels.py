@@ -186,7 +186,7 @@ class Channel(Effect):
         for ch in chans:
             if not ch.get("sd", 0) > 0 or ch.get("kind") == "response":
                 continue   # constant on TRAIN (no evidence possible) or a measured response: considered, not a cause
-            name, reg = ch["name"], regressor_of(ch["name"])
+            reg = regressor_of(ch["name"])
             for level in LEVELS if ch.get("within_run", True) else ("run",):
                 for shape in SHAPES if "lo" in ch and "hi" in ch else SHAPES[:1]:
                     for form in FORMS:
