@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from l1b2.ident.identifiable import (
     IdentifiableProblem,
+    admissible,
     feasible_gauge,
     h_of_k0,
     identifiable_objective,
@@ -147,3 +148,15 @@ def test_the_search_ends_above_its_start_with_a_paper_vector_of_that_likelihood(
     ll = profile_loglik(obj, outer.z)
     assert ll == pytest.approx(-search.results[search.best].cost, abs=1e-6)
     assert ll > ll0
+
+
+def test_admissible_points_have_k_below_zero_and_positive_sigma_and_b():
+    for seed in range(4):
+        assert admissible(_theta(seed), N1)
+    for i in (1, 2):  # sigma = 0 or mu = 0 (their bound): no beta_s = b / sigma
+        th = _theta(0)
+        th[i] = 0.0
+        assert not admissible(th, N1)
+    y = y_of_theta(_theta(1), N1)
+    y[0] = 0.5  # K > 0: c_r = sigma h(k0) - K / beta_s < 0 for every gauge
+    assert not admissible(theta_of_y(y, N1), N1)

@@ -37,7 +37,7 @@ import numpy as np
 
 from ..predictor.model import G_of_k0, drive_factor
 
-__all__ = ["h_of_k0", "y_of_theta", "theta_of_y", "feasible_gauge", "IdentifiableProblem"]
+__all__ = ["h_of_k0", "y_of_theta", "admissible", "theta_of_y", "feasible_gauge", "IdentifiableProblem"]
 
 
 def h_of_k0(k0: float) -> float:
@@ -57,6 +57,15 @@ def y_of_theta(theta, n1: int) -> np.ndarray:
     d[0] += c_r + 0.5 * sigma
     y[5:5 + n1] = d
     return y
+
+
+def admissible(theta, n1: int) -> bool:
+    """Whether theta has identifiable coordinates with a paper vector: sigma > 0, b > 0 and K < 0 (all finite)."""
+    th = np.asarray(theta, dtype=float)
+    if not (th[1] > 0 and th[2] > 0 and float(G_of_k0(th[3])) > 0):
+        return False
+    y = y_of_theta(th, n1)
+    return bool(np.all(np.isfinite(y)) and y[0] < 0 < y[2])
 
 
 def theta_of_y(y, n1: int) -> np.ndarray:

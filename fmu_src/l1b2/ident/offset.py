@@ -47,7 +47,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from ..predictor.model import G_of_k0, drive_factor
-from .identifiable import identifiable_search
+from .identifiable import admissible, identifiable_search
 from .problem import ScaledObjective
 from .varpro import linear_positions, local_fit, profile_loglik, varpro_search
 
@@ -393,8 +393,11 @@ def _keep_profile_point(obj, search, outer, best, log=None):
 def _continue_identifiable(obj, search, outer, more, n1, p_theta, max_nfev, tol, stat_tol, max_outer, log):
     """The search continued in the identifiable coordinates from its optimum (``BRACKET["final"]`` =
     "paper+identifiable"): the continuation when it ends higher, else the search as it was (noise model there);
-    its evaluations count either way and its stages are added as "identifiable ..."."""
+    its evaluations count either way and its stages are added as "identifiable ...". Not continued when the
+    optimum has no identifiable coordinates (:func:`l1b2.ident.identifiable.admissible`)."""
     ll = -search.results[search.best].cost
+    if not admissible(obj.theta_of(outer.z), n1):  # e.g. mu or sigma at its bound 0: no coordinates to continue in
+        return search, outer, more
     s2, o2, m2 = identifiable_search(obj, obj.theta_of(outer.z), n1, p_theta, max_nfev, tol, stat_tol, max_outer,
                                      log, BRACKET["final_min_gain"])
     more = more + [{**m, "stage": "identifiable " + m["stage"]} for m in m2]
@@ -427,7 +430,7 @@ def bracketed_offset_search(obj, theta_start, order, kappa, p_theta, max_nfev, t
         search, outer, more = varpro_search(obj, lin, [obj.z_of(theta_start)], max_nfev, tol, stat_tol, max_outer, 1,
                                             log, BRACKET["final_min_gain"])
     else:
-        if BRACKET["final"] == "identifiable":  # decision 0039: the null directions of (sigma, mu, k0) removed
+        if BRACKET["final"] == "identifiable" and admissible(best["theta"], n1):  # decision 0039: the null directions of (sigma, mu, k0) removed
             search, outer, more = identifiable_search(obj, best["theta"], n1, p_theta, max_nfev, tol, stat_tol,
                                                       max_outer, log, BRACKET["final_min_gain"])
         else:
