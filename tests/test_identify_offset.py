@@ -266,3 +266,13 @@ def test_the_continuation_in_identifiable_coordinates_never_ends_below_the_paper
     assert own > 0 and both.convergence_["nfev_total"] >= paper.convergence_["nfev_total"] + own - 1
     lo, hi = PredictorParams.bounds(3)
     assert np.all(both.theta_ >= lo) and np.all(both.theta_ <= hi)
+    # a continuation that fails leaves the paper-coordinate result as it was
+
+    def fails(*args, **kwargs):
+        raise ValueError("no paper vector")
+
+    monkeypatch.setitem(off.BRACKET, "final", "paper+identifiable")
+    monkeypatch.setattr(off, "identifiable_search", fails)
+    kept = PredictorIdentifier(order=3, solver="offset_bracket").fit(df, slider_mass_kg=M_S)
+    assert kept.loglik_ == pytest.approx(paper.loglik_, abs=1e-9)
+    np.testing.assert_array_equal(kept.theta_, paper.theta_)

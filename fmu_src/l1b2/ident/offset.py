@@ -46,6 +46,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from ..errors import IdentificationError
 from ..predictor.model import G_of_k0, drive_factor
 from .identifiable import admissible, identifiable_search
 from .problem import ScaledObjective
@@ -398,8 +399,14 @@ def _continue_identifiable(obj, search, outer, more, n1, p_theta, max_nfev, tol,
     ll = -search.results[search.best].cost
     if not admissible(obj.theta_of(outer.z), n1):  # e.g. mu or sigma at its bound 0: no coordinates to continue in
         return search, outer, more
-    s2, o2, m2 = identifiable_search(obj, obj.theta_of(outer.z), n1, p_theta, max_nfev, tol, stat_tol, max_outer,
-                                     log, BRACKET["final_min_gain"])
+    try:
+        s2, o2, m2 = identifiable_search(obj, obj.theta_of(outer.z), n1, p_theta, max_nfev, tol, stat_tol,
+                                         max_outer, log, BRACKET["final_min_gain"])
+    except (IdentificationError, np.linalg.LinAlgError, ValueError) as exc:  # the search as it was
+        if log is not None:
+            log(f"identifiable continuation failed ({exc}); the paper-coordinate optimum kept")
+        profile_loglik(obj, outer.z)
+        return search, outer, more
     more = more + [{**m, "stage": "identifiable " + m["stage"]} for m in m2]
     extra = sum(m.get("nfev", 0) for m in m2)
     if -s2.results[s2.best].cost > ll:
