@@ -75,7 +75,8 @@ def theta_of_y(y, n1: int) -> np.ndarray:
     th = y.copy()
     K, sigma, beta_s, k0 = y[:4]
     th[2] = beta_s * sigma / (0.5 * np.pi * float(G_of_k0(k0)))
-    th[0] = c_r = sigma * h_of_k0(k0) - K / beta_s
+    with np.errstate(divide="ignore", invalid="ignore"):  # beta_s = 0 (its bound): non-finite, which searches reject
+        th[0] = c_r = sigma * h_of_k0(k0) - K / beta_s
     alpha = -y[5:5 + n1] / sigma
     alpha[0] += (c_r + 0.5 * sigma) / sigma
     th[5:5 + n1] = alpha
@@ -111,10 +112,14 @@ class IdentifiableProblem:
         return theta_of_y(y, self.n1)
 
     def residual(self, y):
-        return self.problem.residual(self.theta(y))
+        th = self.theta(y)
+        with np.errstate(over="ignore", invalid="ignore"):
+            return self.problem.residual(th)
 
     def start_gain(self, y):
-        return self.problem.start_gain(self.theta(y))
+        th = self.theta(y)
+        with np.errstate(over="ignore", invalid="ignore"):
+            return self.problem.start_gain(th)
 
     def predict_all(self, y):
         return self.problem.predict_all(self.theta(y))
