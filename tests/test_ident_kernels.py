@@ -131,3 +131,23 @@ def test_signals_are_computed_once_per_frame_and_equal_the_uncached_ones(problem
     import pickle
     assert pickle.loads(pickle.dumps(Context(baseline_free_run=np.sin, m_s=M_S, time_range=(0.0, 1.0),
                                              position_range=(0.0, 1.0)))).signal_cache == {}
+
+
+@pytest.mark.parametrize("sorted_runs", [True, False])
+def test_whitening_a_vector_by_run_sums_is_the_sparse_product_to_the_last_bit(sorted_runs):
+    # W(x) = x - c g (G x)[run]: G x by bincount adds the same products in the same order as the CSR product
+    from scipy.sparse import csr_matrix
+
+    rng = np.random.default_rng(3 if sorted_runs else 4)
+    for _ in range(10):
+        n, R = int(rng.integers(50, 20000)), int(rng.integers(1, 30))
+        run = rng.integers(0, R, n)
+        run = np.sort(run) if sorted_runs else run
+        nm = NoiseModel(run, R, "per_run")
+        g = rng.normal(size=n) * rng.uniform(0.0, 3.0)
+        nm.set_start_gain(g)
+        x = rng.normal(size=n) * 10.0 ** rng.uniform(-5, 5)
+        G = csr_matrix((g, (run, np.arange(n))), shape=(R, n))
+        np.testing.assert_array_equal(nm.W(x), x - nm.cg * (G @ x)[run])
+        X = rng.normal(size=(n, 3))
+        np.testing.assert_array_equal(nm.W(X), X - nm.cg[:, None] * (G @ X)[run])

@@ -212,7 +212,8 @@ def test_bracketed_offset_search_recovers_the_small_world():
     err = est.predict_free_run(clean) - clean["speed_m_s"].to_numpy()
     assert np.sqrt(np.nanmean(err ** 2)) < 1e-4  # a tenth of the noise
     stages = est.convergence_["stages"]
-    assert [s["stage"] for s in stages] == ["start", "offset profile", "starts", "noise refinement", "uncertainty"]
+    assert [s["stage"] for s in stages] == ["start", "offset profile", "starts", "noise refinement",
+                                            "identifiable starts", "identifiable noise refinement", "uncertainty"]
     prof = stages[1]["profile"]
     assert any(r["omega"] < 0 for r in prof) and any(r["omega"] > 0 for r in prof)
     assert all(-1 < r["omega"] < 1 for r in prof)
@@ -236,6 +237,7 @@ def test_bracketed_offset_search_never_ends_below_its_best_profile_point(monkeyp
         return search, outer, stages
 
     monkeypatch.setattr(off, "varpro_search", poor)
+    monkeypatch.setitem(off.BRACKET, "final", "paper")  # the rule of the paper-coordinate search alone
     df, _ = _small_world(11)
     est = PredictorIdentifier(order=3, solver="offset_bracket").fit(df, slider_mass_kg=M_S)
     best = max(r["loglik"] for r in est.convergence_["stages"][1]["profile"])
@@ -246,3 +248,31 @@ def test_bracketed_offset_search_never_ends_below_its_best_profile_point(monkeyp
     free = PredictorIdentifier(order=3, solver="offset_bracket").fit(df, slider_mass_kg=M_S)
     assert "profile's best point kept" not in free.convergence_["message"]
     assert free.loglik_ >= best - 1e-6
+
+
+def test_the_continuation_in_identifiable_coordinates_never_ends_below_the_paper_search(monkeypatch):
+    # "paper+identifiable" (the default) continues the paper-coordinate search's optimum without the null
+    # directions of (sigma, mu, k0) and keeps the better: never below "paper", with every evaluation counted
+    import l1b2.ident.offset as off
+
+    df, _ = _small_world(12)
+    assert off.BRACKET["final"] == "paper+identifiable"
+    both = PredictorIdentifier(order=3, solver="offset_bracket").fit(df, slider_mass_kg=M_S)
+    monkeypatch.setitem(off.BRACKET, "final", "paper")
+    paper = PredictorIdentifier(order=3, solver="offset_bracket").fit(df, slider_mass_kg=M_S)
+    assert both.loglik_ >= paper.loglik_ - 1e-6
+    stages = both.convergence_["stages"]
+    own = sum(s.get("nfev", 0) for s in stages if s["stage"].startswith("identifiable"))
+    assert own > 0 and both.convergence_["nfev_total"] >= paper.convergence_["nfev_total"] + own - 1
+    lo, hi = PredictorParams.bounds(3)
+    assert np.all(both.theta_ >= lo) and np.all(both.theta_ <= hi)
+    # a continuation that fails leaves the paper-coordinate result as it was
+
+    def fails(*args, **kwargs):
+        raise ValueError("no paper vector")
+
+    monkeypatch.setitem(off.BRACKET, "final", "paper+identifiable")
+    monkeypatch.setattr(off, "identifiable_search", fails)
+    kept = PredictorIdentifier(order=3, solver="offset_bracket").fit(df, slider_mass_kg=M_S)
+    assert kept.loglik_ == pytest.approx(paper.loglik_, abs=1e-9)
+    np.testing.assert_array_equal(kept.theta_, paper.theta_)

@@ -66,13 +66,12 @@ class NoiseModel:
         self.counts = np.bincount(run_sel, minlength=n_runs)
         self.R = np.ones(n_runs)
         self.g = None
+        self._G = None
         self.gg = np.zeros(n_runs)
         self._sqrtR = np.ones(self.n)
 
     def set_start_gain(self, g):
         """Set ``g = d v_pred / d v_start`` per residual (rank-one part of the covariance)."""
-        from scipy.sparse import csr_matrix
-
         g = np.asarray(g, float)
         self.g = g
         gg = np.bincount(self.run_sel, weights=g * g, minlength=self.n_runs)
@@ -80,15 +79,28 @@ class NoiseModel:
             c = np.where(gg > 0, (1.0 - 1.0 / np.sqrt(1.0 + gg)) / gg, 0.0)
         self.gg = gg
         self.cg = c[self.run_sel] * g
-        self.G = csr_matrix((g, (self.run_sel, np.arange(self.n))), shape=(self.n_runs, self.n))
+        self._G = None  # the sparse run-by-residual matrix of g, made when a matrix is whitened without numba
+
+    @property
+    def G(self):
+        """The runs x residuals matrix with g in each residual's run row (scipy CSR, made on first use)."""
+        if self._G is None:
+            from scipy.sparse import csr_matrix
+
+            self._G = csr_matrix((self.g, (self.run_sel, np.arange(self.n))), shape=(self.n_runs, self.n))
+        return self._G
 
     def W(self, x):
-        """(I + g g^T)^(-1/2) x, run by run (x: vector or matrix with residual rows)."""
+        """(I + g g^T)^(-1/2) x, run by run (x: vector or matrix with residual rows).
+
+        A vector's run sums ``G x`` come from one ``bincount`` (the same additions in the same order as the
+        sparse product: equal to the last bit); a matrix's from :attr:`G`."""
         if self.g is None:
             return x
-        proj = self.G @ x
         if x.ndim == 1:
+            proj = np.bincount(self.run_sel, weights=self.g * x, minlength=self.n_runs)
             return x - self.cg * proj[self.run_sel]
+        proj = self.G @ x
         return x - self.cg[:, None] * proj[self.run_sel]
 
     def weighted(self, x):

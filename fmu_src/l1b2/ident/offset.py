@@ -46,7 +46,9 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from ..errors import IdentificationError
 from ..predictor.model import G_of_k0, drive_factor
+from .identifiable import admissible, identifiable_search
 from .problem import ScaledObjective
 from .varpro import linear_positions, local_fit, profile_loglik, varpro_search
 
@@ -299,9 +301,13 @@ def bracket_search(f, coarse, lo, hi, tol, max_points, seen=()):
 #: inwards), the bracket width that ends a branch's search, the most points of a branch (the branch with the
 #: best coarse point is searched, the other as well when its best is within ``margin`` log-likelihood units), each
 #: point's fit (iterations from a neighbour's optimum, ``cold_iter`` from the gauged start, statistical
-#: tolerance, least gain a step must promise: ``local_fit``'s min_gain) and the final free search's min_gain
+#: tolerance, least gain a step must promise: ``local_fit``'s min_gain), the final free search's min_gain and its
+#: coordinates ("identifiable": :func:`l1b2.ident.identifiable.identifiable_search`, decision 0039; "paper": the
+#: variable-projection search in theta, decision 0036; "paper+identifiable": the paper's, then continued in the
+#: identifiable coordinates from its optimum, the better kept)
 BRACKET = {"coarse": (0.95, 0.7, 0.4), "tol": 0.08, "max_points": 6, "margin": 3.0, "max_iter": 4,
-           "cold_iter": 12, "stat_tol": 0.05, "min_gain": 0.01, "final_min_gain": 0.01}
+           "cold_iter": 12, "stat_tol": 0.05, "min_gain": 0.01, "final_min_gain": 0.01,
+           "final": "paper+identifiable"}
 
 
 def bracketed_profile(obj, theta_start, n1, kappa, p_theta, settings=None, log=None):
@@ -385,6 +391,32 @@ def _keep_profile_point(obj, search, outer, best, log=None):
                                                                   "profile_point": True}], outer.converged)
 
 
+def _continue_identifiable(obj, search, outer, more, n1, p_theta, max_nfev, tol, stat_tol, max_outer, log):
+    """The search continued in the identifiable coordinates from its optimum (``BRACKET["final"]`` =
+    "paper+identifiable"): the continuation when it ends higher, else the search as it was (noise model there);
+    its evaluations count either way and its stages are added as "identifiable ...". Not continued when the
+    optimum has no identifiable coordinates (:func:`l1b2.ident.identifiable.admissible`)."""
+    ll = -search.results[search.best].cost
+    if not admissible(obj.theta_of(outer.z), n1):  # e.g. mu or sigma at its bound 0: no coordinates to continue in
+        return search, outer, more
+    try:
+        s2, o2, m2 = identifiable_search(obj, obj.theta_of(outer.z), n1, p_theta, max_nfev, tol, stat_tol,
+                                         max_outer, log, BRACKET["final_min_gain"])
+    except (IdentificationError, np.linalg.LinAlgError, ValueError) as exc:  # the search as it was
+        if log is not None:
+            log(f"identifiable continuation failed ({exc}); the paper-coordinate optimum kept")
+        profile_loglik(obj, outer.z)
+        return search, outer, more
+    more = more + [{**m, "stage": "identifiable " + m["stage"]} for m in m2]
+    extra = sum(m.get("nfev", 0) for m in m2)
+    if -s2.results[s2.best].cost > ll:
+        s2.records[0]["nfev"] += sum(r.get("nfev", 0) for r in search.records)
+        return s2, o2, more
+    profile_loglik(obj, outer.z)  # the noise model at the kept optimum
+    search.records[0]["nfev"] += extra
+    return search, outer, more
+
+
 def bracketed_offset_search(obj, theta_start, order, kappa, p_theta, max_nfev, tol, stat_tol, max_outer, log=None):
     """The drive-offset search with the bracketed profile (``solver="offset_bracket"``).
 
@@ -405,11 +437,18 @@ def bracketed_offset_search(obj, theta_start, order, kappa, p_theta, max_nfev, t
         search, outer, more = varpro_search(obj, lin, [obj.z_of(theta_start)], max_nfev, tol, stat_tol, max_outer, 1,
                                             log, BRACKET["final_min_gain"])
     else:
-        z0 = obj.z_of(best["theta"])
-        profile_loglik(obj, z0)  # the free search starts with the noise model of its start
-        search, outer, more = varpro_search(obj, lin, [z0], max_nfev, tol, stat_tol, max_outer, 1, log,
-                                            BRACKET["final_min_gain"])
+        if BRACKET["final"] == "identifiable" and admissible(best["theta"], n1):  # decision 0039: the null directions of (sigma, mu, k0) removed
+            search, outer, more = identifiable_search(obj, best["theta"], n1, p_theta, max_nfev, tol, stat_tol,
+                                                      max_outer, log, BRACKET["final_min_gain"])
+        else:
+            z0 = obj.z_of(best["theta"])
+            profile_loglik(obj, z0)  # the free search starts with the noise model of its start
+            search, outer, more = varpro_search(obj, lin, [z0], max_nfev, tol, stat_tol, max_outer, 1, log,
+                                                BRACKET["final_min_gain"])
         search, outer = _keep_profile_point(obj, search, outer, best, log)
+        if BRACKET["final"] == "paper+identifiable":  # decision 0039: continued without the null directions
+            search, outer, more = _continue_identifiable(obj, search, outer, more, n1, p_theta, max_nfev, tol,
+                                                         stat_tol, max_outer, log)
     search.records[0]["nfev"] += stage["nfev"]  # the profile's evaluations count with the search's
     return search, outer, [stage] + more
 

@@ -790,7 +790,7 @@ class ScaledObjective:
         """Columns ``cols`` (indices into z) of :meth:`jac`."""
         J = self.noise.weighted(self.problem.jacobian(self.theta_of(z), self.vidx[cols]))
         J *= self.sv_scale[cols][None, :]
-        return np.where(np.isfinite(J), J, 0.0)
+        return J if np.isfinite(J).all() else np.where(np.isfinite(J), J, 0.0)
 
     def update_noise(self, theta):
         """Re-estimate g (start-speed propagation) and R at theta; returns the max relative R change."""
