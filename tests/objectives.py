@@ -19,3 +19,12 @@ def scaled_objective(df, theta, m_s, order=3, *, varied=None, start_noise=True, 
     obj = ScaledObjective(prob, noise, theta, varied, param_scale(theta, order), lo, hi, start_noise)
     obj.update_noise(theta)
     return obj
+
+
+def central_difference(f, x, j, floor):
+    """``(f(x + h e_j) - f(x - h e_j)) / 2h`` with ``h = 1e-6 max(|x_j|, floor)``: the finite-difference reference of a sensitivity."""
+    step = 1e-6 * max(abs(x[j]), floor)
+    xp, xm = x.copy(), x.copy()
+    xp[j] += step
+    xm[j] -= step
+    return (f(xp) - f(xm)) / (2 * step)

@@ -19,7 +19,7 @@ from l1b2.ident.identifiable import (
 from l1b2.ident.varpro import profile_loglik
 from l1b2.predictor.model import K0_MAX, G_of_k0, drive_factor, example_params
 from l1b2.predictor.simulate import design_grid, simulate_dataset
-from objectives import scaled_objective
+from objectives import central_difference, scaled_objective
 
 M_S = 0.1
 SMALL = design_grid(voltages=(220.0, 324.0), loads=(-0.07, 0.0, 0.07))
@@ -117,15 +117,11 @@ def test_the_chain_rule_jacobian_and_start_gain_sensitivity_match_finite_differe
     plain = ~np.isin(p.run_sel, p.lay.to_packed(p.lay.run_of_sample)[flags != 0])
     assert 0 < plain.sum() < plain.size  # both kinds of run in the world
     for j, c in enumerate(cols):
-        step = 1e-6 * max(abs(y[c]), 1e-2)
-        yp, ym = y.copy(), y.copy()
-        yp[c] += step
-        ym[c] -= step
-        fd = (prob.residual(yp) - prob.residual(ym)) / (2 * step)
+        fd = central_difference(prob.residual, y, c, 1e-2)
         np.testing.assert_allclose(J[:, j], fd, rtol=0, atol=1e-5 * max(np.max(np.abs(fd)), 1e-12))
         # the start gain's sensitivity holds the factor of reversing and stuck steps fixed (its contract):
         # compared on the runs without such steps
-        fdg = ((prob.start_gain(yp) - prob.start_gain(ym)) / (2 * step))[plain]
+        fdg = central_difference(prob.start_gain, y, c, 1e-2)[plain]
         np.testing.assert_allclose(G[plain, j], fdg, rtol=0, atol=1e-5 * max(np.max(np.abs(fdg)), 1e-5))
     # D(s) does not depend on K or beta_s: their start-gain columns vanish
     np.testing.assert_allclose(G[:, :2], 0.0, atol=1e-9 * max(np.max(np.abs(G)), 1.0))

@@ -17,7 +17,7 @@ from l1b2.predictor.model import G_of_k0, drive_factor, example_params
 from l1b2.predictor.simulate import RunLayout, design_grid, packed_linear_recursion, packed_recursion, \
     simulate_dataset
 from l1b2.units import G_M_S2
-from objectives import scaled_objective
+from objectives import central_difference, scaled_objective
 
 M_S = 0.1
 SMALL = design_grid(voltages=(220.0, 324.0), loads=(-0.07, 0.0, 0.07))
@@ -127,11 +127,7 @@ def test_start_gain_sensitivity_matches_central_differences(noisy_world):
     assert odd_runs.size and odd_runs.size < prob.lay.R  # the data hold both kinds of run
     plain = ~np.isin(prob.run_sel, odd_runs)
     for j, c in enumerate(cols):
-        step = 1e-6 * max(abs(theta[c]), 1e-3)
-        tp, tm = theta.copy(), theta.copy()
-        tp[c] += step
-        tm[c] -= step
-        fd = (prob.start_gain(tp) - prob.start_gain(tm)) / (2 * step)
+        fd = central_difference(prob.start_gain, theta, c, 1e-3)
         assert np.max(np.abs(G[plain, j] - fd[plain])) <= 1e-6 * np.max(np.abs(fd)), c
 
 
