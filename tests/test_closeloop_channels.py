@@ -117,6 +117,12 @@ def test_a_channel_gets_both_shapes_with_its_training_range():
     quad = [h for h in hyps if h.spec.get("shape") == "quadratic"]
     assert all(len(h.names) == 2 and (h.spec["lo"], h.spec["hi"]) == (1.0, 3.0) for h in quad)
     assert {h.family for h in hyps} == {"channel_aux"}   # one family for the significance correction
+    # the session clock: the linear shape only (its curvature is the generic time spline's), both levels
+    clock = [h for h in fx.family("channel").grid(fx.TrainingSummary(0.1, (0.0, 5.1), (-0.02, 0.02), 200.0, {},
+                                                                      channels=tuple(ch.values())))
+             if h.spec["channel"] == "time_s"]
+    assert ch["time_s"]["lo"] == 0.0 and len(clock) == 6
+    assert all(h.spec.get("shape", "linear") == "linear" and len(h.names) == 1 for h in clock)
 
 
 def test_every_numeric_column_beyond_the_required_ones_is_a_channel():

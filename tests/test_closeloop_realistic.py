@@ -148,14 +148,9 @@ def _known_miss(why: str):
     return pytest.mark.xfail(strict=True, raises=AssertionError, reason=why)
 
 
-#: thermal_drift 4 is missed even by the exact self-heating form (V0 times the rig's first-order heating state of
-#: V0^2, on TRAIN and TEST merged, tau 10-80 s: CV gain 0.08-0.14, p 0.14-0.26 at round 0), so adding that form
-#: to the library would not trace it. drive_saturation 3 (V0_sat 287 V) leaves nothing significant, and its
-#: baseline's held-out nrmse (2.45 %) is below the clean world's (3.24 %): the effect does not show as an error
-SINGLE = [pytest.param("thermal_drift", 4, marks=_known_miss("time not traced: drift below detection (p ~0.15)")),
-          ("direction_asymmetry", 2), ("bar_waviness", 2),
+SINGLE = [("thermal_drift", 4), ("direction_asymmetry", 2), ("bar_waviness", 2),
           pytest.param("pulley_friction", 11, marks=pytest.mark.ci_slow),
-          pytest.param("drive_saturation", 3, marks=_known_miss("nothing significant: b 2.45 % < b0 3.24 %")),
+          ("drive_saturation", 3),
           ("thermal_drift", 12), ("direction_asymmetry", 13), ("bar_bump", 8),
           ("drive_saturation", 11), ("drive_saturation", 12), ("speed_lowpass", 11)]
 

@@ -18,7 +18,8 @@ enters in one of three generic forms, each linear in one parameter ``a``
 
 in one of two shapes: ``linear`` (the factor times ``a z``, one parameter) or ``quadratic`` (the factor times
 ``a zc + b (zc^2 - 1)``, ``zc`` = ``z`` clipped to TRAIN's range of the channel: a response that saturates or peaks
-inside the range, flat beyond it), and at one of two levels: ``run`` (``c`` is the run's mean of the channel:
+inside the range, flat beyond it; a logged channel only: the session clock keeps the linear shape, its curvature
+is the generic time spline's, :mod:`l1b2.predictor.effects.generic`), and at one of two levels: ``run`` (``c`` is the run's mean of the channel:
 an effect that differs between runs, not along the stroke) or ``sample``
 (``c`` is the sample's value: along the stroke; listed only for a channel
 that varies within runs). Every form and level of one channel is one
@@ -188,7 +189,7 @@ class Channel(Effect):
                 continue   # constant on TRAIN (no evidence possible) or a measured response: considered, not a cause
             reg = regressor_of(ch["name"])
             for level in LEVELS if ch.get("within_run", True) else ("run",):
-                for shape in SHAPES if "lo" in ch and "hi" in ch else SHAPES[:1]:
+                for shape in SHAPES if "lo" in ch and "hi" in ch and ch["name"] != SESSION_TIME else SHAPES[:1]:
                     for form in FORMS:
                         out.append(self._hypothesis(ch, reg, form, level, shape))
         return out
