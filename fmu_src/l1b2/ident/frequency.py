@@ -258,6 +258,20 @@ class ResponseLinearisation:
         return step, S
 
 
+def _search_coordinates(best, f_ref):
+    """``(q, scale, lo, hi)`` of the best fit so far: ``q = x / scale`` (x: Hz and logs; q: shares of f_ref and
+    logs) and q's bounds (two coordinates, or four with the contact law)."""
+    x = np.asarray(best["x"], float)
+    scale = np.where(np.arange(x.size) % 2 == 0, f_ref, 1.0)
+    lo, hi = (Q_LO, Q_HI) if x.size == 2 else (np.r_[Q_LO, QC_LO], np.r_[Q_HI, QC_HI])
+    return x / scale, scale, lo, hi
+
+
+def _below_stop(step) -> bool:
+    """Whether a step in q is below the stopping size: 2e-5 in the shares of f_ref and 0.01 in the logs."""
+    return bool(np.all(np.abs(step[0::2]) < 2e-5) and np.all(np.abs(step[1::2]) < 0.01))
+
+
 def _gauss_newton(data, mask, f_ref, loglik, best, max_outer=8, damping=(0.0,)):
     """Gauss-Newton steps of the joint least squares in q from the best fit so far, each with a line search.
 
@@ -272,12 +286,9 @@ def _gauss_newton(data, mask, f_ref, loglik, best, max_outer=8, damping=(0.0,)):
             if not _damped_step(data, mask, f_ref, loglik, best, damping):
                 return
             continue
-        x = np.asarray(best["x"], float)
-        scale = np.where(np.arange(x.size) % 2 == 0, f_ref, 1.0)   # x: Hz and logs; q: shares of f_ref and logs
-        q = x / scale
-        lo, hi = (Q_LO, Q_HI) if x.size == 2 else (np.r_[Q_LO, QC_LO], np.r_[Q_HI, QC_HI])
+        q, scale, lo, hi = _search_coordinates(best, f_ref)
         step = ResponseLinearisation(best["result"], data, mask, f_ref, q).step_and_information()[0]
-        if np.all(np.abs(step[0::2]) < 2e-5) and np.all(np.abs(step[1::2]) < 0.01):
+        if _below_stop(step):
             return
         l0 = best["loglik"]
         for frac in (1.0, 0.3, 0.1):
@@ -291,10 +302,7 @@ def _gauss_newton(data, mask, f_ref, loglik, best, max_outer=8, damping=(0.0,)):
 def _damped_step(data, mask, f_ref, loglik, best, damping) -> bool:
     """One Levenberg-Marquardt step of :func:`_gauss_newton` in x's coordinates: True when a trial raised the
     log-likelihood by more than 0.01 (``best`` moved), False when none did or the step is below the stopping size."""
-    x = np.asarray(best["x"], float)
-    scale = np.where(np.arange(x.size) % 2 == 0, f_ref, 1.0)
-    q = x / scale
-    lo, hi = (Q_LO, Q_HI) if x.size == 2 else (np.r_[Q_LO, QC_LO], np.r_[Q_HI, QC_HI])
+    q, scale, lo, hi = _search_coordinates(best, f_ref)
     lin = ResponseLinearisation(best["result"], data, mask, f_ref, q)
     PJ = lin.project(lin.jacobian_q())
     S, g = PJ.T @ PJ, PJ.T @ lin.project(lin.r_fit)
@@ -304,7 +312,7 @@ def _damped_step(data, mask, f_ref, loglik, best, damping) -> bool:
             step = -np.linalg.solve(S + (lam + 1e-9) * np.diag(np.diag(S)), g)
         except np.linalg.LinAlgError:
             continue
-        if np.all(np.abs(step[0::2]) < 2e-5) and np.all(np.abs(step[1::2]) < 0.01):
+        if _below_stop(step):
             return False
         for frac in (1.0, 0.3):
             if loglik(np.clip(q + frac * step, lo, hi) * scale) > l0 + 0.01:
