@@ -1,5 +1,6 @@
 #!/usr/bin/env python
-"""Benchmark: ``identify`` on ~20 000 samples of several worlds: the bracketed offset search, old and new, against a strict reference.
+"""Benchmark: ``identify`` on ~20 000 samples of several worlds: the bracketed offset search, old and new, against
+a strict reference.
 
 Worlds (the virtual rig, in-process engine, 11 loads -0.09 ... 0.09 kg, TRAIN = |load| != 0.05 kg,
 about 19.7k samples; made once and cached):

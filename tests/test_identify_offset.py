@@ -217,10 +217,35 @@ def test_bracketed_offset_search_recovers_the_small_world():
     prof = stages[1]["profile"]
     assert any(r["omega"] < 0 for r in prof) and any(r["omega"] > 0 for r in prof)
     assert all(-1 < r["omega"] < 1 for r in prof)
+    from l1b2.ident.offset import BRACKET
+    for sign in (-1, 1):  # each branch's bracketed search within its point budget
+        assert 0 < sum(np.sign(r["omega"]) == sign for r in prof) <= BRACKET["max_points"]
     assert est.loglik_ >= max(r["loglik"] for r in prof) - 1e-6
     assert est.convergence_["solver"] == "offset_bracket"
     lo, hi = PredictorParams.bounds(3)
     assert np.all(est.theta_ >= lo) and np.all(est.theta_ <= hi)
+
+
+@pytest.mark.parametrize("fits", [1, 4])
+def test_the_bracketed_search_starts_from_as_many_equation_error_fits_as_its_settings_say(monkeypatch, fits):
+    import l1b2.ident.offset as off
+    import l1b2.ident.reduced as red
+
+    asked = []
+
+    class Started(Exception):
+        pass
+
+    def recorder(*args, **kwargs):
+        asked.append(args[6])  # n_starts of equation_error_fit
+        raise Started
+
+    monkeypatch.setattr(red, "equation_error_fit", recorder)
+    monkeypatch.setitem(off.BRACKET, "start_fits", fits)
+    df, _ = _small_world(11)
+    with pytest.raises(Started):
+        PredictorIdentifier(order=3, solver="offset_bracket").fit(df, slider_mass_kg=M_S)
+    assert asked == [fits]
 
 
 def test_bracketed_offset_search_never_ends_below_its_best_profile_point(monkeypatch):
@@ -263,7 +288,11 @@ def test_the_continuation_in_identifiable_coordinates_never_ends_below_the_paper
     assert both.loglik_ >= paper.loglik_ - 1e-6
     stages = both.convergence_["stages"]
     own = sum(s.get("nfev", 0) for s in stages if s["stage"].startswith("identifiable"))
-    assert own > 0 and both.convergence_["nfev_total"] >= paper.convergence_["nfev_total"] + own - 1
+    # the stages count every evaluation (the starts' records leave out the scoring ones): the two searches share
+    # everything before the continuation, so the stages differ by the continuation's own; the total counts it too
+    total = {k: sum(s.get("nfev", 0) for s in e.convergence_["stages"]) for k, e in (("both", both), ("paper", paper))}
+    assert own > 0 and total["both"] == total["paper"] + own
+    assert both.convergence_["nfev_total"] > paper.convergence_["nfev_total"]
     lo, hi = PredictorParams.bounds(3)
     assert np.all(both.theta_ >= lo) and np.all(both.theta_ <= hi)
     # a continuation that fails leaves the paper-coordinate result as it was

@@ -121,7 +121,7 @@ from .slipproblem import RECOMMENDED_FIXED_PURE_SLIP, make_problem
 from .search import (LocalSolver, alternate_noise, multi_start, polish_stalled, profile_search, search_nfev,
                      start_points, warm_prestep)
 from .uncertainty import alternative_optima, extra_confounding, fisher_uncertainty
-from .offset import projected_search
+from .offset import BRACKET, projected_search
 
 __all__ = ["PredictorIdentifier", "clone", "RECOMMENDED_FIXED", "evaluation_mask"]
 
@@ -245,7 +245,8 @@ class PredictorIdentifier(EstimatorSettings):
     solver : ``"joint"`` (the searches of ``noise_fit``), ``"varpro"`` (:mod:`l1b2.ident.varpro`),
         ``"offset"`` (the drive offset as a search coordinate: a profile on a grid of offsets, then varpro;
         :mod:`l1b2.ident.offset`) or ``"offset_bracket"`` (the same with a bracketed search over the offset
-        on each side of the barrier, warm-started points, and a result never below the profile's best point).
+        on each side of the barrier, warm-started points, and a result never below the profile's best point;
+        its settings, including the start's number of equation-error fits: :data:`l1b2.ident.offset.BRACKET`).
     model : the predictor family: ``"eq29"`` (default, the paper's Eq. 29) or
         ``"pure_slip"`` (the slip ratio follows the state,
         :mod:`l1b2.predictor.pureslip`; same parameters, likelihood, noise
@@ -499,7 +500,7 @@ class PredictorIdentifier(EstimatorSettings):
         red, minima = data_driven_start(sample, space, m_s, cfg.kappa, cfg.include_load_inertia, s_center,
                                         s_half, E, cfg.n_starts, cfg.seed, warm=warm,
                                         n_ee_starts={"varpro": 4 * cfg.n_starts, "offset": 4,
-                                                     "offset_bracket": 4}.get(cfg.solver),
+                                                     "offset_bracket": BRACKET["start_fits"]}.get(cfg.solver),
                                         drive_law=cfg.model)
         theta0, fixed_final = self._centre(cfg, space, minima, s_center, s_half)
         t_centre, c_centre = time.perf_counter(), time.process_time()
