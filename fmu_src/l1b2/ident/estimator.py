@@ -244,9 +244,8 @@ class PredictorIdentifier(EstimatorSettings):
         ``extra.start``, else zeros). Only used with ``init``.
     solver : ``"joint"`` (the searches of ``noise_fit``), ``"varpro"`` (:mod:`l1b2.ident.varpro`),
         ``"offset"`` (the drive offset as a search coordinate: a profile on a grid of offsets, then varpro;
-        :mod:`l1b2.ident.offset`) or ``"offset_bracket"`` (the same with a bracketed search over the offset
-        on each side of the barrier, warm-started points, and a result never below the profile's best point;
-        its settings, including the start's number of equation-error fits: :data:`l1b2.ident.offset.BRACKET`).
+        :mod:`l1b2.ident.offset`) or ``"offset_bracket"`` (the same with a bracketed search over the offset on
+        each side of the barrier, warm-started points, a result never below the profile's best point; ``BRACKET``).
     model : the predictor family: ``"eq29"`` (default, the paper's Eq. 29) or
         ``"pure_slip"`` (the slip ratio follows the state,
         :mod:`l1b2.predictor.pureslip`; same parameters, likelihood, noise
