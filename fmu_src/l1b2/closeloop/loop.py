@@ -43,7 +43,9 @@ Procedure (TEST is never used for fitting or choosing):
       ``min_cv_gain`` in most folds; the most parsimonious within
       ``parsimony`` of the best CV gain is added, a named family instead of a generic term it explains
       unless the generic one is better by more than one standard error
-      (:func:`~l1b2.closeloop.acceptance.named_reading`);
+      (:func:`~l1b2.closeloop.acceptance.named_reading`); from the Eq. 29 baseline a named pick must be accepted
+      again from the pure-slip family, else it is withdrawn and its force is offered again as a generic term
+      of the reduced model (:func:`~l1b2.closeloop.crosscheck.confirmed_pick`, decision 0043);
    c. *joint re-identification* of the model with every accepted effect
       (warm start).
 
@@ -81,6 +83,7 @@ from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT
                          chain_cv_errors, collinear, cv_errors, fold_start_phi, materiality, named_reading, refit,
                          session_blocks, stratified_folds, time_dependent, validated)
 from .baselines import choose_baseline, identify_families, retag_structural
+from .crosscheck import PureSlipCheck, confirmed_pick, score_of, withdrawn_note
 from .evidence import channels_considered, order_traced
 from .guard import checked_fit
 from .intervals import added_parameters, reported_uncertainty, train_levels
@@ -237,11 +240,11 @@ class CloseLoop(EstimatorSettings):
         if self.baseline not in ("best",) + DRIVE_LAWS:
             raise ValueError(f"baseline must be 'best' or one of {DRIVE_LAWS}, got {self.baseline!r}")
         self.frequency_ = None
-        def fit_family(family):
-            say(f"baseline: identifying the {family} predictor on TRAIN")
-            est = checked_fit(lambda: self._identify(dtr, m_s, mask_tr, model=family),
-                              lambda: self._identify(dtr, m_s, mask_tr, retry=True, model=family), dtr,
-                              mask_tr, f"the {family} baseline identification on TRAIN")
+        def fit_family(family, df=dtr, what="baseline"):
+            say(f"{what}: identifying the {family} predictor on TRAIN")
+            est = checked_fit(lambda: self._identify(df, m_s, mask_tr, model=family),
+                              lambda: self._identify(df, m_s, mask_tr, retry=True, model=family), df,
+                              mask_tr, f"the {family} {what} identification on TRAIN")
             say.count(1, nfev_of(est))
             return est
         fits, failed = identify_families(DRIVE_LAWS if self.baseline == "best" else (self.baseline,), fit_family)
@@ -274,7 +277,10 @@ class CloseLoop(EstimatorSettings):
         library = self.library if self.library is not None else full_library()
         pool = retag_structural(library(ctx, fit_tr), start.params_.drive_law)
         it.channels = training_summary(ctx, fit_tr).channels
-        self._iterate(it, pool, fit_tr, mask_tr, m_s, lambda mdl: _metrics(wrap(mdl), dtr, dte), say, ctx)
+        # a named pick from Eq. 29 is confirmed from the pure-slip family (decision 0043): that family's fit
+        other = (None if start.params_.drive_law != "eq29" else (lambda: fits["pure_slip"]) if (
+            "pure_slip" in fits and fit_tr is dtr) else (lambda: fit_family("pure_slip", fit_tr, "named-effect check")))
+        self._iterate(it, pool, fit_tr, mask_tr, m_s, lambda mdl: _metrics(wrap(mdl), dtr, dte), say, ctx, other)
         it.model = wrap(it.model)
 
         ext = it.model if (it.effects.candidates or it.output_filter is not None) else None
@@ -320,11 +326,13 @@ class CloseLoop(EstimatorSettings):
         return RefitSettings(order=self.order, seed=self.seed, max_nfev=self.refit_nfev, noise=self.noise,
                              client=self.client, frequency=getattr(self, "frequency_", None) or "off")
 
-    def _iterate(self, it: _Iteration, pool, dtr, mask, m_s, report, say, ctx=None) -> None:
+    def _iterate(self, it: _Iteration, pool, dtr, mask, m_s, report, say, ctx=None, other=None) -> None:
         """Rounds of linearised shortlist -> cross-validated refit -> acceptance -> joint re-identification.
 
         Extends ``it`` in place; ``report(model)`` gives a round's metrics (on the measured speed); ``say`` is
         the job's :class:`~l1b2.closeloop.stages.StageClock` (refits and evaluations are counted on it).
+        ``other``: None, or the pure-slip baseline's fit (a callable) from which every named pick is confirmed
+        (:mod:`l1b2.closeloop.crosscheck`; the checks go to ``it.checks``).
         Candidates that depend on the session clock are scored and cross-validated on contiguous session
         blocks, the others on the stratified run folds; the current model is cross-validated on the same
         folds as each.
@@ -332,6 +340,9 @@ class CloseLoop(EstimatorSettings):
         schemes = {False: stratified_folds(dtr, self.refit_folds, self.seed),
                    True: session_blocks(dtr, self.refit_folds)}
         screen_blocks = session_blocks(dtr, self.k_folds)
+        check = None if other is None else PureSlipCheck(
+            other, dtr, mask, m_s, lambda c: schemes[time_dependent(c)], self.refit_settings(),
+            min_gain=self.min_cv_gain, final_nfev=self.final_nfev, clock=say)
         cur_err: dict = {}
         for rnd in range(1, self.max_rounds + 1):
             n_rnd = len(it.rounds)
@@ -375,10 +386,15 @@ class CloseLoop(EstimatorSettings):
                                                min_drop=materiality(t.candidate, self.min_cv_drop))]
             if not ok:
                 break
-            pick = named_reading(prefer(ok, self.parsimony, rl), ok,
-                                 lambda n, g: geo.share(n.candidate, g.candidate, g.phi))
+            pick, checks = confirmed_pick(
+                ok, lambda tr: named_reading(prefer(tr, self.parsimony, rl), tr,
+                                             lambda n, g: geo.share(n.candidate, g.candidate, g.phi)),
+                (lambda t: check(t, it.effects, n_rnd)) if check is not None else (lambda t: None))
+            it.checks += checks
+            if pick is None:
+                break
             if rnd == 1:
-                it.chosen = next(s for s in short if s.candidate is pick.candidate)
+                it.chosen = score_of(pick, short)
                 it.significant = [s for s in short if any(t.candidate is s.candidate for t in ok)]
             say(f"round {n_rnd}: adding {pick.candidate.label}; re-identifying jointly")
             effects = it.effects.add(pick.candidate, pick.phi)
@@ -510,6 +526,7 @@ class CloseLoop(EstimatorSettings):
             "message": (f"missing effect{'s' if len(effects) > 1 else ''}: {labels}" if c
                         else "no significant missing effect")
                        + ("; speed channel filtered (measurement chain)" if it.output_filter is not None else "")
+                       + withdrawn_note(it.checks)
                        + (f"; the speed column looks filtered (measurement chain, cross-validated gain "
                           f"{chain_rec['cv_gain']:.3f}) but a model behind the filter did not lower the "
                           "cross-validated free-run error: not applied" if chain_found and (c is not None) else ""),
@@ -540,6 +557,7 @@ class CloseLoop(EstimatorSettings):
             "channels_considered": channels_considered(it.channels, scores, it.level, self.min_gain,
                                                        it.effects.families, it.run_level),
             "run_level": it.run_level.to_dict() if it.run_level is not None else None,
+            "named_checks": list(it.checks),
         }
 
 
@@ -558,6 +576,7 @@ class _Iteration:
     output_filter: chain.OutputFilter | None = None
     channels: tuple = ()
     run_level: runlevel.RunLevelAnalysis | None = None
+    checks: list = field(default_factory=list)    #: the named picks' checks from the pure-slip family
 
 
 class ChainModel:

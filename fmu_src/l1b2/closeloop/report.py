@@ -123,6 +123,8 @@ class Diagnosis(_Record):
     and protocol signal with its first-round evidence, significant or not (its ``run_level`` entries: the
     evidence of its run mean for the runs' own deviations); ``run_level`` the first round's run-level
     deviations (:meth:`l1b2.closeloop.runlevel.RunLevelAnalysis.to_dict`; None when not estimated).
+    ``named_checks``: every named pick of a round from the Eq. 29 baseline, cross-validated again from the
+    pure-slip family (:mod:`l1b2.closeloop.crosscheck`), with its figures and outcome.
     The nested evidence stays JSON-shaped.
     """
 
@@ -148,6 +150,7 @@ class Diagnosis(_Record):
     channels_considered: list = field(default_factory=list)
     baseline_choice: dict = field(default_factory=dict)
     run_level: Any = None
+    named_checks: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
         out = {f.name: getattr(self, f.name) for f in fields(self)}

@@ -23,6 +23,7 @@ from ..data import plots
 from ..jsonio import dumps, sig, strict_json
 from ..predictor.effects import ExtendedPredictor
 from . import residuals as res
+from .crosscheck import describe
 from .report import SCHEMA_VERSION, Diagnosis, ReportFormatError, Round
 from .selection import Score
 
@@ -327,6 +328,7 @@ def markdown_report(rep: dict) -> str:
         lines.append(f"* evidence below the materiality threshold: `{t['label']}` ({', '.join(t['regressors'])}), "
                      f"CV nrmse {t['cv_free_run_nrmse_current']:.2%} -> {t['cv_free_run_nrmse_refit']:.2%} "
                      f"(< {d['rules'].get('min_cv_drop', 0):.2%} drop: not added)")
+    lines += [f"* {describe(c)}" for c in d.get("named_checks", [])]
     bc = d.get("baseline_choice") or {}
     if bc.get("families"):
         lines += ["", f"## Baseline family (chosen: `{bc['chosen']}`, by TRAIN's cross-validated free-run nrmse over "

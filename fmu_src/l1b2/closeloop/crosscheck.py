@@ -1,0 +1,209 @@
+"""A named effect found from the Eq. 29 baseline is read as physics only when the pure-slip family confirms it.
+
+Eq. 29 holds the drive force's slope over speed constant; the pure-slip drive force (Eq. 25 with
+``k0 = v/(omega U_w)``) has a slope that changes with V0. On data of a motor that is not Eq. 29, that
+structural error is in every residual of the Eq. 29 baseline, and a named family can lower it (on a clean realistic
+world the pulley's ``-g|m|`` does: a pulley coefficient for a pulley that is not there, decision 0043). Whether a
+named effect's evidence hinges on that linearisation is a question the data can answer: the same candidate,
+cross-validated by the same machinery from the family that does not make the linearisation, must be accepted too.
+
+Contract:
+
+* :func:`confirmed_pick` applies the rule to a round's accepted trials: the pick (``choose``, the loop's
+  ``prefer`` then ``named_reading``) is kept when it is generic or when ``confirm`` accepts it (``confirm``
+  returns None when no check applies, e.g. the baseline is already pure slip). A named pick that is not confirmed
+  is withdrawn: its trial is offered again as :func:`as_form` (the same force and the same cross-validated
+  figures, whose acceptance stands, read as a generic structural term of the reduced model) and the pick is
+  chosen again; every check is recorded with its outcome.
+* :class:`PureSlipCheck` is the ``confirm`` of the loop: the pure-slip baseline identified on TRAIN once
+  (lazily, at the first named pick), the effects accepted so far re-identified jointly in that family, then the
+  current model and the current model + the named candidate cross-validated on the trial's own folds
+  (:func:`l1b2.closeloop.acceptance.cv_errors`, warm refits, the candidate started per fold from its linearised
+  fit on the training folds only); confirmed when :func:`l1b2.closeloop.acceptance.accepts` accepts that trial
+  with the loop's ``min_cv_gain`` (a named effect is not structural: no materiality threshold). Its refits and
+  evaluations are counted on the stage clock.
+
+Nothing here is tuned: the rule is the loop's own acceptance rule, applied from the other family.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from ..errors import FitDivergedError, IdentificationError
+from . import residuals as res
+from .acceptance import EffectSet, RefitCV, accepts, cv_errors, fold_start_phi, refit
+from .candidates import EQ29_LINEARISATION, CandidateForce
+from .selection import design
+
+__all__ = ["FORM_SUFFIX", "as_form", "confirmed_pick", "score_of", "PureSlipCheck", "describe", "withdrawn_note"]
+
+#: appended to a withdrawn named family's name: the same force read as a generic term of the reduced model
+FORM_SUFFIX = "_form"
+#: what a withdrawn named form relaxes (its ``structural`` tag)
+WITHDRAWN = ("the named form's evidence was not confirmed from the pure-slip family: it takes up the error of "
+             "Eq. 29's linearisation (" + EQ29_LINEARISATION + ")")
+
+
+def as_form(c: CandidateForce) -> CandidateForce:
+    """The named candidate ``c`` read as a generic structural term: the same features, spec and bounds; family
+    ``c.family + FORM_SUFFIX`` (so no subsystem parameter is its home), parameters ``<family>_<j>``, generic,
+    structural (:data:`WITHDRAWN`)."""
+    fam = c.family + FORM_SUFFIX
+    return replace(c, family=fam, names=tuple(f"{fam}_{j}" for j in range(c.n_params)), generic=True,
+                   structural=WITHDRAWN,
+                   description=f"the force of {c.label} ({c.description}), not read as that physics: " + WITHDRAWN)
+
+
+def score_of(pick: RefitCV, scores: list):
+    """The score of ``scores`` whose candidate ``pick`` cross-validated; for an :func:`as_form` trial, its named
+    candidate's score carrying the form (the same force and linearised figures)."""
+    for sc in scores:
+        if sc.candidate is pick.candidate:
+            return sc
+    for sc in scores:
+        if as_form(sc.candidate) == pick.candidate:
+            return replace(sc, candidate=pick.candidate)
+    raise ValueError(f"{pick.candidate.label}: not among the round's scores")
+
+
+def _round(x) -> float | None:
+    return float(x) if x is not None and np.isfinite(x) else None
+
+
+def confirmed_pick(ok: list, choose, confirm) -> tuple:
+    """``(pick or None, records)``: the trial the round adds once every named pick has been checked.
+
+    ``ok``: the round's accepted :class:`~l1b2.closeloop.acceptance.RefitCV` trials; ``choose(trials)`` the loop's
+    choice among them; ``confirm(trial)`` a record ``{"confirmed": bool, ...}`` of the check, or None when no
+    check applies. A generic pick, a structural one (a named term of the reduced model that relaxes Eq. 29's
+    linearisation, no physical reading) or a named one confirmed (or not checked) is returned. A named pick that is
+    not confirmed is withdrawn and its :func:`as_form` trial takes its place (the same force and errors: the
+    acceptance it passed stands, only its reading changes); then the choice is made again, so a generic term the
+    choice prefers to the form is added instead. Each record gets ``"outcome"``: ``"kept"``,
+    ``"withdrawn, kept as <label>"`` (its form was added), or ``"withdrawn"``.
+    """
+    pool, records, forms = list(ok), [], {}
+    while pool:
+        pick = choose(pool)
+        if pick.candidate.generic or pick.candidate.structural:    # already read as Eq. 29's own linearisation
+            break
+        rec = confirm(pick)
+        if rec is None or rec["confirmed"]:
+            if rec is not None:
+                records.append({**rec, "outcome": "kept"})
+            return pick, records
+        records.append({**rec, "outcome": "withdrawn"})
+        form = replace(pick, candidate=as_form(pick.candidate))
+        pool = [t for t in pool if t is not pick] + [form]
+        forms[id(form)] = records[-1]
+    else:
+        return None, records
+    if id(pick) in forms:
+        forms[id(pick)]["outcome"] = f"withdrawn, kept as {pick.candidate.label}"
+    return pick, records
+
+
+class PureSlipCheck:
+    """The loop's ``confirm`` (see the module): a named trial cross-validated again from the pure-slip family.
+
+    ``identify()`` returns the pure-slip baseline identified on the loop's TRAIN frame (called once, at the first
+    check; a :class:`l1b2.errors.FitDivergedError` is recorded and every check then says it could not be made,
+    and the named reading stands); ``df``, ``mask``, ``m_s``: the rounds' TRAIN frame; ``folds(candidate)``: the
+    run ids per fold the loop cross-validated that candidate on; ``settings``: the loop's
+    :class:`~l1b2.closeloop.acceptance.RefitSettings`; ``final_nfev``: the joint re-identification's budget;
+    ``clock``: the job's :class:`~l1b2.closeloop.stages.StageClock`.
+    """
+
+    family = "pure_slip"
+
+    def __init__(self, identify, df, mask, m_s: float, folds, settings, *, min_gain: float, final_nfev: int,
+                 clock=None):
+        self.identify, self.df, self.mask, self.m_s = identify, df, np.asarray(mask, bool), float(m_s)
+        self.folds, self.settings, self.min_gain, self.final_nfev = folds, settings, min_gain, int(final_nfev)
+        self.clock = clock if clock is not None else (lambda msg: None)
+        self._base, self._failed = None, None
+        self._current: dict = {}      # effects' labels -> the pure-slip model with them (re-identified once)
+
+    def _count(self, refits: int, nfev: int) -> None:
+        if hasattr(self.clock, "count"):
+            self.clock.count(refits, nfev)
+
+    def _baseline(self):
+        """The pure-slip baseline (identified at the first call; None when that failed, ``_failed`` says why)."""
+        if self._base is None and self._failed is None:
+            try:
+                self._base = self.identify()
+            except (FitDivergedError, IdentificationError) as e:
+                self._failed = str(e)
+        return self._base
+
+    def _model(self, effects: EffectSet):
+        """The pure-slip baseline with ``effects`` re-identified jointly (the baseline itself when there are none)."""
+        if self._baseline() is None:
+            return None
+        key = tuple(c.label for c in effects.candidates)
+        if key not in self._current:
+            if not effects.candidates:
+                self._current[key] = self._base
+            else:
+                m = refit(self.df, self.mask, self.m_s, self._base.params_, effects,
+                          self.settings.budget(self.final_nfev), max_outer=3)
+                self._count(1, m.convergence_.get("nfev_total", 0))
+                self._current[key] = m
+        return self._current[key]
+
+    def __call__(self, trial: RefitCV, effects: EffectSet, round_no: int) -> dict:
+        """The check's record of ``trial`` (a named candidate) against the current ``effects``."""
+        c = trial.candidate
+        self._baseline()    # its identification is a stage of its own
+        self.clock(f"round {round_no}: checking the named {c.label} from the {self.family} family")
+        rec = {"round": int(round_no), "label": c.label, "effect": c.family, "family": self.family,
+               "eq29_cv_gain": _round(trial.gain), "eq29_cv_free_run_nrmse_current": _round(trial.current.nrmse),
+               "eq29_cv_free_run_nrmse_refit": _round(trial.extended.nrmse)}
+        try:
+            cur = self._model(effects)
+        except IdentificationError as e:
+            cur, why = None, str(e)
+        else:
+            why = self._failed
+        if cur is None:
+            return {**rec, "confirmed": True, "checked": False,
+                    "note": f"the {self.family} model could not be identified ({why}): not checked"}
+        v = cur.predict_free_run(self.df)
+        y, A, S, runs_m = design(c, res.drive_residual(self.df, v), self.df, self.mask, cur.params_, self.m_s,
+                                 v_pred=v)
+        folds = self.folds(c)
+        phi = fold_start_phi(S, A, y, runs_m, folds)
+        errs = cv_errors(self.df, self.mask, self.m_s, folds, cur.params_,
+                         [(effects, None), (effects.add(c, trial.phi), phi)], self.settings)
+        self._count(2 * len(folds), sum(e.nfev for e in errs))
+        t = RefitCV(c, errs[0], errs[1])
+        return {**rec, "checked": True, "confirmed": accepts(t, min_gain=self.min_gain, min_drop=0.0),
+                "cv_gain": _round(t.gain), "cv_free_run_nrmse_current": _round(t.current.nrmse),
+                "cv_free_run_nrmse_refit": _round(t.extended.nrmse), "folds_improved": t.folds_improved,
+                "folds": len(folds), "min_cv_gain": float(self.min_gain)}
+
+
+def describe(rec: dict) -> str:
+    """One line of ``report.md`` for a check's record (:meth:`PureSlipCheck.__call__` and its outcome)."""
+    head = f"named reading of `{rec['label']}` (round {rec['round']}) checked from the {rec['family']} family: "
+    if not rec.get("checked"):
+        return head + rec.get("note", "not checked") + f"; {rec.get('outcome', '')}"
+
+    def pct(x, f):
+        return "-" if x is None else format(x, f)
+    return (head + f"CV free-run nrmse {pct(rec['cv_free_run_nrmse_current'], '.2%')} -> "
+            f"{pct(rec['cv_free_run_nrmse_refit'], '.2%')} (gain {pct(rec['cv_gain'], '.1%')}, "
+            f"{rec['folds_improved']}/{rec['folds']} folds; from Eq. 29: gain {pct(rec['eq29_cv_gain'], '.1%')}; "
+            f"accepted needs >= {rec['min_cv_gain']:.0%} in most folds): "
+            + ("confirmed" if rec["confirmed"] else "not confirmed") + f"; {rec.get('outcome', '')}")
+
+
+def withdrawn_note(records: list) -> str:
+    """The diagnosis message's note on withdrawn named readings ('' when none was withdrawn)."""
+    out = [r["label"] for r in records if str(r.get("outcome", "")).startswith("withdrawn")]
+    return (f"; named reading withdrawn (not confirmed from the pure-slip family, Eq. 29's linearisation): "
+            f"{', '.join(out)}") if out else ""

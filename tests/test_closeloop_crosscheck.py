@@ -1,0 +1,249 @@
+"""A named effect found from the Eq. 29 baseline is read as physics only when the pure-slip family confirms it
+(issue 28 item 6, decision 0043): the pick rule and the check on synthetic inputs, in seconds."""
+
+import numpy as np
+import pytest
+from l1b2.closeloop import acceptance as acc
+from l1b2.closeloop import crosscheck as cc
+from l1b2.closeloop.candidates import CandidateForce, candidate
+from l1b2.errors import FitDivergedError
+from l1b2.predictor import effects as fx
+from test_effects_registry import TRAIN
+
+
+def _fe(sse):
+    return acc.FoldErrors(np.asarray(sse, float), np.full(len(sse), 100.0))
+
+
+CUR = _fe([10.0, 10.0, 10.0, 10.0])     # current model: CV nrmse sqrt(40 / 400) = 0.316
+
+
+def _t(family, ext, generic, cur=CUR, n=1):
+    c = CandidateForce(family, "load", "", tuple(f"{family}_{i}" for i in range(n)), ("N",) * n, None,
+                       generic=generic, description=f"{family} force")
+    return acc.RefitCV(c, cur, _fe(ext), phi=np.zeros(n))
+
+
+def _first(trials):
+    """A stand-in for the loop's choice: named before generic, then the largest gain."""
+    return min(trials, key=lambda t: (t.candidate.generic, -t.gain))
+
+
+class _Confirm:
+    """``confirm`` answering from a table, recording what it was asked."""
+
+    def __init__(self, verdicts):
+        self.verdicts, self.asked = verdicts, []
+
+    def __call__(self, t):
+        self.asked.append(t.candidate.family)
+        v = self.verdicts.get(t.candidate.family)
+        return None if v is None else {"label": t.candidate.label, "confirmed": v}
+
+
+def test_a_generic_pick_is_not_checked():
+    gen = _t("smooth_load", [5, 5, 5, 5], True)
+    conf = _Confirm({})
+    pick, recs = cc.confirmed_pick([gen], _first, conf)
+    assert pick is gen and recs == [] and conf.asked == []
+
+
+def test_a_structural_named_pick_is_not_checked():
+    # a named term that relaxes Eq. 29's linearisation (load_slope_voltage) is already read as the reduced model's
+    named = _t("load_slope_voltage", [4, 4, 4, 4], False)
+    structural = acc.RefitCV(CandidateForce("load_slope_voltage", "load", "", ("p",), ("N",), None,
+                                            structural="Eq. 29's slope"), CUR, _fe([4] * 4))
+    conf = _Confirm({"load_slope_voltage": False})
+    pick, recs = cc.confirmed_pick([structural], _first, conf)
+    assert pick is structural and recs == [] and conf.asked == []
+    pick, recs = cc.confirmed_pick([named], _first, conf)     # the same without the tag: checked
+    assert pick is not named and conf.asked == ["load_slope_voltage"]
+
+
+def test_a_confirmed_named_pick_is_kept_and_recorded():
+    named, gen = _t("named_x", [4, 4, 4, 4], False), _t("smooth_load", [3, 3, 3, 3], True)
+    conf = _Confirm({"named_x": True})
+    pick, recs = cc.confirmed_pick([gen, named], _first, conf)
+    assert pick is named and [r["outcome"] for r in recs] == ["kept"]
+    pick, recs = cc.confirmed_pick([gen, named], _first, _Confirm({}))
+    assert pick is named and recs == []                    # no check applies (e.g. a pure-slip baseline)
+
+
+def test_an_unconfirmed_named_pick_is_kept_only_as_its_generic_structural_form():
+    named = _t("named_x", [4, 4, 4, 4], False)
+    conf = _Confirm({"named_x": False})
+    pick, recs = cc.confirmed_pick([named], _first, conf)
+    assert pick is not named and pick.candidate.generic and pick.candidate.structural
+    assert pick.candidate.family == "named_x" + cc.FORM_SUFFIX
+    assert pick.current is named.current and pick.extended is named.extended     # the same cross-validated figures
+    assert [r["outcome"] for r in recs] == [f"withdrawn, kept as {pick.candidate.label}"]
+    assert conf.asked == ["named_x"]                       # the form itself is generic: not checked again
+
+
+def test_an_unconfirmed_named_pick_gives_way_to_a_generic_term_the_choice_prefers():
+    named = _t("named_x", [4, 4, 4, 4], False)
+    gen = _t("smooth_load", [3, 3, 3, 3], True)            # larger gain: `_first` takes it before the form
+    pick, recs = cc.confirmed_pick([named, gen], _first, _Confirm({"named_x": False}))
+    assert pick is gen and [r["outcome"] for r in recs] == ["withdrawn"]
+    weaker = _t("smooth_load", [5, 5, 5, 5], True)         # smaller gain: the form is taken
+    pick, recs = cc.confirmed_pick([named, weaker], _first, _Confirm({"named_x": False}))
+    assert pick.candidate.family == "named_x" + cc.FORM_SUFFIX and recs[0]["outcome"].startswith("withdrawn, kept")
+    assert cc.confirmed_pick([], _first, _Confirm({})) == (None, [])
+
+
+def test_every_named_pick_is_checked_in_turn():
+    a, b = _t("named_a", [3, 3, 3, 3], False), _t("named_b", [5, 5, 5, 5], False)
+    conf = _Confirm({"named_a": False, "named_b": True})
+    pick, recs = cc.confirmed_pick([a, b], _first, conf)
+    # a is withdrawn; the choice then takes b (named before generic, before a's form), which is confirmed
+    assert pick is b and conf.asked == ["named_a", "named_b"]
+    assert [r["outcome"] for r in recs] == ["withdrawn", "kept"]
+    conf = _Confirm({"named_a": False, "named_b": False})
+    pick, recs = cc.confirmed_pick([a, b], _first, conf)
+    assert pick.candidate.family == "named_a" + cc.FORM_SUFFIX      # both withdrawn; the better form is added
+    assert [r["outcome"] for r in recs] == [f"withdrawn, kept as {pick.candidate.label}", "withdrawn"]
+
+
+def _pulley():
+    return candidate(None, fx.family("load_path_friction").grid(TRAIN)[0])
+
+
+def test_the_form_has_the_same_force_and_no_physical_home():
+    import pandas as pd
+    from l1b2.physics.params import SYSTEM_MODELS_DIR, load_motor
+    from l1b2.predictor.effects.homes import map_effects
+    c = _pulley()
+    f = cc.as_form(c)
+    assert f.generic and not c.generic and f.structural and not c.structural
+    assert f.family == "load_path_friction_form" and f.names == ("load_path_friction_form_0",)
+    assert f.spec == c.spec and f.bounds == c.bounds and f.n_params == c.n_params
+    df = pd.DataFrame({"time_s": [0.0, 1e-3], "run": [0, 0], "position_m": [0.0, 0.0], "voltage_V": [300.0] * 2,
+                       "direction": [1, 1], "load_kg": [0.05, -0.03], "speed_m_s": [0.1, 0.1]})
+    np.testing.assert_array_equal(f.features(df), c.features(df))
+
+    def effect(cand):
+        return fx.IdentifiedEffect(cand.family, cand.label, dict(cand.spec), cand.names, cand.units, (0.3,),
+                                   (0.01,), cand.description, cand.regressors, cand.structural)
+    mp = load_motor(SYSTEM_MODELS_DIR / "realistic_motor.toml")
+    model = type("M", (), {"effects": (effect(c),)})()
+    out, rec = map_effects(model, mp)
+    assert rec[0]["mapped"] and out.slider.pulley_mu == pytest.approx(0.3)      # the named reading: copied
+    model = type("M", (), {"effects": (effect(f),)})()
+    out, rec = map_effects(model, mp)
+    assert not rec[0]["mapped"] and out.slider.pulley_mu == mp.slider.pulley_mu   # the form: no subsystem value
+
+
+def test_score_of_finds_the_named_score_behind_a_form():
+    from l1b2.closeloop.selection import Score
+    c = _pulley()
+    s = Score(c, 0.4, 1e-4, 0.9, -5.0, np.ones(1), -6.0)
+    other = Score(CandidateForce("smooth_load", "load", "", ("p",), ("N",), None, generic=True),
+                  0.3, 1e-3, 0.8, -4.0, np.ones(1), -5.0)
+    t = acc.RefitCV(c, CUR, _fe([4] * 4), phi=np.ones(1))
+    assert cc.score_of(t, [other, s]) is s
+    form = cc.score_of(acc.RefitCV(cc.as_form(c), CUR, _fe([4] * 4)), [other, s])
+    assert form.candidate == cc.as_form(c) and form.cv_gain == s.cv_gain
+    with pytest.raises(ValueError):
+        cc.score_of(t, [other])
+
+
+# ---------------------------------------------------------------------------
+# the check itself, with the identifications replaced by stand-ins (what it refits, counts and decides)
+# ---------------------------------------------------------------------------
+
+class _Model:
+    def __init__(self, name):
+        self.name, self.params_ = name, name
+        self.convergence_ = {"nfev_total": 7}
+
+    def predict_free_run(self, df):
+        return np.zeros(len(df))
+
+
+class _Clock:
+    def __init__(self):
+        self.stages, self.counts = [], []
+
+    def __call__(self, msg):
+        self.stages.append(msg)
+
+    def count(self, n, nfev):
+        self.counts.append((n, nfev))
+
+
+@pytest.fixture
+def stand_ins(monkeypatch):
+    calls = {"refit": [], "cv": []}
+    ext = {"sse": [4.0, 4.0, 4.0, 4.0]}
+
+    def refit(df, mask, m_s, init, effects, settings, max_outer=2):
+        calls["refit"].append((init, tuple(c.label for c in effects.candidates), settings.max_nfev))
+        return _Model(f"{init}+{len(effects.candidates)}")
+
+    def cv_errors(df, mask, m_s, folds, init, jobs, settings):
+        calls["cv"].append((init, [tuple(c.label for c in e.candidates) for e, _ in jobs], len(folds)))
+        out = [_fe([10.0] * len(folds)), _fe(ext["sse"][:len(folds)])]
+        for e in out:
+            e.nfev = 3
+        return out
+
+    monkeypatch.setattr(cc, "refit", refit)
+    monkeypatch.setattr(cc, "cv_errors", cv_errors)
+    monkeypatch.setattr(cc, "design", lambda c, r, df, mask, p, m_s, v_pred: (None, None, None, None))
+    monkeypatch.setattr(cc, "fold_start_phi", lambda S, A, y, runs, folds: [np.zeros(1)] * len(folds))
+    monkeypatch.setattr(cc.res, "drive_residual", lambda df, v: np.zeros(len(df)))
+    return calls, ext
+
+
+def _check(identify, clock, min_gain=0.03):
+    import pandas as pd
+    df = pd.DataFrame({"x": np.zeros(5)})
+    return cc.PureSlipCheck(identify, df, np.ones(5, bool), 0.1, lambda c: [[0], [1], [2], [3]],
+                            acc.RefitSettings(max_nfev=10), min_gain=min_gain, final_nfev=60, clock=clock)
+
+
+def test_the_check_refits_from_the_pure_slip_family_and_counts_on_the_stage_clock(stand_ins):
+    calls, ext = stand_ins
+    n_identify = []
+    clock = _Clock()
+    check = _check(lambda: n_identify.append(1) or _Model("ps"), clock)
+    trial = _t("named_x", [4, 4, 4, 4], False)
+    rec = check(trial, acc.EffectSet(), 2)
+    assert rec["checked"] and rec["confirmed"] and rec["cv_gain"] == pytest.approx(0.6)
+    assert rec["folds_improved"] == 4 and rec["eq29_cv_gain"] == pytest.approx(trial.gain)
+    assert calls["refit"] == [] and calls["cv"] == [("ps", [(), ("named_x",)], 4)]   # from the baseline itself
+    assert clock.counts == [(8, 6)] and "pure_slip" in clock.stages[0]
+    # with effects already added, the pure-slip model is re-identified with them once (the final budget)
+    gen = _t("smooth_load", [5] * 4, True).candidate
+    eff = acc.EffectSet().add(gen, [0.0])
+    check(trial, eff, 3)
+    check(trial, eff, 3)
+    assert calls["refit"] == [("ps", ("smooth_load",), 60)] and len(n_identify) == 1
+    assert calls["cv"][-1] == ("ps+1", [("smooth_load",), ("smooth_load", "named_x")], 4)
+    assert clock.counts[1] == (1, 7)
+    # the loop's acceptance rule decides: a gain below min_gain, or a fall in only half of the folds, refuses it
+    ext["sse"] = [9.9, 9.9, 9.9, 9.9]
+    assert not check(trial, acc.EffectSet(), 2)["confirmed"]
+    ext["sse"] = [2.0, 2.0, 11.0, 11.0]
+    assert not check(trial, acc.EffectSet(), 2)["confirmed"]
+
+
+def test_a_pure_slip_fit_that_diverges_leaves_the_named_reading_unchecked(stand_ins):
+    def fail():
+        raise FitDivergedError("the pure_slip fit diverged")
+    check = _check(fail, _Clock())
+    rec = check(_t("named_x", [4, 4, 4, 4], False), acc.EffectSet(), 1)
+    assert rec["confirmed"] and not rec["checked"] and "diverged" in rec["note"]
+
+
+def test_the_report_names_the_check_its_figures_and_its_outcome():
+    rec = {"round": 2, "label": "load_path_friction", "family": "pure_slip", "checked": True, "confirmed": False,
+           "cv_free_run_nrmse_current": 0.021, "cv_free_run_nrmse_refit": 0.0208, "cv_gain": 0.019,
+           "folds_improved": 3, "folds": 4, "eq29_cv_gain": 0.2, "min_cv_gain": 0.03,
+           "outcome": "withdrawn, kept as load_path_friction_form"}
+    line = cc.describe(rec)
+    for part in ("load_path_friction", "pure_slip", "2.10% -> 2.08%", "1.9%", "3/4", "20.0%", "not confirmed",
+                 "kept as load_path_friction_form"):
+        assert part in line, (part, line)
+    assert "load_path_friction" in cc.withdrawn_note([rec])
+    assert cc.withdrawn_note([{**rec, "confirmed": True, "outcome": "kept"}]) == ""
