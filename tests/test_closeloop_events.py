@@ -2,8 +2,9 @@
 
 Fast unit tests: an event clock that restarts one sample late or early (``searchsorted`` on the wrong side), events
 taken at the wrong run, a step rule off by one block, TEST's events not merged with TRAIN's, or two sessions on
-one clock merged, fails one of them; the last one shows on run-level deviations that relax after each event that
-the event clock explains them where the channel itself and the session clock do not.
+one clock merged, fails one of them; one shows on run-level deviations that relax after each event that the
+event clock explains them where the channel itself and the session clock do not; the last one that of two
+correlated run-level signals the one that only follows the cause ranks after it (``runlevel.dominated_signals``).
 """
 
 import numpy as np
@@ -107,3 +108,32 @@ def test_deviations_that_relax_after_each_event_are_explained_by_the_event_clock
     got = {e.channel: e for e in rl.signal_evidence(dev, sigs, alpha=0.01, k=5, seed=0, session_order=t)}
     assert got["count_since_s"].significant and got["count_since_s"].cv_gain > 0.3
     assert not got["count"].significant and not got["time_s"].significant
+
+
+def test_a_correlated_signal_that_only_follows_the_cause_is_dominated_and_ranks_after_it():
+    rng = np.random.default_rng(11)
+    n = 56
+    cause, other = rng.normal(size=n), rng.normal(size=n)
+    decoy = 0.85 * cause + 0.53 * rng.normal(size=n)          # r ~ 0.85 over runs, acts on nothing
+    S = np.array([[4e-4, 0.0], [0.0, 0.01]])
+    theta = (np.array([1.0, 0.0]) + np.outer(cause, [0.0, 0.3]) + np.outer(other, [0.015, 0.0])
+             + rng.multivariate_normal([0, 0], np.diag([1e-4, 4e-3]), n) + rng.multivariate_normal([0, 0], S, n))
+    dev = rl.RunDeviations(np.arange(n), theta, np.repeat(S[None], n, axis=0), np.full(n, 500))
+    # the decoy's evidence given the cause is none, the cause's given the decoy remains (written-out Wald test)
+    assert rl.conditional_p(dev, decoy, cause) > 0.01 and rl.conditional_p(dev, cause, decoy) < 1e-6
+    # given an unrelated signal, a signal keeps its own evidence (the joint fit only adds independent columns)
+    marginal = {e.channel: e for e in rl.signal_evidence(dev, [{"channel": "cause", "transform": "none",
+                                                                 "values": cause}], alpha=0.01, k=4, seed=0)}
+    assert np.log(rl.conditional_p(dev, (cause - cause.mean()) / cause.std(), other)) == pytest.approx(
+        np.log(marginal["cause"].p_value), rel=0.2)
+    sigs = [{"channel": "decoy", "transform": "none", "values": 25 + 4 * decoy},   # listed first on purpose
+            {"channel": "cause", "transform": "none", "values": 25 + 4 * cause},
+            {"channel": "other", "transform": "none", "values": other}]
+    got = rl.signal_evidence(dev, sigs, alpha=0.01, k=4, seed=0)
+    by = {e.channel: e for e in got}
+    assert all(e.significant for e in got)
+    assert by["decoy"].dominated_by == "cause" and by["cause"].dominated_by is None
+    assert by["other"].dominated_by is None                    # uncorrelated with both: never compared
+    assert by["other"].p_value > by["decoy"].p_value           # weaker on its own, yet ranked before the decoy
+    assert [e.channel for e in got] == ["cause", "other", "decoy"]
+    assert by["decoy"].to_dict()["dominated_by"] == "cause"
