@@ -80,6 +80,8 @@ def test_two_sessions_on_one_clock_are_derived_each_from_its_own_runs():
     t = test["time_s"].to_numpy()
     start = test.groupby("run")["time_s"].min()
     assert te["count_since_s"].to_numpy() == pytest.approx(ev.since_event(t, [start[102]], t[0]))
+    _, te, _ = ev.with_event_clocks(train, test.drop(columns="count"))   # not logged there: no clock to derive
+    assert "count_since_s" not in te.columns
 
 
 def test_no_step_channel_leaves_the_frames_as_they_are_and_the_clock_is_a_logged_channel():

@@ -99,12 +99,12 @@ def with_event_clocks(train: pd.DataFrame, test: pd.DataFrame | None = None, res
         return train, test, []
     train, test = train.copy(), (test.copy() if test is not None else None)
     record = []
+    merged = one_session(run_table([train, test], dataio.TIME))   # every run of both frames, logged or not
     for name in names:
         tab = run_table([train, test], name)
-        merged = one_session(tab)
         for df in (train, test):
-            if df is None:
-                continue
+            if df is None or (not merged and name not in df.columns):
+                continue   # a frame of its own session without the channel has no events to place
             own = tab if merged else run_table([df], name)
             t = df[dataio.TIME].to_numpy(float)
             df[name + SUFFIX] = since_event(t, event_times(own), float(own["start"].min()))
