@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
+from scipy import stats
 
 from ..data import measurements as dataio
 from ..predictor.effects import apply_output_filter
@@ -127,3 +128,44 @@ def speed_channel(df: pd.DataFrame, mask: np.ndarray, *, k: int = 5, seed: int =
     ok = bool(rel >= min_rel_rms and gain >= min_gain and p < 0.01 and abs(filt.a) < 0.999)
     return {"accepted": ok, "rel_rms_mismatch": rel, "cv_gain": gain, "p_value": p,
             "runs_improved": float(np.mean(s1 < s0)) if len(s0) else 0.0, "filter": filt}
+
+
+#: a run whose recorded travel is within this share of the median travel is a full traverse (stop to stop)
+FULL_TRAVERSE_TOL = 0.05
+
+
+def stroke_gain(df: pd.DataFrame, channels=(), *, alpha: float = 0.01) -> dict:
+    """The position sensor's gain from run to run, read from each run's recorded travel between the end stops.
+
+    Every run of the protocol traverses the stroke from one end stop to the other, and the stops do not move: a
+    full traverse records the same travel in every run, up to the encoder's quantisation, unless the sensor's gain
+    (its scale) changes. A run whose travel (``max - min`` of the position) is within :data:`FULL_TRAVERSE_TOL` of
+    the median travel is a full traverse (a run that stalled short of the far stop is not), and its relative gain
+    is ``g_r = travel_r / median - 1``. Each channel of ``channels`` (column names; its run means) is tested as the
+    gain's cause by the least-squares slope of ``g_r`` on it (t-test, two-sided), significant below ``alpha`` /
+    number of channels tested (Bonferroni). Such a gain scales the recorded position and every speed derived from
+    it: a measurement effect, not a force. Reported; no model of the loop carries it.
+
+    Returns ``{"full_runs", "gain_sd_rel", "gain_range_rel", "channel", "slope_per_unit", "r", "p_value",
+    "significant"}`` (the strongest channel: smallest p-value; ``channel`` None when none was testable).
+    """
+    g = df.groupby(dataio.RUN, sort=False)
+    travel = (g[dataio.POSITION].max() - g[dataio.POSITION].min()).to_numpy(float)
+    full = np.abs(travel / np.median(travel) - 1.0) <= FULL_TRAVERSE_TOL if len(travel) else np.zeros(0, bool)
+    gain = travel[full] / np.median(travel[full]) - 1.0 if full.any() else np.zeros(0)
+    out = {"full_runs": int(full.sum()), "gain_sd_rel": float(np.std(gain)) if len(gain) else 0.0,
+           "gain_range_rel": float(np.ptp(gain)) if len(gain) else 0.0, "channel": None, "slope_per_unit": None,
+           "r": None, "p_value": 1.0, "significant": False}
+    tested = []
+    for name in channels:
+        if name not in df.columns:
+            continue
+        c = g[name].mean().to_numpy(float)[full]
+        if len(gain) < 4 or not (np.all(np.isfinite(c)) and np.std(c) > 0 and np.std(gain) > 0):
+            continue
+        fit = stats.linregress(c, gain)
+        tested.append((float(fit.pvalue), name, float(fit.slope), float(fit.rvalue)))
+    if tested:
+        p, name, slope, r = min(tested)
+        out.update(channel=name, slope_per_unit=slope, r=r, p_value=p, significant=bool(p < alpha / len(tested)))
+    return out

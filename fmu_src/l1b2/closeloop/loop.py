@@ -76,7 +76,7 @@ from ..predictor.setup import PredictorSetup
 from . import chain
 from . import residuals as res
 from . import runlevel
-from .candidates import CandidateSource, Context, full_library, training_summary
+from .candidates import CandidateSource, Context, channels_of, full_library, training_summary
 from .stages import StageClock
 from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT_FOLDS, DEFAULT_REFIT_NFEV,
                          Directions, EffectSet, RefitCV, RefitSettings, Validated, accepts, added_columns,
@@ -84,6 +84,7 @@ from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT
                          session_blocks, stratified_folds, time_dependent, validated)
 from .baselines import choose_baseline, identify_families, retag_structural
 from .crosscheck import PureSlipCheck, confirmed_pick, score_of, withdrawn_note
+from .events import with_event_clocks
 from .evidence import channels_considered, order_traced
 from .guard import checked_fit
 from .intervals import added_parameters, reported_uncertainty, train_levels
@@ -235,6 +236,7 @@ class CloseLoop(EstimatorSettings):
         m_s = train.slider_mass_kg
         dtr = train.df
         dte = test.df if test is not None else None
+        dtr, dte, event_rec = with_event_clocks(dtr, dte, self.response_columns)   # derived logged channels
         mask_tr = np.array(train.mask)
 
         if self.baseline not in ("best",) + DRIVE_LAWS:
@@ -297,7 +299,7 @@ class CloseLoop(EstimatorSettings):
                                            levels)
         first = it.first_scores or []
         chosen = it.chosen
-        diagnosis = self._diagnosis(it, first, analysis, ext_params, chain_rec)
+        diagnosis = {**self._diagnosis(it, first, analysis, ext_params, chain_rec), "event_clocks": event_rec}
         self.result_ = CloseLoopResult(
             baseline=baseline, diagnosis=diagnosis, scores=first,
             significant=it.significant, chosen=chosen, extended=extended,
@@ -457,6 +459,8 @@ class CloseLoop(EstimatorSettings):
         """
         ch = chain.speed_channel(dtr, mask, k=self.k_folds, seed=self.seed)
         rec = {k: v for k, v in ch.items() if k != "filter"}
+        rec["sensor_gain"] = chain.stroke_gain(dtr, [c["name"] for c in channels_of(dtr, self.response_columns)
+                                                     if c["kind"] != "response"], alpha=self.alpha)
         if "filter" in ch:
             rec["filter"] = ch["filter"].to_dict()
         if not ch["accepted"]:

@@ -122,7 +122,8 @@ class Diagnosis(_Record):
     the speed channel's test; ``channels_considered`` every logged channel
     and protocol signal with its first-round evidence, significant or not (its ``run_level`` entries: the
     evidence of its run mean for the runs' own deviations); ``run_level`` the first round's run-level
-    deviations (:meth:`l1b2.closeloop.runlevel.RunLevelAnalysis.to_dict`; None when not estimated).
+    deviations (:meth:`l1b2.closeloop.runlevel.RunLevelAnalysis.to_dict`; None when not estimated);
+    ``event_clocks`` the event clocks derived from logged step channels (:mod:`l1b2.closeloop.events`).
     ``named_checks``: every named pick of a round from the Eq. 29 baseline, cross-validated again from the
     pure-slip family (:mod:`l1b2.closeloop.crosscheck`), with its figures and outcome.
     The nested evidence stays JSON-shaped.
@@ -151,6 +152,7 @@ class Diagnosis(_Record):
     baseline_choice: dict = field(default_factory=dict)
     run_level: Any = None
     named_checks: list = field(default_factory=list)
+    event_clocks: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
         out = {f.name: getattr(self, f.name) for f in fields(self)}

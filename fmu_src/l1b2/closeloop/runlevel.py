@@ -22,7 +22,10 @@ estimates and explains:
    it removes (folds over runs: contiguous blocks of the session for the session clock,
    :func:`l1b2.closeloop.acceptance.session_blocks`).
    A signal is significant when its p-value is below ``alpha`` / number of signals tested (Bonferroni) and its
-   cross-validated gain is positive. The loop offers the strongest significant one (:func:`offer`) as a
+   cross-validated gain is positive. Of two significant signals whose run values correlate, the one with the
+   weaker evidence given the other is *dominated* and ranks after every undominated one
+   (:func:`dominated_signals`: a logged channel that only follows the cause). The loop offers the strongest
+   significant one (:func:`offer`) as a
    :class:`~l1b2.predictor.effects.channels.RunLevel` candidate to the same cross-validated refit acceptance as
    every other candidate.
 
@@ -43,6 +46,8 @@ from ..predictor import effects as fx
 from ..predictor import model as pr
 from . import residuals as res
 
+#: run-value correlation above which two significant signals are compared by their evidence given each other
+DOMINANCE_CORR = 0.5
 #: EM iterations of the REML fit and its relative tolerance on T
 REML_ITER = 400
 REML_TOL = 1e-8
@@ -221,12 +226,15 @@ class SignalEvidence:
     per_run: np.ndarray = field(default=None, repr=False)
     #: TRAIN's largest deviation of a sample's value from its run's (0: constant within every run; None: unknown)
     run_spread: float | None = None
+    #: the label of a correlated significant signal whose evidence given this one is stronger than this one's
+    #: given it (:func:`dominated_signals`); None: not dominated
+    dominated_by: str | None = None
 
     def to_dict(self) -> dict:
         return {"signal": self.label, "regressor": self.regressor, "p_value": self.p_value, "cv_gain": self.cv_gain,
                 "gain_per_sd": self.coef[0], "offset_per_sd_N": self.coef[1],
                 "load_offset_per_sd_N": self.coef[2], "significant": self.significant,
-                "folds": "session blocks" if self.blocked_folds else "runs"}
+                "folds": "session blocks" if self.blocked_folds else "runs", "dominated_by": self.dominated_by}
 
 
 def run_signals(df: pd.DataFrame, channels) -> list[dict]:
@@ -278,7 +286,8 @@ def cv_signal_gain(theta, cov, z, folds_idx, w=None) -> tuple[float, np.ndarray]
 
 def signal_evidence(dev: RunDeviations, signals_, *, alpha: float, k: int, seed: int,
                     session_order: np.ndarray | None = None) -> list[SignalEvidence]:
-    """Every signal's evidence (:class:`SignalEvidence`), strongest first (smallest p-value).
+    """Every signal's evidence (:class:`SignalEvidence`), strongest first: undominated before dominated
+    (:func:`dominated_signals`), then the smallest p-value.
 
     ``signals_`` as :func:`run_signals` (values in ``dev.runs``' order); ``session_order``: each run's start
     time (its rank orders the contiguous session blocks of the session clock's folds).
@@ -291,6 +300,7 @@ def signal_evidence(dev: RunDeviations, signals_, *, alpha: float, k: int, seed:
     rand = [np.flatnonzero(np.isin(dev.runs, f)) for f in res.run_folds(dev.runs, k, seed)]
     order = np.argsort(session_order) if session_order is not None else np.arange(n)
     blocks = [np.sort(b) for b in np.array_split(order, min(k, n))]
+    zs = []
     for sg in signals_:
         v = np.asarray(sg["values"], float)
         mean, sd = float(np.mean(v)), float(np.std(v))
@@ -311,7 +321,45 @@ def signal_evidence(dev: RunDeviations, signals_, *, alpha: float, k: int, seed:
                                   mean, sd, p, gain, tuple(float(x) for x in b) + (0.0,) * (3 - len(b)),
                                   bool(p < level and gain > 0),
                                   blocked, per_run, sg.get("run_spread")))
-    return sorted(out, key=lambda e: (e.p_value, -e.cv_gain))
+        zs.append(z)
+    dominated = dominated_signals(dev, [e.significant for e in out], zs)
+    for e, dom in zip(out, dominated):
+        e.dominated_by = out[dom].label if dom is not None else None
+    return sorted(out, key=lambda e: (e.dominated_by is not None, e.p_value, -e.cv_gain))
+
+
+def conditional_p(dev: RunDeviations, z: np.ndarray, given: np.ndarray) -> float:
+    """Wald p-value of the signal ``z``'s coefficients (``g1, o1[, o2]`` of :func:`signal_design`) in the mean
+    that also holds the signal ``given``'s: its evidence beyond what ``given`` explains."""
+    idx = [1, 3, 4] if dev.load is not None else [1, 3]
+    X = np.concatenate([signal_design(z, dev.load), signal_design(given, dev.load)[:, :, idx]], axis=2)
+    try:
+        fit = reml(dev.theta, dev.cov, X)
+        b, C = fit.beta[idx], fit.beta_cov[np.ix_(idx, idx)]
+        return float(stats.chi2.sf(float(b @ np.linalg.solve(C, b)), len(idx)))
+    except np.linalg.LinAlgError:
+        return 1.0
+
+
+def dominated_signals(dev: RunDeviations, significant, zs) -> list:
+    """Per signal, the index of a significant signal that dominates it, else None.
+
+    Two significant signals whose run values correlate (``|r| >=`` :data:`DOMINANCE_CORR`: a logged channel and
+    another that follows it, such as two temperatures of one rig) both explain the runs' deviations on their own;
+    the one whose evidence given the other (:func:`conditional_p`) is the weaker is dominated and is offered after
+    every undominated one. The rest keep the order of their own evidence.
+    """
+    out = [None] * len(zs)
+    sig = [i for i, s in enumerate(significant) if s]
+    for a in sig:
+        for b in sig:
+            if b <= a or abs(float(np.corrcoef(zs[a], zs[b])[0, 1])) < DOMINANCE_CORR:
+                continue
+            pa, pb = conditional_p(dev, zs[a], zs[b]), conditional_p(dev, zs[b], zs[a])
+            loser, winner = (a, b) if pa > pb else (b, a)
+            if out[loser] is None:
+                out[loser] = winner
+    return out
 
 
 @dataclass
