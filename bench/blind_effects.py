@@ -31,8 +31,9 @@ data carries them in:
 * ``humidity_pulley`` -- the same logged ``humidity_pct`` acting through the load's path (a channel x load
   interaction): the pulley runs in a hygroscopic polymer bushing whose Coulomb friction follows its water uptake, a
   BET sorption isotherm ``u(a) = C a / ((1 - a)(1 - a + C a))`` of the relative humidity ``a = RH/100``
-  (``C`` drawn in 8-15), ``pulley_mu = M u(a) / u(0.45)`` (M drawn in 0.08-0.12): a friction ``pulley_mu g |m|``
-  that grows with the load and, convexly, with the humidity (nothing at no load). RH as above.
+  (``C`` drawn in 8-15), ``pulley_mu = M u(a) / u(0.45)`` (M drawn in 0.25-0.35, the rig's range of a pulley's
+  friction): a friction ``pulley_mu g |m|`` that grows with the load and, convexly, with the humidity (nothing at
+  no load). RH as above.
 
 Usage: python bench/blind_effects.py KIND SEED [--cache DIR]       (KIND: one of the above or clean)
 Prints one JSON line: traced (first two), added, TEST free-run nrmse before and after, the channels considered,
@@ -97,7 +98,7 @@ def draw(kind: str, seed: int, n_runs: int) -> dict:
     if kind == "cable_preload":
         return {"angle_deg": float(rng.uniform(15, 25))}
     if kind == "humidity_pulley":
-        return {"M": float(rng.uniform(0.08, 0.12)), "C": float(rng.uniform(8, 15)),
+        return {"M": float(rng.uniform(0.25, 0.35)), "C": float(rng.uniform(8, 15)),
                 "RH": np.clip(45 + 15 * rng.standard_normal(n_runs), 20, 80)}
     return {}
 
