@@ -101,22 +101,22 @@ def test_quadratic_channel_shape_is_the_clipped_z_and_its_square_minus_one():
     assert len(ek.spec_scalars(lin)[1]) == 4
 
 
-def test_cubic_channel_shape_is_the_clipped_hermite_polynomials_up_to_order_three():
-    # reference: the cubic shape written out: zc = z clipped to TRAIN's range [(lo - mean)/sd, (hi - mean)/sd],
-    # columns (zc, zc^2 - 1, zc^3 - 3 zc) times the form's factor; the kernel of Predictor.fmu gives the same force,
+def test_odd_channel_shape_is_the_clipped_z_and_its_third_hermite_polynomial():
+    # reference: the odd shape written out: zc = z clipped to TRAIN's range [(lo - mean)/sd, (hi - mean)/sd],
+    # columns (zc, zc^3 - 3 zc) times the form's factor; the kernel of Predictor.fmu gives the same force,
     # also beyond TRAIN's range (9 -> flat at hi = 6)
     from l1b2.predictor import effects as fx
     from l1b2.predictor.effects import kernels as ek
     c = np.array([1.0, 3.0, 2.5, 9.0, 0.0])
     V0, d = np.array([300.0, 150.0, 240.0, 330.0, 210.0]), np.array([1.0, -1.0, 1.0, -1.0, 1.0])
     spec = {"kind": "channel", "channel": "temperature_C", "mean": 2.0, "sd": 0.5, "lo": 1.0, "hi": 6.0,
-            "shape": "cubic", "level": "sample"}
+            "shape": "odd", "level": "sample"}
     zc = np.array([-2.0, 2.0, 1.0, 8.0, -2.0])          # (c - 2)/0.5 clipped to [-2, 8]
-    H = np.column_stack([zc, zc * zc - 1.0, zc * zc * zc - 3.0 * zc])
-    np.testing.assert_allclose(H[:, 2], [-2.0, 2.0, -2.0, 488.0, -2.0])
+    H = np.column_stack([zc, zc * zc * zc - 3.0 * zc])
+    np.testing.assert_allclose(H[:, 1], [-2.0, 2.0, -2.0, 488.0, -2.0])
     x = {"V0": V0, "d": d, "T": c, "col:temperature_C": c}
     rows = np.column_stack([x[sg] if sg in x else np.zeros(5) for sg in fx.SIGNALS])
-    phi = np.array([0.7, -0.3, 0.05])
+    phi = np.array([0.7, 0.05])
     for form, factor in (("friction", -np.ones(5)), ("force_factor", V0 / 300.0), ("force", d)):
         s = {**spec, "form": form}
         F = factor[:, None] * H
@@ -124,7 +124,7 @@ def test_cubic_channel_shape_is_the_clipped_hermite_polynomials_up_to_order_thre
         kind, q = ek.spec_scalars(s)
         got = [ek.effect_force(kind, row.tolist(), q, phi.tolist()) for row in rows]
         np.testing.assert_allclose(got, F @ phi, rtol=0, atol=1e-12)
-    assert fx.family("channel").width(spec) == 3
+    assert fx.family("channel").width(spec) == 2
 
 
 def test_a_channel_effect_growing_with_the_load_is_the_form_times_one_and_the_load_size():
@@ -169,9 +169,9 @@ def test_a_channel_gets_every_shape_and_the_load_interaction_with_its_training_r
     # constant within runs: the run level only, 3 forms x (3 shapes + the linear and quadratic x load)
     assert sorted((h.spec["form"], h.spec.get("shape", "linear"), h.spec.get("by", "")) for h in hyps) == sorted(
         (f, s, b) for f in ("friction", "force_factor", "force")
-        for s, b in (("linear", ""), ("quadratic", ""), ("cubic", ""), ("linear", "load"), ("quadratic", "load")))
+        for s, b in (("linear", ""), ("quadratic", ""), ("odd", ""), ("linear", "load"), ("quadratic", "load")))
     for h in hyps:
-        n = {"linear": 1, "quadratic": 2, "cubic": 3}[h.spec.get("shape", "linear")]
+        n = {"linear": 1, "quadratic": 2, "odd": 2}[h.spec.get("shape", "linear")]
         assert len(h.names) == n * (2 if h.spec.get("by") else 1)
         if h.spec.get("shape", "linear") != "linear":
             assert (h.spec["lo"], h.spec["hi"]) == (1.0, 3.0)

@@ -16,10 +16,10 @@ enters in one of three generic forms, each linear in one parameter ``a``
 * ``force_factor``: it scales the drive's force factor, ``dF = a (V0/V_ref) z``;
 * ``force``: it adds a force fixed in the lab frame, ``dF = a d z`` (``d`` the direction).
 
-in one of three shapes, the Hermite polynomials of ``zc`` (``z`` clipped to TRAIN's range of the channel, flat
-beyond it) up to an order: ``linear`` (the factor times ``a z``, one parameter, unclipped), ``quadratic`` (``a zc
-+ b (zc^2 - 1)``: a response that peaks inside the range) or ``cubic`` (``a zc + b (zc^2 - 1) + c (zc^3 - 3 zc)``:
-one that saturates, an odd response the even square cannot take); a logged channel only: the session clock keeps
+in one of three shapes, Hermite polynomials of ``zc`` (``z`` clipped to TRAIN's range of the channel, flat
+beyond it): ``linear`` (the factor times ``a z``, one parameter, unclipped), ``quadratic`` (``a zc + b (zc^2 -
+1)``: an even part, a response that peaks inside the range) or ``odd`` (``a zc + c (zc^3 - 3 zc)``: an odd part, a
+response that saturates, which the even square cannot take); a logged channel only: the session clock keeps
 the linear shape, its curvature is the generic time spline's, :mod:`l1b2.predictor.effects.generic`; and at one of
 two levels: ``run`` (``c`` is the run's mean of the channel: an effect that differs between runs, not along the
 stroke) or ``sample`` (``c`` is the sample's value: along the stroke; listed only for a channel that varies within
@@ -64,9 +64,9 @@ from .base import SIGNALS, V_REF, Effect, EffectSpecError, needs, num, register,
 
 FORMS = ("friction", "force_factor", "force")
 LEVELS = ("run", "sample")
-#: a channel's shapes: linear in ``z``, or the Hermite polynomials of ``z`` clipped to TRAIN's range up to order 2
-#: or 3 (:func:`shape_basis`)
-SHAPES = ("linear", "quadratic", "cubic")
+#: a channel's shapes: linear in ``z``, or ``z`` clipped to TRAIN's range and its second or third Hermite
+#: polynomial (:func:`shape_basis`)
+SHAPES = ("linear", "quadratic", "odd")
 #: the inputs a channel's effect may grow with (``by``): the load's size ``|m|/load_abs`` (:func:`interaction_basis`)
 INTERACTIONS = ("load",)
 #: the shapes listed with an interaction (:meth:`Channel.grid`)
@@ -191,7 +191,7 @@ class Channel(Effect):
         return interaction_basis(spec, x, form_factor(str(spec.get("form")), x)[:, None] * shape_basis(spec, z))
 
     def width(self, spec):
-        n = 1 + SHAPES.index(spec.get("shape", "linear"))
+        n = 1 if spec.get("shape", "linear") == "linear" else 2
         return 2 * n if spec.get("by") else n
 
     def grid(self, train):
@@ -221,7 +221,7 @@ class Channel(Effect):
         names = [f"{name}_{form}_{level}"]
         if shape != "linear":
             spec.update(shape=shape, lo=float(ch["lo"]), hi=float(ch["hi"]))
-            names = [f"{name}_{form}_{level}_{h}" for h in ("lin", "sq", "cub")[:SHAPES.index(shape) + 1]]
+            names = [f"{name}_{form}_{level}_lin", f"{name}_{form}_{level}_{'sq' if shape == 'quadratic' else 'cub'}"]
         if by:
             spec.update(by=by, load_abs=float(load_abs))
             names = names + [f"{n}_x_{by}" for n in names]
@@ -234,9 +234,9 @@ class Channel(Effect):
 
 
 def shape_basis(spec, z) -> np.ndarray:
-    """The columns of a channel's shape for its standardised values ``z``: ``z`` (``linear``), or the Hermite
-    polynomials ``zc``, ``zc^2 - 1`` (``quadratic``) and ``zc^3 - 3 zc`` (``cubic``) of ``zc`` = ``z`` clipped to
-    TRAIN's range ``[(lo - mean)/sd, (hi - mean)/sd]``."""
+    """The columns of a channel's shape for its standardised values ``z``: ``z`` (``linear``), or ``zc`` and
+    ``zc^2 - 1`` (``quadratic``) or ``zc`` and ``zc^3 - 3 zc`` (``odd``), ``zc`` = ``z`` clipped to TRAIN's range
+    ``[(lo - mean)/sd, (hi - mean)/sd]``."""
     shape = spec.get("shape", "linear")
     if shape == "linear":
         return np.asarray(z, float)[:, None]
@@ -244,8 +244,7 @@ def shape_basis(spec, z) -> np.ndarray:
         raise EffectSpecError(f"channel shape {shape!r} is not one of {', '.join(SHAPES)}")
     mean, sd = num(spec, "mean"), num(spec, "sd")
     zc = np.clip(z, (num(spec, "lo") - mean) / sd, (num(spec, "hi") - mean) / sd)
-    cols = [zc, zc ** 2 - 1.0, zc ** 3 - 3.0 * zc]
-    return np.column_stack(cols[:SHAPES.index(shape) + 1])
+    return np.column_stack([zc, zc ** 2 - 1.0 if shape == "quadratic" else zc ** 3 - 3.0 * zc])
 
 
 def interaction_basis(spec, x, F) -> np.ndarray:

@@ -67,10 +67,10 @@ KERNEL_KINDS = tuple(SPEC_KEYS)
 #: the codes of a channel's form and of a run-level signal's transform in ``q``
 #: (:data:`l1b2.predictor.effects.channels.FORMS` and ``TRANSFORMS``)
 FORM_FRICTION, FORM_FORCE_FACTOR, FORM_FORCE = range(len(FORMS))
-#: added to a channel's form code in ``q[1]`` for the quadratic and the cubic shape (then ``q[4:6]``: TRAIN's
+#: added to a channel's form code in ``q[1]`` for the quadratic and the odd shape (then ``q[4:6]``: TRAIN's
 #: range of ``z``), and for an interaction with the load (then ``q[6]``: TRAIN's largest load size ``load_abs``)
 QUADRATIC = len(FORMS)
-CUBIC = 2 * len(FORMS)
+ODD = 2 * len(FORMS)
 BY_LOAD = len(SHAPES) * len(FORMS)
 TR_NONE, TR_DRIVE, TR_ABS = range(len(TRANSFORMS))
 #: the offsets of the range scalars in ``q`` (smooth: after the regressor; pair: after both)
@@ -355,9 +355,9 @@ def input_signal(x, sig):
 
 def channel_force(x, q, phi):
     """``Channel.features`` @ phi: ``z`` = (input - mean)/sd (``q[0]`` the input, ``q[2:4]`` mean and sd) in its
-    shape (``z phi[0]``; ``q[1]`` >= ``QUADRATIC``: ``zc phi[0] + (zc^2 - 1) phi[1]``, >= ``CUBIC``: also
-    ``(zc^3 - 3 zc) phi[2]``, ``zc`` = ``z`` clipped to ``q[4:6]``) times the form's factor (the code less its
-    offsets: -1, ``V0/V_REF`` or ``d``); with ``q[1]`` >= ``BY_LOAD``, plus the same columns times
+    shape (``z phi[0]``; ``q[1]`` >= ``QUADRATIC``: ``zc phi[0] + (zc^2 - 1) phi[1]``, >= ``ODD``:
+    ``zc phi[0] + (zc^3 - 3 zc) phi[1]``, ``zc`` = ``z`` clipped to ``q[4:6]``) times the form's factor (the code
+    less its offsets: -1, ``V0/V_REF`` or ``d``); with ``q[1]`` >= ``BY_LOAD``, plus the same columns times
     ``|load| / q[6]`` on the next parameters."""
     z = (input_signal(x, int(q[0])) - q[2]) / q[3]
     form = int(q[1])
@@ -370,28 +370,23 @@ def channel_force(x, q, phi):
     n = int(1)   # an int: it indexes phi
     b1 = z
     b2 = 0.0
-    b3 = 0.0
-    if form >= CUBIC:
-        form = form - CUBIC
-        n = int(3)
+    if form >= ODD:
+        form = form - ODD
+        n = int(2)
+        b1 = min(max(z, q[4]), q[5])
+        b2 = b1 * b1 * b1 - 3.0 * b1
     elif form >= QUADRATIC:
         form = form - QUADRATIC
         n = int(2)
-    if n > 1:
         b1 = min(max(z, q[4]), q[5])
         b2 = b1 * b1 - 1.0
-        b3 = b1 * b1 * b1 - 3.0 * b1
     g = b1 * phi[0]
     if n > 1:
         g = g + b2 * phi[1]
-    if n > 2:
-        g = g + b3 * phi[2]
     if by == 1:
         gu = b1 * phi[n]
         if n > 1:
             gu = gu + b2 * phi[n + 1]
-        if n > 2:
-            gu = gu + b3 * phi[n + 2]
         g = g + u * gu
     if form == FORM_FRICTION:
         return -g
