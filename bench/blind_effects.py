@@ -28,6 +28,12 @@ data carries them in:
 * ``cable_preload`` -- the load's own column, acting through the preload: the pulley's cable leaves the slider at an
   angle (drawn 15-25 deg) toward the bar, so the load's weight adds ``|m| g sin(angle)`` to the preload (the
   cable pulls the slider onto the bar whichever way the load hangs).
+* ``humidity_pulley`` -- the same logged ``humidity_pct`` acting through the load's path (a channel x load
+  interaction): the pulley runs in a hygroscopic polymer bushing whose Coulomb friction follows its water uptake, a
+  BET sorption isotherm ``u(a) = C a / ((1 - a)(1 - a + C a))`` of the relative humidity ``a = RH/100``
+  (``C`` drawn in 8-15), ``pulley_mu = M u(a) / u(0.45)`` (M drawn in 0.25-0.35, the rig's range of a pulley's
+  friction): a friction ``pulley_mu g |m|`` that grows with the load and, convexly, with the humidity (nothing at
+  no load). RH as above.
 
 Usage: python bench/blind_effects.py KIND SEED [--cache DIR]       (KIND: one of the above or clean)
 Prints one JSON line: traced (first two), added, TEST free-run nrmse before and after, the channels considered,
@@ -57,13 +63,15 @@ from l1b2.rig.experiment import (RigPlan, add_speed_noise, plan_runs, run_contac
                                  sampling_every, scattered_motor, write_experiment)
 
 KINDS = ("humidity_friction", "chamber_temperature", "lining_wear", "vco_warmup", "cable_preload",
-         "humidity_capillary")
+         "humidity_capillary", "humidity_pulley")
 #: the channel each kind acts through (as the loop's report names channels), None: none logged
 CHANNEL = {"humidity_friction": "humidity_pct", "chamber_temperature": "temperature_C", "lining_wear": None,
-           "vco_warmup": "frequency_Hz", "cable_preload": "load_kg", "humidity_capillary": "humidity_pct"}
+           "vco_warmup": "frequency_Hz", "cable_preload": "load_kg", "humidity_capillary": "humidity_pct",
+           "humidity_pulley": "humidity_pct"}
 #: the regressor the loop should trace (its report's name of the channel; the session clock for the unlogged wear)
 WANT = {"humidity_friction": "humidity_pct", "chamber_temperature": "temperature", "lining_wear": "time",
-        "vco_warmup": "frequency", "cable_preload": "load", "humidity_capillary": "humidity_pct"}
+        "vco_warmup": "frequency", "cable_preload": "load", "humidity_capillary": "humidity_pct",
+        "humidity_pulley": "humidity_pct"}
 TIP_SPEED_M_S = 0.2   # tip sliding speed at 324 V (order of omega U_w), for the wear's sliding distance
 
 
@@ -89,7 +97,15 @@ def draw(kind: str, seed: int, n_runs: int) -> dict:
         return {"D": rng.uniform(150, 400, n_runs), "tau": float(rng.uniform(0.08, 0.15))}
     if kind == "cable_preload":
         return {"angle_deg": float(rng.uniform(15, 25))}
+    if kind == "humidity_pulley":
+        return {"M": float(rng.uniform(0.25, 0.35)), "C": float(rng.uniform(8, 15)),
+                "RH": np.clip(45 + 15 * rng.standard_normal(n_runs), 20, 80)}
     return {}
+
+
+def bet_uptake(a: float, C: float) -> float:
+    """The BET sorption isotherm: a polymer's water uptake (per monolayer) at the relative humidity ``a`` (0-1)."""
+    return C * a / ((1 - a) * (1 - a + C * a))
 
 
 def traverse(mp, nominal, plan, V0, load, d, T=None, f_of_t=None):
@@ -133,6 +149,9 @@ def experiment(kind: str, seed: int):
             f_of_t = lambda t, D=D, tau=tau, f0=f0: f0 + D * math.exp(-t / tau)  # noqa: E731
         elif kind == "cable_preload":
             mp = mp.replace(stator__P0_N=mp.stator.P0_N + abs(L) * 9.81 * math.sin(math.radians(p["angle_deg"])))
+        elif kind == "humidity_pulley":
+            uptake = bet_uptake(p["RH"][k] / 100, p["C"]) / bet_uptake(0.45, p["C"])
+            mp = mp.replace(slider__pulley_mu=p["M"] * uptake)
         r = traverse(mp, nominal, plan, V, L, d, T, f_of_t)
         idx = np.arange(0, len(r["time"]), every)
         t = r["time"][idx]
@@ -144,10 +163,11 @@ def experiment(kind: str, seed: int):
         noise = np.random.default_rng([seed, 78, k]).standard_normal(len(t))
         if kind == "chamber_temperature":
             out[dataio.TEMPERATURE] = np.round(r["Stator.T_stator"][idx] + 0.05 * noise, 2)
-        if kind in ("humidity_friction", "humidity_capillary"):
+        if kind in ("humidity_friction", "humidity_capillary", "humidity_pulley"):
             out["humidity_pct"] = np.round(p["RH"][k] + 0.5 * noise, 2)
         frames.append(out)
-        per_run.append({"run": k + 1, "mu_p": mp.interface.mu_p, "P0_N": mp.stator.P0_N, "S_m": S})
+        per_run.append({"run": k + 1, "mu_p": mp.interface.mu_p, "P0_N": mp.stator.P0_N, "S_m": S,
+                        "pulley_mu": mp.slider.pulley_mu})
         S += TIP_SPEED_M_S * V / 324.0 * float(t[-1])
         t_next = float(out[dataio.TIME].iloc[-1]) + plan.pause_s
     df = add_speed_noise(pd.concat(frames, ignore_index=True), plan)

@@ -101,28 +101,89 @@ def test_quadratic_channel_shape_is_the_clipped_z_and_its_square_minus_one():
     assert len(ek.spec_scalars(lin)[1]) == 4
 
 
-def test_a_channel_gets_both_shapes_with_its_training_range():
+def test_odd_channel_shape_is_the_clipped_z_and_its_third_hermite_polynomial():
+    # reference: the odd shape written out: zc = z clipped to TRAIN's range [(lo - mean)/sd, (hi - mean)/sd],
+    # columns (zc, zc^3 - 3 zc) times the form's factor; the kernel of Predictor.fmu gives the same force,
+    # also beyond TRAIN's range (9 -> flat at hi = 6)
+    from l1b2.predictor import effects as fx
+    from l1b2.predictor.effects import kernels as ek
+    c = np.array([1.0, 3.0, 2.5, 9.0, 0.0])
+    V0, d = np.array([300.0, 150.0, 240.0, 330.0, 210.0]), np.array([1.0, -1.0, 1.0, -1.0, 1.0])
+    spec = {"kind": "channel", "channel": "temperature_C", "mean": 2.0, "sd": 0.5, "lo": 1.0, "hi": 6.0,
+            "shape": "odd", "level": "sample"}
+    zc = np.array([-2.0, 2.0, 1.0, 8.0, -2.0])          # (c - 2)/0.5 clipped to [-2, 8]
+    H = np.column_stack([zc, zc * zc * zc - 3.0 * zc])
+    np.testing.assert_allclose(H[:, 1], [-2.0, 2.0, -2.0, 488.0, -2.0])
+    x = {"V0": V0, "d": d, "T": c, "col:temperature_C": c}
+    rows = np.column_stack([x[sg] if sg in x else np.zeros(5) for sg in fx.SIGNALS])
+    phi = np.array([0.7, 0.05])
+    for form, factor in (("friction", -np.ones(5)), ("force_factor", V0 / 300.0), ("force", d)):
+        s = {**spec, "form": form}
+        F = factor[:, None] * H
+        np.testing.assert_allclose(fx.effect_features(s, x), F)
+        kind, q = ek.spec_scalars(s)
+        got = [ek.effect_force(kind, row.tolist(), q, phi.tolist()) for row in rows]
+        np.testing.assert_allclose(got, F @ phi, rtol=0, atol=1e-12)
+    assert fx.family("channel").width(spec) == 2
+
+
+def test_a_channel_effect_growing_with_the_load_is_the_form_times_one_and_the_load_size():
+    # reference: the interaction written out: the form's columns F = factor * shape(z), then F * |m| / load_abs
+    # (the load's size, either sign of m; not V0, not the signed load); the kernel gives the same force
+    from l1b2.predictor import effects as fx
+    from l1b2.predictor.effects import kernels as ek
+    c = np.array([1.0, 3.0, 2.5, 9.0, 0.0, 2.0])
+    m = np.array([0.1, -0.2, 0.0, 0.3, -0.05, 0.2])
+    V0, d = np.array([300.0, 150.0, 240.0, 330.0, 210.0, 280.0]), np.array([1.0, -1.0, 1.0, -1.0, 1.0, -1.0])
+    x = {"V0": V0, "d": d, "T": c, "load": m, "col:temperature_C": c, "run:temperature_C": c}
+    rows = np.column_stack([x[sg] if sg in x else np.zeros(6) for sg in fx.SIGNALS])
+    u = np.abs(m) / 0.4
+    z = (c - 2.0) / 0.5
+    zc = np.clip(z, -2.0, 8.0)
+    shapes = {"linear": z[:, None], "quadratic": np.column_stack([zc, zc * zc - 1.0])}
+    for shape, B in shapes.items():
+        for form, factor in (("friction", -np.ones(6)), ("force_factor", V0 / 300.0), ("force", d)):
+            s = {"kind": "channel", "channel": "temperature_C", "mean": 2.0, "sd": 0.5, "lo": 1.0, "hi": 6.0,
+                 "shape": shape, "level": "sample", "form": form, "by": "load", "load_abs": 0.4, "run_spread": 0.0}
+            F = factor[:, None] * B
+            want = np.hstack([F, F * u[:, None]])
+            np.testing.assert_allclose(fx.effect_features(s, x), want)
+            phi = np.linspace(-0.8, 0.9, want.shape[1])
+            kind, q = ek.spec_scalars(s)
+            got = [ek.effect_force(kind, row.tolist(), q, phi.tolist()) for row in rows]
+            np.testing.assert_allclose(got, want @ phi, rtol=0, atol=1e-12)
+            assert "load" in fx.needs(s) and fx.family("channel").width(s) == want.shape[1]
+
+
+def test_a_channel_gets_every_shape_and_the_load_interaction_with_its_training_range():
     from l1b2.closeloop.candidates import channels_of
     from l1b2.predictor import effects as fx
     df = pd.DataFrame({"time_s": [0.0, 0.1, 5.0, 5.1], "run": [1, 1, 2, 2], "position_m": 0.0, "voltage_V": 200.0,
-                       "direction": 1, "load_kg": 0.0, "speed_m_s": 0.1, "aux": [1.0, 1.0, 3.0, 3.0]})
+                       "direction": 1, "load_kg": [0.1, 0.1, -0.2, -0.2], "speed_m_s": 0.1,
+                       "aux": [1.0, 1.0, 3.0, 3.0]})
     ch = {c["name"]: c for c in channels_of(df)}
     assert (ch["aux"]["lo"], ch["aux"]["hi"]) == (1.0, 3.0)
-    hyps = [h for h in fx.family("channel").grid(fx.TrainingSummary(0.1, (0.0, 5.1), (-0.02, 0.02), 200.0, {},
-                                                                     channels=tuple(ch.values())))
-            if h.spec["channel"] == "aux"]
-    # constant within runs: the run level only, 3 forms x 2 shapes; the quadratic ones carry TRAIN's range
-    assert sorted((h.spec["form"], h.spec.get("shape", "linear")) for h in hyps) == sorted(
-        (f, s) for f in ("friction", "force_factor", "force") for s in ("linear", "quadratic"))
-    quad = [h for h in hyps if h.spec.get("shape") == "quadratic"]
-    assert all(len(h.names) == 2 and (h.spec["lo"], h.spec["hi"]) == (1.0, 3.0) for h in quad)
+    train = fx.TrainingSummary(0.1, (0.0, 5.1), (-0.02, 0.02), 200.0, {"load_abs": 0.2},
+                               channels=tuple(ch.values()))
+    hyps = [h for h in fx.family("channel").grid(train) if h.spec["channel"] == "aux"]
+    # constant within runs: the run level only, 3 forms x (3 shapes + the linear and quadratic x load)
+    assert sorted((h.spec["form"], h.spec.get("shape", "linear"), h.spec.get("by", "")) for h in hyps) == sorted(
+        (f, s, b) for f in ("friction", "force_factor", "force")
+        for s, b in (("linear", ""), ("quadratic", ""), ("odd", ""), ("linear", "load"), ("quadratic", "load")))
+    for h in hyps:
+        n = {"linear": 1, "quadratic": 2, "odd": 2}[h.spec.get("shape", "linear")]
+        assert len(h.names) == n * (2 if h.spec.get("by") else 1)
+        if h.spec.get("shape", "linear") != "linear":
+            assert (h.spec["lo"], h.spec["hi"]) == (1.0, 3.0)
+        if h.spec.get("by"):
+            assert h.spec["load_abs"] == 0.2 and h.regressor == "aux" and tuple(h.also) == ("load",)
     assert {h.family for h in hyps} == {"channel_aux"}   # one family for the significance correction
-    # the session clock: the linear shape only (its curvature is the generic time spline's), both levels
-    clock = [h for h in fx.family("channel").grid(fx.TrainingSummary(0.1, (0.0, 5.1), (-0.02, 0.02), 200.0, {},
-                                                                      channels=tuple(ch.values())))
-             if h.spec["channel"] == "time_s"]
+    # the session clock: the linear shape only (its curvature is the generic time spline's), both levels,
+    # no interaction (the generic time x load terms are its)
+    clock = [h for h in fx.family("channel").grid(train) if h.spec["channel"] == "time_s"]
     assert ch["time_s"]["lo"] == 0.0 and len(clock) == 6
-    assert all(h.spec.get("shape", "linear") == "linear" and len(h.names) == 1 for h in clock)
+    assert all(h.spec.get("shape", "linear") == "linear" and len(h.names) == 1 and not h.spec.get("by")
+               for h in clock)
 
 
 def test_every_numeric_column_beyond_the_required_ones_is_a_channel():

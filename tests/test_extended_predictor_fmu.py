@@ -437,8 +437,10 @@ def test_run_level_kernels_equal_the_features_on_runs_that_hold_their_inputs(poo
     assert {h.spec["channel"] for h in hyps} == {dataio.VOLTAGE, dataio.LOAD, dataio.DIRECTION, dataio.TEMPERATURE}
     import re   # the parameters are FMU variables: legal structured FMI names (fmpy refused "|load_kg|_run_gain")
     assert all(re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", n) for h in hyps for n in h.names), [h.names for h in hyps]
-    chans = fx.family("channel").grid(fx.TrainingSummary(1.0, (T0, T0 + 1), (-0.02, 0.02), 300.0, {},
-                                                         channels=channels_of(df)))
+    load_abs = float(np.max(np.abs(df[dataio.LOAD])))
+    assert load_abs > 0
+    chans = fx.family("channel").grid(fx.TrainingSummary(1.0, (T0, T0 + 1), (-0.02, 0.02), 300.0,
+                                                         {"load_abs": load_abs}, channels=channels_of(df)))
     rows = np.column_stack([x[sg] for sg in fx.SIGNALS])
     n_checked = 0
     for h in hyps + [h for h in chans if h.spec["channel"] == dataio.TEMPERATURE]:
@@ -450,7 +452,8 @@ def test_run_level_kernels_equal_the_features_on_runs_that_hold_their_inputs(poo
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * max(1.0, np.max(np.abs(want))), err_msg=h.family)
         assert np.max(np.abs(want)) > 1e-3, h.family
         n_checked += 1
-    assert n_checked == 4 + 1 + 6   # V0, d*load, |load|, direction, temperature; its channel's 3 forms x 2 shapes (run)
+    # V0, d*load, |load|, direction, temperature; its channel's 3 forms x (3 shapes + 2 shapes x load) (run)
+    assert n_checked == 4 + 1 + 3 * (3 + 2)
     varied = dict(hyps[0].spec, run_spread=0.02 * hyps[0].spec["sd"])
     with pytest.raises(fx.EffectSpecError, match="not constant within runs"):
         ek.spec_scalars(varied)

@@ -214,10 +214,14 @@ def _effect_specs():
     # a channel and a run-level signal of each input (the FMU's current value), every form and transform
     specs += [{"kind": "channel", "channel": "temperature_C", "form": f, "level": lv, "mean": 31.0, "sd": 4.0,
                "run_spread": 0.0} for f in ("friction", "force_factor", "force") for lv in ("run", "sample")]
-    # the quadratic shape, clipped to TRAIN's range 24-41 degC (samples fall on both sides of it)
+    # the quadratic and odd shapes, clipped to TRAIN's range 24-41 degC (samples fall on both sides of it)
     specs += [{"kind": "channel", "channel": "temperature_C", "form": f, "level": "sample", "mean": 31.0, "sd": 4.0,
-               "run_spread": 0.0, "shape": "quadratic", "lo": 24.0, "hi": 41.0}
-              for f in ("friction", "force_factor", "force")]
+               "run_spread": 0.0, "shape": sh, "lo": 24.0, "hi": 41.0}
+              for f in ("friction", "force_factor", "force") for sh in ("quadratic", "odd")]
+    # and growing with the load's size (|m| / 0.3 kg), in every shape
+    specs += [{"kind": "channel", "channel": "temperature_C", "form": f, "level": "sample", "mean": 31.0, "sd": 4.0,
+               "run_spread": 0.0, "shape": sh, "lo": 24.0, "hi": 41.0, "by": "load", "load_abs": 0.3}
+              for f in ("friction", "force_factor", "force") for sh in ("linear", "quadratic", "odd")]
     specs += [{"kind": "run_level", "channel": c, "transform": tr, "mean": m, "sd": sd, "run_spread": 0.0}
               for c, tr, m, sd in (("voltage_V", "none", 280.0, 40.0), ("load_kg", "drive", 0.01, 0.2),
                                    ("load_kg", "abs", 0.15, 0.1), ("direction", "none", 0.0, 1.0),

@@ -16,14 +16,24 @@ enters in one of three generic forms, each linear in one parameter ``a``
 * ``force_factor``: it scales the drive's force factor, ``dF = a (V0/V_ref) z``;
 * ``force``: it adds a force fixed in the lab frame, ``dF = a d z`` (``d`` the direction).
 
-in one of two shapes: ``linear`` (the factor times ``a z``, one parameter) or ``quadratic`` (the factor times
-``a zc + b (zc^2 - 1)``, ``zc`` = ``z`` clipped to TRAIN's range of the channel: a response that saturates or peaks
-inside the range, flat beyond it; a logged channel only: the session clock keeps the linear shape, its curvature
-is the generic time spline's, :mod:`l1b2.predictor.effects.generic`), and at one of two levels: ``run`` (``c`` is the run's mean of the channel:
-an effect that differs between runs, not along the stroke) or ``sample``
-(``c`` is the sample's value: along the stroke; listed only for a channel
-that varies within runs). Every form and level of one channel is one
-family for the significance correction (``channel_<column>``).
+in one of three shapes, Hermite polynomials of ``zc`` (``z`` clipped to TRAIN's range of the channel, flat
+beyond it): ``linear`` (the factor times ``a z``, one parameter, unclipped), ``quadratic`` (``a zc + b (zc^2 -
+1)``: an even part, a response that peaks inside the range) or ``odd`` (``a zc + c (zc^3 - 3 zc)``: an odd part, a
+response that saturates, which the even square cannot take); a logged channel only: the session clock keeps
+the linear shape, its curvature is the generic time spline's, :mod:`l1b2.predictor.effects.generic`; and at one of
+two levels: ``run`` (``c`` is the run's mean of the channel: an effect that differs between runs, not along the
+stroke) or ``sample`` (``c`` is the sample's value: along the stroke; listed only for a channel that varies within
+runs).
+
+A channel's effect may also grow with an input of the model (``by``, :data:`INTERACTIONS`): the form's force times
+``(1 + u)``-like, two sets of columns, ``factor shape(z)`` and ``factor shape(z) u``, ``u = |m| / m_max`` (the
+load's size over TRAIN's largest, ``load_abs``). The load is the one input a form lacks: V0 already scales the
+``force_factor`` form and the direction the ``force`` form (a channel effect growing with V0 or differing between
+the directions is one of those forms), whereas the load enters the physics as its weight along the motion (gravity:
+no channel changes it) and as the friction that weight causes in the load path and the contact, ``g |m|``, whose
+coefficient a logged channel can change. Listed for the linear and quadratic shapes (at most four parameters).
+Every form, shape, level and interaction of one channel is one family for the significance correction
+(``channel_<column>``).
 
 Signals: ``col:<column>`` (the sample values) and ``run:<column>`` (each
 run's mean, per sample), taken from the data frame by
@@ -54,8 +64,13 @@ from .base import SIGNALS, V_REF, Effect, EffectSpecError, needs, num, register,
 
 FORMS = ("friction", "force_factor", "force")
 LEVELS = ("run", "sample")
-#: a channel's shapes: linear in ``z``, or ``z`` and ``z^2 - 1`` with ``z`` clipped to TRAIN's range (:func:`shape_basis`)
-SHAPES = ("linear", "quadratic")
+#: a channel's shapes: linear in ``z``, or ``z`` clipped to TRAIN's range and its second or third Hermite
+#: polynomial (:func:`shape_basis`)
+SHAPES = ("linear", "quadratic", "odd")
+#: the inputs a channel's effect may grow with (``by``): the load's size ``|m|/load_abs`` (:func:`interaction_basis`)
+INTERACTIONS = ("load",)
+#: the shapes listed with an interaction (:meth:`Channel.grid`)
+INTERACTION_SHAPES = ("linear", "quadratic")
 #: the session clock's column: the recording protocol's signal, always a candidate
 SESSION_TIME = "time_s"
 #: logged columns that are measured *responses* of the motor, not causes: listed, never candidates. A regressor
@@ -164,7 +179,8 @@ class Channel(Effect):
     description = "a logged channel or protocol signal in a generic physical form"
 
     def needs(self, spec):
-        return super().needs(spec) | {signal_key(str(spec.get("channel")), str(spec.get("level")))}
+        by = {"load"} if spec.get("by") else set()
+        return super().needs(spec) | {signal_key(str(spec.get("channel")), str(spec.get("level")))} | by
 
     def features(self, spec, x):
         c = signal(x, signal_key(str(spec.get("channel")), str(spec.get("level"))))
@@ -172,10 +188,11 @@ class Channel(Effect):
         if not sd > 0:
             raise EffectSpecError(f"channel {spec.get('channel')!r}: standard deviation {sd} is not positive")
         z = (c - num(spec, "mean")) / sd
-        return form_factor(str(spec.get("form")), x)[:, None] * shape_basis(spec, z)
+        return interaction_basis(spec, x, form_factor(str(spec.get("form")), x)[:, None] * shape_basis(spec, z))
 
     def width(self, spec):
-        return 2 if spec.get("shape", "linear") == "quadratic" else 1
+        n = 1 if spec.get("shape", "linear") == "linear" else 2
+        return 2 * n if spec.get("by") else n
 
     def grid(self, train):
         chans = list(train.channels)
@@ -188,38 +205,61 @@ class Channel(Effect):
             if not ch.get("sd", 0) > 0 or ch.get("kind") == "response":
                 continue   # constant on TRAIN (no evidence possible) or a measured response: considered, not a cause
             reg = regressor_of(ch["name"])
+            logged = "lo" in ch and "hi" in ch and ch["name"] != SESSION_TIME
+            load_abs = float(train.ranges.get("load_abs", 0.0)) if logged else 0.0
             for level in LEVELS if ch.get("within_run", True) else ("run",):
-                for shape in SHAPES if "lo" in ch and "hi" in ch and ch["name"] != SESSION_TIME else SHAPES[:1]:
-                    for form in FORMS:
-                        out.append(self._hypothesis(ch, reg, form, level, shape))
+                for shape in SHAPES if logged else SHAPES[:1]:
+                    for by in ("",) + (INTERACTIONS if load_abs > 0 and shape in INTERACTION_SHAPES else ()):
+                        for form in FORMS:
+                            out.append(self._hypothesis(ch, reg, form, level, shape, by, load_abs))
         return out
 
-    def _hypothesis(self, ch, reg, form, level, shape):
+    def _hypothesis(self, ch, reg, form, level, shape, by="", load_abs=0.0):
         name = ch["name"]
         spec = {"channel": name, "form": form, "level": level, "mean": float(ch["mean"]), "sd": float(ch["sd"]),
                 **_spread(ch, level)}
         names = [f"{name}_{form}_{level}"]
-        if shape == "quadratic":
+        if shape != "linear":
             spec.update(shape=shape, lo=float(ch["lo"]), hi=float(ch["hi"]))
-            names = [f"{name}_{form}_{level}_lin", f"{name}_{form}_{level}_sq"]
+            names = [f"{name}_{form}_{level}_lin", f"{name}_{form}_{level}_{'sq' if shape == 'quadratic' else 'cub'}"]
+        if by:
+            spec.update(by=by, load_abs=float(load_abs))
+            names = names + [f"{n}_x_{by}" for n in names]
+        extra = (f", {shape}" if shape != "linear" else "") + (f", x {by}" if by else "")
         return self.hypothesis(
-            names, ["N"] * len(names), spec, f"{form}, {level}" + (", quadratic" if shape == "quadratic" else ""),
-            family=f"channel_{name}", regressor=reg, generic=True,
+            names, ["N"] * len(names), spec, f"{form}, {level}{extra}",
+            family=f"channel_{name}", regressor=reg, generic=True, also=(regressor_of(_BY_COLUMN[by]),) if by else (),
             description=f"{ch.get('kind', 'logged')} channel {name} ({'run mean' if level == 'run' else 'per sample'}"
-                        f"{', quadratic' if shape == 'quadratic' else ''}) {_FORM_TEXT[form]}")
+                        f"{extra}) {_FORM_TEXT[form]}{', growing with the load' if by else ''}")
 
 
 def shape_basis(spec, z) -> np.ndarray:
     """The columns of a channel's shape for its standardised values ``z``: ``z`` (``linear``), or ``zc`` and
-    ``zc^2 - 1`` (``quadratic``; ``zc`` = ``z`` clipped to TRAIN's range ``[(lo - mean)/sd, (hi - mean)/sd]``)."""
+    ``zc^2 - 1`` (``quadratic``) or ``zc`` and ``zc^3 - 3 zc`` (``odd``), ``zc`` = ``z`` clipped to TRAIN's range
+    ``[(lo - mean)/sd, (hi - mean)/sd]``."""
     shape = spec.get("shape", "linear")
     if shape == "linear":
         return np.asarray(z, float)[:, None]
-    if shape != "quadratic":
+    if shape not in SHAPES:
         raise EffectSpecError(f"channel shape {shape!r} is not one of {', '.join(SHAPES)}")
     mean, sd = num(spec, "mean"), num(spec, "sd")
     zc = np.clip(z, (num(spec, "lo") - mean) / sd, (num(spec, "hi") - mean) / sd)
-    return np.column_stack([zc, zc ** 2 - 1.0])
+    return np.column_stack([zc, zc ** 2 - 1.0 if shape == "quadratic" else zc ** 3 - 3.0 * zc])
+
+
+def interaction_basis(spec, x, F) -> np.ndarray:
+    """A channel's columns ``F`` (form factor times shape) with, when the spec has an interaction ``by`` (the
+    load), the same columns times ``u = |m| / load_abs`` appended: ``[F, F u]``."""
+    by = spec.get("by")
+    if not by:
+        return F
+    if by not in INTERACTIONS:
+        raise EffectSpecError(f"channel interaction {by!r} is not one of {', '.join(INTERACTIONS)}")
+    load_abs = num(spec, "load_abs")
+    if not load_abs > 0:
+        raise EffectSpecError(f"channel {spec.get('channel')!r}: load_abs {load_abs} is not positive")
+    u = np.abs(signal(x, "load")) / load_abs
+    return np.hstack([F, F * u[:, None]])
 
 
 def _spread(sg, level: str = "run") -> dict:
@@ -227,6 +267,8 @@ def _spread(sg, level: str = "run") -> dict:
     return {"run_spread": float(sg["run_spread"])} if level == "run" and "run_spread" in sg else {}
 
 
+#: the column of each interaction's input (the report's traced regressor)
+_BY_COLUMN = {"load": "load_kg"}
 _FORM_TEXT = {"friction": "scaling the friction level", "force_factor": "scaling the drive's force factor",
               "force": "adding a force"}
 

@@ -30,7 +30,7 @@ import math
 
 from ...units import G_M_S2
 from .base import SIGNALS, SPEED_REF, V_REF, EffectSpecError
-from .channels import FORMS, G_N_PER_KG, SHAPES, TRANSFORMS, export_problem, fmu_signal, signal_key
+from .channels import FORMS, G_N_PER_KG, INTERACTIONS, SHAPES, TRANSFORMS, export_problem, fmu_signal, signal_key
 
 #: index of each signal in ``x``
 SIG_T, SIG_S, SIG_V0, SIG_LOAD, SIG_D, SIG_TEMP, SIG_VB, SIG_AB = range(len(SIGNALS))
@@ -67,8 +67,11 @@ KERNEL_KINDS = tuple(SPEC_KEYS)
 #: the codes of a channel's form and of a run-level signal's transform in ``q``
 #: (:data:`l1b2.predictor.effects.channels.FORMS` and ``TRANSFORMS``)
 FORM_FRICTION, FORM_FORCE_FACTOR, FORM_FORCE = range(len(FORMS))
-#: added to a channel's form code in ``q[1]`` for the quadratic shape (then ``q[4:6]``: TRAIN's range of ``z``)
+#: added to a channel's form code in ``q[1]`` for the quadratic and the odd shape (then ``q[4:6]``: TRAIN's
+#: range of ``z``), and for an interaction with the load (then ``q[6]``: TRAIN's largest load size ``load_abs``)
 QUADRATIC = len(FORMS)
+ODD = 2 * len(FORMS)
+BY_LOAD = len(SHAPES) * len(FORMS)
 TR_NONE, TR_DRIVE, TR_ABS = range(len(TRANSFORMS))
 #: the offsets of the range scalars in ``q`` (smooth: after the regressor; pair: after both)
 R_T_LO, R_T_HI, R_S_LO, R_S_HI, R_N_INNER, R_LOAD_ABS, R_V_LO, R_V_HI, R_VB_LO, R_VB_HI, R_M_S, R_TEMP_LO, \
@@ -124,16 +127,35 @@ def _signal_scalars(spec) -> list[float]:
     if not sd > 0:
         raise EffectSpecError(f"effect spec {kind!r} of {spec.get('channel')!r}: standard deviation {sd} is not "
                               "positive")
-    if kind == "channel" and spec.get("shape", "linear") != "linear":
-        if spec.get("shape") != "quadratic":
-            raise EffectSpecError(f"effect spec 'channel': shape {spec.get('shape')!r} is not one of "
-                                  f"{', '.join(SHAPES)}")
+    if kind == "channel" and (spec.get("shape", "linear") != "linear" or spec.get("by")):
+        return [float(SIGNAL_INDEX[sig])] + _channel_shape_scalars(spec, code, mean, sd)
+    return [float(SIGNAL_INDEX[sig]), float(code), mean, sd]
+
+
+def _channel_shape_scalars(spec, code: int, mean: float, sd: float) -> list[float]:
+    """``q[1:7]`` of a channel spec with a non-linear shape or an interaction: the code (form + shape's and
+    interaction's offsets), mean, sd, TRAIN's range of ``z`` (0, 0 for the unclipped linear shape) and
+    ``load_abs`` (0 without an interaction)."""
+    shape, by = spec.get("shape", "linear"), spec.get("by") or ""
+    if shape not in SHAPES:
+        raise EffectSpecError(f"effect spec 'channel': shape {shape!r} is not one of {', '.join(SHAPES)}")
+    if by and by not in INTERACTIONS:
+        raise EffectSpecError(f"effect spec 'channel': interaction {by!r} is not one of {', '.join(INTERACTIONS)}")
+    z_lo = z_hi = load_abs = 0.0
+    if shape != "linear":
         try:
             z_lo, z_hi = (float(spec["lo"]) - mean) / sd, (float(spec["hi"]) - mean) / sd
         except (KeyError, TypeError, ValueError):
-            raise EffectSpecError("effect spec 'channel' of shape 'quadratic' lacks a numeric 'lo' or 'hi'") from None
-        return [float(SIGNAL_INDEX[sig]), float(code + QUADRATIC), mean, sd, z_lo, z_hi]
-    return [float(SIGNAL_INDEX[sig]), float(code), mean, sd]
+            raise EffectSpecError(f"effect spec 'channel' of shape {shape!r} lacks a numeric 'lo' or 'hi'") from None
+    if by:
+        try:
+            load_abs = float(spec["load_abs"])
+        except (KeyError, TypeError, ValueError):
+            raise EffectSpecError("effect spec 'channel' with an interaction lacks a numeric 'load_abs'") from None
+        if not load_abs > 0:
+            raise EffectSpecError(f"effect spec 'channel': load_abs {load_abs} is not positive")
+    code = code + SHAPES.index(shape) * len(FORMS) + (BY_LOAD if by else 0)
+    return [float(code), mean, sd, z_lo, z_hi, load_abs]
 
 
 # ---------------------------------------------------------------------------
@@ -333,15 +355,39 @@ def input_signal(x, sig):
 
 def channel_force(x, q, phi):
     """``Channel.features`` @ phi: ``z`` = (input - mean)/sd (``q[0]`` the input, ``q[2:4]`` mean and sd) in its
-    shape (``z phi[0]``; quadratic, ``q[1]`` >= ``QUADRATIC``: ``zc phi[0] + (zc^2 - 1) phi[1]``, ``zc`` = ``z``
-    clipped to ``q[4:6]``) times the form's factor (``q[1]`` modulo ``QUADRATIC``: -1, ``V0/V_REF`` or ``d``)."""
+    shape (``z phi[0]``; ``q[1]`` >= ``QUADRATIC``: ``zc phi[0] + (zc^2 - 1) phi[1]``, >= ``ODD``:
+    ``zc phi[0] + (zc^3 - 3 zc) phi[1]``, ``zc`` = ``z`` clipped to ``q[4:6]``) times the form's factor (the code
+    less its offsets: -1, ``V0/V_REF`` or ``d``); with ``q[1]`` >= ``BY_LOAD``, plus the same columns times
+    ``|load| / q[6]`` on the next parameters."""
     z = (input_signal(x, int(q[0])) - q[2]) / q[3]
     form = int(q[1])
-    g = z * phi[0]
-    if form >= QUADRATIC:
+    u = 0.0
+    by = 0
+    if form >= BY_LOAD:
+        form = form - BY_LOAD
+        by = 1
+        u = abs(x[SIG_LOAD]) / q[6]
+    n = int(1)   # an int: it indexes phi
+    b1 = z
+    b2 = 0.0
+    if form >= ODD:
+        form = form - ODD
+        n = int(2)
+        b1 = min(max(z, q[4]), q[5])
+        b2 = b1 * b1 * b1 - 3.0 * b1
+    elif form >= QUADRATIC:
         form = form - QUADRATIC
-        zc = min(max(z, q[4]), q[5])
-        g = zc * phi[0] + (zc * zc - 1.0) * phi[1]
+        n = int(2)
+        b1 = min(max(z, q[4]), q[5])
+        b2 = b1 * b1 - 1.0
+    g = b1 * phi[0]
+    if n > 1:
+        g = g + b2 * phi[1]
+    if by == 1:
+        gu = b1 * phi[n]
+        if n > 1:
+            gu = gu + b2 * phi[n + 1]
+        g = g + u * gu
     if form == FORM_FRICTION:
         return -g
     if form == FORM_FORCE_FACTOR:
