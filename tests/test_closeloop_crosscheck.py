@@ -80,28 +80,18 @@ def test_an_unconfirmed_named_pick_is_kept_only_as_its_generic_structural_form()
     assert conf.asked == ["named_x"]                       # the form itself is generic: not checked again
 
 
-def test_an_unconfirmed_named_pick_gives_way_to_a_generic_term_the_choice_prefers():
+def test_an_unconfirmed_named_pick_keeps_its_place_as_its_form():
+    # the round's choice stands (its acceptance and the choice's rules); only the pick's reading changes, even when
+    # a generic term has the larger gain or another named trial would be confirmed
     named = _t("named_x", [4, 4, 4, 4], False)
-    gen = _t("smooth_load", [3, 3, 3, 3], True)            # larger gain: `_first` takes it before the form
-    pick, recs = cc.confirmed_pick([named, gen], _first, _Confirm({"named_x": False}))
-    assert pick is gen and [r["outcome"] for r in recs] == ["withdrawn"]
-    weaker = _t("smooth_load", [5, 5, 5, 5], True)         # smaller gain: the form is taken
-    pick, recs = cc.confirmed_pick([named, weaker], _first, _Confirm({"named_x": False}))
-    assert pick.candidate.family == "named_x" + cc.FORM_SUFFIX and recs[0]["outcome"].startswith("withdrawn, kept")
+    gen = _t("smooth_load", [3, 3, 3, 3], True)
+    other = _t("named_y", [5, 5, 5, 5], False)
+    conf = _Confirm({"named_x": False, "named_y": True})
+    pick, recs = cc.confirmed_pick([named, gen, other], _first, conf)
+    assert pick.candidate == cc.as_form(named.candidate) and pick.phi is named.phi
+    assert [r["outcome"] for r in recs] == [f"withdrawn, kept as {pick.candidate.label}"]
+    assert conf.asked == ["named_x"]                       # only the pick is checked
     assert cc.confirmed_pick([], _first, _Confirm({})) == (None, [])
-
-
-def test_every_named_pick_is_checked_in_turn():
-    a, b = _t("named_a", [3, 3, 3, 3], False), _t("named_b", [5, 5, 5, 5], False)
-    conf = _Confirm({"named_a": False, "named_b": True})
-    pick, recs = cc.confirmed_pick([a, b], _first, conf)
-    # a is withdrawn; the choice then takes b (named before generic, before a's form), which is confirmed
-    assert pick is b and conf.asked == ["named_a", "named_b"]
-    assert [r["outcome"] for r in recs] == ["withdrawn", "kept"]
-    conf = _Confirm({"named_a": False, "named_b": False})
-    pick, recs = cc.confirmed_pick([a, b], _first, conf)
-    assert pick.candidate.family == "named_a" + cc.FORM_SUFFIX      # both withdrawn; the better form is added
-    assert [r["outcome"] for r in recs] == [f"withdrawn, kept as {pick.candidate.label}", "withdrawn"]
 
 
 def _pulley():

@@ -12,9 +12,9 @@ Contract:
 * :func:`confirmed_pick` applies the rule to a round's accepted trials: the pick (``choose``, the loop's
   ``prefer`` then ``named_reading``) is kept when it is generic or when ``confirm`` accepts it (``confirm``
   returns None when no check applies, e.g. the baseline is already pure slip). A named pick that is not confirmed
-  is withdrawn: its trial is offered again as :func:`as_form` (the same force and the same cross-validated
-  figures, whose acceptance stands, read as a generic structural term of the reduced model) and the pick is
-  chosen again; every check is recorded with its outcome.
+  is withdrawn: its :func:`as_form` trial takes its place (the same force and the same cross-validated
+  figures, whose acceptance stands, read as a generic structural term of the reduced model), so the round adds
+  the force its acceptance and choice selected; every check is recorded with its outcome.
 * :class:`PureSlipCheck` is the ``confirm`` of the loop: the pure-slip baseline identified on TRAIN once
   (lazily, at the first named pick), the effects accepted so far re-identified jointly in that family, then the
   current model and the current model + the named candidate cross-validated on the trial's own folds
@@ -74,36 +74,28 @@ def _round(x) -> float | None:
 
 
 def confirmed_pick(ok: list, choose, confirm) -> tuple:
-    """``(pick or None, records)``: the trial the round adds once every named pick has been checked.
+    """``(pick or None, records)``: the trial the round adds once its named pick has been checked.
 
     ``ok``: the round's accepted :class:`~l1b2.closeloop.acceptance.RefitCV` trials; ``choose(trials)`` the loop's
     choice among them; ``confirm(trial)`` a record ``{"confirmed": bool, ...}`` of the check, or None when no
     check applies. A generic pick, a structural one (a named term of the reduced model that relaxes Eq. 29's
-    linearisation, no physical reading) or a named one confirmed (or not checked) is returned. A named pick that is
-    not confirmed is withdrawn and its :func:`as_form` trial takes its place (the same force and errors: the
-    acceptance it passed stands, only its reading changes); then the choice is made again, so a generic term the
-    choice prefers to the form is added instead. Each record gets ``"outcome"``: ``"kept"``,
-    ``"withdrawn, kept as <label>"`` (its form was added), or ``"withdrawn"``.
+    linearisation, no physical reading) or a named one confirmed (or not checked) is returned as chosen. A named
+    pick that is not confirmed is withdrawn and its :func:`as_form` trial takes its place: the same force and
+    cross-validated errors, so the round adds what its acceptance and choice selected and only the reading
+    changes. Each record gets ``"outcome"``: ``"kept"`` or ``"withdrawn, kept as <label>"``.
     """
-    pool, records, forms = list(ok), [], {}
-    while pool:
-        pick = choose(pool)
-        if pick.candidate.generic or pick.candidate.structural:    # already read as Eq. 29's own linearisation
-            break
-        rec = confirm(pick)
-        if rec is None or rec["confirmed"]:
-            if rec is not None:
-                records.append({**rec, "outcome": "kept"})
-            return pick, records
-        records.append({**rec, "outcome": "withdrawn"})
-        form = replace(pick, candidate=as_form(pick.candidate))
-        pool = [t for t in pool if t is not pick] + [form]
-        forms[id(form)] = records[-1]
-    else:
-        return None, records
-    if id(pick) in forms:
-        forms[id(pick)]["outcome"] = f"withdrawn, kept as {pick.candidate.label}"
-    return pick, records
+    if not ok:
+        return None, []
+    pick = choose(list(ok))
+    if pick.candidate.generic or pick.candidate.structural:    # already read as Eq. 29's own linearisation
+        return pick, []
+    rec = confirm(pick)
+    if rec is None:
+        return pick, []
+    if rec["confirmed"]:
+        return pick, [{**rec, "outcome": "kept"}]
+    form = replace(pick, candidate=as_form(pick.candidate))
+    return form, [{**rec, "outcome": f"withdrawn, kept as {form.candidate.label}"}]
 
 
 class PureSlipCheck:

@@ -44,8 +44,8 @@ Procedure (TEST is never used for fitting or choosing):
       ``parsimony`` of the best CV gain is added, a named family instead of a generic term it explains
       unless the generic one is better by more than one standard error
       (:func:`~l1b2.closeloop.acceptance.named_reading`); from the Eq. 29 baseline a named pick must be accepted
-      again from the pure-slip family, else it is withdrawn and its force is offered again as a generic term
-      of the reduced model (:func:`~l1b2.closeloop.crosscheck.confirmed_pick`, decision 0043);
+      again from the pure-slip family, else its reading is withdrawn and the same force is added as a generic
+      term of the reduced model (:func:`~l1b2.closeloop.crosscheck.confirmed_pick`, decision 0043);
    c. *joint re-identification* of the model with every accepted effect
       (warm start).
 
