@@ -176,10 +176,12 @@ def experiment(kind: str, seed: int):
     return df, truth, nominal, plan
 
 
-def data_dir(kind: str, seed: int, cache: Path) -> Path:
+def data_dir(kind: str, seed: int, cache: Path, make=None) -> Path:
+    """The cached experiment of ``kind`` at ``seed`` (made by ``make(kind, seed)``, default :func:`experiment`,
+    when absent; written to a partial folder first, then renamed)."""
     out = cache / f"{kind}_{seed}"
     if not (out / "train.csv").exists():
-        df, truth, mp, plan = experiment(kind, seed)
+        df, truth, mp, plan = (make or experiment)(kind, seed)
         tmp = out.with_name(out.name + ".partial")
         shutil.rmtree(tmp, ignore_errors=True)
         write_experiment(df, tmp, mp, plan, truth)
@@ -187,15 +189,15 @@ def data_dir(kind: str, seed: int, cache: Path) -> Path:
     return out
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("kind", choices=KINDS + ("clean",))
-    ap.add_argument("seed", type=int)
-    ap.add_argument("--cache", default=str(Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
-                                           / "l1b2" / "blind_effects"))
-    ap.add_argument("--report", default="", help="write the close loop's whole result (report.json's content) here")
-    args = ap.parse_args(argv)
-    d = data_dir(args.kind, args.seed, Path(args.cache))
+def default_cache() -> str:
+    return str(Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "l1b2" / "blind_effects")
+
+
+def loop_row(kind: str, seed: int, d: Path, **extra) -> tuple[dict, object]:
+    """``(row, result)``: the close loop on the experiment in ``d`` (TRAIN, TEST) and its printed row: the first
+    two traced regressors, the added effects, TEST free-run nrmse before and after [%], the channels considered
+    and the significant ones, the message and the loop's CPU time [s]; ``extra(names)`` adds fields per kind
+    (``names``: the channels considered)."""
     c0 = time.process_time()
     res = close_loop(load_measurements(d / "train.csv"), load_measurements(d / "test.csv"))
     cpu = time.process_time() - c0
@@ -204,13 +206,26 @@ def main(argv=None):
     a = res.after["test"]["free_run"]["nrmse"] if res.after is not None else b
     considered = diag.get("channels_considered") or []
     names = [c.get("channel") for c in considered]
-    ch = CHANNEL.get(args.kind)
-    row = {"kind": args.kind, "seed": args.seed, "traced": diag["traced_to"][:2],
+    row = {"kind": kind, "seed": seed, "traced": diag["traced_to"][:2],
            "added": [e["label"] for e in diag["effects"]], "before": round(100 * b, 3), "after": round(100 * a, 3),
-           "channel_considered": None if ch is None else ch in names, "channels": names,
+           **{k: f(names, diag) for k, f in extra.items()}, "channels": names,
            "significant": [c.get("channel") for c in considered if c.get("significant")]
            + [f"{e['signal']} (run)" for c in considered for e in c.get("run_level") or [] if e.get("significant")],
            "message": diag["message"], "cpu_s": round(cpu, 1)}
+    return row, res
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("kind", choices=KINDS + ("clean",))
+    ap.add_argument("seed", type=int)
+    ap.add_argument("--cache", default=default_cache())
+    ap.add_argument("--report", default="", help="write the close loop's whole result (report.json's content) here")
+    args = ap.parse_args(argv)
+    d = data_dir(args.kind, args.seed, Path(args.cache))
+    ch = CHANNEL.get(args.kind)
+    row, res = loop_row(args.kind, args.seed, d,
+                        channel_considered=lambda names, diag: None if ch is None else ch in names)
     print(json.dumps(row))
     if args.report:
         Path(args.report).write_text(json.dumps(res.to_dict(), default=str))

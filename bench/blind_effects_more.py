@@ -30,10 +30,7 @@ after, channels considered, CPU of the close loop by ``time.process_time``).
 import argparse
 import json
 import math
-import os
-import shutil
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -42,12 +39,10 @@ import pandas as pd
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import blind_effects as be  # noqa: E402  (adds fmu_src to the path)
 
-from l1b2.closeloop.loop import close_loop  # noqa: E402
 from l1b2.data import measurements as dataio  # noqa: E402
-from l1b2.data.measurements import load_measurements  # noqa: E402
 from l1b2.physics.params import SYSTEM_MODELS_DIR, load_motor  # noqa: E402
 from l1b2.rig.experiment import (add_speed_noise, plan_runs, run_contact_factors, sampling_every,  # noqa: E402
-                                 scattered_motor, write_experiment)
+                                 scattered_motor)
 
 KINDS = ("payload_swap", "sensor_gain_thermal", "clamp_decoy", "reclamp_relax")
 #: the logged channel each kind acts through
@@ -143,24 +138,14 @@ def experiment(kind: str, seed: int):
 
 
 def data_dir(kind: str, seed: int, cache: Path) -> Path:
-    if kind == "clean":
-        return be.data_dir(kind, seed, cache)
-    out = cache / f"{kind}_{seed}"
-    if not (out / "train.csv").exists():
-        df, truth, mp, plan = experiment(kind, seed)
-        tmp = out.with_name(out.name + ".partial")
-        shutil.rmtree(tmp, ignore_errors=True)
-        write_experiment(df, tmp, mp, plan, truth)
-        os.replace(tmp, out)
-    return out
+    return be.data_dir(kind, seed, cache, None if kind == "clean" else experiment)
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("kind", choices=KINDS + ("clean",))
     ap.add_argument("seed", type=int)
-    ap.add_argument("--cache", default=str(Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
-                                           / "l1b2" / "blind_effects"))
+    ap.add_argument("--cache", default=be.default_cache())
     ap.add_argument("--data-only", action="store_true", help="make (or find) the data and stop")
     ap.add_argument("--report", default="", help="write the close loop's whole result (report.json's content) here")
     args = ap.parse_args(argv)
@@ -168,20 +153,9 @@ def main(argv=None):
     if args.data_only:
         print(d)
         return
-    c0 = time.process_time()
-    res = close_loop(load_measurements(d / "train.csv"), load_measurements(d / "test.csv"))
-    cpu = time.process_time() - c0
-    diag = res.diagnosis
-    b = res.before["test"]["free_run"]["nrmse"]
-    a = res.after["test"]["free_run"]["nrmse"] if res.after is not None else b
-    considered = diag.get("channels_considered") or []
-    names = [c.get("channel") for c in considered]
-    row = {"kind": args.kind, "seed": args.seed, "traced": diag["traced_to"][:2],
-           "added": [e["label"] for e in diag["effects"]], "before": round(100 * b, 3), "after": round(100 * a, 3),
-           "channel": CHANNEL.get(args.kind), "decoy": DECOY.get(args.kind), "channels": names,
-           "significant": [c.get("channel") for c in considered if c.get("significant")]
-           + [f"{e['signal']} (run)" for c in considered for e in c.get("run_level") or [] if e.get("significant")],
-           "event_clocks": diag.get("event_clocks"), "message": diag["message"], "cpu_s": round(cpu, 1)}
+    row, res = be.loop_row(args.kind, args.seed, d, channel=lambda names, diag: CHANNEL.get(args.kind),
+                           decoy=lambda names, diag: DECOY.get(args.kind),
+                           event_clocks=lambda names, diag: diag.get("event_clocks"))
     print(json.dumps(row))
     if args.report:
         Path(args.report).write_text(json.dumps(res.to_dict(), default=str))
