@@ -178,6 +178,9 @@ def test_a_channel_gets_every_shape_and_the_load_interaction_with_its_training_r
         if h.spec.get("by"):
             assert h.spec["load_abs"] == 0.2 and h.regressor == "aux" and tuple(h.also) == ("load",)
     assert {h.family for h in hyps} == {"channel_aux"}   # one family for the significance correction
+    # every parameter of the family has a name of its own (Predictor.fmu declares them as variables)
+    names = [n for h in hyps for n in h.names]
+    assert len(names) == len(set(names)), sorted(n for n in names if names.count(n) > 1)
     # the session clock: the linear shape only (its curvature is the generic time spline's), both levels,
     # no interaction (the generic time x load terms are its)
     clock = [h for h in fx.family("channel").grid(train) if h.spec["channel"] == "time_s"]

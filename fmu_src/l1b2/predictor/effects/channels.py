@@ -221,10 +221,11 @@ class Channel(Effect):
         names = [f"{name}_{form}_{level}"]
         if shape != "linear":
             spec.update(shape=shape, lo=float(ch["lo"]), hi=float(ch["hi"]))
-            names = [f"{name}_{form}_{level}_lin", f"{name}_{form}_{level}_{'sq' if shape == 'quadratic' else 'cub'}"]
-        if by:
+            names = ([f"{name}_{form}_{level}_lin", f"{name}_{form}_{level}_sq"] if shape == "quadratic" else
+                     [f"{name}_{form}_{level}_odd_lin", f"{name}_{form}_{level}_odd_cub"])
+        if by:     # the channel's own part and its part growing with the input, named apart from every other shape
             spec.update(by=by, load_abs=float(load_abs))
-            names = names + [f"{n}_x_{by}" for n in names]
+            names = [f"{n}_by_{by}" for n in names] + [f"{n}_x_{by}" for n in names]
         extra = (f", {shape}" if shape != "linear" else "") + (f", x {by}" if by else "")
         return self.hypothesis(
             names, ["N"] * len(names), spec, f"{form}, {level}{extra}",
