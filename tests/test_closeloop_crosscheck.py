@@ -237,3 +237,73 @@ def test_the_report_names_the_check_its_figures_and_its_outcome():
         assert part in line, (part, line)
     assert "load_path_friction" in cc.withdrawn_note([rec])
     assert cc.withdrawn_note([{**rec, "confirmed": True, "outcome": "kept"}]) == ""
+
+
+# ---------------------------------------------------------------------------
+# the named parameter from both families (decision 0048): recorded beside the check, not a rule
+# ---------------------------------------------------------------------------
+
+class _Fitted(_Model):
+    """A stand-in joint fit whose named parameter has a value and a model-based standard error."""
+
+    def __init__(self, name, value, se):
+        super().__init__(name)
+        self.extra_params_ = {"pulley_mu": value}
+        self.extra_stderr_ = {"pulley_mu": se}
+        self.extra_ci95_ = {"pulley_mu": (value - 2 * se, value + 2 * se)}
+
+
+def test_the_named_parameter_is_estimated_in_both_families_with_its_standard_errors(stand_ins, monkeypatch):
+    calls, _ = stand_ins
+    fits = {"eq29": (0.061, 0.008), "ps+1": (0.045, 0.011)}
+    starts = []
+
+    def refit(df, mask, m_s, init, effects, settings, max_outer=2):
+        calls["refit"].append((init, tuple(c.label for c in effects.candidates), settings.max_nfev))
+        starts.append((init, effects.phi[-1].tolist()))
+        return _Fitted(init, *fits[init])
+
+    monkeypatch.setattr(cc, "refit", refit)
+    check = _check(lambda: _Model("ps+1"), _Clock())
+    trial = acc.RefitCV(_pulley(), CUR, _fe([4] * 4), phi=np.array([0.3]))
+    y = np.array([1.0, 2.0, 3.0, 4.0])
+    A, S = np.ones((4, 1)), np.array([[0.0], [1.0], [2.0], [3.0]])       # least squares: y = 1 + 1 * S
+    p = check.parameters(trial, acc.EffectSet(), _Model("eq29"), _Model("ps+1"), y, A, S)["pulley_mu"]
+    # each family refits its own model with the candidate, the pure-slip one started at its own linearised fit
+    assert sorted(starts) == [("eq29", [0.3]), ("ps+1", [pytest.approx(1.0)])]
+    assert calls["refit"][-1][2] == 60 and p["eq29"]["value"] == 0.061 and p["pure_slip"]["stderr"] == 0.011
+    # the difference against the standard error of both estimates (a dropped one or the wrong sign fails)
+    assert p["z_difference"] == pytest.approx((0.045 - 0.061) / np.hypot(0.008, 0.011))
+    assert p["z_pure_slip"] == pytest.approx(0.045 / 0.011)
+    line = cc.describe({"round": 2, "label": "load_path_friction", "family": "pure_slip", "checked": True,
+                        "confirmed": True, "cv_free_run_nrmse_current": 0.02, "cv_free_run_nrmse_refit": 0.019,
+                        "cv_gain": 0.05, "folds_improved": 4, "folds": 4, "eq29_cv_gain": 0.3,
+                        "min_cv_gain": 0.03, "outcome": "kept", "parameters": {"pulley_mu": p}})
+    assert "pulley_mu from eq29 0.061 ± 0.008, from pure_slip 0.045 ± 0.011 (difference -1.2 se)" in line, line
+
+
+def test_only_a_confirmed_reading_gets_both_families_parameters(stand_ins, monkeypatch):
+    calls, ext = stand_ins
+    monkeypatch.setattr(cc, "refit", lambda df, mask, m_s, init, effects, settings, max_outer=2: _Fitted(
+        init, 0.05, 0.01))
+    monkeypatch.setattr(cc, "design", lambda c, r, df, mask, p, m_s, v_pred: (
+        np.ones(4), np.ones((4, 1)), np.arange(4.0)[:, None], np.arange(4)))
+    check = _check(lambda: _Model("ps"), _Clock())
+    trial = acc.RefitCV(_pulley(), CUR, _fe([4] * 4), phi=np.array([0.3]))
+    rec = check(trial, acc.EffectSet(), 2, _Model("eq29"))
+    assert rec["confirmed"] and set(rec["parameters"]["pulley_mu"]) >= {"eq29", "pure_slip", "z_difference"}
+    assert "pulley_mu from eq29 0.05 ± 0.01" in cc.describe({**rec, "outcome": "kept"})
+    ext["sse"] = [9.9, 9.9, 9.9, 9.9]        # withdrawn: no parameter is reported, none is estimated
+    assert "parameters" not in check(trial, acc.EffectSet(), 2, _Model("eq29"))
+    assert "parameters" not in check(trial, acc.EffectSet(), 2)     # no current model given: no estimate
+
+
+def test_a_failed_estimate_of_the_named_parameters_is_recorded_not_raised(stand_ins, monkeypatch):
+    def refit(*a, **k):
+        raise FitDivergedError("the joint refit diverged")
+    monkeypatch.setattr(cc, "refit", refit)
+    monkeypatch.setattr(cc, "design", lambda c, r, df, mask, p, m_s, v_pred: (
+        np.ones(4), np.ones((4, 1)), np.arange(4.0)[:, None], np.arange(4)))
+    rec = _check(lambda: _Model("ps"), _Clock())(acc.RefitCV(_pulley(), CUR, _fe([4] * 4), phi=np.array([0.3])),
+                                                 acc.EffectSet(), 2, _Model("eq29"))
+    assert rec["confirmed"] and "parameters" not in rec and "diverged" in rec["parameters_note"]

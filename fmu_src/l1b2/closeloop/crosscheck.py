@@ -20,8 +20,13 @@ Contract:
   current model and the current model + the named candidate cross-validated on the trial's own folds
   (:func:`l1b2.closeloop.acceptance.cv_errors`, warm refits, the candidate started per fold from its linearised
   fit on the training folds only); confirmed when :func:`l1b2.closeloop.acceptance.accepts` accepts that trial
-  with the loop's ``min_cv_gain`` (a named effect is not structural: no materiality threshold). Its refits and
-  evaluations are counted on the stage clock.
+  with the loop's ``min_cv_gain`` (a named effect is not structural: no materiality threshold). A confirmed
+  reading's parameters are then estimated in both families (:meth:`PureSlipCheck.parameters`: each family's
+  current model with the named candidate re-identified jointly on TRAIN, the report's standard errors, and the
+  difference of the two estimates in units of their combined standard error). They are a record, not a rule:
+  on the realistic world neither their agreement nor the pure-slip interval's distance from zero separates the
+  false pulley readings that pass from the true ones (decision 0048). Its refits and evaluations are counted on
+  the stage clock.
 
 Nothing here is tuned: the rule is the loop's own acceptance rule, applied from the other family.
 """
@@ -36,6 +41,7 @@ from ..errors import FitDivergedError, IdentificationError
 from . import residuals as res
 from .acceptance import EffectSet, RefitCV, accepts, cv_errors, fold_start_phi, refit
 from .candidates import EQ29_LINEARISATION, CandidateForce
+from .intervals import reported_uncertainty, train_levels
 from .selection import design
 
 __all__ = ["FORM_SUFFIX", "as_form", "confirmed_pick", "score_of", "PureSlipCheck", "describe", "withdrawn_note"]
@@ -147,7 +153,36 @@ class PureSlipCheck:
                 self._current[key] = m
         return self._current[key]
 
-    def __call__(self, trial: RefitCV, effects: EffectSet, round_no: int) -> dict:
+    def _estimates(self, model, effects: EffectSet, c: CandidateForce, phi) -> dict:
+        """``{name: {"value", "stderr", "interval"}}`` of ``c``'s parameters: ``model``'s family with ``effects`` and
+        ``c`` (started at ``phi``) re-identified jointly on TRAIN (the loop's final budget), the report's intervals."""
+        m = refit(self.df, self.mask, self.m_s, model.params_, effects.add(c, c.clip(phi)),
+                  self.settings.budget(self.final_nfev), max_outer=3)
+        self._count(1, m.convergence_.get("nfev_total", 0))
+        groups = train_levels(m, self.df)
+        out = {}
+        for n in c.names:
+            u = reported_uncertainty(m, n, groups)
+            out[n] = {"value": _round(m.extra_params_[n]), "stderr": _round(u["stderr"]), "interval": u["interval"]}
+        return out
+
+    def parameters(self, trial: RefitCV, effects: EffectSet, eq29, cur, y, A, S) -> dict:
+        """The named candidate's parameters from both families (``eq29``: the loop's current model; ``cur``: the
+        pure-slip one with the same effects; ``y, A, S``: the pure-slip design, whose least-squares fit starts it)."""
+        c = trial.candidate
+        coef = np.linalg.lstsq(np.column_stack([A, S]), y, rcond=None)[0][A.shape[1]:]
+        ps = self._estimates(cur, effects.with_phi(cur.phi_) if effects.candidates else effects, c, coef)
+        e29 = self._estimates(eq29, effects, c, trial.phi)
+        out = {}
+        for n in c.names:
+            a, b = e29[n], ps[n]
+            d = (None if None in (a["value"], b["value"], a["stderr"], b["stderr"])
+                 else _round((b["value"] - a["value"]) / np.hypot(a["stderr"], b["stderr"])))
+            z = None if None in (b["value"], b["stderr"]) else _round(b["value"] / b["stderr"])
+            out[n] = {"eq29": a, self.family: b, "z_difference": d, f"z_{self.family}": z}
+        return out
+
+    def __call__(self, trial: RefitCV, effects: EffectSet, round_no: int, model=None) -> dict:
         """The check's record of ``trial`` (a named candidate) against the current ``effects``."""
         c = trial.candidate
         self._baseline()    # its identification is a stage of its own
@@ -173,7 +208,13 @@ class PureSlipCheck:
                          [(effects, None), (effects.add(c, trial.phi), phi)], self.settings)
         self._count(2 * len(folds), sum(e.nfev for e in errs))
         t = RefitCV(c, errs[0], errs[1])
-        return {**rec, "checked": True, "confirmed": accepts(t, min_gain=self.min_gain, min_drop=0.0),
+        ok = accepts(t, min_gain=self.min_gain, min_drop=0.0)
+        if ok and model is not None:     # a reading that stands: its value from both families (decision 0048)
+            try:
+                rec["parameters"] = self.parameters(trial, effects, model, cur, y, A, S)
+            except (FitDivergedError, IdentificationError) as e:
+                rec["parameters_note"] = f"the named parameters could not be estimated in both families ({e})"
+        return {**rec, "checked": True, "confirmed": ok,
                 "cv_gain": _round(t.gain), "cv_free_run_nrmse_current": _round(t.current.nrmse),
                 "cv_free_run_nrmse_refit": _round(t.extended.nrmse), "folds_improved": t.folds_improved,
                 "folds": len(folds), "min_cv_gain": float(self.min_gain)}
@@ -191,7 +232,20 @@ def describe(rec: dict) -> str:
             f"{pct(rec['cv_free_run_nrmse_refit'], '.2%')} (gain {pct(rec['cv_gain'], '.1%')}, "
             f"{rec['folds_improved']}/{rec['folds']} folds; from Eq. 29: gain {pct(rec['eq29_cv_gain'], '.1%')}; "
             f"accepted needs >= {rec['min_cv_gain']:.0%} in most folds): "
-            + ("confirmed" if rec["confirmed"] else "not confirmed") + f"; {rec.get('outcome', '')}")
+            + ("confirmed" if rec["confirmed"] else "not confirmed") + f"; {rec.get('outcome', '')}"
+            + "".join(f"; {n} " + values(p) for n, p in (rec.get("parameters") or {}).items()))
+
+
+def values(p: dict) -> str:
+    """A named parameter's two estimates (``PureSlipCheck.parameters``), e.g. ``from eq29 0.061 ± 0.008, from
+    pure_slip 0.045 ± 0.011 (difference -1.2 se)``."""
+    def one(f):
+        e = p[f]
+        return f"from {f} " + ("-" if e["value"] is None else format(e["value"], ".4g")) + (
+            "" if e["stderr"] is None else f" ± {e['stderr']:.2g}")
+    fams = [f for f in p if isinstance(p[f], dict)]
+    d = p.get("z_difference")
+    return ", ".join(one(f) for f in fams) + ("" if d is None else f" (difference {d:+.1f} se)")
 
 
 def withdrawn_note(records: list) -> str:

@@ -391,7 +391,7 @@ class CloseLoop(EstimatorSettings):
             pick, checks = confirmed_pick(
                 ok, lambda tr: named_reading(prefer(tr, self.parsimony, rl), tr,
                                              lambda n, g: geo.share(n.candidate, g.candidate, g.phi)),
-                (lambda t: check(t, it.effects, n_rnd)) if check is not None else (lambda t: None))
+                (lambda t: check(t, it.effects, n_rnd, it.model)) if check is not None else (lambda t: None))
             it.checks += checks
             if pick is None:
                 break
