@@ -166,11 +166,15 @@ def test_a_channel_gets_every_shape_and_the_load_interaction_with_its_training_r
     train = fx.TrainingSummary(0.1, (0.0, 5.1), (-0.02, 0.02), 200.0, {"load_abs": 0.2},
                                channels=tuple(ch.values()))
     hyps = [h for h in fx.family("channel").grid(train) if h.spec["channel"] == "aux"]
-    # constant within runs: the run level only, 3 forms x (3 shapes + the linear and quadratic x load)
+    # constant within runs: the run level only, 3 forms x (3 shapes + the linear and quadratic x load), and the
+    # inertia form in the 3 shapes (no load interaction), with TRAIN's slider mass
     assert sorted((h.spec["form"], h.spec.get("shape", "linear"), h.spec.get("by", "")) for h in hyps) == sorted(
-        (f, s, b) for f in ("friction", "force_factor", "force")
-        for s, b in (("linear", ""), ("quadratic", ""), ("odd", ""), ("linear", "load"), ("quadratic", "load")))
+        [(f, s, b) for f in ("friction", "force_factor", "force")
+         for s, b in (("linear", ""), ("quadratic", ""), ("odd", ""), ("linear", "load"), ("quadratic", "load"))]
+        + [("inertia", s, "") for s in ("linear", "quadratic", "odd")])
     for h in hyps:
+        assert (h.spec.get("m_s") == 0.1) == (h.spec["form"] == "inertia")
+        assert set(h.units) == {"1" if h.spec["form"] == "inertia" else "N"}
         n = {"linear": 1, "quadratic": 2, "odd": 2}[h.spec.get("shape", "linear")]
         assert len(h.names) == n * (2 if h.spec.get("by") else 1)
         if h.spec.get("shape", "linear") != "linear":
@@ -187,6 +191,42 @@ def test_a_channel_gets_every_shape_and_the_load_interaction_with_its_training_r
     assert ch["time_s"]["lo"] == 0.0 and len(clock) == 6
     assert all(h.spec.get("shape", "linear") == "linear" and len(h.names) == 1 and not h.spec.get("by")
                for h in clock)
+
+
+def test_inertia_channel_form_is_the_channel_times_the_baseline_acceleration():
+    # reference: the inertia form written out: the moving mass scaled by the channel, dF = -m_s d a_base times the
+    # shape's columns (z, or zc and its Hermite polynomial; zc clipped to TRAIN's range), a_base the baseline's
+    # predicted acceleration; the kernel of Predictor.fmu gives the same force
+    from l1b2.predictor import effects as fx
+    from l1b2.predictor.effects import kernels as ek
+    c = np.array([1.0, 3.0, 2.5, 9.0, 0.0])                 # 9 and 0 lie beyond TRAIN's range 1-6
+    V0, d = np.array([300.0, 150.0, 240.0, 330.0, 210.0]), np.array([1.0, -1.0, 1.0, -1.0, 1.0])
+    a_base = np.array([2.0, -0.5, 0.0, 1.5, -3.0])
+    m_s = 0.12
+    x = {"V0": V0, "d": d, "T": c, "a_base": a_base, "col:temperature_C": c, "run:temperature_C": c}
+    rows = np.column_stack([x[sg] if sg in x else np.zeros(5) for sg in fx.SIGNALS])
+    z = (c - 2.0) / 0.5
+    zc = np.array([-2.0, 2.0, 1.0, 8.0, -2.0])
+    shapes = {"linear": z[:, None], "quadratic": np.column_stack([zc, zc * zc - 1.0]),
+              "odd": np.column_stack([zc, zc * zc * zc - 3.0 * zc])}
+    for shape, B in shapes.items():
+        for level in ("sample", "run"):
+            s = {"kind": "channel", "channel": "temperature_C", "mean": 2.0, "sd": 0.5, "lo": 1.0, "hi": 6.0,
+                 "shape": shape, "level": level, "form": "inertia", "m_s": m_s, "run_spread": 0.0}
+            want = (-m_s * d * a_base)[:, None] * B
+            np.testing.assert_allclose(fx.effect_features(s, x), want)
+            phi = np.linspace(0.4, -0.3, B.shape[1])
+            kind, q = ek.spec_scalars(s)
+            got = [ek.effect_force(kind, row.tolist(), q, phi.tolist()) for row in rows]
+            np.testing.assert_allclose(got, want @ phi, rtol=0, atol=1e-12)
+            assert "a_base" in fx.needs(s) and fx.family("channel").width(s) == B.shape[1]
+    # the linear shape is inertia_mismatch's constant mass error times z (a relative mass change per sd)
+    lin = {"kind": "channel", "channel": "temperature_C", "mean": 2.0, "sd": 0.5, "level": "sample",
+           "form": "inertia", "m_s": m_s}
+    mis = fx.effect_features({"kind": "inertia_mismatch", "m_s": m_s}, x)[:, 0]
+    np.testing.assert_allclose(fx.effect_features(lin, x)[:, 0], mis * z)
+    with pytest.raises(fx.EffectSpecError, match="m_s"):
+        fx.effect_features({**lin, "m_s": 0.0}, x)
 
 
 def test_every_numeric_column_beyond_the_required_ones_is_a_channel():

@@ -105,6 +105,46 @@ def _score(family, p, gain=0.3, aic=-5.0, generic=False, n=1):
     return sel.Score(c, gain, p, 1.0, 0.0, np.zeros(n), aic)
 
 
+def _shaped(family, shape, p, gain, aic=-5.0, n=2):
+    c = CandidateForce(family, "aux", "", tuple(f"{family}_{shape}_{i}_{gain}" for i in range(n)), ("N",) * n,
+                       features=None, generic=True, spec={"kind": "channel", "shape": shape})
+    return sel.Score(c, gain, p, 1.0, 0.0, np.zeros(n), aic)
+
+
+def test_every_shape_of_a_shortlisted_family_that_passes_the_screen_is_cross_validated():
+    # reference: the screen keeps a family's best hypothesis by its linearised gain (here the odd shape); the
+    # family's best of each other shape that passes the same screen (gain >= min_gain, p < level, AIC improves)
+    # goes to the cross-validated refit too, once per shape; a shape failing any screen rule, another family's
+    # shapes and the shortlisted hypothesis itself do not
+    odd = _shaped("channel_h", "odd", 1e-4, 0.40)
+    quad = _shaped("channel_h", "quadratic", 1e-4, 0.35)
+    quad2 = _shaped("channel_h", "quadratic", 1e-5, 0.30)            # the same shape, a smaller gain
+    lin = _shaped("channel_h", "linear", 1e-3, 0.20, n=1)
+    lin_p = _shaped("channel_h", "linear", 0.2, 0.25, n=1)           # a larger gain, but p above the level
+    odd2 = _shaped("channel_h", "odd", 1e-4, 0.39)                   # the shortlisted shape's runner-up
+    other = _shaped("channel_k", "quadratic", 1e-6, 0.5)             # not shortlisted
+    weak = _shaped("channel_w", "odd", 1e-6, 0.30, aic=1.0)
+    weak_alt = _shaped("channel_w", "linear", 1e-6, 0.04, n=1)       # below min_gain
+    scores = [odd, quad, quad2, lin, lin_p, odd2, other, weak, weak_alt]
+    level = 0.01
+    alt = sel.shape_alternatives([odd], scores, level=level, min_gain=0.05)
+    assert [a is b for a, b in zip(alt, [quad, lin])] == [True, True] and len(alt) == 2
+    assert sel.shape_of(odd.candidate) == "odd" and sel.shape_of(CandidateForce(
+        "x", "time", "", ("a",), ("N",), features=None)) == "linear"
+    # with the level at 0.5 the linear shape's best passing hypothesis is lin_p (larger gain)
+    assert [s is lin_p for s in sel.shape_alternatives([odd], scores, level=0.5, min_gain=0.05)] == [False, True]
+    assert sel.shape_alternatives([weak], scores, level=level, min_gain=0.05) == []
+    assert sel.shape_alternatives([], scores, level=level, min_gain=0.05) == []
+    # the refit then chooses: the quadratic shape's cross-validated gain beats the odd one's
+    from l1b2.closeloop.loop import prefer
+
+    def trial(s, gain):
+        cur = acc.FoldErrors(np.ones(4), np.full(4, 100.0))
+        return acc.RefitCV(s.candidate, cur, acc.FoldErrors(np.full(4, 1.0 - gain), np.full(4, 100.0)))
+    assert prefer([trial(odd, 0.20), trial(quad, 0.35), trial(lin, 0.10)], 0.9).candidate is quad.candidate
+    assert prefer([trial(odd, 0.36), trial(quad, 0.35), trial(lin, 0.34)], 0.9).candidate is lin.candidate
+
+
 def test_significance_is_bonferroni_over_the_families_tested():
     scores = [_score("a", 0.001), _score("a", 0.2), _score("b", 0.004), _score("c", 0.5), _score("d", 0.02)]
     level = sel.significance_level(scores, alpha=0.02)

@@ -391,7 +391,7 @@ def test_effect_kernels_equal_the_families_features(pool):
     x["t"][:6] = [T0 - 1.0, T0, T0 + 0.5, T0 + 1.0, T0 + 2.0, T0 + 1.0 / 3.0]
     x["s"][:6] = [-0.05, -0.02, 0.0, 0.02, 0.05, 0.01]
     x.update({k: v for k, v in _identification_signals(df).items() if k not in x})   # channels, run means
-    seen = set()
+    seen, forms = set(), set()
     for c in pool:
         if c.spec["kind"] not in ek.KERNEL_KINDS:
             continue
@@ -400,6 +400,7 @@ def test_effect_kernels_equal_the_families_features(pool):
                 ek.spec_scalars(c.spec)
             continue
         seen.add(c.spec["kind"])
+        forms.add(c.spec.get("form"))
         phi = rng.normal(0.0, 1.0, c.n_params)
         want = fx.effect_features(c.spec, x) @ phi
         kind, q = ek.spec_scalars(c.spec)
@@ -407,6 +408,7 @@ def test_effect_kernels_equal_the_families_features(pool):
         got = np.array([ek.effect_force(kind, row.tolist(), q, phi.tolist()) for row in rows])
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * max(1.0, np.max(np.abs(want))), err_msg=c.label)
     assert seen == set(ek.KERNEL_KINDS)
+    assert {"friction", "force_factor", "force", "inertia"} <= forms   # every channel form (the temperature's)
 
 
 def _identification_signals(df) -> dict:
@@ -452,8 +454,9 @@ def test_run_level_kernels_equal_the_features_on_runs_that_hold_their_inputs(poo
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * max(1.0, np.max(np.abs(want))), err_msg=h.family)
         assert np.max(np.abs(want)) > 1e-3, h.family
         n_checked += 1
-    # V0, d*load, |load|, direction, temperature; its channel's 3 forms x (3 shapes + 2 shapes x load) (run)
-    assert n_checked == 4 + 1 + 3 * (3 + 2)
+    # V0, d*load, |load|, direction, temperature; its channel's 3 forms x (3 shapes + 2 shapes x load) and the
+    # inertia form in the 3 shapes (run)
+    assert n_checked == 4 + 1 + 3 * (3 + 2) + 3
     varied = dict(hyps[0].spec, run_spread=0.02 * hyps[0].spec["sd"])
     with pytest.raises(fx.EffectSpecError, match="not constant within runs"):
         ek.spec_scalars(varied)

@@ -222,6 +222,10 @@ def _effect_specs():
     specs += [{"kind": "channel", "channel": "temperature_C", "form": f, "level": "sample", "mean": 31.0, "sd": 4.0,
                "run_spread": 0.0, "shape": sh, "lo": 24.0, "hi": 41.0, "by": "load", "load_abs": 0.3}
               for f in ("friction", "force_factor", "force") for sh in ("linear", "quadratic", "odd")]
+    # the inertia form (the channel scaling the moving mass, -m_s d a_base) in every shape and level
+    specs += [{"kind": "channel", "channel": "temperature_C", "form": "inertia", "level": lv, "mean": 31.0,
+               "sd": 4.0, "run_spread": 0.0, "shape": sh, "lo": 24.0, "hi": 41.0, "m_s": 0.12}
+              for sh in ("linear", "quadratic", "odd") for lv in ("run", "sample")]
     specs += [{"kind": "run_level", "channel": c, "transform": tr, "mean": m, "sd": sd, "run_spread": 0.0}
               for c, tr, m, sd in (("voltage_V", "none", 280.0, 40.0), ("load_kg", "drive", 0.01, 0.2),
                                    ("load_kg", "abs", 0.15, 0.1), ("direction", "none", 0.0, 1.0),

@@ -51,7 +51,9 @@ def channels_considered(channels, scores: list[Score], level: float, min_gain: f
     form of its family ``channel_<name>`` by linearised held-out gain with
     that gain and its run-level p-value, ``significant`` (it passes the
     Bonferroni screen: gain >= ``min_gain``, p < ``level``, AIC improved)
-    and ``added`` (the loop added it or its run-level form). A constant channel has no evidence (``note``).
+    and ``added`` (the loop added it or its run-level form); ``forms``: the best hypothesis of each generic
+    physical form of the family (friction, force factor, force, inertia) with its gain and p-value, so that a
+    form that is not the family's best is still reported. A constant channel has no evidence (``note``).
     ``run_level``: the evidence of its run mean as an explanation of the runs' own deviations from the model
     (:class:`l1b2.closeloop.runlevel.SignalEvidence` as dicts; empty when not tested). The model's inputs
     that are run-level signals (V0, the drive-coordinate load and its size, the direction) follow as rows of
@@ -60,6 +62,12 @@ def channels_considered(channels, scores: list[Score], level: float, min_gain: f
     """
     from ..predictor.effects.channels import INPUT_SIGNALS, regressor_of
     best = {s.candidate.family: s for s in best_per_family(scores)}
+    forms: dict = {}
+    for s in scores:
+        form = s.candidate.spec.get("form") if s.candidate.spec.get("kind") == "channel" else None
+        key = (s.candidate.family, form)
+        if form and (key not in forms or s.cv_gain > forms[key].cv_gain):
+            forms[key] = s
     ev: dict = {}
     for e in (run_level.evidence if run_level is not None else []):
         ev.setdefault(e.channel, []).append(e)
@@ -69,7 +77,9 @@ def channels_considered(channels, scores: list[Score], level: float, min_gain: f
         s = best.get(fam)
         rec = {"channel": ch["name"], "kind": ch["kind"], "regressor": regressor_of(ch["name"]),
                "varies_within_runs": bool(ch["within_run"]), "best": None, "cv_gain": None, "p_value": None,
-               "significant": False, "added": fam in added, "note": ""}
+               "significant": False, "added": fam in added, "note": "",
+               "forms": {f: {"best": b.candidate.label, "cv_gain": float(b.cv_gain), "p_value": float(b.p_value)}
+                         for (g, f), b in forms.items() if g == fam}}
         if ch["kind"] == "response":
             rec["note"] = "a measured response of the motor, not a cause: not a candidate"
         elif not ch["sd"] > 0:

@@ -35,7 +35,9 @@ Procedure (TEST is never used for fitting or choosing):
       ``min_gain``, ``alpha`` / number of families and an AIC improvement,
       the best ``shortlist`` of them (when none passes and ``screen_alpha``
       is set: the best one at that uncorrected level), and for a shortlisted generic term the named family that
-      explains most of its force (:func:`~l1b2.closeloop.selection.named_alternatives`);
+      explains most of its force (:func:`~l1b2.closeloop.selection.named_alternatives`), and for a shortlisted
+      family the best of each of its other shapes that passes the same screen
+      (:func:`~l1b2.closeloop.selection.shape_alternatives`: the refit chooses a channel's shape);
    b. *acceptance* (:mod:`l1b2.closeloop.acceptance`): current model and
       current model + candidate re-identified on ``refit_folds`` - 1 run folds
       (warm start, bounded budget) and predicting the held-out fold in free
@@ -90,7 +92,8 @@ from .guard import checked_fit
 from .intervals import added_parameters, reported_uncertainty, train_levels
 from .result import CloseLoopResult, ResidualAnalysis
 from .selection import (DEFAULT_ALPHA, DEFAULT_PARSIMONY, SHORTLIST_MIN_GAIN, Score, best_per_family, design,
-                        named_alternatives, nuisance_forces, score_candidates, shortlist, significance_level)
+                        named_alternatives, nuisance_forces, score_candidates, shape_alternatives, shortlist,
+                        significance_level)
 
 
 def _quiet(msg: str) -> None:
@@ -360,10 +363,12 @@ class CloseLoop(EstimatorSettings):
                                       seed=self.seed, time_folds=screen_blocks)
             level = significance_level(scores, self.alpha)
             short = shortlist(scores, level=level, min_gain=self.min_gain, size=self.shortlist)
+            screen = level
             if not short and self.screen_alpha:
                 # nothing passes the corrected screen: the best candidate at the uncorrected level is still
                 # cross-validated (the refit's acceptance rule, not this screen, decides what is added)
-                short = shortlist(scores, level=self.screen_alpha, min_gain=self.min_gain, size=1)
+                short, screen = shortlist(scores, level=self.screen_alpha, min_gain=self.min_gain, size=1), \
+                    self.screen_alpha
             rl = None
             if self.run_level and ctx is not None:
                 say(f"round {n_rnd}: run-level deviations and the signals that explain them")
@@ -375,6 +380,7 @@ class CloseLoop(EstimatorSettings):
                                                  k=self.k_folds, seed=self.seed, time_folds=screen_blocks)
             short = short + named_alternatives(short, scores, lambda n, g: geo.share(n, g.candidate, g.phi),
                                                min_gain=self.min_gain)
+            short = short + shape_alternatives(short, scores, level=screen, min_gain=self.min_gain)
             if rnd == 1:
                 it.first_scores, it.level, it.run_level = scores, level, rl
             if not short:

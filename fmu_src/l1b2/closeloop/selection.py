@@ -288,6 +288,34 @@ def named_alternatives(short: list[Score], scores: list[Score], share, *, min_ga
     return out
 
 
+def shape_of(candidate: CandidateForce) -> str:
+    """The shape of a candidate within its family: its spec's ``shape`` (a channel's ``linear``, ``quadratic`` or
+    ``odd``; ``linear`` for a spec without one)."""
+    return str(candidate.spec.get("shape", "linear"))
+
+
+def shape_alternatives(short: list[Score], scores: list[Score], *, level: float, min_gain: float) -> list[Score]:
+    """The other shapes of the shortlisted families, for the cross-validated refit to choose between.
+
+    For each family of ``short`` whose hypotheses come in more than one shape (:func:`shape_of`), the best-gain
+    hypothesis of ``scores`` of every other shape of that family that passes the same screen as the shortlist
+    (held-out gain >= ``min_gain``, run-level p < ``level``, an AIC improvement), by decreasing gain; each
+    family's shape at most once, nothing already in ``short``. The screen keeps the best of a family by its
+    linearised gain; the refit's acceptance and its parsimony rule (fewest parameters within the parsimony of the
+    best cross-validated gain) then choose the shape, as they choose between families.
+    """
+    listed = {id(s.candidate) for s in short}
+    taken = {(s.candidate.family, shape_of(s.candidate)) for s in short}
+    families = {s.candidate.family for s in short}
+    best: dict = {}
+    for s in significant(scores, level=level, min_gain=min_gain):
+        key = (s.candidate.family, shape_of(s.candidate))
+        if s.candidate.family in families and key not in taken and id(s.candidate) not in listed and (
+                key not in best or s.cv_gain > best[key].cv_gain):
+            best[key] = s
+    return sorted(best.values(), key=lambda s: -s.cv_gain)
+
+
 def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5, seed=0,
                      time_folds=None) -> list[Score]:
     """Cross-validated gain, run-level p-value and AIC/BIC change of every candidate.

@@ -8,13 +8,18 @@ whatever else the rig logs, but the measured responses of
 protocol's own clock, the session time ``time_s`` (which also orders the
 runs). Nothing about a channel's physics is assumed: its standardised value
 ``z = (c - mean) / sd`` (TRAIN's mean and standard deviation of the samples)
-enters in one of three generic forms, each linear in one parameter ``a``
+enters in one of four generic forms, each linear in one parameter ``a``
 [N per standard deviation]:
 
 * ``friction``: it scales the friction level, ``dF = -a z`` (drive
   coordinates: a force opposing the motion, whichever the direction);
 * ``force_factor``: it scales the drive's force factor, ``dF = a (V0/V_ref) z``;
-* ``force``: it adds a force fixed in the lab frame, ``dF = a d z`` (``d`` the direction).
+* ``force``: it adds a force fixed in the lab frame, ``dF = a d z`` (``d`` the direction);
+* ``inertia``: it scales the moving mass, ``dF = -a m_s d a_base z`` (``a_base`` the baseline's predicted
+  acceleration, ``m_s`` the slider's mass: ``a`` [1 per standard deviation] is the relative change of the moving
+  mass, the per-channel form of :class:`l1b2.predictor.effects.motion.InertiaMismatch`'s constant error); a logged
+  channel only (a payload, a tool, a fluid that changes the moving mass between runs or along the stroke), listed
+  without the load interaction (:data:`FORCE_FORMS`),
 
 in one of three shapes, Hermite polynomials of ``zc`` (``z`` clipped to TRAIN's range of the channel, flat
 beyond it): ``linear`` (the factor times ``a z``, one parameter, unclipped), ``quadratic`` (``a zc + b (zc^2 -
@@ -62,7 +67,10 @@ import pandas as pd
 
 from .base import SIGNALS, V_REF, Effect, EffectSpecError, needs, num, register, signal
 
-FORMS = ("friction", "force_factor", "force")
+FORMS = ("friction", "force_factor", "force", "inertia")
+#: the forms of every channel, the session clock's included, and of the load interaction: all but ``inertia``
+#: (a logged channel's moving mass; the load's own mass is the model's, a load interaction of it no cause's form)
+FORCE_FORMS = ("friction", "force_factor", "force")
 LEVELS = ("run", "sample")
 #: a channel's shapes: linear in ``z``, or ``z`` clipped to TRAIN's range and its second or third Hermite
 #: polynomial (:func:`shape_basis`)
@@ -160,8 +168,13 @@ def signal_key(column: str, level: str) -> str:
     return ("col:" if level == "sample" else "run:") + column
 
 
-def form_factor(form: str, x) -> np.ndarray:
-    """The generic physical form's factor per sample: ``-1`` (friction), ``V0/V_ref`` (force factor), ``d`` (force)."""
+def form_factor(form: str, x, m_s: float | None = None) -> np.ndarray:
+    """The generic physical form's factor per sample: ``-1`` (friction), ``V0/V_ref`` (force factor), ``d`` (force),
+    ``-m_s d a_base`` (inertia: ``m_s`` the slider's mass [kg], ``a_base`` the baseline's acceleration)."""
+    if form == "inertia":
+        if m_s is None or not m_s > 0:
+            raise EffectSpecError(f"channel form 'inertia': the slider mass m_s {m_s} is not positive")
+        return -m_s * signal(x, "d") * signal(x, "a_base")
     if form == "friction":
         return -np.ones(len(signal(x, "d")))
     if form == "force_factor":
@@ -180,7 +193,8 @@ class Channel(Effect):
 
     def needs(self, spec):
         by = {"load"} if spec.get("by") else set()
-        return super().needs(spec) | {signal_key(str(spec.get("channel")), str(spec.get("level")))} | by
+        acc = {"a_base"} if spec.get("form") == "inertia" else set()
+        return super().needs(spec) | {signal_key(str(spec.get("channel")), str(spec.get("level")))} | by | acc
 
     def features(self, spec, x):
         c = signal(x, signal_key(str(spec.get("channel")), str(spec.get("level"))))
@@ -188,7 +202,9 @@ class Channel(Effect):
         if not sd > 0:
             raise EffectSpecError(f"channel {spec.get('channel')!r}: standard deviation {sd} is not positive")
         z = (c - num(spec, "mean")) / sd
-        return interaction_basis(spec, x, form_factor(str(spec.get("form")), x)[:, None] * shape_basis(spec, z))
+        form = str(spec.get("form"))
+        factor = form_factor(form, x, num(spec, "m_s") if form == "inertia" else None)
+        return interaction_basis(spec, x, factor[:, None] * shape_basis(spec, z))
 
     def width(self, spec):
         n = 1 if spec.get("shape", "linear") == "linear" else 2
@@ -207,17 +223,18 @@ class Channel(Effect):
             reg = regressor_of(ch["name"])
             logged = "lo" in ch and "hi" in ch and ch["name"] != SESSION_TIME
             load_abs = float(train.ranges.get("load_abs", 0.0)) if logged else 0.0
+            m_s = float(getattr(train, "m_s", 0.0) or 0.0) if logged else 0.0
             for level in LEVELS if ch.get("within_run", True) else ("run",):
                 for shape in SHAPES if logged else SHAPES[:1]:
                     for by in ("",) + (INTERACTIONS if load_abs > 0 and shape in INTERACTION_SHAPES else ()):
-                        for form in FORMS:
-                            out.append(self._hypothesis(ch, reg, form, level, shape, by, load_abs))
+                        for form in FORMS if m_s > 0 and not by else FORCE_FORMS:
+                            out.append(self._hypothesis(ch, reg, form, level, shape, by, load_abs, m_s))
         return out
 
-    def _hypothesis(self, ch, reg, form, level, shape, by="", load_abs=0.0):
+    def _hypothesis(self, ch, reg, form, level, shape, by="", load_abs=0.0, m_s=0.0):
         name = ch["name"]
         spec = {"channel": name, "form": form, "level": level, "mean": float(ch["mean"]), "sd": float(ch["sd"]),
-                **_spread(ch, level)}
+                **_spread(ch, level), **({"m_s": float(m_s)} if form == "inertia" else {})}
         names = [f"{name}_{form}_{level}"]
         if shape != "linear":
             spec.update(shape=shape, lo=float(ch["lo"]), hi=float(ch["hi"]))
@@ -228,7 +245,7 @@ class Channel(Effect):
             names = [f"{n}_by_{by}" for n in names] + [f"{n}_x_{by}" for n in names]
         extra = (f", {shape}" if shape != "linear" else "") + (f", x {by}" if by else "")
         return self.hypothesis(
-            names, ["N"] * len(names), spec, f"{form}, {level}{extra}",
+            names, ["1" if form == "inertia" else "N"] * len(names), spec, f"{form}, {level}{extra}",
             family=f"channel_{name}", regressor=reg, generic=True, also=(regressor_of(_BY_COLUMN[by]),) if by else (),
             description=f"{ch.get('kind', 'logged')} channel {name} ({'run mean' if level == 'run' else 'per sample'}"
                         f"{extra}) {_FORM_TEXT[form]}{', growing with the load' if by else ''}")
@@ -271,7 +288,7 @@ def _spread(sg, level: str = "run") -> dict:
 #: the column of each interaction's input (the report's traced regressor)
 _BY_COLUMN = {"load": "load_kg"}
 _FORM_TEXT = {"friction": "scaling the friction level", "force_factor": "scaling the drive's force factor",
-              "force": "adding a force"}
+              "force": "adding a force", "inertia": "scaling the moving mass"}
 
 
 #: the required inputs that are run-level signals of the recording protocol: ``(column, transform)``; ``drive``
