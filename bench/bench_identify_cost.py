@@ -47,7 +47,51 @@ def child(src: str, data: str, solver: str) -> None:
     import l1b2
 
     print(json.dumps({"cpu_s": cpu, "nfev": int(est.convergence_["nfev_total"]), "loglik": float(est.loglik_),
-                      "n": len(train.df), "package": str(Path(l1b2.__file__).parent)}))
+                      "n": len(train.df), "package": str(Path(l1b2.__file__).parent),
+                      "stages": {st["stage"]: st.get("cpu_s") for st in est.convergence_.get("stages", [])},
+                      "pieces": pieces(train, est)}))
+
+
+def pieces(train, est, repeat=15) -> dict:
+    """CPU [ms] of one call of the evaluation's pieces at the fitted vector (the minimum over ``repeat`` calls,
+    the cache of the last evaluation emptied before each): the whitened residual, the whole Jacobian (row-major),
+    the Jacobian of the linear parameters (column-major, as the variable projection takes it)."""
+    import time
+
+    import numpy as np
+
+    from l1b2.ident.noise import NoiseModel
+    from l1b2.ident.problem import ParameterSpace, SampleData, ScaledObjective, param_scale
+    from l1b2.ident.slipproblem import make_problem
+    from l1b2.ident.varpro import linear_positions
+
+    sample = SampleData(train)
+    space = ParameterSpace(est.order, None, est.fixed)
+    s_center, s_half = sample.position_scaling()
+    theta = np.asarray(est.result_.values, float)
+    problem = make_problem("eq29", sample, est.order, est.kappa, est.include_load_inertia, "free_run", s_center,
+                           s_half, 0.1 if train.slider_mass_kg is None else train.slider_mass_kg)
+    obj = ScaledObjective(problem, NoiseModel(problem.run_sel, sample.layout.R, "common"), theta, space.varied,
+                          param_scale(theta, est.order), space.lo, space.hi, True)
+    z = obj.z_of(theta)
+    obj.update_noise(obj.theta_of(z))
+    lin = linear_positions(obj, space.p_theta, est.order + 1)
+    if "order" in ScaledObjective.jac_columns.__code__.co_varnames:  # (the old tree: a Fortran copy)
+        def jac_f():
+            return obj.jac_columns(z, lin, order="F")
+    else:
+        def jac_f():
+            return np.asfortranarray(obj.jac_columns(z, lin))
+    out = {}
+    for name, f in (("residual", lambda: obj.fun(z)), ("jacobian", lambda: obj.jac(z)), ("linear columns", jac_f)):
+        best = float("inf")
+        for _ in range(repeat):
+            problem.reset_cache()
+            c0 = time.process_time()
+            f()
+            best = min(best, time.process_time() - c0)
+        out[name] = 1e3 * best
+    return out
 
 
 def run(src: Path, data: Path, solver: str) -> dict:
@@ -99,7 +143,10 @@ def main(argv=None):
                         r = run(srcs[which], data, solver)
                         res[which].append(r)
                         print(f"{world} {solver} {which}: {r['cpu_s']:.2f} s CPU, {r['nfev']} evaluations, "
-                              f"loglik {r['loglik']:.6f}", flush=True)
+                              f"loglik {r['loglik']:.6f}; stages (CPU s): "
+                              + ", ".join(f"{k} {v:.2f}" for k, v in r["stages"].items() if v is not None)
+                              + "; one call (CPU ms): " + ", ".join(f"{k} {v:.2f}" for k, v in r["pieces"].items()),
+                              flush=True)
                 rows.append((world, solver, res, best))
     print(f"\nold = {args.old}, new = this tree; CPU [s]: median (min-max) of {args.repeat} run(s) each\n")
     print(f"{'world':>13} {'samples':>7} {'solver':>15} {'CPU old':>16} {'CPU new':>16} {'new/old':>7} "

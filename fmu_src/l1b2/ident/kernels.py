@@ -193,7 +193,8 @@ def scaled_whitened(S, rows, run, g, cg, sqrtR, n_runs, scale, order="C"):
         return None
     S = np.ascontiguousarray(S, dtype=float)
     out = np.empty((rows.size, S.shape[1]), order=order)
-    kernel(S, np.ascontiguousarray(rows, dtype=np.int64), np.ascontiguousarray(run, dtype=np.int64), np.ascontiguousarray(g, dtype=float),
+    kernel(S, np.ascontiguousarray(rows, dtype=np.int64), np.ascontiguousarray(run, dtype=np.int64),
+           np.ascontiguousarray(g, dtype=float),
            np.ascontiguousarray(cg, dtype=float), np.ascontiguousarray(sqrtR, dtype=float),
            np.ascontiguousarray(scale, dtype=float), np.zeros((int(n_runs), S.shape[1])), out)
     return out

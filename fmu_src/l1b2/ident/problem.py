@@ -784,7 +784,7 @@ class ScaledObjective:
         return self.jac_columns(z, slice(None), order)
 
     def jac_columns(self, z, cols, order="C"):
-        """Columns ``cols`` (indices into z) of :meth:`jac` (:meth:`l1b2.ident.noise.NoiseModel.weighted_jacobian`)."""
+        """Columns ``cols`` (indices into z) of :meth:`jac` (``NoiseModel.weighted_jacobian`` of the sensitivities)."""
         prob, packed = self.problem, getattr(self.problem, "criterion", None) == "free_run"  # (Eq. 29 or pure slip)
         S = prob.jacobian(self.theta_of(z), self.vidx[cols], packed=True) if packed else prob.jacobian(
             self.theta_of(z), self.vidx[cols])

@@ -48,7 +48,8 @@ from .problem import SampleData, clip_theta, param_scale, strictly_inside
 from .search import sobol_box
 
 __all__ = [
-    "CONVENTIONAL", "reduced_linear_fit", "reduced_of_theta", "reduced_linear_columns", "map_reduced_to_theta", "equation_error_fit",
+    "CONVENTIONAL", "reduced_linear_fit", "reduced_of_theta", "reduced_linear_columns", "map_reduced_to_theta",
+    "equation_error_fit",
     "data_driven_start", "slip_sigma_start", "reduced_summary", "init_theta",
 ]
 
