@@ -151,3 +151,84 @@ def test_whitening_a_vector_by_run_sums_is_the_sparse_product_to_the_last_bit(so
         np.testing.assert_array_equal(nm.W(x), x - nm.cg * (G @ x)[run])
         X = rng.normal(size=(n, 3))
         np.testing.assert_array_equal(nm.W(X), X - nm.cg[:, None] * (G @ X)[run])
+
+
+@compiled
+@pytest.mark.parametrize("order", ["C", "F"])
+def test_fused_gather_whitening_and_scaling_is_the_numpy_form_to_the_last_bit(order):
+    # reference: S[rows] whitened by NoiseModel.W / sqrt(R), scaled by columns, non-finite entries set to 0 (the
+    # steps of ScaledObjective.jac before the fused loop), on unsorted runs with start gains and a few NaN / inf
+    rng = np.random.default_rng(11)
+    n_all, p, R = 3000, 7, 9
+    rows = np.sort(rng.choice(n_all, 2200, replace=False))
+    run = rng.integers(0, R, rows.size)
+    nm = NoiseModel(run, R, "per_run")
+    nm.set_start_gain(rng.normal(size=rows.size))
+    nm.update_R(rng.normal(size=rows.size) * rng.uniform(0.5, 2.0, R)[run])
+    S = rng.normal(size=(n_all, p)) * 10.0 ** rng.uniform(-4, 4, p)
+    S[rows[5], 2], S[rows[17], 0] = np.nan, np.inf
+    scale = 10.0 ** rng.uniform(-3, 3, p)
+    with np.errstate(invalid="ignore"):                   # inf - inf in the run of the inf entry
+        ref = nm.W(S[rows]) / nm._sqrtR[:, None]
+    ref *= scale[None, :]
+    ref = np.where(np.isfinite(ref), ref, 0.0)
+    fast = kernels.scaled_whitened(S, rows, run, nm.g, nm.cg, nm._sqrtR, R, scale, order)
+    assert fast.flags.c_contiguous if order == "C" else fast.flags.f_contiguous
+    assert np.array_equal(fast, ref) and np.all(fast[run == run[5], 2] == 0.0)
+    assert np.array_equal(nm.weighted_jacobian(S, rows, scale, order), ref)
+    try:
+        NoiseModel.compiled = False
+        with np.errstate(invalid="ignore"):
+            assert np.array_equal(nm.weighted_jacobian(S, rows, scale, order), ref)
+    finally:
+        NoiseModel.compiled = True
+
+
+def test_objective_jacobian_is_the_whitened_scaled_problem_jacobian_in_either_memory_order(problem):
+    # reference: the unfused steps (problem Jacobian on the residual rows, NoiseModel.weighted, column scaling)
+    prob, theta, _ = problem
+    varied = np.ones(theta.size, bool)
+    varied[[1, 3]] = False
+    scale = np.concatenate([param_scale(theta[:-2], 3), [1.0, 1.0]])
+    lo, hi = np.full(theta.size, -np.inf), np.full(theta.size, np.inf)
+    obj = ScaledObjective(prob, NoiseModel(prob.run_sel, prob.data.layout.R, "per_run"), theta, varied, scale, lo,
+                          hi, True)
+    obj.update_noise(theta)
+    z = obj.z_of(theta)
+    ref = obj.noise.weighted(prob.jacobian(obj.theta_of(z), obj.vidx)) * obj.sv_scale[None, :]
+    assert np.array_equal(obj.jac(z), ref) and np.array_equal(obj.jac(z, order="F"), ref)
+    assert obj.jac(z, order="F").flags.f_contiguous
+    cols = np.array([0, 4, z.size - 1])
+    assert np.array_equal(obj.jac_columns(z, cols, order="F"), ref[:, cols])
+
+
+def test_run_sums_by_bincount_are_numpy_add_at_to_the_last_bit():
+    # reference: numpy.add.at (the rows added in their order), unsorted runs, magnitudes over ten decades
+    from l1b2.ident.search import _run_sums
+
+    rng = np.random.default_rng(2)
+    run = rng.integers(0, 13, 5000)
+    X = rng.normal(size=(5000, 6)) * 10.0 ** rng.uniform(-5, 5, (5000, 1))
+    ref = np.zeros((13, 6))
+    np.add.at(ref, run, X)
+    assert np.array_equal(_run_sums(run, 13, X), ref)
+
+
+@pytest.mark.parametrize("n_extra", [0, 2])
+def test_reduced_linear_columns_are_those_of_the_full_reduced_jacobian_to_the_last_bit(n_extra):
+    # reference: reduced_of_theta(..., jac=True)'s columns of c_r, beta, p (and phi), at the projection's point
+    # (the linear parameters zeroed, as the equation-error fit sets them)
+    from l1b2.ident.reduced import reduced_linear_columns, reduced_of_theta
+
+    order = 4
+    n1 = order + 1
+    th = np.concatenate([example_params(order).to_vector(), 0.3 * np.arange(1, n_extra + 1)])
+    th[5:5 + n1] += 0.01 * np.cos(np.arange(n1))          # a curved A'(s): the P * A' products matter
+    lin = np.array([0] + list(range(5 + n1, th.size)))
+    th[lin] = 0.0
+    full = reduced_of_theta(th, order, M_S, 0.5, jac=True)[1]
+    assert np.array_equal(reduced_linear_columns(th, lin, order, M_S, 0.5), full[:, lin])
+    sub = lin[[0, 2, -1]]
+    assert np.array_equal(reduced_linear_columns(th, sub, order, M_S, 0.5), full[:, sub])
+    with pytest.raises(ValueError):
+        reduced_linear_columns(th, np.array([5]), order, M_S, 0.5)       # alpha_0 is not linear

@@ -21,8 +21,8 @@ from ..physics.jit import cached_kernel
 from ..predictor.model import G_of_k0, ddrive_factor_dk0, dG_dk0, drive_factor
 from ..units import G_M_S2
 
-__all__ = ["drive_derivative_loop", "whitening_loop", "compiled_drive_derivative", "compiled_whitening",
-           "drive_derivative", "whitened"]
+__all__ = ["drive_derivative_loop", "whitening_loop", "scaled_whitening_loop", "compiled_drive_derivative",
+           "compiled_whitening", "compiled_scaled_whitening", "drive_derivative", "whitened", "scaled_whitened"]
 
 
 def drive_derivative_loop(L, V0, E, vp, sg, Ap, P, w, cols, c, out):
@@ -88,8 +88,44 @@ def whitening_loop(x, run, g, cg, sqrtR, acc, out):
             out[i, k] = (x[i, k] - ci * acc[r, k]) / si
 
 
+def scaled_whitening_loop(S, rows, run, g, cg, sqrtR, scale, acc, out):
+    """``out[i] = (S[rows[i]] - cg[i] (G x)[run[i]]) / sqrtR[i] * scale``, non-finite entries set to 0.
+
+    The fused form of ``x = S[rows]``, :func:`whitening_loop` of ``x`` and the column scaling with the clean-up
+    of :meth:`l1b2.ident.problem.ScaledObjective.jac` (``J *= scale``; ``where(isfinite(J), J, 0)``): the same
+    floating-point operations in the same order, without the gathered copy and the passes of the scaling and
+    the check. ``out`` may be row- or column-major (the second pass writes it column by column then).
+    """
+    p = S.shape[1]
+    m = rows.size
+    for i in range(m):
+        r = run[i]
+        gi = g[i]
+        src = rows[i]
+        for k in range(p):
+            acc[r, k] += gi * S[src, k]
+    if out.strides[0] < out.strides[1]:  # column-major: column by column (each entry on its own, as below)
+        for k in range(p):
+            sk = scale[k]
+            for i in range(m):
+                val = (S[rows[i], k] - cg[i] * acc[run[i], k]) / sqrtR[i]
+                val = val * sk
+                out[i, k] = val if np.isfinite(val) else 0.0
+        return
+    for i in range(m):
+        r = run[i]
+        ci = cg[i]
+        si = sqrtR[i]
+        src = rows[i]
+        for k in range(p):
+            val = (S[src, k] - ci * acc[r, k]) / si
+            val = val * scale[k]
+            out[i, k] = val if np.isfinite(val) else 0.0
+
+
 _DERIVATIVE: list = []
 _WHITENING: list = []
+_SCALED_WHITENING: list = []
 
 
 def compiled_drive_derivative():
@@ -106,6 +142,14 @@ def compiled_whitening():
         {"whitening_loop": whitening_loop}, "whitening_loop",
         "void(float64[:, ::1], int64[::1], float64[::1], float64[::1], float64[::1], float64[:, ::1], "
         "float64[:, ::1])"))
+
+
+def compiled_scaled_whitening():
+    """:func:`scaled_whitening_loop` compiled by numba (once per process), or None."""
+    return cached_kernel(_SCALED_WHITENING, lambda: (
+        {"scaled_whitening_loop": scaled_whitening_loop}, "scaled_whitening_loop",
+        "void(float64[:, ::1], int64[::1], int64[::1], float64[::1], float64[::1], float64[::1], float64[::1], "
+        "float64[:, ::1], float64[:, :])"))
 
 
 def drive_derivative(core, theta, vp, sg, Ap, P, cols, w):
@@ -137,4 +181,20 @@ def whitened(x, run, g, cg, sqrtR, n_runs):
     kernel(x, np.ascontiguousarray(run, dtype=np.int64), np.ascontiguousarray(g, dtype=float),
            np.ascontiguousarray(cg, dtype=float), np.ascontiguousarray(sqrtR, dtype=float),
            np.zeros((int(n_runs), x.shape[1])), out)
+    return out
+
+
+def scaled_whitened(S, rows, run, g, cg, sqrtR, n_runs, scale, order="C"):
+    """``where(isfinite(J), J, 0)`` of ``J = whitened(S[rows], ...) * scale[None, :]`` by
+    :func:`scaled_whitening_loop` (the same values to the last bit), in memory order ``order`` ("C" or "F");
+    None without the compiled loop. ``S``: C-contiguous float64 (sensitivities of all packed rows)."""
+    kernel = compiled_scaled_whitening()
+    if kernel is None:
+        return None
+    S = np.ascontiguousarray(S, dtype=float)
+    out = np.empty((rows.size, S.shape[1]), order=order)
+    kernel(S, np.ascontiguousarray(rows, dtype=np.int64), np.ascontiguousarray(run, dtype=np.int64),
+           np.ascontiguousarray(g, dtype=float),
+           np.ascontiguousarray(cg, dtype=float), np.ascontiguousarray(sqrtR, dtype=float),
+           np.ascontiguousarray(scale, dtype=float), np.zeros((int(n_runs), S.shape[1])), out)
     return out

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .kernels import whitened
+from .kernels import scaled_whitened, whitened
 
 __all__ = ["NoiseModel"]
 
@@ -113,6 +113,23 @@ class NoiseModel:
         if y.ndim == 1:
             return y / self._sqrtR
         return y / self._sqrtR[:, None]
+
+    def weighted_jacobian(self, S, rows, scale, order="C"):
+        """``where(isfinite(J), J, 0)`` of ``J = weighted(S[rows]) * scale[None, :]`` in memory order ``order``.
+
+        ``S``: a C-contiguous float64 matrix of which ``rows`` are the residual rows. With start gains and the
+        compiled loops one fused pass (:func:`l1b2.ident.kernels.scaled_whitened`, the same values to the last
+        bit), else these numpy steps.
+        """
+        if self.g is not None and self.compiled:
+            out = scaled_whitened(S, rows, self.run_sel, self.g, self.cg, self._sqrtR, self.n_runs, scale, order)
+            if out is not None:
+                return out
+        J = self.weighted(S[rows])
+        J *= scale[None, :]
+        if not np.all(np.isfinite(J)):
+            J = np.where(np.isfinite(J), J, 0.0)
+        return np.asarray(J, order=order)
 
     def update_R(self, r):
         """ML variances from the whitened residuals; returns the max relative change."""

@@ -492,8 +492,9 @@ class LikelihoodProblem:
         U *= d[:, None]
         return a_r, U
 
-    def jacobian(self, theta, cols):
-        """d residual / d theta[cols] (unweighted): forward sensitivities for the free run."""
+    def jacobian(self, theta, cols, packed=False):
+        """d residual / d theta[cols] (unweighted): forward sensitivities for the free run (``packed``: of all
+        packed rows, the residual rows being :attr:`sel`; one_step: the residual rows either way)."""
         c = self.evaluate(theta)
         core = self.core
         flags = c["flags"]
@@ -510,7 +511,7 @@ class LikelihoodProblem:
                 a[st] = 0.0
             with np.errstate(over="ignore", invalid="ignore"):
                 S = packed_linear_recursion(self.lay, a, U)
-            return S[self.sel]
+            return S if packed else S[self.sel]
         sub = self.sel
         U = core.dF(theta, c["vp"][sub], c["sg"][sub], c["Ap"][sub], c["P"][sub], cols, rows=sub)
         U *= core.hd[sub, None]
@@ -778,19 +779,17 @@ class ScaledObjective:
             out = np.where(np.isfinite(out), out, 1e10)
         return out
 
-    def jac(self, z):
-        J = self.problem.jacobian(self.theta_of(z), self.vidx)
-        J = self.noise.weighted(J)
-        J *= self.sv_scale[None, :]
-        if not np.all(np.isfinite(J)):
-            J = np.where(np.isfinite(J), J, 0.0)
-        return J
+    def jac(self, z, order="C"):
+        """Jacobian of :meth:`fun` (non-finite entries 0), in memory order ``order`` ("C" or "F")."""
+        return self.jac_columns(z, slice(None), order)
 
-    def jac_columns(self, z, cols):
-        """Columns ``cols`` (indices into z) of :meth:`jac`."""
-        J = self.noise.weighted(self.problem.jacobian(self.theta_of(z), self.vidx[cols]))
-        J *= self.sv_scale[cols][None, :]
-        return J if np.isfinite(J).all() else np.where(np.isfinite(J), J, 0.0)
+    def jac_columns(self, z, cols, order="C"):
+        """Columns ``cols`` (indices into z) of :meth:`jac` (``NoiseModel.weighted_jacobian`` of the sensitivities)."""
+        prob, packed = self.problem, getattr(self.problem, "criterion", None) == "free_run"  # (Eq. 29 or pure slip)
+        S = prob.jacobian(self.theta_of(z), self.vidx[cols], packed=True) if packed else prob.jacobian(
+            self.theta_of(z), self.vidx[cols])
+        rows = prob.sel if packed else np.arange(S.shape[0])
+        return self.noise.weighted_jacobian(S, rows, self.sv_scale[cols], order)
 
     def update_noise(self, theta):
         """Re-estimate g (start-speed propagation) and R at theta; returns the max relative R change."""

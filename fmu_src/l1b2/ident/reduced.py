@@ -48,7 +48,8 @@ from .problem import SampleData, clip_theta, param_scale, strictly_inside
 from .search import sobol_box
 
 __all__ = [
-    "CONVENTIONAL", "reduced_linear_fit", "reduced_of_theta", "map_reduced_to_theta", "equation_error_fit",
+    "CONVENTIONAL", "reduced_linear_fit", "reduced_of_theta", "reduced_linear_columns", "map_reduced_to_theta",
+    "equation_error_fit",
     "data_driven_start", "slip_sigma_start", "reduced_summary", "init_theta",
 ]
 
@@ -202,6 +203,40 @@ def reduced_of_theta(theta, order, m_s, kappa, jac=False):
     return g, Jg
 
 
+def reduced_linear_columns(theta, lin, order, m_s, kappa):
+    """``reduced_of_theta(theta, ..., jac=True)[1][:, lin]`` for columns ``lin`` among c_r (0), beta, p and
+    phi (the parameters the reduced coefficients are affine in), without the other columns.
+
+    The same entries to the last bit (the same expressions): the equation-error fit's projection needs only
+    these, at every one of its many cheap evaluations.
+    """
+    n1 = order + 1
+    T = _legmul_tensor(order)
+    p_theta = 5 + 3 * n1
+    nx = theta.size - p_theta
+    nC = 2 * order + 1
+    _, _, mu, k0, musd = theta[:5]
+    al = theta[5 : 5 + n1]
+    out = np.zeros((2 * n1 + nC + nx, len(lin)))
+    ps = [j for j, c in enumerate(lin) if 5 + 2 * n1 <= c < p_theta]
+    if ps:
+        hG = 0.5 * np.pi * float(G_of_k0(k0))
+        dCp = -mu * hG * np.einsum("j,ijk->ki", al, T)
+        dCp[:n1, :] += (mu * float(drive_factor(k0)) - musd * kappa) * np.eye(n1)
+    for j, c in enumerate(lin):
+        if c == 0:
+            out[0, j] = 1.0
+        elif 5 + n1 <= c < 5 + 2 * n1:
+            out[n1 + c - 5 - n1, j] = 1.0
+        elif 5 + 2 * n1 <= c < p_theta:
+            out[2 * n1 : 2 * n1 + nC, j] = dCp[:, c - 5 - 2 * n1]
+        elif c >= p_theta:
+            out[2 * n1 + nC + c - p_theta, j] = 1.0
+        else:
+            raise ValueError(f"parameter {c} does not enter the reduced coefficients linearly")
+    return out
+
+
 def _grid(order):
     ng = 4 * order + 4
     return np.cos(np.pi * (np.arange(ng) + 0.5) / ng)
@@ -294,8 +329,8 @@ def equation_error_fit(theta_start, varied, red, order, m_s, kappa, n_starts, se
         if lin.size == 0:
             return th, Rc @ reduced_of_theta(th, order, m_s, kappa) - qy
         th[lin] = 0.0
-        g0, Jg = reduced_of_theta(th, order, m_s, kappa, jac=True)
-        A = Rc @ Jg[:, lin]
+        g0 = reduced_of_theta(th, order, m_s, kappa)
+        A = Rc @ reduced_linear_columns(th, lin, order, m_s, kappa)
         b = qy - Rc @ g0
         x, *_ = np.linalg.lstsq(A, b, rcond=1e-13)
         th[lin] = x

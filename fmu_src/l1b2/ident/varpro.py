@@ -133,7 +133,7 @@ class Projection:
             g, G = problem.start_gain_sensitivity(theta, obj.vidx[d_cols])
             noise.set_start_gain(g)
         r = obj.fun(z)
-        J = np.asfortranarray(obj.jac(z))  # column-major: J^T J and J^T r several times faster
+        J = obj.jac(z, order="F")  # column-major: J^T J and J^T r several times faster
         grad = J.T @ r
         if obj.start_noise and d_cols.size:
             G = G * obj.sv_scale[d_cols][None, :]
@@ -164,7 +164,7 @@ class Projection:
             return z, r, cost
         for _ in range(MAX_INNER):
             self.njev += 1
-            JL = np.asfortranarray(self.obj.jac_columns(z, self.lin))
+            JL = self.obj.jac_columns(z, self.lin, order="F")
             gL = JL.T @ r
             step = -_solve_spd(JL.T @ JL, gL)
             predicted = cost + float(gL @ step)  # the minimum of the quadratic model (affine residual)
