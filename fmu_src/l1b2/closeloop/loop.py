@@ -367,8 +367,8 @@ class CloseLoop(EstimatorSettings):
             if not short and self.screen_alpha:
                 # nothing passes the corrected screen: the best candidate at the uncorrected level is still
                 # cross-validated (the refit's acceptance rule, not this screen, decides what is added)
-                short, screen = shortlist(scores, level=self.screen_alpha, min_gain=self.min_gain, size=1), \
-                    self.screen_alpha
+                short = shortlist(scores, level=self.screen_alpha, min_gain=self.min_gain, size=1)
+                screen = self.screen_alpha
             rl = None
             if self.run_level and ctx is not None:
                 say(f"round {n_rnd}: run-level deviations and the signals that explain them")
