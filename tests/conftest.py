@@ -49,15 +49,17 @@ COSTLY_FIRST = (
     "test_closeloop_realistic.py",  # two realistic-world control close loops, one injected case (ci_slow)
     "test_export.py",
     "test_fmus.py",
+    "test_tutorial.py",  # the tutorial end to end (one ~60 s test, else handed out among the last modules)
     "test_identify.py",
-    "test_chost.py",
     "test_closeloop_chain.py",  # one reference-world close loop
+    "test_chost.py",
     "test_sweep.py",
     "test_fmu_misuse.py",
-    "test_identify_workflow.py",
-    "test_hostile_inputs.py",
+    "test_effect_plugin.py",  # one close loop with the toy family, its export
     "test_interface.py",
     "test_output_dirs.py",
+    "test_identify_workflow.py",
+    "test_hostile_inputs.py",
 )
 
 

@@ -79,7 +79,19 @@ def _extended_free_run(model, df):
                           temperature=df[dataio.TEMPERATURE] if dataio.TEMPERATURE in df else None)
 
 
-def test_export_of_the_calibrated_model(tmp_path, isolated):
+@pytest.fixture(scope="module")
+def pulley_export(tmp_path_factory):
+    """``(folder, manifest)``: ``export_close_loop`` of pulley_friction 1's result with its TEST runs (Predictor.fmu,
+    the native FMUs, the calibrated SSP and its held-out check), written once for the two tests that read it."""
+    from l1b2.workflows import export_close_loop
+    res, _ = _run("pulley_friction", 1)
+    d = rig_dir("pulley_friction_1", injections=["pulley_friction"], injection_seed=1,
+                plan=RigPlan(step_s=1e-3, seed=1))
+    out = tmp_path_factory.mktemp("pulley_friction_1") / "exp"
+    return out, export_close_loop(res, out, test=load_measurements(d / "test.csv"))
+
+
+def test_export_of_the_calibrated_model(pulley_export, isolated):
     # reference: the close-the-loop estimator's own free-run prediction of TEST (1e-10 relative), for the
     # serialisable model and for Predictor.fmu through fmpy (one TEST run); the manifest names each effect's home
     from pathlib import Path
@@ -91,8 +103,7 @@ def test_export_of_the_calibrated_model(tmp_path, isolated):
     dte = res.test_df
     want = res.extended_model.predict_free_run(dte)
     np.testing.assert_allclose(_extended_free_run(ep, dte), want, rtol=1e-10, atol=1e-13)
-    from l1b2.workflows import export_close_loop
-    manifest = export_close_loop(res, tmp_path / "exp")
+    exp, manifest = pulley_export
     fam = {e["family"]: e for e in manifest["effects"]}
     assert fam["load_path_friction"]["subsystems"]["home"] == "Slider.pulley_mu"
     assert all(e["predictor_fmu"] == "fmus/Predictor.fmu" for e in manifest["effects"])
@@ -101,24 +112,27 @@ def test_export_of_the_calibrated_model(tmp_path, isolated):
          "load": run["load_kg"].tolist(), "d": run["direction"].tolist(), "T": run["time_s"].tolist(),
          "v_start": float(run["speed_m_s"].iloc[0])}
     got = isolated(str(Path(__file__).with_name("test_extended_predictor_fmu.py")), "worker_fmpy",
-                   {"fmu": str(tmp_path / "exp" / "fmus" / "Predictor.fmu")}, [r], r["t"][0]).value["fmu"][0]
+                   {"fmu": str(exp / "fmus" / "Predictor.fmu")}, [r], r["t"][0]).value["fmu"][0]
     np.testing.assert_allclose(got, want[: len(run)], rtol=1e-10, atol=1e-13)
 
 
 @pytest.mark.parametrize("effect,seed,home", [("pulley_friction", 1, "Slider.pulley_mu"),
                                               ("direction_asymmetry", 2, "Stator.asym_b")])
-def test_calibrated_ssp_carries_the_identified_effect(effect, seed, home, tmp_path, isolated):
+def test_calibrated_ssp_carries_the_identified_effect(effect, seed, home, isolated, request):
     # reference: rig_truth.json (the injected parameter, within 10 %) and the held-out runs: the calibrated SSP's
     # free-run nrmse is at most 1 pp above the extended predictor's and below half the uncalibrated SSP's;
-    # libcosim loads the calibrated SSP with the calibrated parameter
+    # libcosim loads the calibrated SSP with the calibrated parameter. The exports with the TEST runs made once
+    # for the module: pulley_friction 1 by export_close_loop (pulley_export), direction_asymmetry 2 by
+    # `l1b2 close-loop --export` (cli_run: the same loop on the same runs, its result checked equal to _run's
+    # in test_close_loop_without_a_test_file_holds_out_the_papers_runs)
     from pathlib import Path
-
-    from l1b2.workflows import export_calibrated_model
     res, truth = _run(effect, seed)
-    d = rig_dir(f"{effect}_{seed}", injections=[effect], injection_seed=seed, plan=RigPlan(step_s=1e-3, seed=seed))
-    out = tmp_path / "exp"
-    man = export_calibrated_model(res.calibrated_model, out, test=load_measurements(d / "test.csv"),
-                                  test_prediction=res.test_free_run_after)
+    if effect == "direction_asymmetry":
+        cli = request.getfixturevalue("cli_run")
+        out, res = cli["export"], cli["result"]
+        man = json.loads((out / "calibrated_manifest.json").read_text())
+    else:
+        out, man = request.getfixturevalue("pulley_export")
     got = man["calibrated_ssp"]["changed"][home]
     assert got == pytest.approx(truth["injections"][0]["parameters"][home], rel=0.1)
     chk = man["held_out_check"]
@@ -181,20 +195,39 @@ def test_control_ten_seeds(record_property):
     assert sum(quiet) >= 9
 
 
-def test_cli_writes_the_report_files_and_figures(tmp_path, capsys):
-    # reference: issue: DIR/report.json keys, report.md, PNGs (residual vs regressors, chosen effect,
-    # before/after on TEST); the before/after table printed
+@pytest.fixture(scope="module")
+def cli_run(tmp_path_factory):
+    """``l1b2 close-loop --train all.csv --report-dir DIR --export DIR2`` on direction_asymmetry 2, run once for the
+    module: no ``--test`` (TEST: the paper's held-out runs of the same file) and the default settings, i.e. the loop
+    of ``_run("direction_asymmetry", 2)`` on the same runs (compared in
+    test_close_loop_without_a_test_file_holds_out_the_papers_runs). ``--workers 1``: the refits in this process,
+    as ``_run``'s (the CLI's default local cluster runs the tutorial's close loop, test_tutorial.py; that a cluster
+    gives the serial refits is test_closeloop_parallel.py's check). ``{"code", "printed", "report", "export",
+    "result"}``; the result is read back from report.json."""
+    import contextlib
+    import io
     d = rig_dir("direction_asymmetry_2", injections=["direction_asymmetry"], injection_seed=2,
                 plan=RigPlan(step_s=1e-3, seed=2))
-    out = tmp_path / "cl"
-    assert cli_main(["close-loop", "--train", str(d / "train.csv"), "--test", str(d / "test.csv"),
-                     "--report-dir", str(out), "--quiet", "--min-cv-drop", "0.006", "--screen-alpha", "1e-6",
-                     "--export", str(tmp_path / "fmu")]) == 0
-    printed = capsys.readouterr().out
+    root = tmp_path_factory.mktemp("cli_close_loop")
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        code = cli_main(["close-loop", "--train", str(d / "all.csv"), "--report-dir", str(root / "cl"), "--quiet",
+                         "--export", str(root / "fmu"), "--workers", "1"])
+    rep = json.loads((root / "cl" / "report.json").read_text()) if code == 0 else None
+    return {"code": code, "printed": buf.getvalue(), "report": root / "cl", "export": root / "fmu",
+            "result": CloseLoopResult.from_dict(rep) if rep is not None else None}
+
+
+def test_cli_writes_the_report_files_and_figures(cli_run, tmp_path, capsys):
+    # reference: issue: DIR/report.json keys, report.md, PNGs (residual vs regressors, chosen effect,
+    # before/after on TEST); the before/after table printed
+    out = cli_run["report"]
+    assert cli_run["code"] == 0
+    printed = cli_run["printed"]
     # the calibrated model went into Predictor.fmu, and again from the report alone
-    assert (tmp_path / "fmu" / "fmus" / "Predictor.fmu").is_file()
+    assert (cli_run["export"] / "fmus" / "Predictor.fmu").is_file()
     assert cli_main(["export", "--from-report", str(out), "--out", str(tmp_path / "again")]) == 0
-    first = json.loads((tmp_path / "fmu" / "calibrated_manifest.json").read_text())
+    first = json.loads((cli_run["export"] / "calibrated_manifest.json").read_text())
     again = json.loads((tmp_path / "again" / "calibrated_manifest.json").read_text())
     assert first["effects"] == again["effects"] and first["effects"]
     assert cli_main(["export", "--from-report", str(tmp_path), "--out", str(tmp_path / "x")]) == 2
@@ -210,8 +243,6 @@ def test_cli_writes_the_report_files_and_figures(tmp_path, capsys):
             assert {"nrmse", "mean_abs_rel_error", "p95_abs_rel_error"} <= set(rep["extended"][part][kind])
     d_ = rep["diagnosis"]
     assert {"significant", "traced_to", "effect", "candidates"} <= set(d_)
-    assert d_["rules"]["min_cv_drop"] == 0.006  # the CLI's materiality threshold reaches the loop
-    assert d_["rules"]["screen_alpha"] == 1e-6  # and the uncorrected screen's level (below Bonferroni's: no cost)
     assert d_["rules"]["noise"] == "common"  # the fits' noise model is recorded
     assert all("cv_gain" in c for c in d_["candidates"])
     assert set(d_["traced_to"]) <= {"time", "position", "direction", "load", "voltage", "speed", "acceleration",
@@ -225,16 +256,29 @@ def test_cli_writes_the_report_files_and_figures(tmp_path, capsys):
     assert "Error before and after" in md and "Candidates" in md
 
 
-def test_close_loop_without_a_test_file_holds_out_the_papers_runs(tmp_path, capsys):
+def test_cli_settings_reach_the_loop(tmp_path):
+    # reference: the command line's values are the loop's recorded rules: the materiality threshold, the
+    # uncorrected screen's level (below Bonferroni's: no cost) and the number of rounds (none here: the rules are
+    # recorded whatever the loop finds, so the baseline alone is identified)
+    d = rig_dir("direction_asymmetry_2", injections=["direction_asymmetry"], injection_seed=2,
+                plan=RigPlan(step_s=1e-3, seed=2))
+    out = tmp_path / "cl"
+    assert cli_main(["close-loop", "--train", str(d / "train.csv"), "--test", str(d / "test.csv"),
+                     "--report-dir", str(out), "--quiet", "--no-plots", "--max-rounds", "0", "--workers", "1",
+                     "--min-cv-drop", "0.006", "--screen-alpha", "1e-6"]) == 0
+    rules = json.loads((out / "report.json").read_text())["diagnosis"]["rules"]
+    assert (rules["min_cv_drop"], rules["screen_alpha"], rules["max_rounds"]) == (0.006, 1e-6, 0)
+
+
+def test_close_loop_without_a_test_file_holds_out_the_papers_runs(cli_run, tmp_path, capsys):
     # reference: `l1b2 identify`'s rule (data format: one file may hold every run): without --test, TEST is the
     # runs with |load| 0.05 kg; the result equals the loop on the rig's own train.csv/test.csv (1e-9 relative)
-    from l1b2.workflows import run_close_loop
     d = rig_dir("direction_asymmetry_2", injections=["direction_asymmetry"], injection_seed=2,
                 plan=RigPlan(step_s=1e-3, seed=2))
     res_files, _ = _run("direction_asymmetry", 2)
-    res = run_close_loop(d / "all.csv", None, tmp_path / "cl", plots_on=False)
+    res = cli_run["result"]
     assert res.checks["split"] == "paper's split: test = runs with |load| in [0.05] kg"
-    assert json.loads((tmp_path / "cl" / "report.json").read_text())["checks"]["split"] == res.checks["split"]
+    assert f"data: {res.checks['split']}" in cli_run["printed"]
     for part in ("before", "after"):
         for kind in ("one_step", "free_run"):
             assert getattr(res, part)["test"][kind]["nrmse"] == pytest.approx(

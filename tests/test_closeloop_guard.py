@@ -93,7 +93,7 @@ def test_close_loop_exits_non_zero_in_one_line_when_the_baseline_diverges(tmp_pa
     df[df["run"] >= 6].to_csv(test, index=False)
     out = tmp_path / "cl"
     code = cli_main(["close-loop", "--train", str(train), "--test", str(test), "--slider-mass", "0.3",
-                     "--report-dir", str(out), "--quiet", "--no-plots"])
+                     "--report-dir", str(out), "--quiet", "--no-plots", "--workers", "1"])   # no cluster for refits
     err = capsys.readouterr().err
     assert code != 0 and err.count("\n") == 1, err
     assert "baseline identification on TRAIN diverged" in err and "retried from the identifier's multistart" in err
