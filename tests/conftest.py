@@ -46,7 +46,7 @@ COSTLY_FIRST = (
     "test_closeloop.py",  # reference-world close loops, their exports
     "test_readme_examples.py",  # the pages' commands: rig, identify, close loop, export
     "test_extended_predictor_fmu.py",  # native FMUs compiled per effect kind, FMI 2.0 and 3.0
-    "test_closeloop_realistic.py",  # two realistic-world control close loops, one injected case (ci_slow)
+    "test_closeloop_realistic.py",  # two realistic-world control close loops, two injected cases (ci_slow)
     "test_export.py",
     "test_fmus.py",
     "test_tutorial.py",  # the tutorial end to end (one ~60 s test, else handed out among the last modules)
