@@ -307,13 +307,10 @@ def shape_alternatives(short: list[Score], scores: list[Score], *, level: float,
     listed = {id(s.candidate) for s in short}
     taken = {(s.candidate.family, shape_of(s.candidate)) for s in short}
     families = {s.candidate.family for s in short}
-    best: dict = {}
-    for s in significant(scores, level=level, min_gain=min_gain):
-        key = (s.candidate.family, shape_of(s.candidate))
-        if s.candidate.family in families and key not in taken and id(s.candidate) not in listed and (
-                key not in best or s.cv_gain > best[key].cv_gain):
-            best[key] = s
-    return sorted(best.values(), key=lambda s: -s.cv_gain)
+    pool = [s for s in significant(scores, level=level, min_gain=min_gain)
+            if s.candidate.family in families and (s.candidate.family, shape_of(s.candidate)) not in taken
+            and id(s.candidate) not in listed]
+    return best_per_family(pool, key=lambda c: (c.family, shape_of(c)))
 
 
 def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5, seed=0,
@@ -405,11 +402,12 @@ def choose(scores: list[Score], *, alpha=DEFAULT_ALPHA, min_gain=DEFAULT_MIN_GAI
     return Choice(sig, most_parsimonious(sig, parsimony=parsimony), level)
 
 
-def best_per_family(scores: list[Score]) -> list[Score]:
-    """The best-gain candidate of each family, by decreasing held-out gain."""
+def best_per_family(scores: list[Score], key=lambda c: c.family) -> list[Score]:
+    """The best-gain candidate of each family (or of each ``key(candidate)``: e.g. a family's shape), by decreasing
+    held-out gain; of equal gains the first."""
     best = {}
     for s in scores:
-        key = s.candidate.family
-        if key not in best or s.cv_gain > best[key].cv_gain:
-            best[key] = s
+        k = key(s.candidate)
+        if k not in best or s.cv_gain > best[k].cv_gain:
+            best[k] = s
     return sorted(best.values(), key=lambda s: -s.cv_gain)
