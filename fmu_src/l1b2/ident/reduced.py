@@ -197,10 +197,16 @@ def reduced_of_theta(theta, order, m_s, kappa, jac=False):
     Jg[iC, 4] = -kappa * ppad
     Jg[2 * n1, 4] -= G_M_S2 * m_s
     Jg[iC, 5 : 5 + n1] = -mu * hG * np.einsum("i,ijk->kj", pp, T)
+    Jg[iC, 5 + 2 * n1 : p_theta] = _dC_dp(al, T, mu, musd, kappa, g1, hG)
+    return g, Jg
+
+
+def _dC_dp(al, T, mu, musd, kappa, g1, hG):
+    """d(C's Legendre coefficients)/d(p), (2n+1, n+1): ``g1 = drive_factor(k0)``, ``hG = pi/2 G(k0)``."""
+    n1 = al.size
     dCp = -mu * hG * np.einsum("j,ijk->ki", al, T)
     dCp[:n1, :] += (mu * g1 - musd * kappa) * np.eye(n1)
-    Jg[iC, 5 + 2 * n1 : p_theta] = dCp
-    return g, Jg
+    return dCp
 
 
 def reduced_linear_columns(theta, lin, order, m_s, kappa):
@@ -220,9 +226,7 @@ def reduced_linear_columns(theta, lin, order, m_s, kappa):
     out = np.zeros((2 * n1 + nC + nx, len(lin)))
     ps = [j for j, c in enumerate(lin) if 5 + 2 * n1 <= c < p_theta]
     if ps:
-        hG = 0.5 * np.pi * float(G_of_k0(k0))
-        dCp = -mu * hG * np.einsum("j,ijk->ki", al, T)
-        dCp[:n1, :] += (mu * float(drive_factor(k0)) - musd * kappa) * np.eye(n1)
+        dCp = _dC_dp(al, T, mu, musd, kappa, float(drive_factor(k0)), 0.5 * np.pi * float(G_of_k0(k0)))
     for j, c in enumerate(lin):
         if c == 0:
             out[0, j] = 1.0
