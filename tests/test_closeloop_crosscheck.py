@@ -264,14 +264,23 @@ def test_the_named_parameter_is_estimated_in_both_families_with_its_standard_err
         return _Fitted(init, *fits[init])
 
     monkeypatch.setattr(cc, "refit", refit)
-    check = _check(lambda: _Model("ps+1"), _Clock())
-    trial = acc.RefitCV(_pulley(), CUR, _fe([4] * 4), phi=np.array([0.3]))
     y = np.array([1.0, 2.0, 3.0, 4.0])
     A, S = np.ones((4, 1)), np.array([[0.0], [1.0], [2.0], [3.0]])       # least squares: y = 1 + 1 * S
-    p = check.parameters(trial, acc.EffectSet(), _Model("eq29"), _Model("ps+1"), y, A, S)["pulley_mu"]
-    # each family refits its own model with the candidate, the pure-slip one started at its own linearised fit
-    assert sorted(starts) == [("eq29", [0.3]), ("ps+1", [pytest.approx(1.0)])]
-    assert calls["refit"][-1][2] == 60 and p["eq29"]["value"] == 0.061 and p["pure_slip"]["stderr"] == 0.011
+    monkeypatch.setattr(cc, "design", lambda c, r, df, mask, p, m_s, v_pred: (y, A, S, np.arange(4)))
+    clock = _Clock()
+    check = _check(lambda: _Model("ps+1"), clock)
+    trial = acc.RefitCV(_pulley(), CUR, _fe([4] * 4), phi=np.array([0.3]))
+    rec = {**check(trial, acc.EffectSet(), 2, estimate=True), "outcome": "kept"}
+    assert "parameters" not in rec      # the Eq. 29 side waits for the loop's joint refit
+    # the check refits only its own family, started at its own linearised fit, with the final budget
+    assert starts == [("ps+1", [pytest.approx(1.0)])] and calls["refit"][-1][2] == 60
+    assert clock.counts[-1] == (1, 7)
+    joint = _Fitted("eq29", *fits["eq29"])          # the loop's joint re-identification with the pick
+    check.record_joint_refit([rec], joint)
+    p = rec["parameters"]["pulley_mu"]
+    assert len(starts) == 1                          # no second Eq. 29 refit: the loop's is read
+    assert p["eq29"] == check.estimates_of(joint, trial.candidate)["pulley_mu"]
+    assert p["eq29"]["value"] == 0.061 and p["eq29"]["stderr"] == 0.008 and p["pure_slip"]["stderr"] == 0.011
     # the difference against the standard error of both estimates (a dropped one or the wrong sign fails)
     assert p["z_difference"] == pytest.approx((0.045 - 0.061) / np.hypot(0.008, 0.011))
     assert p["z_pure_slip"] == pytest.approx(0.045 / 0.011)
@@ -280,6 +289,9 @@ def test_the_named_parameter_is_estimated_in_both_families_with_its_standard_err
                         "cv_gain": 0.05, "folds_improved": 4, "folds": 4, "eq29_cv_gain": 0.3,
                         "min_cv_gain": 0.03, "outcome": "kept", "parameters": {"pulley_mu": p}})
     assert "pulley_mu from eq29 0.061 ± 0.008, from pure_slip 0.045 ± 0.011 (difference -1.2 se)" in line, line
+    again = {**rec, "parameters": None}
+    check.record_joint_refit([again], joint)          # completed once: nothing is left pending
+    assert again["parameters"] is None
 
 
 def test_only_a_confirmed_reading_gets_both_families_parameters(stand_ins, monkeypatch):
@@ -290,12 +302,21 @@ def test_only_a_confirmed_reading_gets_both_families_parameters(stand_ins, monke
         np.ones(4), np.ones((4, 1)), np.arange(4.0)[:, None], np.arange(4)))
     check = _check(lambda: _Model("ps"), _Clock())
     trial = acc.RefitCV(_pulley(), CUR, _fe([4] * 4), phi=np.array([0.3]))
-    rec = check(trial, acc.EffectSet(), 2, _Model("eq29"))
+    rec = {**check(trial, acc.EffectSet(), 2, estimate=True), "outcome": "kept"}
+    check.record_joint_refit([rec], _Fitted("eq29", 0.05, 0.01))
     assert rec["confirmed"] and set(rec["parameters"]["pulley_mu"]) >= {"eq29", "pure_slip", "z_difference"}
-    assert "pulley_mu from eq29 0.05 ± 0.01" in cc.describe({**rec, "outcome": "kept"})
+    assert "pulley_mu from eq29 0.05 ± 0.01" in cc.describe(rec)
     ext["sse"] = [9.9, 9.9, 9.9, 9.9]        # withdrawn: no parameter is reported, none is estimated
-    assert "parameters" not in check(trial, acc.EffectSet(), 2, _Model("eq29"))
-    assert "parameters" not in check(trial, acc.EffectSet(), 2)     # no current model given: no estimate
+    rec = {**check(trial, acc.EffectSet(), 2, estimate=True), "outcome": "withdrawn, kept as x"}
+    check.record_joint_refit([rec], _Fitted("eq29", 0.05, 0.01))
+    assert "parameters" not in rec
+    kept = {**rec, "outcome": "kept"}                  # nothing was left pending by the withdrawn one
+    check.record_joint_refit([kept], _Fitted("eq29", 0.05, 0.01))
+    assert "parameters" not in kept
+    ext["sse"] = [4.0] * 4
+    rec = {**check(trial, acc.EffectSet(), 2), "outcome": "kept"}     # no estimate asked: none made
+    check.record_joint_refit([rec], _Fitted("eq29", 0.05, 0.01))
+    assert "parameters" not in rec
 
 
 def test_a_failed_estimate_of_the_named_parameters_is_recorded_not_raised(stand_ins, monkeypatch):
@@ -304,6 +325,8 @@ def test_a_failed_estimate_of_the_named_parameters_is_recorded_not_raised(stand_
     monkeypatch.setattr(cc, "refit", refit)
     monkeypatch.setattr(cc, "design", lambda c, r, df, mask, p, m_s, v_pred: (
         np.ones(4), np.ones((4, 1)), np.arange(4.0)[:, None], np.arange(4)))
-    rec = _check(lambda: _Model("ps"), _Clock())(acc.RefitCV(_pulley(), CUR, _fe([4] * 4), phi=np.array([0.3])),
-                                                 acc.EffectSet(), 2, _Model("eq29"))
+    check = _check(lambda: _Model("ps"), _Clock())
+    rec = check(acc.RefitCV(_pulley(), CUR, _fe([4] * 4), phi=np.array([0.3])), acc.EffectSet(), 2, estimate=True)
+    rec = {**rec, "outcome": "kept"}
+    check.record_joint_refit([rec], _Fitted("eq29", 0.05, 0.01))
     assert rec["confirmed"] and "parameters" not in rec and "diverged" in rec["parameters_note"]

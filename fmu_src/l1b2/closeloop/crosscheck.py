@@ -21,9 +21,11 @@ Contract:
   (:func:`l1b2.closeloop.acceptance.cv_errors`, warm refits, the candidate started per fold from its linearised
   fit on the training folds only); confirmed when :func:`l1b2.closeloop.acceptance.accepts` accepts that trial
   with the loop's ``min_cv_gain`` (a named effect is not structural: no materiality threshold). A confirmed
-  reading's parameters are then estimated in both families (:meth:`PureSlipCheck.parameters`: each family's
-  current model with the named candidate re-identified jointly on TRAIN, the report's standard errors, and the
-  difference of the two estimates in units of their combined standard error). They are a record, not a rule:
+  reading's parameters are then estimated in both families (each family's current model with the named candidate
+  re-identified jointly on TRAIN, the report's standard errors, and the difference of the two estimates in units
+  of their combined standard error): the pure-slip side by the check (:meth:`PureSlipCheck.parameters`), the
+  Eq. 29 side from the loop's own joint re-identification after the pick, which is that same refit (same frame,
+  start, effects and budget; :meth:`PureSlipCheck.record_joint_refit`). They are a record, not a rule:
   on the realistic world neither their agreement nor the pure-slip interval's distance from zero separates the
   false pulley readings that pass from the true ones (decision 0048). Its refits and evaluations are counted on
   the stage clock.
@@ -44,7 +46,8 @@ from .candidates import EQ29_LINEARISATION, CandidateForce
 from .intervals import reported_uncertainty, train_levels
 from .selection import design
 
-__all__ = ["FORM_SUFFIX", "as_form", "confirmed_pick", "score_of", "PureSlipCheck", "describe", "withdrawn_note"]
+__all__ = ["FORM_SUFFIX", "as_form", "both_families", "confirmed_pick", "score_of", "PureSlipCheck", "describe",
+           "withdrawn_note"]
 
 #: appended to a withdrawn named family's name: the same force read as a generic term of the reduced model
 FORM_SUFFIX = "_form"
@@ -124,6 +127,7 @@ class PureSlipCheck:
         self.clock = clock if clock is not None else (lambda msg: None)
         self._base, self._failed = None, None
         self._current: dict = {}      # effects' labels -> the pure-slip model with them (re-identified once)
+        self._pending: dict = {}      # (round, label) -> (candidate, its pure-slip estimates), for the joint refit
 
     def _count(self, refits: int, nfev: int) -> None:
         if hasattr(self.clock, "count"):
@@ -159,6 +163,11 @@ class PureSlipCheck:
         m = refit(self.df, self.mask, self.m_s, model.params_, effects.add(c, c.clip(phi)),
                   self.settings.budget(self.final_nfev), max_outer=3)
         self._count(1, m.convergence_.get("nfev_total", 0))
+        return self.estimates_of(m, c)
+
+    def estimates_of(self, m, c: CandidateForce) -> dict:
+        """``{name: {"value", "stderr", "interval"}}`` of ``c``'s parameters in the joint fit ``m`` (fitted on the
+        check's TRAIN frame): the value and the report's interval (:func:`l1b2.closeloop.intervals.reported_uncertainty`)."""
         groups = train_levels(m, self.df)
         out = {}
         for n in c.names:
@@ -166,24 +175,30 @@ class PureSlipCheck:
             out[n] = {"value": _round(m.extra_params_[n]), "stderr": _round(u["stderr"]), "interval": u["interval"]}
         return out
 
-    def parameters(self, trial: RefitCV, effects: EffectSet, eq29, cur, y, A, S) -> dict:
-        """The named candidate's parameters from both families (``eq29``: the loop's current model; ``cur``: the
-        pure-slip one with the same effects; ``y, A, S``: the pure-slip design, whose least-squares fit starts it)."""
+    def parameters(self, trial: RefitCV, effects: EffectSet, cur, y, A, S) -> dict:
+        """The named candidate's pure-slip estimates (:meth:`estimates_of`): ``cur``, the pure-slip model with the
+        current ``effects``, and the candidate re-identified jointly, started from the least-squares fit of the
+        pure-slip design ``y, A, S``. The Eq. 29 side is the loop's joint refit (:meth:`record_joint_refit`)."""
         c = trial.candidate
         coef = np.linalg.lstsq(np.column_stack([A, S]), y, rcond=None)[0][A.shape[1]:]
-        ps = self._estimates(cur, effects.with_phi(cur.phi_) if effects.candidates else effects, c, coef)
-        e29 = self._estimates(eq29, effects, c, trial.phi)
-        out = {}
-        for n in c.names:
-            a, b = e29[n], ps[n]
-            d = (None if None in (a["value"], b["value"], a["stderr"], b["stderr"])
-                 else _round((b["value"] - a["value"]) / np.hypot(a["stderr"], b["stderr"])))
-            z = None if None in (b["value"], b["stderr"]) else _round(b["value"] / b["stderr"])
-            out[n] = {"eq29": a, self.family: b, "z_difference": d, f"z_{self.family}": z}
-        return out
+        return self._estimates(cur, effects.with_phi(cur.phi_) if effects.candidates else effects, c, coef)
 
-    def __call__(self, trial: RefitCV, effects: EffectSet, round_no: int, model=None) -> dict:
-        """The check's record of ``trial`` (a named candidate) against the current ``effects``."""
+    def record_joint_refit(self, records: list, model) -> None:
+        """Complete, in place, the ``"parameters"`` of the kept ``records`` (this round's checks) whose pure-slip
+        estimates were made: the Eq. 29 side from ``model``, the loop's joint re-identification of its current
+        model with the confirmed pick (the refit this check would otherwise repeat), by :func:`both_families`."""
+        for rec in records:
+            pending = self._pending.pop((rec["round"], rec["label"]), None)
+            if pending is not None and rec.get("outcome") == "kept":
+                c, ps = pending
+                rec["parameters"] = both_families(c, self.estimates_of(model, c), ps, self.family)
+
+    def __call__(self, trial: RefitCV, effects: EffectSet, round_no: int, estimate: bool = False) -> dict:
+        """The check's record of ``trial`` (a named candidate) against the current ``effects``.
+
+        ``estimate``: when the reading is confirmed, estimate its parameters from the pure-slip family
+        (:meth:`parameters`); the record's ``"parameters"`` are completed by :meth:`record_joint_refit` once the
+        loop has re-identified its model with the pick (a failed estimate: ``"parameters_note"``)."""
         c = trial.candidate
         self._baseline()    # its identification is a stage of its own
         self.clock(f"round {round_no}: checking the named {c.label} from the {self.family} family")
@@ -209,15 +224,29 @@ class PureSlipCheck:
         self._count(2 * len(folds), sum(e.nfev for e in errs))
         t = RefitCV(c, errs[0], errs[1])
         ok = accepts(t, min_gain=self.min_gain, min_drop=0.0)
-        if ok and model is not None:     # a reading that stands: its value from both families (decision 0048)
+        if ok and estimate:     # a reading that stands: its value from both families (decision 0048)
             try:
-                rec["parameters"] = self.parameters(trial, effects, model, cur, y, A, S)
+                self._pending[(int(round_no), c.label)] = (c, self.parameters(trial, effects, cur, y, A, S))
             except (FitDivergedError, IdentificationError) as e:
                 rec["parameters_note"] = f"the named parameters could not be estimated in both families ({e})"
         return {**rec, "checked": True, "confirmed": ok,
                 "cv_gain": _round(t.gain), "cv_free_run_nrmse_current": _round(t.current.nrmse),
                 "cv_free_run_nrmse_refit": _round(t.extended.nrmse), "folds_improved": t.folds_improved,
                 "folds": len(folds), "min_cv_gain": float(self.min_gain)}
+
+
+def both_families(c: CandidateForce, e29: dict, other: dict, family: str) -> dict:
+    """``{name: {"eq29", <family>, "z_difference", "z_<family>"}}``: ``c``'s estimates from Eq. 29 and from the
+    other ``family`` (each ``{name: {"value", "stderr", "interval"}}``), the difference of the two in units of their
+    combined standard error and the other family's value over its standard error (None where a figure is missing)."""
+    out = {}
+    for n in c.names:
+        a, b = e29[n], other[n]
+        d = (None if None in (a["value"], b["value"], a["stderr"], b["stderr"])
+             else _round((b["value"] - a["value"]) / np.hypot(a["stderr"], b["stderr"])))
+        z = None if None in (b["value"], b["stderr"]) else _round(b["value"] / b["stderr"])
+        out[n] = {"eq29": a, family: b, "z_difference": d, f"z_{family}": z}
+    return out
 
 
 def describe(rec: dict) -> str:

@@ -397,7 +397,7 @@ class CloseLoop(EstimatorSettings):
             pick, checks = confirmed_pick(
                 ok, lambda tr: named_reading(prefer(tr, self.parsimony, rl), tr,
                                              lambda n, g: geo.share(n.candidate, g.candidate, g.phi)),
-                (lambda t: check(t, it.effects, n_rnd, it.model)) if check is not None else (lambda t: None))
+                (lambda t: check(t, it.effects, n_rnd, True)) if check is not None else (lambda t: None))
             it.checks += checks
             if pick is None:
                 break
@@ -414,6 +414,8 @@ class CloseLoop(EstimatorSettings):
                 dtr, mask, f"the joint re-identification with {pick.candidate.label} (round {n_rnd})")
             it.model, it.effects = model, effects.with_phi(model.phi_)
             say.count(1, model.convergence_.get("nfev_total", 0))
+            if check is not None:     # a confirmed reading's Eq. 29 estimates are this refit's (decision 0054)
+                check.record_joint_refit(checks, model)
             cur_err = {}
             it.rounds.append({"round": n_rnd, "added": pick.candidate.label, "effect": pick.candidate.family,
                               "regressors": list(pick.candidate.regressors), "cv": pick.to_dict(),
