@@ -299,3 +299,43 @@ def test_equation_error_fit_with_and_without_the_compiled_projection(problem, mo
     slow = equation_error_fit(th0, varied, red, order, M_S, 0.5, 6, 0)
     assert fast[0][0] == pytest.approx(slow[0][0], rel=1e-6)
     np.testing.assert_allclose(fast[0][1], slow[0][1], rtol=1e-4, atol=1e-4 * np.max(np.abs(slow[0][1])))
+
+
+@pytest.mark.parametrize("lin_set", ["all linear", "p pinned in part"])
+def test_equation_error_jacobian_is_the_derivative_of_the_projected_residual(problem, lin_set):
+    # reference: central differences of the projection's residual (numpy form); their error falls as h^2 until
+    # rounding, so at h = 1e-4 (relative) they agree with the exact Jacobian to 1e-5 of its largest entry, column
+    # by column, and the largest error at h = 1e-3 is about 100 times that at 1e-4 (the h^2 law of an exact
+    # derivative; a wrong term would leave an error independent of h)
+    from l1b2.ident.reduced import equation_error_jacobian, equation_error_projection
+
+    order = 3
+    n1 = order + 1
+    red, th0 = _window_problem(problem, order)
+    Rc = red["R"] * red["cn"][None, :]
+    lin = {"all linear": [0] + list(range(5 + n1, th0.size)),
+           "p pinned in part": [0] + list(range(5 + n1, 5 + 2 * n1 + 2)) + [th0.size - 1]}[lin_set]
+    lin = np.array(lin, dtype=np.int64)
+    non = np.array([1, 2, 3, 4] + list(range(5, 5 + n1)))
+    rng = np.random.default_rng(4)
+    th = th0 * (1 + 0.2 * rng.standard_normal(th0.size))
+    th[3] = 0.4
+    th[5:5 + n1] += 0.05 * rng.standard_normal(n1)
+    tp, r = equation_error_projection(th, lin, Rc, red["qy"], order, M_S, 0.5)
+    J = equation_error_jacobian(tp, r, non, lin, Rc, order, M_S, 0.5)
+
+    def central(hr):
+        out = np.zeros_like(J)
+        for k, c in enumerate(non):
+            h = hr * max(abs(th[c]), 1e-3)
+            up, dn = th.copy(), th.copy()
+            up[c] += h
+            dn[c] -= h
+            out[:, k] = (equation_error_projection(up, lin, Rc, red["qy"], order, M_S, 0.5)[1]
+                         - equation_error_projection(dn, lin, Rc, red["qy"], order, M_S, 0.5)[1]) / (2 * h)
+        return out
+    err4 = np.max(np.abs(J - central(1e-4)), axis=0)
+    err3 = np.max(np.abs(J - central(1e-3)), axis=0)
+    scale = np.max(np.abs(J), axis=0)
+    assert np.all(err4 <= 1e-5 * scale)
+    assert np.max(err3 / scale) > 20 * np.max(err4 / scale)  # (columns nearly linear in theta are at rounding)
