@@ -50,7 +50,7 @@ from .search import sobol_box
 
 __all__ = [
     "CONVENTIONAL", "reduced_linear_fit", "reduced_of_theta", "reduced_linear_columns", "map_reduced_to_theta",
-    "equation_error_projection", "equation_error_jacobian", "equation_error_fit",
+    "equation_error_projection", "equation_error_fit",
     "data_driven_start", "slip_sigma_start", "reduced_summary", "init_theta",
 ]
 
@@ -327,52 +327,6 @@ def equation_error_projection(theta, lin, Rc, qy, order, m_s, kappa, kernel=None
     return th, A @ x - b
 
 
-def equation_error_jacobian(theta, r, non, lin, Rc, order, m_s, kappa, rcond=1e-13):
-    """d r / d theta[non] of the equation-error projection (:func:`equation_error_projection`), exact.
-
-    ``theta`` is a projected vector (``theta[lin]`` the least-squares solution x) and ``r`` its residual; ``non``:
-    the nonlinear parameters (sigma, mu, k0, mu_sd, alpha slots). With ``A = Rc Lc`` (the linear parameters'
-    columns) and ``g`` the reduced coefficients, ``r = A x - b`` varies as (Golub and Pereyra)
-
-        dr/dtheta_k = P (Rc dg/dtheta_k) - (A^+)^T (dLc/dtheta_k)^T Rc^T r,
-
-    ``P = I - A A^+`` (``dg/dtheta_k`` at the projected theta: :func:`reduced_of_theta`'s Jacobian column). ``A^+``
-    from the SVD of A, singular values below ``rcond`` times the largest dropped as numpy's ``lstsq`` drops them.
-    """
-    n1 = order + 1
-    nC = 2 * order + 1
-    _, Jg = reduced_of_theta(theta, order, m_s, kappa, jac=True)
-    A = Rc @ Jg[:, lin]
-    U, sv, Vt = np.linalg.svd(A, full_matrices=False)
-    keep = sv > rcond * sv[0]
-    U, sv, Vt = U[:, keep], sv[keep], Vt[keep]
-    first = Rc @ Jg[:, non]
-    first -= U @ (U.T @ first)
-    # (dLc/dtheta_k)^T s, s = Rc^T r: only the columns of p depend on theta[non] (through dC/dp)
-    sC = (Rc.T @ r)[2 * n1:2 * n1 + nC]
-    T = _legmul_tensor(order)
-    mu, k0 = float(theta[2]), float(theta[3])
-    al = theta[5:5 + n1]
-    M = T @ sC                                       # M[i, j] = sum_k T[i, j, k] sC[k]
-    alT = M @ al
-    hG = 0.5 * np.pi * float(G_of_k0(k0))
-    g1 = float(drive_factor(k0))
-    pos = {int(c): j for j, c in enumerate(lin) if 5 + 2 * n1 <= c < 5 + 3 * n1}
-    G = np.zeros((len(lin), len(non)))
-    for kk, c in enumerate(non):
-        for ci, j in pos.items():
-            i = ci - 5 - 2 * n1
-            if c == 2:
-                G[j, kk] = -hG * alT[i] + g1 * sC[i]
-            elif c == 3:
-                G[j, kk] = -mu * 0.5 * np.pi * float(dG_dk0(k0)) * alT[i] + mu * float(ddrive_factor_dk0(k0)) * sC[i]
-            elif c == 4:
-                G[j, kk] = -kappa * sC[i]
-            elif 5 <= c < 5 + n1:
-                G[j, kk] = -mu * hG * M[i, c - 5]
-    return first - U @ ((Vt @ G) / sv[:, None])
-
-
 def equation_error_fit(theta_start, varied, red, order, m_s, kappa, n_starts, seed, spread=1.0, floor=0.25,
                         max_nfev=100):
     """Fit the Eq. 35 structure to the window-integrated equation error.
@@ -391,9 +345,8 @@ def equation_error_fit(theta_start, varied, red, order, m_s, kappa, n_starts, se
     polynomial C(s) can be split into P(s) and (a - b A'(s)) in several
     ways), so it is multi-started from ``theta_start`` and scrambled Sobol
     points in the box ``z0 +- spread * max(|z0|, floor)`` (scaled
-    coordinates). Each search is scipy's trust-region ``least_squares`` with the
-    exact Jacobian of the projected residual (:func:`equation_error_jacobian`).
-    Returns the distinct local minima as ``(cost, theta)``, best first.
+    coordinates). Returns the distinct local minima as ``(cost, theta)``,
+    best first.
     """
     idx = np.flatnonzero(varied)
     n1 = order + 1
@@ -417,18 +370,10 @@ def equation_error_fit(theta_start, varied, red, order, m_s, kappa, n_starts, se
     scale = param_scale(theta_start, order)[non]
     lb, ub = lo[non] / scale, hi[non] / scale
 
-    last = {}  # the projection at the last point evaluated (least_squares asks for the Jacobian where it evaluated)
-
     def fun(zv):
         th = theta_start.copy()
         th[non] = zv * scale
-        last["z"], (last["theta"], last["r"]) = zv.copy(), project(th)
-        return last["r"]
-
-    def jac(zv):
-        if "z" not in last or not np.array_equal(zv, last["z"]):
-            fun(zv)
-        return equation_error_jacobian(last["theta"], last["r"], non, lin, Rc, order, m_s, kappa) * scale
+        return project(th)[1]
 
     z0 = strictly_inside(theta_start[non] / scale, lb, ub)
     starts = [z0] + [strictly_inside(z, lb, ub) for z in sobol_box(z0, n_starts - 1, seed, spread, floor)]
@@ -437,8 +382,7 @@ def equation_error_fit(theta_start, varied, red, order, m_s, kappa, n_starts, se
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
-                res = least_squares(fun, zs, jac=jac, bounds=(lb, ub), method="trf", x_scale=1.0,
-                                    max_nfev=max_nfev)
+                res = least_squares(fun, zs, bounds=(lb, ub), method="trf", x_scale=1.0, max_nfev=max_nfev)
         except (ValueError, np.linalg.LinAlgError):
             continue
         if np.isfinite(res.cost):
