@@ -5,13 +5,13 @@ For every world of ``bench_identify_worlds.py`` (about 19.7k TRAIN samples, the 
 solver (``joint``, the default and the close loop's, and ``offset_bracket``), the fit is run by the code of a
 git revision (``--old``, default ``main``; its package unpacked by ``git archive`` into a temporary folder) and
 by this tree (or the revision ``--new``), each in a fresh subprocess, alternately (``--repeat`` times). Each
-subprocess loads the data and compiles the numba kernels by a short fit first, then times one fit with ``time.process_time`` (CPU of that
-process). Printed per world and solver: CPU per identification (median of the repeats and the spread),
-evaluations, log-likelihood and its gap to the world's strict reference (decision 0045, read from the cache
-of ``bench_identify_worlds.py``; ``nan`` when it has not been made), for the old and the new code, and the
-ratio of the CPU medians. Faster evaluations that keep the path must not change it: the evaluations and the
-log-likelihood of old and new are printed next to each other (``same``: equal evaluations and log-likelihood
-within 1e-6 relative).
+subprocess loads the data and compiles the numba kernels by a short fit first, then times one fit with
+``time.process_time`` (CPU of that process). Printed per world and solver: CPU per identification (median of
+the repeats and the spread), evaluations, log-likelihood and its gap to the world's strict reference (decision
+0045, read from the cache of ``bench_identify_worlds.py``; ``nan`` when it has not been made), for the old and
+the new code, and the ratio of the CPU medians. Faster evaluations that keep the path must not change it: the
+evaluations and the log-likelihood of old and new are printed next to each other (``same``: equal evaluations
+and log-likelihood within 1e-6 relative); a change of path is judged by the two gaps.
 
 Usage: python bench/bench_identify_cost.py [--old main] [--new REV] [--worlds realistic/s0,...]
                                            [--solvers joint,offset_bracket] [--repeat 1] [--cache DIR]
