@@ -232,3 +232,70 @@ def test_reduced_linear_columns_are_those_of_the_full_reduced_jacobian_to_the_la
     assert np.array_equal(reduced_linear_columns(th, sub, order, M_S, 0.5), full[:, sub])
     with pytest.raises(ValueError):
         reduced_linear_columns(th, np.array([5]), order, M_S, 0.5)       # alpha_0 is not linear
+
+
+def _window_problem(problem, order):
+    """The equation-error fit's inputs on the small world: the reduced linear fit and Eq. 29's start there."""
+    from l1b2.ident.reduced import map_reduced_to_theta, reduced_linear_fit
+
+    prob, _, df = problem
+    data = SampleData(df, evaluation_mask(df))
+    s_center, s_half = data.position_scaling()
+    E = np.random.default_rng(1).standard_normal((data.layout.n, 2))
+    red = reduced_linear_fit(data, order, M_S, True, s_center, s_half, E=E)
+    th = np.concatenate([map_reduced_to_theta(red["D"], red["B"], red["C"], {}, order, M_S, 0.5), red["E"]])
+    return red, th
+
+
+@compiled
+@pytest.mark.parametrize("lin_set", ["all linear", "p pinned in part", "no extras varied"])
+def test_equation_error_projection_compiled_equals_the_numpy_form_to_rounding(problem, lin_set):
+    # reference: the numpy form (reduced_of_theta, reduced_linear_columns, numpy's lstsq); the compiled loop adds
+    # the same products in its own order, so the two agree to rounding: the residual to 1e-10 of |qy|, the
+    # projected parameters to 1e-7 relative (the window problem is ill-conditioned in some of them)
+    from l1b2.ident.reduced import equation_error_projection
+
+    order = 3
+    n1 = order + 1
+    red, th0 = _window_problem(problem, order)
+    Rc = red["R"] * red["cn"][None, :]
+    lin = {"all linear": [0] + list(range(5 + n1, th0.size)),
+           "p pinned in part": [0] + list(range(5 + n1, 5 + 2 * n1 + 2)) + [th0.size - 1],
+           "no extras varied": [0] + list(range(5 + n1, 5 + 3 * n1))}[lin_set]
+    lin = np.array(lin, dtype=np.int64)
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        th = th0 * (1 + 0.2 * rng.standard_normal(th0.size))
+        th[3] = rng.uniform(0.0, 0.9)                         # k0 inside its range
+        th[5:5 + n1] += 0.05 * rng.standard_normal(n1)        # a curved A'(s): the P * A' products matter
+        th_ref = th.copy()
+        a, ra = equation_error_projection(th, lin, Rc, red["qy"], order, M_S, 0.5)
+        b, rb = equation_error_projection(th, lin, Rc, red["qy"], order, M_S, 0.5, kernels.compiled_projection())
+        assert np.array_equal(th, th_ref)                     # the input is not modified
+        keep = np.setdiff1d(np.arange(th.size), lin)
+        assert np.array_equal(a[keep], th[keep]) and np.array_equal(b[keep], th[keep])
+        assert np.max(np.abs(ra - rb)) <= 1e-10 * np.max(np.abs(red["qy"]))
+        np.testing.assert_allclose(b[lin], a[lin], rtol=1e-7, atol=1e-12 * np.max(np.abs(a[lin])))
+        # and it is the least-squares solution: the residual orthogonal to the columns of the linear parameters
+        from l1b2.ident.reduced import reduced_linear_columns
+        A = Rc @ reduced_linear_columns(b, lin, order, M_S, 0.5)
+        assert np.max(np.abs(A.T @ rb)) <= 1e-8 * np.linalg.norm(A, axis=0).max() * np.linalg.norm(rb) + 1e-14
+
+
+@compiled
+def test_equation_error_fit_with_and_without_the_compiled_projection(problem, monkeypatch):
+    # the whole fit (forward-difference trust-region searches from several starts) compiled and with L1B2_JIT=0
+    # (then compiled_projection() is None and the numpy form runs): rounding differences do not move the best
+    # equation-error minimum found on the small world (cost to 1e-6 relative, theta to 1e-4 of its scale)
+    from l1b2.ident.reduced import equation_error_fit
+
+    order = 3
+    red, th0 = _window_problem(problem, order)
+    varied = np.ones(th0.size, bool)
+    varied[[1, 2, 3]] = False                                  # sigma, mu, k0 pinned (the recommended gauge)
+    fast = equation_error_fit(th0, varied, red, order, M_S, 0.5, 6, 0)
+    monkeypatch.setenv("L1B2_JIT", "0")
+    assert kernels.compiled_projection() is None
+    slow = equation_error_fit(th0, varied, red, order, M_S, 0.5, 6, 0)
+    assert fast[0][0] == pytest.approx(slow[0][0], rel=1e-6)
+    np.testing.assert_allclose(fast[0][1], slow[0][1], rtol=1e-4, atol=1e-4 * np.max(np.abs(slow[0][1])))
