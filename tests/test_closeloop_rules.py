@@ -145,6 +145,60 @@ def test_every_shape_of_a_shortlisted_family_that_passes_the_screen_is_cross_val
     assert prefer([trial(odd, 0.36), trial(quad, 0.35), trial(lin, 0.34)], 0.9).candidate is lin.candidate
 
 
+def _fold_trial(score, sse, cur):
+    """A refit trial of ``score``'s candidate with per-fold held-out SSE ``sse`` against the current model's ``cur``."""
+    cur = cur if isinstance(cur, acc.FoldErrors) else acc.FoldErrors(np.asarray(cur, float), np.full(len(cur), 100.0))
+    return acc.RefitCV(score.candidate, cur, acc.FoldErrors(np.asarray(sse, float), np.full(len(sse), 100.0)))
+
+
+def _gap_and_se(t, best):
+    # written out: per fold, (SSE_t - SSE_best) / mean(SSE_current); the gap is their mean, its standard error
+    # their sample standard deviation over sqrt(k)
+    d = (t.extended.sse - best.extended.sse) / np.mean(best.current.sse)
+    return d.mean(), d.std(ddof=1) / np.sqrt(len(d))
+
+
+def test_one_standard_error_rule_keeps_the_simplest_shape_of_a_family():
+    # reference: among one family's accepted shapes, those whose pooled CV gain is below the best's by at most one
+    # standard error of the per-fold gap are equivalent; the simplest of them is kept (fewest parameters, then the
+    # lowest polynomial degree of the shape: linear 1, quadratic 2, odd 3); another family is left alone
+    cur = acc.FoldErrors(np.array([10.0, 12.0, 8.0, 10.0]), np.full(4, 100.0))
+    odd = _fold_trial(_shaped("channel_h", "odd", 1e-4, 0.4), [5.0, 6.0, 4.0, 5.0], cur)        # gain 0.50, best
+    lin = _fold_trial(_shaped("channel_h", "linear", 1e-4, 0.3, n=1), [4.0, 8.0, 3.5, 5.5], cur)
+    quad = _fold_trial(_shaped("channel_h", "quadratic", 1e-4, 0.3), [5.6, 5.6, 4.6, 4.8], cur)
+    other = _fold_trial(_shaped("channel_k", "odd", 1e-4, 0.3), [9.0, 9.0, 9.0, 9.0], cur)
+    other_lin = _fold_trial(_shaped("channel_k", "linear", 1e-4, 0.3, n=1), [5.0, 5.0, 5.0, 5.0], cur)
+    assert odd.gain > lin.gain and odd.gain > quad.gain
+    gap, se = _gap_and_se(lin, odd)
+    assert 0 < gap <= se                                   # the linear shape is within one standard error
+    gap_o, se_o = _gap_and_se(other, other_lin)
+    assert gap_o > se_o                                    # channel_k: its odd shape is clearly worse
+    out = sel.simplest_within_one_se([other, odd, quad, lin, other_lin])
+    assert [t is u for t, u in zip(out, [lin, other_lin])] == [True, True] and len(out) == 2
+    # the linear shape beyond one standard error: the best (odd) or a simpler shape within the band (quadratic,
+    # degree 2 with the same two parameters) is kept; here the quadratic one is within it
+    far = _fold_trial(_shaped("channel_h", "linear", 1e-4, 0.3, n=1), [7.0, 8.0, 6.0, 7.0], cur)
+    assert _gap_and_se(far, odd)[0] > _gap_and_se(far, odd)[1]
+    assert 0 < _gap_and_se(quad, odd)[0] <= _gap_and_se(quad, odd)[1]
+    assert [t is quad for t in sel.simplest_within_one_se([odd, far, quad])] == [True]
+    assert [t is odd for t in sel.simplest_within_one_se([odd, far])] == [True]
+    # within one standard deviation of the per-fold gap but beyond its standard error (sd / sqrt(4)): the best
+    mid = _fold_trial(_shaped("channel_h", "linear", 1e-4, 0.3, n=1), [5.0, 9.0, 4.0, 6.0], cur)
+    gap, se = _gap_and_se(mid, odd)
+    assert se < gap <= 2 * se
+    assert [t is odd for t in sel.simplest_within_one_se([mid, odd])] == [True]
+    # the same parameters and degree (an interaction counts as its shape): the larger gain
+    a = _fold_trial(_shaped("channel_h", "linear", 1e-4, 0.3), [5.0, 6.0, 4.0, 5.0], cur)
+    b = _fold_trial(_shaped("channel_h", "linear", 1e-4, 0.31), [5.1, 6.0, 4.0, 5.0], cur)
+    assert [t is a for t in sel.simplest_within_one_se([b, a])] == [True]
+    # trials on other folds (a different current model): no gap can be computed, the best stays
+    lin_else = _fold_trial(_shaped("channel_h", "linear", 1e-4, 0.3, n=1), [4.0, 8.0, 3.5, 5.5],
+                           [10.0, 12.0, 8.0, 10.5])
+    assert [t is odd for t in sel.simplest_within_one_se([lin_else, odd])] == [True]
+    assert sel.simplest_within_one_se([]) == []
+    assert [sel.shape_degree(t.candidate) for t in (lin, quad, odd)] == [1, 2, 3]
+
+
 def test_significance_is_bonferroni_over_the_families_tested():
     scores = [_score("a", 0.001), _score("a", 0.2), _score("b", 0.004), _score("c", 0.5), _score("d", 0.02)]
     level = sel.significance_level(scores, alpha=0.02)

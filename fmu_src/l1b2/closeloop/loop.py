@@ -42,7 +42,8 @@ Procedure (TEST is never used for fitting or choosing):
       current model + candidate re-identified on ``refit_folds`` - 1 run folds
       (warm start, bounded budget) and predicting the held-out fold in free
       run; accepted when the pooled held-out sum of squares falls by
-      ``min_cv_gain`` in most folds; the most parsimonious within
+      ``min_cv_gain`` in most folds; of a family's accepted shapes the simplest within one standard error of
+      its best (:func:`~l1b2.closeloop.selection.simplest_within_one_se`); the most parsimonious within
       ``parsimony`` of the best CV gain is added, a named family instead of a generic term it explains
       unless the generic one is better by more than one standard error
       (:func:`~l1b2.closeloop.acceptance.named_reading`); from the Eq. 29 baseline a named pick must be accepted
@@ -93,7 +94,7 @@ from .intervals import added_parameters, reported_uncertainty, train_levels
 from .result import CloseLoopResult, ResidualAnalysis
 from .selection import (DEFAULT_ALPHA, DEFAULT_PARSIMONY, SHORTLIST_MIN_GAIN, Score, best_per_family, design,
                         named_alternatives, nuisance_forces, score_candidates, shape_alternatives, shortlist,
-                        significance_level)
+                        significance_level, simplest_within_one_se)
 
 
 def _quiet(msg: str) -> None:
@@ -390,8 +391,8 @@ class CloseLoop(EstimatorSettings):
             trials = [RefitCV(s.candidate, cur_err[time_dependent(s.candidate)], err, s.cv_gain, s.phi)
                       for s, err in zip(short, errs)]
             it.trials.append(trials)
-            ok = [t for t in trials if accepts(t, min_gain=self.min_cv_gain,
-                                               min_drop=materiality(t.candidate, self.min_cv_drop))]
+            ok = simplest_within_one_se([t for t in trials if accepts(
+                t, min_gain=self.min_cv_gain, min_drop=materiality(t.candidate, self.min_cv_drop))])
             if not ok:
                 break
             pick, checks = confirmed_pick(

@@ -36,7 +36,7 @@ import pandas as pd
 from ..data import measurements as dataio
 from ..predictor import model as pr
 from . import residuals as res
-from .acceptance import NAMED_SHARE, time_dependent
+from .acceptance import NAMED_SHARE, one_se_gap, time_dependent
 from .candidates import CandidateForce
 
 DEFAULT_MIN_GAIN = 0.5
@@ -311,6 +311,51 @@ def shape_alternatives(short: list[Score], scores: list[Score], *, level: float,
             if s.candidate.family in families and (s.candidate.family, shape_of(s.candidate)) not in taken
             and id(s.candidate) not in listed]
     return best_per_family(pool, key=lambda c: (c.family, shape_of(c)))
+
+
+#: a shape's polynomial degree in the channel's standardised value (:func:`shape_degree`)
+SHAPE_DEGREE = {"linear": 1, "quadratic": 2, "odd": 3}
+
+
+def shape_degree(candidate: CandidateForce) -> int:
+    """The degree of a candidate's shape as a polynomial in its channel's standardised value: 1 (``linear``, and
+    every candidate without a shape), 2 (``quadratic``), 3 (``odd``)."""
+    return SHAPE_DEGREE.get(shape_of(candidate), 1)
+
+
+def simplest_within_one_se(accepted: list) -> list:
+    """The accepted refits with each family's shapes reduced to one: the one-standard-error rule.
+
+    Per family of ``accepted`` (:class:`~l1b2.closeloop.acceptance.RefitCV` trials; a family has several when
+    :func:`shape_alternatives` sent its other shapes to the refit), the trial with the largest cross-validated gain
+    and every trial whose gain is below it by at most one standard error of the per-fold gap
+    (:func:`~l1b2.closeloop.acceptance.one_se_gap`, on the same folds and current model) are candidates; the
+    simplest is kept: fewest parameters, then the lowest :func:`shape_degree`, then the largest gain. A gap beyond
+    its standard error, or one that cannot be computed, leaves the best. Families with one trial, and the order of
+    the kept trials, are unchanged.
+    """
+    best: dict = {}
+    for t in accepted:
+        f = t.candidate.family
+        if f not in best or t.gain > best[f].gain:
+            best[f] = t
+
+    def close(t) -> bool:
+        b = best[t.candidate.family]
+        if t is b:
+            return True
+        gap = one_se_gap(t, b)
+        return gap is not None and gap[0] <= gap[1]
+
+    keep = {}
+    for t in accepted:
+        if close(t):
+            f = t.candidate.family
+            key = (t.candidate.n_params, shape_degree(t.candidate), -t.gain)
+            if f not in keep or key < keep[f][0]:
+                keep[f] = (key, t)
+    kept = {id(t) for _, t in keep.values()}
+    return [t for t in accepted if id(t) in kept]
 
 
 def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5, seed=0,
