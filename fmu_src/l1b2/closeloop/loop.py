@@ -88,6 +88,7 @@ from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT
 from .baselines import choose_baseline, identify_families, retag_structural
 from .crosscheck import PureSlipCheck, confirmed_pick, score_of, withdrawn_note
 from .events import with_event_clocks
+from .lags import with_lagged_channels
 from .evidence import channels_considered, order_traced
 from .guard import checked_fit
 from .intervals import added_parameters, reported_uncertainty, train_levels
@@ -241,6 +242,7 @@ class CloseLoop(EstimatorSettings):
         dtr = train.df
         dte = test.df if test is not None else None
         dtr, dte, event_rec = with_event_clocks(dtr, dte, self.response_columns)   # derived logged channels
+        dtr, dte, lag_rec = with_lagged_channels(dtr, dte, self.response_columns)
         mask_tr = np.array(train.mask)
 
         if self.baseline not in ("best",) + DRIVE_LAWS:
@@ -303,7 +305,8 @@ class CloseLoop(EstimatorSettings):
                                            levels)
         first = it.first_scores or []
         chosen = it.chosen
-        diagnosis = {**self._diagnosis(it, first, analysis, ext_params, chain_rec), "event_clocks": event_rec}
+        diagnosis = {**self._diagnosis(it, first, analysis, ext_params, chain_rec), "event_clocks": event_rec,
+                     "lagged_channels": lag_rec}
         self.result_ = CloseLoopResult(
             baseline=baseline, diagnosis=diagnosis, scores=first,
             significant=it.significant, chosen=chosen, extended=extended,

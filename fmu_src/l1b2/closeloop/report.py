@@ -123,7 +123,8 @@ class Diagnosis(_Record):
     and protocol signal with its first-round evidence, significant or not (its ``run_level`` entries: the
     evidence of its run mean for the runs' own deviations); ``run_level`` the first round's run-level
     deviations (:meth:`l1b2.closeloop.runlevel.RunLevelAnalysis.to_dict`; None when not estimated);
-    ``event_clocks`` the event clocks derived from logged step channels (:mod:`l1b2.closeloop.events`).
+    ``event_clocks`` the event clocks derived from logged step channels (:mod:`l1b2.closeloop.events`);
+    ``lagged_channels`` the low-passes derived from logged run settings (:mod:`l1b2.closeloop.lags`).
     ``named_checks``: every named pick of a round from the Eq. 29 baseline, cross-validated again from the
     pure-slip family (:mod:`l1b2.closeloop.crosscheck`), with its figures and outcome.
     The nested evidence stays JSON-shaped.
@@ -153,6 +154,7 @@ class Diagnosis(_Record):
     run_level: Any = None
     named_checks: list = field(default_factory=list)
     event_clocks: list = field(default_factory=list)
+    lagged_channels: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
         out = {f.name: getattr(self, f.name) for f in fields(self)}

@@ -1,0 +1,107 @@
+"""Lagged channels: a logged run setting seen through a store, its first-order low-pass on the session clock.
+
+A rig may log a setting that the design changes from run to run (a heater's power, a coolant's flow, a bias
+current) while the motor feels it through a store: a thermal mass, a charge, a soaked film. The effect then follows
+the setting's low-pass in session time, delayed by a few runs, and the setting's current value explains little of
+it. For each *run setting* the loop therefore derives the logged columns ``<column>_lag<n>r`` (:data:`TAU_RUNS`):
+
+    ``y' = (c - y) / tau`` on the session clock, ``c`` held at its last logged value between samples (a setting
+    holds through the pause until the next run's), ``y`` starting at the session's first value,
+    ``tau = n`` times the session's median run period (start to start),
+
+solved exactly sample to sample (``y_i = c_(i-1) + (y_(i-1) - c_(i-1)) exp(-(t_i - t_(i-1)) / tau)``), and considers
+each as one more logged channel (every form, shape and level of :mod:`l1b2.predictor.effects.channels` and the
+run-level evidence). The derivation reads only the logged channel and the clock, never a response; TRAIN and TEST
+are merged in time order when they are one session (:func:`l1b2.closeloop.events.one_session`), so TEST's first run
+carries the store TRAIN's runs filled; otherwise each frame from its own runs.
+
+A column is a run setting (:func:`run_settings`) when it is a logged candidate channel, constant within every run and
+changes between consecutive runs more often than a step channel may (more than once per
+:data:`l1b2.closeloop.events.MIN_BLOCK_RUNS` runs on average; a step channel gets its event clock instead). A
+channel that varies within runs is not lagged: its sensor already samples the path along the stroke.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from ..data import measurements as dataio
+from .candidates import channels_of
+from .events import MIN_BLOCK_RUNS, event_times, one_session, run_table
+
+#: the stores' time constants, in the session's median run period
+TAU_RUNS = (3, 10)
+
+
+def suffix(n) -> str:
+    """The column suffix of the lag of ``n`` run periods."""
+    return f"_lag{n}r"
+
+
+def lowpass(t, c, tau: float) -> np.ndarray:
+    """The first-order low-pass of the samples ``c`` at times ``t`` (sorted) with time constant ``tau`` [s]: ``c``
+    held between samples, the start at ``c[0]`` (module docstring)."""
+    t, c = np.asarray(t, float), np.asarray(c, float)
+    if not tau > 0:
+        raise ValueError(f"lag time constant {tau} s is not positive")
+    y = np.empty_like(c)
+    if len(c) == 0:
+        return y
+    decay = np.exp(-np.diff(t) / tau)
+    y[0] = c[0]
+    for i in range(1, len(c)):
+        y[i] = c[i - 1] + (y[i - 1] - c[i - 1]) * decay[i - 1]
+    return y
+
+
+def is_run_setting(tab: pd.DataFrame, within_run: bool) -> bool:
+    """The run-setting rule on one channel's run table (session order): constant within runs and more than one
+    change per :data:`~l1b2.closeloop.events.MIN_BLOCK_RUNS` runs."""
+    return (not within_run) and len(event_times(tab)) > len(tab) / MIN_BLOCK_RUNS
+
+
+def run_settings(df: pd.DataFrame, response_columns=None) -> list[str]:
+    """The run settings of a TRAIN frame (module docstring), in column order."""
+    return [ch["name"] for ch in channels_of(df, response_columns)
+            if ch["kind"] == "logged" and not any(ch["name"] + suffix(n) in df.columns for n in TAU_RUNS)
+            and is_run_setting(run_table([df], ch["name"]), ch["within_run"])]
+
+
+def run_period(tab: pd.DataFrame) -> float:
+    """The median start-to-start time of consecutive runs [s] (``tab``: :func:`~l1b2.closeloop.events.run_table`)."""
+    starts = tab["start"].to_numpy(float)
+    return float(np.median(np.diff(starts))) if len(starts) > 1 else 0.0
+
+
+def with_lagged_channels(train: pd.DataFrame, test: pd.DataFrame | None = None, response_columns=None):
+    """``(train, test, record)``: copies of the frames with the lags of every run setting of ``train`` appended
+    (``test`` None stays None), and ``record`` ``[{"channel", "lags", "tau_s", "one_session"}]``.
+
+    The frames are returned unchanged (not copied) when TRAIN has no run setting.
+    """
+    names = run_settings(train, response_columns)
+    clock = run_table([train, test], dataio.TIME)
+    period = run_period(clock)
+    if not names or not period > 0:
+        return train, test, []
+    train, test = train.copy(), (test.copy() if test is not None else None)
+    merged = one_session(clock)
+    taus = [n * period for n in TAU_RUNS]
+    record = []
+    for name in names:
+        frames = [df for df in (train, test) if df is not None and name in df.columns]
+        for session in [frames] if merged else [[df] for df in frames]:
+            t = np.concatenate([df[dataio.TIME].to_numpy(float) for df in session])
+            c = np.concatenate([df[name].to_numpy(float) for df in session])
+            order = np.argsort(t, kind="stable")
+            for n, tau in zip(TAU_RUNS, taus):
+                y = np.empty_like(c)
+                y[order] = lowpass(t[order], c[order], tau)
+                k = 0
+                for df in session:
+                    df[name + suffix(n)] = y[k:k + len(df)]
+                    k += len(df)
+        record.append({"channel": name, "lags": [name + suffix(n) for n in TAU_RUNS],
+                       "tau_s": [float(x) for x in taus], "one_session": merged})
+    return train, test, record

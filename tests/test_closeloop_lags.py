@@ -1,0 +1,62 @@
+"""Lagged channels: a logged run setting's first-order low-pass on the session clock (a store between the setting and
+the motor). Fast tests against the solution written out."""
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+
+def test_the_lowpass_is_the_exact_first_order_response_to_the_held_samples():
+    # reference: a unit step held from t = 2 s (the sample at 2 s is the first at 1): y = 1 - exp(-(t - 2)/tau) at
+    # the later samples, whatever their spacing (a 3 s pause between 4 and 7 s); before the step the start value
+    from l1b2.closeloop.lags import lowpass
+    tau = 1.7
+    t = np.array([0.0, 1.0, 2.0, 3.0, 4.0, 7.0, 7.5])
+    c = np.array([0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 1.0])
+    want = [0.0, 0.0, 0.0] + [1 - math.exp(-(x - 2.0) / tau) for x in t[3:]]
+    np.testing.assert_allclose(lowpass(t, c, tau), want, rtol=0, atol=1e-15)
+    # a setting held at 4 and then at 0: the charge of the first, the discharge of the second
+    y = lowpass([0.0, 5.0, 6.0, 9.0], [4.0, 0.0, 0.0, 0.0], 2.0)
+    q = 4.0 * (1 - math.exp(-5.0 / 2.0))
+    np.testing.assert_allclose(y, [4.0, 4.0, 4.0 * math.exp(-1 / 2.0), 4.0 * math.exp(-4 / 2.0)], atol=1e-14)
+    assert q < 4.0   # (the start is at the first value: no charge from zero)
+    with pytest.raises(ValueError, match="not positive"):
+        lowpass([0.0, 1.0], [1.0, 1.0], 0.0)
+
+
+def _frame(values, t0=0.0, run0=1, n=3, period=2.0):
+    rows = []
+    for k, v in enumerate(values):
+        for i in range(n):
+            rows.append({"time_s": t0 + k * period + 0.1 * i, "run": run0 + k, "position_m": 0.0, "voltage_V": 200.0,
+                         "direction": 1, "load_kg": 0.0, "speed_m_s": 0.1, "heater": v, "stepped": float(k // 4)})
+    return pd.DataFrame(rows)
+
+
+def test_a_run_setting_changes_more_often_than_a_step_channel_may():
+    from l1b2.closeloop.events import run_table
+    from l1b2.closeloop.lags import is_run_setting
+    tab = run_table([_frame([0, 1, 1, 1, 1, 1, 1, 2])], "heater")     # 2 changes in 8 runs: once per 4, a step
+    assert not is_run_setting(tab, False)
+    tab = run_table([_frame([0, 1, 1, 1, 2, 2, 2, 3])], "heater")     # 3 changes in 8 runs: one more
+    assert is_run_setting(tab, False) and not is_run_setting(tab, True)
+
+
+def test_lags_of_one_session_continue_from_train_into_test():
+    from l1b2.closeloop.lags import TAU_RUNS, lowpass, with_lagged_channels
+    v = [0.0, 2.0, 4.0, 2.0, 0.0, 4.0, 2.0, 4.0, 0.0, 2.0, 0.0, 4.0]
+    whole = _frame(v)
+    train, test = whole.iloc[:27].reset_index(drop=True), whole.iloc[27:].reset_index(drop=True)
+    tr, te, rec = with_lagged_channels(train, test)
+    assert [r["channel"] for r in rec] == ["heater"]      # the stepped column is a step channel, not lagged
+    for n, tau in zip(TAU_RUNS, rec[0]["tau_s"]):
+        assert tau == pytest.approx(2.0 * n)               # n median run periods (start to start 2 s)
+        want = lowpass(whole["time_s"], whole["heater"], tau)
+        np.testing.assert_allclose(np.concatenate([tr[f"heater_lag{n}r"], te[f"heater_lag{n}r"]]), want)
+    assert "heater_lag3r" not in train.columns             # copies, the inputs untouched
+    # no run setting: the frames come back as they are
+    plain = whole.drop(columns="heater")
+    a, b, r = with_lagged_channels(plain, None)
+    assert a is plain and b is None and r == []
