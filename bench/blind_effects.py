@@ -155,11 +155,8 @@ def experiment(kind: str, seed: int):
         r = traverse(mp, nominal, plan, V, L, d, T, f_of_t)
         idx = np.arange(0, len(r["time"]), every)
         t = r["time"][idx]
-        pos = np.round(np.round(r["Slider.s"][idx] / plan.encoder_resolution_m) * plan.encoder_resolution_m, 12)
-        f = (np.round([f_of_t(x) for x in t], 1) if f_of_t is not None else np.full(len(t), plan.f_drive_Hz))
-        out = pd.DataFrame({dataio.TIME: np.round(t_next + t, 9), dataio.RUN: k + 1, dataio.POSITION: pos,
-                            dataio.VOLTAGE: V, dataio.DIRECTION: d, dataio.LOAD: L,
-                            dataio.SPEED: np.round(np.gradient(pos, t), 9), dataio.FREQUENCY: f})
+        f = (np.round([f_of_t(x) for x in t], 1) if f_of_t is not None else None)
+        out = daq_frame(plan, t_next, k, t, r["Slider.s"][idx], V, L, d, f)
         noise = np.random.default_rng([seed, 78, k]).standard_normal(len(t))
         if kind == "chamber_temperature":
             out[dataio.TEMPERATURE] = np.round(r["Stator.T_stator"][idx] + 0.05 * noise, 2)
@@ -170,6 +167,23 @@ def experiment(kind: str, seed: int):
                         "pulley_mu": mp.slider.pulley_mu})
         S += TIP_SPEED_M_S * V / 324.0 * float(t[-1])
         t_next = float(out[dataio.TIME].iloc[-1]) + plan.pause_s
+    return finish(kind, frames, per_run, p, nominal, plan)
+
+
+def daq_frame(plan, t_next: float, k: int, t, s_m, V0, load, d, f_Hz=None, **extra) -> pd.DataFrame:
+    """Run ``k + 1`` as the DAQ records it: the slider's position ``s_m`` [m] at the times ``t`` [s] of the run
+    rounded to the encoder's resolution, the session clock offset by ``t_next`` [s], the speed the derivative of the
+    recorded position, the drive frequency ``f_Hz`` per sample (default the plan's), then the ``extra`` columns."""
+    pos = np.round(np.round(s_m / plan.encoder_resolution_m) * plan.encoder_resolution_m, 12)
+    return pd.DataFrame({dataio.TIME: np.round(t_next + t, 9), dataio.RUN: k + 1, dataio.POSITION: pos,
+                         dataio.VOLTAGE: V0, dataio.DIRECTION: d, dataio.LOAD: load,
+                         dataio.SPEED: np.round(np.gradient(pos, t), 9),
+                         dataio.FREQUENCY: np.full(len(t), plan.f_drive_Hz) if f_Hz is None else f_Hz, **extra})
+
+
+def finish(kind: str, frames, per_run, p: dict, nominal, plan):
+    """``(df, truth, nominal, plan)`` of an experiment: the runs' frames joined with the plan's speed noise, and the
+    truth (the kind, its drawn parameters, the per-run values, the plan)."""
     df = add_speed_noise(pd.concat(frames, ignore_index=True), plan)
     params = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in p.items()}
     truth = {"blind_kind": kind, "parameters": params, "per_run": per_run, "plan": plan.__dict__}
@@ -215,21 +229,31 @@ def loop_row(kind: str, seed: int, d: Path, **extra) -> tuple[dict, object]:
     return row, res
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("kind", choices=KINDS + ("clean",))
+def run_cli(argv, doc: str, kinds, make, row_extra):
+    """The audits' command line: ``KIND SEED [--cache DIR] [--data-only] [--report FILE]``; ``make(kind, seed)``
+    makes an experiment, ``row_extra(kind)`` gives the printed row's extra fields (see :func:`loop_row`)."""
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    ap.add_argument("kind", choices=tuple(kinds) + ("clean",))
     ap.add_argument("seed", type=int)
     ap.add_argument("--cache", default=default_cache())
+    ap.add_argument("--data-only", action="store_true", help="make (or find) the data and stop")
     ap.add_argument("--report", default="", help="write the close loop's whole result (report.json's content) here")
     args = ap.parse_args(argv)
-    d = data_dir(args.kind, args.seed, Path(args.cache))
-    ch = CHANNEL.get(args.kind)
-    row, res = loop_row(args.kind, args.seed, d,
-                        channel_considered=lambda names, diag: None if ch is None else ch in names)
+    d = data_dir(args.kind, args.seed, Path(args.cache), None if args.kind == "clean" else make)
+    if args.data_only:
+        print(d)
+        return
+    row, res = loop_row(args.kind, args.seed, d, **row_extra(args.kind))
     print(json.dumps(row))
     if args.report:
         Path(args.report).write_text(json.dumps(res.to_dict(), default=str))
 
+
+def main(argv=None):
+    def extra(kind):
+        ch = CHANNEL.get(kind)
+        return {"channel_considered": lambda names, diag: None if ch is None else ch in names}
+    run_cli(argv, __doc__, KINDS, experiment, extra)
 
 if __name__ == "__main__":
     main()

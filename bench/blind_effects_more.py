@@ -27,21 +27,18 @@ Usage: python bench/blind_effects_more.py KIND SEED [--cache DIR]     (KIND: one
 Prints one JSON line as ``bench/blind_effects.py`` does (traced first two, added, TEST free-run nrmse before and
 after, channels considered, CPU of the close loop by ``time.process_time``).
 """
-import argparse
-import json
 import math
 import sys
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import blind_effects as be  # noqa: E402  (adds fmu_src to the path)
 
 from l1b2.data import measurements as dataio  # noqa: E402
 from l1b2.physics.params import SYSTEM_MODELS_DIR, load_motor  # noqa: E402
-from l1b2.rig.experiment import (add_speed_noise, plan_runs, run_contact_factors, sampling_every,  # noqa: E402
+from l1b2.rig.experiment import (plan_runs, run_contact_factors, sampling_every,  # noqa: E402
                                  scattered_motor)
 
 KINDS = ("payload_swap", "sensor_gain_thermal", "clamp_decoy", "reclamp_relax")
@@ -122,19 +119,12 @@ def experiment(kind: str, seed: int):
             extra["case_temp_C"] = np.round(p["Tcase"][k] + 0.05 * noise[::-1], 2)
         elif kind == "reclamp_relax":
             extra["clamp_count"] = np.full(len(t), int(p["count"][k]))
-        pos = np.round(np.round(s / plan.encoder_resolution_m) * plan.encoder_resolution_m, 12)
-        out = pd.DataFrame({dataio.TIME: np.round(t_next + t, 9), dataio.RUN: k + 1, dataio.POSITION: pos,
-                            dataio.VOLTAGE: V, dataio.DIRECTION: d, dataio.LOAD: L,
-                            dataio.SPEED: np.round(np.gradient(pos, t), 9),
-                            dataio.FREQUENCY: np.full(len(t), plan.f_drive_Hz), **extra})
+        out = be.daq_frame(plan, t_next, k, t, s, V, L, d, **extra)
         frames.append(out)
         per_run.append({"run": k + 1, "mass_kg": mp.slider.mass_kg, "P0_N": mp.stator.P0_N,
                         "mu_p": mp.interface.mu_p})
         t_next = float(out[dataio.TIME].iloc[-1]) + plan.pause_s
-    df = add_speed_noise(pd.concat(frames, ignore_index=True), plan)
-    params = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in p.items()}
-    truth = {"blind_kind": kind, "parameters": params, "per_run": per_run, "plan": plan.__dict__}
-    return df, truth, nominal, plan
+    return be.finish(kind, frames, per_run, p, nominal, plan)
 
 
 def data_dir(kind: str, seed: int, cache: Path) -> Path:
@@ -142,24 +132,10 @@ def data_dir(kind: str, seed: int, cache: Path) -> Path:
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("kind", choices=KINDS + ("clean",))
-    ap.add_argument("seed", type=int)
-    ap.add_argument("--cache", default=be.default_cache())
-    ap.add_argument("--data-only", action="store_true", help="make (or find) the data and stop")
-    ap.add_argument("--report", default="", help="write the close loop's whole result (report.json's content) here")
-    args = ap.parse_args(argv)
-    d = data_dir(args.kind, args.seed, Path(args.cache))
-    if args.data_only:
-        print(d)
-        return
-    row, res = be.loop_row(args.kind, args.seed, d, channel=lambda names, diag: CHANNEL.get(args.kind),
-                           decoy=lambda names, diag: DECOY.get(args.kind),
-                           event_clocks=lambda names, diag: diag.get("event_clocks"))
-    print(json.dumps(row))
-    if args.report:
-        Path(args.report).write_text(json.dumps(res.to_dict(), default=str))
-
+    run_cli_extra = lambda kind: {"channel": lambda names, diag: CHANNEL.get(kind),  # noqa: E731
+                                  "decoy": lambda names, diag: DECOY.get(kind),
+                                  "event_clocks": lambda names, diag: diag.get("event_clocks")}
+    be.run_cli(argv, __doc__, KINDS, experiment, run_cli_extra)
 
 if __name__ == "__main__":
     main()
