@@ -121,14 +121,20 @@ def traverse(mp, nominal, plan, V0, load, d, T=None, f_of_t=None):
     return m.run(plan.max_run_s, record=rec, until=lambda mm: mm.value("Slider.at_stop") == d)
 
 
-def experiment(kind: str, seed: int):
-    """The 72-run experiment of one kind (``"clean"``: none) and its truth."""
+def setting(kind: str, seed: int, draw_of) -> tuple:
+    """``(plan, nominal, conds, factors, p, every)`` of an audit's experiment: the seed's plan, the realistic motor,
+    the plan's runs ``(V0, load, direction)``, each run's contact factors, the kind's draw ``draw_of(kind, seed,
+    n_runs)`` and the sampling stride of the co-simulation's output."""
     plan = plan_of(seed)
     nominal = load_motor(SYSTEM_MODELS_DIR / "realistic_motor.toml")
     conds = plan_runs(plan)
     factors = run_contact_factors(plan, len(conds))
-    p = draw(kind, seed, len(conds))
-    every = sampling_every(plan)
+    return plan, nominal, conds, factors, draw_of(kind, seed, len(conds)), sampling_every(plan)
+
+
+def experiment(kind: str, seed: int):
+    """The 72-run experiment of one kind (``"clean"``: none) and its truth."""
+    plan, nominal, conds, factors, p, every = setting(kind, seed, draw)
     frames, t_next, S = [], 0.0, 0.0
     per_run = []
     for k, (V, L, d) in enumerate(conds):

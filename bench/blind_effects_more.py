@@ -37,9 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import blind_effects as be  # noqa: E402  (adds fmu_src to the path)
 
 from l1b2.data import measurements as dataio  # noqa: E402
-from l1b2.physics.params import SYSTEM_MODELS_DIR, load_motor  # noqa: E402
-from l1b2.rig.experiment import (plan_runs, run_contact_factors, sampling_every,  # noqa: E402
-                                 scattered_motor)
+from l1b2.rig.experiment import scattered_motor  # noqa: E402
 
 KINDS = ("payload_swap", "sensor_gain_thermal", "clamp_decoy", "reclamp_relax")
 #: the logged channel each kind acts through
@@ -87,12 +85,7 @@ def readhead_temperature(p: dict, t: np.ndarray) -> np.ndarray:
 
 def experiment(kind: str, seed: int):
     """The 72-run experiment of one kind and its truth."""
-    plan = be.plan_of(seed)
-    nominal = load_motor(SYSTEM_MODELS_DIR / "realistic_motor.toml")
-    conds = plan_runs(plan)
-    factors = run_contact_factors(plan, len(conds))
-    p = draw(kind, seed, len(conds))
-    every = sampling_every(plan)
+    plan, nominal, conds, factors, p, every = be.setting(kind, seed, draw)
     frames, per_run, t_next = [], [], 0.0
     for k, (V, L, d) in enumerate(conds):
         mp = scattered_motor(nominal, factors[k])
