@@ -8,12 +8,6 @@ for a few floating-point operations per entry. The loops below make one pass (dF
 with the *same* floating-point operations in the same order, so their results are those of the numpy forms
 to the last bit (``tests/test_ident_kernels.py``).
 
-The equation-error fits of the data-driven start (:func:`l1b2.ident.reduced.equation_error_fit`) evaluate a
-variable projection on a problem of a few tens of rows thousands of times; in numpy each evaluation is about
-ten calls on tiny matrices (about 0.5 ms, nearly all call overhead). :func:`projection_loop` makes the whole
-evaluation one compiled call. Its least-squares solve is LAPACK's ``gelsd`` as numpy's ``lstsq``, but its
-products and sums are its own loops, so it agrees with the numpy form to rounding (not to the last bit).
-
 :func:`compiled_drive_derivative` and :func:`compiled_whitening` return the compiled loops (once per
 process, cached on disk like the physics kernels) or ``None`` when numba is missing or ``L1B2_JIT=0``;
 the callers then use their numpy forms.
@@ -27,9 +21,8 @@ from ..physics.jit import cached_kernel
 from ..predictor.model import G_of_k0, ddrive_factor_dk0, dG_dk0, drive_factor
 from ..units import G_M_S2
 
-__all__ = ["drive_derivative_loop", "whitening_loop", "scaled_whitening_loop", "projection_loop",
-           "compiled_drive_derivative", "compiled_whitening", "compiled_scaled_whitening", "compiled_projection",
-           "drive_derivative", "whitened", "scaled_whitened"]
+__all__ = ["drive_derivative_loop", "whitening_loop", "scaled_whitening_loop", "compiled_drive_derivative",
+           "compiled_whitening", "compiled_scaled_whitening", "drive_derivative", "whitened", "scaled_whitened"]
 
 
 def drive_derivative_loop(L, V0, E, vp, sg, Ap, P, w, cols, c, out):
@@ -130,90 +123,9 @@ def scaled_whitening_loop(S, rows, run, g, cg, sqrtR, scale, acc, out):
             out[i, k] = val if np.isfinite(val) else 0.0
 
 
-def projection_loop(th, lin, Rc, qy, T, n1, kappa, gms, r):
-    """The equation-error projection at ``th`` (Eq. 35 order, extras appended): ``th[lin]`` set to the least-squares
-    solution ``x`` of ``min |A x - b|`` (``rcond`` 1e-13) and ``r = A x - b``, with ``A = Rc Lc`` (``Lc``: the reduced
-    coefficients' columns of the linear parameters ``lin``) and ``b = qy - Rc g0`` (``g0``: the reduced coefficients
-    with ``th[lin] = 0``). The expressions are those of :func:`l1b2.ident.reduced.reduced_of_theta` and
-    :func:`~l1b2.ident.reduced.reduced_linear_columns`; ``T`` the Legendre product tensor (n1, n1, 2 n1 - 1),
-    ``gms = 9.81 m_s``. ``lin`` holds only c_r (0), beta, p and phi slots (the caller checks).
-    """
-    nC = 2 * n1 - 1
-    pt = 5 + 3 * n1
-    m = qy.size
-    q = lin.size
-    for j in range(q):
-        th[lin[j]] = 0.0
-    sig = th[1]
-    mu = th[2]
-    k0 = th[3]
-    musd = th[4]
-    sq = np.sqrt(1.0 - k0 * k0)
-    g1 = 2.0 * sq - 1.0
-    hG = 0.5 * np.pi * (2.0 * k0 * sq - 2.0 * np.arcsin(k0) + 0.5 * np.pi)
-    a = mu * g1 - musd * kappa
-    g0 = np.zeros(m)
-    for i in range(n1):
-        g0[i] = -sig * th[5 + i]
-        g0[n1 + i] = th[5 + n1 + i]
-    g0[0] += th[0] + 0.5 * sig
-    for k in range(m - (2 * n1 + nC)):
-        g0[2 * n1 + nC + k] = th[pt + k]
-    for i in range(n1):
-        pi_ = th[5 + 2 * n1 + i]
-        if pi_ != 0.0:
-            for j in range(n1):
-                pa = pi_ * th[5 + j]
-                for k in range(nC):
-                    g0[2 * n1 + k] -= mu * hG * pa * T[i, j, k]
-            g0[2 * n1 + i] += a * pi_
-    g0[2 * n1] -= musd * gms
-    Lc = np.zeros((m, q))
-    for jj in range(q):
-        c = lin[jj]
-        if c == 0:
-            Lc[0, jj] = 1.0
-        elif c < 5 + 2 * n1:
-            Lc[c - 5, jj] = 1.0
-        elif c < pt:
-            i = c - 5 - 2 * n1
-            for j in range(n1):
-                aj = th[5 + j]
-                for k in range(nC):
-                    Lc[2 * n1 + k, jj] -= mu * hG * aj * T[i, j, k]
-            Lc[2 * n1 + i, jj] += a
-        else:
-            Lc[2 * n1 + nC + c - pt, jj] = 1.0
-    A = np.zeros((m, q))
-    b = np.empty(m)
-    for i in range(m):
-        acc = 0.0
-        for k in range(m):
-            acc += Rc[i, k] * g0[k]
-        b[i] = qy[i] - acc
-        for jj in range(q):
-            c = lin[jj]
-            if c < 5 + 2 * n1 or c >= pt:  # a unit column of Lc (c_r, beta, phi): a column of Rc
-                A[i, jj] = Rc[i, c - 5 if c > 0 and c < pt else (0 if c == 0 else c - pt + 2 * n1 + nC)]
-                continue
-            acc = 0.0
-            for k in range(m):
-                acc += Rc[i, k] * Lc[k, jj]
-            A[i, jj] = acc
-    x = np.linalg.lstsq(A, b, rcond=1e-13)[0]
-    for jj in range(q):
-        th[lin[jj]] = x[jj]
-    for i in range(m):
-        acc = 0.0
-        for jj in range(q):
-            acc += A[i, jj] * x[jj]
-        r[i] = acc - b[i]
-
-
 _DERIVATIVE: list = []
 _WHITENING: list = []
 _SCALED_WHITENING: list = []
-_PROJECTION: list = []
 
 
 def compiled_drive_derivative():
@@ -238,14 +150,6 @@ def compiled_scaled_whitening():
         {"scaled_whitening_loop": scaled_whitening_loop}, "scaled_whitening_loop",
         "void(float64[:, ::1], int64[::1], int64[::1], float64[::1], float64[::1], float64[::1], float64[::1], "
         "float64[:, ::1], float64[:, :])"))
-
-
-def compiled_projection():
-    """:func:`projection_loop` compiled by numba (once per process), or None."""
-    return cached_kernel(_PROJECTION, lambda: (
-        {"projection_loop": projection_loop}, "projection_loop",
-        "void(float64[::1], int64[::1], float64[:, ::1], float64[::1], float64[:, :, ::1], int64, float64, float64, "
-        "float64[::1])"))
 
 
 def drive_derivative(core, theta, vp, sg, Ap, P, cols, w):

@@ -44,13 +44,12 @@ from ..predictor.model import (
     drive_factor,
 )
 from ..units import G_M_S2
-from .kernels import compiled_projection
 from .problem import SampleData, clip_theta, param_scale, strictly_inside
 from .search import sobol_box
 
 __all__ = [
     "CONVENTIONAL", "reduced_linear_fit", "reduced_of_theta", "reduced_linear_columns", "map_reduced_to_theta",
-    "equation_error_projection", "equation_error_fit",
+    "equation_error_fit",
     "data_driven_start", "slip_sigma_start", "reduced_summary", "init_theta",
 ]
 
@@ -300,33 +299,6 @@ def map_reduced_to_theta(dco, bco, cco, fixed, order, m_s, kappa):
     return np.clip(theta, lo, np.minimum(hi, np.where(np.isfinite(hi), hi, np.inf)))
 
 
-def equation_error_projection(theta, lin, Rc, qy, order, m_s, kappa, kernel=None):
-    """One evaluation of the equation-error fit's variable projection: ``(theta with theta[lin] = x, r)``.
-
-    ``x`` minimises ``|r|``, ``r = Rc g(theta) - qy`` with ``g`` the reduced coefficients
-    (:func:`reduced_of_theta`), which are affine in the parameters ``lin`` (c_r, beta, p, phi slots only);
-    ``Rc`` is the window problem's R factor with its column norms, ``qy`` its projected data. The solve is
-    ``lstsq`` with ``rcond`` 1e-13. ``kernel``: :func:`l1b2.ident.kernels.compiled_projection`'s compiled loop
-    (one call, the same expressions, equal to rounding), or None for the numpy form. ``theta`` is not modified.
-    """
-    th = np.array(theta, dtype=float)
-    if lin.size == 0:
-        return th, Rc @ reduced_of_theta(th, order, m_s, kappa) - qy
-    if kernel is not None:
-        r = np.empty(qy.size)
-        kernel(th, np.ascontiguousarray(lin, dtype=np.int64), np.ascontiguousarray(Rc, dtype=float),
-               np.ascontiguousarray(qy, dtype=float), _legmul_tensor(order), order + 1, float(kappa),
-               G_M_S2 * float(m_s), r)
-        return th, r
-    th[lin] = 0.0
-    g0 = reduced_of_theta(th, order, m_s, kappa)
-    A = Rc @ reduced_linear_columns(th, lin, order, m_s, kappa)
-    b = qy - Rc @ g0
-    x, *_ = np.linalg.lstsq(A, b, rcond=1e-13)
-    th[lin] = x
-    return th, A @ x - b
-
-
 def equation_error_fit(theta_start, varied, red, order, m_s, kappa, n_starts, seed, spread=1.0, floor=0.25,
                         max_nfev=100):
     """Fit the Eq. 35 structure to the window-integrated equation error.
@@ -350,16 +322,23 @@ def equation_error_fit(theta_start, varied, red, order, m_s, kappa, n_starts, se
     """
     idx = np.flatnonzero(varied)
     n1 = order + 1
-    Rc = np.ascontiguousarray(red["R"] * red["cn"][None, :], dtype=float)
-    qy = np.ascontiguousarray(red["qy"], dtype=float)
-    lin = np.array([i for i in idx if i == 0 or i >= 5 + n1], dtype=np.int64)
+    Rc = red["R"] * red["cn"][None, :]
+    qy = red["qy"]
+    lin = np.array([i for i in idx if i == 0 or i >= 5 + n1], dtype=int)
     non = np.array([i for i in idx if i not in set(lin.tolist())], dtype=int)
-
-    kernel = compiled_projection() if lin.size else None
 
     def project(th):
         """theta with the optimal linear parameters, and the residual."""
-        return equation_error_projection(th, lin, Rc, qy, order, m_s, kappa, kernel)
+        th = th.copy()
+        if lin.size == 0:
+            return th, Rc @ reduced_of_theta(th, order, m_s, kappa) - qy
+        th[lin] = 0.0
+        g0 = reduced_of_theta(th, order, m_s, kappa)
+        A = Rc @ reduced_linear_columns(th, lin, order, m_s, kappa)
+        b = qy - Rc @ g0
+        x, *_ = np.linalg.lstsq(A, b, rcond=1e-13)
+        th[lin] = x
+        return th, A @ x - b
 
     if idx.size == 0:
         return [(float("nan"), theta_start)]
