@@ -4,17 +4,17 @@
 For every world of ``bench_identify_worlds.py`` (about 19.7k TRAIN samples, the same cached data) and each
 solver (``joint``, the default and the close loop's, and ``offset_bracket``), the fit is run by the code of a
 git revision (``--old``, default ``main``; its package unpacked by ``git archive`` into a temporary folder) and
-by this tree, each in a fresh subprocess, alternately (``--repeat`` times). Each subprocess loads the data and
-compiles the numba kernels by a short fit first, then times one fit with ``time.process_time`` (CPU of that
-process). Printed per world and solver: CPU per identification (median of the repeats and the spread),
-evaluations, log-likelihood and its gap to the world's strict reference (decision 0045, read from the cache
-of ``bench_identify_worlds.py``; ``nan`` when it has not been made), for the old and the new code, and the
-ratio of the CPU medians. Faster evaluations must not change the path: the evaluations and the
-log-likelihood of old and new are printed next to each other (``same``: equal evaluations and log-likelihood
-within 1e-6 relative).
+by this tree (or the revision ``--new``), each in a fresh subprocess, alternately (``--repeat`` times). Each
+subprocess loads the data and compiles the numba kernels by a short fit first, then times one fit with
+``time.process_time`` (CPU of that process). Printed per world and solver: CPU per identification (median of
+the repeats and the spread), evaluations, log-likelihood and its gap to the world's strict reference (decision
+0045, read from the cache of ``bench_identify_worlds.py``; ``nan`` when it has not been made), for the old and
+the new code, and the ratio of the CPU medians. Faster evaluations that keep the path must not change it: the
+evaluations and the log-likelihood of old and new are printed next to each other (``same``: equal evaluations
+and log-likelihood within 1e-6 relative); a change of path is judged by the two gaps.
 
-Usage: python bench/bench_identify_cost.py [--old main] [--worlds realistic/s0,...] [--solvers joint,offset_bracket]
-                                           [--repeat 1] [--cache DIR]
+Usage: python bench/bench_identify_cost.py [--old main] [--new REV] [--worlds realistic/s0,...]
+                                           [--solvers joint,offset_bracket] [--repeat 1] [--cache DIR]
 """
 import argparse
 import json
@@ -104,6 +104,15 @@ def run(src: Path, data: Path, solver: str) -> dict:
     return res
 
 
+def unpack(rev: str, into: Path) -> Path:
+    """The package of git revision ``rev`` unpacked under ``into``; returns its ``fmu_src``."""
+    into.mkdir(parents=True)
+    archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev, "fmu_src"], check=True,
+                             capture_output=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(into)], input=archive, check=True)
+    return into / "fmu_src"
+
+
 def best_reference(cache: Path, world: str) -> float:
     from bench_identify_worlds import reference_names
     path = cache / f"reference_{world.replace('/', '_')}.json"
@@ -120,6 +129,7 @@ def main(argv=None):
     from bench_identify_worlds import WORLDS, dataset
     ap = argparse.ArgumentParser()
     ap.add_argument("--old", default="main", help="git revision of the old code")
+    ap.add_argument("--new", default="", help="git revision of the new code (default: this working tree)")
     ap.add_argument("--worlds", default=",".join(WORLDS))
     ap.add_argument("--solvers", default=",".join(SOLVERS))
     ap.add_argument("--repeat", type=int, default=1)
@@ -129,10 +139,8 @@ def main(argv=None):
     cache = Path(args.cache)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        archive = subprocess.run(["git", "-C", str(ROOT), "archive", args.old, "fmu_src"], check=True,
-                                 capture_output=True).stdout
-        subprocess.run(["tar", "-x", "-C", tmp], input=archive, check=True)
-        srcs = {"old": Path(tmp) / "fmu_src", "new": ROOT / "fmu_src"}
+        srcs = {"old": unpack(args.old, Path(tmp) / "old"),
+                "new": unpack(args.new, Path(tmp) / "new") if args.new else ROOT / "fmu_src"}
         for world in args.worlds.split(","):
             data = dataset(cache, world)
             best = best_reference(cache, world)
@@ -148,9 +156,11 @@ def main(argv=None):
                               + "; one call (CPU ms): " + ", ".join(f"{k} {v:.2f}" for k, v in r["pieces"].items()),
                               flush=True)
                 rows.append((world, solver, res, best))
-    print(f"\nold = {args.old}, new = this tree; CPU [s]: median (min-max) of {args.repeat} run(s) each\n")
+    print(f"\nold = {args.old}, new = {args.new or 'this tree'}; CPU [s]: median (min-max) of {args.repeat} "
+          "run(s) each\n")
     print(f"{'world':>13} {'samples':>7} {'solver':>15} {'CPU old':>16} {'CPU new':>16} {'new/old':>7} "
-          f"{'nfev old/new':>12} {'loglik old':>13} {'loglik new':>13} {'- ref (new)':>11} {'path':>5}")
+          f"{'nfev old/new':>12} {'loglik old':>13} {'loglik new':>13} {'- ref (old)':>11} {'- ref (new)':>11} "
+          f"{'path':>5}")
     for world, solver, res, best in rows:
         o, n = res["old"][-1], res["new"][-1]
 
@@ -161,7 +171,8 @@ def main(argv=None):
         same = all(a["nfev"] == b["nfev"] and abs(a["loglik"] - b["loglik"]) <= 1e-6 * abs(a["loglik"])
                    for a, b in zip(res["old"], res["new"]))
         print(f"{world:>13} {n['n']:7d} {solver:>15} {so:>16} {sn:>16} {mn / mo:7.2f} "
-              f"{o['nfev']:>5d}/{n['nfev']:<6d} {o['loglik']:13.3f} {n['loglik']:13.3f} {n['loglik'] - best:11.3f} "
+              f"{o['nfev']:>5d}/{n['nfev']:<6d} {o['loglik']:13.3f} {n['loglik']:13.3f} "
+              f"{o['loglik'] - best:11.3f} {n['loglik'] - best:11.3f} "
               f"{'same' if same else 'DIFF':>5}")
 
 
