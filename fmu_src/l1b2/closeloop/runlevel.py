@@ -140,16 +140,29 @@ def design_rows(z: np.ndarray | None, n: int, p: int) -> np.ndarray:
 
 def signal_design(z: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
     """The mean's design of a signal, ``(n, 2, 5)`` (``(n, 2, 4)`` without ``w``): gain row ``[1, z, 0, 0, 0]``,
-    offset row ``[0, 0, 1, z, z w]``; coefficients ``(g0, g1, o0, o1, o2)``."""
+    offset row ``[0, 0, 1, z, z w]``; coefficients ``(g0, g1, o0, o1, o2)``.
+
+    ``z`` (n, q), q columns (a categorical signal's centred level indicators): ``(n, 2, 2 + 3 q)``, gain row
+    ``[1, Z, 0, 0.., 0..]``, offset row ``[0, 0.., 1, Z, Z w]`` (:func:`signal_index`: where the signal's are)."""
     z = np.asarray(z, float)
     n = len(z)
-    one, zero = np.ones(n), np.zeros(n)
-    gain = [one, z, zero, zero]
-    off = [zero, zero, one, z]
+    Z = z.reshape(n, -1)
+    one, zero = np.ones((n, 1)), np.zeros(Z.shape)
+    gain = [one, Z, 0 * one, zero]
+    off = [0 * one, zero, one, Z]
     if w is not None:
         gain.append(zero)
-        off.append(z * np.asarray(w, float))
-    return np.stack([np.column_stack(gain), np.column_stack(off)], axis=1)
+        off.append(Z * np.asarray(w, float)[:, None])
+    return np.stack([np.hstack(gain), np.hstack(off)], axis=1)
+
+
+def signal_index(q: int, load: bool) -> list:
+    """The coefficients of a signal of ``q`` columns in :func:`signal_design` (gain, offset[, load] slopes):
+    ``[1, 3, 4]`` for one column with the load, ``3 q`` (``2 q`` without) in all, the joint test's degrees of
+    freedom."""
+    gain = list(range(1, 1 + q))
+    off = list(range(2 + q, 2 + 2 * q))
+    return gain + off + (list(range(2 + 2 * q, 2 + 3 * q)) if load else [])
 
 
 def reml(theta: np.ndarray, cov: np.ndarray, X: np.ndarray | None = None, *, n_iter: int = REML_ITER,
@@ -229,12 +242,27 @@ class SignalEvidence:
     #: the label of a correlated significant signal whose evidence given this one is stronger than this one's
     #: given it (:func:`dominated_signals`); None: not dominated
     dominated_by: str | None = None
+    #: a categorical signal's TRAIN levels and the runs' shares of all but the last (None: a value signal); its
+    #: ``coef`` is then ``(gain, offset, load)`` per level but the last, against the runs' average, flat
+    levels: tuple | None = None
+    shares: tuple | None = None
+    #: the joint test's degrees of freedom
+    dof: int = 0
 
     def to_dict(self) -> dict:
-        return {"signal": self.label, "regressor": self.regressor, "p_value": self.p_value, "cv_gain": self.cv_gain,
-                "gain_per_sd": self.coef[0], "offset_per_sd_N": self.coef[1],
-                "load_offset_per_sd_N": self.coef[2], "significant": self.significant,
-                "folds": "session blocks" if self.blocked_folds else "runs", "dominated_by": self.dominated_by}
+        out = {"signal": self.label, "regressor": self.regressor, "p_value": self.p_value, "cv_gain": self.cv_gain,
+               "gain_per_sd": self.coef[0], "offset_per_sd_N": self.coef[1],
+               "load_offset_per_sd_N": self.coef[2], "significant": self.significant,
+               "folds": "session blocks" if self.blocked_folds else "runs", "dominated_by": self.dominated_by,
+               "dof": self.dof}
+        if self.levels is not None:
+            q = len(self.levels) - 1
+            c = list(self.coef) + [0.0] * (3 * q - len(self.coef))
+            out.update(gain_per_sd=None, offset_per_sd_N=None, load_offset_per_sd_N=None,
+                       levels=list(self.levels),
+                       per_level={str(v): {"gain": c[j], "offset_N": c[q + j], "load_offset_N": c[2 * q + j]}
+                                  for j, v in enumerate(self.levels[:-1])})
+        return out
 
 
 def run_signals(df: pd.DataFrame, channels) -> list[dict]:
@@ -249,6 +277,7 @@ def run_signals(df: pd.DataFrame, channels) -> list[dict]:
             continue
         out.append({"channel": ch["name"], "transform": "none", "values": first[ch["name"]].mean().to_numpy(float),
                     "run_spread": fx.channels.run_spread(df[ch["name"]], df[dataio.RUN])})
+    out += category_signals(df, channels)
     d = first[dataio.DIRECTION].first().to_numpy(float)
     for col, tr in fx.channels.INPUT_SIGNALS:
         values = fx.channels.transformed(first[col].mean().to_numpy(float), d, tr)
@@ -256,6 +285,47 @@ def run_signals(df: pd.DataFrame, channels) -> list[dict]:
         out.append({"channel": col, "transform": tr, "values": values,
                     "run_spread": fx.channels.run_spread(samples, df[dataio.RUN])})
     return [s for s in out if np.all(np.isfinite(s["values"])) and np.std(s["values"]) > 0]
+
+
+def category_signals(df: pd.DataFrame, channels) -> list[dict]:
+    """The categorical signals of a frame: each logged channel that is constant within every run, no FMU input
+    (an input has its own physics and signals) and a category by
+    :func:`l1b2.predictor.effects.channels.category_levels`; as :func:`run_signals`' entries with transform
+    ``category``, ``levels`` and ``shares``. None in most data: nothing then costs anything."""
+    out = []
+    for ch in channels:
+        col = ch["name"]
+        if (ch.get("kind") != "logged" or ch.get("within_run", True) or col not in df.columns
+                or col in fx.channels.INPUT_COLUMNS):
+            continue
+        values = df.groupby(dataio.RUN, sort=False)[col].first().to_numpy(float)
+        cat = fx.channels.category_levels(values)
+        if cat is not None:
+            out.append({"channel": col, "transform": fx.channels.CATEGORY, "values": values, "levels": cat[0],
+                        "shares": cat[1], "run_spread": fx.channels.run_spread(df[col], df[dataio.RUN])})
+    return out
+
+
+def signal_columns(sg: dict) -> tuple[np.ndarray, float, float]:
+    """A signal's columns in the run-level mean and its mean and sd: ``z = (v - mean) / sd`` (n,) of a value
+    signal, the centred level indicators (n, L - 1) of a categorical one (mean 0, sd 1)."""
+    v = np.asarray(sg["values"], float)
+    if sg.get("transform") == fx.channels.CATEGORY:
+        return fx.channels.category_columns(v, sg["levels"], sg["shares"]), 0.0, 1.0
+    mean, sd = float(np.mean(v)), float(np.std(v))
+    return (v - mean) / sd, mean, sd
+
+
+def independent_columns(Z: np.ndarray) -> np.ndarray:
+    """The columns of ``Z`` (n, q) that add to the rank of ``[1, the columns kept so far]``, in order (a fold
+    whose training runs miss a level: its indicator is then constant, or the others sum to one)."""
+    Z = np.asarray(Z, float).reshape(len(Z), -1)
+    keep: list = []
+    for j in range(Z.shape[1]):
+        M = np.column_stack([np.ones(len(Z)), Z[:, keep + [j]]])
+        if np.linalg.matrix_rank(M) == len(keep) + 2:
+            keep.append(j)
+    return np.array(keep, int)
 
 
 def _weighted_sse(theta, cov, T, X, beta) -> np.ndarray:
@@ -272,10 +342,12 @@ def cv_signal_gain(theta, cov, z, folds_idx, w=None) -> tuple[float, np.ndarray]
     the same for both) are compared: gain ``1 - sum SSE1 / sum SSE0``.
     """
     n, p = theta.shape
-    X0, X1 = design_rows(None, n, p), signal_design(z, w)
+    Z = np.asarray(z, float).reshape(n, -1)
+    X0 = design_rows(None, n, p)
     s0, s1 = np.zeros(n), np.zeros(n)
     for te in folds_idx:
         tr = np.setdiff1d(np.arange(n), te)
+        X1 = signal_design(Z if Z.shape[1] == 1 else Z[:, independent_columns(Z[tr])], w)
         f0 = reml(theta[tr], cov[tr], X0[tr], n_iter=100)
         f1 = reml(theta[tr], cov[tr], X1[tr], n_iter=100)
         s0[te] = _weighted_sse(theta[te], cov[te], f0.T, X0[te], f0.beta)
@@ -302,37 +374,65 @@ def signal_evidence(dev: RunDeviations, signals_, *, alpha: float, k: int, seed:
     blocks = [np.sort(b) for b in np.array_split(order, min(k, n))]
     zs = []
     for sg in signals_:
-        v = np.asarray(sg["values"], float)
-        mean, sd = float(np.mean(v)), float(np.std(v))
-        z = (v - mean) / sd
-        fit = reml(dev.theta, dev.cov, signal_design(z, dev.load))
-        idx = [1, 3, 4] if dev.load is not None else [1, 3]     # (g1, o1[, o2]) of signal_design
-        b = fit.beta[idx]
-        C = fit.beta_cov[np.ix_(idx, idx)]
-        try:
-            wald = float(b @ np.linalg.solve(C, b))
-            p = float(stats.chi2.sf(wald, len(idx)))
-        except np.linalg.LinAlgError:
-            p = 1.0
+        z, mean, sd = signal_columns(sg)
+        b, p, dof = joint_test(dev, z)
         blocked = sg["channel"] == fx.channels.SESSION_TIME
         gain, per_run = cv_signal_gain(dev.theta, dev.cov, z, blocks if blocked else rand, dev.load)
         label = fx.channels.signal_label(sg["channel"], sg["transform"])
+        cat = sg.get("transform") == fx.channels.CATEGORY
         out.append(SignalEvidence(sg["channel"], sg["transform"], label, fx.channels.regressor_of(sg["channel"]),
                                   mean, sd, p, gain, tuple(float(x) for x in b) + (0.0,) * (3 - len(b)),
                                   bool(p < level and gain > 0),
-                                  blocked, per_run, sg.get("run_spread")))
+                                  blocked, per_run, sg.get("run_spread"),
+                                  levels=tuple(sg["levels"]) if cat else None,
+                                  shares=tuple(sg["shares"]) if cat else None, dof=dof))
         zs.append(z)
-    dominated = dominated_signals(dev, [e.significant for e in out], zs)
+    dominated = dominated_signals(dev, [e.significant for e in out], zs, level)
     for e, dom in zip(out, dominated):
         e.dominated_by = out[dom].label if dom is not None else None
     return sorted(out, key=lambda e: (e.dominated_by is not None, e.p_value, -e.cv_gain))
 
 
+def joint_test(dev: RunDeviations, z: np.ndarray) -> tuple[np.ndarray, float, int]:
+    """``(b, p, dof)``: a signal's coefficients in the REML mean of :func:`signal_design` (:func:`signal_index`),
+    the p-value of their joint Wald test ``b' C^-1 b`` (``C`` their block of REML's ``beta_cov``) against
+    chi-square with ``dof = len(b)`` degrees of freedom: 3 per column of ``z`` (2 without load variation)."""
+    Z = np.asarray(z, float).reshape(len(z), -1)
+    idx = signal_index(Z.shape[1], dev.load is not None)
+    fit = reml(dev.theta, dev.cov, signal_design(z, dev.load))
+    b = fit.beta[idx]
+    C = fit.beta_cov[np.ix_(idx, idx)]
+    try:
+        p = float(stats.chi2.sf(float(b @ np.linalg.solve(C, b)), len(idx)))
+    except np.linalg.LinAlgError:
+        p = 1.0
+    return b, p, len(idx)
+
+
+def _beyond(z: np.ndarray, given: np.ndarray) -> np.ndarray:
+    """The part of ``z``'s columns that ``given``'s (and a constant) do not span: ``z`` itself when together they
+    have full rank, else an orthonormal basis of its residual on them (no column: ``z`` is nested in ``given``)."""
+    Z = np.asarray(z, float).reshape(len(z), -1)
+    G = np.column_stack([np.ones(len(Z)), np.asarray(given, float).reshape(len(Z), -1)])
+    if np.linalg.matrix_rank(np.column_stack([G, Z])) == G.shape[1] + Z.shape[1]:
+        return z
+    R = Z - G @ np.linalg.lstsq(G, Z, rcond=None)[0]
+    u, sv, _ = np.linalg.svd(R, full_matrices=False)
+    return u[:, sv > 1e-9 * max(float(np.linalg.norm(Z)), 1e-300)] * np.sqrt(len(Z))
+
+
 def conditional_p(dev: RunDeviations, z: np.ndarray, given: np.ndarray) -> float:
-    """Wald p-value of the signal ``z``'s coefficients (``g1, o1[, o2]`` of :func:`signal_design`) in the mean
-    that also holds the signal ``given``'s: its evidence beyond what ``given`` explains."""
-    idx = [1, 3, 4] if dev.load is not None else [1, 3]
-    X = np.concatenate([signal_design(z, dev.load), signal_design(given, dev.load)[:, :, idx]], axis=2)
+    """Wald p-value of the signal ``z``'s coefficients (``g1, o1[, o2]`` of :func:`signal_design`, per column) in
+    the mean that also holds the signal ``given``'s: its evidence beyond what ``given`` explains. Of a ``z`` whose
+    columns ``given``'s span in part, only the rest is tested (:func:`_beyond`); nested in ``given``: 1."""
+    z = _beyond(z, given)
+    Z = np.asarray(z, float).reshape(len(z), -1)
+    G = np.asarray(given, float).reshape(len(Z), -1)
+    if Z.shape[1] == 0:
+        return 1.0
+    load = dev.load is not None
+    idx, gidx = signal_index(Z.shape[1], load), signal_index(G.shape[1], load)
+    X = np.concatenate([signal_design(z, dev.load), signal_design(given, dev.load)[:, :, gidx]], axis=2)
     try:
         fit = reml(dev.theta, dev.cov, X)
         b, C = fit.beta[idx], fit.beta_cov[np.ix_(idx, idx)]
@@ -341,22 +441,40 @@ def conditional_p(dev: RunDeviations, z: np.ndarray, given: np.ndarray) -> float
         return 1.0
 
 
-def dominated_signals(dev: RunDeviations, significant, zs) -> list:
+def run_correlation(a: np.ndarray, b: np.ndarray) -> float:
+    """How closely two signals' run values follow each other: ``|r|`` of two value signals, the largest canonical
+    correlation when one has several columns (a category: 1 for the linear value of the same channel)."""
+    A, B = (np.asarray(x, float).reshape(len(x), -1) for x in (a, b))
+    if A.shape[1] == 1 and B.shape[1] == 1:
+        return abs(float(np.corrcoef(A[:, 0], B[:, 0])[0, 1]))
+    qa, qb = (np.linalg.qr(M - M.mean(axis=0))[0] for M in (A, B))
+    return float(np.linalg.svd(qa.T @ qb, compute_uv=False).max())
+
+
+def dominated_signals(dev: RunDeviations, significant, zs, level: float = 0.0) -> list:
     """Per signal, the index of a significant signal that dominates it, else None.
 
-    Two significant signals whose run values correlate (``|r| >=`` :data:`DOMINANCE_CORR`: a logged channel and
-    another that follows it, such as two temperatures of one rig) both explain the runs' deviations on their own;
-    the one whose evidence given the other (:func:`conditional_p`) is the weaker is dominated and is offered after
-    every undominated one. The rest keep the order of their own evidence.
+    Two significant signals whose run values correlate (:func:`run_correlation` ``>=`` :data:`DOMINANCE_CORR`: a
+    logged channel and another that follows it, such as two temperatures of one rig) both explain the runs'
+    deviations on their own; the one whose evidence given the other (:func:`conditional_p`) is the weaker is
+    dominated and is offered after every undominated one. When one is nested in the other (a channel's value in
+    its category's indicators), the larger dominates only if its evidence beyond the smaller is below ``level``;
+    else the smaller does. The rest keep the order of their own evidence.
     """
     out = [None] * len(zs)
     sig = [i for i, s in enumerate(significant) if s]
     for a in sig:
         for b in sig:
-            if b <= a or abs(float(np.corrcoef(zs[a], zs[b])[0, 1])) < DOMINANCE_CORR:
+            if b <= a or run_correlation(zs[a], zs[b]) < DOMINANCE_CORR:
                 continue
             pa, pb = conditional_p(dev, zs[a], zs[b]), conditional_p(dev, zs[b], zs[a])
-            loser, winner = (a, b) if pa > pb else (b, a)
+            nested = [i for i, j in ((a, b), (b, a)) if _beyond(zs[i], zs[j]).reshape(len(zs[i]), -1).shape[1] == 0]
+            if nested:
+                small = nested[0]
+                big = b if small == a else a
+                (loser, winner) = (small, big) if min(pa, pb) < level else (big, small)
+            else:
+                loser, winner = (a, b) if pa > pb else (b, a)
             if out[loser] is None:
                 out[loser] = winner
     return out
@@ -396,7 +514,8 @@ def analyse(df: pd.DataFrame, model, mask: np.ndarray, channels, *, alpha: float
     dev = run_deviations(df, model, mask)
     sigs = run_signals(df, channels)
     keep = pd.Index(pd.unique(df[dataio.RUN])).get_indexer(dev.runs)
-    sigs = [{**s, "values": s["values"][keep]} for s in sigs]
+    sigs = [_kept(s, keep) for s in sigs]
+    sigs = [s for s in sigs if s is not None]
     start = df.groupby(dataio.RUN, sort=False)[dataio.TIME].min().to_numpy(float)[keep]
     level = alpha / max(len(sigs), 1)
     if len(dev.runs) < 6:
@@ -406,12 +525,23 @@ def analyse(df: pd.DataFrame, model, mask: np.ndarray, channels, *, alpha: float
                             signal_evidence(dev, sigs, alpha=alpha, k=k, seed=seed, session_order=start), level)
 
 
+def _kept(sg: dict, keep: np.ndarray) -> dict | None:
+    """A signal on the runs the deviations kept; a category's levels and shares taken again on them (None: no
+    longer a category)."""
+    out = {**sg, "values": sg["values"][keep]}
+    if sg.get("transform") != fx.channels.CATEGORY:
+        return out
+    cat = fx.channels.category_levels(out["values"])
+    return None if cat is None else {**out, "levels": cat[0], "shares": cat[1]}
+
+
 def candidates(analysis: RunLevelAnalysis, ctx) -> list:
     """The :class:`~l1b2.closeloop.candidates.CandidateForce` of every significant signal, strongest first."""
     from .candidates import candidate
     fam = fx.family("run_level")
     hyps = fam.hypotheses([{"channel": e.channel, "transform": e.transform, "mean": e.mean, "sd": e.sd,
-                            **({} if e.run_spread is None else {"run_spread": float(e.run_spread)})}
+                            **({} if e.run_spread is None else {"run_spread": float(e.run_spread)}),
+                            **({} if e.levels is None else {"levels": e.levels, "shares": e.shares})}
                            for e in analysis.significant])
     return [candidate(ctx, h) for h in hyps]
 

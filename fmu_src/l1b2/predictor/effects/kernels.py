@@ -115,6 +115,9 @@ def _signal_scalars(spec) -> list[float]:
     if why:
         raise EffectSpecError(f"effect spec {spec.get('kind')!r} of {spec.get('channel')!r}: {why}")
     kind = spec["kind"]
+    if kind == "run_level" and spec.get("transform") not in TRANSFORMS:
+        raise EffectSpecError(f"effect spec 'run_level' of {spec.get('channel')!r}: transform "
+                              f"{spec.get('transform')!r} has no per-sample kernel (one of {', '.join(TRANSFORMS)})")
     level = "run" if kind == "run_level" else str(spec.get("level"))
     sig = fmu_signal(signal_key(str(spec.get("channel")), level))
     code = (TRANSFORMS.index(spec.get("transform", "none")) if kind == "run_level"
