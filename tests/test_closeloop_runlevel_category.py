@@ -115,9 +115,16 @@ def test_the_joint_test_is_ordinary_least_squares_chi_square_with_two_per_level_
     means = np.array([theta[c == v].mean(axis=0) for v in levels])
     np.testing.assert_allclose(b[:3], means[:3, 0] - means[3, 0], atol=1e-3)
     np.testing.assert_allclose(b[3:6], means[:3, 1] - means[3, 1], atol=1e-3)
-    # with load variation the offset's load slopes join: 3 (L - 1) degrees of freedom
-    dev.load = np.where(np.arange(n) % 2 == 0, 0.5, -1.0)
-    assert rl.joint_test(dev, Z)[2] == 9
+    # with load variation the offset's load slopes join (offset on [1, Z, Z w]): 3 (L - 1) degrees of freedom
+    w = np.where(np.arange(n) % 2 == 0, 0.5, -1.0)
+    dev.load = w
+    _, p, dof = rl.joint_test(dev, Z)
+    y = theta[:, 1]
+    Aw = np.column_stack([A, A[:, 1:] * w[:, None]])
+    chi2_w = chi2 - (np.sum((y - y.mean()) ** 2) - np.sum((y - A @ np.linalg.lstsq(A, y, rcond=None)[0]) ** 2))
+    chi2_w += np.sum((y - y.mean()) ** 2) - np.sum((y - Aw @ np.linalg.lstsq(Aw, y, rcond=None)[0]) ** 2)
+    assert dof == 9
+    assert p == pytest.approx(stats.chi2.sf(chi2_w / s2, 9), rel=2e-3)
 
 
 def _realistic_deviations(effect, seed=5):
