@@ -8,6 +8,8 @@ levels found by the category and not by the channel's linear value, and the domi
 indicators, the last level kept or the wrong degrees of freedom fail one of them.
 """
 
+import types
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -166,3 +168,16 @@ def test_a_linear_effect_keeps_the_linear_value_first_and_the_category_dominated
     assert ev["none"].dominated_by is None and ev["category"].dominated_by == "fixture_id"
     assert rl.run_correlation(sigs[0]["values"], ch.category_columns(sigs[0]["values"], *ch.category_levels(
         sigs[0]["values"]))) == pytest.approx(1.0)
+
+
+def test_test_runs_at_a_value_train_never_had_are_recorded():
+    spec = {"kind": "run_level", "channel": "fixture_id", "transform": "category",
+            **ch.category_spec((1.0, 2.0, 3.0), (0.4, 0.3))}
+    added = [types.SimpleNamespace(spec=spec, label="run_level_category(fixture_id)[run]"),
+             types.SimpleNamespace(spec={"kind": "run_level", "channel": "fixture_id", "transform": "none"},
+                                   label="run_level_fixture_id[run]")]
+    test = pd.DataFrame({"run": np.repeat(np.arange(5), 2), "fixture_id": np.repeat([1.0, 5.0, 2.0, 5.0, 7.0], 2)})
+    assert rl.unseen_test_levels(added, test) == {
+        "run_level_category(fixture_id)[run]": {"channel": "fixture_id", "values": [5.0, 7.0], "runs": 3}}
+    assert rl.unseen_test_levels(added, test[test.fixture_id < 3]) == {}
+    assert rl.unseen_test_levels(added, None) == {}

@@ -306,7 +306,8 @@ class CloseLoop(EstimatorSettings):
         first = it.first_scores or []
         chosen = it.chosen
         diagnosis = {**self._diagnosis(it, first, analysis, ext_params, chain_rec), "event_clocks": event_rec,
-                     "lagged_channels": lag_rec}
+                     "lagged_channels": lag_rec,
+                     "unseen_levels": runlevel.unseen_test_levels(it.effects.candidates, dte)}
         self.result_ = CloseLoopResult(
             baseline=baseline, diagnosis=diagnosis, scores=first,
             significant=it.significant, chosen=chosen, extended=extended,

@@ -569,3 +569,21 @@ def offer(found: list, short: list, allowed) -> list:
     if out[0].regressor in regs:
         out += [c for c in ok[1:] if c.regressor not in regs and c.regressor != out[0].regressor][:1]
     return out
+
+
+def unseen_test_levels(added, df: pd.DataFrame | None) -> dict:
+    """``{label: {"channel", "values", "runs"}}`` of every added categorical run-level effect whose channel takes
+    a value in ``df`` (TEST) that TRAIN never had: those runs get TRAIN's average over runs (0 in the level
+    columns), so their prediction cannot carry that value's own effect (``diagnosis.unseen_levels``)."""
+    out: dict = {}
+    for c in added if df is not None else ():
+        spec = c.spec or {}
+        col = spec.get("channel")
+        if spec.get("transform") != fx.channels.CATEGORY or col not in df.columns:
+            continue
+        per_run = df.groupby(dataio.RUN, sort=False)[col].first().to_numpy(float)
+        values = fx.channels.unseen_levels(spec, per_run)
+        if values:
+            out[c.label] = {"channel": col, "values": values,
+                            "runs": int(np.sum(np.isin(per_run, values)))}
+    return out
