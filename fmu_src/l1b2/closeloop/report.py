@@ -124,7 +124,9 @@ class Diagnosis(_Record):
     evidence of its run mean for the runs' own deviations); ``run_level`` the first round's run-level
     deviations (:meth:`l1b2.closeloop.runlevel.RunLevelAnalysis.to_dict`; None when not estimated);
     ``event_clocks`` the event clocks derived from logged step channels (:mod:`l1b2.closeloop.events`);
-    ``lagged_channels`` the low-passes derived from logged run settings (:mod:`l1b2.closeloop.lags`).
+    ``lagged_channels`` the low-passes derived from logged run settings (:mod:`l1b2.closeloop.lags`);
+    ``unseen_levels`` the TEST values of an added categorical setting that TRAIN never had
+    (:func:`l1b2.closeloop.runlevel.unseen_test_levels`).
     ``named_checks``: every named pick of a round from the Eq. 29 baseline, cross-validated again from the
     pure-slip family (:mod:`l1b2.closeloop.crosscheck`), with its figures and outcome.
     The nested evidence stays JSON-shaped.
@@ -155,6 +157,7 @@ class Diagnosis(_Record):
     named_checks: list = field(default_factory=list)
     event_clocks: list = field(default_factory=list)
     lagged_channels: list = field(default_factory=list)
+    unseen_levels: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         out = {f.name: getattr(self, f.name) for f in fields(self)}
