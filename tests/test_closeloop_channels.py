@@ -302,6 +302,46 @@ def test_a_channel_that_scales_the_damping_is_recovered_by_the_damping_form_not_
     assert fits["friction"][1] > 30 * fits["damping"][1], fits
 
 
+def test_the_free_run_evaluates_the_damping_form_at_the_baselines_free_run_speed():
+    # reference: an independent family that reads the same signal, speed_dependent_friction (-d v_base / 0.2 m/s
+    # times its first parameter): with the channel (the stator temperature, an input of the free run and of
+    # Predictor.fmu) held at z = 2, a damping-form effect of parameter a moves the free run exactly as the drag of
+    # parameters (2 a, 0); both are evaluated at the baseline's free run of the same inputs, which the predictor runs
+    from l1b2.physics.params import load_motor
+    from l1b2.predictor import effects as fx
+    from l1b2.predictor.derive import derive_predictor
+    from l1b2.predictor.setup import PredictorSetup
+    mp = load_motor()
+    pp = derive_predictor(mp, n_grid=9)
+    base = PredictorSetup(pp, mp.slider.mass_kg, 1e-3)
+    model = PredictorSetup(type(pp).from_vector(pp.to_vector() * 1.03, s_center=pp.s_center, s_half=pp.s_half,
+                                                kappa=pp.kappa, include_load_inertia=pp.include_load_inertia),
+                           mp.slider.mass_kg, 1e-3)
+    n = 400
+    t = 5.0 + np.arange(2 * n) * 1e-3
+    d = np.repeat([1.0, -1.0], n)
+    s = np.concatenate([-0.01 + 0.2 * (t[:n] - 5.0), 0.01 - 0.2 * (t[n:] - t[n])])
+    V0, load, run = np.repeat([324.0, 250.0], n), np.repeat([0.03, -0.02], n), np.repeat([0, 1], n)
+    T = np.full(2 * n, 35.0)                                  # (35 - 31) / 2 = 2 standard deviations
+    spec = {"kind": "channel", "channel": "temperature_C", "form": "damping", "level": "sample", "mean": 31.0,
+            "sd": 2.0}
+    a = 0.4
+
+    def run_with(effects):
+        ep = fx.ExtendedPredictor(base, model, effects)
+        return ep.free_run(t, s, V0, load, d, [0.0, 0.0], run, temperature=T)
+    damped = run_with((fx.IdentifiedEffect("channel_temperature_C", "damping", spec, ("a",), ("N",), (a,),
+                                           (0.01,)),))
+    drag = run_with((fx.IdentifiedEffect("speed_dependent_friction", "drag", {"kind": "speed_dependent_friction"},
+                                         ("l", "q"), ("N", "N"), (2 * a, 0.0), (0.01, 0.01)),))
+    np.testing.assert_allclose(damped, drag, rtol=0, atol=1e-12)
+    plain = run_with(())
+    assert np.max(np.abs(damped - plain)) > 1e-4              # not vacuous: the effect moves the speed
+    # a positive parameter brakes (drive coordinates): the slider is slower in both runs
+    tail = np.r_[n // 2:n, n + n // 2:2 * n]
+    assert np.all(d[tail] * (damped[tail] - plain[tail]) < 0)
+
+
 def test_every_numeric_column_beyond_the_required_ones_is_a_channel():
     from l1b2.closeloop.candidates import channels_of, signals
     df = pd.DataFrame({"time_s": [0.0, 0.1, 5.0, 5.1], "run": [1, 1, 2, 2], "position_m": 0.0, "voltage_V": 200.0,
