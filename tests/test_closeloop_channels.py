@@ -166,15 +166,18 @@ def test_a_channel_gets_every_shape_and_the_load_interaction_with_its_training_r
     train = fx.TrainingSummary(0.1, (0.0, 5.1), (-0.02, 0.02), 200.0, {"load_abs": 0.2},
                                channels=tuple(ch.values()))
     hyps = [h for h in fx.family("channel").grid(train) if h.spec["channel"] == "aux"]
-    # constant within runs: the run level only, 3 forms x (3 shapes + the linear and quadratic x load), and the
-    # inertia form in the 3 shapes (no load interaction), with TRAIN's slider mass
+    # constant within runs: the run level only, 3 forms x (3 shapes + the linear and quadratic x load), the
+    # inertia form in the 3 shapes (no load interaction), with TRAIN's slider mass, and the damping form in the
+    # linear and quadratic shapes (no load interaction)
     assert sorted((h.spec["form"], h.spec.get("shape", "linear"), h.spec.get("by", "")) for h in hyps) == sorted(
         [(f, s, b) for f in ("friction", "force_factor", "force")
          for s, b in (("linear", ""), ("quadratic", ""), ("odd", ""), ("linear", "load"), ("quadratic", "load"))]
-        + [("inertia", s, "") for s in ("linear", "quadratic", "odd")])
+        + [("inertia", s, "") for s in ("linear", "quadratic", "odd")]
+        + [("damping", s, "") for s in ("linear", "quadratic")])
     for h in hyps:
         assert (h.spec.get("m_s") == 0.1) == (h.spec["form"] == "inertia")
         assert set(h.units) == {"1" if h.spec["form"] == "inertia" else "N"}
+        assert ("v_base" in fx.needs(h.spec)) == (h.spec["form"] == "damping")
         n = {"linear": 1, "quadratic": 2, "odd": 2}[h.spec.get("shape", "linear")]
         assert len(h.names) == n * (2 if h.spec.get("by") else 1)
         if h.spec.get("shape", "linear") != "linear":
@@ -227,6 +230,116 @@ def test_inertia_channel_form_is_the_channel_times_the_baseline_acceleration():
     np.testing.assert_allclose(fx.effect_features(lin, x)[:, 0], mis * z)
     with pytest.raises(fx.EffectSpecError, match="m_s"):
         fx.effect_features({**lin, "m_s": 0.0}, x)
+
+
+def test_damping_channel_form_is_the_channel_times_the_baseline_speed():
+    # reference: the damping form written out: the viscous damping scaled by the channel, dF = -d v_base / 0.2 m/s
+    # times the shape's columns (z, or zc and zc^2 - 1; zc clipped to TRAIN's range), v_base the baseline's predicted
+    # speed (signed: the force opposes the motion in either direction); the kernel of Predictor.fmu gives the same
+    # force; the linear shape is speed_dependent_friction's linear column times z
+    from l1b2.predictor import effects as fx
+    from l1b2.predictor.effects import kernels as ek
+    c = np.array([1.0, 3.0, 2.5, 9.0, 0.0, 4.0])           # 9 and 0 lie beyond TRAIN's range 1-6
+    V0, d = np.array([300.0, 150.0, 240.0, 330.0, 210.0, 280.0]), np.array([1.0, -1.0, 1.0, -1.0, 1.0, -1.0])
+    v_base = np.array([0.12, -0.05, 0.0, 0.3, -0.02, 0.08])   # the last moves against its drive direction
+    x = {"V0": V0, "d": d, "T": c, "v_base": v_base, "a_base": np.full(6, 3.0), "col:temperature_C": c,
+         "run:temperature_C": c}
+    rows = np.column_stack([x[sg] if sg in x else np.zeros(6) for sg in fx.SIGNALS])
+    z = (c - 2.0) / 0.5
+    zc = np.array([-2.0, 2.0, 1.0, 8.0, -2.0, 4.0])
+    speed = np.array([0.6, 0.25, 0.0, -1.5, -0.1, -0.4])    # d v_base / 0.2
+    shapes = {"linear": z[:, None], "quadratic": np.column_stack([zc, zc * zc - 1.0])}
+    for shape, B in shapes.items():
+        for level in ("sample", "run"):
+            s = {"kind": "channel", "channel": "temperature_C", "mean": 2.0, "sd": 0.5, "lo": 1.0, "hi": 6.0,
+                 "shape": shape, "level": level, "form": "damping", "run_spread": 0.0}
+            want = -speed[:, None] * B
+            np.testing.assert_allclose(fx.effect_features(s, x), want)
+            phi = np.linspace(0.6, -0.2, B.shape[1])
+            kind, q = ek.spec_scalars(s)
+            got = [ek.effect_force(kind, row.tolist(), q, phi.tolist()) for row in rows]
+            np.testing.assert_allclose(got, want @ phi, rtol=0, atol=1e-12)
+            assert "v_base" in fx.needs(s) and "a_base" not in fx.needs(s)
+            assert fx.family("channel").width(s) == B.shape[1]
+    lin = {"kind": "channel", "channel": "temperature_C", "mean": 2.0, "sd": 0.5, "level": "sample",
+           "form": "damping"}
+    drag = fx.effect_features({"kind": "speed_dependent_friction"}, x)[:, 0]
+    np.testing.assert_allclose(fx.effect_features(lin, x)[:, 0], drag * z)
+    # a positive parameter brakes: the force opposes the motion (drive coordinates) wherever z > 0
+    F = fx.effect_features(lin, x)[:, 0] * 1.0
+    assert np.all(F[z > 0] * (d * v_base)[z > 0] <= 0)
+
+
+def test_a_channel_that_scales_the_damping_is_recovered_by_the_damping_form_not_the_friction_form():
+    # reference: data made from the law written out, a damping coefficient c_0 (1 + k z) changed by a logged channel
+    # (z its standardised run value), over runs whose speeds differ (V0 and load); the excess force on the baseline
+    # (damping c_0) is -c_0 k z d v; least squares on the damping form recovers a = c_0 k 0.2 m/s [N per sd]; the
+    # friction form (the same channel's level, no speed) explains far less of it
+    from l1b2.predictor import effects as fx
+    rng = np.random.default_rng(3)
+    n_runs, n = 24, 50
+    z_run = rng.normal(0.0, 1.0, n_runs)
+    d_run = np.where(np.arange(n_runs) % 2 == 0, 1.0, -1.0)
+    speed_run = rng.uniform(0.02, 0.25, n_runs)            # |v| per run [m/s]
+    ramp = 1.0 - np.exp(-np.linspace(0.0, 5.0, n))          # each run's start transient
+    z = np.repeat(z_run, n)
+    d = np.repeat(d_run, n)
+    v_base = d * np.repeat(speed_run, n) * np.tile(ramp, n_runs)
+    c_0, k = 4.0, 0.15                                      # N s/m and its change per standard deviation
+    dF = -c_0 * k * z * d * v_base + rng.normal(0.0, 0.002, len(z))
+    c = 1.5 + 0.4 * z                                        # the logged channel: mean 1.5, sd 0.4
+    x = {"V0": np.full(len(z), 300.0), "d": d, "v_base": v_base, "col:aux": c, "run:aux": c}
+    spec = {"kind": "channel", "channel": "aux", "mean": 1.5, "sd": 0.4, "level": "run"}
+    fits = {}
+    for form in ("damping", "friction"):
+        X = fx.effect_features({**spec, "form": form}, x)
+        phi, *_ = np.linalg.lstsq(X, dF, rcond=None)
+        fits[form] = (phi, float(np.sum((dF - X @ phi) ** 2)))
+    np.testing.assert_allclose(fits["damping"][0], [c_0 * k * 0.2], rtol=0.01)
+    sse0 = float(np.sum(dF ** 2))
+    assert fits["damping"][1] < 0.01 * sse0, fits
+    assert fits["friction"][1] > 0.1 * sse0, fits
+    assert fits["friction"][1] > 30 * fits["damping"][1], fits
+
+
+def test_the_free_run_evaluates_the_damping_form_at_the_baselines_free_run_speed():
+    # reference: an independent family that reads the same signal, speed_dependent_friction (-d v_base / 0.2 m/s
+    # times its first parameter): with the channel (the stator temperature, an input of the free run and of
+    # Predictor.fmu) held at z = 2, a damping-form effect of parameter a moves the free run exactly as the drag of
+    # parameters (2 a, 0); both are evaluated at the baseline's free run of the same inputs, which the predictor runs
+    from l1b2.physics.params import load_motor
+    from l1b2.predictor import effects as fx
+    from l1b2.predictor.derive import derive_predictor
+    from l1b2.predictor.setup import PredictorSetup
+    mp = load_motor()
+    pp = derive_predictor(mp, n_grid=9)
+    base = PredictorSetup(pp, mp.slider.mass_kg, 1e-3)
+    model = PredictorSetup(type(pp).from_vector(pp.to_vector() * 1.03, s_center=pp.s_center, s_half=pp.s_half,
+                                                kappa=pp.kappa, include_load_inertia=pp.include_load_inertia),
+                           mp.slider.mass_kg, 1e-3)
+    n = 400
+    t = 5.0 + np.arange(2 * n) * 1e-3
+    d = np.repeat([1.0, -1.0], n)
+    s = np.concatenate([-0.01 + 0.2 * (t[:n] - 5.0), 0.01 - 0.2 * (t[n:] - t[n])])
+    V0, load, run = np.repeat([324.0, 250.0], n), np.repeat([0.03, -0.02], n), np.repeat([0, 1], n)
+    T = np.full(2 * n, 35.0)                                  # (35 - 31) / 2 = 2 standard deviations
+    spec = {"kind": "channel", "channel": "temperature_C", "form": "damping", "level": "sample", "mean": 31.0,
+            "sd": 2.0}
+    a = 0.4
+
+    def run_with(effects):
+        ep = fx.ExtendedPredictor(base, model, effects)
+        return ep.free_run(t, s, V0, load, d, [0.0, 0.0], run, temperature=T)
+    damped = run_with((fx.IdentifiedEffect("channel_temperature_C", "damping", spec, ("a",), ("N",), (a,),
+                                           (0.01,)),))
+    drag = run_with((fx.IdentifiedEffect("speed_dependent_friction", "drag", {"kind": "speed_dependent_friction"},
+                                         ("l", "q"), ("N", "N"), (2 * a, 0.0), (0.01, 0.01)),))
+    np.testing.assert_allclose(damped, drag, rtol=0, atol=1e-12)
+    plain = run_with(())
+    assert np.max(np.abs(damped - plain)) > 1e-4              # not vacuous: the effect moves the speed
+    # a positive parameter brakes (drive coordinates): the slider is slower in both runs
+    tail = np.r_[n // 2:n, n + n // 2:2 * n]
+    assert np.all(d[tail] * (damped[tail] - plain[tail]) < 0)
 
 
 def test_every_numeric_column_beyond_the_required_ones_is_a_channel():

@@ -408,7 +408,8 @@ def test_effect_kernels_equal_the_families_features(pool):
         got = np.array([ek.effect_force(kind, row.tolist(), q, phi.tolist()) for row in rows])
         np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * max(1.0, np.max(np.abs(want))), err_msg=c.label)
     assert seen == set(ek.KERNEL_KINDS)
-    assert {"friction", "force_factor", "force", "inertia"} <= forms   # every channel form (the temperature's)
+    # every channel form (the temperature's)
+    assert {"friction", "force_factor", "force", "inertia", "damping"} <= forms
 
 
 def _identification_signals(df) -> dict:
@@ -455,8 +456,8 @@ def test_run_level_kernels_equal_the_features_on_runs_that_hold_their_inputs(poo
         assert np.max(np.abs(want)) > 1e-3, h.family
         n_checked += 1
     # V0, d*load, |load|, direction, temperature; its channel's 3 forms x (3 shapes + 2 shapes x load) and the
-    # inertia form in the 3 shapes (run)
-    assert n_checked == 4 + 1 + 3 * (3 + 2) + 3
+    # inertia form in the 3 shapes and the damping form in the linear and quadratic shapes (run)
+    assert n_checked == 4 + 1 + 3 * (3 + 2) + 3 + 2
     varied = dict(hyps[0].spec, run_spread=0.02 * hyps[0].spec["sd"])
     with pytest.raises(fx.EffectSpecError, match="not constant within runs"):
         ek.spec_scalars(varied)

@@ -226,6 +226,10 @@ def _effect_specs():
     specs += [{"kind": "channel", "channel": "temperature_C", "form": "inertia", "level": lv, "mean": 31.0,
                "sd": 4.0, "run_spread": 0.0, "shape": sh, "lo": 24.0, "hi": 41.0, "m_s": 0.12}
               for sh in ("linear", "quadratic", "odd") for lv in ("run", "sample")]
+    # the damping form (the channel scaling the viscous damping, -d v_base / 0.2 m/s) in its shapes and levels
+    specs += [{"kind": "channel", "channel": "temperature_C", "form": "damping", "level": lv, "mean": 31.0,
+               "sd": 4.0, "run_spread": 0.0, "shape": sh, "lo": 24.0, "hi": 41.0}
+              for sh in ("linear", "quadratic") for lv in ("run", "sample")]
     specs += [{"kind": "run_level", "channel": c, "transform": tr, "mean": m, "sd": sd, "run_spread": 0.0}
               for c, tr, m, sd in (("voltage_V", "none", 280.0, 40.0), ("load_kg", "drive", 0.01, 0.2),
                                    ("load_kg", "abs", 0.15, 0.1), ("direction", "none", 0.0, 1.0),

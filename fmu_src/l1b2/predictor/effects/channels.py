@@ -20,6 +20,12 @@ enters in one of four generic forms, each linear in one parameter ``a``
   mass, the per-channel form of :class:`l1b2.predictor.effects.motion.InertiaMismatch`'s constant error); a logged
   channel only (a payload, a tool, a fluid that changes the moving mass between runs or along the stroke), listed
   without the load interaction (:data:`FORCE_FORMS`),
+* ``damping``: it scales the viscous damping, ``dF = -a d v_base / SPEED_REF z`` (``v_base`` the baseline's
+  predicted speed, signed; ``d v_base`` the speed in drive coordinates, so the force opposes the motion;
+  ``SPEED_REF`` = 0.2 m/s, the base module's speed scale, the order of the slider's top speed: ``a`` [N per
+  standard deviation] is the change of the damping force at that speed); a logged channel only (a field that
+  brakes the moving carriage, a fluid's or a film's viscosity that a logged condition sets), in the linear and
+  quadratic shapes (:data:`DAMPING_SHAPES`), without the load interaction,
 
 in one of three shapes, Hermite polynomials of ``zc`` (``z`` clipped to TRAIN's range of the channel, flat
 beyond it): ``linear`` (the factor times ``a z``, one parameter, unclipped), ``quadratic`` (``a zc + b (zc^2 -
@@ -65,12 +71,19 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from .base import SIGNALS, V_REF, Effect, EffectSpecError, needs, num, register, signal
+from .base import SIGNALS, SPEED_REF, V_REF, Effect, EffectSpecError, needs, num, register, signal
 
-FORMS = ("friction", "force_factor", "force", "inertia")
+FORMS = ("friction", "force_factor", "force", "inertia", "damping")
 #: the forms of every channel, the session clock's included, and of the load interaction: all but ``inertia``
 #: (a logged channel's moving mass; the load's own mass is the model's, a load interaction of it no cause's form)
+#: and ``damping`` (a logged channel's viscous damping; the session clock's is the generic time x speed pair's, the
+#: load's weight pulls along the motion and changes no viscosity)
 FORCE_FORMS = ("friction", "force_factor", "force")
+#: the shapes of the damping form: a damping coefficient that a condition changes monotonically (the slope) or
+#: convexly (a viscosity's exponential law over a range, a brake's force growing with the square of its field:
+#: the curvature); a saturation (the odd shape's third-order term) of a force that is itself a small share of the
+#: drive's is not listed
+DAMPING_SHAPES = ("linear", "quadratic")
 LEVELS = ("run", "sample")
 #: a channel's shapes: linear in ``z``, or ``z`` clipped to TRAIN's range and its second or third Hermite
 #: polynomial (:func:`shape_basis`)
@@ -170,11 +183,14 @@ def signal_key(column: str, level: str) -> str:
 
 def form_factor(form: str, x, m_s: float | None = None) -> np.ndarray:
     """The generic physical form's factor per sample: ``-1`` (friction), ``V0/V_ref`` (force factor), ``d`` (force),
-    ``-m_s d a_base`` (inertia: ``m_s`` the slider's mass [kg], ``a_base`` the baseline's acceleration)."""
+    ``-m_s d a_base`` (inertia: ``m_s`` the slider's mass [kg], ``a_base`` the baseline's acceleration),
+    ``-d v_base / SPEED_REF`` (damping: ``v_base`` the baseline's speed)."""
     if form == "inertia":
         if m_s is None or not m_s > 0:
             raise EffectSpecError(f"channel form 'inertia': the slider mass m_s {m_s} is not positive")
         return -m_s * signal(x, "d") * signal(x, "a_base")
+    if form == "damping":
+        return -signal(x, "d") * signal(x, "v_base") / SPEED_REF
     if form == "friction":
         return -np.ones(len(signal(x, "d")))
     if form == "force_factor":
@@ -193,8 +209,8 @@ class Channel(Effect):
 
     def needs(self, spec):
         by = {"load"} if spec.get("by") else set()
-        acc = {"a_base"} if spec.get("form") == "inertia" else set()
-        return super().needs(spec) | {signal_key(str(spec.get("channel")), str(spec.get("level")))} | by | acc
+        motion = {"inertia": {"a_base"}, "damping": {"v_base"}}.get(str(spec.get("form")), set())
+        return super().needs(spec) | {signal_key(str(spec.get("channel")), str(spec.get("level")))} | by | motion
 
     def features(self, spec, x):
         c = signal(x, signal_key(str(spec.get("channel")), str(spec.get("level"))))
@@ -227,7 +243,7 @@ class Channel(Effect):
             for level in LEVELS if ch.get("within_run", True) else ("run",):
                 for shape in SHAPES if logged else SHAPES[:1]:
                     for by in ("",) + (INTERACTIONS if load_abs > 0 and shape in INTERACTION_SHAPES else ()):
-                        for form in FORMS if m_s > 0 and not by else FORCE_FORMS:
+                        for form in _forms(logged and not by, m_s, shape):
                             out.append(self._hypothesis(ch, reg, form, level, shape, by, load_abs, m_s))
         return out
 
@@ -249,6 +265,13 @@ class Channel(Effect):
             family=f"channel_{name}", regressor=reg, generic=True, also=(regressor_of(_BY_COLUMN[by]),) if by else (),
             description=f"{ch.get('kind', 'logged')} channel {name} ({'run mean' if level == 'run' else 'per sample'}"
                         f"{extra}) {_FORM_TEXT[form]}{', growing with the load' if by else ''}")
+
+
+def _forms(own: bool, m_s: float, shape: str) -> tuple:
+    """The forms a channel lists in a shape: the force forms; a logged channel's own (no interaction) adds the
+    inertia form (given the slider's mass) and, in :data:`DAMPING_SHAPES`, the damping form."""
+    return (FORCE_FORMS + (("inertia",) if own and m_s > 0 else ())
+            + (("damping",) if own and shape in DAMPING_SHAPES else ()))
 
 
 def shape_basis(spec, z) -> np.ndarray:
@@ -288,7 +311,8 @@ def _spread(sg, level: str = "run") -> dict:
 #: the column of each interaction's input (the report's traced regressor)
 _BY_COLUMN = {"load": "load_kg"}
 _FORM_TEXT = {"friction": "scaling the friction level", "force_factor": "scaling the drive's force factor",
-              "force": "adding a force", "inertia": "scaling the moving mass"}
+              "force": "adding a force", "inertia": "scaling the moving mass",
+              "damping": "scaling the viscous damping"}
 
 
 #: the required inputs that are run-level signals of the recording protocol: ``(column, transform)``; ``drive``

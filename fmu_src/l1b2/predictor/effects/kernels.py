@@ -66,10 +66,11 @@ KERNEL_KINDS = tuple(SPEC_KEYS)
  K_LOAD_V, K_DAMPING_V, K_POSITION_LOAD, K_SMOOTH, K_PAIR, K_CHANNEL, K_RUN_LEVEL) = range(len(KERNEL_KINDS))
 #: the codes of a channel's form and of a run-level signal's transform in ``q``
 #: (:data:`l1b2.predictor.effects.channels.FORMS` and ``TRANSFORMS``)
-FORM_FRICTION, FORM_FORCE_FACTOR, FORM_FORCE, FORM_INERTIA = range(len(FORMS))
+FORM_FRICTION, FORM_FORCE_FACTOR, FORM_FORCE, FORM_INERTIA, FORM_DAMPING = range(len(FORMS))
 #: added to a channel's form code in ``q[1]`` for the quadratic and the odd shape (then ``q[4:6]``: TRAIN's
 #: range of ``z``), and for an interaction with the load (then ``q[6]``: TRAIN's largest load size ``load_abs``);
-#: the inertia form has ``q[4:7]`` in any shape and the slider's mass ``m_s`` in ``q[7]``
+#: the inertia form has ``q[4:7]`` in any shape and the slider's mass ``m_s`` in ``q[7]``; the damping form reads
+#: ``v_base`` and no scalar of its own
 QUADRATIC = len(FORMS)
 ODD = 2 * len(FORMS)
 BY_LOAD = len(SHAPES) * len(FORMS)
@@ -367,7 +368,8 @@ def channel_force(x, q, phi):
     """``Channel.features`` @ phi: ``z`` = (input - mean)/sd (``q[0]`` the input, ``q[2:4]`` mean and sd) in its
     shape (``z phi[0]``; ``q[1]`` >= ``QUADRATIC``: ``zc phi[0] + (zc^2 - 1) phi[1]``, >= ``ODD``:
     ``zc phi[0] + (zc^3 - 3 zc) phi[1]``, ``zc`` = ``z`` clipped to ``q[4:6]``) times the form's factor (the code
-    less its offsets: -1, ``V0/V_REF``, ``d`` or, for the inertia form, ``-q[7] d a_base``); with ``q[1]`` >=
+    less its offsets: -1, ``V0/V_REF``, ``d``, for the inertia form ``-q[7] d a_base``, for the damping form
+    ``-d v_base / SPEED_REF``); with ``q[1]`` >=
     ``BY_LOAD``, plus the same columns times ``|load| / q[6]`` on the next parameters."""
     z = (input_signal(x, int(q[0])) - q[2]) / q[3]
     form = int(q[1])
@@ -404,6 +406,8 @@ def channel_force(x, q, phi):
         return x[SIG_V0] / V_REF * g
     if form == FORM_INERTIA:
         return -q[7] * x[SIG_D] * x[SIG_AB] * g
+    if form == FORM_DAMPING:
+        return -(x[SIG_D] * x[SIG_VB]) / SPEED_REF * g
     return x[SIG_D] * g
 
 
