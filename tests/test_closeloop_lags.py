@@ -60,3 +60,26 @@ def test_lags_of_one_session_continue_from_train_into_test():
     plain = whole.drop(columns="heater")
     a, b, r = with_lagged_channels(plain, None)
     assert a is plain and b is None and r == []
+
+
+@pytest.mark.parametrize("split", [27, None])
+def test_the_session_computed_once_and_passed_gives_the_same_frames_and_records(split, monkeypatch):
+    # reference: each derivation computing the session itself (as before the session was passed)
+    from l1b2.closeloop import events as ev
+    from l1b2.closeloop.lags import with_lagged_channels
+    whole = _frame([0.0, 2.0, 4.0, 2.0, 0.0, 4.0, 2.0, 4.0, 0.0, 2.0, 0.0, 4.0])
+    if split is None:      # two sessions on one clock: TEST overlaps TRAIN in time
+        train, test = whole, _frame([4.0, 0.0, 2.0, 2.0], t0=0.1, run0=100)
+    else:
+        train, test = whole.iloc[:split].reset_index(drop=True), whole.iloc[split:].reset_index(drop=True)
+    a_tr, a_te, a_ev = ev.with_event_clocks(train, test)
+    a_tr, a_te, a_lag = with_lagged_channels(a_tr, a_te)
+    sess = ev.session(train, test)
+    assert sess.one == (split is not None)
+    calls = []
+    monkeypatch.setattr(ev, "one_session", lambda tab: calls.append(tab) or True)   # not called once passed
+    b_tr, b_te, b_ev = ev.with_event_clocks(train, test, sess=sess)
+    b_tr, b_te, b_lag = with_lagged_channels(b_tr, b_te, sess=sess)
+    assert calls == [] and a_ev == b_ev and a_lag == b_lag and len(a_ev) == len(a_lag) == 1
+    pd.testing.assert_frame_equal(a_tr, b_tr)
+    pd.testing.assert_frame_equal(a_te, b_te)

@@ -45,6 +45,13 @@ def test_cv_refits_on_a_local_cluster_equal_the_serial_ones():
     # each entry is the one-fold refit; the candidate lowers the held-out error (pulley friction is in the data)
     one = fold_error(df, mask, m_s, folds[1], base.params_, jobs[1][0].with_phi(fphi[1]), settings)
     assert one[0] == pytest.approx(serial[1].sse[1], rel=1e-12) and one[1] == serial[1].ss_meas[1]
+    # the same held-out sums of squares per run: every run of the fold, adding up to the fold's
+    assert sorted(one[4]) == sorted(folds[1].tolist()) and sum(one[4].values()) == pytest.approx(one[0], rel=1e-12)
+    for s, p in zip(serial, parallel):
+        assert sorted(s.run_sse) == sorted(np.concatenate(folds).tolist()) and p.run_sse.keys() == s.run_sse.keys()
+        for f, fold in enumerate(folds):
+            assert sum(s.run_sse[r] for r in fold) == pytest.approx(s.sse[f], rel=1e-12)
+            assert sum(p.run_sse[r] for r in fold) == pytest.approx(p.sse[f], rel=1e-12)
     assert serial[1].sse.sum() < serial[0].sse.sum()
 
 

@@ -145,58 +145,108 @@ def test_every_shape_of_a_shortlisted_family_that_passes_the_screen_is_cross_val
     assert prefer([trial(odd, 0.36), trial(quad, 0.35), trial(lin, 0.34)], 0.9).candidate is lin.candidate
 
 
-def _fold_trial(score, sse, cur):
-    """A refit trial of ``score``'s candidate with per-fold held-out SSE ``sse`` against the current model's ``cur``."""
-    cur = cur if isinstance(cur, acc.FoldErrors) else acc.FoldErrors(np.asarray(cur, float), np.full(len(cur), 100.0))
-    return acc.RefitCV(score.candidate, cur, acc.FoldErrors(np.asarray(sse, float), np.full(len(sse), 100.0)))
+#: eight held-out runs in four folds of two (every run in exactly one fold)
+RUN_FOLDS = [[0, 4], [1, 5], [2, 6], [3, 7]]
 
 
-def _gap_and_se(t, best):
-    # written out: per fold, (SSE_t - SSE_best) / mean(SSE_current); the gap is their mean, its standard error
-    # their sample standard deviation over sqrt(k)
-    d = (t.extended.sse - best.extended.sse) / np.mean(best.current.sse)
-    return d.mean(), d.std(ddof=1) / np.sqrt(len(d))
+def _errors(run_sse):
+    """:class:`FoldErrors` of per-run held-out SSEs ``run_sse`` (run i at index i): the folds' SSEs are their sums."""
+    run_sse = np.asarray(list(run_sse), float)
+    return acc.FoldErrors(np.array([run_sse[f].sum() for f in RUN_FOLDS]), np.full(len(RUN_FOLDS), 100.0),
+                          run_sse={i: float(x) for i, x in enumerate(run_sse)})
+
+
+def _run_trial(score, run_sse, cur):
+    """A refit trial of ``score``'s candidate with per-run held-out SSEs ``run_sse`` against the current model's."""
+    return acc.RefitCV(score.candidate, cur, _errors(run_sse))
+
+
+def test_per_run_gap_and_standard_error_written_out():
+    # reference, by hand: current per-run SSE [10, 12, 8, 10, 9, 11, 10, 10] (mean 10), the best's
+    # [5, 6, 4, 5, 4.5, 5.5, 5, 5], the trial's [7.5, 5.5, 5.5, 4, 3, 6.5, 4, 6.5]; per run
+    # delta = (trial - best) / 10 = [0.25, -0.05, 0.15, -0.1, -0.15, 0.1, -0.1, 0.15]: mean 0.25 / 8 = 0.03125
+    # (the pooled gains' difference: (42.5 - 40) / 80), sum of squared deviations 0.1625 - 8 * 0.03125**2 = 0.1546875,
+    # sd = sqrt(0.1461875 / 7), se = sd / sqrt(8)
+    cur = _errors([10, 12, 8, 10, 9, 11, 10, 10])
+    best = _run_trial(_shaped("channel_h", "odd", 1e-4, 0.4), [5, 6, 4, 5, 4.5, 5.5, 5, 5], cur)
+    lin = _run_trial(_shaped("channel_h", "linear", 1e-4, 0.3, n=1), [7.5, 5.5, 5.5, 4, 3, 6.5, 4, 6.5], cur)
+    gap, se = acc.one_se_gap_per_run(lin, best)
+    assert gap == pytest.approx(0.03125, rel=1e-12) and gap == pytest.approx(best.gain - lin.gain, rel=1e-12)
+    assert se == pytest.approx(np.sqrt(0.1546875 / 7) / np.sqrt(8), rel=1e-12)      # 0.05256
+    # the folds' gap is the same number; its standard error over the four folds is another one: per fold
+    # (trial - best) / 20 = [1, 0.5, 0.5, 0.5] / 20, sd 0.0125 over sqrt(4) = 0.00625
+    fgap, fse = acc.one_se_gap(lin, best)
+    assert fgap == pytest.approx(gap, rel=1e-12) and fse == pytest.approx(0.00625, rel=1e-12)
+    # not the same current model's runs, or a run missing: no paired gap
+    assert acc.one_se_gap_per_run(lin, _run_trial(best, best.extended.run_sse.values(),
+                                                  _errors([10, 12, 8, 10, 9, 11, 10, 10.5]))) is None
+    assert acc.one_se_gap_per_run(acc.RefitCV(lin.candidate, cur, acc.FoldErrors(lin.extended.sse,
+                                                                                  lin.extended.ss_meas)), best) is None
+    assert acc.paired_gap([1.0, np.inf], [1.0, 1.0], [2.0, 2.0]) is None
 
 
 def test_one_standard_error_rule_keeps_the_simplest_shape_of_a_family():
     # reference: among one family's accepted shapes, those whose pooled CV gain is below the best's by at most one
-    # standard error of the per-fold gap are equivalent; the simplest of them is kept (fewest parameters, then the
-    # lowest polynomial degree of the shape: linear 1, quadratic 2, odd 3); another family is left alone
-    cur = acc.FoldErrors(np.array([10.0, 12.0, 8.0, 10.0]), np.full(4, 100.0))
-    odd = _fold_trial(_shaped("channel_h", "odd", 1e-4, 0.4), [5.0, 6.0, 4.0, 5.0], cur)        # gain 0.50, best
-    lin = _fold_trial(_shaped("channel_h", "linear", 1e-4, 0.3, n=1), [4.0, 8.0, 3.5, 5.5], cur)
-    quad = _fold_trial(_shaped("channel_h", "quadratic", 1e-4, 0.3), [5.6, 5.6, 4.6, 4.8], cur)
-    other = _fold_trial(_shaped("channel_k", "odd", 1e-4, 0.3), [9.0, 9.0, 9.0, 9.0], cur)
-    other_lin = _fold_trial(_shaped("channel_k", "linear", 1e-4, 0.3, n=1), [5.0, 5.0, 5.0, 5.0], cur)
-    assert odd.gain > lin.gain and odd.gain > quad.gain
-    gap, se = _gap_and_se(lin, odd)
-    assert 0 < gap <= se                                   # the linear shape is within one standard error
-    gap_o, se_o = _gap_and_se(other, other_lin)
-    assert gap_o > se_o                                    # channel_k: its odd shape is clearly worse
-    out = sel.simplest_within_one_se([other, odd, quad, lin, other_lin])
+    # standard error of the gap paired per held-out run are equivalent; the simplest of them is kept (fewest
+    # parameters, then the lowest polynomial degree of the shape: linear 1, quadratic 2, odd 3); another family is
+    # left alone. Per run, delta = (trial - best) / mean(current) with mean(current) = 10 here.
+    cur = _errors([10, 12, 8, 10, 9, 11, 10, 10])
+    B = [5, 6, 4, 5, 4.5, 5.5, 5, 5]
+    odd = _run_trial(_shaped("channel_h", "odd", 1e-4, 0.4), B, cur)                          # gain 0.5, best
+    # gap 0.03125, se 0.0526 (test above): within one per-run SE. Over the four folds the SE is 0.00625 and the
+    # gap beyond it: a rule on the folds' SE would keep the best
+    lin = _run_trial(_shaped("channel_h", "linear", 1e-4, 0.3, n=1), [7.5, 5.5, 5.5, 4, 3, 6.5, 4, 6.5], cur)
+    other = _run_trial(_shaped("channel_k", "odd", 1e-4, 0.3), [9.0] * 8, cur)
+    other_lin = _run_trial(_shaped("channel_k", "linear", 1e-4, 0.3, n=1), B, cur)
+    out = sel.simplest_within_one_se([other, odd, lin, other_lin])
     assert [t is u for t, u in zip(out, [lin, other_lin])] == [True, True] and len(out) == 2
-    # the linear shape beyond one standard error: the best (odd) or a simpler shape within the band (quadratic,
-    # degree 2 with the same two parameters) is kept; here the quadratic one is within it
-    far = _fold_trial(_shaped("channel_h", "linear", 1e-4, 0.3, n=1), [7.0, 8.0, 6.0, 7.0], cur)
-    assert _gap_and_se(far, odd)[0] > _gap_and_se(far, odd)[1]
-    assert 0 < _gap_and_se(quad, odd)[0] <= _gap_and_se(quad, odd)[1]
-    assert [t is quad for t in sel.simplest_within_one_se([odd, far, quad])] == [True]
-    assert [t is odd for t in sel.simplest_within_one_se([odd, far])] == [True]
-    # within one standard deviation of the per-fold gap but beyond its standard error (sd / sqrt(4)): the best
-    mid = _fold_trial(_shaped("channel_h", "linear", 1e-4, 0.3, n=1), [5.0, 9.0, 4.0, 6.0], cur)
-    gap, se = _gap_and_se(mid, odd)
-    assert se < gap <= 2 * se
+    # delta = [0.09, 0, 0.05, 0, 0.07, 0.01, 0.03, 0.01]: gap 0.0325, sd 0.03412 (sum of squared deviations
+    # 0.0165 - 8 * 0.0325**2 = 0.00815), se 0.01206: beyond one SE, within one SD: the best
+    mid = _run_trial(_shaped("channel_h", "linear", 1e-4, 0.3, n=1), [5.9, 6, 4.5, 5, 5.2, 5.6, 5.3, 5.1], cur)
+    gap, se = acc.one_se_gap_per_run(mid, odd)
+    assert gap == pytest.approx(0.0325, rel=1e-12) and se == pytest.approx(np.sqrt(0.00815 / 7 / 8), rel=1e-12)
+    assert se < gap <= se * np.sqrt(8)
     assert [t is odd for t in sel.simplest_within_one_se([mid, odd])] == [True]
+    # delta = [0.03, 0.01, 0.03, 0, 0.02, 0.01, 0.02, 0.02]: gap 0.0175, paired se 0.00366 (sum of squared
+    # deviations 0.0032 - 8 * 0.0175**2 = 0.00075): the best. Unpaired, the spread of each model's own per-run
+    # SSEs (the best's sd 0.0598 / sqrt(8) alone is 0.0211) would hide the gap
+    near = _run_trial(_shaped("channel_h", "linear", 1e-4, 0.3, n=1), [5.3, 6.1, 4.3, 5, 4.7, 5.6, 5.2, 5.2], cur)
+    gap, se = acc.one_se_gap_per_run(near, odd)
+    assert gap == pytest.approx(0.0175, rel=1e-12) and se == pytest.approx(np.sqrt(0.00075 / 7 / 8), rel=1e-12)
+    assert np.std(np.array(B) / 10, ddof=1) / np.sqrt(8) > gap > se
+    assert [t is odd for t in sel.simplest_within_one_se([near, odd])] == [True]
+    # the quadratic shape within one SE (its two parameters as the odd one's, degree 2 < 3) and a linear one beyond:
+    # the quadratic is kept; with only the far linear one, the best
+    quad = _run_trial(_shaped("channel_h", "quadratic", 1e-4, 0.3), [7.5, 5.5, 5.5, 4, 3, 6.5, 4, 6.5], cur)
+    assert [t is quad for t in sel.simplest_within_one_se([odd, mid, quad])] == [True]
+    assert [t is odd for t in sel.simplest_within_one_se([odd, mid])] == [True]
     # the same parameters and degree (an interaction counts as its shape): the larger gain
-    a = _fold_trial(_shaped("channel_h", "linear", 1e-4, 0.3), [5.0, 6.0, 4.0, 5.0], cur)
-    b = _fold_trial(_shaped("channel_h", "linear", 1e-4, 0.31), [5.1, 6.0, 4.0, 5.0], cur)
+    a = _run_trial(_shaped("channel_h", "linear", 1e-4, 0.3), B, cur)
+    b = _run_trial(_shaped("channel_h", "linear", 1e-4, 0.31), [5.1] + B[1:], cur)
     assert [t is a for t in sel.simplest_within_one_se([b, a])] == [True]
-    # trials on other folds (a different current model): no gap can be computed, the best stays
-    lin_else = _fold_trial(_shaped("channel_h", "linear", 1e-4, 0.3, n=1), [4.0, 8.0, 3.5, 5.5],
-                           [10.0, 12.0, 8.0, 10.5])
+    # trials on other folds (another current model's per-run errors): no gap can be computed, the best stays
+    lin_else = _run_trial(lin, lin.extended.run_sse.values(), _errors([10, 12, 8, 10, 9, 11, 10, 10.5]))
     assert [t is odd for t in sel.simplest_within_one_se([lin_else, odd])] == [True]
     assert sel.simplest_within_one_se([]) == []
     assert [sel.shape_degree(t.candidate) for t in (lin, quad, odd)] == [1, 2, 3]
+
+
+def test_pooled_gain_is_the_share_of_the_current_sum_of_squares_removed():
+    # reference: 1 - (1 + 3 + 1) / (4 + 4 + 2) = 0.5, for the refit's trials and the linearised score alike
+    assert acc.pooled_gain([4.0, 4.0, 2.0], [1.0, 3.0, 1.0]) == pytest.approx(0.5, rel=1e-15)
+    assert acc.pooled_gain([0.0, 0.0], [1.0, 1.0]) == 0.0
+    t = acc.RefitCV(None, acc.FoldErrors(np.array([4.0, 4.0, 2.0]), np.full(3, 100.0)),
+                    acc.FoldErrors(np.array([1.0, 3.0, 1.0]), np.full(3, 100.0)))
+    assert t.gain == pytest.approx(0.5, rel=1e-15)
+    # the linearised score's gain on two folds of two runs each: the same formula over runs
+    rng = np.random.default_rng(0)
+    y, S = rng.normal(size=40), rng.normal(size=40)
+    y += 0.8 * S
+    runs = np.repeat([0, 1, 2, 3], 10)
+    solver = sel.FoldSolver(y, np.zeros((40, 0)), runs, [np.array([0, 2]), np.array([1, 3])])
+    gain, per_run = solver.gain(S)
+    s0 = np.array([solver.sse0[r] for r in solver.keys])
+    assert gain == pytest.approx(1 - (s0 - per_run * s0.mean()).sum() / s0.sum(), rel=1e-12)
 
 
 def test_significance_is_bonferroni_over_the_families_tested():

@@ -315,16 +315,31 @@ def refit(df: pd.DataFrame, mask: np.ndarray, m_s: float, init, effects: EffectS
 
 @dataclass
 class FoldErrors:
-    """Held-out free-run sums of squares per fold (on the evaluation mask) and the measured speed's."""
+    """Held-out free-run sums of squares per fold (on the evaluation mask) and the measured speed's.
+
+    ``run_sse``: the same held-out sums of squares per run (run id -> SSE; every held-out run with at least one
+    sample on the evaluation mask, each in exactly one fold, so they add up to ``sse``'s folds; empty when not
+    kept). A fold that failed gives its runs ``inf``.
+    """
 
     sse: np.ndarray
     ss_meas: np.ndarray
     failed: int = 0
     nfev: int = 0        #: function evaluations of the folds' refits (all folds)
+    run_sse: dict = field(default_factory=dict)
 
     @property
     def nrmse(self) -> float:
         return float(np.sqrt(self.sse.sum() / max(self.ss_meas.sum(), 1e-300)))
+
+
+def pooled_gain(sse_current, sse_new) -> float:
+    """The cross-validated gain: the share of the current model's pooled held-out sum of squares that the new model
+    removes, ``1 - sum(sse_new) / sum(sse_current)`` (sums over folds or runs; 0 when the current sum is not
+    positive). The one formula of the refit's gain (:attr:`RefitCV.gain`) and the linearised score's
+    (:class:`l1b2.closeloop.selection.FoldSolver`)."""
+    s0 = float(np.sum(sse_current))
+    return float(1.0 - float(np.sum(sse_new)) / s0) if s0 > 0 else 0.0
 
 
 @dataclass
@@ -339,8 +354,8 @@ class RefitCV:
 
     @property
     def gain(self) -> float:
-        """Relative fall of the pooled held-out free-run sum of squares."""
-        return float(1.0 - self.extended.sse.sum() / max(self.current.sse.sum(), 1e-300))
+        """Relative fall of the pooled held-out free-run sum of squares (:func:`pooled_gain`)."""
+        return pooled_gain(self.current.sse, self.extended.sse)
 
     @property
     def folds_improved(self) -> int:
@@ -371,22 +386,55 @@ def materiality(candidate: CandidateForce, min_drop: float) -> float:
     return min_drop if candidate.structural else 0.0
 
 
+def paired_gap(sse_a, sse_b, sse_current) -> tuple[float, float] | None:
+    """``(gap, se)`` of two models' held-out sums of squares paired by unit (fold or run), against the current
+    model's on the same units: per unit ``i``, ``delta_i = (a_i - b_i) / mean(current)``; ``gap = mean(delta)``,
+    which is exactly ``pooled_gain(current, b) - pooled_gain(current, a)``, and ``se = sd(delta) / sqrt(n)``
+    (sample standard deviation, ``n`` units; 0 with one unit). None when a ``delta`` is not finite or there is no
+    unit."""
+    a, b, c = (np.asarray(x, float) for x in (sse_a, sse_b, sse_current))
+    n = len(c)
+    if not n:
+        return None
+    delta = (a - b) / max(float(np.mean(c)), 1e-300)
+    if not np.all(np.isfinite(delta)):
+        return None
+    return float(np.mean(delta)), (float(np.std(delta, ddof=1) / np.sqrt(n)) if n > 1 else 0.0)
+
+
 def one_se_gap(named: RefitCV, generic: RefitCV) -> tuple[float, float] | None:
     """``(gap, se)``: how far the generic trial's pooled CV gain is above the named one's, and the standard error of
     that gap over the folds; None when the two were not cross-validated against the same current model's errors
     on the same folds.
 
     Per fold ``f``, ``delta_f = (SSE_named_f - SSE_generic_f) / mean_f SSE_current_f``: their mean is the gap of
-    the pooled gains exactly, and ``se = sd(delta) / sqrt(k)`` (0 with one fold).
+    the pooled gains exactly, and ``se = sd(delta) / sqrt(k)`` (0 with one fold; :func:`paired_gap`).
     """
     cur, other = named.current, generic.current
     if cur is not other and not (np.array_equal(cur.sse, other.sse) and np.array_equal(cur.ss_meas, other.ss_meas)):
         return None
-    k = len(cur.sse)
-    delta = (named.extended.sse - generic.extended.sse) / max(float(np.mean(cur.sse)), 1e-300)
-    if not np.all(np.isfinite(delta)):
+    return paired_gap(named.extended.sse, generic.extended.sse, cur.sse)
+
+
+def one_se_gap_per_run(trial: RefitCV, best: RefitCV) -> tuple[float, float] | None:
+    """``(gap, se)``: how far ``best``'s pooled CV gain is above ``trial``'s, with the standard error of that gap
+    over the held-out *runs* (paired per run); None when the two were not cross-validated against the same
+    current model's per-run errors (the same folds) or a per-run error is missing or not finite.
+
+    Every run is held out in exactly one fold (:attr:`FoldErrors.run_sse`). Per run ``r`` (``n`` runs),
+    ``delta_r = (SSE_trial_r - SSE_best_r) / mean_r SSE_current_r``: their mean is
+    ``(sum SSE_trial - sum SSE_best) / sum SSE_current``, the gap of the pooled gains exactly (the same gap as
+    :func:`one_se_gap`'s over folds), and ``se = sd(delta) / sqrt(n)`` (:func:`paired_gap`): with ``n`` runs
+    instead of ``k`` folds the standard error has ``n - 1`` degrees of freedom instead of ``k - 1``.
+    """
+    cur = trial.current.run_sse
+    if not cur or (trial.current is not best.current and best.current.run_sse != cur):
         return None
-    return float(np.mean(delta)), (float(np.std(delta, ddof=1) / np.sqrt(k)) if k > 1 else 0.0)
+    runs = list(cur)
+    a, b = trial.extended.run_sse, best.extended.run_sse
+    if any(r not in a or r not in b for r in runs):
+        return None
+    return paired_gap([a[r] for r in runs], [b[r] for r in runs], [cur[r] for r in runs])
 
 
 def named_reading(pick: RefitCV, accepted: list, share, min_share: float = NAMED_SHARE) -> RefitCV:
@@ -462,21 +510,26 @@ def fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, init, 
     The refit sees the training runs at one sample per millisecond at most (:func:`fold_fit_data`); the
     held-out runs are predicted at their own rate.
 
-    Returns ``(sse, ss_meas, failed, nfev)`` on the held-out evaluation mask (a
-    failed fit or a diverged prediction: ``sse = inf``; ``nfev``: the refit's evaluations). A pure function of
-    its arguments: the unit of work of :func:`cv_errors` and :func:`chain_cv_errors`.
+    Returns ``(sse, ss_meas, failed, nfev, run_sse)`` on the held-out evaluation mask (a
+    failed fit or a diverged prediction: ``sse = inf``; ``nfev``: the refit's evaluations; ``run_sse``: the same
+    sum of squares per held-out run with a sample on the mask, ``inf`` for each when ``sse`` is). A pure function
+    of its arguments: the unit of work of :func:`cv_errors` and :func:`chain_cv_errors`.
     """
     runs = df[dataio.RUN].to_numpy()
     v = df[dataio.SPEED].to_numpy(float)
     held = np.isin(runs, held_runs)
     m_te = mask[held]
     ssm = float(np.sum(v[held][m_te] ** 2))
+    run_ids, code = np.unique(runs[held][m_te], return_inverse=True)
+
+    def failed():
+        return np.inf, ssm, True, 0, {r: np.inf for r in run_ids.tolist()}
     train, test = df.loc[~held].reset_index(drop=True), df.loc[held].reset_index(drop=True)
     filt = None
     if chain_k is not None:
         filt = chain.speed_channel(train, mask[~held], k=chain_k, seed=settings.seed).get("filter")
         if filt is None:
-            return np.inf, ssm, True, 0
+            return failed()
         train, test_in = chain.with_position_speed(train), chain.with_position_speed(test)
     else:
         test_in = test
@@ -485,9 +538,12 @@ def fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, init, 
         pred = est.predict_free_run(test_in)
         e = (v[held] - (pred if filt is None else filt.apply(test, pred)))[m_te]
     except IdentificationError:
-        return np.inf, ssm, True, 0
+        return failed()
     nfev = int(est.convergence_.get("nfev_total", 0))
-    return (float(np.sum(e ** 2)) if np.all(np.isfinite(e)) else np.inf), ssm, False, nfev
+    finite = bool(np.all(np.isfinite(e)))
+    per_run = np.bincount(code, weights=e * e, minlength=len(run_ids)) if finite else np.full(len(run_ids), np.inf)
+    return (float(np.sum(e ** 2)) if finite else np.inf), ssm, False, nfev, dict(zip(run_ids.tolist(),
+                                                                                      per_run.tolist()))
 
 
 def fold_fit_data(train: pd.DataFrame, mask: np.ndarray) -> tuple[pd.DataFrame, np.ndarray]:
@@ -518,7 +574,7 @@ def _fold_errors(args: list, n_groups: int, n_folds: int, client, name: str) -> 
         out[i] = r
     groups = [out[j * n_folds:(j + 1) * n_folds] for j in range(n_groups)]
     return [FoldErrors(np.array([r[0] for r in rows]), np.array([r[1] for r in rows]), sum(bool(r[2]) for r in rows),
-                       sum(int(r[3]) for r in rows)) for rows in groups]
+                       sum(int(r[3]) for r in rows), {k: x for r in rows for k, x in r[4].items()}) for rows in groups]
 
 
 def cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init, jobs,

@@ -26,6 +26,8 @@ of fewer runs would not show what happens along it.
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 import pandas as pd
 
@@ -55,6 +57,20 @@ def run_table(frames, column: str) -> pd.DataFrame:
 def one_session(tab: pd.DataFrame) -> bool:
     """Whether the runs of ``tab`` (:func:`run_table`) follow one another on one clock (no two overlap in time)."""
     return bool(np.all(tab["start"].to_numpy()[1:] > tab["stop"].to_numpy()[:-1]))
+
+
+class Session(NamedTuple):
+    """The runs of TRAIN and TEST on the clock (:func:`run_table` of the time column) and whether they are one
+    session (:func:`one_session`): what the event clocks and the lagged channels both read (:func:`session`)."""
+
+    runs: pd.DataFrame
+    one: bool
+
+
+def session(train: pd.DataFrame, test: pd.DataFrame | None = None) -> Session:
+    """The :class:`Session` of every run of both frames (``test`` may be None), logged channel or not."""
+    clock = run_table([train, test], dataio.TIME)
+    return Session(clock, one_session(clock))
 
 
 def event_times(tab: pd.DataFrame) -> np.ndarray:
@@ -88,18 +104,20 @@ def step_channels(df: pd.DataFrame, response_columns=None) -> list[str]:
     return out
 
 
-def with_event_clocks(train: pd.DataFrame, test: pd.DataFrame | None = None, response_columns=None):
+def with_event_clocks(train: pd.DataFrame, test: pd.DataFrame | None = None, response_columns=None,
+                      sess: Session | None = None):
     """``(train, test, record)``: copies of the frames with the event clock of every step channel of ``train``
     appended (``test`` None stays None), and ``record`` ``[{"channel", "clock", "events_s"}]``.
 
-    The frames are returned unchanged (not copied) when TRAIN has no step channel.
+    ``sess``: the frames' :func:`session` when the caller has it (default: computed here). The frames are returned
+    unchanged (not copied) when TRAIN has no step channel.
     """
     names = step_channels(train, response_columns)
     if not names:
         return train, test, []
     train, test = train.copy(), (test.copy() if test is not None else None)
     record = []
-    merged = one_session(run_table([train, test], dataio.TIME))   # every run of both frames, logged or not
+    merged = (session(train, test) if sess is None else sess).one   # every run of both frames, logged or not
     for name in names:
         tab = run_table([train, test], name)
         for df in (train, test):

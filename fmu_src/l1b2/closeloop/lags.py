@@ -28,7 +28,7 @@ import pandas as pd
 
 from ..data import measurements as dataio
 from .candidates import channels_of
-from .events import MIN_BLOCK_RUNS, event_times, one_session, run_table
+from .events import MIN_BLOCK_RUNS, Session, event_times, run_table, session
 
 #: the stores' time constants, in the session's median run period
 TAU_RUNS = (3, 10)
@@ -74,32 +74,34 @@ def run_period(tab: pd.DataFrame) -> float:
     return float(np.median(np.diff(starts))) if len(starts) > 1 else 0.0
 
 
-def with_lagged_channels(train: pd.DataFrame, test: pd.DataFrame | None = None, response_columns=None):
+def with_lagged_channels(train: pd.DataFrame, test: pd.DataFrame | None = None, response_columns=None,
+                         sess: Session | None = None):
     """``(train, test, record)``: copies of the frames with the lags of every run setting of ``train`` appended
     (``test`` None stays None), and ``record`` ``[{"channel", "lags", "tau_s", "one_session"}]``.
 
+    ``sess``: the frames' :func:`~l1b2.closeloop.events.session` when the caller has it (default: computed here).
     The frames are returned unchanged (not copied) when TRAIN has no run setting.
     """
     names = run_settings(train, response_columns)
-    clock = run_table([train, test], dataio.TIME)
-    period = run_period(clock)
+    sess = session(train, test) if sess is None else sess
+    period = run_period(sess.runs)
     if not names or not period > 0:
         return train, test, []
     train, test = train.copy(), (test.copy() if test is not None else None)
-    merged = one_session(clock)
+    merged = sess.one
     taus = [n * period for n in TAU_RUNS]
     record = []
     for name in names:
         frames = [df for df in (train, test) if df is not None and name in df.columns]
-        for session in [frames] if merged else [[df] for df in frames]:
-            t = np.concatenate([df[dataio.TIME].to_numpy(float) for df in session])
-            c = np.concatenate([df[name].to_numpy(float) for df in session])
+        for group in [frames] if merged else [[df] for df in frames]:
+            t = np.concatenate([df[dataio.TIME].to_numpy(float) for df in group])
+            c = np.concatenate([df[name].to_numpy(float) for df in group])
             order = np.argsort(t, kind="stable")
             for n, tau in zip(TAU_RUNS, taus):
                 y = np.empty_like(c)
                 y[order] = lowpass(t[order], c[order], tau)
                 k = 0
-                for df in session:
+                for df in group:
                     df[name + suffix(n)] = y[k:k + len(df)]
                     k += len(df)
         record.append({"channel": name, "lags": [name + suffix(n) for n in TAU_RUNS],

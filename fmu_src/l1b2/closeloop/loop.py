@@ -87,7 +87,7 @@ from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT
                          session_blocks, stratified_folds, time_dependent, validated)
 from .baselines import choose_baseline, identify_families, retag_structural
 from .crosscheck import PureSlipCheck, confirmed_pick, score_of, withdrawn_note
-from .events import with_event_clocks
+from .events import session, with_event_clocks
 from .lags import with_lagged_channels
 from .evidence import channels_considered, order_traced
 from .guard import checked_fit
@@ -241,8 +241,9 @@ class CloseLoop(EstimatorSettings):
         m_s = train.slider_mass_kg
         dtr = train.df
         dte = test.df if test is not None else None
-        dtr, dte, event_rec = with_event_clocks(dtr, dte, self.response_columns)   # derived logged channels
-        dtr, dte, lag_rec = with_lagged_channels(dtr, dte, self.response_columns)
+        sess = session(dtr, dte)   # the runs on the clock, for both derivations of logged channels
+        dtr, dte, event_rec = with_event_clocks(dtr, dte, self.response_columns, sess)
+        dtr, dte, lag_rec = with_lagged_channels(dtr, dte, self.response_columns, sess)
         mask_tr = np.array(train.mask)
 
         if self.baseline not in ("best",) + DRIVE_LAWS:

@@ -36,7 +36,7 @@ import pandas as pd
 from ..data import measurements as dataio
 from ..predictor import model as pr
 from . import residuals as res
-from .acceptance import NAMED_SHARE, one_se_gap, time_dependent
+from .acceptance import NAMED_SHARE, one_se_gap_per_run, pooled_gain, time_dependent
 from .candidates import CandidateForce
 
 DEFAULT_MIN_GAIN = 0.5
@@ -220,8 +220,7 @@ class FoldSolver:
         for per_fold in sums:
             sse1 = self._run_sse(per_fold)
             s1 = np.array([sse1[k] for k in keys])
-            gain = 1 - s1.sum() / s0.sum() if s0.sum() > 0 else 0.0
-            out.append((float(gain), (s0 - s1) / max(s0.mean(), 1e-300)))
+            out.append((pooled_gain(s0, s1), (s0 - s1) / max(s0.mean(), 1e-300)))
         return out
 
     def gain(self, S):
@@ -328,23 +327,21 @@ def simplest_within_one_se(accepted: list) -> list:
 
     Per family of ``accepted`` (:class:`~l1b2.closeloop.acceptance.RefitCV` trials; a family has several when
     :func:`shape_alternatives` sent its other shapes to the refit), the trial with the largest cross-validated gain
-    and every trial whose gain is below it by at most one standard error of the per-fold gap
-    (:func:`~l1b2.closeloop.acceptance.one_se_gap`, on the same folds and current model) are candidates; the
-    simplest is kept: fewest parameters, then the lowest :func:`shape_degree`, then the largest gain. A gap beyond
-    its standard error, or one that cannot be computed, leaves the best. Families with one trial, and the order of
-    the kept trials, are unchanged.
+    (:func:`best_per_family`) and every trial whose gain is below it by at most one standard error of the gap are
+    candidates; the simplest is kept: fewest parameters, then the lowest :func:`shape_degree`, then the largest
+    gain. The gap and its standard error are paired per held-out run
+    (:func:`~l1b2.closeloop.acceptance.one_se_gap_per_run`, on the same folds and current model): per run ``r``,
+    ``delta_r = (SSE_trial_r - SSE_best_r) / mean_r SSE_current_r``, the gap ``mean(delta)`` (the pooled gains'
+    difference exactly) and ``se = sd(delta) / sqrt(n_runs)``. A gap beyond its standard error, or one that cannot
+    be computed, leaves the best. Families with one trial, and the order of the kept trials, are unchanged.
     """
-    best: dict = {}
-    for t in accepted:
-        f = t.candidate.family
-        if f not in best or t.gain > best[f].gain:
-            best[f] = t
+    best = {t.candidate.family: t for t in best_per_family(accepted, gain=lambda t: t.gain)}
 
     def close(t) -> bool:
         b = best[t.candidate.family]
         if t is b:
             return True
-        gap = one_se_gap(t, b)
+        gap = one_se_gap_per_run(t, b)
         return gap is not None and gap[0] <= gap[1]
 
     keep = {}
@@ -447,12 +444,13 @@ def choose(scores: list[Score], *, alpha=DEFAULT_ALPHA, min_gain=DEFAULT_MIN_GAI
     return Choice(sig, most_parsimonious(sig, parsimony=parsimony), level)
 
 
-def best_per_family(scores: list[Score], key=lambda c: c.family) -> list[Score]:
+def best_per_family(scores: list, key=lambda c: c.family, gain=lambda s: s.cv_gain) -> list:
     """The best-gain candidate of each family (or of each ``key(candidate)``: e.g. a family's shape), by decreasing
-    held-out gain; of equal gains the first."""
+    held-out gain; of equal gains the first. ``scores``: anything with a ``candidate``; ``gain(s)`` its gain (default
+    a :class:`Score`'s ``cv_gain``; a refit trial's ``gain``)."""
     best = {}
     for s in scores:
         k = key(s.candidate)
-        if k not in best or s.cv_gain > best[k].cv_gain:
+        if k not in best or gain(s) > gain(best[k]):
             best[k] = s
-    return sorted(best.values(), key=lambda s: -s.cv_gain)
+    return sorted(best.values(), key=lambda s: -gain(s))
