@@ -81,3 +81,15 @@ def test_close_loop_report_md_prints_parameters_with_4_significant_digits():
     text = markdown_report(rep)
     row = next(line for line in text.splitlines() if line.startswith("| pulley_mu"))
     assert row == "| pulley_mu | 0.3865 | 0.001235 | [0.3841, 0.389] | - | - |"   # no interval kind recorded
+
+
+def test_close_loop_report_md_flags_test_runs_at_a_category_value_train_never_had():
+    from l1b2.closeloop.result import markdown_report
+    rep = minimal_report()
+    rep["diagnosis"] = {**rep["diagnosis"], "unseen_levels": {
+        "run_level_category(fixture_id)[run]": {"channel": "fixture_id", "values": [5.0, 7.5], "runs": 3}}}
+    lines = [line for line in markdown_report(rep).splitlines() if "never had" in line]
+    assert lines == ["* TEST has 3 run(s) at fixture_id = 5, 7.5, a value TRAIN never had: "
+                     "`run_level_category(fixture_id)[run]` gives them TRAIN's average over runs (its prediction "
+                     "there carries no effect of that value)"]
+    assert "never had" not in markdown_report(minimal_report())

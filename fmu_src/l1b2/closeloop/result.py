@@ -329,6 +329,11 @@ def markdown_report(rep: dict) -> str:
                      f"CV nrmse {t['cv_free_run_nrmse_current']:.2%} -> {t['cv_free_run_nrmse_refit']:.2%} "
                      f"(< {d['rules'].get('min_cv_drop', 0):.2%} drop: not added)")
     lines += [f"* {describe(c)}" for c in d.get("named_checks", [])]
+    for label, u in (d.get("unseen_levels") or {}).items():
+        values = ", ".join(format(v, "g") for v in u["values"])
+        lines.append(f"* TEST has {u['runs']} run(s) at {u['channel']} = {values}, a value TRAIN never had: "
+                     f"`{label}` gives them TRAIN's average over runs (its prediction there carries no effect of "
+                     "that value)")
     bc = d.get("baseline_choice") or {}
     if bc.get("families"):
         lines += ["", f"## Baseline family (chosen: `{bc['chosen']}`, by TRAIN's cross-validated free-run nrmse over "
