@@ -293,12 +293,13 @@ def category_signals(df: pd.DataFrame, channels) -> list[dict]:
     :func:`l1b2.predictor.effects.channels.category_levels`; as :func:`run_signals`' entries with transform
     ``category``, ``levels`` and ``shares``. None in most data: nothing then costs anything."""
     out = []
+    runs = df.groupby(dataio.RUN, sort=False)
     for ch in channels:
         col = ch["name"]
         if (ch.get("kind") != "logged" or ch.get("within_run", True) or col not in df.columns
                 or col in fx.channels.INPUT_COLUMNS):
             continue
-        values = df.groupby(dataio.RUN, sort=False)[col].first().to_numpy(float)
+        values = runs[col].first().to_numpy(float)
         cat = fx.channels.category_levels(values)
         if cat is not None:
             out.append({"channel": col, "transform": fx.channels.CATEGORY, "values": values, "levels": cat[0],
