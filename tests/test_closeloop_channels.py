@@ -270,6 +270,110 @@ def test_damping_channel_form_is_the_channel_times_the_baseline_speed():
     assert np.all(F[z > 0] * (d * v_base)[z > 0] <= 0)
 
 
+def test_the_linear_damping_form_is_bounded_so_the_total_damping_stays_non_negative_over_trains_range():
+    # reference, written out: TRAIN's channel has mean 2, sd 0.5, range 1..6, so z runs over [-2, 8]; the baseline's
+    # smallest viscous damping D = 6 N s/m; the form's damping coefficient is a z / 0.2 m/s, and D + a z / 0.2 >= 0
+    # over [-2, 8] is -6 * 0.2 / 8 = -0.15 <= a <= 6 * 0.2 / 2 = 0.6 N; at either bound the total damping is 0 at one
+    # end of the range. The quadratic shape (two parameters) gets no box; a baseline without a positive damping none
+    from l1b2.predictor import effects as fx
+    from l1b2.predictor.effects import channels as ch_mod
+    ch = {"name": "coil_A", "kind": "logged", "mean": 2.0, "sd": 0.5, "lo": 1.0, "hi": 6.0, "within_run": False,
+          "run_spread": 0.0}
+
+    def grid(ranges):
+        train = fx.TrainingSummary(m_s=0.1, time_range=(0.0, 10.0), position_range=(-0.02, 0.02),
+                                   voltage_median=250.0, ranges={"load_abs": 0.0, **ranges}, channels=(ch,))
+        return {h.shape: h for h in fx.family("channel").grid(train)
+                if h.spec.get("channel") == "coil_A" and h.spec["form"] == "damping"}
+
+    hs = grid({"damping": 6.0})
+    assert set(hs) == {"damping, run", "damping, run, quadratic"}
+    (lo, hi), = hs["damping, run"].bounds
+    np.testing.assert_allclose([lo, hi], [-0.15, 0.6], rtol=1e-12)
+    for a, z_edge in ((lo, 8.0), (hi, -2.0)):
+        np.testing.assert_allclose(6.0 + a * z_edge / 0.2, 0.0, atol=1e-12)
+    assert hs["damping, run, quadratic"].bounds == ()
+    assert grid({})["damping, run"].bounds == () and grid({"damping": -1.0})["damping, run"].bounds == ()
+    # the other forms stay unbounded
+    assert all(h.bounds == () for h in fx.family("channel").grid(fx.TrainingSummary(
+        m_s=0.1, time_range=(0.0, 10.0), position_range=(-0.02, 0.02), voltage_median=250.0,
+        ranges={"load_abs": 0.0, "damping": 6.0}, channels=(ch,))) if h.spec["form"] != "damping")
+    assert ch_mod.damping_bounds({"mean": 2.0, "sd": 0.5}, 1.0, 6.0, 6.0) == ((lo, hi),)
+
+
+def test_the_damping_floor_is_the_smallest_total_damping_over_trains_range_of_the_channel():
+    # reference, written out (mean 2, sd 0.5, range 1..6: z and zc in [-2, 8]; D the baseline's damping [N s/m]):
+    # linear a = 0.3: 6 + min(0.3 * -2, 0.3 * 8) / 0.2 = 3; quadratic (a, b) = (0.2, 0.1): g = a zc + b (zc^2 - 1) is
+    # -0.1 at -2, 7.9 at 8 and -0.2 at its vertex zc = -1, so 6 - 0.2 / 0.2 = 5 (and 0.5 - 1 = -0.5 with D = 0.5);
+    # (0, -0.1): g(8) = -6.3, so 6 - 31.5 = -25.5; every value also against a dense grid of zc
+    from l1b2.predictor.effects.channels import damping_floor
+    base = {"kind": "channel", "channel": "coil_A", "form": "damping", "level": "run", "mean": 2.0, "sd": 0.5}
+    quad = {**base, "shape": "quadratic", "lo": 1.0, "hi": 6.0}
+    cases = [(base, [0.3], 6.0, 3.0), (base, [-0.3], 6.0, 6.0 - 2.4 / 0.2), (quad, [0.2, 0.1], 6.0, 5.0),
+             (quad, [0.2, 0.1], 0.5, -0.5), (quad, [0.0, -0.1], 6.0, -25.5), (quad, [3.0, 0.1], 6.0, 6.0 - 5.7 / 0.2)]
+    zz = np.linspace(-2.0, 8.0, 100001)
+    for spec, phi, D, want in cases:
+        got = damping_floor(spec, phi, 1.0, 6.0, D)
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
+        cols = zz[:, None] if len(phi) == 1 else np.column_stack([zz, zz * zz - 1.0])
+        np.testing.assert_allclose(got, D + np.min(cols @ np.asarray(phi)) / 0.2, atol=1e-6)
+
+
+def test_the_baselines_viscous_damping_is_c_r_plus_the_drive_forces_speed_slope():
+    # reference, written out: Eq. 29's F = -(c_r + sigma (0.5 - A'(s))) v' + ...: D(s) = c_r + sigma (0.5 - A'(s)),
+    # A' the Legendre series of alpha at (s - s_center) / s_half; with a contact half angle a, 0.5 -> a / pi;
+    # baseline_damping is its smallest value over the masked samples
+    from types import SimpleNamespace
+
+    from l1b2.closeloop.candidates import baseline_damping
+    from l1b2.predictor.model import example_params, force_parts, viscous_damping
+    prm = example_params()
+    s = np.linspace(-0.02, 0.02, 41)
+    Ap = np.polynomial.legendre.legval(s / 0.02, prm.alpha)
+    np.testing.assert_allclose(viscous_damping(prm, s), 6.0 + 0.2 * (0.5 - Ap), rtol=1e-14)
+    a = np.full(41, 1.2)
+    np.testing.assert_allclose(viscous_damping(prm, s, a), 6.0 + 0.2 * (1.2 / np.pi - Ap), rtol=1e-14)
+    np.testing.assert_allclose(force_parts(prm, s, np.full(41, 250.0), 0.0, 0.1)[0], viscous_damping(prm, s))
+    df = pd.DataFrame({"position_m": s, "voltage_V": 250.0})
+    mask = s > 0.0
+    model = SimpleNamespace(params_=prm, result_=SimpleNamespace(frequency_response=None))
+    np.testing.assert_allclose(baseline_damping(model, df, mask), np.min((6.0 + 0.2 * (0.5 - Ap))[mask]))
+
+
+def test_a_refit_whose_damping_form_turns_the_total_damping_negative_is_refused():
+    # reference, written out: the model's own smallest damping D (baseline_damping, about 6 N s/m); a linear damping
+    # form of a = 0.3 N over z in [-2, 8] takes at most 0.3 * 2 / 0.2 = 3 N s/m off (kept), a = 2 N takes 20 off
+    # (refused: the pick is not added and the record says why); a candidate of another form has no floor
+    from types import SimpleNamespace
+
+    from l1b2.closeloop.acceptance import EffectSet
+    from l1b2.closeloop.candidates import CandidateForce, baseline_damping, damping_floors
+    from l1b2.closeloop.loop import CloseLoop
+    from l1b2.predictor.model import example_params
+    s = np.linspace(-0.02, 0.02, 41)
+    df = pd.DataFrame({"position_m": s, "voltage_V": 250.0})
+    mask = np.ones(41, bool)
+    model = SimpleNamespace(params_=example_params(), result_=SimpleNamespace(frequency_response=None))
+    D = baseline_damping(model, df, mask)
+    spec = {"kind": "channel", "channel": "coil_A", "form": "damping", "level": "run", "mean": 2.0, "sd": 0.5}
+    c = CandidateForce("channel_coil_A", "coil_A", "damping, run", ("coil_A_damping_run",), ("N",),
+                       lambda d: np.zeros((len(d), 1)), spec=spec)
+    chans = ({"name": "coil_A", "lo": 1.0, "hi": 6.0},)
+    msgs = []
+    for a, refused in ((0.3, False), (2.0, True)):
+        eff = EffectSet().add(c, [a])
+        floors = damping_floors(eff, model, df, mask, chans)
+        np.testing.assert_allclose(floors[c.label], D - 2.0 * a / 0.2, rtol=1e-12)
+        it = SimpleNamespace(ranges=[], channels=chans)
+        got = CloseLoop._refused_range(it, eff, model, df, mask, 3, SimpleNamespace(candidate=c), msgs.append)
+        assert got is refused
+        assert it.ranges[0]["outcome"].startswith("refused" if refused else "kept")
+    assert len(msgs) == 1 and "refused" in msgs[0]
+    other = CandidateForce("smooth_time", "time", "", ("b",), ("N",), lambda d: np.zeros((len(d), 1)),
+                           spec={"kind": "smooth_time"})
+    assert damping_floors(EffectSet().add(other, [1.0]), model, df, mask, chans) == {}
+
+
 def test_a_channel_that_scales_the_damping_is_recovered_by_the_damping_form_not_the_friction_form():
     # reference: data made from the law written out, a damping coefficient c_0 (1 + k z) changed by a logged channel
     # (z its standardised run value), over runs whose speeds differ (V0 and load); the excess force on the baseline

@@ -32,6 +32,8 @@ import pandas as pd
 
 from ..data import measurements as dataio
 from ..predictor import effects as fx
+from ..predictor.frequency import contact_angle, sample_frequency
+from ..predictor.model import viscous_damping
 from ..predictor.effects import SPEED_REF, V_REF  # noqa: F401  (re-exported: the features' scales)
 from ..predictor.effects.interactions import EQ29_LINEARISATION  # noqa: F401  (re-exported)
 
@@ -100,6 +102,9 @@ class Context:
     #: logged columns that are measured responses of the motor (listed, never candidates; the user's setting
     #: ``CloseLoop(response_columns=...)``, default :data:`l1b2.predictor.effects.channels.RESPONSE_COLUMNS`)
     response_columns: tuple = fx.channels.RESPONSE_COLUMNS
+    #: the baseline's smallest viscous damping over TRAIN [N s/m] (:func:`baseline_damping`; None: not known), the
+    #: floor the damping forms of the channels keep (:func:`l1b2.predictor.effects.channels.damping_bounds`)
+    damping_N_s_per_m: float | None = None
     #: :func:`signals` of the last few frames (by identity; their arrays read-only), not pickled with the context
     signal_cache: dict = field(default_factory=dict, repr=False, compare=False)
 
@@ -216,7 +221,8 @@ def training_summary(ctx: Context, df_train: pd.DataFrame) -> fx.TrainingSummary
     ranges = {"t_lo": float(t0), "t_hi": float(t1), "s_lo": float(s0), "s_hi": float(s1),
               "V_lo": float(V.min()), "V_hi": float(V.max()),
               "load_abs": float(np.max(np.abs(df_train[dataio.LOAD].to_numpy(float)))) or 1.0,
-              "v_lo": float(np.min(vp)), "v_hi": float(np.max(vp))}
+              "v_lo": float(np.min(vp)), "v_hi": float(np.max(vp)),
+              **({} if ctx.damping_N_s_per_m is None else {"damping": float(ctx.damping_N_s_per_m)})}
     T = (df_train[dataio.TEMPERATURE].to_numpy(float) if dataio.TEMPERATURE in df_train.columns else None)
     out = fx.TrainingSummary(m_s=float(ctx.m_s), time_range=ctx.time_range, position_range=ctx.position_range,
                              voltage_median=float(np.median(V)), ranges=ranges,
@@ -226,6 +232,33 @@ def training_summary(ctx: Context, df_train: pd.DataFrame) -> fx.TrainingSummary
                              channels=channels_of(df_train, ctx.response_columns))
     ctx.summaries[key] = (df_train, out)
     return out
+
+
+def baseline_damping(model, df: pd.DataFrame, mask) -> float:
+    """The smallest viscous damping [N s/m] of a fitted predictor (``params_``, ``result_.frequency_response``) over
+    the masked samples of ``df``: :func:`l1b2.predictor.model.viscous_damping` at their positions, with the
+    pure-slip family's contact angle when its response carries the contact law."""
+    prm, fr = model.params_, getattr(model.result_, "frequency_response", None)
+    m = np.asarray(mask, bool)
+    contact = None
+    if prm.drive_law == "pure_slip" and fr is not None and fr.has_contact:
+        V0 = df[dataio.VOLTAGE].to_numpy(float)[m]
+        contact = contact_angle(V0, sample_frequency(df[m], fr.f_ref_Hz), fr)
+    return float(np.min(viscous_damping(prm, df[dataio.POSITION].to_numpy(float)[m], contact)))
+
+
+def damping_floors(effects, model, df: pd.DataFrame, mask, channels) -> dict:
+    """``{label: N s/m}``: the total viscous damping's smallest value over TRAIN's range of the channel
+    (:func:`l1b2.predictor.effects.channels.damping_floor`) of every damping form of a channel among ``effects``
+    (an :class:`~l1b2.closeloop.acceptance.EffectSet` with its fitted ``phi``), with ``model``'s own damping
+    (:func:`baseline_damping`); ``channels``: TRAIN's channel records (``name``, ``lo``, ``hi``)."""
+    rng = {ch["name"]: (ch["lo"], ch["hi"]) for ch in channels if "lo" in ch and "hi" in ch}
+    picks = [(c, p) for c, p in zip(effects.candidates, effects.phi)
+             if c.spec.get("kind") == "channel" and c.spec.get("form") == "damping" and c.spec["channel"] in rng]
+    if not picks:
+        return {}
+    D = baseline_damping(model, df, mask)
+    return {c.label: fx.channels.damping_floor(c.spec, p, *rng[c.spec["channel"]], D) for c, p in picks}
 
 
 def group_candidates(groups, ctx: Context, df_train: pd.DataFrame) -> list[CandidateForce]:

@@ -79,7 +79,8 @@ from ..predictor.setup import PredictorSetup
 from . import chain
 from . import residuals as res
 from . import runlevel
-from .candidates import CandidateSource, Context, channels_of, full_library, training_summary
+from .candidates import (CandidateSource, Context, baseline_damping, channels_of, damping_floors, full_library,
+                         training_summary)
 from .stages import StageClock
 from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT_FOLDS, DEFAULT_REFIT_NFEV,
                          Directions, EffectSet, RefitCV, RefitSettings, Validated, accepts, added_columns,
@@ -282,7 +283,8 @@ class CloseLoop(EstimatorSettings):
         analysis = analyse_residuals(fit_tr, start.predict_free_run(fit_tr), mask_tr, alpha=self.alpha,
                                      k=self.k_folds, seed=self.seed)
         ctx = candidate_context(start.predict_free_run, m_s, fit_tr, mask_tr, analysis.peak,
-                                response_columns=self.response_columns)
+                                response_columns=self.response_columns,
+                                damping=baseline_damping(start, fit_tr, mask_tr))
         library = self.library if self.library is not None else full_library()
         pool = retag_structural(library(ctx, fit_tr), start.params_.drive_law)
         it.channels = training_summary(ctx, fit_tr).channels
@@ -418,14 +420,31 @@ class CloseLoop(EstimatorSettings):
                 lambda: refit(dtr, mask, m_s, cur.params_, effects, settings, max_outer=3,
                               n_starts=max(self.n_starts, 2)),
                 dtr, mask, f"the joint re-identification with {pick.candidate.label} (round {n_rnd})")
-            it.model, it.effects = model, effects.with_phi(model.phi_)
             say.count(1, model.convergence_.get("nfev_total", 0))
+            if self._refused_range(it, effects.with_phi(model.phi_), model, dtr, mask, n_rnd, pick, say):
+                break
+            it.model, it.effects = model, effects.with_phi(model.phi_)
             if check is not None:     # a confirmed reading's Eq. 29 estimates are this refit's (decision 0054)
                 check.record_joint_refit(checks, model)
             cur_err = {}
             it.rounds.append({"round": n_rnd, "added": pick.candidate.label, "effect": pick.candidate.family,
                               "regressors": list(pick.candidate.regressors), "cv": pick.to_dict(),
                               "metrics": report(model)})
+
+    @staticmethod
+    def _refused_range(it, effects, model, dtr, mask, n_rnd, pick, say) -> bool:
+        """Whether the joint refit with ``pick`` leaves a channel's damping form with a negative total viscous
+        damping over TRAIN's range of the channel (:func:`~l1b2.closeloop.candidates.damping_floors`); the check
+        goes to ``it.ranges``, and a refused pick is not added (the model stays the previous round's)."""
+        floors = damping_floors(effects, model, dtr, mask, it.channels)
+        low = sorted(k for k, v in floors.items() if not v >= 0)
+        if floors:
+            it.ranges.append({"round": n_rnd, "label": pick.candidate.label, "damping_floor_N_s_per_m": floors,
+                              "outcome": f"refused: negative total damping ({', '.join(low)})" if low else "kept"})
+        if low:
+            say(f"round {n_rnd}: {pick.candidate.label} refused: the total viscous damping of {', '.join(low)} "
+                "turns negative within TRAIN's range of the channel")
+        return bool(low)
 
     def _cross_validate(self, it, short, cur, cur_err: dict, schemes: dict, r, dtr, mask, m_s, v_cur, say,
                         n_rnd) -> list:
@@ -576,6 +595,7 @@ class CloseLoop(EstimatorSettings):
                                                        it.effects.families, it.run_level),
             "run_level": it.run_level.to_dict() if it.run_level is not None else None,
             "named_checks": list(it.checks),
+            "physical_range": list(it.ranges),
         }
 
 
@@ -595,6 +615,7 @@ class _Iteration:
     channels: tuple = ()
     run_level: runlevel.RunLevelAnalysis | None = None
     checks: list = field(default_factory=list)    #: the named picks' checks from the pure-slip family
+    ranges: list = field(default_factory=list)    #: the damping forms' physical-range checks after each refit
 
 
 class ChainModel:
@@ -685,9 +706,10 @@ def analyse_residuals(df: pd.DataFrame, v_pred: np.ndarray, mask: np.ndarray, *,
 
 
 def candidate_context(baseline_free_run, m_s: float, df: pd.DataFrame, mask: np.ndarray, peak: dict,
-                      response_columns=None) -> Context:
+                      response_columns=None, damping: float | None = None) -> Context:
     """What candidate features may use: the baseline's free run, the mass, TRAIN's ranges, the spectral peak
-    (``response_columns``: the measured responses, never candidates; None: the default list)."""
+    (``response_columns``: the measured responses, never candidates; None: the default list; ``damping``: the
+    baseline's smallest viscous damping over TRAIN [N s/m], :func:`~l1b2.closeloop.candidates.baseline_damping`)."""
     pos = df[dataio.POSITION].to_numpy(float)[mask]
     return Context(
         baseline_free_run=baseline_free_run, m_s=float(m_s),
@@ -695,6 +717,7 @@ def candidate_context(baseline_free_run, m_s: float, df: pd.DataFrame, mask: np.
         position_range=(float(pos.min()), float(pos.max())),
         temperature_ref=float(df[dataio.TEMPERATURE].median()) if dataio.TEMPERATURE in df.columns else None,
         spectral_period_m=peak.get("period_m") if peak.get("power_ratio_to_median", 0) > 4 else None,
+        damping_N_s_per_m=damping,
         **({} if response_columns is None else {"response_columns": tuple(response_columns)}))
 
 

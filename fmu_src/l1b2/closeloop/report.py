@@ -129,6 +129,9 @@ class Diagnosis(_Record):
     (:func:`l1b2.closeloop.runlevel.unseen_test_levels`).
     ``named_checks``: every named pick of a round from the Eq. 29 baseline, cross-validated again from the
     pure-slip family (:mod:`l1b2.closeloop.crosscheck`), with its figures and outcome.
+    ``physical_range``: after each joint refit with a channel's damping form, the total viscous damping's smallest
+    value over TRAIN's range of the channel per such form (``damping_floor_N_s_per_m``) and the outcome (``kept``,
+    or ``refused``: a negative floor, the pick not added).
     The nested evidence stays JSON-shaped.
     """
 
@@ -158,6 +161,7 @@ class Diagnosis(_Record):
     event_clocks: list = field(default_factory=list)
     lagged_channels: list = field(default_factory=list)
     unseen_levels: dict = field(default_factory=dict)
+    physical_range: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
         out = {f.name: getattr(self, f.name) for f in fields(self)}

@@ -329,6 +329,10 @@ def markdown_report(rep: dict) -> str:
                      f"CV nrmse {t['cv_free_run_nrmse_current']:.2%} -> {t['cv_free_run_nrmse_refit']:.2%} "
                      f"(< {d['rules'].get('min_cv_drop', 0):.2%} drop: not added)")
     lines += [f"* {describe(c)}" for c in d.get("named_checks", [])]
+    lines += [f"* round {c['round']}: `{c['label']}` refused, the total viscous damping turns negative within "
+              f"TRAIN's range of the channel (" + ", ".join(f"{k}: {v:.3g} N s/m" for k, v in
+                                                            c["damping_floor_N_s_per_m"].items()) + ")"
+              for c in d.get("physical_range", []) if c["outcome"] != "kept"]
     for label, u in (d.get("unseen_levels") or {}).items():
         values = ", ".join(format(v, "g") for v in u["values"])
         lines.append(f"* TEST has {u['runs']} run(s) at {u['channel']} = {values}, a value TRAIN never had: "

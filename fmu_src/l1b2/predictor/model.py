@@ -127,6 +127,7 @@ __all__ = [
     "one_step",
     "steady_state",
     "example_params",
+    "viscous_damping",
 ]
 
 
@@ -493,13 +494,30 @@ def force_parts(params: PredictorParams, s, V0, m_load_p, m_s, contact=None):
     Ap, Bp, P = position_terms(params, s)
     g1 = drive_factor(params.k0)
     G = G_of_k0(params.k0)
-    a_pi, sin_a = (0.5, 1.0) if contact is None else (np.asarray(contact, float) / np.pi, np.sin(contact))
-    D = params.c_r + params.sigma * (a_pi - Ap)
+    sin_a = 1.0 if contact is None else np.sin(contact)
+    D = _damping(params, Ap, contact)
     X = Bp * np.asarray(V0, float) * sin_a + params.mu * P * (g1 - 0.5 * np.pi * Ap * G) - G_M_S2 * np.asarray(
         m_load_p, float
     )
     Fr = params.mu_sd * (G_M_S2 * np.asarray(m_s, float) + params.kappa * P)
     return D, X, Fr
+
+
+def _damping(params: PredictorParams, Ap, contact=None):
+    """``c_r + sigma (a/pi - A')`` [N s/m] from A' at the samples (``a = pi/2`` without a contact angle)."""
+    a_pi = 0.5 if contact is None else np.asarray(contact, float) / np.pi
+    return params.c_r + params.sigma * (a_pi - Ap)
+
+
+def viscous_damping(params: PredictorParams, s, contact=None):
+    """The model's viscous damping ``D(s) = c_r + sigma (a/pi - A'(s))`` [N s/m] at positions ``s`` [m].
+
+    ``F = -D v' + ...``: the slider's own damping ``c_r`` plus the speed slope of Eq. 29's drive force
+    (:func:`force_parts`' ``D``); ``contact``: the half contact angle per sample [rad] of the pure-slip family's
+    contact law (None: ``a = pi/2``, Eq. 29's 0.5). The pure-slip family's slip force adds its own slope in
+    ``v'`` on top (:func:`l1b2.predictor.pureslip.slip_force`), which this does not include.
+    """
+    return _damping(params, position_terms(params, s)[0], contact)
 
 
 def slip_terms(params: PredictorParams, s, V0):

@@ -239,15 +239,16 @@ class Channel(Effect):
             reg = regressor_of(ch["name"])
             logged = "lo" in ch and "hi" in ch and ch["name"] != SESSION_TIME
             load_abs = float(train.ranges.get("load_abs", 0.0)) if logged else 0.0
+            damping = float(train.ranges.get("damping", np.nan))
             m_s = float(getattr(train, "m_s", 0.0) or 0.0) if logged else 0.0
             for level in LEVELS if ch.get("within_run", True) else ("run",):
                 for shape in SHAPES if logged else SHAPES[:1]:
                     for by in ("",) + (INTERACTIONS if load_abs > 0 and shape in INTERACTION_SHAPES else ()):
                         for form in _forms(logged and not by, m_s, shape):
-                            out.append(self._hypothesis(ch, reg, form, level, shape, by, load_abs, m_s))
+                            out.append(self._hypothesis(ch, reg, form, level, shape, by, load_abs, m_s, damping))
         return out
 
-    def _hypothesis(self, ch, reg, form, level, shape, by="", load_abs=0.0, m_s=0.0):
+    def _hypothesis(self, ch, reg, form, level, shape, by="", load_abs=0.0, m_s=0.0, damping=np.nan):
         name = ch["name"]
         spec = {"channel": name, "form": form, "level": level, "mean": float(ch["mean"]), "sd": float(ch["sd"]),
                 **_spread(ch, level), **({"m_s": float(m_s)} if form == "inertia" else {})}
@@ -260,8 +261,9 @@ class Channel(Effect):
             spec.update(by=by, load_abs=float(load_abs))
             names = [f"{n}_by_{by}" for n in names] + [f"{n}_x_{by}" for n in names]
         extra = (f", {shape}" if shape != "linear" else "") + (f", x {by}" if by else "")
+        bounds = damping_bounds(spec, ch["lo"], ch["hi"], damping) if form == "damping" and shape == "linear" else ()
         return self.hypothesis(
-            names, ["1" if form == "inertia" else "N"] * len(names), spec, f"{form}, {level}{extra}",
+            names, ["1" if form == "inertia" else "N"] * len(names), spec, f"{form}, {level}{extra}", bounds=bounds,
             family=f"channel_{name}", regressor=reg, generic=True, also=(regressor_of(_BY_COLUMN[by]),) if by else (),
             description=f"{ch.get('kind', 'logged')} channel {name} ({'run mean' if level == 'run' else 'per sample'}"
                         f"{extra}) {_FORM_TEXT[form]}{', growing with the load' if by else ''}")
@@ -272,6 +274,45 @@ def _forms(own: bool, m_s: float, shape: str) -> tuple:
     inertia form (given the slider's mass) and, in :data:`DAMPING_SHAPES`, the damping form."""
     return (FORCE_FORMS + (("inertia",) if own and m_s > 0 else ())
             + (("damping",) if own and shape in DAMPING_SHAPES else ()))
+
+
+def damping_bounds(spec, lo: float, hi: float, damping: float) -> tuple:
+    """The range of the linear damping form's ``a`` [N] that keeps the total viscous damping non-negative.
+
+    The form's damping coefficient is ``a z / SPEED_REF`` [N s/m]; with the baseline's own viscous damping
+    ``damping`` [N s/m] (its smallest value over TRAIN, :func:`l1b2.predictor.model.viscous_damping`),
+    ``damping + a z / SPEED_REF >= 0`` for every ``z`` of TRAIN's range of the channel, ``[(lo - mean)/sd,
+    (hi - mean)/sd]`` (``lo < mean < hi``), is ``-damping SPEED_REF / z_hi <= a <= damping SPEED_REF / (-z_lo)``:
+    ``((lower, upper),)``; ``()`` (unbounded) when ``damping`` is not a positive number (no baseline damping known,
+    or the baseline's own damping is negative somewhere: no ``a`` restores it everywhere).
+    """
+    if not damping > 0:
+        return ()
+    mean, sd = num(spec, "mean"), num(spec, "sd")
+    z_lo, z_hi = (float(lo) - mean) / sd, (float(hi) - mean) / sd
+    if not z_lo < 0 < z_hi:
+        return ()
+    return ((-damping * SPEED_REF / z_hi, damping * SPEED_REF / -z_lo),)
+
+
+def damping_floor(spec, phi, lo: float, hi: float, damping: float) -> float:
+    """The smallest total viscous damping [N s/m] of a damping-form spec with parameters ``phi`` over TRAIN's
+    range ``[lo, hi]`` of its channel: ``damping + min_z shape(z) @ phi / SPEED_REF``.
+
+    ``damping`` [N s/m]: the baseline's own (smallest) viscous damping. The minimum over the range is exact: the
+    linear shape's at an end of the range, the quadratic shape's ``a zc + b (zc^2 - 1)`` at an end or, when
+    ``b > 0``, at its vertex ``zc = -a / (2 b)`` inside the range.
+    """
+    if spec.get("form") != "damping":
+        raise EffectSpecError(f"damping_floor: the spec's form {spec.get('form')!r} is not 'damping'")
+    phi = np.asarray(phi, float).ravel()
+    mean, sd = num(spec, "mean"), num(spec, "sd")
+    z_lo, z_hi = (float(lo) - mean) / sd, (float(hi) - mean) / sd
+    z = [z_lo, z_hi]
+    if spec.get("shape", "linear") == "quadratic" and phi[1] > 0 and z_lo < -phi[0] / (2.0 * phi[1]) < z_hi:
+        z.append(-phi[0] / (2.0 * phi[1]))
+    cols = shape_basis({**spec, "lo": lo, "hi": hi}, np.asarray(z, float))
+    return float(damping + np.min(cols @ phi) / SPEED_REF)
 
 
 def shape_basis(spec, z) -> np.ndarray:
