@@ -360,7 +360,8 @@ def test_a_refit_whose_damping_form_turns_the_total_damping_negative_is_refused(
                        lambda d: np.zeros((len(d), 1)), spec=spec)
     chans = ({"name": "coil_A", "lo": 1.0, "hi": 6.0},)
     msgs = []
-    for a, refused in ((0.3, False), (2.0, True)):
+    # and either side of the edge: a floor of +0.05 N s/m is kept, one of -0.05 refused
+    for a, refused in ((0.3, False), (2.0, True), ((D - 0.05) * 0.1, False), ((D + 0.05) * 0.1, True)):
         eff = EffectSet().add(c, [a])
         floors = damping_floors(eff, model, df, mask, chans)
         np.testing.assert_allclose(floors[c.label], D - 2.0 * a / 0.2, rtol=1e-12)
@@ -368,7 +369,7 @@ def test_a_refit_whose_damping_form_turns_the_total_damping_negative_is_refused(
         got = CloseLoop._refused_range(it, eff, model, df, mask, 3, SimpleNamespace(candidate=c), msgs.append)
         assert got is refused
         assert it.ranges[0]["outcome"].startswith("refused" if refused else "kept")
-    assert len(msgs) == 1 and "refused" in msgs[0]
+    assert len(msgs) == 2 and all("refused" in m for m in msgs)
     other = CandidateForce("smooth_time", "time", "", ("b",), ("N",), lambda d: np.zeros((len(d), 1)),
                            spec={"kind": "smooth_time"})
     assert damping_floors(EffectSet().add(other, [1.0]), model, df, mask, chans) == {}
