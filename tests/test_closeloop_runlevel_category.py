@@ -181,3 +181,52 @@ def test_test_runs_at_a_value_train_never_had_are_recorded():
         "run_level_category(fixture_id)[run]": {"channel": "fixture_id", "values": [5.0, 7.0], "runs": 3}}
     assert rl.unseen_test_levels(added, test[test.fixture_id < 3]) == {}
     assert rl.unseen_test_levels(added, None) == {}
+
+
+def _dominated_reference(dev, significant, zs, level):
+    # the rule computed as written before one residual per ordered pair was shared: conditional_p computing its own
+    # _beyond, and the nesting test computing both again
+    out = [None] * len(zs)
+    sig = [i for i, s in enumerate(significant) if s]
+    for a in sig:
+        for b in sig:
+            if b <= a or rl.run_correlation(zs[a], zs[b]) < rl.DOMINANCE_CORR:
+                continue
+            pa, pb = rl.conditional_p(dev, zs[a], zs[b]), rl.conditional_p(dev, zs[b], zs[a])
+            nested = [i for i, j in ((a, b), (b, a)) if rl._beyond(zs[i], zs[j]).reshape(len(zs[i]), -1).shape[1] == 0]
+            if nested:
+                small = nested[0]
+                big = b if small == a else a
+                loser, winner = (small, big) if min(pa, pb) < level else (big, small)
+            else:
+                loser, winner = (a, b) if pa > pb else (b, a)
+            if out[loser] is None:
+                out[loser] = winner
+    return out
+
+
+def test_dominated_signals_computes_each_pairs_residuals_once_with_the_same_result(monkeypatch):
+    # property: the same dominance as the rule computed with every residual recomputed (nested value and category,
+    # a correlated follower of the value, a signal below the correlation limit), for levels either side of the
+    # nested pair's conditional p; and two _beyond calls per correlated pair instead of four
+    import itertools
+    calls = []
+    beyond = rl._beyond
+    for effect in ((-1.5, -0.5, 0.5, 1.5), (1.0, -1.0, -1.0, 1.0)):
+        dev, sigs = _realistic_deviations(effect)
+        zs = [rl.signal_columns(s)[0] for s in sigs]
+        rng = np.random.default_rng(3)
+        zs.append(zs[0] + 0.2 * rng.standard_normal(len(zs[0])))   # follows the value (|r| about 0.98)
+        zs.append(rng.standard_normal(len(zs[0])))                 # uncorrelated
+        pairs = sum(1 for a, b in itertools.combinations(range(4), 2)
+                    if rl.run_correlation(zs[a], zs[b]) >= rl.DOMINANCE_CORR)
+        assert pairs == 3
+        p_nested = min(rl.conditional_p(dev, zs[0], zs[1]), rl.conditional_p(dev, zs[1], zs[0]))
+        for level in (0.0, p_nested * 0.5, p_nested * 2.0, 1.0):
+            want = _dominated_reference(dev, [True] * 4, zs, level)
+            calls.clear()
+            monkeypatch.setattr(rl, "_beyond", lambda z, g: calls.append(1) or beyond(z, g))
+            got = rl.dominated_signals(dev, [True] * 4, zs, level)
+            monkeypatch.setattr(rl, "_beyond", beyond)
+            assert got == want
+            assert len(calls) == 2 * pairs

@@ -422,11 +422,12 @@ def _beyond(z: np.ndarray, given: np.ndarray) -> np.ndarray:
     return u[:, sv > 1e-9 * max(float(np.linalg.norm(Z)), 1e-300)] * np.sqrt(len(Z))
 
 
-def conditional_p(dev: RunDeviations, z: np.ndarray, given: np.ndarray) -> float:
+def conditional_p(dev: RunDeviations, z: np.ndarray, given: np.ndarray, rest: np.ndarray | None = None) -> float:
     """Wald p-value of the signal ``z``'s coefficients (``g1, o1[, o2]`` of :func:`signal_design`, per column) in
     the mean that also holds the signal ``given``'s: its evidence beyond what ``given`` explains. Of a ``z`` whose
-    columns ``given``'s span in part, only the rest is tested (:func:`_beyond`); nested in ``given``: 1."""
-    z = _beyond(z, given)
+    columns ``given``'s span in part, only the rest is tested (:func:`_beyond`); nested in ``given``: 1.
+    ``rest``: ``_beyond(z, given)`` when the caller has it (None: computed here)."""
+    z = _beyond(z, given) if rest is None else rest
     Z = np.asarray(z, float).reshape(len(z), -1)
     G = np.asarray(given, float).reshape(len(Z), -1)
     if Z.shape[1] == 0:
@@ -468,8 +469,9 @@ def dominated_signals(dev: RunDeviations, significant, zs, level: float = 0.0) -
         for b in sig:
             if b <= a or run_correlation(zs[a], zs[b]) < DOMINANCE_CORR:
                 continue
-            pa, pb = conditional_p(dev, zs[a], zs[b]), conditional_p(dev, zs[b], zs[a])
-            nested = [i for i, j in ((a, b), (b, a)) if _beyond(zs[i], zs[j]).reshape(len(zs[i]), -1).shape[1] == 0]
+            rest = {(i, j): _beyond(zs[i], zs[j]) for i, j in ((a, b), (b, a))}
+            pa, pb = conditional_p(dev, zs[a], zs[b], rest[a, b]), conditional_p(dev, zs[b], zs[a], rest[b, a])
+            nested = [i for i, j in ((a, b), (b, a)) if rest[i, j].reshape(len(zs[i]), -1).shape[1] == 0]
             if nested:
                 small = nested[0]
                 big = b if small == a else a
