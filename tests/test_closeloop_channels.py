@@ -280,24 +280,27 @@ def test_the_linear_damping_form_is_bounded_so_the_total_damping_stays_non_negat
     ch = {"name": "coil_A", "kind": "logged", "mean": 2.0, "sd": 0.5, "lo": 1.0, "hi": 6.0, "within_run": False,
           "run_spread": 0.0}
 
-    def grid(ranges):
+    def grid(damping):
         train = fx.TrainingSummary(m_s=0.1, time_range=(0.0, 10.0), position_range=(-0.02, 0.02),
-                                   voltage_median=250.0, ranges={"load_abs": 0.0, **ranges}, channels=(ch,))
+                                   voltage_median=250.0, ranges={"load_abs": 0.0}, channels=(ch,),
+                                   damping_N_s_per_m=damping)
         return {h.shape: h for h in fx.family("channel").grid(train)
                 if h.spec.get("channel") == "coil_A" and h.spec["form"] == "damping"}
 
-    hs = grid({"damping": 6.0})
+    hs = grid(6.0)
     assert set(hs) == {"damping, run", "damping, run, quadratic"}
     (lo, hi), = hs["damping, run"].bounds
     np.testing.assert_allclose([lo, hi], [-0.15, 0.6], rtol=1e-12)
     for a, z_edge in ((lo, 8.0), (hi, -2.0)):
         np.testing.assert_allclose(6.0 + a * z_edge / 0.2, 0.0, atol=1e-12)
     assert hs["damping, run, quadratic"].bounds == ()
-    assert grid({})["damping, run"].bounds == () and grid({"damping": -1.0})["damping, run"].bounds == ()
-    # the other forms stay unbounded
-    assert all(h.bounds == () for h in fx.family("channel").grid(fx.TrainingSummary(
+    assert grid(None)["damping, run"].bounds == () and grid(-1.0)["damping, run"].bounds == ()
+    # the other forms stay unbounded, and no spec carries the damping
+    hyps = fx.family("channel").grid(fx.TrainingSummary(
         m_s=0.1, time_range=(0.0, 10.0), position_range=(-0.02, 0.02), voltage_median=250.0,
-        ranges={"load_abs": 0.0, "damping": 6.0}, channels=(ch,))) if h.spec["form"] != "damping")
+        ranges={"load_abs": 0.0}, channels=(ch,), damping_N_s_per_m=6.0))
+    assert all(h.bounds == () for h in hyps if h.spec["form"] != "damping")
+    assert not any("damping_N_s_per_m" in h.spec or "damping" in h.spec for h in hyps)
     assert ch_mod.damping_bounds({"mean": 2.0, "sd": 0.5}, 1.0, 6.0, 6.0) == ((lo, hi),)
 
 
@@ -484,3 +487,24 @@ def test_an_effect_through_a_logged_channel_is_traced_and_a_noise_channel_is_not
     assert considered["ambient_noise"]["cv_gain"] is not None     # considered: scored, with its evidence
     b, a = held_out_nrmse(res)
     assert a ** 2 <= b0 ** 2 + (b ** 2 - b0 ** 2) / 4, (b0, b, a, d["message"])
+
+
+def test_the_loops_context_carries_the_baselines_damping_into_the_channels_grid():
+    # property: candidate_context's damping reaches TrainingSummary.damping_N_s_per_m and bounds the linear damping
+    # form of a logged channel by the formula of damping_bounds (z over the channel's TRAIN range)
+    from l1b2.closeloop.candidates import channels_of, group_candidates, training_summary
+    from l1b2.closeloop.loop import candidate_context
+    n = 40
+    df = pd.DataFrame({"run": np.repeat(np.arange(4), 10), "time_s": np.arange(n) * 0.01,
+                       "position_m": np.tile(np.linspace(-0.01, 0.01, 10), 4), "voltage_V": 250.0,
+                       "load_kg": 0.0, "direction": 1.0, "speed_m_s": 0.1,
+                       "coil_A": np.repeat([0.0, 0.5, 1.5, 2.0], 10)})
+    ctx = candidate_context(lambda d: np.full(len(d), 0.1), 0.1, df, np.ones(n, bool), {}, damping=6.0)
+    assert training_summary(ctx, df).damping_N_s_per_m == 6.0
+    ch = next(c for c in channels_of(df) if c["name"] == "coil_A")
+    lin = [c for c in group_candidates(("generic",), ctx, df)
+           if c.spec.get("channel") == "coil_A" and c.spec.get("form") == "damping" and c.n_params == 1]
+    assert lin and all(c.bounds == ((-6.0 * 0.2 / ((ch["hi"] - ch["mean"]) / ch["sd"]),
+                                     6.0 * 0.2 / ((ch["mean"] - ch["lo"]) / ch["sd"])),) for c in lin)
+    assert training_summary(candidate_context(lambda d: np.full(len(d), 0.1), 0.1, df, np.ones(n, bool), {}),
+                            df).damping_N_s_per_m is None

@@ -221,15 +221,15 @@ def training_summary(ctx: Context, df_train: pd.DataFrame) -> fx.TrainingSummary
     ranges = {"t_lo": float(t0), "t_hi": float(t1), "s_lo": float(s0), "s_hi": float(s1),
               "V_lo": float(V.min()), "V_hi": float(V.max()),
               "load_abs": float(np.max(np.abs(df_train[dataio.LOAD].to_numpy(float)))) or 1.0,
-              "v_lo": float(np.min(vp)), "v_hi": float(np.max(vp)),
-              **({} if ctx.damping_N_s_per_m is None else {"damping": float(ctx.damping_N_s_per_m)})}
+              "v_lo": float(np.min(vp)), "v_hi": float(np.max(vp))}
     T = (df_train[dataio.TEMPERATURE].to_numpy(float) if dataio.TEMPERATURE in df_train.columns else None)
     out = fx.TrainingSummary(m_s=float(ctx.m_s), time_range=ctx.time_range, position_range=ctx.position_range,
                              voltage_median=float(np.median(V)), ranges=ranges,
                              temperature_ref=ctx.temperature_ref,
                              temperature_range=None if T is None else (float(T.min()), float(T.max())),
                              spectral_period_m=ctx.spectral_period_m,
-                             channels=channels_of(df_train, ctx.response_columns))
+                             channels=channels_of(df_train, ctx.response_columns),
+                             damping_N_s_per_m=ctx.damping_N_s_per_m)
     ctx.summaries[key] = (df_train, out)
     return out
 

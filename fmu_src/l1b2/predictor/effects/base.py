@@ -138,6 +138,9 @@ class TrainingSummary:
     #: the logged channels (:mod:`l1b2.predictor.effects.channels`): ``{"name", "kind", "mean", "sd", "lo", "hi",
     #: "within_run"}`` per numeric column beyond the required ones, and the session clock
     channels: tuple = ()
+    #: the baseline's smallest viscous damping over TRAIN [N s/m] (None: not known): the floor a channel's damping
+    #: form keeps (:func:`l1b2.predictor.effects.channels.damping_bounds`)
+    damping_N_s_per_m: float | None = None
 
     @property
     def has_temperature(self) -> bool:

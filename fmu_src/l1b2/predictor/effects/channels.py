@@ -239,7 +239,7 @@ class Channel(Effect):
             reg = regressor_of(ch["name"])
             logged = "lo" in ch and "hi" in ch and ch["name"] != SESSION_TIME
             load_abs = float(train.ranges.get("load_abs", 0.0)) if logged else 0.0
-            damping = float(train.ranges.get("damping", np.nan))
+            damping = np.nan if train.damping_N_s_per_m is None else float(train.damping_N_s_per_m)
             m_s = float(getattr(train, "m_s", 0.0) or 0.0) if logged else 0.0
             for level in LEVELS if ch.get("within_run", True) else ("run",):
                 for shape in SHAPES if logged else SHAPES[:1]:
