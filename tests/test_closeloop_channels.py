@@ -179,7 +179,8 @@ def test_a_channel_gets_every_shape_and_the_load_interaction_with_its_training_r
         assert set(h.units) == {"1" if h.spec["form"] == "inertia" else "N"}
         assert ("v_base" in fx.needs(h.spec)) == (h.spec["form"] == "damping")
         n = {"linear": 1, "quadratic": 2, "odd": 2}[h.spec.get("shape", "linear")]
-        assert len(h.names) == n * (2 if h.spec.get("by") else 1)
+        # the inertia form has its constant too: the mass change at the channel's mean
+        assert len(h.names) == n * (2 if h.spec.get("by") else 1) + (h.spec["form"] == "inertia")
         if h.spec.get("shape", "linear") != "linear":
             assert (h.spec["lo"], h.spec["hi"]) == (1.0, 3.0)
         if h.spec.get("by"):
@@ -198,8 +199,9 @@ def test_a_channel_gets_every_shape_and_the_load_interaction_with_its_training_r
 
 def test_inertia_channel_form_is_the_channel_times_the_baseline_acceleration():
     # reference: the inertia form written out: the moving mass scaled by the channel, dF = -m_s d a_base times the
-    # shape's columns (z, or zc and its Hermite polynomial; zc clipped to TRAIN's range), a_base the baseline's
-    # predicted acceleration; the kernel of Predictor.fmu gives the same force
+    # shape's columns (z, or zc and its Hermite polynomial; zc clipped to TRAIN's range) and a constant column (the
+    # mass change at the channel's mean), a_base the baseline's predicted acceleration; the kernel of Predictor.fmu
+    # gives the same force
     from l1b2.predictor import effects as fx
     from l1b2.predictor.effects import kernels as ek
     c = np.array([1.0, 3.0, 2.5, 9.0, 0.0])                 # 9 and 0 lie beyond TRAIN's range 1-6
@@ -216,20 +218,48 @@ def test_inertia_channel_form_is_the_channel_times_the_baseline_acceleration():
         for level in ("sample", "run"):
             s = {"kind": "channel", "channel": "temperature_C", "mean": 2.0, "sd": 0.5, "lo": 1.0, "hi": 6.0,
                  "shape": shape, "level": level, "form": "inertia", "m_s": m_s, "run_spread": 0.0}
-            want = (-m_s * d * a_base)[:, None] * B
+            want = (-m_s * d * a_base)[:, None] * np.column_stack([B, np.ones(5)])
             np.testing.assert_allclose(fx.effect_features(s, x), want)
-            phi = np.linspace(0.4, -0.3, B.shape[1])
+            phi = np.linspace(0.4, -0.3, B.shape[1] + 1)
             kind, q = ek.spec_scalars(s)
             got = [ek.effect_force(kind, row.tolist(), q, phi.tolist()) for row in rows]
             np.testing.assert_allclose(got, want @ phi, rtol=0, atol=1e-12)
-            assert "a_base" in fx.needs(s) and fx.family("channel").width(s) == B.shape[1]
-    # the linear shape is inertia_mismatch's constant mass error times z (a relative mass change per sd)
+            assert "a_base" in fx.needs(s) and fx.family("channel").width(s) == B.shape[1] + 1
+    # the linear shape is inertia_mismatch's constant mass error times z (a relative mass change per sd), then
+    # inertia_mismatch's own column (the mass change at the channel's mean)
     lin = {"kind": "channel", "channel": "temperature_C", "mean": 2.0, "sd": 0.5, "level": "sample",
            "form": "inertia", "m_s": m_s}
     mis = fx.effect_features({"kind": "inertia_mismatch", "m_s": m_s}, x)[:, 0]
-    np.testing.assert_allclose(fx.effect_features(lin, x)[:, 0], mis * z)
+    np.testing.assert_allclose(fx.effect_features(lin, x), np.column_stack([mis * z, mis]))
     with pytest.raises(fx.EffectSpecError, match="m_s"):
         fx.effect_features({**lin, "m_s": 0.0}, x)
+
+
+def test_a_payload_whose_mean_is_not_zero_is_recovered_by_the_inertia_form_with_its_constant():
+    # reference: a payload m_p bolted on between runs (0.06, 0.12 or 0.18 kg, never 0 in TRAIN) adds the force
+    # -m_p d a (drive coordinates) to a model whose mass is the slider's m_s; least squares of that force on the
+    # form's columns recovers a = sd(m_p)/m_s per standard deviation and a_0 = mean(m_p)/m_s at the mean, exactly
+    # (the force is in the columns' span); without the constant column (the channel centred on its TRAIN mean, as
+    # the other forms) the mean's mass change is left over: more than half of the force's sum of squares here
+    from l1b2.predictor import effects as fx
+    rng = np.random.default_rng(3)
+    m_s, n_runs, n = 0.12, 12, 40
+    m_p = np.repeat(rng.choice([0.06, 0.12, 0.18], n_runs), n)
+    d = np.repeat(np.where(np.arange(n_runs) % 2 == 0, 1.0, -1.0), n)
+    tk = np.tile(np.arange(n) * 1e-3, n_runs)
+    a_base = d * 4.0 * np.exp(-tk / 0.024)                   # a start transient of time constant 24 ms
+    c = 1000.0 * m_p                                         # the logged payload [g]
+    mean, sd = float(np.mean(c)), float(np.std(c))
+    x = {"V0": np.full(len(c), 250.0), "d": d, "a_base": a_base, "run:payload_g": c}
+    spec = {"kind": "channel", "channel": "payload_g", "mean": mean, "sd": sd, "level": "run", "form": "inertia",
+            "m_s": m_s, "run_spread": 0.0}
+    X = fx.effect_features(spec, x)
+    force = -m_p * d * a_base
+    coef, *_ = np.linalg.lstsq(X, force, rcond=None)
+    np.testing.assert_allclose(coef, [sd / 1000.0 / m_s, mean / 1000.0 / m_s], rtol=1e-9)
+    centred = X[:, :1]
+    left = force - centred @ np.linalg.lstsq(centred, force, rcond=None)[0]
+    assert float(left @ left) > 0.5 * float(force @ force)
 
 
 def test_damping_channel_form_is_the_channel_times_the_baseline_speed():

@@ -15,11 +15,15 @@ enters in one of four generic forms, each linear in one parameter ``a``
   coordinates: a force opposing the motion, whichever the direction);
 * ``force_factor``: it scales the drive's force factor, ``dF = a (V0/V_ref) z``;
 * ``force``: it adds a force fixed in the lab frame, ``dF = a d z`` (``d`` the direction);
-* ``inertia``: it scales the moving mass, ``dF = -a m_s d a_base z`` (``a_base`` the baseline's predicted
+* ``inertia``: it scales the moving mass, ``dF = -m_s d a_base (a z + a_0)`` (``a_base`` the baseline's predicted
   acceleration, ``m_s`` the slider's mass: ``a`` [1 per standard deviation] is the relative change of the moving
-  mass, the per-channel form of :class:`l1b2.predictor.effects.motion.InertiaMismatch`'s constant error); a logged
-  channel only (a payload, a tool, a fluid that changes the moving mass between runs or along the stroke), listed
-  without the load interaction (:data:`FORCE_FORMS`),
+  mass per standard deviation of the channel, ``a_0`` [1] the relative mass change at the channel's TRAIN mean,
+  :class:`l1b2.predictor.effects.motion.InertiaMismatch`'s constant error; in every shape, the shape's columns
+  then the constant one). The constant is the form's own: the model's mass is the slider's stated one, never
+  re-identified, so the mass change at the channel's mean is in no re-identification direction of the baseline,
+  whereas every other form's constant is (the friction offset, the force factor, the damping). A logged channel
+  only (a payload, a tool, a fluid that changes the moving mass between runs or along the stroke), listed without
+  the load interaction (:data:`FORCE_FORMS`),
 * ``damping``: it scales the viscous damping, ``dF = -a d v_base / SPEED_REF z`` (``v_base`` the baseline's
   predicted speed, signed; ``d v_base`` the speed in drive coordinates, so the force opposes the motion;
   ``SPEED_REF`` = 0.2 m/s, the base module's speed scale, the order of the slider's top speed: ``a`` [N per
@@ -183,7 +187,8 @@ def signal_key(column: str, level: str) -> str:
 
 def form_factor(form: str, x, m_s: float | None = None) -> np.ndarray:
     """The generic physical form's factor per sample: ``-1`` (friction), ``V0/V_ref`` (force factor), ``d`` (force),
-    ``-m_s d a_base`` (inertia: ``m_s`` the slider's mass [kg], ``a_base`` the baseline's acceleration),
+    ``-m_s d a_base`` (inertia: ``m_s`` the slider's mass [kg], ``a_base`` the baseline's acceleration; the
+    form's features add this factor itself as a last column, the mass change at the channel's mean),
     ``-d v_base / SPEED_REF`` (damping: ``v_base`` the baseline's speed)."""
     if form == "inertia":
         if m_s is None or not m_s > 0:
@@ -220,11 +225,12 @@ class Channel(Effect):
         z = (c - num(spec, "mean")) / sd
         form = str(spec.get("form"))
         factor = form_factor(form, x, num(spec, "m_s") if form == "inertia" else None)
-        return interaction_basis(spec, x, factor[:, None] * shape_basis(spec, z))
+        F = interaction_basis(spec, x, factor[:, None] * shape_basis(spec, z))
+        return np.column_stack([F, factor]) if form == "inertia" else F
 
     def width(self, spec):
         n = 1 if spec.get("shape", "linear") == "linear" else 2
-        return 2 * n if spec.get("by") else n
+        return 2 * n if spec.get("by") else n + (spec.get("form") == "inertia")
 
     def grid(self, train):
         chans = list(train.channels)
@@ -260,6 +266,8 @@ class Channel(Effect):
         if by:     # the channel's own part and its part growing with the input, named apart from every other shape
             spec.update(by=by, load_abs=float(load_abs))
             names = [f"{n}_by_{by}" for n in names] + [f"{n}_x_{by}" for n in names]
+        if form == "inertia":   # the mass change at the channel's mean, named apart in every shape
+            names = names + [f"{name}_{form}_{level}{dict(linear='', quadratic='_quad', odd='_odd')[shape]}_mean"]
         extra = (f", {shape}" if shape != "linear" else "") + (f", x {by}" if by else "")
         bounds = damping_bounds(spec, ch["lo"], ch["hi"], damping) if form == "damping" and shape == "linear" else ()
         return self.hypothesis(

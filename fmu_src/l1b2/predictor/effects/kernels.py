@@ -370,7 +370,8 @@ def channel_force(x, q, phi):
     ``zc phi[0] + (zc^3 - 3 zc) phi[1]``, ``zc`` = ``z`` clipped to ``q[4:6]``) times the form's factor (the code
     less its offsets: -1, ``V0/V_REF``, ``d``, for the inertia form ``-q[7] d a_base``, for the damping form
     ``-d v_base / SPEED_REF``); with ``q[1]`` >=
-    ``BY_LOAD``, plus the same columns times ``|load| / q[6]`` on the next parameters."""
+    ``BY_LOAD``, plus the same columns times ``|load| / q[6]`` on the next parameters; the inertia form adds its
+    constant, the next parameter (the mass change at the channel's mean)."""
     z = (input_signal(x, int(q[0])) - q[2]) / q[3]
     form = int(q[1])
     u = 0.0
@@ -405,7 +406,7 @@ def channel_force(x, q, phi):
     if form == FORM_FORCE_FACTOR:
         return x[SIG_V0] / V_REF * g
     if form == FORM_INERTIA:
-        return -q[7] * x[SIG_D] * x[SIG_AB] * g
+        return -q[7] * x[SIG_D] * x[SIG_AB] * (g + phi[n])
     if form == FORM_DAMPING:
         return -(x[SIG_D] * x[SIG_VB]) / SPEED_REF * g
     return x[SIG_D] * g
