@@ -249,6 +249,48 @@ def test_pooled_gain_is_the_share_of_the_current_sum_of_squares_removed():
     assert gain == pytest.approx(1 - (s0 - per_run * s0.mean()).sum() / s0.sum(), rel=1e-12)
 
 
+def test_run_evidence_pairs_the_gain_per_held_out_run():
+    # reference, by hand: current per-run SSE [10, 12, 8, 10, 9, 11, 10, 10] (mean 10), the refit's
+    # [6, 13, 5, 10.5, 7, 12, 8, 9]; per run delta = (current - refit) / 10 = [0.4, -0.1, 0.3, -0.05, 0.2, -0.1, 0.2,
+    # 0.1]: mean 0.95 / 8 = 0.11875, which is the pooled gain 1 - 70.5 / 80; sum of squared deviations
+    # 0.3625 - 8 * 0.11875**2 = 0.2496875, se = sqrt(0.2496875 / 7) / sqrt(8); 5 of the 8 runs fell (13 > 12,
+    # 10.5 > 10 and 12 > 11 rose). Over the four folds of two runs: current [19, 23, 18, 20], refit [13, 25, 13, 19.5]
+    cur = _errors([10, 12, 8, 10, 9, 11, 10, 10])
+    c = CandidateForce("x", "time", "", ("a",), ("N",), features=None)
+    t = acc.RefitCV(c, cur, _errors([6, 13, 5, 10.5, 7, 12, 8, 9]))
+    gain, se, improved, n = acc.run_evidence(t)
+    assert gain == pytest.approx(0.11875, rel=1e-12) and gain == pytest.approx(t.gain, rel=1e-12)
+    assert se == pytest.approx(np.sqrt(0.2496875 / 7) / np.sqrt(8), rel=1e-12)     # 0.0667
+    assert (improved, n) == (5, 8) and t.folds_improved == 3
+    rec = t.to_dict()
+    assert rec["cv_gain_se_runs"] == pytest.approx(se, rel=1e-12) and (rec["runs_improved"], rec["runs"]) == (5, 8)
+    # no per-run record, a run missing from the refit, or a run's refit diverged: no evidence (and None in the record)
+    assert acc.run_evidence(acc.RefitCV(c, acc.FoldErrors(cur.sse, cur.ss_meas), t.extended)) is None
+    part = acc.FoldErrors(t.extended.sse, t.extended.ss_meas, run_sse={k: v for k, v in t.extended.run_sse.items()
+                                                                       if k != 3})
+    assert acc.run_evidence(acc.RefitCV(c, cur, part)) is None
+    assert acc.run_evidence(acc.RefitCV(c, cur, _errors([6, 13, 5, np.inf, 7, 12, 8, 9]))) is None
+    assert acc.RefitCV(c, cur, part).to_dict()["runs"] is None
+
+
+def test_acceptance_of_a_refit_that_improved_two_of_four_folds():
+    # reference: a run-level category's refit, measured per fold (held-out free-run SSE of the current model and of
+    # the refit, four stratified folds of 14 runs): pooled gain 1 - 0.28679 / 0.32479 = 0.117, but folds 1 and 4
+    # rose (0.043046 -> 0.043278, 0.104179 -> 0.121022), so not more than half of the folds fell: refused
+    c = CandidateForce("run_level_category(fixture_id)", "fixture_id", "", ("a",), ("N",), features=None)
+    ss = np.full(4, 1.0)
+    cur = acc.FoldErrors(np.array([0.04304604769860089, 0.07505304486288528, 0.10251306639137184,
+                                   0.10417896486205147]), ss)
+    ext = acc.FoldErrors(np.array([0.043278106249645114, 0.04531599560021911, 0.07717494875618396,
+                                   0.12102173112379866]), ss)
+    t = acc.RefitCV(c, cur, ext)
+    assert t.gain == pytest.approx(1 - 0.2867907 / 0.3247911, abs=1e-6) and t.folds_improved == 2
+    assert not acc.accepts(t, min_gain=acc.DEFAULT_MIN_CV_GAIN, min_drop=0.0)
+    # the same refit with its first fold's tie resolved the other way (3 of 4 folds fell): accepted
+    tied = acc.RefitCV(c, cur, acc.FoldErrors(np.array([0.043] + ext.sse[1:].tolist()), ss))
+    assert tied.folds_improved == 3 and acc.accepts(tied, min_gain=acc.DEFAULT_MIN_CV_GAIN, min_drop=0.0)
+
+
 def test_significance_is_bonferroni_over_the_families_tested():
     scores = [_score("a", 0.001), _score("a", 0.2), _score("b", 0.004), _score("c", 0.5), _score("d", 0.02)]
     level = sel.significance_level(scores, alpha=0.02)

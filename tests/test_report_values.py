@@ -93,3 +93,19 @@ def test_close_loop_report_md_flags_test_runs_at_a_category_value_train_never_ha
                      "`run_level_category(fixture_id)[run]` gives them TRAIN's average over runs (its prediction "
                      "there carries no effect of that value)"]
     assert "never had" not in markdown_report(minimal_report())
+
+
+def test_close_loop_report_md_prints_each_refit_trials_evidence_over_runs():
+    from l1b2.closeloop.result import markdown_report
+    rep = minimal_report()
+    trial = {"effect": "run_level", "label": "run_level_category(fixture_id)[run]", "regressors": ["fixture_id"],
+             "cv_free_run_nrmse_current": 0.028534, "cv_free_run_nrmse_refit": 0.026813, "cv_gain": 0.117,
+             "folds_improved": 2, "folds": 4, "cv_gain_se_runs": 0.1956, "runs_improved": 29, "runs": 56,
+             "linearised_gain": 0.25}
+    rep["diagnosis"] = {**rep["diagnosis"], "refit_trials": [[trial, {**trial, "label": "x", "cv_gain_se_runs": None,
+                                                                      "runs_improved": None, "runs": None}]]}
+    rows = [line for line in markdown_report(rep).splitlines() if line.startswith("| run_level_category")
+            or line.startswith("| x |")]
+    assert rows == ["| run_level_category(fixture_id)[run] | fixture_id | 25.0% | 2.85% | 2.68% | 11.7% | 19.6% | 2/4 "
+                    "| 29/56 |",
+                    "| x | fixture_id | 25.0% | 2.85% | 2.68% | 11.7% | - | 2/4 | - |"]

@@ -363,10 +363,33 @@ class RefitCV:
 
     def to_dict(self) -> dict:
         c = self.candidate
+        ev = run_evidence(self)
         return {"effect": c.family, "label": c.label, "regressors": list(c.regressors),
                 "cv_free_run_nrmse_current": self.current.nrmse, "cv_free_run_nrmse_refit": self.extended.nrmse,
                 "cv_gain": self.gain, "folds_improved": self.folds_improved, "folds": len(self.current.sse),
+                "cv_gain_se_runs": None if ev is None else ev[1],
+                "runs_improved": None if ev is None else ev[2], "runs": None if ev is None else ev[3],
                 "linearised_gain": self.linear_gain}
+
+
+def run_evidence(r: RefitCV) -> tuple[float, float, int, int] | None:
+    """``(gain, se, improved, n)``: the trial's pooled CV gain paired per held-out run against the current model.
+
+    Every TRAIN run is held out in exactly one fold (:attr:`FoldErrors.run_sse`). Per run ``r`` of ``n``,
+    ``delta_r = (SSE_current_r - SSE_refit_r) / mean_r SSE_current_r``: ``gain = mean(delta)`` is
+    :attr:`RefitCV.gain` exactly and ``se = sd(delta) / sqrt(n)`` its standard error over the runs
+    (:func:`paired_gap`); ``improved`` counts the runs whose held-out SSE fell. None when the two models' runs
+    differ, a run is missing, or a run's SSE is not finite. A record: :func:`accepts` does not read it.
+    """
+    cur, ext = r.current.run_sse, r.extended.run_sse
+    if not cur or set(cur) != set(ext):
+        return None
+    runs = list(cur)
+    c, e = np.array([cur[k] for k in runs], float), np.array([ext[k] for k in runs], float)
+    pg = paired_gap(c, e, c)
+    if pg is None:
+        return None
+    return pg[0], pg[1], int(np.sum(e < c)), len(runs)
 
 
 def accepts(r: RefitCV, *, min_gain: float = DEFAULT_MIN_CV_GAIN, min_drop: float = DEFAULT_MIN_CV_DROP) -> bool:

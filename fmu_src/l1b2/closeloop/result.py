@@ -352,12 +352,13 @@ def markdown_report(rep: dict) -> str:
         if trials:
             lines += ["", f"Round {i}: candidates refit and cross-validated:", "",
                       "| candidate | regressors | linearised gain | CV nrmse current | CV nrmse refit | CV gain "
-                      "| folds improved |", "|---|---|---|---|---|---|---|"]
+                      "| SE over runs | folds improved | runs improved |", "|---|---|---|---|---|---|---|---|---|"]
             for t in trials:
+                runs = f"{t['runs_improved']}/{t['runs']}" if t.get("runs") else "-"
                 lines.append(f"| {t['label']} | {', '.join(t['regressors'])} | {_pct(t['linearised_gain'], '.1%')} | "
                              f"{_pct(t['cv_free_run_nrmse_current'], '.2%')} | "
                              f"{_pct(t['cv_free_run_nrmse_refit'], '.2%')} | {_pct(t['cv_gain'], '.1%')} | "
-                             f"{t['folds_improved']}/{t['folds']} |")
+                             f"{_pct(t.get('cv_gain_se_runs'), '.1%')} | {t['folds_improved']}/{t['folds']} | {runs} |")
     lines += ["", "## Error before and after (all rounds)", "", "```", before_after_table(rep), "```", "",
               "## Candidates (best of each family, by held-out gain)", "",
               "| effect | regressor | params | held-out gain | p (runs) | runs improved | dAIC | dBIC |",
