@@ -154,6 +154,44 @@ def test_a_signal_explaining_the_runs_deviations_is_significant_and_noise_is_not
     assert e.significant and e.coef[2] == pytest.approx(0.0, abs=0.1)
 
 
+def _gain_by_hand(theta, cov, z, folds):
+    """:func:`runlevel.cv_signal_gain` written out: per fold both REML fits on the other runs, the held-out runs'
+    weighted squared deviations with the null fit's between-run covariance."""
+    n, p = theta.shape
+    X0, X1 = rl.design_rows(None, n, p), rl.signal_design(z)
+    s0, s1 = np.zeros(n), np.zeros(n)
+    for te in folds:
+        tr = np.setdiff1d(np.arange(n), te)
+        f0 = rl.reml(theta[tr], cov[tr], X0[tr], n_iter=100)
+        f1 = rl.reml(theta[tr], cov[tr], X1[tr], n_iter=100)
+        for out, X, beta in ((s0, X0, f0.beta), (s1, X1, f1.beta)):
+            r = theta[te] - np.einsum("rpk,k->rp", X[te], beta)
+            out[te] = np.einsum("rp,rpq,rq->r", r, np.linalg.inv(f0.T[None] + cov[te]), r)
+    return 1 - s1.sum() / s0.sum(), (s0 - s1) / s0.mean()
+
+
+def test_the_null_fold_fits_are_shared_by_value_of_the_runs_and_the_folds():
+    """The memo of the null model's fold fits gives every signal the fits of its own folds and runs' deviations:
+    two fold schemes and two sets of deviations through one memo give, to the last bit, the gains computed
+    without it (a memo keyed by the fold's position, or not by the deviations, hands over another fold's fit)."""
+    dev, z, rng = _deviations(n=30)
+    rand = [np.sort(f) for f in np.array_split(rng.permutation(30), 4)]
+    blocks = [np.asarray(b) for b in np.array_split(np.arange(30), 4)]
+    other = dev.theta + rng.normal(scale=0.05, size=dev.theta.shape)
+    memo: dict = {}
+    for theta, folds in ((dev.theta, rand), (dev.theta, blocks), (other, rand), (dev.theta, rand)):
+        g, per_run = rl.cv_signal_gain(theta, dev.cov, z, folds, null_fits=memo)
+        g_ref, per_run_ref = _gain_by_hand(theta, dev.cov, z, folds)
+        assert g == g_ref and np.array_equal(per_run, per_run_ref)
+    assert len(memo) == 12                       # one fit per distinct (deviations, fold): 4 + 4 + 4
+    te = rand[1]
+    tr = np.setdiff1d(np.arange(30), te)
+    again = rl.null_fold_fit(dev.theta, dev.cov, te.copy(), memo)
+    assert again is rl.null_fold_fit(dev.theta, dev.cov, te, memo)           # taken from the memo
+    fresh = rl.reml(dev.theta[tr], dev.cov[tr], rl.design_rows(None, 30, 2)[tr], n_iter=100)
+    assert np.array_equal(again.T, fresh.T) and np.array_equal(again.beta, fresh.beta)
+
+
 def test_run_level_offers_a_candidate_of_another_regressor_when_the_shortlist_has_its_regressor():
     def cand(fam, reg):
         return CandidateForce(fam, reg, "", ("a",), ("N",), None)

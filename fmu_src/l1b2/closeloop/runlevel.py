@@ -335,12 +335,32 @@ def _weighted_sse(theta, cov, T, X, beta) -> np.ndarray:
     return np.einsum("rp,rpq,rq->r", r, np.linalg.inv(T[None] + cov), r)
 
 
-def cv_signal_gain(theta, cov, z, folds_idx, w=None) -> tuple[float, np.ndarray]:
+def null_fold_fit(theta, cov, te, memo: dict | None = None) -> REMLFit:
+    """The null model's (intercepts only) REML fit on the runs not in ``te`` (indices of held-out runs), as
+    :func:`cv_signal_gain` fits it.
+
+    ``memo``: a dict kept by the caller: the fit is stored under ``theta``, ``cov`` and the held-out indices
+    (their values) and returned from there when they come again (every signal of one :func:`signal_evidence` is
+    scored on the same folds against the same null fits)."""
+    theta, cov, te = np.asarray(theta, float), np.asarray(cov, float), np.asarray(te)
+    key = (theta.shape, theta.tobytes(), cov.tobytes(), te.dtype.str, te.tobytes())
+    if memo is not None and key in memo:
+        return memo[key]
+    n, p = theta.shape
+    tr = np.setdiff1d(np.arange(n), te)
+    fit = reml(theta[tr], cov[tr], design_rows(None, n, p)[tr], n_iter=100)
+    if memo is not None:
+        memo[key] = fit
+    return fit
+
+
+def cv_signal_gain(theta, cov, z, folds_idx, w=None, null_fits: dict | None = None) -> tuple[float, np.ndarray]:
     """Held-out share of the runs' weighted deviation that the signal ``z`` removes, and the per-run reductions.
 
     For each fold (indices of held-out runs) the null (intercepts) and the signal's model are fitted by REML on
     the other runs; the held-out runs' weighted squared deviations (weights ``(T0 + S_r)^-1`` of the null fit,
-    the same for both) are compared: gain ``1 - sum SSE1 / sum SSE0``.
+    the same for both) are compared: gain ``1 - sum SSE1 / sum SSE0``. ``null_fits``: a memo of
+    :func:`null_fold_fit` (None: every null fit computed here).
     """
     n, p = theta.shape
     Z = np.asarray(z, float).reshape(n, -1)
@@ -349,7 +369,7 @@ def cv_signal_gain(theta, cov, z, folds_idx, w=None) -> tuple[float, np.ndarray]
     for te in folds_idx:
         tr = np.setdiff1d(np.arange(n), te)
         X1 = signal_design(Z if Z.shape[1] == 1 else Z[:, independent_columns(Z[tr])], w)
-        f0 = reml(theta[tr], cov[tr], X0[tr], n_iter=100)
+        f0 = null_fold_fit(theta, cov, te, null_fits)
         f1 = reml(theta[tr], cov[tr], X1[tr], n_iter=100)
         s0[te] = _weighted_sse(theta[te], cov[te], f0.T, X0[te], f0.beta)
         s1[te] = _weighted_sse(theta[te], cov[te], f0.T, X1[te], f1.beta)
@@ -374,11 +394,12 @@ def signal_evidence(dev: RunDeviations, signals_, *, alpha: float, k: int, seed:
     order = np.argsort(session_order) if session_order is not None else np.arange(n)
     blocks = [np.sort(b) for b in np.array_split(order, min(k, n))]
     zs = []
+    null_fits: dict = {}     # the null model's fold fits, shared by every signal (same deviations, same folds)
     for sg in signals_:
         z, mean, sd = signal_columns(sg)
         b, p, dof = joint_test(dev, z)
         blocked = sg["channel"] == fx.channels.SESSION_TIME
-        gain, per_run = cv_signal_gain(dev.theta, dev.cov, z, blocks if blocked else rand, dev.load)
+        gain, per_run = cv_signal_gain(dev.theta, dev.cov, z, blocks if blocked else rand, dev.load, null_fits)
         label = fx.channels.signal_label(sg["channel"], sg["transform"])
         cat = sg.get("transform") == fx.channels.CATEGORY
         out.append(SignalEvidence(sg["channel"], sg["transform"], label, fx.channels.regressor_of(sg["channel"]),
