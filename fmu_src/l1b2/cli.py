@@ -650,7 +650,9 @@ def cmd_close_loop(args) -> int:
     print(f"diagnosis: {d['message']}" + (f"; traced to {', '.join(d['traced_to'])}" if d["traced_to"] else ""))
     print(result.rounds_table())
     print(result.before_after_table())
-    print_input_checks(result.checks, {"baseline " + k: v for k, v in result.baseline.items()})
+    from .closeloop.report import channel_range_line
+    print_input_checks(result.checks, {"baseline " + k: v for k, v in result.baseline.items()},
+                       [channel_range_line(r) for r in d.get("channel_ranges") or ()])
     print(f"wrote {Path(args.out) / 'report.json'} and report.md ({result.wall_time_s} s)")
     if args.export is not None:
         _print_calibrated(args.export, result.calibrated_note)

@@ -310,7 +310,8 @@ class CloseLoop(EstimatorSettings):
         chosen = it.chosen
         diagnosis = {**self._diagnosis(it, first, analysis, ext_params, chain_rec), "event_clocks": event_rec,
                      "lagged_channels": lag_rec,
-                     "unseen_levels": runlevel.unseen_test_levels(it.effects.candidates, dte)}
+                     "unseen_levels": runlevel.unseen_test_levels(it.effects.candidates, dte),
+                     "channel_ranges": runlevel.channel_ranges(it.effects.candidates, dtr, dte)}
         self.result_ = CloseLoopResult(
             baseline=baseline, diagnosis=diagnosis, scores=first,
             significant=it.significant, chosen=chosen, extended=extended,
