@@ -665,7 +665,10 @@ def _print_calibrated(out: Path, note: str = "") -> None:
     man = json.loads((Path(out) / "calibrated_manifest.json").read_text())
     for e in man["effects"]:
         sub = e["subsystems"]
-        where = (f"; {', '.join(f'{k} = {v:.4g}' for k, v in sub['parameters'].items())} in the calibrated SSP"
+        se = sub.get("stderr") or {}
+        values = ", ".join(f"{k} = {v:.4g}" + ("" if se.get(k) is None else f" +- {se[k]:.2g} (se)")
+                           for k, v in sub["parameters"].items())
+        where = (f"; {values} in the calibrated SSP"
                  if sub["mapped"] else f"; subsystems: not mapped ({sub['reason']})")
         print(f"  {e['label']}: Predictor.fmu{where}")
     chk = man.get("held_out_check")
