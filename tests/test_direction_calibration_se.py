@@ -98,3 +98,18 @@ def test_the_reported_covariance_is_the_block_of_the_reported_interval():
     np.testing.assert_allclose(reported_covariance(fit, names), [[4e-4, -1e-4], [-1e-4, 1e-4]])
     fit.extra_stderr_robust_ = {"asym_gain": 0.03, "asym_offset_N": float("nan")}    # kinds differ: none
     assert reported_covariance(fit, names) is None
+
+
+def test_the_cli_prints_the_calibrated_parameter_with_its_standard_error(tmp_path, capsys):
+    import json
+    from l1b2.cli import _print_calibrated
+    sub = {"mapped": True, "parameters": {"Stator.asym_b": 0.04436}, "stderr": {"Stator.asym_b": 0.002636}}
+    old = {"mapped": True, "parameters": {"Slider.pulley_mu": 0.1}}          # a record without standard errors
+    man = {"effects": [{"label": "direction_asymmetry", "subsystems": sub},
+                       {"label": "load_path_friction", "subsystems": old}],
+           "calibrated_ssp": {"included": False}}
+    (tmp_path / "calibrated_manifest.json").write_text(json.dumps(man))
+    _print_calibrated(tmp_path)
+    out = capsys.readouterr().out.splitlines()
+    assert out[0] == "  direction_asymmetry: Predictor.fmu; Stator.asym_b = 0.04436 +- 0.0026 (se) in the calibrated SSP"
+    assert out[1] == "  load_path_friction: Predictor.fmu; Slider.pulley_mu = 0.1 in the calibrated SSP"
