@@ -135,6 +135,9 @@ def test_calibrated_ssp_carries_the_identified_effect(effect, seed, home, isolat
         out, man = request.getfixturevalue("pulley_export")
     got = man["calibrated_ssp"]["changed"][home]
     assert got == pytest.approx(truth["injections"][0]["parameters"][home], rel=0.1)
+    if effect == "direction_asymmetry":   # the calibrated value's delta-method standard error (decision 0063)
+        se = next(e for e in man["effects"] if e["family"] == effect)["subsystems"]["stderr"][home]
+        assert 0 < se < 0.1 * abs(got), se
     chk = man["held_out_check"]
     assert chk["extended_predictor_nrmse"] == pytest.approx(res.after["test"]["free_run"]["nrmse"], rel=1e-9)
     assert chk["calibrated_ssp_nrmse"] <= chk["extended_predictor_nrmse"] + 0.01, chk

@@ -650,7 +650,9 @@ def cmd_close_loop(args) -> int:
     print(f"diagnosis: {d['message']}" + (f"; traced to {', '.join(d['traced_to'])}" if d["traced_to"] else ""))
     print(result.rounds_table())
     print(result.before_after_table())
-    print_input_checks(result.checks, {"baseline " + k: v for k, v in result.baseline.items()})
+    from .closeloop.report import channel_range_line
+    print_input_checks(result.checks, {"baseline " + k: v for k, v in result.baseline.items()},
+                       [channel_range_line(r) for r in d.get("channel_ranges") or ()])
     print(f"wrote {Path(args.out) / 'report.json'} and report.md ({result.wall_time_s} s)")
     if args.export is not None:
         _print_calibrated(args.export, result.calibrated_note)
@@ -663,7 +665,10 @@ def _print_calibrated(out: Path, note: str = "") -> None:
     man = json.loads((Path(out) / "calibrated_manifest.json").read_text())
     for e in man["effects"]:
         sub = e["subsystems"]
-        where = (f"; {', '.join(f'{k} = {v:.4g}' for k, v in sub['parameters'].items())} in the calibrated SSP"
+        se = sub.get("stderr") or {}
+        values = ", ".join(f"{k} = {v:.4g}" + ("" if se.get(k) is None else f" +- {se[k]:.2g} (se)")
+                           for k, v in sub["parameters"].items())
+        where = (f"; {values} in the calibrated SSP"
                  if sub["mapped"] else f"; subsystems: not mapped ({sub['reason']})")
         print(f"  {e['label']}: Predictor.fmu{where}")
     chk = man.get("held_out_check")

@@ -13,8 +13,10 @@ def pct(x) -> str:
     return "-" if x is None or x != x else f"{x:.2%}"
 
 
-def print_input_checks(checks: dict, metrics: dict) -> None:
-    """Warnings of a report's input checks and diverged runs (shared by identify and close-loop)."""
+def print_input_checks(checks: dict, metrics: dict, test_lines=()) -> None:
+    """Warnings of a report's input checks and diverged runs (shared by identify and close-loop); ``test_lines``:
+    more TEST checks, one warning each (empty lines skipped; the close loop's logged channels outside TRAIN's range,
+    :func:`l1b2.closeloop.report.channel_range_line`)."""
     found = [m for part in ("train", "test") for m in checks.get("unusual_units", {}).get(part, [])]
     if checks.get("allow_unusual_units") and found:
         print(f"  warning: --allow-unusual-units accepted {len(found)} likely unit mistake(s), e.g.: {found[0]}")
@@ -22,6 +24,9 @@ def print_input_checks(checks: dict, metrics: dict) -> None:
         runs = [str(f["run"]) for f in checks.get("test_runs_outside_training_range", [])]
         print(f"  warning: TEST {checks['extrapolation']} (runs {', '.join(runs[:10])}"
               f"{', ...' if len(runs) > 10 else ''})")
+    for line in test_lines:
+        if line:
+            print(f"  warning: {line}")
     for part, m in metrics.items():
         for kind, x in (m or {}).items():
             if x.get("n_diverged_runs"):

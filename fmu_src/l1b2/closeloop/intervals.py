@@ -15,8 +15,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..ident.clusters import grouped_interval, run_groups
+from ..ident.uncertainty import grouped_sandwich
 
-__all__ = ["REPORTED_GROUPING", "added_parameters", "reported_uncertainty", "train_levels"]
+__all__ = ["REPORTED_GROUPING", "added_parameters", "reported_covariance", "reported_uncertainty", "train_levels"]
 
 #: the clustering of TRAIN's runs behind the reported interval (:data:`l1b2.ident.clusters.RUN_GROUPINGS`)
 REPORTED_GROUPING = "level"
@@ -70,6 +71,31 @@ def reported_uncertainty(model, name: str, groups=None) -> dict:
     if run is not None:
         return {**run, "interval": "run", **model_based}
     return {"stderr": se, "ci95": ci, "interval": "model"}
+
+
+def reported_covariance(model, names, groups=None) -> tuple | None:
+    """The covariance matrix of the added parameters ``names`` under the interval the report gives them.
+
+    The kind is :func:`reported_uncertainty`'s (``level``: the grouped sandwich of the fit's ``run_influence_``
+    with the runs merged by ``groups``; ``run``: the cluster-by-run robust ``cov_robust_all_``; ``model``:
+    ``cov_all_``), so its diagonal is the reported standard errors squared. Nested tuples, one row per name;
+    None when the names' kinds differ, the fit has no such matrix or a value is not finite.
+    """
+    kinds = {reported_uncertainty(model, n, groups)["interval"] for n in names}
+    if len(kinds) != 1:
+        return None
+    kind = kinds.pop()
+    extras = list(model.extra_names_)
+    offset = len(list(model.param_names_all_)) - len(extras)
+    idx = [offset + extras.index(n) for n in names]
+    if kind == "level":
+        cov = grouped_sandwich(model.run_influence_, groups)[0]
+    else:
+        cov = getattr(model, "cov_robust_all_" if kind == "run" else "cov_all_", None)
+    if cov is None:
+        return None
+    block = np.asarray(cov, float)[np.ix_(idx, idx)]
+    return tuple(tuple(float(v) for v in row) for row in block) if np.all(np.isfinite(block)) else None
 
 
 def added_parameters(model, effects, groups=None) -> dict:

@@ -92,7 +92,7 @@ from .events import session, with_event_clocks
 from .lags import with_lagged_channels
 from .evidence import channels_considered, order_traced
 from .guard import checked_fit
-from .intervals import added_parameters, reported_uncertainty, train_levels
+from .intervals import added_parameters, reported_covariance, reported_uncertainty, train_levels
 from .result import CloseLoopResult, ResidualAnalysis
 from .selection import (DEFAULT_ALPHA, DEFAULT_PARSIMONY, SHORTLIST_MIN_GAIN, Score, best_per_family, design,
                         named_alternatives, nuisance_forces, score_candidates, shape_alternatives, shortlist,
@@ -310,7 +310,8 @@ class CloseLoop(EstimatorSettings):
         chosen = it.chosen
         diagnosis = {**self._diagnosis(it, first, analysis, ext_params, chain_rec), "event_clocks": event_rec,
                      "lagged_channels": lag_rec,
-                     "unseen_levels": runlevel.unseen_test_levels(it.effects.candidates, dte)}
+                     "unseen_levels": runlevel.unseen_test_levels(it.effects.candidates, dte),
+                     "channel_ranges": runlevel.channel_ranges(it.effects.candidates, dtr, dte)}
         self.result_ = CloseLoopResult(
             baseline=baseline, diagnosis=diagnosis, scores=first,
             significant=it.significant, chosen=chosen, extended=extended,
@@ -725,7 +726,8 @@ def calibrated_model(base, ext, effects: EffectSet, output_filter, source: dict,
     """``(ExtendedPredictor or None, note)``: the final model in the serialisable form ``Predictor.fmu`` carries.
 
     Each effect's standard errors are the report's (:func:`l1b2.closeloop.intervals.reported_uncertainty`,
-    ``groups`` its runs' level labels).
+    ``groups`` its runs' level labels), and so is its parameters' covariance
+    (:func:`l1b2.closeloop.intervals.reported_covariance`).
 
     When nothing was added it is the baseline (no effects); None when an
     effect has no spec (a user's candidate with a Python feature function
@@ -745,7 +747,8 @@ def calibrated_model(base, ext, effects: EffectSet, output_filter, source: dict,
     recs = tuple(IdentifiedEffect(c.family, c.label, dict(c.spec), tuple(c.names), tuple(c.units),
                         tuple(float(p) for p in phi),
                         tuple(reported_uncertainty(ext, n, groups)["stderr"] for n in c.names),
-                        c.description, tuple(c.regressors), c.structural)
+                        c.description, tuple(c.regressors), c.structural,
+                        reported_covariance(ext, c.names, groups))
                  for c, phi in zip(effects.candidates, effects.phi))
     filt = None if output_filter is None else {"a": output_filter.a, "b0": output_filter.b0, "b1": output_filter.b1}
     ext_setup = PredictorSetup(ext.params_, ext.m_s_, ext.T_s_, ext.result_.frequency_response)

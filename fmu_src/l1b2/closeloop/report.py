@@ -126,7 +126,9 @@ class Diagnosis(_Record):
     ``event_clocks`` the event clocks derived from logged step channels (:mod:`l1b2.closeloop.events`);
     ``lagged_channels`` the low-passes derived from logged run settings (:mod:`l1b2.closeloop.lags`);
     ``unseen_levels`` the TEST values of an added categorical setting that TRAIN never had
-    (:func:`l1b2.closeloop.runlevel.unseen_test_levels`).
+    (:func:`l1b2.closeloop.runlevel.unseen_test_levels`); ``channel_ranges`` per logged channel an added effect
+    reads, the share of TEST's samples and runs outside TRAIN's range of it
+    (:func:`l1b2.closeloop.runlevel.channel_ranges`, the report's line: :func:`channel_range_line`).
     ``named_checks``: every named pick of a round from the Eq. 29 baseline, cross-validated again from the
     pure-slip family (:mod:`l1b2.closeloop.crosscheck`), with its figures and outcome.
     ``physical_range``: after each joint refit with a channel's damping form, the total viscous damping's smallest
@@ -161,6 +163,7 @@ class Diagnosis(_Record):
     event_clocks: list = field(default_factory=list)
     lagged_channels: list = field(default_factory=list)
     unseen_levels: dict = field(default_factory=dict)
+    channel_ranges: list = field(default_factory=list)
     physical_range: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
@@ -173,3 +176,16 @@ class Diagnosis(_Record):
         kw = _take(cls, d, "diagnosis", optional=tuple(f.name for f in fields(cls))[7:])
         kw["effects"] = [e if isinstance(e, EffectRecord) else EffectRecord.from_dict(e) for e in kw["effects"]]
         return cls(**kw)
+
+
+def channel_range_line(rec: Mapping) -> str:
+    """One line on a logged channel whose TEST values leave TRAIN's range (a record of
+    ``diagnosis.channel_ranges``); empty when none does."""
+    if not rec.get("runs_outside"):
+        return ""
+    how = {"extrapolates": "extrapolate linearly", "clipped": "are held at TRAIN's range's end (saturate)"}
+    effects = "; ".join(f"`{label}` {how.get(v, v)}" for label, v in rec["effects"].items())
+    lo, hi = rec["train"]
+    return (f"TEST has {rec['samples_outside']:.1%} of its samples ({rec['runs_outside']} of {rec['test_runs']} "
+            f"runs) with {rec['signal']} outside TRAIN's range [{lo:.4g}, {hi:.4g}] (TEST: "
+            f"[{rec['test'][0]:.4g}, {rec['test'][1]:.4g}]): the effects of it there {effects}")

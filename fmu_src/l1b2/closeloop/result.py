@@ -24,7 +24,7 @@ from ..jsonio import dumps, sig, strict_json
 from ..predictor.effects import ExtendedPredictor
 from . import residuals as res
 from .crosscheck import describe
-from .report import SCHEMA_VERSION, Diagnosis, ReportFormatError, Round
+from .report import SCHEMA_VERSION, Diagnosis, ReportFormatError, Round, channel_range_line
 from .selection import Score
 
 #: file names (without ``.png``) of the figures, in report order
@@ -338,6 +338,7 @@ def markdown_report(rep: dict) -> str:
         lines.append(f"* TEST has {u['runs']} run(s) at {u['channel']} = {values}, a value TRAIN never had: "
                      f"`{label}` gives them TRAIN's average over runs (its prediction there carries no effect of "
                      "that value)")
+    lines += [f"* {line}" for r in d.get("channel_ranges") or [] if (line := channel_range_line(r))]
     bc = d.get("baseline_choice") or {}
     if bc.get("families"):
         lines += ["", f"## Baseline family (chosen: `{bc['chosen']}`, by TRAIN's cross-validated free-run nrmse over "

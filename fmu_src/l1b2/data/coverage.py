@@ -30,7 +30,7 @@ from ..errors import DataFormatError
 from .measurements import DIRECTION, FREQUENCY, LOAD, POSITION, RUN, VOLTAGE, Measurements, run_slices
 
 __all__ = ["RANGE_COLUMNS", "DEFAULT_TOLERANCE", "MIN_TOLERANCE", "data_range", "outside_range",
-           "summarize_outside", "FREQUENCY_REL_SPREAD", "run_frequencies", "frequency_varies", "input_checks", "RIG_SETTINGS",
+           "summarize_outside", "values_outside", "FREQUENCY_REL_SPREAD", "run_frequencies", "frequency_varies", "input_checks", "RIG_SETTINGS",
            "check_same_rig"]
 
 #: The prediction inputs whose range is checked (unit in the name); a direction TRAIN never drove is outside.
@@ -91,6 +91,33 @@ def summarize_outside(flagged: list[dict], n_runs: int) -> str:
     per = {c: sum(c in f["outside"] for f in flagged) for c in RANGE_COLUMNS}
     cols = ", ".join(f"{c} {k}" for c, k in per.items() if k)
     return f"{len(flagged)} of {n_runs} runs outside the training range ({cols}): predictions there extrapolate"
+
+
+def values_outside(train_values, test_values, test_runs, *, tolerance: float = DEFAULT_TOLERANCE) -> dict:
+    """How many TEST values of one signal lie outside TRAIN's range of it (an effect of the signal extrapolates there).
+
+    ``train_values``, ``test_values``: the signal per sample (a channel's value, or its run's value at the run
+    level); ``test_runs``: each TEST sample's run id. A value is outside when it lies further outside
+    ``[min, max]`` of ``train_values`` than ``tolerance`` x that range's width (the rule of
+    :func:`outside_range`). Non-finite values are left out of both.
+
+    Returns
+    -------
+    dict
+        ``train`` and ``test`` ([min, max] of each), ``samples_outside`` (share of TEST's samples),
+        ``runs_outside`` (TEST runs with a sample outside) and ``test_runs`` (TEST's runs).
+    """
+    tr = np.asarray(train_values, float)
+    te = np.asarray(test_values, float)
+    runs = np.asarray(test_runs)
+    tr, ok = tr[np.isfinite(tr)], np.isfinite(te)
+    te, runs = te[ok], runs[ok]
+    lo, hi = float(tr.min()), float(tr.max())
+    tol = tolerance * (hi - lo)
+    bad = (te < lo - tol) | (te > hi + tol)
+    return {"train": [lo, hi], "test": [float(te.min()), float(te.max())] if te.size else [None, None],
+            "samples_outside": float(bad.mean()) if te.size else 0.0,
+            "runs_outside": int(len(np.unique(runs[bad]))), "test_runs": int(len(np.unique(runs)))}
 
 
 def run_frequencies(*data: pd.DataFrame | Measurements | None) -> np.ndarray:

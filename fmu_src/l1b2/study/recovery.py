@@ -50,7 +50,8 @@ from ..ident.estimator import PredictorIdentifier
 from ..ident.extra import ExtraForces
 from ..ident.uncertainty import grouped_sandwich
 from ..predictor import effects as fx
-from ..predictor.effects.direction import calibrate_asymmetry
+from ..predictor.effects.direction import calibration_gradient as direction_gradient
+from ..predictor.effects.direction import delta_stderr
 from ..predictor.setup import PredictorSetup
 from .world import World, world_data
 
@@ -235,7 +236,7 @@ def read_parameter(target: RecoveryTarget, est, h, train: dataio.Measurements, m
         return {"estimate": value, **_intervals(value, se, dof)}
     phi = np.array([est.extra_params_[n] for n in h.names], float)
     grad, value = calibration_gradient(est, h, phi, train, mp)
-    se = {k: float(np.sqrt(grad @ _phi_block(est, c) @ grad)) for k, c in covs.items()}
+    se = {k: delta_stderr(grad, _phi_block(est, c)) for k, c in covs.items()}
     return {"estimate": value, **_intervals(value, se, dof)}
 
 
@@ -257,11 +258,8 @@ def frequency_parameter(est, name: str) -> dict:
 
 def calibration_gradient(est, h, phi: np.ndarray, train: dataio.Measurements, mp,
                          rel_step: float = 0.05) -> tuple[np.ndarray, float]:
-    """``(d asym_b / d phi, asym_b)``: the direction calibration's value and its gradient (forward differences).
-
-    The step per parameter is ``rel_step`` of its magnitude (or of the largest
-    magnitude when it is 0).
-    """
+    """``(d asym_b / d phi, asym_b)`` of a fit of the direction family at ``phi``: the family's own
+    :func:`l1b2.predictor.effects.direction.calibration_gradient` over TRAIN's operating points."""
     df = train.df
     pos = df[dataio.POSITION].to_numpy(float)
     source = {"operating_points": {
@@ -270,21 +268,9 @@ def calibration_gradient(est, h, phi: np.ndarray, train: dataio.Measurements, mp
         "position_m": [float(pos.min()), float(pos.max())]}}
     setup = PredictorSetup(est.params_, est.m_s_, est.T_s_)
     model = fx.ExtendedPredictor(setup, setup, (), None, source)
-
-    def asym(p):
-        eff = fx.IdentifiedEffect(h.family, h.family, dict(h.spec), tuple(h.names), tuple(h.units),
-                                  tuple(float(v) for v in p), (None,) * len(p))
-        return calibrate_asymmetry(model, eff, mp)["value"]
-
-    value = asym(phi)
-    scale = np.max(np.abs(phi)) or 1.0
-    grad = np.zeros(len(phi))
-    for j in range(len(phi)):
-        step = rel_step * (abs(phi[j]) or scale)
-        e = np.zeros(len(phi))
-        e[j] = step
-        grad[j] = (asym(phi + e) - value) / step
-    return grad, value
+    eff = fx.IdentifiedEffect(h.family, h.family, dict(h.spec), tuple(h.names), tuple(h.units),
+                              tuple(float(v) for v in phi), (None,) * len(phi))
+    return direction_gradient(model, eff, mp, rel_step=rel_step)
 
 
 def recover_one(injection: str, seed: int, world: World = World(), settings: FitSettings = FitSettings(),

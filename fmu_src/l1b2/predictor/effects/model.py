@@ -23,7 +23,12 @@ from .base import EffectSpecError, effect_features, needs, time_derivative
 
 @dataclass(frozen=True)
 class IdentifiedEffect:
-    """One identified effect: its spec, parameter names, units, values and standard errors."""
+    """One identified effect: its spec, parameter names, units, values and standard errors.
+
+    ``cov``: the covariance matrix of ``phi`` (one row per parameter, the interval the standard errors come from),
+    or None when not recorded (a record written before it was, or an identification without one); a calibration
+    into a physical parameter carries its standard error from it (the delta method).
+    """
 
     family: str
     label: str
@@ -35,12 +40,14 @@ class IdentifiedEffect:
     description: str = ""
     regressors: tuple = ()
     structural: str = ""
+    cov: tuple | None = None
 
     def to_dict(self) -> dict:
         return {"family": self.family, "label": self.label, "spec": dict(self.spec), "names": list(self.names),
                 "units": list(self.units), "phi": [float(p) for p in self.phi],
                 "stderr": [None if s is None else float(s) for s in self.stderr], "description": self.description,
-                "regressors": list(self.regressors), "structural": self.structural}
+                "regressors": list(self.regressors), "structural": self.structural,
+                "cov": None if self.cov is None else [[float(v) for v in row] for row in self.cov]}
 
     @classmethod
     def from_dict(cls, d: Mapping) -> IdentifiedEffect:
@@ -48,11 +55,14 @@ class IdentifiedEffect:
             e = cls(str(d["family"]), str(d.get("label", d["family"])), dict(d["spec"]), tuple(d["names"]),
                     tuple(d["units"]), tuple(float(p) for p in d["phi"]),
                     tuple(None if s is None else float(s) for s in d.get("stderr", [None] * len(d["phi"]))),
-                    str(d.get("description", "")), tuple(d.get("regressors", ())), str(d.get("structural") or ""))
+                    str(d.get("description", "")), tuple(d.get("regressors", ())), str(d.get("structural") or ""),
+                    None if d.get("cov") is None else tuple(tuple(float(v) for v in row) for row in d["cov"]))
         except (KeyError, TypeError, ValueError) as exc:
             raise EffectSpecError(f"effect record {d.get('family', '?')!r}: {exc}") from None
         if not (len(e.names) == len(e.units) == len(e.phi) == len(e.stderr)):
             raise EffectSpecError(f"effect {e.label}: names, units, phi and stderr differ in length")
+        if e.cov is not None and (len(e.cov) != len(e.phi) or any(len(row) != len(e.phi) for row in e.cov)):
+            raise EffectSpecError(f"effect {e.label}: cov is not {len(e.phi)} x {len(e.phi)}")
         needs(e.spec)  # the kind is known
         return e
 
