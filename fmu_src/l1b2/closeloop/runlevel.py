@@ -42,6 +42,7 @@ import pandas as pd
 from scipy import stats
 
 from ..data import measurements as dataio
+from ..data.coverage import values_outside
 from ..predictor import effects as fx
 from ..predictor import model as pr
 from . import residuals as res
@@ -633,7 +634,6 @@ def channel_ranges(added, dtr: pd.DataFrame, dte: pd.DataFrame | None) -> list:
     shapes, flat beyond TRAIN's range) and :func:`l1b2.data.coverage.values_outside` of the signal (TRAIN's and
     TEST's signal per sample). Empty without TEST.
     """
-    from ..data.coverage import values_outside
     out: dict = {}
     for c in added if dte is not None else ():
         spec = c.spec or {}
