@@ -15,7 +15,8 @@ import pandas as pd
 import pytest
 from l1b2.closeloop import runlevel as rl
 from l1b2.predictor import effects as fx
-from l1b2.predictor.effects import channels as ch
+from l1b2.predictor.effects import category as ch
+from l1b2.predictor.effects import channels
 from scipy import stats
 
 
@@ -40,20 +41,21 @@ def test_indicator_columns_are_centred_without_the_last_level_and_zero_for_an_un
                      [-0.25, 1 - 0.5, -0.125],     # a run mean of a constant, to rounding
                      [0.0, 0.0, 0.0]])              # a value TRAIN never had: the runs' average
     np.testing.assert_allclose(ch.category_columns(c, levels, shares), want)
-    spec = {"kind": "run_level", "channel": "fixture_id", "transform": "category",
-            **ch.category_spec(levels, shares)}
+    spec = {"kind": "run_level_category", "channel": "fixture_id", **ch.category_spec(levels, shares)}
     assert ch.unseen_levels(spec, c) == [9.0]
 
 
-def test_the_run_level_family_gives_each_level_a_drive_gain_an_offset_and_a_load_term():
+def test_the_categorical_family_gives_each_level_a_drive_gain_an_offset_and_a_load_term():
     levels, shares = (1.0, 2.0, 3.0), (0.5, 0.25)
     V0, d = np.array([300.0, 150.0, 240.0, 330.0]), np.array([1.0, -1.0, 1.0, -1.0])
     load = np.array([0.05, 0.05, -0.02, -0.02])
     c = np.array([1.0, 3.0, 2.0, 5.0])
     x = {"V0": V0, "d": d, "load": load, "run:fixture_id": c}
-    h = fx.family("run_level").hypotheses([{"channel": "fixture_id", "transform": "category", "mean": 0.0,
-                                            "sd": 1.0, "levels": levels, "shares": shares, "run_spread": 0.0}])[0]
+    h = fx.family("run_level_category").hypotheses([{"channel": "fixture_id", "levels": levels, "shares": shares,
+                                                     "run_spread": 0.0}])[0]
+    assert h.spec["kind"] == "run_level_category"
     assert h.family == "run_level_category(fixture_id)" and h.regressor == "fixture_id" and h.generic
+    assert h.units == ("N", "N", "1") * 2
     assert h.names == ("cat_fixture_id_is_1_run_gain", "cat_fixture_id_is_1_run_offset", "cat_fixture_id_is_1_run_load",
                        "cat_fixture_id_is_2_run_gain", "cat_fixture_id_is_2_run_offset", "cat_fixture_id_is_2_run_load")
     x1 = np.array([0.5, -0.5, -0.5, 0.0])          # 1[c = 1] - 0.5 (c = 5: unseen)
@@ -61,11 +63,13 @@ def test_the_run_level_family_gives_each_level_a_drive_gain_an_offset_and_a_load
     g = 9.81 * d * load
     want = np.column_stack([V0 / 300 * x1, x1, g * x1, V0 / 300 * x2, x2, g * x2])
     np.testing.assert_allclose(fx.effect_features(h.spec, x), want)
-    assert fx.family("run_level").width(h.spec) == 6
-    # a logged channel that is no FMU input: the export says so (no crash), the kernel refuses it naming why
-    assert ch.export_problem(h.spec) == "no input: run:fixture_id"
+    assert fx.family("run_level_category").width(h.spec) == 6
+    assert fx.needs(h.spec) == {"V0", "d", "load", "run:fixture_id"}
+    # a logged channel that is no FMU input: the export says so (no crash), the family has no kernel
+    assert channels.export_problem(h.spec) == "no input: run:fixture_id"
+    assert not fx.family("run_level_category").exportable
     from l1b2.predictor.effects import kernels as ek
-    with pytest.raises(fx.EffectSpecError, match="no input: run:fixture_id"):
+    with pytest.raises(fx.EffectSpecError, match="'run_level_category' has no per-sample kernel"):
         ek.spec_scalars(h.spec)
 
 
@@ -155,8 +159,8 @@ def test_a_non_monotone_four_level_effect_is_found_by_the_category_not_by_the_li
     per = cat.to_dict()["per_level"]
     assert per["1.0"]["offset_N"] == pytest.approx(0.0, abs=0.3)            # level 1 against level 4: equal
     assert per["2.0"]["offset_N"] == pytest.approx(-2.0, abs=0.3)           # level 2 against level 4
-    hyp = fx.family("run_level").hypotheses([{"channel": cat.channel, "transform": cat.transform, "mean": 0.0,
-                                              "sd": 1.0, "levels": cat.levels, "shares": cat.shares}])[0]
+    hyp = fx.family("run_level_category").hypotheses([{"channel": cat.channel, "levels": cat.levels,
+                                                       "shares": cat.shares}])[0]
     assert len(hyp.names) == 9
 
 
@@ -171,8 +175,7 @@ def test_a_linear_effect_keeps_the_linear_value_first_and_the_category_dominated
 
 
 def test_test_runs_at_a_value_train_never_had_are_recorded():
-    spec = {"kind": "run_level", "channel": "fixture_id", "transform": "category",
-            **ch.category_spec((1.0, 2.0, 3.0), (0.4, 0.3))}
+    spec = {"kind": "run_level_category", "channel": "fixture_id", **ch.category_spec((1.0, 2.0, 3.0), (0.4, 0.3))}
     added = [types.SimpleNamespace(spec=spec, label="run_level_category(fixture_id)[run]"),
              types.SimpleNamespace(spec={"kind": "run_level", "channel": "fixture_id", "transform": "none"},
                                    label="run_level_fixture_id[run]")]
@@ -230,3 +233,19 @@ def test_dominated_signals_computes_each_pairs_residuals_once_with_the_same_resu
             monkeypatch.setattr(rl, "_beyond", beyond)
             assert got == want
             assert len(calls) == 2 * pairs
+
+def test_the_categorical_family_takes_a_logged_run_setting_and_relevels_it_on_the_kept_runs():
+    fam = fx.family("run_level_category")
+    logged = {"name": "fixture_id", "kind": "logged", "within_run": False}
+    assert fam.takes(logged)
+    assert not fam.takes({**logged, "within_run": True})              # varies inside a run: a quantity's signal
+    assert not fam.takes({**logged, "name": "voltage_V"})             # an FMU input has its own signals
+    assert not fam.takes({**logged, "kind": "protocol"})
+    sg = fam.signal("fixture_id", [1.0, 2.0, 3.0, 1.0, 2.0, 3.0, 3.0])
+    assert sg["levels"] == (1.0, 2.0, 3.0) and sg["shares"] == pytest.approx((2 / 7, 2 / 7))
+    kept = fam.on_runs(sg, np.array([0, 1, 2, 3, 4, 6]))              # one run of level 3 dropped: shares 2/6
+    assert kept["shares"] == pytest.approx((1 / 3, 1 / 3)) and list(kept["values"]) == [1, 2, 3, 1, 2, 3]
+    assert fam.on_runs(sg, np.array([0, 1, 3, 4, 6])) is None          # level 3 in one run: no longer a category
+    assert fam.signal("fixture_id", [1.0, 2.0, 1.0, 2.0]) is None
+    np.testing.assert_allclose(fam.columns(kept), ch.category_columns(kept["values"], (1.0, 2.0, 3.0),
+                                                                       (1 / 3, 1 / 3)))

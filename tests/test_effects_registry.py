@@ -12,7 +12,10 @@ TRAIN = fx.TrainingSummary(
     m_s=0.12, time_range=(0.0, 300.0), position_range=(-0.012, 0.012), voltage_median=270.0,
     ranges={"t_lo": 0.0, "t_hi": 300.0, "s_lo": -0.012, "s_hi": 0.012, "V_lo": 220.0, "V_hi": 324.0,
             "load_abs": 0.09, "v_lo": 0.02, "v_hi": 0.3},
-    temperature_ref=30.0, temperature_range=(25.0, 40.0), spectral_period_m=0.006)
+    temperature_ref=30.0, temperature_range=(25.0, 40.0), spectral_period_m=0.006,
+    # a logged run setting of three values whose summary records its category (the categorical family's grid)
+    channels=({"name": "fixture_id", "kind": "logged", "mean": 2.0, "sd": 0.8, "lo": 1.0, "hi": 3.0,
+               "within_run": False, "run_spread": 0.0, "levels": (1.0, 2.0, 3.0), "shares": (0.4, 0.4)},))
 
 
 def _signals(n=50, seed=0):
@@ -21,7 +24,9 @@ def _signals(n=50, seed=0):
             "load": rng.uniform(-0.09, 0.09, n), "d": rng.choice([-1.0, 1.0], n), "T": rng.uniform(25, 40, n),
             "v_base": rng.uniform(-0.3, 0.3, n), "a_base": rng.normal(0, 1, n),
             # the protocol clock as a logged channel (l1b2.predictor.effects.channels): samples and run means
-            "col:time_s": np.linspace(0, 300, n), "run:time_s": np.repeat(np.linspace(0, 300, 5), n // 5)}
+            "col:time_s": np.linspace(0, 300, n), "run:time_s": np.repeat(np.linspace(0, 300, 5), n // 5),
+            "col:fixture_id": np.repeat([1.0, 3.0, 2.0, 1.0, 3.0], n // 5),
+            "run:fixture_id": np.repeat([1.0, 3.0, 2.0, 1.0, 3.0], n // 5)}
 
 
 @pytest.mark.parametrize("kind", fx.kinds())

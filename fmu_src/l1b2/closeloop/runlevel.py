@@ -288,32 +288,39 @@ def run_signals(df: pd.DataFrame, channels) -> list[dict]:
     return [s for s in out if np.all(np.isfinite(s["values"])) and np.std(s["values"]) > 0]
 
 
+def _category() -> fx.Effect:
+    """The categorical run-level family (:class:`l1b2.predictor.effects.category.RunLevelCategory`)."""
+    return fx.family("run_level_category")
+
+
+def _is_category(sg) -> bool:
+    return sg.get("transform") == fx.category.CATEGORY
+
+
 def category_signals(df: pd.DataFrame, channels) -> list[dict]:
-    """The categorical signals of a frame: each logged channel that is constant within every run, no FMU input
-    (an input has its own physics and signals) and a category by
-    :func:`l1b2.predictor.effects.channels.category_levels`; as :func:`run_signals`' entries with transform
-    ``category``, ``levels`` and ``shares``. None in most data: nothing then costs anything."""
+    """The categorical signals of a frame: each channel the categorical family takes
+    (:meth:`~l1b2.predictor.effects.category.RunLevelCategory.takes`) whose values per run are a category
+    (:meth:`~l1b2.predictor.effects.category.RunLevelCategory.signal`), with its ``run_spread``. None in most
+    data: nothing then costs anything."""
     out = []
+    fam = _category()
     runs = df.groupby(dataio.RUN, sort=False)
     for ch in channels:
         col = ch["name"]
-        if (ch.get("kind") != "logged" or ch.get("within_run", True) or col not in df.columns
-                or col in fx.channels.INPUT_COLUMNS):
+        if col not in df.columns or not fam.takes(ch):
             continue
-        values = runs[col].first().to_numpy(float)
-        cat = fx.channels.category_levels(values)
-        if cat is not None:
-            out.append({"channel": col, "transform": fx.channels.CATEGORY, "values": values, "levels": cat[0],
-                        "shares": cat[1], "run_spread": fx.channels.run_spread(df[col], df[dataio.RUN])})
+        sg = fam.signal(col, runs[col].first().to_numpy(float))
+        if sg is not None:
+            out.append({**sg, "run_spread": fx.channels.run_spread(df[col], df[dataio.RUN])})
     return out
 
 
 def signal_columns(sg: dict) -> tuple[np.ndarray, float, float]:
     """A signal's columns in the run-level mean and its mean and sd: ``z = (v - mean) / sd`` (n,) of a value
-    signal, the centred level indicators (n, L - 1) of a categorical one (mean 0, sd 1)."""
+    signal, the categorical family's columns (n, L - 1) of a categorical one (mean 0, sd 1)."""
     v = np.asarray(sg["values"], float)
-    if sg.get("transform") == fx.channels.CATEGORY:
-        return fx.channels.category_columns(v, sg["levels"], sg["shares"]), 0.0, 1.0
+    if _is_category(sg):
+        return _category().columns(sg), 0.0, 1.0
     mean, sd = float(np.mean(v)), float(np.std(v))
     return (v - mean) / sd, mean, sd
 
@@ -401,8 +408,8 @@ def signal_evidence(dev: RunDeviations, signals_, *, alpha: float, k: int, seed:
         b, p, dof = joint_test(dev, z)
         blocked = sg["channel"] == fx.channels.SESSION_TIME
         gain, per_run = cv_signal_gain(dev.theta, dev.cov, z, blocks if blocked else rand, dev.load, null_fits)
-        label = fx.channels.signal_label(sg["channel"], sg["transform"])
-        cat = sg.get("transform") == fx.channels.CATEGORY
+        cat = _is_category(sg)
+        label = _category().label(sg["channel"]) if cat else fx.channels.signal_label(sg["channel"], sg["transform"])
         out.append(SignalEvidence(sg["channel"], sg["transform"], label, fx.channels.regressor_of(sg["channel"]),
                                   mean, sd, p, gain, tuple(float(x) for x in b) + (0.0,) * (3 - len(b)),
                                   bool(p < level and gain > 0),
@@ -553,28 +560,27 @@ def analyse(df: pd.DataFrame, model, mask: np.ndarray, channels, *, alpha: float
 def _kept(sg: dict, keep: np.ndarray) -> dict | None:
     """A signal on the runs the deviations kept; a category's levels and shares taken again on them (None: no
     longer a category)."""
-    out = {**sg, "values": sg["values"][keep]}
-    if sg.get("transform") != fx.channels.CATEGORY:
-        return out
-    cat = fx.channels.category_levels(out["values"])
-    return None if cat is None else {**out, "levels": cat[0], "shares": cat[1]}
+    return _category().on_runs(sg, keep) if _is_category(sg) else {**sg, "values": sg["values"][keep]}
 
 
 def candidates(analysis: RunLevelAnalysis, ctx) -> list:
     """The :class:`~l1b2.closeloop.candidates.CandidateForce` of every significant signal, strongest first."""
     from .candidates import candidate
-    fam = fx.family("run_level")
-    hyps = fam.hypotheses([{"channel": e.channel, "transform": e.transform, "mean": e.mean, "sd": e.sd,
-                            **({} if e.run_spread is None else {"run_spread": float(e.run_spread)}),
-                            **({} if e.levels is None else {"levels": e.levels, "shares": e.shares})}
-                           for e in analysis.significant])
-    return [candidate(ctx, h) for h in hyps]
+    out = []
+    for e in analysis.significant:
+        fam = fx.family("run_level") if e.levels is None else _category()
+        sg = {"channel": e.channel, "transform": e.transform, "mean": e.mean, "sd": e.sd,
+              **({} if e.run_spread is None else {"run_spread": float(e.run_spread)}),
+              **({} if e.levels is None else {"levels": e.levels, "shares": e.shares})}
+        out += [candidate(ctx, h) for h in fam.hypotheses([sg])]
+    return out
 
 
 def is_run_level(c) -> bool:
     """Whether a candidate is constant along the stroke by construction (a run-level family or a channel's run mean)."""
     spec = c.spec or {}
-    return spec.get("kind") == "run_level" or (spec.get("kind") == "channel" and spec.get("level") == "run")
+    return spec.get("kind") in ("run_level", _category().kind) or (spec.get("kind") == "channel"
+                                                                  and spec.get("level") == "run")
 
 
 def offer(found: list, short: list, allowed) -> list:
@@ -601,16 +607,15 @@ def unseen_test_levels(added, df: pd.DataFrame | None) -> dict:
     a value in ``df`` (TEST) that TRAIN never had: those runs get TRAIN's average over runs (0 in the level
     columns), so their prediction cannot carry that value's own effect (``diagnosis.unseen_levels``)."""
     out: dict = {}
+    fam = _category()
     for c in added if df is not None else ():
         spec = c.spec or {}
         col = spec.get("channel")
-        if spec.get("transform") != fx.channels.CATEGORY or col not in df.columns:
+        if spec.get("kind") != fam.kind or col not in df.columns:
             continue
-        per_run = df.groupby(dataio.RUN, sort=False)[col].first().to_numpy(float)
-        values = fx.channels.unseen_levels(spec, per_run)
-        if values:
-            out[c.label] = {"channel": col, "values": values,
-                            "runs": int(np.sum(np.isin(per_run, values)))}
+        unseen = fam.unseen(spec, df.groupby(dataio.RUN, sort=False)[col].first().to_numpy(float))
+        if unseen:
+            out[c.label] = {"channel": col, **unseen}
     return out
 
 
@@ -638,7 +643,7 @@ def channel_ranges(added, dtr: pd.DataFrame, dte: pd.DataFrame | None) -> list:
     for c in added if dte is not None else ():
         spec = c.spec or {}
         kind, col, tr = spec.get("kind"), spec.get("channel"), spec.get("transform", "none")
-        if kind not in ("channel", "run_level") or tr == fx.channels.CATEGORY:
+        if kind not in ("channel", "run_level"):
             continue
         if col not in dtr.columns or col not in dte.columns:
             continue

@@ -196,6 +196,9 @@ class Effect:
         Non-empty when it relaxes an approximation of Eq. 29 itself (what it relaxes).
     home : tuple
         ``"Component.parameter"`` of the subsystem FMUs that model the same physics (empty: none).
+    exportable : bool
+        False when every hypothesis of the family reads a logged channel that no input of ``Predictor.fmu``
+        gives: it has no per-sample kernel and a model carrying it is not exported.
     """
 
     kind: str = ""
@@ -206,6 +209,7 @@ class Effect:
     description: str = ""
     structural: str = ""
     home: tuple = ()
+    exportable: bool = True
 
     def needs(self, spec: Mapping) -> set:
         """The signals a spec of this family reads."""

@@ -257,7 +257,7 @@ class Channel(Effect):
     def _hypothesis(self, ch, reg, form, level, shape, by="", load_abs=0.0, m_s=0.0, damping=np.nan):
         name = ch["name"]
         spec = {"channel": name, "form": form, "level": level, "mean": float(ch["mean"]), "sd": float(ch["sd"]),
-                **_spread(ch, level), **({"m_s": float(m_s)} if form == "inertia" else {})}
+                **run_spread_entry(ch, level), **({"m_s": float(m_s)} if form == "inertia" else {})}
         names = [f"{name}_{form}_{level}"]
         if shape != "linear":
             spec.update(shape=shape, lo=float(ch["lo"]), hi=float(ch["hi"]))
@@ -352,7 +352,7 @@ def interaction_basis(spec, x, F) -> np.ndarray:
     return np.hstack([F, F * u[:, None]])
 
 
-def _spread(sg, level: str = "run") -> dict:
+def run_spread_entry(sg, level: str = "run") -> dict:
     """``{"run_spread": ...}`` of a run-level signal that records it (:func:`export_problem` reads it), else ``{}``."""
     return {"run_spread": float(sg["run_spread"])} if level == "run" and "run_spread" in sg else {}
 
@@ -374,100 +374,14 @@ REGRESSOR_NAMES.update({"voltage_V": "voltage", "load_kg": "load", "direction": 
 
 
 def signal_label(column: str, transform: str = "none") -> str:
-    """The report's name of a run-level signal: the column, ``d*<column>``, ``|<column>|`` or
-    ``category(<column>)``."""
-    return {"none": column, "drive": f"d*{column}", "abs": f"|{column}|", CATEGORY: f"category({column})"}[transform]
+    """The report's name of a run-level signal: the column, ``d*<column>`` or ``|<column>|``."""
+    return {"none": column, "drive": f"d*{column}", "abs": f"|{column}|"}[transform]
 
 
 def parameter_stem(column: str, transform: str = "none") -> str:
-    """The stem of a run-level signal's parameter names: the column, ``d_<column>``, ``abs_<column>`` or
-    ``cat_<column>`` (a legal FMI structured name, unlike the report's :func:`signal_label`: the parameters are
-    FMU variables)."""
-    return {"none": column, "drive": f"d_{column}", "abs": f"abs_{column}", CATEGORY: f"cat_{column}"}[transform]
-
-
-# ---------------------------------------------------------------------------
-# a logged run setting that is a category: each of its values its own run-level effect
-# ---------------------------------------------------------------------------
-
-#: the run-level transform of a categorical signal (not in :data:`TRANSFORMS`: its columns are the centred level
-#: indicators, :func:`category_columns`, not a transformed value)
-CATEGORY = "category"
-#: the number of distinct TRAIN run values of a logged run setting that make it also a category: two values are a
-#: line (the linear signal spans their indicator), and beyond six the categorical form's 3 (L - 1) parameters
-#: outgrow the runs per value of a session of some tens of runs (and a setting that fine is more likely a quantity,
-#: which the value's own forms take)
-CATEGORY_LEVELS = (3, 6)
-#: the fewest TRAIN runs holding each value: a value of one run is confounded with that run's own random deviation
-CATEGORY_MIN_RUNS = 2
-#: a sample's value matches a level within this share of the levels' largest size (a run mean of a constant is
-#: the constant to rounding)
-CATEGORY_RTOL = 1e-9
-
-
-def category_levels(run_values) -> tuple | None:
-    """``(levels, shares)`` of a logged run setting taken as a category, or None when it is not one.
-
-    ``run_values``: one value per TRAIN run (the setting constant within every run). A category has
-    :data:`CATEGORY_LEVELS` distinct values, each held by at least :data:`CATEGORY_MIN_RUNS` runs; ``levels`` are
-    the values in increasing order, ``shares`` the runs' shares of every level but the last (the dropped one).
-    """
-    v = np.asarray(run_values, float)
-    if len(v) == 0 or not np.all(np.isfinite(v)):
-        return None
-    levels, counts = np.unique(v, return_counts=True)
-    lo, hi = CATEGORY_LEVELS
-    if not lo <= len(levels) <= hi or counts.min() < CATEGORY_MIN_RUNS:
-        return None
-    return tuple(float(x) for x in levels), tuple(float(c) / len(v) for c in counts[:-1])
-
-
-def category_spec(levels, shares) -> dict:
-    """A category's scalars in a spec: ``n_levels``, ``level_0..level_{L-1}``, ``share_0..share_{L-2}``."""
-    out = {"n_levels": len(levels)}
-    out.update({f"level_{j}": float(v) for j, v in enumerate(levels)})
-    out.update({f"share_{j}": float(s) for j, s in enumerate(shares)})
-    return out
-
-
-def category_of(spec) -> tuple:
-    """``(levels, shares)`` of a categorical spec (:func:`category_spec`)."""
-    n = int(num(spec, "n_levels"))
-    if n < 2:
-        raise EffectSpecError(f"categorical signal {spec.get('channel')!r}: {n} levels")
-    return tuple(num(spec, f"level_{j}") for j in range(n)), tuple(num(spec, f"share_{j}") for j in range(n - 1))
-
-
-def _matches(c, levels) -> np.ndarray:
-    """``(n, L)``: each value against each level, within :data:`CATEGORY_RTOL`."""
-    lv = np.asarray(levels, float)
-    tol = CATEGORY_RTOL * max(1.0, float(np.max(np.abs(lv))))
-    return np.abs(np.asarray(c, float)[:, None] - lv[None, :]) <= tol
-
-
-def category_columns(c, levels, shares) -> np.ndarray:
-    """The centred indicators of a category, ``(n, L - 1)``: ``1[c = v_j] - s_j`` for every level but the last;
-    a value that is none of TRAIN's levels gets 0 in every column (TRAIN's average over runs, see
-    :func:`unseen_levels`)."""
-    hit = _matches(c, levels)
-    out = hit[:, :-1].astype(float) - np.asarray(shares, float)[None, :]
-    out[~hit.any(axis=1)] = 0.0
-    return out
-
-
-def unseen_levels(spec, c) -> list:
-    """The distinct values of ``c`` that are none of a categorical spec's TRAIN levels (their runs get TRAIN's
-    average over runs: the effect cannot tell them; a report flags them)."""
-    c = np.asarray(c, float)
-    levels, _ = category_of(spec)
-    return sorted(float(x) for x in np.unique(c[~_matches(c, levels).any(axis=1)]))
-
-
-def level_tag(v: float) -> str:
-    """A level's value in a parameter name: ``3``, ``2p5``, ``m1`` (a legal FMI structured name's part)."""
-    v = float(v)
-    text = str(int(v)) if v == int(v) else f"{v:g}"
-    return "is_" + text.replace("-", "m").replace(".", "p").replace("+", "")
+    """The stem of a run-level signal's parameter names: the column, ``d_<column>`` or ``abs_<column>`` (a legal
+    FMI structured name, unlike the report's :func:`signal_label`: the parameters are FMU variables)."""
+    return {"none": column, "drive": f"d_{column}", "abs": f"abs_{column}"}[transform]
 
 
 def transformed(c, d, transform: str) -> np.ndarray:
@@ -508,10 +422,8 @@ class RunLevel(Effect):
     load and the direction (:func:`export_problem` checks the spec's ``run_spread``). A run mean of any other
     column (a logged channel that is no input, the session clock) is not exported.
 
-    A logged run setting that is a category (:func:`category_levels`: 3 to 6 values, each of two runs or more)
-    also enters as transform ``category``: ``z`` is then the vector of its centred level indicators
-    (:func:`category_columns`, the last level dropped), each with its own ``(a, b, c)``: ``3 (L - 1)``
-    parameters, a value TRAIN never had gets TRAIN's average over runs (0 in every column).
+    A logged run setting that is a category, each of its values its own effect, is its own family,
+    :class:`l1b2.predictor.effects.category.RunLevelCategory` (``run_level_category``), in the same form.
     """
 
     kind = "run_level"
@@ -525,8 +437,6 @@ class RunLevel(Effect):
         return super().needs(spec) | {signal_key(str(spec.get("channel")), "run")}
 
     def features(self, spec, x):
-        if spec.get("transform") == CATEGORY:
-            return self._category_features(spec, x)
         c = run_signal(x, str(spec.get("channel")), str(spec.get("transform", "none")))
         sd = num(spec, "sd")
         if not sd > 0:
@@ -534,16 +444,8 @@ class RunLevel(Effect):
         z = (c - num(spec, "mean")) / sd
         return np.column_stack([signal(x, "V0") / V_REF * z, z, G_N_PER_KG * signal(x, "d") * signal(x, "load") * z])
 
-    def _category_features(self, spec, x):
-        """A categorical signal's columns: per level ``j`` but the last, ``x_j (V0/V_ref, 1, g d m)`` with ``x_j``
-        its centred indicator (:func:`category_columns`), level by level."""
-        levels, shares = category_of(spec)
-        X = category_columns(signal(x, signal_key(str(spec.get("channel")), "run")), levels, shares)
-        per = [signal(x, "V0") / V_REF, np.ones(X.shape[0]), G_N_PER_KG * signal(x, "d") * signal(x, "load")]
-        return np.column_stack([X[:, j] * f for j in range(X.shape[1]) for f in per])
-
     def width(self, spec):
-        return 3 * (int(num(spec, "n_levels")) - 1) if spec.get("transform") == CATEGORY else 3
+        return 3
 
     def hypotheses(self, signals_: list) -> list:
         """One hypothesis per run-level signal ``{"channel", "transform", "mean", "sd"}`` (``sd`` > 0; with
@@ -552,29 +454,14 @@ class RunLevel(Effect):
         for sg in signals_:
             col, tr = sg["channel"], sg.get("transform", "none")
             label, stem = signal_label(col, tr), parameter_stem(col, tr)
-            if tr == CATEGORY:
-                out.append(self._category_hypothesis(sg, col, label, stem))
-                continue
             out.append(self.hypothesis(
                 [f"{stem}_run_gain", f"{stem}_run_offset", f"{stem}_run_load"], ["N", "N", "1"],
-                {"channel": col, "transform": tr, "mean": float(sg["mean"]), "sd": float(sg["sd"]), **_spread(sg)},
+                {"channel": col, "transform": tr, "mean": float(sg["mean"]), "sd": float(sg["sd"]), **run_spread_entry(sg)},
                 "run",
                 family=f"run_level_{label}", regressor=regressor_of(col), generic=True,
                 description=f"run-level {label} scaling the drive force, adding a force and scaling the "
                             "load's force (run mean, constant along the stroke)"))
         return out
-
-    def _category_hypothesis(self, sg, col, label, stem):
-        """A categorical signal ``{"channel", "levels", "shares"}``: three parameters per level but the last."""
-        levels = tuple(sg["levels"])
-        tags = [level_tag(v) for v in levels[:-1]]
-        names = [f"{stem}_{t}_run_{p}" for t in tags for p in ("gain", "offset", "load")]
-        return self.hypothesis(
-            names, ["N", "N", "1"] * len(tags),
-            {"channel": col, "transform": CATEGORY, **category_spec(levels, sg["shares"]), **_spread(sg)}, "run",
-            family=f"run_level_{label}", regressor=regressor_of(col), generic=True,
-            description=f"run-level {label}: each of its {len(levels)} values scaling the drive force, adding a "
-                        "force and scaling the load's force (against the runs' average; constant along the stroke)")
 
     def grid(self, train):
         """The run-level hypothesis of every candidate channel (standardised by TRAIN's sample mean and sd) and
@@ -585,4 +472,4 @@ class RunLevel(Effect):
             t0, t1 = train.time_range
             chans.append({"name": SESSION_TIME, "mean": 0.5 * (t0 + t1), "sd": (t1 - t0) / np.sqrt(12.0)})
         return self.hypotheses([{"channel": ch["name"], "transform": "none", "mean": ch["mean"], "sd": ch["sd"],
-                                 **_spread(ch)} for ch in chans])
+                                 **run_spread_entry(ch)} for ch in chans])

@@ -18,9 +18,11 @@ accepts. Each kernel returns one effect's force ``features(spec, x) @ phi``
 :data:`KERNEL_KINDS` lists the kinds with a kernel: every family of the package
 (``channel`` and ``run_level`` for a signal that an input of ``Predictor.fmu``
 gives, :func:`l1b2.predictor.effects.channels.fmu_signal`: a run-level signal is
-the input's current value, exact when the input is constant within a run); a
-family registered outside the package has none (its model stays a Python
-FMU). A change of a family's features needs the same change in its kernel:
+the input's current value, exact when the input is constant within a run) but
+those whose every hypothesis reads a logged channel no input gives
+(:attr:`~l1b2.predictor.effects.base.Effect.exportable` False:
+``run_level_category``, never exported); a family registered outside the
+package has none (its model stays a Python FMU). A change of a family's features needs the same change in its kernel:
 the tests compare every kernel with its family's vectorised features.
 """
 
