@@ -42,7 +42,7 @@ ADDED = [
     _added("C", kind="channel", channel="coil_A", level="run", form="friction", mean=2.0, sd=1.0),
     _added("D", kind="run_level", channel="load_kg", transform="drive", mean=0.0, sd=0.1),
     _added("E", kind="run_level", channel="load_kg", transform="abs", mean=0.1, sd=0.05),
-    _added("F", kind="run_level", channel="coil_A", transform="category", n_levels=2, level_0=0.0, level_1=1.0,
+    _added("F", kind="run_level_category", channel="coil_A", n_levels=2, level_0=0.0, level_1=1.0,
            share_0=0.5),
     _added("G", kind="channel", channel="not_in_test", level="sample", form="force", mean=0.0, sd=1.0),
     _added("H", kind="load_path_friction"),
