@@ -28,6 +28,9 @@ derivative of the recorded position. Each kind draws from one random stream of i
   temperature beside it, ``25 + rho (T_bar - 25) + 5 sqrt(1 - rho^2) z'`` (rho drawn in 0.75-0.85, z' standard
   normal per run) plus 0.05 degC of sensor noise per sample: correlated with the cause at about rho, never equal.
   The drive sits in its own rack at 25 degC (its tank does not see the bar's temperature).
+* ``oil_viscosity_cause`` -- the proxy's control, not a kind of its own: the same draw and the same motion as
+  ``oil_viscosity_proxy`` at the seed, with the bar's own temperature logged (``bar_temp_C``, plus 0.05 degC of sensor
+  noise per sample) instead of the air's. What the loop makes of the cause tells the proxy's loss from the loop's.
 * ``dewpoint_film`` -- two logged columns whose combination acts, ``humidity_pct`` and ``air_temp_C`` (one value
   per run each, independent: RH ``45 + 12 z`` clipped to 20-75 %, air 20-30 degC uniform, plus 0.5 % and 0.05 degC
   of sensor noise per sample). The friction bar is clamped to a base plate held at 27 degC, so the water film on it
@@ -52,15 +55,19 @@ import blind_effects as be  # noqa: E402  (adds fmu_src to the path)
 from l1b2.data import measurements as dataio  # noqa: E402
 from l1b2.rig.experiment import scattered_motor  # noqa: E402
 
-KINDS = ("runin_glaze", "eyelet_capstan", "oil_viscosity_proxy", "dewpoint_film")
+KINDS = ("runin_glaze", "eyelet_capstan", "oil_viscosity_proxy", "dewpoint_film", "oil_viscosity_cause")
+#: a kind that draws from another kind's stream (the same draw and motion, another logged column)
+STREAM = {"oil_viscosity_cause": "oil_viscosity_proxy"}
 #: the channel each kind acts through (a logged column; the session clock for the unlogged run-in)
 CHANNEL = {"runin_glaze": "time", "eyelet_capstan": "load_kg x direction", "oil_viscosity_proxy": "air_temp_C",
+           "oil_viscosity_cause": "bar_temp_C",
            "dewpoint_film": "humidity_pct x air_temp_C"}
 BAR_PLATE_DEGC = 27.0   # the base plate's set point under the friction bar (dewpoint_film)
 
 
 def draw(kind: str, seed: int, n_runs: int) -> dict:
     """The kind's parameters and per-run values (its own random stream of ``seed``)."""
+    kind = STREAM.get(kind, kind)
     rng = np.random.default_rng([seed, 83, KINDS.index(kind) if kind in KINDS else 99])
     if kind == "runin_glaze":
         return {"H": float(rng.uniform(0.15, 0.22)), "S1_m": float(rng.uniform(1.0, 1.6))}
@@ -105,7 +112,7 @@ def experiment(kind: str, seed: int):
             mp = mp.replace(interface__mu_p=mp.interface.mu_p * runin_factor(S, p["H"], p["S1_m"]))
         elif kind == "eyelet_capstan":
             mp = mp.replace(slider__pulley_mu=p["pulley_mu_fwd"] if d > 0 else 0.0)
-        elif kind == "oil_viscosity_proxy":
+        elif kind in ("oil_viscosity_proxy", "oil_viscosity_cause"):
             thin = math.exp(-p["b_per_K"] * (p["T_bar"][k] - 25))
             mp = mp.replace(interface__sigma_N_s_per_m=mp.interface.sigma_N_s_per_m * thin,
                             slider__c_r_N_s_per_m=mp.slider.c_r_N_s_per_m * thin)
@@ -119,6 +126,8 @@ def experiment(kind: str, seed: int):
         extra = {}
         if kind == "oil_viscosity_proxy":
             extra["air_temp_C"] = np.round(p["T_air"][k] + 0.05 * noise, 2)
+        elif kind == "oil_viscosity_cause":
+            extra["bar_temp_C"] = np.round(p["T_bar"][k] + 0.05 * noise, 2)
         elif kind == "dewpoint_film":
             extra["humidity_pct"] = np.round(p["RH"][k] + 0.5 * noise, 2)
             extra["air_temp_C"] = np.round(p["T_air"][k] + 0.05 * noise[::-1], 2)

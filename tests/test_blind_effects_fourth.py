@@ -55,3 +55,9 @@ def test_water_activity_against_magnus_written_out(audit):
     e = lambda T: 6.112 * math.exp(17.62 * T / (243.12 + T))  # noqa: E731
     assert float(audit.water_activity(50.0, 20.0)) == pytest.approx(0.5 * e(20.0) / e(27.0), rel=1e-12)
     assert 0.5 * e(20.0) / e(27.0) == pytest.approx(0.33, abs=0.01)   # 2.34 kPa / 3.57 kPa at 50 %
+
+
+def test_the_cause_control_draws_the_proxy_s_world(audit):
+    for seed in (1, 2):
+        proxy, cause = audit.draw("oil_viscosity_proxy", seed, 72), audit.draw("oil_viscosity_cause", seed, 72)
+        assert np.array_equal(proxy["T_bar"], cause["T_bar"]) and proxy["b_per_K"] == cause["b_per_K"]
