@@ -13,7 +13,7 @@ derivative of the recorded position. Each kind draws from one random stream of i
   grow), then glazes (the film polishes to a resin-rich skin and the friction falls back). With ``S`` the tip's
   sliding distance over the runs before (tip speed ~ 0.2 m/s x V0/324 V times the run's duration), the slip friction
   coefficient is ``mu_p (1 + H x exp(1 - x))``, ``x = S / S1``: a hump of height H (drawn in 0.15-0.22) at the
-  sliding distance S1 (drawn in 1.0-1.6 m; a session slides ~4 m), falling back over the rest of the session.
+  sliding distance S1 (drawn in 1.0-1.6 m; the 72-run session slides ~2.9 m), falling back over the rest of the session.
 * ``eyelet_capstan`` -- the load's own column, in one direction only (a direction x load interaction). The load's
   cable runs from the slider through a fixed PTFE eyelet before the pulley; in forward runs (``direction`` +1) the
   slider drags the cable over the eyelet's lip (wrap angle theta drawn in 80-110 deg, cable-on-PTFE friction mu_c in
