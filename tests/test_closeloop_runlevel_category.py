@@ -249,3 +249,22 @@ def test_the_categorical_family_takes_a_logged_run_setting_and_relevels_it_on_th
     assert fam.signal("fixture_id", [1.0, 2.0, 1.0, 2.0]) is None
     np.testing.assert_allclose(fam.columns(kept), ch.category_columns(kept["values"], (1.0, 2.0, 3.0),
                                                                        (1 / 3, 1 / 3)))
+
+
+def test_a_categorical_effect_recorded_as_the_run_level_transform_reads_as_its_own_family():
+    # a record written when the category was the run_level family's transform: the same scalars and names, read as
+    # the family's own spec, whose features are the per-level forms written out
+    from l1b2.predictor.effects.model import IdentifiedEffect
+    levels, shares = (1.0, 2.0, 3.0), (0.25, 0.5)
+    old_spec = {"kind": "run_level", "transform": "category", "channel": "fixture_id",
+                **ch.category_spec(levels, shares)}
+    names = [f"cat_fixture_id_is_{v}_run_{p}" for v in (1, 2) for p in ("gain", "offset", "load")]
+    rec = {"family": "run_level_category(fixture_id)", "label": "run_level_category(fixture_id)[run]",
+           "spec": old_spec, "names": names, "units": ["N", "N", "1"] * 2, "phi": [0.0] * 6, "stderr": [None] * 6}
+    e = IdentifiedEffect.from_dict(rec)
+    assert e.spec["kind"] == "run_level_category" and "transform" not in e.spec
+    assert {k: v for k, v in e.spec.items() if k != "kind"} == {k: v for k, v in old_spec.items()
+                                                                if k not in ("kind", "transform")}
+    assert IdentifiedEffect.from_dict(e.to_dict()) == e
+    new = dict(rec, spec={k: v for k, v in old_spec.items() if k != "transform"} | {"kind": "run_level_category"})
+    assert IdentifiedEffect.from_dict(new) == e

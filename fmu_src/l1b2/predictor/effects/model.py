@@ -21,6 +21,16 @@ from ..setup import PredictorSetup
 from .base import EffectSpecError, effect_features, needs, time_derivative
 
 
+def _current_spec(spec: Mapping) -> dict:
+    """``spec`` as a dict, a former categorical spec (kind ``run_level``, transform ``category``) in its family's
+    own form (kind ``run_level_category``, no transform; the same scalars, features and names)."""
+    out = dict(spec)
+    if out.get("kind") == "run_level" and out.get("transform") == "category":
+        out.pop("transform")
+        out["kind"] = "run_level_category"
+    return out
+
+
 @dataclass(frozen=True)
 class IdentifiedEffect:
     """One identified effect: its spec, parameter names, units, values and standard errors.
@@ -51,8 +61,10 @@ class IdentifiedEffect:
 
     @classmethod
     def from_dict(cls, d: Mapping) -> IdentifiedEffect:
+        """The record of :meth:`to_dict`; a categorical run setting written as the ``run_level`` family's
+        transform ``category`` (before it had a family of its own) is read as ``run_level_category``."""
         try:
-            e = cls(str(d["family"]), str(d.get("label", d["family"])), dict(d["spec"]), tuple(d["names"]),
+            e = cls(str(d["family"]), str(d.get("label", d["family"])), _current_spec(d["spec"]), tuple(d["names"]),
                     tuple(d["units"]), tuple(float(p) for p in d["phi"]),
                     tuple(None if s is None else float(s) for s in d.get("stderr", [None] * len(d["phi"]))),
                     str(d.get("description", "")), tuple(d.get("regressors", ())), str(d.get("structural") or ""),
