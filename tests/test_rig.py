@@ -281,3 +281,23 @@ def test_a_sampling_rate_that_is_not_a_positive_number_is_refused(rate):
     # reference: stated behaviour: RigPlan refuses it when built, naming the field
     with pytest.raises(SimulationError, match="sample_rate_Hz"):
         RigPlan(sample_rate_Hz=rate)
+
+
+def test_rig_cli_runs_the_traverses_on_two_local_workers_by_default(tmp_path, monkeypatch):
+    # reference: the virtual-rig how-to's words: `--workers N` local single-thread processes, default 2 (the pages'
+    # quick commands pass --workers 1, so this is the default's check); --workers 1 reaches the rig as 1
+    import l1b2.rig.experiment as rig_experiment
+
+    class Stop(Exception):
+        pass
+    seen = []
+
+    def fake_run_experiment(plan, mp=None, **kw):
+        seen.append(kw)
+        raise Stop
+
+    monkeypatch.setattr(rig_experiment, "run_experiment", fake_run_experiment)
+    for extra in ([], ["--workers", "1"]):   # the command stops at the rig (an internal error, exit code 1)
+        assert cli_main(["rig", "--out", str(tmp_path / f"r{len(seen)}"), "--engine", "inprocess", "--quiet",
+                         *extra]) != 0
+    assert [(kw["workers"], kw["scheduler"]) for kw in seen] == [(2, None), (1, None)]
