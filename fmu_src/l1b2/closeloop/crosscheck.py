@@ -47,7 +47,7 @@ from .intervals import reported_uncertainty, train_levels
 from .selection import design
 
 __all__ = ["FORM_SUFFIX", "as_form", "both_families", "confirmed_pick", "score_of", "PureSlipCheck", "describe",
-           "withdrawn_note"]
+           "identified_pick", "identified_text", "withdrawn_note"]
 
 #: appended to a withdrawn named family's name: the same force read as a generic term of the reduced model
 FORM_SUFFIX = "_form"
@@ -105,6 +105,41 @@ def confirmed_pick(ok: list, choose, confirm) -> tuple:
         return pick, [{**rec, "outcome": "kept"}]
     form = replace(pick, candidate=as_form(pick.candidate))
     return form, [{**rec, "outcome": f"withdrawn, kept as {form.candidate.label}"}]
+
+
+def identified_pick(ok: list, choose, confirm, fit, identify, round_no: int) -> tuple:
+    """``(pick, model, checks, records)``: the round's pick once it is checked and, when read as physics, identified.
+
+    The pick is :func:`confirmed_pick`'s of the trials left (``ok`` at first), ``model = fit(pick)`` its joint
+    re-identification. A pick read as physics (named, not structural) is named only when identified:
+    ``identify(model, candidate)`` (:func:`l1b2.closeloop.intervals.identification`, the joint test of its
+    parameters against zero) goes into its records (``"identification"``; a record is made for a pick with no
+    check), and when it says not identified the record's outcome says so, the trial leaves the round and the
+    choice is made again among the rest. ``checks``: the kept pick's records; ``records``: all of them;
+    ``(None, None, [], records)`` when no trial is left.
+    """
+    left, records = list(ok), []
+    while left:
+        pick, checks = confirmed_pick(left, choose, confirm)
+        model = fit(pick)
+        c = pick.candidate
+        if c.generic or c.structural:
+            return pick, model, checks, records + checks
+        mine = [r for r in checks if r["label"] == c.label]
+        if not mine:
+            mine = [{"round": int(round_no), "label": c.label, "effect": c.family, "family": None,
+                     "checked": False, "confirmed": True, "outcome": "kept"}]
+            checks = checks + mine
+        ident = identify(model, c)
+        for r in mine:
+            r["identification"] = ident
+        records += checks
+        if ident["identified"]:
+            return pick, model, checks, records
+        for r in mine:
+            r["outcome"] = "not identified (its parameters are not jointly different from zero): not added"
+        left = [t for t in left if t is not pick]
+    return None, None, [], records
 
 
 class PureSlipCheck:
@@ -251,9 +286,12 @@ def both_families(c: CandidateForce, e29: dict, other: dict, family: str) -> dic
 
 def describe(rec: dict) -> str:
     """One line of ``report.md`` for a check's record (:meth:`PureSlipCheck.__call__` and its outcome)."""
+    ident = identified_text(rec.get("identification"))
+    if rec.get("family") is None:
+        return f"named reading of `{rec['label']}` (round {rec['round']}): {rec.get('outcome', '')}" + ident
     head = f"named reading of `{rec['label']}` (round {rec['round']}) checked from the {rec['family']} family: "
     if not rec.get("checked"):
-        return head + rec.get("note", "not checked") + f"; {rec.get('outcome', '')}"
+        return head + rec.get("note", "not checked") + f"; {rec.get('outcome', '')}" + ident
 
     def pct(x, f):
         return "-" if x is None else format(x, f)
@@ -262,7 +300,21 @@ def describe(rec: dict) -> str:
             f"{rec['folds_improved']}/{rec['folds']} folds; from Eq. 29: gain {pct(rec['eq29_cv_gain'], '.1%')}; "
             f"accepted needs >= {rec['min_cv_gain']:.0%} in most folds): "
             + ("confirmed" if rec["confirmed"] else "not confirmed") + f"; {rec.get('outcome', '')}"
-            + "".join(f"; {n} " + values(p) for n, p in (rec.get("parameters") or {}).items()))
+            + "".join(f"; {n} " + values(p) for n, p in (rec.get("parameters") or {}).items()) + ident)
+
+
+def identified_text(t: dict | None) -> str:
+    """The identification test's figures (:func:`l1b2.closeloop.intervals.identification`) as a clause of a
+    check's line, e.g. ``; joint Wald 12.3 (k 2, F on 2 and 7 df, p 0.0041 < 0.01): identified``."""
+    if not t:
+        return ""
+    if t["wald"] is None:
+        return f"; joint Wald test not computable ({t['interval']} covariance): not identified"
+    dist = (f"F on {t['k']} and {t['df_denominator']} df" if t["df_denominator"] is not None
+            else f"chi-square with {t['k']} df")
+    return (f"; joint Wald {t['wald']:.3g} (k {t['k']}, {dist}, {t['interval']} covariance, p {t['p']:.2g} "
+            + ("<" if t["identified"] else ">=") + f" {t['alpha']:g}): "
+            + ("identified" if t["identified"] else "not identified"))
 
 
 def values(p: dict) -> str:
@@ -278,7 +330,10 @@ def values(p: dict) -> str:
 
 
 def withdrawn_note(records: list) -> str:
-    """The diagnosis message's note on withdrawn named readings ('' when none was withdrawn)."""
+    """The diagnosis message's note on withdrawn and not identified named readings ('' when there is none)."""
     out = [r["label"] for r in records if str(r.get("outcome", "")).startswith("withdrawn")]
-    return (f"; named reading withdrawn (not confirmed from the pure-slip family, Eq. 29's linearisation): "
-            f"{', '.join(out)}") if out else ""
+    nid = [r["label"] for r in records if str(r.get("outcome", "")).startswith("not identified")]
+    return ((f"; named reading withdrawn (not confirmed from the pure-slip family, Eq. 29's linearisation): "
+             f"{', '.join(out)}") if out else "") + (
+        f"; named reading not identified (parameters not jointly different from zero), not added: "
+        f"{', '.join(nid)}" if nid else "")

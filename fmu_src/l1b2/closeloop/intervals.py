@@ -13,11 +13,13 @@ run-robust and model-based ones are kept beside it.
 from __future__ import annotations
 
 import numpy as np
+from scipy import stats
 
 from ..ident.clusters import grouped_interval, run_groups
 from ..ident.uncertainty import grouped_sandwich
 
-__all__ = ["REPORTED_GROUPING", "added_parameters", "reported_covariance", "reported_uncertainty", "train_levels"]
+__all__ = ["REPORTED_GROUPING", "added_parameters", "identification", "reported_covariance", "reported_uncertainty",
+           "train_levels", "wald_test"]
 
 #: the clustering of TRAIN's runs behind the reported interval (:data:`l1b2.ident.clusters.RUN_GROUPINGS`)
 REPORTED_GROUPING = "level"
@@ -96,6 +98,51 @@ def reported_covariance(model, names, groups=None) -> tuple | None:
         return None
     block = np.asarray(cov, float)[np.ix_(idx, idx)]
     return tuple(tuple(float(v) for v in row) for row in block) if np.all(np.isfinite(block)) else None
+
+
+def wald_test(phi, cov, clusters: int | None, alpha: float) -> dict:
+    """Whether the parameters ``phi`` are jointly different from zero under their covariance ``cov``.
+
+    The Wald statistic ``W = phi' C^-1 phi`` (k parameters). With ``clusters`` H (a cluster-robust ``cov``) the
+    test is ``F = W / k`` on (k, H - 1) degrees of freedom, which for k = 1 is the square of the t with H - 1
+    that :func:`reported_uncertainty` gives one parameter; without (``None``) it is chi-square with k. Returns
+    ``{"wald", "k", "df_denominator", "p", "alpha", "identified"}``: identified when ``p < alpha``. A ``cov``
+    that is singular or not finite, or fewer than two clusters, identifies nothing (``wald`` and ``p`` None).
+    """
+    phi = np.asarray(phi, float).ravel()
+    C = np.asarray(cov, float).reshape(phi.size, phi.size)
+    k = int(phi.size)
+    out = {"wald": None, "k": k, "df_denominator": None if clusters is None else int(clusters) - 1, "p": None,
+           "alpha": float(alpha), "identified": False}
+    if not (np.all(np.isfinite(C)) and np.all(np.isfinite(phi))) or (clusters is not None and clusters < 2):
+        return out
+    try:
+        w = float(phi @ np.linalg.solve(C, phi))
+    except np.linalg.LinAlgError:
+        return out
+    if not np.isfinite(w) or w < 0:
+        return out
+    p = float(stats.f.sf(w / k, k, clusters - 1) if clusters is not None else stats.chi2.sf(w, k))
+    return {**out, "wald": w, "p": p, "identified": bool(p < alpha)}
+
+
+def identification(model, names, groups, alpha: float) -> dict:
+    """:func:`wald_test` of the added parameters ``names`` of ``model`` against zero, under the interval the
+    report gives them (:func:`reported_covariance`; ``level``: H the level clusters, ``run``: H the runs,
+    ``model``: chi-square). Adds ``"interval"`` and ``"values"``; no covariance: not identified."""
+    names = list(names)
+    phi = [float(model.extra_params_[n]) for n in names]
+    cov = reported_covariance(model, names, groups)
+    u = reported_uncertainty(model, names[0], groups)
+    runs = getattr(model, "runs_", None)
+    h = (u.get("clusters") if u["interval"] == "level"
+         else (len(runs) if runs is not None else None) if u["interval"] == "run" else None)
+    if cov is None:
+        out = {"wald": None, "k": len(names), "df_denominator": None, "p": None, "alpha": float(alpha),
+               "identified": False}
+    else:
+        out = wald_test(phi, cov, h, alpha)
+    return {**out, "interval": u["interval"], "values": dict(zip(names, phi))}
 
 
 def added_parameters(model, effects, groups=None) -> dict:

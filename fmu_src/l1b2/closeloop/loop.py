@@ -87,12 +87,12 @@ from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT
                          chain_cv_errors, collinear, cv_errors, fold_start_phi, materiality, named_reading, refit,
                          session_blocks, stratified_folds, time_dependent, validated)
 from .baselines import choose_baseline, identify_families, retag_structural
-from .crosscheck import PureSlipCheck, confirmed_pick, score_of, withdrawn_note
+from .crosscheck import PureSlipCheck, identified_pick, score_of, withdrawn_note
 from .events import session, with_event_clocks
 from .lags import with_lagged_channels
 from .evidence import channels_considered, order_traced
 from .guard import checked_fit
-from .intervals import added_parameters, reported_covariance, reported_uncertainty, train_levels
+from .intervals import added_parameters, identification, reported_covariance, reported_uncertainty, train_levels
 from .result import CloseLoopResult, ResidualAnalysis
 from .selection import (DEFAULT_ALPHA, DEFAULT_PARSIMONY, SHORTLIST_MIN_GAIN, Score, best_per_family, design,
                         named_alternatives, nuisance_forces, score_candidates, shape_alternatives, shortlist,
@@ -403,25 +403,17 @@ class CloseLoop(EstimatorSettings):
                 t, min_gain=self.min_cv_gain, min_drop=materiality(t.candidate, self.min_cv_drop))])
             if not ok:
                 break
-            pick, checks = confirmed_pick(
-                ok, lambda tr: named_reading(prefer(tr, self.parsimony, rl), tr,
-                                             lambda n, g: geo.share(n.candidate, g.candidate, g.phi)),
-                (lambda t: check(t, it.effects, n_rnd, True)) if check is not None else (lambda t: None))
-            it.checks += checks
+            pick, model, checks = self._identified_pick(
+                it, ok, lambda tr: named_reading(prefer(tr, self.parsimony, rl), tr,
+                                                 lambda n, g: geo.share(n.candidate, g.candidate, g.phi)),
+                (lambda t: check(t, it.effects, n_rnd, True)) if check is not None else (lambda t: None),
+                cur, dtr, mask, m_s, n_rnd, say)
             if pick is None:
                 break
             if rnd == 1:
                 it.chosen = score_of(pick, short)
                 it.significant = [s for s in short if any(t.candidate is s.candidate for t in ok)]
-            say(f"round {n_rnd}: adding {pick.candidate.label}; re-identifying jointly")
             effects = it.effects.add(pick.candidate, pick.phi)
-            settings = self.refit_settings().budget(self.final_nfev)
-            model = checked_fit(
-                lambda: refit(dtr, mask, m_s, cur.params_, effects, settings, max_outer=3),
-                lambda: refit(dtr, mask, m_s, cur.params_, effects, settings, max_outer=3,
-                              n_starts=max(self.n_starts, 2)),
-                dtr, mask, f"the joint re-identification with {pick.candidate.label} (round {n_rnd})")
-            say.count(1, model.convergence_.get("nfev_total", 0))
             if self._refused_range(it, effects.with_phi(model.phi_), model, dtr, mask, n_rnd, pick, say):
                 break
             it.model, it.effects = model, effects.with_phi(model.phi_)
@@ -431,6 +423,27 @@ class CloseLoop(EstimatorSettings):
             it.rounds.append({"round": n_rnd, "added": pick.candidate.label, "effect": pick.candidate.family,
                               "regressors": list(pick.candidate.regressors), "cv": pick.to_dict(),
                               "metrics": report(model)})
+
+    def _identified_pick(self, it, ok, choose, confirm, cur, dtr, mask, m_s, n_rnd, say) -> tuple:
+        """``(pick, model, checks)``: :func:`~l1b2.closeloop.crosscheck.identified_pick` of the accepted trials
+        ``ok`` with the joint re-identification of the current model ``cur`` and the test at the loop's ``alpha``
+        (``it.checks`` gets every record; ``checks`` are the kept pick's)."""
+        def fit(pick):
+            say(f"round {n_rnd}: adding {pick.candidate.label}; re-identifying jointly")
+            effects = it.effects.add(pick.candidate, pick.phi)
+            settings = self.refit_settings().budget(self.final_nfev)
+            model = checked_fit(
+                lambda: refit(dtr, mask, m_s, cur.params_, effects, settings, max_outer=3),
+                lambda: refit(dtr, mask, m_s, cur.params_, effects, settings, max_outer=3,
+                              n_starts=max(self.n_starts, 2)),
+                dtr, mask, f"the joint re-identification with {pick.candidate.label} (round {n_rnd})")
+            say.count(1, model.convergence_.get("nfev_total", 0))
+            return model
+        pick, model, checks, records = identified_pick(
+            ok, choose, confirm, fit, lambda m, c: identification(m, c.names, train_levels(m, dtr), self.alpha),
+            n_rnd)
+        it.checks += records
+        return pick, model, checks
 
     @staticmethod
     def _refused_range(it, effects, model, dtr, mask, n_rnd, pick, say) -> bool:

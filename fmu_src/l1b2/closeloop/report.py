@@ -130,7 +130,9 @@ class Diagnosis(_Record):
     reads, the share of TEST's samples and runs outside TRAIN's range of it
     (:func:`l1b2.closeloop.runlevel.channel_ranges`, the report's line: :func:`channel_range_line`).
     ``named_checks``: every named pick of a round from the Eq. 29 baseline, cross-validated again from the
-    pure-slip family (:mod:`l1b2.closeloop.crosscheck`), with its figures and outcome.
+    pure-slip family (:mod:`l1b2.closeloop.crosscheck`), with its figures and outcome; every named pick read as
+    physics also carries ``identification``, the joint Wald test of its parameters against zero under the
+    reported covariance (:func:`l1b2.closeloop.intervals.identification`), and is not added when it fails.
     ``physical_range``: after each joint refit with a channel's damping form, the total viscous damping's smallest
     value over TRAIN's range of the channel per such form (``damping_floor_N_s_per_m``) and the outcome (``kept``,
     or ``refused``: a negative floor, the pick not added).
