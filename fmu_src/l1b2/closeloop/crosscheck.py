@@ -15,6 +15,10 @@ Contract:
   is withdrawn: its :func:`as_form` trial takes its place (the same force and the same cross-validated
   figures, whose acceptance stands, read as a generic structural term of the reduced model), so the round adds
   the force its acceptance and choice selected; every check is recorded with its outcome.
+* :func:`identified_pick` then re-identifies the model with the pick; a pick read as physics (named, not
+  structural) is named only when its parameters are jointly different from zero under the interval the report
+  gives them (:func:`l1b2.closeloop.intervals.identification`); when they are not, it is recorded as not identified
+  and the round's choice is made again without it.
 * :class:`PureSlipCheck` is the ``confirm`` of the loop: the pure-slip baseline identified on TRAIN once
   (lazily, at the first named pick), the effects accepted so far re-identified jointly in that family, then the
   current model and the current model + the named candidate cross-validated on the trial's own folds

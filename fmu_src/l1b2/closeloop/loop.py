@@ -48,7 +48,10 @@ Procedure (TEST is never used for fitting or choosing):
       unless the generic one is better by more than one standard error
       (:func:`~l1b2.closeloop.acceptance.named_reading`); from the Eq. 29 baseline a named pick must be accepted
       again from the pure-slip family, else its reading is withdrawn and the same force is added as a generic
-      term of the reduced model (:func:`~l1b2.closeloop.crosscheck.confirmed_pick`, decision 0043);
+      term of the reduced model (:func:`~l1b2.closeloop.crosscheck.confirmed_pick`, decision 0043); a pick read
+      as physics is named only when its parameters are jointly different from zero under the reported
+      covariance at ``alpha``, else the round's next trial is taken
+      (:func:`~l1b2.closeloop.crosscheck.identified_pick`);
    c. *joint re-identification* of the model with every accepted effect
       (warm start).
 
