@@ -336,7 +336,7 @@ def values(p: dict) -> str:
 def withdrawn_note(records: list) -> str:
     """The diagnosis message's note on withdrawn and not identified named readings ('' when there is none)."""
     out = [r["label"] for r in records if str(r.get("outcome", "")).startswith("withdrawn")]
-    nid = [r["label"] for r in records if str(r.get("outcome", "")).startswith("not identified")]
+    nid = list(dict.fromkeys(r["label"] for r in records if str(r.get("outcome", "")).startswith("not identified")))
     return ((f"; named reading withdrawn (not confirmed from the pure-slip family, Eq. 29's linearisation): "
              f"{', '.join(out)}") if out else "") + (
         f"; named reading not identified (parameters not jointly different from zero), not added: "
