@@ -129,6 +129,8 @@ def test_a_named_pick_that_is_not_identified_falls_back_to_the_rounds_next_trial
     assert rec["outcome"].startswith("not identified") and rec["identification"]["identified"] is False
     assert "not identified" in cc.withdrawn_note(records) and "direction_asymmetry" in cc.withdrawn_note(records)
     assert "not identified" in cc.describe(rec)
+    # a label not identified in two rounds is named once
+    assert cc.withdrawn_note([rec, {**rec, "round": 4}]).count("direction_asymmetry") == 1
 
 
 def test_an_identified_named_pick_is_kept_with_its_test_in_its_check():
