@@ -22,8 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import V_REF, Effect, EffectSpecError, num, register, signal
-from .channels import G_N_PER_KG, INPUT_COLUMNS, regressor_of, run_spread_entry, signal_key
+from .base import Effect, EffectSpecError, num, register, signal
+from .channels import INPUT_COLUMNS, regressor_of, run_level_columns, run_spread_entry, signal_key
 
 #: the run-level transform name of a categorical signal (beside
 #: :data:`l1b2.predictor.effects.channels.TRANSFORMS`: its columns are the centred level indicators, not a
@@ -141,8 +141,7 @@ class RunLevelCategory(Effect):
         (:func:`category_columns`) of the run's value, level by level."""
         levels, shares = category_of(spec)
         X = category_columns(signal(x, signal_key(str(spec.get("channel")), "run")), levels, shares)
-        per = [signal(x, "V0") / V_REF, np.ones(X.shape[0]), G_N_PER_KG * signal(x, "d") * signal(x, "load")]
-        return np.column_stack([X[:, j] * f for j in range(X.shape[1]) for f in per])
+        return run_level_columns(x, X)
 
     def width(self, spec):
         return 3 * (int(num(spec, "n_levels")) - 1)

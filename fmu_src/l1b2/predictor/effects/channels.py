@@ -284,6 +284,12 @@ def _forms(own: bool, m_s: float, shape: str) -> tuple:
             + (("damping",) if own and shape in DAMPING_SHAPES else ()))
 
 
+def _z_range(spec, lo: float, hi: float) -> tuple[float, float]:
+    """A channel's range ``[lo, hi]`` in its spec's standard deviations about its mean."""
+    mean, sd = num(spec, "mean"), num(spec, "sd")
+    return (float(lo) - mean) / sd, (float(hi) - mean) / sd
+
+
 def damping_bounds(spec, lo: float, hi: float, damping: float) -> tuple:
     """The range of the linear damping form's ``a`` [N] that keeps the total viscous damping non-negative.
 
@@ -296,8 +302,7 @@ def damping_bounds(spec, lo: float, hi: float, damping: float) -> tuple:
     """
     if not damping > 0:
         return ()
-    mean, sd = num(spec, "mean"), num(spec, "sd")
-    z_lo, z_hi = (float(lo) - mean) / sd, (float(hi) - mean) / sd
+    z_lo, z_hi = _z_range(spec, lo, hi)
     if not z_lo < 0 < z_hi:
         return ()
     return ((-damping * SPEED_REF / z_hi, damping * SPEED_REF / -z_lo),)
@@ -314,8 +319,7 @@ def damping_floor(spec, phi, lo: float, hi: float, damping: float) -> float:
     if spec.get("form") != "damping":
         raise EffectSpecError(f"damping_floor: the spec's form {spec.get('form')!r} is not 'damping'")
     phi = np.asarray(phi, float).ravel()
-    mean, sd = num(spec, "mean"), num(spec, "sd")
-    z_lo, z_hi = (float(lo) - mean) / sd, (float(hi) - mean) / sd
+    z_lo, z_hi = _z_range(spec, lo, hi)
     z = [z_lo, z_hi]
     if spec.get("shape", "linear") == "quadratic" and phi[1] > 0 and z_lo < -phi[0] / (2.0 * phi[1]) < z_hi:
         z.append(-phi[0] / (2.0 * phi[1]))
@@ -384,6 +388,14 @@ def parameter_stem(column: str, transform: str = "none") -> str:
     return {"none": column, "drive": f"d_{column}", "abs": f"abs_{column}"}[transform]
 
 
+def run_level_columns(x, Z) -> np.ndarray:
+    """The run-level form of every column ``z_j`` of ``Z`` (n, m): ``(V0/V_ref z_j, z_j, g d m z_j)`` (a drive gain, a
+    force [N] and a load term), the columns of ``z_1`` first (``3 m`` columns)."""
+    Z = np.asarray(Z, float)
+    gain, load = signal(x, "V0") / V_REF, G_N_PER_KG * signal(x, "d") * signal(x, "load")
+    return np.column_stack([col for j in range(Z.shape[1]) for col in (gain * Z[:, j], Z[:, j], load * Z[:, j])])
+
+
 def transformed(c, d, transform: str) -> np.ndarray:
     """A signal's values ``c`` under a run-level transform (:data:`TRANSFORMS`): as they are (``none``), times the
     direction ``d`` (``drive``) or their size (``abs``)."""
@@ -442,7 +454,7 @@ class RunLevel(Effect):
         if not sd > 0:
             raise EffectSpecError(f"run-level signal {spec.get('channel')!r}: standard deviation {sd} is not positive")
         z = (c - num(spec, "mean")) / sd
-        return np.column_stack([signal(x, "V0") / V_REF * z, z, G_N_PER_KG * signal(x, "d") * signal(x, "load") * z])
+        return run_level_columns(x, z[:, None])
 
     def width(self, spec):
         return 3
