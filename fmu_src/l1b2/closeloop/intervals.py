@@ -37,6 +37,13 @@ def train_levels(model, df) -> list | None:
     return run_groups(df, runs, REPORTED_GROUPING)
 
 
+def _extra_index(model, name: str) -> int:
+    """The index of the added parameter ``name`` in the fit's full parameter vector (``param_names_all_``, the
+    added parameters last)."""
+    extras = list(model.extra_names_)
+    return len(list(model.param_names_all_)) - len(extras) + extras.index(name)
+
+
 def reported_uncertainty(model, name: str, groups=None) -> dict:
     """``{"stderr", "ci95", "interval", ...}`` the close loop reports for the added parameter ``name``.
 
@@ -60,10 +67,8 @@ def reported_uncertainty(model, name: str, groups=None) -> dict:
            if np.isfinite(se_run) else None)
     level = None
     if groups is not None and getattr(model, "run_influence_", None) is not None:
-        names = list(model.param_names_all_)
-        extras = list(model.extra_names_)
-        index = len(names) - len(extras) + extras.index(name)
-        level = grouped_interval(float(model.extra_params_[name]), model.run_influence_, groups, index)
+        level = grouped_interval(float(model.extra_params_[name]), model.run_influence_, groups,
+                                 _extra_index(model, name))
     model_based = {"stderr_model": se, "ci95_model": ci}
     if level is not None:
         out = {**level, "interval": "level"}
@@ -87,9 +92,7 @@ def reported_covariance(model, names, groups=None) -> tuple | None:
     if len(kinds) != 1:
         return None
     kind = kinds.pop()
-    extras = list(model.extra_names_)
-    offset = len(list(model.param_names_all_)) - len(extras)
-    idx = [offset + extras.index(n) for n in names]
+    idx = [_extra_index(model, n) for n in names]
     if kind == "level":
         cov = grouped_sandwich(model.run_influence_, groups)[0]
     else:
@@ -107,13 +110,16 @@ def wald_test(phi, cov, clusters: int | None, alpha: float) -> dict:
     test is ``F = W / k`` on (k, H - 1) degrees of freedom, which for k = 1 is the square of the t with H - 1
     that :func:`reported_uncertainty` gives one parameter; without (``None``) it is chi-square with k. Returns
     ``{"wald", "k", "df_denominator", "p", "alpha", "identified"}``: identified when ``p < alpha``. A ``cov``
-    that is singular or not finite, or fewer than two clusters, identifies nothing (``wald`` and ``p`` None).
+    that is missing (None), singular or not finite, or fewer than two clusters, identifies nothing (``wald`` and
+    ``p`` None).
     """
     phi = np.asarray(phi, float).ravel()
-    C = np.asarray(cov, float).reshape(phi.size, phi.size)
     k = int(phi.size)
     out = {"wald": None, "k": k, "df_denominator": None if clusters is None else int(clusters) - 1, "p": None,
            "alpha": float(alpha), "identified": False}
+    if cov is None:
+        return out
+    C = np.asarray(cov, float).reshape(phi.size, phi.size)
     if not (np.all(np.isfinite(C)) and np.all(np.isfinite(phi))) or (clusters is not None and clusters < 2):
         return out
     try:
@@ -137,11 +143,7 @@ def identification(model, names, groups, alpha: float) -> dict:
     runs = getattr(model, "runs_", None)
     h = (u.get("clusters") if u["interval"] == "level"
          else (len(runs) if runs is not None else None) if u["interval"] == "run" else None)
-    if cov is None:
-        out = {"wald": None, "k": len(names), "df_denominator": None, "p": None, "alpha": float(alpha),
-               "identified": False}
-    else:
-        out = wald_test(phi, cov, h, alpha)
+    out = wald_test(phi, cov, None if cov is None else h, alpha)
     return {**out, "interval": u["interval"], "values": dict(zip(names, phi))}
 
 
