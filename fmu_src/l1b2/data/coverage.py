@@ -56,6 +56,13 @@ def data_range(data: pd.DataFrame | Measurements) -> dict[str, list[float]]:
     return {c: [float(df[c].min()), float(df[c].max())] for c in RANGE_COLUMNS if c in df.columns}
 
 
+def _outside(x: np.ndarray, lo: float, hi: float, tolerance: float, min_tolerance: float = 0.0) -> np.ndarray:
+    """Which values of ``x`` lie outside ``[lo, hi]`` by more than ``tolerance`` x its width (at least
+    ``min_tolerance``, in the values' unit)."""
+    tol = max(tolerance * (hi - lo), min_tolerance)
+    return (x < lo - tol) | (x > hi + tol)
+
+
 def outside_range(data: pd.DataFrame | Measurements, train_range: Mapping[str, Any], *,
                   tolerance: float = DEFAULT_TOLERANCE) -> list[dict]:
     """Runs of ``data`` with an input outside ``train_range`` (:func:`data_range` of TRAIN).
@@ -74,8 +81,7 @@ def outside_range(data: pd.DataFrame | Measurements, train_range: Mapping[str, A
         flags = {}
         for col, (lo, hi) in ((c, train_range[c]) for c in RANGE_COLUMNS if c in train_range and c in df.columns):
             x = df[col].to_numpy(dtype=float)[sl]
-            tol = max(tolerance * (float(hi) - float(lo)), MIN_TOLERANCE[col])
-            bad = (x < float(lo) - tol) | (x > float(hi) + tol)
+            bad = _outside(x, float(lo), float(hi), tolerance, MIN_TOLERANCE[col])
             if bad.any():
                 flags[col] = {"min": float(x.min()), "max": float(x.max()), "train": [float(lo), float(hi)],
                               "share_outside": float(bad.mean())}
@@ -113,8 +119,7 @@ def values_outside(train_values, test_values, test_runs, *, tolerance: float = D
     tr, ok = tr[np.isfinite(tr)], np.isfinite(te)
     te, runs = te[ok], runs[ok]
     lo, hi = float(tr.min()), float(tr.max())
-    tol = tolerance * (hi - lo)
-    bad = (te < lo - tol) | (te > hi + tol)
+    bad = _outside(te, lo, hi, tolerance)
     return {"train": [lo, hi], "test": [float(te.min()), float(te.max())] if te.size else [None, None],
             "samples_outside": float(bad.mean()) if te.size else 0.0,
             "runs_outside": int(len(np.unique(runs[bad]))), "test_runs": int(len(np.unique(runs)))}
