@@ -255,6 +255,12 @@ def run_cli(argv, doc: str, kinds, make, row_extra):
         Path(args.report).write_text(json.dumps(res.to_dict(), default=str))
 
 
+def channel_field(channels: dict):
+    """``row_extra`` of :func:`run_cli` for an audit whose kinds each act through one logged channel: the row's
+    ``channel`` field is ``channels[kind]`` (None for a kind without one, and for ``clean``)."""
+    return lambda kind: {"channel": lambda names, diag: channels.get(kind)}
+
+
 def main(argv=None):
     def extra(kind):
         ch = CHANNEL.get(kind)

@@ -120,10 +120,6 @@ def experiment(kind: str, seed: int):
     return be.finish(kind, frames, per_run, p, nominal, plan)
 
 
-def data_dir(kind: str, seed: int, cache: Path) -> Path:
-    return be.data_dir(kind, seed, cache, None if kind == "clean" else experiment)
-
-
 def main(argv=None):
     run_cli_extra = lambda kind: {"channel": lambda names, diag: CHANNEL.get(kind),  # noqa: E731
                                   "decoy": lambda names, diag: DECOY.get(kind),

@@ -97,13 +97,8 @@ def experiment(kind: str, seed: int):
     return be.finish(kind, frames, per_run, p, nominal, plan)
 
 
-def data_dir(kind: str, seed: int, cache: Path) -> Path:
-    return be.data_dir(kind, seed, cache, None if kind == "clean" else experiment)
-
-
 def main(argv=None):
-    be.run_cli(argv, __doc__, KINDS, experiment,
-               lambda kind: {"channel": lambda names, diag: CHANNEL.get(kind)})
+    be.run_cli(argv, __doc__, KINDS, experiment, be.channel_field(CHANNEL))
 
 if __name__ == "__main__":
     main()
