@@ -27,7 +27,8 @@ variable-projection search with tight tolerances from it, :func:`_continue_best`
 the reference is kept in the cache (``seen: ...``) and counts from then on; the next run continues from it.
 Targets: CPU <= 2 s, log-likelihood within 0.1 of the reference.
 
-Usage: python bench/bench_identify_worlds.py [--worlds realistic/s0,...] [--fits "a;b"] [--reference] [--cache DIR]
+Usage: python bench/bench_identify_worlds.py [--worlds realistic/s0,...] [--fits "a;b"] [--seeds 0,1,2,3]
+       [--reference] [--cache DIR]
 """
 import argparse
 import json
@@ -82,7 +83,8 @@ FITS = {"joint (default)": {"solver": "joint"},
         "offset, bracketed, y final": {"solver": "offset_bracket",
                                        "bracket": {**BRACKET_0039, "final": "identifiable"}},
         "offset, bracketed (0039)": {"solver": "offset_bracket", "bracket": BRACKET_0039},
-        "offset, bracketed (0045)": {"solver": "offset_bracket"}}
+        "offset, bracketed (0045)": {"solver": "offset_bracket"},
+        "offset, reduced frame (0070)": {"solver": "offset_reduced"}}
 #: the fits compared when ``--fits`` is not given: decision 0039's search and the current one (BRACKET as it is)
 DEFAULT_FITS = ("offset, bracketed (0039)", "offset, bracketed (0045)")
 
@@ -184,6 +186,8 @@ def main(argv=None):
     ap.add_argument("--references-only", help="only make these reference fits (names separated by ;)")
     ap.add_argument("--skip-old", action="store_true", help="leave out the default joint search (slow)")
     ap.add_argument("--fits", help="only these compared fits (names separated by ;)")
+    ap.add_argument("--seeds", default="", help="each compared fit once per seed (e.g. 0,1,2,3; default: the "
+                                                "identifier's own seed)")
     ap.add_argument("--cache", default=str(Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
                                          / "l1b2" / "bench"))
     args = ap.parse_args(argv)
@@ -192,6 +196,8 @@ def main(argv=None):
     worlds = args.worlds.split(",")
     chosen = DEFAULT_FITS if args.fits is None else args.fits.split(";")
     fits = {k: v for k, v in FITS.items() if not (args.skip_old and v["solver"] == "joint") and k in chosen}
+    if args.seeds:
+        fits = {f"{k}, seed {s}": {**v, "seed": int(s)} for k, v in fits.items() for s in args.seeds.split(",")}
     rows = []
     for world in worlds:
         data = dataset(cache, world)

@@ -305,3 +305,69 @@ def test_the_continuation_in_identifiable_coordinates_never_ends_below_the_paper
     kept = PredictorIdentifier(order=3, solver="offset_bracket").fit(df, slider_mass_kg=M_S)
     assert kept.loglik_ == pytest.approx(paper.loglik_, abs=1e-9)
     np.testing.assert_array_equal(kept.theta_, paper.theta_)
+
+
+# ---- the bracketed search framed at the reduced linear fit (solver="offset_reduced", decision 0070) ------------
+
+
+def test_the_reduced_frame_is_the_mapped_reduced_fit_and_no_seed_enters(monkeypatch):
+    # the frame is computed here from the data independently of the identifier: the window equation-error
+    # linear fit of D(s), B'(s), C(s), mapped to Eq. 35 with the conventions of the null directions. No
+    # equation-error fit of the Eq. 35 structure may run (it is the only place a seed enters), so two seeds
+    # must give the same result bit for bit.
+    import l1b2.ident.offset as off
+    import l1b2.ident.reduced as red
+    from l1b2.ident.problem import SampleData
+
+    def forbidden(*args, **kwargs):
+        raise AssertionError("an equation-error fit ran")
+
+    framed = []
+    real_profile = off.bracketed_profile
+
+    def recording(obj, theta_start, *args, **kwargs):
+        framed.append(np.array(theta_start, dtype=float))
+        return real_profile(obj, theta_start, *args, **kwargs)
+
+    monkeypatch.setattr(red, "equation_error_fit", forbidden)
+    monkeypatch.setattr(off, "bracketed_profile", recording)
+    df, _ = _small_world(11)
+    fits = [PredictorIdentifier(order=3, solver="offset_reduced", seed=s).fit(df, slider_mass_kg=M_S) for s in (0, 7)]
+    assert fits[0].loglik_ == fits[1].loglik_
+    np.testing.assert_array_equal(fits[0].theta_, fits[1].theta_)
+    np.testing.assert_array_equal(framed[0], framed[1])
+
+    est, n1 = fits[0], 4
+    prm = est.get_params()
+    lin = red.reduced_linear_fit(SampleData(df), 3, M_S, prm["include_load_inertia"], est.s_center_, est.s_half_)
+    conv = red.map_reduced_to_theta(lin["D"], lin["B"], lin["C"], {}, 3, M_S, prm["kappa"])
+    lo, hi = PredictorParams.bounds(3)
+    conv = np.clip(conv, lo, hi)
+    np.testing.assert_allclose(framed[0], conv, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(est.theta_init_, conv, rtol=1e-12, atol=1e-14)
+    # the mapping's contract: D(s) = c_r + sigma (0.5 - A'(s)) and B'(s) of the frame are the linear fit's
+    assert conv[0] > 0  # (c_r not clipped at its bound here, so D is reproduced exactly)
+    A = np.polynomial.legendre.legval(X, conv[5:5 + n1])
+    np.testing.assert_allclose(conv[0] + conv[1] * (0.5 - A), np.polynomial.legendre.legval(X, lin["D"]),
+                               rtol=1e-12)
+    np.testing.assert_allclose(conv[5 + n1:5 + 2 * n1], lin["B"], rtol=1e-12)
+
+    # the search itself is the bracketed one: both branches, never below its best profile point
+    stages = est.convergence_["stages"]
+    prof = stages[1]["profile"]
+    assert stages[1]["stage"] == "offset profile" and est.convergence_["solver"] == "offset_reduced"
+    assert any(r["omega"] < 0 for r in prof) and any(r["omega"] > 0 for r in prof)
+    assert est.loglik_ >= max(r["loglik"] for r in prof) - 1e-6
+    assert est.reduced_["equation_error_minima"] == [] or np.isnan(est.reduced_["equation_error_minima"]).all()
+
+
+def test_the_reduced_frame_recovers_the_small_world():
+    # as the seeded bracketed search: the fitted model's free run against the noise-free motor that made the data
+    df, clean = _small_world(11)
+    est = PredictorIdentifier(order=3, solver="offset_reduced").fit(df, slider_mass_kg=M_S)
+    err = est.predict_free_run(clean) - clean["speed_m_s"].to_numpy()
+    assert np.sqrt(np.nanmean(err ** 2)) < 1e-4  # a tenth of the noise
+    # and it ends no lower than the seeded bracketed search or the joint search on the same data
+    others = [PredictorIdentifier(order=3, solver=s).fit(df, slider_mass_kg=M_S).loglik_
+              for s in ("offset_bracket", "joint")]
+    assert est.loglik_ >= max(others) - 0.1, (est.loglik_, others)

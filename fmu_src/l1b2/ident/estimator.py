@@ -136,7 +136,7 @@ _NOT_SERIALISED = ("verbose", "extra", "init", "init_extra", "frequency")
 NOISE_FITS = ("auto", "alternate", "profile")
 
 #: the local solvers of the global search (``solver``): variable projection, or the joint multistart
-SOLVERS = ("varpro", "joint", "offset", "offset_bracket")
+SOLVERS = ("varpro", "joint", "offset", "offset_bracket", "offset_reduced")
 
 
 def clone(estimator, **changes):
@@ -245,7 +245,10 @@ class PredictorIdentifier(EstimatorSettings):
     solver : ``"joint"`` (the searches of ``noise_fit``), ``"varpro"`` (:mod:`l1b2.ident.varpro`),
         ``"offset"`` (the drive offset as a search coordinate: a profile on a grid of offsets, then varpro;
         :mod:`l1b2.ident.offset`) or ``"offset_bracket"`` (the same with a bracketed search over the offset on
-        each side of the barrier, warm-started points, a result never below the profile's best point; ``BRACKET``).
+        each side of the barrier, warm-started points, a result never below the profile's best point; ``BRACKET``;
+        its frame: the best equation-error minimum of the Sobol starts of ``seed``) or ``"offset_reduced"`` (the
+        bracketed search framed at the reduced linear fit mapped to Eq. 35 with the conventions of the null
+        directions, :func:`l1b2.ident.reduced.map_reduced_to_theta`: no equation-error fits, so no ``seed``).
     model : the predictor family: ``"eq29"`` (default, the paper's Eq. 29) or
         ``"pure_slip"`` (the slip ratio follows the state,
         :mod:`l1b2.predictor.pureslip`; same parameters, likelihood, noise
@@ -499,7 +502,8 @@ class PredictorIdentifier(EstimatorSettings):
         red, minima = data_driven_start(sample, space, m_s, cfg.kappa, cfg.include_load_inertia, s_center,
                                         s_half, E, cfg.n_starts, cfg.seed, warm=warm,
                                         n_ee_starts={"varpro": 4 * cfg.n_starts, "offset": 4,
-                                                     "offset_bracket": BRACKET["start_fits"]}.get(cfg.solver),
+                                                     "offset_bracket": BRACKET["start_fits"],
+                                                     "offset_reduced": 0}.get(cfg.solver),
                                         drive_law=cfg.model)
         theta0, fixed_final = self._centre(cfg, space, minima, s_center, s_half)
         t_centre, c_centre = time.perf_counter(), time.process_time()

@@ -33,6 +33,9 @@ search over omega on each side of omega = 0 (:func:`bracket_search`: a few coars
 inwards, then parabolic or golden-section points inside the bracket of the best one), each point warm-started
 from the optimum of its nearest evaluated neighbour and fitted with a smaller budget; step 3 starts with the
 noise model of the profile's best point, and when it ends below that point the point itself is the result.
+``solver="offset_reduced"`` is the same search framed at the reduced linear fit mapped to Eq. 35
+(:func:`l1b2.ident.reduced.map_reduced_to_theta`, no equation-error fits): its gauge (sigma, b) and the D(s),
+B'(s) the profile starts from are fixed by the data alone, with no random starts.
 
 Why both are opt-in, with the measurements: decisions 0023 and 0036.
 
@@ -466,17 +469,17 @@ def offset_grid(n_starts: int) -> tuple:
 
 
 def projected_search(cfg, obj, starts, theta_centre, p_theta, log=None):
-    """The search of ``cfg.solver`` ("varpro", "offset" or "offset_bracket") on ``obj``: ``(SearchOutcome,
-    refinement, stages)``.
+    """The search of ``cfg.solver`` ("varpro", "offset", "offset_bracket" or "offset_reduced": the bracketed
+    search, framed at ``theta_centre`` either way) on ``obj``: ``(SearchOutcome, refinement, stages)``.
 
     The offset searches need c_r, sigma, mu, k0 varied (they carry the gauge and the offset); with any of them pinned
     it is the variable-projection search from ``starts[0]`` (the pins already fix the offset's range).
     """
     n1 = cfg.order + 1
     lin = linear_positions(obj, p_theta, n1)
-    offset = cfg.solver in ("offset", "offset_bracket")
+    offset = cfg.solver in ("offset", "offset_bracket", "offset_reduced")
     if offset and np.isin([0, 1, 2, 3, 5], obj.vidx).all():
-        if cfg.solver == "offset_bracket":
+        if cfg.solver in ("offset_bracket", "offset_reduced"):
             return bracketed_offset_search(obj, theta_centre, cfg.order, cfg.kappa, p_theta, cfg.max_nfev, cfg.tol,
                                            cfg.stat_tol, cfg.max_outer, log)
         return offset_search(obj, theta_centre, cfg.order, cfg.kappa, p_theta, cfg.max_nfev, cfg.tol,

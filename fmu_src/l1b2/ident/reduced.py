@@ -416,7 +416,8 @@ def data_driven_start(data, space, m_s, kappa, include_load_inertia, s_center, s
         Extra-force features [N per unit phi].
     n_starts, seed : int
         ``max(16, 4 n_starts)`` equation-error starts from the Sobol sequence of ``seed``
-        (``n_ee_starts`` if given).
+        (``n_ee_starts`` if given; 0: no equation-error fit, the only "minimum" is the reduced fit mapped by
+        :func:`map_reduced_to_theta` (pins applied, clipped) with cost NaN, and ``seed`` is not used).
     warm : bool
         Warm start: no equation-error search; a failing linear fit gives ``red = None``.
     drive_law : ``"pure_slip"`` with sigma varied: the minima of a second equation-error fit with sigma held
@@ -446,6 +447,8 @@ def data_driven_start(data, space, m_s, kappa, include_load_inertia, s_center, s
     def minima(pins, varied):
         theta_conv = map_reduced_to_theta(red["D"], red["B"], red["C"], pins, order, m_s, kappa)
         theta_conv = space.clip(space.with_fixed(np.concatenate([theta_conv, red["E"]])))
+        if n_ee == 0:  # the mapped reduced fit itself (no equation-error fit, no seed)
+            return [(float("nan"), theta_conv)]
         return equation_error_fit(theta_conv, varied, red, order, m_s, kappa, n_ee, seed, 1.0)
     ee = minima(pins, space.varied)
     sig = slip_sigma_start(data, red["B"], s_center, s_half) if drive_law == "pure_slip" else None
