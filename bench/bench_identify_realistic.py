@@ -17,11 +17,15 @@ one variance per run, the former default):
   ``solver="joint"``) and ``common, varpro`` (the variable-projection search
   of :mod:`l1b2.ident.varpro` from the data-driven start): wall and CPU time
   (target: 2 s), evaluations, log-likelihood, and the varpro fit's stages;
-* each fit's log-likelihood against the better of two long reference fits
-  *of the same noise model* (made once and cached, ``--reference`` makes them
-  again): the profile search from 32 starts (tolerance 1e-3 log-likelihood
-  units, every start run, 600 evaluations per start) and the varpro search
-  from 8 starts (stat_tol 1e-4, tol 1e-12); target within 0.1 of it;
+* each fit's log-likelihood against the best of the long reference fits
+  *of the same noise model* (made once and cached with their parameter vectors,
+  ``--reference`` makes them again): the profile search from 32 starts
+  (tolerance 1e-3 log-likelihood units, every start run, 600 evaluations per
+  start) and the varpro search from 8 starts (stat_tol 1e-4, tol 1e-12); for
+  the common variance also ``bench_identify_worlds.py``'s strict reference of
+  the same data (world ``realistic/s0``, the same cache folder: its long fits,
+  the best vector any compared fit found, and their continuation); target
+  within 0.1 of the best;
 * the free-run nrmse of each fit on TRAIN and on the held-out TEST runs
   (|load| 0.05 kg): the likelihoods of the two noise models are not
   comparable with each other, their predictions are.
@@ -38,10 +42,13 @@ from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "fmu_src"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from l1b2.data.metrics import speed_metrics  # noqa: E402
 from l1b2.ident.estimator import PredictorIdentifier, evaluation_mask  # noqa: E402
 from l1b2.workflows import load_train_test  # noqa: E402
+
+import bench_identify_worlds as worlds  # noqa: E402
 
 LOADS = "-0.09,-0.07,-0.05,-0.03,-0.01,0,0.01,0.03,0.05,0.07,0.09"
 TARGET_S = 2.0  #: identification on 20 000 samples (issue: identification in seconds)
@@ -59,7 +66,10 @@ FITS = {"per-run, alternate": {"noise": "per_run", "noise_fit": "alternate"},
         "common, alternate": {"noise_fit": "alternate"},
         "common, auto=profile": {"solver": "joint"},
         "common, varpro": {"solver": "varpro", "n_starts": 1},
-        "common, varpro, 4 starts": {"solver": "varpro", "n_starts": 4}}
+        "common, varpro, 4 starts": {"solver": "varpro", "n_starts": 4},
+        "common, offset_reduced": {"solver": "offset_reduced"}}
+#: the world of ``bench_identify_worlds.py`` with the same data (its strict reference counts for the common variance)
+WORLD = "realistic/s0"
 
 
 def dataset(cache: Path) -> Path:
@@ -80,7 +90,7 @@ def fit(train, settings: dict, test=None) -> dict:
     out = {"wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0, "loglik": float(est.loglik_),
            "nfev": int(est.convergence_["nfev_total"]), "noise": est.noise,
            "starts_run": sum(1 for r in est.convergence_["starts"] if r.get("status") is not None),
-           "stages": est.convergence_.get("stages", [])}
+           "stages": est.convergence_.get("stages", []), "values": [float(x) for x in est.result_.values]}
     for name, d in (("train", train), ("test", test)):
         if d is not None:
             v = est.predict_free_run(d)
@@ -101,7 +111,8 @@ def reference(cache: Path, train, data: Path, again: bool, noise: str, search: s
     if path.exists() and not again:
         ref = json.loads(path.read_text())
         same = {**REFERENCE, "noise": "per_run"} if (noise == "per_run" and search == "joint") else settings
-        if ref.get("data_mtime_ns") == stamp and {"noise": "per_run", **ref.get("settings", {})} == same:
+        if ref.get("data_mtime_ns") == stamp and {"noise": "per_run", **ref.get("settings", {})} == same \
+                and "values" in ref:  # (a cached fit without its parameter vector is made again)
             return ref
     print(f"making the long reference fit ({noise} noise, {search}) once (cached in", path, ")", flush=True)
     ref = {**fit(train, {"solver": "joint", **settings}), "settings": settings, "data_mtime_ns": stamp}
@@ -124,6 +135,10 @@ def main(argv=None):
     noises = ("per_run", "common") if args.noise == "both" else (args.noise,)
     refs = {noise: {search: reference(cache, train, data, args.reference, noise, search)
                     for search in ("joint", "varpro")} for noise in noises}
+    if "common" in refs:  # bench_identify_worlds.py's strict reference of the same data (default noise: common)
+        strict = worlds.reference(cache, WORLD, data, train, args.reference)
+        name = max(worlds.reference_names(strict), key=lambda k: strict[k]["loglik"])
+        refs["common"][f"strict ({WORLD}: {name})"] = strict[name]
     best = {noise: max(r.values(), key=lambda x: x["loglik"]) for noise, r in refs.items()}
     rows = [(name, fit(train, settings, test)) for name, settings in FITS.items()
             if settings.get("noise", "common") in noises]
@@ -132,7 +147,7 @@ def main(argv=None):
     for noise, by in refs.items():
         for search, ref in by.items():
             print(f"  reference fit, {noise} noise, {search}: loglik {ref['loglik']:.3f} ({ref['cpu_s']:.0f} s CPU, "
-                  f"{ref['nfev']} evaluations)")
+                  f"{ref['nfev']} evaluations{'' if 'values' in ref else ', no parameter vector'})")
     print(f"{'fit':>24} {'wall [s]':>9} {'CPU [s]':>8} {'nfev':>5} {'starts':>6} "
           f"{'loglik':>12} {'- ref':>9} {'>= -0.1':>7} {'TRAIN nrmse':>11} {'TEST nrmse':>10}")
     for name, r in rows:
@@ -142,15 +157,18 @@ def main(argv=None):
               f"{'ok' if d >= -TARGET_DLL else 'MISSED':>7} {100 * r['nrmse_train']:10.2f}% "
               f"{100 * r['nrmse_test']:9.2f}%")
     by_name = dict(rows)
-    if "common, auto=profile" in by_name and "common, varpro" in by_name:
-        old, new = by_name["common, auto=profile"], by_name["common, varpro"]
+    for other in ("common, varpro", "common, offset_reduced"):
+        if "common, auto=profile" not in by_name or other not in by_name:
+            continue
+        old, new = by_name["common, auto=profile"], by_name[other]
         ref = best["common"]["loglik"]
-        print(f"joint (default) -> varpro, common noise: wall {old['wall_s']:.1f} -> {new['wall_s']:.1f} s, CPU "
+        solver = FITS[other]["solver"]
+        print(f"joint (default) -> {solver}, common noise: wall {old['wall_s']:.1f} -> {new['wall_s']:.1f} s, CPU "
               f"{old['cpu_s']:.1f} -> {new['cpu_s']:.1f} s (target {TARGET_S:g} s), evaluations {old['nfev']} -> "
               f"{new['nfev']}, loglik gap to the best reference {old['loglik'] - ref:.3f} -> {new['loglik'] - ref:.3f}")
         for st in new["stages"]:
             cpu = st.get("cpu_s", float("nan"))
-            print(f"    varpro stage {st['stage']}: {st['time_s']:.2f} s wall, {cpu:.2f} s CPU"
+            print(f"    {solver} stage {st['stage']}: {st['time_s']:.2f} s wall, {cpu:.2f} s CPU"
                   + (f", {st['nfev']} evaluations, {st.get('njev', 0)} sensitivity passes" if "nfev" in st else ""))
 
 
