@@ -85,7 +85,6 @@ FITS = {"joint (default)": {"solver": "joint"},
         "offset, bracketed (0039)": {"solver": "offset_bracket", "bracket": BRACKET_0039},
         "offset, bracketed (0045)": {"solver": "offset_bracket"},
         "offset, reduced frame (0070)": {"solver": "offset_reduced"},
-        "offset, reduced frame, frame fitted": {"solver": "offset_reduced", "bracket": {"frame_iter": 12}},
         "offset, reduced frame, points fitted 12": {"solver": "offset_reduced", "bracket": {"max_iter": 12}}}
 #: the fits compared when ``--fits`` is not given: decision 0039's search and the current one (BRACKET as it is)
 DEFAULT_FITS = ("offset, bracketed (0039)", "offset, bracketed (0045)")

@@ -308,14 +308,12 @@ def bracket_search(f, coarse, lo, hi, tol, max_points, seen=()):
 #: coordinates ("identifiable": :func:`l1b2.ident.identifiable.identifiable_search`, decision 0039; "paper": the
 #: variable-projection search in theta, decision 0036; "paper+identifiable": the paper's, then continued in the
 #: identifiable coordinates from its optimum, the better kept) and the number of equation-error fits of the start
-#: (:func:`l1b2.ident.reduced.data_driven_start`); ``frame_iter`` > 0: the gauged start is first fitted at its own
-#: omega as a profile point with that many iterations (its D(s), B'(s), P(s) the likelihood's before any point is
-#: moved), and the branches start from that fit when it is finite. ``max_points`` was 6 until decision 0045 (4: the same optimum
+#: (:func:`l1b2.ident.reduced.data_driven_start`). ``max_points`` was 6 until decision 0045 (4: the same optimum
 #: or a better one on three of the bench's four worlds, 0.014 log-likelihood units lower on one, the profile
 #: 15-35 % cheaper)
 BRACKET = {"coarse": (0.95, 0.7, 0.4), "tol": 0.08, "max_points": 4, "margin": 3.0, "max_iter": 4,
            "cold_iter": 12, "stat_tol": 0.05, "min_gain": 0.01, "final_min_gain": 0.01,
-           "final": "paper+identifiable", "start_fits": 4, "frame_iter": 0}
+           "final": "paper+identifiable", "start_fits": 4}
 
 
 def bracketed_profile(obj, theta_start, n1, kappa, p_theta, settings=None, log=None):
@@ -326,23 +324,12 @@ def bracketed_profile(obj, theta_start, n1, kappa, p_theta, settings=None, log=N
     and omega = 0 are the ends of each interval), then the bracketed search on the branch with the best
     point, and on the other one when its best is within ``margin`` of it. Each point is fitted as in
     :func:`profile`, starting from the optimum of the evaluated point nearest to it moved to its omega
-    (the first of each branch from the gauged start, or from its own fit when ``frame_iter`` > 0; that fit is
-    a record too).
+    (the first of each branch from the gauged start).
     """
     cfg = {**BRACKET, **(settings or {})}
     th_g, scale_full, c_hi = _profile_frame(obj, theta_start, n1, kappa)
     saved = dict(vars(obj.noise))
     records = []
-    if cfg["frame_iter"] > 0:  # the frame's own profile point, fitted before any point is moved
-        om0 = omega_of_offset(drive_offset(th_g, n1, kappa), d_coefficients(th_g, n1))
-        if 0 < abs(om0) < 1:
-            rec = _point_fit(obj, th_g, om0, n1, kappa, p_theta, scale_full, c_hi, cfg["frame_iter"],
-                             cfg["stat_tol"], saved, cfg["min_gain"])
-            records.append(rec)
-            if np.isfinite(rec["loglik"]):
-                th_g = rec["theta"]
-            if log is not None:
-                log(f"offset profile: the frame at omega {om0:+.3f}: loglik {rec['loglik']:.3f}")
 
     def f(om, warm):
         rec = _point_fit(obj, th_g if warm is None else warm, om, n1, kappa, p_theta, scale_full, c_hi,
