@@ -13,10 +13,9 @@ The fit runs, in order (one module each):
 
 1. data and problem (:mod:`l1b2.ident.problem`): the criterion ``free_run``
    or ``one_step``, residuals [m/s] and their analytic Jacobian;
-2. a data-driven start (:mod:`l1b2.ident.reduced`): a linear window
-   equation-error fit of the reduced functions D(s), B'(s), C(s) and an
-   equation-error fit of the Eq. 35 structure from many Sobol starts (or the
-   warm start ``init``);
+2. a data-driven start (:mod:`l1b2.ident.reduced`): a linear window equation-error fit of the reduced
+   functions D(s), B'(s), C(s) and an equation-error fit of the Eq. 35 structure from many Sobol starts (or
+   the warm start ``init``; ``solver="offset_reduced"``: the linear fit mapped to Eq. 35 alone);
 3. the global search (:mod:`l1b2.ident.search`): local ``least_squares``
    runs from several starts with a statistical stopping rule, then the
    alternation with the noise model (:mod:`l1b2.ident.noise`, Eq. 32:
@@ -204,8 +203,7 @@ class PredictorIdentifier(EstimatorSettings):
         steps can stall on a kink of the free run (a run at the edge of
         sticking) or creep until its iteration limit (common variance, exact
         data); the best start is therefore always continued by least-squares
-        refits at the ML variances, kept if they gain
-        (:func:`l1b2.ident.search.polish_stalled`).
+        refits at the ML variances, kept if they gain (:func:`l1b2.ident.search.polish_stalled`).
         Why ``"auto"`` chooses so: ``docs/decisions/0004-noise-fit-auto.md``.
     start_agree : profile search: stop the global search once this many starts
         reached the best log-likelihood within ``10 * stat_tol`` (0: run every start).
@@ -244,11 +242,10 @@ class PredictorIdentifier(EstimatorSettings):
         ``extra.start``, else zeros). Only used with ``init``.
     solver : ``"joint"`` (the searches of ``noise_fit``), ``"varpro"`` (:mod:`l1b2.ident.varpro`),
         ``"offset"`` (the drive offset as a search coordinate: a profile on a grid of offsets, then varpro;
-        :mod:`l1b2.ident.offset`) or ``"offset_bracket"`` (the same with a bracketed search over the offset on
+        :mod:`l1b2.ident.offset`), ``"offset_bracket"`` (the same with a bracketed search over the offset on
         each side of the barrier, warm-started points, a result never below the profile's best point; ``BRACKET``;
-        its frame: the best equation-error minimum of the Sobol starts of ``seed``) or ``"offset_reduced"`` (the
-        bracketed search framed at the reduced linear fit mapped to Eq. 35 with the conventions of the null
-        directions, :func:`l1b2.ident.reduced.map_reduced_to_theta`: no equation-error fits, so no ``seed``).
+        framed at the best equation-error minimum of ``seed``'s starts) or ``"offset_reduced"`` (the same framed at
+        the mapped reduced linear fit, :func:`l1b2.ident.reduced.map_reduced_to_theta`: no ``seed``).
     model : the predictor family: ``"eq29"`` (default, the paper's Eq. 29) or
         ``"pure_slip"`` (the slip ratio follows the state,
         :mod:`l1b2.predictor.pureslip`; same parameters, likelihood, noise
@@ -501,9 +498,8 @@ class PredictorIdentifier(EstimatorSettings):
         # ---- start: data-driven centre and equation-error minima, or init ----
         red, minima = data_driven_start(sample, space, m_s, cfg.kappa, cfg.include_load_inertia, s_center,
                                         s_half, E, cfg.n_starts, cfg.seed, warm=warm,
-                                        n_ee_starts={"varpro": 4 * cfg.n_starts, "offset": 4,
-                                                     "offset_bracket": BRACKET["start_fits"],
-                                                     "offset_reduced": 0}.get(cfg.solver),
+                                        n_ee_starts={"varpro": 4 * cfg.n_starts, "offset": 4, "offset_reduced": 0,
+                                                     "offset_bracket": BRACKET["start_fits"]}.get(cfg.solver),
                                         drive_law=cfg.model)
         theta0, fixed_final = self._centre(cfg, space, minima, s_center, s_half)
         t_centre, c_centre = time.perf_counter(), time.process_time()
