@@ -76,7 +76,8 @@ REFERENCES = {"varpro, 8 starts": {"solver": "varpro", "n_starts": 8, "stat_tol"
                                           "max_nfev": 600, "max_outer": 10, "bracket": STRICT_BRACKET},
               "bracketed (0039)": {"solver": "offset_bracket", "bracket": BRACKET_0039}}
 #: the fits compared
-FITS = {"joint (default)": {"solver": "joint"},
+FITS = {"default (auto)": {},
+        "joint (default)": {"solver": "joint"},
         "varpro, 1 start": {"solver": "varpro", "n_starts": 1},
         "offset, grid profile": {"solver": "offset"},
         "offset, bracketed (0036)": {"solver": "offset_bracket", "bracket": {**BRACKET_0039, "final": "paper"}},
@@ -196,7 +197,7 @@ def main(argv=None):
     cache.mkdir(parents=True, exist_ok=True)
     worlds = args.worlds.split(",")
     chosen = DEFAULT_FITS if args.fits is None else args.fits.split(";")
-    fits = {k: v for k, v in FITS.items() if not (args.skip_old and v["solver"] == "joint") and k in chosen}
+    fits = {k: v for k, v in FITS.items() if not (args.skip_old and v.get("solver") == "joint") and k in chosen}
     if args.seeds:
         fits = {f"{k}, seed {s}": {**v, "seed": int(s)} for k, v in fits.items() for s in args.seeds.split(",")}
     rows = []
@@ -216,7 +217,7 @@ def main(argv=None):
             record_seen(cache, world, name, r, best)
             print(f"{world}: {name}: {r['cpu_s']:.2f} s CPU, {r['nfev']} evaluations, loglik {r['loglik']:.3f} "
                   f"({r['loglik'] - best:+.3f} to the reference)", flush=True)
-            if settings["solver"].startswith("offset"):
+            if settings.get("solver", "auto").startswith(("offset", "auto")):
                 print("    stages (CPU s): " + ", ".join(f"{st['stage']} {st.get('cpu_s', float('nan')):.2f}"
                                                     for st in r["stages"]), flush=True)
                 prof = next((st["profile"] for st in r["stages"] if "profile" in st), [])

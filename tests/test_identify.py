@@ -449,7 +449,7 @@ def test_profile_search_stalled_on_exact_data_is_polished_to_the_optimum(noise, 
     exact optimum (residual at rounding level), and the report says why and how."""
     prm, th, names = _truth(3)
     df = simulate_dataset(prm, SMALL, M_S, noise_std=0.0)
-    idf = PredictorIdentifier(order=3, n_starts=2, seed=0, noise_fit="profile", noise=noise).fit(
+    idf = PredictorIdentifier(order=3, n_starts=2, seed=0, solver="joint", noise_fit="profile", noise=noise).fit(
         df, M_S, mask=evaluation_mask(df))
     assert idf.residual_rms_ < 1e-9
     conv = idf.convergence_

@@ -371,3 +371,39 @@ def test_the_reduced_frame_recovers_the_small_world():
     others = [PredictorIdentifier(order=3, solver=s).fit(df, slider_mass_kg=M_S).loglik_
               for s in ("offset_bracket", "joint")]
     assert est.loglik_ >= max(others) - 0.1, (est.loglik_, others)
+
+
+# ---- the default search (solver="auto") ------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("changes, expected", [
+    ({}, "offset_reduced"),
+    ({"fixed": ("mu_sd",)}, "offset_reduced"),          # mu_sd does not carry the offset or its gauge
+    ({"fixed": "recommended"}, "joint"),                # sigma, k0, mu pinned: the pins fix the offset's range
+    ({"fixed": {"c_r": 1.0}}, "joint"),
+    ({"fixed": ["alpha_0"]}, "joint"),
+    ({"init": example_params(3)}, "joint"),             # a warm start is a local continuation
+    ({"model": "pure_slip"}, "joint"),
+    ({"solver": "varpro"}, "varpro"),                   # an explicit choice is kept
+])
+def test_the_default_search_is_the_seed_free_offset_search_where_the_offset_is_free(changes, expected):
+    from l1b2.ident.offset import OFFSET_COORDINATES
+    assert set(OFFSET_COORDINATES) == {"c_r", "sigma", "mu", "k0", "alpha_0"}
+    est = PredictorIdentifier(order=3, **changes)
+    assert est.solver == changes.get("solver", "auto")
+    assert est._checked_settings().solver == expected
+
+
+def test_the_default_search_with_extra_forces_is_the_joint_one():
+    from l1b2.ident.extra import ExtraForces
+    extra = ExtraForces(("const_N",), ("N",), lambda df: np.ones((len(df), 1)))
+    assert PredictorIdentifier(order=3, extra=extra)._checked_settings().solver == "joint"
+
+
+def test_the_default_fit_is_the_offset_reduced_fit():
+    df, _ = _small_world(11)
+    default = PredictorIdentifier(order=3).fit(df, slider_mass_kg=M_S)
+    explicit = PredictorIdentifier(order=3, solver="offset_reduced", seed=5).fit(df, slider_mass_kg=M_S)
+    assert default.convergence_["solver"] == "offset_reduced"
+    assert default.loglik_ == explicit.loglik_
+    np.testing.assert_array_equal(default.theta_, explicit.theta_)

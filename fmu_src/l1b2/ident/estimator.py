@@ -120,7 +120,7 @@ from .slipproblem import RECOMMENDED_FIXED_PURE_SLIP, make_problem
 from .search import (LocalSolver, alternate_noise, multi_start, polish_stalled, profile_search, search_nfev,
                      start_points, warm_prestep)
 from .uncertainty import alternative_optima, extra_confounding, fisher_uncertainty
-from .offset import BRACKET, projected_search
+from .offset import BRACKET, auto_solver, projected_search
 
 __all__ = ["PredictorIdentifier", "clone", "RECOMMENDED_FIXED", "evaluation_mask"]
 
@@ -135,7 +135,7 @@ _NOT_SERIALISED = ("verbose", "extra", "init", "init_extra", "frequency")
 NOISE_FITS = ("auto", "alternate", "profile")
 
 #: the local solvers of the global search (``solver``): variable projection, or the joint multistart
-SOLVERS = ("varpro", "joint", "offset", "offset_bracket", "offset_reduced")
+SOLVERS = ("auto", "varpro", "joint", "offset", "offset_bracket", "offset_reduced")
 
 
 def clone(estimator, **changes):
@@ -220,9 +220,8 @@ class PredictorIdentifier(EstimatorSettings):
         ``R_r (I + g g^T)``, ``g = d v_pred/d v_start``); see
         :class:`l1b2.ident.noise.NoiseModel`.
     verbose : print the progress of the search.
-    extra : :class:`~l1b2.ident.extra.ExtraForces` or None. Extra exogenous
-        forces with their own parameters phi, identified jointly with theta:
-        in drive coordinates ``X_total = X + features(df) @ phi``. ``None``
+    extra : :class:`~l1b2.ident.extra.ExtraForces` or None. Extra exogenous forces with their own parameters
+        phi, identified jointly with theta: in drive coordinates ``X_total = X + features(df) @ phi``. ``None``
         (default) is the paper's model, unchanged.
     init : PredictorParams (or theta in Eq. 35 order) to warm-start from,
         e.g. a baseline fit. With ``n_starts=1`` only this start is run: one
@@ -238,9 +237,9 @@ class PredictorIdentifier(EstimatorSettings):
         re-expanded exactly if its position scaling (s_center, s_half)
         differs from the data's; kappa and include_load_inertia are the
         identifier's.
-    init_extra : start values of phi for the warm start (default
-        ``extra.start``, else zeros). Only used with ``init``.
-    solver : ``"joint"`` (the searches of ``noise_fit``), ``"varpro"`` (:mod:`l1b2.ident.varpro`),
+    init_extra : start values of phi for the warm start (default ``extra.start``, else zeros); only with ``init``.
+    solver : ``"auto"`` (default: ``"offset_reduced"`` or ``"joint"``, :func:`l1b2.ident.offset.auto_solver`),
+        ``"joint"`` (the searches of ``noise_fit``), ``"varpro"`` (:mod:`l1b2.ident.varpro`),
         ``"offset"`` (the drive offset as a search coordinate: a profile on a grid of offsets, then varpro;
         :mod:`l1b2.ident.offset`), ``"offset_bracket"`` (the same with a bracketed search over the offset on
         each side of the barrier, warm-started points, a result never below the profile's best point; ``BRACKET``;
@@ -322,7 +321,7 @@ class PredictorIdentifier(EstimatorSettings):
         extra: ExtraForces | None = None,
         init: PredictorParams | None = None,
         init_extra=None,
-        solver: str = "joint",
+        solver: str = "auto",
         model: str = "eq29",
         frequency="auto",
     ):
@@ -374,6 +373,7 @@ class PredictorIdentifier(EstimatorSettings):
             raise IdentificationError(f"criterion must be 'free_run' or 'one_step', got {cfg.criterion!r}")
         if cfg.solver not in SOLVERS:
             raise IdentificationError(f"solver must be one of {SOLVERS}, got {cfg.solver!r}")
+        cfg.solver = auto_solver(cfg) if cfg.solver == "auto" else cfg.solver
         if cfg.model not in DRIVE_LAWS:
             raise IdentificationError(f"model must be one of {DRIVE_LAWS}, got {cfg.model!r}")
         if cfg.model == "pure_slip":

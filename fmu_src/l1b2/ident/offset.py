@@ -52,13 +52,13 @@ import numpy as np
 from ..errors import IdentificationError
 from ..predictor.model import G_of_k0, drive_factor
 from .identifiable import admissible, identifiable_search
-from .problem import ScaledObjective
+from .problem import RECOMMENDED_FIXED, ScaledObjective
 from .varpro import linear_positions, local_fit, profile_loglik, varpro_search
 
 __all__ = ["OMEGA_GRID", "GAUGE_K0", "drive_offset", "offset_of_omega", "omega_of_offset", "d_coefficients",
            "gauge", "multiplier", "point", "c_r_of_omega", "with_offset", "profile",
            "offset_search", "offset_grid", "projected_search", "BRACKET", "bracket_search", "bracketed_profile",
-           "bracketed_offset_search"]
+           "bracketed_offset_search", "OFFSET_COORDINATES", "auto_solver"]
 
 #: the profile's grid of omega (both branches of the offset, the barrier |omega| -> 1 approached)
 OMEGA_GRID = (-0.95, -0.85, -0.7, -0.5, -0.3, -0.1, 0.3, 0.6, 0.85, 0.95)
@@ -487,3 +487,17 @@ def projected_search(cfg, obj, starts, theta_centre, p_theta, log=None):
     if offset:
         starts = starts[:1]
     return varpro_search(obj, lin, starts, cfg.max_nfev, cfg.tol, cfg.stat_tol, cfg.max_outer, cfg.n_refine, log)
+
+
+#: the parameters that carry the drive offset and its gauge: the offset searches need them varied
+OFFSET_COORDINATES = ("c_r", "sigma", "mu", "k0", "alpha_0")
+
+
+def auto_solver(cfg) -> str:
+    """The search of ``solver="auto"`` for the settings ``cfg``: ``"offset_reduced"`` for a cold fit (no
+    ``init``) of the Eq. 29 model alone (no extra forces) with :data:`OFFSET_COORDINATES` varied, else ``"joint"``
+    (a warm start is a local continuation; pins of the offset's coordinates fix its range; the pure-slip family and
+    the extra forces are searched by the joint search)."""
+    fixed = RECOMMENDED_FIXED if isinstance(cfg.fixed, str) and cfg.fixed == "recommended" else (cfg.fixed or ())
+    cold_eq29 = cfg.init is None and cfg.model == "eq29" and cfg.extra is None
+    return "offset_reduced" if cold_eq29 and not set(fixed) & set(OFFSET_COORDINATES) else "joint"
