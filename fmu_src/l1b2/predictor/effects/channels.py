@@ -23,7 +23,11 @@ enters in one of four generic forms, each linear in one parameter ``a``
   re-identified, so the mass change at the channel's mean is in no re-identification direction of the baseline,
   whereas every other form's constant is (the friction offset, the force factor, the damping). A logged channel
   only (a payload, a tool, a fluid that changes the moving mass between runs or along the stroke), listed without
-  the load interaction (:data:`FORCE_FORMS`),
+  the load interaction (:data:`FORCE_FORMS`). The force is the first-order change of the free run when the slider's
+  mass is ``m_s (1 + a z + a_0)``; the same parameters with that mass inside the recursion are
+  :func:`slider_mass` (the mass per sample, for :func:`l1b2.predictor.simulate.free_run`), their sensitivities
+  :func:`l1b2.predictor.simulate.mass_sensitivity` and their physical range a positive slider mass over TRAIN's
+  range (:func:`mass_floor`); the loop's screen, refit and export use the force,
 * ``damping``: it scales the viscous damping, ``dF = -a d v_base / SPEED_REF z`` (``v_base`` the baseline's
   predicted speed, signed; ``d v_base`` the speed in drive coordinates, so the force opposes the motion;
   ``SPEED_REF`` = 0.2 m/s, the base module's speed scale, the order of the slider's top speed: ``a`` [N per
