@@ -8,6 +8,8 @@ the blind audit script that makes the case). The close loop's baseline on TRAIN 
 
 * ``first_order``: the loop's inertia form, the force ``-m_s d a_base (a z + a_0)`` added to the drive force
   (``a_base`` the baseline's free-run acceleration, :func:`l1b2.predictor.effects.time_derivative`);
+* ``first_order_weight``: the same plus the heavier slider's weight on the guide, ``mu_sd 9.81 m_s (a z + a_0)
+  sign(-v')`` at the baseline's speed (the exact form's linearisation);
 * ``mass``: the slider's mass ``m_s (1 + a z + a_0)`` inside the recursion
   (:func:`l1b2.predictor.simulate.mass_sensitivity`, its exact Jacobian), bounded to a positive mass;
 * ``known`` (``payload_g`` only): the slider's mass plus each run's known payload, nothing fitted.
@@ -98,6 +100,16 @@ def main(argv=None):
     fo = least_squares(lambda phi: run("train", force=first_force("train", phi))[mask_tr] - y, np.zeros(2))
     row["test_first_order"] = nrmse(run("test", force=first_force("test", fo.x)))
     row["first_order_phi"] = [round(float(v), 4) for v in fo.x]
+    vb = {k: run(k) for k in fr}
+
+    def weight_force(k, phi):   # the first order plus the heavier slider's weight on the guide, mu_sd g dm sign(-v')
+        return first_force(k, phi) + (p.mu_sd * 9.81 * m_s * np.sign(-fr[k][3] * vb[k]))[:, None] * ch.mass_columns(
+            spec, xs[k]) @ phi
+
+    fw = least_squares(lambda phi: run("train", force=weight_force("train", phi))[mask_tr] - y, np.zeros(2))
+    row["test_first_order_weight"] = nrmse(run("test", force=weight_force("test", fw.x)))
+    row["first_order_weight_phi"] = [round(float(v), 4) for v in fw.x]
+    row["mu_sd"] = round(float(p.mu_sd), 4)
     s, V0, load, dd, t, _, r = fr["train"]
     M = m_s * ch.mass_columns(spec, xs["train"])
 
@@ -112,7 +124,7 @@ def main(argv=None):
     row["test_mass"] = nrmse(run("test", ch.slider_mass(spec, xs["test"], ms.x)))
     row["mass_phi"] = [round(float(v), 4) for v in ms.x]
     row["mass_floor_kg"] = round(ch.mass_floor(spec, ms.x, float(np.min(c_tr)), float(np.max(c_tr))), 4)
-    row["train_sse_first_order_mass"] = [float(2 * fo.cost), float(2 * ms.cost)]
+    row["train_sse_first_order_weight_mass"] = [round(float(2 * c), 4) for c in (fo.cost, fw.cost, ms.cost)]
     if args.channel == "payload_g":
         row["test_known"] = nrmse(run("test", m_s + xs["test"]["run:payload_g"] / 1000.0))
         row["known_phi"] = [round(spec["sd"] / 1000.0 / m_s, 4), round(spec["mean"] / 1000.0 / m_s, 4)]
