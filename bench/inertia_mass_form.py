@@ -12,6 +12,8 @@ the blind audit script that makes the case). The close loop's baseline on TRAIN 
   sign(-v')`` at the baseline's speed (the exact form's linearisation);
 * ``mass``: the slider's mass ``m_s (1 + a z + a_0)`` inside the recursion
   (:func:`l1b2.predictor.simulate.mass_sensitivity`, its exact Jacobian), bounded to a positive mass;
+* ``friction``, ``force_factor``: the channel's force forms with a constant, ``-(a z + a_0)`` and
+  ``V0/V_ref (a z + a_0)`` [N], for comparison;
 * ``known`` (``payload_g`` only): the slider's mass plus each run's known payload, nothing fitted.
 
 Prints one JSON line: TEST's free-run nrmse [%] (:func:`l1b2.data.metrics.report_metrics`) of the baseline and
@@ -110,6 +112,11 @@ def main(argv=None):
     row["test_first_order_weight"] = nrmse(run("test", force=weight_force("test", fw.x)))
     row["first_order_weight_phi"] = [round(float(v), 4) for v in fw.x]
     row["mu_sd"] = round(float(p.mu_sd), 4)
+    for form, fac in (("friction", lambda k: -np.ones(len(fr[k][0]))), ("force_factor", lambda k: fr[k][1] / fx.V_REF)):
+        cols = lambda k: fac(k)[:, None] * ch.mass_columns(spec, xs[k])  # noqa: E731  (the form's [z, 1] columns)
+        ff = least_squares(lambda phi: run("train", force=cols("train") @ phi)[mask_tr] - y, np.zeros(2))
+        row[f"test_{form}"] = nrmse(run("test", force=cols("test") @ ff.x))
+        row[f"train_sse_{form}"] = round(float(2 * ff.cost), 4)
     s, V0, load, dd, t, _, r = fr["train"]
     M = m_s * ch.mass_columns(spec, xs["train"])
 
