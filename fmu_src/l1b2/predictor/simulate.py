@@ -23,6 +23,7 @@ from .model import (
     step_drive,
 )
 from .pureslip import packed_slip_recursion
+from ..units import G_M_S2
 
 # ---------------------------------------------------------------------------
 # run layout: flat samples <-> padded (time, run) arrays
@@ -270,6 +271,61 @@ def free_run(
     a, e, f, z0 = free_run_coefficients(params, s, V0, load, d, dt, m_s_arr, extra_force)
     vpk = packed_recursion(lay, pk(a), pk(e), pk(f), pk(-d), pk(z0), v0[lay.run_order])
     return lay.from_packed(vpk)
+
+
+def mass_sensitivity(params: PredictorParams, s, V0, load, direction, t, v_start, m_s, M, run_index=None,
+                     extra_force=None):
+    """The free run with a slider mass per sample and its exact derivative with respect to mass parameters.
+
+    ``m_s`` [kg] (scalar or per sample) is the slider's mass inside the recursion, in its inertia
+    (``m_eff = m_s + |m|``) and in its weight on the guide (``Fr = mu_sd (9.81 m_s + kappa P)``); ``M`` (n, p)
+    [kg per unit parameter] is ``dm_s/dphi`` per sample (an inertia-form channel: ``m_s0`` times
+    :func:`l1b2.predictor.effects.channels.mass_columns`). The other arguments are :func:`free_run`'s (Eq. 29's
+    drive law only). Returns ``(v, S)``: :func:`free_run`'s speed [m/s] and ``S = dv/dphi`` (n, p) [m/s per unit],
+    the forward sensitivity of the same recursion: with ``h = dt / m_eff`` and the step's drive-coordinate force
+    ``F = -D v' + X + sg Fr``, a normal step gives ``dv[k+1]/dm_s[k] = d h (-F / m_eff + sg mu_sd 9.81)``; a step
+    that reverses, ``v'[k+1] = h F_rest + v' F_rest / F`` (``F_rest = X + z0 Fr``), its derivative in ``m_s`` and
+    ``v'``; a stuck step 0.
+    """
+    if params.drive_law == "pure_slip":
+        raise ValueError("mass_sensitivity: Eq. 29's drive law only, not the pure-slip family's")
+    s = np.asarray(s, dtype=float).ravel()
+    n = s.size
+    lay = RunLayout(run_index, n)
+    V0, load, d, t, m = (_broadcast_flat(x, n, nm) for x, nm in ((V0, "V0"), (load, "load"), (direction,
+                                                                  "direction"), (t, "t"), (m_s, "m_s")))
+    M = np.asarray(M, dtype=float).reshape(n, -1)
+    vs = np.asarray(v_start, dtype=float).ravel()
+    v0 = (np.full(lay.R, float(vs[0])) if vs.size == 1 else vs[lay.starts] if vs.size == n else vs.copy())
+    dt = lay.step_dt(t)
+    ef = None if extra_force is None else _broadcast_flat(extra_force, n, "extra_force")
+    pk = lay.to_packed
+    a, e, f, z0 = (pk(x) for x in free_run_coefficients(params, s, V0, load, d, dt, m, ef))
+    D, X, Fr = force_parts(params, s, V0, d * load, m)
+    D, X, Fr = (pk(np.broadcast_to(x, (n,))) for x in (D, add_extra_force(X, ef), Fr))
+    m_eff, dp = pk(effective_mass(params, load, m)), pk(d)
+    h = pk(dt) / m_eff
+    flags = np.zeros(n, dtype=np.int8)
+    vpk = packed_recursion(lay, a, e, f, -dp, z0, v0[lay.run_order], flags)
+    vp = dp * vpk
+    sg = np.sign(-vp)
+    sg[vp == 0] = z0[vp == 0]
+    dFr = params.mu_sd * G_M_S2          # dFr/dm_s [N/kg]
+    F = -D * vp + X + sg * Fr
+    dv = dp * h * (-F / m_eff + sg * dFr)
+    rev = flags == STEP_REVERSAL
+    if rev.any():
+        Frest = X[rev] + z0[rev] * Fr[rev]
+        Fk, hr, vr, mr = F[rev], h[rev], vp[rev], m_eff[rev]
+        dFrest, dFk = z0[rev] * dFr, sg[rev] * dFr
+        dv[rev] = dp[rev] * (-hr / mr * Frest + hr * dFrest + vr * (dFrest * Fk - Frest * dFk) / Fk ** 2)
+        a = a.copy()
+        a[rev] = (Frest / Fk) * (1.0 + vr * D[rev] / Fk)
+    st = flags == STEP_STUCK
+    dv[st] = 0.0
+    a = np.where(st, 0.0, a)
+    S = packed_linear_recursion(lay, a, dv[:, None] * pk(M))
+    return lay.from_packed(vpk), lay.from_packed(S)
 
 
 # ---------------------------------------------------------------------------

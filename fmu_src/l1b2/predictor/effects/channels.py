@@ -23,7 +23,11 @@ enters in one of four generic forms, each linear in one parameter ``a``
   re-identified, so the mass change at the channel's mean is in no re-identification direction of the baseline,
   whereas every other form's constant is (the friction offset, the force factor, the damping). A logged channel
   only (a payload, a tool, a fluid that changes the moving mass between runs or along the stroke), listed without
-  the load interaction (:data:`FORCE_FORMS`),
+  the load interaction (:data:`FORCE_FORMS`). The force is the first-order change of the free run when the slider's
+  mass is ``m_s (1 + a z + a_0)``; the same parameters with that mass inside the recursion are
+  :func:`slider_mass` (the mass per sample, for :func:`l1b2.predictor.simulate.free_run`), their sensitivities
+  :func:`l1b2.predictor.simulate.mass_sensitivity` and their physical range a positive slider mass over TRAIN's
+  range (:func:`mass_floor`); the loop's screen, refit and export use the force,
 * ``damping``: it scales the viscous damping, ``dF = -a d v_base / SPEED_REF z`` (``v_base`` the baseline's
   predicted speed, signed; ``d v_base`` the speed in drive coordinates, so the force opposes the motion;
   ``SPEED_REF`` = 0.2 m/s, the base module's speed scale, the order of the slider's top speed: ``a`` [N per
@@ -225,8 +229,9 @@ class Channel(Effect):
         z = (c - num(spec, "mean")) / sd
         form = str(spec.get("form"))
         factor = form_factor(form, x, num(spec, "m_s") if form == "inertia" else None)
-        F = interaction_basis(spec, x, factor[:, None] * shape_basis(spec, z))
-        return np.column_stack([F, factor]) if form == "inertia" else F
+        if form == "inertia":   # the mass form's linearisation: the force of each relative mass column
+            return factor[:, None] * _mass_basis(spec, z)
+        return interaction_basis(spec, x, factor[:, None] * shape_basis(spec, z))
 
     def width(self, spec):
         n = 1 if spec.get("shape", "linear") == "linear" else 2
@@ -319,12 +324,72 @@ def damping_floor(spec, phi, lo: float, hi: float, damping: float) -> float:
     if spec.get("form") != "damping":
         raise EffectSpecError(f"damping_floor: the spec's form {spec.get('form')!r} is not 'damping'")
     phi = np.asarray(phi, float).ravel()
-    z_lo, z_hi = _z_range(spec, lo, hi)
-    z = [z_lo, z_hi]
-    if spec.get("shape", "linear") == "quadratic" and phi[1] > 0 and z_lo < -phi[0] / (2.0 * phi[1]) < z_hi:
-        z.append(-phi[0] / (2.0 * phi[1]))
-    cols = shape_basis({**spec, "lo": lo, "hi": hi}, np.asarray(z, float))
+    z = _shape_extremes(spec, phi, *_z_range(spec, lo, hi))
+    cols = shape_basis({**spec, "lo": lo, "hi": hi}, z)
     return float(damping + np.min(cols @ phi) / SPEED_REF)
+
+
+def _mass_basis(spec, z) -> np.ndarray:
+    """The inertia form's relative mass columns for standardised values ``z``: the shape's, then a column of ones."""
+    F = shape_basis(spec, z)
+    return np.column_stack([F, np.ones(len(F))])
+
+
+def mass_columns(spec, x) -> np.ndarray:
+    """The relative mass columns of an inertia-form spec per sample [1 per unit parameter]: the shape's columns of
+    the channel's ``z`` (:func:`shape_basis`), then a column of ones (the mass change at the channel's mean).
+
+    With parameters ``phi`` the slider's mass is ``m_s (1 + mass_columns(spec, x) @ phi)`` [kg]
+    (:func:`slider_mass`). The form's force features (:meth:`Channel.features`) are these columns times
+    ``-m_s d a_base``: the first-order change of the free run's force when that mass moves the baseline's
+    acceleration ``a_base``.
+    """
+    if spec.get("form") != "inertia":
+        raise EffectSpecError(f"mass_columns: the spec's form {spec.get('form')!r} is not 'inertia'")
+    if spec.get("by"):
+        raise EffectSpecError("mass_columns: the inertia form has no interaction")
+    c = signal(x, signal_key(str(spec.get("channel")), str(spec.get("level"))))
+    sd = num(spec, "sd")
+    if not sd > 0:
+        raise EffectSpecError(f"channel {spec.get('channel')!r}: standard deviation {sd} is not positive")
+    return _mass_basis(spec, (c - num(spec, "mean")) / sd)
+
+
+def slider_mass(spec, x, phi) -> np.ndarray:
+    """The slider's mass per sample [kg] of an inertia-form spec with parameters ``phi`` (shape's, then the
+    constant ``a_0``): ``m_s (1 + mass_columns(spec, x) @ phi)``, ``m_s`` the spec's slider mass [kg]. The free run
+    with this mass inside its recursion (:func:`l1b2.predictor.simulate.free_run` with ``m_s`` per sample) is the
+    form's exact effect: ``(m_s (1 + g) + |m|) dv/dt = F``, the slider's weight on the guide included."""
+    m_s = num(spec, "m_s")
+    if not m_s > 0:
+        raise EffectSpecError(f"channel form 'inertia': the slider mass m_s {m_s} is not positive")
+    return m_s * (1.0 + mass_columns(spec, x) @ np.asarray(phi, float).ravel())
+
+
+def _shape_extremes(spec, phi, z_lo: float, z_hi: float) -> np.ndarray:
+    """The standardised values where a shape's value ``shape_basis(z) @ phi[:2]`` can be smallest over
+    ``[z_lo, z_hi]``: the ends and the interior stationary points (the quadratic's vertex ``-a / (2 b)``; the odd
+    shape's ``zc^2 = 1 - a / (3 c)``, from ``a + c (3 zc^2 - 3) = 0``)."""
+    shape, z = spec.get("shape", "linear"), [z_lo, z_hi]
+    if shape == "quadratic" and phi[1] != 0:
+        z.append(-phi[0] / (2.0 * phi[1]))
+    elif shape == "odd" and phi[1] != 0 and 1.0 - phi[0] / (3.0 * phi[1]) > 0:
+        r = np.sqrt(1.0 - phi[0] / (3.0 * phi[1]))
+        z += [-r, r]
+    return np.array([v for v in z if z_lo <= v <= z_hi], float)
+
+
+def mass_floor(spec, phi, lo: float, hi: float) -> float:
+    """The smallest slider mass [kg] of an inertia-form spec with parameters ``phi`` over TRAIN's range ``[lo, hi]``
+    of its channel: ``m_s (1 + a_0 + min_z shape(z) @ a)``, exact (the shape's minimum lies at an end of the range
+    or at an interior stationary point). The physical range of the form is a positive floor: the slider with its
+    change keeps a positive mass wherever TRAIN's channel was (the shaped forms are flat beyond the range)."""
+    if spec.get("form") != "inertia":
+        raise EffectSpecError(f"mass_floor: the spec's form {spec.get('form')!r} is not 'inertia'")
+    phi = np.asarray(phi, float).ravel()
+    z = _shape_extremes(spec, phi, *_z_range(spec, lo, hi))
+    cols = _mass_basis({**spec, "lo": lo, "hi": hi}, z)
+    return float(num(spec, "m_s") * (1.0 + np.min(cols @ phi)))
 
 
 def shape_basis(spec, z) -> np.ndarray:
