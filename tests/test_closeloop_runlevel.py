@@ -127,6 +127,7 @@ def test_the_loop_folds_clock_candidates_by_its_setting(scheme, monkeypatch):
         return acc.clock_folds(d, k, sch)
 
     monkeypatch.setattr(loop_mod, "clock_folds", spy)
+    assert CloseLoop().clock_folds == "blocks"                       # the default: contiguous blocks
     est = CloseLoop(clock_folds=scheme, k_folds=5, refit_folds=3)
     assert est.get_params()["clock_folds"] == scheme
     with pytest.raises(Stop):

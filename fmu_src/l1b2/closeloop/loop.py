@@ -205,7 +205,7 @@ class CloseLoop(EstimatorSettings):
                  refit_nfev: int = DEFAULT_REFIT_NFEV,
                  final_nfev: int = 60, screen_alpha: float | None = 0.01, noise_fit: str = "alternate",
                  noise: str = "common", client=None, baseline: str = "eq29", run_level: bool = True,
-                 response_columns: tuple | None = None, clock_folds: str = "rotation"):
+                 response_columns: tuple | None = None, clock_folds: str = "blocks"):
         self.order = order
         self.k_folds = k_folds
         self.alpha = alpha
