@@ -50,6 +50,91 @@ def test_session_blocks_are_contiguous_stretches_of_the_session_each_held_out_on
     assert [b.tolist() for b in acc.session_blocks(shuffled, k)] == [b.tolist() for b in blocks]
 
 
+def _conditions_session(seed=7):
+    """A session of conditions (V0, load) in a row: mostly two runs each (forward, backward), one of three runs,
+    two of one run, and two neighbouring conditions at the same V0 (different loads); run ids shuffled.
+    Returns the frame and the session's units written out (lists of run ids, in session order)."""
+    sizes = [2, 2, 3, 2, 1, 2, 2, 1, 2, 2, 2]
+    conds = [(324.0, 0.03), (255.0, 0.0), (220.0, -0.07), (220.0, 0.09), (324.0, -0.03), (255.0, 0.07),
+             (290.0, 0.0), (255.0, 0.0), (324.0, 0.09), (220.0, -0.03), (290.0, 0.07)]
+    n = sum(sizes)
+    ids = np.random.default_rng(seed).permutation(np.arange(500, 500 + n))
+    rows, units, k = [], [], 0
+    for (V, L), m in zip(conds, sizes):
+        units.append(ids[k:k + m].tolist())
+        for j in range(m):
+            rows.append(pd.DataFrame({"run": ids[k], "time_s": 2.0 * k + np.arange(3) * 0.1, "voltage_V": V,
+                                      "load_kg": L, "direction": 1 - 2 * (j % 2)}))
+            k += 1
+    return pd.concat(rows, ignore_index=True).sample(frac=1.0, random_state=3), units
+
+
+def test_session_units_are_the_conditions_in_a_row():
+    df, units = _conditions_session()
+    assert [u.tolist() for u in acc.session_units(df)] == units
+    # without the condition columns: one unit per run, in session order
+    assert [u.tolist() for u in acc.session_units(df.drop(columns=["voltage_V", "load_kg"]))] == [
+        [r] for u in units for r in u]
+
+
+@pytest.mark.parametrize("k", [2, 3, 4, 5])
+def test_session_rotation_deals_whole_conditions_to_the_folds_in_turn(k):
+    df, units = _conditions_session()
+    folds = acc.session_rotation(df, k)
+    assert len(folds) == k
+    order = [r for u in units for r in u]
+    # written out: fold i holds units i, i + k, i + 2k, ... of the session, their runs in session order
+    for i, f in enumerate(folds):
+        assert f.tolist() == [r for j, u in enumerate(units) if j % k == i for r in u]
+    assert sorted(np.concatenate(folds).tolist()) == sorted(order)                   # every run held out once
+    assert [len(f) for f in folds] == [sum(len(u) for u in units[i::k]) for i in range(k)]          # sizes
+    fold_of = {r: i for i, f in enumerate(folds) for r in f.tolist()}
+    for j, u in enumerate(units):
+        assert len({fold_of[r] for r in u}) == 1                   # a condition in a row is never split
+        pos = [order.index(r) for r in u]
+        assert pos == list(range(pos[0], pos[0] + len(u)))         # a held-out unit is contiguous in time
+        # its neighbouring units, on both sides (one at the session's ends), are in the fitted part
+        for nb in (units[j - 1] if j > 0 else [], units[j + 1] if j + 1 < len(units) else []):
+            assert all(fold_of[r] != fold_of[u[0]] for r in nb)
+    # more folds than units: one unit per fold
+    assert [f.tolist() for f in acc.session_rotation(df, 50)] == units
+
+
+def test_clock_folds_picks_the_scheme_and_refuses_an_unknown_one():
+    df, units = _conditions_session()
+    for k in (2, 4):
+        assert [f.tolist() for f in acc.clock_folds(df, k, "blocks")] == [
+            f.tolist() for f in acc.session_blocks(df, k)]
+        assert [f.tolist() for f in acc.clock_folds(df, k, "rotation")] == [
+            f.tolist() for f in acc.session_rotation(df, k)]
+    with pytest.raises(ValueError, match="clock_folds"):
+        acc.clock_folds(df, 4, "interleaved")
+
+
+@pytest.mark.parametrize("scheme", ["blocks", "rotation"])
+def test_the_loop_folds_clock_candidates_by_its_setting(scheme, monkeypatch):
+    from l1b2.closeloop import loop as loop_mod
+    df, _ = _conditions_session()
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def spy(d, k, sch):
+        seen.append((k, sch))
+        if len(seen) == 2:
+            raise Stop
+        return acc.clock_folds(d, k, sch)
+
+    monkeypatch.setattr(loop_mod, "clock_folds", spy)
+    assert CloseLoop().clock_folds == "blocks"                       # the default: contiguous blocks
+    est = CloseLoop(clock_folds=scheme, k_folds=5, refit_folds=3)
+    assert est.get_params()["clock_folds"] == scheme
+    with pytest.raises(Stop):
+        est._iterate(None, [], df, None, 0.1, None, None)
+    assert seen == [(3, scheme), (5, scheme)]                        # the refit's folds, then the screen's
+
+
 def test_time_dependent_candidates_are_those_reading_the_session_clock():
     train = fx.TrainingSummary(m_s=0.12, time_range=(0.0, 300.0), position_range=(-0.012, 0.012),
                                voltage_median=270.0, ranges={"t_lo": 0.0, "t_hi": 300.0, "s_lo": -0.012,

@@ -223,6 +223,49 @@ def session_blocks(df: pd.DataFrame, k: int) -> list[np.ndarray]:
     return [b for b in np.array_split(ids, min(k, len(ids))) if len(b)]
 
 
+def session_units(df: pd.DataFrame) -> list[np.ndarray]:
+    """Run ids in session order (runs ordered by their first time), grouped into units: a maximal stretch of
+    consecutive runs at the same drive amplitude and load (``voltage_V``, ``load_kg`` of a run's first sample),
+    e.g. one condition of the rig's plan, its forward run and its backward run. A frame without those columns
+    has one unit per run. Every run is in exactly one unit; a unit is contiguous in the session."""
+    g = df.groupby(dataio.RUN, sort=False)
+    first = g.first()
+    order = np.argsort(g[dataio.TIME].min().reindex(first.index).to_numpy(float), kind="stable")
+    ids = first.index.to_numpy()[order]
+    cols = [c for c in (dataio.VOLTAGE, dataio.LOAD) if c in first.columns]
+    if not cols or len(ids) < 2:
+        return [ids[i:i + 1] for i in range(len(ids))]
+    cond = first[cols].to_numpy(float)[order]
+    new = np.r_[True, np.any(cond[1:] != cond[:-1], axis=1)]
+    return np.split(ids, np.flatnonzero(new)[1:])
+
+
+def session_rotation(df: pd.DataFrame, k: int) -> list[np.ndarray]:
+    """Run ids in ``k`` folds of whole session units (:func:`session_units`) dealt in rotation: unit ``j`` of the
+    session goes to fold ``j mod k``.
+
+    The folds of a candidate that depends on the session clock when what must be predicted lies between
+    measured runs of the session (held-out runs interleaved with the fitted ones in time): a held-out unit has
+    fitted units on both sides (one side at the session's ends), so a term is scored on interpolating the clock,
+    while the runs of one condition in a row are never split between the held-out and the fitted part. Each
+    fold's runs are in session order; every run is in exactly one fold; ``min(k, units)`` folds.
+    """
+    units = session_units(df)
+    k = min(k, len(units))
+    return [np.concatenate(units[i::k]) for i in range(k)] if k else []
+
+
+#: the fold schemes of a candidate that depends on the session clock (``CloseLoop(clock_folds=...)``)
+CLOCK_FOLDS = {"blocks": session_blocks, "rotation": session_rotation}
+
+
+def clock_folds(df: pd.DataFrame, k: int, scheme: str = "blocks") -> list[np.ndarray]:
+    """The ``k`` folds of a session-clock candidate by ``scheme`` (a key of :data:`CLOCK_FOLDS`)."""
+    if scheme not in CLOCK_FOLDS:
+        raise ValueError(f"clock_folds must be one of {sorted(CLOCK_FOLDS)}, got {scheme!r}")
+    return CLOCK_FOLDS[scheme](df, k)
+
+
 #: the signals of the session clock (:data:`l1b2.predictor.effects.SIGNALS` and the channel family's)
 SESSION_SIGNALS = frozenset({"t", "col:time_s", "run:time_s"})
 

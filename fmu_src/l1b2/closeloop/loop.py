@@ -88,7 +88,7 @@ from .stages import StageClock
 from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT_FOLDS, DEFAULT_REFIT_NFEV,
                          Directions, EffectSet, RefitCV, RefitSettings, Validated, accepts, added_columns,
                          chain_cv_errors, collinear, cv_errors, fold_start_phi, materiality, named_reading, refit,
-                         session_blocks, stratified_folds, time_dependent, validated)
+                         clock_folds, stratified_folds, time_dependent, validated)
 from .baselines import choose_baseline, identify_families, retag_structural
 from .crosscheck import PureSlipCheck, identified_pick, score_of, withdrawn_note
 from .events import session, with_event_clocks
@@ -172,8 +172,9 @@ class CloseLoop(EstimatorSettings):
         (:mod:`l1b2.closeloop.runlevel`, Bonferroni over the signals) as one more candidate of the
         cross-validated refit; among accepted candidates within ``parsimony`` of the best, a form constant along
         the stroke is preferred over a within-run form when the run-level evidence names its regressor.
-        Candidates that depend on the session clock are cross-validated on contiguous blocks of the session
-        (:func:`~l1b2.closeloop.acceptance.session_blocks`) whatever this setting.
+    clock_folds : {"blocks", "rotation"}
+        Folds of the candidates that depend on the session clock (screen and refit, whatever ``run_level``):
+        ``"blocks"`` k contiguous blocks, ``"rotation"`` conditions dealt in turn (:mod:`~l1b2.closeloop.acceptance`).
     response_columns : tuple of str or None
         Logged columns that are measured responses of the motor: listed in ``channels_considered``, never
         offered as a cause. None: :data:`l1b2.predictor.effects.channels.RESPONSE_COLUMNS` (the virtual rig's
@@ -204,7 +205,7 @@ class CloseLoop(EstimatorSettings):
                  refit_nfev: int = DEFAULT_REFIT_NFEV,
                  final_nfev: int = 60, screen_alpha: float | None = 0.01, noise_fit: str = "alternate",
                  noise: str = "common", client=None, baseline: str = "eq29", run_level: bool = True,
-                 response_columns: tuple | None = None):
+                 response_columns: tuple | None = None, clock_folds: str = "blocks"):
         self.order = order
         self.k_folds = k_folds
         self.alpha = alpha
@@ -228,6 +229,7 @@ class CloseLoop(EstimatorSettings):
         self.baseline = baseline
         self.run_level = run_level
         self.response_columns = response_columns
+        self.clock_folds = clock_folds
 
     # -- the job -------------------------------------------------------------
     def fit(self, train: dataio.Measurements, test: dataio.Measurements | None = None) -> CloseLoop:
@@ -350,13 +352,13 @@ class CloseLoop(EstimatorSettings):
         the job's :class:`~l1b2.closeloop.stages.StageClock` (refits and evaluations are counted on it).
         ``other``: None, or the pure-slip baseline's fit (a callable) from which every named pick is confirmed
         (:mod:`l1b2.closeloop.crosscheck`; the checks go to ``it.checks``).
-        Candidates that depend on the session clock are scored and cross-validated on contiguous session
-        blocks, the others on the stratified run folds; the current model is cross-validated on the same
-        folds as each.
+        Candidates that depend on the session clock are scored and cross-validated on the session's folds
+        (``clock_folds``), the others on the stratified run folds; the current model is cross-validated on the
+        same folds as each.
         """
         schemes = {False: stratified_folds(dtr, self.refit_folds, self.seed),
-                   True: session_blocks(dtr, self.refit_folds)}
-        screen_blocks = session_blocks(dtr, self.k_folds)
+                   True: clock_folds(dtr, self.refit_folds, self.clock_folds)}
+        screen_blocks = clock_folds(dtr, self.k_folds, self.clock_folds)
         check = None if other is None else PureSlipCheck(
             other, dtr, mask, m_s, lambda c: schemes[time_dependent(c)], self.refit_settings(),
             min_gain=self.min_cv_gain, final_nfev=self.final_nfev, clock=say)
@@ -598,7 +600,7 @@ class CloseLoop(EstimatorSettings):
                       "refit_folds": self.refit_folds, "min_cv_gain": self.min_cv_gain,
                       "min_cv_drop": self.min_cv_drop, "screen_alpha": self.screen_alpha,
                       "noise_fit": self.noise_fit, "noise": self.noise,
-                      "max_rounds": self.max_rounds, "run_level": self.run_level,
+                      "max_rounds": self.max_rounds, "run_level": self.run_level, "clock_folds": self.clock_folds,
                       "response_columns": (list(self.response_columns) if self.response_columns is not None
                                            else None)},
             "regressor_evidence": [[e.to_dict() for e in rnd] for rnd in a.rounds],
