@@ -8,7 +8,7 @@ export OPENBLAS_NUM_THREADS ?= 1
 export MPLBACKEND ?= Agg
 # pytest-xdist workers for `make test` (the CI machine has 2 cores); modules stay whole on one worker and are
 # handed out in collection order, the costliest modules first (tests/conftest.py COSTLY_FIRST, decision 0030).
-# `make test` runs the not-slow tests and the slow ones marked ci_slow (three realistic close-loop cases, decisions 0037, 0050 and 0054)
+# `make test` runs the not-slow tests and the slow ones marked ci_slow (twelve realistic close-loop cases: the eleven single effects and the logged temperature, decisions 0054 and 0074)
 TEST_WORKERS ?= 2
 
 .PHONY: docs venv test test-slow test-all check-install fmus demo dist bench clean
