@@ -86,9 +86,10 @@ from .candidates import (CandidateSource, Context, baseline_damping, channels_of
                          training_summary)
 from .stages import StageClock
 from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT_FOLDS, DEFAULT_REFIT_NFEV,
-                         Directions, EffectSet, RefitCV, RefitSettings, Validated, accepts, added_columns,
-                         chain_cv_errors, collinear, cv_errors, fold_start_phi, materiality, named_reading, refit,
-                         session_blocks, stratified_folds, time_dependent, validated)
+                         DEFAULT_REFIT_REPEATS, Directions, EffectSet, RefitCV, RefitSettings, Validated, accepts,
+                         added_columns, chain_cv_errors, collinear, cv_errors, fold_start_phi, materiality,
+                         named_reading, refit, repeated_folds, session_blocks, stratified_folds, time_dependent,
+                         validated)
 from .baselines import choose_baseline, identify_families, retag_structural
 from .crosscheck import PureSlipCheck, identified_pick, score_of, withdrawn_note
 from .events import session, with_event_clocks
@@ -148,6 +149,8 @@ class CloseLoop(EstimatorSettings):
         Candidates (best of their family by linearised gain) refit and cross-validated per round.
     refit_folds : int
         Folds over runs of the cross-validated refit (stratified by direction and voltage).
+    refit_repeats : int
+        Splits of the runs into ``refit_folds`` folds for a round's acceptance (:func:`repeated_folds`, from ``seed``).
     min_cv_gain : float
         Smallest relative fall of the cross-validated free-run sum of squares (in most folds) to add an effect.
     min_cv_drop : float
@@ -199,7 +202,7 @@ class CloseLoop(EstimatorSettings):
     def __init__(self, *, order: int = 8, k_folds: int = 5, alpha: float = DEFAULT_ALPHA,
                  min_gain: float = SHORTLIST_MIN_GAIN, parsimony: float = DEFAULT_PARSIMONY, seed: int = 0,
                  n_starts: int = 4, library: CandidateSource | None = None, progress=None, max_rounds: int = 3,
-                 shortlist: int = 2, refit_folds: int = DEFAULT_REFIT_FOLDS,
+                 shortlist: int = 2, refit_folds: int = DEFAULT_REFIT_FOLDS, refit_repeats: int = DEFAULT_REFIT_REPEATS,
                  min_cv_gain: float = DEFAULT_MIN_CV_GAIN, min_cv_drop: float = DEFAULT_MIN_CV_DROP,
                  refit_nfev: int = DEFAULT_REFIT_NFEV,
                  final_nfev: int = 60, screen_alpha: float | None = 0.01, noise_fit: str = "alternate",
@@ -218,7 +221,7 @@ class CloseLoop(EstimatorSettings):
         self.progress = progress
         self.max_rounds = max_rounds
         self.shortlist = shortlist
-        self.refit_folds = refit_folds
+        self.refit_folds, self.refit_repeats = refit_folds, refit_repeats
         self.min_cv_gain = min_cv_gain
         self.min_cv_drop = min_cv_drop
         self.refit_nfev = refit_nfev
@@ -354,7 +357,7 @@ class CloseLoop(EstimatorSettings):
         blocks, the others on the stratified run folds; the current model is cross-validated on the same
         folds as each.
         """
-        schemes = {False: stratified_folds(dtr, self.refit_folds, self.seed),
+        schemes = {False: repeated_folds(dtr, self.refit_folds, self.refit_repeats, self.seed),
                    True: session_blocks(dtr, self.refit_folds)}
         screen_blocks = session_blocks(dtr, self.k_folds)
         check = None if other is None else PureSlipCheck(
@@ -594,8 +597,8 @@ class CloseLoop(EstimatorSettings):
             "refit_trials": [[t.to_dict() for t in rnd] for rnd in it.trials],
             "baseline_choice": getattr(self, "baseline_choice_", {}),
             "rules": {"min_gain": self.min_gain, "alpha": self.alpha, "parsimony": self.parsimony,
-                      "k_folds": self.k_folds, "shortlist": self.shortlist,
-                      "refit_folds": self.refit_folds, "min_cv_gain": self.min_cv_gain,
+                      "k_folds": self.k_folds, "shortlist": self.shortlist, "refit_folds": self.refit_folds,
+                      "refit_repeats": self.refit_repeats, "min_cv_gain": self.min_cv_gain,
                       "min_cv_drop": self.min_cv_drop, "screen_alpha": self.screen_alpha,
                       "noise_fit": self.noise_fit, "noise": self.noise,
                       "max_rounds": self.max_rounds, "run_level": self.run_level,
