@@ -499,3 +499,18 @@ def test_one_split_is_todays_rule_exactly(monkeypatch):
     assert [f.tolist() for f in acc.repeated_folds(df, 4, 1, seed=3)] == [
         f.tolist() for f in acc.stratified_folds(df, 4, seed=3)]
     assert acc.mean_per_run([{0: 0.1, 1: 0.7}, {2: 0.3}]) == {0: 0.1, 1: 0.7, 2: 0.3}
+
+
+def test_the_loops_refit_folds_are_repeated_only_for_the_stratified_scheme():
+    # reference: the loop's refit folds for refit_repeats = R are repeated_folds(df, k, R, seed) for a candidate
+    # that does not read the session clock and the k session blocks (one split) for one that does; the setting is
+    # a constructor argument of the loop (get_params / set_params)
+    from l1b2.closeloop.loop import CloseLoop
+    df = _runs_frame()
+    s = acc.refit_schemes(df, 4, 3, seed=5)
+    assert [f.tolist() for f in s[False]] == [f.tolist() for f in acc.repeated_folds(df, 4, 3, seed=5)]
+    assert [f.tolist() for f in s[True]] == [f.tolist() for f in acc.session_blocks(df, 4)]
+    assert acc.held_out_times(s[False]) == 3 and acc.held_out_times(s[True]) == 1
+    loop = CloseLoop(refit_repeats=3)
+    assert loop.get_params()["refit_repeats"] == 3 and CloseLoop().refit_repeats == acc.DEFAULT_REFIT_REPEATS == 1
+    assert loop.set_params(refit_repeats=2).refit_repeats == 2

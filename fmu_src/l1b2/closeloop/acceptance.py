@@ -249,6 +249,13 @@ def session_blocks(df: pd.DataFrame, k: int) -> list[np.ndarray]:
     return [b for b in np.array_split(ids, min(k, len(ids))) if len(b)]
 
 
+def refit_schemes(df: pd.DataFrame, k: int, repeats: int = 1, seed: int = 0) -> dict:
+    """The folds of a round's cross-validated refits: ``{False: repeated_folds(df, k, repeats, seed), True:
+    session_blocks(df, k)}``, keyed by whether the candidate depends on the session clock (:func:`time_dependent`);
+    contiguous session blocks are one split whatever ``repeats`` (another shuffle gives the same blocks)."""
+    return {False: repeated_folds(df, k, repeats, seed), True: session_blocks(df, k)}
+
+
 #: the signals of the session clock (:data:`l1b2.predictor.effects.SIGNALS` and the channel family's)
 SESSION_SIGNALS = frozenset({"t", "col:time_s", "run:time_s"})
 

@@ -88,7 +88,7 @@ from .stages import StageClock
 from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT_FOLDS, DEFAULT_REFIT_NFEV,
                          DEFAULT_REFIT_REPEATS, Directions, EffectSet, RefitCV, RefitSettings, Validated, accepts,
                          added_columns, chain_cv_errors, collinear, cv_errors, fold_start_phi, materiality,
-                         named_reading, refit, repeated_folds, session_blocks, stratified_folds, time_dependent,
+                         named_reading, refit, refit_schemes, session_blocks, stratified_folds, time_dependent,
                          validated)
 from .baselines import choose_baseline, identify_families, retag_structural
 from .crosscheck import PureSlipCheck, identified_pick, score_of, withdrawn_note
@@ -150,7 +150,7 @@ class CloseLoop(EstimatorSettings):
     refit_folds : int
         Folds over runs of the cross-validated refit (stratified by direction and voltage).
     refit_repeats : int
-        Splits of the runs into ``refit_folds`` folds for a round's acceptance (:func:`repeated_folds`, from ``seed``).
+        Splits of the runs into ``refit_folds`` folds for a round's acceptance (:func:`refit_schemes`, from ``seed``).
     min_cv_gain : float
         Smallest relative fall of the cross-validated free-run sum of squares (in most folds) to add an effect.
     min_cv_drop : float
@@ -357,8 +357,7 @@ class CloseLoop(EstimatorSettings):
         blocks, the others on the stratified run folds; the current model is cross-validated on the same
         folds as each.
         """
-        schemes = {False: repeated_folds(dtr, self.refit_folds, self.refit_repeats, self.seed),
-                   True: session_blocks(dtr, self.refit_folds)}
+        schemes = refit_schemes(dtr, self.refit_folds, self.refit_repeats, self.seed)
         screen_blocks = session_blocks(dtr, self.k_folds)
         check = None if other is None else PureSlipCheck(
             other, dtr, mask, m_s, lambda c: schemes[time_dependent(c)], self.refit_settings(),
