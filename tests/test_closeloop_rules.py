@@ -389,3 +389,128 @@ def test_generic_terms_against_their_formulas():
     pair = fx.effect_features({"kind": "smooth_pair", "a": "direction", "b": "voltage", **rng}, x)
     np.testing.assert_allclose(pair, np.column_stack([d * u, d * u ** 2]))
     np.testing.assert_allclose(fx.effect_features({"kind": "smooth", "regressor": "time", **rng}, x).sum(axis=1), 1.0)
+
+
+# ---------------------------------------------------------------------------
+# repeated cross-validation of the refit's acceptance
+# ---------------------------------------------------------------------------
+@pytest.mark.parametrize("k,repeats", [(2, 1), (4, 1), (4, 2), (5, 3)])
+def test_repeated_folds_hold_out_every_run_exactly_repeats_times(k, repeats):
+    # reference: split j (of R) is stratified_folds(df, k, seed) for j = 0 and stratified_folds(df, k, [seed, j])
+    # after it; each split is a partition of the runs, so every run is held out exactly R times; R = 1 is
+    # stratified_folds itself; the list is a function of the seed
+    df = _runs_frame()
+    runs = sorted(pd.unique(df["run"]).tolist())
+    folds = acc.repeated_folds(df, k, repeats, seed=7)
+    assert len(folds) == k * repeats
+    for j in range(repeats):
+        split = folds[j * k:(j + 1) * k]
+        assert sorted(np.concatenate(split).tolist()) == runs                       # one partition per split
+        ref = acc.stratified_folds(df, k, seed=7 if j == 0 else [7, j])
+        assert [f.tolist() for f in split] == [f.tolist() for f in ref]
+    held, counts = np.unique(np.concatenate(folds), return_counts=True)
+    assert held.tolist() == runs and set(counts.tolist()) == {repeats}
+    assert acc.held_out_times(folds) == repeats
+    assert [f.tolist() for f in acc.repeated_folds(df, k, repeats, seed=7)] == [f.tolist() for f in folds]
+    if repeats > 1:
+        assert [f.tolist() for f in folds[:k]] != [f.tolist() for f in folds[k:2 * k]]   # another shuffle
+    with pytest.raises(ValueError):
+        acc.held_out_times(folds + [folds[0]])         # the first fold's runs held out once more than the others
+
+
+#: four runs in two splits of two folds; per split, each model's held-out SSE of every run (written out)
+SPLITS = {"A": [[0, 1], [2, 3]], "B": [[0, 2], [1, 3]]}
+RUN_SSE = {"current": {"A": {0: 10, 1: 12, 2: 8, 3: 10}, "B": {0: 12, 1: 10, 2: 8, 3: 14}},
+           "refit": {"A": {0: 6, 1: 13, 2: 5, 3: 11}, "B": {0: 8, 1: 9, 2: 7, 3: 14}},
+           "other": {"A": {0: 5, 1: 12, 2: 5, 3: 10}, "B": {0: 7, 1: 10, 2: 6, 3: 13}},
+           "split_a_only": {"A": {0: 6, 1: 12, 2: 5, 3: 10}, "B": {0: 13, 1: 10, 2: 8, 3: 14}}}
+
+
+def _repeated_errors(monkeypatch, splits):
+    """``cv_errors`` of the four models of :data:`RUN_SSE` on the folds of ``splits`` (a fold's refit replaced by
+    the written-out per-run SSEs; 100 for the measured speed's sum of squares of every fold)."""
+    def fake(df, mask, m_s, held, init, effects, settings):
+        name = next(s for s in splits if any(sorted(held) == f for f in SPLITS[s]))
+        per_run = {r: float(RUN_SSE[effects][name][r]) for r in held}
+        return sum(per_run.values()), 100.0, False, 1, per_run
+    monkeypatch.setattr(acc, "fold_error", fake)
+    folds = [np.array(f) for s in splits for f in SPLITS[s]]
+    return dict(zip(RUN_SSE, acc.cv_errors(None, None, 1.0, folds, None, [(m, None) for m in RUN_SSE],
+                                           acc.RefitSettings())))
+
+
+def test_repeated_cv_pools_the_gain_the_majority_and_each_runs_error_over_the_splits(monkeypatch):
+    # reference, by hand: folds A[0,1], A[2,3], B[0,2], B[1,3]. Current fold SSEs [22, 18, 20, 24] (sum 84), the
+    # refit's [19, 16, 15, 23] (sum 73): pooled gain 1 - 73 / 84, 4 of 4 folds fell. Per run, the mean over its two
+    # held-out predictions: current [11, 11, 8, 12] (sum 42 = 84 / 2, mean 10.5), refit [7, 11, 6, 12.5];
+    # delta = (current - refit) / 10.5 = [4, 0, 2, -0.5] / 10.5: mean 5.5 / 42 = 0.130952 (= 1 - 36.5 / 42, the
+    # pooled gain again); [4, 0, 2, -0.5] has mean 1.375 and sum of squared deviations 20.25 - 4 * 1.375**2 =
+    # 12.6875, so se = sqrt(12.6875 / 3) / 10.5 / sqrt(4); 2 of the 4 runs fell (0 and 2)
+    e = _repeated_errors(monkeypatch, "AB")
+    cur, ext = e["current"], e["refit"]
+    assert cur.repeats == 2 and cur.sse.tolist() == [22, 18, 20, 24] and ext.sse.tolist() == [19, 16, 15, 23]
+    assert cur.run_sse == {0: 11, 1: 11, 2: 8, 3: 12} and ext.run_sse == {0: 7, 1: 11, 2: 6, 3: 12.5}
+    t = acc.RefitCV(None, cur, ext)
+    assert t.gain == pytest.approx(1 - 73 / 84, rel=1e-12) and t.folds_improved == 4
+    assert cur.nrmse == pytest.approx(np.sqrt(84 / 400), rel=1e-12)
+    gain, se, improved, n = acc.run_evidence(t)
+    assert gain == pytest.approx(5.5 / 42, rel=1e-12) and gain == pytest.approx(t.gain, rel=1e-12)
+    assert se == pytest.approx(np.sqrt(12.6875 / 3) / 10.5 / 2, rel=1e-12) and (improved, n) == (2, 4)
+    # the one-standard-error rule paired per run, on the runs' means: other's per-run means [6, 11, 5.5, 11.5];
+    # delta = (refit - other) / 10.5 = [1, 0, 0.5, 1] / 10.5: gap 2.5 / 42, sum of squared deviations
+    # 2.25 - 4 * 0.625**2 = 0.6875, se = sqrt(0.6875 / 3) / 10.5 / 2
+    o = acc.RefitCV(None, cur, e["other"])
+    gap, se_r = acc.one_se_gap_per_run(t, o)
+    assert gap == pytest.approx(2.5 / 42, rel=1e-12) and gap == pytest.approx(o.gain - t.gain, rel=1e-12)
+    assert se_r == pytest.approx(np.sqrt(0.6875 / 3) / 10.5 / 2, rel=1e-12)
+    # per fold: the other's fold SSEs [17, 15, 13, 23]; delta = [2, 1, 2, 0] / 21 (mean of current 21): gap 5 / 84,
+    # sd of [2, 1, 2, 0] = sqrt(2.75 / 3), over the sqrt of 4 folds / 2 splits = sqrt(2), not sqrt(4)
+    fgap, fse = acc.one_se_gap(t, o)
+    assert fgap == pytest.approx(5 / 84, rel=1e-12)
+    assert fse == pytest.approx(np.sqrt(2.75 / 3) / 21 / np.sqrt(2), rel=1e-12)
+
+
+def test_the_fold_majority_of_repeated_cv_is_over_every_split_s_folds(monkeypatch):
+    # reference: split A alone: fold SSEs current [22, 18], refit [18, 15]: gain 1 - 33 / 40 = 0.175, 2 of 2 folds,
+    # accepted. With split B too: current [22, 18, 20, 24], refit [18, 15, 21, 24]: gain 1 - 78 / 84 = 0.0714
+    # (above min_gain 0.03) but 2 of the 4 folds fell, not more than half: refused
+    one = _repeated_errors(monkeypatch, "A")
+    t1 = acc.RefitCV(None, one["current"], one["split_a_only"])
+    assert t1.gain == pytest.approx(0.175, rel=1e-12) and t1.folds_improved == 2
+    assert acc.accepts(t1, min_gain=0.03, min_drop=0.0)
+    two = _repeated_errors(monkeypatch, "AB")
+    t2 = acc.RefitCV(None, two["current"], two["split_a_only"])
+    assert t2.gain == pytest.approx(1 - 78 / 84, rel=1e-12) and t2.folds_improved == 2
+    assert not acc.accepts(t2, min_gain=0.03, min_drop=0.0)
+
+
+def test_one_split_is_todays_rule_exactly(monkeypatch):
+    # reference: with one split every run is held out once: its SSE is the fold's own number (no mean taken), the
+    # errors' repeats is 1 and the fold-level standard error is sd over the k folds / sqrt(k), as before repeats
+    e = _repeated_errors(monkeypatch, "A")
+    cur, ext, oth = e["current"], e["refit"], e["other"]
+    assert cur.repeats == 1 and cur.run_sse == RUN_SSE["current"]["A"] and ext.run_sse == RUN_SSE["refit"]["A"]
+    assert all(type(x) is float for x in ext.run_sse.values())
+    t, o = acc.RefitCV(None, cur, ext), acc.RefitCV(None, cur, oth)
+    # fold SSEs: current [22, 18], refit [19, 16], other [17, 15]; delta = [2, 1] / 20: gap 0.075, sd sqrt(0.5) / 20
+    assert acc.one_se_gap(t, o) == pytest.approx((0.075, np.sqrt(0.5) / 20 / np.sqrt(2)), rel=1e-12)
+    assert acc.paired_gap([19, 16], [17, 15], [22, 18]) == acc.paired_gap([19, 16], [17, 15], [22, 18], repeats=1)
+    df = _runs_frame()
+    assert [f.tolist() for f in acc.repeated_folds(df, 4, 1, seed=3)] == [
+        f.tolist() for f in acc.stratified_folds(df, 4, seed=3)]
+    assert acc.mean_per_run([{0: 0.1, 1: 0.7}, {2: 0.3}]) == {0: 0.1, 1: 0.7, 2: 0.3}
+
+
+def test_the_loops_refit_folds_are_repeated_only_for_the_stratified_scheme():
+    # reference: the loop's refit folds for refit_repeats = R are repeated_folds(df, k, R, seed) for a candidate
+    # that does not read the session clock and the k session blocks (one split) for one that does; the setting is
+    # a constructor argument of the loop (get_params / set_params)
+    from l1b2.closeloop.loop import CloseLoop
+    df = _runs_frame()
+    s = acc.refit_schemes(df, 4, 3, seed=5)
+    assert [f.tolist() for f in s[False]] == [f.tolist() for f in acc.repeated_folds(df, 4, 3, seed=5)]
+    assert [f.tolist() for f in s[True]] == [f.tolist() for f in acc.session_blocks(df, 4)]
+    assert acc.held_out_times(s[False]) == 3 and acc.held_out_times(s[True]) == 1
+    loop = CloseLoop(refit_repeats=3)
+    assert loop.get_params()["refit_repeats"] == 3 and CloseLoop().refit_repeats == acc.DEFAULT_REFIT_REPEATS == 1
+    assert loop.set_params(refit_repeats=2).refit_repeats == 2

@@ -120,13 +120,16 @@ def test_the_loop_folds_clock_candidates_by_its_setting(scheme, monkeypatch):
     class Stop(Exception):
         pass
 
+    real = acc.clock_folds
+
     def spy(d, k, sch):
         seen.append((k, sch))
         if len(seen) == 2:
             raise Stop
-        return acc.clock_folds(d, k, sch)
+        return real(d, k, sch)
 
-    monkeypatch.setattr(loop_mod, "clock_folds", spy)
+    monkeypatch.setattr(loop_mod, "clock_folds", spy)               # the screen's folds
+    monkeypatch.setattr(acc, "clock_folds", spy)                    # the refit's, through refit_schemes
     assert CloseLoop().clock_folds == "blocks"                       # the default: contiguous blocks
     est = CloseLoop(clock_folds=scheme, k_folds=5, refit_folds=3)
     assert est.get_params()["clock_folds"] == scheme

@@ -40,6 +40,8 @@ from . import chain
 from .candidates import CandidateForce
 
 DEFAULT_REFIT_FOLDS = 4
+#: splits of TRAIN's runs into the refit's folds (repeated cross-validation, :func:`repeated_folds`)
+DEFAULT_REFIT_REPEATS = 1
 DEFAULT_REFIT_NFEV = 10
 DEFAULT_MIN_CV_GAIN = 0.03
 #: smallest fall of the cross-validated free-run nrmse (absolute, share of the speed's rms): a relative gain of a
@@ -197,8 +199,10 @@ def explained_share(x: np.ndarray, Y: np.ndarray, N: np.ndarray | None = None) -
     return float(min(c @ c / nx, 1.0))
 
 
-def stratified_folds(df: pd.DataFrame, k: int, seed: int = 0) -> list[np.ndarray]:
-    """Run ids in ``k`` folds: seeded shuffle, then dealt in turn within each (direction, voltage) stratum."""
+def stratified_folds(df: pd.DataFrame, k: int, seed=0) -> list[np.ndarray]:
+    """Run ids in ``k`` folds: seeded shuffle, then dealt in turn within each (direction, voltage) stratum.
+
+    ``seed``: an int or a sequence of ints (the shuffle's :func:`numpy.random.default_rng` seed)."""
     first = df.groupby(dataio.RUN, sort=False)[[dataio.DIRECTION, dataio.VOLTAGE]].first()
     runs = first.index.to_numpy()
     rng = np.random.default_rng(seed)
@@ -209,6 +213,28 @@ def stratified_folds(df: pd.DataFrame, k: int, seed: int = 0) -> list[np.ndarray
     ids = ranked.index.to_numpy()
     k = min(k, len(ids))
     return [ids[i::k] for i in range(k)]
+
+
+def repeated_folds(df: pd.DataFrame, k: int, repeats: int = 1, seed: int = 0) -> list[np.ndarray]:
+    """``repeats`` stratified splits of the runs into ``k`` folds each, one after the other (``repeats * k`` folds).
+
+    Split 0 is ``stratified_folds(df, k, seed)``; split ``j >= 1`` is shuffled by the stream ``[seed, j]``: the
+    whole list is a function of ``seed``, and ``repeats=1`` gives :func:`stratified_folds` itself. Every run is
+    in exactly one fold of each split, so it is held out exactly ``repeats`` times (:func:`held_out_times`).
+    """
+    return [f for j in range(max(int(repeats), 1)) for f in stratified_folds(df, k, seed if j == 0 else [seed, j])]
+
+
+def held_out_times(folds) -> int:
+    """How many times every run is held out over ``folds`` (the number of splits they come from).
+
+    Raises ValueError when there is no run or when the runs are not all held out the same number of times.
+    """
+    ids = np.concatenate([np.asarray(f).ravel() for f in folds]) if len(folds) else np.zeros(0)
+    _, counts = np.unique(ids, return_counts=True)
+    if not len(counts) or np.any(counts != counts[0]):
+        raise ValueError("every run must be held out the same number of times over the folds")
+    return int(counts[0])
 
 
 def session_blocks(df: pd.DataFrame, k: int) -> list[np.ndarray]:
@@ -264,6 +290,13 @@ def clock_folds(df: pd.DataFrame, k: int, scheme: str = "blocks") -> list[np.nda
     if scheme not in CLOCK_FOLDS:
         raise ValueError(f"clock_folds must be one of {sorted(CLOCK_FOLDS)}, got {scheme!r}")
     return CLOCK_FOLDS[scheme](df, k)
+
+
+def refit_schemes(df: pd.DataFrame, k: int, repeats: int = 1, seed: int = 0, clock: str = "blocks") -> dict:
+    """The folds of a round's cross-validated refits: ``{False: repeated_folds(df, k, repeats, seed), True:
+    clock_folds(df, k, clock)}``, keyed by whether the candidate depends on the session clock
+    (:func:`time_dependent`); the session's folds are one split whatever ``repeats`` (they are not shuffled)."""
+    return {False: repeated_folds(df, k, repeats, seed), True: clock_folds(df, k, clock)}
 
 
 #: the signals of the session clock (:data:`l1b2.predictor.effects.SIGNALS` and the channel family's)
@@ -360,9 +393,12 @@ def refit(df: pd.DataFrame, mask: np.ndarray, m_s: float, init, effects: EffectS
 class FoldErrors:
     """Held-out free-run sums of squares per fold (on the evaluation mask) and the measured speed's.
 
-    ``run_sse``: the same held-out sums of squares per run (run id -> SSE; every held-out run with at least one
-    sample on the evaluation mask, each in exactly one fold, so they add up to ``sse``'s folds; empty when not
-    kept). A fold that failed gives its runs ``inf``.
+    The folds may come from ``repeats`` splits of the runs (:func:`repeated_folds`: every run held out exactly
+    ``repeats`` times; ``sse`` has one entry per fold of every split). ``run_sse``: each held-out run's sum of
+    squares, averaged over the ``repeats`` times it was held out (run id -> SSE; every run with at least one
+    sample on the evaluation mask; with one split each run is in exactly one fold, so they add up to ``sse``'s
+    folds, and with ``repeats`` splits they add up to ``sum(sse) / repeats``; empty when not kept). A fold that
+    failed gives its runs ``inf``.
     """
 
     sse: np.ndarray
@@ -370,6 +406,7 @@ class FoldErrors:
     failed: int = 0
     nfev: int = 0        #: function evaluations of the folds' refits (all folds)
     run_sse: dict = field(default_factory=dict)
+    repeats: int = 1     #: splits the folds come from (each run held out this many times)
 
     @property
     def nrmse(self) -> float:
@@ -410,6 +447,7 @@ class RefitCV:
         return {"effect": c.family, "label": c.label, "regressors": list(c.regressors),
                 "cv_free_run_nrmse_current": self.current.nrmse, "cv_free_run_nrmse_refit": self.extended.nrmse,
                 "cv_gain": self.gain, "folds_improved": self.folds_improved, "folds": len(self.current.sse),
+                "repeats": self.current.repeats,
                 "cv_gain_se_runs": None if ev is None else ev[1],
                 "runs_improved": None if ev is None else ev[2], "runs": None if ev is None else ev[3],
                 "linearised_gain": self.linear_gain}
@@ -418,7 +456,8 @@ class RefitCV:
 def run_evidence(r: RefitCV) -> tuple[float, float, int, int] | None:
     """``(gain, se, improved, n)``: the trial's pooled CV gain paired per held-out run against the current model.
 
-    Every TRAIN run is held out in exactly one fold (:attr:`FoldErrors.run_sse`). Per run ``r`` of ``n``,
+    Every TRAIN run is held out in one fold of each split, its SSE averaged over the splits
+    (:attr:`FoldErrors.run_sse`). Per run ``r`` of ``n``,
     ``delta_r = (SSE_current_r - SSE_refit_r) / mean_r SSE_current_r``: ``gain = mean(delta)`` is
     :attr:`RefitCV.gain` exactly and ``se = sd(delta) / sqrt(n)`` its standard error over the runs
     (:func:`paired_gap`); ``improved`` counts the runs whose held-out SSE fell. None when the two models' runs
@@ -437,7 +476,10 @@ def run_evidence(r: RefitCV) -> tuple[float, float, int, int] | None:
 
 def accepts(r: RefitCV, *, min_gain: float = DEFAULT_MIN_CV_GAIN, min_drop: float = DEFAULT_MIN_CV_DROP) -> bool:
     """At least ``min_gain`` relative fall of the held-out free-run SS, in more than half of the folds, and a
-    fall of the pooled held-out free-run nrmse by at least ``min_drop`` (absolute)."""
+    fall of the pooled held-out free-run nrmse by at least ``min_drop`` (absolute).
+
+    With folds from ``R`` splits (:func:`repeated_folds`) the gain and the nrmse are pooled over all ``R * k``
+    held-out folds (each run counted ``R`` times) and the majority is over the ``R * k`` folds."""
     k = len(r.current.sse)
     return (r.extended.failed == 0 and r.gain >= min_gain and r.folds_improved > k / 2
             and r.current.nrmse - r.extended.nrmse >= min_drop)
@@ -452,12 +494,13 @@ def materiality(candidate: CandidateForce, min_drop: float) -> float:
     return min_drop if candidate.structural else 0.0
 
 
-def paired_gap(sse_a, sse_b, sse_current) -> tuple[float, float] | None:
+def paired_gap(sse_a, sse_b, sse_current, repeats: int = 1) -> tuple[float, float] | None:
     """``(gap, se)`` of two models' held-out sums of squares paired by unit (fold or run), against the current
     model's on the same units: per unit ``i``, ``delta_i = (a_i - b_i) / mean(current)``; ``gap = mean(delta)``,
-    which is exactly ``pooled_gain(current, b) - pooled_gain(current, a)``, and ``se = sd(delta) / sqrt(n)``
-    (sample standard deviation, ``n`` units; 0 with one unit). None when a ``delta`` is not finite or there is no
-    unit."""
+    which is exactly ``pooled_gain(current, b) - pooled_gain(current, a)``, and ``se = sd(delta) / sqrt(n /
+    repeats)`` (sample standard deviation, ``n`` units; 0 with one unit). ``repeats``: the units are the folds
+    of that many splits of the same runs (:func:`repeated_folds`), which hold no more independent units than one
+    split's ``n / repeats`` folds. None when a ``delta`` is not finite or there is no unit."""
     a, b, c = (np.asarray(x, float) for x in (sse_a, sse_b, sse_current))
     n = len(c)
     if not n:
@@ -465,7 +508,7 @@ def paired_gap(sse_a, sse_b, sse_current) -> tuple[float, float] | None:
     delta = (a - b) / max(float(np.mean(c)), 1e-300)
     if not np.all(np.isfinite(delta)):
         return None
-    return float(np.mean(delta)), (float(np.std(delta, ddof=1) / np.sqrt(n)) if n > 1 else 0.0)
+    return float(np.mean(delta)), (float(np.std(delta, ddof=1) / np.sqrt(n / repeats)) if n > 1 else 0.0)
 
 
 def one_se_gap(named: RefitCV, generic: RefitCV) -> tuple[float, float] | None:
@@ -474,12 +517,13 @@ def one_se_gap(named: RefitCV, generic: RefitCV) -> tuple[float, float] | None:
     on the same folds.
 
     Per fold ``f``, ``delta_f = (SSE_named_f - SSE_generic_f) / mean_f SSE_current_f``: their mean is the gap of
-    the pooled gains exactly, and ``se = sd(delta) / sqrt(k)`` (0 with one fold; :func:`paired_gap`).
+    the pooled gains exactly, and ``se = sd(delta) / sqrt(k)`` (0 with one fold; :func:`paired_gap`); with the
+    folds of ``R`` splits, ``sd`` over all ``R * k`` folds and ``k`` the folds of one split.
     """
     cur, other = named.current, generic.current
     if cur is not other and not (np.array_equal(cur.sse, other.sse) and np.array_equal(cur.ss_meas, other.ss_meas)):
         return None
-    return paired_gap(named.extended.sse, generic.extended.sse, cur.sse)
+    return paired_gap(named.extended.sse, generic.extended.sse, cur.sse, repeats=cur.repeats)
 
 
 def one_se_gap_per_run(trial: RefitCV, best: RefitCV) -> tuple[float, float] | None:
@@ -487,7 +531,8 @@ def one_se_gap_per_run(trial: RefitCV, best: RefitCV) -> tuple[float, float] | N
     over the held-out *runs* (paired per run); None when the two were not cross-validated against the same
     current model's per-run errors (the same folds) or a per-run error is missing or not finite.
 
-    Every run is held out in exactly one fold (:attr:`FoldErrors.run_sse`). Per run ``r`` (``n`` runs),
+    Every run is held out in exactly one fold of each of the ``R`` splits, and its SSE is the mean over them
+    (:attr:`FoldErrors.run_sse`). Per run ``r`` (``n`` runs),
     ``delta_r = (SSE_trial_r - SSE_best_r) / mean_r SSE_current_r``: their mean is
     ``(sum SSE_trial - sum SSE_best) / sum SSE_current``, the gap of the pooled gains exactly (the same gap as
     :func:`one_se_gap`'s over folds), and ``se = sd(delta) / sqrt(n)`` (:func:`paired_gap`): with ``n`` runs
@@ -632,20 +677,35 @@ def chain_cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init_
     return tuple(_fold_errors(args, 2, len(folds), settings.client, "l1b2-chain-cv"))
 
 
-def _fold_errors(args: list, n_groups: int, n_folds: int, client, name: str) -> list[FoldErrors]:
+def _fold_errors(args: list, n_groups: int, n_folds: int, client, name: str, repeats: int = 1) -> list[FoldErrors]:
     """Run :func:`fold_error` on every argument tuple (tasks of :func:`l1b2.cluster.run_tasks`); one
-    :class:`FoldErrors` per group of ``n_folds`` consecutive tuples, ``n_groups`` of them."""
+    :class:`FoldErrors` per group of ``n_folds`` consecutive tuples, ``n_groups`` of them (their folds from
+    ``repeats`` splits)."""
     out = [None] * len(args)
     for i, r in run_tasks(fold_error, args, client=client, name=name):
         out[i] = r
     groups = [out[j * n_folds:(j + 1) * n_folds] for j in range(n_groups)]
     return [FoldErrors(np.array([r[0] for r in rows]), np.array([r[1] for r in rows]), sum(bool(r[2]) for r in rows),
-                       sum(int(r[3]) for r in rows), {k: x for r in rows for k, x in r[4].items()}) for rows in groups]
+                       sum(int(r[3]) for r in rows), mean_per_run([r[4] for r in rows]), repeats)
+            for rows in groups]
+
+
+def mean_per_run(fold_run_sse: list) -> dict:
+    """Each run's mean held-out SSE over the folds that held it out (``fold_run_sse``: one ``{run: SSE}`` per
+    fold); a run held out once keeps its SSE exactly."""
+    acc: dict = {}
+    for d in fold_run_sse:
+        for k, x in d.items():
+            acc.setdefault(k, []).append(float(x))
+    return {k: (v[0] if len(v) == 1 else sum(v) / len(v)) for k, v in acc.items()}
 
 
 def cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init, jobs,
               settings: RefitSettings) -> list[FoldErrors]:
     """:class:`FoldErrors` of every job ``(effects, fold_phi)`` on the same ``folds``, all folds as tasks.
+
+    ``folds`` may be the folds of several splits (:func:`repeated_folds`); every run must be held out the same
+    number of times (:func:`held_out_times`, ValueError otherwise), which is the errors' ``repeats``.
 
     ``fold_phi`` (or None): per fold, the start of the last effect's parameters
     (:func:`fold_start_phi`). The ``len(jobs) * len(folds)`` refits are
@@ -659,7 +719,7 @@ def cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init, jobs,
             eff = effects if fold_phi is None else effects.with_phi(
                 np.concatenate([effects.start()[:-len(fold_phi[i])], fold_phi[i]]))
             args.append((df, mask, m_s, fold, init, eff, settings.task()))
-    return _fold_errors(args, len(jobs), len(folds), settings.client, "l1b2-cv-refit")
+    return _fold_errors(args, len(jobs), len(folds), settings.client, "l1b2-cv-refit", held_out_times(folds))
 
 
 def fold_start_phi(S: np.ndarray, A: np.ndarray, y: np.ndarray, runs_m: np.ndarray, folds) -> list[np.ndarray]:

@@ -86,9 +86,10 @@ from .candidates import (CandidateSource, Context, baseline_damping, channels_of
                          training_summary)
 from .stages import StageClock
 from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT_FOLDS, DEFAULT_REFIT_NFEV,
-                         Directions, EffectSet, RefitCV, RefitSettings, Validated, accepts, added_columns,
-                         chain_cv_errors, collinear, cv_errors, fold_start_phi, materiality, named_reading, refit,
-                         clock_folds, stratified_folds, time_dependent, validated)
+                         DEFAULT_REFIT_REPEATS, Directions, EffectSet, RefitCV, RefitSettings, Validated, accepts,
+                         added_columns, chain_cv_errors, clock_folds, collinear, cv_errors, fold_start_phi,
+                         materiality, named_reading, refit, refit_schemes, stratified_folds, time_dependent,
+                         validated)
 from .baselines import choose_baseline, identify_families, retag_structural
 from .crosscheck import PureSlipCheck, identified_pick, score_of, withdrawn_note
 from .events import session, with_event_clocks
@@ -148,14 +149,14 @@ class CloseLoop(EstimatorSettings):
         Candidates (best of their family by linearised gain) refit and cross-validated per round.
     refit_folds : int
         Folds over runs of the cross-validated refit (stratified by direction and voltage).
+    refit_repeats : int
+        Splits of the runs into ``refit_folds`` folds for a round's acceptance (:func:`refit_schemes`, from ``seed``).
     min_cv_gain : float
         Smallest relative fall of the cross-validated free-run sum of squares (in most folds) to add an effect.
     min_cv_drop : float
         Smallest absolute fall of the cross-validated free-run nrmse to add a *structural* term (one that
         relaxes Eq. 29's own linearisation, ``CandidateForce.structural``): the materiality threshold.
-        Other candidates need only ``min_cv_gain`` in most folds: an effect of the data that halves a
-        small held-out error is still a missing effect (reference motor, thermal drift seed 11: CV nrmse
-        0.73 -> 0.41 %, 4 of 4 folds; the absolute threshold refused it).
+        Other candidates need only ``min_cv_gain`` in most folds.
     refit_nfev, final_nfev : int
         Function evaluations of each fold's warm refit and of the joint re-identification after a round.
     screen_alpha : float or None
@@ -201,8 +202,8 @@ class CloseLoop(EstimatorSettings):
                  min_gain: float = SHORTLIST_MIN_GAIN, parsimony: float = DEFAULT_PARSIMONY, seed: int = 0,
                  n_starts: int = 4, library: CandidateSource | None = None, progress=None, max_rounds: int = 3,
                  shortlist: int = 2, refit_folds: int = DEFAULT_REFIT_FOLDS,
-                 min_cv_gain: float = DEFAULT_MIN_CV_GAIN, min_cv_drop: float = DEFAULT_MIN_CV_DROP,
-                 refit_nfev: int = DEFAULT_REFIT_NFEV,
+                 refit_repeats: int = DEFAULT_REFIT_REPEATS, min_cv_gain: float = DEFAULT_MIN_CV_GAIN,
+                 min_cv_drop: float = DEFAULT_MIN_CV_DROP, refit_nfev: int = DEFAULT_REFIT_NFEV,
                  final_nfev: int = 60, screen_alpha: float | None = 0.01, noise_fit: str = "alternate",
                  noise: str = "common", client=None, baseline: str = "eq29", run_level: bool = True,
                  response_columns: tuple | None = None, clock_folds: str = "blocks"):
@@ -219,7 +220,7 @@ class CloseLoop(EstimatorSettings):
         self.progress = progress
         self.max_rounds = max_rounds
         self.shortlist = shortlist
-        self.refit_folds = refit_folds
+        self.refit_folds, self.refit_repeats = refit_folds, refit_repeats
         self.min_cv_gain = min_cv_gain
         self.min_cv_drop = min_cv_drop
         self.refit_nfev = refit_nfev
@@ -356,8 +357,7 @@ class CloseLoop(EstimatorSettings):
         (``clock_folds``), the others on the stratified run folds; the current model is cross-validated on the
         same folds as each.
         """
-        schemes = {False: stratified_folds(dtr, self.refit_folds, self.seed),
-                   True: clock_folds(dtr, self.refit_folds, self.clock_folds)}
+        schemes = refit_schemes(dtr, self.refit_folds, self.refit_repeats, self.seed, self.clock_folds)
         screen_blocks = clock_folds(dtr, self.k_folds, self.clock_folds)
         check = None if other is None else PureSlipCheck(
             other, dtr, mask, m_s, lambda c: schemes[time_dependent(c)], self.refit_settings(),
@@ -596,8 +596,8 @@ class CloseLoop(EstimatorSettings):
             "refit_trials": [[t.to_dict() for t in rnd] for rnd in it.trials],
             "baseline_choice": getattr(self, "baseline_choice_", {}),
             "rules": {"min_gain": self.min_gain, "alpha": self.alpha, "parsimony": self.parsimony,
-                      "k_folds": self.k_folds, "shortlist": self.shortlist,
-                      "refit_folds": self.refit_folds, "min_cv_gain": self.min_cv_gain,
+                      "k_folds": self.k_folds, "shortlist": self.shortlist, "refit_folds": self.refit_folds,
+                      "refit_repeats": self.refit_repeats, "min_cv_gain": self.min_cv_gain,
                       "min_cv_drop": self.min_cv_drop, "screen_alpha": self.screen_alpha,
                       "noise_fit": self.noise_fit, "noise": self.noise,
                       "max_rounds": self.max_rounds, "run_level": self.run_level, "clock_folds": self.clock_folds,
