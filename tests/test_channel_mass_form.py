@@ -145,3 +145,44 @@ def test_the_mass_floor_is_the_smallest_slider_mass_over_trains_range_of_the_cha
         assert got <= dense.min() + 1e-12 and got == pytest.approx(dense.min(), abs=1e-9)
     with pytest.raises(ch.EffectSpecError, match="inertia"):
         ch.mass_floor({**base, "form": "damping"}, (0.1, 0.0), 1.0, 6.0)
+
+
+@pytest.mark.parametrize("shape", ["linear", "quadratic"])
+def test_the_inertia_forms_force_is_the_free_runs_first_order_change_with_the_slider_mass(shape):
+    # reference: the free run with the slider's mass m_s (1 + cols @ phi), differentiated in phi at phi = 0 by
+    # central finite differences, equals the free run's response to the inertia form's force features @ dphi
+    # (an extra force, differentiated the same way), to first order, with a_base the step's own forward difference
+    # of the baseline's free run: the step (m + |m_load|) dv'/dt = -D v' + X + sign(-v') mu_sd (9.81 m + kappa P)
+    # changes with dm by the force dm (-a' + mu_sd 9.81 sign(-v')) = -dm d (a_base + mu_sd 9.81 sign(v_base));
+    # without the guide's weight (mu_sd 0 in the spec) the agreement fails by far; runs that move freely
+    p = example_params()
+    assert p.mu_sd > 0
+    conds = [(324.0, 0.0, 1.0), (300.0, -0.05, -1.0), (260.0, 0.05, 1.0), (324.0, 0.03, -1.0)]
+    s, V0, load, d, t, v_start, run = _runs(conds)
+    payload = np.array([0.0, 60.0, 120.0, 180.0])[run]
+    v0 = sim.free_run(p, s, V0, load, d, t, v_start, M_S, run_index=run)
+    a_fwd = np.zeros_like(v0)
+    for r in range(len(conds)):
+        i = np.flatnonzero(run == r)
+        a_fwd[i[:-1]] = np.diff(v0[i]) / np.diff(t[i])
+    x = {"run:payload_g": payload, "d": d, "a_base": a_fwd, "v_base": v0}
+    spec = {**_spec(payload, shape), "mu_sd": p.mu_sd}
+    Fx = ch.Channel().features(spec, x)
+    Fx_inertia = ch.Channel().features({**spec, "mu_sd": 0.0}, x)
+    np.testing.assert_allclose(Fx, (-M_S * d * (a_fwd + p.mu_sd * 9.81 * np.sign(v0)))[:, None]
+                               * ch.mass_columns(spec, x), rtol=1e-13, atol=1e-15)
+    n_par = Fx.shape[1]
+    eps = 1e-6
+    for j in range(n_par):
+        dp = np.zeros(n_par)
+        dp[j] = eps
+        vm_p, vm_m = (sim.free_run(p, s, V0, load, d, t, v_start, ch.slider_mass(spec, x, sgn * dp), run_index=run)
+                      for sgn in (1, -1))
+        fd_mass = (vm_p - vm_m) / (2 * eps)
+        assert np.max(np.abs(fd_mass)) > 1e-3
+        for F, ok in ((Fx, True), (Fx_inertia, False)):
+            vf_p, vf_m = (sim.free_run(p, s, V0, load, d, t, v_start, M_S, run_index=run,
+                                       extra_force=sgn * eps * F[:, j]) for sgn in (1, -1))
+            fd_force = (vf_p - vf_m) / (2 * eps)
+            err = np.max(np.abs(fd_force - fd_mass)) / np.max(np.abs(fd_mass))
+            assert (err < 1e-6) if ok else (err > 0.1), (j, ok, err)
