@@ -164,7 +164,7 @@ def test_a_channel_gets_every_shape_and_the_load_interaction_with_its_training_r
     ch = {c["name"]: c for c in channels_of(df)}
     assert (ch["aux"]["lo"], ch["aux"]["hi"]) == (1.0, 3.0)
     train = fx.TrainingSummary(0.1, (0.0, 5.1), (-0.02, 0.02), 200.0, {"load_abs": 0.2},
-                               channels=tuple(ch.values()), mu_sd=0.07)
+                               channels=tuple(ch.values()))
     hyps = [h for h in fx.family("channel").grid(train) if h.spec["channel"] == "aux"]
     # constant within runs: the run level only, 3 forms x (3 shapes + the linear and quadratic x load), the
     # inertia form in the 3 shapes (no load interaction), with TRAIN's slider mass, and the damping form in the
@@ -176,10 +176,8 @@ def test_a_channel_gets_every_shape_and_the_load_interaction_with_its_training_r
         + [("damping", s, "") for s in ("linear", "quadratic")])
     for h in hyps:
         assert (h.spec.get("m_s") == 0.1) == (h.spec["form"] == "inertia")
-        # the inertia form carries TRAIN's guide friction coefficient (the weight on the guide) and reads v_base
-        assert (h.spec.get("mu_sd") == 0.07) == (h.spec["form"] == "inertia")
         assert set(h.units) == {"1" if h.spec["form"] == "inertia" else "N"}
-        assert ("v_base" in fx.needs(h.spec)) == (h.spec["form"] in ("damping", "inertia"))
+        assert ("v_base" in fx.needs(h.spec)) == (h.spec["form"] == "damping")
         n = {"linear": 1, "quadratic": 2, "odd": 2}[h.spec.get("shape", "linear")]
         # the inertia form has its constant too: the mass change at the channel's mean
         assert len(h.names) == n * (2 if h.spec.get("by") else 1) + (h.spec["form"] == "inertia")
@@ -199,21 +197,18 @@ def test_a_channel_gets_every_shape_and_the_load_interaction_with_its_training_r
                for h in clock)
 
 
-def test_inertia_channel_form_is_the_channel_times_the_baseline_acceleration_and_the_weight_on_the_guide():
-    # reference: the inertia form written out: the moving mass scaled by the channel, its inertia and its weight on
-    # the guide, dF = -m_s d (a_base + mu_sd 9.81 sign(v_base)) times the shape's columns (z, or zc and its Hermite
-    # polynomial; zc clipped to TRAIN's range) and a constant column (the mass change at the channel's mean), a_base
-    # and v_base the baseline's predicted acceleration and speed (a sample at rest: no weight term); the kernel of
-    # Predictor.fmu gives the same force; a spec without mu_sd is the inertia alone
+def test_inertia_channel_form_is_the_channel_times_the_baseline_acceleration():
+    # reference: the inertia form written out: the moving mass scaled by the channel, dF = -m_s d a_base times the
+    # shape's columns (z, or zc and its Hermite polynomial; zc clipped to TRAIN's range) and a constant column (the
+    # mass change at the channel's mean), a_base the baseline's predicted acceleration; the kernel of Predictor.fmu
+    # gives the same force
     from l1b2.predictor import effects as fx
     from l1b2.predictor.effects import kernels as ek
     c = np.array([1.0, 3.0, 2.5, 9.0, 0.0])                 # 9 and 0 lie beyond TRAIN's range 1-6
     V0, d = np.array([300.0, 150.0, 240.0, 330.0, 210.0]), np.array([1.0, -1.0, 1.0, -1.0, 1.0])
     a_base = np.array([2.0, -0.5, 0.0, 1.5, -3.0])
-    v_base = np.array([0.1, -0.2, 0.0, 0.05, -0.01])          # the last moves against its drive direction
-    m_s, mu_sd = 0.12, 0.06
-    x = {"V0": V0, "d": d, "T": c, "a_base": a_base, "v_base": v_base, "col:temperature_C": c,
-         "run:temperature_C": c}
+    m_s = 0.12
+    x = {"V0": V0, "d": d, "T": c, "a_base": a_base, "col:temperature_C": c, "run:temperature_C": c}
     rows = np.column_stack([x[sg] if sg in x else np.zeros(5) for sg in fx.SIGNALS])
     z = (c - 2.0) / 0.5
     zc = np.array([-2.0, 2.0, 1.0, 8.0, -2.0])
@@ -222,28 +217,22 @@ def test_inertia_channel_form_is_the_channel_times_the_baseline_acceleration_and
     for shape, B in shapes.items():
         for level in ("sample", "run"):
             s = {"kind": "channel", "channel": "temperature_C", "mean": 2.0, "sd": 0.5, "lo": 1.0, "hi": 6.0,
-                 "shape": shape, "level": level, "form": "inertia", "m_s": m_s, "mu_sd": mu_sd, "run_spread": 0.0}
-            factor = -m_s * d * (a_base + mu_sd * 9.81 * np.array([1.0, -1.0, 0.0, 1.0, -1.0]))
-            want = factor[:, None] * np.column_stack([B, np.ones(5)])
+                 "shape": shape, "level": level, "form": "inertia", "m_s": m_s, "run_spread": 0.0}
+            want = (-m_s * d * a_base)[:, None] * np.column_stack([B, np.ones(5)])
             np.testing.assert_allclose(fx.effect_features(s, x), want)
             phi = np.linspace(0.4, -0.3, B.shape[1] + 1)
             kind, q = ek.spec_scalars(s)
             got = [ek.effect_force(kind, row.tolist(), q, phi.tolist()) for row in rows]
             np.testing.assert_allclose(got, want @ phi, rtol=0, atol=1e-12)
-            assert {"a_base", "v_base"} <= fx.needs(s) and fx.family("channel").width(s) == B.shape[1] + 1
+            assert "a_base" in fx.needs(s) and fx.family("channel").width(s) == B.shape[1] + 1
     # the linear shape is inertia_mismatch's constant mass error times z (a relative mass change per sd), then
     # inertia_mismatch's own column (the mass change at the channel's mean)
     lin = {"kind": "channel", "channel": "temperature_C", "mean": 2.0, "sd": 0.5, "level": "sample",
            "form": "inertia", "m_s": m_s}
     mis = fx.effect_features({"kind": "inertia_mismatch", "m_s": m_s}, x)[:, 0]
     np.testing.assert_allclose(fx.effect_features(lin, x), np.column_stack([mis * z, mis]))
-    kind, q = ek.spec_scalars({**lin, "run_spread": 0.0})
-    np.testing.assert_allclose([ek.effect_force(kind, row.tolist(), q, [0.3, -0.2]) for row in rows],
-                               np.column_stack([mis * z, mis]) @ [0.3, -0.2], rtol=0, atol=1e-12)
     with pytest.raises(fx.EffectSpecError, match="m_s"):
         fx.effect_features({**lin, "m_s": 0.0}, x)
-    with pytest.raises(fx.EffectSpecError, match="mu_sd"):
-        fx.effect_features({**lin, "mu_sd": -0.1}, x)
 
 
 def test_a_payload_whose_mean_is_not_zero_is_recovered_by_the_inertia_form_with_its_constant():

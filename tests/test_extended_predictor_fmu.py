@@ -88,8 +88,7 @@ def pool():
         firsts = frame.groupby(dataio.RUN, sort=False)[dataio.SPEED].first().to_numpy()
         return plain.free_run(frame[dataio.TIME], frame[dataio.POSITION], frame[dataio.VOLTAGE], frame[dataio.LOAD],
                               frame[dataio.DIRECTION], firsts, frame[dataio.RUN].to_numpy())
-    ctx = Context(baseline_free_run, base.slider_mass_kg, (T0, T0 + 1.0), (-0.02, 0.02), temperature_ref=31.0,
-                  mu_sd=base.params.mu_sd)
+    ctx = Context(baseline_free_run, base.slider_mass_kg, (T0, T0 + 1.0), (-0.02, 0.02), temperature_ref=31.0)
     return full_library()(ctx, _frame()) + _run_level_candidates(ctx, _frame())
 
 
@@ -445,8 +444,7 @@ def test_run_level_kernels_equal_the_features_on_runs_that_hold_their_inputs(poo
     load_abs = float(np.max(np.abs(df[dataio.LOAD])))
     assert load_abs > 0
     chans = fx.family("channel").grid(fx.TrainingSummary(1.0, (T0, T0 + 1), (-0.02, 0.02), 300.0,
-                                                         {"load_abs": load_abs}, channels=channels_of(df),
-                                                         mu_sd=0.05))
+                                                         {"load_abs": load_abs}, channels=channels_of(df)))
     rows = np.column_stack([x[sg] for sg in fx.SIGNALS])
     n_checked = 0
     for h in hyps + [h for h in chans if h.spec["channel"] == dataio.TEMPERATURE]:

@@ -222,13 +222,10 @@ def _effect_specs():
     specs += [{"kind": "channel", "channel": "temperature_C", "form": f, "level": "sample", "mean": 31.0, "sd": 4.0,
                "run_spread": 0.0, "shape": sh, "lo": 24.0, "hi": 41.0, "by": "load", "load_abs": 0.3}
               for f in ("friction", "force_factor", "force") for sh in ("linear", "quadratic", "odd")]
-    # the inertia form (the channel scaling the moving mass, -m_s d (a_base + mu_sd 9.81 sign(v_base))) in every
-    # shape and level, and without the guide's weight (a spec without mu_sd)
+    # the inertia form (the channel scaling the moving mass, -m_s d a_base) in every shape and level
     specs += [{"kind": "channel", "channel": "temperature_C", "form": "inertia", "level": lv, "mean": 31.0,
-               "sd": 4.0, "run_spread": 0.0, "shape": sh, "lo": 24.0, "hi": 41.0, "m_s": 0.12, "mu_sd": 0.05}
+               "sd": 4.0, "run_spread": 0.0, "shape": sh, "lo": 24.0, "hi": 41.0, "m_s": 0.12}
               for sh in ("linear", "quadratic", "odd") for lv in ("run", "sample")]
-    specs += [{"kind": "channel", "channel": "temperature_C", "form": "inertia", "level": "sample", "mean": 31.0,
-               "sd": 4.0, "run_spread": 0.0, "m_s": 0.12}]
     # the damping form (the channel scaling the viscous damping, -d v_base / 0.2 m/s) in its shapes and levels
     specs += [{"kind": "channel", "channel": "temperature_C", "form": "damping", "level": lv, "mean": 31.0,
                "sd": 4.0, "run_spread": 0.0, "shape": sh, "lo": 24.0, "hi": 41.0}

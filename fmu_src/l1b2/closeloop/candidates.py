@@ -105,9 +105,6 @@ class Context:
     #: the baseline's smallest viscous damping over TRAIN [N s/m] (:func:`baseline_damping`; None: not known), the
     #: floor the damping forms of the channels keep (:func:`l1b2.predictor.effects.channels.damping_bounds`)
     damping_N_s_per_m: float | None = None
-    #: the baseline's guide friction coefficient ``mu_sd`` [-] (0: not known), the weight on the guide of a channel's
-    #: inertia form (:func:`l1b2.predictor.effects.channels.inertia_factor`)
-    mu_sd: float = 0.0
     #: :func:`signals` of the last few frames (by identity; their arrays read-only), not pickled with the context
     signal_cache: dict = field(default_factory=dict, repr=False, compare=False)
 
@@ -232,7 +229,7 @@ def training_summary(ctx: Context, df_train: pd.DataFrame) -> fx.TrainingSummary
                              temperature_range=None if T is None else (float(T.min()), float(T.max())),
                              spectral_period_m=ctx.spectral_period_m,
                              channels=channels_of(df_train, ctx.response_columns),
-                             damping_N_s_per_m=ctx.damping_N_s_per_m, mu_sd=float(ctx.mu_sd))
+                             damping_N_s_per_m=ctx.damping_N_s_per_m)
     ctx.summaries[key] = (df_train, out)
     return out
 

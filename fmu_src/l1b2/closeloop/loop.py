@@ -290,7 +290,7 @@ class CloseLoop(EstimatorSettings):
                                      k=self.k_folds, seed=self.seed)
         ctx = candidate_context(start.predict_free_run, m_s, fit_tr, mask_tr, analysis.peak,
                                 response_columns=self.response_columns,
-                                damping=baseline_damping(start, fit_tr, mask_tr), mu_sd=start.params_.mu_sd)
+                                damping=baseline_damping(start, fit_tr, mask_tr))
         library = self.library if self.library is not None else full_library()
         pool = retag_structural(library(ctx, fit_tr), start.params_.drive_law)
         it.channels = training_summary(ctx, fit_tr).channels
@@ -725,10 +725,10 @@ def analyse_residuals(df: pd.DataFrame, v_pred: np.ndarray, mask: np.ndarray, *,
 
 
 def candidate_context(baseline_free_run, m_s: float, df: pd.DataFrame, mask: np.ndarray, peak: dict,
-                      response_columns=None, damping: float | None = None, mu_sd: float = 0.0) -> Context:
+                      response_columns=None, damping: float | None = None) -> Context:
     """What candidate features may use: the baseline's free run, the mass, TRAIN's ranges, the spectral peak
     (``response_columns``: the measured responses, never candidates; None: the default list; ``damping``: the
-    baseline's smallest viscous damping over TRAIN [N s/m], ``baseline_damping``; ``mu_sd``: its guide friction [-])."""
+    baseline's smallest viscous damping over TRAIN [N s/m], :func:`~l1b2.closeloop.candidates.baseline_damping`)."""
     pos = df[dataio.POSITION].to_numpy(float)[mask]
     return Context(
         baseline_free_run=baseline_free_run, m_s=float(m_s),
@@ -736,7 +736,7 @@ def candidate_context(baseline_free_run, m_s: float, df: pd.DataFrame, mask: np.
         position_range=(float(pos.min()), float(pos.max())),
         temperature_ref=float(df[dataio.TEMPERATURE].median()) if dataio.TEMPERATURE in df.columns else None,
         spectral_period_m=peak.get("period_m") if peak.get("power_ratio_to_median", 0) > 4 else None,
-        damping_N_s_per_m=damping, mu_sd=float(mu_sd),
+        damping_N_s_per_m=damping,
         **({} if response_columns is None else {"response_columns": tuple(response_columns)}))
 
 

@@ -141,9 +141,6 @@ class TrainingSummary:
     #: the baseline's smallest viscous damping over TRAIN [N s/m] (None: not known): the floor a channel's damping
     #: form keeps (:func:`l1b2.predictor.effects.channels.damping_bounds`)
     damping_N_s_per_m: float | None = None
-    #: the baseline's guide friction coefficient ``mu_sd`` [-] (0: not known): the weight on the guide that a
-    #: channel's inertia form adds with the mass (:func:`l1b2.predictor.effects.channels.inertia_factor`)
-    mu_sd: float = 0.0
 
     @property
     def has_temperature(self) -> bool:

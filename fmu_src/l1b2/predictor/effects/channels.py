@@ -15,10 +15,8 @@ enters in one of four generic forms, each linear in one parameter ``a``
   coordinates: a force opposing the motion, whichever the direction);
 * ``force_factor``: it scales the drive's force factor, ``dF = a (V0/V_ref) z``;
 * ``force``: it adds a force fixed in the lab frame, ``dF = a d z`` (``d`` the direction);
-* ``inertia``: it scales the moving mass, ``dF = -m_s d (a_base + mu_sd g sign(v_base)) (a z + a_0)`` (``a_base``
-  and ``v_base`` the baseline's predicted acceleration and speed, ``mu_sd`` the baseline's guide friction
-  coefficient, ``g`` = 9.81 m/s^2: the extra mass's inertia and its weight on the guide, :func:`inertia_factor`;
-  ``m_s`` the slider's mass: ``a`` [1 per standard deviation] is the relative change of the moving
+* ``inertia``: it scales the moving mass, ``dF = -m_s d a_base (a z + a_0)`` (``a_base`` the baseline's predicted
+  acceleration, ``m_s`` the slider's mass: ``a`` [1 per standard deviation] is the relative change of the moving
   mass per standard deviation of the channel, ``a_0`` [1] the relative mass change at the channel's TRAIN mean,
   :class:`l1b2.predictor.effects.motion.InertiaMismatch`'s constant error; in every shape, the shape's columns
   then the constant one). The constant is the form's own: the model's mass is the slider's stated one, never
@@ -81,7 +79,6 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from ...units import G_M_S2
 from .base import SIGNALS, SPEED_REF, V_REF, Effect, EffectSpecError, needs, num, register, signal
 
 FORMS = ("friction", "force_factor", "force", "inertia", "damping")
@@ -192,43 +189,15 @@ def signal_key(column: str, level: str) -> str:
     return ("col:" if level == "sample" else "run:") + column
 
 
-def guide_friction(spec) -> float:
-    """An inertia-form spec's guide friction coefficient ``mu_sd`` [-] (the baseline's): ``spec["mu_sd"]``, 0 when
-    the spec has none (the inertia alone); :class:`EffectSpecError` when it is negative or not finite."""
-    mu = float(spec.get("mu_sd", 0.0))
-    if not (np.isfinite(mu) and mu >= 0.0):
-        raise EffectSpecError(f"channel form 'inertia': the guide friction coefficient mu_sd {mu} is not a finite "
-                              "non-negative number")
-    return mu
-
-
-def inertia_factor(x, m_s: float, mu_sd: float = 0.0) -> np.ndarray:
-    """The free run's force [N, drive coordinates] per relative change of the slider's mass, to first order about
-    the baseline: ``-m_s d (a_base + mu_sd G_M_S2 sign(v_base))``.
-
-    The free run steps ``(m_s + |m|) dv'/dt = -D v' + X + sign(-v') mu_sd (G_M_S2 m_s + kappa P)``
-    (:func:`l1b2.predictor.simulate.free_run`, ``v' = d v``); a slider mass ``m_s (1 + e)`` adds, to first order in
-    ``e``, the force ``e m_s (-d a_base + mu_sd G_M_S2 sign(-d v_base))`` to the baseline's: the inertia of the
-    extra mass and its weight on the guide (``mu_sd = 0``: the inertia alone). ``m_s`` [kg], ``mu_sd`` [-];
-    ``x`` gives ``d``, ``a_base`` [m/s^2] and, with ``mu_sd`` not 0, ``v_base`` [m/s] (signed data convention).
-    """
-    d, a = signal(x, "d"), signal(x, "a_base")
-    if mu_sd == 0.0:
-        return -m_s * d * a
-    return -m_s * d * (a + mu_sd * G_M_S2 * np.sign(signal(x, "v_base")))
-
-
-def form_factor(form: str, x, m_s: float | None = None, mu_sd: float = 0.0) -> np.ndarray:
+def form_factor(form: str, x, m_s: float | None = None) -> np.ndarray:
     """The generic physical form's factor per sample: ``-1`` (friction), ``V0/V_ref`` (force factor), ``d`` (force),
-    ``-m_s d (a_base + mu_sd g sign(v_base))`` (inertia: ``m_s`` the slider's mass [kg], ``a_base`` [m/s^2] and
-    ``v_base`` [m/s] the baseline's acceleration and speed, signed, ``mu_sd`` [-] the baseline's guide friction
-    coefficient, ``g`` = ``G_M_S2``: the free run's force per unit of the slider's mass, its inertia and its weight on
-    the guide, :func:`inertia_factor`; the form's features add this factor itself as a last column, the mass change
-    at the channel's mean), ``-d v_base / SPEED_REF`` (damping: ``v_base`` the baseline's speed)."""
+    ``-m_s d a_base`` (inertia: ``m_s`` the slider's mass [kg], ``a_base`` the baseline's acceleration; the
+    form's features add this factor itself as a last column, the mass change at the channel's mean),
+    ``-d v_base / SPEED_REF`` (damping: ``v_base`` the baseline's speed)."""
     if form == "inertia":
         if m_s is None or not m_s > 0:
             raise EffectSpecError(f"channel form 'inertia': the slider mass m_s {m_s} is not positive")
-        return inertia_factor(x, m_s, mu_sd)
+        return -m_s * signal(x, "d") * signal(x, "a_base")
     if form == "damping":
         return -signal(x, "d") * signal(x, "v_base") / SPEED_REF
     if form == "friction":
@@ -249,7 +218,7 @@ class Channel(Effect):
 
     def needs(self, spec):
         by = {"load"} if spec.get("by") else set()
-        motion = {"inertia": {"a_base", "v_base"}, "damping": {"v_base"}}.get(str(spec.get("form")), set())
+        motion = {"inertia": {"a_base"}, "damping": {"v_base"}}.get(str(spec.get("form")), set())
         return super().needs(spec) | {signal_key(str(spec.get("channel")), str(spec.get("level")))} | by | motion
 
     def features(self, spec, x):
@@ -259,8 +228,7 @@ class Channel(Effect):
             raise EffectSpecError(f"channel {spec.get('channel')!r}: standard deviation {sd} is not positive")
         z = (c - num(spec, "mean")) / sd
         form = str(spec.get("form"))
-        factor = (form_factor(form, x, num(spec, "m_s"), guide_friction(spec)) if form == "inertia"
-                  else form_factor(form, x))
+        factor = form_factor(form, x, num(spec, "m_s") if form == "inertia" else None)
         if form == "inertia":   # the mass form's linearisation: the force of each relative mass column
             return factor[:, None] * _mass_basis(spec, z)
         return interaction_basis(spec, x, factor[:, None] * shape_basis(spec, z))
@@ -284,20 +252,17 @@ class Channel(Effect):
             load_abs = float(train.ranges.get("load_abs", 0.0)) if logged else 0.0
             damping = np.nan if train.damping_N_s_per_m is None else float(train.damping_N_s_per_m)
             m_s = float(getattr(train, "m_s", 0.0) or 0.0) if logged else 0.0
-            mu_sd = float(getattr(train, "mu_sd", 0.0) or 0.0)
             for level in LEVELS if ch.get("within_run", True) else ("run",):
                 for shape in SHAPES if logged else SHAPES[:1]:
                     for by in ("",) + (INTERACTIONS if load_abs > 0 and shape in INTERACTION_SHAPES else ()):
                         for form in _forms(logged and not by, m_s, shape):
-                            out.append(self._hypothesis(ch, reg, form, level, shape, by, load_abs, m_s, damping,
-                                                        mu_sd))
+                            out.append(self._hypothesis(ch, reg, form, level, shape, by, load_abs, m_s, damping))
         return out
 
-    def _hypothesis(self, ch, reg, form, level, shape, by="", load_abs=0.0, m_s=0.0, damping=np.nan, mu_sd=0.0):
+    def _hypothesis(self, ch, reg, form, level, shape, by="", load_abs=0.0, m_s=0.0, damping=np.nan):
         name = ch["name"]
         spec = {"channel": name, "form": form, "level": level, "mean": float(ch["mean"]), "sd": float(ch["sd"]),
-                **run_spread_entry(ch, level),
-                **({"m_s": float(m_s), "mu_sd": float(mu_sd)} if form == "inertia" else {})}
+                **run_spread_entry(ch, level), **({"m_s": float(m_s)} if form == "inertia" else {})}
         names = [f"{name}_{form}_{level}"]
         if shape != "linear":
             spec.update(shape=shape, lo=float(ch["lo"]), hi=float(ch["hi"]))

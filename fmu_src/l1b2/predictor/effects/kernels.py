@@ -32,8 +32,7 @@ import math
 
 from ...units import G_M_S2
 from .base import SIGNALS, SPEED_REF, V_REF, EffectSpecError
-from .channels import (FORMS, G_N_PER_KG, INTERACTIONS, SHAPES, TRANSFORMS, export_problem, fmu_signal, guide_friction,
-                       signal_key)
+from .channels import FORMS, G_N_PER_KG, INTERACTIONS, SHAPES, TRANSFORMS, export_problem, fmu_signal, signal_key
 
 #: index of each signal in ``x``
 SIG_T, SIG_S, SIG_V0, SIG_LOAD, SIG_D, SIG_TEMP, SIG_VB, SIG_AB = range(len(SIGNALS))
@@ -72,8 +71,7 @@ KERNEL_KINDS = tuple(SPEC_KEYS)
 FORM_FRICTION, FORM_FORCE_FACTOR, FORM_FORCE, FORM_INERTIA, FORM_DAMPING = range(len(FORMS))
 #: added to a channel's form code in ``q[1]`` for the quadratic and the odd shape (then ``q[4:6]``: TRAIN's
 #: range of ``z``), and for an interaction with the load (then ``q[6]``: TRAIN's largest load size ``load_abs``);
-#: the inertia form has ``q[4:7]`` in any shape, the slider's mass ``m_s`` in ``q[7]`` and the guide friction
-#: coefficient ``mu_sd`` in ``q[8]`` (:func:`l1b2.predictor.effects.channels.inertia_factor`); the damping form reads
+#: the inertia form has ``q[4:7]`` in any shape and the slider's mass ``m_s`` in ``q[7]``; the damping form reads
 #: ``v_base`` and no scalar of its own
 QUADRATIC = len(FORMS)
 ODD = 2 * len(FORMS)
@@ -141,7 +139,7 @@ def _signal_scalars(spec) -> list[float]:
             m_s = float(spec["m_s"])
         except (KeyError, TypeError, ValueError):
             raise EffectSpecError("effect spec 'channel' of form 'inertia' lacks a numeric 'm_s'") from None
-        return [float(SIGNAL_INDEX[sig])] + _channel_shape_scalars(spec, code, mean, sd) + [m_s, guide_friction(spec)]
+        return [float(SIGNAL_INDEX[sig])] + _channel_shape_scalars(spec, code, mean, sd) + [m_s]
     if kind == "channel" and (spec.get("shape", "linear") != "linear" or spec.get("by")):
         return [float(SIGNAL_INDEX[sig])] + _channel_shape_scalars(spec, code, mean, sd)
     return [float(SIGNAL_INDEX[sig]), float(code), mean, sd]
@@ -372,8 +370,7 @@ def channel_force(x, q, phi):
     """``Channel.features`` @ phi: ``z`` = (input - mean)/sd (``q[0]`` the input, ``q[2:4]`` mean and sd) in its
     shape (``z phi[0]``; ``q[1]`` >= ``QUADRATIC``: ``zc phi[0] + (zc^2 - 1) phi[1]``, >= ``ODD``:
     ``zc phi[0] + (zc^3 - 3 zc) phi[1]``, ``zc`` = ``z`` clipped to ``q[4:6]``) times the form's factor (the code
-    less its offsets: -1, ``V0/V_REF``, ``d``, for the inertia form ``-q[7] d (a_base + q[8] G_M_S2 sign(v_base))``,
-    for the damping form
+    less its offsets: -1, ``V0/V_REF``, ``d``, for the inertia form ``-q[7] d a_base``, for the damping form
     ``-d v_base / SPEED_REF``); with ``q[1]`` >=
     ``BY_LOAD``, plus the same columns times ``|load| / q[6]`` on the next parameters; the inertia form adds its
     constant, the next parameter (the mass change at the channel's mean)."""
@@ -411,12 +408,7 @@ def channel_force(x, q, phi):
     if form == FORM_FORCE_FACTOR:
         return x[SIG_V0] / V_REF * g
     if form == FORM_INERTIA:
-        sv = 0.0
-        if x[SIG_VB] > 0.0:
-            sv = 1.0
-        elif x[SIG_VB] < 0.0:
-            sv = -1.0
-        return -q[7] * x[SIG_D] * (x[SIG_AB] + q[8] * G_M_S2 * sv) * (g + phi[n])
+        return -q[7] * x[SIG_D] * x[SIG_AB] * (g + phi[n])
     if form == FORM_DAMPING:
         return -(x[SIG_D] * x[SIG_VB]) / SPEED_REF * g
     return x[SIG_D] * g
