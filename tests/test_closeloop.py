@@ -452,6 +452,11 @@ def test_result_api_matches_the_saved_report(tmp_path):
     assert cv and all(s["identifications"] >= 4 for s in cv)   # every fold of every trial is one refit
     assert all(s["nfev"] >= s["identifications"] for s in cv)  # ... and returns its evaluations (at least one each)
     assert all(s["wall_s"] >= 0 and s["cpu_s"] >= 0 for s in stages)
+    # each round's collinearity screen is its own stage, just before that round's scoring (not billed to the
+    # stage before it: the baseline's residual analysis or the previous round's joint re-identification)
+    names = [s["stage"] for s in stages]
+    scoring = [k for k, n in enumerate(names) if "candidate effects (linearised)" in n]
+    assert scoring and all("screening the candidates" in names[k - 1] for k in scoring)
     assert "## Time per stage" in res.markdown() and CloseLoopResult.from_dict(saved).stages == stages
 
 

@@ -366,6 +366,7 @@ class CloseLoop(EstimatorSettings):
         for rnd in range(1, self.max_rounds + 1):
             n_rnd = len(it.rounds)
             cur = it.model
+            say(f"round {n_rnd}: the current model's residual; screening the candidates against the added effects")
             v_cur = cur.predict_free_run(dtr)
             r = res.drive_residual(dtr, v_cur)
             added = added_columns(it.effects, dtr, mask) if it.effects.candidates else None
