@@ -236,6 +236,13 @@ def test_cli_writes_the_report_files_and_figures(cli_run, tmp_path, capsys):
     assert cli_main(["export", "--from-report", str(tmp_path), "--out", str(tmp_path / "x")]) == 2
     assert "no close-loop report here" in capsys.readouterr().err
     assert "before" in printed and "after" in printed and "direction" in printed
+    # time and evaluations per stage printed: one line per stage of report.json, in order, then their total
+    stages = json.loads((out / "report.json").read_text())["stages"]
+    lines = printed.splitlines()
+    at = lines.index("time and evaluations per stage (fits: identifications, fold refits included):")
+    rows = [ln.split() for ln in lines[at + 2:at + 3 + len(stages)]]
+    assert [r[-2:] for r in rows[:-1]] == [[str(s["identifications"]), str(s["nfev"])] for s in stages]
+    assert rows[-1][0] == "total" and rows[-1][-1] == str(sum(s["nfev"] for s in stages)) != "0"
     text = (out / "report.json").read_text()
     rep = json.loads(text, parse_constant=lambda c: pytest.fail(f"report.json is not strict JSON: {c}"))
     for key in ("baseline", "diagnosis", "extended", "extended_parameters"):
@@ -445,6 +452,11 @@ def test_result_api_matches_the_saved_report(tmp_path):
     assert cv and all(s["identifications"] >= 4 for s in cv)   # every fold of every trial is one refit
     assert all(s["nfev"] >= s["identifications"] for s in cv)  # ... and returns its evaluations (at least one each)
     assert all(s["wall_s"] >= 0 and s["cpu_s"] >= 0 for s in stages)
+    # each round's collinearity screen is its own stage, just before that round's scoring (not billed to the
+    # stage before it: the baseline's residual analysis or the previous round's joint re-identification)
+    names = [s["stage"] for s in stages]
+    scoring = [k for k, n in enumerate(names) if "candidate effects (linearised)" in n]
+    assert scoring and all("screening the candidates" in names[k - 1] for k in scoring)
     assert "## Time per stage" in res.markdown() and CloseLoopResult.from_dict(saved).stages == stages
 
 

@@ -16,7 +16,7 @@ from pathlib import Path
 from . import __version__
 from .cluster import default_workers
 from .errors import L1B2Error
-from .console import StageBar, pct, print_input_checks
+from .console import StageBar, pct, print_input_checks, stage_lines
 
 
 def _floats(text: str) -> tuple[float, ...]:
@@ -554,6 +554,8 @@ def cmd_identify(args) -> int:
                                  noise_fit=args.noise_fit, noise=args.noise, model=args.model)
     print(f"identify: {rep['data']['train_runs']} train runs, {rep['data']['test_runs']} test runs "
           f"({rep['data']['split']}); fit {rep['fit_time_s']:.1f} s")
+    print("time and evaluations per stage of the fit:")
+    print("\n".join(stage_lines(rep["convergence"].get("stages") or [])))
     for part in ("train", "test"):
         m = rep["metrics"][part]
         if m is None:
@@ -650,6 +652,8 @@ def cmd_close_loop(args) -> int:
     print(f"diagnosis: {d['message']}" + (f"; traced to {', '.join(d['traced_to'])}" if d["traced_to"] else ""))
     print(result.rounds_table())
     print(result.before_after_table())
+    print("time and evaluations per stage (fits: identifications, fold refits included):")
+    print("\n".join(stage_lines(result.stages)))
     from .closeloop.report import channel_range_line
     print_input_checks(result.checks, {"baseline " + k: v for k, v in result.baseline.items()},
                        [channel_range_line(r) for r in d.get("channel_ranges") or ()])

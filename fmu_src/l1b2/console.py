@@ -5,12 +5,38 @@ from __future__ import annotations
 import sys
 import threading
 
-__all__ = ["StageBar", "print_input_checks", "pct"]
+__all__ = ["StageBar", "print_input_checks", "pct", "stage_lines"]
 
 
 def pct(x) -> str:
     """A share as a percentage with two decimals; '-' for None or NaN."""
     return "-" if x is None or x != x else f"{x:.2%}"
+
+
+def stage_lines(stages: list) -> list[str]:
+    """One line per stage record, then their total: wall [s], CPU [s] of this process, identifications and evaluations.
+
+    Takes the close loop's records (:class:`l1b2.closeloop.stages.StageClock`: ``wall_s``, ``cpu_s``,
+    ``identifications``, ``nfev``) and an identification's (``convergence["stages"]``: ``time_s``, ``cpu_s`` and
+    ``nfev`` where the stage evaluates). A count a record does not hold is printed as '-' and left out of the total.
+    """
+    def cell(r, key):
+        return "-" if r.get(key) is None else str(int(r[key]))
+
+    lines = [f"  {'stage':60s} {'wall [s]':>8s} {'CPU [s]':>8s} {'fits':>5s} {'evaluations':>11s}"]
+    total = {"wall_s": 0.0, "cpu_s": 0.0, "identifications": None, "nfev": None}
+    for r in stages:
+        wall = float(r.get("wall_s", r.get("time_s", 0.0)))
+        lines.append(f"  {str(r['stage'])[:60]:60s} {wall:8.1f} {float(r['cpu_s']):8.1f} "
+                     f"{cell(r, 'identifications'):>5s} {cell(r, 'nfev'):>11s}")
+        total["wall_s"] += wall
+        total["cpu_s"] += float(r["cpu_s"])
+        for key in ("identifications", "nfev"):
+            if r.get(key) is not None:
+                total[key] = (total[key] or 0) + int(r[key])
+    lines.append(f"  {'total':60s} {total['wall_s']:8.1f} {total['cpu_s']:8.1f} "
+                 f"{cell(total, 'identifications'):>5s} {cell(total, 'nfev'):>11s}")
+    return lines
 
 
 def print_input_checks(checks: dict, metrics: dict, test_lines=()) -> None:

@@ -364,8 +364,8 @@ class CloseLoop(EstimatorSettings):
             min_gain=self.min_cv_gain, final_nfev=self.final_nfev, clock=say)
         cur_err: dict = {}
         for rnd in range(1, self.max_rounds + 1):
-            n_rnd = len(it.rounds)
-            cur = it.model
+            n_rnd, cur = len(it.rounds), it.model
+            say(f"round {n_rnd}: the current model's residual; screening the candidates against the added effects")
             v_cur = cur.predict_free_run(dtr)
             r = res.drive_residual(dtr, v_cur)
             added = added_columns(it.effects, dtr, mask) if it.effects.candidates else None

@@ -201,11 +201,15 @@ class FoldSolver:
         """:meth:`gain` of every candidate: ``S_all`` holds their columns side by side, ``widths`` their counts."""
         bounds = np.cumsum([0] + list(widths))
         sums = [[] for _ in widths]
+        # the training rows and their projection go into two arrays made once for all folds (a fresh n x k array
+        # per fold costs the kernel its pages each time); the same products as S_tr - U @ (U.T @ S_tr)
+        n_tr = max(part[2].shape[0] for part in self.parts)
+        rows_buf, proj_buf = np.empty((n_tr, S_all.shape[1])), np.empty((n_tr, S_all.shape[1]))
         for part in self.parts:
             test, tr, U, W, yp, e0, code, _ = part
-            S_tr = S_all[tr]
+            S_tr = np.compress(tr, S_all, axis=0, out=rows_buf[:U.shape[0]])
             C = U.T @ S_tr
-            Sp = S_tr - U @ C
+            Sp = np.subtract(S_tr, np.matmul(U, C, out=proj_buf[:U.shape[0]]), out=proj_buf[:U.shape[0]])
             Spy = Sp.T @ yp
             T_te = S_all[test] - self.A[test] @ (W @ C)
             norms = np.einsum("ij,ij->j", S_tr, S_tr)
