@@ -50,3 +50,164 @@ def test_fold_gains_equal_the_fresh_array_form_to_the_last_bit():
     g3, per_run3 = solver.gain(S_all[:, 3:6])
     g3_ref, per_run3_ref = _gains_written_out(solver, np.ascontiguousarray(S_all[:, 3:6]), [3])[0]
     assert g3 == g3_ref and np.array_equal(per_run3, per_run3_ref)
+
+
+# --- the scoring's arrays written over and reused: the former fresh-array forms written out as references ---
+
+def _linear_response_written_out(params, df, m_s, F, v_pred=None):
+    """S(k+1) = (1 - h_k D_k) S(k) + h_k F_k into a fresh zero array, S = 0 at each run's first sample."""
+    from l1b2.data import measurements as dataio
+    from l1b2.predictor import model as pr
+    d, s, V0, load, t = (df[c].to_numpy(float) for c in (dataio.DIRECTION, dataio.POSITION, dataio.VOLTAGE,
+                                                         dataio.LOAD, dataio.TIME))
+    D, _, _ = pr.force_parts(params, s, V0, d * load, m_s)
+    if v_pred is not None:
+        D = D - pr.speed_slope(params, s, V0, d * np.asarray(v_pred, float))
+    D = np.broadcast_to(D, s.shape)
+    m_eff = pr.effective_mass(params, load, m_s)
+    F = np.asarray(F, float).reshape(len(df), -1)
+    S = np.zeros_like(F)
+    slices = [sl for _, sl in dataio.run_slices(df[dataio.RUN])]
+    starts, lengths = np.array([sl.start for sl in slices]), np.array([sl.stop - sl.start for sl in slices])
+    dt = np.zeros(len(df))
+    dt[:-1] = np.diff(t)
+    h = dt / m_eff
+    a = 1.0 - h * D
+    for k in range(int(lengths.max()) - 1):
+        cur = starts[lengths > k + 1] + k
+        S[cur + 1] = a[cur, None] * S[cur] + h[cur, None] * F[cur]
+    return S
+
+
+def _insample_written_out(A, y, S_all, widths):
+    U, _ = sel._basis(A)
+    yp = y - U @ (U.T @ y)
+    Sp = S_all - U @ (U.T @ S_all)
+    Spy = Sp.T @ yp
+    norms = np.einsum("ij,ij->j", S_all, S_all)
+    out = []
+    bounds = np.cumsum([0] + list(widths))
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        Spj = Sp[:, a:b]
+        coef = sel._solve_small(Spj.T @ Spj, Spy[a:b], float(np.max(norms[a:b])))
+        r = yp - Spj @ coef
+        out.append((float(r @ r), coef))
+    return float(yp @ yp), out
+
+
+def _scores_written_out(candidates, r_drive, df, mask, params, m_s, v_pred, k=5, seed=0):
+    """The scoring with a fresh array at every step (responses, masked rows, usable columns, folds' rows)."""
+    import math
+    runs = df["run"].to_numpy()
+    idx = np.flatnonzero(mask)
+    y, runs_m = r_drive[idx], runs[idx]
+    folds = res.run_folds(runs_m, k, seed)
+    n_eff = sel._effective_n(y, runs_m)
+    feats = [np.asarray(c.features(df), float).reshape(len(df), -1) for c in candidates]
+    widths = [f.shape[1] for f in feats]
+    N = _linear_response_written_out(params, df, m_s, sel.nuisance_forces(params, df, v_pred), v_pred)[idx]
+    S_all = _linear_response_written_out(params, df, m_s, np.column_stack(feats), v_pred)[idx]
+    solver = sel.FoldSolver(y, N, runs_m, folds)
+    starts = np.cumsum([0] + widths[:-1])
+    usable = [bool(np.all(np.isfinite(S_all[:, a:a + w])) and not np.allclose(S_all[:, a:a + w], 0))
+              for a, w in zip(starts, widths)]
+    cols = np.concatenate([np.arange(a, a + w) for a, w, u in zip(starts, widths, usable) if u]).astype(int)
+    w_ok = [w for w, u in zip(widths, usable) if u]
+    S_ok = np.ascontiguousarray(S_all[:, cols])
+    cv = iter(_gains_written_out(solver, S_ok, w_ok))
+    sse0, fits = _insample_written_out(solver.A, y, S_ok, w_ok)
+    fits = iter(fits)
+    out = []
+    for w, u in zip(widths, usable):
+        if not u:
+            out.append((0.0, 1.0, 0.0, 0.0, np.zeros(w), 0.0))
+            continue
+        gain, per_run = next(cv)
+        sse1, coef = next(fits)
+        dll = n_eff * math.log(max(sse1, 1e-300) / max(sse0, 1e-300))
+        out.append((gain, res.wilcoxon_greater(per_run), float(np.mean(per_run > 0)), dll + w * math.log(n_eff),
+                    coef, dll + 2 * w))
+    return out
+
+
+def _simulated_case():
+    from l1b2.predictor.model import example_params
+    from l1b2.predictor.simulate import design_grid, free_run, simulate_dataset
+    p = example_params(2).replace(sigma=8.0, c_r=5.0, alpha=(0.05, 0.005, 0.0))
+    df = simulate_dataset(p, design_grid(voltages=(200.0, 260.0, 300.0), loads=(0.0, 0.03)), 0.1)
+    cols = [df[c].to_numpy(float) for c in ("position_m", "voltage_V", "load_kg", "direction", "time_s")]
+    v = df["speed_m_s"].to_numpy(float)
+    base = free_run(p, *cols[:4], cols[4], v, 0.1, df["run"].to_numpy())
+    rng = np.random.default_rng(5)
+    r = cols[3] * (v - base) + rng.normal(0.0, 1e-3, len(df))
+    return p, df, base, r, rng
+
+
+def test_linear_response_written_over_its_forces_equals_the_fresh_array_form_to_the_last_bit():
+    p, df, base, _, rng = _simulated_case()
+    F = rng.normal(size=(len(df), 7))
+    ref = _linear_response_written_out(p, df, 0.1, F, base)
+    assert np.array_equal(sel.linear_response(p, df, 0.1, F, v_pred=base), ref)
+    F_keep = F.copy()
+    got = sel.linear_response(p, df, 0.1, F, v_pred=base, overwrite_F=True)
+    assert np.shares_memory(got, F) and np.array_equal(got, ref) and not np.array_equal(F, F_keep)
+    # one column given as a vector, no v_pred
+    assert np.array_equal(sel.linear_response(p, df, 0.1, F_keep[:, 2].copy(), overwrite_F=True)[:, 0],
+                          _linear_response_written_out(p, df, 0.1, F_keep[:, 2])[:, 0])
+
+
+def test_rows_cut_in_place_equal_fancy_indexing():
+    rng = np.random.default_rng(2)
+    for n, p_keep in ((1000, 0.97), (1000, 0.5), (37, 1.0), (600, 0.0)):
+        X = rng.normal(size=(n, 5))
+        mask = rng.random(n) < p_keep
+        mask[100:400] = p_keep > 0         # a block longer than the copy's block, shifted over itself
+        idx = np.flatnonzero(mask)
+        ref = X[idx]
+        got = sel._rows_in_place(X, idx, block=64)
+        assert (got.base is X or got is X) and got.shape == ref.shape and np.array_equal(got, ref)
+
+
+def test_gains_and_insample_fits_with_shared_work_arrays_equal_the_fresh_array_forms():
+    rng = np.random.default_rng(4)
+    runs = np.repeat(np.arange(11), rng.integers(30, 70, 11))
+    n = len(runs)
+    N = rng.normal(size=(n, 3))
+    widths = [3, 1, 2, 1]                  # an odd total: the held-out rows start off a 16-byte boundary
+    S_all = rng.normal(size=(n, sum(widths)))
+    y = 0.4 * N[:, 0] + 0.7 * S_all[:, 1] - 0.3 * S_all[:, 5] + rng.normal(0, 0.5, n)
+    solver = sel.FoldSolver(y, N, runs, res.run_folds(runs, 5, 0))
+    work = (np.full((n + 9, S_all.shape[1]), np.nan), np.full((n + 9, S_all.shape[1]), np.nan))
+    for (g, pr_), (g_ref, pr_ref) in zip(solver.gains(S_all, widths, work),
+                                         _gains_written_out(solver, S_all, widths)):
+        assert g == g_ref and np.array_equal(pr_, pr_ref)
+    sse0, fits = sel.insample_fits(solver.A, y, S_all, widths, work)
+    sse0_ref, fits_ref = _insample_written_out(solver.A, y, S_all, widths)
+    assert sse0 == sse0_ref
+    for (s1, c), (s1_ref, c_ref) in zip(fits, fits_ref):
+        assert s1 == s1_ref and np.array_equal(c, c_ref)
+    assert np.array_equal(sel.insample_fits(solver.A, y, S_all, widths)[1][2][1], fits_ref[2][1])
+
+
+def test_scores_equal_the_fresh_array_scoring_to_the_last_bit():
+    from l1b2.closeloop.candidates import CandidateForce
+    p, df, base, r, rng = _simulated_case()
+    mask = np.abs(base) > 0.01
+    assert 0 < mask.sum() < len(mask)
+    s, V0 = df["position_m"].to_numpy(float), df["voltage_V"].to_numpy(float)
+
+    def cand(name, f):
+        k = f(df).reshape(len(df), -1).shape[1]
+        return CandidateForce(name, "x", "", tuple(f"c{i}" for i in range(k)), ("N",) * k, f)
+    cands = [cand("a", lambda d: np.column_stack([np.sign(base), s])),
+             cand("b", lambda d: V0 / 300.0),
+             cand("c", lambda d: np.column_stack([s ** 2, np.sin(40 * s), np.ones(len(d))]))]
+    zero = cand("z", lambda d: np.zeros(len(d)))
+    for cs in (cands, cands[:1] + [zero] + cands[1:]):     # every candidate usable; one left out (a column copy)
+        got = sel.score_candidates(cs, r, df, mask, p, 0.1, v_pred=base)
+        ref = _scores_written_out(cs, r, df, mask, p, 0.1, base)
+        assert len(got) == len(ref) == len(cs)
+        for g, (gain, pv, imp, dbic, phi, daic) in zip(got, ref):
+            assert (g.cv_gain, g.p_value, g.runs_improved, g.delta_bic, g.delta_aic) == (gain, pv, imp, dbic, daic)
+            assert np.array_equal(g.phi, phi)
+    assert got[1].cv_gain == 0.0 and got[0].cv_gain != 0.0

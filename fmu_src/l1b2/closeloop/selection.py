@@ -51,7 +51,7 @@ SHORTLIST_MIN_GAIN = 0.05
 # ---------------------------------------------------------------------------
 
 def linear_response(params: pr.PredictorParams, df: pd.DataFrame, m_s: float, F: np.ndarray,
-                    v_pred=None) -> np.ndarray:
+                    v_pred=None, *, overwrite_F: bool = False) -> np.ndarray:
     """Drive-coordinate free-run speed response to drive-coordinate forces ``F`` (n x k) [m/s per unit].
 
     ``S(k+1) = (1 - h_k D_k) S(k) + h_k F_k`` with ``h = dt / m_eff`` and ``D``
@@ -61,6 +61,9 @@ def linear_response(params: pr.PredictorParams, df: pd.DataFrame, m_s: float, F:
     pure-slip family the damping is ``D - dX/dv'`` at the baseline's free-run
     speed ``v_pred`` (data convention; the drive force's own slope,
     :func:`l1b2.predictor.model.speed_slope`), to first order.
+
+    ``overwrite_F``: ``F`` (a float64 array) is overwritten with ``S`` and returned (no n x k array is made);
+    the values are those of the default form to the last bit.
     """
     d = df[dataio.DIRECTION].to_numpy(float)
     s = df[dataio.POSITION].to_numpy(float)
@@ -72,8 +75,11 @@ def linear_response(params: pr.PredictorParams, df: pd.DataFrame, m_s: float, F:
         D = D - pr.speed_slope(params, s, V0, d * np.asarray(v_pred, float))
     D = np.broadcast_to(D, s.shape)
     m_eff = pr.effective_mass(params, load, m_s)
-    F = np.asarray(F, float).reshape(len(df), -1)
-    S = np.zeros_like(F)
+    if overwrite_F and not (isinstance(F, np.ndarray) and F.dtype == np.float64):
+        raise ValueError("overwrite_F needs a float64 array")
+    S = (F if overwrite_F else np.array(F, float)).reshape(len(df), -1)
+    if overwrite_F and not np.shares_memory(S, F):
+        raise ValueError("overwrite_F needs an array whose n x k reshape is a view")
     slices = [sl for _, sl in dataio.run_slices(df[dataio.RUN])]
     starts = np.array([sl.start for sl in slices])
     lengths = np.array([sl.stop - sl.start for sl in slices])
@@ -81,11 +87,31 @@ def linear_response(params: pr.PredictorParams, df: pd.DataFrame, m_s: float, F:
     dt[:-1] = np.diff(t)
     h = dt / m_eff
     a = 1.0 - h * D
+    # S is written over F row by row: f holds each run's force at its current row, read before that row is written
+    f = S[starts]
+    S[starts] = 0.0
     for k in range(int(lengths.max()) - 1):
         act = lengths > k + 1
         cur = starts[act] + k
-        S[cur + 1] = a[cur, None] * S[cur] + h[cur, None] * F[cur]
+        f_cur = f[act]
+        f[act] = S[cur + 1]
+        S[cur + 1] = a[cur, None] * S[cur] + h[cur, None] * f_cur
     return S
+
+
+def _rows_in_place(X: np.ndarray, idx: np.ndarray, block: int = 256) -> np.ndarray:
+    """``X[idx]`` for increasing ``idx``, written into ``X``'s first ``len(idx)`` rows (a view is returned)."""
+    if len(idx) == len(X) or len(idx) == 0:
+        return X[:len(idx)]
+    cuts = np.flatnonzero(np.diff(idx) != 1) + 1
+    dst = 0
+    for lo, hi in zip(np.concatenate([[0], cuts]), np.concatenate([cuts, [len(idx)]])):
+        src, n = int(idx[lo]), int(hi - lo)
+        for o in range(0, n if src != dst else 0, block):   # in blocks: an overlapping copy buffers only a block
+            b = min(block, n - o)
+            X[dst + o:dst + o + b] = X[src + o:src + o + b]
+        dst += n
+    return X[:len(idx)]
 
 
 def nuisance_forces(params: pr.PredictorParams, df: pd.DataFrame, v_pred: np.ndarray) -> np.ndarray:
@@ -197,21 +223,27 @@ class FoldSolver:
             out.update({run: float(sums[k]) for run, k in zip(labels, part[7])})
         return out
 
-    def gains(self, S_all, widths) -> list:
-        """:meth:`gain` of every candidate: ``S_all`` holds their columns side by side, ``widths`` their counts."""
+    def gains(self, S_all, widths, work=None) -> list:
+        """:meth:`gain` of every candidate: ``S_all`` holds their columns side by side, ``widths`` their counts.
+
+        ``work``: two C-contiguous float64 arrays of at least ``S_all``'s shape, not sharing memory with it,
+        used as scratch (overwritten); made here when not given.
+        """
         bounds = np.cumsum([0] + list(widths))
         sums = [[] for _ in widths]
-        # the training rows and their projection go into two arrays made once for all folds (a fresh n x k array
-        # per fold costs the kernel its pages each time); the same products as S_tr - U @ (U.T @ S_tr)
-        n_tr = max(part[2].shape[0] for part in self.parts)
-        rows_buf, proj_buf = np.empty((n_tr, S_all.shape[1])), np.empty((n_tr, S_all.shape[1]))
+        # each fold's training rows, their projection and its held-out rows go into two arrays (a fresh n x k array
+        # costs the kernel its pages each time): the training rows fill the first rows, the held-out rows the rest;
+        # the same products as S_tr - U @ (U.T @ S_tr) and S_te - A_te @ (W @ C)
+        rows_buf, proj_buf = _scratch(work, S_all.shape)
         for part in self.parts:
             test, tr, U, W, yp, e0, code, _ = part
-            S_tr = np.compress(tr, S_all, axis=0, out=rows_buf[:U.shape[0]])
+            n_tr, n_te = U.shape[0], len(e0)
+            S_tr = np.compress(tr, S_all, axis=0, out=rows_buf[:n_tr])
             C = U.T @ S_tr
-            Sp = np.subtract(S_tr, np.matmul(U, C, out=proj_buf[:U.shape[0]]), out=proj_buf[:U.shape[0]])
+            Sp = np.subtract(S_tr, np.matmul(U, C, out=proj_buf[:n_tr]), out=proj_buf[:n_tr])
             Spy = Sp.T @ yp
-            T_te = S_all[test] - self.A[test] @ (W @ C)
+            S_te = np.compress(test, S_all, axis=0, out=rows_buf[n_tr:n_tr + n_te])
+            T_te = np.subtract(S_te, np.matmul(self.A[test], W @ C, out=proj_buf[n_tr:n_tr + n_te]), out=S_te)
             norms = np.einsum("ij,ij->j", S_tr, S_tr)
             for j, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])):
                 Spj = Sp[:, a:b]
@@ -233,11 +265,26 @@ class FoldSolver:
         return self.gains(S, [S.shape[1]])[0]
 
 
-def insample_fits(A, y, S_all, widths):
-    """Least squares of ``y`` on ``[A, S_j]`` for every candidate j on all rows: ``(sse0, [(sse1, coef_S)])``."""
+def _scratch(work, shape):
+    """Two float64 arrays of ``shape`` (rows x columns): the first ones of ``work``'s, or new ones."""
+    if work is None:
+        return np.empty(shape), np.empty(shape)
+    if any(w.dtype != np.float64 or not w.flags.c_contiguous or w.shape[0] < shape[0] or w.shape[1] != shape[1]
+           for w in work):
+        raise ValueError("work: two C-contiguous float64 arrays with at least the rows and the columns of S_all")
+    return tuple(w[:shape[0]] for w in work)
+
+
+def insample_fits(A, y, S_all, widths, work=None):
+    """Least squares of ``y`` on ``[A, S_j]`` for every candidate j on all rows: ``(sse0, [(sse1, coef_S)])``.
+
+    ``work``: as in :meth:`FoldSolver.gains` (its first array holds the projection).
+    """
     U, _ = _basis(A)
     yp = y - U @ (U.T @ y)
-    Sp = S_all - U @ (U.T @ S_all)
+    out_buf = None if work is None else _scratch(work, S_all.shape)[0]
+    Sp = np.matmul(U, U.T @ S_all, out=out_buf)
+    Sp = np.subtract(S_all, Sp, out=Sp)
     Spy = Sp.T @ yp
     norms = np.einsum("ij,ij->j", S_all, S_all)
     sse0 = float(yp @ yp)
@@ -378,8 +425,11 @@ def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5,
     n_eff = _effective_n(y, runs_m)
     feats = [np.asarray(c.features(df), float).reshape(len(df), -1) for c in candidates]
     widths = [f.shape[1] for f in feats]
-    N = linear_response(params, df, m_s, nuisance_forces(params, df, v_pred), v_pred=v_pred)[idx]
-    S_all = linear_response(params, df, m_s, np.column_stack(feats), v_pred=v_pred)[idx]
+    N = _rows_in_place(linear_response(params, df, m_s, nuisance_forces(params, df, v_pred), v_pred=v_pred,
+                                       overwrite_F=True), idx)
+    # the candidates' responses are written over their forces and cut to the masked rows in place
+    S_all = _rows_in_place(linear_response(params, df, m_s, np.column_stack(feats), v_pred=v_pred, overwrite_F=True),
+                           idx)
     solver = FoldSolver(y, N, runs_m, folds)
     time_solver = FoldSolver(y, N, runs_m, time_folds) if time_folds is not None else solver
     A = solver.A
@@ -388,9 +438,10 @@ def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5,
     cols = np.concatenate([np.arange(a, a + w) for a, w, u in zip(np.cumsum([0] + widths[:-1]), widths, usable) if u]
                           + [np.zeros(0, int)]).astype(int)
     w_ok = [w for w, u in zip(widths, usable) if u]
-    S_ok = np.ascontiguousarray(S_all[:, cols])
-    cv = iter(solver.gains(S_ok, w_ok)) if w_ok else iter(())
-    sse0, fits = insample_fits(A, y, S_ok, w_ok) if w_ok else (0.0, [])
+    S_ok = S_all if all(usable) else S_all[:, cols]   # a copy only when a candidate is left out
+    work = (np.empty(S_ok.shape), np.empty(S_ok.shape)) if w_ok else None
+    cv = iter(solver.gains(S_ok, w_ok, work)) if w_ok else iter(())
+    sse0, fits = insample_fits(A, y, S_ok, w_ok, work) if w_ok else (0.0, [])
     fits = iter(fits)
     out = []
     for c, w, u, start in zip(candidates, widths, usable, np.cumsum([0] + widths[:-1])):
