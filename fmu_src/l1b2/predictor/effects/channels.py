@@ -222,11 +222,7 @@ class Channel(Effect):
         return super().needs(spec) | {signal_key(str(spec.get("channel")), str(spec.get("level")))} | by | motion
 
     def features(self, spec, x):
-        c = signal(x, signal_key(str(spec.get("channel")), str(spec.get("level"))))
-        sd = num(spec, "sd")
-        if not sd > 0:
-            raise EffectSpecError(f"channel {spec.get('channel')!r}: standard deviation {sd} is not positive")
-        z = (c - num(spec, "mean")) / sd
+        z = _channel_z(spec, x)
         form = str(spec.get("form"))
         factor = form_factor(form, x, num(spec, "m_s") if form == "inertia" else None)
         if form == "inertia":   # the mass form's linearisation: the force of each relative mass column
@@ -289,6 +285,15 @@ def _forms(own: bool, m_s: float, shape: str) -> tuple:
             + (("damping",) if own and shape in DAMPING_SHAPES else ()))
 
 
+def _channel_z(spec, x) -> np.ndarray:
+    """A channel spec's standardised values per sample, ``(c - mean) / sd`` (``sd`` must be positive)."""
+    c = signal(x, signal_key(str(spec.get("channel")), str(spec.get("level"))))
+    sd = num(spec, "sd")
+    if not sd > 0:
+        raise EffectSpecError(f"channel {spec.get('channel')!r}: standard deviation {sd} is not positive")
+    return (c - num(spec, "mean")) / sd
+
+
 def _z_range(spec, lo: float, hi: float) -> tuple[float, float]:
     """A channel's range ``[lo, hi]`` in its spec's standard deviations about its mean."""
     mean, sd = num(spec, "mean"), num(spec, "sd")
@@ -348,11 +353,7 @@ def mass_columns(spec, x) -> np.ndarray:
         raise EffectSpecError(f"mass_columns: the spec's form {spec.get('form')!r} is not 'inertia'")
     if spec.get("by"):
         raise EffectSpecError("mass_columns: the inertia form has no interaction")
-    c = signal(x, signal_key(str(spec.get("channel")), str(spec.get("level"))))
-    sd = num(spec, "sd")
-    if not sd > 0:
-        raise EffectSpecError(f"channel {spec.get('channel')!r}: standard deviation {sd} is not positive")
-    return _mass_basis(spec, (c - num(spec, "mean")) / sd)
+    return _mass_basis(spec, _channel_z(spec, x))
 
 
 def slider_mass(spec, x, phi) -> np.ndarray:
