@@ -52,7 +52,8 @@ import numpy as np
 from ..errors import IdentificationError
 from ..predictor.model import G_of_k0, drive_factor
 from .identifiable import admissible, identifiable_search
-from .problem import RECOMMENDED_FIXED, ScaledObjective
+from .pins import pinned_parameters
+from .problem import ScaledObjective
 from .varpro import linear_positions, local_fit, profile_loglik, varpro_search
 
 __all__ = ["OMEGA_GRID", "GAUGE_K0", "drive_offset", "offset_of_omega", "omega_of_offset", "d_coefficients",
@@ -498,6 +499,6 @@ def auto_solver(cfg) -> str:
     ``init``) of the Eq. 29 model alone (no extra forces) with :data:`OFFSET_COORDINATES` varied, else ``"joint"``
     (a warm start is a local continuation; pins of the offset's coordinates fix its range; the pure-slip family and
     the extra forces are searched by the joint search)."""
-    fixed = RECOMMENDED_FIXED if isinstance(cfg.fixed, str) and cfg.fixed == "recommended" else (cfg.fixed or ())
+    fixed = pinned_parameters(cfg.fixed)
     cold_eq29 = cfg.init is None and cfg.model == "eq29" and cfg.extra is None
     return "offset_reduced" if cold_eq29 and not set(fixed) & set(OFFSET_COORDINATES) else "joint"

@@ -44,8 +44,6 @@ as it is, or checks a DataFrame against the same contract
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-
 import numpy as np
 import pandas as pd
 from numpy.polynomial.legendre import legvander
@@ -82,16 +80,12 @@ from ..predictor.simulate import (
 )
 from ..units import G_M_S2
 from .kernels import drive_derivative
+from .pins import RECOMMENDED_FIXED, pinned_parameters
 
 __all__ = [
-    "RECOMMENDED_FIXED", "run_label", "SampleData", "ForceCore", "LikelihoodProblem", "clip_theta",
-    "param_scale", "strictly_inside", "ParameterSpace", "extra_parameter_scale", "ScaledObjective",
+    "RECOMMENDED_FIXED", "pinned_parameters", "run_label", "SampleData", "ForceCore", "LikelihoodProblem",
+    "clip_theta", "param_scale", "strictly_inside", "ParameterSpace", "extra_parameter_scale", "ScaledObjective",
 ]
-
-#: parameters pinned by ``fixed="recommended"``: one per structural null
-#: direction (sigma, k0, mu) plus the practically unidentifiable mu_sd
-RECOMMENDED_FIXED = ("sigma", "k0", "mu", "mu_sd")
-
 
 # ---------------------------------------------------------------------------
 # data
@@ -642,7 +636,7 @@ class ParameterSpace:
         Extra-force parameters phi appended to theta.
     fixed : None, "recommended", sequence of names or mapping name -> value
         Pinned parameters (value ``None`` = pinned at the start value).
-        ``"recommended"`` pins :data:`RECOMMENDED_FIXED`.
+        ``"recommended"`` pins :data:`RECOMMENDED_FIXED` (:func:`~l1b2.ident.pins.pinned_parameters`).
 
     Attributes
     ----------
@@ -670,27 +664,11 @@ class ParameterSpace:
         self.xlo, self.xhi = extra.bounds() if extra is not None else (np.zeros(0), np.zeros(0))
         self.lo = np.concatenate([lo_t, self.xlo])
         self.hi = np.concatenate([hi_t, self.xhi])
-        self.fixed = self._parse_fixed(fixed)
+        self.fixed = pinned_parameters(fixed, self.names)
         self.varied = np.ones(self.size, dtype=bool)
         for k in self.fixed:
             self.varied[self.names.index(k)] = False
         self.fixed_values = {k: v for k, v in self.fixed.items() if v is not None}
-
-    def _parse_fixed(self, fx) -> dict:
-        if fx is None:
-            return {}
-        if isinstance(fx, str):
-            if fx != "recommended":
-                raise IdentificationError(f"fixed: unknown preset {fx!r} (use 'recommended' or a dict)")
-            fx = {k: None for k in RECOMMENDED_FIXED}
-        elif not isinstance(fx, Mapping):
-            fx = {k: None for k in fx}
-        out = {}
-        for k, v in fx.items():
-            if k not in self.names:
-                raise IdentificationError(f"fixed: unknown parameter {k!r}; known: {self.names}")
-            out[k] = None if v is None else float(v)
-        return out
 
     def index(self, name: str) -> int:
         return self.names.index(name)
