@@ -145,3 +145,31 @@ def test_the_mass_floor_is_the_smallest_slider_mass_over_trains_range_of_the_cha
         assert got <= dense.min() + 1e-12 and got == pytest.approx(dense.min(), abs=1e-9)
     with pytest.raises(ch.EffectSpecError, match="inertia"):
         ch.mass_floor({**base, "form": "damping"}, (0.1, 0.0), 1.0, 6.0)
+
+
+def test_the_mass_forms_free_run_takes_free_runs_inputs_in_every_form():
+    # reference: each run integrated alone (one run, no layout to pack across runs) and its speeds put end to
+    # end; the start speed as one scalar per run, one value per run or one per sample (its first sample), the
+    # extra force and the mass per sample; a start speed of another size refused by both
+    p = example_params()
+    conds = [(324.0, 0.0, 1.0), (260.0, 0.05, -1.0), (20.0, 0.5, 1.0)]
+    s, V0, load, d, t, v_start, run = _runs(conds)
+    rng = np.random.default_rng(5)
+    ef = rng.normal(0.0, 0.2, run.size)
+    m = M_S * (1 + 0.3 * rng.uniform(size=run.size))
+    M = np.stack([np.full(run.size, M_S), M_S * rng.normal(size=run.size)], 1)
+    v_start = v_start * rng.uniform(0.5, 1.5, run.size)      # only each run's first sample is its start
+    alone = np.concatenate([sim.free_run(p, s[run == r], V0[run == r], load[run == r], d[run == r], t[run == r],
+                                         v_start[run == r][0], m[run == r], extra_force=ef[run == r])
+                            for r in range(len(conds))])
+    per_run = v_start[np.r_[0, np.flatnonzero(np.diff(run)) + 1]]
+    for vs in (v_start, per_run):
+        v, S = sim.mass_sensitivity(p, s, V0, load, d, t, vs, m, M, run_index=run, extra_force=ef)
+        np.testing.assert_allclose(v, alone, rtol=1e-14, atol=1e-16)
+        np.testing.assert_array_equal(v, sim.free_run(p, s, V0, load, d, t, vs, m, run_index=run, extra_force=ef))
+        assert S.shape == (run.size, 2) and np.all(np.isfinite(S))
+    v1, _ = sim.mass_sensitivity(p, s, V0, load, d, t, 0.1, m, M, run_index=run, extra_force=ef)
+    np.testing.assert_array_equal(v1, sim.free_run(p, s, V0, load, d, t, 0.1, m, run_index=run, extra_force=ef))
+    for call in (sim.free_run, lambda *a, **k: sim.mass_sensitivity(*a, M=M, **k)):
+        with pytest.raises(ValueError, match="v_start must be a scalar, one value per run or one per sample"):
+            call(p, s, V0, load, d, t, np.ones(2), m, run_index=run)

@@ -7,6 +7,7 @@ the time index only, vectorised across runs.
 
 from __future__ import annotations
 
+from types import SimpleNamespace
 from typing import Iterable, Mapping, Sequence
 
 import numpy as np
@@ -206,6 +207,40 @@ def free_run_coefficients(params: PredictorParams, s, V0, load, direction, dt, m
     return 1.0 - h * D, d * h * X, d * h * Fr, rest_sign(X, Fr)
 
 
+def _free_run_setup(params: PredictorParams, s, V0, load, direction, t, v_start, m_s, run_index, extra_force):
+    """The inputs of a free run on its layout (the arguments of :func:`free_run`).
+
+    Returns a namespace: ``n``, ``lay`` (:class:`RunLayout`), the flat per-sample arrays ``s``, ``V0``, ``load``,
+    ``d`` (direction), ``m_s`` and ``extra_force`` (None when not given), ``dt`` (:meth:`RunLayout.step_dt`),
+    ``v0`` (each run's start speed, in the packed run order) and ``coef``: the packed ``(a, e, f, z0)`` of
+    :func:`free_run_coefficients` for Eq. 29's drive law, None for the pure-slip family. ValueError for a
+    ``v_start`` that is neither a scalar nor one value per run nor one per sample.
+    """
+    s = np.asarray(s, dtype=float).ravel()
+    n = s.size
+    lay = RunLayout(run_index, n)
+    V0 = _broadcast_flat(V0, n, "V0")
+    load = _broadcast_flat(load, n, "load")
+    d = _broadcast_flat(direction, n, "direction")
+    t = _broadcast_flat(t, n, "t")
+    m_s = _broadcast_flat(m_s, n, "m_s")
+    vs = np.asarray(v_start, dtype=float).ravel()
+    if vs.size == 1:
+        v0 = np.full(lay.R, float(vs[0]))
+    elif vs.size == n:
+        v0 = vs[lay.starts]
+    elif vs.size == lay.R:
+        v0 = vs.copy()
+    else:
+        raise ValueError("v_start must be a scalar, one value per run or one per sample")
+    dt = lay.step_dt(t)
+    ef = None if extra_force is None else _broadcast_flat(extra_force, n, "extra_force")
+    coef = (None if params.drive_law == "pure_slip" else
+            tuple(lay.to_packed(x) for x in free_run_coefficients(params, s, V0, load, d, dt, m_s, ef)))
+    return SimpleNamespace(n=n, lay=lay, s=s, V0=V0, load=load, d=d, m_s=m_s, extra_force=ef, dt=dt,
+                           v0=v0[lay.run_order], coef=coef)
+
+
 def free_run(
     params: PredictorParams,
     s,
@@ -238,38 +273,19 @@ def free_run(
     default None: pi/2).
     Returns the predicted speed per sample [m/s], signed data convention.
     """
-    s = np.asarray(s, dtype=float).ravel()
-    n = s.size
-    lay = RunLayout(run_index, n)
-    V0 = _broadcast_flat(V0, n, "V0")
-    load = _broadcast_flat(load, n, "load")
-    d = _broadcast_flat(direction, n, "direction")
-    t = _broadcast_flat(t, n, "t")
-    m_s_arr = _broadcast_flat(m_s, n, "m_s")
-    vs = np.asarray(v_start, dtype=float).ravel()
-    if vs.size == 1:
-        v0 = np.full(lay.R, float(vs[0]))
-    elif vs.size == n:
-        v0 = vs[lay.starts]
-    elif vs.size == lay.R:
-        v0 = vs.copy()
-    else:
-        raise ValueError("v_start must be a scalar, one value per run or one per sample")
-    dt = lay.step_dt(t)
-    if extra_force is not None:
-        extra_force = _broadcast_flat(extra_force, n, "extra_force")
-    pk = lay.to_packed
+    r = _free_run_setup(params, s, V0, load, direction, t, v_start, m_s, run_index, extra_force)
+    lay, pk = r.lay, r.lay.to_packed
     if params.drive_law == "pure_slip":   # non-linear in the speed: stepped with the state's slip ratio
-        ca = None if contact is None else _broadcast_flat(contact, n, "contact")
-        D, X, Fr = force_parts(params, s, V0, d * load, m_s_arr, ca)
-        muP, Ap, c_k, frozen = slip_terms(params, s, V0)
-        h = dt / effective_mass(params, load, m_s_arr)
-        vpk = packed_slip_recursion(lay.offs, lay.na, step_drive, *(pk(np.broadcast_to(x, (n,))) for x in (
-            D, add_extra_force(X, extra_force) - frozen, muP, Ap, c_k, Fr, h, d)), v0[lay.run_order],
+        ca = None if contact is None else _broadcast_flat(contact, r.n, "contact")
+        D, X, Fr = force_parts(params, r.s, r.V0, r.d * r.load, r.m_s, ca)
+        muP, Ap, c_k, frozen = slip_terms(params, r.s, r.V0)
+        h = r.dt / effective_mass(params, r.load, r.m_s)
+        vpk = packed_slip_recursion(lay.offs, lay.na, step_drive, *(pk(np.broadcast_to(x, (r.n,))) for x in (
+            D, add_extra_force(X, r.extra_force) - frozen, muP, Ap, c_k, Fr, h, r.d)), r.v0,
             a=None if ca is None else pk(ca))[0]
         return lay.from_packed(vpk)
-    a, e, f, z0 = free_run_coefficients(params, s, V0, load, d, dt, m_s_arr, extra_force)
-    vpk = packed_recursion(lay, pk(a), pk(e), pk(f), pk(-d), pk(z0), v0[lay.run_order])
+    a, e, f, z0 = r.coef
+    vpk = packed_recursion(lay, a, e, f, pk(-r.d), z0, r.v0)
     return lay.from_packed(vpk)
 
 
@@ -289,24 +305,16 @@ def mass_sensitivity(params: PredictorParams, s, V0, load, direction, t, v_start
     """
     if params.drive_law == "pure_slip":
         raise ValueError("mass_sensitivity: Eq. 29's drive law only, not the pure-slip family's")
-    s = np.asarray(s, dtype=float).ravel()
-    n = s.size
-    lay = RunLayout(run_index, n)
-    V0, load, d, t, m = (_broadcast_flat(x, n, nm) for x, nm in ((V0, "V0"), (load, "load"), (direction,
-                                                                  "direction"), (t, "t"), (m_s, "m_s")))
+    r = _free_run_setup(params, s, V0, load, direction, t, v_start, m_s, run_index, extra_force)
+    n, lay, pk, d, m, ef = r.n, r.lay, r.lay.to_packed, r.d, r.m_s, r.extra_force
     M = np.asarray(M, dtype=float).reshape(n, -1)
-    vs = np.asarray(v_start, dtype=float).ravel()
-    v0 = (np.full(lay.R, float(vs[0])) if vs.size == 1 else vs[lay.starts] if vs.size == n else vs.copy())
-    dt = lay.step_dt(t)
-    ef = None if extra_force is None else _broadcast_flat(extra_force, n, "extra_force")
-    pk = lay.to_packed
-    a, e, f, z0 = (pk(x) for x in free_run_coefficients(params, s, V0, load, d, dt, m, ef))
-    D, X, Fr = force_parts(params, s, V0, d * load, m)
+    a, e, f, z0 = r.coef
+    D, X, Fr = force_parts(params, r.s, r.V0, d * r.load, m)
     D, X, Fr = (pk(np.broadcast_to(x, (n,))) for x in (D, add_extra_force(X, ef), Fr))
-    m_eff, dp = pk(effective_mass(params, load, m)), pk(d)
-    h = pk(dt) / m_eff
+    m_eff, dp = pk(effective_mass(params, r.load, m)), pk(d)
+    h = pk(r.dt) / m_eff
     flags = np.zeros(n, dtype=np.int8)
-    vpk = packed_recursion(lay, a, e, f, -dp, z0, v0[lay.run_order], flags)
+    vpk = packed_recursion(lay, a, e, f, -dp, z0, r.v0, flags)
     vp = dp * vpk
     sg = np.sign(-vp)
     sg[vp == 0] = z0[vp == 0]
