@@ -6,7 +6,8 @@ spectrum, evidence per regressor by cross-validation over runs),
 estimator), :mod:`~l1b2.closeloop.selection` (exact scores against the fixed
 baseline and the selection rules), :mod:`~l1b2.closeloop.loop` (the
 :class:`~l1b2.closeloop.loop.CloseLoop` estimator and
-:func:`~l1b2.closeloop.loop.close_loop`), :mod:`~l1b2.closeloop.acceptance`
+:func:`~l1b2.closeloop.loop.close_loop`), :mod:`~l1b2.closeloop.settings` (their settings as one frozen record,
+:class:`~l1b2.closeloop.settings.LoopSettings`), :mod:`~l1b2.closeloop.acceptance`
 (cross-validated refits, :class:`~l1b2.closeloop.acceptance.RefitSettings`),
 :mod:`~l1b2.closeloop.report` (the typed records of ``report.json``) and
 :mod:`~l1b2.closeloop.result` (:class:`~l1b2.closeloop.result.CloseLoopResult`:

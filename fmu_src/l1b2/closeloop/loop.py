@@ -82,14 +82,12 @@ from ..predictor.setup import PredictorSetup
 from . import chain
 from . import residuals as res
 from . import runlevel
-from .candidates import (CandidateSource, Context, baseline_damping, channels_of, damping_floors, full_library,
-                         training_summary)
+from .candidates import Context, baseline_damping, channels_of, damping_floors, full_library, training_summary
+from .settings import LoopSettings, keyword_signature
 from .stages import StageClock
-from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT_FOLDS, DEFAULT_REFIT_NFEV,
-                         DEFAULT_REFIT_REPEATS, Directions, EffectSet, RefitCV, RefitSettings, Validated, accepts,
-                         added_columns, chain_cv_errors, clock_folds, collinear, cv_errors, fold_start_phi,
-                         materiality, named_reading, refit, refit_schemes, stratified_folds, time_dependent,
-                         validated)
+from .acceptance import (Directions, EffectSet, RefitCV, RefitSettings, Validated, accepts, added_columns,
+                         chain_cv_errors, clock_folds, collinear, cv_errors, fold_start_phi, materiality,
+                         named_reading, refit, refit_schemes, stratified_folds, time_dependent, validated)
 from .baselines import choose_baseline, identify_families, retag_structural
 from .crosscheck import PureSlipCheck, identified_pick, score_of, withdrawn_note
 from .events import session, with_event_clocks
@@ -98,9 +96,8 @@ from .evidence import channels_considered, order_traced
 from .guard import checked_fit
 from .intervals import added_parameters, identification, reported_covariance, reported_uncertainty, train_levels
 from .result import CloseLoopResult, ResidualAnalysis
-from .selection import (DEFAULT_ALPHA, DEFAULT_PARSIMONY, SHORTLIST_MIN_GAIN, Score, best_per_family, design,
-                        named_alternatives, nuisance_forces, score_candidates, shape_alternatives, shortlist,
-                        significance_level, simplest_within_one_se)
+from .selection import (Score, best_per_family, design, named_alternatives, nuisance_forces, score_candidates,
+                        shape_alternatives, shortlist, significance_level, simplest_within_one_se)
 
 
 def _quiet(msg: str) -> None:
@@ -112,85 +109,9 @@ class CloseLoop(EstimatorSettings):
 
     Parameters
     ----------
-    order : int
-        Polynomial order of the predictor's A, B, P (paper: 8).
-    k_folds : int
-        Cross-validation folds over runs.
-    alpha : float
-        Significance level, Bonferroni-corrected over the candidate families.
-    min_gain : float
-        Smallest linearised held-out share of the residual for a candidate to be shortlisted.
-    parsimony : float
-        Accepted candidates within this share of the best CV gain count as equally good
-        (named before generic, then fewer parameters).
-    seed : int
-        Seed of the folds and of the baseline's multi-start.
-    n_starts : int
-        Multi-start local searches of the baseline identification.
-    noise_fit : {"alternate", "auto", "profile"}
-        The baseline identification's search (:class:`l1b2.ident.estimator.PredictorIdentifier`;
-        default ``"alternate"``, with which the loop's results were measured); the refits are
-        warm-started local searches either way.
-    noise : {"common", "per_run"}
-        The noise variances of every identification of the loop (baseline, refits): one common
-        variance (default, the paper's single R) or one per run (see ``PredictorIdentifier``).
-    library : CandidateSource, optional
-        Candidate library ``(ctx, df_train) -> list[CandidateForce]``;
-        default :func:`l1b2.closeloop.candidates.full_library` (one-regressor and two-regressor candidates).
-    progress : callable, optional
-        Called with a short message at the start of each stage.
-    client : dask.distributed.Client, optional
-        Where the cross-validated refits run (:func:`l1b2.cluster.dask_client`): each fold of each trial is
-        one task, spread over the cluster's workers; ``None``: in this process, in order. The result does
-        not depend on it.
-    max_rounds : int
-        Most effects added (one per round).
-    shortlist : int
-        Candidates (best of their family by linearised gain) refit and cross-validated per round.
-    refit_folds : int
-        Folds over runs of the cross-validated refit (stratified by direction and voltage).
-    refit_repeats : int
-        Splits of the runs into ``refit_folds`` folds for a round's acceptance (:func:`refit_schemes`, from ``seed``).
-    min_cv_gain : float
-        Smallest relative fall of the cross-validated free-run sum of squares (in most folds) to add an effect.
-    min_cv_drop : float
-        Smallest absolute fall of the cross-validated free-run nrmse to add a *structural* term (one that
-        relaxes Eq. 29's own linearisation, ``CandidateForce.structural``): the materiality threshold.
-        Other candidates need only ``min_cv_gain`` in most folds.
-    refit_nfev, final_nfev : int
-        Function evaluations of each fold's warm refit and of the joint re-identification after a round.
-    screen_alpha : float or None
-        When no candidate passes the Bonferroni-corrected screen, the best one whose run-level p-value is
-        below this uncorrected level is still refit and cross-validated (one per round; ``None``: off).
-        The screen only decides what is worth the refit: Bonferroni over ~30 families misses an effect
-        whose per-run gains are uneven (a drift in time) although the re-identified model improves on
-        held-out runs; what is added is decided by the acceptance rule. A screened round costs the
-        cross-validated refits of the current model and of one candidate (and, if it is accepted, the
-        next round).
-    run_level : bool
-        Each round, estimate every run's own deviation from the current model (a drive-force gain and an
-        offset, shrunk as random effects) and offer the run-level signal that best explains them
-        (:mod:`l1b2.closeloop.runlevel`, Bonferroni over the signals) as one more candidate of the
-        cross-validated refit; among accepted candidates within ``parsimony`` of the best, a form constant along
-        the stroke is preferred over a within-run form when the run-level evidence names its regressor.
-    clock_folds : {"blocks", "rotation"}
-        Folds of the candidates that depend on the session clock (screen and refit, whatever ``run_level``):
-        ``"blocks"`` k contiguous blocks, ``"rotation"`` conditions dealt in turn (:mod:`~l1b2.closeloop.acceptance`).
-    response_columns : tuple of str or None
-        Logged columns that are measured responses of the motor: listed in ``channels_considered``, never
-        offered as a cause. None: :data:`l1b2.predictor.effects.channels.RESPONSE_COLUMNS` (the virtual rig's
-        ``tip_velocity_amp_m_s``); a tuple replaces that list (``()``: every logged column is a candidate).
-
-    baseline : {"eq29", "best", "pure_slip"}
-        The predictor family the loop starts from: ``"eq29"`` (default), ``"pure_slip"``, or ``"best"``,
-        which identifies both on TRAIN and keeps Eq. 29 unless the pure-slip family's cross-validated
-        free-run nrmse over the refit folds is lower by at least ``min_cv_drop``
-        (:func:`l1b2.closeloop.baselines.choose_baseline`; both figures in ``diagnosis.baseline_choice``;
-        a pure-slip fit that diverges is recorded there and the loop starts from Eq. 29). With the
-        pure-slip family no candidate counts as relaxing Eq. 29 (a load x voltage term is a missing
-        effect). Why ``"best"`` is not yet the default: ``docs/decisions/0026-best-baseline-by-default.md``,
-        ``0032-run-level-effects-in-predictor-fmu.md``, ``0033-named-before-collinear-generic.md`` and
-        ``0040-why-the-named-pulley-form-loses-from-pure-slip.md``.
+    **settings
+        The fields of :class:`~l1b2.closeloop.settings.LoopSettings`, by name (their defaults and meaning there);
+        each is stored as an attribute of the same name, :attr:`settings` is them as one record.
 
     Attributes
     ----------
@@ -198,39 +119,16 @@ class CloseLoop(EstimatorSettings):
         Set by :meth:`fit`.
     """
 
-    def __init__(self, *, order: int = 8, k_folds: int = 5, alpha: float = DEFAULT_ALPHA,
-                 min_gain: float = SHORTLIST_MIN_GAIN, parsimony: float = DEFAULT_PARSIMONY, seed: int = 0,
-                 n_starts: int = 4, library: CandidateSource | None = None, progress=None, max_rounds: int = 3,
-                 shortlist: int = 2, refit_folds: int = DEFAULT_REFIT_FOLDS,
-                 refit_repeats: int = DEFAULT_REFIT_REPEATS, min_cv_gain: float = DEFAULT_MIN_CV_GAIN,
-                 min_cv_drop: float = DEFAULT_MIN_CV_DROP, refit_nfev: int = DEFAULT_REFIT_NFEV,
-                 final_nfev: int = 60, screen_alpha: float | None = 0.01, noise_fit: str = "alternate",
-                 noise: str = "common", client=None, baseline: str = "eq29", run_level: bool = True,
-                 response_columns: tuple | None = None, clock_folds: str = "blocks"):
-        self.order = order
-        self.k_folds = k_folds
-        self.alpha = alpha
-        self.min_gain = min_gain
-        self.parsimony = parsimony
-        self.seed = seed
-        self.n_starts = n_starts
-        self.noise_fit = noise_fit
-        self.noise = noise
-        self.library = library
-        self.progress = progress
-        self.max_rounds = max_rounds
-        self.shortlist = shortlist
-        self.refit_folds, self.refit_repeats = refit_folds, refit_repeats
-        self.min_cv_gain = min_cv_gain
-        self.min_cv_drop = min_cv_drop
-        self.refit_nfev = refit_nfev
-        self.final_nfev = final_nfev
-        self.screen_alpha = screen_alpha
-        self.client = client
-        self.baseline = baseline
-        self.run_level = run_level
-        self.response_columns = response_columns
-        self.clock_folds = clock_folds
+    def __init__(self, **settings):
+        for name, value in LoopSettings(**settings).as_dict().items():   # an unknown name: TypeError
+            setattr(self, name, value)
+
+    __init__.__signature__ = keyword_signature(LoopSettings)
+
+    @property
+    def settings(self) -> LoopSettings:
+        """The current settings as one frozen record."""
+        return LoopSettings(**self.get_params())
 
     # -- the job -------------------------------------------------------------
     def fit(self, train: dataio.Measurements, test: dataio.Measurements | None = None) -> CloseLoop:
@@ -595,14 +493,7 @@ class CloseLoop(EstimatorSettings):
             "significance_level": it.level,
             "refit_trials": [[t.to_dict() for t in rnd] for rnd in it.trials],
             "baseline_choice": getattr(self, "baseline_choice_", {}),
-            "rules": {"min_gain": self.min_gain, "alpha": self.alpha, "parsimony": self.parsimony,
-                      "k_folds": self.k_folds, "shortlist": self.shortlist, "refit_folds": self.refit_folds,
-                      "refit_repeats": self.refit_repeats, "min_cv_gain": self.min_cv_gain,
-                      "min_cv_drop": self.min_cv_drop, "screen_alpha": self.screen_alpha,
-                      "noise_fit": self.noise_fit, "noise": self.noise,
-                      "max_rounds": self.max_rounds, "run_level": self.run_level, "clock_folds": self.clock_folds,
-                      "response_columns": (list(self.response_columns) if self.response_columns is not None
-                                           else None)},
+            "rules": self.settings.rules(),
             "regressor_evidence": [[e.to_dict() for e in rnd] for rnd in a.rounds],
             "whiteness": {"runs": len(w),
                           "share_runs_ljung_box_p_below_0.05": (float(np.mean([x["ljung_box_p"] < 0.05 for x in w]))
@@ -705,7 +596,8 @@ def _effect_record(c, rec: dict, params: dict | None) -> dict:
 
 
 def close_loop(train: dataio.Measurements, test: dataio.Measurements | None = None, **settings) -> CloseLoopResult:
-    """``CloseLoop(**settings).fit(train, test).result_`` (settings: see :class:`CloseLoop`)."""
+    """``CloseLoop(**settings).fit(train, test).result_`` (settings: the fields of
+    :class:`~l1b2.closeloop.settings.LoopSettings`)."""
     return CloseLoop(**settings).fit(train, test).result_
 
 

@@ -1,0 +1,64 @@
+"""The close loop's settings as one frozen record (:mod:`l1b2.closeloop.settings`) behind ``CloseLoop(...)``."""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+from l1b2.closeloop.loop import CloseLoop, close_loop
+from l1b2.closeloop.settings import LoopSettings
+from l1b2.data.measurements import Measurements
+from l1b2.predictor.model import example_params
+from l1b2.predictor.simulate import design_grid, simulate_dataset
+
+#: the constructor's keywords and defaults, in order, written out
+DEFAULTS = {"order": 8, "k_folds": 5, "alpha": 0.01, "min_gain": 0.05, "parsimony": 0.9, "seed": 0, "n_starts": 4,
+            "library": None, "progress": None, "max_rounds": 3, "shortlist": 2, "refit_folds": 4,
+            "refit_repeats": 1, "min_cv_gain": 0.03, "min_cv_drop": 0.005, "refit_nfev": 10, "final_nfev": 60,
+            "screen_alpha": 0.01, "noise_fit": "alternate", "noise": "common", "client": None, "baseline": "eq29",
+            "run_level": True, "response_columns": None, "clock_folds": "blocks"}
+
+#: settings other than the defaults for every rule the report records
+CHANGED = {"order": 3, "n_starts": 1, "max_rounds": 0, "min_gain": 0.07, "alpha": 0.02, "parsimony": 0.8,
+           "k_folds": 3, "shortlist": 1, "refit_folds": 2, "refit_repeats": 2, "min_cv_gain": 0.04,
+           "min_cv_drop": 0.006, "screen_alpha": None, "noise_fit": "profile", "noise": "per_run",
+           "run_level": False, "clock_folds": "rotation", "response_columns": ("aux_a", "aux_b")}
+
+
+def small_train(seed=1):
+    """Twelve noisy runs of the Eq. 29 predictor itself (order 3), as validated measurements."""
+    df = simulate_dataset(example_params(3), design_grid(voltages=(220.0, 324.0), loads=(-0.05, 0.0, 0.05)), 0.1,
+                          noise_std=1e-3, seed=seed)
+    return Measurements(df=df, meta={"slider_mass_kg": 0.1}, path="train.csv")
+
+
+def test_the_settings_are_the_constructors_keywords_in_one_frozen_record():
+    est = CloseLoop()
+    assert est.get_params() == DEFAULTS and list(est.get_params()) == list(DEFAULTS)
+    assert est.settings == LoopSettings() and est.settings.as_dict() == DEFAULTS
+    est = CloseLoop(**CHANGED)
+    assert est.get_params() == {**DEFAULTS, **CHANGED}
+    assert (est.k_folds, est.noise, est.clock_folds, est.refit_repeats) == (3, "per_run", "rotation", 2)
+    assert est.settings == LoopSettings(**CHANGED)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        est.settings.seed = 4
+    assert est.set_params(seed=4) is est and est.settings.seed == 4 == est.seed
+    with pytest.raises(TypeError, match="gamma"):
+        CloseLoop(gamma=1.0)
+    with pytest.raises(TypeError):
+        CloseLoop(8)            # keywords only
+
+
+def test_the_report_records_the_rules_as_given():
+    # reference: the rules written out for settings other than the defaults; the list of response columns as a
+    # list (JSON), in report.json as in the result
+    rules = {"min_gain": 0.07, "alpha": 0.02, "parsimony": 0.8, "k_folds": 3, "shortlist": 1, "refit_folds": 2,
+             "refit_repeats": 2, "min_cv_gain": 0.04, "min_cv_drop": 0.006, "screen_alpha": None,
+             "noise_fit": "profile", "noise": "per_run", "max_rounds": 0, "run_level": False,
+             "clock_folds": "rotation", "response_columns": ["aux_a", "aux_b"]}
+    assert CloseLoop(**CHANGED).settings.rules() == rules
+    res = close_loop(small_train(), **CHANGED)
+    got = res.diagnosis["rules"]
+    assert got == rules and list(got) == list(rules)
+    assert json.loads(json.dumps(res.to_dict()))["diagnosis"]["rules"] == rules
+    assert np.isfinite(res.baseline["train"]["free_run"]["nrmse"])
