@@ -1,4 +1,5 @@
-"""The close loop's settings as one frozen record (:mod:`l1b2.closeloop.settings`) behind ``CloseLoop(...)``."""
+"""The close loop's settings as one frozen record (:mod:`l1b2.closeloop.settings`) behind ``CloseLoop(...)``, and
+the run folds they define, computed once per fit."""
 
 import dataclasses
 import json
@@ -62,3 +63,44 @@ def test_the_report_records_the_rules_as_given():
     assert got == rules and list(got) == list(rules)
     assert json.loads(json.dumps(res.to_dict()))["diagnosis"]["rules"] == rules
     assert np.isfinite(res.baseline["train"]["free_run"]["nrmse"])
+
+
+def test_trains_run_folds_are_computed_once_per_fit_and_shared_by_their_three_users(monkeypatch):
+    # reference: stratified_folds(TRAIN, refit_folds, seed) computed independently; the baseline's choice, the
+    # measurement chain's cross-validation and split 0 of the rounds' refit folds get that one list (the chain's
+    # test made to accept a filter, so that the chain is cross-validated; both families, so that one is chosen)
+    import l1b2.closeloop.acceptance as acc
+    import l1b2.closeloop.loop as loop_mod
+    from l1b2.closeloop.chain import OutputFilter
+    real, calls, seen = acc.stratified_folds, [], {}
+
+    def spy(df, k, seed=0):
+        calls.append(seed)
+        return real(df, k, seed)
+
+    def spy_on(name, key, at):
+        fn = getattr(loop_mod, name)
+
+        def wrapped(*args, **kwargs):
+            out = fn(*args, **kwargs)
+            seen[key] = args[at] if at is not None else out
+            return out
+        monkeypatch.setattr(loop_mod, name, wrapped)
+
+    monkeypatch.setattr(acc, "stratified_folds", spy)
+    monkeypatch.setattr(loop_mod, "stratified_folds", spy)
+    spy_on("choose_baseline", "baseline", 4)
+    spy_on("chain_cv_errors", "chain", 3)
+    spy_on("refit_schemes", "refit", None)
+    monkeypatch.setattr(loop_mod.chain, "speed_channel", lambda df, mask, k, seed: {
+        "accepted": True, "filter": OutputFilter(), "cv_gain": 0.0})
+    train = small_train()
+    close_loop(train, order=3, n_starts=1, max_rounds=0, run_level=False, baseline="best", refit_folds=3,
+               refit_repeats=2, seed=3)
+    assert calls == [3, [3, 1]]                   # split 0 once; split 1 of the repeated folds on its own stream
+    monkeypatch.undo()
+    want = acc.stratified_folds(train.df, 3, 3)
+    assert seen["baseline"] is seen["chain"] and [f.tolist() for f in seen["baseline"]] == [f.tolist() for f in want]
+    refit = seen["refit"][False]
+    assert all(a is b for a, b in zip(refit[:3], seen["baseline"]))
+    assert [f.tolist() for f in refit] == [f.tolist() for f in acc.repeated_folds(train.df, 3, 2, 3)]

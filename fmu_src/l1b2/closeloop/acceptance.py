@@ -215,14 +215,16 @@ def stratified_folds(df: pd.DataFrame, k: int, seed=0) -> list[np.ndarray]:
     return [ids[i::k] for i in range(k)]
 
 
-def repeated_folds(df: pd.DataFrame, k: int, repeats: int = 1, seed: int = 0) -> list[np.ndarray]:
+def repeated_folds(df: pd.DataFrame, k: int, repeats: int = 1, seed: int = 0, first=None) -> list[np.ndarray]:
     """``repeats`` stratified splits of the runs into ``k`` folds each, one after the other (``repeats * k`` folds).
 
-    Split 0 is ``stratified_folds(df, k, seed)``; split ``j >= 1`` is shuffled by the stream ``[seed, j]``: the
-    whole list is a function of ``seed``, and ``repeats=1`` gives :func:`stratified_folds` itself. Every run is
-    in exactly one fold of each split, so it is held out exactly ``repeats`` times (:func:`held_out_times`).
+    Split 0 is ``stratified_folds(df, k, seed)`` (``first``: that split, already computed; None: computed here);
+    split ``j >= 1`` is shuffled by the stream ``[seed, j]``: the whole list is a function of ``seed``, and
+    ``repeats=1`` gives :func:`stratified_folds` itself. Every run is in exactly one fold of each split, so it is
+    held out exactly ``repeats`` times (:func:`held_out_times`).
     """
-    return [f for j in range(max(int(repeats), 1)) for f in stratified_folds(df, k, seed if j == 0 else [seed, j])]
+    split0 = list(stratified_folds(df, k, seed) if first is None else first)
+    return split0 + [f for j in range(1, max(int(repeats), 1)) for f in stratified_folds(df, k, [seed, j])]
 
 
 def held_out_times(folds) -> int:
@@ -292,11 +294,13 @@ def clock_folds(df: pd.DataFrame, k: int, scheme: str = "blocks") -> list[np.nda
     return CLOCK_FOLDS[scheme](df, k)
 
 
-def refit_schemes(df: pd.DataFrame, k: int, repeats: int = 1, seed: int = 0, clock: str = "blocks") -> dict:
-    """The folds of a round's cross-validated refits: ``{False: repeated_folds(df, k, repeats, seed), True:
+def refit_schemes(df: pd.DataFrame, k: int, repeats: int = 1, seed: int = 0, clock: str = "blocks",
+                  first=None) -> dict:
+    """The folds of a round's cross-validated refits: ``{False: repeated_folds(df, k, repeats, seed, first), True:
     clock_folds(df, k, clock)}``, keyed by whether the candidate depends on the session clock
-    (:func:`time_dependent`); the session's folds are one split whatever ``repeats`` (they are not shuffled)."""
-    return {False: repeated_folds(df, k, repeats, seed), True: clock_folds(df, k, clock)}
+    (:func:`time_dependent`); the session's folds are one split whatever ``repeats`` (they are not shuffled).
+    ``first``: ``stratified_folds(df, k, seed)`` when the caller has it already."""
+    return {False: repeated_folds(df, k, repeats, seed, first), True: clock_folds(df, k, clock)}
 
 
 #: the signals of the session clock (:data:`l1b2.predictor.effects.SIGNALS` and the channel family's)

@@ -150,6 +150,7 @@ class CloseLoop(EstimatorSettings):
         dtr, dte, event_rec = with_event_clocks(dtr, dte, self.response_columns, sess)
         dtr, dte, lag_rec = with_lagged_channels(dtr, dte, self.response_columns, sess)
         mask_tr = np.array(train.mask)
+        folds = stratified_folds(dtr, self.refit_folds, self.seed)   # TRAIN's run folds, one split for the fit
 
         if self.baseline not in ("best",) + DRIVE_LAWS:
             raise ValueError(f"baseline must be 'best' or one of {DRIVE_LAWS}, got {self.baseline!r}")
@@ -166,7 +167,7 @@ class CloseLoop(EstimatorSettings):
         if len(fits) > 1:
             say("baseline: cross-validating both families on TRAIN's run folds")
             family, self.baseline_choice_ = choose_baseline(
-                fits, dtr, mask_tr, m_s, stratified_folds(dtr, self.refit_folds, self.seed), self.refit_settings(),
+                fits, dtr, mask_tr, m_s, folds, self.refit_settings(),
                 min_drop=self.min_cv_drop)
             say.count(*(sum(r[k] for r in self.baseline_choice_["families"].values()) for k in ("refits", "nfev")))
         self.baseline_choice_["families"].update({f: {"fit_failed": why} for f, why in failed.items()})
@@ -178,7 +179,7 @@ class CloseLoop(EstimatorSettings):
         it = _Iteration(model=base, effects=EffectSet(), rounds=[{"round": 0, "added": None, "metrics": baseline}])
 
         say("measurement chain: speed column against the position's derivative")
-        chain_rec, fit_tr = self._chain(it, dtr, dte, mask_tr, m_s)
+        chain_rec, fit_tr = self._chain(it, dtr, dte, mask_tr, m_s, folds)
         start = it.model     # the physics model the rounds extend (fitted on fit_tr)
         wrap = ((lambda mdl: ChainModel(mdl, it.output_filter)) if it.output_filter is not None
                 else (lambda mdl: mdl))
@@ -195,7 +196,8 @@ class CloseLoop(EstimatorSettings):
         # a named pick from Eq. 29 is confirmed from the pure-slip family (decision 0043): that family's fit
         other = (None if start.params_.drive_law != "eq29" else (lambda: fits["pure_slip"]) if (
             "pure_slip" in fits and fit_tr is dtr) else (lambda: fit_family("pure_slip", fit_tr, "named-effect check")))
-        self._iterate(it, pool, fit_tr, mask_tr, m_s, lambda mdl: _metrics(wrap(mdl), dtr, dte), say, ctx, other)
+        self._iterate(it, pool, fit_tr, mask_tr, m_s, lambda mdl: _metrics(wrap(mdl), dtr, dte), say, ctx, other,
+                      folds)
         it.model = wrap(it.model)
 
         ext = it.model if (it.effects.candidates or it.output_filter is not None) else None
@@ -244,7 +246,8 @@ class CloseLoop(EstimatorSettings):
         return RefitSettings(order=self.order, seed=self.seed, max_nfev=self.refit_nfev, noise=self.noise,
                              client=self.client, frequency=getattr(self, "frequency_", None) or "off")
 
-    def _iterate(self, it: _Iteration, pool, dtr, mask, m_s, report, say, ctx=None, other=None) -> None:
+    def _iterate(self, it: _Iteration, pool, dtr, mask, m_s, report, say, ctx=None, other=None,
+                 folds=None) -> None:
         """Rounds of linearised shortlist -> cross-validated refit -> acceptance -> joint re-identification.
 
         Extends ``it`` in place; ``report(model)`` gives a round's metrics (on the measured speed); ``say`` is
@@ -253,9 +256,9 @@ class CloseLoop(EstimatorSettings):
         (:mod:`l1b2.closeloop.crosscheck`; the checks go to ``it.checks``).
         Candidates that depend on the session clock are scored and cross-validated on the session's folds
         (``clock_folds``), the others on the stratified run folds; the current model is cross-validated on the
-        same folds as each.
+        same folds as each. ``folds``: ``stratified_folds(dtr, refit_folds, seed)`` when the caller has it.
         """
-        schemes = refit_schemes(dtr, self.refit_folds, self.refit_repeats, self.seed, self.clock_folds)
+        schemes = refit_schemes(dtr, self.refit_folds, self.refit_repeats, self.seed, self.clock_folds, folds)
         screen_blocks = clock_folds(dtr, self.k_folds, self.clock_folds)
         check = None if other is None else PureSlipCheck(
             other, dtr, mask, m_s, lambda c: schemes[time_dependent(c)], self.refit_settings(),
@@ -389,8 +392,9 @@ class CloseLoop(EstimatorSettings):
                 errs[i] = e
         return errs
 
-    def _chain(self, it: _Iteration, dtr, dte, mask, m_s):
-        """The speed channel first (:mod:`l1b2.closeloop.chain`): ``(record, the TRAIN frame the rounds fit)``.
+    def _chain(self, it: _Iteration, dtr, dte, mask, m_s, folds):
+        """The speed channel first (:mod:`l1b2.closeloop.chain`): ``(record, the TRAIN frame the rounds fit)``;
+        ``folds``: TRAIN's run folds (:func:`~l1b2.closeloop.acceptance.stratified_folds`).
 
         When the speed column is a filtered derivative of the position (found from
         position and speed alone, cross-validated over runs), the physics is
@@ -422,7 +426,7 @@ class CloseLoop(EstimatorSettings):
         fr1 = filt.predict_free_run(dtr)
         sse1 = float(np.sum((v - fr1[mask]) ** 2))
         rec["train_free_run_gain"] = 1 - sse1 / sse0 if sse0 > 0 else 0.0   # reported, not deciding
-        base_cv, chain_cv = chain_cv_errors(dtr, mask, m_s, stratified_folds(dtr, self.refit_folds, self.seed),
+        base_cv, chain_cv = chain_cv_errors(dtr, mask, m_s, folds,
                                             it.model.params_, filt.model.params_, self.refit_settings(),
                                             k=self.k_folds)
         gain = (float(1 - chain_cv.sse.sum() / base_cv.sse.sum())
