@@ -104,3 +104,36 @@ def test_trains_run_folds_are_computed_once_per_fit_and_shared_by_their_three_us
     refit = seen["refit"][False]
     assert all(a is b for a, b in zip(refit[:3], seen["baseline"]))
     assert [f.tolist() for f in refit] == [f.tolist() for f in acc.repeated_folds(train.df, 3, 2, 3)]
+
+
+@pytest.mark.parametrize("flags, message", [
+    (["--clock-folds", "weekly"], "l1b2: error: --clock-folds must be one of blocks, rotation, got 'weekly'"),
+    (["--refit-repeats", "0"], "l1b2: error: --refit-repeats must be a whole number >= 1, got '0'"),
+    (["--refit-repeats", "two"], "l1b2: error: --refit-repeats must be a whole number >= 1, got 'two'"),
+    (["--refit-repeats", "1.5"], "l1b2: error: --refit-repeats must be a whole number >= 1, got '1.5'"),
+])
+def test_a_bad_fold_flag_is_one_line_before_any_file_is_read(tmp_path, capsys, flags, message):
+    from l1b2.cli import main
+    out = tmp_path / "cl"
+    code = main(["close-loop", "--train", str(tmp_path / "absent.csv"), "--out", str(out), "--quiet",
+                 "--no-plots", "--workers", "1"] + flags)
+    err = capsys.readouterr().err
+    assert code == 2 and err == message + "\n" and not out.exists()
+
+
+def test_the_fold_flags_reach_the_loop_and_its_report(tmp_path):
+    # reference: the values given on the command line are the report's rules; the flags' defaults are the loop's
+    from l1b2 import cli
+    from l1b2.closeloop.acceptance import CLOCK_FOLDS
+    assert set(cli.CLOCK_FOLDS) == set(CLOCK_FOLDS)
+    args = cli.build_parser().parse_args(["close-loop", "--train", "x.csv", "--out", "o"])
+    assert cli._fold_settings(args) == {"clock_folds": LoopSettings().clock_folds,
+                                        "refit_repeats": LoopSettings().refit_repeats}
+    for name, seed in (("train", 1), ("test", 2)):
+        small_train(seed).df.to_csv(tmp_path / f"{name}.csv", index=False)
+    out = tmp_path / "cl"
+    assert cli.main(["close-loop", "--train", str(tmp_path / "train.csv"), "--test", str(tmp_path / "test.csv"),
+                     "--slider-mass", "0.1", "--order", "3", "--max-rounds", "0", "--out", str(out), "--quiet",
+                     "--no-plots", "--workers", "1", "--clock-folds", "rotation", "--refit-repeats", "3"]) == 0
+    rules = json.loads((out / "report.json").read_text())["diagnosis"]["rules"]
+    assert (rules["clock_folds"], rules["refit_repeats"], rules["max_rounds"]) == ("rotation", 3, 0)

@@ -251,6 +251,8 @@ NOISE_FIT_HELP = ("'alternate': least squares at fixed noise variances, re-estim
                   "profile-likelihood search (faster, reached the reference optimum on the 20 000-sample benchmark "
                   "where the alternation stopped 5 log-likelihood units short, but ended in a worse optimum with a "
                   "confounded extra force); 'auto': profile for the Eq. 29 model alone, alternate with extra forces")
+#: the fold schemes of the session-clock candidates (:data:`l1b2.closeloop.acceptance.CLOCK_FOLDS`'s keys)
+CLOCK_FOLDS = ("blocks", "rotation")
 NOISES = ("common", "per_run")
 NOISE_HELP = ("noise variances of Eq. 32: 'common' (default, the paper's single R) or 'per_run' (one per run; on "
               "data the model does not fit exactly its likelihood is multimodal and its optima predicted held-out "
@@ -286,6 +288,12 @@ def _close_loop_args(p: argparse.ArgumentParser) -> None:
                    help="the predictor family the loop starts from: eq29 (default), pure_slip, or best (Eq. 29 "
                    "unless the pure-slip family's cross-validated free-run error on TRAIN is lower by the "
                    "materiality threshold --min-cv-drop; both reported)")
+    p.add_argument("--clock-folds", metavar="{blocks,rotation}", default="blocks", help="folds of the candidates "
+                   "that depend on the session clock: blocks (contiguous stretches of the session) or rotation "
+                   "(whole conditions dealt to the folds in turn)")
+    p.add_argument("--refit-repeats", metavar="N", default="1", help="splits of TRAIN's runs into the refit's "
+                   "folds for a round's acceptance (repeated cross-validation, each run held out N times; "
+                   "N times the refits)")
     p.add_argument("--seed", type=int, default=0, help="seed of the multi-start and of the fold assignment")
     p.add_argument("--slider-mass", type=float, help="slider mass [kg] (overrides the sidecars)")
     p.add_argument("--allow-unusual-units", action="store_true", help=UNUSUAL_UNITS_HELP)
@@ -629,13 +637,26 @@ def cmd_compare(args) -> int:
     return 0
 
 
+def _fold_settings(args) -> dict:
+    """``--clock-folds`` and ``--refit-repeats`` as the loop's settings; L1B2Error (one line) for a bad value."""
+    if args.clock_folds not in CLOCK_FOLDS:
+        raise L1B2Error(f"--clock-folds must be one of {', '.join(CLOCK_FOLDS)}, got {args.clock_folds!r}")
+    try:
+        repeats = int(args.refit_repeats)
+    except ValueError:
+        repeats = 0
+    if repeats < 1:
+        raise L1B2Error(f"--refit-repeats must be a whole number >= 1, got {args.refit_repeats!r}")
+    return {"clock_folds": args.clock_folds, "refit_repeats": repeats}
+
+
 def _run_close_loop(args, say):
     from .workflows import run_close_loop
     return run_close_loop(args.train, args.test, args.out, order=args.order, k_folds=args.folds,
                           alpha=args.alpha, min_gain=args.min_gain, seed=args.seed,
                           max_rounds=args.max_rounds, min_cv_gain=args.min_cv_gain,
                           min_cv_drop=args.min_cv_drop, screen_alpha=args.screen_alpha or None,
-                          noise_fit=args.noise_fit, noise=args.noise, baseline=args.baseline,
+                          noise_fit=args.noise_fit, noise=args.noise, baseline=args.baseline, **_fold_settings(args),
                           **({"response_columns": tuple(args.response_columns)} if args.response_columns else {}),
                           slider_mass_kg=args.slider_mass, plots_on=not args.no_plots, progress=say,
                           allow_unusual_units=args.allow_unusual_units, export_dir=args.export,

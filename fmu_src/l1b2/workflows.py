@@ -729,7 +729,8 @@ def run_close_loop(train_path, test_path, out_dir, *, slider_mass_kg=None, plots
     :class:`l1b2.closeloop.loop.CloseLoop` runs with
     ``settings`` (``order``, ``k_folds``, ``alpha``, ``min_gain``, ``seed``,
     ``n_starts``, ``max_rounds``, ``min_cv_gain``, ``min_cv_drop``, ``screen_alpha``, ``noise_fit``, ``noise``,
-    ``library``); the result,
+    ``refit_repeats``, ``clock_folds``, ``library``, ...: the fields of
+    :class:`~l1b2.closeloop.settings.LoopSettings`); the result,
     with the data checks (TEST runs outside TRAIN's range flagged), is saved
     all at once. ``export_dir``: also write ``Predictor.fmu`` carrying the
     final model there, and the calibrated SSP of ``motor`` (default: the
