@@ -205,9 +205,8 @@ def test_the_offset_forms_chain_rule_matches_finite_differences_and_rejects_k_ab
 
 
 def test_the_search_in_the_offset_form_ends_not_below_the_k_forms_with_a_vanishing_gradient(world):
-    # mu_sd pinned (with it free the small world's likelihood rises without end along mu_sd and beta_s); from c_r
-    # halved both forms search the same likelihood: the offset form must end with a vanishing gradient and not
-    # below the K form
+    # mu_sd pinned; from c_r halved both forms search the same likelihood: the offset form must end where the
+    # criterion's gradient vanishes and not below the K form
     from l1b2.ident.varpro import Projection, linear_positions
 
     df, theta, _ = world

@@ -500,8 +500,7 @@ class PredictorIdentifier(EstimatorSettings):
                                         s_half, E, cfg.n_starts, cfg.seed, warm=warm,
                                         n_ee_starts={"varpro": 4 * cfg.n_starts, "offset": 4, "offset_reduced": 0,
                                                      "offset_kappa0": 0, "offset_bracket": BRACKET["start_fits"]
-                                                     }.get(cfg.solver),
-                                        drive_law=cfg.model)
+                                                     }.get(cfg.solver), drive_law=cfg.model)
         theta0, fixed_final = self._centre(cfg, space, minima, s_center, s_half)
         t_centre, c_centre = time.perf_counter(), time.process_time()
         self.reduced_ = reduced_summary(red, minima, space.extra_names)

@@ -409,8 +409,9 @@ def bracket_search(f, coarse, lo, hi, tol, max_points, seen=()):
 #: coordinates ("identifiable": :func:`l1b2.ident.identifiable.identifiable_search`, decision 0039; "paper": the
 #: variable-projection search in theta, decision 0036; "paper+identifiable": the paper's, then continued in the
 #: identifiable coordinates from its optimum, the better kept) and the number of equation-error fits of the start
-#: (:func:`l1b2.ident.reduced.data_driven_start`). ``max_points`` was 6 until decision 0045 (4: the same optimum
-#: or a better one on three of the bench's four worlds, 0.014 log-likelihood units lower on one, the profile
+#: (:func:`l1b2.ident.reduced.data_driven_start`); ``point_mu_sd``: each point fitted with mu_sd varied at the
+#: point's drive offset (:func:`_point_fit`, decision 0079). ``max_points`` was 6 until decision 0045 (4: the same
+#: optimum or a better one on three of the bench's four worlds, 0.014 log-likelihood units lower on one, the profile
 #: 15-35 % cheaper)
 BRACKET = {"coarse": (0.95, 0.7, 0.4), "tol": 0.08, "max_points": 4, "margin": 3.0, "max_iter": 4,
            "cold_iter": 12, "stat_tol": 0.05, "min_gain": 0.01, "final_min_gain": 0.01,
