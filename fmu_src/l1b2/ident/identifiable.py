@@ -116,7 +116,8 @@ class IdentifiableProblem:
     """A likelihood problem taking identifiable vectors y (module docstring) instead of theta.
 
     ``residual``, ``jacobian``, ``start_gain``, ``start_gain_sensitivity``, ``predict_all`` and ``core`` as those of
-    the wrapped problem, with the chain rule dtheta/dy for the Jacobian and the start-gain sensitivity.
+    the wrapped problem, with the chain rule dtheta/dy for the Jacobian and the start-gain sensitivity. With
+    ``kappa`` its vectors hold the drive offset kappa0 in slot 0 (:func:`offset_form`).
     """
 
     def __init__(self, problem, kappa=None):
@@ -208,7 +209,8 @@ def identifiable_objective(obj, theta0, n1: int, kappa=None):
     """``(objective, y0)``: a :class:`~l1b2.ident.problem.ScaledObjective` on the identifiable coordinates of
     ``obj``'s problem and noise (slots 1, 3 pinned at theta0's sigma and k0; K <= 0, beta_s >= 0, mu_sd >= 0;
     d free; the other slots varied and bounded as in ``obj``), and y of ``theta0``. With ``kappa`` slot 0 holds
-    the drive offset kappa0 instead (:func:`offset_form`, unbounded; K < 0 is then checked at the end only).
+    the drive offset kappa0 instead (:func:`offset_form`, unbounded; K < 0 is held by the problem, which gives no
+    finite value for K >= 0: :class:`IdentifiableProblem`).
     """
     from .problem import ScaledObjective
 
