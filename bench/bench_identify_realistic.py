@@ -67,7 +67,8 @@ FITS = {"per-run, alternate": {"noise": "per_run", "noise_fit": "alternate"},
         "common, auto=profile": {"solver": "joint"},
         "common, varpro": {"solver": "varpro", "n_starts": 1},
         "common, varpro, 4 starts": {"solver": "varpro", "n_starts": 4},
-        "common, offset_reduced": {"solver": "offset_reduced"}}
+        "common, offset_reduced": {"solver": "offset_reduced"},
+        "common, offset_kappa0": {"solver": "offset_kappa0"}}
 #: the world of ``bench_identify_worlds.py`` with the same data (its strict reference counts for the common variance)
 WORLD = "realistic/s0"
 
@@ -157,7 +158,7 @@ def main(argv=None):
               f"{'ok' if d >= -TARGET_DLL else 'MISSED':>7} {100 * r['nrmse_train']:10.2f}% "
               f"{100 * r['nrmse_test']:9.2f}%")
     by_name = dict(rows)
-    for other in ("common, varpro", "common, offset_reduced"):
+    for other in ("common, varpro", "common, offset_reduced", "common, offset_kappa0"):
         if "common, auto=profile" not in by_name or other not in by_name:
             continue
         old, new = by_name["common, auto=profile"], by_name[other]

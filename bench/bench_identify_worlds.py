@@ -9,7 +9,9 @@ about 19.7k samples; made once and cached):
   ``bench_identify_realistic.py``);
 * ``realistic/s1``, ``realistic/s2``: the realistic motor with 1 mm/s speed noise and a 2 % run-to-run
   contact scatter (the realistic world of the test suite), rig seeds 1 and 2;
-* ``reference/s0``: the reference motor (Eq. 29 nearly exact), noise-free.
+* ``reference/s0``: the reference motor (Eq. 29 nearly exact), noise-free;
+* ``realistic/s3``, ``realistic/s4``: as ``realistic/s1`` with rig seeds 3 and 4, and ``reference/s1``: the
+  reference motor with the same noise and scatter, rig seed 1 (validation worlds of decision 0079).
 
 For each world, side by side in one run (same process, same data), with CPU time (``time.process_time``),
 evaluations and log-likelihood: by default decision 0039's bracketed drive-offset search
@@ -27,7 +29,7 @@ variable-projection search with tight tolerances from it, :func:`_continue_best`
 the reference is kept in the cache (``seen: ...``) and counts from then on; the next run continues from it.
 Targets: CPU <= 2 s, log-likelihood within 0.1 of the reference.
 
-Usage: python bench/bench_identify_worlds.py [--worlds realistic/s0,...] [--fits "a;b"] [--seeds 0,1,2,3]
+Usage: python bench/bench_identify_worlds.py [--worlds realistic/s0,...] (default: the first four) [--fits "a;b"] [--seeds 0,1,2,3]
        [--reference] [--cache DIR]
 """
 import argparse
@@ -56,6 +58,9 @@ WORLDS = {
     "realistic/s1": ["--motor", "realistic_motor", "--seed", "1", "--speed-noise", "0.001", "--run-scatter", "0.02"],
     "realistic/s2": ["--motor", "realistic_motor", "--seed", "2", "--speed-noise", "0.001", "--run-scatter", "0.02"],
     "reference/s0": ["--motor", "reference_motor", "--seed", "0"],
+    "realistic/s3": ["--motor", "realistic_motor", "--seed", "3", "--speed-noise", "0.001", "--run-scatter", "0.02"],
+    "realistic/s4": ["--motor", "realistic_motor", "--seed", "4", "--speed-noise", "0.001", "--run-scatter", "0.02"],
+    "reference/s1": ["--motor", "reference_motor", "--seed", "1", "--speed-noise", "0.001", "--run-scatter", "0.02"],
 }
 #: decision 0039's bracketed search (the settings of :data:`l1b2.ident.offset.BRACKET` then)
 BRACKET_0039 = {"coarse": (0.95, 0.7, 0.4), "tol": 0.08, "max_points": 6, "margin": 3.0, "max_iter": 4,
@@ -86,7 +91,11 @@ FITS = {"default (auto)": {},
         "offset, bracketed (0039)": {"solver": "offset_bracket", "bracket": BRACKET_0039},
         "offset, bracketed (0045)": {"solver": "offset_bracket"},
         "offset, reduced frame (0070)": {"solver": "offset_reduced"},
-        "offset, reduced frame, points fitted 12": {"solver": "offset_reduced", "bracket": {"max_iter": 12}}}
+        "offset, reduced frame, points fitted 12": {"solver": "offset_reduced", "bracket": {"max_iter": 12}},
+        "offset, reduced frame, mu_sd in the points": {"solver": "offset_reduced", "bracket": {"point_mu_sd": True}},
+        "offset, kappa0 continuation (0079)": {"solver": "offset_kappa0"},
+        "offset, kappa0 continuation, mu_sd in the points": {"solver": "offset_kappa0",
+                                                             "bracket": {"point_mu_sd": True}}}
 #: the fits compared when ``--fits`` is not given: decision 0039's search and the current one (BRACKET as it is)
 DEFAULT_FITS = ("offset, bracketed (0039)", "offset, bracketed (0045)")
 
@@ -182,7 +191,7 @@ def reference_names(refs: dict) -> list:
 
 def main(argv=None):
     ap = argparse.ArgumentParser()
-    ap.add_argument("--worlds", default=",".join(WORLDS))
+    ap.add_argument("--worlds", default=",".join(list(WORLDS)[:4]))
     ap.add_argument("--reference", action="store_true", help="make the reference fits again")
     ap.add_argument("--data-only", action="store_true", help="only make the worlds' data")
     ap.add_argument("--references-only", help="only make these reference fits (names separated by ;)")

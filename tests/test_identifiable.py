@@ -13,6 +13,8 @@ from l1b2.ident.identifiable import (
     h_of_k0,
     identifiable_objective,
     identifiable_search,
+    k_form,
+    offset_form,
     theta_of_y,
     y_of_theta,
 )
@@ -156,3 +158,81 @@ def test_admissible_points_have_k_below_zero_and_positive_sigma_and_b():
     y = y_of_theta(_theta(1), N1)
     y[0] = 0.5  # K > 0: c_r = sigma h(k0) - K / beta_s < 0 for every gauge
     assert not admissible(theta_of_y(y, N1), N1)
+
+
+# ---- the offset form: the drive offset kappa0 in slot 0 instead of K (decision 0079) ---------------------------
+
+KAPPA = 0.5
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_offset_form_holds_the_drive_offset_and_round_trips(seed):
+    from l1b2.ident.offset import drive_offset
+
+    th = _theta(seed)
+    y = y_of_theta(th, N1)
+    yo = offset_form(y, KAPPA)
+    # kappa0 = sigma a / b - c_r - sigma / 2, a = mu g1(k0) - mu_sd kappa, b = mu (pi/2) G(k0), written out
+    c_r, sigma, mu, k0, mu_sd = th[:5]
+    a = mu * drive_factor(k0) - mu_sd * KAPPA
+    b = mu * 0.5 * np.pi * G_of_k0(k0)
+    assert yo[0] == pytest.approx(sigma * a / b - c_r - 0.5 * sigma, rel=1e-12)
+    assert yo[0] == pytest.approx(drive_offset(th, N1, KAPPA), rel=1e-12)
+    np.testing.assert_array_equal(yo[1:], y[1:])
+    np.testing.assert_allclose(k_form(yo, KAPPA), y, rtol=1e-13, atol=1e-13)
+    np.testing.assert_allclose(theta_of_y(k_form(yo, KAPPA), N1), th, rtol=1e-11, atol=1e-11)
+
+
+def test_the_offset_forms_chain_rule_matches_finite_differences_and_rejects_k_above_zero(world):
+    df, theta, obj = world
+    prob = IdentifiableProblem(obj.problem, KAPPA)
+    yo = offset_form(y_of_theta(theta, N1), KAPPA)
+    np.testing.assert_allclose(prob.residual(yo), obj.problem.residual(theta), rtol=0,
+                               atol=1e-10 * np.max(np.abs(obj.problem.residual(theta))))
+    cols = np.array([0, 2, 4, 5, 6, 9, 16])
+    J = prob.jacobian(yo, cols)
+    g, G = prob.start_gain_sensitivity(yo, cols)
+    for j, c in enumerate(cols):
+        fd = central_difference(prob.residual, yo, c, 1e-2)
+        np.testing.assert_allclose(J[:, j], fd, rtol=0, atol=1e-5 * max(np.max(np.abs(fd)), 1e-12))
+    # D(s) depends on d only: the start gain's columns of kappa0, beta_s and mu_sd vanish
+    np.testing.assert_allclose(G[:, :3], 0.0, atol=1e-9 * max(np.max(np.abs(G)), 1.0))
+    # K = beta_s kappa0 + kappa mu_sd >= 0 has no paper vector: the problem gives no finite residual there
+    bad = yo.copy()
+    bad[0] = -KAPPA * yo[4] / yo[2] + 0.1
+    assert k_form(bad, KAPPA)[0] > 0
+    assert not np.all(np.isfinite(prob.residual(bad)))
+
+
+def test_the_search_in_the_offset_form_ends_not_below_the_k_forms_with_a_vanishing_gradient(world):
+    # mu_sd pinned; from c_r halved both forms search the same likelihood: the offset form must end where the
+    # criterion's gradient vanishes and not below the K form
+    from l1b2.ident.varpro import Projection, linear_positions
+
+    df, theta, _ = world
+    varied = np.ones(theta.size, bool)
+    varied[4] = False
+    obj = scaled_objective(df, theta, M_S, ORDER, varied=varied)
+    th0 = theta.copy()
+    th0[0] *= 0.5
+    p_theta = obj.problem.core.p_theta
+    res = {}
+    for kappa in (None, KAPPA):
+        search, outer, _ = identifiable_search(obj, th0, N1, p_theta, 200, 1e-12, 1e-6, 10, kappa=kappa)
+        res[kappa] = (profile_loglik(obj, outer.z), obj.theta_of(outer.z))
+        assert res[kappa][0] == pytest.approx(-search.results[search.best].cost, abs=1e-6)
+    assert res[KAPPA][0] > profile_loglik(obj, obj.z_of(th0)) + 1.0
+    assert res[KAPPA][0] >= res[None][0] - 0.01
+    assert res[KAPPA][1][4] == theta[4]  # mu_sd stayed pinned
+    # the gradient of the criterion (the projection's, in the offset form, at the returned vector) against the
+    # start's
+    grads = []
+    for th in (th0, res[KAPPA][1]):
+        oy, y0 = identifiable_objective(obj, th, N1, KAPPA)
+        z = oy.z_of(y0)
+        profile_loglik(oy, z)
+        proj = Projection(oy, linear_positions(oy, p_theta, N1))
+        r, cost = proj.residual(z)
+        z, r, cost = proj.project(z, r, cost)
+        grads.append(np.max(np.abs(proj.normal(z, r)[1])))
+    assert grads[1] < 1e-3 * grads[0], grads

@@ -407,3 +407,120 @@ def test_the_default_fit_is_the_offset_reduced_fit():
     assert default.convergence_["solver"] == "offset_reduced"
     assert default.loglik_ == explicit.loglik_
     np.testing.assert_array_equal(default.theta_, explicit.theta_)
+
+
+# ---- mu_sd fitted in a profile point at a held drive offset (BRACKET["point_mu_sd"], decision 0079) ------------
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_held_offset_problem_moves_mu_sd_at_a_fixed_offset_and_a_fixed_d(seed):
+    from types import SimpleNamespace
+
+    from l1b2.ident.offset import HeldOffsetProblem
+
+    n1, kappa = 4, 0.5
+    th = _theta(seed)
+    held = HeldOffsetProblem(SimpleNamespace(core=None), th, kappa)
+    np.testing.assert_array_equal(held.theta(th), th)  # at its own mu_sd the identity
+    for m in (0.0, 0.01, th[4] + 0.7, 3.0):
+        u = th.copy()
+        u[4] = m
+        t2 = held.theta(u)
+        assert t2[4] == m
+        assert drive_offset(t2, n1, kappa) == pytest.approx(drive_offset(th, n1, kappa), rel=1e-12, abs=1e-12)
+        np.testing.assert_allclose(d_coefficients(t2, n1), d_coefficients(th, n1), rtol=1e-12, atol=1e-12)
+        np.testing.assert_array_equal(t2[1:4], th[1:4])
+        np.testing.assert_array_equal(t2[6:], th[6:])
+        # c_r moves by -(sigma kappa / b)(mu_sd - mu_sd_ref), written out
+        b = th[2] * 0.5 * np.pi * G_of_k0(th[3])
+        assert t2[0] - th[0] == pytest.approx(-(th[1] * kappa / b) * (m - th[4]), rel=1e-12)
+        np.testing.assert_allclose(held.u_of(t2), u, rtol=1e-12, atol=1e-12)
+
+
+def _held_world():
+    from objectives import scaled_objective
+
+    from l1b2.ident.offset import _profile_frame
+
+    df, _ = _small_world(11)
+    theta = example_params(3).to_vector()
+    obj = scaled_objective(df, theta, M_S, 3)
+    th_g, scale_full, c_hi = _profile_frame(obj, theta, 4, 0.5)
+    return obj, th_g, scale_full, c_hi
+
+
+def test_the_held_offset_problems_mu_sd_column_matches_finite_differences():
+    from objectives import central_difference
+
+    from l1b2.ident.offset import HeldOffsetProblem
+
+    obj, th_g, _, _ = _held_world()
+    held = HeldOffsetProblem(obj.problem, th_g, 0.5)
+    u = th_g.copy()
+    u[4] += 0.05
+    cols = np.array([4, 5, 6, 13])
+    J = held.jacobian(u, cols)
+    for j, c in enumerate(cols):
+        fd = central_difference(held.residual, u, c, 1e-2)
+        np.testing.assert_allclose(J[:, j], fd, rtol=0, atol=1e-5 * max(np.max(np.abs(fd)), 1e-12))
+    g, G = held.start_gain_sensitivity(u, cols)
+    np.testing.assert_allclose(G[:, 0], 0.0, atol=1e-9 * max(np.max(np.abs(G)), 1.0))  # D(s) does not move
+
+
+def test_a_profile_point_with_mu_sd_fitted_is_stationary_among_the_pinned_points_at_its_offset():
+    # the profile point with mu_sd free (c_r following it) against points fitted with mu_sd pinned (the profile's
+    # former point fit), warm from it, at the same drive offset kappa0 (``point`` sets c_r for it): the pinned fit
+    # at its mu_sd gains nothing, those at mu_sd -+ 0.03 end no higher, the pinned fit at the start's mu_sd lower
+    from l1b2.ident.offset import _point_fit
+
+    obj, th_g, scale_full, c_hi = _held_world()
+    n1, kappa, p_theta = 4, 0.5, obj.problem.core.p_theta
+    saved = dict(vars(obj.noise))
+    dco = d_coefficients(th_g, n1)
+    omega = omega_of_offset(drive_offset(th_g, n1, kappa), dco) * 0.9
+    start = th_g.copy()
+    start[4] = 0.3
+    free = _point_fit(obj, start, omega, n1, kappa, p_theta, scale_full, c_hi, 60, 0.0, saved, mu_sd_free=True)
+    th = free["theta"]
+    assert drive_offset(th, n1, kappa) == pytest.approx(offset_of_omega(omega, dco), rel=1e-9)
+    om = omega_of_offset(drive_offset(th, n1, kappa), d_coefficients(th, n1))
+
+    def pinned(m, base=th):
+        t = base.copy()
+        t[4] = m
+        rec = _point_fit(obj, t, om, n1, kappa, p_theta, scale_full, c_hi, 60, 0.0, saved)
+        assert drive_offset(rec["theta"], n1, kappa) == pytest.approx(drive_offset(th, n1, kappa), rel=1e-9)
+        return rec["loglik"]
+
+    m = th[4]
+    assert 0.0 < m != start[4]
+    assert pinned(m) == pytest.approx(free["loglik"], abs=0.01)
+    for dm in (-0.03, 0.03):
+        assert pinned(m + dm) <= free["loglik"] + 0.01
+    assert pinned(start[4]) < free["loglik"] - 0.1
+
+
+def test_offset_kappa0_is_offset_reduced_with_its_continuation_in_the_offset_form(monkeypatch):
+    import l1b2.ident.offset as off
+
+    real = off.identifiable_search
+    asked = []
+
+    def recorder(*args, **kwargs):
+        asked.append(args[10] if len(args) > 10 else kwargs.get("kappa"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(off, "identifiable_search", recorder)
+    df, _ = _small_world(11)
+    fits = {s: PredictorIdentifier(order=3, solver=s).fit(df, slider_mass_kg=M_S)
+            for s in ("offset_reduced", "offset_kappa0")}
+    assert asked == [None, 0.5]  # the K form, then the offset form with the identifier's kappa
+    assert fits["offset_kappa0"].convergence_["solver"] == "offset_kappa0"
+    prof = [f.convergence_["stages"][1]["profile"] for f in fits.values()]
+    assert prof[0] == prof[1]  # the same profile; only the continuation differs
+    monkeypatch.setitem(off.BRACKET, "final", "paper")
+    paper = PredictorIdentifier(order=3, solver="offset_kappa0").fit(df, slider_mass_kg=M_S)
+    assert fits["offset_kappa0"].loglik_ >= paper.loglik_ - 1e-6
+    lo, hi = PredictorParams.bounds(3)
+    assert np.all(fits["offset_kappa0"].theta_ >= lo) and np.all(fits["offset_kappa0"].theta_ <= hi)
+    assert PredictorIdentifier(order=3)._checked_settings().solver == "offset_reduced"  # the default unchanged

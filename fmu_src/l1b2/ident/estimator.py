@@ -130,12 +130,11 @@ NUMERICAL_FAILURES = (np.linalg.LinAlgError, FloatingPointError, OverflowError, 
 #: constructor arguments that are not part of the serialised settings
 _NOT_SERIALISED = ("verbose", "extra", "init", "init_extra", "frequency")
 
-
 #: the searches of ``noise_fit`` (``"auto"``: profile without extra forces, alternate with them)
 NOISE_FITS = ("auto", "alternate", "profile")
 
 #: the local solvers of the global search (``solver``): variable projection, or the joint multistart
-SOLVERS = ("auto", "varpro", "joint", "offset", "offset_bracket", "offset_reduced")
+SOLVERS = ("auto", "varpro", "joint", "offset", "offset_bracket", "offset_reduced", "offset_kappa0")
 
 
 def clone(estimator, **changes):
@@ -243,8 +242,9 @@ class PredictorIdentifier(EstimatorSettings):
         ``"offset"`` (the drive offset as a search coordinate: a profile on a grid of offsets, then varpro;
         :mod:`l1b2.ident.offset`), ``"offset_bracket"`` (the same with a bracketed search over the offset on
         each side of the barrier, warm-started points, a result never below the profile's best point; ``BRACKET``;
-        framed at the best equation-error minimum of ``seed``'s starts) or ``"offset_reduced"`` (the same framed at
-        the mapped reduced linear fit, :func:`l1b2.ident.reduced.map_reduced_to_theta`: no ``seed``).
+        framed at the best equation-error minimum of ``seed``'s starts), ``"offset_reduced"`` (the same framed at
+        the mapped reduced linear fit, :func:`l1b2.ident.reduced.map_reduced_to_theta`: no ``seed``) or
+        ``"offset_kappa0"`` (``offset_reduced`` with the drive offset in place of K in its identifiable stage).
     model : the predictor family: ``"eq29"`` (default, the paper's Eq. 29) or
         ``"pure_slip"`` (the slip ratio follows the state,
         :mod:`l1b2.predictor.pureslip`; same parameters, likelihood, noise
@@ -499,8 +499,8 @@ class PredictorIdentifier(EstimatorSettings):
         red, minima = data_driven_start(sample, space, m_s, cfg.kappa, cfg.include_load_inertia, s_center,
                                         s_half, E, cfg.n_starts, cfg.seed, warm=warm,
                                         n_ee_starts={"varpro": 4 * cfg.n_starts, "offset": 4, "offset_reduced": 0,
-                                                     "offset_bracket": BRACKET["start_fits"]}.get(cfg.solver),
-                                        drive_law=cfg.model)
+                                                     "offset_kappa0": 0, "offset_bracket": BRACKET["start_fits"]
+                                                     }.get(cfg.solver), drive_law=cfg.model)
         theta0, fixed_final = self._centre(cfg, space, minima, s_center, s_half)
         t_centre, c_centre = time.perf_counter(), time.process_time()
         self.reduced_ = reduced_summary(red, minima, space.extra_names)

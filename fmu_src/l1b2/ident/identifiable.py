@@ -37,7 +37,8 @@ import numpy as np
 
 from ..predictor.model import G_of_k0, drive_factor
 
-__all__ = ["h_of_k0", "y_of_theta", "admissible", "theta_of_y", "feasible_gauge", "IdentifiableProblem"]
+__all__ = ["h_of_k0", "y_of_theta", "admissible", "theta_of_y", "offset_form", "k_form", "feasible_gauge",
+           "IdentifiableProblem"]
 
 
 def h_of_k0(k0: float) -> float:
@@ -83,6 +84,21 @@ def theta_of_y(y, n1: int) -> np.ndarray:
     return th
 
 
+def offset_form(y, kappa: float) -> np.ndarray:
+    """y with slot 0 holding the drive offset kappa0 = (K - kappa mu_sd) / beta_s [N s/m] instead of K (the
+    identifiable form of :func:`l1b2.ident.offset.drive_offset`: sigma a / b - c_r - sigma / 2 of theta_of_y(y))."""
+    out = np.array(y, dtype=float)
+    out[0] = (out[0] - kappa * out[4]) / out[2]
+    return out
+
+
+def k_form(y, kappa: float) -> np.ndarray:
+    """The inverse of :func:`offset_form`: K = beta_s kappa0 + kappa mu_sd back in slot 0."""
+    out = np.array(y, dtype=float)
+    out[0] = out[2] * out[0] + kappa * out[4]
+    return out
+
+
 def feasible_gauge(y, sigma_max: float, k0: float, margin: float = 0.5) -> np.ndarray:
     """y with a gauge (sigma, k0) whose theta has c_r >= 0: sigma = ``sigma_max`` when that gives c_r >= 0,
     else ``margin`` times the largest sigma that does (c_r = (1 - margin) (-K / beta_s) > 0). Needs K < 0."""
@@ -100,16 +116,25 @@ class IdentifiableProblem:
     """A likelihood problem taking identifiable vectors y (module docstring) instead of theta.
 
     ``residual``, ``jacobian``, ``start_gain``, ``start_gain_sensitivity``, ``predict_all`` and ``core`` as those of
-    the wrapped problem, with the chain rule dtheta/dy for the Jacobian and the start-gain sensitivity.
+    the wrapped problem, with the chain rule dtheta/dy for the Jacobian and the start-gain sensitivity. With
+    ``kappa`` its vectors hold the drive offset kappa0 in slot 0 (:func:`offset_form`).
     """
 
-    def __init__(self, problem):
+    def __init__(self, problem, kappa=None):
         self.problem = problem
         self.core = problem.core
         self.n1 = problem.core.n1
+        self.kappa = kappa
 
     def theta(self, y):
-        return theta_of_y(y, self.n1)
+        """theta of y; with ``kappa`` (the offset form) NaN where K >= 0 (no paper vector: a search rejects it)."""
+        if self.kappa is None:
+            return theta_of_y(y, self.n1)
+        y_k = k_form(y, self.kappa)
+        th = theta_of_y(y_k, self.n1)
+        if not y_k[0] < 0:
+            th[:] = np.nan
+        return th
 
     def residual(self, y):
         th = self.theta(y)
@@ -126,6 +151,20 @@ class IdentifiableProblem:
 
     def chain(self, y, cols):
         """``(theta columns, M)``: d theta[tcols] / d y[cols] = M (a small dense matrix)."""
+        if self.kappa is None:
+            return self._chain_k(y, cols)
+        cols = np.asarray(cols, dtype=int)
+        y_k = k_form(y, self.kappa)
+        kcols = np.union1d(cols, [0]) if np.isin([0, 2, 4], cols).any() else cols
+        T = (kcols[:, None] == cols[None, :]).astype(float)  # d y_k[kcols] / d y[cols]
+        for j, c in enumerate(cols):  # K = beta_s kappa0 + kappa mu_sd
+            if c in (0, 2, 4):
+                T[0, j] = {0: y[2], 2: y[0], 4: self.kappa}[int(c)]
+        tcols, M = self._chain_k(y_k, kcols)
+        return tcols, M @ T
+
+    def _chain_k(self, y, cols):
+        """:meth:`chain` for y with K in slot 0."""
         n1 = self.n1
         K, sigma, beta_s, k0 = (float(v) for v in y[:4])
         cols = np.asarray(cols, dtype=int)
@@ -166,14 +205,16 @@ class IdentifiableProblem:
 _FLOORS = {0: 1e-2, 2: 1e-3, 4: 1e-2}
 
 
-def identifiable_objective(obj, theta0, n1: int):
+def identifiable_objective(obj, theta0, n1: int, kappa=None):
     """``(objective, y0)``: a :class:`~l1b2.ident.problem.ScaledObjective` on the identifiable coordinates of
     ``obj``'s problem and noise (slots 1, 3 pinned at theta0's sigma and k0; K <= 0, beta_s >= 0, mu_sd >= 0;
-    d free; the other slots varied and bounded as in ``obj``), and y of ``theta0``.
+    d free; the other slots varied and bounded as in ``obj``), and y of ``theta0``. With ``kappa`` slot 0 holds
+    the drive offset kappa0 instead (:func:`offset_form`, unbounded; K < 0 is held by the problem, which gives no
+    finite value for K >= 0: :class:`IdentifiableProblem`).
     """
     from .problem import ScaledObjective
 
-    y0 = y_of_theta(theta0, n1)
+    y0 = y_of_theta(theta0, n1) if kappa is None else offset_form(y_of_theta(theta0, n1), kappa)
     varied = np.zeros(y0.size, dtype=bool)
     varied[obj.vidx] = True
     varied[[1, 3]] = False
@@ -181,34 +222,37 @@ def identifiable_objective(obj, theta0, n1: int):
     hi = np.full(y0.size, np.inf)
     lo[obj.vidx], hi[obj.vidx] = obj.zlo * obj.sv_scale, obj.zhi * obj.sv_scale
     lo[[0, 5]], hi[[0, 5]] = -np.inf, np.inf
-    hi[0] = 0.0
+    hi[0] = 0.0 if kappa is None else np.inf
     lo[2], hi[2] = 0.0, np.inf
     scale = np.ones(y0.size)
     scale[obj.vidx] = obj.sv_scale
     for i, fl in _FLOORS.items():
         scale[i] = max(abs(y0[i]), fl)
     scale[5:5 + n1] = max(float(np.max(np.abs(y0[5:5 + n1]))), 1e-12)
-    return ScaledObjective(IdentifiableProblem(obj.problem), obj.noise, y0, varied, scale, lo, hi,
+    return ScaledObjective(IdentifiableProblem(obj.problem, kappa), obj.noise, y0, varied, scale, lo, hi,
                            obj.start_noise), y0
 
 
 def identifiable_search(obj, theta0, n1: int, p_theta: int, max_nfev, tol, stat_tol, max_outer, log=None,
-                        min_gain=0.0):
+                        min_gain=0.0, kappa=None):
     """The variable-projection search (:func:`l1b2.ident.varpro.varpro_search`, one start) in the identifiable
     coordinates, from ``theta0`` (the noise model set there first), mapped back to ``obj``'s coordinates.
 
     The optimum y is given the gauge of :func:`feasible_gauge` (theta0's sigma, or less when c_r would be
     negative; theta0's k0): the paper vector returned has the same likelihood. Returns ``(SearchOutcome,
-    refinement, stages)`` as ``varpro_search`` on ``obj`` (``x`` / ``z`` in obj's scaled coordinates).
+    refinement, stages)`` as ``varpro_search`` on ``obj`` (``x`` / ``z`` in obj's scaled coordinates);
+    ``min_gain``: that of its local fits (:func:`l1b2.ident.varpro.local_fit`); ``kappa``: the search
+    runs with the drive offset in slot 0 (:func:`identifiable_objective`).
     """
     from .varpro import linear_positions, profile_loglik, varpro_search
 
-    oy, y0 = identifiable_objective(obj, theta0, n1)
+    oy, y0 = identifiable_objective(obj, theta0, n1, kappa)
     zy0 = oy.z_of(y0)
     profile_loglik(oy, zy0)  # the noise model at the start
     search, outer, stages = varpro_search(oy, linear_positions(oy, p_theta, n1), [zy0], max_nfev, tol, stat_tol,
                                           max_outer, 1, log, min_gain)
-    y_hat = feasible_gauge(oy.theta_of(outer.z), float(theta0[1]), float(theta0[3]))
+    y_end = oy.theta_of(outer.z)
+    y_hat = feasible_gauge(y_end if kappa is None else k_form(y_end, kappa), float(theta0[1]), float(theta0[3]))
     z = obj.z_of(theta_of_y(y_hat, n1))
     ll = profile_loglik(obj, z)  # the noise model at the paper vector (the same likelihood: a null move)
     final = search.results[search.best]

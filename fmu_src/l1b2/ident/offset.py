@@ -35,7 +35,10 @@ from the optimum of its nearest evaluated neighbour and fitted with a smaller bu
 noise model of the profile's best point, and when it ends below that point the point itself is the result.
 ``solver="offset_reduced"`` is the same search framed at the reduced linear fit mapped to Eq. 35
 (:func:`l1b2.ident.reduced.map_reduced_to_theta`, no equation-error fits): its gauge (sigma, b) and the D(s),
-B'(s) the profile starts from are fixed by the data alone, with no random starts.
+B'(s) the profile starts from are fixed by the data alone, with no random starts. ``solver="offset_kappa0"`` is
+``offset_reduced`` with its identifiable continuation run in the drive offset kappa0 instead of K
+(:func:`l1b2.ident.identifiable.offset_form`): along the offset's valley kappa0 stays put while K, beta_s and
+mu_sd move together.
 
 Why both are opt-in, with the measurements: decisions 0023 and 0036.
 
@@ -165,6 +168,99 @@ def with_offset(theta, n1: int, kappa: float, kappa0: float, dco) -> np.ndarray:
 _PROFILE_PINS = (0, 1, 2, 3, 4)
 
 
+class HeldOffsetProblem:
+    """A likelihood problem in which mu_sd moves at a held drive offset kappa0 and a held D(s).
+
+    It takes vectors u in theta's layout (Eq. 35 order) and evaluates the wrapped problem at
+
+        theta(u) = u + (u[4] - mu_sd_ref) v,   v = s (e_0 + e_5 / sigma),   s = -sigma kappa / b,
+
+    b = mu (pi/2) G(k0) and sigma of ``theta_ref`` (their slots must stay pinned at those values). Along u[4]
+    (mu_sd) c_r changes by s per unit and alpha_0 by s / sigma, so that d kappa0 / d mu_sd = -sigma kappa / b - s = 0
+    (kappa0 = sigma a / b - c_r - sigma / 2, a = mu g1(k0) - mu_sd kappa) and dD(s) = s - sigma (s / sigma) = 0
+    (D = c_r + sigma (0.5 - A')). At u[4] = mu_sd_ref, theta(u) = u. ``residual``, ``jacobian``, ``start_gain``,
+    ``start_gain_sensitivity`` and ``predict_all`` are those of the wrapped problem with the chain rule d theta / d u.
+    """
+
+    def __init__(self, problem, theta_ref, kappa: float):
+        self.problem = problem
+        self.core = problem.core
+        self.criterion = getattr(problem, "criterion", None)
+        self.sel = getattr(problem, "sel", None)
+        c_r, sigma, mu, k0, mu_sd = (float(x) for x in theta_ref[:5])
+        b = mu * 0.5 * np.pi * float(G_of_k0(k0))
+        self.mu_sd_ref, self.sigma = mu_sd, sigma
+        self.slope = -sigma * kappa / b  #: d c_r / d mu_sd [N s/m per unit mu_sd]
+
+    def theta(self, u):
+        th = np.array(u, dtype=float)
+        dm = th[4] - self.mu_sd_ref
+        th[0] += self.slope * dm
+        th[5] += self.slope * dm / self.sigma
+        return th
+
+    def u_of(self, theta):
+        """The inverse of :meth:`theta` (at theta's own mu_sd)."""
+        u = np.array(theta, dtype=float)
+        dm = u[4] - self.mu_sd_ref
+        u[0] -= self.slope * dm
+        u[5] -= self.slope * dm / self.sigma
+        return u
+
+    def _chain(self, cols):
+        """``(theta columns, M)``: d theta[tcols] / d u[cols] = M."""
+        cols = np.asarray(cols, dtype=int)
+        tcols = np.unique(np.concatenate([cols, [0, 5] if np.isin(4, cols) else []]).astype(int))
+        pos = {int(t): i for i, t in enumerate(tcols)}
+        M = np.zeros((tcols.size, cols.size))
+        for j, c in enumerate(cols):
+            M[pos[int(c)], j] = 1.0
+            if c == 4:
+                M[pos[0], j] += self.slope
+                M[pos[5], j] += self.slope / self.sigma
+        return tcols, M
+
+    def residual(self, u):
+        return self.problem.residual(self.theta(u))
+
+    def start_gain(self, u):
+        return self.problem.start_gain(self.theta(u))
+
+    def predict_all(self, u):
+        return self.problem.predict_all(self.theta(u))
+
+    def jacobian(self, u, cols, packed=False):
+        tcols, M = self._chain(cols)
+        kw = {"packed": True} if packed else {}
+        return self.problem.jacobian(self.theta(u), tcols, **kw) @ M
+
+    def start_gain_sensitivity(self, u, cols):
+        tcols, M = self._chain(cols)
+        g, G = self.problem.start_gain_sensitivity(self.theta(u), tcols)
+        return g, G @ M
+
+
+def _held_objective(obj, theta, scale_full, kappa, c_hi):
+    """``(objective, problem)``: :func:`_profile_objective` with mu_sd varied (when ``obj`` varies it) on a
+    :class:`HeldOffsetProblem` at ``theta``: the offset, D(s)'s dependence on c_r and the gauge held, mu_sd
+    bounded by ``obj``'s bounds and by c_r staying in [0, ``c_hi``]."""
+    op = _profile_objective(obj, theta, scale_full)
+    if 4 not in obj.vidx:
+        return op, None
+    held = HeldOffsetProblem(obj.problem, theta, kappa)
+    varied = np.zeros(theta.size, dtype=bool)
+    varied[op.vidx] = True
+    varied[4] = True
+    lo = np.full(theta.size, -np.inf)
+    hi = np.full(theta.size, np.inf)
+    lo[op.vidx], hi[op.vidx] = op.zlo * op.sv_scale, op.zhi * op.sv_scale
+    k = int(np.flatnonzero(obj.vidx == 4)[0])
+    lo[4], hi[4] = obj.zlo[k] * obj.sv_scale[k], obj.zhi[k] * obj.sv_scale[k]
+    ends = sorted(theta[4] + (np.array([0.0, c_hi]) - theta[0]) / held.slope)  # c_r = 0 and c_r = c_hi
+    lo[4], hi[4] = max(lo[4], ends[0]), min(hi[4], ends[1])
+    return ScaledObjective(held, obj.noise, theta.copy(), varied, scale_full, lo, hi, obj.start_noise), held
+
+
 def _profile_objective(obj, theta, scale_full):
     """A ScaledObjective on obj's problem and noise with c_r, sigma, mu, k0, mu_sd pinned at ``theta``'s values
     (the other bounds obj's)."""
@@ -177,22 +273,27 @@ def _profile_objective(obj, theta, scale_full):
     return ScaledObjective(obj.problem, obj.noise, theta.copy(), varied, scale_full, lo, hi, obj.start_noise)
 
 
-def _point_fit(obj, theta, omega, n1, kappa, p_theta, scale_full, c_hi, max_iter, stat_tol, saved, min_gain=0.0):
+def _point_fit(obj, theta, omega, n1, kappa, p_theta, scale_full, c_hi, max_iter, stat_tol, saved, min_gain=0.0,
+               mu_sd_free=False):
     """One point of the profile: theta moved to ``omega`` (its own D(s)), c_r, sigma, mu, k0, mu_sd pinned, the
     rest fitted by at most ``max_iter`` variable-projection iterations (0: B'(s), P(s) projected only;
-    ``min_gain``: that of :func:`l1b2.ident.varpro.local_fit`)."""
+    ``min_gain``: that of :func:`l1b2.ident.varpro.local_fit`). With ``mu_sd_free`` mu_sd is fitted too, at the
+    point's drive offset kappa0 (:class:`HeldOffsetProblem`: c_r follows it); ``c_r`` of the record is that of the
+    move, ``theta`` the fitted Eq. 35 vector."""
     th = point(theta, n1, kappa, omega, d_coefficients(theta, n1))
     rec = {"omega": float(omega), "c_r": float(th[0]), "loglik": -np.inf, "theta": th, "nfev": 0, "njev": 0}
     if not (0.0 <= th[0] < c_hi):
         return rec
     vars(obj.noise).update(saved)
-    op = _profile_objective(obj, th, scale_full)
+    op, held = _held_objective(obj, th, scale_full, kappa, c_hi) if mu_sd_free else (
+        _profile_objective(obj, th, scale_full), None)
     try:
         fit = local_fit(op, linear_positions(op, p_theta, n1), op.z_of(th), max_iter, 1e-8, stat_tol,
                         min_gain=min_gain)
     except (np.linalg.LinAlgError, ValueError) as exc:
         return {**rec, "message": str(exc)}
-    rec.update(loglik=profile_loglik(op, fit.z), theta=op.theta_of(fit.z), nfev=fit.nfev + 1, njev=fit.njev)
+    th_fit = op.theta_of(fit.z) if held is None else held.theta(op.theta_of(fit.z))
+    rec.update(loglik=profile_loglik(op, fit.z), theta=th_fit, nfev=fit.nfev + 1, njev=fit.njev)
     return rec
 
 
@@ -309,12 +410,13 @@ def bracket_search(f, coarse, lo, hi, tol, max_points, seen=()):
 #: coordinates ("identifiable": :func:`l1b2.ident.identifiable.identifiable_search`, decision 0039; "paper": the
 #: variable-projection search in theta, decision 0036; "paper+identifiable": the paper's, then continued in the
 #: identifiable coordinates from its optimum, the better kept) and the number of equation-error fits of the start
-#: (:func:`l1b2.ident.reduced.data_driven_start`). ``max_points`` was 6 until decision 0045 (4: the same optimum
-#: or a better one on three of the bench's four worlds, 0.014 log-likelihood units lower on one, the profile
+#: (:func:`l1b2.ident.reduced.data_driven_start`); ``point_mu_sd``: each point fitted with mu_sd varied at the
+#: point's drive offset (:func:`_point_fit`, decision 0079). ``max_points`` was 6 until decision 0045 (4: the same
+#: optimum or a better one on three of the bench's four worlds, 0.014 log-likelihood units lower on one, the profile
 #: 15-35 % cheaper)
 BRACKET = {"coarse": (0.95, 0.7, 0.4), "tol": 0.08, "max_points": 4, "margin": 3.0, "max_iter": 4,
            "cold_iter": 12, "stat_tol": 0.05, "min_gain": 0.01, "final_min_gain": 0.01,
-           "final": "paper+identifiable", "start_fits": 4}
+           "final": "paper+identifiable", "start_fits": 4, "point_mu_sd": False}
 
 
 def bracketed_profile(obj, theta_start, n1, kappa, p_theta, settings=None, log=None):
@@ -334,7 +436,8 @@ def bracketed_profile(obj, theta_start, n1, kappa, p_theta, settings=None, log=N
 
     def f(om, warm):
         rec = _point_fit(obj, th_g if warm is None else warm, om, n1, kappa, p_theta, scale_full, c_hi,
-                         cfg["cold_iter" if warm is None else "max_iter"], cfg["stat_tol"], saved, cfg["min_gain"])
+                         cfg["cold_iter" if warm is None else "max_iter"], cfg["stat_tol"], saved, cfg["min_gain"],
+                         cfg["point_mu_sd"])
         records.append(rec)
         if log is not None:
             log(f"offset profile: omega {om:+.3f} (c_r {rec['c_r']:.3f}): loglik {rec['loglik']:.3f}, "
@@ -398,9 +501,11 @@ def _keep_profile_point(obj, search, outer, best, log=None):
                                                                   "profile_point": True}], outer.converged)
 
 
-def _continue_identifiable(obj, search, outer, more, n1, p_theta, max_nfev, tol, stat_tol, max_outer, log):
+def _continue_identifiable(obj, search, outer, more, n1, p_theta, max_nfev, tol, stat_tol, max_outer, log,
+                           kappa=None):
     """The search continued in the identifiable coordinates from its optimum (``BRACKET["final"]`` =
-    "paper+identifiable"): the continuation when it ends higher, else the search as it was (noise model there);
+    "paper+identifiable"; with ``kappa`` in their offset form, :func:`l1b2.ident.identifiable.identifiable_search`):
+    the continuation when it ends higher, else the search as it was (noise model there);
     its evaluations count either way and its stages are added as "identifiable ...". Not continued when the
     optimum has no identifiable coordinates (:func:`l1b2.ident.identifiable.admissible`)."""
     ll = -search.results[search.best].cost
@@ -408,7 +513,7 @@ def _continue_identifiable(obj, search, outer, more, n1, p_theta, max_nfev, tol,
         return search, outer, more
     try:
         s2, o2, m2 = identifiable_search(obj, obj.theta_of(outer.z), n1, p_theta, max_nfev, tol, stat_tol,
-                                         max_outer, log, BRACKET["final_min_gain"])
+                                         max_outer, log, BRACKET["final_min_gain"], kappa)
     except (IdentificationError, np.linalg.LinAlgError, ValueError) as exc:  # the search as it was
         if log is not None:
             log(f"identifiable continuation failed ({exc}); the paper-coordinate optimum kept")
@@ -424,13 +529,16 @@ def _continue_identifiable(obj, search, outer, more, n1, p_theta, max_nfev, tol,
     return search, outer, more
 
 
-def bracketed_offset_search(obj, theta_start, order, kappa, p_theta, max_nfev, tol, stat_tol, max_outer, log=None):
+def bracketed_offset_search(obj, theta_start, order, kappa, p_theta, max_nfev, tol, stat_tol, max_outer, log=None,
+                            offset_form=False):
     """The drive-offset search with the bracketed profile (``solver="offset_bracket"``).
 
     :func:`bracketed_profile`, then the free variable-projection search from its best point (the noise model
     set at that point, every local fit with :data:`BRACKET`'s ``min_gain``); the result is the profile's best
-    point itself when the free search ends below it (:func:`_keep_profile_point`). Returns
-    ``(SearchOutcome, refinement, stages)`` as :func:`offset_search`.
+    point itself when the free search ends below it (:func:`_keep_profile_point`). With ``offset_form`` (``solver=
+    "offset_kappa0"``) the identifiable stages of ``BRACKET["final"]`` run with the drive offset kappa0 in place of
+    K (:func:`l1b2.ident.identifiable.offset_form`). Returns ``(SearchOutcome, refinement, stages)`` as
+    :func:`offset_search`.
     """
     n1 = order + 1
     t0, c0 = time.perf_counter(), time.process_time()
@@ -446,7 +554,8 @@ def bracketed_offset_search(obj, theta_start, order, kappa, p_theta, max_nfev, t
     else:
         if BRACKET["final"] == "identifiable" and admissible(best["theta"], n1):  # decision 0039: the null directions of (sigma, mu, k0) removed
             search, outer, more = identifiable_search(obj, best["theta"], n1, p_theta, max_nfev, tol, stat_tol,
-                                                      max_outer, log, BRACKET["final_min_gain"])
+                                                      max_outer, log, BRACKET["final_min_gain"],
+                                                      kappa if offset_form else None)
         else:
             z0 = obj.z_of(best["theta"])
             profile_loglik(obj, z0)  # the free search starts with the noise model of its start
@@ -455,7 +564,7 @@ def bracketed_offset_search(obj, theta_start, order, kappa, p_theta, max_nfev, t
         search, outer = _keep_profile_point(obj, search, outer, best, log)
         if BRACKET["final"] == "paper+identifiable":  # decision 0039: continued without the null directions
             search, outer, more = _continue_identifiable(obj, search, outer, more, n1, p_theta, max_nfev, tol,
-                                                         stat_tol, max_outer, log)
+                                                         stat_tol, max_outer, log, kappa if offset_form else None)
     search.records[0]["nfev"] += stage["nfev"]  # the profile's evaluations count with the search's
     return search, outer, [stage] + more
 
@@ -470,19 +579,19 @@ def offset_grid(n_starts: int) -> tuple:
 
 
 def projected_search(cfg, obj, starts, theta_centre, p_theta, log=None):
-    """The search of ``cfg.solver`` ("varpro", "offset", "offset_bracket" or "offset_reduced": the bracketed
-    search, framed at ``theta_centre`` either way) on ``obj``: ``(SearchOutcome, refinement, stages)``.
+    """The search of ``cfg.solver`` ("varpro", "offset", "offset_bracket", "offset_reduced" or "offset_kappa0": the
+    bracketed search, framed at ``theta_centre`` either way) on ``obj``: ``(SearchOutcome, refinement, stages)``.
 
     The offset searches need c_r, sigma, mu, k0 varied (they carry the gauge and the offset); with any of them pinned
     it is the variable-projection search from ``starts[0]`` (the pins already fix the offset's range).
     """
     n1 = cfg.order + 1
     lin = linear_positions(obj, p_theta, n1)
-    offset = cfg.solver in ("offset", "offset_bracket", "offset_reduced")
+    offset = cfg.solver in ("offset", "offset_bracket", "offset_reduced", "offset_kappa0")
     if offset and np.isin([0, 1, 2, 3, 5], obj.vidx).all():
-        if cfg.solver in ("offset_bracket", "offset_reduced"):
+        if cfg.solver != "offset":
             return bracketed_offset_search(obj, theta_centre, cfg.order, cfg.kappa, p_theta, cfg.max_nfev, cfg.tol,
-                                           cfg.stat_tol, cfg.max_outer, log)
+                                           cfg.stat_tol, cfg.max_outer, log, cfg.solver == "offset_kappa0")
         return offset_search(obj, theta_centre, cfg.order, cfg.kappa, p_theta, cfg.max_nfev, cfg.tol,
                              cfg.stat_tol, cfg.max_outer, offset_grid(cfg.n_starts), log)
     if offset:
