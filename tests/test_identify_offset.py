@@ -377,8 +377,8 @@ def test_the_reduced_frame_recovers_the_small_world():
 
 
 @pytest.mark.parametrize("changes, expected", [
-    ({}, "offset_reduced"),
-    ({"fixed": ("mu_sd",)}, "offset_reduced"),          # mu_sd does not carry the offset or its gauge
+    ({}, "offset_kappa0"),
+    ({"fixed": ("mu_sd",)}, "offset_kappa0"),          # mu_sd does not carry the offset or its gauge
     ({"fixed": "recommended"}, "joint"),                # sigma, k0, mu pinned: the pins fix the offset's range
     ({"fixed": {"c_r": 1.0}}, "joint"),
     ({"fixed": ["alpha_0"]}, "joint"),
@@ -400,11 +400,11 @@ def test_the_default_search_with_extra_forces_is_the_joint_one():
     assert PredictorIdentifier(order=3, extra=extra)._checked_settings().solver == "joint"
 
 
-def test_the_default_fit_is_the_offset_reduced_fit():
+def test_the_default_fit_is_the_offset_kappa0_fit():
     df, _ = _small_world(11)
     default = PredictorIdentifier(order=3).fit(df, slider_mass_kg=M_S)
-    explicit = PredictorIdentifier(order=3, solver="offset_reduced", seed=5).fit(df, slider_mass_kg=M_S)
-    assert default.convergence_["solver"] == "offset_reduced"
+    explicit = PredictorIdentifier(order=3, solver="offset_kappa0", seed=5).fit(df, slider_mass_kg=M_S)
+    assert default.convergence_["solver"] == "offset_kappa0"
     assert default.loglik_ == explicit.loglik_
     np.testing.assert_array_equal(default.theta_, explicit.theta_)
 
@@ -523,4 +523,4 @@ def test_offset_kappa0_is_offset_reduced_with_its_continuation_in_the_offset_for
     assert fits["offset_kappa0"].loglik_ >= paper.loglik_ - 1e-6
     lo, hi = PredictorParams.bounds(3)
     assert np.all(fits["offset_kappa0"].theta_ >= lo) and np.all(fits["offset_kappa0"].theta_ <= hi)
-    assert PredictorIdentifier(order=3)._checked_settings().solver == "offset_reduced"  # the default unchanged
+    assert PredictorIdentifier(order=3)._checked_settings().solver == "offset_kappa0"  # the default

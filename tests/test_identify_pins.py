@@ -36,7 +36,7 @@ def test_the_space_and_the_default_search_read_every_form_of_fixed_alike(fixed, 
     assert space.fixed == expected and list(space.fixed) == list(expected)
     assert [n for n, v in zip(space.names, space.varied) if not v] == [n for n in space.names if n in expected]
     cfg = PredictorIdentifier(order=3, fixed=fixed)._checked_settings()
-    assert cfg.solver == ("joint" if set(expected) & OFFSET else "offset_reduced")
+    assert cfg.solver == ("joint" if set(expected) & OFFSET else "offset_kappa0")
     assert auto_solver(cfg) == cfg.solver
 
 
@@ -69,4 +69,4 @@ def test_an_unknown_name_is_refused_where_the_names_are_known():
     with pytest.raises(IdentificationError, match="fixed: unknown parameter 'gamma'"):
         pinned_parameters(["gamma"], names=["c_r", "sigma"])
     assert pinned_parameters(["gamma"]) == {"gamma": None}
-    assert PredictorIdentifier(order=3, fixed=["gamma"])._checked_settings().solver == "offset_reduced"
+    assert PredictorIdentifier(order=3, fixed=["gamma"])._checked_settings().solver == "offset_kappa0"

@@ -237,7 +237,7 @@ class PredictorIdentifier(EstimatorSettings):
         differs from the data's; kappa and include_load_inertia are the
         identifier's.
     init_extra : start values of phi for the warm start (default ``extra.start``, else zeros); only with ``init``.
-    solver : ``"auto"`` (default: ``"offset_reduced"`` or ``"joint"``, :func:`l1b2.ident.offset.auto_solver`),
+    solver : ``"auto"`` (default: ``"offset_kappa0"`` or ``"joint"``, :func:`l1b2.ident.offset.auto_solver`),
         ``"joint"`` (the searches of ``noise_fit``), ``"varpro"`` (:mod:`l1b2.ident.varpro`),
         ``"offset"`` (the drive offset as a search coordinate: a profile on a grid of offsets, then varpro;
         :mod:`l1b2.ident.offset`), ``"offset_bracket"`` (the same with a bracketed search over the offset on

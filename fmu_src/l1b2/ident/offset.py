@@ -604,10 +604,10 @@ OFFSET_COORDINATES = ("c_r", "sigma", "mu", "k0", "alpha_0")
 
 
 def auto_solver(cfg) -> str:
-    """The search of ``solver="auto"`` for the settings ``cfg``: ``"offset_reduced"`` for a cold fit (no
+    """The search of ``solver="auto"`` for the settings ``cfg``: ``"offset_kappa0"`` for a cold fit (no
     ``init``) of the Eq. 29 model alone (no extra forces) with :data:`OFFSET_COORDINATES` varied, else ``"joint"``
     (a warm start is a local continuation; pins of the offset's coordinates fix its range; the pure-slip family and
     the extra forces are searched by the joint search)."""
     fixed = pinned_parameters(cfg.fixed)
     cold_eq29 = cfg.init is None and cfg.model == "eq29" and cfg.extra is None
-    return "offset_reduced" if cold_eq29 and not set(fixed) & set(OFFSET_COORDINATES) else "joint"
+    return "offset_kappa0" if cold_eq29 and not set(fixed) & set(OFFSET_COORDINATES) else "joint"
