@@ -7,7 +7,7 @@ baseline of the same seed without the effect); without one (control), the held-o
 
 Fast set (``make test``): one control seed, a control with a logged constant temperature and the speed-channel
 detector, and the slow cases marked ``ci_slow``: the eleven single effects, the logged-temperature case and the
-measurement-chain case (a strict xfail). The realistic world's other slow cases are in
+measurement-chain case (a strict xfail). The pairs, the ten control seeds and the command line's report are in
 ``test_closeloop_realistic_pairs.py`` and ``test_closeloop_realistic_controls.py``: whole modules are what
 ``make test``'s two workers share out (``tests/conftest.py``, ``COSTLY_FIRST``). The cases the loop is known to
 miss are strict xfails with their measured reasons, so that a pass is noticed. Each case's figures are recorded
