@@ -8,7 +8,9 @@ export OPENBLAS_NUM_THREADS ?= 1
 export MPLBACKEND ?= Agg
 # pytest-xdist workers for `make test` (the CI machine has 2 cores); modules stay whole on one worker and are
 # handed out in collection order, the costliest modules first (tests/conftest.py COSTLY_FIRST, decision 0030).
-# `make test` runs the not-slow tests and the slow ones marked ci_slow (twelve realistic close-loop cases: the eleven single effects and the logged temperature, decisions 0054 and 0074)
+# `make test` runs the not-slow tests and the slow ones marked ci_slow: the realistic world's close-loop cases (single effects,
+# pairs, ten control seeds, the CLI report, run-level injections, a logged channel; decisions 0054, 0074 and 0080), in five
+# modules that the two workers share out; the other slow tests run with `make test-slow`
 TEST_WORKERS ?= 2
 
 .PHONY: docs venv test test-slow test-all check-install fmus demo dist bench clean

@@ -43,8 +43,12 @@ print({_RESULT_TAG!r} + json.dumps(result), flush=True)
 #: first and the short ones, in their usual order after them, fill the gaps, so that both workers finish at
 #: about the same time. (xdist's own order, by number of tests, started the few long close-loop modules last.)
 COSTLY_FIRST = (
-    "test_closeloop_realistic.py",  # two realistic-world control close loops, twelve injected cases (ci_slow)
+    "test_closeloop_realistic.py",  # two realistic-world control close loops, thirteen injected cases (ci_slow)
+    "test_closeloop_realistic_pairs.py",  # five realistic pairs of effects (ci_slow)
+    "test_closeloop_realistic_controls.py",  # ten realistic control seeds, the CLI's report of one case (ci_slow)
     "test_closeloop.py",  # reference-world close loops, their exports
+    "test_closeloop_runlevel_slow.py",  # six realistic run-level injections (ci_slow)
+    "test_closeloop_channels.py",  # one realistic close loop with two logged channels (ci_slow)
     "test_readme_examples.py",  # the pages' commands: rig, identify, close loop, export
     "test_extended_predictor_fmu.py",  # native FMUs compiled per effect kind, FMI 2.0 and 3.0
     "test_export.py",

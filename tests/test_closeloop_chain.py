@@ -5,7 +5,7 @@ a data injection: the motor is untouched). The close-the-loop estimator finds
 the filter from position and speed alone, identifies the physics on the
 position's derivative and applies the filter to its predictions; the exported
 model carries the same filter. Exact (reference) world here; the realistic
-world's case is in ``tests/test_closeloop_realistic.py`` (slow set).
+world's case is in ``tests/test_closeloop_realistic.py``.
 """
 
 import json

@@ -496,6 +496,7 @@ def test_every_numeric_column_beyond_the_required_ones_is_a_channel():
 
 
 @pytest.mark.slow
+@pytest.mark.ci_slow    # decision 0080
 def test_an_effect_through_a_logged_channel_is_traced_and_a_noise_channel_is_not_added(tmp_path, record_property):
     train, test, clean_tr, clean_te = _data(str(tmp_path))
     res = close_loop(train, test)

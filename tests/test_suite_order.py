@@ -1,5 +1,7 @@
-"""The test suite's own scheduling list (``conftest.COSTLY_FIRST``, decision 0030) names real test modules."""
+"""The test suite's own scheduling list (``conftest.COSTLY_FIRST``, decision 0030) names real test modules, and
+every module that ``make test`` runs a slow test of."""
 
+import re
 from pathlib import Path
 
 from conftest import COSTLY_FIRST, pytest_collection_modifyitems
@@ -11,6 +13,14 @@ def test_every_module_of_the_costly_first_list_exists_once():
     # reference: the files of tests/; a renamed module would silently lose its place at the front
     assert len(set(COSTLY_FIRST)) == len(COSTLY_FIRST)
     assert [n for n in COSTLY_FIRST if not (HERE / n).is_file()] == []
+
+
+def test_every_module_with_a_slow_test_that_make_test_runs_is_listed():
+    # reference: the files of tests/ that mark a test ci_slow (a slow test make test runs, decision 0080); a module
+    # missing from the list would be handed out among the last and decide alone when its worker ends
+    mark = re.compile(r"^\s*@pytest\.mark\.ci_slow\b|marks=\(?pytest\.mark\.ci_slow\b", re.M)
+    marked = sorted(p.name for p in HERE.glob("test_*.py") if mark.search(p.read_text(encoding="utf-8")))
+    assert marked and [n for n in marked if n not in COSTLY_FIRST] == []
 
 
 class _Item:
