@@ -87,9 +87,8 @@ from .candidates import (CandidateSource, Context, baseline_damping, channels_of
 from .stages import StageClock
 from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT_FOLDS, DEFAULT_REFIT_NFEV,
                          DEFAULT_REFIT_REPEATS, Directions, EffectSet, RefitCV, RefitSettings, Validated, accepts,
-                         added_columns, chain_cv_errors, clock_folds, collinear, cv_errors, fold_start_phi,
-                         materiality, named_reading, refit, refit_schemes, stratified_folds, time_dependent,
-                         validated)
+                         added_columns, chain_cv_errors, collinear, cv_errors, fold_start_phi, screen_folds,
+                         materiality, named_reading, refit, refit_schemes, stratified_folds, time_dependent, validated)
 from .baselines import choose_baseline, identify_families, retag_structural
 from .crosscheck import PureSlipCheck, identified_pick, score_of, withdrawn_note
 from .events import session, with_event_clocks
@@ -148,7 +147,7 @@ class CloseLoop(EstimatorSettings):
     shortlist : int
         Candidates (best of their family by linearised gain) refit and cross-validated per round.
     refit_folds : int
-        Folds over runs of the cross-validated refit (stratified by direction and voltage).
+        Folds over runs of the cross-validated refit (stratified by direction and voltage; see ``fold_unit``).
     refit_repeats : int
         Splits of the runs into ``refit_folds`` folds for a round's acceptance (:func:`refit_schemes`, from ``seed``).
     min_cv_gain : float
@@ -173,9 +172,10 @@ class CloseLoop(EstimatorSettings):
         (:mod:`l1b2.closeloop.runlevel`, Bonferroni over the signals) as one more candidate of the
         cross-validated refit; among accepted candidates within ``parsimony`` of the best, a form constant along
         the stroke is preferred over a within-run form when the run-level evidence names its regressor.
-    clock_folds : {"blocks", "rotation"}
+    clock_folds, fold_unit : {"blocks", "rotation"}, {"run", "condition"}
         Folds of the candidates that depend on the session clock (screen and refit, whatever ``run_level``):
-        ``"blocks"`` k contiguous blocks, ``"rotation"`` conditions dealt in turn (:mod:`~l1b2.closeloop.acceptance`).
+        ``"blocks"`` k contiguous blocks, ``"rotation"`` conditions dealt in turn (:mod:`~l1b2.closeloop.acceptance`);
+        of the others: ``"run"`` runs, ``"condition"`` whole conditions (:func:`~.acceptance.condition_folds`).
     response_columns : tuple of str or None
         Logged columns that are measured responses of the motor: listed in ``channels_considered``, never
         offered as a cause. None: :data:`l1b2.predictor.effects.channels.RESPONSE_COLUMNS` (the virtual rig's
@@ -206,7 +206,7 @@ class CloseLoop(EstimatorSettings):
                  min_cv_drop: float = DEFAULT_MIN_CV_DROP, refit_nfev: int = DEFAULT_REFIT_NFEV,
                  final_nfev: int = 60, screen_alpha: float | None = 0.01, noise_fit: str = "alternate",
                  noise: str = "common", client=None, baseline: str = "eq29", run_level: bool = True,
-                 response_columns: tuple | None = None, clock_folds: str = "blocks"):
+                 response_columns: tuple | None = None, clock_folds: str = "blocks", fold_unit: str = "run"):
         self.order = order
         self.k_folds = k_folds
         self.alpha = alpha
@@ -230,7 +230,7 @@ class CloseLoop(EstimatorSettings):
         self.baseline = baseline
         self.run_level = run_level
         self.response_columns = response_columns
-        self.clock_folds = clock_folds
+        self.clock_folds, self.fold_unit = clock_folds, fold_unit
 
     # -- the job -------------------------------------------------------------
     def fit(self, train: dataio.Measurements, test: dataio.Measurements | None = None) -> CloseLoop:
@@ -357,8 +357,8 @@ class CloseLoop(EstimatorSettings):
         (``clock_folds``), the others on the stratified run folds; the current model is cross-validated on the
         same folds as each.
         """
-        schemes = refit_schemes(dtr, self.refit_folds, self.refit_repeats, self.seed, self.clock_folds)
-        screen_blocks = clock_folds(dtr, self.k_folds, self.clock_folds)
+        schemes = refit_schemes(dtr, self.refit_folds, self.refit_repeats, self.seed, self.clock_folds, self.fold_unit)
+        screen_runs, screen_blocks = screen_folds(dtr, mask, self.k_folds, self.seed, self.clock_folds, self.fold_unit)
         check = None if other is None else PureSlipCheck(
             other, dtr, mask, m_s, lambda c: schemes[time_dependent(c)], self.refit_settings(),
             min_gain=self.min_cv_gain, final_nfev=self.final_nfev, clock=say)
@@ -373,8 +373,8 @@ class CloseLoop(EstimatorSettings):
             cands = [c for c in pool if c.family not in it.effects.families
                      and not collinear(c, it.effects, dtr, mask, added=added) and not geo.conflicts(c, it.effects)]
             say(f"round {n_rnd}: scoring {len(cands)} candidate effects (linearised)")
-            scores = score_candidates(cands, r, dtr, mask, cur.params_, m_s, v_pred=v_cur, k=self.k_folds,
-                                      seed=self.seed, time_folds=screen_blocks)
+            scores = score_candidates(cands, r, dtr, mask, cur.params_, m_s, v_pred=v_cur, folds=screen_runs,
+                                      time_folds=screen_blocks)
             level = significance_level(scores, self.alpha)
             short = shortlist(scores, level=level, min_gain=self.min_gain, size=self.shortlist)
             screen = level
@@ -391,7 +391,7 @@ class CloseLoop(EstimatorSettings):
                     c.family not in it.effects.families and not collinear(c, it.effects, dtr, mask, added=added)
                     and not geo.conflicts(c, it.effects)))
                 short = short + score_candidates(offered, r, dtr, mask, cur.params_, m_s, v_pred=v_cur,
-                                                 k=self.k_folds, seed=self.seed, time_folds=screen_blocks)
+                                                 folds=screen_runs, time_folds=screen_blocks)
             short = short + named_alternatives(short, scores, lambda n, g: geo.share(n, g.candidate, g.phi),
                                                min_gain=self.min_gain)
             short = short + shape_alternatives(short, scores, level=screen, min_gain=self.min_gain)
@@ -599,7 +599,7 @@ class CloseLoop(EstimatorSettings):
                       "k_folds": self.k_folds, "shortlist": self.shortlist, "refit_folds": self.refit_folds,
                       "refit_repeats": self.refit_repeats, "min_cv_gain": self.min_cv_gain,
                       "min_cv_drop": self.min_cv_drop, "screen_alpha": self.screen_alpha,
-                      "noise_fit": self.noise_fit, "noise": self.noise,
+                      "noise_fit": self.noise_fit, "noise": self.noise, "fold_unit": self.fold_unit,
                       "max_rounds": self.max_rounds, "run_level": self.run_level, "clock_folds": self.clock_folds,
                       "response_columns": (list(self.response_columns) if self.response_columns is not None
                                            else None)},
