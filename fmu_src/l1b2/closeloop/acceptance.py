@@ -264,7 +264,7 @@ def unit_folds(df: pd.DataFrame, k: int, seed=0, unit: str = "run") -> list[np.n
 
 
 def repeated_folds(df: pd.DataFrame, k: int, repeats: int = 1, seed: int = 0, unit: str = "run") -> list[np.ndarray]:
-    """``repeats`` stratified splits of the runs into ``k`` folds each, one after the other (``repeats * k`` folds).
+    """``repeats`` splits of the runs by :func:`unit_folds`, ``k`` folds each, in turn (``repeats * k`` folds).
 
     Split 0 is ``unit_folds(df, k, seed, unit)``; split ``j >= 1`` is shuffled by the stream ``[seed, j]``: the
     whole list is a function of ``seed``, and ``repeats=1`` gives :func:`unit_folds` itself. Every run is
@@ -355,11 +355,9 @@ def screen_folds(df: pd.DataFrame, mask, k: int, seed: int = 0, clock: str = "bl
     (:func:`clock_folds`). ``folds`` are over the runs with a sample in ``mask`` (None: every sample): by
     ``unit`` ``"run"`` the runs shuffled (seeded) and dealt in turn (:func:`l1b2.closeloop.residuals.run_folds`),
     ``"condition"`` :func:`condition_folds`."""
-    if unit not in UNIT_FOLDS:
-        raise ValueError(f"fold_unit must be one of {sorted(UNIT_FOLDS)}, got {unit!r}")
     idx = np.flatnonzero(mask) if mask is not None else np.arange(len(df))
-    folds = (condition_folds(df.iloc[idx], k, seed) if unit == "condition"
-             else res.run_folds(df[dataio.RUN].to_numpy()[idx], k, seed))
+    folds = (res.run_folds(df[dataio.RUN].to_numpy()[idx], k, seed) if unit == "run"
+             else unit_folds(df.iloc[idx], k, seed, unit))
     return folds, clock_folds(df, k, clock)
 
 
