@@ -95,13 +95,13 @@ def _insample_written_out(A, y, S_all, widths):
     return float(yp @ yp), out
 
 
-def _scores_written_out(candidates, r_drive, df, mask, params, m_s, v_pred, k=5, seed=0):
+def _scores_written_out(candidates, r_drive, df, mask, params, m_s, v_pred, k=5, seed=0, folds=None):
     """The scoring with a fresh array at every step (responses, masked rows, usable columns, folds' rows)."""
     import math
     runs = df["run"].to_numpy()
     idx = np.flatnonzero(mask)
     y, runs_m = r_drive[idx], runs[idx]
-    folds = res.run_folds(runs_m, k, seed)
+    folds = res.run_folds(runs_m, k, seed) if folds is None else folds
     n_eff = sel._effective_n(y, runs_m)
     feats = [np.asarray(c.features(df), float).reshape(len(df), -1) for c in candidates]
     widths = [f.shape[1] for f in feats]
@@ -211,3 +211,11 @@ def test_scores_equal_the_fresh_array_scoring_to_the_last_bit():
             assert (g.cv_gain, g.p_value, g.runs_improved, g.delta_bic, g.delta_aic) == (gain, pv, imp, dbic, daic)
             assert np.array_equal(g.phi, phi)
     assert got[1].cv_gain == 0.0 and got[0].cv_gain != 0.0
+    # folds given (whole conditions): the gains are those of the same scoring on those folds
+    from l1b2.closeloop.acceptance import condition_folds
+    folds = condition_folds(df[mask], 3, 0)
+    got = sel.score_candidates(cands, r, df, mask, p, 0.1, v_pred=base, folds=folds)
+    ref = _scores_written_out(cands, r, df, mask, p, 0.1, base, folds=folds)
+    assert [g.cv_gain for g in got] == [x[0] for x in ref] and [g.p_value for g in got] == [x[1] for x in ref]
+    assert [g.cv_gain for g in got] != [g.cv_gain for g in sel.score_candidates(cands, r, df, mask, p, 0.1,
+                                                                                 v_pred=base)]

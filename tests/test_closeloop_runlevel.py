@@ -113,7 +113,6 @@ def test_clock_folds_picks_the_scheme_and_refuses_an_unknown_one():
 
 @pytest.mark.parametrize("scheme", ["blocks", "rotation"])
 def test_the_loop_folds_clock_candidates_by_its_setting(scheme, monkeypatch):
-    from l1b2.closeloop import loop as loop_mod
     df, _ = _conditions_session()
     seen = []
 
@@ -128,8 +127,7 @@ def test_the_loop_folds_clock_candidates_by_its_setting(scheme, monkeypatch):
             raise Stop
         return real(d, k, sch)
 
-    monkeypatch.setattr(loop_mod, "clock_folds", spy)               # the screen's folds
-    monkeypatch.setattr(acc, "clock_folds", spy)                    # the refit's, through refit_schemes
+    monkeypatch.setattr(acc, "clock_folds", spy)      # the refit's (refit_schemes) and the screen's (screen_folds)
     assert CloseLoop().clock_folds == "blocks"                       # the default: contiguous blocks
     est = CloseLoop(clock_folds=scheme, k_folds=5, refit_folds=3)
     assert est.get_params()["clock_folds"] == scheme

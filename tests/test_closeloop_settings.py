@@ -17,13 +17,14 @@ DEFAULTS = {"order": 8, "k_folds": 5, "alpha": 0.01, "min_gain": 0.05, "parsimon
             "library": None, "progress": None, "max_rounds": 3, "shortlist": 2, "refit_folds": 4,
             "refit_repeats": 1, "min_cv_gain": 0.03, "min_cv_drop": 0.005, "refit_nfev": 10, "final_nfev": 60,
             "screen_alpha": 0.01, "noise_fit": "alternate", "noise": "common", "client": None, "baseline": "eq29",
-            "run_level": True, "response_columns": None, "clock_folds": "blocks"}
+            "run_level": True, "response_columns": None, "clock_folds": "blocks", "fold_unit": "run"}
 
 #: settings other than the defaults for every rule the report records
 CHANGED = {"order": 3, "n_starts": 1, "max_rounds": 0, "min_gain": 0.07, "alpha": 0.02, "parsimony": 0.8,
            "k_folds": 3, "shortlist": 1, "refit_folds": 2, "refit_repeats": 2, "min_cv_gain": 0.04,
            "min_cv_drop": 0.006, "screen_alpha": None, "noise_fit": "profile", "noise": "per_run",
-           "run_level": False, "clock_folds": "rotation", "response_columns": ("aux_a", "aux_b")}
+           "run_level": False, "clock_folds": "rotation", "response_columns": ("aux_a", "aux_b"),
+           "fold_unit": "condition"}
 
 
 def small_train(seed=1):
@@ -55,7 +56,7 @@ def test_the_report_records_the_rules_as_given():
     # list (JSON), in report.json as in the result
     rules = {"min_gain": 0.07, "alpha": 0.02, "parsimony": 0.8, "k_folds": 3, "shortlist": 1, "refit_folds": 2,
              "refit_repeats": 2, "min_cv_gain": 0.04, "min_cv_drop": 0.006, "screen_alpha": None,
-             "noise_fit": "profile", "noise": "per_run", "max_rounds": 0, "run_level": False,
+             "noise_fit": "profile", "noise": "per_run", "fold_unit": "condition", "max_rounds": 0, "run_level": False,
              "clock_folds": "rotation", "response_columns": ["aux_a", "aux_b"]}
     assert CloseLoop(**CHANGED).settings.rules() == rules
     res = close_loop(small_train(), **CHANGED)
@@ -88,6 +89,7 @@ def test_trains_run_folds_are_computed_once_per_fit_and_shared_by_their_three_us
         monkeypatch.setattr(loop_mod, name, wrapped)
 
     monkeypatch.setattr(acc, "stratified_folds", spy)
+    monkeypatch.setitem(acc.UNIT_FOLDS, "run", spy)      # the run folds as the refit's splits ask for them
     monkeypatch.setattr(loop_mod, "stratified_folds", spy)
     spy_on("choose_baseline", "baseline", 4)
     spy_on("chain_cv_errors", "chain", 3)
@@ -108,6 +110,7 @@ def test_trains_run_folds_are_computed_once_per_fit_and_shared_by_their_three_us
 
 @pytest.mark.parametrize("flags, message", [
     (["--clock-folds", "weekly"], "l1b2: error: --clock-folds must be one of blocks, rotation, got 'weekly'"),
+    (["--fold-unit", "session"], "l1b2: error: --fold-unit must be one of run, condition, got 'session'"),
     (["--refit-repeats", "0"], "l1b2: error: --refit-repeats must be a whole number >= 1, got '0'"),
     (["--refit-repeats", "two"], "l1b2: error: --refit-repeats must be a whole number >= 1, got 'two'"),
     (["--refit-repeats", "1.5"], "l1b2: error: --refit-repeats must be a whole number >= 1, got '1.5'"),
@@ -124,16 +127,18 @@ def test_a_bad_fold_flag_is_one_line_before_any_file_is_read(tmp_path, capsys, f
 def test_the_fold_flags_reach_the_loop_and_its_report(tmp_path):
     # reference: the values given on the command line are the report's rules; the flags' defaults are the loop's
     from l1b2 import cli
-    from l1b2.closeloop.acceptance import CLOCK_FOLDS
-    assert set(cli.CLOCK_FOLDS) == set(CLOCK_FOLDS)
+    from l1b2.closeloop.acceptance import CLOCK_FOLDS, UNIT_FOLDS
+    assert set(cli.CLOCK_FOLDS) == set(CLOCK_FOLDS) and set(cli.FOLD_UNITS) == set(UNIT_FOLDS)
     args = cli.build_parser().parse_args(["close-loop", "--train", "x.csv", "--out", "o"])
-    assert cli._fold_settings(args) == {"clock_folds": LoopSettings().clock_folds,
+    assert cli._fold_settings(args) == {"clock_folds": LoopSettings().clock_folds, "fold_unit": LoopSettings().fold_unit,
                                         "refit_repeats": LoopSettings().refit_repeats}
     for name, seed in (("train", 1), ("test", 2)):
         small_train(seed).df.to_csv(tmp_path / f"{name}.csv", index=False)
     out = tmp_path / "cl"
     assert cli.main(["close-loop", "--train", str(tmp_path / "train.csv"), "--test", str(tmp_path / "test.csv"),
                      "--slider-mass", "0.1", "--order", "3", "--max-rounds", "0", "--out", str(out), "--quiet",
-                     "--no-plots", "--workers", "1", "--clock-folds", "rotation", "--refit-repeats", "3"]) == 0
+                     "--no-plots", "--workers", "1", "--clock-folds", "rotation", "--refit-repeats", "3",
+                     "--fold-unit", "condition"]) == 0
     rules = json.loads((out / "report.json").read_text())["diagnosis"]["rules"]
     assert (rules["clock_folds"], rules["refit_repeats"], rules["max_rounds"]) == ("rotation", 3, 0)
+    assert rules["fold_unit"] == "condition"

@@ -253,6 +253,8 @@ NOISE_FIT_HELP = ("'alternate': least squares at fixed noise variances, re-estim
                   "confounded extra force); 'auto': profile for the Eq. 29 model alone, alternate with extra forces")
 #: the fold schemes of the session-clock candidates (:data:`l1b2.closeloop.acceptance.CLOCK_FOLDS`'s keys)
 CLOCK_FOLDS = ("blocks", "rotation")
+#: the fold units of the other candidates (:data:`l1b2.closeloop.acceptance.UNIT_FOLDS`'s keys)
+FOLD_UNITS = ("run", "condition")
 NOISES = ("common", "per_run")
 NOISE_HELP = ("noise variances of Eq. 32: 'common' (default, the paper's single R) or 'per_run' (one per run; on "
               "data the model does not fit exactly its likelihood is multimodal and its optima predicted held-out "
@@ -291,6 +293,9 @@ def _close_loop_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--clock-folds", metavar="{blocks,rotation}", default="blocks", help="folds of the candidates "
                    "that depend on the session clock: blocks (contiguous stretches of the session) or rotation "
                    "(whole conditions dealt to the folds in turn)")
+    p.add_argument("--fold-unit", metavar="{run,condition}", default="run", help="folds of the other candidates: "
+                   "run (runs dealt to the folds) or condition (whole conditions, a drive amplitude and a load with "
+                   "all their runs, dealt to the folds)")
     p.add_argument("--refit-repeats", metavar="N", default="1", help="splits of TRAIN's runs into the refit's "
                    "folds for a round's acceptance (repeated cross-validation, each run held out N times; "
                    "N times the refits)")
@@ -638,16 +643,19 @@ def cmd_compare(args) -> int:
 
 
 def _fold_settings(args) -> dict:
-    """``--clock-folds`` and ``--refit-repeats`` as the loop's settings; L1B2Error (one line) for a bad value."""
+    """``--clock-folds``, ``--fold-unit`` and ``--refit-repeats`` as the loop's settings; L1B2Error (one line) for a
+    bad value."""
     if args.clock_folds not in CLOCK_FOLDS:
         raise L1B2Error(f"--clock-folds must be one of {', '.join(CLOCK_FOLDS)}, got {args.clock_folds!r}")
+    if args.fold_unit not in FOLD_UNITS:
+        raise L1B2Error(f"--fold-unit must be one of {', '.join(FOLD_UNITS)}, got {args.fold_unit!r}")
     try:
         repeats = int(args.refit_repeats)
     except ValueError:
         repeats = 0
     if repeats < 1:
         raise L1B2Error(f"--refit-repeats must be a whole number >= 1, got {args.refit_repeats!r}")
-    return {"clock_folds": args.clock_folds, "refit_repeats": repeats}
+    return {"clock_folds": args.clock_folds, "fold_unit": args.fold_unit, "refit_repeats": repeats}
 
 
 def _run_close_loop(args, say):

@@ -7,7 +7,7 @@ once a term is added). Here each shortlisted candidate is judged by what a
 user would see on new runs:
 
 * TRAIN's runs are split into ``k`` folds (:func:`stratified_folds`: seeded,
-  stratified by direction and voltage);
+  stratified by direction and voltage; or whole conditions, :func:`condition_folds`);
 * for each fold, the current model (its accepted effects included) and the
   current model + the candidate are both re-identified on the other folds
   (warm start from the current fit, one local search with a bounded budget,
@@ -37,6 +37,7 @@ from ..ident.coarse import decimate, decimation
 from ..ident.estimator import ExtraForces, PredictorIdentifier
 from ..predictor import effects as fx
 from . import chain
+from . import residuals as res
 from .candidates import CandidateForce
 
 DEFAULT_REFIT_FOLDS = 4
@@ -215,16 +216,64 @@ def stratified_folds(df: pd.DataFrame, k: int, seed=0) -> list[np.ndarray]:
     return [ids[i::k] for i in range(k)]
 
 
-def repeated_folds(df: pd.DataFrame, k: int, repeats: int = 1, seed: int = 0, first=None) -> list[np.ndarray]:
-    """``repeats`` stratified splits of the runs into ``k`` folds each, one after the other (``repeats * k`` folds).
+def condition_units(df: pd.DataFrame) -> list[np.ndarray]:
+    """Run ids grouped by condition: the runs that share a drive amplitude and a load (``voltage_V``, ``load_kg`` of
+    a run's first sample; the rig's plan runs each such condition forward, then backward), wherever they lie in the
+    session. Units in the order their first run appears in ``df``, runs in that order too; a frame without those
+    columns has one unit per run. Every run is in exactly one unit."""
+    cols = [c for c in (dataio.VOLTAGE, dataio.LOAD) if c in df.columns]
+    first = df.groupby(dataio.RUN, sort=False)[cols].first()
+    runs = first.index.to_numpy()
+    code = (first.groupby(cols, sort=False, dropna=False).ngroup().to_numpy() if cols and len(runs)
+            else np.arange(len(runs)))
+    return [runs[code == u] for u in range(int(code.max()) + 1 if len(code) else 0)]
 
-    Split 0 is ``stratified_folds(df, k, seed)`` (``first``: that split, already computed; None: computed here);
-    split ``j >= 1`` is shuffled by the stream ``[seed, j]``: the whole list is a function of ``seed``, and
-    ``repeats=1`` gives :func:`stratified_folds` itself. Every run is in exactly one fold of each split, so it is
-    held out exactly ``repeats`` times (:func:`held_out_times`).
+
+def condition_folds(df: pd.DataFrame, k: int, seed=0) -> list[np.ndarray]:
+    """Run ids in ``k`` folds of whole conditions (:func:`condition_units`): the conditions shuffled (seeded), ordered
+    stably by stratum (the mean ``direction`` of a condition's runs, then its ``voltage_V``) and dealt in turn,
+    condition ``j`` of that order to fold ``j mod k``.
+
+    A condition's runs share their inputs, so a held-out run's partner is never in the fitted part (grouped
+    cross-validation; the TEST split holds out whole conditions too). Every run is held out exactly once; in
+    every stratum the folds' numbers of conditions differ by at most one; a condition of a forward and a backward
+    run has mean direction 0, so the strata are then the voltages and each fold holds both directions equally.
+    With one run per condition this is :func:`stratified_folds`. ``seed``: an int or a sequence of ints.
     """
-    split0 = list(stratified_folds(df, k, seed) if first is None else first)
-    return split0 + [f for j in range(1, max(int(repeats), 1)) for f in stratified_folds(df, k, [seed, j])]
+    units = condition_units(df)
+    first = df.groupby(dataio.RUN, sort=False)[[dataio.DIRECTION, dataio.VOLTAGE]].first()
+    keys = pd.DataFrame([[first.loc[u, dataio.DIRECTION].astype(float).mean(), first.loc[u[0], dataio.VOLTAGE]]
+                         for u in units], columns=["d", "v"])
+    order = np.random.default_rng(seed).permutation(len(units))
+    ranked = order[keys.iloc[order].assign(_o=np.arange(len(order))).sort_values(["d", "v", "_o"],
+                                                                                 kind="stable")["_o"].to_numpy()]
+    k = min(k, len(units))
+    return [np.concatenate([units[u] for u in ranked[i::k]]) for i in range(k)]
+
+
+#: the fold schemes of a candidate that does not depend on the session clock (``CloseLoop(fold_unit=...)``)
+UNIT_FOLDS = {"run": stratified_folds, "condition": condition_folds}
+
+
+def unit_folds(df: pd.DataFrame, k: int, seed=0, unit: str = "run") -> list[np.ndarray]:
+    """The ``k`` folds of a candidate that does not depend on the session clock by ``unit`` (a key of
+    :data:`UNIT_FOLDS`): runs (:func:`stratified_folds`) or whole conditions (:func:`condition_folds`)."""
+    if unit not in UNIT_FOLDS:
+        raise ValueError(f"fold_unit must be one of {sorted(UNIT_FOLDS)}, got {unit!r}")
+    return UNIT_FOLDS[unit](df, k, seed)
+
+
+def repeated_folds(df: pd.DataFrame, k: int, repeats: int = 1, seed: int = 0, unit: str = "run",
+                   first=None) -> list[np.ndarray]:
+    """``repeats`` splits of the runs by :func:`unit_folds`, ``k`` folds each, in turn (``repeats * k`` folds).
+
+    Split 0 is ``unit_folds(df, k, seed, unit)`` (``first``: that split, already computed; None: computed here);
+    split ``j >= 1`` is shuffled by the stream ``[seed, j]``: the whole list is a function of ``seed``, and
+    ``repeats=1`` gives :func:`unit_folds` itself. Every run is in exactly one fold of each split, so it is held out
+    exactly ``repeats`` times (:func:`held_out_times`).
+    """
+    split0 = list(unit_folds(df, k, seed, unit) if first is None else first)
+    return split0 + [f for j in range(1, max(int(repeats), 1)) for f in unit_folds(df, k, [seed, j], unit)]
 
 
 def held_out_times(folds) -> int:
@@ -295,12 +344,25 @@ def clock_folds(df: pd.DataFrame, k: int, scheme: str = "blocks") -> list[np.nda
 
 
 def refit_schemes(df: pd.DataFrame, k: int, repeats: int = 1, seed: int = 0, clock: str = "blocks",
-                  first=None) -> dict:
-    """The folds of a round's cross-validated refits: ``{False: repeated_folds(df, k, repeats, seed, first), True:
-    clock_folds(df, k, clock)}``, keyed by whether the candidate depends on the session clock
+                  unit: str = "run", first=None) -> dict:
+    """The folds of a round's cross-validated refits: ``{False: repeated_folds(df, k, repeats, seed, unit, first),
+    True: clock_folds(df, k, clock)}``, keyed by whether the candidate depends on the session clock
     (:func:`time_dependent`); the session's folds are one split whatever ``repeats`` (they are not shuffled).
-    ``first``: ``stratified_folds(df, k, seed)`` when the caller has it already."""
-    return {False: repeated_folds(df, k, repeats, seed, first), True: clock_folds(df, k, clock)}
+    ``first``: ``unit_folds(df, k, seed, unit)`` when the caller has it already."""
+    return {False: repeated_folds(df, k, repeats, seed, unit, first), True: clock_folds(df, k, clock)}
+
+
+def screen_folds(df: pd.DataFrame, mask, k: int, seed: int = 0, clock: str = "blocks",
+                 unit: str = "run") -> tuple[list, list]:
+    """The folds of a round's linearised screen (:func:`l1b2.closeloop.selection.score_candidates`): ``(folds,
+    time_folds)``, those of the candidates that do not depend on the session clock and of those that do
+    (:func:`clock_folds`). ``folds`` are over the runs with a sample in ``mask`` (None: every sample): by
+    ``unit`` ``"run"`` the runs shuffled (seeded) and dealt in turn (:func:`l1b2.closeloop.residuals.run_folds`),
+    ``"condition"`` :func:`condition_folds`."""
+    idx = np.flatnonzero(mask) if mask is not None else np.arange(len(df))
+    folds = (res.run_folds(df[dataio.RUN].to_numpy()[idx], k, seed) if unit == "run"
+             else unit_folds(df.iloc[idx], k, seed, unit))
+    return folds, clock_folds(df, k, clock)
 
 
 #: the signals of the session clock (:data:`l1b2.predictor.effects.SIGNALS` and the channel family's)

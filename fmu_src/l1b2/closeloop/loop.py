@@ -86,8 +86,8 @@ from .candidates import Context, baseline_damping, channels_of, damping_floors, 
 from .settings import LoopSettings, keyword_signature
 from .stages import StageClock
 from .acceptance import (Directions, EffectSet, RefitCV, RefitSettings, Validated, accepts, added_columns,
-                         chain_cv_errors, clock_folds, collinear, cv_errors, fold_start_phi, materiality,
-                         named_reading, refit, refit_schemes, stratified_folds, time_dependent, validated)
+                         chain_cv_errors, collinear, cv_errors, fold_start_phi, materiality, named_reading, refit,
+                         refit_schemes, screen_folds, stratified_folds, time_dependent, validated)
 from .baselines import choose_baseline, identify_families, retag_structural
 from .crosscheck import PureSlipCheck, identified_pick, score_of, withdrawn_note
 from .events import session, with_event_clocks
@@ -258,8 +258,9 @@ class CloseLoop(EstimatorSettings):
         (``clock_folds``), the others on the stratified run folds; the current model is cross-validated on the
         same folds as each. ``folds``: ``stratified_folds(dtr, refit_folds, seed)`` when the caller has it.
         """
-        schemes = refit_schemes(dtr, self.refit_folds, self.refit_repeats, self.seed, self.clock_folds, folds)
-        screen_blocks = clock_folds(dtr, self.k_folds, self.clock_folds)
+        schemes = refit_schemes(dtr, self.refit_folds, self.refit_repeats, self.seed, self.clock_folds, self.fold_unit,
+                                folds if self.fold_unit == "run" else None)
+        screen_runs, screen_blocks = screen_folds(dtr, mask, self.k_folds, self.seed, self.clock_folds, self.fold_unit)
         check = None if other is None else PureSlipCheck(
             other, dtr, mask, m_s, lambda c: schemes[time_dependent(c)], self.refit_settings(),
             min_gain=self.min_cv_gain, final_nfev=self.final_nfev, clock=say)
@@ -274,8 +275,8 @@ class CloseLoop(EstimatorSettings):
             cands = [c for c in pool if c.family not in it.effects.families
                      and not collinear(c, it.effects, dtr, mask, added=added) and not geo.conflicts(c, it.effects)]
             say(f"round {n_rnd}: scoring {len(cands)} candidate effects (linearised)")
-            scores = score_candidates(cands, r, dtr, mask, cur.params_, m_s, v_pred=v_cur, k=self.k_folds,
-                                      seed=self.seed, time_folds=screen_blocks)
+            scores = score_candidates(cands, r, dtr, mask, cur.params_, m_s, v_pred=v_cur, folds=screen_runs,
+                                      time_folds=screen_blocks)
             level = significance_level(scores, self.alpha)
             short = shortlist(scores, level=level, min_gain=self.min_gain, size=self.shortlist)
             screen = level
@@ -292,7 +293,7 @@ class CloseLoop(EstimatorSettings):
                     c.family not in it.effects.families and not collinear(c, it.effects, dtr, mask, added=added)
                     and not geo.conflicts(c, it.effects)))
                 short = short + score_candidates(offered, r, dtr, mask, cur.params_, m_s, v_pred=v_cur,
-                                                 k=self.k_folds, seed=self.seed, time_folds=screen_blocks)
+                                                 folds=screen_runs, time_folds=screen_blocks)
             short = short + named_alternatives(short, scores, lambda n, g: geo.share(n, g.candidate, g.phi),
                                                min_gain=self.min_gain)
             short = short + shape_alternatives(short, scores, level=screen, min_gain=self.min_gain)

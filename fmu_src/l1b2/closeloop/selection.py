@@ -407,21 +407,23 @@ def simplest_within_one_se(accepted: list) -> list:
 
 
 def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5, seed=0,
-                     time_folds=None) -> list[Score]:
+                     time_folds=None, folds=None) -> list[Score]:
     """Cross-validated gain, run-level p-value and AIC/BIC change of every candidate.
 
     The regression of the TRAIN residual on a candidate's free-run response
     includes the nuisance responses (:func:`nuisance_forces`) in both the
     null and the candidate model; folds are whole runs (``time_folds``, run ids per fold, when given: the
     folds of the candidates that depend on the session clock,
-    :func:`l1b2.closeloop.acceptance.time_dependent`, e.g. contiguous blocks of the session).
+    :func:`l1b2.closeloop.acceptance.time_dependent`, e.g. contiguous blocks of the session; ``folds``, when
+    given: those of the other candidates, else ``k`` folds of the runs shuffled by ``seed``,
+    :func:`l1b2.closeloop.residuals.run_folds`).
     """
     if not candidates:
         return []
     runs = df[dataio.RUN].to_numpy()
     idx = np.flatnonzero(mask)
     y, runs_m = r_drive[idx], runs[idx]
-    folds = res.run_folds(runs_m, k, seed)
+    folds = res.run_folds(runs_m, k, seed) if folds is None else folds
     n_eff = _effective_n(y, runs_m)
     feats = [np.asarray(c.features(df), float).reshape(len(df), -1) for c in candidates]
     widths = [f.shape[1] for f in feats]

@@ -85,6 +85,10 @@ class LoopSettings:
     clock_folds : {"blocks", "rotation"}
         Folds of the candidates that depend on the session clock (screen and refit, whatever ``run_level``):
         ``"blocks"`` k contiguous blocks, ``"rotation"`` conditions dealt in turn (:mod:`~l1b2.closeloop.acceptance`).
+    fold_unit : {"run", "condition"}
+        Folds of the other candidates (screen and refit): ``"run"`` runs (the refit's stratified by direction and
+        voltage), ``"condition"`` whole conditions, a drive amplitude and a load with all their runs
+        (:func:`~l1b2.closeloop.acceptance.condition_folds`).
     response_columns : tuple of str or None
         Logged columns that are measured responses of the motor: listed in ``channels_considered``, never
         offered as a cause. None: :data:`l1b2.predictor.effects.channels.RESPONSE_COLUMNS` (the virtual rig's
@@ -127,6 +131,7 @@ class LoopSettings:
     run_level: bool = True
     response_columns: tuple | None = None
     clock_folds: str = "blocks"
+    fold_unit: str = "run"
 
     def as_dict(self) -> dict:
         """name -> value of every setting, in the order of the fields (the values themselves, not copies)."""
@@ -139,7 +144,7 @@ class LoopSettings:
                 "k_folds": self.k_folds, "shortlist": self.shortlist, "refit_folds": self.refit_folds,
                 "refit_repeats": self.refit_repeats, "min_cv_gain": self.min_cv_gain,
                 "min_cv_drop": self.min_cv_drop, "screen_alpha": self.screen_alpha,
-                "noise_fit": self.noise_fit, "noise": self.noise,
+                "noise_fit": self.noise_fit, "noise": self.noise, "fold_unit": self.fold_unit,
                 "max_rounds": self.max_rounds, "run_level": self.run_level, "clock_folds": self.clock_folds,
                 "response_columns": (list(self.response_columns) if self.response_columns is not None
                                      else None)}
