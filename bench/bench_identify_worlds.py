@@ -101,7 +101,17 @@ FITS = {"default (auto)": {},
         "offset, reduced frame, mu_sd in the points": {"solver": "offset_reduced", "bracket": {"point_mu_sd": True}},
         "offset, kappa0 continuation (0079)": {"solver": "offset_kappa0"},
         "offset, kappa0 continuation, mu_sd in the points": {"solver": "offset_kappa0",
-                                                             "bracket": {"point_mu_sd": True}}}
+                                                             "bracket": {"point_mu_sd": True}},
+        "offset, kappa0, finals from the confidence set, 2 (0083)": {"solver": "offset_kappa0",
+                                                                     "bracket": {"finals": 2}},
+        "offset, kappa0, finals from the confidence set, 3 (0083)": {"solver": "offset_kappa0",
+                                                                     "bracket": {"finals": 3}},
+        "offset, kappa0, coarse points from 0.99 (0083)": {"solver": "offset_kappa0",
+                                                           "bracket": {"coarse": (0.99, 0.95, 0.7, 0.4),
+                                                                       "max_points": 5}},
+        "offset, kappa0, coarse points dense at the barrier (0083)": {
+            "solver": "offset_kappa0", "bracket": {"coarse": (0.995, 0.99, 0.98, 0.97, 0.95, 0.9, 0.8, 0.7, 0.4),
+                                                   "max_points": 9}}}
 #: the fits compared when ``--fits`` is not given: decision 0039's search and the current one (BRACKET as it is)
 DEFAULT_FITS = ("offset, bracketed (0039)", "offset, bracketed (0045)")
 

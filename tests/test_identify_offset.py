@@ -524,3 +524,56 @@ def test_offset_kappa0_is_offset_reduced_with_its_continuation_in_the_offset_for
     lo, hi = PredictorParams.bounds(3)
     assert np.all(fits["offset_kappa0"].theta_ >= lo) and np.all(fits["offset_kappa0"].theta_ <= hi)
     assert PredictorIdentifier(order=3)._checked_settings().solver == "offset_kappa0"  # the default
+
+
+# ---- the final search from more than one profile point (BRACKET["finals"], decision 0083) ------------------------
+
+
+def test_the_final_searchs_candidates_are_the_profiles_likelihood_confidence_set():
+    from scipy.stats import chi2
+
+    from l1b2.ident.offset import BRACKET, profile_candidates
+
+    # the margin is half the 95 % quantile of chi2 with one degree of freedom (a likelihood-ratio test on omega)
+    assert BRACKET["final_margin"] == pytest.approx(0.5 * chi2.ppf(0.95, 1), abs=5e-3)
+    recs = [{"omega": w, "loglik": ll} for w, ll in
+            [(-0.95, 10.0), (-0.7, 12.5), (-0.4, -np.inf), (0.4, 11.0), (0.7, 12.0), (0.95, 10.6)]]
+    # written out: best 12.5; within 1.92 of it: 12.0 (0.5 below), 11.0 (1.5), 10.6 (1.9); 10.0 is 2.5 below
+    assert [r["omega"] for r in profile_candidates(recs, 9, 1.92)] == [-0.7, 0.7, 0.4, 0.95]
+    assert [r["omega"] for r in profile_candidates(recs, 2, 1.92)] == [-0.7, 0.7]
+    assert [r["omega"] for r in profile_candidates(recs, 1, 1.92)] == [-0.7]
+    assert [r["omega"] for r in profile_candidates(recs, 9, 0.4)] == [-0.7]
+    assert profile_candidates([{"omega": 0.5, "loglik": -np.inf}], 3, 1.92) == []
+
+
+@pytest.mark.parametrize("finals", [1, 2])
+def test_the_final_search_runs_from_each_candidate_and_keeps_the_highest(monkeypatch, finals):
+    import l1b2.ident.offset as off
+
+    real = off._final_search
+    ran = []
+
+    def recorder(obj, best, *args):
+        out = real(obj, best, *args)
+        ran.append((best["omega"], -out[0].results[out[0].best].cost))
+        return out
+
+    monkeypatch.setattr(off, "_final_search", recorder)
+    monkeypatch.setitem(off.BRACKET, "final_margin", 1e9)  # every finite profile point is a candidate
+    df, _ = _small_world(11)
+    one = PredictorIdentifier(order=3, solver="offset_kappa0").fit(df, slider_mass_kg=M_S)
+    first = ran[:]
+    ran.clear()
+    monkeypatch.setitem(off.BRACKET, "finals", finals)
+    est = PredictorIdentifier(order=3, solver="offset_kappa0").fit(df, slider_mass_kg=M_S)
+    prof = est.convergence_["stages"][1]["profile"]
+    ranked = sorted((p for p in prof if np.isfinite(p["loglik"])), key=lambda p: -p["loglik"])
+    assert [w for w, _ in ran] == [p["omega"] for p in ranked[:finals]]  # the best points, best first
+    assert len(first) == 1 and ran[0] == first[0]  # the first final is the one-final search's
+    assert est.loglik_ == pytest.approx(max(ll for _, ll in ran), abs=1e-9)  # the highest kept
+    assert est.loglik_ >= one.loglik_ - 1e-9
+    other = [s for s in est.convergence_["stages"] if s["stage"].startswith("other final")]
+    assert bool(other) == (finals > 1)  # the other finals' stages and evaluations are counted
+    assert (est.convergence_["nfev_total"] > one.convergence_["nfev_total"]) == (finals > 1)
+    lo, hi = PredictorParams.bounds(3)
+    assert np.all(est.theta_ >= lo) and np.all(est.theta_ <= hi)

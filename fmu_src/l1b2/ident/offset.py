@@ -416,7 +416,8 @@ def bracket_search(f, coarse, lo, hi, tol, max_points, seen=()):
 #: 15-35 % cheaper)
 BRACKET = {"coarse": (0.95, 0.7, 0.4), "tol": 0.08, "max_points": 4, "margin": 3.0, "max_iter": 4,
            "cold_iter": 12, "stat_tol": 0.05, "min_gain": 0.01, "final_min_gain": 0.01,
-           "final": "paper+identifiable", "start_fits": 4, "point_mu_sd": False}
+           "final": "paper+identifiable", "start_fits": 4, "point_mu_sd": False, "finals": 1,
+           "final_margin": 1.92}
 
 
 def bracketed_profile(obj, theta_start, n1, kappa, p_theta, settings=None, log=None):
@@ -547,26 +548,50 @@ def bracketed_offset_search(obj, theta_start, order, kappa, p_theta, max_nfev, t
              "nfev": int(sum(r["nfev"] for r in records)), "njev": int(sum(r.get("njev", 0) for r in records)),
              "profile": [{"omega": r["omega"], "c_r": r["c_r"], "loglik": r["loglik"], "nfev": r["nfev"]}
                          for r in records]}
-    lin = linear_positions(obj, p_theta, n1)
     if not np.isfinite(best["loglik"]):
-        search, outer, more = varpro_search(obj, lin, [obj.z_of(theta_start)], max_nfev, tol, stat_tol, max_outer, 1,
-                                            log, BRACKET["final_min_gain"])
+        search, outer, more = varpro_search(obj, linear_positions(obj, p_theta, n1), [obj.z_of(theta_start)],
+                                            max_nfev, tol, stat_tol, max_outer, 1, log, BRACKET["final_min_gain"])
     else:
-        if BRACKET["final"] == "identifiable" and admissible(best["theta"], n1):  # decision 0039: the null directions of (sigma, mu, k0) removed
-            search, outer, more = identifiable_search(obj, best["theta"], n1, p_theta, max_nfev, tol, stat_tol,
-                                                      max_outer, log, BRACKET["final_min_gain"],
-                                                      kappa if offset_form else None)
-        else:
-            z0 = obj.z_of(best["theta"])
-            profile_loglik(obj, z0)  # the free search starts with the noise model of its start
-            search, outer, more = varpro_search(obj, lin, [z0], max_nfev, tol, stat_tol, max_outer, 1, log,
-                                                BRACKET["final_min_gain"])
-        search, outer = _keep_profile_point(obj, search, outer, best, log)
-        if BRACKET["final"] == "paper+identifiable":  # decision 0039: continued without the null directions
-            search, outer, more = _continue_identifiable(obj, search, outer, more, n1, p_theta, max_nfev, tol,
-                                                         stat_tol, max_outer, log, kappa if offset_form else None)
+        args = (n1, p_theta, max_nfev, tol, stat_tol, max_outer, log, kappa if offset_form else None)
+        finals = [_final_search(obj, rec, *args) for rec in profile_candidates(records, BRACKET["finals"],
+                                                                                BRACKET["final_margin"])]
+        search, outer, more = max(finals, key=lambda f: -f[0].results[f[0].best].cost)
+        for other in finals:
+            if other[0] is not search:
+                search.records[0]["nfev"] += sum(r.get("nfev", 0) for r in other[0].records)
+                more = more + [{**m, "stage": "other final " + m["stage"]} for m in other[2]]
+        if len(finals) > 1:
+            profile_loglik(obj, outer.z)  # the noise model at the kept optimum
     search.records[0]["nfev"] += stage["nfev"]  # the profile's evaluations count with the search's
     return search, outer, [stage] + more
+
+
+def profile_candidates(records, k: int, margin: float) -> list:
+    """The profile points the final search is run from: at most ``k`` of the points whose profile log-likelihood
+    is within ``margin`` of the best (the profile-likelihood confidence set of omega: with ``margin`` =
+    chi2_1(0.95) / 2 = 1.92 the offsets that a likelihood-ratio test at 5 % does not tell from the best), best
+    first (``[]`` when no point is finite; with ``k = 1`` the profile's best point alone)."""
+    pts = sorted((r for r in records if np.isfinite(r["loglik"])), key=lambda r: -r["loglik"])
+    return [r for r in pts if r["loglik"] >= pts[0]["loglik"] - margin][:k] if pts else []
+
+
+def _final_search(obj, best, n1, p_theta, max_nfev, tol, stat_tol, max_outer, log, kappa):
+    """The free search from one profile point ``best`` (``BRACKET["final"]``'s coordinates, the point itself kept
+    when the search ends below it, the identifiable continuation of "paper+identifiable"):
+    ``(SearchOutcome, refinement, stages)``."""
+    if BRACKET["final"] == "identifiable" and admissible(best["theta"], n1):  # decision 0039: the null directions of (sigma, mu, k0) removed
+        search, outer, more = identifiable_search(obj, best["theta"], n1, p_theta, max_nfev, tol, stat_tol,
+                                                  max_outer, log, BRACKET["final_min_gain"], kappa)
+    else:
+        z0 = obj.z_of(best["theta"])
+        profile_loglik(obj, z0)  # the free search starts with the noise model of its start
+        search, outer, more = varpro_search(obj, linear_positions(obj, p_theta, n1), [z0], max_nfev, tol, stat_tol,
+                                            max_outer, 1, log, BRACKET["final_min_gain"])
+    search, outer = _keep_profile_point(obj, search, outer, best, log)
+    if BRACKET["final"] == "paper+identifiable":  # decision 0039: continued without the null directions
+        search, outer, more = _continue_identifiable(obj, search, outer, more, n1, p_theta, max_nfev, tol,
+                                                     stat_tol, max_outer, log, kappa)
+    return search, outer, more
 
 
 def offset_grid(n_starts: int) -> tuple:
