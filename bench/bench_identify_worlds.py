@@ -13,7 +13,8 @@ about 19.7k samples; made once and cached):
 * ``realistic/s3``, ``realistic/s4``: as ``realistic/s1`` with rig seeds 3 and 4, and ``reference/s1``: the
   reference motor with the same noise and scatter, rig seed 1 (validation worlds of decision 0079);
 * ``realistic/s5``, ``realistic/s6``, ``reference/s2``, ``reference/s3``: built the same way with rig seeds 5, 6
-  and 2, 3 (validation worlds of decision 0083, their references made before any fit of that work was run on them).
+  and 2, 3 (validation worlds of decision 0083, their references made before any fit of that work was run on them);
+  ``realistic/s7``, ``reference/s4`` (rig seeds 7 and 4): added by decision 0083 before its second candidate.
 
 For each world, side by side in one run (same process, same data), with CPU time (``time.process_time``),
 evaluations and log-likelihood: by default decision 0039's bracketed drive-offset search
@@ -67,6 +68,8 @@ WORLDS = {
     "reference/s2": ["--motor", "reference_motor", "--seed", "2", "--speed-noise", "0.001", "--run-scatter", "0.02"],
     "realistic/s6": ["--motor", "realistic_motor", "--seed", "6", "--speed-noise", "0.001", "--run-scatter", "0.02"],
     "reference/s3": ["--motor", "reference_motor", "--seed", "3", "--speed-noise", "0.001", "--run-scatter", "0.02"],
+    "realistic/s7": ["--motor", "realistic_motor", "--seed", "7", "--speed-noise", "0.001", "--run-scatter", "0.02"],
+    "reference/s4": ["--motor", "reference_motor", "--seed", "4", "--speed-noise", "0.001", "--run-scatter", "0.02"],
 }
 #: decision 0039's bracketed search (the settings of :data:`l1b2.ident.offset.BRACKET` then)
 BRACKET_0039 = {"coarse": (0.95, 0.7, 0.4), "tol": 0.08, "max_points": 6, "margin": 3.0, "max_iter": 4,
