@@ -577,3 +577,36 @@ def test_the_final_search_runs_from_each_candidate_and_keeps_the_highest(monkeyp
     assert (est.convergence_["nfev_total"] > one.convergence_["nfev_total"]) == (finals > 1)
     lo, hi = PredictorParams.bounds(3)
     assert np.all(est.theta_ >= lo) and np.all(est.theta_ <= hi)
+
+
+def test_the_barrier_points_extend_each_branch_and_leave_the_brackets_best_final_first(monkeypatch):
+    import l1b2.ident.offset as off
+
+    real = off._final_search
+    ran = []
+
+    def recorder(obj, best, *args):
+        ran.append(best["omega"])
+        return real(obj, best, *args)
+
+    monkeypatch.setattr(off, "_final_search", recorder)
+    df, _ = _small_world(11)
+    plain = PredictorIdentifier(order=3, solver="offset_kappa0").fit(df, slider_mass_kg=M_S)
+    monkeypatch.setitem(off.BRACKET, "barrier", (0.98, 0.995))
+    ran.clear()
+    one = PredictorIdentifier(order=3, solver="offset_kappa0").fit(df, slider_mass_kg=M_S)
+    prof = one.convergence_["stages"][1]["profile"]
+    bracket = plain.convergence_["stages"][1]["profile"]
+    # the bracket's points as before, then each branch's barrier points, from the coarse points outwards
+    assert prof[:len(bracket)] == bracket
+    assert [p["omega"] for p in prof[len(bracket):]] == [-0.98, -0.995, 0.98, 0.995]
+    # with one final the result is the bracket's: its best point is finished, the barrier points only ranked
+    top = max(bracket, key=lambda p: p["loglik"])["omega"]
+    assert ran == [top] and one.loglik_ == plain.loglik_
+    monkeypatch.setitem(off.BRACKET, "finals", 2)
+    monkeypatch.setitem(off.BRACKET, "final_margin", 1e9)
+    ran.clear()
+    two = PredictorIdentifier(order=3, solver="offset_kappa0").fit(df, slider_mass_kg=M_S)
+    others = sorted((p for p in prof if np.isfinite(p["loglik"]) and p["omega"] != top), key=lambda p: -p["loglik"])
+    assert ran == [top, others[0]["omega"]]  # the bracket's best first, then the best of the others
+    assert two.loglik_ >= plain.loglik_ - 1e-9

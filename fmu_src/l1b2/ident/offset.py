@@ -38,7 +38,9 @@ noise model of the profile's best point, and when it ends below that point the p
 B'(s) the profile starts from are fixed by the data alone, with no random starts. ``solver="offset_kappa0"`` is
 ``offset_reduced`` with its identifiable continuation run in the drive offset kappa0 instead of K
 (:func:`l1b2.ident.identifiable.offset_form`): along the offset's valley kappa0 stays put while K, beta_s and
-mu_sd move together.
+mu_sd move together. Two options of :data:`BRACKET` widen the bracketed searches' last step: the final search
+from more than one profile point (``finals``: the points that a likelihood-ratio test on omega does not tell from
+the best) and profile points between the coarse points and the barrier (``barrier``).
 
 Why both are opt-in, with the measurements: decisions 0023 and 0036.
 
@@ -411,13 +413,18 @@ def bracket_search(f, coarse, lo, hi, tol, max_points, seen=()):
 #: variable-projection search in theta, decision 0036; "paper+identifiable": the paper's, then continued in the
 #: identifiable coordinates from its optimum, the better kept) and the number of equation-error fits of the start
 #: (:func:`l1b2.ident.reduced.data_driven_start`); ``point_mu_sd``: each point fitted with mu_sd varied at the
-#: point's drive offset (:func:`_point_fit`, decision 0079). ``max_points`` was 6 until decision 0045 (4: the same
+#: point's drive offset (:func:`_point_fit`, decision 0079); ``finals``: the final search is run from at most this
+#: many profile points, the bracket's best first, then the best of the points within ``final_margin`` of the best
+#: profile log-likelihood (:func:`profile_candidates`), and the highest end is kept; ``barrier``: the |omega| of
+#: points added on each branch after the bracketed search, between its coarse points and the barrier |omega| = 1
+#: (each from its branch's nearest evaluated point; they are candidates of the other finals only, decision 0083).
+#: ``max_points`` was 6 until decision 0045 (4: the same
 #: optimum or a better one on three of the bench's four worlds, 0.014 log-likelihood units lower on one, the profile
 #: 15-35 % cheaper)
 BRACKET = {"coarse": (0.95, 0.7, 0.4), "tol": 0.08, "max_points": 4, "margin": 3.0, "max_iter": 4,
            "cold_iter": 12, "stat_tol": 0.05, "min_gain": 0.01, "final_min_gain": 0.01,
            "final": "paper+identifiable", "start_fits": 4, "point_mu_sd": False, "finals": 1,
-           "final_margin": 1.92}
+           "final_margin": 1.92, "barrier": ()}
 
 
 def bracketed_profile(obj, theta_start, n1, kappa, p_theta, settings=None, log=None):
@@ -426,7 +433,8 @@ def bracketed_profile(obj, theta_start, n1, kappa, p_theta, settings=None, log=N
 
     The coarse points of :data:`BRACKET` on both branches (omega < 0 and omega > 0; the barrier |omega| = 1
     and omega = 0 are the ends of each interval), then the bracketed search on the branch with the best
-    point, and on the other one when its best is within ``margin`` of it. Each point is fitted as in
+    point, and on the other one when its best is within ``margin`` of it; then the ``barrier`` points of each branch.
+    ``best`` is the best point of the bracketed searches (the barrier points left out). Each point is fitted as in
     :func:`profile`, starting from the optimum of the evaluated point nearest to it moved to its omega
     (the first of each branch from the gauged start).
     """
@@ -453,8 +461,13 @@ def bracketed_profile(obj, theta_start, n1, kappa, p_theta, settings=None, log=N
     for sign in (first, -first):
         if sign == first or top[sign] >= top[first] - cfg["margin"]:
             bracket_search(f, (), *ends[sign], cfg["tol"], cfg["max_points"], seen=pts[sign])
+    best = max(records, key=lambda r: r["loglik"])
+    for sign in (-1, 1):  # the barrier side of each branch, outwards from its evaluated points
+        for w in cfg["barrier"]:
+            near = [r for r in records if np.sign(r["omega"]) == sign and np.isfinite(r["loglik"])]
+            f(sign * w, min(near, key=lambda r: abs(r["omega"] - sign * w))["theta"] if near else None)
     vars(obj.noise).update(saved)
-    return records, max(records, key=lambda r: r["loglik"])
+    return records, best
 
 
 def offset_search(obj, theta_start, order, kappa, p_theta, max_nfev, tol, stat_tol, max_outer, grid=OMEGA_GRID,
@@ -536,7 +549,10 @@ def bracketed_offset_search(obj, theta_start, order, kappa, p_theta, max_nfev, t
 
     :func:`bracketed_profile`, then the free variable-projection search from its best point (the noise model
     set at that point, every local fit with :data:`BRACKET`'s ``min_gain``); the result is the profile's best
-    point itself when the free search ends below it (:func:`_keep_profile_point`). With ``offset_form`` (``solver=
+    point itself when the free search ends below it (:func:`_keep_profile_point`). With ``BRACKET["finals"]`` > 1
+    the free search runs from the profile's best point and then from the other points of :func:`profile_candidates`
+    (at most ``finals`` in all), and the highest end is the result (every search's evaluations counted, the other
+    searches' stages named "other final ..."). With ``offset_form`` (``solver=
     "offset_kappa0"``) the identifiable stages of ``BRACKET["final"]`` run with the drive offset kappa0 in place of
     K (:func:`l1b2.ident.identifiable.offset_form`). Returns ``(SearchOutcome, refinement, stages)`` as
     :func:`offset_search`.
@@ -553,8 +569,8 @@ def bracketed_offset_search(obj, theta_start, order, kappa, p_theta, max_nfev, t
                                             max_nfev, tol, stat_tol, max_outer, 1, log, BRACKET["final_min_gain"])
     else:
         args = (n1, p_theta, max_nfev, tol, stat_tol, max_outer, log, kappa if offset_form else None)
-        finals = [_final_search(obj, rec, *args) for rec in profile_candidates(records, BRACKET["finals"],
-                                                                                BRACKET["final_margin"])]
+        others = [r for r in profile_candidates(records, BRACKET["finals"], BRACKET["final_margin"]) if r is not best]
+        finals = [_final_search(obj, rec, *args) for rec in ([best] + others)[:BRACKET["finals"]]]
         search, outer, more = max(finals, key=lambda f: -f[0].results[f[0].best].cost)
         for other in finals:
             if other[0] is not search:
