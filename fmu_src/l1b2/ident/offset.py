@@ -64,7 +64,7 @@ from .varpro import linear_positions, local_fit, profile_loglik, varpro_search
 __all__ = ["OMEGA_GRID", "GAUGE_K0", "drive_offset", "offset_of_omega", "omega_of_offset", "d_coefficients",
            "gauge", "multiplier", "point", "c_r_of_omega", "with_offset", "profile",
            "offset_search", "offset_grid", "projected_search", "BRACKET", "bracket_search", "bracketed_profile",
-           "bracketed_offset_search", "OFFSET_COORDINATES", "auto_solver"]
+           "bracketed_offset_search", "OFFSET_COORDINATES", "auto_solver", "profile_candidates"]
 
 #: the profile's grid of omega (both branches of the offset, the barrier |omega| -> 1 approached)
 OMEGA_GRID = (-0.95, -0.85, -0.7, -0.5, -0.3, -0.1, 0.3, 0.6, 0.85, 0.95)
