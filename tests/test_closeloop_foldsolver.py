@@ -219,3 +219,38 @@ def test_scores_equal_the_fresh_array_scoring_to_the_last_bit():
     assert [g.cv_gain for g in got] == [x[0] for x in ref] and [g.p_value for g in got] == [x[1] for x in ref]
     assert [g.cv_gain for g in got] != [g.cv_gain for g in sel.score_candidates(cands, r, df, mask, p, 0.1,
                                                                                  v_pred=base)]
+
+
+def test_a_diverging_nuisance_response_is_left_out_and_a_diverging_candidate_scores_nothing(monkeypatch):
+    # reference: the same scoring with the diverging nuisance columns removed from nuisance_forces beforehand,
+    # computed by the written-out scoring; a candidate whose response diverges gets gain 0, p-value 1
+    from l1b2.closeloop.candidates import CandidateForce
+    p, df, base, r, rng = _simulated_case()
+    mask = np.abs(base) > 0.01
+    s = df["position_m"].to_numpy(float)
+    n_all = sel.nuisance_forces(p, df, base)
+    bad = [1, 4]                               # two nuisance directions whose linearised response overflows
+    keep = [j for j in range(n_all.shape[1]) if j not in bad]
+    real = sel.linear_response
+
+    def diverging(params, d, m_s, F, v_pred=None, overwrite_F=False):
+        out = real(params, d, m_s, F, v_pred=v_pred, overwrite_F=overwrite_F)
+        if out.shape[1] == n_all.shape[1]:
+            out[len(out) // 2:, bad] = np.inf
+        elif out.shape[1] == 3:                # the third candidate's response overflows too
+            out[len(out) // 2:, 2] = np.nan
+        return out
+
+    def cand(name, f):
+        k = f(df).reshape(len(df), -1).shape[1]
+        return CandidateForce(name, "x", "", tuple(f"c{i}" for i in range(k)), ("N",) * k, f)
+    cands = [cand("a", lambda d: np.sin(40 * s)), cand("b", lambda d: np.sign(base)), cand("c", lambda d: s ** 2)]
+    monkeypatch.setattr(sel, "linear_response", diverging)
+    got = sel.score_candidates(cands, r, df, mask, p, 0.1, v_pred=base)
+    monkeypatch.setattr(sel, "linear_response", real)
+    monkeypatch.setattr(sel, "nuisance_forces", lambda params, d, v: n_all[:, keep])
+    ref = _scores_written_out(cands[:2], r, df, mask, p, 0.1, base)
+    for g, (gain, pv, imp, dbic, phi, daic) in zip(got[:2], ref):
+        assert (g.cv_gain, g.p_value) == (gain, pv) and np.array_equal(g.phi, phi)
+    assert got[0].cv_gain != 0.0 or got[1].cv_gain != 0.0
+    assert (got[2].cv_gain, got[2].p_value) == (0.0, 1.0)

@@ -788,12 +788,11 @@ def cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init, jobs,
     return _fold_errors(args, len(jobs), len(folds), settings.client, "l1b2-cv-refit", held_out_times(folds))
 
 
-def fold_start_phi(S: np.ndarray, A: np.ndarray, y: np.ndarray, runs_m: np.ndarray, folds) -> list[np.ndarray]:
-    """Per fold, the candidate's linearised parameters fitted on the training folds only (no held-out leak)."""
-    out = []
+def fold_start_phi(S: np.ndarray, A: np.ndarray, y: np.ndarray, runs_m: np.ndarray, folds) -> list[np.ndarray] | None:
+    """Per fold, the candidate's linearised parameters fitted on the training folds only (no held-out leak); None
+    when a response is not finite (the refits then start from the effect's own start)."""
     X = np.column_stack([A, S])
-    for fold in folds:
-        tr = ~np.isin(runs_m, fold)
-        coef = np.linalg.lstsq(X[tr], y[tr], rcond=None)[0]
-        out.append(coef[A.shape[1]:])
-    return out
+    if not np.isfinite(X).all():
+        return None
+    return [np.linalg.lstsq(X[~np.isin(runs_m, fold)], y[~np.isin(runs_m, fold)], rcond=None)[0][A.shape[1]:]
+            for fold in folds]

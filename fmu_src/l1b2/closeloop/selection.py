@@ -298,12 +298,21 @@ def insample_fits(A, y, S_all, widths, work=None):
     return sse0, out
 
 
+def finite_columns(X: np.ndarray) -> np.ndarray:
+    """``X`` without its columns that hold a value that is not finite (a free-run response whose linearised
+    recursion diverges where the local damping is negative, :func:`linear_response`); ``X`` itself when all are."""
+    ok = np.isfinite(X).all(axis=0)
+    return X if ok.all() else X[:, ok]
+
+
 def design(candidate: CandidateForce, r_drive, df, mask, params, m_s, *, v_pred):
-    """``(y, A, S, runs)`` on the masked samples: residual, intercept + nuisance responses, candidate response."""
+    """``(y, A, S, runs)`` on the masked samples: residual, intercept + nuisance responses (those that are finite,
+    :func:`finite_columns`), candidate response (not finite where its linearised recursion diverges)."""
     idx = np.flatnonzero(mask)
-    N = linear_response(params, df, m_s, nuisance_forces(params, df, v_pred), v_pred=v_pred)[idx]
-    F = np.asarray(candidate.features(df), float).reshape(len(df), -1)
-    S = linear_response(params, df, m_s, F, v_pred=v_pred)[idx]
+    with np.errstate(over="ignore", invalid="ignore"):
+        N = finite_columns(linear_response(params, df, m_s, nuisance_forces(params, df, v_pred), v_pred=v_pred)[idx])
+        F = np.asarray(candidate.features(df), float).reshape(len(df), -1)
+        S = linear_response(params, df, m_s, F, v_pred=v_pred)[idx]
     A = np.column_stack([np.ones(len(idx)), N])
     return r_drive[idx], A, S, df[dataio.RUN].to_numpy()[idx]
 
@@ -412,7 +421,9 @@ def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5,
 
     The regression of the TRAIN residual on a candidate's free-run response
     includes the nuisance responses (:func:`nuisance_forces`) in both the
-    null and the candidate model; folds are whole runs (``time_folds``, run ids per fold, when given: the
+    null and the candidate model (a nuisance response that is not finite, where the linearised recursion of
+    :func:`linear_response` diverges, is left out; a candidate whose response is not finite or zero scores gain 0
+    and p-value 1); folds are whole runs (``time_folds``, run ids per fold, when given: the
     folds of the candidates that depend on the session clock,
     :func:`l1b2.closeloop.acceptance.time_dependent`, e.g. contiguous blocks of the session; ``folds``, when
     given: those of the other candidates, else ``k`` folds of the runs shuffled by ``seed``,
@@ -427,11 +438,13 @@ def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5,
     n_eff = _effective_n(y, runs_m)
     feats = [np.asarray(c.features(df), float).reshape(len(df), -1) for c in candidates]
     widths = [f.shape[1] for f in feats]
-    N = _rows_in_place(linear_response(params, df, m_s, nuisance_forces(params, df, v_pred), v_pred=v_pred,
-                                       overwrite_F=True), idx)
-    # the candidates' responses are written over their forces and cut to the masked rows in place
-    S_all = _rows_in_place(linear_response(params, df, m_s, np.column_stack(feats), v_pred=v_pred, overwrite_F=True),
-                           idx)
+    with np.errstate(over="ignore", invalid="ignore"):   # a diverging response is left out below, not warned of
+        N = _rows_in_place(linear_response(params, df, m_s, nuisance_forces(params, df, v_pred), v_pred=v_pred,
+                                           overwrite_F=True), idx)
+        # the candidates' responses are written over their forces and cut to the masked rows in place
+        S_all = _rows_in_place(linear_response(params, df, m_s, np.column_stack(feats), v_pred=v_pred,
+                                               overwrite_F=True), idx)
+    N = finite_columns(N)
     solver = FoldSolver(y, N, runs_m, folds)
     time_solver = FoldSolver(y, N, runs_m, time_folds) if time_folds is not None else solver
     A = solver.A
