@@ -69,6 +69,28 @@ def test_checked_fit_retries_once_then_raises_naming_both():
     assert isinstance(exc.value, IdentificationError)
 
 
+def test_checked_fit_rescues_only_when_the_fit_and_its_retry_are_broken():
+    df = _frame()
+    mask = np.ones(len(df), bool)
+    good, bad = _Pred(lambda v: v), _Pred(lambda v: 0 * v)
+    calls = []
+
+    def attempt(name, model):
+        def run():
+            calls.append(name)
+            return model
+        return run
+    assert guard.checked_fit(attempt("fit", good), attempt("retry", bad), df, mask, "x", attempt("rescue", bad)) is good
+    assert guard.checked_fit(attempt("fit", bad), attempt("retry", good), df, mask, "x", attempt("rescue", bad)) is good
+    assert calls == ["fit", "fit", "retry"]          # no rescue while one of the first two is usable
+    calls.clear()
+    assert guard.checked_fit(attempt("fit", bad), attempt("retry", bad), df, mask, "x", attempt("rescue", good)) is good
+    assert calls == ["fit", "retry", "rescue"]
+    with pytest.raises(FitDivergedError) as exc:
+        guard.checked_fit(attempt("fit", bad), attempt("retry", bad), df, mask, "x", attempt("rescue", bad))
+    assert str(exc.value).count("100.0 %") == 3 and "without pins" in str(exc.value)
+
+
 def test_close_loop_exits_non_zero_in_one_line_when_the_baseline_diverges(tmp_path, capsys, monkeypatch):
     # the identification's solver ends non-finite (here: every fit predicts overflow); the loop retries from the
     # identifier's multistart (more starts, the next seed), then refuses without writing a diagnosis
@@ -79,8 +101,10 @@ def test_close_loop_exits_non_zero_in_one_line_when_the_baseline_diverges(tmp_pa
         def __init__(self, **kw):
             self.kw = kw
 
+        params_ = None
+
         def fit(self, data, slider_mass_kg=None, mask=None):
-            fits.append((self.kw["n_starts"], self.kw["seed"]))
+            fits.append((self.kw.get("n_starts"), self.kw.get("seed"), self.kw.get("fixed")))
             return self
 
         def predict_free_run(self, data):
@@ -97,5 +121,9 @@ def test_close_loop_exits_non_zero_in_one_line_when_the_baseline_diverges(tmp_pa
     err = capsys.readouterr().err
     assert code != 0 and err.count("\n") == 1, err
     assert "baseline identification on TRAIN diverged" in err and "retried from the identifier's multistart" in err
-    assert fits == [(4, 0), (8, 1)]   # the default 4 starts, then twice as many (at least 8), next seed
+    assert "from the seed-free search without pins, then with them" in err
+    # the default 4 starts, then twice as many (at least 8), next seed; then the rescue: the search without pins
+    # (the identifier's defaults), then the pinned fit from there (one start)
+    rec = "recommended"
+    assert fits == [(4, 0, rec), (8, 1, rec), (None, None, None), (1, 0, rec)]
     assert not (out / "report.json").exists()

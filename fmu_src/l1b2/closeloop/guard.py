@@ -7,8 +7,10 @@ the measured speed's rms on its own training data has not fitted (an
 overflowing recursion, a search that left the basin: the diverged baselines
 seen so far had 97 % held-out error), whatever its likelihood said.
 :func:`checked_fit` fits, checks, retries once from the identifier's
-multistart and raises :class:`~l1b2.errors.FitDivergedError` when the retry
-is broken too (or fails outright).
+multistart (and, when given, once more by a rescue: the seed-free search of
+the identifier without pins, continued with the pins) and raises
+:class:`~l1b2.errors.FitDivergedError` when every attempt is broken (or
+fails outright).
 """
 
 from __future__ import annotations
@@ -53,15 +55,16 @@ def broken(model, df: pd.DataFrame, mask: np.ndarray) -> str | None:
 
 
 def checked_fit(fit: Callable[[], object], retry: Callable[[], object], df: pd.DataFrame, mask: np.ndarray,
-                what: str) -> object:
-    """``fit()``, or ``retry()`` when that fails or is :func:`broken`; :class:`FitDivergedError` when both are.
+                what: str, rescue: Callable[[], object] | None = None) -> object:
+    """``fit()``, or ``retry()`` when that fails or is :func:`broken`, or ``rescue()`` (when given) when both do;
+    :class:`FitDivergedError` naming every attempt's reason when all are.
 
-    ``fit``/``retry``: callables returning a fitted model (an
+    ``fit``/``retry``/``rescue``: callables returning a fitted model (an
     :class:`~l1b2.errors.IdentificationError` counts as a failure); ``what``
     names the fit in the message (e.g. ``"the baseline identification on TRAIN"``).
     """
     why = []
-    for attempt in (fit, retry):
+    for attempt in (fit, retry) + ((rescue,) if rescue is not None else ()):
         try:
             model = attempt()
         except IdentificationError as exc:
@@ -71,5 +74,6 @@ def checked_fit(fit: Callable[[], object], retry: Callable[[], object], df: pd.D
         if reason is None:
             return model
         why.append(reason)
-    raise FitDivergedError(f"{what} diverged: {why[0]}; retried from the identifier's multistart: {why[1]}; "
+    rescued = f"; from the seed-free search without pins, then with them: {why[2]}" if rescue is not None else ""
+    raise FitDivergedError(f"{what} diverged: {why[0]}; retried from the identifier's multistart: {why[1]}{rescued}; "
                            "no diagnosis is drawn from a broken fit (check the data's units and runs)")

@@ -159,7 +159,8 @@ class CloseLoop(EstimatorSettings):
             say(f"{what}: identifying the {family} predictor on TRAIN")
             est = checked_fit(lambda: self._identify(df, m_s, mask_tr, model=family),
                               lambda: self._identify(df, m_s, mask_tr, retry=True, model=family), df,
-                              mask_tr, f"the {family} {what} identification on TRAIN")
+                              mask_tr, f"the {family} {what} identification on TRAIN",
+                              lambda: self._identify(df, m_s, mask_tr, model=family, rescue=True))
             say.count(1, nfev_of(est))
             return est
         fits, failed = identify_families(DRIVE_LAWS if self.baseline == "best" else (self.baseline,), fit_family)
@@ -229,17 +230,23 @@ class CloseLoop(EstimatorSettings):
         return self
 
     def _identify(self, df: pd.DataFrame, m_s: float, mask: np.ndarray, retry: bool = False,
-                  model: str = "eq29") -> Validated:
+                  model: str = "eq29", rescue: bool = False) -> Validated:
         """The baseline Eq. 29 predictor identified on ``df`` (free-run maximum likelihood, multi-start; coarse
         to fine on data sampled faster than once per millisecond, :func:`l1b2.ident.coarse.coarse_to_fine`).
 
         ``retry``: the identifier's multistart again with twice the starts (at least 8) and the next seed.
+        ``rescue``: the identifier's default search without pins (``solver="auto"``: the seed-free offset search
+        for Eq. 29), then the pinned fit warm-started there (the pins held at that fit's values, one local search).
         """
         n_starts, seed = (max(2 * self.n_starts, 8), self.seed + 1) if retry else (self.n_starts, self.seed)
         freq = getattr(self, "frequency_", None) or "auto"   # once the baseline's is known, it is held
-        return Validated(coarse_to_fine(PredictorIdentifier(
-            order=self.order, criterion="free_run", fixed="recommended", n_starts=n_starts, seed=seed,
-            noise_fit=self.noise_fit, noise=self.noise, model=model, frequency=freq), validated(df), m_s, mask))
+
+        def fit(**kw):
+            return coarse_to_fine(PredictorIdentifier(order=self.order, criterion="free_run", noise=self.noise,
+                                                      model=model, frequency=freq, **kw), validated(df), m_s, mask)
+        init = fit().params_ if rescue else None
+        return Validated(fit(fixed="recommended", n_starts=1 if rescue else n_starts, seed=seed,
+                             noise_fit=self.noise_fit, init=init))
 
     def refit_settings(self) -> RefitSettings:
         """The settings of every refit of the loop (order, seed, budget of a fold's refit, noise, client)."""
