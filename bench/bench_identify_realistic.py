@@ -39,6 +39,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "fmu_src"))
@@ -46,6 +47,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from l1b2.data.metrics import speed_metrics  # noqa: E402
 from l1b2.ident.estimator import PredictorIdentifier, evaluation_mask  # noqa: E402
+from l1b2.ident.offset import auto_solver  # noqa: E402
 from l1b2.workflows import load_train_test  # noqa: E402
 
 import bench_identify_worlds as worlds  # noqa: E402
@@ -72,7 +74,7 @@ FITS = {"per-run, alternate": {"noise": "per_run", "noise_fit": "alternate"},
 #: the world of ``bench_identify_worlds.py`` with the same data (its strict reference counts for the common variance)
 WORLD = "realistic/s0"
 #: what ``solver="auto"`` resolves to for this cold, unpinned fit of Eq. 29
-DEFAULT_COLD = "offset_kappa0"
+DEFAULT_COLD = auto_solver(SimpleNamespace(**PredictorIdentifier(order=8).get_params()))
 
 
 def dataset(cache: Path) -> Path:

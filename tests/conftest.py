@@ -13,6 +13,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import subprocess
@@ -148,3 +149,19 @@ def exported(tmp_path_factory, predictor_setup):
     from l1b2.fmi.export import export_all
     out = tmp_path_factory.mktemp("dist")
     return out, export_all(out, predictor=predictor_setup)
+
+
+@pytest.fixture(scope="session")
+def load_bench():
+    """Load a script of ``bench/`` as a module: ``load_bench("blind_effects_fifth")`` (``bench/`` put on
+    ``sys.path`` first, for the scripts' imports of their siblings)."""
+    bench = str(REPO / "bench")
+
+    def load(name: str):
+        if bench not in sys.path:
+            sys.path.insert(0, bench)
+        spec = importlib.util.spec_from_file_location(name, REPO / "bench" / f"{name}.py")
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        return mod
+    return load

@@ -4,24 +4,14 @@ The audit's rows are measurements (its decision record); these checks only hold 
 cylinder's play operator, the cable loop's force, the draw-wire sensor's geometry and the tracking drive's lag.
 """
 
-import importlib.util
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-BENCH = Path(__file__).resolve().parents[1] / "bench"
-
-
 @pytest.fixture(scope="module")
-def audit():
-    sys.path.insert(0, str(BENCH))
-    spec = importlib.util.spec_from_file_location("blind_effects_fifth", BENCH / "blind_effects_fifth.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+def audit(load_bench):
+    return load_bench("blind_effects_fifth")
 
 
 def test_cylinder_preload_is_a_play_of_the_pressure_force(audit):

@@ -4,24 +4,14 @@ The audit's rows are measurements (its decision record); these checks only hold 
 run-in hump, the one-way capstan, the proxy's correlation with the cause and the water activity at the bar.
 """
 
-import importlib.util
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-BENCH = Path(__file__).resolve().parents[1] / "bench"
-
-
 @pytest.fixture(scope="module")
-def audit():
-    sys.path.insert(0, str(BENCH))
-    spec = importlib.util.spec_from_file_location("blind_effects_fourth", BENCH / "blind_effects_fourth.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+def audit(load_bench):
+    return load_bench("blind_effects_fourth")
 
 
 def test_runin_hump_peaks_at_s1_and_falls_back(audit):

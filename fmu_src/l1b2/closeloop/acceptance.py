@@ -794,5 +794,4 @@ def fold_start_phi(S: np.ndarray, A: np.ndarray, y: np.ndarray, runs_m: np.ndarr
     X = np.column_stack([A, S])
     if not np.isfinite(X).all():
         return None
-    return [np.linalg.lstsq(X[~np.isin(runs_m, fold)], y[~np.isin(runs_m, fold)], rcond=None)[0][A.shape[1]:]
-            for fold in folds]
+    return [np.linalg.lstsq(X[tr], y[tr], rcond=None)[0][A.shape[1]:] for tr in (~np.isin(runs_m, f) for f in folds)]
