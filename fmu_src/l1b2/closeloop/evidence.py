@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
-from . import runlevel
-from .selection import Score, best_per_family
+import numpy as np
 
-__all__ = ["order_traced", "channels_considered"]
+from ..data import measurements as dataio
+from . import runlevel
+from .selection import Score, best_per_family, position_basis
+
+__all__ = ["order_traced", "channels_considered", "position_share", "with_position_share"]
 
 
 def order_traced(effects, speed_filter: bool, residual_trace, evidence=(), speed_evidence: bool = False) -> list[str]:
@@ -42,6 +45,36 @@ def order_traced(effects, speed_filter: bool, residual_trace, evidence=(), speed
     return traced + [r for r in residual_trace if r not in traced]
 
 
+def position_share(values, basis) -> float:
+    """The share of a channel's variance over the samples that a series ``basis`` (n, k; its columns span the
+    constants) holds: ``1 - |c - B b|^2 / |c - mean(c)|^2``, ``b`` the least-squares coefficients of the values
+    ``c`` (n,) on ``B``. In [0, 1]; NaN for a constant channel (no variance to share)."""
+    c = np.asarray(values, float).ravel()
+    B = np.asarray(basis, float).reshape(len(c), -1)
+    sst = float(np.sum((c - np.mean(c)) ** 2))
+    if not sst > 0:
+        return float("nan")
+    coef = np.linalg.lstsq(B, c, rcond=None)[0]
+    return float(min(max(1.0 - float(np.sum((c - B @ coef) ** 2)) / sst, 0.0), 1.0))
+
+
+def with_position_share(channels, df, mask, params) -> tuple:
+    """The channel records ``channels`` (:func:`l1b2.closeloop.candidates.channels_of`) with ``position_share``:
+    the share of each channel's variance over the masked samples of ``df`` that is a function of the position in
+    the baseline's own position series (:func:`position_share` on
+    :func:`l1b2.closeloop.selection.position_basis` of ``params``, the series whose forces are the screen's
+    re-identification directions); None for a channel constant on the masked samples or a measured response (no
+    hypothesis)."""
+    m = np.asarray(mask, bool)
+    basis = position_basis(params, df[dataio.POSITION].to_numpy(float)[m])
+    out = []
+    for ch in channels:
+        ok = ch.get("sd", 0) > 0 and ch.get("kind") != "response" and ch["name"] in df.columns
+        share = position_share(df[ch["name"]].to_numpy(float)[m], basis) if ok else float("nan")
+        out.append({**ch, "position_share": share if np.isfinite(share) else None})
+    return tuple(out)
+
+
 def channels_considered(channels, scores: list[Score], level: float, min_gain: float, added,
                         run_level: runlevel.RunLevelAnalysis | None = None) -> list[dict]:
     """``diagnosis.channels_considered``: every candidate channel and run-level signal with its first-round evidence.
@@ -58,7 +91,10 @@ def channels_considered(channels, scores: list[Score], level: float, min_gain: f
     (:class:`l1b2.closeloop.runlevel.SignalEvidence` as dicts; empty when not tested). The model's inputs
     that are run-level signals (V0, the drive-coordinate load and its size, the direction) follow as rows of
     kind ``"input"`` with their run-level evidence only (their within-run forms are the named and generic
-    families of the candidate table).
+    families of the candidate table). ``position_share``: the channel record's (:func:`with_position_share`; None
+    when it has none): how much of the channel is a function of the position in the baseline's own series. What is,
+    the baseline's re-identification absorbs, so a within-run form is credited only for the rest, and a channel
+    near 1 cannot be told from the position along the stroke.
     """
     from ..predictor.effects.channels import INPUT_SIGNALS, regressor_of
     best = {s.candidate.family: s for s in best_per_family(scores)}
@@ -77,7 +113,7 @@ def channels_considered(channels, scores: list[Score], level: float, min_gain: f
         s = best.get(fam)
         rec = {"channel": ch["name"], "kind": ch["kind"], "regressor": regressor_of(ch["name"]),
                "varies_within_runs": bool(ch["within_run"]), "best": None, "cv_gain": None, "p_value": None,
-               "significant": False, "added": fam in added, "note": "",
+               "significant": False, "added": fam in added, "note": "", "position_share": ch.get("position_share"),
                "forms": {f: {"best": b.candidate.label, "cv_gain": float(b.cv_gain), "p_value": float(b.p_value)}
                          for (g, f), b in forms.items() if g == fam}}
         if ch["kind"] == "response":
@@ -95,7 +131,7 @@ def channels_considered(channels, scores: list[Score], level: float, min_gain: f
     for col in dict.fromkeys(c for c, _ in INPUT_SIGNALS):
         rows = ev.get(col, [])
         out.append({"channel": col, "kind": "input", "regressor": regressor_of(col), "varies_within_runs": False,
-                    "best": None, "cv_gain": None, "p_value": None,
+                    "best": None, "cv_gain": None, "p_value": None, "position_share": None,
                     "significant": any(e.significant for e in rows),
                     "added": any(f"run_level_{e.label}" in added for e in rows),
                     "note": "an input of the model: run-level evidence only" if rows

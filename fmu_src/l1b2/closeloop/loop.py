@@ -92,7 +92,7 @@ from .baselines import choose_baseline, identify_families, retag_structural
 from .crosscheck import PureSlipCheck, identified_pick, score_of, withdrawn_note
 from .events import session, with_event_clocks
 from .lags import with_lagged_channels
-from .evidence import channels_considered, order_traced
+from .evidence import channels_considered, order_traced, with_position_share
 from .guard import checked_fit
 from .intervals import added_parameters, identification, reported_covariance, reported_uncertainty, train_levels
 from .result import CloseLoopResult, ResidualAnalysis
@@ -193,7 +193,7 @@ class CloseLoop(EstimatorSettings):
                                 damping=baseline_damping(start, fit_tr, mask_tr))
         library = self.library if self.library is not None else full_library()
         pool = retag_structural(library(ctx, fit_tr), start.params_.drive_law)
-        it.channels = training_summary(ctx, fit_tr).channels
+        it.channels = with_position_share(training_summary(ctx, fit_tr).channels, fit_tr, mask_tr, start.params_)
         # a named pick from Eq. 29 is confirmed from the pure-slip family (decision 0043): that family's fit
         other = (None if start.params_.drive_law != "eq29" else (lambda: fits["pure_slip"]) if (
             "pure_slip" in fits and fit_tr is dtr) else (lambda: fit_family("pure_slip", fit_tr, "named-effect check")))

@@ -114,18 +114,24 @@ def _rows_in_place(X: np.ndarray, idx: np.ndarray, block: int = 256) -> np.ndarr
     return X[:len(idx)]
 
 
+def position_basis(params: pr.PredictorParams, s_m) -> np.ndarray:
+    """The baseline's position series per sample: ``L_j(x)``, ``j = 0..order``, the Legendre polynomials of the
+    scaled position ``x`` (:meth:`~l1b2.predictor.model.PredictorParams.scaled_position` of ``s_m`` [m], clipped to
+    ``[-1.2, 1.2]``), ``(n, order + 1)``."""
+    from numpy.polynomial.legendre import legvander
+    return legvander(np.clip(params.scaled_position(np.asarray(s_m, float)), -1.2, 1.2), params.order)
+
+
 def nuisance_forces(params: pr.PredictorParams, df: pd.DataFrame, v_pred: np.ndarray) -> np.ndarray:
     """Forces spanning Eq. 29's own function space around the fit (drive coordinates).
 
     Perturbations of D(s), B'(s) and the offset E(s) as Legendre series in
-    the scaled position: ``-v' L_j(x)``, ``V0 L_j(x)``, ``L_j(x)``. Their
+    the scaled position (:func:`position_basis`): ``-v' L_j(x)``, ``V0 L_j(x)``, ``L_j(x)``. Their
     free-run responses are the re-identification directions of the baseline:
     a candidate gets credit only for what the baseline cannot absorb by
     re-fitting itself (a score test with nuisance parameters).
     """
-    from numpy.polynomial.legendre import legvander
-    x = np.clip(params.scaled_position(df[dataio.POSITION].to_numpy(float)), -1.2, 1.2)
-    Lv = legvander(x, params.order)
+    Lv = position_basis(params, df[dataio.POSITION].to_numpy(float))
     vp = df[dataio.DIRECTION].to_numpy(float) * np.asarray(v_pred, float)
     V0 = df[dataio.VOLTAGE].to_numpy(float)
     return np.column_stack([-vp[:, None] * Lv, V0[:, None] * Lv / 300.0, Lv])
