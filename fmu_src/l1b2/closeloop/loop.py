@@ -215,7 +215,8 @@ class CloseLoop(EstimatorSettings):
                                for k, v in (("a", it.output_filter.a), ("b0", it.output_filter.b0),
                                             ("b1", it.output_filter.b1))})
         calibrated, why = calibrated_model(start, ext, it.effects, it.output_filter,
-                                           {**_data_summary(train, test), "operating_points": _operating_points(dtr)},
+                                           {**_data_summary(train, test), "operating_points": _operating_points(dtr),
+                                            **({"auxiliary_columns": aux_rec} if aux_rec else {})},
                                            levels)
         first = it.first_scores or []
         chosen = it.chosen
