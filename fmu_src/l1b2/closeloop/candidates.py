@@ -36,6 +36,7 @@ from ..predictor.frequency import contact_angle, sample_frequency
 from ..predictor.model import viscous_damping
 from ..predictor.effects import SPEED_REF, V_REF  # noqa: F401  (re-exported: the features' scales)
 from ..predictor.effects.interactions import EQ29_LINEARISATION  # noqa: F401  (re-exported)
+from .auxiliary import label_columns
 
 
 @dataclass(frozen=True)
@@ -185,15 +186,18 @@ def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
 
     One ``{"name", "kind", "mean", "sd", "lo", "hi", "within_run", "run_spread"}`` each (``lo``/``hi``: the
     smallest and largest value; ``kind``:
-    ``"logged"``, ``"protocol"`` for the session clock ``time_s``, or
+    ``"logged"``, ``"protocol"`` for the session clock ``time_s``,
     ``"response"`` for a measured response of the motor (``response_columns``, default
-    :data:`l1b2.predictor.effects.channels.RESPONSE_COLUMNS`: listed, no hypothesis);
+    :data:`l1b2.predictor.effects.channels.RESPONSE_COLUMNS`: listed, no hypothesis), or ``"label"`` for a text
+    column coded by :func:`l1b2.closeloop.auxiliary.with_usable_channels` (its codes have no order: only the
+    categorical run-level family reads them);
     ``sd`` 0 for a constant column, which is listed but gets no hypothesis;
     ``within_run``: it varies inside some run; ``run_spread``:
     :func:`l1b2.predictor.effects.channels.run_spread`).
     """
     required = (set(dataio.REQUIRED_COLUMNS) | {dataio.SPEED}) - {dataio.TIME}   # speed: the measured output
     responses = set(fx.channels.RESPONSE_COLUMNS if response_columns is None else response_columns)
+    labels = set(label_columns(df))
     out = []
     names = [c for c in df.columns if c not in required and c != dataio.TIME
              and pd.api.types.is_numeric_dtype(df[c]) and not pd.api.types.is_bool_dtype(df[c])]
@@ -202,7 +206,8 @@ def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
         if not np.all(np.isfinite(c)):
             continue
         within = bool((df.groupby(dataio.RUN, sort=False)[name].agg(np.ptp) > 0).any())
-        kind = "protocol" if name == dataio.TIME else "response" if name in responses else "logged"
+        kind = ("protocol" if name == dataio.TIME else "response" if name in responses
+                else "label" if name in labels else "logged")
         out.append({"name": str(name), "kind": kind, "mean": float(np.mean(c)), "sd": float(np.std(c)),
                     "lo": float(np.min(c)), "hi": float(np.max(c)), "within_run": within,
                     "run_spread": fx.channels.run_spread(c, df[dataio.RUN])})

@@ -8,7 +8,7 @@ from ..data import measurements as dataio
 from . import runlevel
 from .selection import Score, best_per_family, position_basis
 
-__all__ = ["order_traced", "channels_considered", "position_share", "with_position_share"]
+__all__ = ["order_traced", "channels_considered", "position_share", "with_position_share", "with_auxiliary"]
 
 
 def order_traced(effects, speed_filter: bool, residual_trace, evidence=(), speed_evidence: bool = False) -> list[str]:
@@ -120,6 +120,8 @@ def channels_considered(channels, scores: list[Score], level: float, min_gain: f
             rec["note"] = "a measured response of the motor, not a cause: not a candidate"
         elif not ch["sd"] > 0:
             rec["note"] = "constant on TRAIN: no evidence possible"
+        elif ch["kind"] == "label":
+            rec["note"] = "a text label's unordered codes: categorical run-level evidence only"
         elif s is None:
             rec["note"] = "not scored (not in the candidate library)"
         else:
@@ -137,4 +139,26 @@ def channels_considered(channels, scores: list[Score], level: float, min_gain: f
                     "note": "an input of the model: run-level evidence only" if rows
                     else "constant on TRAIN or not tested: no run-level evidence",
                     "run_level": [e.to_dict() for e in rows]})
+    return out
+
+
+def with_auxiliary(rows: list[dict], auxiliary) -> list[dict]:
+    """``channels_considered``'s rows with what :func:`l1b2.closeloop.auxiliary.with_usable_channels` did to the
+    auxiliary columns: the note of a flag, a label or a filled column joined to its row (``prepared``: the action),
+    and one row of kind ``"unusable"`` per column left out, with the reason, so that every column of the file is
+    listed."""
+    by = {r["channel"]: r for r in auxiliary}
+    out = []
+    for row in rows:
+        aux = by.get(row["channel"])
+        if aux is not None and aux["action"] != "unusable":
+            row = {**row, "prepared": aux["action"],
+                   "note": "; ".join(x for x in (aux["note"], row.get("note", "")) if x)}
+        out.append(row)
+    for aux in auxiliary:
+        if aux["action"] == "unusable":
+            out.append({"channel": aux["channel"], "kind": "unusable", "regressor": None, "varies_within_runs": None,
+                        "best": None, "cv_gain": None, "p_value": None, "significant": False, "added": False,
+                        "prepared": "unusable", "note": aux["note"], "forms": {}, "run_level": [],
+                        "position_share": None})
     return out

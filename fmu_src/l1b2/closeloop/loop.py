@@ -79,12 +79,14 @@ from ..ident.estimator import PredictorIdentifier
 from ..predictor.effects import ExtendedPredictor, IdentifiedEffect
 from ..predictor.model import DRIVE_LAWS
 from ..predictor.setup import PredictorSetup
+from ..predictor.effects import channels as fx_channels
 from . import chain
 from . import residuals as res
 from . import runlevel
 from .candidates import Context, baseline_damping, channels_of, damping_floors, full_library, training_summary
 from .settings import LoopSettings, keyword_signature
 from .stages import StageClock
+from .auxiliary import with_usable_channels
 from .acceptance import (Directions, EffectSet, RefitCV, RefitSettings, Validated, accepts, added_columns,
                          chain_cv_errors, collinear, cv_errors, fold_start_phi, materiality, named_reading, refit,
                          refit_schemes, screen_folds, stratified_folds, time_dependent, validated)
@@ -92,7 +94,7 @@ from .baselines import choose_baseline, identify_families, retag_structural
 from .crosscheck import PureSlipCheck, identified_pick, score_of, withdrawn_note
 from .events import session, with_event_clocks
 from .lags import with_lagged_channels
-from .evidence import channels_considered, order_traced, with_position_share
+from .evidence import channels_considered, order_traced, with_auxiliary, with_position_share
 from .guard import checked_fit
 from .intervals import added_parameters, identification, reported_covariance, reported_uncertainty, train_levels
 from .result import CloseLoopResult, ResidualAnalysis
@@ -147,6 +149,8 @@ class CloseLoop(EstimatorSettings):
         dtr = train.df
         dte = test.df if test is not None else None
         sess = session(dtr, dte)   # the runs on the clock, for both derivations of logged channels
+        responses = fx_channels.RESPONSE_COLUMNS if self.response_columns is None else self.response_columns
+        dtr, dte, aux_rec = with_usable_channels(dtr, dte, responses)   # flags, labels, gaps: numeric or listed
         dtr, dte, event_rec = with_event_clocks(dtr, dte, self.response_columns, sess)
         dtr, dte, lag_rec = with_lagged_channels(dtr, dte, self.response_columns, sess)
         mask_tr = np.array(train.mask)
@@ -211,14 +215,17 @@ class CloseLoop(EstimatorSettings):
                                for k, v in (("a", it.output_filter.a), ("b0", it.output_filter.b0),
                                             ("b1", it.output_filter.b1))})
         calibrated, why = calibrated_model(start, ext, it.effects, it.output_filter,
-                                           {**_data_summary(train, test), "operating_points": _operating_points(dtr)},
+                                           {**_data_summary(train, test), "operating_points": _operating_points(dtr),
+                                            **({"auxiliary_columns": aux_rec} if aux_rec else {})},
                                            levels)
         first = it.first_scores or []
         chosen = it.chosen
-        diagnosis = {**self._diagnosis(it, first, analysis, ext_params, chain_rec), "event_clocks": event_rec,
+        diagnosis = {**self._diagnosis(it, first, analysis, ext_params, chain_rec), "auxiliary_columns": aux_rec,
+                     "event_clocks": event_rec,
                      "lagged_channels": lag_rec,
                      "unseen_levels": runlevel.unseen_test_levels(it.effects.candidates, dte),
                      "channel_ranges": runlevel.channel_ranges(it.effects.candidates, dtr, dte)}
+        diagnosis["channels_considered"] = with_auxiliary(diagnosis["channels_considered"], aux_rec)
         self.result_ = CloseLoopResult(
             baseline=baseline, diagnosis=diagnosis, scores=first,
             significant=it.significant, chosen=chosen, extended=extended,

@@ -136,6 +136,8 @@ class Diagnosis(_Record):
     ``physical_range``: after each joint refit with a channel's damping form, the total viscous damping's smallest
     value over TRAIN's range of the channel per such form (``damping_floor_N_s_per_m``) and the outcome (``kept``,
     or ``refused``: a negative floor, the pick not added).
+    ``auxiliary_columns``: what was done to each auxiliary column that was not numeric and finite as logged
+    (flags, text labels, gaps; :func:`l1b2.closeloop.auxiliary.with_usable_channels`).
     The nested evidence stays JSON-shaped.
     """
 
@@ -167,6 +169,7 @@ class Diagnosis(_Record):
     unseen_levels: dict = field(default_factory=dict)
     channel_ranges: list = field(default_factory=list)
     physical_range: list = field(default_factory=list)
+    auxiliary_columns: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
         out = {f.name: getattr(self, f.name) for f in fields(self)}

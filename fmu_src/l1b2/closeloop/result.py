@@ -380,6 +380,9 @@ def markdown_report(rep: dict) -> str:
             lines.append(f"| {c['channel']} | {c['kind']} | {c['regressor']} | {c['best'] or c['note']} | "
                          f"{_pct(c['cv_gain'], '.1%')} | {p} | {runl} | "
                          f"{'yes' if c['significant'] else 'no'} | {'yes' if c['added'] else 'no'} |")
+    if d.get("auxiliary_columns"):
+        lines += ["", "Auxiliary columns not numeric and finite as logged (flags, text labels, gaps):", ""]
+        lines += [f"- `{a['channel']}`: {a['action']}: {a['note']}" for a in d["auxiliary_columns"]]
     if d.get("run_level"):
         r = d["run_level"]
         lines += ["", f"Run-level deviations (first round, {r['runs']} runs, shrunk by REML): between-run sd of the "

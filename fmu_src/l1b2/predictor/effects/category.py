@@ -150,9 +150,9 @@ class RunLevelCategory(Effect):
 
     @staticmethod
     def takes(channel: dict) -> bool:
-        """Whether a channel (:func:`l1b2.closeloop.candidates.channels_of`'s record) may be a category: logged,
-        constant within every run and no input of ``Predictor.fmu``."""
-        return (channel.get("kind") == "logged" and not channel.get("within_run", True)
+        """Whether a channel (:func:`l1b2.closeloop.candidates.channels_of`'s record) may be a category: logged or
+        a coded text label, constant within every run and no input of ``Predictor.fmu``."""
+        return (channel.get("kind") in ("logged", "label") and not channel.get("within_run", True)
                 and channel["name"] not in INPUT_COLUMNS)
 
     def signal(self, column: str, run_values) -> dict | None:

@@ -241,8 +241,9 @@ class Channel(Effect):
                           "sd": (t1 - t0) / np.sqrt(12.0), "within_run": True, "lo": t0, "hi": t1})
         out = []
         for ch in chans:
-            if not ch.get("sd", 0) > 0 or ch.get("kind") == "response":
-                continue   # constant on TRAIN (no evidence possible) or a measured response: considered, not a cause
+            if not ch.get("sd", 0) > 0 or ch.get("kind") in ("response", "label"):
+                continue   # constant on TRAIN (no evidence possible), a measured response (not a cause) or a
+                # label's unordered codes (categorical run-level family only): considered, no value form
             reg = regressor_of(ch["name"])
             logged = "lo" in ch and "hi" in ch and ch["name"] != SESSION_TIME
             load_abs = float(train.ranges.get("load_abs", 0.0)) if logged else 0.0
@@ -545,7 +546,7 @@ class RunLevel(Effect):
         """The run-level hypothesis of every candidate channel (standardised by TRAIN's sample mean and sd) and
         of the session clock. The loop does not list these: its run-level analysis offers :meth:`hypotheses`
         standardised by the runs' own values, for the signals whose evidence is significant."""
-        chans = [ch for ch in train.channels if ch.get("sd", 0) > 0 and ch.get("kind") != "response"]
+        chans = [ch for ch in train.channels if ch.get("sd", 0) > 0 and ch.get("kind") not in ("response", "label")]
         if not any(ch["name"] == SESSION_TIME for ch in chans):
             t0, t1 = train.time_range
             chans.append({"name": SESSION_TIME, "mean": 0.5 * (t0 + t1), "sd": (t1 - t0) / np.sqrt(12.0)})
