@@ -122,3 +122,17 @@ def test_the_evidence_table_carries_every_column_with_what_was_done():
     assert out[0]["prepared"] == "filled" and out[0]["note"] == "3 gaps"
     assert out[2]["kind"] == "unusable" and out[2]["note"] == "text that varies within a run"
     assert not out[2]["significant"] and not out[2]["added"]
+
+
+def test_a_test_file_without_a_channel_train_logs_is_refused_before_any_fit(tmp_path):
+    from pathlib import Path
+
+    from l1b2.data.measurements import Measurements
+    from l1b2.errors import DataFormatError
+    tr = Measurements(frame(pressure_bar=lambda r, k: 2.0 + r, tip_velocity_amp_m_s=lambda r, k: 0.3,
+                            note=lambda r, k: "x"), {}, Path("train.csv"))
+    te = Measurements(frame(n_runs=2), {}, Path("test.csv"))
+    with pytest.raises(DataFormatError, match=r"test\.csv: column 'pressure_bar'.*and 1 more: note.*train\.csv"):
+        aux.check_test_columns(tr, te, ("tip_velocity_amp_m_s",))
+    te2 = Measurements(frame(n_runs=2, pressure_bar=lambda r, k: 2.0, note=lambda r, k: "y"), {}, Path("test.csv"))
+    aux.check_test_columns(tr, te2, ("tip_velocity_amp_m_s",))   # a measured response may be absent

@@ -33,9 +33,10 @@ import numpy as np
 import pandas as pd
 
 from ..data import measurements as dataio
+from ..errors import DataFormatError
 
 __all__ = ["MAX_LABELS", "MAX_TOKEN_SHARE", "LABELS_ATTR", "with_usable_channels", "label_codes", "fill_gaps",
-           "label_columns"]
+           "label_columns", "check_test_columns"]
 
 #: the most distinct text values a label column may have over TRAIN's runs to be coded
 MAX_LABELS = 12
@@ -206,3 +207,19 @@ def with_usable_channels(train: pd.DataFrame, test: pd.DataFrame | None = None, 
         if df is not None and labels:
             df.attrs[LABELS_ATTR] = labels
     return train, test, record
+
+
+def check_test_columns(train, test, response_columns=()) -> None:
+    """Refuse, before any fit, a TEST file that lacks an auxiliary column TRAIN logs.
+
+    ``train``/``test``: :class:`l1b2.data.measurements.Measurements`. Every column of TRAIN beyond the required ones,
+    the speed and the measured responses ``response_columns`` is a candidate channel, and an effect found in it
+    can only be evaluated on TEST when TEST logs it too. Raises :class:`l1b2.errors.DataFormatError` naming TEST's
+    file and the first missing column (and how many are missing)."""
+    skip = _required() | set(response_columns)
+    missing = [c for c in train.df.columns if c not in skip and c not in test.df.columns]
+    if missing:
+        more = f" (and {len(missing) - 1} more: {', '.join(missing[1:])})" if len(missing) > 1 else ""
+        raise DataFormatError(test.path, missing[0], None,
+                              f"missing{more}: TRAIN ({train.path}) logs it, and an effect found in it could not "
+                              "be evaluated on TEST; log it in TEST too, or remove it from TRAIN")

@@ -86,7 +86,7 @@ from . import runlevel
 from .candidates import Context, baseline_damping, channels_of, damping_floors, full_library, training_summary
 from .settings import LoopSettings, keyword_signature
 from .stages import StageClock
-from .auxiliary import with_usable_channels
+from .auxiliary import check_test_columns, with_usable_channels
 from .acceptance import (Directions, EffectSet, RefitCV, RefitSettings, Validated, accepts, added_columns,
                          chain_cv_errors, collinear, cv_errors, fold_start_phi, materiality, named_reading, refit,
                          refit_schemes, screen_folds, stratified_folds, time_dependent, validated)
@@ -141,15 +141,16 @@ class CloseLoop(EstimatorSettings):
         ``test`` is only predicted, never used to fit or choose.
         """
         _check_measurements(train, "train")
+        responses = fx_channels.RESPONSE_COLUMNS if self.response_columns is None else self.response_columns
         if test is not None:
             _check_measurements(test, "test")
+            check_test_columns(train, test, responses)
         say = StageClock(self.progress or _quiet)  # times every stage it announces (report.json "stages")
         t_start = time.perf_counter()
         m_s = train.slider_mass_kg
         dtr = train.df
         dte = test.df if test is not None else None
         sess = session(dtr, dte)   # the runs on the clock, for both derivations of logged channels
-        responses = fx_channels.RESPONSE_COLUMNS if self.response_columns is None else self.response_columns
         dtr, dte, aux_rec = with_usable_channels(dtr, dte, responses)   # flags, labels, gaps: numeric or listed
         dtr, dte, event_rec = with_event_clocks(dtr, dte, self.response_columns, sess)
         dtr, dte, lag_rec = with_lagged_channels(dtr, dte, self.response_columns, sess)
