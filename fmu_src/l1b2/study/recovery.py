@@ -26,7 +26,11 @@ Each interval kind of :data:`INTERVALS` is checked (:func:`covariances`): the
 AR(1)-inflated Fisher one (the close-the-loop report's ``ci95_model``), the
 cluster-by-run robust one (its ``ci95_run``), and the cluster-robust ones whose
 clusters are the runs of one operating condition (:data:`GROUPINGS`; ``level`` is
-the report's ``ci95``, decision 0031). Each row also holds the correlation of the paired runs' mean
+the report's ``ci95``, decision 0031). The drive frequency's response has the same kinds from its own run
+influences (theta profiled out) and two more, with the runs at one drive frequency as one cluster
+(``frequency``: Bell-McCaffrey CR2 with Satterthwaite degrees of freedom; ``frequency_cr1``: CR1 with t on
+clusters - 1; :func:`frequency_parameter`); the other targets' rows have them as NaN (one drive
+frequency). Each row also holds the correlation of the paired runs' mean
 residuals (:func:`paired_residual_correlation`), the evidence for the level
 at which errors are shared. Optionally the same family is also
 fitted on the same seed's data *without* the injection (``clean_fit``): its
