@@ -275,3 +275,39 @@ def test_the_coupled_physics_frequency_acts_on_the_b2_drive_not_on_the_voltage()
     b = minimize_scalar(b2_drive, bounds=(0.8, 1.8), method="bounded", options={"xatol": 1e-3})
     assert b.fun < 0.02 and a.fun > 2 * b.fun
     assert b.x > 1.2
+
+
+def test_response_cluster_influence_is_the_joint_sandwich_written_out():
+    # reference: the joint least squares in (theta, q) with J = [Jt Jq] (weighted) and residuals r; a cluster's
+    # influence on q is q's rows of (J'J)^-1 J_g' r_g (CR0/CR1 rows) or (J'J)^-1 J_g' (I - H_gg)^-1/2 r_g (CR2,
+    # H = J (J'J)^-1 J'), written out here with numpy on the exact world's three frequencies; in the response's
+    # units: f_b0 = f_ref q0, zeta_b = exp(q1). The frequency levels of its runs are the three frequencies
+    from l1b2.ident.clusters import frequency_levels
+    from l1b2.ident.frequency import ResponseLinearisation, response_of
+    truth = FrequencyResponse(48500.0, 47800.0, 0.0125)
+    df = _exact_world(truth, (48000.0, 48500.0, 49000.0), noise=1e-3)
+    q = np.array([47800.0 / 48500.0, math.log(0.0125)])
+    est = PredictorIdentifier(order=3, fixed="recommended", n_starts=1, seed=0,
+                              frequency=response_of(48500.0, q)).fit(df, slider_mass_kg=0.1)
+    lin = ResponseLinearisation(est.result_, df, None, 48500.0, q)
+    prob = lin.problem(q)
+    res = est.result_
+    Jt = prob.jacobian(res.values, np.flatnonzero(res.varied)) * lin.w[:, None]
+    Jt = Jt[:, np.any(Jt != 0, axis=0)]
+    J = np.hstack([Jt, lin.jacobian_q()])
+    r = lin.residual(q)
+    A = np.linalg.inv(J.T @ J)
+    unit = np.array([48500.0, 0.0125])
+    run = prob.run_sel
+    want = np.array([(A @ J[run == g].T @ r[run == g])[-2:] for g in range(len(res.runs))]) * unit
+    np.testing.assert_allclose(lin.cluster_influence(), want, rtol=1e-6, atol=1e-12 * np.abs(want).max())
+    levels = np.array(frequency_levels(df, res.runs))
+    first = df.groupby("run", sort=False)["frequency_Hz"].first()
+    assert list(levels) == [{48000.0: 0, 48500.0: 1, 49000.0: 2}[first[x]] for x in res.runs]
+    lev = levels[run]
+    rows = []
+    for g in range(3):
+        sel = lev == g
+        lam, V = np.linalg.eigh(np.eye(sel.sum()) - J[sel] @ A @ J[sel].T)
+        rows.append((A @ J[sel].T @ ((V / np.sqrt(np.clip(lam, 1e-12, None))) @ V.T @ r[sel]))[-2:])
+    np.testing.assert_allclose(lin.cluster_influence(levels, cr2=True), np.array(rows) * unit, rtol=1e-6)

@@ -266,6 +266,24 @@ def test_condition_clusters_are_the_runs_at_one_voltage_and_load():
     assert covs["robust"] is _Influence.cov_robust_all_
 
 
+def test_frequency_levels_join_the_runs_within_the_one_frequency_spread():
+    # reference: FREQUENCY_REL_SPREAD = 1e-3 of the runs' median frequency (48.5 kHz: 48.5 Hz) joins neighbours;
+    # runs 7, 3 (48 000 +- 40 Hz: 40 Hz apart), 5, 1 (48 500 +- 20 Hz), 9 (49 000 Hz) in shuffled order, each run
+    # two samples, the level of each run is its nominal frequency's rank; a 60 Hz step between 48 500 and
+    # 48 560 Hz (above 48.5 Hz) starts a new level
+    from l1b2.ident.clusters import frequency_levels
+    f = {7: 48040.0, 5: 48480.0, 3: 48000.0, 9: 49000.0, 1: 48500.0}
+    runs = [7, 5, 3, 9, 1]
+    df = pd.DataFrame({"run": np.repeat(runs, 2), "frequency_Hz": np.repeat([f[r] for r in runs], 2)})
+    assert frequency_levels(df, [1, 3, 5, 7, 9]) == [1, 0, 1, 0, 2]
+    f[9] = 48560.0
+    df = pd.DataFrame({"run": np.repeat(runs, 2), "frequency_Hz": np.repeat([f[r] for r in runs], 2)})
+    assert frequency_levels(df, [1, 3, 5, 7, 9]) == [1, 0, 1, 0, 2]
+    f[9] = 48540.0
+    df = pd.DataFrame({"run": np.repeat(runs, 2), "frequency_Hz": np.repeat([f[r] for r in runs], 2)})
+    assert frequency_levels(df, [1, 3, 5, 7, 9]) == [1, 0, 1, 0, 1]
+
+
 def test_an_interval_the_fit_does_not_offer_counts_for_nothing():
     # the frequency response has only the profile's (model-based) interval: its rows carry None for the others
     rows = [{"injection": "drive_frequency", "parameter": "f_b0_Hz", "seed": s, "injected": 47800.0,
@@ -288,7 +306,7 @@ def test_the_frequency_target_reads_the_identified_response():
     got = frequency_parameter(SimpleNamespace(result_=SimpleNamespace(frequency=rec)), "f_b0_Hz")
     lo, hi, se = got["ar1"]
     assert got["estimate"] == 47000.0 and se == 10.0 and hi - lo == pytest.approx(2 * 1.959964 * 10.0, rel=1e-6)
-    assert all(np.isnan(got[k][2]) for k in ("robust", "condition", "mirror", "level"))
+    assert all(np.isnan(got[k][2]) for k in ("robust", "condition", "mirror", "level", "frequency", "frequency_cr1"))
     fixed = SimpleNamespace(result_=SimpleNamespace(frequency={"status": "fixed", "reason": "one frequency"}))
     with pytest.raises(IdentificationError, match="one frequency"):
         frequency_parameter(fixed, "f_b0_Hz")

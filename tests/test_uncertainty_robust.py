@@ -184,3 +184,65 @@ def test_singular_values_and_vectors_through_the_r_factor_are_the_svds():
         np.testing.assert_allclose(np.outer(Vt[k], Vt[k]), np.outer(Vt_ref[k], Vt_ref[k]), atol=1e-8)
     s_w, Vt_w = singular(J[:4])   # wide: the SVD itself
     np.testing.assert_allclose(s_w, np.linalg.svd(J[:4], compute_uv=False), rtol=1e-12)
+
+
+def _inv_sqrt(A):
+    """A^-1/2 of a symmetric positive definite matrix (eigen-decomposition)."""
+    lam, V = np.linalg.eigh(A)
+    return (V / np.sqrt(lam)) @ V.T
+
+
+def _profiled_problem(rng, n_clusters=6, per=12):
+    """OLS of y on [1, x] (nuisance) and z (the parameter of interest), z varying mostly between clusters."""
+    g = np.repeat(np.arange(n_clusters), per)
+    x = rng.normal(size=g.size)
+    z = rng.normal(size=n_clusters)[g] + 0.2 * rng.normal(size=g.size)
+    y = 0.5 + x + 2.0 * z + rng.normal(size=n_clusters)[g] + 0.3 * rng.normal(size=g.size)
+    X = np.column_stack([np.ones_like(x), x, z])
+    e = y - X @ np.linalg.lstsq(X, y, rcond=None)[0]
+    return X, e, g
+
+
+def test_profiled_influence_is_the_joint_sandwichs_block_cr1_and_cr2():
+    # reference (Cameron & Miller 2015; Bell & McCaffrey 2002), written out on the full OLS X = [1, x, z]:
+    # CR1: V = (X'X)^-1 [G/(G-1) sum_g X_g' e_g e_g' X_g] (X'X)^-1,
+    # CR2: V = (X'X)^-1 [sum_g X_g' A_g e_g e_g' A_g X_g] (X'X)^-1, A_g = (I - X_g (X'X)^-1 X_g')^-1/2;
+    # the profiled rows must give z's entry (the last) of both
+    from l1b2.ident.uncertainty import profiled_influence
+    rng = np.random.default_rng(7)
+    X, e, g = _profiled_problem(rng)
+    G = 6
+    bread = np.linalg.inv(X.T @ X)
+    meat1 = sum(np.outer(X[g == k].T @ e[g == k], X[g == k].T @ e[g == k]) for k in range(G)) * G / (G - 1)
+    meat2 = 0
+    for k in range(G):
+        Xg = X[g == k]
+        a = _inv_sqrt(np.eye(len(Xg)) - Xg @ bread @ Xg.T) @ e[g == k]
+        meat2 = meat2 + np.outer(Xg.T @ a, Xg.T @ a)
+    Q = np.linalg.qr(X[:, :2])[0]
+    U1 = profiled_influence(Q, X[:, 2:], e, g)
+    np.testing.assert_allclose(grouped_sandwich(U1, np.arange(G))[0][0, 0], (bread @ meat1 @ bread)[2, 2], rtol=1e-10)
+    U2 = profiled_influence(Q, X[:, 2:], e, g, cr2=True)
+    np.testing.assert_allclose((U2.T @ U2)[0, 0], (bread @ meat2 @ bread)[2, 2], rtol=1e-10)
+    assert (U2.T @ U2)[0, 0] > (U1.T @ U1)[0, 0]           # CR2 inflates each cluster's residuals
+
+
+def test_bell_mccaffrey_dof_written_out():
+    # reference: Imbens & Kolesar (2016), nu = (sum lambda)^2 / sum lambda^2, lambda the eigenvalues of G'G with
+    # column g of G = (I - H)_{., g} A_g X_g (X'X)^-1 e_z; for the mean of G equal clusters nu = G - 1
+    from l1b2.ident.uncertainty import bell_mccaffrey_dof
+    rng = np.random.default_rng(8)
+    X, e, g = _profiled_problem(rng)
+    n, G = len(e), 6
+    bread = np.linalg.inv(X.T @ X)
+    H = X @ bread @ X.T
+    cols = []
+    for k in range(G):
+        sel = g == k
+        A = _inv_sqrt(np.eye(sel.sum()) - H[np.ix_(sel, sel)])
+        cols.append((np.eye(n) - H)[:, sel] @ A @ X[sel] @ bread[:, 2])
+    lam = np.linalg.eigvalsh(np.column_stack(cols).T @ np.column_stack(cols))
+    Q = np.linalg.qr(X[:, :2])[0]
+    assert bell_mccaffrey_dof(Q, X[:, 2:], g, [1.0]) == pytest.approx(lam.sum() ** 2 / np.sum(lam ** 2), rel=1e-10)
+    ones = np.ones((n, 1))
+    assert bell_mccaffrey_dof(np.zeros((n, 0)), ones, g, [1.0]) == pytest.approx(G - 1, rel=1e-10)

@@ -15,9 +15,10 @@ import numpy as np
 from scipy import stats
 
 from ..data import measurements as dataio
+from ..data.coverage import FREQUENCY_REL_SPREAD
 from .uncertainty import grouped_sandwich
 
-__all__ = ["RUN_GROUPINGS", "run_groups", "grouped_interval"]
+__all__ = ["RUN_GROUPINGS", "run_groups", "grouped_interval", "frequency_levels"]
 
 #: each grouping's load coordinate of a run's label ``(V0, load form)`` from its signed load m [kg] and
 #: direction d: the rig's condition (m), its mirror image (d m) and the level (|m|: both pairs together)
@@ -42,6 +43,26 @@ def run_groups(df, runs, grouping: str = "level") -> list[tuple]:
     label = {k: (round(float(v), 6), round(float(load(m, d)), 9) + 0.0)    # + 0.0: no -0.0 label
              for k, (v, m, d) in zip(first.index, first.to_numpy())}
     return [label[r] for r in runs]
+
+
+def frequency_levels(df, runs) -> list[int]:
+    """Each run's drive-frequency level (0, 1, ... from the lowest), in the order of ``runs``.
+
+    A run's frequency is the median of its ``frequency_Hz``
+    (as :func:`l1b2.data.coverage.run_frequencies`); sorted, a new level starts
+    where the step to the next run's frequency exceeds
+    :data:`l1b2.data.coverage.FREQUENCY_REL_SPREAD` of the runs' median
+    frequency (the spread within which the package treats runs as at one
+    frequency): runs closer than that to a neighbour share a level (single linkage).
+    """
+    if dataio.FREQUENCY not in df.columns:
+        raise ValueError("frequency_levels: the data have no frequency_Hz column")
+    freq = df[dataio.FREQUENCY].to_numpy(float)
+    f = {rid: float(np.median(freq[sl])) for rid, sl in dataio.run_slices(df[dataio.RUN])}
+    vals = np.array([f[r] for r in runs], float)
+    srt = np.sort(np.unique(vals))
+    level_of = np.concatenate([[0], np.cumsum(np.diff(srt) > FREQUENCY_REL_SPREAD * float(np.median(vals)))])
+    return [int(level_of[np.searchsorted(srt, v)]) for v in vals]
 
 
 def grouped_interval(value: float, influence, groups, index: int) -> dict | None:

@@ -50,6 +50,7 @@ from ..errors import IdentificationError
 from ..predictor.frequency import FrequencyResponse
 from .problem import SampleData
 from .slipproblem import make_problem
+from .uncertainty import bell_mccaffrey_dof, profiled_influence
 
 __all__ = ["FREQUENCY_SETTINGS", "response_setting", "reference_frequency", "frequency_record",
            "frequency_report_lines", "fit_frequency_response", "GRID_OFFSETS", "GRID_ZETAS", "ZETA_B_RANGE",
@@ -212,7 +213,10 @@ class ResponseLinearisation:
         J = prob.jacobian(result.values, cols) * self.w[:, None]
         J = J[:, np.all(np.isfinite(J), axis=0) & np.any(J != 0, axis=0)]
         self.Q = np.linalg.qr(J)[0]
+        self.run_sel = np.asarray(prob.run_sel, int)
+        self.n_runs = len(result.runs)
         self.r_fit = self.residual(self.q_fit, prob)
+        self._jq = None
 
     def problem(self, q):
         res, prm = self.result, self.result.params
@@ -245,6 +249,34 @@ class ResponseLinearisation:
             e[i] = h
             cols.append((self.residual(self.q_fit + e) - self.residual(self.q_fit - e)) / (2 * h))
         return np.column_stack(cols)
+
+    def cluster_influence(self, run_codes=None, cr2: bool = False) -> np.ndarray:
+        """Each cluster's influence on the response's parameters in their units (``f_b0_Hz``, ``zeta_b``[, ``f_l0_Hz``,
+        ``contact_V``]), theta profiled out: :func:`l1b2.ident.uncertainty.profiled_influence` of the weighted
+        residuals, with ``J_q`` and ``Q`` of this linearisation, shape (G, len(q)).
+
+        ``run_codes``: one integer cluster code per run of the fit (``result.runs``' order); None: each run its
+        own cluster. ``cr2``: the Bell-McCaffrey adjusted rows (else the plain rows, CR1 through
+        :func:`l1b2.ident.uncertainty.grouped_sandwich`).
+        """
+        codes = np.arange(self.n_runs) if run_codes is None else np.asarray(run_codes, int)
+        return profiled_influence(self.Q, self._jacobian_q(), self.r_fit, codes[self.run_sel], cr2=cr2) * self.scale()
+
+    def bell_mccaffrey_dof(self, run_codes, index: int) -> float:
+        """:func:`l1b2.ident.uncertainty.bell_mccaffrey_dof` of the response's parameter ``index`` with the runs'
+        clusters ``run_codes`` (as :meth:`cluster_influence`)."""
+        c = np.zeros(self.q_fit.size)
+        c[index] = 1.0
+        return bell_mccaffrey_dof(self.Q, self._jacobian_q(), np.asarray(run_codes, int)[self.run_sel], c)
+
+    def scale(self) -> np.ndarray:
+        """d(parameter)/dq at q_fit: f_ref for the resonances (shares of f_ref), the value for the logs."""
+        return np.array([self.f_ref if i % 2 == 0 else math.exp(v) for i, v in enumerate(self.q_fit)])
+
+    def _jacobian_q(self) -> np.ndarray:
+        if self._jq is None:
+            self._jq = self.jacobian_q()
+        return self._jq
 
     def step_and_information(self):
         """``(Gauss-Newton step in q, J_q^T P J_q)`` at q_fit."""

@@ -79,6 +79,7 @@ from scipy.linalg import qr
 __all__ = [
     "NULL_TOL", "describe_direction", "ar1_factors", "Uncertainty", "fisher_uncertainty", "extra_confounding",
     "alternative_optima", "cluster_sandwich", "run_influence", "grouped_sandwich", "singular",
+    "profiled_influence", "bell_mccaffrey_dof",
 ]
 
 #: a parameter with a component above this in a null direction is not identifiable
@@ -223,6 +224,75 @@ def grouped_sandwich(influence, groups):
     if H:
         np.add.at(v, idx, infl[live])
     return v.T @ v * (H / max(H - 1, 1)), H
+
+
+def _profiled_parts(Q, Jq):
+    """``(P Jq S^-1, W)``: q's columns of ``J (J^T J)^-1`` and an orthonormal basis of J's columns."""
+    Q = np.asarray(Q, float).reshape(len(Jq), -1)
+    Jq = np.asarray(Jq, float)
+    PJ = Jq - Q @ (Q.T @ Jq)
+    S = PJ.T @ PJ
+    W = np.column_stack([Q, np.linalg.qr(PJ)[0]])
+    return PJ @ np.linalg.inv(S), W
+
+
+def _cr2_adjusted(W_g, x_g):
+    """``(I - H_gg)^{-1/2} x_g`` with ``H_gg = W_g W_g^T`` (through W_g's thin SVD; columns of x_g adjusted alike)."""
+    U, s, _ = np.linalg.svd(W_g, full_matrices=False)
+    lam = np.clip(1.0 - s ** 2, 1e-12, None)
+    x2 = np.asarray(x_g, float).reshape(len(x_g), -1)
+    return (x2 + U @ ((lam ** -0.5 - 1.0)[:, None] * (U.T @ x2))).reshape(np.shape(x_g))
+
+
+def profiled_influence(Q, Jq, r, clusters, cr2: bool = False) -> np.ndarray:
+    """Each cluster's influence on the parameters of ``Jq``'s columns, the nuisance parameters profiled out.
+
+    The joint linear least squares of ``r`` on ``J = [X, Jq]``: ``Q`` (n, k) orthonormal columns spanning X
+    (the nuisance Jacobian), ``Jq`` (n, m), ``r`` (n,) the residuals at the optimum, ``clusters`` (n,) integer
+    codes 0..G-1. With ``P = I - Q Q^T`` and ``S = (P Jq)^T P Jq``, q's rows of ``(J^T J)^-1 J^T`` are
+    ``S^-1 (P Jq)^T`` (Frisch-Waugh-Lovell), so cluster g's influence is ``u_g = S^-1 (P Jq)_g^T a_g`` with
+
+    * ``cr2=False``: ``a_g = r_g``; ``G/(G-1) sum_g u_g u_g^T`` is q's block of the CR1 sandwich
+      (:func:`grouped_sandwich` of these rows, which also merges clusters by summing rows);
+    * ``cr2=True``: ``a_g = (I - H_gg)^{-1/2} r_g``, ``H = W W^T`` the joint hat matrix (``W = [Q, orth(P Jq)]``):
+      ``sum_g u_g u_g^T`` (no factor) is the Bell-McCaffrey CR2 covariance.
+
+    Returns U, shape (G, m); a cluster without samples has a row of zeros.
+    """
+    M, W = _profiled_parts(Q, Jq)
+    r = np.asarray(r, float)
+    clusters = np.asarray(clusters, int)
+    G = int(clusters.max()) + 1 if clusters.size else 0
+    U = np.zeros((G, M.shape[1]))
+    for g in range(G):
+        sel = clusters == g
+        if np.any(sel):
+            a = _cr2_adjusted(W[sel], r[sel]) if cr2 else r[sel]
+            U[g] = M[sel].T @ a
+    return U
+
+
+def bell_mccaffrey_dof(Q, Jq, clusters, c) -> float:
+    """Satterthwaite degrees of freedom of the CR2 variance of ``c^T q`` (Bell and McCaffrey 2002, working
+    model: independent errors of one variance), arguments as :func:`profiled_influence`.
+
+    With ``b_g = (I - H_gg)^{-1/2} (P Jq S^-1)_g c`` the matrix ``B_gh = delta_gh b_g^T b_g - (W_g^T b_g)^T
+    (W_h^T b_h)`` (the Gram matrix of the columns ``(I - H)_{.,g} b_g``) gives ``nu = tr(B)^2 / tr(B^2)``: G - 1
+    for a mean over G equal clusters, fewer when a few clusters carry the contrast.
+    """
+    M, W = _profiled_parts(Q, Jq)
+    mc = M @ np.asarray(c, float)
+    clusters = np.asarray(clusters, int)
+    groups = [g for g in range(int(clusters.max()) + 1) if np.any(clusters == g)]
+    bb, D = [], []
+    for g in groups:
+        sel = clusters == g
+        b = _cr2_adjusted(W[sel], mc[sel])
+        bb.append(float(b @ b))
+        D.append(W[sel].T @ b)
+    D = np.array(D)
+    B = np.diag(bb) - D @ D.T
+    return float(np.trace(B) ** 2 / np.sum(B * B))
 
 
 def cluster_sandwich(J, w, clusters, sv_scale, svd_rtol, influence=None):

@@ -26,7 +26,11 @@ Each interval kind of :data:`INTERVALS` is checked (:func:`covariances`): the
 AR(1)-inflated Fisher one (the close-the-loop report's ``ci95_model``), the
 cluster-by-run robust one (its ``ci95_run``), and the cluster-robust ones whose
 clusters are the runs of one operating condition (:data:`GROUPINGS`; ``level`` is
-the report's ``ci95``, decision 0031). Each row also holds the correlation of the paired runs' mean
+the report's ``ci95``, decision 0031). The drive frequency's response has the same kinds from its own run
+influences (theta profiled out) and two more, with the runs at one drive frequency as one cluster
+(``frequency``: Bell-McCaffrey CR2 with Satterthwaite degrees of freedom; ``frequency_cr1``: CR1 with t on
+clusters - 1; :func:`frequency_parameter`); the other targets' rows have them as NaN (one drive
+frequency). Each row also holds the correlation of the paired runs' mean
 residuals (:func:`paired_residual_correlation`), the evidence for the level
 at which errors are shared. Optionally the same family is also
 fitted on the same seed's data *without* the injection (``clean_fit``): its
@@ -45,18 +49,20 @@ from scipy import stats
 
 from ..data import measurements as dataio
 from ..errors import IdentificationError
-from ..ident.clusters import RUN_GROUPINGS, run_groups
+from ..ident.clusters import RUN_GROUPINGS, frequency_levels, run_groups
 from ..ident.estimator import PredictorIdentifier
 from ..ident.extra import ExtraForces
+from ..ident.frequency import ResponseLinearisation, coordinates
 from ..ident.uncertainty import grouped_sandwich
 from ..predictor import effects as fx
 from ..predictor.effects.direction import calibration_gradient as direction_gradient
 from ..predictor.effects.direction import delta_stderr
+from ..predictor.frequency import FrequencyResponse
 from ..predictor.setup import PredictorSetup
 from .world import World, world_data
 
 #: the interval kinds of every row (:func:`covariances`)
-INTERVALS = ("ar1", "robust", "condition", "mirror", "level")
+INTERVALS = ("ar1", "robust", "condition", "mirror", "level", "frequency", "frequency_cr1")
 
 
 @dataclass(frozen=True)
@@ -227,33 +233,73 @@ def read_parameter(target: RecoveryTarget, est, h, train: dataio.Measurements, m
     ``ci95_model``, ``"robust"`` its run-robust ``ci95_run``, ``"level"`` its ``ci95``).
     """
     if target.mapping == "frequency":
-        return frequency_parameter(est, target.parameter)
+        return frequency_parameter(est, target.parameter, train)
     covs, dof = covariances(est, train)
     if target.mapping == "copy":
         j = len(est.param_names_all_) - len(h.names) + list(h.names).index(target.parameter)
         value = float(est.extra_params_[target.parameter])
         se = {k: float(np.sqrt(c[j, j])) for k, c in covs.items()}
-        return {"estimate": value, **_intervals(value, se, dof)}
-    phi = np.array([est.extra_params_[n] for n in h.names], float)
-    grad, value = calibration_gradient(est, h, phi, train, mp)
-    se = {k: delta_stderr(grad, _phi_block(est, c)) for k, c in covs.items()}
-    return {"estimate": value, **_intervals(value, se, dof)}
+    else:
+        phi = np.array([est.extra_params_[n] for n in h.names], float)
+        grad, value = calibration_gradient(est, h, phi, train, mp)
+        se = {k: delta_stderr(grad, _phi_block(est, c)) for k, c in covs.items()}
+    out = {"estimate": value, **_intervals(value, se, dof)}
+    return {**out, **{k: (float("nan"),) * 3 for k in INTERVALS if k not in out}}   # one drive frequency
 
 
-def frequency_parameter(est, name: str) -> dict:
-    """The identified frequency response's ``name`` with its interval: ``{"estimate", kind: (lo, hi, se)}``.
+def frequency_parameter(est, name: str, train: dataio.Measurements | None = None) -> dict:
+    """The identified frequency response's ``name`` with its intervals: ``{"estimate", kind: (lo, hi, se)}``.
 
-    Its only standard error is the profile likelihood's curvature (model-based,
-    :func:`l1b2.ident.frequency.fit_frequency_response`), reported as ``"ar1"``
-    with the normal quantile; no cluster-robust one exists for it (NaN).
+    ``"ar1"``: the joint Fisher standard error of the fit's record
+    (:func:`l1b2.ident.frequency.fit_frequency_response`) with the normal
+    quantile. With ``train`` (the fit's data), the cluster-robust ones of the
+    response's run influences (theta profiled out,
+    :meth:`l1b2.ident.frequency.ResponseLinearisation.cluster_influence`):
+    ``"robust"`` by run and each of :data:`GROUPINGS`, CR1 with t on
+    clusters - 1 as :func:`covariances`; ``"frequency"``: the runs at one
+    drive frequency as one cluster (:func:`l1b2.ident.clusters.frequency_levels`),
+    Bell-McCaffrey CR2 with t on its Satterthwaite degrees of freedom;
+    ``"frequency_cr1"``: the same clusters, CR1 with t on clusters - 1. A kind
+    not computed (no ``train``, fewer than two clusters) is NaN.
     """
     rec = est.result_.frequency or {}
     if rec.get("status") != "estimated":
         raise IdentificationError(f"drive frequency: the response was not estimated ({rec.get('reason', 'no record')})")
     value = float(rec["response"][name])
-    se = float((rec.get("stderr") or {}).get(name, float("nan")))
-    out = {"estimate": value, **_intervals(value, {"ar1": se}, {"ar1": float("inf")})}
+    se = {"ar1": float((rec.get("stderr") or {}).get(name, float("nan")))}
+    dof = {"ar1": float("inf")}
+    if train is not None:
+        more_se, more_dof = _frequency_robust(est, name, train)
+        se.update(more_se)
+        dof.update(more_dof)
+    out = {"estimate": value, **_intervals(value, se, dof)}
     return {**out, **{k: (float("nan"),) * 3 for k in INTERVALS if k not in out}}
+
+
+def _codes(labels) -> np.ndarray:
+    index: dict = {}
+    return np.array([index.setdefault(x, len(index)) for x in labels], int)
+
+
+def _frequency_robust(est, name: str, train: dataio.Measurements) -> tuple[dict, dict]:
+    """``({kind: se}, {kind: dof})`` of :func:`frequency_parameter`'s cluster-robust kinds."""
+    resp = FrequencyResponse.from_dict(est.result_.frequency["response"])
+    lin = ResponseLinearisation(est.result_, train.df, np.array(train.mask), resp.f_ref_Hz, coordinates(resp))
+    j = ["f_b0_Hz", "zeta_b", "f_l0_Hz", "contact_V"].index(name)
+    rows = lin.cluster_influence()[:, j:j + 1]
+    groupings = {"robust": est.runs_, **{k: run_conditions(est, train, k) for k in GROUPINGS}}
+    se, dof = {}, {}
+    for kind, labels in groupings.items():
+        cov, n = grouped_sandwich(rows, labels)
+        if n >= 2:
+            se[kind], dof[kind] = float(np.sqrt(cov[0, 0])), float(n - 1)
+    levels = _codes(frequency_levels(train.df, est.runs_))
+    if levels.max() >= 1:
+        cov, n = grouped_sandwich(rows, levels)
+        se["frequency_cr1"], dof["frequency_cr1"] = float(np.sqrt(cov[0, 0])), float(n - 1)
+        u = lin.cluster_influence(levels, cr2=True)[:, j]
+        se["frequency"], dof["frequency"] = float(np.sqrt(u @ u)), lin.bell_mccaffrey_dof(levels, j)
+    return se, dof
 
 
 def calibration_gradient(est, h, phi: np.ndarray, train: dataio.Measurements, mp,
@@ -296,6 +342,8 @@ def recover_one(injection: str, seed: int, world: World = World(), settings: Fit
         row.update({f"se_{kind}": se, f"lo_{kind}": lo, f"hi_{kind}": hi,
                     f"covered_{kind}": bool(lo <= truth_value <= hi) if np.isfinite(se) else None})
     row["wrong_sign"] = bool(got["estimate"] * truth_value < 0)
+    if target.mapping == "frequency":
+        row["frequency_levels"] = len(set(frequency_levels(train.df, est.runs_)))
     row.update({f"pair_corr_{k}": v for k, v in paired_residual_correlation(est, train).items()})
     if clean_fit:
         clean, _, _ = world_data(world, seed)   # the frequency target: the world's own B2 resonance
