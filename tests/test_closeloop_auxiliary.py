@@ -67,7 +67,7 @@ def test_flags_labels_and_gaps_become_numeric_channels_and_the_rest_is_listed():
     assert by["empty"]["action"] == "unusable" and "empty" not in tr2.columns
     # even samples read 40 + r; odd ones between two readings 2 ms apart: their mean; the last held
     np.testing.assert_allclose(tr2["humidity"], np.repeat(40.0 + np.arange(6), 5))
-    assert by["humidity"]["filled_samples"] == 12 and by["humidity"]["first_row"] == 1
+    assert by["humidity"]["filled_samples"] == 12 and by["humidity"]["first_row"] == 2   # 1-based data row
     np.testing.assert_allclose(te2["humidity"], np.mean(40.0 + np.arange(6)))   # no TEST reading: TRAIN's mean
     assert aux.label_columns(tr2) == ("fixture",) and aux.label_columns(te2) == ("fixture",)
     assert tr["humidity"].isna().sum() == 12 and tr["flag"].dtype == bool   # the caller's frames are not changed

@@ -57,8 +57,10 @@ def _required() -> set:
 
 
 def _first_row(bad: np.ndarray) -> int | None:
+    """The first flagged sample as a 1-based data row of the file (header excluded, as in
+    :class:`l1b2.errors.DataFormatError`), or None."""
     idx = np.flatnonzero(bad)
-    return int(idx[0]) if idx.size else None
+    return int(idx[0]) + 1 if idx.size else None
 
 
 def fill_gaps(values, time_s, run) -> tuple[np.ndarray, list]:
@@ -175,8 +177,8 @@ def with_usable_channels(train: pd.DataFrame, test: pd.DataFrame | None = None, 
     """``(train, test, record)``: copies of the frames in which every auxiliary column (beyond the required ones,
     the speed and the measured responses ``response_columns``) is numeric and finite, or dropped, by the rules of
     the module docstring; ``record``: one dict per column touched ``{"channel", "action" ("flag", "filled",
-    "label", "unusable"), "kind" (for usable ones), "note", "first_row" (0-based row of TRAIN), ...}``. The frames
-    are returned unchanged (not copied) when no column needs a change."""
+    "label", "unusable"), "kind" (for usable ones), "note", "first_row" (1-based data row of TRAIN's file),
+    ...}``. The frames are returned unchanged (not copied) when no column needs a change."""
     skip = _required() | set(response_columns)
 
     def usable(df, name):
