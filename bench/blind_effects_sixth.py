@@ -9,13 +9,13 @@ speed noise, 2 % run-to-run contact scatter). Each kind draws from one random st
 
 * ``velocity_clip`` -- a data-quality effect of the recorded speed itself. The speed column comes from a velocity
   decoder whose analogue output is read by an ADC of +-10 V; the operator chose a scale factor that puts the
-  rails at +-v_rail (drawn in 0.24-0.28 m/s, a decoder range picked for the motor's datasheet speed), so the
+  rails at +-v_rail (drawn in 0.19-0.22 m/s, a decoder range picked below the fastest runs' speed), so the
   recorded speed is ``clip(v + noise, -v_rail, v_rail)``: the fastest runs read flat at the rail (the position,
   from the encoder, is not clipped).
 * ``holder_damping_nan`` -- logged auxiliary ``holder_temp_C`` per sample, with gaps written as NaN. The stator
   sits in a polymer holder that takes part of each mode's strain energy; the polymer's loss factor rises with its
-  temperature over room temperatures, so both modes' damping ratios scale as ``zeta (1 + beta (T - 25 degC))``
-  (beta drawn in 0.025-0.035 /K). The holder's temperature differs from run to run (the enclosure's air cycles;
+  temperature near its glass transition (a polyurethane holder with its transition at room temperature), so
+  both modes' damping ratios scale as ``zeta (1 + beta (T - 25 degC))`` (beta drawn in 0.06-0.08 /K). The holder's temperature differs from run to run (the enclosure's air cycles;
   drawn uniform in 20-32 degC per run) and is logged by a thermocouple (0.05 K noise, 0.01 K resolution) whose
   amplifier flags an open circuit now and then: in a run, with probability 0.3, a burst of 5-40 samples is written
   as NaN (an empty cell in the CSV).
@@ -60,9 +60,9 @@ def draw(kind: str, seed: int, n_runs: int) -> dict:
     """The kind's parameters and per-run values (its own random stream of ``seed``)."""
     rng = np.random.default_rng([seed, 91, KINDS.index(kind) if kind in KINDS else 99])
     if kind == "velocity_clip":
-        return {"v_rail_m_s": float(rng.uniform(0.24, 0.28))}
+        return {"v_rail_m_s": float(rng.uniform(0.19, 0.22))}
     if kind == "holder_damping_nan":
-        return {"beta_per_K": float(rng.uniform(0.025, 0.035)), "T_C": rng.uniform(20.0, 32.0, n_runs),
+        return {"beta_per_K": float(rng.uniform(0.06, 0.08)), "T_C": rng.uniform(20.0, 32.0, n_runs),
                 "gap": rng.uniform(0.0, 1.0, n_runs) < 0.3, "gap_len": rng.integers(5, 41, n_runs),
                 "gap_at": rng.uniform(0.0, 1.0, n_runs)}
     if kind == "heatsink_decoy":

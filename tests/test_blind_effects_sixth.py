@@ -63,9 +63,9 @@ def test_deaging_share_is_an_average_of_the_previous_runs_only(audit):
 def test_draws_lie_in_their_ranges(audit):
     for seed in (1, 2, 3):
         p = audit.draw("velocity_clip", seed, 72)
-        assert 0.24 <= p["v_rail_m_s"] <= 0.28
+        assert 0.19 <= p["v_rail_m_s"] <= 0.22
         p = audit.draw("holder_damping_nan", seed, 72)
-        assert 0.025 <= p["beta_per_K"] <= 0.035 and np.all((p["T_C"] >= 20) & (p["T_C"] <= 32))
+        assert 0.06 <= p["beta_per_K"] <= 0.08 and np.all((p["T_C"] >= 20) & (p["T_C"] <= 32))
         assert np.all((p["gap_len"] >= 5) & (p["gap_len"] <= 40)) and 0 < p["gap"].sum() < 72
         p = audit.draw("heatsink_decoy", seed, 72)
         assert 3.0 <= p["tau_s"] <= 6.0
