@@ -15,10 +15,10 @@ speed noise, 2 % run-to-run contact scatter). Each kind draws from one random st
 * ``holder_damping_nan`` -- logged auxiliary ``holder_temp_C`` per sample, with gaps written as NaN. The stator
   sits in a polymer holder that takes part of each mode's strain energy; the polymer's loss factor rises with its
   temperature near its glass transition (a polyurethane holder with its transition at room temperature), so
-  both modes' damping ratios scale as ``zeta (1 + beta (T - 25 degC))`` (beta drawn in 0.06-0.08 /K). The holder's temperature differs from run to run (the enclosure's air cycles;
-  drawn uniform in 20-32 degC per run) and is logged by a thermocouple (0.05 K noise, 0.01 K resolution) whose
-  amplifier flags an open circuit now and then: in a run, with probability 0.3, a burst of 5-40 samples is written
-  as NaN (an empty cell in the CSV).
+  both modes' damping ratios scale as ``zeta (1 + beta (T - 25 degC))`` (beta drawn in 0.06-0.08 /K). The
+  holder's temperature differs from run to run (the enclosure's air cycles; drawn uniform in 20-32 degC per run)
+  and is logged by a thermocouple (0.05 K noise, 0.01 K resolution) whose amplifier flags an open circuit now and
+  then: in a run, with probability 0.3, a burst of 5-40 samples is written as NaN (an empty cell in the CSV).
 * ``heatsink_decoy`` -- a decoy, no effect on the motor: logged ``amp_heatsink_C`` per sample, the drive
   amplifier's heat-sink temperature. The amplifier's output is regulated, so its temperature does not reach the
   motor; it heats during each run toward ``25 + 12 (V0 / 324 V)^2`` degC and cools in the pauses toward 27 degC
