@@ -1,0 +1,72 @@
+#!/usr/bin/env python
+"""Probes of the sixth blind audit (decision 0089): the close loop on a changed copy of a case's data.
+
+Modes, each on a copy of ``<cache>/<KIND>_<SEED>`` (``bench/blind_effects_sixth.py`` or ``bench/blind_effects.py``
+makes it first):
+
+* ``fill`` -- the ``holder_temp_C`` column's NaN gaps filled by linear interpolation within each run (held at the
+  run's ends): is the gap the only reason the channel is not traced?
+* ``derived`` -- the ``speed_m_s`` column removed, so the loader derives the speed from the position: the loop on the
+  same motion without the clipped speed channel.
+* ``vcopy`` -- the voltage also logged as an auxiliary column ``drive_setting_V``, a run setting the loop lags
+  (``l1b2.closeloop.lags``): would a lag of the voltage be traced?
+
+Usage: python bench/blind_effects_sixth_probe.py KIND SEED MODE [--out DIR]. Prints the row of
+``bench/blind_effects.py`` (its ``loop_row``), then the evidence of the probed column (and of its lags), one JSON
+line each.
+"""
+import argparse
+import json
+import shutil
+import sys
+import tempfile
+from pathlib import Path
+
+import pandas as pd
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import blind_effects as be  # noqa: E402
+import blind_effects_sixth as sixth  # noqa: E402
+
+COLUMN = {"fill": "holder_temp_C", "vcopy": "drive_setting_V"}
+
+
+def changed(df: pd.DataFrame, mode: str) -> pd.DataFrame:
+    """The frame of one split as the probe ``mode`` changes it."""
+    out = df.copy()
+    if mode == "fill":
+        out["holder_temp_C"] = out.groupby("run")["holder_temp_C"].transform(
+            lambda s: s.interpolate(limit_direction="both"))
+    elif mode == "derived":
+        out = out.drop(columns=["speed_m_s"])
+    elif mode == "vcopy":
+        out["drive_setting_V"] = out["voltage_V"]
+    return out
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("kind", choices=sixth.KINDS + ("clean",))
+    ap.add_argument("seed", type=int)
+    ap.add_argument("mode", choices=("fill", "derived", "vcopy"))
+    ap.add_argument("--cache", default=be.default_cache())
+    ap.add_argument("--out", default="", help="the changed copy's folder (default: a temporary one)")
+    args = ap.parse_args(argv)
+    src = be.data_dir(args.kind, args.seed, Path(args.cache), None if args.kind == "clean" else sixth.experiment)
+    dst = Path(args.out or tempfile.mkdtemp(prefix="l1b2_probe_"))
+    shutil.rmtree(dst, ignore_errors=True)
+    shutil.copytree(src, dst)
+    for part in ("train", "test"):
+        changed(pd.read_csv(src / f"{part}.csv"), args.mode).to_csv(dst / f"{part}.csv", index=False)
+    row, res = be.loop_row(f"{args.kind}({args.mode})", args.seed, dst)
+    print(json.dumps(row))
+    col = COLUMN.get(args.mode)
+    keys = ("channel", "significant", "p_value", "cv_gain", "dominated_by")
+    for c in res.diagnosis.get("channels_considered") or []:
+        if col and str(c.get("channel", "")).startswith(col):
+            print(json.dumps({k: c.get(k) for k in keys}
+                             | {"run_level": [{k: e.get(k) for k in ("signal",) + keys[1:]}
+                                              for e in c.get("run_level") or []]}, default=str))
+
+if __name__ == "__main__":
+    main()
