@@ -83,3 +83,21 @@ def test_the_session_computed_once_and_passed_gives_the_same_frames_and_records(
     assert calls == [] and a_ev == b_ev and a_lag == b_lag and len(a_ev) == len(a_lag) == 1
     pd.testing.assert_frame_equal(a_tr, b_tr)
     pd.testing.assert_frame_equal(a_te, b_te)
+
+
+def test_the_drive_amplitude_is_lagged_when_the_plan_changes_it_from_run_to_run_and_stays_an_input():
+    from l1b2.closeloop.candidates import channels_of
+    from l1b2.closeloop.lags import TAU_RUNS, lowpass, run_settings, with_lagged_channels
+    v = [220.0, 324.0, 255.0, 324.0, 220.0, 290.0, 255.0, 220.0]        # 7 changes in 8 runs: a run setting
+    df = _frame([0.0] * 8).drop(columns=["heater", "stepped"])
+    df["voltage_V"] = np.repeat(v, 3)
+    assert run_settings(df) == ["voltage_V"]
+    tr, _, rec = with_lagged_channels(df, None)
+    assert rec[0]["channel"] == "voltage_V"
+    for n, tau in zip(TAU_RUNS, rec[0]["tau_s"]):
+        np.testing.assert_allclose(tr[f"voltage_V_lag{n}r"], lowpass(df["time_s"], df["voltage_V"], tau))
+    names = [c["name"] for c in channels_of(tr)]
+    assert "voltage_V" not in names and {"voltage_V_lag3r", "voltage_V_lag10r"} <= set(names)
+    blocks = df.copy()
+    blocks["voltage_V"] = np.repeat([220.0] * 4 + [324.0] * 4, 3)       # one change in 8 runs: not a run setting
+    assert run_settings(blocks) == []

@@ -19,6 +19,12 @@ A column is a run setting (:func:`run_settings`) when it is a logged candidate c
 changes between consecutive runs more often than a step channel may (more than once per
 :data:`l1b2.closeloop.events.MIN_BLOCK_RUNS` runs on average; a step channel gets its event clock instead). A
 channel that varies within runs is not lagged: its sensor already samples the path along the stroke.
+
+The plan's own drive amplitude is such a setting too (:data:`STORED_INPUTS`): the motor stores what its drive did in
+the previous runs (the stator's heat, a piezoceramic's de-ageing under a strong field, a film worked by fast runs), so
+its effect follows the voltage's low-pass while the current run's voltage is already a model input. When the
+plan's ``voltage_V`` is a run setting by the rule above, its lags ``voltage_V_lag<n>r`` are derived like a logged
+column's; the voltage itself stays an input, never a channel.
 """
 
 from __future__ import annotations
@@ -32,6 +38,8 @@ from .events import MIN_BLOCK_RUNS, Session, event_times, run_table, session
 
 #: the stores' time constants, in the session's median run period
 TAU_RUNS = (3, 10)
+#: the model inputs whose lags are derived when they are run settings (the drive's history: module docstring)
+STORED_INPUTS = (dataio.VOLTAGE,)
 
 
 def suffix(n) -> str:
@@ -62,10 +70,15 @@ def is_run_setting(tab: pd.DataFrame, within_run: bool) -> bool:
 
 
 def run_settings(df: pd.DataFrame, response_columns=None) -> list[str]:
-    """The run settings of a TRAIN frame (module docstring), in column order."""
-    return [ch["name"] for ch in channels_of(df, response_columns)
-            if ch["kind"] == "logged" and not any(ch["name"] + suffix(n) in df.columns for n in TAU_RUNS)
-            and is_run_setting(run_table([df], ch["name"]), ch["within_run"])]
+    """The run settings of a TRAIN frame (module docstring): the inputs of :data:`STORED_INPUTS` that are run
+    settings, then the logged channels in column order."""
+    def within(name):
+        return bool((df.groupby(dataio.RUN, sort=False)[name].agg(np.ptp) > 0).any())
+    inputs = [c for c in STORED_INPUTS if c in df.columns and is_run_setting(run_table([df], c), within(c))]
+    return [c for c in inputs if not any(c + suffix(n) in df.columns for n in TAU_RUNS)] + [
+        ch["name"] for ch in channels_of(df, response_columns)
+        if ch["kind"] == "logged" and not any(ch["name"] + suffix(n) in df.columns for n in TAU_RUNS)
+        and is_run_setting(run_table([df], ch["name"]), ch["within_run"])]
 
 
 def run_period(tab: pd.DataFrame) -> float:
