@@ -88,6 +88,15 @@ def fit_gain(df: pd.DataFrame, mask, v_model, s_range, order: int = STROKE_GAIN_
                            tuple(float(np.sqrt(max(c, 0.0))) for c in np.diag(cov)))
 
 
+def gain_columns(df: pd.DataFrame, v_pred, order: int = STROKE_GAIN_ORDER) -> np.ndarray:
+    """``(n, order + 1)``: the recorded speed's response to the gain's coefficients in drive coordinates,
+    ``d P_j(x) v_pred`` (:meth:`~l1b2.predictor.effects.sensor.SpeedSensorGain.response`; ``x`` scaled to
+    ``df``'s position range, ``d`` the direction, ``v_pred`` [m/s] the model's free run, data convention)."""
+    zero = SpeedSensorGain(*position_range(df), (0.0,) * (order + 1))
+    return zero.response(df[dataio.POSITION].to_numpy(float),
+                         df[dataio.DIRECTION].to_numpy(float) * np.asarray(v_pred, float))
+
+
 def screen(df: pd.DataFrame, mask, v_pred, params, m_s: float, folds, order: int = STROKE_GAIN_ORDER) -> dict:
     """Cross-validated evidence of the gain against the baseline ``params`` (free run ``v_pred`` [m/s]).
 
@@ -102,7 +111,7 @@ def screen(df: pd.DataFrame, mask, v_pred, params, m_s: float, folds, order: int
     y = (d * (df[dataio.SPEED].to_numpy(float) - v_pred))[idx]
     with np.errstate(over="ignore", invalid="ignore"):
         N = finite_columns(linear_response(params, df, m_s, nuisance_forces(params, df, v_pred), v_pred=v_pred)[idx])
-    S = stroke_basis(df[dataio.POSITION].to_numpy(float)[idx], *position_range(df), order) * (d * v_pred)[idx, None]
+    S = gain_columns(df, v_pred, order)[idx]
     runs = df[dataio.RUN].to_numpy()[idx]
     gain, per_run = FoldSolver(y, N, runs, folds).gain(S)
     return {"cv_gain": float(gain), "p_value": float(res.wilcoxon_greater(per_run)),
