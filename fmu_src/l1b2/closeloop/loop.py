@@ -214,9 +214,10 @@ class CloseLoop(EstimatorSettings):
                                             ("b1", it.output_filter.b1))})
         if it.speed_gain is not None:
             g = it.speed_gain.gain
-            ext_params.update({n: {"value": c, "stderr": se, "ci95": None if se is None else [c - 1.96 * se,
-                                                                                           c + 1.96 * se],
-                                   "unit": "1"} for n, c, se in zip(g.names(), g.coef, g.stderr or (None,) * len(g.coef))})
+            ses = g.stderr or (None,) * len(g.coef)
+            ext_params.update({n: {"value": c, "stderr": se, "unit": "1",
+                                   "ci95": None if se is None else [c - 1.96 * se, c + 1.96 * se]}
+                               for n, c, se in zip(g.names(), g.coef, ses)})
         calibrated, why = calibrated_model(start, ext, it.effects, it.output_filter,
                                            {**_data_summary(train, test), "operating_points": _operating_points(dtr)},
                                            levels, None if it.speed_gain is None else it.speed_gain.gain)
@@ -468,13 +469,13 @@ class CloseLoop(EstimatorSettings):
         refitted behind the gain lowers the cross-validated free-run sum of squares of the recorded speed by at
         least ``min_cv_gain``, in more than half of the folds (the rule of every added effect that is not
         structural, :func:`~l1b2.closeloop.acceptance.accepts`; the gain is a missing effect of the measurement,
-        not an approximation of Eq. 29). ``rec["stroke_gain"]``
-        holds the evidence and the decision. Off when ``self.sensor_gain`` is False.
+        not an approximation of Eq. 29). ``rec["stroke_speed_gain"]``
+        holds the evidence and the decision. Off when ``self.stroke_speed_gain`` is False.
         """
-        if not self.sensor_gain:
+        if not self.stroke_speed_gain:
             return dtr
         v_base = it.model.predict_free_run(dtr)
-        out = rec["stroke_gain"] = {"effect": sensor.STROKE_GAIN, "accepted": False,
+        out = rec["stroke_speed_gain"] = {"effect": sensor.STROKE_GAIN, "accepted": False,
                                     **sensor.screen(dtr, mask, v_base, it.model.params_, m_s, folds)}
         if not (out["p_value"] < self.alpha and out["cv_gain"] >= self.min_gain):
             return dtr
