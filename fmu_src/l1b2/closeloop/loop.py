@@ -470,7 +470,7 @@ class CloseLoop(EstimatorSettings):
         least ``min_cv_gain``, in more than half of the folds (the rule of every added effect that is not
         structural, :func:`~l1b2.closeloop.acceptance.accepts`; the gain is a missing effect of the measurement,
         not an approximation of Eq. 29). ``rec["stroke_speed_gain"]``
-        holds the evidence and the decision. Off when ``self.stroke_speed_gain`` is False.
+        holds the evidence and the decision. Runs only when ``self.stroke_speed_gain`` is True (default off).
         """
         if not self.stroke_speed_gain:
             return dtr

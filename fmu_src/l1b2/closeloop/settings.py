@@ -79,6 +79,7 @@ class LoopSettings:
     stroke_speed_gain : bool
         When the speed channel keeps no filter, test the speed sensor's gain along the stroke (a measurement
         effect, :mod:`l1b2.closeloop.sensor`) before the rounds, and keep it when the cross-validated rule says so.
+        Off by default: the stage is decided against the baseline alone, before the force candidates compete.
     run_level : bool
         Each round, estimate every run's own deviation from the current model (a drive-force gain and an
         offset, shrunk as random effects) and offer the run-level signal that best explains them
@@ -132,7 +133,7 @@ class LoopSettings:
     client: Any = field(default=None, compare=False)
     baseline: str = "eq29"
     run_level: bool = True
-    stroke_speed_gain: bool = True
+    stroke_speed_gain: bool = False
     response_columns: tuple | None = None
     clock_folds: str = "blocks"
     fold_unit: str = "run"
