@@ -154,6 +154,13 @@ def test_a_kept_gain_puts_position_first_in_the_trace():
     assert order_traced((), False, ["voltage"]) == []
 
 
+def test_the_stage_is_off_by_default():
+    from l1b2.closeloop.loop import CloseLoop
+    df, rec = frame(n_runs=2, n=10), {}
+    assert CloseLoop()._stroke_gain(None, rec, df, None, np.ones(len(df), bool), 0.1, []) is df
+    assert rec == {}
+
+
 def test_stroke_basis_is_constant_on_an_empty_range():
     B = stroke_basis(np.array([0.0, 0.01]), 0.01, 0.01, 2)
     np.testing.assert_allclose(B, [[1.0, 0.0, -0.5], [1.0, 0.0, -0.5]])
