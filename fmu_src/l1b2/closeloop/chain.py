@@ -47,6 +47,10 @@ class OutputFilter:
         starts = sorted(sl.start for _, sl in dataio.run_slices(df[dataio.RUN]))
         return apply_output_filter({"a": self.a, "b0": self.b0, "b1": self.b1}, u, starts)
 
+    def frame(self, df: pd.DataFrame) -> pd.DataFrame:
+        """The frame the physics behind the filter is fitted on and predicts along (:func:`with_position_speed`)."""
+        return with_position_speed(df)
+
     def to_dict(self) -> dict:
         dc = (self.b0 + self.b1) / (1.0 - self.a) if abs(1.0 - self.a) > 1e-9 else float("nan")
         return {"a": self.a, "b0": self.b0, "b1": self.b1, "dc_gain": dc,

@@ -11,11 +11,13 @@ from .selection import Score, best_per_family, position_basis
 __all__ = ["order_traced", "channels_considered", "position_share", "with_position_share", "with_auxiliary"]
 
 
-def order_traced(effects, speed_filter: bool, residual_trace, evidence=(), speed_evidence: bool = False) -> list[str]:
+def order_traced(effects, speed_filter: bool, residual_trace, evidence=(), speed_evidence: bool = False,
+                 measured=()) -> list[str]:
     """``diagnosis.traced_to``: the regressors with significant evidence, strongest first.
 
     ``speed`` first if the speed channel's filter was kept (the measurement
-    chain is settled before any physical effect); the added effects in the
+    chain is settled before any physical effect), then ``measured``, the regressors of the measurement chain's
+    other kept stage (``position`` for the speed sensor's gain along the stroke); the added effects in the
     order they were chosen (each round takes the candidate with the largest
     cross-validated gain against the current model, so earlier is stronger);
     then the evidence not acted on: ``speed`` if ``speed_evidence`` (the
@@ -29,9 +31,10 @@ def order_traced(effects, speed_filter: bool, residual_trace, evidence=(), speed
     regressors should point at what the data hold beyond it. Then the rest of
     the baseline residual's regressor trace. Empty when nothing was added.
     """
-    if not effects and not speed_filter:
+    if not effects and not speed_filter and not measured:
         return []
     traced: list[str] = ["speed"] if speed_filter else []
+    traced.extend(r for r in measured if r not in traced)
 
     def take(cands):
         for c in cands:

@@ -87,6 +87,8 @@ from .candidates import Context, baseline_damping, channels_of, damping_floors, 
 from .settings import LoopSettings, keyword_signature
 from .stages import StageClock
 from .auxiliary import check_test_columns, with_usable_channels
+from . import sensor
+from .sensor import GainChain
 from .acceptance import (Directions, EffectSet, RefitCV, RefitSettings, Validated, accepts, added_columns,
                          chain_cv_errors, collinear, cv_errors, fold_start_phi, materiality, named_reading, refit,
                          refit_schemes, screen_folds, stratified_folds, time_dependent, validated)
@@ -187,8 +189,8 @@ class CloseLoop(EstimatorSettings):
         say("measurement chain: speed column against the position's derivative")
         chain_rec, fit_tr = self._chain(it, dtr, dte, mask_tr, m_s, folds)
         start = it.model     # the physics model the rounds extend (fitted on fit_tr)
-        wrap = ((lambda mdl: ChainModel(mdl, it.output_filter)) if it.output_filter is not None
-                else (lambda mdl: mdl))
+        stage = it.output_filter if it.output_filter is not None else it.speed_gain
+        wrap = (lambda mdl: ChainModel(mdl, stage)) if stage is not None else (lambda mdl: mdl)
 
         say("residual analysis on TRAIN")
         analysis = analyse_residuals(fit_tr, start.predict_free_run(fit_tr), mask_tr, alpha=self.alpha,
@@ -206,7 +208,7 @@ class CloseLoop(EstimatorSettings):
                       folds)
         it.model = wrap(it.model)
 
-        ext = it.model if (it.effects.candidates or it.output_filter is not None) else None
+        ext = it.model if (it.effects.candidates or stage is not None) else None
         v_te_ext = ext.predict_free_run(dte) if (ext is not None and dte is not None) else None
         extended = it.rounds[-1]["metrics"] if ext is not None else None
         levels = train_levels(ext, fit_tr) if ext is not None else None    # the reported interval's clusters
@@ -215,10 +217,16 @@ class CloseLoop(EstimatorSettings):
             ext_params.update({f"speed_filter_{k}": {"value": v, "stderr": None, "ci95": None, "unit": "1"}
                                for k, v in (("a", it.output_filter.a), ("b0", it.output_filter.b0),
                                             ("b1", it.output_filter.b1))})
+        if it.speed_gain is not None:
+            g = it.speed_gain.gain
+            ses = g.stderr or (None,) * len(g.coef)
+            ext_params.update({n: {"value": c, "stderr": se, "unit": "1",
+                                   "ci95": None if se is None else [c - 1.96 * se, c + 1.96 * se]}
+                               for n, c, se in zip(g.names(), g.coef, ses)})
         calibrated, why = calibrated_model(start, ext, it.effects, it.output_filter,
                                            {**_data_summary(train, test), "operating_points": _operating_points(dtr),
                                             **({"auxiliary_columns": aux_rec} if aux_rec else {})},
-                                           levels)
+                                           levels, None if it.speed_gain is None else it.speed_gain.gain)
         first = it.first_scores or []
         chosen = it.chosen
         diagnosis = {**self._diagnosis(it, first, analysis, ext_params, chain_rec), "auxiliary_columns": aux_rec,
@@ -434,7 +442,7 @@ class CloseLoop(EstimatorSettings):
         if "filter" in ch:
             rec["filter"] = ch["filter"].to_dict()
         if not ch["accepted"]:
-            return rec, dtr
+            return rec, self._stroke_gain(it, rec, dtr, dte, mask, m_s, folds)
         ptr = chain.with_position_speed(dtr)
         filt = ChainModel(self._identify(ptr, m_s, mask), ch["filter"])
         v = dtr[dataio.SPEED].to_numpy(float)[mask]
@@ -452,13 +460,52 @@ class CloseLoop(EstimatorSettings):
         if not gain > 0:
             rec["accepted"] = False
             rec["refused_by_harm_guard"] = True  # found by the channel's test, not applied
-            return rec, dtr
+            return rec, self._stroke_gain(it, rec, dtr, dte, mask, m_s, folds)
         it.model, it.output_filter = filt.model, ch["filter"]
         it.rounds.append({"round": len(it.rounds), "added": "speed_channel_filter", "effect": "speed_channel_filter",
                           "regressors": ["speed"], "cv": {"cv_gain": ch["cv_gain"], "cv_free_run_gain": gain,
                                                           "train_free_run_gain": rec["train_free_run_gain"]},
                           "metrics": _metrics(filt, dtr, dte, train_free_run=fr1)})
         return rec, ptr
+
+    def _stroke_gain(self, it: _Iteration, rec: dict, dtr, dte, mask, m_s, folds):
+        """The speed sensor's gain along the stroke (:mod:`l1b2.closeloop.sensor`), when the speed channel kept no
+        filter: the TRAIN frame the rounds fit (the recorded speed over the gain when it is kept, else ``dtr``).
+
+        Screened at the loop's ``alpha`` against the baseline with its nuisance responses (one pre-declared
+        hypothesis, shortlisted at the screen's smallest gain as every candidate is); kept when the physics
+        refitted behind the gain lowers the cross-validated free-run sum of squares of the recorded speed by at
+        least ``min_cv_gain``, in more than half of the folds (the rule of every added effect that is not
+        structural, :func:`~l1b2.closeloop.acceptance.accepts`; the gain is a missing effect of the measurement,
+        not an approximation of Eq. 29). ``rec["stroke_speed_gain"]``
+        holds the evidence and the decision. Runs only when ``self.stroke_speed_gain`` is True (default off).
+        """
+        if not self.stroke_speed_gain:
+            return dtr
+        v_base = it.model.predict_free_run(dtr)
+        out = rec["stroke_speed_gain"] = {"effect": sensor.STROKE_GAIN, "accepted": False,
+                                    **sensor.screen(dtr, mask, v_base, it.model.params_, m_s, folds)}
+        if not (out["p_value"] < self.alpha and out["cv_gain"] >= self.min_gain):
+            return dtr
+        cv = sensor.gain_cv_errors(dtr, mask, m_s, folds, it.model.params_, self.refit_settings(), v_base)
+        ssm = max(float(cv["ss_meas"].sum()), 1e-300)
+        sse0, sse1 = float(cv["sse_baseline"].sum()), float(cv["sse_gain"].sum())
+        gain = 1 - sse1 / sse0 if cv["failed"] == 0 and sse0 > 0 else 0.0
+        out.update(cv_free_run_gain=gain, cv_free_run_nrmse_baseline=float(np.sqrt(sse0 / ssm)),
+                   cv_free_run_nrmse_gain=float(np.sqrt(sse1 / ssm)), cv_folds_improved=cv["folds_improved"])
+        if not (gain >= self.min_cv_gain and cv["folds_improved"] > len(folds) / 2):
+            return dtr
+        s_range = sensor.position_range(dtr)
+        g0 = sensor.fit_gain(dtr, mask, v_base, s_range)
+        model = self._identify(sensor.gain_frame(dtr, g0), m_s, mask)
+        g1 = sensor.fit_gain(dtr, mask, model.predict_free_run(sensor.gain_frame(dtr, g0)), s_range)
+        it.model, it.speed_gain = model, sensor.GainChain(g1)
+        wrapped = ChainModel(model, it.speed_gain)
+        out.update(accepted=True, gain=g1.to_dict(), names=list(g1.names()), description=sensor.DESCRIPTION)
+        it.rounds.append({"round": len(it.rounds), "added": sensor.STROKE_GAIN, "effect": sensor.STROKE_GAIN,
+                          "regressors": ["position"], "cv": {"cv_gain": out["cv_gain"], "cv_free_run_gain": gain},
+                          "metrics": _metrics(wrapped, dtr, dte)})
+        return sensor.gain_frame(dtr, g1)
 
     def _immaterial(self, it: _Iteration) -> list[RefitCV]:
         """Candidates of the last round that pass every acceptance rule but the materiality threshold.
@@ -480,18 +527,21 @@ class CloseLoop(EstimatorSettings):
         effects = it.effects.candidates
         c = effects[0] if effects else None
         below = self._immaterial(it)
+        chain_rounds = ("speed_channel_filter", sensor.STROKE_GAIN)
         records = ([_filter_record(rec, ext_params) for rec in it.rounds if rec["added"] == "speed_channel_filter"]
+                   + [_gain_record(rec, ext_params) for rec in it.rounds if rec["added"] == sensor.STROKE_GAIN]
                    + [_effect_record(e, rec, ext_params) for e, rec in
-                      zip(effects, [r for r in it.rounds[1:] if r["added"] != "speed_channel_filter"])])
+                      zip(effects, [r for r in it.rounds[1:] if r["added"] not in chain_rounds])])
         # the channel's test found a filter that was not applied (it did not lower the CV free-run error)
         chain_found = bool(chain_rec.get("refused_by_harm_guard", False))
         traced_to = order_traced(effects, it.output_filter is not None, a.traced,
-                                 evidence=[t.candidate for t in below], speed_evidence=chain_found)
+                                 evidence=[t.candidate for t in below], speed_evidence=chain_found,
+                                 measured=("position",) if it.speed_gain is not None else ())
         w = a.whiteness
         labels = "; ".join(f"{e.label} ({', '.join(e.regressors)})" + (", relaxes Eq. 29" if e.structural else "")
                            for e in effects)
         return {
-            "significant": c is not None or it.output_filter is not None,
+            "significant": c is not None or it.output_filter is not None or it.speed_gain is not None,
             "traced_to": traced_to,
             "effect": records[0]["effect"] if records else None,
             "effect_shape": records[0]["shape"] if records else None,
@@ -500,6 +550,7 @@ class CloseLoop(EstimatorSettings):
             "message": (f"missing effect{'s' if len(effects) > 1 else ''}: {labels}" if c
                         else "no significant missing effect")
                        + ("; speed channel filtered (measurement chain)" if it.output_filter is not None else "")
+                       + (f"; {_gain_reading(it.speed_gain.gain)}" if it.speed_gain is not None else "")
                        + withdrawn_note(it.checks)
                        + (f"; the speed column looks filtered (measurement chain, cross-validated gain "
                           f"{chain_rec['cv_gain']:.3f}) but a model behind the filter did not lower the "
@@ -542,6 +593,7 @@ class _Iteration:
     significant: list = field(default_factory=list)
     level: float = float("nan")
     output_filter: chain.OutputFilter | None = None
+    speed_gain: GainChain | None = None   #: the speed sensor's gain along the stroke (measurement chain)
     channels: tuple = ()
     run_level: runlevel.RunLevelAnalysis | None = None
     checks: list = field(default_factory=list)    #: the named picks' checks from the pure-slip family
@@ -549,22 +601,22 @@ class _Iteration:
 
 
 class ChainModel:
-    """The measurement chain around a physics model fitted on the position's derivative.
+    """The measurement chain around a physics model fitted behind it.
 
-    The model predicts the slider's speed along the position's derivative
-    (:func:`l1b2.closeloop.chain.with_position_speed`: run starts and one-step
-    inputs from it); the speed channel's output filter turns that into the
-    measured speed column.
+    The model predicts the slider's speed along the chain's frame (``output_filter.frame``: the position's
+    derivative behind the speed channel's filter, :func:`l1b2.closeloop.chain.with_position_speed`, or the recorded
+    speed over the sensor's gain, :class:`l1b2.closeloop.sensor.GainChain`; run starts and one-step inputs from
+    it); ``output_filter.apply`` turns that into the measured speed column.
     """
 
-    def __init__(self, model, output_filter: chain.OutputFilter):
+    def __init__(self, model, output_filter):
         self.model, self.output_filter = model, output_filter
 
     def predict_free_run(self, df) -> np.ndarray:
-        return self.output_filter.apply(df, self.model.predict_free_run(chain.with_position_speed(df)))
+        return self.output_filter.apply(df, self.model.predict_free_run(self.output_filter.frame(df)))
 
     def predict_one_step(self, df) -> np.ndarray:
-        return self.output_filter.apply(df, self.model.predict_one_step(chain.with_position_speed(df)))
+        return self.output_filter.apply(df, self.model.predict_one_step(self.output_filter.frame(df)))
 
     def __getattr__(self, name):
         if name == "model":
@@ -594,6 +646,24 @@ def _filter_record(rec: dict, params: dict | None) -> dict:
                            "(measurement chain): output filter on the predicted speed",
             "cv_gain": rec["cv"]["cv_gain"], "cv_free_run_nrmse_before": None, "cv_free_run_nrmse_after": None,
             "folds_improved": None}
+
+
+def _gain_record(rec: dict, params: dict | None) -> dict:
+    names = [n for n in (params or {}) if n.startswith("sensor_gain_c")]
+    return {"round": rec["round"], "effect": sensor.STROKE_GAIN, "label": sensor.STROKE_GAIN, "shape": "",
+            "regressors": ["position"], "generic": False, "structural": None,
+            "parameters": {n: (params or {}).get(n) for n in names}, "description": sensor.DESCRIPTION,
+            "cv_gain": rec["cv"]["cv_gain"], "cv_free_run_nrmse_before": None, "cv_free_run_nrmse_after": None,
+            "folds_improved": None}
+
+
+def _gain_reading(g) -> str:
+    """The report's line for a kept sensor gain: its coefficients with their standard errors and range."""
+    se = g.stderr or (float("nan"),) * len(g.coef)
+    coef = ", ".join(f"c{j} {c:+.4f} +- {e:.4f}" for j, (c, e) in enumerate(zip(g.coef, se)))
+    gs = g.gain(np.linspace(g.s_lo, g.s_hi, 201))
+    return (f"speed sensor's gain along the stroke (measurement, not a force): g(s) = 1 + sum c_j P_j, {coef}; "
+            f"g from {gs.min():.3f} to {gs.max():.3f} over the stroke")
 
 
 def _metrics(model, dtr, dte, train_free_run=None) -> dict:
@@ -652,7 +722,7 @@ def candidate_context(baseline_free_run, m_s: float, df: pd.DataFrame, mask: np.
         **({} if response_columns is None else {"response_columns": tuple(response_columns)}))
 
 
-def calibrated_model(base, ext, effects: EffectSet, output_filter, source: dict, groups=None):
+def calibrated_model(base, ext, effects: EffectSet, output_filter, source: dict, groups=None, speed_gain=None):
     """``(ExtendedPredictor or None, note)``: the final model in the serialisable form ``Predictor.fmu`` carries.
 
     Each effect's standard errors are the report's (:func:`l1b2.closeloop.intervals.reported_uncertainty`,
@@ -682,7 +752,8 @@ def calibrated_model(base, ext, effects: EffectSet, output_filter, source: dict,
                  for c, phi in zip(effects.candidates, effects.phi))
     filt = None if output_filter is None else {"a": output_filter.a, "b0": output_filter.b0, "b1": output_filter.b1}
     ext_setup = PredictorSetup(ext.params_, ext.m_s_, ext.T_s_, ext.result_.frequency_response)
-    model = ExtendedPredictor(base_setup, ext_setup, recs, filt, dict(source))
+    model = ExtendedPredictor(base_setup, ext_setup, recs, filt, dict(source),
+                              None if speed_gain is None else speed_gain.to_dict())
     return model, "the final extended model"
 
 

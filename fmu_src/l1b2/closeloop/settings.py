@@ -76,6 +76,10 @@ class LoopSettings:
         held-out runs; what is added is decided by the acceptance rule. A screened round costs the
         cross-validated refits of the current model and of one candidate (and, if it is accepted, the
         next round).
+    stroke_speed_gain : bool
+        When the speed channel keeps no filter, test the speed sensor's gain along the stroke (a measurement
+        effect, :mod:`l1b2.closeloop.sensor`) before the rounds, and keep it when the cross-validated rule says so.
+        Off by default: the stage is decided against the baseline alone, before the force candidates compete.
     run_level : bool
         Each round, estimate every run's own deviation from the current model (a drive-force gain and an
         offset, shrunk as random effects) and offer the run-level signal that best explains them
@@ -129,6 +133,7 @@ class LoopSettings:
     client: Any = field(default=None, compare=False)
     baseline: str = "eq29"
     run_level: bool = True
+    stroke_speed_gain: bool = False
     response_columns: tuple | None = None
     clock_folds: str = "blocks"
     fold_unit: str = "run"
@@ -145,7 +150,8 @@ class LoopSettings:
                 "refit_repeats": self.refit_repeats, "min_cv_gain": self.min_cv_gain,
                 "min_cv_drop": self.min_cv_drop, "screen_alpha": self.screen_alpha,
                 "noise_fit": self.noise_fit, "noise": self.noise, "fold_unit": self.fold_unit,
-                "max_rounds": self.max_rounds, "run_level": self.run_level, "clock_folds": self.clock_folds,
+                "max_rounds": self.max_rounds, "run_level": self.run_level, "stroke_speed_gain": self.stroke_speed_gain,
+                "clock_folds": self.clock_folds,
                 "response_columns": (list(self.response_columns) if self.response_columns is not None
                                      else None)}
 

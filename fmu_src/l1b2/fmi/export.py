@@ -340,7 +340,9 @@ def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None)
         anything, if an effect reads a signal that no input of ``Predictor.fmu`` gives (a logged channel that
         is no input, the session clock's run mean), or the run-level value of an input that TRAIN's runs did not
         hold constant (:func:`l1b2.predictor.effects.channels.export_problem`: the FMU reads a run-level signal
-        of V0, the load, the direction or the temperature as the input's current value).
+        of V0, the load, the direction or the temperature as the input's current value); if the model carries a
+        speed sensor's gain along the stroke (``ExtendedPredictor.speed_gain``: Predictor.fmu has no such output
+        stage).
     """
     from ..predictor.effects import ExtendedPredictor, plugin_sources
     from ..predictor.effects.channels import export_problem
@@ -349,6 +351,9 @@ def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None)
         raise ExportError(f"export_calibrated needs an l1b2.predictor.effects.ExtendedPredictor, "
                           f"got {type(model).__name__}")
     _predictor_dict(model.model)     # refuses what the FMU cannot carry (the contact law)
+    if model.speed_gain is not None:
+        raise ExportError("Predictor.fmu has no stage for the speed sensor's gain along the stroke (speed_gain): "
+                          "the model predicts the recorded speed only through ExtendedPredictor.free_run")
     problems = [(e.label, export_problem(e.spec)) for e in model.effects]
     logged = [label for label, why in problems if why and why.startswith("no input")]
     if logged:

@@ -33,6 +33,7 @@ from .base import (ALWAYS_SIGNALS, SIGNALS, SPEED_REF, V_REF, Effect, EffectSpec
                    num, register, scaled, signal, time_derivative, unregister)
 from .model import (ExtendedPredictor, IdentifiedEffect, apply_output_filter, filter_start_gain,  # noqa: F401
                     filter_step)
+from .sensor import STROKE_GAIN_ORDER, SpeedSensorGain, stroke_basis  # noqa: F401
 from .plugins import load_all as _load_plugins
 
 #: the package's family modules, imported (and so registered) in this order: the candidate library's order

@@ -19,6 +19,7 @@ import numpy as np
 from ..frequency import contact_angle, effective_voltage
 from ..setup import PredictorSetup
 from .base import EffectSpecError, effect_features, needs, time_derivative
+from .sensor import SpeedSensorGain
 
 
 def _current_spec(spec: Mapping) -> dict:
@@ -100,6 +101,7 @@ class ExtendedPredictor:
     effects: tuple = ()
     output_filter: dict | None = None
     source: dict = field(default_factory=dict)
+    speed_gain: dict | None = None
 
     @property
     def signals(self) -> set:
@@ -121,7 +123,8 @@ class ExtendedPredictor:
                 "effects": [e.to_dict() for e in self.effects],
                 "output_filter": None if self.output_filter is None else {k: float(self.output_filter[k])
                                                                           for k in ("a", "b0", "b1")},
-                "source": dict(self.source)}
+                "source": dict(self.source),
+                **({} if self.speed_gain is None else {"speed_gain": dict(self.speed_gain)})}
 
     @classmethod
     def from_dict(cls, d: Mapping) -> ExtendedPredictor:
@@ -131,7 +134,8 @@ class ExtendedPredictor:
             raise EffectSpecError(f"extended predictor: missing or bad {exc}") from None
         filt = d.get("output_filter")
         return cls(base, model, tuple(IdentifiedEffect.from_dict(e) for e in d.get("effects", [])),
-                   None if filt is None else {k: float(filt[k]) for k in ("a", "b0", "b1")}, dict(d.get("source", {})))
+                   None if filt is None else {k: float(filt[k]) for k in ("a", "b0", "b1")}, dict(d.get("source", {})),
+                   None if d.get("speed_gain") is None else SpeedSensorGain.from_dict(d["speed_gain"]).to_dict())
 
     def extra_force(self, x: Mapping) -> np.ndarray:
         """Sum of the effects' forces per sample [N].
@@ -186,6 +190,8 @@ class ExtendedPredictor:
         m = self.model
         v = free_run(m.params, x["s"], _drive(m, x["V0"], frequency), x["load"], x["d"], t, vs, m.slider_mass_kg,
                      run_index, extra_force=F, contact=_contact(m, x["V0"], frequency))
+        if self.speed_gain is not None:
+            v = SpeedSensorGain.from_dict(self.speed_gain).apply(x["s"], v)
         if self.output_filter is not None:
             v = apply_output_filter(self.output_filter, v, starts_sorted)
         return v
