@@ -41,6 +41,7 @@ import os
 import subprocess
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -102,7 +103,8 @@ FITS = {"default (auto)": {},
         "offset, reduced frame (0070)": {"solver": "offset_reduced"},
         "offset, reduced frame, points fitted 12": {"solver": "offset_reduced", "bracket": {"max_iter": 12}},
         "offset, reduced frame, mu_sd in the points": {"solver": "offset_reduced", "bracket": {"point_mu_sd": True}},
-        "offset, kappa0 continuation (0079)": {"solver": "offset_kappa0"},
+        "offset, kappa0 continuation (0079)": {"solver": "offset_kappa0", "bracket": {"finals": 1}},
+        "offset, kappa0 as it is": {"solver": "offset_kappa0"},
         "offset, kappa0 continuation, mu_sd in the points": {"solver": "offset_kappa0",
                                                              "bracket": {"point_mu_sd": True}},
         "offset, kappa0, finals from the confidence set, 2 (0083)": {"solver": "offset_kappa0",
@@ -133,27 +135,36 @@ def dataset(cache: Path, world: str) -> Path:
     return out
 
 
+@contextmanager
+def bracket_settings(solver, over: dict):
+    """``BRACKETS[solver]`` (:data:`l1b2.ident.offset.BRACKETS`, the named solver's entry only) updated by ``over``
+    while the block runs, restored after; ``over`` empty: nothing changed (any solver)."""
+    if over and solver not in BRACKETS:
+        raise ValueError(f"bracket settings need a bracketed solver {tuple(BRACKETS)}, got {solver!r}")
+    target = BRACKETS.get(solver, {})
+    former = dict(target)
+    target.update(over)
+    try:
+        yield
+    finally:
+        target.clear()
+        target.update(former)
+
+
 def fit(train, settings: dict) -> dict:
     """One fit; ``settings["final"]`` (offset_bracket only) picks the final search's coordinates and
-    ``settings["bracket"]`` overrides any other entries of the settings of the fit's solver
-    (:data:`l1b2.ident.offset.BRACKETS`, the named solver's entry only) for this fit."""
+    ``settings["bracket"]`` overrides any other entries of the settings of the fit's solver for this fit
+    (:func:`bracket_settings`)."""
     settings = dict(settings)
     over = dict(settings.pop("bracket", {}))
     if "final" in settings:
         over["final"] = settings.pop("final")
-    if over and settings.get("solver") not in BRACKETS:
-        raise ValueError(f"bracket settings need a bracketed solver {tuple(BRACKETS)}, got {settings.get('solver')!r}")
-    est = PredictorIdentifier(**settings)
-    target = BRACKETS.get(settings.get("solver"), {})
-    former = dict(target)
-    target.update(over)
-    c0 = time.process_time()
-    try:
+    with bracket_settings(settings.get("solver"), over):
+        est = PredictorIdentifier(**settings)
+        c0 = time.process_time()
         est.fit(train)
-    finally:
-        target.clear()
-        target.update(former)
-    return {"cpu_s": time.process_time() - c0, "loglik": float(est.loglik_),
+        cpu = time.process_time() - c0
+    return {"cpu_s": cpu, "loglik": float(est.loglik_),
             "nfev": int(est.convergence_["nfev_total"]), "stages": est.convergence_.get("stages", []),
             "values": [float(x) for x in est.result_.values]}
 

@@ -675,3 +675,34 @@ def test_the_worlds_bench_overrides_the_settings_of_the_named_solver_only(monkey
     assert off.BRACKETS == default
     with pytest.raises(ValueError):  # overrides without a bracketed solver would change nothing
         bench.fit(None, {"solver": "joint", "bracket": {"finals": 2}})
+
+
+def test_the_default_cold_search_finishes_the_two_best_points_of_the_offsets_confidence_set(monkeypatch):
+    from scipy.stats import chi2
+
+    import l1b2.ident.offset as off
+
+    real = off._final_search
+    ran = []
+
+    def recorder(obj, best, *args):
+        out = real(obj, best, *args)
+        ran.append((best["omega"], -out[0].results[out[0].best].cost))
+        return out
+
+    monkeypatch.setattr(off, "_final_search", recorder)
+    df, _ = _small_world(11)
+    est = PredictorIdentifier(order=3).fit(df, slider_mass_kg=M_S)  # solver="auto": a cold, unpinned Eq. 29 fit
+    assert est.convergence_["solver"] == "offset_kappa0"
+    assert off.BRACKETS["offset_kappa0"]["finals"] == 2
+    assert off.BRACKETS["offset_reduced"]["finals"] == off.BRACKETS["offset_bracket"]["finals"] == 1
+    prof = est.convergence_["stages"][1]["profile"]
+    ranked = sorted((p for p in prof if np.isfinite(p["loglik"])), key=lambda p: -p["loglik"])
+    # the points a likelihood-ratio test at 5 % does not tell from the best: within chi2_1(0.95) / 2 of it
+    in_set = [p["omega"] for p in ranked if p["loglik"] >= ranked[0]["loglik"] - 0.5 * chi2.ppf(0.95, 1)]
+    assert len(in_set) >= 2 and [w for w, _ in ran] == in_set[:2]  # (here two points or more)
+    assert est.loglik_ == pytest.approx(max(ll for _, ll in ran), abs=1e-9)
+    ran.clear()
+    monkeypatch.setitem(off.BRACKETS["offset_kappa0"], "finals", 1)
+    one = PredictorIdentifier(order=3).fit(df, slider_mass_kg=M_S)
+    assert est.loglik_ >= one.loglik_ - 1e-9  # never below the one-final search

@@ -424,10 +424,12 @@ _BRACKET_COMMON = {"coarse": (0.95, 0.7, 0.4), "tol": 0.08, "max_points": 4, "ma
                    "barrier": ()}
 #: the settings of each bracketed search (``solver`` -> its own dict, read when a fit runs: changing one solver's
 #: entry changes no other solver's fit); ``start_fits`` of ``offset_bracket``: the number of equation-error fits
-#: of its start (:func:`l1b2.ident.reduced.data_driven_start`; ``offset_reduced`` and ``offset_kappa0`` have none)
+#: of its start (:func:`l1b2.ident.reduced.data_driven_start`; ``offset_reduced`` and ``offset_kappa0`` have none).
+#: ``offset_kappa0`` (the default cold search) runs its final search from the two best points of the profile's
+#: 95 % confidence set of omega: its first final is the one-final search, so its result is never below that one's
 BRACKETS = {"offset_bracket": {**_BRACKET_COMMON, "start_fits": 4},
             "offset_reduced": dict(_BRACKET_COMMON),
-            "offset_kappa0": dict(_BRACKET_COMMON)}
+            "offset_kappa0": {**_BRACKET_COMMON, "finals": 2}}
 
 
 def bracketed_profile(obj, theta_start, n1, kappa, p_theta, settings=None, log=None):
