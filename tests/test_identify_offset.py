@@ -511,6 +511,8 @@ def test_offset_kappa0_is_offset_reduced_with_its_continuation_in_the_offset_for
         return real(*args, **kwargs)
 
     monkeypatch.setattr(off, "identifiable_search", recorder)
+    monkeypatch.setitem(off.BRACKETS["offset_kappa0"], "finals", 1)  # offset_reduced's other settings
+    assert off.BRACKETS["offset_kappa0"] == off.BRACKETS["offset_reduced"]
     df, _ = _small_world(11)
     fits = {s: PredictorIdentifier(order=3, solver=s).fit(df, slider_mass_kg=M_S)
             for s in ("offset_reduced", "offset_kappa0")}
@@ -524,6 +526,11 @@ def test_offset_kappa0_is_offset_reduced_with_its_continuation_in_the_offset_for
     lo, hi = PredictorParams.bounds(3)
     assert np.all(fits["offset_kappa0"].theta_ >= lo) and np.all(fits["offset_kappa0"].theta_ <= hi)
     assert PredictorIdentifier(order=3)._checked_settings().solver == "offset_kappa0"  # the default
+    monkeypatch.setitem(off.BRACKETS["offset_kappa0"], "final", "paper+identifiable")
+    monkeypatch.setitem(off.BRACKETS["offset_kappa0"], "finals", 2)
+    asked.clear()
+    PredictorIdentifier(order=3, solver="offset_kappa0").fit(df, slider_mass_kg=M_S)
+    assert asked == [0.5, 0.5]  # with two finals each one's continuation is in the offset form
 
 
 # ---- the final search from more than one profile point (the setting "finals", decision 0083) -------------------
