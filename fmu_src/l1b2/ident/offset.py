@@ -40,8 +40,8 @@ B'(s) the profile starts from are fixed by the data alone, with no random starts
 (:func:`l1b2.ident.identifiable.offset_form`): along the offset's valley kappa0 stays put while K, beta_s and
 mu_sd move together. Each of the three bracketed searches has its own settings in :data:`BRACKETS`. Two of
 them widen the last step: the final search from more than one profile point (``finals``: the points that a
-likelihood-ratio test on omega does not tell from the best) and profile points between the coarse points and the
-barrier (``barrier``).
+likelihood-ratio test on omega does not tell from the best; two in ``offset_kappa0``, one in the other two) and
+profile points between the coarse points and the barrier (``barrier``, none by default).
 
 Why both are opt-in, with the measurements: decisions 0023 and 0036.
 
