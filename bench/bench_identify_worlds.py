@@ -19,8 +19,8 @@ about 19.7k samples; made once and cached):
 For each world, side by side in one run (same process, same data), with CPU time (``time.process_time``),
 evaluations and log-likelihood: by default decision 0039's bracketed drive-offset search
 (``solver="offset_bracket"``, :mod:`l1b2.ident.offset`, with the settings :data:`BRACKET_0039`) and the current
-one (``BRACKET`` as it is, decision 0045); ``--fits`` picks others by name (separated by ;): the default
-``solver="joint"``, the variable-projection search from one start, the grid profile (decision 0023), the
+one (``BRACKETS["offset_bracket"]`` as it is, decision 0045); ``--fits`` picks others by name (separated by ;):
+the default ``solver="joint"``, the variable-projection search from one start, the grid profile (decision 0023), the
 bracketed search with its final search in the paper's coordinates only (decision 0036) or in the identifiable
 ones only (decision 0039).
 
@@ -41,6 +41,7 @@ import os
 import subprocess
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -49,7 +50,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "fmu_src"))
 
 from l1b2.ident.estimator import PredictorIdentifier  # noqa: E402
-from l1b2.ident.offset import BRACKET  # noqa: E402
+from l1b2.ident.offset import BRACKETS  # noqa: E402
 from l1b2.workflows import load_train_test  # noqa: E402
 
 LOADS = "-0.09,-0.07,-0.05,-0.03,-0.01,0,0.01,0.03,0.05,0.07,0.09"
@@ -71,12 +72,12 @@ WORLDS = {
     "realistic/s7": ["--motor", "realistic_motor", "--seed", "7", "--speed-noise", "0.001", "--run-scatter", "0.02"],
     "reference/s4": ["--motor", "reference_motor", "--seed", "4", "--speed-noise", "0.001", "--run-scatter", "0.02"],
 }
-#: decision 0039's bracketed search (the settings of :data:`l1b2.ident.offset.BRACKET` then)
+#: decision 0039's bracketed search (the settings of the bracketed searches then)
 BRACKET_0039 = {"coarse": (0.95, 0.7, 0.4), "tol": 0.08, "max_points": 6, "margin": 3.0, "max_iter": 4,
                 "cold_iter": 12, "stat_tol": 0.05, "min_gain": 0.01, "final_min_gain": 0.01,
                 "final": "paper+identifiable", "start_fits": 4}
-#: the settings of the bracketed search that the strict reference uses (BRACKET overrides): ten coarse points
-#: per branch, both branches searched to 16 points, every point fitted to convergence (no least gain), the
+#: the settings of the bracketed search that the strict reference uses (overrides of its solver's settings): ten
+#: coarse points per branch, both branches searched to 16 points, every point fitted to convergence (no least gain), the
 #: final search in the paper's coordinates continued in the identifiable ones (decision 0039), tight tolerances
 STRICT_BRACKET = {"coarse": (0.97, 0.9, 0.8, 0.7, 0.6, 0.5, 0.4, 0.3, 0.2, 0.1), "max_points": 16, "margin": 1e9,
                   "max_iter": 12, "cold_iter": 20, "min_gain": 0.0, "final_min_gain": 0.0,
@@ -102,7 +103,8 @@ FITS = {"default (auto)": {},
         "offset, reduced frame (0070)": {"solver": "offset_reduced"},
         "offset, reduced frame, points fitted 12": {"solver": "offset_reduced", "bracket": {"max_iter": 12}},
         "offset, reduced frame, mu_sd in the points": {"solver": "offset_reduced", "bracket": {"point_mu_sd": True}},
-        "offset, kappa0 continuation (0079)": {"solver": "offset_kappa0"},
+        "offset, kappa0 continuation (0079)": {"solver": "offset_kappa0", "bracket": {"finals": 1}},
+        "offset, kappa0 as it is": {"solver": "offset_kappa0"},
         "offset, kappa0 continuation, mu_sd in the points": {"solver": "offset_kappa0",
                                                              "bracket": {"point_mu_sd": True}},
         "offset, kappa0, finals from the confidence set, 2 (0083)": {"solver": "offset_kappa0",
@@ -117,7 +119,8 @@ FITS = {"default (auto)": {},
         "offset, kappa0, coarse points dense at the barrier (0083)": {
             "solver": "offset_kappa0", "bracket": {"coarse": (0.995, 0.99, 0.98, 0.97, 0.95, 0.9, 0.8, 0.7, 0.4),
                                                    "max_points": 9}}}
-#: the fits compared when ``--fits`` is not given: decision 0039's search and the current one (BRACKET as it is)
+#: the fits compared when ``--fits`` is not given: decision 0039's search and the current one (its settings as
+#: they are)
 DEFAULT_FITS = ("offset, bracketed (0039)", "offset, bracketed (0045)")
 
 
@@ -132,23 +135,36 @@ def dataset(cache: Path, world: str) -> Path:
     return out
 
 
+@contextmanager
+def bracket_settings(solver, over: dict):
+    """``BRACKETS[solver]`` (:data:`l1b2.ident.offset.BRACKETS`, the named solver's entry only) updated by ``over``
+    while the block runs, restored after; ``over`` empty: nothing changed (any solver)."""
+    if over and solver not in BRACKETS:
+        raise ValueError(f"bracket settings need a bracketed solver {tuple(BRACKETS)}, got {solver!r}")
+    target = BRACKETS.get(solver, {})
+    former = dict(target)
+    target.update(over)
+    try:
+        yield
+    finally:
+        target.clear()
+        target.update(former)
+
+
 def fit(train, settings: dict) -> dict:
     """One fit; ``settings["final"]`` (offset_bracket only) picks the final search's coordinates and
-    ``settings["bracket"]`` overrides any other entries of :data:`l1b2.ident.offset.BRACKET` for this fit."""
+    ``settings["bracket"]`` overrides any other entries of the settings of the fit's solver for this fit
+    (:func:`bracket_settings`)."""
     settings = dict(settings)
     over = dict(settings.pop("bracket", {}))
     if "final" in settings:
         over["final"] = settings.pop("final")
-    est = PredictorIdentifier(**settings)
-    former = dict(BRACKET)
-    BRACKET.update(over)
-    c0 = time.process_time()
-    try:
+    with bracket_settings(settings.get("solver"), over):
+        est = PredictorIdentifier(**settings)
+        c0 = time.process_time()
         est.fit(train)
-    finally:
-        BRACKET.clear()
-        BRACKET.update(former)
-    return {"cpu_s": time.process_time() - c0, "loglik": float(est.loglik_),
+        cpu = time.process_time() - c0
+    return {"cpu_s": cpu, "loglik": float(est.loglik_),
             "nfev": int(est.convergence_["nfev_total"]), "stages": est.convergence_.get("stages", []),
             "values": [float(x) for x in est.result_.values]}
 

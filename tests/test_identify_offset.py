@@ -217,9 +217,9 @@ def test_bracketed_offset_search_recovers_the_small_world():
     prof = stages[1]["profile"]
     assert any(r["omega"] < 0 for r in prof) and any(r["omega"] > 0 for r in prof)
     assert all(-1 < r["omega"] < 1 for r in prof)
-    from l1b2.ident.offset import BRACKET
+    from l1b2.ident.offset import BRACKETS
     for sign in (-1, 1):  # each branch's bracketed search within its point budget
-        assert 0 < sum(np.sign(r["omega"]) == sign for r in prof) <= BRACKET["max_points"]
+        assert 0 < sum(np.sign(r["omega"]) == sign for r in prof) <= BRACKETS["offset_bracket"]["max_points"]
     assert est.loglik_ >= max(r["loglik"] for r in prof) - 1e-6
     assert est.convergence_["solver"] == "offset_bracket"
     lo, hi = PredictorParams.bounds(3)
@@ -241,7 +241,7 @@ def test_the_bracketed_search_starts_from_as_many_equation_error_fits_as_its_set
         raise Started
 
     monkeypatch.setattr(red, "equation_error_fit", recorder)
-    monkeypatch.setitem(off.BRACKET, "start_fits", fits)
+    monkeypatch.setitem(off.BRACKETS["offset_bracket"], "start_fits", fits)
     df, _ = _small_world(11)
     with pytest.raises(Started):
         PredictorIdentifier(order=3, solver="offset_bracket").fit(df, slider_mass_kg=M_S)
@@ -262,7 +262,7 @@ def test_bracketed_offset_search_never_ends_below_its_best_profile_point(monkeyp
         return search, outer, stages
 
     monkeypatch.setattr(off, "varpro_search", poor)
-    monkeypatch.setitem(off.BRACKET, "final", "paper")  # the rule of the paper-coordinate search alone
+    monkeypatch.setitem(off.BRACKETS["offset_bracket"], "final", "paper")  # the paper-coordinate search's rule alone
     df, _ = _small_world(11)
     est = PredictorIdentifier(order=3, solver="offset_bracket").fit(df, slider_mass_kg=M_S)
     best = max(r["loglik"] for r in est.convergence_["stages"][1]["profile"])
@@ -281,9 +281,9 @@ def test_the_continuation_in_identifiable_coordinates_never_ends_below_the_paper
     import l1b2.ident.offset as off
 
     df, _ = _small_world(12)
-    assert off.BRACKET["final"] == "paper+identifiable"
+    assert off.BRACKETS["offset_bracket"]["final"] == "paper+identifiable"
     both = PredictorIdentifier(order=3, solver="offset_bracket").fit(df, slider_mass_kg=M_S)
-    monkeypatch.setitem(off.BRACKET, "final", "paper")
+    monkeypatch.setitem(off.BRACKETS["offset_bracket"], "final", "paper")
     paper = PredictorIdentifier(order=3, solver="offset_bracket").fit(df, slider_mass_kg=M_S)
     assert both.loglik_ >= paper.loglik_ - 1e-6
     stages = both.convergence_["stages"]
@@ -300,7 +300,7 @@ def test_the_continuation_in_identifiable_coordinates_never_ends_below_the_paper
     def fails(*args, **kwargs):
         raise ValueError("no paper vector")
 
-    monkeypatch.setitem(off.BRACKET, "final", "paper+identifiable")
+    monkeypatch.setitem(off.BRACKETS["offset_bracket"], "final", "paper+identifiable")
     monkeypatch.setattr(off, "identifiable_search", fails)
     kept = PredictorIdentifier(order=3, solver="offset_bracket").fit(df, slider_mass_kg=M_S)
     assert kept.loglik_ == pytest.approx(paper.loglik_, abs=1e-9)
@@ -409,7 +409,7 @@ def test_the_default_fit_is_the_offset_kappa0_fit():
     np.testing.assert_array_equal(default.theta_, explicit.theta_)
 
 
-# ---- mu_sd fitted in a profile point at a held drive offset (BRACKET["point_mu_sd"], decision 0079) ------------
+# ---- mu_sd fitted in a profile point at a held drive offset (the setting "point_mu_sd", decision 0079) --------
 
 
 @pytest.mark.parametrize("seed", range(3))
@@ -511,6 +511,8 @@ def test_offset_kappa0_is_offset_reduced_with_its_continuation_in_the_offset_for
         return real(*args, **kwargs)
 
     monkeypatch.setattr(off, "identifiable_search", recorder)
+    monkeypatch.setitem(off.BRACKETS["offset_kappa0"], "finals", 1)  # offset_reduced's other settings
+    assert off.BRACKETS["offset_kappa0"] == off.BRACKETS["offset_reduced"]
     df, _ = _small_world(11)
     fits = {s: PredictorIdentifier(order=3, solver=s).fit(df, slider_mass_kg=M_S)
             for s in ("offset_reduced", "offset_kappa0")}
@@ -518,24 +520,30 @@ def test_offset_kappa0_is_offset_reduced_with_its_continuation_in_the_offset_for
     assert fits["offset_kappa0"].convergence_["solver"] == "offset_kappa0"
     prof = [f.convergence_["stages"][1]["profile"] for f in fits.values()]
     assert prof[0] == prof[1]  # the same profile; only the continuation differs
-    monkeypatch.setitem(off.BRACKET, "final", "paper")
+    monkeypatch.setitem(off.BRACKETS["offset_kappa0"], "final", "paper")
     paper = PredictorIdentifier(order=3, solver="offset_kappa0").fit(df, slider_mass_kg=M_S)
     assert fits["offset_kappa0"].loglik_ >= paper.loglik_ - 1e-6
     lo, hi = PredictorParams.bounds(3)
     assert np.all(fits["offset_kappa0"].theta_ >= lo) and np.all(fits["offset_kappa0"].theta_ <= hi)
     assert PredictorIdentifier(order=3)._checked_settings().solver == "offset_kappa0"  # the default
+    monkeypatch.setitem(off.BRACKETS["offset_kappa0"], "final", "paper+identifiable")
+    monkeypatch.setitem(off.BRACKETS["offset_kappa0"], "finals", 2)
+    asked.clear()
+    PredictorIdentifier(order=3, solver="offset_kappa0").fit(df, slider_mass_kg=M_S)
+    assert asked == [0.5, 0.5]  # with two finals each one's continuation is in the offset form
 
 
-# ---- the final search from more than one profile point (BRACKET["finals"], decision 0083) ------------------------
+# ---- the final search from more than one profile point (the setting "finals", decision 0083) -------------------
 
 
 def test_the_final_searchs_candidates_are_the_profiles_likelihood_confidence_set():
     from scipy.stats import chi2
 
-    from l1b2.ident.offset import BRACKET, profile_candidates
+    from l1b2.ident.offset import BRACKETS, profile_candidates
 
     # the margin is half the 95 % quantile of chi2 with one degree of freedom (a likelihood-ratio test on omega)
-    assert BRACKET["final_margin"] == pytest.approx(0.5 * chi2.ppf(0.95, 1), abs=5e-3)
+    for settings in BRACKETS.values():
+        assert settings["final_margin"] == pytest.approx(0.5 * chi2.ppf(0.95, 1), abs=5e-3)
     recs = [{"omega": w, "loglik": ll} for w, ll in
             [(-0.95, 10.0), (-0.7, 12.5), (-0.4, -np.inf), (0.4, 11.0), (0.7, 12.0), (0.95, 10.6)]]
     # written out: best 12.5; within 1.92 of it: 12.0 (0.5 below), 11.0 (1.5), 10.6 (1.9); 10.0 is 2.5 below
@@ -559,12 +567,13 @@ def test_the_final_search_runs_from_each_candidate_and_keeps_the_highest(monkeyp
         return out
 
     monkeypatch.setattr(off, "_final_search", recorder)
-    monkeypatch.setitem(off.BRACKET, "final_margin", 1e9)  # every finite profile point is a candidate
+    monkeypatch.setitem(off.BRACKETS["offset_kappa0"], "final_margin", 1e9)  # every finite profile point a candidate
+    monkeypatch.setitem(off.BRACKETS["offset_kappa0"], "finals", 1)
     df, _ = _small_world(11)
     one = PredictorIdentifier(order=3, solver="offset_kappa0").fit(df, slider_mass_kg=M_S)
     first = ran[:]
     ran.clear()
-    monkeypatch.setitem(off.BRACKET, "finals", finals)
+    monkeypatch.setitem(off.BRACKETS["offset_kappa0"], "finals", finals)
     est = PredictorIdentifier(order=3, solver="offset_kappa0").fit(df, slider_mass_kg=M_S)
     prof = est.convergence_["stages"][1]["profile"]
     ranked = sorted((p for p in prof if np.isfinite(p["loglik"])), key=lambda p: -p["loglik"])
@@ -590,9 +599,10 @@ def test_the_barrier_points_extend_each_branch_and_leave_the_brackets_best_final
         return real(obj, best, *args)
 
     monkeypatch.setattr(off, "_final_search", recorder)
+    monkeypatch.setitem(off.BRACKETS["offset_kappa0"], "finals", 1)
     df, _ = _small_world(11)
     plain = PredictorIdentifier(order=3, solver="offset_kappa0").fit(df, slider_mass_kg=M_S)
-    monkeypatch.setitem(off.BRACKET, "barrier", (0.98, 0.995))
+    monkeypatch.setitem(off.BRACKETS["offset_kappa0"], "barrier", (0.98, 0.995))
     ran.clear()
     one = PredictorIdentifier(order=3, solver="offset_kappa0").fit(df, slider_mass_kg=M_S)
     prof = one.convergence_["stages"][1]["profile"]
@@ -603,10 +613,103 @@ def test_the_barrier_points_extend_each_branch_and_leave_the_brackets_best_final
     # with one final the result is the bracket's: its best point is finished, the barrier points only ranked
     top = max(bracket, key=lambda p: p["loglik"])["omega"]
     assert ran == [top] and one.loglik_ == plain.loglik_
-    monkeypatch.setitem(off.BRACKET, "finals", 2)
-    monkeypatch.setitem(off.BRACKET, "final_margin", 1e9)
+    monkeypatch.setitem(off.BRACKETS["offset_kappa0"], "finals", 2)
+    monkeypatch.setitem(off.BRACKETS["offset_kappa0"], "final_margin", 1e9)
     ran.clear()
     two = PredictorIdentifier(order=3, solver="offset_kappa0").fit(df, slider_mass_kg=M_S)
     others = sorted((p for p in prof if np.isfinite(p["loglik"]) and p["omega"] != top), key=lambda p: -p["loglik"])
     assert ran == [top, others[0]["omega"]]  # the bracket's best first, then the best of the others
     assert two.loglik_ >= plain.loglik_ - 1e-9
+
+
+# ---- each bracketed search has its own settings (BRACKETS, decision 0091) ---------------------------------------
+
+
+def test_changing_one_bracketed_searchs_settings_changes_no_other_searchs_fit(monkeypatch):
+    import l1b2.ident.offset as off
+
+    names = ("offset_bracket", "offset_reduced", "offset_kappa0")
+    assert set(off.BRACKETS) == set(names)
+    assert len({id(off.BRACKETS[n]) for n in names}) == 3  # three dicts, none shared
+    df, _ = _small_world(11)
+    before = PredictorIdentifier(order=3, solver="offset_kappa0").fit(df, slider_mass_kg=M_S)
+    reduced = PredictorIdentifier(order=3, solver="offset_reduced").fit(df, slider_mass_kg=M_S)
+    for other in ("offset_bracket", "offset_reduced"):  # other coarse points, two finals, paper coordinates only
+        monkeypatch.setitem(off.BRACKETS[other], "coarse", (0.9, 0.5))
+        monkeypatch.setitem(off.BRACKETS[other], "finals", 2)
+        monkeypatch.setitem(off.BRACKETS[other], "final", "paper")
+    after = PredictorIdentifier(order=3, solver="offset_kappa0").fit(df, slider_mass_kg=M_S)
+    assert after.loglik_ == before.loglik_
+    np.testing.assert_array_equal(after.theta_, before.theta_)
+    assert after.convergence_["stages"][1]["profile"] == before.convergence_["stages"][1]["profile"]
+    assert after.convergence_["nfev_total"] == before.convergence_["nfev_total"]
+    # the named solver's own fit does read the changed settings: its profile starts at the new coarse points
+    changed = PredictorIdentifier(order=3, solver="offset_reduced").fit(df, slider_mass_kg=M_S)
+    omegas = [p["omega"] for p in changed.convergence_["stages"][1]["profile"]]
+    assert omegas[:2] == [-0.9, -0.5] and omegas[:2] != [p["omega"] for p in
+                                                         reduced.convergence_["stages"][1]["profile"]][:2]
+    assert not any(s["stage"].startswith("identifiable") for s in changed.convergence_["stages"])
+
+
+def test_the_worlds_bench_overrides_the_settings_of_the_named_solver_only(monkeypatch, load_bench):
+    import copy
+
+    import l1b2.ident.offset as off
+
+    bench = load_bench("bench_identify_worlds")
+    assert bench.BRACKETS is off.BRACKETS
+    default = copy.deepcopy(off.BRACKETS)
+    seen = []
+
+    class Recorder:  # stands in for the identifier: records the settings each solver has while the fit runs
+        def __init__(self, **settings):
+            self.solver = settings.get("solver")
+
+        def fit(self, train):
+            seen.append(copy.deepcopy(off.BRACKETS))
+            self.loglik_, self.convergence_ = 0.0, {"nfev_total": 0}
+            self.result_ = type("R", (), {"values": np.zeros(2)})()
+            return self
+
+    monkeypatch.setattr(bench, "PredictorIdentifier", Recorder)
+    bench.fit(None, {"solver": "offset_reduced", "bracket": {"finals": 3, "coarse": (0.9,)}})
+    assert seen[0]["offset_reduced"] == {**default["offset_reduced"], "finals": 3, "coarse": (0.9,)}
+    assert seen[0]["offset_kappa0"] == default["offset_kappa0"]
+    assert seen[0]["offset_bracket"] == default["offset_bracket"]
+    assert off.BRACKETS == default  # restored after the fit
+    bench.fit(None, {"solver": "offset_bracket", "final": "paper"})
+    assert seen[1]["offset_bracket"]["final"] == "paper" and seen[1]["offset_kappa0"] == default["offset_kappa0"]
+    assert off.BRACKETS == default
+    with pytest.raises(ValueError):  # overrides without a bracketed solver would change nothing
+        bench.fit(None, {"solver": "joint", "bracket": {"finals": 2}})
+
+
+def test_the_default_cold_search_finishes_the_two_best_points_of_the_offsets_confidence_set(monkeypatch):
+    from scipy.stats import chi2
+
+    import l1b2.ident.offset as off
+
+    real = off._final_search
+    ran = []
+
+    def recorder(obj, best, *args):
+        out = real(obj, best, *args)
+        ran.append((best["omega"], -out[0].results[out[0].best].cost))
+        return out
+
+    monkeypatch.setattr(off, "_final_search", recorder)
+    df, _ = _small_world(11)
+    est = PredictorIdentifier(order=3).fit(df, slider_mass_kg=M_S)  # solver="auto": a cold, unpinned Eq. 29 fit
+    assert est.convergence_["solver"] == "offset_kappa0"
+    assert off.BRACKETS["offset_kappa0"]["finals"] == 2
+    assert off.BRACKETS["offset_reduced"]["finals"] == off.BRACKETS["offset_bracket"]["finals"] == 1
+    prof = est.convergence_["stages"][1]["profile"]
+    ranked = sorted((p for p in prof if np.isfinite(p["loglik"])), key=lambda p: -p["loglik"])
+    # the points a likelihood-ratio test at 5 % does not tell from the best: within chi2_1(0.95) / 2 of it
+    in_set = [p["omega"] for p in ranked if p["loglik"] >= ranked[0]["loglik"] - 0.5 * chi2.ppf(0.95, 1)]
+    assert len(in_set) >= 2 and [w for w, _ in ran] == in_set[:2]  # (here two points or more)
+    assert est.loglik_ == pytest.approx(max(ll for _, ll in ran), abs=1e-9)
+    ran.clear()
+    monkeypatch.setitem(off.BRACKETS["offset_kappa0"], "finals", 1)
+    one = PredictorIdentifier(order=3).fit(df, slider_mass_kg=M_S)
+    assert est.loglik_ >= one.loglik_ - 1e-9  # never below the one-final search

@@ -120,7 +120,7 @@ from .slipproblem import RECOMMENDED_FIXED_PURE_SLIP, make_problem
 from .search import (LocalSolver, alternate_noise, multi_start, polish_stalled, profile_search, search_nfev,
                      start_points, warm_prestep)
 from .uncertainty import alternative_optima, extra_confounding, fisher_uncertainty
-from .offset import BRACKET, auto_solver, projected_search
+from .offset import BRACKETS, auto_solver, projected_search
 
 __all__ = ["PredictorIdentifier", "clone", "RECOMMENDED_FIXED", "evaluation_mask"]
 
@@ -240,11 +240,11 @@ class PredictorIdentifier(EstimatorSettings):
     solver : ``"auto"`` (default: ``"offset_kappa0"`` or ``"joint"``, :func:`l1b2.ident.offset.auto_solver`),
         ``"joint"`` (the searches of ``noise_fit``), ``"varpro"`` (:mod:`l1b2.ident.varpro`),
         ``"offset"`` (the drive offset as a search coordinate: a profile on a grid of offsets, then varpro;
-        :mod:`l1b2.ident.offset`), ``"offset_bracket"`` (the same with a bracketed search over the offset on
-        each side of the barrier, warm-started points, a result never below the profile's best point; ``BRACKET``;
-        framed at the best equation-error minimum of ``seed``'s starts), ``"offset_reduced"`` (the same framed at
-        the mapped reduced linear fit, :func:`l1b2.ident.reduced.map_reduced_to_theta`: no ``seed``) or
-        ``"offset_kappa0"`` (``offset_reduced`` with the drive offset in place of K in its identifiable stage).
+        :mod:`l1b2.ident.offset`), ``"offset_bracket"`` (the same with a bracketed search over the offset on each
+        side of the barrier, warm-started points, a result never below the profile's best point; framed at the best
+        equation-error minimum of ``seed``'s starts), ``"offset_reduced"`` (framed at the mapped reduced linear fit,
+        :func:`l1b2.ident.reduced.map_reduced_to_theta`: no ``seed``) or ``"offset_kappa0"`` (``offset_reduced``
+        with the drive offset in place of K in its identifiable stage); their settings: ``offset.BRACKETS[solver]``.
     model : the predictor family: ``"eq29"`` (default, the paper's Eq. 29) or
         ``"pure_slip"`` (the slip ratio follows the state,
         :mod:`l1b2.predictor.pureslip`; same parameters, likelihood, noise
@@ -499,8 +499,8 @@ class PredictorIdentifier(EstimatorSettings):
         red, minima = data_driven_start(sample, space, m_s, cfg.kappa, cfg.include_load_inertia, s_center,
                                         s_half, E, cfg.n_starts, cfg.seed, warm=warm,
                                         n_ee_starts={"varpro": 4 * cfg.n_starts, "offset": 4, "offset_reduced": 0,
-                                                     "offset_kappa0": 0, "offset_bracket": BRACKET["start_fits"]
-                                                     }.get(cfg.solver), drive_law=cfg.model)
+                                                     "offset_kappa0": 0}.get(cfg.solver, BRACKETS.get(
+                                                         cfg.solver, {}).get("start_fits")), drive_law=cfg.model)
         theta0, fixed_final = self._centre(cfg, space, minima, s_center, s_half)
         t_centre, c_centre = time.perf_counter(), time.process_time()
         self.reduced_ = reduced_summary(red, minima, space.extra_names)

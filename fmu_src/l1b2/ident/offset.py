@@ -38,9 +38,10 @@ noise model of the profile's best point, and when it ends below that point the p
 B'(s) the profile starts from are fixed by the data alone, with no random starts. ``solver="offset_kappa0"`` is
 ``offset_reduced`` with its identifiable continuation run in the drive offset kappa0 instead of K
 (:func:`l1b2.ident.identifiable.offset_form`): along the offset's valley kappa0 stays put while K, beta_s and
-mu_sd move together. Two options of :data:`BRACKET` widen the bracketed searches' last step: the final search
-from more than one profile point (``finals``: the points that a likelihood-ratio test on omega does not tell from
-the best) and profile points between the coarse points and the barrier (``barrier``).
+mu_sd move together. Each of the three bracketed searches has its own settings in :data:`BRACKETS`. Two of
+them widen the last step: the final search from more than one profile point (``finals``: the points that a
+likelihood-ratio test on omega does not tell from the best; two in ``offset_kappa0``, one in the other two) and
+profile points between the coarse points and the barrier (``barrier``, none by default).
 
 Why both are opt-in, with the measurements: decisions 0023 and 0036.
 
@@ -63,7 +64,7 @@ from .varpro import linear_positions, local_fit, profile_loglik, varpro_search
 
 __all__ = ["OMEGA_GRID", "GAUGE_K0", "drive_offset", "offset_of_omega", "omega_of_offset", "d_coefficients",
            "gauge", "multiplier", "point", "c_r_of_omega", "with_offset", "profile",
-           "offset_search", "offset_grid", "projected_search", "BRACKET", "bracket_search", "bracketed_profile",
+           "offset_search", "offset_grid", "projected_search", "BRACKETS", "bracket_search", "bracketed_profile",
            "bracketed_offset_search", "OFFSET_COORDINATES", "auto_solver", "profile_candidates"]
 
 #: the profile's grid of omega (both branches of the offset, the barrier |omega| -> 1 approached)
@@ -404,41 +405,46 @@ def bracket_search(f, coarse, lo, hi, tol, max_points, seen=()):
     return pts
 
 
-#: the bracketed profile (``solver="offset_bracket"``): the coarse |omega| of each branch (from the barrier
+#: the settings of a bracketed profile and its final search: the coarse |omega| of each branch (from the barrier
 #: inwards), the bracket width that ends a branch's search, the most points of a branch (the branch with the
 #: best coarse point is searched, the other as well when its best is within ``margin`` log-likelihood units), each
 #: point's fit (iterations from a neighbour's optimum, ``cold_iter`` from the gauged start, statistical
 #: tolerance, least gain a step must promise: ``local_fit``'s min_gain), the final free search's min_gain and its
-#: coordinates ("identifiable": :func:`l1b2.ident.identifiable.identifiable_search`, decision 0039; "paper": the
-#: variable-projection search in theta, decision 0036; "paper+identifiable": the paper's, then continued in the
-#: identifiable coordinates from its optimum, the better kept) and the number of equation-error fits of the start
-#: (:func:`l1b2.ident.reduced.data_driven_start`); ``point_mu_sd``: each point fitted with mu_sd varied at the
-#: point's drive offset (:func:`_point_fit`, decision 0079); ``finals``: the final search is run from at most this
+#: coordinates ("identifiable": :func:`l1b2.ident.identifiable.identifiable_search`; "paper": the
+#: variable-projection search in theta; "paper+identifiable": the paper's, then continued in the
+#: identifiable coordinates from its optimum, the better kept); ``point_mu_sd``: each point fitted with mu_sd varied
+#: at the point's drive offset (:func:`_point_fit`); ``finals``: the final search is run from at most this
 #: many profile points, the bracket's best first, then the best of the points within ``final_margin`` of the best
 #: profile log-likelihood (:func:`profile_candidates`), and the highest end is kept; ``barrier``: the |omega| of
 #: points added on each branch after the bracketed search, between its coarse points and the barrier |omega| = 1
-#: (each from its branch's nearest evaluated point; they are candidates of the other finals only, decision 0083).
-#: ``max_points`` was 6 until decision 0045 (4: the same
-#: optimum or a better one on three of the bench's four worlds, 0.014 log-likelihood units lower on one, the profile
-#: 15-35 % cheaper)
-BRACKET = {"coarse": (0.95, 0.7, 0.4), "tol": 0.08, "max_points": 4, "margin": 3.0, "max_iter": 4,
-           "cold_iter": 12, "stat_tol": 0.05, "min_gain": 0.01, "final_min_gain": 0.01,
-           "final": "paper+identifiable", "start_fits": 4, "point_mu_sd": False, "finals": 1,
-           "final_margin": 1.92, "barrier": ()}
+#: (each from its branch's nearest evaluated point; they are candidates of the other finals only).
+_BRACKET_COMMON = {"coarse": (0.95, 0.7, 0.4), "tol": 0.08, "max_points": 4, "margin": 3.0, "max_iter": 4,
+                   "cold_iter": 12, "stat_tol": 0.05, "min_gain": 0.01, "final_min_gain": 0.01,
+                   "final": "paper+identifiable", "point_mu_sd": False, "finals": 1, "final_margin": 1.92,
+                   "barrier": ()}
+#: the settings of each bracketed search (``solver`` -> its own dict, read when a fit runs: changing one solver's
+#: entry changes no other solver's fit); ``start_fits`` of ``offset_bracket``: the number of equation-error fits
+#: of its start (:func:`l1b2.ident.reduced.data_driven_start`; ``offset_reduced`` and ``offset_kappa0`` have none).
+#: ``offset_kappa0`` (the default cold search) runs its final search from the two best points of the profile's
+#: 95 % confidence set of omega: its first final is the one-final search, so its result is never below that one's
+BRACKETS = {"offset_bracket": {**_BRACKET_COMMON, "start_fits": 4},
+            "offset_reduced": dict(_BRACKET_COMMON),
+            "offset_kappa0": {**_BRACKET_COMMON, "finals": 2}}
 
 
 def bracketed_profile(obj, theta_start, n1, kappa, p_theta, settings=None, log=None):
     """The profile over omega by a bracketed search on each side of omega = 0 (:func:`bracket_search`):
     ``(records, best)`` as :func:`profile`.
 
-    The coarse points of :data:`BRACKET` on both branches (omega < 0 and omega > 0; the barrier |omega| = 1
+    ``settings``: a bracketed search's settings (:data:`BRACKETS`; default those of ``offset_bracket``, entries
+    given override them). The coarse points on both branches (omega < 0 and omega > 0; the barrier |omega| = 1
     and omega = 0 are the ends of each interval), then the bracketed search on the branch with the best
     point, and on the other one when its best is within ``margin`` of it; then the ``barrier`` points of each branch.
     ``best`` is the best point of the bracketed searches (the barrier points left out). Each point is fitted as in
     :func:`profile`, starting from the optimum of the evaluated point nearest to it moved to its omega
     (the first of each branch from the gauged start).
     """
-    cfg = {**BRACKET, **(settings or {})}
+    cfg = {**BRACKETS["offset_bracket"], **(settings or {})}
     th_g, scale_full, c_hi = _profile_frame(obj, theta_start, n1, kappa)
     saved = dict(vars(obj.noise))
     records = []
@@ -516,18 +522,18 @@ def _keep_profile_point(obj, search, outer, best, log=None):
 
 
 def _continue_identifiable(obj, search, outer, more, n1, p_theta, max_nfev, tol, stat_tol, max_outer, log,
-                           kappa=None):
-    """The search continued in the identifiable coordinates from its optimum (``BRACKET["final"]`` =
-    "paper+identifiable"; with ``kappa`` in their offset form, :func:`l1b2.ident.identifiable.identifiable_search`):
-    the continuation when it ends higher, else the search as it was (noise model there);
-    its evaluations count either way and its stages are added as "identifiable ...". Not continued when the
-    optimum has no identifiable coordinates (:func:`l1b2.ident.identifiable.admissible`)."""
+                           kappa=None, min_gain=0.01):
+    """The search continued in the identifiable coordinates from its optimum (a bracketed search's ``final`` =
+    "paper+identifiable", every local fit with ``min_gain``; with ``kappa`` in their offset form,
+    :func:`l1b2.ident.identifiable.identifiable_search`): the continuation when it ends higher, else the search as
+    it was (noise model there); its evaluations count either way and its stages are added as "identifiable ...".
+    Not continued when the optimum has no identifiable coordinates (:func:`l1b2.ident.identifiable.admissible`)."""
     ll = -search.results[search.best].cost
     if not admissible(obj.theta_of(outer.z), n1):  # e.g. mu or sigma at its bound 0: no coordinates to continue in
         return search, outer, more
     try:
         s2, o2, m2 = identifiable_search(obj, obj.theta_of(outer.z), n1, p_theta, max_nfev, tol, stat_tol,
-                                         max_outer, log, BRACKET["final_min_gain"], kappa)
+                                         max_outer, log, min_gain, kappa)
     except (IdentificationError, np.linalg.LinAlgError, ValueError) as exc:  # the search as it was
         if log is not None:
             log(f"identifiable continuation failed ({exc}); the paper-coordinate optimum kept")
@@ -544,33 +550,35 @@ def _continue_identifiable(obj, search, outer, more, n1, p_theta, max_nfev, tol,
 
 
 def bracketed_offset_search(obj, theta_start, order, kappa, p_theta, max_nfev, tol, stat_tol, max_outer, log=None,
-                            offset_form=False):
+                            offset_form=False, settings=None):
     """The drive-offset search with the bracketed profile (``solver="offset_bracket"``).
 
-    :func:`bracketed_profile`, then the free variable-projection search from its best point (the noise model
-    set at that point, every local fit with :data:`BRACKET`'s ``min_gain``); the result is the profile's best
-    point itself when the free search ends below it (:func:`_keep_profile_point`). With ``BRACKET["finals"]`` > 1
+    ``settings``: the search's settings (:data:`BRACKETS`; default those of ``offset_bracket``, entries given
+    override them). :func:`bracketed_profile`, then the free variable-projection search from its best point (the
+    noise model set at that point, every local fit with ``final_min_gain``); the result is the profile's best
+    point itself when the free search ends below it (:func:`_keep_profile_point`). With ``finals`` > 1
     the free search runs from the profile's best point and then from the other points of :func:`profile_candidates`
     (at most ``finals`` in all), and the highest end is the result (every search's evaluations counted, the other
     searches' stages named "other final ..."). With ``offset_form`` (``solver=
-    "offset_kappa0"``) the identifiable stages of ``BRACKET["final"]`` run with the drive offset kappa0 in place of
+    "offset_kappa0"``) the identifiable stages of ``final`` run with the drive offset kappa0 in place of
     K (:func:`l1b2.ident.identifiable.offset_form`). Returns ``(SearchOutcome, refinement, stages)`` as
     :func:`offset_search`.
     """
+    cfg = {**BRACKETS["offset_bracket"], **(settings or {})}
     n1 = order + 1
     t0, c0 = time.perf_counter(), time.process_time()
-    records, best = bracketed_profile(obj, theta_start, n1, kappa, p_theta, log=log)
+    records, best = bracketed_profile(obj, theta_start, n1, kappa, p_theta, cfg, log=log)
     stage = {"stage": "offset profile", "time_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0,
              "nfev": int(sum(r["nfev"] for r in records)), "njev": int(sum(r.get("njev", 0) for r in records)),
              "profile": [{"omega": r["omega"], "c_r": r["c_r"], "loglik": r["loglik"], "nfev": r["nfev"]}
                          for r in records]}
     if not np.isfinite(best["loglik"]):
         search, outer, more = varpro_search(obj, linear_positions(obj, p_theta, n1), [obj.z_of(theta_start)],
-                                            max_nfev, tol, stat_tol, max_outer, 1, log, BRACKET["final_min_gain"])
+                                            max_nfev, tol, stat_tol, max_outer, 1, log, cfg["final_min_gain"])
     else:
-        args = (n1, p_theta, max_nfev, tol, stat_tol, max_outer, log, kappa if offset_form else None)
-        others = [r for r in profile_candidates(records, BRACKET["finals"], BRACKET["final_margin"]) if r is not best]
-        finals = [_final_search(obj, rec, *args) for rec in ([best] + others)[:BRACKET["finals"]]]
+        args = (n1, p_theta, max_nfev, tol, stat_tol, max_outer, log, kappa if offset_form else None, cfg)
+        others = [r for r in profile_candidates(records, cfg["finals"], cfg["final_margin"]) if r is not best]
+        finals = [_final_search(obj, rec, *args) for rec in ([best] + others)[:cfg["finals"]]]
         search, outer, more = max(finals, key=lambda f: -f[0].results[f[0].best].cost)
         for other in finals:
             if other[0] is not search:
@@ -591,22 +599,22 @@ def profile_candidates(records, k: int, margin: float) -> list:
     return [r for r in pts if r["loglik"] >= pts[0]["loglik"] - margin][:k] if pts else []
 
 
-def _final_search(obj, best, n1, p_theta, max_nfev, tol, stat_tol, max_outer, log, kappa):
-    """The free search from one profile point ``best`` (``BRACKET["final"]``'s coordinates, the point itself kept
-    when the search ends below it, the identifiable continuation of "paper+identifiable"):
-    ``(SearchOutcome, refinement, stages)``."""
-    if BRACKET["final"] == "identifiable" and admissible(best["theta"], n1):  # decision 0039: the null directions of (sigma, mu, k0) removed
+def _final_search(obj, best, n1, p_theta, max_nfev, tol, stat_tol, max_outer, log, kappa, cfg):
+    """The free search from one profile point ``best`` (the coordinates of ``cfg["final"]``, the point itself kept
+    when the search ends below it, the identifiable continuation of "paper+identifiable"; ``cfg``: the bracketed
+    search's settings): ``(SearchOutcome, refinement, stages)``."""
+    if cfg["final"] == "identifiable" and admissible(best["theta"], n1):  # null directions of (sigma, mu, k0) removed
         search, outer, more = identifiable_search(obj, best["theta"], n1, p_theta, max_nfev, tol, stat_tol,
-                                                  max_outer, log, BRACKET["final_min_gain"], kappa)
+                                                  max_outer, log, cfg["final_min_gain"], kappa)
     else:
         z0 = obj.z_of(best["theta"])
         profile_loglik(obj, z0)  # the free search starts with the noise model of its start
         search, outer, more = varpro_search(obj, linear_positions(obj, p_theta, n1), [z0], max_nfev, tol, stat_tol,
-                                            max_outer, 1, log, BRACKET["final_min_gain"])
+                                            max_outer, 1, log, cfg["final_min_gain"])
     search, outer = _keep_profile_point(obj, search, outer, best, log)
-    if BRACKET["final"] == "paper+identifiable":  # decision 0039: continued without the null directions
+    if cfg["final"] == "paper+identifiable":  # continued without the null directions
         search, outer, more = _continue_identifiable(obj, search, outer, more, n1, p_theta, max_nfev, tol,
-                                                     stat_tol, max_outer, log, kappa)
+                                                     stat_tol, max_outer, log, kappa, cfg["final_min_gain"])
     return search, outer, more
 
 
@@ -632,7 +640,8 @@ def projected_search(cfg, obj, starts, theta_centre, p_theta, log=None):
     if offset and np.isin([0, 1, 2, 3, 5], obj.vidx).all():
         if cfg.solver != "offset":
             return bracketed_offset_search(obj, theta_centre, cfg.order, cfg.kappa, p_theta, cfg.max_nfev, cfg.tol,
-                                           cfg.stat_tol, cfg.max_outer, log, cfg.solver == "offset_kappa0")
+                                           cfg.stat_tol, cfg.max_outer, log, cfg.solver == "offset_kappa0",
+                                           BRACKETS[cfg.solver])
         return offset_search(obj, theta_centre, cfg.order, cfg.kappa, p_theta, cfg.max_nfev, cfg.tol,
                              cfg.stat_tol, cfg.max_outer, offset_grid(cfg.n_starts), log)
     if offset:
