@@ -197,8 +197,8 @@ class Effect:
     home : tuple
         ``"Component.parameter"`` of the subsystem FMUs that model the same physics (empty: none).
     exportable : bool
-        False when every hypothesis of the family reads a logged channel that no input of ``Predictor.fmu``
-        gives: it has no per-sample kernel and a model carrying it is not exported.
+        False when ``Predictor.fmu`` cannot evaluate the family's specs: a model carrying it is not exported
+        (:func:`l1b2.predictor.effects.channels.export_problem`). Every family of the package is.
     """
 
     kind: str = ""
