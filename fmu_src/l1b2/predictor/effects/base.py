@@ -219,6 +219,11 @@ class Effect:
         """Feature matrix ``(n, k)``: the force is ``features(spec, x) @ phi`` [N]."""
         raise NotImplementedError
 
+    def channel_mean(self, spec: Mapping) -> float | None:
+        """TRAIN's mean of the logged channel a spec reads (``spec["channel"]``): its ``mean`` scalar (the
+        samples' for a channel, the runs' values' for a run-level signal), None when it records none."""
+        return float(spec["mean"]) if "mean" in spec else None
+
     def grid(self, train: TrainingSummary) -> list[Hypothesis]:
         """The family's hypotheses (one per shape-grid point) for a fit on ``train``."""
         raise NotImplementedError

@@ -83,14 +83,6 @@ def _matches(c, levels) -> np.ndarray:
     return np.abs(np.asarray(c, float)[:, None] - lv[None, :]) <= tol
 
 
-def run_mean(spec) -> float:
-    """TRAIN's mean over runs of a categorical spec's setting: ``sum_j v_j s_j`` over its levels, the last level's
-    share ``1 - sum_j s_j`` (:func:`category_of`)."""
-    levels, shares = category_of(spec)
-    w = list(shares) + [1.0 - float(sum(shares))]
-    return float(sum(v * s for v, s in zip(levels, w)))
-
-
 def category_columns(c, levels, shares) -> np.ndarray:
     """The centred indicators of a category, ``(n, L - 1)``: ``1[c = v_j] - s_j`` for every level but the last;
     a value that is none of TRAIN's levels gets 0 in every column (TRAIN's average over runs, see
@@ -154,6 +146,13 @@ class RunLevelCategory(Effect):
 
     def width(self, spec):
         return 3 * (int(num(spec, "n_levels")) - 1)
+
+    def channel_mean(self, spec):
+        """TRAIN's mean over runs of the setting: ``sum_j v_j s_j`` over its levels, the last level's share
+        ``1 - sum_j s_j`` (:func:`category_of`)."""
+        levels, shares = category_of(spec)
+        w = list(shares) + [1.0 - float(sum(shares))]
+        return float(sum(v * s for v, s in zip(levels, w)))
 
     # -- the signal of the run-level analysis -------------------------------------------------------------------
 

@@ -144,7 +144,7 @@ def channel_inputs(specs) -> dict:
     """The logged channels that effect specs read through inputs of their own, ``{column: start}`` in column
     order: every column of a ``col:``/``run:`` signal (:func:`fmu_signal`) that is no input of
     :data:`INPUT_COLUMNS`, with TRAIN's mean of it as the first spec naming it as its ``channel`` records it
-    (:func:`train_mean`; 0 when none does)."""
+    (:meth:`~l1b2.predictor.effects.base.Effect.channel_mean`; 0 when none does)."""
     out: dict = {}
     for spec in specs:
         for key in sorted(needs(spec)):
@@ -152,22 +152,10 @@ def channel_inputs(specs) -> dict:
             if sig is None or not sig.startswith("col:"):
                 continue
             col = sig[4:]
-            mean = train_mean(spec) if spec.get("channel") == col else None
+            mean = family(spec.get("kind")).channel_mean(spec) if spec.get("channel") == col else None
             if out.get(col) is None:
                 out[col] = mean
     return {col: (0.0 if out[col] is None else float(out[col])) for col in sorted(out)}
-
-
-def train_mean(spec) -> float | None:
-    """TRAIN's mean of a spec's ``channel``: its ``mean`` (the samples' for a ``channel`` spec, the runs' values'
-    for a ``run_level`` one), or a category's mean over runs (:func:`l1b2.predictor.effects.category.run_mean`);
-    None when the spec records neither."""
-    if "mean" in spec:
-        return float(spec["mean"])
-    if "n_levels" in spec:
-        from .category import run_mean
-        return run_mean(spec)
-    return None
 
 
 def with_input_signals(x, keys) -> dict:
