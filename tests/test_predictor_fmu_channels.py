@@ -137,6 +137,24 @@ def test_the_block_declares_one_input_per_logged_channel_with_unit_start_and_pro
     assert [v.name for v in plain.INPUTS] == ["V0", "s", "load", "direction", "frequency_Hz"]
 
 
+def test_a_channel_named_like_a_predictor_variable_is_refused_and_the_drive_frequency_is_its_input():
+    # reference: the FMU's variable names are unique; the data format's frequency_Hz is the predictor's own input
+    base, refit = _setups()
+    for name in ("v0", "s", "F_extra"):
+        h = fx.family("run_level").hypotheses([{"channel": name, "transform": "none", "mean": 1.0, "sd": 0.5,
+                                                "run_spread": 0.0}])[0]
+        with pytest.raises(ValueError, match=f"variable names declared twice: {name} "):
+            PredictorBlock.variables(ExtendedPredictor(base, refit, (_effect(h, (0.1,) * 3),), None, {}))
+    h = fx.family("run_level").hypotheses([{"channel": "frequency_Hz", "transform": "none", "mean": 48500.0,
+                                            "sd": 50.0, "run_spread": 0.0}])[0]
+    ep = ExtendedPredictor(base, refit, (_effect(h, (0.1, 0.2, 0.3)),), None, {})
+    ins = [v for v in PredictorBlock.variables(ep) if v.causality == "input"]
+    assert [v.name for v in ins] == ["V0", "s", "load", "direction", "frequency_Hz"]
+    assert ins[-1].description.endswith("; also the logged channel the identified effects read")
+    gain = 0.1 * 300.0 / 300.0 + 0.2   # load 0: F = z (a V0/300 + b), z = (f - 48500)/50
+    assert _stepped_force(ep, frequency_Hz=48600.0) == pytest.approx(2.0 * gain, rel=1e-12)
+
+
 def _stepped_force(ep, **inputs) -> float:
     """``F_extra`` of the block after one step from the inputs ``inputs`` (held), the FMU's own call sequence."""
     block = PredictorBlock(ep)

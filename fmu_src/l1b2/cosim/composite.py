@@ -28,7 +28,7 @@ from ..predictor.effects import ExtendedPredictor
 from ..predictor.frequency import FrequencyResponse, effective_voltage
 from ..predictor.model import PredictorParams
 from ..predictor.setup import PredictorSetup
-from ..units import column_unit
+from ..units import COLUMN_UNITS, column_unit
 from .blocks import SUBSYSTEM_BLOCKS, Block, Var, parameter_vars
 from .engine import InProcessMotor, state_getter
 
@@ -444,8 +444,9 @@ class ExtendedPredictorBlock(PredictorBlock):
     ``INPUTS``): the plain predictor's, the measured stator temperature ``T``
     when an effect reads it, and one input per logged channel the effects read
     (:attr:`~l1b2.predictor.effects.ExtendedPredictor.channel_inputs`), named
-    after the column; a column that is already an input (``frequency_Hz``) is
-    that input.
+    after the column; a column of the data format that is already an input
+    (``frequency_Hz``) is that input, and a column named like another variable
+    of the predictor is refused (:meth:`variables`).
     """
 
     EXT_OUTPUTS = [
@@ -517,8 +518,8 @@ class ExtendedPredictorBlock(PredictorBlock):
         chans = params.channel_inputs
         out = [replace(v, description=v.description + "; also the logged channel the identified effects read")
                if v.name in chans else v for v in out]
-        taken = {v.name for v in out}
-        return out + [channel_input(col, start, src) for col, start in chans.items() if col not in taken]
+        shared = {v.name for v in out if v.name in COLUMN_UNITS}   # an input that is a data-format column
+        return out + [channel_input(col, start, src) for col, start in chans.items() if col not in shared]
 
     def set_start_time(self, t0: float):
         self.t_now = float(t0)
