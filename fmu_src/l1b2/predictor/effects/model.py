@@ -104,8 +104,8 @@ class ExtendedPredictor:
     @property
     def signals(self) -> set:
         """Every signal the effects read, as ``Predictor.fmu`` gives it: a signal of :data:`SIGNALS`, the input
-        that gives a ``col:``/``run:`` signal of an input column (:func:`~l1b2.predictor.effects.channels.fmu_signal`),
-        or the key itself when no input gives it."""
+        that gives a ``col:``/``run:`` signal of an input column, ``col:<column>`` for a logged channel's own input
+        (:func:`~l1b2.predictor.effects.channels.fmu_signal`), or the key itself when no input gives it."""
         from .channels import fmu_signal
         out: set = set()
         for e in self.effects:
