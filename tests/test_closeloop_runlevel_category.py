@@ -65,9 +65,12 @@ def test_the_categorical_family_gives_each_level_a_drive_gain_an_offset_and_a_lo
     np.testing.assert_allclose(fx.effect_features(h.spec, x), want)
     assert fx.family("run_level_category").width(h.spec) == 6
     assert fx.needs(h.spec) == {"V0", "d", "load", "run:fixture_id"}
-    # a logged channel that is no FMU input: the export says so (no crash), the family has no kernel
-    assert channels.export_problem(h.spec) == "no input: run:fixture_id"
-    assert not fx.family("run_level_category").exportable
+    # a logged channel: Predictor.fmu reads it through an input of its own (its current value as the run's
+    # level, exact as the setting is constant within runs: run_spread 0), the family has no kernel
+    assert channels.fmu_signal("run:fixture_id") == "col:fixture_id"
+    assert channels.export_problem(h.spec) is None
+    assert channels.export_problem({**h.spec, "run_spread": 1e-9}) is not None   # no sd: only 0 is constant
+    assert fx.family("run_level_category").exportable
     from l1b2.predictor.effects import kernels as ek
     with pytest.raises(fx.EffectSpecError, match="'run_level_category' has no per-sample kernel"):
         ek.spec_scalars(h.spec)

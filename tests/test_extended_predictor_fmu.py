@@ -34,11 +34,11 @@ pytestmark = pytest.mark.fmu
 N = 90
 DT = 1e-3
 T0 = 5.0                      # session time of the runs' start [s]
-#: the kinds Predictor.fmu carries: every signal they read is given by an FMU input (``channel`` of the logged
-#: stator temperature, ``run_level`` of the inputs held constant per run; a logged channel that is no input and a
-#: run mean of one the runs did not hold constant are refused, tested below); not the families whose every
-#: hypothesis reads a logged channel no input gives (``exportable`` False: the categorical run-level family)
-CARRIED = tuple(k for k in fx.KINDS if fx.family(k).exportable)
+#: the kinds Predictor.fmu carries with its fixed inputs (``channel`` of the logged stator temperature,
+#: ``run_level`` of the inputs held constant per run; the session clock as a channel and a run mean of an input the
+#: runs did not hold constant are refused, tested below); not the categorical run-level family, whose every
+#: hypothesis reads a logged channel through an input of its own (tests/test_predictor_fmu_channels.py)
+CARRIED = tuple(k for k in fx.KINDS if fx.family(k).exportable and k != "run_level_category")
 KINDS = CARRIED + ("output_filter",)
 FILTER = {"a": 0.3, "b0": 0.5, "b1": 0.2}
 
@@ -223,10 +223,11 @@ def _run_level_effect(channel: str, **spec) -> IdentifiedEffect:
                             (0.01,) * len(h.names), h.description, (h.regressor,), h.structural)
 
 
-@pytest.mark.parametrize("kind", ["channel", "run_level", "session_clock"])
-def test_a_model_reading_a_logged_channel_is_refused_by_the_export(pool, tmp_path, kind):
-    # reference: the inputs of Predictor.fmu (V0, s, load, direction, T): a logged channel that is none of them
-    # has no input, nor the session clock's run mean (the FMU's time changes within a run), nor a column unknown to it
+@pytest.mark.parametrize("kind", ["channel", "session_clock"])
+def test_a_model_reading_the_session_clock_as_a_channel_is_refused_by_the_export(pool, tmp_path, kind):
+    # reference: the inputs of Predictor.fmu: the session clock time_s is no input at either level (the FMU's own
+    # time is the clock; its run mean changes within a run); a logged channel has an input (test file
+    # tests/test_predictor_fmu_channels.py)
     from l1b2.fmi.export import ExportError, export_calibrated
     base, refit = _setups()
     if kind == "channel":
@@ -234,10 +235,9 @@ def test_a_model_reading_a_logged_channel_is_refused_by_the_export(pool, tmp_pat
         eff = IdentifiedEffect(c.family, c.label, c.spec, c.names, c.units, (0.1,) * c.n_params,
                                (0.01,) * c.n_params, c.description, c.regressors, c.structural)
     else:
-        col = dataio.TIME if kind == "session_clock" else "supply_V"
-        eff = _run_level_effect(col, mean=T0 + 0.5, sd=0.3, run_spread=0.0)
+        eff = _run_level_effect(dataio.TIME, mean=T0 + 0.5, sd=0.3, run_spread=0.0)
     assert not fx.needs(eff.spec) <= set(fx.SIGNALS)
-    with pytest.raises(ExportError, match="^Predictor.fmu has no input for the logged channels these effects read: "
+    with pytest.raises(ExportError, match="^Predictor.fmu has no input for the signals these effects read: "
                                           + eff.label.replace("[", r"\[").replace("]", r"\]") + "$"):
         export_calibrated(ExtendedPredictor(base, refit, (eff,), None, {}), tmp_path / "out")
     assert not (tmp_path / "out" / "fmus" / "Predictor.fmu").exists()
@@ -469,7 +469,7 @@ def test_every_family_of_the_package_has_a_kernel():
     # its calibrated models Python FMUs (the export says so)
     from l1b2.predictor.effects import kernels as ek
     assert set(CARRIED) - set(ek.KERNEL_KINDS) == set(), "families without a kernel in l1b2.predictor.effects.kernels"
-    assert set(fx.KINDS) - set(CARRIED) == {"run_level_category"}   # reads a logged channel: no kernel, refused
+    assert set(fx.KINDS) - set(ek.KERNEL_KINDS) == {"run_level_category"}   # reads a logged channel: no kernel
 
 
 OUTPUTS = ("v", "v_steady", "v_baseline", "F_extra")

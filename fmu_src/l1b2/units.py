@@ -72,6 +72,12 @@ UNITS: dict[str, UnitDef] = {
     "N/K2": UnitDef(kg=1, m=1, s=-2, K=-2),
     "N/m": UnitDef(kg=1, s=-2),
     "N.s/m": UnitDef(kg=1, s=-1),
+    # units a rig's logged auxiliary channel may name in its column's suffix (:func:`column_unit`)
+    "A": UnitDef(A=1),
+    "W": UnitDef(kg=1, m=2, s=-3),
+    "Pa": UnitDef(kg=1, m=-1, s=-2),
+    "bar": UnitDef(kg=1, m=-1, s=-2, factor=1e5),
+    "g": UnitDef(kg=1, factor=1e-3),
 }
 
 
@@ -131,6 +137,31 @@ def data_unit(name: str | None) -> str | None:
     if name in COLUMN_UNITS:
         return COLUMN_UNITS[name]
     return SIDECAR_FIELD_UNITS.get(name)  # type: ignore[arg-type]
+
+
+#: a column name's suffix that names a unit other than by its symbol in :data:`UNITS` (the data format's
+#: ``temperature_C``)
+SUFFIX_UNITS: dict[str, str] = {"C": "degC"}
+
+
+def column_unit(name: str) -> str | None:
+    """The unit of a measured-data column as a key of :data:`UNITS`, None when neither the data format nor the
+    name says it.
+
+    A column of the data format has its unit (:func:`data_unit`, ``"-"`` as ``"1"``); any other column's name
+    gives it by its suffix, the rig's naming rule (``line_pressure_bar``, ``supply_V``, ``belt_speed_m_s``): the
+    last two ``_``-separated parts read as a quotient (``m_s`` -> ``m/s``) or the last part, when that is a unit
+    of :data:`UNITS` other than ``1`` or of :data:`SUFFIX_UNITS` (``C`` -> ``degC``).
+    """
+    known = data_unit(name)
+    if known is not None:
+        return "1" if known == "-" else known
+    parts = str(name).split("_")[1:]
+    for suffix in (["/".join(parts[-2:])] if len(parts) >= 2 else []) + parts[-1:]:
+        unit = SUFFIX_UNITS.get(suffix, suffix)
+        if unit in UNITS and unit != "1":   # a trailing number is an index, not the unit 1
+            return unit
+    return None
 
 
 def tidy_float(x: float, digits: int = 12) -> float:

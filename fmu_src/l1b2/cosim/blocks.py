@@ -132,16 +132,21 @@ class Block:
         self.params = replace(self.params, **kw)
 
     def check_inputs(self):
-        """Raise :class:`SimulationError` on a non-finite or out-of-range input."""
-        bounds = _INPUT_BOUNDS.get(type(self))
+        """Raise :class:`SimulationError` on a non-finite or out-of-range input (the class's ``INPUTS``, or the
+        instance's own when it has them)."""
+        own = "INPUTS" in self.__dict__
+        bounds = self.__dict__.get("_input_bounds") if own else _INPUT_BOUNDS.get(type(self))
         if bounds is None:  # unbounded inputs: the largest finite floats, so that inf and nan fail
             big = sys.float_info.max
             names = tuple(v.name for v in self.INPUTS)
-            bounds = _INPUT_BOUNDS[type(self)] = (
-                operator.attrgetter(*names) if len(names) > 1
-                else (lambda obj, names=names: tuple(getattr(obj, n) for n in names)),
-                tuple(-big if v.min is None else v.min for v in self.INPUTS),
-                tuple(big if v.max is None else v.max for v in self.INPUTS))
+            bounds = (operator.attrgetter(*names) if len(names) > 1
+                      else (lambda obj, names=names: tuple(getattr(obj, n) for n in names)),
+                      tuple(-big if v.min is None else v.min for v in self.INPUTS),
+                      tuple(big if v.max is None else v.max for v in self.INPUTS))
+            if own:
+                self.__dict__["_input_bounds"] = bounds
+            else:
+                _INPUT_BOUNDS[type(self)] = bounds
         getter, lows, highs = bounds
         try:  # fast pass: every value inside its (finite) range; nan fails every comparison
             for value, lo, hi in zip(getter(self), lows, highs):

@@ -28,6 +28,7 @@ from ..predictor.effects import ExtendedPredictor
 from ..predictor.frequency import FrequencyResponse, effective_voltage
 from ..predictor.model import PredictorParams
 from ..predictor.setup import PredictorSetup
+from ..units import COLUMN_UNITS, column_unit
 from .blocks import SUBSYSTEM_BLOCKS, Block, Var, parameter_vars
 from .engine import InProcessMotor, state_getter
 
@@ -249,7 +250,7 @@ class PredictorBlock(Block):
 
     def __new__(cls, setup=None):
         if cls is PredictorBlock and isinstance(setup, ExtendedPredictor):
-            cls = ExtendedPredictorTBlock if setup.needs_temperature else ExtendedPredictorBlock
+            cls = ExtendedPredictorBlock
         return super().__new__(cls)
 
     def __init__(self, setup: PredictorSetup):
@@ -302,8 +303,7 @@ class PredictorBlock(Block):
     @classmethod
     def variables(cls, params: PredictorSetup | ExtendedPredictor | None = None) -> list[Var]:
         if cls is PredictorBlock and isinstance(params, ExtendedPredictor):
-            sub = ExtendedPredictorTBlock if params.needs_temperature else ExtendedPredictorBlock
-            return sub.variables(params)
+            return ExtendedPredictorBlock.variables(params)
         return cls._setup_vars(params) + list(cls.EXTRA_PARAMETERS) + cls.inputs(params) + cls.OUTPUTS + cls.STATES
 
     @staticmethod
@@ -439,6 +439,14 @@ class ExtendedPredictorBlock(PredictorBlock):
        time), ``v_base`` and ``a_base``;
     3. the model speed is advanced with ``F_extra`` added to its drive force,
        and passed through the output filter.
+
+    Its inputs (:meth:`inputs`, one list per carried model, the block's own
+    ``INPUTS``): the plain predictor's, the measured stator temperature ``T``
+    when an effect reads it, and one input per logged channel the effects read
+    (:attr:`~l1b2.predictor.effects.ExtendedPredictor.channel_inputs`), named
+    after the column; a column of the data format that is already an input
+    (``frequency_Hz``) is that input, and a column named like another variable
+    of the predictor is refused (:meth:`variables`).
     """
 
     EXT_OUTPUTS = [
@@ -457,6 +465,8 @@ class ExtendedPredictorBlock(PredictorBlock):
 
     def __init__(self, setup: ExtendedPredictor):
         self.extended = setup
+        self.INPUTS = self.inputs(setup)
+        self._channels = tuple(setup.channel_inputs)
         super().__init__(setup.model)
         for var in self.EXT_OUTPUTS + self.EXT_STATES:
             setattr(self, var.name, 0.0)
@@ -485,8 +495,31 @@ class ExtendedPredictorBlock(PredictorBlock):
                 out.append(Var(f"speed_filter_{k}", "parameter", "1",
                                f"speed channel output filter y(k) = a y(k-1) + b0 u(k) + b1 u(k-1): {k}",
                                start=float(params.output_filter[k]), variability="fixed"))
-        return (out + list(cls.EXTRA_PARAMETERS) + cls.inputs(params) + cls.OUTPUTS + cls.EXT_OUTPUTS + cls.STATES
-                + cls.EXT_STATES)
+        out = (out + list(cls.EXTRA_PARAMETERS) + cls.inputs(params) + cls.OUTPUTS + cls.EXT_OUTPUTS + cls.STATES
+               + cls.EXT_STATES)
+        names = [v.name for v in out]
+        clash = sorted({n for n in names if names.count(n) > 1})
+        if clash:   # a logged channel named like a variable of the predictor
+            raise ValueError(f"Predictor.fmu: variable names declared twice: {', '.join(clash)} (a logged channel "
+                             "an effect reads has the name of a predictor variable: rename the column)")
+        return out
+
+    @classmethod
+    def inputs(cls, params) -> list[Var]:
+        """The plain predictor's inputs (:meth:`PredictorBlock.inputs`), ``T`` when an effect of the extended
+        model ``params`` reads the stator temperature, then one input per logged channel its effects read that is
+        no input yet (:func:`channel_input`)."""
+        out = PredictorBlock.inputs(params)
+        if not isinstance(params, ExtendedPredictor):
+            return out
+        if params.needs_temperature:
+            out.append(cls.TEMPERATURE)
+        src = params.source.get("train") or "TRAIN data"
+        chans = params.channel_inputs
+        out = [replace(v, description=v.description + "; also the logged channel the identified effects read")
+               if v.name in chans else v for v in out]
+        shared = {v.name for v in out if v.name in COLUMN_UNITS}   # an input that is a data-format column
+        return out + [channel_input(col, start, src) for col, start in chans.items() if col not in shared]
 
     def set_start_time(self, t0: float):
         self.t_now = float(t0)
@@ -515,6 +548,8 @@ class ExtendedPredictorBlock(PredictorBlock):
              "v_base": [self.v_base], "a_base": [a_base]}
         if hasattr(self, "T"):
             x["T"] = [self.T]
+        for col in self._channels:
+            x["col:" + col] = [getattr(self, col)]
         return x
 
     def _force(self, x) -> float:
@@ -544,10 +579,18 @@ class ExtendedPredictorBlock(PredictorBlock):
         self.initialize_outputs()
 
 
-class ExtendedPredictorTBlock(ExtendedPredictorBlock):
-    """:class:`ExtendedPredictorBlock` with the measured stator temperature ``T`` [degC] as an input."""
+def channel_input(column: str, start: float, source: str) -> Var:
+    """The input of ``Predictor.fmu`` that gives a logged channel's signals to the effects reading it.
 
-    INPUTS = PredictorBlock.INPUTS + [ExtendedPredictorBlock.TEMPERATURE]
+    Named after the column; its unit from the column's name (:func:`l1b2.units.column_unit`; ``1`` when the name
+    does not say it, which the description states); its start value ``start``, TRAIN's mean of the channel;
+    unbounded (a non-finite value is refused).
+    """
+    unit = column_unit(column)
+    return Var(column, "input", unit or "1",
+               f"logged channel {column} of the calibration data ({source}), read by the identified effects (a "
+               "run-level effect reads its current value as the run's); start: TRAIN's mean"
+               + ("" if unit else "; its unit is not known from its name: the column's own"), start=float(start))
 
 
 #: every FMU's block class by FMU name

@@ -337,12 +337,17 @@ def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None)
     ------
     ExportError
         if the FMU fails fmpy validation or a Real has no unit (no manifest is written); before building
-        anything, if an effect reads a signal that no input of ``Predictor.fmu`` gives (a logged channel that
-        is no input, the session clock's run mean), or the run-level value of an input that TRAIN's runs did not
-        hold constant (:func:`l1b2.predictor.effects.channels.export_problem`: the FMU reads a run-level signal
-        of V0, the load, the direction or the temperature as the input's current value); if the model carries a
-        speed sensor's gain along the stroke (``ExtendedPredictor.speed_gain``: Predictor.fmu has no such output
-        stage).
+        anything, if an effect reads a signal that no input of ``Predictor.fmu`` gives (the session clock as a
+        channel), or the run-level value of an input that TRAIN's runs did not hold constant
+        (:func:`l1b2.predictor.effects.channels.export_problem`: the FMU reads a run-level signal of V0, the
+        load, the direction, the temperature or a logged channel as the input's current value); if the model
+        carries a speed sensor's gain along the stroke (``ExtendedPredictor.speed_gain``: Predictor.fmu has no such
+        output stage).
+
+    A logged channel an effect reads is an input of ``Predictor.fmu`` named after its column
+    (:func:`l1b2.cosim.composite.channel_input`); the manifest lists it in ``inputs`` and ``channel_inputs``
+    (:func:`channel_records`). No native FMU carries such an effect (its kernels read the fixed inputs only:
+    ``native`` says so).
     """
     from ..predictor.effects import ExtendedPredictor, plugin_sources
     from ..predictor.effects.channels import export_problem
@@ -357,7 +362,7 @@ def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None)
     problems = [(e.label, export_problem(e.spec)) for e in model.effects]
     logged = [label for label, why in problems if why and why.startswith("no input")]
     if logged:
-        raise ExportError(f"Predictor.fmu has no input for the logged channels these effects read: {', '.join(logged)}")
+        raise ExportError(f"Predictor.fmu has no input for the signals these effects read: {', '.join(logged)}")
     varied = [f"{label}: {why}" for label, why in problems if why]
     if varied:
         raise ExportError("Predictor.fmu reads a run-level signal as its input's current value, exact only when "
@@ -401,6 +406,8 @@ def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None)
         ssp_info = {"included": True, "path": CALIBRATED_SSP, "libcosim_path": CALIBRATED_LIBCOSIM_SSP,
                     "parameter_sets": CALIBRATED_SSV_DIR,
                     "motor": mp.name, "changed": {k: v for m in mapping for k, v in m["parameters"].items()}}
+        if model.channel_inputs:   # the SSP's system has no input for them: their effects are Predictor.fmu's
+            ssp_info["not_carried_channels"] = list(model.channel_inputs)
     problems = _all_problems({"files": files})
     if problems:
         raise ExportError(f"{out}: {len(problems)} validation problem(s):\n  " + "\n  ".join(problems))
@@ -415,12 +422,30 @@ def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None)
         "source": model.source, "files": files, "effects": effects, "calibrated_ssp": ssp_info,
         "native": {PREDICTOR_FMU: native_info},
         "output_filter": model.output_filter,
-        "inputs": ["V0", "s", "load", "direction"] + (["T"] if model.needs_temperature else []),
+        "inputs": (["V0", "s", "load", "direction"] + (["T"] if model.needs_temperature else [])
+                   + list(model.channel_inputs)),
+        "channel_inputs": channel_records(model),
         "time": "the FMU's own time is the session clock the effects use (start the simulation at the run's "
                 "session time)",
     }
     write_manifest(out / CALIBRATED_MANIFEST, manifest)
     return manifest
+
+
+def channel_records(model) -> list:
+    """One record per logged-channel input of a calibrated model's ``Predictor.fmu`` (``name``, ``unit``,
+    ``start``: TRAIN's mean, ``description``, ``effects``: the labels of the effects reading it)."""
+    from ..cosim.composite import ExtendedPredictorBlock
+    from ..predictor.effects import needs
+    from ..predictor.effects.channels import fmu_signal
+    chans = model.channel_inputs
+    out = []
+    for v in ExtendedPredictorBlock.inputs(model):
+        if v.name in chans:
+            readers = [e.label for e in model.effects if "col:" + v.name in {fmu_signal(k) for k in needs(e.spec)}]
+            out.append({"name": v.name, "unit": v.unit, "start": v.start, "description": v.description,
+                        "effects": readers})
+    return out
 
 
 def _numba_version() -> dict:

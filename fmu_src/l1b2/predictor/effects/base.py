@@ -197,8 +197,8 @@ class Effect:
     home : tuple
         ``"Component.parameter"`` of the subsystem FMUs that model the same physics (empty: none).
     exportable : bool
-        False when every hypothesis of the family reads a logged channel that no input of ``Predictor.fmu``
-        gives: it has no per-sample kernel and a model carrying it is not exported.
+        False when ``Predictor.fmu`` cannot evaluate the family's specs: a model carrying it is not exported
+        (:func:`l1b2.predictor.effects.channels.export_problem`). Every family of the package is.
     """
 
     kind: str = ""
@@ -218,6 +218,11 @@ class Effect:
     def features(self, spec: Mapping, x: Mapping) -> np.ndarray:
         """Feature matrix ``(n, k)``: the force is ``features(spec, x) @ phi`` [N]."""
         raise NotImplementedError
+
+    def channel_mean(self, spec: Mapping) -> float | None:
+        """TRAIN's mean of the logged channel a spec reads (``spec["channel"]``): its ``mean`` scalar (the
+        samples' for a channel, the runs' values' for a run-level signal), None when it records none."""
+        return float(spec["mean"]) if "mean" in spec else None
 
     def grid(self, train: TrainingSummary) -> list[Hypothesis]:
         """The family's hypotheses (one per shape-grid point) for a fit on ``train``."""

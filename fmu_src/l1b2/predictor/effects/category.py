@@ -13,9 +13,11 @@ Which settings are categories (:func:`category_levels`, :meth:`RunLevelCategory.
 input of ``Predictor.fmu`` (an input has its own physics and signals), constant within every run, with
 :data:`CATEGORY_LEVELS` distinct values over TRAIN's runs, each held by at least :data:`CATEGORY_MIN_RUNS` runs.
 
-Every hypothesis of this family reads a logged channel that no input of ``Predictor.fmu`` gives
-(:func:`l1b2.predictor.effects.channels.export_problem`: ``"no input: run:<column>"``): the family has no
-per-sample kernel and a model carrying it is not exported (:attr:`RunLevelCategory.exportable` False).
+Every hypothesis of this family reads a logged channel: ``Predictor.fmu`` reads it through the channel's own input
+(:func:`l1b2.predictor.effects.channels.channel_inputs`), its current value taken as the run's level (the
+run-level contract of :func:`l1b2.predictor.effects.channels.export_problem`); a value that is none of TRAIN's
+levels gets TRAIN's average over runs. The family has no per-sample kernel: its models stay Python FMUs (no
+native one).
 """
 
 from __future__ import annotations
@@ -119,7 +121,6 @@ class RunLevelCategory(Effect):
     regressor = "run"
     group = "run_level"
     signals = ("load",)
-    exportable = False
     description = ("a logged run setting's values, each scaling the drive force, adding a force and scaling the "
                    "load's force (constant along the stroke)")
 
@@ -145,6 +146,13 @@ class RunLevelCategory(Effect):
 
     def width(self, spec):
         return 3 * (int(num(spec, "n_levels")) - 1)
+
+    def channel_mean(self, spec):
+        """TRAIN's mean over runs of the setting: ``sum_j v_j s_j`` over its levels, the last level's share
+        ``1 - sum_j s_j`` (:func:`category_of`)."""
+        levels, shares = category_of(spec)
+        w = list(shares) + [1.0 - float(sum(shares))]
+        return float(sum(v * s for v, s in zip(levels, w)))
 
     # -- the signal of the run-level analysis -------------------------------------------------------------------
 

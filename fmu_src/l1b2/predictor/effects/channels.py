@@ -61,17 +61,19 @@ run's mean, per sample), taken from the data frame by
 What ``Predictor.fmu`` evaluates (:func:`fmu_signal`, :func:`export_problem`): a
 signal of a column that is an input of the FMU (:data:`INPUT_COLUMNS`:
 ``voltage_V`` -> ``V0``, ``load_kg`` -> ``load``, ``direction`` -> ``d``,
-``temperature_C`` -> ``T``) is that input's **current value**, at both levels.
-For ``col:`` that is the signal itself; for ``run:`` (the run's mean) it is
-exact only when the input is constant within a run, which the rig's protocol
-does for V0, the load and the direction: the run-level contract. Each
-run-level hypothesis records how far TRAIN's runs were from it
-(``run_spread``: the largest deviation of a sample's value from its run's
-mean, in the signal's units) and the export refuses one whose spread exceeds
-:data:`RUN_CONSTANT_TOL` standard deviations of the signal. Any other column
-(a logged channel that is no FMU input, the session clock ``time_s``, the drive
-frequency, which scales the force factor but is no effect signal) has no
-input: a model reading it is not exported.
+``temperature_C`` -> ``T``) is that input's **current value**, at both levels;
+so is a signal of any other logged column, whose input the FMU declares when an
+effect reads it (:func:`channel_inputs`: the input named after the column, its
+signal ``col:<column>``). For ``col:`` that is the signal itself; for ``run:``
+(the run's mean) it is exact only when the input is constant within a run,
+which the rig's protocol does for V0, the load and the direction, and a rig
+may do for a logged setting: the run-level contract. Each run-level hypothesis
+records how far TRAIN's runs were from it (``run_spread``: the largest
+deviation of a sample's value from its run's mean, in the signal's units) and
+the export refuses one whose spread exceeds :data:`RUN_CONSTANT_TOL` standard
+deviations of the signal. The session clock ``time_s`` has no input (the FMU's
+own time is the session clock; its run mean changes along the run): a model
+reading it as a channel is not exported.
 """
 
 from __future__ import annotations
@@ -79,7 +81,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from .base import SIGNALS, SPEED_REF, V_REF, Effect, EffectSpecError, needs, num, register, signal
+from .base import SIGNALS, SPEED_REF, V_REF, Effect, EffectSpecError, family, needs, num, register, signal
 
 FORMS = ("friction", "force_factor", "force", "inertia", "damping")
 #: the forms of every channel, the session clock's included, and of the load interaction: all but ``inertia``
@@ -124,17 +126,36 @@ RUN_CONSTANT_TOL = 0.01
 
 
 def fmu_signal(key: str) -> str | None:
-    """The signal of :data:`SIGNALS` that ``Predictor.fmu`` gives for a signal key (None: it has no input for it).
+    """The signal that ``Predictor.fmu`` gives for a signal key (None: it has no input for it).
 
     A signal of :data:`SIGNALS` is itself; ``col:<column>`` and ``run:<column>`` of a column of
-    :data:`INPUT_COLUMNS` are that input (its current value: for ``run:`` exact when the input is constant within
-    a run); any other key has no input.
+    :data:`INPUT_COLUMNS` are that input; of the session clock :data:`SESSION_TIME`, None; of any other column,
+    ``col:<column>``, the signal of the column's own input (:func:`channel_inputs`). Either level is the input's
+    current value: for ``run:`` exact when the input is constant within a run.
     """
     if key in SIGNALS:
         return key
-    if key[:4] in ("col:", "run:"):
-        return INPUT_COLUMNS.get(key[4:])
+    if key[:4] in ("col:", "run:") and key[4:] and key[4:] != SESSION_TIME:
+        return INPUT_COLUMNS.get(key[4:], "col:" + key[4:])
     return None
+
+
+def channel_inputs(specs) -> dict:
+    """The logged channels that effect specs read through inputs of their own, ``{column: start}`` in column
+    order: every column of a ``col:``/``run:`` signal (:func:`fmu_signal`) that is no input of
+    :data:`INPUT_COLUMNS`, with TRAIN's mean of it as the first spec naming it as its ``channel`` records it
+    (:meth:`~l1b2.predictor.effects.base.Effect.channel_mean`; 0 when none does)."""
+    out: dict = {}
+    for spec in specs:
+        for key in sorted(needs(spec)):
+            sig = fmu_signal(key)
+            if sig is None or not sig.startswith("col:"):
+                continue
+            col = sig[4:]
+            mean = family(spec.get("kind")).channel_mean(spec) if spec.get("channel") == col else None
+            if out.get(col) is None:
+                out[col] = mean
+    return {col: (0.0 if out[col] is None else float(out[col])) for col in sorted(out)}
 
 
 def with_input_signals(x, keys) -> dict:
@@ -161,11 +182,15 @@ def run_spread(values, run) -> float:
 def export_problem(spec) -> str | None:
     """Why ``Predictor.fmu`` cannot evaluate an effect spec as identified (None: it can).
 
-    ``"no input: <keys>"`` when a signal has no FMU input (:func:`fmu_signal`); for a run-level signal of an input,
+    ``"the family ... is not exportable"`` for a family that says so (``exportable`` False); ``"no input: <keys>"``
+    when a signal has no FMU input (:func:`fmu_signal`); for a run-level signal of an input,
     ``"not constant within runs: ..."`` when the spec does not record TRAIN's ``run_spread`` or it exceeds
     :data:`RUN_CONSTANT_TOL` standard deviations (``sd``) of the signal.
     """
-    keys = needs(spec)
+    fam = family(spec.get("kind"))
+    if not fam.exportable:
+        return f"the family {fam.kind!r} is not exportable"
+    keys = fam.needs(spec)
     missing = sorted(k for k in keys if fmu_signal(k) is None)
     if missing:
         return "no input: " + ", ".join(missing)
@@ -496,10 +521,10 @@ class RunLevel(Effect):
     family ``run_level_<signal>``).
 
     In ``Predictor.fmu`` (and :meth:`~l1b2.predictor.effects.model.ExtendedPredictor.free_run`) the run-level
-    value of an input's signal (V0, the load, the direction, the temperature: :data:`INPUT_COLUMNS`) is the
-    input's current value: exact when the input is constant within a run, as the rig's protocol holds V0, the
-    load and the direction (:func:`export_problem` checks the spec's ``run_spread``). A run mean of any other
-    column (a logged channel that is no input, the session clock) is not exported.
+    value of an input's signal (V0, the load, the direction, the temperature: :data:`INPUT_COLUMNS`, or a logged
+    channel's own input, :func:`channel_inputs`) is the input's current value: exact when the input is constant
+    within a run, as the rig's protocol holds V0, the load and the direction (:func:`export_problem` checks the
+    spec's ``run_spread``). A run mean of the session clock is not exported.
 
     A logged run setting that is a category, each of its values its own effect, is its own family,
     :class:`l1b2.predictor.effects.category.RunLevelCategory` (``run_level_category``), in the same form.

@@ -16,13 +16,14 @@ accepts. Each kernel returns one effect's force ``features(spec, x) @ phi``
 * ``phi``: the effect's parameters, one per feature column.
 
 :data:`KERNEL_KINDS` lists the kinds with a kernel: every family of the package
-(``channel`` and ``run_level`` for a signal that an input of ``Predictor.fmu``
-gives, :func:`l1b2.predictor.effects.channels.fmu_signal`: a run-level signal is
-the input's current value, exact when the input is constant within a run) but
-those whose every hypothesis reads a logged channel no input gives
-(:attr:`~l1b2.predictor.effects.base.Effect.exportable` False:
-``run_level_category``, never exported); a family registered outside the
-package has none (its model stays a Python FMU). A change of a family's features needs the same change in its kernel:
+(``channel`` and ``run_level`` for a signal of :data:`~l1b2.predictor.effects.base.SIGNALS`
+that an input of ``Predictor.fmu`` gives, :func:`l1b2.predictor.effects.channels.fmu_signal`:
+a run-level signal is the input's current value, exact when the input is constant within a run)
+but ``run_level_category``, whose every hypothesis reads a logged channel; a
+spec reading a logged channel through an input of its own
+(:func:`l1b2.predictor.effects.channels.channel_inputs`) has no kernel either
+(:func:`spec_scalars` says so): those models, and those of a family registered
+outside the package, stay Python FMUs. A change of a family's features needs the same change in its kernel:
 the tests compare every kernel with its family's vectorised features.
 """
 
@@ -123,6 +124,10 @@ def _signal_scalars(spec) -> list[float]:
                               f"{spec.get('transform')!r} has no per-sample kernel (one of {', '.join(TRANSFORMS)})")
     level = "run" if kind == "run_level" else str(spec.get("level"))
     sig = fmu_signal(signal_key(str(spec.get("channel")), level))
+    if sig not in SIGNAL_INDEX:
+        raise EffectSpecError(f"effect spec {kind!r} reads the logged channel {spec.get('channel')!r} through an "
+                              "input of its own, which the native kernels do not have (they read "
+                              f"{', '.join(SIGNALS)})")
     code = (TRANSFORMS.index(spec.get("transform", "none")) if kind == "run_level"
             else FORMS.index(spec.get("form")) if spec.get("form") in FORMS else -1)
     if code < 0:

@@ -106,8 +106,8 @@ class ExtendedPredictor:
     @property
     def signals(self) -> set:
         """Every signal the effects read, as ``Predictor.fmu`` gives it: a signal of :data:`SIGNALS`, the input
-        that gives a ``col:``/``run:`` signal of an input column (:func:`~l1b2.predictor.effects.channels.fmu_signal`),
-        or the key itself when no input gives it."""
+        that gives a ``col:``/``run:`` signal of an input column, ``col:<column>`` for a logged channel's own input
+        (:func:`~l1b2.predictor.effects.channels.fmu_signal`), or the key itself when no input gives it."""
         from .channels import fmu_signal
         out: set = set()
         for e in self.effects:
@@ -117,6 +117,13 @@ class ExtendedPredictor:
     @property
     def needs_temperature(self) -> bool:
         return "T" in self.signals
+
+    @property
+    def channel_inputs(self) -> dict:
+        """The logged channels the effects read through inputs of their own, ``{column: TRAIN's mean}``
+        (:func:`~l1b2.predictor.effects.channels.channel_inputs`): ``Predictor.fmu``'s extra inputs."""
+        from .channels import channel_inputs
+        return channel_inputs(e.spec for e in self.effects)
 
     def to_dict(self) -> dict:
         return {"baseline": self.baseline.to_dict(), "model": self.model.to_dict(),
@@ -152,7 +159,7 @@ class ExtendedPredictor:
         return out
 
     def free_run(self, t, s, V0, load, direction, v_start, run_index=None, temperature=None,
-                 frequency=None) -> np.ndarray:
+                 frequency=None, channels=None) -> np.ndarray:
         """Free-run speed per sample [m/s] along measured inputs (the vectorised reference of the FMU).
 
         Flat per-sample arrays, runs contiguous and labelled by ``run_index``
@@ -161,9 +168,13 @@ class ExtendedPredictor:
         ``frequency`` [Hz] the drive frequency per sample (None: each setup's
         nominal one, gain 1), which scales the setups' force factors by their
         frequency response (:mod:`l1b2.predictor.frequency`; effects see the commanded V0).
-        A run-level signal of an input (a run-level voltage effect) is the
-        input's value per sample, as in the FMU: the identified model's run
-        mean when the input is constant within each run (the rig's protocol).
+        ``channels``: ``{column: values per sample}`` of every logged channel
+        of :attr:`channel_inputs` (the drive frequency's column ``frequency_Hz``
+        defaults to ``frequency``), each as the FMU's input of that name.
+        A run-level signal of an input (a run-level voltage effect, a logged
+        setting's run value) is the input's value per sample, as in the FMU:
+        the identified model's run mean when the input is constant within each
+        run (the rig's protocol).
         """
         from ..simulate import RunLayout, free_run
 
@@ -179,6 +190,14 @@ class ExtendedPredictor:
              "d": np.broadcast_to(np.asarray(direction, float), t.shape)}
         if temperature is not None:
             x["T"] = np.asarray(temperature, float)
+        given = dict(channels or {})
+        if frequency is not None:
+            given.setdefault("frequency_Hz", frequency)
+        for col in self.channel_inputs:
+            if col not in given:
+                raise EffectSpecError(f"an effect reads the logged channel {col!r}: pass channels={{{col!r}: "
+                                      "values per sample}")
+            x["col:" + col] = np.broadcast_to(np.asarray(given[col], float), t.shape)
         sig = self.signals
         if "T" in sig and "T" not in x:
             raise EffectSpecError("an effect needs the stator temperature: pass temperature= (degC per sample)")
