@@ -9,6 +9,8 @@ identification's own free run (run means by groupby) and :meth:`l1b2.predictor.e
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pandas as pd
 import pytest
@@ -333,3 +335,36 @@ def test_the_exported_fmu_driven_with_the_channel_inputs_reproduces_the_identifi
     starts = np.r_[0, np.flatnonzero(np.diff(run)) + 1]
     steps = np.setdiff1d(np.arange(len(df)), starts)   # F_extra after a step: the force at the step's start
     np.testing.assert_allclose(got[steps, 1], force[steps - 1], rtol=1e-10, atol=1e-14)
+
+
+def test_a_logged_setting_with_sensor_noise_is_exported_when_its_samples_barely_move_the_free_run(tmp_path):
+    # reference: the export accepts a run-level effect of a logged channel beyond RUN_CONSTANT_TOL when the spec's
+    # run_feed (largest change of the free run, samples fed instead of run means, over its rms) is at most
+    # RUN_FEED_TOL; an input of the plan keeps the contract whatever run_feed says
+    from l1b2.closeloop.calibrated import run_feed
+    from l1b2.fmi.export import export_calibrated
+    base, refit = _setups()
+    df = _frame(pressure_noise_bar=0.01)
+    noisy = _hypotheses(df)["pressure_run"]
+    ep = ExtendedPredictor(base, refit, (_effect(noisy, (0.3, -0.2, 0.5)),), None, {"train": "synthetic"})
+    # written out: the free run with the logged samples and with each run's mean of the pressure
+    run = df[dataio.RUN].to_numpy()
+    first = df.groupby(dataio.RUN, sort=False)[dataio.SPEED].first().to_numpy()
+    args = (df[dataio.TIME], df[dataio.POSITION], df[dataio.VOLTAGE], df[dataio.LOAD], df[dataio.DIRECTION], first, run)
+    v1 = ep.free_run(*args, channels={"line_pressure_bar": df["line_pressure_bar"].to_numpy()})
+    means = df.groupby(dataio.RUN)["line_pressure_bar"].transform("mean").to_numpy()
+    v2 = ep.free_run(*args, channels={"line_pressure_bar": means})
+    want = np.max(np.abs(v1 - v2)) / np.sqrt(np.mean(v1 ** 2))
+    assert 0 < want < ch.RUN_FEED_TOL
+    assert run_feed(ep, df, "line_pressure_bar") == pytest.approx(want, rel=1e-12)
+    fed = {**noisy.spec, "run_feed": want}
+    assert ch.export_problem(fed) is None
+    worse = ch.export_problem({**noisy.spec, "run_feed": 0.02})
+    assert worse.startswith("not constant within runs: line_pressure_bar") and "by up to 2.00% of its rms" in worse
+    effect = dataclasses.replace(_effect(noisy, (0.3, -0.2, 0.5)), spec=fed)
+    man = export_calibrated(ExtendedPredictor(base, refit, (effect,), None, {}), tmp_path / "out")
+    assert "line_pressure_bar" in man["inputs"]
+    # an input of the plan (V0) is held to the run-level contract: run_feed does not excuse it
+    spec_v = {"kind": "run_level", "channel": "voltage_V", "transform": "none", "mean": 300.0, "sd": 20.0,
+              "run_spread": 5.0, "run_feed": 0.0}
+    assert ch.export_problem(spec_v).startswith("not constant within runs: voltage_V")

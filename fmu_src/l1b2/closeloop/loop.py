@@ -76,9 +76,7 @@ from ..data.metrics import report_metrics
 from ..ident.coarse import coarse_to_fine, nfev_of
 from ..ident.convention import EstimatorSettings
 from ..ident.estimator import PredictorIdentifier
-from ..predictor.effects import ExtendedPredictor, IdentifiedEffect
 from ..predictor.model import DRIVE_LAWS
-from ..predictor.setup import PredictorSetup
 from ..predictor.effects import channels as fx_channels
 from . import chain
 from . import residuals as res
@@ -87,6 +85,7 @@ from .candidates import Context, baseline_damping, channels_of, damping_floors, 
 from .settings import LoopSettings, keyword_signature
 from .stages import StageClock
 from .auxiliary import check_test_columns, with_usable_channels
+from .calibrated import calibrated_model
 from . import sensor
 from .sensor import GainChain
 from .acceptance import (Directions, EffectSet, RefitCV, RefitSettings, Validated, accepts, added_columns,
@@ -98,7 +97,7 @@ from .events import session, with_event_clocks
 from .lags import with_lagged_channels
 from .evidence import channels_considered, order_traced, with_auxiliary, with_position_share
 from .guard import checked_fit
-from .intervals import added_parameters, identification, reported_covariance, reported_uncertainty, train_levels
+from .intervals import added_parameters, identification, train_levels
 from .result import CloseLoopResult, ResidualAnalysis
 from .selection import (Score, best_per_family, design, named_alternatives, nuisance_forces, score_candidates,
                         shape_alternatives, shortlist, significance_level, simplest_within_one_se)
@@ -226,7 +225,7 @@ class CloseLoop(EstimatorSettings):
         calibrated, why = calibrated_model(start, ext, it.effects, it.output_filter,
                                            {**_data_summary(train, test), "operating_points": _operating_points(dtr),
                                             **({"auxiliary_columns": aux_rec} if aux_rec else {})},
-                                           levels, None if it.speed_gain is None else it.speed_gain.gain)
+                                           levels, None if it.speed_gain is None else it.speed_gain.gain, dtr)
         first = it.first_scores or []
         chosen = it.chosen
         diagnosis = {**self._diagnosis(it, first, analysis, ext_params, chain_rec), "auxiliary_columns": aux_rec,
@@ -720,41 +719,6 @@ def candidate_context(baseline_free_run, m_s: float, df: pd.DataFrame, mask: np.
         spectral_period_m=peak.get("period_m") if peak.get("power_ratio_to_median", 0) > 4 else None,
         damping_N_s_per_m=damping,
         **({} if response_columns is None else {"response_columns": tuple(response_columns)}))
-
-
-def calibrated_model(base, ext, effects: EffectSet, output_filter, source: dict, groups=None, speed_gain=None):
-    """``(ExtendedPredictor or None, note)``: the final model in the serialisable form ``Predictor.fmu`` carries.
-
-    Each effect's standard errors are the report's (:func:`l1b2.closeloop.intervals.reported_uncertainty`,
-    ``groups`` its runs' level labels), and so is its parameters' covariance
-    (:func:`l1b2.closeloop.intervals.reported_covariance`).
-
-    When nothing was added it is the baseline (no effects); None when an
-    effect has no spec (a user's candidate with a Python feature function
-    only), the note says which.
-    """
-    base_setup = PredictorSetup(base.params_, base.m_s_, base.T_s_, base.result_.frequency_response)
-    if ext is None:
-        return (ExtendedPredictor(base_setup, base_setup, (), None, dict(source)),
-                f"nothing was added: the baseline predictor ({base.params_.drive_law}) is the model")
-    missing = [c.label for c in effects.candidates if not c.spec]
-    if missing:
-        return None, f"effects without a serialisable spec (custom candidates): {', '.join(missing)}"
-    from ..predictor.effects.channels import export_problem
-    logged = [f"{c.label} ({why})" for c in effects.candidates if (why := export_problem(c.spec))]
-    if logged:
-        return None, f"effects Predictor.fmu cannot evaluate as identified: {', '.join(logged)}"
-    recs = tuple(IdentifiedEffect(c.family, c.label, dict(c.spec), tuple(c.names), tuple(c.units),
-                        tuple(float(p) for p in phi),
-                        tuple(reported_uncertainty(ext, n, groups)["stderr"] for n in c.names),
-                        c.description, tuple(c.regressors), c.structural,
-                        reported_covariance(ext, c.names, groups))
-                 for c, phi in zip(effects.candidates, effects.phi))
-    filt = None if output_filter is None else {"a": output_filter.a, "b0": output_filter.b0, "b1": output_filter.b1}
-    ext_setup = PredictorSetup(ext.params_, ext.m_s_, ext.T_s_, ext.result_.frequency_response)
-    model = ExtendedPredictor(base_setup, ext_setup, recs, filt, dict(source),
-                              None if speed_gain is None else speed_gain.to_dict())
-    return model, "the final extended model"
 
 
 def _operating_points(df: pd.DataFrame) -> dict:
