@@ -267,8 +267,8 @@ class SignalEvidence:
 
 
 def run_signals(df: pd.DataFrame, channels) -> list[dict]:
-    """The run-level signals of a frame: each candidate channel's run mean (not the responses, not a label's codes, not constant ones)
-    and the inputs of :data:`~l1b2.predictor.effects.channels.INPUT_SIGNALS`; ``{"channel", "transform", "values",
+    """The run-level signals of a frame: each candidate channel's run mean (not the responses, not a label's codes,
+    not constant ones) and the inputs of :data:`~l1b2.predictor.effects.channels.INPUT_SIGNALS`; ``{"channel", "transform", "values",
     "run_spread"}`` with one value per run (in run order) and the largest deviation of a sample's value from its
     run's (:func:`l1b2.predictor.effects.channels.run_spread`: what the export checks)."""
     out = []
