@@ -19,9 +19,9 @@ derived from their own runs.
 
 A column is a step channel (:func:`step_channels`) when it is a logged candidate channel
 (:func:`l1b2.closeloop.candidates.channels_of`, not a response; a coded text label counts), constant within every
-run, and its value changes between consecutive runs of the session at least once and at most once per :data:`MIN_BLOCK_RUNS` runs on average:
-a channel that changes from almost every run to the next is a run-level channel, not a log of events, and a block
-of fewer runs would not show what happens along it.
+run, and its value changes between consecutive runs of the session at least once and at most once per
+:data:`MIN_BLOCK_RUNS` runs on average: a channel that changes from almost every run to the next is a run-level
+channel, not a log of events, and a block of fewer runs would not show what happens along it.
 """
 
 from __future__ import annotations
