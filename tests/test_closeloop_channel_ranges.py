@@ -106,3 +106,22 @@ def test_the_cli_warns_per_channel_outside_and_an_older_report_without_the_field
     assert Diagnosis.from_dict(old).channel_ranges == []
     d = Diagnosis.from_dict({**old, "channel_ranges": [sample]})
     assert Diagnosis.from_dict(d.to_dict()) == d
+
+
+def test_the_report_says_how_far_the_speed_column_is_from_the_positions_derivative():
+    from l1b2.closeloop.report import chain_line
+    from l1b2.closeloop.result import markdown_report
+    from test_report_values import minimal_report
+    rec = {"accepted": False, "rel_rms_mismatch": 0.2134, "cv_gain": 0.0008, "p_value": 0.0756}
+    want = ("Measurement chain: the speed column differs from the position's derivative by 21.3% of the speed's "
+            "rms; the speed channel's test (held-out gain 0.1%, p 0.076): no filter found.")
+    assert chain_line(rec) == want
+    assert chain_line({**rec, "accepted": True}).endswith(": its filter was kept.")
+    assert "found but not applied" in chain_line({**rec, "refused_by_harm_guard": True})
+    assert chain_line({"accepted": False, "reason": "no speed column"}) == \
+        "Measurement chain: not tested (no speed column)."
+    assert chain_line({}) == ""
+    rep = minimal_report()
+    rep["diagnosis"] = {**rep["diagnosis"], "measurement_chain": rec}
+    assert want in markdown_report(rep).splitlines()
+    assert "Measurement chain" not in markdown_report(minimal_report())

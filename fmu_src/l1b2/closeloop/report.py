@@ -183,6 +183,22 @@ class Diagnosis(_Record):
         return cls(**kw)
 
 
+def chain_line(rec: Mapping) -> str:
+    """One line on the measurement chain's test (``diagnosis.measurement_chain``): how far the speed column is from
+    the position's derivative (``rel_rms_mismatch``, a share of the speed's rms) and what the speed channel's
+    filter test found; empty when the record is empty."""
+    if not rec:
+        return ""
+    if "rel_rms_mismatch" not in rec:
+        return f"Measurement chain: not tested ({rec.get('reason', 'no record')})."
+    found = ("its filter was kept" if rec.get("accepted")
+             else "a filter was found but not applied (it did not lower the cross-validated free-run error)"
+             if rec.get("refused_by_harm_guard") else "no filter found")
+    return (f"Measurement chain: the speed column differs from the position's derivative by "
+            f"{float(rec['rel_rms_mismatch']):.1%} of the speed's rms; the speed channel's test "
+            f"(held-out gain {float(rec.get('cv_gain', 0.0)):.1%}, p {float(rec.get('p_value', 1.0)):.2g}): {found}.")
+
+
 def channel_range_line(rec: Mapping) -> str:
     """One line on a logged channel whose TEST values leave TRAIN's range (a record of
     ``diagnosis.channel_ranges``); empty when none does."""

@@ -24,7 +24,7 @@ from ..jsonio import dumps, sig, strict_json
 from ..predictor.effects import ExtendedPredictor
 from . import residuals as res
 from .crosscheck import describe
-from .report import SCHEMA_VERSION, Diagnosis, ReportFormatError, Round, channel_range_line
+from .report import SCHEMA_VERSION, Diagnosis, ReportFormatError, Round, chain_line, channel_range_line
 from .selection import Score
 
 #: file names (without ``.png``) of the figures, in report order
@@ -398,6 +398,8 @@ def markdown_report(rep: dict) -> str:
     lines += ["", f"Whiteness: median lag-1 autocorrelation {w['median_rho1']:.2f}; Ljung-Box p < 0.05 in "
               f"{w['share_runs_ljung_box_p_below_0.05']:.0%} of {w['runs']} runs (free-run residuals are "
               "coloured by the slider's low-pass even without a missing effect; evidence is judged per run).", ""]
+    if line := chain_line(d.get("measurement_chain") or {}):
+        lines += [line, ""]
     if rep.get("extended_parameters"):
         lines += ["## Extended model's new parameters", "",
                   "| name | value | stderr | 95 % interval | clustered by | unit |", "|---|---|---|---|---|---|"]
