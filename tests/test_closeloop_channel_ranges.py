@@ -114,7 +114,7 @@ def test_the_report_says_how_far_the_speed_column_is_from_the_positions_derivati
     from test_report_values import minimal_report
     rec = {"accepted": False, "rel_rms_mismatch": 0.2134, "cv_gain": 0.0008, "p_value": 0.0756}
     want = ("Measurement chain: the speed column differs from the position's derivative by 21.3% of the speed's "
-            "rms; the speed channel's test (held-out gain 0.1%, p 0.076): no filter found.")
+            "rms; the speed channel's test (held-out gain 0.1%, p 0.076): no filter passed the test.")
     assert chain_line(rec) == want
     assert chain_line({**rec, "accepted": True}).endswith(": its filter was kept.")
     assert "found but not applied" in chain_line({**rec, "refused_by_harm_guard": True})

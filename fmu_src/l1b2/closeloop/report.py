@@ -193,7 +193,7 @@ def chain_line(rec: Mapping) -> str:
         return f"Measurement chain: not tested ({rec.get('reason', 'no record')})."
     found = ("its filter was kept" if rec.get("accepted")
              else "a filter was found but not applied (it did not lower the cross-validated free-run error)"
-             if rec.get("refused_by_harm_guard") else "no filter found")
+             if rec.get("refused_by_harm_guard") else "no filter passed the test")
     return (f"Measurement chain: the speed column differs from the position's derivative by "
             f"{float(rec['rel_rms_mismatch']):.1%} of the speed's rms; the speed channel's test "
             f"(held-out gain {float(rec.get('cv_gain', 0.0)):.1%}, p {float(rec.get('p_value', 1.0)):.2g}): {found}.")
