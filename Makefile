@@ -9,7 +9,7 @@ export MPLBACKEND ?= Agg
 # pytest-xdist workers for `make test` (the CI machine has 2 cores); modules stay whole on one worker and are
 # handed out in collection order, the costliest modules first (tests/conftest.py COSTLY_FIRST, decision 0030).
 # `make test` runs the not-slow tests and the slow ones marked ci_slow: the realistic world's close-loop cases (single effects,
-# pairs, ten control seeds, the CLI report, run-level injections, a logged channel; decisions 0054, 0074 and 0080), in five
+# pairs, ten control seeds, the CLI report, a logged channel; decisions 0054, 0074, 0080 and 0095), in four
 # modules that the two workers share out; the other slow tests run with `make test-slow`
 TEST_WORKERS ?= 2
 

@@ -48,7 +48,6 @@ COSTLY_FIRST = (
     "test_closeloop_realistic_pairs.py",  # five realistic pairs of effects (ci_slow)
     "test_closeloop_realistic_controls.py",  # ten realistic control seeds, the CLI's report of one case (ci_slow)
     "test_closeloop.py",  # reference-world close loops, their exports
-    "test_closeloop_runlevel_slow.py",  # six realistic run-level injections (ci_slow)
     "test_closeloop_channels.py",  # one realistic close loop with two logged channels (ci_slow)
     "test_readme_examples.py",  # the pages' commands: rig, identify, close loop, export
     "test_extended_predictor_fmu.py",  # native FMUs compiled per effect kind, FMI 2.0 and 3.0

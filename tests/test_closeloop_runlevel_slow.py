@@ -7,7 +7,7 @@ falls traverse by traverse (not logged), constant along each stroke. The checks 
 (``tests/realistic_cases.py``): the right regressor (``supply_V``; the session clock, ``time``) among the
 first two traced, and on TEST ``a^2 <= b0^2 + (b^2 - b0^2)/4`` (b: baseline, a: final, b0: the same seed and plan
 without the effect). Sizes: the paper's four voltages (72 runs), three (54 runs) and five (90 runs). Measured
-figures: ``docs/decisions/0018-run-level-evidence.md``. Slow, and run by ``make test`` too (``ci_slow``).
+figures: ``docs/decisions/0018-run-level-evidence.md``. Slow: ``make test-slow`` runs it (decision 0095).
 """
 
 import dataclasses
@@ -57,7 +57,6 @@ CASES = [("supply_sag", 41, 72), ("supply_sag", 42, 54), ("supply_sag", 43, 90),
 
 
 @pytest.mark.slow
-@pytest.mark.ci_slow    # all six cases (decision 0080)
 @pytest.mark.parametrize("effect,seed,runs", CASES)
 def test_realistic_run_level_injection(effect, seed, runs, record_property):
     d = _dir((effect,), seed, runs)
