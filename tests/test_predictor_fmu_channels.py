@@ -226,6 +226,14 @@ def test_a_run_level_channel_the_runs_did_not_hold_constant_is_still_refused(tmp
                                                                          - np.mean(np.sin(np.arange(N) / 3.0)))),
                                                      rel=1e-6)
     assert ch.export_problem(noisy.spec).startswith("not constant within runs: line_pressure_bar")
+    # the shared rule: (column, spread, sd) beyond RUN_CONSTANT_TOL sd; an unrecorded spread is inf
+    assert ch.run_spread_excess(hs["pressure_run"].spec) == []
+    [(col, spread, sd)] = ch.run_spread_excess(noisy.spec)
+    assert (col, spread, sd) == ("line_pressure_bar", noisy.spec["run_spread"], noisy.spec["sd"])
+    assert spread > ch.RUN_CONSTANT_TOL * sd
+    unrecorded = {k: v for k, v in noisy.spec.items() if k != "run_spread"}
+    assert ch.run_spread_excess(unrecorded) == [("line_pressure_bar", float("inf"), noisy.spec["sd"])]
+    assert "(run_spread)" in ch.export_problem(unrecorded)
     with pytest.raises(ExportError, match="run_level_line_pressure_bar: not constant within runs"):
         export_calibrated(ExtendedPredictor(base, refit, (_effect(noisy, (0.1, 0.1, 0.1)),), None, {}),
                           tmp_path / "out")

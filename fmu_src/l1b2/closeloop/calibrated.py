@@ -55,15 +55,10 @@ def run_feed(model: ExtendedPredictor, df: pd.DataFrame, column: str) -> float:
 
 def _spread_columns(spec) -> list[str]:
     """The logged channels (no input of :data:`~l1b2.predictor.effects.channels.INPUT_COLUMNS`) whose run-level
-    signal a spec reads beyond the run-level contract's tolerance."""
-    out = []
-    for key in sorted(k for k in fx_channels.family(spec.get("kind")).needs(spec) if k.startswith("run:")):
-        col = key[4:]
-        if col in fx_channels.INPUT_COLUMNS or col == fx_channels.SESSION_TIME or "run_spread" not in spec:
-            continue
-        if not float(spec["run_spread"]) <= fx_channels.RUN_CONSTANT_TOL * float(spec.get("sd", 0.0)):
-            out.append(col)
-    return out
+    signal a spec reads beyond the run-level contract's tolerance
+    (:func:`~l1b2.predictor.effects.channels.run_spread_excess`)."""
+    return [col for col, spread, _ in fx_channels.run_spread_excess(spec)
+            if np.isfinite(spread) and col not in fx_channels.INPUT_COLUMNS and col != fx_channels.SESSION_TIME]
 
 
 def calibrated_model(base, ext, effects, output_filter, source: dict, groups=None, speed_gain=None, df=None):

@@ -184,6 +184,21 @@ def run_spread(values, run) -> float:
     return float(np.max(np.abs(c - means)))
 
 
+def run_spread_excess(spec) -> list[tuple[str, float, float]]:
+    """The run-level signals (``run:<column>``) a spec reads that TRAIN's runs did not hold constant, in column order.
+
+    ``(column, run_spread, sd)`` for each whose recorded ``run_spread`` exceeds :data:`RUN_CONSTANT_TOL` standard
+    deviations ``sd`` of the run-level signal; ``run_spread`` is ``inf`` when the spec does not record it.
+    """
+    out = []
+    for key in sorted(k for k in family(spec.get("kind")).needs(spec) if k.startswith("run:")):
+        spread = float(spec.get("run_spread", float("inf")))
+        sd = float(spec.get("sd", 0.0))
+        if not spread <= RUN_CONSTANT_TOL * sd:
+            out.append((key[4:], spread, sd))
+    return out
+
+
 def export_problem(spec) -> str | None:
     """Why ``Predictor.fmu`` cannot evaluate an effect spec as identified (None: it can).
 
@@ -201,14 +216,10 @@ def export_problem(spec) -> str | None:
     missing = sorted(k for k in keys if fmu_signal(k) is None)
     if missing:
         return "no input: " + ", ".join(missing)
-    for key in sorted(k for k in keys if k.startswith("run:")):
-        col = key[4:]
-        if "run_spread" not in spec:
+    for col, spread, sd in run_spread_excess(spec):
+        if not np.isfinite(spread):
             return (f"not constant within runs: the spec does not record how far TRAIN's runs held {col} constant "
                     "(run_spread)")
-        spread, sd = float(spec["run_spread"]), float(spec.get("sd", 0.0))
-        if spread <= RUN_CONSTANT_TOL * sd:
-            continue
         logged = col not in INPUT_COLUMNS
         feed = float(spec.get("run_feed", float("inf"))) if logged else float("inf")
         if feed <= RUN_FEED_TOL:
