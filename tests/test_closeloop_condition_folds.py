@@ -2,7 +2,7 @@
 
 The fold rule is written out here (conditions shuffled by the seed, ordered by stratum, dealt in turn) and checked
 with its stated properties: every run held out once, a condition never split, the strata balanced, seeded, and
-:func:`~l1b2.closeloop.acceptance.stratified_folds` when every condition is one run. The loop's setting
+:func:`~l1b2.closeloop.folds.stratified_folds` when every condition is one run. The loop's setting
 ``fold_unit`` is followed to the refit's folds and to the folds the screen scores on.
 """
 
@@ -12,6 +12,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from l1b2.closeloop import acceptance as acc
+from l1b2.closeloop import folds as fo
 from l1b2.closeloop import residuals as res
 from l1b2.closeloop.loop import CloseLoop
 
@@ -60,22 +61,22 @@ def _dealt_written_out(df, units, k, seed):
 
 def test_condition_units_group_the_runs_of_one_drive_amplitude_and_load_wherever_they_lie():
     df, units = _irregular_frame()
-    assert [u.tolist() for u in acc.condition_units(df)] == units
+    assert [u.tolist() for u in fo.condition_units(df)] == units
     # the rows' order decides only the units' order (first appearance), not their content
     shuffled = df.sample(frac=1.0, random_state=2)
-    assert sorted(sorted(u.tolist()) for u in acc.condition_units(shuffled)) == sorted(units)
+    assert sorted(sorted(u.tolist()) for u in fo.condition_units(shuffled)) == sorted(units)
     # without the condition columns: one unit per run
-    assert [u.tolist() for u in acc.condition_units(df.drop(columns=["voltage_V", "load_kg"]))] == [
+    assert [u.tolist() for u in fo.condition_units(df.drop(columns=["voltage_V", "load_kg"]))] == [
         [r] for r in range(500, 515)]
     plan, plan_units = _plan_frame()
-    assert [u.tolist() for u in acc.condition_units(plan)] == plan_units
+    assert [u.tolist() for u in fo.condition_units(plan)] == plan_units
 
 
 @pytest.mark.parametrize("k", [2, 3, 4, 5])
 @pytest.mark.parametrize("case", ["plan", "irregular"])
 def test_condition_folds_deal_whole_conditions_in_turn_within_strata(k, case):
     df, units = _plan_frame() if case == "plan" else _irregular_frame()
-    folds = acc.condition_folds(df, k, seed=7)
+    folds = fo.condition_folds(df, k, seed=7)
     assert [f.tolist() for f in folds] == _dealt_written_out(df, units, k, 7)            # the rule written out
     runs = [r for u in units for r in u]
     assert sorted(np.concatenate(folds).tolist()) == sorted(runs)                       # every run held out once
@@ -93,9 +94,9 @@ def test_condition_folds_deal_whole_conditions_in_turn_within_strata(k, case):
         sizes = [len(f) for f in folds]
         assert max(sizes) - min(sizes) <= 2
     # seeded: the same seed gives the same folds; another seed other folds (seven conditions in each stratum)
-    assert [f.tolist() for f in acc.condition_folds(df, k, seed=7)] == [f.tolist() for f in folds]
+    assert [f.tolist() for f in fo.condition_folds(df, k, seed=7)] == [f.tolist() for f in folds]
     if case == "plan":
-        assert [f.tolist() for f in acc.condition_folds(df, k, seed=8)] != [f.tolist() for f in folds]
+        assert [f.tolist() for f in fo.condition_folds(df, k, seed=8)] != [f.tolist() for f in folds]
 
 
 def test_condition_folds_of_one_run_per_condition_are_the_stratified_run_folds():
@@ -104,8 +105,8 @@ def test_condition_folds_of_one_run_per_condition_are_the_stratified_run_folds()
                                   "voltage_V": rng.choice([220.0, 255.0, 290.0]), "load_kg": 0.001 * r})
                     for r in rng.permutation(29)], ignore_index=True)
     for k, seed in ((2, 0), (4, 7), (5, [7, 1])):
-        assert [f.tolist() for f in acc.condition_folds(df, k, seed)] == [
-            f.tolist() for f in acc.stratified_folds(df, k, seed)]
+        assert [f.tolist() for f in fo.condition_folds(df, k, seed)] == [
+            f.tolist() for f in fo.stratified_folds(df, k, seed)]
 
 
 def test_the_refit_and_the_screen_take_their_folds_by_the_unit():
@@ -113,19 +114,19 @@ def test_the_refit_and_the_screen_take_their_folds_by_the_unit():
     mask = np.ones(len(df), bool)
     mask[df["run"].to_numpy() == 103] = False                       # a run without a sample on the mask
     for unit in ("run", "condition"):
-        s = acc.refit_schemes(df, 4, 2, seed=5, unit=unit)
-        split = acc.stratified_folds if unit == "run" else acc.condition_folds
+        s = fo.refit_schemes(df, 4, 2, seed=5, unit=unit)
+        split = fo.stratified_folds if unit == "run" else fo.condition_folds
         assert [f.tolist() for f in s[False]] == [f.tolist() for seed in (5, [5, 1]) for f in split(df, 4, seed)]
-        assert [f.tolist() for f in s[True]] == [f.tolist() for f in acc.session_blocks(df, 4)]
-        assert [f.tolist() for f in acc.unit_folds(df, 4, 5, unit)] == [f.tolist() for f in split(df, 4, 5)]
+        assert [f.tolist() for f in s[True]] == [f.tolist() for f in fo.session_blocks(df, 4)]
+        assert [f.tolist() for f in fo.unit_folds(df, 4, 5, unit)] == [f.tolist() for f in split(df, 4, 5)]
     # the screen: the runs on the mask shuffled and dealt (as before), or whole conditions of the runs on the mask
-    folds, blocks = acc.screen_folds(df, mask, 5, 3, "rotation", "run")
+    folds, blocks = fo.screen_folds(df, mask, 5, 3, "rotation", "run")
     assert [f.tolist() for f in folds] == [f.tolist() for f in res.run_folds(df["run"].to_numpy()[mask], 5, 3)]
-    assert [f.tolist() for f in blocks] == [f.tolist() for f in acc.session_rotation(df, 5)]
-    folds, _ = acc.screen_folds(df, mask, 5, 3, "blocks", "condition")
-    assert [f.tolist() for f in folds] == [f.tolist() for f in acc.condition_folds(df[mask], 5, 3)]
+    assert [f.tolist() for f in blocks] == [f.tolist() for f in fo.session_rotation(df, 5)]
+    folds, _ = fo.screen_folds(df, mask, 5, 3, "blocks", "condition")
+    assert [f.tolist() for f in folds] == [f.tolist() for f in fo.condition_folds(df[mask], 5, 3)]
     assert 103 not in np.concatenate(folds) and 102 in np.concatenate(folds)
-    for call in (lambda: acc.unit_folds(df, 4, 0, "conditions"), lambda: acc.screen_folds(df, mask, 4, 0, "blocks",
+    for call in (lambda: fo.unit_folds(df, 4, 0, "conditions"), lambda: fo.screen_folds(df, mask, 4, 0, "blocks",
                                                                                              "runs")):
         with pytest.raises(ValueError, match="fold_unit"):
             call()
@@ -142,7 +143,7 @@ def test_the_loop_folds_the_other_candidates_by_its_setting(unit, monkeypatch):
     class Stop(Exception):
         pass
 
-    real_refit = acc.refit_schemes
+    real_refit = fo.refit_schemes
 
     def refit_spy(d, k, repeats, seed, clock, u, first=None):
         seen.append((k, seed, u, first))
@@ -161,13 +162,13 @@ def test_the_loop_folds_the_other_candidates_by_its_setting(unit, monkeypatch):
     assert CloseLoop().fold_unit == "run"                                   # the default: runs, as before
     est = CloseLoop(fold_unit=unit, k_folds=5, refit_folds=3, seed=4)
     assert est.get_params()["fold_unit"] == unit
-    run_folds = acc.stratified_folds(df, 3, 4)        # the fit's run folds, as CloseLoop.fit hands them on
+    run_folds = fo.stratified_folds(df, 3, 4)        # the fit's run folds, as CloseLoop.fit hands them on
     with pytest.raises(Stop):
         est._iterate(it, [], df, mask, 0.1, None, lambda *a: None, folds=run_folds)
     # the run folds are reused as split 0 only when the unit is the run; condition folds are computed afresh
     assert seen == [(3, 4, unit, run_folds if unit == "run" else None)]
-    want, blocks = acc.screen_folds(df, mask, 5, 4, "blocks", unit)
+    want, blocks = fo.screen_folds(df, mask, 5, 4, "blocks", unit)
     assert [f.tolist() for f in scored["folds"]] == [f.tolist() for f in want]
     assert [f.tolist() for f in scored["time_folds"]] == [f.tolist() for f in blocks]
     if unit == "condition":
-        assert [f.tolist() for f in want] == [f.tolist() for f in acc.condition_folds(df, 5, 4)]
+        assert [f.tolist() for f in want] == [f.tolist() for f in fo.condition_folds(df, 5, 4)]

@@ -212,7 +212,7 @@ def test_scores_equal_the_fresh_array_scoring_to_the_last_bit():
             assert np.array_equal(g.phi, phi)
     assert got[1].cv_gain == 0.0 and got[0].cv_gain != 0.0
     # folds given (whole conditions): the gains are those of the same scoring on those folds
-    from l1b2.closeloop.acceptance import condition_folds
+    from l1b2.closeloop.folds import condition_folds
     folds = condition_folds(df[mask], 3, 0)
     got = sel.score_candidates(cands, r, df, mask, p, 0.1, v_pred=base, folds=folds)
     ref = _scores_written_out(cands, r, df, mask, p, 0.1, base, folds=folds)

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 from l1b2.closeloop import residuals as res
-from l1b2.closeloop.acceptance import (EffectSet, RefitSettings, cv_errors, fold_error, fold_start_phi,
-                                      stratified_folds)
+from l1b2.closeloop.acceptance import EffectSet, RefitSettings, cv_errors, fold_error, fold_start_phi
+from l1b2.closeloop.folds import stratified_folds
 from l1b2.closeloop.candidates import full_library
 from l1b2.closeloop.loop import analyse_residuals, candidate_context
 from l1b2.closeloop.selection import design

@@ -8,6 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from l1b2.closeloop import acceptance as acc
+from l1b2.closeloop import folds as fo
 from l1b2.closeloop import residuals as res
 from l1b2.closeloop import selection as sel
 from l1b2.closeloop.candidates import CandidateForce
@@ -28,7 +29,7 @@ def _runs_frame(n_runs=23, seed=3):
 @pytest.mark.parametrize("k", [2, 4, 5])
 def test_stratified_folds_hold_out_every_run_exactly_once_and_balance_each_stratum(k):
     df = _runs_frame()
-    folds = acc.stratified_folds(df, k, seed=7)
+    folds = fo.stratified_folds(df, k, seed=7)
     assert len(folds) == k
     held = np.concatenate(folds)
     assert sorted(held.tolist()) == sorted(pd.unique(df["run"]).tolist())   # each run once, none missing
@@ -36,7 +37,25 @@ def test_stratified_folds_hold_out_every_run_exactly_once_and_balance_each_strat
     for _, stratum in first.groupby(["direction", "voltage_V"]):
         counts = [int(np.isin(stratum.index, f).sum()) for f in folds]
         assert max(counts) - min(counts) <= 1, counts
-    assert [f.tolist() for f in acc.stratified_folds(df, k, seed=7)] == [f.tolist() for f in folds]  # seeded
+    assert [f.tolist() for f in fo.stratified_folds(df, k, seed=7)] == [f.tolist() for f in folds]  # seeded
+
+
+def test_a_held_out_split_scores_only_the_held_runs_masked_samples_per_run():
+    # reference: sse = sum over held-out rows on the mask of (v - p)^2, per run the same sum; ss_meas = sum v^2 there
+    df = pd.DataFrame({"run": [1, 1, 2, 2, 2, 3, 3], "speed_m_s": [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0]})
+    mask = np.array([True, True, True, False, True, True, False])
+    split = fo.held_out_split(df, mask, [2, 3])
+    assert split.held.tolist() == [False, False, True, True, True, True, True]
+    assert split.train["run"].tolist() == [1, 1] and split.mask_train.tolist() == [True, True]
+    assert split.test.index.tolist() == [0, 1, 2, 3, 4] and split.mask_test.tolist() == [True, False, True, True, False]
+    pred = np.array([2.5, 0.0, 4.0, 5.5, 100.0])            # rows with mask False never count
+    sse, ssm, failed, nfev, per_run = split.score(pred, 7)
+    assert per_run == {2: pytest.approx(0.5 ** 2 + 1.0 ** 2), 3: pytest.approx(0.5 ** 2)}
+    assert sse == pytest.approx(0.25 + 1.0 + 0.25) and ssm == pytest.approx(9.0 + 25.0 + 36.0)
+    assert (failed, nfev) == (False, 7)
+    diverged = split.score(np.array([2.5, 0.0, np.nan, 5.5, 0.0]), 3)
+    assert diverged[0] == np.inf and diverged[4] == {2: np.inf, 3: np.inf} and diverged[2] is False
+    assert split.failed() == (np.inf, ssm, True, 0, {2: np.inf, 3: np.inf})
 
 
 @pytest.mark.parametrize("k", [3, 5])
@@ -401,21 +420,21 @@ def test_repeated_folds_hold_out_every_run_exactly_repeats_times(k, repeats):
     # stratified_folds itself; the list is a function of the seed
     df = _runs_frame()
     runs = sorted(pd.unique(df["run"]).tolist())
-    folds = acc.repeated_folds(df, k, repeats, seed=7)
+    folds = fo.repeated_folds(df, k, repeats, seed=7)
     assert len(folds) == k * repeats
     for j in range(repeats):
         split = folds[j * k:(j + 1) * k]
         assert sorted(np.concatenate(split).tolist()) == runs                       # one partition per split
-        ref = acc.stratified_folds(df, k, seed=7 if j == 0 else [7, j])
+        ref = fo.stratified_folds(df, k, seed=7 if j == 0 else [7, j])
         assert [f.tolist() for f in split] == [f.tolist() for f in ref]
     held, counts = np.unique(np.concatenate(folds), return_counts=True)
     assert held.tolist() == runs and set(counts.tolist()) == {repeats}
-    assert acc.held_out_times(folds) == repeats
-    assert [f.tolist() for f in acc.repeated_folds(df, k, repeats, seed=7)] == [f.tolist() for f in folds]
+    assert fo.held_out_times(folds) == repeats
+    assert [f.tolist() for f in fo.repeated_folds(df, k, repeats, seed=7)] == [f.tolist() for f in folds]
     if repeats > 1:
         assert [f.tolist() for f in folds[:k]] != [f.tolist() for f in folds[k:2 * k]]   # another shuffle
     with pytest.raises(ValueError):
-        acc.held_out_times(folds + [folds[0]])         # the first fold's runs held out once more than the others
+        fo.held_out_times(folds + [folds[0]])         # the first fold's runs held out once more than the others
 
 
 #: four runs in two splits of two folds; per split, each model's held-out SSE of every run (written out)
@@ -496,8 +515,8 @@ def test_one_split_is_todays_rule_exactly(monkeypatch):
     assert acc.one_se_gap(t, o) == pytest.approx((0.075, np.sqrt(0.5) / 20 / np.sqrt(2)), rel=1e-12)
     assert acc.paired_gap([19, 16], [17, 15], [22, 18]) == acc.paired_gap([19, 16], [17, 15], [22, 18], repeats=1)
     df = _runs_frame()
-    assert [f.tolist() for f in acc.repeated_folds(df, 4, 1, seed=3)] == [
-        f.tolist() for f in acc.stratified_folds(df, 4, seed=3)]
+    assert [f.tolist() for f in fo.repeated_folds(df, 4, 1, seed=3)] == [
+        f.tolist() for f in fo.stratified_folds(df, 4, seed=3)]
     assert acc.mean_per_run([{0: 0.1, 1: 0.7}, {2: 0.3}]) == {0: 0.1, 1: 0.7, 2: 0.3}
 
 
@@ -507,10 +526,10 @@ def test_the_loops_refit_folds_are_repeated_only_for_the_stratified_scheme():
     # a constructor argument of the loop (get_params / set_params)
     from l1b2.closeloop.loop import CloseLoop
     df = _runs_frame()
-    s = acc.refit_schemes(df, 4, 3, seed=5)
-    assert [f.tolist() for f in s[False]] == [f.tolist() for f in acc.repeated_folds(df, 4, 3, seed=5)]
-    assert [f.tolist() for f in s[True]] == [f.tolist() for f in acc.session_blocks(df, 4)]
-    assert acc.held_out_times(s[False]) == 3 and acc.held_out_times(s[True]) == 1
+    s = fo.refit_schemes(df, 4, 3, seed=5)
+    assert [f.tolist() for f in s[False]] == [f.tolist() for f in fo.repeated_folds(df, 4, 3, seed=5)]
+    assert [f.tolist() for f in s[True]] == [f.tolist() for f in fo.session_blocks(df, 4)]
+    assert fo.held_out_times(s[False]) == 3 and fo.held_out_times(s[True]) == 1
     loop = CloseLoop(refit_repeats=3)
     assert loop.get_params()["refit_repeats"] == 3 and CloseLoop().refit_repeats == acc.DEFAULT_REFIT_REPEATS == 1
     assert loop.set_params(refit_repeats=2).refit_repeats == 2

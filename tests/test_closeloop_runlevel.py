@@ -14,6 +14,7 @@ import pandas as pd
 import pytest
 from l1b2.cli import build_parser
 from l1b2.closeloop import acceptance as acc
+from l1b2.closeloop import folds as fo
 from l1b2.closeloop import runlevel as rl
 from l1b2.closeloop.candidates import CandidateForce, channels_of
 from l1b2.closeloop.loop import CloseLoop, prefer
@@ -36,7 +37,7 @@ def _session(n_runs=23, seed=4):
 @pytest.mark.parametrize("k", [2, 4, 5])
 def test_session_blocks_are_contiguous_stretches_of_the_session_each_held_out_once(k):
     df, order = _session()
-    blocks = acc.session_blocks(df, k)
+    blocks = fo.session_blocks(df, k)
     assert len(blocks) == k
     assert sorted(np.concatenate(blocks).tolist()) == sorted(order.tolist())          # every run exactly once
     sizes = [len(b) for b in blocks]
@@ -47,7 +48,7 @@ def test_session_blocks_are_contiguous_stretches_of_the_session_each_held_out_on
         assert b.tolist() == order[edges[j]:edges[j + 1]].tolist()
     # the same split whatever the frame's row order (runs are ordered by their first time, not by id or row)
     shuffled = df.sample(frac=1.0, random_state=1).sort_values(["run", "time_s"])
-    assert [b.tolist() for b in acc.session_blocks(shuffled, k)] == [b.tolist() for b in blocks]
+    assert [b.tolist() for b in fo.session_blocks(shuffled, k)] == [b.tolist() for b in blocks]
 
 
 def _conditions_session(seed=7):
@@ -71,16 +72,16 @@ def _conditions_session(seed=7):
 
 def test_session_units_are_the_conditions_in_a_row():
     df, units = _conditions_session()
-    assert [u.tolist() for u in acc.session_units(df)] == units
+    assert [u.tolist() for u in fo.session_units(df)] == units
     # without the condition columns: one unit per run, in session order
-    assert [u.tolist() for u in acc.session_units(df.drop(columns=["voltage_V", "load_kg"]))] == [
+    assert [u.tolist() for u in fo.session_units(df.drop(columns=["voltage_V", "load_kg"]))] == [
         [r] for u in units for r in u]
 
 
 @pytest.mark.parametrize("k", [2, 3, 4, 5])
 def test_session_rotation_deals_whole_conditions_to_the_folds_in_turn(k):
     df, units = _conditions_session()
-    folds = acc.session_rotation(df, k)
+    folds = fo.session_rotation(df, k)
     assert len(folds) == k
     order = [r for u in units for r in u]
     # written out: fold i holds units i, i + k, i + 2k, ... of the session, their runs in session order
@@ -97,18 +98,18 @@ def test_session_rotation_deals_whole_conditions_to_the_folds_in_turn(k):
         for nb in (units[j - 1] if j > 0 else [], units[j + 1] if j + 1 < len(units) else []):
             assert all(fold_of[r] != fold_of[u[0]] for r in nb)
     # more folds than units: one unit per fold
-    assert [f.tolist() for f in acc.session_rotation(df, 50)] == units
+    assert [f.tolist() for f in fo.session_rotation(df, 50)] == units
 
 
 def test_clock_folds_picks_the_scheme_and_refuses_an_unknown_one():
     df, units = _conditions_session()
     for k in (2, 4):
-        assert [f.tolist() for f in acc.clock_folds(df, k, "blocks")] == [
-            f.tolist() for f in acc.session_blocks(df, k)]
-        assert [f.tolist() for f in acc.clock_folds(df, k, "rotation")] == [
-            f.tolist() for f in acc.session_rotation(df, k)]
+        assert [f.tolist() for f in fo.clock_folds(df, k, "blocks")] == [
+            f.tolist() for f in fo.session_blocks(df, k)]
+        assert [f.tolist() for f in fo.clock_folds(df, k, "rotation")] == [
+            f.tolist() for f in fo.session_rotation(df, k)]
     with pytest.raises(ValueError, match="clock_folds"):
-        acc.clock_folds(df, 4, "interleaved")
+        fo.clock_folds(df, 4, "interleaved")
 
 
 @pytest.mark.parametrize("scheme", ["blocks", "rotation"])
@@ -119,7 +120,7 @@ def test_the_loop_folds_clock_candidates_by_its_setting(scheme, monkeypatch):
     class Stop(Exception):
         pass
 
-    real = acc.clock_folds
+    real = fo.clock_folds
 
     def spy(d, k, sch):
         seen.append((k, sch))
@@ -127,7 +128,7 @@ def test_the_loop_folds_clock_candidates_by_its_setting(scheme, monkeypatch):
             raise Stop
         return real(d, k, sch)
 
-    monkeypatch.setattr(acc, "clock_folds", spy)      # the refit's (refit_schemes) and the screen's (screen_folds)
+    monkeypatch.setattr(fo, "clock_folds", spy)      # the refit's (refit_schemes) and the screen's (screen_folds)
     assert CloseLoop().clock_folds == "blocks"                       # the default: contiguous blocks
     est = CloseLoop(clock_folds=scheme, k_folds=5, refit_folds=3)
     assert est.get_params()["clock_folds"] == scheme

@@ -72,10 +72,10 @@ def test_trains_run_folds_are_computed_once_per_fit_and_shared_by_their_three_us
     # reference: stratified_folds(TRAIN, refit_folds, seed) computed independently; the baseline's choice, the
     # measurement chain's cross-validation and split 0 of the rounds' refit folds get that one list (the chain's
     # test made to accept a filter, so that the chain is cross-validated; both families, so that one is chosen)
-    import l1b2.closeloop.acceptance as acc
+    from l1b2.closeloop import folds as fo
     import l1b2.closeloop.loop as loop_mod
     from l1b2.closeloop.chain import OutputFilter
-    real, calls, seen = acc.stratified_folds, [], {}
+    real, calls, seen = fo.stratified_folds, [], {}
 
     def spy(df, k, seed=0):
         calls.append(seed)
@@ -90,8 +90,8 @@ def test_trains_run_folds_are_computed_once_per_fit_and_shared_by_their_three_us
             return out
         monkeypatch.setattr(loop_mod, name, wrapped)
 
-    monkeypatch.setattr(acc, "stratified_folds", spy)
-    monkeypatch.setitem(acc.UNIT_FOLDS, "run", spy)      # the run folds as the refit's splits ask for them
+    monkeypatch.setattr(fo, "stratified_folds", spy)
+    monkeypatch.setitem(fo.UNIT_FOLDS, "run", spy)      # the run folds as the refit's splits ask for them
     monkeypatch.setattr(loop_mod, "stratified_folds", spy)
     spy_on("choose_baseline", "baseline", 4)
     spy_on("chain_cv_errors", "chain", 3)
@@ -103,11 +103,11 @@ def test_trains_run_folds_are_computed_once_per_fit_and_shared_by_their_three_us
                refit_repeats=2, seed=3)
     assert calls == [3, [3, 1]]                   # split 0 once; split 1 of the repeated folds on its own stream
     monkeypatch.undo()
-    want = acc.stratified_folds(train.df, 3, 3)
+    want = fo.stratified_folds(train.df, 3, 3)
     assert seen["baseline"] is seen["chain"] and [f.tolist() for f in seen["baseline"]] == [f.tolist() for f in want]
     refit = seen["refit"][False]
     assert all(a is b for a, b in zip(refit[:3], seen["baseline"]))
-    assert [f.tolist() for f in refit] == [f.tolist() for f in acc.repeated_folds(train.df, 3, 2, 3)]
+    assert [f.tolist() for f in refit] == [f.tolist() for f in fo.repeated_folds(train.df, 3, 2, 3)]
 
 
 @pytest.mark.parametrize("flags, message", [
@@ -129,7 +129,7 @@ def test_a_bad_fold_flag_is_one_line_before_any_file_is_read(tmp_path, capsys, f
 def test_the_fold_flags_reach_the_loop_and_its_report(tmp_path):
     # reference: the values given on the command line are the report's rules; the flags' defaults are the loop's
     from l1b2 import cli
-    from l1b2.closeloop.acceptance import CLOCK_FOLDS, UNIT_FOLDS
+    from l1b2.closeloop.folds import CLOCK_FOLDS, UNIT_FOLDS
     assert set(cli.CLOCK_FOLDS) == set(CLOCK_FOLDS) and set(cli.FOLD_UNITS) == set(UNIT_FOLDS)
     args = cli.build_parser().parse_args(["close-loop", "--train", "x.csv", "--out", "o"])
     assert cli._fold_settings(args) == {"clock_folds": LoopSettings().clock_folds, "fold_unit": LoopSettings().fold_unit,

@@ -251,9 +251,9 @@ NOISE_FIT_HELP = ("'alternate': least squares at fixed noise variances, re-estim
                   "profile-likelihood search (faster, reached the reference optimum on the 20 000-sample benchmark "
                   "where the alternation stopped 5 log-likelihood units short, but ended in a worse optimum with a "
                   "confounded extra force); 'auto': profile for the Eq. 29 model alone, alternate with extra forces")
-#: the fold schemes of the session-clock candidates (:data:`l1b2.closeloop.acceptance.CLOCK_FOLDS`'s keys)
+#: the fold schemes of the session-clock candidates (:data:`l1b2.closeloop.folds.CLOCK_FOLDS`'s keys)
 CLOCK_FOLDS = ("blocks", "rotation")
-#: the fold units of the other candidates (:data:`l1b2.closeloop.acceptance.UNIT_FOLDS`'s keys)
+#: the fold units of the other candidates (:data:`l1b2.closeloop.folds.UNIT_FOLDS`'s keys)
 FOLD_UNITS = ("run", "condition")
 NOISES = ("common", "per_run")
 NOISE_HELP = ("noise variances of Eq. 32: 'common' (default, the paper's single R) or 'per_run' (one per run; on "

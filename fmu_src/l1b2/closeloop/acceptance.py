@@ -6,8 +6,8 @@ baseline itself is imperfect (its structural error is absorbed differently
 once a term is added). Here each shortlisted candidate is judged by what a
 user would see on new runs:
 
-* TRAIN's runs are split into ``k`` folds (:func:`stratified_folds`: seeded,
-  stratified by direction and voltage; or whole conditions, :func:`condition_folds`);
+* TRAIN's runs are split into ``k`` folds (:mod:`l1b2.closeloop.folds`: seeded,
+  stratified by direction and voltage; or whole conditions);
 * for each fold, the current model (its accepted effects included) and the
   current model + the candidate are both re-identified on the other folds
   (warm start from the current fit, one local search with a bounded budget,
@@ -37,7 +37,7 @@ from ..ident.coarse import decimate, decimation
 from ..ident.estimator import ExtraForces, PredictorIdentifier
 from ..predictor import effects as fx
 from . import chain
-from . import residuals as res
+from .folds import held_out_split, held_out_times
 from .candidates import CandidateForce
 
 DEFAULT_REFIT_FOLDS = 4
@@ -198,171 +198,6 @@ def explained_share(x: np.ndarray, Y: np.ndarray, N: np.ndarray | None = None) -
         return 0.0
     c = Q.T @ xp
     return float(min(c @ c / nx, 1.0))
-
-
-def stratified_folds(df: pd.DataFrame, k: int, seed=0) -> list[np.ndarray]:
-    """Run ids in ``k`` folds: seeded shuffle, then dealt in turn within each (direction, voltage) stratum.
-
-    ``seed``: an int or a sequence of ints (the shuffle's :func:`numpy.random.default_rng` seed)."""
-    first = df.groupby(dataio.RUN, sort=False)[[dataio.DIRECTION, dataio.VOLTAGE]].first()
-    runs = first.index.to_numpy()
-    rng = np.random.default_rng(seed)
-    order = rng.permutation(len(runs))
-    keys = first.iloc[order]
-    ranked = keys.assign(_o=np.arange(len(order))).sort_values([dataio.DIRECTION, dataio.VOLTAGE, "_o"],
-                                                               kind="stable")
-    ids = ranked.index.to_numpy()
-    k = min(k, len(ids))
-    return [ids[i::k] for i in range(k)]
-
-
-def condition_units(df: pd.DataFrame) -> list[np.ndarray]:
-    """Run ids grouped by condition: the runs that share a drive amplitude and a load (``voltage_V``, ``load_kg`` of
-    a run's first sample; the rig's plan runs each such condition forward, then backward), wherever they lie in the
-    session. Units in the order their first run appears in ``df``, runs in that order too; a frame without those
-    columns has one unit per run. Every run is in exactly one unit."""
-    cols = [c for c in (dataio.VOLTAGE, dataio.LOAD) if c in df.columns]
-    first = df.groupby(dataio.RUN, sort=False)[cols].first()
-    runs = first.index.to_numpy()
-    code = (first.groupby(cols, sort=False, dropna=False).ngroup().to_numpy() if cols and len(runs)
-            else np.arange(len(runs)))
-    return [runs[code == u] for u in range(int(code.max()) + 1 if len(code) else 0)]
-
-
-def condition_folds(df: pd.DataFrame, k: int, seed=0) -> list[np.ndarray]:
-    """Run ids in ``k`` folds of whole conditions (:func:`condition_units`): the conditions shuffled (seeded), ordered
-    stably by stratum (the mean ``direction`` of a condition's runs, then its ``voltage_V``) and dealt in turn,
-    condition ``j`` of that order to fold ``j mod k``.
-
-    A condition's runs share their inputs, so a held-out run's partner is never in the fitted part (grouped
-    cross-validation; the TEST split holds out whole conditions too). Every run is held out exactly once; in
-    every stratum the folds' numbers of conditions differ by at most one; a condition of a forward and a backward
-    run has mean direction 0, so the strata are then the voltages and each fold holds both directions equally.
-    With one run per condition this is :func:`stratified_folds`. ``seed``: an int or a sequence of ints.
-    """
-    units = condition_units(df)
-    first = df.groupby(dataio.RUN, sort=False)[[dataio.DIRECTION, dataio.VOLTAGE]].first()
-    keys = pd.DataFrame([[first.loc[u, dataio.DIRECTION].astype(float).mean(), first.loc[u[0], dataio.VOLTAGE]]
-                         for u in units], columns=["d", "v"])
-    order = np.random.default_rng(seed).permutation(len(units))
-    ranked = order[keys.iloc[order].assign(_o=np.arange(len(order))).sort_values(["d", "v", "_o"],
-                                                                                 kind="stable")["_o"].to_numpy()]
-    k = min(k, len(units))
-    return [np.concatenate([units[u] for u in ranked[i::k]]) for i in range(k)]
-
-
-#: the fold schemes of a candidate that does not depend on the session clock (``CloseLoop(fold_unit=...)``)
-UNIT_FOLDS = {"run": stratified_folds, "condition": condition_folds}
-
-
-def unit_folds(df: pd.DataFrame, k: int, seed=0, unit: str = "run") -> list[np.ndarray]:
-    """The ``k`` folds of a candidate that does not depend on the session clock by ``unit`` (a key of
-    :data:`UNIT_FOLDS`): runs (:func:`stratified_folds`) or whole conditions (:func:`condition_folds`)."""
-    if unit not in UNIT_FOLDS:
-        raise ValueError(f"fold_unit must be one of {sorted(UNIT_FOLDS)}, got {unit!r}")
-    return UNIT_FOLDS[unit](df, k, seed)
-
-
-def repeated_folds(df: pd.DataFrame, k: int, repeats: int = 1, seed: int = 0, unit: str = "run",
-                   first=None) -> list[np.ndarray]:
-    """``repeats`` splits of the runs by :func:`unit_folds`, ``k`` folds each, in turn (``repeats * k`` folds).
-
-    Split 0 is ``unit_folds(df, k, seed, unit)`` (``first``: that split, already computed; None: computed here);
-    split ``j >= 1`` is shuffled by the stream ``[seed, j]``: the whole list is a function of ``seed``, and
-    ``repeats=1`` gives :func:`unit_folds` itself. Every run is in exactly one fold of each split, so it is held out
-    exactly ``repeats`` times (:func:`held_out_times`).
-    """
-    split0 = list(unit_folds(df, k, seed, unit) if first is None else first)
-    return split0 + [f for j in range(1, max(int(repeats), 1)) for f in unit_folds(df, k, [seed, j], unit)]
-
-
-def held_out_times(folds) -> int:
-    """How many times every run is held out over ``folds`` (the number of splits they come from).
-
-    Raises ValueError when there is no run or when the runs are not all held out the same number of times.
-    """
-    ids = np.concatenate([np.asarray(f).ravel() for f in folds]) if len(folds) else np.zeros(0)
-    _, counts = np.unique(ids, return_counts=True)
-    if not len(counts) or np.any(counts != counts[0]):
-        raise ValueError("every run must be held out the same number of times over the folds")
-    return int(counts[0])
-
-
-def session_blocks(df: pd.DataFrame, k: int) -> list[np.ndarray]:
-    """Run ids in ``k`` contiguous blocks of the session: runs ordered by their first time, split in order.
-
-    The folds of a candidate that depends on the session clock (:func:`time_dependent`): a held-out block is a
-    stretch of the session the fit has not seen, so a term that only interpolates a drift between neighbouring
-    runs gains nothing. Block sizes differ by at most one run; every run is in exactly one block.
-    """
-    start = df.groupby(dataio.RUN, sort=False)[dataio.TIME].min()
-    ids = start.index.to_numpy()[np.argsort(start.to_numpy(float), kind="stable")]
-    return [b for b in np.array_split(ids, min(k, len(ids))) if len(b)]
-
-
-def session_units(df: pd.DataFrame) -> list[np.ndarray]:
-    """Run ids in session order (runs ordered by their first time), grouped into units: a maximal stretch of
-    consecutive runs at the same drive amplitude and load (``voltage_V``, ``load_kg`` of a run's first sample),
-    e.g. one condition of the rig's plan, its forward run and its backward run. A frame without those columns
-    has one unit per run. Every run is in exactly one unit; a unit is contiguous in the session."""
-    g = df.groupby(dataio.RUN, sort=False)
-    first = g.first()
-    order = np.argsort(g[dataio.TIME].min().reindex(first.index).to_numpy(float), kind="stable")
-    ids = first.index.to_numpy()[order]
-    cols = [c for c in (dataio.VOLTAGE, dataio.LOAD) if c in first.columns]
-    if not cols or len(ids) < 2:
-        return [ids[i:i + 1] for i in range(len(ids))]
-    cond = first[cols].to_numpy(float)[order]
-    new = np.r_[True, np.any(cond[1:] != cond[:-1], axis=1)]
-    return np.split(ids, np.flatnonzero(new)[1:])
-
-
-def session_rotation(df: pd.DataFrame, k: int) -> list[np.ndarray]:
-    """Run ids in ``k`` folds of whole session units (:func:`session_units`) dealt in rotation: unit ``j`` of the
-    session goes to fold ``j mod k``.
-
-    The folds of a candidate that depends on the session clock when what must be predicted lies between
-    measured runs of the session (held-out runs interleaved with the fitted ones in time): a held-out unit has
-    fitted units on both sides (one side at the session's ends), so a term is scored on interpolating the clock,
-    while the runs of one condition in a row are never split between the held-out and the fitted part. Each
-    fold's runs are in session order; every run is in exactly one fold; ``min(k, units)`` folds.
-    """
-    units = session_units(df)
-    k = min(k, len(units))
-    return [np.concatenate(units[i::k]) for i in range(k)] if k else []
-
-
-#: the fold schemes of a candidate that depends on the session clock (``CloseLoop(clock_folds=...)``)
-CLOCK_FOLDS = {"blocks": session_blocks, "rotation": session_rotation}
-
-
-def clock_folds(df: pd.DataFrame, k: int, scheme: str = "blocks") -> list[np.ndarray]:
-    """The ``k`` folds of a session-clock candidate by ``scheme`` (a key of :data:`CLOCK_FOLDS`)."""
-    if scheme not in CLOCK_FOLDS:
-        raise ValueError(f"clock_folds must be one of {sorted(CLOCK_FOLDS)}, got {scheme!r}")
-    return CLOCK_FOLDS[scheme](df, k)
-
-
-def refit_schemes(df: pd.DataFrame, k: int, repeats: int = 1, seed: int = 0, clock: str = "blocks",
-                  unit: str = "run", first=None) -> dict:
-    """The folds of a round's cross-validated refits: ``{False: repeated_folds(df, k, repeats, seed, unit, first),
-    True: clock_folds(df, k, clock)}``, keyed by whether the candidate depends on the session clock
-    (:func:`time_dependent`); the session's folds are one split whatever ``repeats`` (they are not shuffled).
-    ``first``: ``unit_folds(df, k, seed, unit)`` when the caller has it already."""
-    return {False: repeated_folds(df, k, repeats, seed, unit, first), True: clock_folds(df, k, clock)}
-
-
-def screen_folds(df: pd.DataFrame, mask, k: int, seed: int = 0, clock: str = "blocks",
-                 unit: str = "run") -> tuple[list, list]:
-    """The folds of a round's linearised screen (:func:`l1b2.closeloop.selection.score_candidates`): ``(folds,
-    time_folds)``, those of the candidates that do not depend on the session clock and of those that do
-    (:func:`clock_folds`). ``folds`` are over the runs with a sample in ``mask`` (None: every sample): by
-    ``unit`` ``"run"`` the runs shuffled (seeded) and dealt in turn (:func:`l1b2.closeloop.residuals.run_folds`),
-    ``"condition"`` :func:`condition_folds`."""
-    idx = np.flatnonzero(mask) if mask is not None else np.arange(len(df))
-    folds = (res.run_folds(df[dataio.RUN].to_numpy()[idx], k, seed) if unit == "run"
-             else unit_folds(df.iloc[idx], k, seed, unit))
-    return folds, clock_folds(df, k, clock)
 
 
 #: the signals of the session clock (:data:`l1b2.predictor.effects.SIGNALS` and the channel family's)
@@ -692,35 +527,22 @@ def fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, init, 
     sum of squares per held-out run with a sample on the mask, ``inf`` for each when ``sse`` is). A pure function
     of its arguments: the unit of work of :func:`cv_errors` and :func:`chain_cv_errors`.
     """
-    runs = df[dataio.RUN].to_numpy()
-    v = df[dataio.SPEED].to_numpy(float)
-    held = np.isin(runs, held_runs)
-    m_te = mask[held]
-    ssm = float(np.sum(v[held][m_te] ** 2))
-    run_ids, code = np.unique(runs[held][m_te], return_inverse=True)
-
-    def failed():
-        return np.inf, ssm, True, 0, {r: np.inf for r in run_ids.tolist()}
-    train, test = df.loc[~held].reset_index(drop=True), df.loc[held].reset_index(drop=True)
+    split = held_out_split(df, mask, held_runs)
+    train, test = split.train, split.test
     filt = None
     if chain_k is not None:
-        filt = chain.speed_channel(train, mask[~held], k=chain_k, seed=settings.seed).get("filter")
+        filt = chain.speed_channel(train, split.mask_train, k=chain_k, seed=settings.seed).get("filter")
         if filt is None:
-            return failed()
+            return split.failed()
         train, test_in = chain.with_position_speed(train), chain.with_position_speed(test)
     else:
         test_in = test
     try:
-        est = refit(*fold_fit_data(train, mask[~held]), m_s, init, effects, settings)
+        est = refit(*fold_fit_data(train, split.mask_train), m_s, init, effects, settings)
         pred = est.predict_free_run(test_in)
-        e = (v[held] - (pred if filt is None else filt.apply(test, pred)))[m_te]
     except IdentificationError:
-        return failed()
-    nfev = int(est.convergence_.get("nfev_total", 0))
-    finite = bool(np.all(np.isfinite(e)))
-    per_run = np.bincount(code, weights=e * e, minlength=len(run_ids)) if finite else np.full(len(run_ids), np.inf)
-    return (float(np.sum(e ** 2)) if finite else np.inf), ssm, False, nfev, dict(zip(run_ids.tolist(),
-                                                                                      per_run.tolist()))
+        return split.failed()
+    return split.score(pred if filt is None else filt.apply(test, pred), est.convergence_.get("nfev_total", 0))
 
 
 def fold_fit_data(train: pd.DataFrame, mask: np.ndarray) -> tuple[pd.DataFrame, np.ndarray]:

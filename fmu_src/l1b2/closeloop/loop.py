@@ -90,7 +90,8 @@ from . import sensor
 from .sensor import GainChain
 from .acceptance import (Directions, EffectSet, RefitCV, RefitSettings, Validated, accepts, added_columns,
                          chain_cv_errors, collinear, cv_errors, fold_start_phi, materiality, named_reading, refit,
-                         refit_schemes, screen_folds, stratified_folds, time_dependent, validated)
+                         time_dependent, validated)
+from .folds import refit_schemes, screen_folds, stratified_folds
 from .baselines import choose_baseline, identify_families, retag_structural
 from .crosscheck import PureSlipCheck, identified_pick, score_of, withdrawn_note
 from .events import session, with_event_clocks
@@ -417,7 +418,7 @@ class CloseLoop(EstimatorSettings):
 
     def _chain(self, it: _Iteration, dtr, dte, mask, m_s, folds):
         """The speed channel first (:mod:`l1b2.closeloop.chain`): ``(record, the TRAIN frame the rounds fit)``;
-        ``folds``: TRAIN's run folds (:func:`~l1b2.closeloop.acceptance.stratified_folds`).
+        ``folds``: TRAIN's run folds (:func:`~l1b2.closeloop.folds.stratified_folds`).
 
         When the speed column is a filtered derivative of the position (found from
         position and speed alone, cross-validated over runs), the physics is

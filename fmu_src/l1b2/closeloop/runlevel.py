@@ -20,7 +20,7 @@ estimates and explains:
    slope as well as the drive); its evidence is the Wald test of ``(g1, o1, o2)`` (chi-square, 3 degrees of
    freedom; 2 without load variation) and the cross-validated share of the runs' weighted held-out deviation
    it removes (folds over runs: contiguous blocks of the session for the session clock,
-   :func:`l1b2.closeloop.acceptance.session_blocks`).
+   :func:`l1b2.closeloop.folds.session_blocks`).
    A signal is significant when its p-value is below ``alpha`` / number of signals tested (Bonferroni) and its
    cross-validated gain is positive. Of two significant signals whose run values correlate, the one with the
    weaker evidence given the other is *dominated* and ranks after every undominated one

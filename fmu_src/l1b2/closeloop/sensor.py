@@ -30,6 +30,7 @@ from ..errors import IdentificationError
 from ..predictor.effects.sensor import STROKE_GAIN_ORDER, SpeedSensorGain, stroke_basis
 from . import residuals as res
 from .acceptance import EffectSet, RefitSettings, fold_error, fold_fit_data, refit
+from .folds import held_out_split
 from .selection import FoldSolver, finite_columns, linear_response, nuisance_forces
 
 #: the family's name in reports
@@ -124,26 +125,16 @@ def gain_fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, i
     (:func:`fit_gain`), the physics refitted behind it, the gain refitted on that model's free run; the held-out
     runs' recorded speed predicted as ``g(s)`` times the physics' free run. Returns what
     :func:`~l1b2.closeloop.acceptance.fold_error` returns: ``(sse, ss_meas, failed, nfev, run_sse)``."""
-    runs = df[dataio.RUN].to_numpy()
-    v = df[dataio.SPEED].to_numpy(float)
-    held = np.isin(runs, held_runs)
-    m_te = mask[held]
-    ssm = float(np.sum(v[held][m_te] ** 2))
-    run_ids, code = np.unique(runs[held][m_te], return_inverse=True)
-    train, test = df.loc[~held].reset_index(drop=True), df.loc[held].reset_index(drop=True)
-    m_tr = mask[~held]
+    split = held_out_split(df, mask, held_runs)
+    train, test, m_tr = split.train, split.test, split.mask_train
     try:
-        g0 = fit_gain(train, m_tr, np.asarray(v_base, float)[~held], s_range, order)
+        g0 = fit_gain(train, m_tr, np.asarray(v_base, float)[~split.held], s_range, order)
         est = refit(*fold_fit_data(gain_frame(train, g0), m_tr), m_s, init, EffectSet(), settings)
         g1 = fit_gain(train, m_tr, est.predict_free_run(gain_frame(train, g0)), s_range, order)
-        e = (v[held] - g1.apply(test[dataio.POSITION].to_numpy(float),
-                                est.predict_free_run(gain_frame(test, g1))))[m_te]
+        pred = g1.apply(test[dataio.POSITION].to_numpy(float), est.predict_free_run(gain_frame(test, g1)))
     except (IdentificationError, np.linalg.LinAlgError):
-        return np.inf, ssm, True, 0, {r: np.inf for r in run_ids.tolist()}
-    finite = bool(np.all(np.isfinite(e)))
-    per_run = np.bincount(code, weights=e * e, minlength=len(run_ids)) if finite else np.full(len(run_ids), np.inf)
-    return ((float(np.sum(e ** 2)) if finite else np.inf), ssm, False, int(est.convergence_.get("nfev_total", 0)),
-            dict(zip(run_ids.tolist(), per_run.tolist())))
+        return split.failed()
+    return split.score(pred, est.convergence_.get("nfev_total", 0))
 
 
 def gain_cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init, settings: RefitSettings,

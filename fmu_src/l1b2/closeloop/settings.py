@@ -59,7 +59,8 @@ class LoopSettings:
     refit_folds : int
         Folds over runs of the cross-validated refit (stratified by direction and voltage).
     refit_repeats : int
-        Splits of the runs into ``refit_folds`` folds for a round's acceptance (:func:`refit_schemes`, from ``seed``).
+        Splits of the runs into ``refit_folds`` folds for a round's acceptance
+        (:func:`~l1b2.closeloop.folds.refit_schemes`, from ``seed``).
     min_cv_gain : float
         Smallest relative fall of the cross-validated free-run sum of squares (in most folds) to add an effect.
     min_cv_drop : float
@@ -92,7 +93,7 @@ class LoopSettings:
     fold_unit : {"run", "condition"}
         Folds of the other candidates (screen and refit): ``"run"`` runs (the refit's stratified by direction and
         voltage), ``"condition"`` whole conditions, a drive amplitude and a load with all their runs
-        (:func:`~l1b2.closeloop.acceptance.condition_folds`).
+        (:func:`~l1b2.closeloop.folds.condition_folds`).
     response_columns : tuple of str or None
         Logged columns that are measured responses of the motor: listed in ``channels_considered``, never
         offered as a cause. None: :data:`l1b2.predictor.effects.channels.RESPONSE_COLUMNS` (the virtual rig's
