@@ -136,3 +136,12 @@ def test_a_test_file_without_a_channel_train_logs_is_refused_before_any_fit(tmp_
         aux.check_test_columns(tr, te, ("tip_velocity_amp_m_s",))
     te2 = Measurements(frame(n_runs=2, pressure_bar=lambda r, k: 2.0, note=lambda r, k: "y"), {}, Path("test.csv"))
     aux.check_test_columns(tr, te2, ("tip_velocity_amp_m_s",))   # a measured response may be absent
+
+
+def test_the_columns_never_candidates_and_the_within_run_test():
+    # reference: the data format's required columns plus the measured speed; a column varies within runs when
+    # some run holds two values (a step between runs is not)
+    from l1b2.closeloop.auxiliary import NOT_CANDIDATES, varies_within_runs
+    assert NOT_CANDIDATES == {"time_s", "run", "position_m", "voltage_V", "direction", "load_kg", "speed_m_s"}
+    df = pd.DataFrame({"run": [1, 1, 2, 2], "step": [0.0, 0.0, 1.0, 1.0], "ramp": [0.0, 0.0, 1.0, 1.5]})
+    assert not varies_within_runs(df, "step") and varies_within_runs(df, "ramp")

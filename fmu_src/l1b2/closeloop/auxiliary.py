@@ -52,8 +52,14 @@ def label_columns(df: pd.DataFrame) -> tuple:
     return tuple(df.attrs.get(LABELS_ATTR, ()))
 
 
-def _required() -> set:
-    return set(dataio.REQUIRED_COLUMNS) | {dataio.SPEED}
+#: The columns that are never auxiliary (candidate) channels: the required ones (the plan, the run id and the
+#: clock; the clock is the session's own signal) and the measured speed (the output).
+NOT_CANDIDATES: frozenset = frozenset(dataio.REQUIRED_COLUMNS) | {dataio.SPEED}
+
+
+def varies_within_runs(df: pd.DataFrame, name: str) -> bool:
+    """Whether the numeric column ``name`` takes more than one value inside some run of ``df``."""
+    return bool((df.groupby(dataio.RUN, sort=False)[name].agg(np.ptp) > 0).any())
 
 
 def _first_row(bad: np.ndarray) -> int | None:
@@ -179,7 +185,7 @@ def with_usable_channels(train: pd.DataFrame, test: pd.DataFrame | None = None, 
     the module docstring; ``record``: one dict per column touched ``{"channel", "action" ("flag", "filled",
     "label", "unusable"), "kind" (for usable ones), "note", "first_row" (1-based data row of TRAIN's file),
     ...}``. The frames are returned unchanged (not copied) when no column needs a change."""
-    skip = _required() | set(response_columns)
+    skip = NOT_CANDIDATES | set(response_columns)
 
     def usable(df, name):
         col = df[name]
@@ -218,7 +224,7 @@ def check_test_columns(train, test, response_columns=()) -> None:
     the speed and the measured responses ``response_columns`` is a candidate channel, and an effect found in it
     can only be evaluated on TEST when TEST logs it too. Raises :class:`l1b2.errors.DataFormatError` naming TEST's
     file and the first missing column (and how many are missing)."""
-    skip = _required() | set(response_columns)
+    skip = NOT_CANDIDATES | set(response_columns)
     missing = [c for c in train.df.columns if c not in skip and c not in test.df.columns]
     if missing:
         more = f" (and {len(missing) - 1} more: {', '.join(missing[1:])})" if len(missing) > 1 else ""

@@ -36,7 +36,7 @@ from ..predictor.frequency import contact_angle, sample_frequency
 from ..predictor.model import viscous_damping
 from ..predictor.effects import SPEED_REF, V_REF  # noqa: F401  (re-exported: the features' scales)
 from ..predictor.effects.interactions import EQ29_LINEARISATION  # noqa: F401  (re-exported)
-from .auxiliary import label_columns
+from .auxiliary import NOT_CANDIDATES, label_columns, varies_within_runs
 
 
 @dataclass(frozen=True)
@@ -195,7 +195,7 @@ def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
     ``within_run``: it varies inside some run; ``run_spread``:
     :func:`l1b2.predictor.effects.channels.run_spread`).
     """
-    required = (set(dataio.REQUIRED_COLUMNS) | {dataio.SPEED}) - {dataio.TIME}   # speed: the measured output
+    required = NOT_CANDIDATES - {dataio.TIME}
     responses = set(fx.channels.RESPONSE_COLUMNS if response_columns is None else response_columns)
     labels = set(label_columns(df))
     out = []
@@ -205,7 +205,7 @@ def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
         c = df[name].to_numpy(float)
         if not np.all(np.isfinite(c)):
             continue
-        within = bool((df.groupby(dataio.RUN, sort=False)[name].agg(np.ptp) > 0).any())
+        within = varies_within_runs(df, name)
         kind = ("protocol" if name == dataio.TIME else "response" if name in responses
                 else "label" if name in labels else "logged")
         out.append({"name": str(name), "kind": kind, "mean": float(np.mean(c)), "sd": float(np.std(c)),

@@ -33,6 +33,7 @@ import numpy as np
 import pandas as pd
 
 from ..data import measurements as dataio
+from .auxiliary import varies_within_runs
 from .candidates import channels_of
 from .events import MIN_BLOCK_RUNS, Session, event_times, run_table, session
 
@@ -72,9 +73,8 @@ def is_run_setting(tab: pd.DataFrame, within_run: bool) -> bool:
 def run_settings(df: pd.DataFrame, response_columns=None) -> list[str]:
     """The run settings of a TRAIN frame (module docstring): the inputs of :data:`STORED_INPUTS` that are run
     settings, then the logged channels in column order."""
-    def within(name):
-        return bool((df.groupby(dataio.RUN, sort=False)[name].agg(np.ptp) > 0).any())
-    inputs = [c for c in STORED_INPUTS if c in df.columns and is_run_setting(run_table([df], c), within(c))]
+    inputs = [c for c in STORED_INPUTS if c in df.columns
+              and is_run_setting(run_table([df], c), varies_within_runs(df, c))]
     return [c for c in inputs if not any(c + suffix(n) in df.columns for n in TAU_RUNS)] + [
         ch["name"] for ch in channels_of(df, response_columns)
         if ch["kind"] == "logged" and not any(ch["name"] + suffix(n) in df.columns for n in TAU_RUNS)
