@@ -554,8 +554,9 @@ def test_the_final_searchs_candidates_are_the_profiles_likelihood_confidence_set
     assert profile_candidates([{"omega": 0.5, "loglik": -np.inf}], 3, 1.92) == []
 
 
-@pytest.mark.parametrize("finals", [1, 2])
-def test_the_final_search_runs_from_each_candidate_and_keeps_the_highest(monkeypatch, finals):
+@pytest.fixture
+def final_searches(monkeypatch):
+    """The final local searches of the offset solvers as they run: ``(omega, loglik)`` each, in order."""
     import l1b2.ident.offset as off
 
     real = off._final_search
@@ -567,6 +568,14 @@ def test_the_final_search_runs_from_each_candidate_and_keeps_the_highest(monkeyp
         return out
 
     monkeypatch.setattr(off, "_final_search", recorder)
+    return ran
+
+
+@pytest.mark.parametrize("finals", [1, 2])
+def test_the_final_search_runs_from_each_candidate_and_keeps_the_highest(monkeypatch, finals, final_searches):
+    import l1b2.ident.offset as off
+
+    ran = final_searches
     monkeypatch.setitem(off.BRACKETS["offset_kappa0"], "final_margin", 1e9)  # every finite profile point a candidate
     monkeypatch.setitem(off.BRACKETS["offset_kappa0"], "finals", 1)
     df, _ = _small_world(11)
@@ -588,17 +597,10 @@ def test_the_final_search_runs_from_each_candidate_and_keeps_the_highest(monkeyp
     assert np.all(est.theta_ >= lo) and np.all(est.theta_ <= hi)
 
 
-def test_the_barrier_points_extend_each_branch_and_leave_the_brackets_best_final_first(monkeypatch):
+def test_the_barrier_points_extend_each_branch_and_leave_the_brackets_best_final_first(monkeypatch, final_searches):
     import l1b2.ident.offset as off
 
-    real = off._final_search
-    ran = []
-
-    def recorder(obj, best, *args):
-        ran.append(best["omega"])
-        return real(obj, best, *args)
-
-    monkeypatch.setattr(off, "_final_search", recorder)
+    ran = final_searches
     monkeypatch.setitem(off.BRACKETS["offset_kappa0"], "finals", 1)
     df, _ = _small_world(11)
     plain = PredictorIdentifier(order=3, solver="offset_kappa0").fit(df, slider_mass_kg=M_S)
@@ -612,13 +614,13 @@ def test_the_barrier_points_extend_each_branch_and_leave_the_brackets_best_final
     assert [p["omega"] for p in prof[len(bracket):]] == [-0.98, -0.995, 0.98, 0.995]
     # with one final the result is the bracket's: its best point is finished, the barrier points only ranked
     top = max(bracket, key=lambda p: p["loglik"])["omega"]
-    assert ran == [top] and one.loglik_ == plain.loglik_
+    assert [w for w, _ in ran] == [top] and one.loglik_ == plain.loglik_
     monkeypatch.setitem(off.BRACKETS["offset_kappa0"], "finals", 2)
     monkeypatch.setitem(off.BRACKETS["offset_kappa0"], "final_margin", 1e9)
     ran.clear()
     two = PredictorIdentifier(order=3, solver="offset_kappa0").fit(df, slider_mass_kg=M_S)
     others = sorted((p for p in prof if np.isfinite(p["loglik"]) and p["omega"] != top), key=lambda p: -p["loglik"])
-    assert ran == [top, others[0]["omega"]]  # the bracket's best first, then the best of the others
+    assert [w for w, _ in ran] == [top, others[0]["omega"]]  # the bracket's best first, then the others' best
     assert two.loglik_ >= plain.loglik_ - 1e-9
 
 
@@ -684,20 +686,12 @@ def test_the_worlds_bench_overrides_the_settings_of_the_named_solver_only(monkey
         bench.fit(None, {"solver": "joint", "bracket": {"finals": 2}})
 
 
-def test_the_default_cold_search_finishes_the_two_best_points_of_the_offsets_confidence_set(monkeypatch):
+def test_the_default_cold_search_finishes_the_two_best_points_of_the_offsets_confidence_set(monkeypatch, final_searches):
     from scipy.stats import chi2
 
     import l1b2.ident.offset as off
 
-    real = off._final_search
-    ran = []
-
-    def recorder(obj, best, *args):
-        out = real(obj, best, *args)
-        ran.append((best["omega"], -out[0].results[out[0].best].cost))
-        return out
-
-    monkeypatch.setattr(off, "_final_search", recorder)
+    ran = final_searches
     df, _ = _small_world(11)
     est = PredictorIdentifier(order=3).fit(df, slider_mass_kg=M_S)  # solver="auto": a cold, unpinned Eq. 29 fit
     assert est.convergence_["solver"] == "offset_kappa0"
