@@ -19,6 +19,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from l1b2.cli import main as cli_main
+from l1b2.closeloop.calibrated import frame_free_run
 from l1b2.closeloop.candidates import (CandidateLibrary, Context, combine, default_library, full_library,
                                        generic_candidates, generic_library, named_candidates, named_library)
 from l1b2.closeloop.loop import CloseLoop, close_loop, order_traced
@@ -70,15 +71,6 @@ def test_logged_stator_temperature_is_traced_and_used(record_property):
     assert res.diagnosis["effects"][0]["effect"] == "thermal_drift_T"
 
 
-def _extended_free_run(model, df):
-    """``ExtendedPredictor.free_run`` over a data frame (runs from their first measured speed)."""
-    from l1b2.data import measurements as dataio
-    first = df.groupby(dataio.RUN, sort=False)[dataio.SPEED].first().to_numpy()
-    return model.free_run(df[dataio.TIME], df[dataio.POSITION], df[dataio.VOLTAGE], df[dataio.LOAD],
-                          df[dataio.DIRECTION], first, df[dataio.RUN].to_numpy(),
-                          temperature=df[dataio.TEMPERATURE] if dataio.TEMPERATURE in df else None)
-
-
 @pytest.fixture(scope="module")
 def pulley_export(tmp_path_factory):
     """``(folder, manifest)``: ``export_close_loop`` of pulley_friction 1's result with its TEST runs (Predictor.fmu,
@@ -102,7 +94,7 @@ def test_export_of_the_calibrated_model(pulley_export, isolated):
     assert ep.effects, res.diagnosis["message"]
     dte = res.test_df
     want = res.extended_model.predict_free_run(dte)
-    np.testing.assert_allclose(_extended_free_run(ep, dte), want, rtol=1e-10, atol=1e-13)
+    np.testing.assert_allclose(frame_free_run(ep, dte), want, rtol=1e-10, atol=1e-13)
     exp, manifest = pulley_export
     fam = {e["family"]: e for e in manifest["effects"]}
     assert fam["load_path_friction"]["subsystems"]["home"] == "Slider.pulley_mu"

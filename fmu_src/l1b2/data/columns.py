@@ -199,20 +199,9 @@ MAX_SAMPLE_INTERVAL_S: float = 1.0
 MIN_PEAK_SPEED_M_S: float = 1e-3
 
 
-def unit_of(name: str | None) -> str | None:
-    """Unit of a known column or sidecar field.
-
-    Parameters
-    ----------
-    name : str or None
-        Column or sidecar field name.
-
-    Returns
-    -------
-    str or None
-        The unit (``"-"`` for dimensionless), ``None`` when unknown.
-    """
-    return data_unit(name)
+#: Unit of a known column or sidecar field (``"-"`` for dimensionless, None when unknown): the data API's name
+#: of :func:`l1b2.units.data_unit`.
+unit_of = data_unit
 
 
 def sidecar_path(path: str | os.PathLike) -> Path:
