@@ -139,3 +139,6 @@ def test_a_correlated_signal_that_only_follows_the_cause_is_dominated_and_ranks_
     assert by["other"].p_value > by["decoy"].p_value           # weaker on its own, yet ranked before the decoy
     assert [e.channel for e in got] == ["cause", "other", "decoy"]
     assert by["decoy"].to_dict()["dominated_by"] == "cause"
+    summary = rl.RunLevelAnalysis(dev, None, np.nan, np.nan, got, 0.01).to_dict()   # the report's run_level entry
+    assert summary["significant_signals"] == ["cause", "other", "decoy"]
+    assert summary["dominated_signals"] == {"decoy": "cause"}

@@ -109,3 +109,18 @@ def test_close_loop_report_md_prints_each_refit_trials_evidence_over_runs():
     assert rows == ["| run_level_category(fixture_id)[run] | fixture_id | 25.0% | 2.85% | 2.68% | 11.7% | 19.6% | 2/4 "
                     "| 29/56 |",
                     "| x | fixture_id | 25.0% | 2.85% | 2.68% | 11.7% | - | 2/4 | - |"]
+
+
+def test_close_loop_report_md_says_which_significant_run_level_signal_another_explains():
+    from l1b2.closeloop.result import markdown_report
+    rep = minimal_report()
+    rep["diagnosis"] = {**rep["diagnosis"], "run_level": {
+        "runs": 72, "between_run_sd_gain": 0.012, "between_run_sd_offset_N": 0.003, "heterogeneity_p": 1e-6,
+        "significance_level": 0.005, "significant_signals": ["voltage_V", "heatsink_C"],
+        "dominated_signals": {"heatsink_C": "voltage_V"}}}
+    [line] = [line for line in markdown_report(rep).splitlines() if line.startswith("Run-level deviations")]
+    assert line.endswith("signals explaining them (Bonferroni level 0.005): voltage_V, heatsink_C (explained by "
+                         "voltage_V given it, not traced).")
+    rep["diagnosis"]["run_level"].pop("dominated_signals")      # a report written before the key: names only
+    [line] = [line for line in markdown_report(rep).splitlines() if line.startswith("Run-level deviations")]
+    assert line.endswith("(Bonferroni level 0.005): voltage_V, heatsink_C.")

@@ -385,11 +385,14 @@ def markdown_report(rep: dict) -> str:
         lines += [f"- `{a['channel']}`: {a['action']}: {a['note']}" for a in d["auxiliary_columns"]]
     if d.get("run_level"):
         r = d["run_level"]
+        dom = r.get("dominated_signals", {})
+        signals = [f"{s} (explained by {dom[s]} given it, not traced)" if s in dom else s
+                   for s in r["significant_signals"]]
         lines += ["", f"Run-level deviations (first round, {r['runs']} runs, shrunk by REML): between-run sd of the "
                   f"drive-force gain {r['between_run_sd_gain']:.2%}, of the offset "
                   f"{r['between_run_sd_offset_N']:.3g} N; "
                   f"heterogeneity p {r['heterogeneity_p']:.2g}; signals explaining them (Bonferroni level "
-                  f"{r['significance_level']:.2g}): {', '.join(r['significant_signals']) or 'none'}."]
+                  f"{r['significance_level']:.2g}): {', '.join(signals) or 'none'}."]
     lines += ["", "## Residual evidence per regressor (first round, cross-validated over runs)", "",
               "| regressor | held-out gain | p (runs) |", "|---|---|---|"]
     for e in d["regressor_evidence"][0] if d["regressor_evidence"] else []:

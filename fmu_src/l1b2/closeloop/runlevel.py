@@ -537,7 +537,8 @@ class RunLevelAnalysis:
                 "mean_offset_N": float(self.fit.beta[1]) if self.fit is not None else None,
                 "heterogeneity_Q": self.q if np.isfinite(self.q) else None, "heterogeneity_p": self.q_p,
                 "significance_level": self.level,
-                "significant_signals": [e.label for e in self.significant]}
+                "significant_signals": [e.label for e in self.significant],
+                "dominated_signals": {e.label: e.dominated_by for e in self.significant if e.dominated_by}}
 
 
 def analyse(df: pd.DataFrame, model, mask: np.ndarray, channels, *, alpha: float, k: int,
