@@ -162,3 +162,15 @@ def test_the_reports_and_the_command_line_name_what_was_filled(tmp_path, capsys)
     assert "Gaps in optional" not in markdown_report(minimal_report())
     print_input_checks(checks, {}, lines)
     assert capsys.readouterr().out.splitlines() == [f"  warning: {line}" for line in lines]
+
+
+def test_the_identification_reads_a_frame_with_gaps_filled_and_evaluates_extra_forces_on_the_filled_frame(tmp_path):
+    from l1b2.ident.problem import SampleData
+    df = load_measurements(write(tmp_path, [r[:7] + ["48500", "25.0"] for r in rows()])).df
+    df.loc[11, "frequency_Hz"] = np.nan              # run 3, between 48500 at 2.000 s and ... at 2.002 s
+    df.loc[12, "frequency_Hz"] = 48600.0
+    sample = SampleData(df)
+    # t = 2.001 s between (2.000 s, 48500) and (2.002 s, 48600): the midpoint
+    assert sample.frame.loc[11, "frequency_Hz"] == pytest.approx(48550.0, abs=1e-9)
+    clean = df.fillna(48500.0)
+    assert SampleData(clean).frame is clean           # nothing filled: the caller's frame, as before
