@@ -33,6 +33,7 @@ import numpy as np
 import pandas as pd
 
 from ..data import measurements as dataio
+from ..data.gaps import fill_gaps
 from ..errors import DataFormatError
 
 __all__ = ["MAX_LABELS", "MAX_TOKEN_SHARE", "LABELS_ATTR", "with_usable_channels", "label_codes", "fill_gaps",
@@ -67,26 +68,6 @@ def _first_row(bad: np.ndarray) -> int | None:
     :class:`l1b2.errors.DataFormatError`), or None."""
     idx = np.flatnonzero(bad)
     return int(idx[0]) + 1 if idx.size else None
-
-
-def fill_gaps(values, time_s, run) -> tuple[np.ndarray, list]:
-    """``(filled, empty_runs)``: ``values`` with every non-finite sample replaced, run by run, by the linear
-    interpolation in ``time_s`` between the run's finite samples (held constant outside them); ``empty_runs``
-    lists the runs (in order of appearance) with no finite sample, left non-finite."""
-    v = np.asarray(values, float).copy()
-    t = np.asarray(time_s, float)
-    codes, uniq = pd.factorize(pd.Series(run), sort=False)
-    empty = []
-    for k in range(len(uniq)):
-        idx = np.flatnonzero(codes == k)
-        ok = np.isfinite(v[idx])
-        if ok.all():
-            continue
-        if not ok.any():
-            empty.append(uniq[k])
-            continue
-        v[idx[~ok]] = np.interp(t[idx[~ok]], t[idx[ok]], v[idx[ok]])
-    return v, empty
 
 
 def label_codes(train_runs: pd.Series, test_values: pd.Series | None = None) -> tuple[dict, float]:

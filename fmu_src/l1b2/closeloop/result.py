@@ -20,6 +20,7 @@ import pandas as pd
 
 from ..data import measurements as dataio
 from ..data import plots
+from ..data.gaps import gap_lines
 from ..jsonio import dumps, sig, strict_json
 from ..predictor.effects import ExtendedPredictor
 from . import residuals as res
@@ -310,8 +311,11 @@ def markdown_report(rep: dict) -> str:
     test = (f"TEST: `{data['test']}` ({data['test_runs']} runs; never used for fitting or choosing)."
             if data.get("test") is not None else "no TEST data.")
     lines = ["# Close the loop: residual -> missing effect -> extended model", "",
-             f"TRAIN: `{data['train']}` ({data['train_runs']} runs), {test}",
-             "", "## Diagnosis", "", f"**{d['message']}**", ""]
+             f"TRAIN: `{data['train']}` ({data['train_runs']} runs), {test}", ""]
+    gaps = gap_lines((rep.get("checks") or {}).get("gaps_filled"))
+    if gaps:
+        lines += ["Gaps in optional input columns, filled on reading:", ""] + [f"* {g}" for g in gaps] + [""]
+    lines += ["## Diagnosis", "", f"**{d['message']}**", ""]
     if d["significant"]:
         lines += [f"* traced to: {', '.join(d['traced_to'])}",
                   f"* effect: `{d['effect']}` {d['effect_shape'] or ''} — {d['effect_description']}"]

@@ -8,7 +8,7 @@ records TRAIN's range (it goes into ``identification.json``),
 :func:`outside_range` flags, per run of any data set to be predicted, each
 input that leaves it, and :func:`input_checks` is the ``checks`` section of
 the identify and close-loop reports (these flags, the unit findings of
-both files). The drive frequency is a prediction input like the others
+both files and the gaps filled in them). The drive frequency is a prediction input like the others
 (the predictor's frequency response, :mod:`l1b2.predictor.frequency`): a
 TEST run at a frequency outside TRAIN's is flagged; :func:`frequency_varies`
 says whether TRAIN's frequencies spread enough to identify the response.
@@ -142,7 +142,9 @@ def frequency_varies(*data: pd.DataFrame | Measurements | None) -> bool:
 
 
 def input_checks(train: Measurements, test: Measurements | None) -> dict:
-    """The report's record of the data checks: unit findings (allowed or none) and TEST runs outside TRAIN's range."""
+    """The report's record of the data checks: unit findings (allowed or none), the gaps of optional input columns
+    filled on reading (per file and column: ``cells``, ``runs``, ``first_row``, ``first_line``) and TEST runs outside
+    TRAIN's range."""
     rng = data_range(train)
     flagged = outside_range(test, rng) if test is not None else []
     n_test = len(test.runs) if test is not None else 0
@@ -150,6 +152,8 @@ def input_checks(train: Measurements, test: Measurements | None) -> dict:
         "allow_unusual_units": bool(train.meta.get("allow_unusual_units")),
         "unusual_units": {"train": list(train.meta.get("unusual_units", [])),
                           "test": list(test.meta.get("unusual_units", [])) if test is not None else []},
+        "gaps_filled": {"train": dict(train.meta.get("gaps_filled") or {}),
+                        "test": dict(test.meta.get("gaps_filled") or {}) if test is not None else {}},
         "training_range": rng,
         "test_runs_outside_training_range": flagged,
         "extrapolation": summarize_outside(flagged, n_test),

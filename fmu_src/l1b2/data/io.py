@@ -3,7 +3,8 @@
 The file side of the contract in the rig data format (docs/reference/data-format.md): one CSV file (one
 row per sample, header line first) plus an optional sidecar ``NAME.json``
 beside ``NAME.csv`` with the rig settings. :func:`read_table_and_sidecar`
-reads both, applies :func:`~l1b2.data.validate.validate_frame`, merges the
+reads both, applies :func:`~l1b2.data.validate.validate_frame_filled` (which
+bridges the gaps of the optional input columns), merges the
 settings (keyword > sidecar > default), derives ``speed_m_s`` / fills
 ``frequency_Hz`` when absent; :func:`write_table_and_sidecar` validates the
 same way and writes both files atomically. Problems of the files themselves
@@ -54,6 +55,7 @@ from .validate import (
     unusual_setting,
     unusual_values,
     validate_frame,
+    validate_frame_filled,
 )
 
 __all__ = ["read_table_and_sidecar", "write_table_and_sidecar", "read_sidecar", "unit_findings"]
@@ -394,7 +396,8 @@ def read_table_and_sidecar(path: str | os.PathLike, *, slider_mass_kg: float | N
     df : pandas.DataFrame
         The validated samples (index 0..n-1).
     meta : dict
-        The settings and the load-time flags.
+        The settings and the load-time flags (``gaps_filled``: per optional
+        input column with gaps, what was filled).
     """
     path = Path(path)
     table = _read_table(path)
@@ -403,7 +406,7 @@ def read_table_and_sidecar(path: str | os.PathLike, *, slider_mass_kg: float | N
     meta = _merge_settings(sidecar, slider_mass_kg=slider_mass_kg,
                            encoder_resolution_m=encoder_resolution_m,
                            drive_frequency_Hz=drive_frequency_Hz)
-    df = validate_frame(table, path)
+    df, meta["gaps_filled"] = validate_frame_filled(table, path)
     del table  # the typed columns are shared with ``df``; the rest is released before the checks below
     for name in df.columns:
         if name not in COLUMN_SPECS:

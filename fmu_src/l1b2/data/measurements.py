@@ -69,7 +69,7 @@ from .columns import (
     unit_of,
 )
 from .io import read_table_and_sidecar, write_table_and_sidecar
-from .validate import format_value, run_slices, validate_frame
+from .validate import format_value, run_slices, validate_frame, validate_frame_filled
 
 __all__ = [
     "TIME", "RUN", "POSITION", "VOLTAGE", "DIRECTION", "LOAD", "SPEED",
@@ -81,7 +81,7 @@ __all__ = [
     "MAX_ABS_LOAD_KG", "MIN_FREQUENCY_HZ", "MAX_FREQUENCY_HZ",
     "MIN_TEMPERATURE_C", "MAX_TEMPERATURE_C",
     "Measurements", "load_measurements", "write_measurements",
-    "validate_frame", "split_by_load", "run_slices", "sidecar_path", "unit_of",
+    "validate_frame", "validate_frame_filled", "split_by_load", "run_slices", "sidecar_path", "unit_of",
 ]
 
 
@@ -200,8 +200,10 @@ class Measurements:
         ``slider_mass_kg`` [kg] or ``None`` (unknown), ``encoder_resolution_m``
         [m], ``drive_frequency_Hz`` [Hz], ``description`` (str), ``source``
         (path of the CSV), ``sidecar`` (path of the sidecar read, or
-        ``None``), ``speed_derived`` and ``frequency_filled`` (bool), plus any
-        extra sidecar fields.
+        ``None``), ``speed_derived`` and ``frequency_filled`` (bool),
+        ``gaps_filled`` (per optional input column whose gaps were bridged:
+        ``cells``, ``runs``, ``first_row``, ``first_line``; empty when none),
+        plus any extra sidecar fields.
     path : pathlib.Path
         The CSV file the data came from.
 
@@ -309,6 +311,11 @@ def load_measurements(path: str | os.PathLike, *, slider_mass_kg: float | None =
     * When ``frequency_Hz`` is absent it is filled with the constant
       ``meta['drive_frequency_Hz']`` (keyword > sidecar > 48 500 Hz) and
       ``meta['frequency_filled']`` is True: it was not measured.
+    * A gap (empty cell, NaN token, infinity) in ``frequency_Hz`` or
+      ``temperature_C`` is filled within its run, linearly in time between
+      the run's readings (the nearest reading at the run's ends), and
+      counted in ``meta['gaps_filled']``; a run without any reading there
+      is refused. A gap in any other known column is refused.
     * Whitespace around header names and values is ignored; blank lines at
       the end of the file are ignored, blank lines inside are refused.
     """

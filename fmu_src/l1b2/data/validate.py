@@ -4,7 +4,12 @@
 written) in two stages: first every value must parse (non-numeric, empty,
 NaN and infinite values; the earliest offending row over all columns is
 reported), then the contents rules (direction, SI plausibility, time order,
-run contiguity; again the earliest offending row is reported). Each breach
+run contiguity; again the earliest offending row is reported). In the
+optional input columns :data:`~l1b2.data.gaps.GAP_COLUMNS` an empty, NaN or
+infinite cell is a gap, not a breach: it is filled within its run
+(:func:`~l1b2.data.gaps.fill_gaps`), and only a run with no reading at all
+there is refused; :func:`validate_frame_filled` also returns what was
+filled. Each breach
 found is a :class:`DataProblem`; the earliest one is raised as a
 :class:`~l1b2.errors.DataFormatError` naming the file, the column with its
 unit and the row.
@@ -71,9 +76,10 @@ from .columns import (
     VOLTAGE,
     PlausibleRange,
 )
+from .gaps import GAP_COLUMNS, fill_gaps, gap_record
 
 __all__ = [
-    "DataProblem", "validate_frame", "check_setting", "run_slices", "format_value",
+    "DataProblem", "validate_frame", "validate_frame_filled", "check_setting", "run_slices", "format_value",
     "is_blank_row", "unusual_setting", "unusual_values", "speed_slopes",
 ]
 
@@ -279,19 +285,46 @@ def _normalise_run(col: pd.Series) -> tuple[pd.Series, int | None]:
     return stripped, None
 
 
-def _parse_values(table: pd.DataFrame, path) -> tuple[dict[str, np.ndarray], pd.Series]:
+def _gap_cells(col: pd.Series, values: np.ndarray) -> np.ndarray:
+    """Where a parsed column holds no reading: an empty cell, a NaN token (:data:`NAN_TOKENS`) or an infinity."""
+    if pd.api.types.is_numeric_dtype(col.dtype):
+        return ~np.isfinite(values)
+    text, missing, _ = _strip_text(col)
+    token = text.astype(str).str.lower().isin(NAN_TOKENS).to_numpy()
+    return missing | (text == "").to_numpy(dtype=bool) | token | np.isinf(values)
+
+
+#: appended to a gap in the measured speed: why it is not filled, and the remedy
+SPEED_GAP_HINT = ("; speed_m_s is the measured output the model is fitted and scored on, so a gap in it is not "
+                  "filled: leave the column out (the speed is then derived from position_m in every run) or leave "
+                  "out the runs with gaps")
+
+
+def _parse_values(table: pd.DataFrame, path) -> tuple[dict[str, np.ndarray], pd.Series, dict[str, np.ndarray]]:
     """Stage 1: every value must parse.
 
-    Returns the known numeric columns present, parsed to float64, and the
-    normalised ``run`` column; raises for the earliest value that does not
-    parse (over all columns), or for a blank line inside the data.
+    Returns the known numeric columns present, parsed to float64, the
+    normalised ``run`` column and, per column of :data:`GAP_COLUMNS` with a
+    gap, where its gaps are (NaN there); raises for the earliest value that
+    does not parse (over all columns; a gap in a column of
+    :data:`GAP_COLUMNS` is not one), or for a blank line inside the data.
     """
     problems: list[DataProblem] = []
     values: dict[str, np.ndarray] = {}
+    gaps: dict[str, np.ndarray] = {}
     for name in NUMERIC_COLUMNS:
         if name not in table.columns:
             continue
         vals, bad, why = _parse_numeric(table[name])
+        if bad is not None and name in GAP_COLUMNS:
+            gap = _gap_cells(table[name], vals)
+            bad = _first(~np.isfinite(vals) & ~gap)
+            if bad is not None:
+                why = _parse_numeric(table[name].iloc[bad:bad + 1])[2]
+            vals = np.where(gap, np.nan, vals)
+            gaps[name] = gap
+        elif bad is not None and name == SPEED and not why.startswith("non-numeric"):
+            why += SPEED_GAP_HINT
         values[name] = vals
         if bad is not None:
             problems.append(DataProblem(bad, _ORDER[name], name, why))
@@ -303,7 +336,7 @@ def _parse_values(table: pd.DataFrame, path) -> tuple[dict[str, np.ndarray], pd.
         if is_blank_row(table.iloc[first.row]):
             raise DataFormatError(path, None, first.row + 1, "blank line inside the data")
         _raise_first(path, problems)
-    return values, run_col
+    return values, run_col, gaps
 
 
 # --------------------------------------------------------------------------
@@ -415,8 +448,28 @@ def _missing_hint(missing: list[str], columns: list[str]) -> str:
     return hint
 
 
-def validate_frame(df: pd.DataFrame, path: str | os.PathLike) -> pd.DataFrame:
-    """Check a measurement table against the contract and type its columns.
+def _readingless_runs(gaps: dict[str, np.ndarray], run_col: pd.Series) -> list[DataProblem]:
+    """Per column of :data:`GAP_COLUMNS`, the first run in which every sample is a gap (no reading to bridge from)."""
+    problems: list[DataProblem] = []
+    for name, gap in gaps.items():
+        for rid, sl in run_slices(run_col):
+            if gap[sl].all():
+                problems.append(DataProblem(
+                    sl.start, _ORDER[name], name,
+                    f"run {format_value(rid)} has no reading in {name} (all of its {sl.stop - sl.start} cells "
+                    "empty, NaN or infinite): a gap is bridged from its run's own readings, and a run without "
+                    f"any is not a gap; log {name} in every run, or leave the column out"))
+                break
+    return problems
+
+
+def validate_frame_filled(df: pd.DataFrame, path: str | os.PathLike) -> tuple[pd.DataFrame, dict[str, dict]]:
+    """Check a measurement table against the contract, type its columns and bridge the gaps it allows.
+
+    Gaps (empty cells, NaN tokens, infinities) are allowed in the optional
+    input columns :data:`~l1b2.data.gaps.GAP_COLUMNS` when each run holds a
+    reading there, and filled within their run
+    (:func:`~l1b2.data.gaps.fill_gaps`); in any other column they are refused.
 
     Parameters
     ----------
@@ -428,11 +481,13 @@ def validate_frame(df: pd.DataFrame, path: str | os.PathLike) -> pd.DataFrame:
 
     Returns
     -------
-    pandas.DataFrame
+    frame : pandas.DataFrame
         A copy with known numeric columns as ``float64`` (``direction`` as
-        ``int64``), ``run`` normalised (see
+        ``int64``), gaps filled, ``run`` normalised (see
         :class:`~l1b2.data.measurements.Measurements`), all other columns
         untouched, column order unchanged.
+    filled : dict
+        Per column with a gap, its :func:`~l1b2.data.gaps.gap_record`.
 
     Raises
     ------
@@ -443,14 +498,28 @@ def validate_frame(df: pd.DataFrame, path: str | os.PathLike) -> pd.DataFrame:
     columns = _checked_header(df, path)
     out = df.copy(deep=False)  # copy-on-write: the columns replaced below never touch ``df``
     out.columns = columns
-    values, run_col = _parse_values(out, path)
-    problems = _order_problems(values[TIME], run_col) + _range_problems(values)
+    values, run_col, gaps = _parse_values(out, path)
+    problems = (_order_problems(values[TIME], run_col) + _range_problems(values)
+                + _readingless_runs(gaps, run_col))
     if problems:
         _raise_first(path, problems)
+    filled: dict[str, dict] = {}
+    for name, gap in gaps.items():
+        values[name] = fill_gaps(values[name], values[TIME], run_col)[0]
+        filled[name] = gap_record(gap, run_col)
     for name, vals in values.items():
         out[name] = vals.astype(np.int64) if name == DIRECTION else vals
     out[RUN] = run_col
-    return out
+    return out, filled
+
+
+def validate_frame(df: pd.DataFrame, path: str | os.PathLike) -> pd.DataFrame:
+    """Check a measurement table against the contract and type its columns.
+
+    The frame of :func:`validate_frame_filled` (parameters, result and
+    errors there), without the record of the gaps filled.
+    """
+    return validate_frame_filled(df, path)[0]
 
 
 # --------------------------------------------------------------------------

@@ -57,7 +57,7 @@ from ..data.measurements import (
     TIME,
     VOLTAGE,
     Measurements,
-    validate_frame,
+    validate_frame_filled,
 )
 from ..errors import DataFormatError, IdentificationError
 from ..predictor.model import (
@@ -110,15 +110,17 @@ def _format_error_text(exc: DataFormatError, df: pd.DataFrame) -> str:
 
 
 def _checked_frame(data) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """(the caller's frame, the contract-checked frame) of a Measurements or a DataFrame."""
+    """(the frame extra forces are evaluated on, the contract-checked frame) of a Measurements or a DataFrame: the
+    caller's frame, or the checked one when gaps of an optional input column were filled in it."""
     if isinstance(data, Measurements):
         return data.df, data.df  # validated when it was read
     if not isinstance(data, pd.DataFrame):
         raise IdentificationError("data must be a Measurements or a pandas DataFrame in the data format")
     try:
-        return data, validate_frame(data, "data")
+        checked, filled = validate_frame_filled(data, "data")
     except DataFormatError as exc:
         raise IdentificationError(_format_error_text(exc, data)) from exc
+    return (checked if filled else data), checked
 
 
 def _derived_speed(s, t, layout) -> np.ndarray:
