@@ -304,6 +304,17 @@ def stages_table(stages: list) -> str:
     return "\n".join(rows)
 
 
+def run_level_line(r: dict) -> str:
+    """``report.md``'s line on the first round's run-level deviations (``diagnosis.run_level``): their spread, the
+    heterogeneity test and the significant signals, each that a correlated one explains marked as not traced."""
+    dom = r.get("dominated_signals", {})
+    signals = [f"{s} (explained by {dom[s]} given it, not traced)" if s in dom else s for s in r["significant_signals"]]
+    return (f"Run-level deviations (first round, {r['runs']} runs, shrunk by REML): between-run sd of the "
+            f"drive-force gain {r['between_run_sd_gain']:.2%}, of the offset {r['between_run_sd_offset_N']:.3g} N; "
+            f"heterogeneity p {r['heterogeneity_p']:.2g}; signals explaining them (Bonferroni level "
+            f"{r['significance_level']:.2g}): {', '.join(signals) or 'none'}.")
+
+
 def markdown_report(rep: dict) -> str:
     """``report.md`` from a report dict (:meth:`CloseLoopResult.to_dict`, plus ``figures`` when saved)."""
     d = rep["diagnosis"]
@@ -388,15 +399,7 @@ def markdown_report(rep: dict) -> str:
         lines += ["", "Auxiliary columns not numeric and finite as logged (flags, text labels, gaps):", ""]
         lines += [f"- `{a['channel']}`: {a['action']}: {a['note']}" for a in d["auxiliary_columns"]]
     if d.get("run_level"):
-        r = d["run_level"]
-        dom = r.get("dominated_signals", {})
-        signals = [f"{s} (explained by {dom[s]} given it, not traced)" if s in dom else s
-                   for s in r["significant_signals"]]
-        lines += ["", f"Run-level deviations (first round, {r['runs']} runs, shrunk by REML): between-run sd of the "
-                  f"drive-force gain {r['between_run_sd_gain']:.2%}, of the offset "
-                  f"{r['between_run_sd_offset_N']:.3g} N; "
-                  f"heterogeneity p {r['heterogeneity_p']:.2g}; signals explaining them (Bonferroni level "
-                  f"{r['significance_level']:.2g}): {', '.join(signals) or 'none'}."]
+        lines += ["", run_level_line(d["run_level"])]
     lines += ["", "## Residual evidence per regressor (first round, cross-validated over runs)", "",
               "| regressor | held-out gain | p (runs) |", "|---|---|---|"]
     for e in d["regressor_evidence"][0] if d["regressor_evidence"] else []:
