@@ -196,7 +196,21 @@ def chain_line(rec: Mapping) -> str:
              if rec.get("refused_by_harm_guard") else "no filter passed the test")
     return (f"Measurement chain: the speed column differs from the position's derivative by "
             f"{float(rec['rel_rms_mismatch']):.1%} of the speed's rms; the speed channel's test "
-            f"(held-out gain {float(rec.get('cv_gain', 0.0)):.1%}, p {float(rec.get('p_value', 1.0)):.2g}): {found}.")
+            f"(held-out gain {float(rec.get('cv_gain', 0.0)):.1%}, p {float(rec.get('p_value', 1.0)):.2g}): {found}."
+            + clip_sentence(rec.get("clip") or {}))
+
+
+def clip_sentence(clip: Mapping) -> str:
+    """The sentence on the speed channel's range test (``measurement_chain.clip``): the rails with their samples and
+    the clipped chain's held-out gain over the chain without a clip; empty when no rail was found."""
+    rails = [f"{clip[f'{side}_m_s']:+.4g} m/s ({clip[f'n_{side}']} samples in {clip[f'runs_{side}']} runs)"
+             for side in ("lo", "hi") if clip.get(f"{side}_m_s") is not None]
+    if not rails:
+        return ""
+    verdict = "kept: the prediction is clipped after the filter" if clip.get("accepted") else "not kept"
+    return (f" The column saturates at {' and '.join(rails)}, {float(clip.get('share_at_rails', 0.0)):.1%} of the "
+            f"samples; the clip's held-out gain over the chain without it {float(clip.get('cv_gain', 0.0)):.1%} "
+            f"(p {float(clip.get('p_value', 1.0)):.2g}): {verdict}.")
 
 
 def channel_range_line(rec: Mapping) -> str:
