@@ -78,7 +78,8 @@ def test_the_rails_of_a_clipped_column_are_found_per_sign_with_the_samples_at_th
     assert (f.a, f.b0, f.b1, f.lo_m_s, f.hi_m_s) == (0.0, 1.0, 0.0, clip["lo_m_s"], clip["hi_m_s"])
     assert f.to_dict()["clip_hi_m_s"] == clip["hi_m_s"]
     line = chain_line({k: v for k, v in out.items() if k != "filter"})
-    assert "+0.22 m/s" in line and "-0.18 m/s" in line and f"{clip['n_hi']} samples" in line and "kept" in line
+    assert "+0.22 m/s" in line and "-0.18 m/s" in line and f"{clip['n_hi']} samples" in line
+    assert "with no filter inside it" in line and "kept: the prediction is clipped after the filter" in line
 
 
 def test_a_filter_inside_the_rails_is_fitted_on_the_samples_inside():

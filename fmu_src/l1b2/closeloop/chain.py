@@ -258,7 +258,8 @@ def clip_test(X: np.ndarray, y: np.ndarray, runs: np.ndarray, folds, sim, *, fil
     (one-sided Wilcoxon over runs).
 
     Returns the rails' record (:func:`speed_rails`, rails None when absent), ``share_at_rails`` (of the rows),
-    ``inner_filter`` (bool), ``inner_cv_gain``, ``inner_p_value``, ``cv_gain``, ``p_value``, ``accepted`` and
+    ``inner_filter`` (bool), ``inner_cv_gain``, ``inner_p_value``, ``filter_kept``, ``cv_gain``, ``p_value``,
+    ``accepted`` and
     ``stage`` (the :class:`OutputFilter` with its rails fitted on all rows; None without a rail).
     """
     u_all, idx, starts = sim
@@ -289,7 +290,7 @@ def clip_test(X: np.ndarray, y: np.ndarray, runs: np.ndarray, folds, sim, *, fil
                 np.clip(run(_fit(X, y, fit, True))[te] if inner else u[te], r_lo, r_hi)]
     gain, p = _gain_p(_heldout_ss(y, runs, folds, predict))
     rec.update(accepted=bool(gain >= min_gain and p < alpha), cv_gain=gain, p_value=p, inner_filter=inner,
-               inner_cv_gain=g_in, inner_p_value=p_in)
+               inner_cv_gain=g_in, inner_p_value=p_in, filter_kept=filter_kept)
     return {**rec, "stage": OutputFilter(*(float(c) for c in coef), lo_m_s=lo, hi_m_s=hi)}
 
 
