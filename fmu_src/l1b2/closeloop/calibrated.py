@@ -88,7 +88,7 @@ def calibrated_model(base, ext, effects, output_filter, source: dict, groups=Non
                              c.description, tuple(c.regressors), c.structural,
                              reported_covariance(ext, c.names, groups))
             for c, phi in zip(effects.candidates, effects.phi)]
-    filt = None if output_filter is None else {"a": output_filter.a, "b0": output_filter.b0, "b1": output_filter.b1}
+    filt = None if output_filter is None else output_filter.params()
     ext_setup = PredictorSetup(ext.params_, ext.m_s_, ext.T_s_, ext.result_.frequency_response)
 
     def build(effects_):

@@ -13,12 +13,21 @@ found and modelled apart from the physics, from position and speed alone:
 * it is accepted when it lowers the held-out sum of squares of
   ``speed - filter(u)`` against the identity by at least ``min_gain`` in most
   runs *and* the speed column's mismatch with the derivative is above the
-  quantisation level (``min_rel_rms`` of the speed's rms).
+  quantisation level (``min_rel_rms`` of the speed's rms);
+* the sensor's range: every analog speed output (tachometer, vibrometer,
+  encoder interpolator read by an ADC) saturates, so the chain may end in
+  ``y = clip(filter(u), lo, hi)`` with rails ``lo < 0 < hi`` [m/s], each sign
+  on its own (:func:`speed_rails`: a saturated channel reads one value
+  while the quantity exceeds it). Above the same ``min_rel_rms``, the clipped
+  chain (its filter fitted on the samples inside the rails) competes with
+  the chain without a clip under the same held-out rule over runs
+  (``min_gain``, p < 0.01), and replaces it when it wins (:func:`clip_test`).
 
 When the filter is accepted, the close-the-loop estimator identifies the
 physics on the position's derivative (:func:`with_position_speed`) and
-applies the filter to its predictions (:meth:`OutputFilter.apply`), before
-it looks for missing physical effects (:class:`l1b2.closeloop.loop.ChainModel`).
+applies the filter (and the clip, when kept) to its predictions
+(:meth:`OutputFilter.apply`), before it looks for missing physical effects
+(:class:`l1b2.closeloop.loop.ChainModel`).
 """
 
 from __future__ import annotations
@@ -30,22 +39,38 @@ import pandas as pd
 from scipy import stats
 
 from ..data import measurements as dataio
-from ..predictor.effects import apply_output_filter
+from ..predictor.effects import FILTER_RAILS, apply_output_filter
 from .residuals import run_folds, wilcoxon_greater
 
 
 @dataclass(frozen=True)
 class OutputFilter:
-    """``y(k) = a y(k-1) + b0 u(k) + b1 u(k-1)`` per run, ``y(0) = (b0 + b1) u(0) / (1 - a)`` (steady start)."""
+    """``y(k) = a y(k-1) + b0 u(k) + b1 u(k-1)`` per run, ``y(0) = (b0 + b1) u(0) / (1 - a)`` (steady start), then
+    ``clip(y, lo_m_s, hi_m_s)`` [m/s] (the speed channel's range; infinite: no limit on that side)."""
 
     a: float = 0.0
     b0: float = 1.0
     b1: float = 0.0
+    lo_m_s: float = -np.inf
+    hi_m_s: float = np.inf
+
+    @property
+    def clipped(self) -> bool:
+        """Whether the stage holds a finite rail."""
+        return bool(np.isfinite(self.lo_m_s) or np.isfinite(self.hi_m_s))
+
+    def params(self) -> dict:
+        """``{"a", "b0", "b1"}`` and each finite rail (``lo_m_s``, ``hi_m_s``): the mapping
+        :func:`l1b2.predictor.effects.apply_output_filter` and the exported model read."""
+        out = {"a": self.a, "b0": self.b0, "b1": self.b1}
+        out.update({k: getattr(self, k) for k in FILTER_RAILS if np.isfinite(getattr(self, k))})
+        return out
 
     def apply(self, df: pd.DataFrame, u) -> np.ndarray:
-        """The filtered signal of ``u`` (per sample), run by run (:func:`l1b2.predictor.effects.apply_output_filter`)."""
+        """The filtered (and clipped) signal of ``u`` (per sample), run by run
+        (:func:`l1b2.predictor.effects.apply_output_filter`)."""
         starts = sorted(sl.start for _, sl in dataio.run_slices(df[dataio.RUN]))
-        return apply_output_filter({"a": self.a, "b0": self.b0, "b1": self.b1}, u, starts)
+        return apply_output_filter(self.params(), u, starts)
 
     def frame(self, df: pd.DataFrame) -> pd.DataFrame:
         """The frame the physics behind the filter is fitted on and predicts along (:func:`with_position_speed`)."""
@@ -54,7 +79,12 @@ class OutputFilter:
     def to_dict(self) -> dict:
         dc = (self.b0 + self.b1) / (1.0 - self.a) if abs(1.0 - self.a) > 1e-9 else float("nan")
         return {"a": self.a, "b0": self.b0, "b1": self.b1, "dc_gain": dc,
-                "time_constant_samples": (-1.0 / np.log(self.a)) if 0 < self.a < 1 else 0.0}
+                "time_constant_samples": (-1.0 / np.log(self.a)) if 0 < self.a < 1 else 0.0,
+                **({"clip_lo_m_s": _finite(self.lo_m_s), "clip_hi_m_s": _finite(self.hi_m_s)} if self.clipped else {})}
+
+
+def _finite(x: float) -> float | None:
+    return float(x) if np.isfinite(x) else None
 
 
 def position_derivative(df: pd.DataFrame) -> np.ndarray:
@@ -98,8 +128,9 @@ def speed_channel(df: pd.DataFrame, mask: np.ndarray, *, k: int = 5, seed: int =
     Returns a dict: ``rel_rms_mismatch`` (rms of speed - derivative over the
     speed's rms), ``cv_gain`` (held-out share of the identity's mismatch the
     filter removes, one-step on the measured speed), ``p_value`` (runs),
-    ``filter`` (:class:`OutputFilter` parameters fitted on all runs) and
-    ``accepted``.
+    ``filter`` (:class:`OutputFilter` parameters fitted on all runs; the clipped stage when the clip is
+    accepted), ``accepted`` (the filter or the clip) and, when the mismatch reaches ``min_rel_rms``, ``clip``
+    (:func:`clip_test`'s record without its stage).
     """
     if dataio.SPEED not in df.columns:
         return {"accepted": False, "reason": "no speed column"}
@@ -130,8 +161,137 @@ def speed_channel(df: pd.DataFrame, mask: np.ndarray, *, k: int = 5, seed: int =
     coef = np.linalg.lstsq(X, y, rcond=None)[0]
     filt = OutputFilter(float(coef[0]), float(coef[1]), float(coef[2]))
     ok = bool(rel >= min_rel_rms and gain >= min_gain and p < 0.01 and abs(filt.a) < 0.999)
-    return {"accepted": ok, "rel_rms_mismatch": rel, "cv_gain": gain, "p_value": p,
-            "runs_improved": float(np.mean(s1 < s0)) if len(s0) else 0.0, "filter": filt}
+    out = {"accepted": ok, "rel_rms_mismatch": rel, "cv_gain": gain, "p_value": p,
+           "runs_improved": float(np.mean(s1 < s0)) if len(s0) else 0.0, "filter": filt}
+    if rel >= min_rel_rms:
+        sim = (u, np.flatnonzero(keep)[m], sorted(sl.start for _, sl in dataio.run_slices(df[dataio.RUN])))
+        clip = clip_test(X, y, runs, folds, sim, filter_kept=ok, min_gain=min_gain)
+        out["clip"] = {k: v for k, v in clip.items() if k != "stage"}
+        if clip["accepted"]:
+            out.update(accepted=True, filter=clip["stage"])
+    return out
+
+
+#: a sample reads a rail when it lies within this share of the rail's value from it (a saturated ADC writes one
+#: code; the share only absorbs the decimal round trip of a data file)
+RAIL_REL_TOL = 1e-9
+
+
+def speed_rails(v: np.ndarray, u: np.ndarray, runs: np.ndarray, *, alpha: float = 0.01) -> dict:
+    """The speed channel's range limits, each sign on its own, from the column ``v`` and the derivative ``u`` [m/s].
+
+    A saturated channel reads one value, its rail, whenever the quantity exceeds it, and never reads beyond it:
+    the candidate rail of each sign is the column's extreme of that sign (``max v > 0``, ``min v < 0``), and a
+    sample reads it when within :data:`RAIL_REL_TOL` of it. The candidate is a rail when the derivative exceeds it
+    where the column reads it: per run holding such samples, the mean of ``u - rail`` (sign turned for the lower
+    rail) is positive, one-sided Wilcoxon over those runs below ``alpha`` (seven runs at least for 0.01). A clean
+    column's extreme is a peak of its noise, where the derivative lies below it, and a low-passed column reads
+    its extreme at one sample.
+
+    Returns ``{"lo_m_s", "hi_m_s"}`` (the rails; -inf / inf when none), and per side (``lo``, ``hi``) the
+    candidate ``candidate_<side>_m_s`` (None when the column has no sample of that sign), ``n_<side>`` (samples at
+    it), ``runs_<side>`` (runs holding them) and ``p_<side>``.
+    """
+    out = {}
+    for side, sgn in (("lo", -1.0), ("hi", 1.0)):
+        ext = float(np.max(sgn * v)) if len(v) else 0.0
+        rail, n, n_runs, p = sgn * np.inf, 0, 0, 1.0
+        if ext > 0:
+            at = sgn * v >= ext * (1.0 - RAIL_REL_TOL)
+            ids, code = np.unique(runs[at], return_inverse=True)
+            excess = np.bincount(code, weights=sgn * u[at] - ext) / np.bincount(code)
+            n, n_runs, p = int(at.sum()), len(ids), wilcoxon_greater(excess)
+            if p < alpha:
+                rail = sgn * ext
+        out.update({f"{side}_m_s": rail, f"candidate_{side}_m_s": sgn * ext if ext > 0 else None,
+                    f"n_{side}": n, f"runs_{side}": n_runs, f"p_{side}": p})
+    return out
+
+
+def inside_rails(x: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """Samples strictly inside the rails ``(lo, hi)`` [m/s], beyond :data:`RAIL_REL_TOL` of each."""
+    return (x < hi * (1.0 - RAIL_REL_TOL)) & (x > lo * (1.0 - RAIL_REL_TOL))
+
+
+def _heldout_ss(y: np.ndarray, runs: np.ndarray, folds, predict) -> np.ndarray:
+    """Held-out sums of squares per run (rows) and model (columns): ``predict(train_rows, test_rows)`` gives each
+    model's prediction of ``y[test_rows]`` fitted on ``train_rows`` (boolean masks)."""
+    ss = {}
+    for fold in folds:
+        te = np.isin(runs, fold)
+        preds = predict(~te, te)
+        for run in fold:
+            sel = runs[te] == run
+            ss[run] = [float(np.sum((y[te][sel] - pr[sel]) ** 2)) for pr in preds]
+    return np.array(list(ss.values()), float).reshape(-1, 2)
+
+
+def _gain_p(ss: np.ndarray) -> tuple[float, float]:
+    """Held-out gain ``1 - SS1/SS0`` and the runs' one-sided Wilcoxon p-value of model 1 over model 0."""
+    s0, s1 = ss[:, 0], ss[:, 1]
+    if not s0.sum() > 0:
+        return 0.0, 1.0
+    return float(1 - s1.sum() / s0.sum()), wilcoxon_greater((s0 - s1) / max(s0.mean(), 1e-300))
+
+
+def _fit(X: np.ndarray, y: np.ndarray, rows, filtered: bool) -> np.ndarray:
+    """``[a, b0, b1]``: the least-squares filter on ``rows`` of the design, or the identity."""
+    return np.linalg.lstsq(X[rows], y[rows], rcond=None)[0] if filtered else np.array([0.0, 1.0, 0.0])
+
+
+def clip_test(X: np.ndarray, y: np.ndarray, runs: np.ndarray, folds, sim, *, filter_kept: bool,
+              min_gain: float = 0.5, alpha: float = 0.01) -> dict:
+    """The chain ending in the speed channel's range against the chain without it, held out over runs.
+
+    ``X``, ``y``, ``runs``: the rows of :func:`speed_channel`'s design (``[v(k-1), u(k), u(k-1)]``, target
+    ``v(k)`` [m/s]); ``folds``: run ids per fold; ``sim = (u, rows, starts)``: the derivative at every sample
+    [m/s], the design rows' sample indices and the runs' first samples. The rails are :func:`speed_rails` of all
+    rows. The filter inside them is fitted on the rows whose ``v(k)`` and ``v(k-1)`` both lie inside
+    (:func:`inside_rails`): the least-squares filter when it beats the identity there by the filter's own rule
+    (one step ahead, held-out gain ``min_gain``, p < ``alpha``, ``|a| < 0.999``), else the identity. The chain
+    without a clip is the least-squares filter on all rows when ``filter_kept``, else the identity. Both chains are
+    compared as the loop uses them, run from the derivative alone (the filter's free run,
+    :func:`l1b2.predictor.effects.apply_output_filter`, never fed the recorded speed), on held-out runs with the
+    filters and the rails' values refitted on the training runs (the sides found on all rows keep their rail:
+    the training runs' extreme), and the clipped chain predicts ``clip(filter(u), lo, hi)``. The
+    clip is accepted when a rail exists and its held-out gain is at least ``min_gain`` with p < ``alpha``
+    (one-sided Wilcoxon over runs).
+
+    Returns the rails' record (:func:`speed_rails`, rails None when absent), ``share_at_rails`` (of the rows),
+    ``inner_filter`` (bool), ``inner_cv_gain``, ``inner_p_value``, ``filter_kept``, ``cv_gain``, ``p_value``,
+    ``accepted`` and
+    ``stage`` (the :class:`OutputFilter` with its rails fitted on all rows; None without a rail).
+    """
+    u_all, idx, starts = sim
+    u = X[:, 1]
+    rails = speed_rails(y, u, runs, alpha=alpha)
+    lo, hi = rails["lo_m_s"], rails["hi_m_s"]
+    rec = {**rails, "lo_m_s": _finite(lo), "hi_m_s": _finite(hi), "accepted": False,
+           "share_at_rails": (rails["n_lo"] + rails["n_hi"]) / max(len(y), 1)}
+    if not (np.isfinite(lo) or np.isfinite(hi)):
+        return {**rec, "stage": None}
+    ins = inside_rails(y, lo, hi) & inside_rails(X[:, 0], lo, hi)
+    Xi, yi, ri = X[ins], y[ins], runs[ins]
+    g_in, p_in = _gain_p(_heldout_ss(yi, ri, folds,
+                                     lambda tr, te: [Xi[te, 1], Xi[te] @ _fit(Xi, yi, tr, True)]))
+    coef = _fit(Xi, yi, np.ones(len(yi), bool), True) if len(yi) > 3 else np.zeros(3)
+    inner = bool(g_in >= min_gain and p_in < alpha and abs(coef[0]) < 0.999)
+    if not inner:
+        coef = _fit(X, y, None, False)
+
+    def run(c):
+        return apply_output_filter(dict(zip(("a", "b0", "b1"), c)), u_all, starts)[idx]
+
+    def predict(tr, te):
+        r_lo = float(np.min(y[tr])) if np.isfinite(lo) else -np.inf   # the rails found, refitted as coefficients are
+        r_hi = float(np.max(y[tr])) if np.isfinite(hi) else np.inf
+        fit = tr & inside_rails(y, r_lo, r_hi) & inside_rails(X[:, 0], r_lo, r_hi)
+        return [run(_fit(X, y, tr, filter_kept))[te] if filter_kept else u[te],
+                np.clip(run(_fit(X, y, fit, True))[te] if inner else u[te], r_lo, r_hi)]
+    gain, p = _gain_p(_heldout_ss(y, runs, folds, predict))
+    rec.update(accepted=bool(gain >= min_gain and p < alpha), cv_gain=gain, p_value=p, inner_filter=inner,
+               inner_cv_gain=g_in, inner_p_value=p_in, filter_kept=filter_kept)
+    return {**rec, "stage": OutputFilter(*(float(c) for c in coef), lo_m_s=lo, hi_m_s=hi)}
 
 
 #: a run whose recorded travel is within this share of the median travel is a full traverse (stop to stop)

@@ -217,6 +217,8 @@ class CloseLoop(EstimatorSettings):
             ext_params.update({f"speed_filter_{k}": {"value": v, "stderr": None, "ci95": None, "unit": "1"}
                                for k, v in (("a", it.output_filter.a), ("b0", it.output_filter.b0),
                                             ("b1", it.output_filter.b1))})
+            ext_params.update({f"speed_clip_{k}": {"value": v, "stderr": None, "ci95": None, "unit": "m/s"}
+                               for k, v in it.output_filter.params().items() if k.endswith("_m_s")})
         if it.speed_gain is not None:
             g = it.speed_gain.gain
             ses = g.stderr or (None,) * len(g.coef)
@@ -549,7 +551,7 @@ class CloseLoop(EstimatorSettings):
             "effects": records,
             "message": (f"missing effect{'s' if len(effects) > 1 else ''}: {labels}" if c
                         else "no significant missing effect")
-                       + ("; speed channel filtered (measurement chain)" if it.output_filter is not None else "")
+                       + _chain_note(it.output_filter)
                        + (f"; {_gain_reading(it.speed_gain.gain)}" if it.speed_gain is not None else "")
                        + withdrawn_note(it.checks)
                        + (f"; the speed column looks filtered (measurement chain, cross-validated gain "
@@ -638,12 +640,25 @@ def prefer(accepted: list[RefitCV], parsimony: float, run_level: runlevel.RunLev
     return min((t for t in accepted if t.gain >= parsimony * best_gain), key=key)
 
 
+def _chain_note(stage: chain.OutputFilter | None) -> str:
+    """The message's words on a kept speed-channel stage: filtered, clipped at its range, or both."""
+    if stage is None:
+        return ""
+    filtered = (stage.a, stage.b0, stage.b1) != (0.0, 1.0, 0.0)
+    what = " and ".join(w for w, on in (("filtered", filtered or not stage.clipped),
+                                         ("clipped at its range", stage.clipped)) if on)
+    return f"; speed channel {what} (measurement chain)"
+
+
 def _filter_record(rec: dict, params: dict | None) -> dict:
     return {"round": rec["round"], "effect": "speed_channel_filter", "label": "speed_channel_filter", "shape": "",
             "regressors": ["speed"], "generic": False, "structural": None,
-            "parameters": {n: (params or {}).get(n) for n in ("speed_filter_a", "speed_filter_b0", "speed_filter_b1")},
+            "parameters": {n: (params or {}).get(n) for n in ("speed_filter_a", "speed_filter_b0", "speed_filter_b1")
+                           + tuple(n for n in (params or {}) if n.startswith("speed_clip_"))},
             "description": "the speed column is a filtered/delayed/scaled derivative of the position "
-                           "(measurement chain): output filter on the predicted speed",
+                           "(measurement chain): output filter on the predicted speed"
+                           + ("; the column saturates at its range (rails): the prediction is clipped after the filter"
+                              if any(n.startswith("speed_clip_") for n in (params or {})) else ""),
             "cv_gain": rec["cv"]["cv_gain"], "cv_free_run_nrmse_before": None, "cv_free_run_nrmse_after": None,
             "folds_improved": None}
 

@@ -191,12 +191,31 @@ def chain_line(rec: Mapping) -> str:
         return ""
     if "rel_rms_mismatch" not in rec:
         return f"Measurement chain: not tested ({rec.get('reason', 'no record')})."
-    found = ("its filter was kept" if rec.get("accepted")
+    clip = rec.get("clip") or {}
+    found = (f"the chain kept is the range below, with {'a' if clip.get('inner_filter') else 'no'} filter inside it"
+             if rec.get("accepted") and clip.get("accepted") else "its filter was kept" if rec.get("accepted")
              else "a filter was found but not applied (it did not lower the cross-validated free-run error)"
              if rec.get("refused_by_harm_guard") else "no filter passed the test")
     return (f"Measurement chain: the speed column differs from the position's derivative by "
             f"{float(rec['rel_rms_mismatch']):.1%} of the speed's rms; the speed channel's test "
-            f"(held-out gain {float(rec.get('cv_gain', 0.0)):.1%}, p {float(rec.get('p_value', 1.0)):.2g}): {found}.")
+            f"(held-out gain {float(rec.get('cv_gain', 0.0)):.1%}, p {float(rec.get('p_value', 1.0)):.2g}): {found}."
+            + clip_sentence(clip, applied=bool(rec.get("accepted"))))
+
+
+def clip_sentence(clip: Mapping, applied: bool = True) -> str:
+    """The sentence on the speed channel's range test (``measurement_chain.clip``): the rails with their samples and
+    the clipped chain's held-out gain over the chain without a clip; empty when no rail was found. ``applied``:
+    whether the chain was kept (the harm guard may refuse a chain whose test passed)."""
+    rails = [f"{clip[f'{side}_m_s']:+.4g} m/s ({clip[f'n_{side}']} samples in {clip[f'runs_{side}']} runs)"
+             for side in ("lo", "hi") if clip.get(f"{side}_m_s") is not None]
+    if not rails:
+        return ""
+    verdict = ("not kept" if not clip.get("accepted") else "kept: the prediction is clipped after the filter"
+               if applied else "passed, but the chain was not applied (it did not lower the cross-validated "
+               "free-run error)")
+    return (f" The column saturates at {' and '.join(rails)}, {float(clip.get('share_at_rails', 0.0)):.1%} of the "
+            f"samples; the clip's held-out gain over the chain without it {float(clip.get('cv_gain', 0.0)):.1%} "
+            f"(p {float(clip.get('p_value', 1.0)):.2g}): {verdict}.")
 
 
 def channel_range_line(rec: Mapping) -> str:

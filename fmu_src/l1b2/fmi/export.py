@@ -312,6 +312,21 @@ CALIBRATED_LIBCOSIM_SSP = "L1B2Motor_calibrated_libcosim.ssp"   # see LIBCOSIM_S
 CALIBRATED_SSV_DIR = "calibrated_ssv"
 
 
+def _refuse_sensor_stages(model) -> None:
+    """ExportError when the model's speed output goes through a sensor stage ``Predictor.fmu`` has no code for: the
+    speed sensor's gain along the stroke, or the speed channel's range limit (the output filter's rails)."""
+    from ..predictor.effects import FILTER_RAILS
+    if model.speed_gain is not None:
+        raise ExportError("Predictor.fmu has no stage for the speed sensor's gain along the stroke (speed_gain): "
+                          "the model predicts the recorded speed only through ExtendedPredictor.free_run")
+    rails = {k: v for k, v in (model.output_filter or {}).items() if k in FILTER_RAILS}
+    if rails:
+        raise ExportError("Predictor.fmu has no stage for the speed channel's range limit (output_filter rails "
+                          + ", ".join(f"{k} = {v:.6g}" for k, v in rails.items()) + "): its speed output would "
+                          "leave the range the recorded column saturates at; the model predicts the recorded speed "
+                          "only through ExtendedPredictor.free_run")
+
+
 def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None) -> dict:
     """Write ``Predictor.fmu`` carrying a calibrated extended predictor, and a manifest of where each effect went.
 
@@ -342,7 +357,8 @@ def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None)
         (:func:`l1b2.predictor.effects.channels.export_problem`: the FMU reads a run-level signal of V0, the
         load, the direction, the temperature or a logged channel as the input's current value); if the model
         carries a speed sensor's gain along the stroke (``ExtendedPredictor.speed_gain``: Predictor.fmu has no such
-        output stage).
+        output stage) or a range limit of the speed channel (``output_filter`` rails ``lo_m_s``/``hi_m_s``: no
+        clip stage either).
 
     A logged channel an effect reads is an input of ``Predictor.fmu`` named after its column
     (:func:`l1b2.cosim.composite.channel_input`); the manifest lists it in ``inputs`` and ``channel_inputs``
@@ -356,9 +372,7 @@ def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None)
         raise ExportError(f"export_calibrated needs an l1b2.predictor.effects.ExtendedPredictor, "
                           f"got {type(model).__name__}")
     _predictor_dict(model.model)     # refuses what the FMU cannot carry (the contact law)
-    if model.speed_gain is not None:
-        raise ExportError("Predictor.fmu has no stage for the speed sensor's gain along the stroke (speed_gain): "
-                          "the model predicts the recorded speed only through ExtendedPredictor.free_run")
+    _refuse_sensor_stages(model)
     problems = [(e.label, export_problem(e.spec)) for e in model.effects]
     logged = [label for label, why in problems if why and why.startswith("no input")]
     if logged:

@@ -31,8 +31,8 @@ import sys
 from .base import (ALWAYS_SIGNALS, SIGNALS, SPEED_REF, V_REF, Effect, EffectSpecError, Hypothesis,  # noqa: F401
                    TrainingSummary, bspline_basis, derivative_step, effect_features, families, family, kinds, needs,
                    num, register, scaled, signal, time_derivative, unregister)
-from .model import (ExtendedPredictor, IdentifiedEffect, apply_output_filter, filter_start_gain,  # noqa: F401
-                    filter_step)
+from .model import (FILTER_RAILS, ExtendedPredictor, IdentifiedEffect, apply_output_filter,  # noqa: F401
+                    filter_dict, filter_start_gain, filter_step)
 from .sensor import STROKE_GAIN_ORDER, SpeedSensorGain, stroke_basis  # noqa: F401
 from .plugins import load_all as _load_plugins
 

@@ -93,7 +93,7 @@ class ExtendedPredictor:
     re-identified setup that the effects' forces are added to; ``effects``:
     in the order they were chosen; ``output_filter``: ``{"a", "b0", "b1"}``
     of the speed channel (``y(k) = a y(k-1) + b0 u(k) + b1 u(k-1)``, steady
-    start) or None; ``source``: where the data came from (free text fields).
+    start), with ``lo_m_s``/``hi_m_s`` when the channel's range clips it (:func:`apply_output_filter`), or None; ``source``: where the data came from (free text fields).
     """
 
     baseline: PredictorSetup
@@ -128,8 +128,7 @@ class ExtendedPredictor:
     def to_dict(self) -> dict:
         return {"baseline": self.baseline.to_dict(), "model": self.model.to_dict(),
                 "effects": [e.to_dict() for e in self.effects],
-                "output_filter": None if self.output_filter is None else {k: float(self.output_filter[k])
-                                                                          for k in ("a", "b0", "b1")},
+                "output_filter": None if self.output_filter is None else filter_dict(self.output_filter),
                 "source": dict(self.source),
                 **({} if self.speed_gain is None else {"speed_gain": dict(self.speed_gain)})}
 
@@ -141,7 +140,7 @@ class ExtendedPredictor:
             raise EffectSpecError(f"extended predictor: missing or bad {exc}") from None
         filt = d.get("output_filter")
         return cls(base, model, tuple(IdentifiedEffect.from_dict(e) for e in d.get("effects", [])),
-                   None if filt is None else {k: float(filt[k]) for k in ("a", "b0", "b1")}, dict(d.get("source", {})),
+                   None if filt is None else filter_dict(filt), dict(d.get("source", {})),
                    None if d.get("speed_gain") is None else SpeedSensorGain.from_dict(d["speed_gain"]).to_dict())
 
     def extra_force(self, x: Mapping) -> np.ndarray:
@@ -232,8 +231,20 @@ def _drive(setup: PredictorSetup, V0, frequency) -> np.ndarray:
     return effective_voltage(V0, frequency, setup.frequency)
 
 
+#: the optional range limits of the speed channel in an output filter's mapping [m/s]
+FILTER_RAILS = ("lo_m_s", "hi_m_s")
+
+
+def filter_dict(filt: Mapping) -> dict:
+    """An output filter's mapping as floats: ``a``, ``b0``, ``b1`` and the rails of :data:`FILTER_RAILS` it holds."""
+    return {k: float(filt[k]) for k in ("a", "b0", "b1") + FILTER_RAILS if k in filt}
+
+
 def apply_output_filter(filt: Mapping, u, run_starts=None) -> np.ndarray:
-    """``y(k) = a y(k-1) + b0 u(k) + b1 u(k-1)`` run by run, ``y(0) = (b0 + b1)/(1 - a) u(0)`` (steady start)."""
+    """``y(k) = a y(k-1) + b0 u(k) + b1 u(k-1)`` run by run, ``y(0) = (b0 + b1)/(1 - a) u(0)`` (steady start),
+    then held within the speed channel's range when ``filt`` has rails: ``clip(y, lo_m_s, hi_m_s)`` [m/s] (a missing
+    rail is no limit on its side; the filter's state is the unclipped ``y``, the range is the sensor's last stage)."""
+    rails = (float(filt.get("lo_m_s", -np.inf)), float(filt.get("hi_m_s", np.inf)))
     filt = {k: float(filt[k]) for k in ("a", "b0", "b1")}
     u = np.asarray(u, float)
     y = np.empty_like(u)
@@ -245,7 +256,7 @@ def apply_output_filter(filt: Mapping, u, run_starts=None) -> np.ndarray:
         y[i0] = gain0 * u[i0]
         for k in range(i0 + 1, i1):
             y[k] = filter_step(filt, y[k - 1], u[k], u[k - 1])
-    return y
+    return np.clip(y, *rails) if np.isfinite(rails).any() else y
 
 
 def filter_step(filt: Mapping, y_prev, u, u_prev):
