@@ -310,6 +310,20 @@ def test_acceptance_of_a_refit_that_improved_two_of_four_folds():
     assert tied.folds_improved == 3 and acc.accepts(tied, min_gain=acc.DEFAULT_MIN_CV_GAIN, min_drop=0.0)
 
 
+def test_the_uncorrected_fallback_judges_a_family_by_its_best_hypothesis_that_passes():
+    # reference: at the corrected level a family stands or falls with its best-gain hypothesis (the level is
+    # Bonferroni over families); only when no family passes, the fallback at the uncorrected level takes the one
+    # best family, judged by its best-gain hypothesis among those that pass
+    scores = [_score("ch", 0.019, gain=0.228), _score("ch", 0.007, gain=0.222), _score("b", 0.03, gain=0.21),
+              _score("c", 0.004, gain=0.1)]
+    assert sel.shortlist(scores, level=0.01, min_gain=0.05, size=2) == [scores[3]]   # ch's best fails: out
+    assert sel.shortlist(scores, level=0.01, min_gain=0.05, size=2, within_family=True) == [scores[1], scores[3]]
+    assert sel.screened(scores, level=0.001, min_gain=0.05, size=2) == ([], 0.001)   # no fallback set
+    assert sel.screened(scores, level=0.001, min_gain=0.05, size=2, fallback_level=0.01) == ([scores[1]], 0.01)
+    assert sel.screened(scores, level=0.005, min_gain=0.05, size=2, fallback_level=0.01) == ([scores[3]], 0.005)
+    assert sel.screened(scores[:1], level=0.001, min_gain=0.05, size=2, fallback_level=0.01) == ([], 0.01)
+
+
 def test_significance_is_bonferroni_over_the_families_tested():
     scores = [_score("a", 0.001), _score("a", 0.2), _score("b", 0.004), _score("c", 0.5), _score("d", 0.02)]
     level = sel.significance_level(scores, alpha=0.02)

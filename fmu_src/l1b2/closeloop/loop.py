@@ -34,7 +34,8 @@ Procedure (TEST is never used for fitting or choosing):
       run-level Wilcoxon p-value, AIC); the best of each family passing
       ``min_gain``, ``alpha`` / number of families and an AIC improvement,
       the best ``shortlist`` of them (when none passes and ``screen_alpha``
-      is set: the best one at that uncorrected level), and for a shortlisted generic term the named family that
+      is set: the best family at that uncorrected level, judged by its best hypothesis that passes,
+      :func:`~l1b2.closeloop.selection.screened`), and for a shortlisted generic term the named family that
       explains most of its force (:func:`~l1b2.closeloop.selection.named_alternatives`), and for a shortlisted
       family the best of each of its other shapes that passes the same screen
       (:func:`~l1b2.closeloop.selection.shape_alternatives`: the refit chooses a channel's shape);
@@ -101,7 +102,7 @@ from .guard import checked_fit
 from .intervals import added_parameters, identification, train_levels
 from .result import CloseLoopResult, ResidualAnalysis
 from .selection import (Score, best_per_family, design, named_alternatives, nuisance_forces, score_candidates,
-                        shape_alternatives, shortlist, significance_level, simplest_within_one_se)
+                        screened, shape_alternatives, significance_level, simplest_within_one_se)
 
 
 def _quiet(msg: str) -> None:
@@ -303,13 +304,8 @@ class CloseLoop(EstimatorSettings):
             scores = score_candidates(cands, r, dtr, mask, cur.params_, m_s, v_pred=v_cur, folds=screen_runs,
                                       time_folds=screen_blocks)
             level = significance_level(scores, self.alpha)
-            short = shortlist(scores, level=level, min_gain=self.min_gain, size=self.shortlist)
-            screen = level
-            if not short and self.screen_alpha:
-                # nothing passes the corrected screen: the best candidate at the uncorrected level is still
-                # cross-validated (the refit's acceptance rule, not this screen, decides what is added)
-                short = shortlist(scores, level=self.screen_alpha, min_gain=self.min_gain, size=1)
-                screen = self.screen_alpha
+            short, screen = screened(scores, level=level, min_gain=self.min_gain, size=self.shortlist,
+                                     fallback_level=self.screen_alpha)
             rl = None
             if self.run_level and ctx is not None:
                 say(f"round {n_rnd}: run-level deviations and the signals that explain them")

@@ -323,10 +323,30 @@ def design(candidate: CandidateForce, r_drive, df, mask, params, m_s, *, v_pred)
     return r_drive[idx], A, S, df[dataio.RUN].to_numpy()[idx]
 
 
-def shortlist(scores: list[Score], *, level: float, min_gain: float, size: int) -> list[Score]:
-    """The best candidate of each family passing the linearised screen (gain, run-level p, AIC), best ``size``."""
-    ok = [s for s in best_per_family(scores) if s.cv_gain >= min_gain and s.p_value < level and s.delta_aic < 0]
+def shortlist(scores: list[Score], *, level: float, min_gain: float, size: int,
+              within_family: bool = False) -> list[Score]:
+    """The best candidate of each family passing the linearised screen (gain, run-level p, AIC), best ``size``.
+
+    By default a family is judged by its best-gain candidate (the screen's level is corrected over families);
+    ``within_family``: by the best-gain candidate of those that pass (for an uncorrected level)."""
+    def passes(s):
+        return s.cv_gain >= min_gain and s.p_value < level and s.delta_aic < 0
+    ok = best_per_family([s for s in scores if passes(s)]) if within_family else [
+        s for s in best_per_family(scores) if passes(s)]
     return ok[:size]
+
+
+def screened(scores: list[Score], *, level: float, min_gain: float, size: int,
+             fallback_level: float | None = None) -> tuple[list[Score], float]:
+    """``(shortlist, level used)``: the best ``size`` families passing the screen at the corrected ``level``
+    (:func:`shortlist`); when none passes and ``fallback_level`` is set, the one best family at that uncorrected
+    level, each family judged by its best-gain hypothesis among those that pass (``within_family``), since the
+    uncorrected level is not a family-wise rule. The cross-validated refit, not this screen, decides what is added.
+    """
+    short = shortlist(scores, level=level, min_gain=min_gain, size=size)
+    if short or not fallback_level:
+        return short, level
+    return shortlist(scores, level=fallback_level, min_gain=min_gain, size=1, within_family=True), fallback_level
 
 
 def named_alternatives(short: list[Score], scores: list[Score], share, *, min_gain: float,
