@@ -19,7 +19,10 @@ followed by a warm refit of theta and a line search) refine it, and the final
 model is identified at the optimum with the identifier's full search.
 Standard errors of ``f_b0`` and ``zeta_b``: q's block of the joint Fisher
 covariance, ``(J_q^T P J_q)^-1`` (the Schur complement), inflated by the
-fit's median AR(1) factor like theta's. The former estimation (a Nelder-Mead
+fit's median AR(1) factor like theta's. Beside them, ``f_b0``'s interval
+clustered by drive-frequency level (:func:`clustered_interval`: CR2 with
+Bell-McCaffrey degrees of freedom, on log f_b0; not available with fewer than
+:data:`CLUSTERED_MIN_LEVELS` levels or :data:`CLUSTERED_MIN_DOF`). The former estimation (a Nelder-Mead
 search of the profile likelihood, standard errors from its curvature) is
 kept as :func:`fit_frequency_response_profile`, the benchmark's reference
 (``bench/bench_frequency.py``; measured figures in
@@ -408,7 +411,8 @@ def fit_frequency_response(est, data, slider_mass_kg=None, mask=None, contact=Fa
     ``zeta_b``: q's block of the joint Fisher covariance (the Schur complement), inflated by the fit's
     median AR(1) factor like theta's. q stays within :data:`Q_LO`/:data:`Q_HI` (zeta_b in
     :data:`ZETA_B_RANGE`); a parameter that ends at its bound is named in the record's ``at_bound`` (and the
-    fit report) and has no standard error. Returns the fitted identifier (``est`` itself) whose result
+    fit report) and has no standard error. The record's ``clustered``: :func:`clustered_interval` of ``f_b0``
+    beside the model-based standard error. Returns the fitted identifier (``est`` itself) whose result
     carries the estimated response and the record ``status="estimated"``.
 
     ``contact=True`` (the setting ``frequency="contact"``, pure-slip family only) adds the contact law of
@@ -493,8 +497,8 @@ def clustered_record(value_Hz: float, levels: int, stderr_Hz: float | None = Non
     G >= :data:`CLUSTERED_MIN_LEVELS`, nu >= :data:`CLUSTERED_MIN_DOF` and finite positive se and estimate:
     then ``{"available": True, "t", "stderr_log", "ci95_Hz"}`` with ``t = t_{0.975, nu}``,
     ``stderr_log = se / f_b0`` and ``ci95_Hz`` of :func:`log_interval`. Otherwise ``"available": False`` and
-    ``"reason"`` says why. Every record has ``kind``, ``parameter``, ``levels``, ``dof`` and ``stderr_Hz``
-    (None when not computed); all values are JSON-safe.
+    ``"reason"`` says why (also when the ends overflow the floats). Every record has ``kind``, ``parameter``,
+    ``levels``, ``dof`` and ``stderr_Hz`` (None when not computed); all values are JSON-safe.
     """
     fin = lambda x: None if x is None or not np.isfinite(x) else float(x)   # noqa: E731
     rec: dict[str, Any] = {"kind": CLUSTERED_KIND, "parameter": "f_b0_Hz", "levels": int(levels),
@@ -512,7 +516,11 @@ def clustered_record(value_Hz: float, levels: int, stderr_Hz: float | None = Non
     if reason is not None:
         return {**rec, "available": False, "reason": reason}
     t = float(stats.t.ppf(0.975, rec["dof"]))
-    lo, hi = log_interval(value_Hz, rec["stderr_Hz"], t)
+    with np.errstate(over="ignore"):
+        lo, hi = log_interval(value_Hz, rec["stderr_Hz"], t)
+    if not (np.isfinite(hi) and lo > 0):
+        return {**rec, "available": False, "t": t, "reason": "the interval's ends overflow: t se / f_b0 = "
+                f"{t * rec['stderr_Hz'] / value_Hz:.3g}, not identified"}
     return {**rec, "available": True, "t": t, "stderr_log": rec["stderr_Hz"] / float(value_Hz),
             "ci95_Hz": [float(lo), float(hi)]}
 
