@@ -1,6 +1,6 @@
 """The identification's clustered interval of f_b0 on a rig plan with few drive-frequency levels.
 
-Usage: python bench/bench_frequency_levels.py LEVELS SEED   (LEVELS: 2, 3 or 5)
+Usage: python bench/bench_frequency_levels.py LEVELS SEED   (LEVELS: 2, 3, 4 or 5)
 
 The realistic world, the drive-frequency study's fit (``l1b2.study.recovery``: the B2 resonance drawn per seed,
 no injection, +-50 Hz per-run jitter), but the rig's frequencies are ``PLANS[LEVELS]``. Prints one JSON line:
@@ -19,8 +19,8 @@ import numpy as np
 from l1b2.study.recovery import TARGETS, FitSettings, fit_family
 from l1b2.study.world import World, world_data
 
-#: the rig's drive frequencies [Hz] by number of levels (the study's five, and two and three over the same span)
-PLANS = {2: (48000.0, 49000.0), 3: (48000.0, 48500.0, 49000.0),
+#: the rig's drive frequencies [Hz] by number of levels (the study's five, and two to four over the same span)
+PLANS = {2: (48000.0, 49000.0), 3: (48000.0, 48500.0, 49000.0), 4: (48000.0, 48333.3, 48666.7, 49000.0),
          5: (48000.0, 48250.0, 48500.0, 48750.0, 49000.0)}
 
 
@@ -47,4 +47,5 @@ def main(levels: int, seed: int) -> dict:
 
 
 if __name__ == "__main__":
-    print(json.dumps(main(int(sys.argv[1]), int(sys.argv[2])), default=lambda x: float(x) if np.isscalar(x) else str(x)))
+    row = main(int(sys.argv[1]), int(sys.argv[2]))
+    print(json.dumps(row, default=lambda x: float(x) if np.isscalar(x) else str(x)))
