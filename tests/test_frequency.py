@@ -7,6 +7,7 @@ import pandas as pd
 import pytest
 from l1b2.cosim.composite import PredictorBlock
 from l1b2.ident.estimator import PredictorIdentifier
+from l1b2.ident.frequency import frequency_report_lines
 from l1b2.predictor.frequency import FrequencyResponse, b2_magnitude, effective_voltage, frequency_gain
 from l1b2.predictor.model import example_params, steady_state
 from l1b2.predictor.setup import PredictorSetup
@@ -72,13 +73,18 @@ def test_identification_recovers_a_known_frequency_response():
     assert abs(got["f_b0_Hz"] - 47800.0) <= max(4 * se["f_b0_Hz"], 1.0) and abs(got["f_b0_Hz"] / 47800 - 1) < 0.01
     assert abs(got["zeta_b"] - 0.0125) <= max(4 * se["zeta_b"], 1e-5) and abs(got["zeta_b"] / 0.0125 - 1) < 0.1
     assert "ESTIMATED" in est.fit_report() and "f_b0" in est.fit_report()
+    c = rec["clustered"]    # three levels without jitter: the record and its report line (decision 0098)
+    assert c["levels"] == 3 and c["parameter"] == "f_b0_Hz" and ("ci95_Hz" in c) == c["available"]
+    assert "f_b0 clustered by drive-frequency level (3 levels, CR2)" in est.fit_report()
     back = PredictorIdentifier.from_dict(est.to_dict())
     assert back.result_.frequency_response == est.result_.frequency_response
+    assert back.result_.frequency["clustered"] == c
     assert np.allclose(back.predict_free_run(df), est.predict_free_run(df), rtol=1e-9, atol=1e-12)
     one = df[df["frequency_Hz"] == 48500.0].reset_index(drop=True)
     e1 = PredictorIdentifier(order=3, fixed="recommended", n_starts=2, seed=0).fit(one, slider_mass_kg=0.1)
     assert e1.result_.frequency["status"] == "fixed" and e1.result_.frequency["response"] is None
     assert "FIXED at gain 1" in e1.fit_report()
+    assert "clustered" not in e1.result_.frequency and "clustered" not in e1.fit_report()
 
 
 def test_predictor_block_reads_the_frequency():
@@ -311,3 +317,81 @@ def test_response_cluster_influence_is_the_joint_sandwich_written_out():
         lam, V = np.linalg.eigh(np.eye(sel.sum()) - J[sel] @ A @ J[sel].T)
         rows.append((A @ J[sel].T @ ((V / np.sqrt(np.clip(lam, 1e-12, None))) @ V.T @ r[sel]))[-2:])
     np.testing.assert_allclose(lin.cluster_influence(levels, cr2=True), np.array(rows) * unit, rtol=1e-6)
+
+
+def test_identify_reports_the_cr2_interval_of_f_b0_clustered_by_frequency_level():
+    # reference: on the exact world with three frequency levels (two frequencies 40 Hz apart in each, below the
+    # 48.5 Hz level gap), the record's clustered interval is the CR2 rows grouped by level, computed here with
+    # cluster_influence / bell_mccaffrey_dof and frequency_levels: se = sqrt(sum_g u_g^2), nu the dof,
+    # t = t_{0.975, nu} (scipy), and the ends f exp(-+ t se / f) written out with math
+    from l1b2.ident.clusters import frequency_levels
+    from l1b2.ident.frequency import ResponseLinearisation, clustered_interval, response_of
+    from scipy import stats
+    truth = FrequencyResponse(48500.0, 47800.0, 0.0125)
+    df = _exact_world(truth, (48000.0, 48040.0, 48500.0, 48540.0, 49000.0, 49040.0), noise=1e-3)
+    q = np.array([47800.0 / 48500.0, math.log(0.0125)])
+    est = PredictorIdentifier(order=3, fixed="recommended", n_starts=1, seed=0,
+                              frequency=response_of(48500.0, q)).fit(df, slider_mass_kg=0.1)
+    lin = ResponseLinearisation(est.result_, df, None, 48500.0, q)
+    levels = np.array(frequency_levels(df, est.result_.runs))
+    assert sorted(set(levels)) == [0, 1, 2]
+    u = lin.cluster_influence(levels, cr2=True)[:, 0]
+    se, nu = math.sqrt(float(np.sum(u ** 2))), lin.bell_mccaffrey_dof(levels, 0)
+    rec = clustered_interval(lin, df, [])
+    assert rec["available"] and rec["parameter"] == "f_b0_Hz" and rec["levels"] == 3
+    assert rec["stderr_Hz"] == pytest.approx(se, rel=1e-9) and rec["dof"] == pytest.approx(nu, rel=1e-9)
+    t = float(stats.t.ppf(0.975, nu))
+    assert rec["t"] == pytest.approx(t, rel=1e-9) and rec["stderr_log"] == pytest.approx(se / 47800.0, rel=1e-9)
+    assert rec["ci95_Hz"] == pytest.approx([47800.0 * math.exp(-t * se / 47800.0),
+                                            47800.0 * math.exp(t * se / 47800.0)], rel=1e-12)
+    assert not clustered_interval(lin, df, ["f_b0_Hz lower bound 0.8 f_ref"])["available"]
+    line = frequency_report_lines({"status": "estimated", "reason": "r", "response": truth.to_dict(),
+                                   "stderr": {"f_b0_Hz": 1.0, "zeta_b": 1e-4}, "clustered": rec})[-1]
+    assert line == (f"    drive frequency: f_b0 clustered by drive-frequency level (3 levels, CR2): Bell-McCaffrey "
+                    f"dof {nu:.2f}, t {t:.2f}, se {se:.1f} Hz, 95 % [{rec['ci95_Hz'][0]:.1f}, "
+                    f"{rec['ci95_Hz'][1]:.1f}] Hz (on log f_b0)")
+    two = _exact_world(truth, (48000.0, 48040.0, 49000.0, 49040.0), noise=1e-3)
+    est2 = PredictorIdentifier(order=3, fixed="recommended", n_starts=1, seed=0,
+                               frequency=response_of(48500.0, q)).fit(two, slider_mass_kg=0.1)
+    rec2 = clustered_interval(ResponseLinearisation(est2.result_, two, None, 48500.0, q), two, [])
+    assert rec2["levels"] == 2 and not rec2["available"] and "2 drive-frequency levels" in rec2["reason"]
+    assert "ci95_Hz" not in rec2 and rec2["dof"] is not None
+
+
+def test_clustered_record_few_levels_rule_and_log_interval():
+    # reference: the rule of decision 0098: a number only with G >= 3 levels and Bell-McCaffrey dof >= 1 (and a
+    # finite positive se); the interval exp(log f +- t se / f), written out, stays positive for se above f
+    from l1b2.ident.frequency import clustered_record, log_interval
+    from scipy import stats
+    f = 48000.0
+    ok = clustered_record(f, 5, 600.0, 2.0)
+    t2 = 4.302652729911275                       # t_{0.975, 2}
+    assert ok["available"] and ok["t"] == pytest.approx(t2, rel=1e-9)
+    assert ok["ci95_Hz"] == pytest.approx([f * math.exp(-t2 * 600.0 / f), f * math.exp(t2 * 600.0 / f)], rel=1e-9)
+    edge = clustered_record(f, 3, 600.0, 1.0)
+    assert edge["available"] and edge["t"] == pytest.approx(stats.t.ppf(0.975, 1.0)) and edge["t"] > 12.7
+    for levels, se, dof, why in ((2, 600.0, 3.0, "2 drive-frequency levels"),
+                                 (1, None, None, "1 drive-frequency level"), (5, 600.0, 0.99, "dof 0.99 below 1"), (4, float("nan"), 2.0, "no finite"),
+                                 (4, 0.0, 2.0, "no finite"), (3, 1e8, 1.0, "overflow")):
+        rec = clustered_record(f, levels, se, dof)
+        assert not rec["available"] and why in rec["reason"] and "ci95_Hz" not in rec, (levels, dof, rec)
+    assert clustered_record(f, 5, 600.0, 2.0, reason="at its bound")["reason"] == "at its bound"
+    lo, hi = log_interval(np.array([f, f]), np.array([100.0, 2 * f]), 3.0)
+    assert lo[0] == pytest.approx(f * math.exp(-300.0 / f)) and hi[1] == pytest.approx(f * math.exp(6.0))
+    assert np.all(lo > 0) and lo[1] < f - 3 * 100.0 < hi[0]
+
+
+def test_frequency_report_lines_without_a_clustered_record_are_unchanged():
+    # reference: the report's lines of a fixed response (one frequency) and of a record without "clustered"
+    # (an identification.json written before the clustered interval), written out as they were
+    r = FrequencyResponse(48500.0, 47800.0, 0.0125).to_dict()
+    fixed = {"status": "fixed", "reason": "TRAIN's runs at one drive frequency", "response": None}
+    assert frequency_report_lines(fixed) == ["    drive frequency: response FIXED at gain 1 (TRAIN's runs at one "
+                                             "drive frequency)"]
+    old = {"status": "estimated", "reason": "r", "response": r, "stderr": {"f_b0_Hz": 12.34, "zeta_b": 0.00042}}
+    assert frequency_report_lines(old) == ["    drive frequency: response ESTIMATED (r): B' x g(f), B2 f_b0 = "
+                                           "47800.0 +/- 12.3 Hz, zeta_b = 0.01250 +/- 0.00042, "
+                                           "g(f_ref = 48500.0 Hz) = 1"]
+    gone = {**old, "clustered": {"levels": 2, "available": False, "reason": "why"}}
+    assert frequency_report_lines(gone)[1] == ("    drive frequency: f_b0 clustered by drive-frequency level "
+                                               "(2 levels, CR2): NOT AVAILABLE (why)")

@@ -19,7 +19,10 @@ followed by a warm refit of theta and a line search) refine it, and the final
 model is identified at the optimum with the identifier's full search.
 Standard errors of ``f_b0`` and ``zeta_b``: q's block of the joint Fisher
 covariance, ``(J_q^T P J_q)^-1`` (the Schur complement), inflated by the
-fit's median AR(1) factor like theta's. The former estimation (a Nelder-Mead
+fit's median AR(1) factor like theta's. Beside them, ``f_b0``'s interval
+clustered by drive-frequency level (:func:`clustered_interval`: CR2 with
+Bell-McCaffrey degrees of freedom, on log f_b0; not available with fewer than
+:data:`CLUSTERED_MIN_LEVELS` levels or :data:`CLUSTERED_MIN_DOF`). The former estimation (a Nelder-Mead
 search of the profile likelihood, standard errors from its curvature) is
 kept as :func:`fit_frequency_response_profile`, the benchmark's reference
 (``bench/bench_frequency.py``; measured figures in
@@ -42,19 +45,21 @@ from dataclasses import replace
 from typing import Any, Mapping
 
 import numpy as np
-from scipy import optimize
+from scipy import optimize, stats
 
 from ..data.coverage import FREQUENCY_REL_SPREAD, frequency_varies, run_frequencies
 from ..data.measurements import Measurements
 from ..errors import IdentificationError
 from ..predictor.frequency import FrequencyResponse
+from .clusters import frequency_levels
 from .problem import SampleData
 from .slipproblem import make_problem
 from .uncertainty import bell_mccaffrey_dof, profiled_influence
 
 __all__ = ["FREQUENCY_SETTINGS", "response_setting", "reference_frequency", "frequency_record",
            "frequency_report_lines", "fit_frequency_response", "GRID_OFFSETS", "GRID_ZETAS", "ZETA_B_RANGE",
-           "bounds_hit"]
+           "bounds_hit", "clustered_interval", "clustered_record", "log_interval", "CLUSTERED_MIN_LEVELS",
+           "CLUSTERED_MIN_DOF"]
 
 #: "contact": as "auto", and the pure-slip family estimates the contact law as well (decision 0038)
 FREQUENCY_SETTINGS = ("auto", "off", "contact")
@@ -125,7 +130,18 @@ def frequency_report_lines(rec: Mapping | None) -> list[str]:
         lines.append("    drive frequency: contact law tried, NOT kept (no higher log-likelihood than the B2 response)")
     if rec.get("at_bound"):
         lines.append(f"    drive frequency: AT A BOUND, not an estimate: {'; '.join(rec['at_bound'])}")
+    if rec.get("clustered"):
+        lines.append(_clustered_line(rec["clustered"]))
     return lines
+
+
+def _clustered_line(c: Mapping) -> str:
+    """The fit report's line on :func:`clustered_record` (beside the model-based ``f_b0 +/- se``)."""
+    head = f"    drive frequency: f_b0 clustered by drive-frequency level ({c['levels']} levels, CR2): "
+    if not c.get("available"):
+        return head + f"NOT AVAILABLE ({c['reason']})"
+    return head + (f"Bell-McCaffrey dof {c['dof']:.2f}, t {c['t']:.2f}, se {c['stderr_Hz']:.1f} Hz, "
+                   f"95 % [{c['ci95_Hz'][0]:.1f}, {c['ci95_Hz'][1]:.1f}] Hz (on log f_b0)")
 
 
 def _clone(est, **changes):
@@ -280,7 +296,7 @@ class ResponseLinearisation:
 
     def step_and_information(self):
         """``(Gauss-Newton step in q, J_q^T P J_q)`` at q_fit."""
-        PJ = self.project(self.jacobian_q())
+        PJ = self.project(self._jacobian_q())
         S = PJ.T @ PJ
         g = PJ.T @ self.project(self.r_fit)
         try:
@@ -395,7 +411,8 @@ def fit_frequency_response(est, data, slider_mass_kg=None, mask=None, contact=Fa
     ``zeta_b``: q's block of the joint Fisher covariance (the Schur complement), inflated by the fit's
     median AR(1) factor like theta's. q stays within :data:`Q_LO`/:data:`Q_HI` (zeta_b in
     :data:`ZETA_B_RANGE`); a parameter that ends at its bound is named in the record's ``at_bound`` (and the
-    fit report) and has no standard error. Returns the fitted identifier (``est`` itself) whose result
+    fit report) and has no standard error. The record's ``clustered``: :func:`clustered_interval` of ``f_b0``
+    beside the model-based standard error. Returns the fitted identifier (``est`` itself) whose result
     carries the estimated response and the record ``status="estimated"``.
 
     ``contact=True`` (the setting ``frequency="contact"``, pure-slip family only) adds the contact law of
@@ -419,13 +436,15 @@ def fit_frequency_response(est, data, slider_mass_kg=None, mask=None, contact=Fa
     resp = response_of(f_ref, np.asarray(best["x"], float) / np.where(np.arange(len(best["x"])) % 2 == 0, f_ref, 1.0))
     final = _clone(est, frequency=resp, init=best["params"]).fit(data, slider_mass_kg=m_s, mask=mask)
     q_hat = coordinates(resp)
-    stderr = response_stderr(ResponseLinearisation(final.result_, data, mask, f_ref, q_hat), resp)
+    lin = ResponseLinearisation(final.result_, data, mask, f_ref, q_hat)
+    stderr = response_stderr(lin, resp)
     at_bound = bounds_hit(q_hat)
     if at_bound and stderr is not None:   # a value held by its bound has no standard error
         stderr = {k: v for k, v in stderr.items() if not any(h.startswith(k) for h in at_bound)} or None
     rec = frequency_record(
         "estimated", f"TRAIN's runs spread over more than {FREQUENCY_REL_SPREAD:.1%} of their frequency: joint "
         "maximum likelihood", resp, data, stderr=stderr, at_bound=at_bound,
+        clustered=clustered_interval(lin, data, at_bound),
         joint={"grid_fits": n_grid, "gauss_newton_fits": len(best["seen"]) - n_grid,
                "loglik": float(final.loglik_),
                "stderr_from": "Schur complement of the joint Fisher information" if stderr else "singular"},
@@ -449,6 +468,82 @@ def response_stderr(lin: "ResponseLinearisation", resp: FrequencyResponse) -> di
         out.update(f_l0_Hz=float(resp.f_ref_Hz * math.sqrt(cov[2, 2])),
                    contact_V=float(resp.contact_V * math.sqrt(cov[3, 3])))
     return out
+
+
+#: the fewest drive-frequency levels, and the fewest Bell-McCaffrey degrees of freedom, for which
+#: :func:`clustered_record` states the clustered interval of ``f_b0`` as a number
+CLUSTERED_MIN_LEVELS = 3
+CLUSTERED_MIN_DOF = 1.0
+#: what :func:`clustered_record`'s interval is
+CLUSTERED_KIND = ("CR2 clustered by drive-frequency level, t on Bell-McCaffrey dof, delta method on log f_b0: "
+                  "exp(log f_b0 +- t se / f_b0)")
+
+
+def log_interval(value, se, t):
+    """The interval ``exp(log value +- t se / value)``: the delta method's ``value +- t se`` on ``log value``
+    (``se / value`` the standard error of ``log value``), positive for a positive ``value``; vectorised."""
+    value, se, t = np.asarray(value, float), np.asarray(se, float), np.asarray(t, float)
+    half = t * se / value
+    return value * np.exp(-half), value * np.exp(half)
+
+
+def clustered_record(value_Hz: float, levels: int, stderr_Hz: float | None = None, dof: float | None = None,
+                     reason: str | None = None) -> dict:
+    """The record of ``f_b0``'s interval clustered by drive-frequency level (:data:`CLUSTERED_KIND`).
+
+    ``value_Hz``: the estimate; ``levels``: the number of drive-frequency levels G; ``stderr_Hz``: the CR2
+    standard error of ``f_b0_Hz``; ``dof``: its Bell-McCaffrey degrees of freedom nu; ``reason``: why no
+    interval exists whatever G and nu are (e.g. f_b0 at its bound). The interval is a number only with
+    G >= :data:`CLUSTERED_MIN_LEVELS`, nu >= :data:`CLUSTERED_MIN_DOF` and finite positive se and estimate:
+    then ``{"available": True, "t", "stderr_log", "ci95_Hz"}`` with ``t = t_{0.975, nu}``,
+    ``stderr_log = se / f_b0`` and ``ci95_Hz`` of :func:`log_interval`. Otherwise ``"available": False`` and
+    ``"reason"`` says why (also when the ends overflow the floats). Every record has ``kind``, ``parameter``,
+    ``levels``, ``dof`` and ``stderr_Hz`` (None when not computed); all values are JSON-safe.
+    """
+    fin = lambda x: None if x is None or not np.isfinite(x) else float(x)   # noqa: E731
+    rec: dict[str, Any] = {"kind": CLUSTERED_KIND, "parameter": "f_b0_Hz", "levels": int(levels),
+                           "dof": fin(dof), "stderr_Hz": fin(stderr_Hz)}
+    if reason is None and levels < CLUSTERED_MIN_LEVELS:
+        reason = (f"{levels} drive-frequency level{'s' if levels != 1 else ''}: at least {CLUSTERED_MIN_LEVELS} are "
+                  "needed; the gain's scale and resonance take the contrast between two levels whole, so no "
+                  "shared error of a level is left to measure")
+    if reason is None and not (rec["dof"] is not None and rec["stderr_Hz"] is not None and rec["stderr_Hz"] > 0
+                               and np.isfinite(value_Hz) and value_Hz > 0):
+        reason = "no finite clustered standard error"
+    if reason is None and rec["dof"] < CLUSTERED_MIN_DOF:
+        reason = (f"Bell-McCaffrey dof {rec['dof']:.2f} below {CLUSTERED_MIN_DOF:g}: the levels do not "
+                  "estimate the variance, the width would be the t quantile's, not the data's")
+    if reason is not None:
+        return {**rec, "available": False, "reason": reason}
+    t = float(stats.t.ppf(0.975, rec["dof"]))
+    with np.errstate(over="ignore"):
+        lo, hi = log_interval(value_Hz, rec["stderr_Hz"], t)
+    if not (np.isfinite(hi) and lo > 0):
+        return {**rec, "available": False, "t": t, "reason": "the interval's ends overflow: t se / f_b0 = "
+                f"{t * rec['stderr_Hz'] / value_Hz:.3g}, not identified"}
+    return {**rec, "available": True, "t": t, "stderr_log": rec["stderr_Hz"] / float(value_Hz),
+            "ci95_Hz": [float(lo), float(hi)]}
+
+
+def clustered_interval(lin: "ResponseLinearisation", data, at_bound=()) -> dict:
+    """:func:`clustered_record` of the fit linearised in ``lin`` on ``data`` (its frame or Measurements).
+
+    The clusters: each run's drive-frequency level (:func:`l1b2.ident.clusters.frequency_levels` of
+    ``lin.result.runs``); the standard error ``sqrt(sum_g u_g^2)`` of the CR2 rows
+    (:meth:`ResponseLinearisation.cluster_influence` with ``cr2=True``, column ``f_b0_Hz``) and its dof
+    (:meth:`ResponseLinearisation.bell_mccaffrey_dof`), computed with two levels or more. ``at_bound``:
+    :func:`bounds_hit`'s list; ``f_b0`` at a bound has no interval.
+    """
+    df = data.df if isinstance(data, Measurements) else data
+    f_b0 = float(lin.q_fit[0] * lin.f_ref)
+    codes = np.asarray(frequency_levels(df, lin.result.runs), int)
+    G = int(np.unique(codes).size)
+    if any(h.startswith("f_b0_Hz") for h in at_bound):
+        return clustered_record(f_b0, G, reason="f_b0 at its bound: no interval")
+    if G < 2:
+        return clustered_record(f_b0, G)
+    u = lin.cluster_influence(codes, cr2=True)[:, 0]
+    return clustered_record(f_b0, G, float(np.sqrt(u @ u)), lin.bell_mccaffrey_dof(codes, 0))
 
 
 def _prepared(data, slider_mass_kg, mask) -> tuple:
