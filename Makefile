@@ -9,8 +9,9 @@ export MPLBACKEND ?= Agg
 # pytest-xdist workers for `make test` (the CI machine has 2 cores); modules stay whole on one worker and are
 # handed out in collection order, the costliest modules first (tests/conftest.py COSTLY_FIRST, decision 0030).
 # `make test` runs the not-slow tests and the slow ones marked ci_slow: the realistic world's close-loop cases (single effects,
-# pairs, ten control seeds, the CLI report, a logged channel; decisions 0054, 0074, 0080 and 0095), in four
-# modules that the two workers share out; the other slow tests run with `make test-slow`
+# ten control seeds, the CLI report, a logged channel; decisions 0054, 0074, 0080, 0095 and 0100), in three
+# modules that the two workers share out; the other slow tests (the realistic pairs and run-level cases among
+# them) run with `make test-slow`
 TEST_WORKERS ?= 2
 
 .PHONY: docs venv test test-slow test-all check-install fmus demo dist bench clean

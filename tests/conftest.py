@@ -45,7 +45,6 @@ print({_RESULT_TAG!r} + json.dumps(result), flush=True)
 #: about the same time. (xdist's own order, by number of tests, started the few long close-loop modules last.)
 COSTLY_FIRST = (
     "test_closeloop_realistic.py",  # two realistic-world control close loops, thirteen injected cases (ci_slow)
-    "test_closeloop_realistic_pairs.py",  # five realistic pairs of effects (ci_slow)
     "test_closeloop_realistic_controls.py",  # ten realistic control seeds, the CLI's report of one case (ci_slow)
     "test_closeloop.py",  # reference-world close loops, their exports
     "test_closeloop_channels.py",  # one realistic close loop with two logged channels (ci_slow)

@@ -16,8 +16,7 @@ PAIRS = [(("pulley_friction", "drive_saturation"), 5),
          (("drive_saturation", "bar_waviness"), 10)]
 
 
-@pytest.mark.slow
-@pytest.mark.ci_slow    # the five pairs (decision 0080)
+@pytest.mark.slow    # make test-slow (decision 0100)
 @pytest.mark.parametrize("effects,seed", PAIRS)
 def test_realistic_two_effects(effects, seed, record_property):
     res, truth = run_case(effects, seed)
