@@ -52,11 +52,13 @@ def _run_inputs(d, V0, load):
 RUNS = [_run_inputs(1.0, 324.0, 0.03), _run_inputs(-1.0, 250.0, -0.02)]
 
 
-def _setups():
+def _setups(scale: float = 1.03):
+    """``(base, refit)``: the reference motor's derived predictor and the same with every parameter times ``scale``
+    (a stand-in for the joint re-identification), both at the sample interval ``DT``."""
     mp = load_motor()
     pp = derive_predictor(mp, n_grid=9)
     base = PredictorSetup(pp, mp.slider.mass_kg, DT)
-    refit = type(pp).from_vector(pp.to_vector() * 1.03, s_center=pp.s_center, s_half=pp.s_half, kappa=pp.kappa,
+    refit = type(pp).from_vector(pp.to_vector() * scale, s_center=pp.s_center, s_half=pp.s_half, kappa=pp.kappa,
                                  include_load_inertia=pp.include_load_inertia)
     return base, PredictorSetup(refit, mp.slider.mass_kg, DT)
 
