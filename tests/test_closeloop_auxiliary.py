@@ -11,6 +11,7 @@ from l1b2.closeloop import auxiliary as aux
 from l1b2.closeloop import runlevel as rl
 from l1b2.closeloop.candidates import channels_of
 from l1b2.closeloop.evidence import with_auxiliary
+from l1b2.data.gaps import fill_gaps
 from l1b2.predictor import effects as fx
 
 
@@ -31,7 +32,7 @@ def test_gaps_are_interpolated_in_time_within_their_run_and_held_at_its_ends():
     t = np.array([0.0, 1.0, 2.0, 4.0, 10.0, 11.0, 12.0, 20.0, 21.0])
     run = np.array([1, 1, 1, 1, 2, 2, 2, 3, 3])
     v = np.array([np.nan, 2.0, np.nan, 8.0, 5.0, np.inf, 7.0, np.nan, np.nan])
-    out, empty = aux.fill_gaps(v, t, run)
+    out, empty = fill_gaps(v, t, run)
     # run 1: held at 2 before its first reading; at t=2, 2 + (8 - 2) (2 - 1)/(4 - 1) = 4
     # run 2: inf is a gap: 5 + (7 - 5) (11 - 10)/(12 - 10) = 6; run 3 has no reading: left non-finite
     np.testing.assert_allclose(out[:7], [2.0, 2.0, 4.0, 8.0, 5.0, 6.0, 7.0])

@@ -36,7 +36,7 @@ from ..data import measurements as dataio
 from ..data.gaps import fill_gaps
 from ..errors import DataFormatError
 
-__all__ = ["MAX_LABELS", "MAX_TOKEN_SHARE", "LABELS_ATTR", "with_usable_channels", "label_codes", "fill_gaps",
+__all__ = ["MAX_LABELS", "MAX_TOKEN_SHARE", "LABELS_ATTR", "with_usable_channels", "label_codes",
            "label_columns", "check_test_columns"]
 
 #: the most distinct text values a label column may have over TRAIN's runs to be coded

@@ -93,7 +93,8 @@ class ExtendedPredictor:
     re-identified setup that the effects' forces are added to; ``effects``:
     in the order they were chosen; ``output_filter``: ``{"a", "b0", "b1"}``
     of the speed channel (``y(k) = a y(k-1) + b0 u(k) + b1 u(k-1)``, steady
-    start), with ``lo_m_s``/``hi_m_s`` when the channel's range clips it (:func:`apply_output_filter`), or None; ``source``: where the data came from (free text fields).
+    start), with ``lo_m_s``/``hi_m_s`` when the channel's range clips it
+    (:func:`apply_output_filter`), or None; ``source``: where the data came from (free text fields).
     """
 
     baseline: PredictorSetup
