@@ -12,6 +12,8 @@ makes it first):
   on the same motion with the packets' stamps undone.
 * ``allow`` -- the files unchanged, read with the loader's plausibility findings allowed (``allow_unusual_units``,
   the documented way on with values that are right): the loop on a case the loader refuses.
+* ``response`` -- the files unchanged, ``mic_level_dB`` declared a response of the motor (``response_columns``,
+  the CLI's ``--response-column``): the loop as a user who knows the meter's column would run it.
 
 Usage: python bench/blind_effects_seventh_probe.py KIND SEED MODE [--out DIR]. Prints the row of
 ``bench/blind_effects.py`` (its ``loop_row``), then the evidence of the probed column, one JSON line each.
@@ -73,7 +75,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("kind", choices=seventh.KINDS + ("clean",))
     ap.add_argument("seed", type=int)
-    ap.add_argument("mode", choices=("rest", "regular", "allow"))
+    ap.add_argument("mode", choices=("rest", "regular", "allow", "response"))
     ap.add_argument("--cache", default=be.default_cache())
     ap.add_argument("--out", default="", help="the changed copy's folder (default: a temporary one)")
     args = ap.parse_args(argv)
@@ -86,6 +88,8 @@ def main(argv=None):
         changed(pd.read_csv(src / f"{part}.csv"), args.mode, session).to_csv(dst / f"{part}.csv", index=False)
     if args.mode == "allow":
         be.load_measurements = functools.partial(be.load_measurements, allow_unusual_units=True)
+    if args.mode == "response":
+        be.close_loop = functools.partial(be.close_loop, response_columns=("mic_level_dB",))
     row, res = be.loop_row(f"{args.kind}({args.mode})", args.seed, dst,
                            traced_all=lambda names, diag: list(diag["traced_to"]))
     print(json.dumps(row))
