@@ -7,6 +7,8 @@ makes it first):
 * ``rest`` -- each run's rest before it (its first ``time_s`` minus the previous run's last in the whole session,
   ``all.csv``; the first run's own start) also logged as a per-run column ``rest_before_s``: would the loop trace
   the rests if a column held them?
+* ``logrest`` -- as ``rest``, with the column's natural logarithm ``ln_rest_before_s`` (ln of the rest in s) instead:
+  does the shape of the column's law stand between the loop and the rests?
 * ``regular`` -- each run's ``time_s`` replaced by its least-squares line in the sample index (a regular clock, as
   the DAQ's own), and the speed column's derivative of the position moved onto that clock (its noise kept): the loop
   on the same motion with the packets' stamps undone.
@@ -33,7 +35,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import blind_effects as be  # noqa: E402
 import blind_effects_seventh as seventh  # noqa: E402
 
-COLUMN = {"rest": "rest_before_s"}
+COLUMN = {"rest": "rest_before_s", "logrest": "ln_rest_before_s"}
 
 
 def rest_before_s(df: pd.DataFrame, session: pd.DataFrame) -> pd.Series:
@@ -66,6 +68,10 @@ def changed(df: pd.DataFrame, mode: str, session: pd.DataFrame) -> pd.DataFrame:
         out = df.copy()
         out["rest_before_s"] = np.round(rest_before_s(df, session), 6)
         return out
+    if mode == "logrest":
+        out = df.copy()
+        out["ln_rest_before_s"] = np.round(np.log(rest_before_s(df, session)), 6)
+        return out
     if mode == "regular":
         return regular_clock(df)
     return df
@@ -75,7 +81,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("kind", choices=seventh.KINDS + ("clean",))
     ap.add_argument("seed", type=int)
-    ap.add_argument("mode", choices=("rest", "regular", "allow", "response"))
+    ap.add_argument("mode", choices=("rest", "logrest", "regular", "allow", "response"))
     ap.add_argument("--cache", default=be.default_cache())
     ap.add_argument("--out", default="", help="the changed copy's folder (default: a temporary one)")
     args = ap.parse_args(argv)
