@@ -18,7 +18,7 @@ from l1b2.closeloop.loop import ChainModel
 from l1b2.closeloop.report import chain_line
 from l1b2.data import measurements as dataio
 from l1b2.fmi.export import ExportError, export_calibrated
-from l1b2.predictor.effects import apply_output_filter
+from l1b2.predictor.effects import EffectSpecError, apply_output_filter
 from l1b2.predictor.effects.model import ExtendedPredictor
 from l1b2.predictor.model import example_params
 from l1b2.predictor.setup import PredictorSetup
@@ -212,3 +212,15 @@ def test_no_rail_in_a_noisy_column_that_follows_the_speed_filtered_or_not():
         r = chain.speed_rails(v, vt, runs)
         assert r["band_hi_m_s"] > 0 and r["band_lo_m_s"] > 0
         assert r["hi_m_s"] == np.inf and r["lo_m_s"] == -np.inf, r
+
+
+@pytest.mark.parametrize("key", ["a", "b0", "b1"])
+def test_a_saved_filter_missing_a_coefficient_fails_where_it_is_read(key):
+    setup = PredictorSetup(example_params(3), 0.1, 1e-3)
+    saved = ExtendedPredictor(setup, setup, output_filter={"a": 0.2, "b0": 0.8, "b1": 0.0}).to_dict()
+    del saved["output_filter"][key]
+    with pytest.raises(EffectSpecError, match=f"output filter: missing '{key}'"):
+        ExtendedPredictor.from_dict(saved)
+    saved["output_filter"][key] = "x"
+    with pytest.raises(EffectSpecError, match=f"output filter: '{key}' is not a number"):
+        ExtendedPredictor.from_dict(saved)
