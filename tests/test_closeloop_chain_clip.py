@@ -14,7 +14,7 @@ import pytest
 from scipy import stats
 
 from l1b2.closeloop import chain
-from l1b2.closeloop.loop import ChainModel
+from l1b2.closeloop.loop import ChainModel, _chain_note
 from l1b2.closeloop.report import chain_line
 from l1b2.data import measurements as dataio
 from l1b2.fmi.export import ExportError, export_calibrated
@@ -224,3 +224,16 @@ def test_a_saved_filter_missing_a_coefficient_fails_where_it_is_read(key):
     saved["output_filter"][key] = "x"
     with pytest.raises(EffectSpecError, match=f"output filter: '{key}' is not a number"):
         ExtendedPredictor.from_dict(saved)
+
+
+@pytest.mark.parametrize("stage, filtered, note", [
+    (chain.OutputFilter(), False, "filtered"),
+    (chain.OutputFilter(0.3, 0.7, 0.0), True, "filtered"),
+    (chain.OutputFilter(0.0, 1.0, 0.0, lo_m_s=LO, hi_m_s=HI), False, "clipped at its range"),
+    (chain.OutputFilter(0.0, 1.0, 0.0, hi_m_s=HI), False, "clipped at its range"),
+    (chain.OutputFilter(0.0, 0.9, 0.1, lo_m_s=LO), True, "filtered and clipped at its range"),
+])
+def test_the_message_names_what_the_kept_stage_does(stage, filtered, note):
+    assert stage.filtered is filtered
+    assert _chain_note(stage) == f"; speed channel {note} (measurement chain)"
+    assert _chain_note(None) == ""

@@ -59,6 +59,11 @@ class OutputFilter:
         """Whether the stage holds a finite rail."""
         return bool(np.isfinite(self.lo_m_s) or np.isfinite(self.hi_m_s))
 
+    @property
+    def filtered(self) -> bool:
+        """Whether the stage's filter is other than the identity (``a, b0, b1 != 0, 1, 0``)."""
+        return (self.a, self.b0, self.b1) != (0.0, 1.0, 0.0)
+
     def params(self) -> dict:
         """``{"a", "b0", "b1"}`` and each finite rail (``lo_m_s``, ``hi_m_s``): the mapping
         :func:`l1b2.predictor.effects.apply_output_filter` and the exported model read."""
