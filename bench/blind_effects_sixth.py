@@ -12,6 +12,11 @@ speed noise, 2 % run-to-run contact scatter). Each kind draws from one random st
   rails at +-v_rail (drawn in 0.19-0.22 m/s, a decoder range picked below the fastest runs' speed), so the
   recorded speed is ``clip(v + noise, -v_rail, v_rail)``: the fastest runs read flat at the rail (the position,
   from the encoder, is not clipped).
+* ``velocity_clip_noisy`` -- the same decoder and the same draws (its rail, the plan's speed noise), but the
+  decoder's analogue output saturates first (at +-v_rail, its +-5 V output stage) and the noise and the ADC's
+  quantisation come after it: an ADC of +-10 V and 12 bits reads ``q round((clip(v, -v_rail, v_rail) + noise) /
+  q)`` with ``q = 4 v_rail / 4096`` (never at its own full scale), so the fastest runs' samples scatter around
+  the rail by the noise instead of repeating one value.
 * ``holder_damping_nan`` -- logged auxiliary ``holder_temp_C`` per sample, with gaps written as NaN. The stator
   sits in a polymer holder that takes part of each mode's strain energy; the polymer's loss factor rises with its
   temperature near its glass transition (a polyurethane holder with its transition at room temperature), so
@@ -48,9 +53,9 @@ import blind_effects as be  # noqa: E402  (adds fmu_src to the path)
 from l1b2.data import measurements as dataio  # noqa: E402
 from l1b2.rig.experiment import scattered_motor  # noqa: E402
 
-KINDS = ("velocity_clip", "holder_damping_nan", "heatsink_decoy", "piezo_deaging")
+KINDS = ("velocity_clip", "holder_damping_nan", "heatsink_decoy", "piezo_deaging", "velocity_clip_noisy")
 #: the channel each kind acts through (the decoy's: the column that must NOT be traced)
-CHANNEL = {"velocity_clip": "speed", "holder_damping_nan": "holder_temp_C", "heatsink_decoy": "amp_heatsink_C",
+CHANNEL = {"velocity_clip": "speed", "velocity_clip_noisy": "speed", "holder_damping_nan": "holder_temp_C", "heatsink_decoy": "amp_heatsink_C",
            "piezo_deaging": "time or a lag of voltage"}
 V_REF_V = 324.0
 T_REF_C = 25.0
@@ -58,6 +63,7 @@ T_REF_C = 25.0
 
 def draw(kind: str, seed: int, n_runs: int) -> dict:
     """The kind's parameters and per-run values (its own random stream of ``seed``)."""
+    kind = {"velocity_clip_noisy": "velocity_clip"}.get(kind, kind)     # the same decoder, the same draws
     rng = np.random.default_rng([seed, 91, KINDS.index(kind) if kind in KINDS else 99])
     if kind == "velocity_clip":
         return {"v_rail_m_s": float(rng.uniform(0.19, 0.22))}
@@ -75,6 +81,16 @@ def draw(kind: str, seed: int, n_runs: int) -> dict:
 def clip_speed(v_m_s, v_rail_m_s: float):
     """The speed [m/s] an ADC reads from a decoder whose rails sit at +-``v_rail_m_s``."""
     return np.clip(np.asarray(v_m_s, float), -v_rail_m_s, v_rail_m_s)
+
+
+#: the noisy rail's ADC: +-10 V, 12 bits, the decoder's rails at +-5 V (so the quantum is 4 v_rail / 4096)
+ADC_SPAN_PER_RAIL, ADC_CODES = 4.0, 4096
+
+
+def quantise_speed(v_m_s, v_rail_m_s: float):
+    """The speed [m/s] that the noisy rail's ADC writes: its nearest code (quantum ``4 v_rail / 4096``)."""
+    q = ADC_SPAN_PER_RAIL * v_rail_m_s / ADC_CODES
+    return q * np.round(np.asarray(v_m_s, float) / q)
 
 
 def holder_damping(zeta, T_C, beta_per_K: float):
@@ -140,6 +156,8 @@ def experiment(kind: str, seed: int):
             path = heatsink_path(t - t[0], V, T_hs, p["tau_s"])
             extra["amp_heatsink_C"] = np.round(path + 0.05 * noise, 2)
         out = be.daq_frame(plan, t_next, k, t, r["Slider.s"][idx], V, L, d, **extra)
+        if kind == "velocity_clip_noisy":       # the analogue stage saturates before the noise is added
+            out[dataio.SPEED] = clip_speed(out[dataio.SPEED].to_numpy(float), p["v_rail_m_s"])
         frames.append(out)
         per_run.append({"run": k + 1, "zeta_l": mp.stator.zeta_l, "zeta_b": mp.stator.zeta_b,
                         "A_l_N_per_V": mp.stator.A_l_N_per_V, "heatsink_start_C": T_hs,
@@ -152,6 +170,8 @@ def experiment(kind: str, seed: int):
     df, truth, nominal, plan = be.finish(kind, frames, per_run, p, nominal, plan)
     if kind == "velocity_clip":
         df[dataio.SPEED] = clip_speed(df[dataio.SPEED].to_numpy(float), p["v_rail_m_s"])
+    elif kind == "velocity_clip_noisy":
+        df[dataio.SPEED] = quantise_speed(df[dataio.SPEED].to_numpy(float), p["v_rail_m_s"])
     return df, truth, nominal, plan
 
 

@@ -11,13 +11,14 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
+from scipy import stats
 
 from l1b2.closeloop import chain
-from l1b2.closeloop.loop import ChainModel
+from l1b2.closeloop.loop import ChainModel, _chain_note
 from l1b2.closeloop.report import chain_line
 from l1b2.data import measurements as dataio
 from l1b2.fmi.export import ExportError, export_calibrated
-from l1b2.predictor.effects import apply_output_filter
+from l1b2.predictor.effects import EffectSpecError, apply_output_filter
 from l1b2.predictor.effects.model import ExtendedPredictor
 from l1b2.predictor.model import example_params
 from l1b2.predictor.setup import PredictorSetup
@@ -68,6 +69,7 @@ def test_the_rails_of_a_clipped_column_are_found_per_sign_with_the_samples_at_th
     clip = out["clip"]
     assert out["accepted"] and clip["accepted"], clip
     assert clip["lo_m_s"] == pytest.approx(LO, rel=1e-12) and clip["hi_m_s"] == pytest.approx(HI, rel=1e-12)
+    assert clip["band_lo_m_s"] == clip["band_hi_m_s"] == 0.0     # the exact rail: one value, no band
     # samples at the rails: those of the noisy speed beyond them, without each run's first sample (the design's rows)
     first = np.r_[True, df[dataio.RUN].to_numpy()[1:] != df[dataio.RUN].to_numpy()[:-1]]
     assert clip["n_hi"] == int(np.sum((noisy >= HI) & ~first))
@@ -151,3 +153,87 @@ def test_the_exported_model_keeps_the_rails_and_predictor_fmu_refuses_them(tmp_p
     assert ExtendedPredictor.from_dict(plain.to_dict()).output_filter == {"a": 0.2, "b0": 0.8, "b1": 0.0}
     with pytest.raises(ExportError, match="range limit"):
         export_calibrated(model, tmp_path)
+
+
+def test_the_column_noise_is_the_second_differences_scatter():
+    # a smooth profile plus white noise of sd s: v(k+1) - 2 v(k) + v(k-1) has sd sqrt(6) s; quantised to q, the
+    # noise's variance is s^2 + q^2 / 12 (q a fifth of s: the quantisation is noise-like)
+    df = slider_frame(seed=8)
+    runs = df[dataio.RUN].to_numpy()
+    e = np.random.default_rng(9).standard_normal(len(df))
+    v = df["v_true"].to_numpy() + 1e-3 * e
+    assert chain.column_noise(v, runs) == pytest.approx(1e-3, rel=0.03)
+    q = 2e-4
+    assert chain.column_noise(q * np.round(v / q), runs) == pytest.approx(np.sqrt(1e-6 + q ** 2 / 12), rel=0.05)
+    # without noise: the profile's own second difference, at most 2 v_peak (pi / T)^2 dt^2 (v_peak <= 0.34 m/s,
+    # T = 0.4 s), bounds the estimate by 1.4826 / sqrt(6) of it
+    bound = 1.4826 / np.sqrt(6) * 2 * 0.34 * (np.pi / 0.4) ** 2 * DT ** 2
+    assert 0 < chain.column_noise(df["v_true"].to_numpy(), runs) <= bound < 0.03e-3
+
+
+@pytest.mark.parametrize("quantum", [0.0, 1e-4])
+def test_a_noisy_rail_is_found_at_the_centre_of_its_pile(quantum):
+    # the analogue stage saturates first, then 1 mm/s noise (and an ADC's quantum) is added: the samples at each
+    # rail scatter around it instead of repeating one value
+    df = slider_frame()
+    sd = 1e-3
+    v = np.clip(df["v_true"].to_numpy(), LO, HI) + sd * np.random.default_rng(11).standard_normal(len(df))
+    if quantum:
+        v = quantum * np.round(v / quantum)
+    out = chain.speed_channel(with_speed(df, v), np.ones(len(df), bool))
+    clip = out["clip"]
+    assert out["accepted"] and clip["accepted"] and clip["cv_gain"] > 0.9, clip
+    assert clip["noise_m_s"] == pytest.approx(np.sqrt(sd ** 2 + quantum ** 2 / 12), rel=0.05)
+    # the band below each extreme: 2 z sigma, z the normal quantile exceeded with probability 1/n (n: the rows)
+    n = len(df) - df[dataio.RUN].nunique()
+    band = 2 * stats.norm.isf(1 / n) * clip["noise_m_s"]
+    assert clip["band_hi_m_s"] == pytest.approx(band, rel=1e-12) and clip["band_lo_m_s"] == clip["band_hi_m_s"]
+    # the rails: the median of the band's samples, within a fifth of the noise's sd of the written-out rails
+    first = np.r_[True, df[dataio.RUN].to_numpy()[1:] != df[dataio.RUN].to_numpy()[:-1]]
+    rows = v[~first]
+    top, bottom = rows[rows >= rows.max() - band], rows[rows <= rows.min() + band]
+    assert clip["hi_m_s"] == pytest.approx(np.median(top), abs=1e-15) and clip["n_hi"] == len(top)
+    assert clip["lo_m_s"] == pytest.approx(np.median(bottom), abs=1e-15) and clip["n_lo"] == len(bottom)
+    assert abs(clip["hi_m_s"] - HI) < 0.2 * sd and abs(clip["lo_m_s"] - LO) < 0.2 * sd
+    f = out["filter"]
+    assert (f.lo_m_s, f.hi_m_s) == (clip["lo_m_s"], clip["hi_m_s"]) and not clip["inner_filter"]
+    line = chain_line({k: v for k, v in out.items() if k != "filter"})
+    assert f"{clip['n_hi']} samples in {clip['runs_hi']} runs, within {1e3 * band:.3g} mm/s" in line
+    assert "a noisy rail" in line
+
+
+def test_no_rail_in_a_noisy_column_that_follows_the_speed_filtered_or_not():
+    # 1 mm/s noise on the speed itself, and after a 5 ms low-pass: the noisy band below the extreme is tried, and
+    # there the derivative lies below the extreme
+    df = slider_frame(seed=12)
+    runs, vt = df[dataio.RUN].to_numpy(), df["v_true"].to_numpy()
+    e = 1e-3 * np.random.default_rng(13).standard_normal(len(df))
+    for v in (vt + e, lowpass(df, vt, np.exp(-DT / 5e-3)) + e):
+        r = chain.speed_rails(v, vt, runs)
+        assert r["band_hi_m_s"] > 0 and r["band_lo_m_s"] > 0
+        assert r["hi_m_s"] == np.inf and r["lo_m_s"] == -np.inf, r
+
+
+@pytest.mark.parametrize("key", ["a", "b0", "b1"])
+def test_a_saved_filter_missing_a_coefficient_fails_where_it_is_read(key):
+    setup = PredictorSetup(example_params(3), 0.1, 1e-3)
+    saved = ExtendedPredictor(setup, setup, output_filter={"a": 0.2, "b0": 0.8, "b1": 0.0}).to_dict()
+    del saved["output_filter"][key]
+    with pytest.raises(EffectSpecError, match=f"output filter: missing '{key}'"):
+        ExtendedPredictor.from_dict(saved)
+    saved["output_filter"][key] = "x"
+    with pytest.raises(EffectSpecError, match=f"output filter: '{key}' is not a number"):
+        ExtendedPredictor.from_dict(saved)
+
+
+@pytest.mark.parametrize("stage, filtered, note", [
+    (chain.OutputFilter(), False, "filtered"),
+    (chain.OutputFilter(0.3, 0.7, 0.0), True, "filtered"),
+    (chain.OutputFilter(0.0, 1.0, 0.0, lo_m_s=LO, hi_m_s=HI), False, "clipped at its range"),
+    (chain.OutputFilter(0.0, 1.0, 0.0, hi_m_s=HI), False, "clipped at its range"),
+    (chain.OutputFilter(0.0, 0.9, 0.1, lo_m_s=LO), True, "filtered and clipped at its range"),
+])
+def test_the_message_names_what_the_kept_stage_does(stage, filtered, note):
+    assert stage.filtered is filtered
+    assert _chain_note(stage) == f"; speed channel {note} (measurement chain)"
+    assert _chain_note(None) == ""

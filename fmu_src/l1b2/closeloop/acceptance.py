@@ -514,10 +514,11 @@ def fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, init, 
 
     With ``chain_k`` the model is the measurement chain's
     (:class:`l1b2.closeloop.loop.ChainModel`): on the training runs the speed
-    channel's output filter (:func:`l1b2.closeloop.chain.speed_channel`, with
-    ``chain_k`` folds) and the physics refitted on the position's derivative;
-    the held-out runs' measured speed is predicted by the filter applied to
-    the physics' free run.
+    channel's output stage (:func:`l1b2.closeloop.chain.speed_channel`, with
+    ``chain_k`` folds: its filter or clip when its test accepts it there, else
+    the identity, as the chain's rule keeps no stage that its test rejects) and
+    the physics refitted on the position's derivative; the held-out runs'
+    measured speed is predicted by that stage applied to the physics' free run.
 
     The refit sees the training runs at one sample per millisecond at most (:func:`fold_fit_data`); the
     held-out runs are predicted at their own rate.
@@ -531,9 +532,10 @@ def fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, init, 
     train, test = split.train, split.test
     filt = None
     if chain_k is not None:
-        filt = chain.speed_channel(train, split.mask_train, k=chain_k, seed=settings.seed).get("filter")
-        if filt is None:
+        ch = chain.speed_channel(train, split.mask_train, k=chain_k, seed=settings.seed)
+        if ch.get("filter") is None:
             return split.failed()
+        filt = ch["filter"] if ch["accepted"] else chain.OutputFilter()
         train, test_in = chain.with_position_speed(train), chain.with_position_speed(test)
     else:
         test_in = test

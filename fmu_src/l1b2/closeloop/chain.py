@@ -59,6 +59,11 @@ class OutputFilter:
         """Whether the stage holds a finite rail."""
         return bool(np.isfinite(self.lo_m_s) or np.isfinite(self.hi_m_s))
 
+    @property
+    def filtered(self) -> bool:
+        """Whether the stage's filter is other than the identity (``a, b0, b1 != 0, 1, 0``)."""
+        return (self.a, self.b0, self.b1) != (0.0, 1.0, 0.0)
+
     def params(self) -> dict:
         """``{"a", "b0", "b1"}`` and each finite rail (``lo_m_s``, ``hi_m_s``): the mapping
         :func:`l1b2.predictor.effects.apply_output_filter` and the exported model read."""
@@ -177,40 +182,112 @@ def speed_channel(df: pd.DataFrame, mask: np.ndarray, *, k: int = 5, seed: int =
 RAIL_REL_TOL = 1e-9
 
 
+def column_noise(v: np.ndarray, runs: np.ndarray) -> float:
+    """The white noise's standard deviation [m/s] in the column ``v``, from its second differences within runs.
+
+    ``v(k+1) - 2 v(k) + v(k-1)`` of a speed that is smooth at the sample rate plus white noise of sd ``sigma`` has
+    sd ``sqrt(6) sigma`` (a quantisation finer than the noise adds its ``q^2 / 12`` to ``sigma^2``); robust,
+    ``1.4826 median|d2| / sqrt(6)``, so a short fast transient or a flat stretch at a rail moves it little. Only
+    consecutive samples of one run enter (0.0 with fewer than three samples in every run).
+    """
+    v, runs = np.asarray(v, float), np.asarray(runs)
+    same = (runs[2:] == runs[1:-1]) & (runs[1:-1] == runs[:-2])
+    d2 = (v[2:] - 2.0 * v[1:-1] + v[:-2])[same]
+    return float(1.4826 * np.median(np.abs(d2)) / np.sqrt(6.0)) if len(d2) else 0.0
+
+
+def noise_band_width(sigma_m_s: float, n: int) -> float:
+    """The width [m/s] below a column's extreme that holds its noisy rail: ``2 z sigma``, ``z`` the standard normal
+    quantile exceeded with probability ``1 / n``.
+
+    Of ``n`` samples reading ``rail + noise``, the largest lies about ``z sigma`` above the rail (``n`` bounds the
+    samples at the rail), so the band ``[extreme - 2 z sigma, extreme]`` holds the rail's samples down to about
+    ``z sigma`` below it.
+    """
+    return 2.0 * float(stats.norm.isf(1.0 / max(n, 2))) * sigma_m_s if sigma_m_s > 0 else 0.0
+
+
+def rail_pile(sv: np.ndarray, band_m_s: float) -> tuple[float, np.ndarray, float, float]:
+    """The candidate rail of the sign-turned column ``sv`` [m/s] (its extreme ``ext = max sv > 0``):
+    ``(ext, at, rail, edge)``.
+
+    ``band_m_s`` 0: an exact rail, ``at`` the samples within :data:`RAIL_REL_TOL` of ``ext`` and the rail ``ext``;
+    else a noisy rail, ``at`` the samples within ``band_m_s`` below ``ext`` and the rail their median (a robust
+    centre: the samples on their way to the rail are a minority of the band). ``edge``: the band's inner end, below
+    which a sample is inside the range.
+    """
+    ext = float(np.max(sv))
+    if band_m_s > 0:
+        edge = ext - band_m_s
+        at = sv >= edge
+        return ext, at, float(np.median(sv[at])), edge
+    edge = ext * (1.0 - RAIL_REL_TOL)
+    at = sv >= edge
+    return ext, at, ext, edge
+
+
 def speed_rails(v: np.ndarray, u: np.ndarray, runs: np.ndarray, *, alpha: float = 0.01) -> dict:
     """The speed channel's range limits, each sign on its own, from the column ``v`` and the derivative ``u`` [m/s].
 
-    A saturated channel reads one value, its rail, whenever the quantity exceeds it, and never reads beyond it:
-    the candidate rail of each sign is the column's extreme of that sign (``max v > 0``, ``min v < 0``), and a
-    sample reads it when within :data:`RAIL_REL_TOL` of it. The candidate is a rail when the derivative exceeds it
-    where the column reads it: per run holding such samples, the mean of ``u - rail`` (sign turned for the lower
-    rail) is positive, one-sided Wilcoxon over those runs below ``alpha`` (seven runs at least for 0.01). A clean
-    column's extreme is a peak of its noise, where the derivative lies below it, and a low-passed column reads
-    its extreme at one sample.
+    A saturated channel stops following the quantity while the quantity exceeds the rail. Its samples there read
+    the rail exactly when the saturation is the chain's last stage (a full-scale code), or the rail plus the noise
+    and quantisation of the stages after it (an analogue stage that saturates before the ADC). Per sign (``max v >
+    0``, ``min v < 0``) two candidates are tested, the exact one first (:func:`rail_pile`): the samples that read
+    the column's extreme, then, when that fails, the samples within :func:`noise_band_width` of it (the column's
+    noise :func:`column_noise` over its ``len(v)`` samples), the rail their median. A candidate is a rail when the
+    derivative exceeds the column's extreme where the column reads the candidate: per run holding such samples,
+    the mean of ``u - extreme`` (sign turned for the lower rail) is positive, one-sided Wilcoxon over those runs
+    below ``alpha`` (seven runs at least for 0.01). A column that follows the quantity reads its extreme where the
+    quantity plus the noise peaks, so there the derivative lies below the extreme: a clean or quantised column's
+    top samples, a low-passed column's (which reads its extreme at one sample, the noise filtered) and the plateaus
+    of its fastest runs alike. The extreme is the pile's upper end, so the test holds for the exact rail as for the
+    noisy one; a noisy rail needs the quantity beyond it by more than the noise's largest excursion.
 
-    Returns ``{"lo_m_s", "hi_m_s"}`` (the rails; -inf / inf when none), and per side (``lo``, ``hi``) the
-    candidate ``candidate_<side>_m_s`` (None when the column has no sample of that sign), ``n_<side>`` (samples at
-    it), ``runs_<side>`` (runs holding them) and ``p_<side>``.
+    Returns ``{"lo_m_s", "hi_m_s"}`` (the rails; -inf / inf when none), ``noise_m_s`` (the column's noise), and per
+    side (``lo``, ``hi``) the candidate ``candidate_<side>_m_s`` (the column's extreme; None when the column has no
+    sample of that sign), ``band_<side>_m_s`` (the last candidate's band below the extreme: 0.0 for the exact one),
+    ``edge_<side>_m_s`` (its inner end: a sample beyond it reads the rail; the extreme's when the side has no
+    sample), ``n_<side>`` (samples in it), ``runs_<side>`` (runs holding them) and ``p_<side>``.
     """
-    out = {}
+    v, u = np.asarray(v, float), np.asarray(u, float)
+    sigma = column_noise(v, runs)
+    bands = (0.0,) + ((noise_band_width(sigma, len(v)),) if sigma > 0 else ())
+    out = {"noise_m_s": sigma}
     for side, sgn in (("lo", -1.0), ("hi", 1.0)):
-        ext = float(np.max(sgn * v)) if len(v) else 0.0
-        rail, n, n_runs, p = sgn * np.inf, 0, 0, 1.0
-        if ext > 0:
-            at = sgn * v >= ext * (1.0 - RAIL_REL_TOL)
+        sv = sgn * v
+        ext = float(np.max(sv)) if len(v) else 0.0
+        rail, n, n_runs, p, band, edge = sgn * np.inf, 0, 0, 1.0, 0.0, ext
+        for band in bands if ext > 0 else ():
+            ext, at, value, edge = rail_pile(sv, band)
             ids, code = np.unique(runs[at], return_inverse=True)
             excess = np.bincount(code, weights=sgn * u[at] - ext) / np.bincount(code)
             n, n_runs, p = int(at.sum()), len(ids), wilcoxon_greater(excess)
-            if p < alpha:
-                rail = sgn * ext
+            if p < alpha and value > 0:
+                rail = sgn * value
+                break
         out.update({f"{side}_m_s": rail, f"candidate_{side}_m_s": sgn * ext if ext > 0 else None,
+                    f"band_{side}_m_s": band, f"edge_{side}_m_s": sgn * edge,
                     f"n_{side}": n, f"runs_{side}": n_runs, f"p_{side}": p})
     return out
 
 
-def inside_rails(x: np.ndarray, lo: float, hi: float) -> np.ndarray:
-    """Samples strictly inside the rails ``(lo, hi)`` [m/s], beyond :data:`RAIL_REL_TOL` of each."""
-    return (x < hi * (1.0 - RAIL_REL_TOL)) & (x > lo * (1.0 - RAIL_REL_TOL))
+def inside_rails(x: np.ndarray, lo_edge: float, hi_edge: float) -> np.ndarray:
+    """Samples strictly inside the range, between the rails' inner edges ``(lo_edge, hi_edge)`` [m/s]
+    (:func:`speed_rails`' ``edge_lo_m_s``/``edge_hi_m_s``; -inf / inf on a side without a rail)."""
+    return (x < hi_edge) & (x > lo_edge)
+
+
+def _rails_of(y: np.ndarray, rails: dict) -> tuple[float, float, float, float]:
+    """``(lo, hi, lo_edge, hi_edge)`` [m/s] of the rows ``y``: the rails :func:`speed_rails` found (their sides and
+    bands) with their values and inner edges refitted on ``y`` (:func:`rail_pile`); infinite on a side without."""
+    out = {}
+    for side, sgn in (("lo", -1.0), ("hi", 1.0)):
+        if np.isfinite(rails[f"{side}_m_s"]) and np.max(sgn * y) > 0:
+            _, _, value, edge = rail_pile(sgn * y, rails[f"band_{side}_m_s"])
+            out[side] = (sgn * value, sgn * edge)
+        else:
+            out[side] = (sgn * np.inf, sgn * np.inf)
+    return out["lo"][0], out["hi"][0], out["lo"][1], out["hi"][1]
 
 
 def _heldout_ss(y: np.ndarray, runs: np.ndarray, folds, predict) -> np.ndarray:
@@ -267,10 +344,12 @@ def clip_test(X: np.ndarray, y: np.ndarray, runs: np.ndarray, folds, sim, *, fil
     rails = speed_rails(y, u, runs, alpha=alpha)
     lo, hi = rails["lo_m_s"], rails["hi_m_s"]
     rec = {**rails, "lo_m_s": _finite(lo), "hi_m_s": _finite(hi), "accepted": False,
-           "share_at_rails": (rails["n_lo"] + rails["n_hi"]) / max(len(y), 1)}
+           "share_at_rails": (rails["n_lo"] * np.isfinite(lo) + rails["n_hi"] * np.isfinite(hi)) / max(len(y), 1)}
     if not (np.isfinite(lo) or np.isfinite(hi)):
         return {**rec, "stage": None}
-    ins = inside_rails(y, lo, hi) & inside_rails(X[:, 0], lo, hi)
+    edges = tuple(rails[f"edge_{s}_m_s"] if np.isfinite(r) else sgn * np.inf
+                  for s, r, sgn in (("lo", lo, -1.0), ("hi", hi, 1.0)))
+    ins = inside_rails(y, *edges) & inside_rails(X[:, 0], *edges)
     Xi, yi, ri = X[ins], y[ins], runs[ins]
     g_in, p_in = _gain_p(_heldout_ss(yi, ri, folds,
                                      lambda tr, te: [Xi[te, 1], Xi[te] @ _fit(Xi, yi, tr, True)]))
@@ -283,9 +362,8 @@ def clip_test(X: np.ndarray, y: np.ndarray, runs: np.ndarray, folds, sim, *, fil
         return apply_output_filter(dict(zip(("a", "b0", "b1"), c)), u_all, starts)[idx]
 
     def predict(tr, te):
-        r_lo = float(np.min(y[tr])) if np.isfinite(lo) else -np.inf   # the rails found, refitted as coefficients are
-        r_hi = float(np.max(y[tr])) if np.isfinite(hi) else np.inf
-        fit = tr & inside_rails(y, r_lo, r_hi) & inside_rails(X[:, 0], r_lo, r_hi)
+        r_lo, r_hi, e_lo, e_hi = _rails_of(y[tr], rails)   # the rails found, refitted as coefficients are
+        fit = tr & inside_rails(y, e_lo, e_hi) & inside_rails(X[:, 0], e_lo, e_hi)
         return [run(_fit(X, y, tr, filter_kept))[te] if filter_kept else u[te],
                 np.clip(run(_fit(X, y, fit, True))[te] if inner else u[te], r_lo, r_hi)]
     gain, p = _gain_p(_heldout_ss(y, runs, folds, predict))

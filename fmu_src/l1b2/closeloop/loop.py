@@ -640,8 +640,7 @@ def _chain_note(stage: chain.OutputFilter | None) -> str:
     """The message's words on a kept speed-channel stage: filtered, clipped at its range, or both."""
     if stage is None:
         return ""
-    filtered = (stage.a, stage.b0, stage.b1) != (0.0, 1.0, 0.0)
-    what = " and ".join(w for w, on in (("filtered", filtered or not stage.clipped),
+    what = " and ".join(w for w, on in (("filtered", stage.filtered or not stage.clipped),
                                          ("clipped at its range", stage.clipped)) if on)
     return f"; speed channel {what} (measurement chain)"
 

@@ -237,8 +237,21 @@ FILTER_RAILS = ("lo_m_s", "hi_m_s")
 
 
 def filter_dict(filt: Mapping) -> dict:
-    """An output filter's mapping as floats: ``a``, ``b0``, ``b1`` and the rails of :data:`FILTER_RAILS` it holds."""
-    return {k: float(filt[k]) for k in ("a", "b0", "b1") + FILTER_RAILS if k in filt}
+    """An output filter's mapping as floats: ``a``, ``b0``, ``b1`` and the rails of :data:`FILTER_RAILS` it holds.
+
+    Raises :class:`EffectSpecError` naming the key when one of ``a``, ``b0``, ``b1`` is missing or a value is not a
+    number (a saved model with a malformed filter fails where it is read)."""
+    missing = [k for k in ("a", "b0", "b1") if k not in filt]
+    if missing:
+        raise EffectSpecError(f"output filter: missing {', '.join(repr(k) for k in missing)} (it needs a, b0 and b1)")
+    out = {}
+    for k in ("a", "b0", "b1") + FILTER_RAILS:
+        if k in filt:
+            try:
+                out[k] = float(filt[k])
+            except (TypeError, ValueError):
+                raise EffectSpecError(f"output filter: {k!r} is not a number ({filt[k]!r})") from None
+    return out
 
 
 def apply_output_filter(filt: Mapping, u, run_starts=None) -> np.ndarray:
