@@ -5,7 +5,9 @@ Usage: python bench/bench_frequency_levels.py LEVELS SEED   (LEVELS: 2, 3, 4 or 
 The realistic world, the drive-frequency study's fit (``l1b2.study.recovery``: the B2 resonance drawn per seed,
 no injection, +-50 Hz per-run jitter), but the rig's frequencies are ``PLANS[LEVELS]``. Prints one JSON line:
 the injected and estimated f_b0, the model-based se, the record's clustered interval (``clustered``), the
-linear interval ``f_b0 +- t se`` of the same se and t for comparison, which covers, and the CPU time.
+linear interval ``f_b0 +- t se`` of the same se and t for comparison, which covers, and the CPU time. When the
+record withholds the number (too few levels, dof, or "not identified"), ``withheld_ci95`` is the log interval it
+would have given and ``covered_withheld`` whether that covers.
 """
 
 from __future__ import annotations
@@ -16,6 +18,9 @@ import time
 from dataclasses import replace
 
 import numpy as np
+from scipy import stats
+
+from l1b2.ident.frequency import log_interval
 from l1b2.study.recovery import TARGETS, FitSettings, fit_family
 from l1b2.study.world import World, world_data
 
@@ -42,6 +47,12 @@ def main(levels: int, seed: int) -> dict:
         row["covered_log"] = bool(lo <= truth <= hi)
         row["linear_ci95"] = [f - c["t"] * c["stderr_Hz"], f + c["t"] * c["stderr_Hz"]]
         row["covered_linear"] = bool(row["linear_ci95"][0] <= truth <= row["linear_ci95"][1])
+    elif c.get("stderr_Hz") and c.get("dof"):
+        # the interval the record withholds (too few levels, or not identified), for the record's tables only
+        t = float(stats.t.ppf(0.975, c["dof"]))
+        with np.errstate(over="ignore"):
+            row["withheld_ci95"] = [float(x) for x in log_interval(f, c["stderr_Hz"], t)]
+        row["covered_withheld"] = bool(row["withheld_ci95"][0] <= truth <= row["withheld_ci95"][1])
     row["cpu_s"] = round(time.process_time() - t0, 1)
     return row
 

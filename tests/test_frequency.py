@@ -320,25 +320,26 @@ def test_response_cluster_influence_is_the_joint_sandwich_written_out():
 
 
 def test_identify_reports_the_cr2_interval_of_f_b0_clustered_by_frequency_level():
-    # reference: on the exact world with three frequency levels (two frequencies 40 Hz apart in each, below the
+    # reference: on the exact world with four frequency levels (two frequencies 40 Hz apart in each, below the
     # 48.5 Hz level gap), the record's clustered interval is the CR2 rows grouped by level, computed here with
     # cluster_influence / bell_mccaffrey_dof and frequency_levels: se = sqrt(sum_g u_g^2), nu the dof,
-    # t = t_{0.975, nu} (scipy), and the ends f exp(-+ t se / f) written out with math
+    # t = t_{0.975, nu} (scipy), and the ends f exp(-+ t se / f) written out with math; three levels give none
     from l1b2.ident.clusters import frequency_levels
     from l1b2.ident.frequency import ResponseLinearisation, clustered_interval, response_of
     from scipy import stats
     truth = FrequencyResponse(48500.0, 47800.0, 0.0125)
-    df = _exact_world(truth, (48000.0, 48040.0, 48500.0, 48540.0, 49000.0, 49040.0), noise=1e-3)
+    df = _exact_world(truth, (48000.0, 48040.0, 48330.0, 48370.0, 48660.0, 48700.0, 49000.0, 49040.0),
+                      noise=1e-3)
     q = np.array([47800.0 / 48500.0, math.log(0.0125)])
     est = PredictorIdentifier(order=3, fixed="recommended", n_starts=1, seed=0,
                               frequency=response_of(48500.0, q)).fit(df, slider_mass_kg=0.1)
     lin = ResponseLinearisation(est.result_, df, None, 48500.0, q)
     levels = np.array(frequency_levels(df, est.result_.runs))
-    assert sorted(set(levels)) == [0, 1, 2]
+    assert sorted(set(levels)) == [0, 1, 2, 3]
     u = lin.cluster_influence(levels, cr2=True)[:, 0]
     se, nu = math.sqrt(float(np.sum(u ** 2))), lin.bell_mccaffrey_dof(levels, 0)
     rec = clustered_interval(lin, df, [])
-    assert rec["available"] and rec["parameter"] == "f_b0_Hz" and rec["levels"] == 3
+    assert rec["available"] and rec["parameter"] == "f_b0_Hz" and rec["levels"] == 4
     assert rec["stderr_Hz"] == pytest.approx(se, rel=1e-9) and rec["dof"] == pytest.approx(nu, rel=1e-9)
     t = float(stats.t.ppf(0.975, nu))
     assert rec["t"] == pytest.approx(t, rel=1e-9) and rec["stderr_log"] == pytest.approx(se / 47800.0, rel=1e-9)
@@ -347,20 +348,21 @@ def test_identify_reports_the_cr2_interval_of_f_b0_clustered_by_frequency_level(
     assert not clustered_interval(lin, df, ["f_b0_Hz lower bound 0.8 f_ref"])["available"]
     line = frequency_report_lines({"status": "estimated", "reason": "r", "response": truth.to_dict(),
                                    "stderr": {"f_b0_Hz": 1.0, "zeta_b": 1e-4}, "clustered": rec})[-1]
-    assert line == (f"    drive frequency: f_b0 clustered by drive-frequency level (3 levels, CR2): Bell-McCaffrey "
+    assert line == (f"    drive frequency: f_b0 clustered by drive-frequency level (4 levels, CR2): Bell-McCaffrey "
                     f"dof {nu:.2f}, t {t:.2f}, se {se:.1f} Hz, 95 % [{rec['ci95_Hz'][0]:.1f}, "
                     f"{rec['ci95_Hz'][1]:.1f}] Hz (on log f_b0)")
-    two = _exact_world(truth, (48000.0, 48040.0, 49000.0, 49040.0), noise=1e-3)
-    est2 = PredictorIdentifier(order=3, fixed="recommended", n_starts=1, seed=0,
-                               frequency=response_of(48500.0, q)).fit(two, slider_mass_kg=0.1)
-    rec2 = clustered_interval(ResponseLinearisation(est2.result_, two, None, 48500.0, q), two, [])
-    assert rec2["levels"] == 2 and not rec2["available"] and "2 drive-frequency levels" in rec2["reason"]
-    assert "ci95_Hz" not in rec2 and rec2["dof"] is not None
+    three = _exact_world(truth, (48000.0, 48040.0, 48500.0, 48540.0, 49000.0, 49040.0), noise=1e-3)
+    est3 = PredictorIdentifier(order=3, fixed="recommended", n_starts=1, seed=0,
+                               frequency=response_of(48500.0, q)).fit(three, slider_mass_kg=0.1)
+    rec3 = clustered_interval(ResponseLinearisation(est3.result_, three, None, 48500.0, q), three, [])
+    assert rec3["levels"] == 3 and not rec3["available"] and "3 drive-frequency levels" in rec3["reason"]
+    assert "ci95_Hz" not in rec3 and rec3["dof"] is not None
 
 
 def test_clustered_record_few_levels_rule_and_log_interval():
-    # reference: the rule of decision 0098: a number only with G >= 3 levels and Bell-McCaffrey dof >= 1 (and a
-    # finite positive se); the interval exp(log f +- t se / f), written out, stays positive for se above f
+    # reference: the rule of decisions 0098 and 0103: a number only with G >= 4 levels and Bell-McCaffrey dof >= 1
+    # (and a finite positive se), and "not identified" when the interval contains the whole search range; the
+    # interval exp(log f +- t se / f), written out, stays positive for se above f
     from l1b2.ident.frequency import clustered_record, log_interval
     from scipy import stats
     f = 48000.0
@@ -368,14 +370,22 @@ def test_clustered_record_few_levels_rule_and_log_interval():
     t2 = 4.302652729911275                       # t_{0.975, 2}
     assert ok["available"] and ok["t"] == pytest.approx(t2, rel=1e-9)
     assert ok["ci95_Hz"] == pytest.approx([f * math.exp(-t2 * 600.0 / f), f * math.exp(t2 * 600.0 / f)], rel=1e-9)
-    edge = clustered_record(f, 3, 600.0, 1.0)
+    edge = clustered_record(f, 4, 600.0, 1.0)
     assert edge["available"] and edge["t"] == pytest.approx(stats.t.ppf(0.975, 1.0)) and edge["t"] > 12.7
-    for levels, se, dof, why in ((2, 600.0, 3.0, "2 drive-frequency levels"),
+    for levels, se, dof, why in ((3, 600.0, 3.0, "3 drive-frequency levels"), (2, 600.0, 3.0, "2 drive-frequency levels"),
                                  (1, None, None, "1 drive-frequency level"), (5, 600.0, 0.99, "dof 0.99 below 1"), (4, float("nan"), 2.0, "no finite"),
-                                 (4, 0.0, 2.0, "no finite"), (3, 1e8, 1.0, "overflow")):
+                                 (4, 0.0, 2.0, "no finite"), (4, 1e8, 1.0, "overflow")):
         rec = clustered_record(f, levels, se, dof)
         assert not rec["available"] and why in rec["reason"] and "ci95_Hz" not in rec, (levels, dof, rec)
     assert clustered_record(f, 5, 600.0, 2.0, reason="at its bound")["reason"] == "at its bound"
+    # the search range (38.8, 58.2) kHz: t_{0.975,2} se / f = 0.2 puts the ends at f e^-+0.2 = 39.30 / 58.63 kHz,
+    # past the upper end only (a number); 0.25 puts them at 37.38 / 61.63 kHz, past both (not identified)
+    search = (38800.0, 58200.0)
+    one_side = clustered_record(f, 5, 0.2 * f / t2, 2.0, search_Hz=search)
+    assert one_side["available"] and one_side["ci95_Hz"] == pytest.approx([f * math.exp(-0.2), f * math.exp(0.2)])
+    both = clustered_record(f, 5, 0.25 * f / t2, 2.0, search_Hz=search)
+    assert not both["available"] and "ci95_Hz" not in both and both["reason"].startswith("not identified")
+    assert f"[{f * math.exp(-0.25):.1f}, {f * math.exp(0.25):.1f}] Hz" in both["reason"]
     lo, hi = log_interval(np.array([f, f]), np.array([100.0, 2 * f]), 3.0)
     assert lo[0] == pytest.approx(f * math.exp(-300.0 / f)) and hi[1] == pytest.approx(f * math.exp(6.0))
     assert np.all(lo > 0) and lo[1] < f - 3 * 100.0 < hi[0]

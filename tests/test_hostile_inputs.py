@@ -107,6 +107,73 @@ def test_clock_jump_limit_both_sides():
         assert (pl.clock_jump_finding(df) is not None) is found, jump
 
 
+def test_uneven_time_steps_within_runs_are_counted_beside_the_5_percent_limit():
+    # reference: two runs of 1 ms steps; a sample stamped late by d moves the step before it to 1 ms + d and the
+    # one after it to 1 ms - d: uneven when d > 5 % of 1 ms (0.06 ms: two steps, 0.94 and 1.06 ms), even at 0.04 ms;
+    # the pause between the runs is no step within a run
+    t = np.r_[np.arange(50), 1000 + np.arange(50)] * 1e-3
+    run = np.repeat([1, 2], 50)
+    assert pl.uneven_steps(pd.DataFrame({"time_s": t, "run": run})) is None
+    for d, found in ((0.06e-3, True), (0.04e-3, False)):
+        tt = t.copy()
+        tt[60] += d                                        # run 2's 11th sample (data row 61)
+        rec = pl.uneven_steps(pd.DataFrame({"time_s": tt, "run": run}))
+        assert (rec is not None) is found, d
+    assert rec is None
+    tt = t.copy()
+    tt[60] += 0.06e-3
+    rec = pl.uneven_steps(pd.DataFrame({"time_s": tt, "run": run}))
+    assert rec == pytest.approx({"steps": 98, "uneven": 2, "runs": 1, "first_row": 61, "smallest_s": 0.94e-3,
+                                 "largest_s": 1.06e-3, "median_s": 1e-3})
+    assert pl.uneven_step_lines({"train": rec, "test": None}) == [
+        "TRAIN time_s: 2 of 98 steps within runs (1 run(s), first at row 61) differ from their run's median step by "
+        "more than 5% (steps 0.94 to 1.06 ms, median 1 ms): stamps given on arrival rather than by the DAQ's clock? "
+        "A speed derived over them is off by as much"]
+
+
+def test_a_speed_glitch_beside_uneven_time_steps_names_the_stamps(tmp_path, rig_frame):
+    # reference: the glitch of test_a_single_speed_glitch_is_refused (one speed sample far off) with the sample
+    # stamped 0.5 ms early: the refusal adds the steps beside it and the uneven stamps as the likely cause; the same
+    # glitch on the rig's even clock does not
+    df = rig_frame.copy()
+    runs = df["run"].to_numpy()
+    row = int(np.flatnonzero(runs == runs[0])[60])
+    df.loc[row, "speed_m_s"] = -1.0
+    step = float(np.median(np.diff(df["time_s"].to_numpy()[runs == runs[0]])))
+    even = _refused(write(tmp_path, df, "even", {"slider_mass_kg": 0.12}), "speed_m_s", "a glitch in the speed")
+    assert "uneven" not in str(even)
+    df.loc[row, "time_s"] -= 0.5 * step
+    err = _refused(write(tmp_path, df, "stamped", {"slider_mass_kg": 0.12}), "speed_m_s", "a glitch in the speed")
+    assert err.row == row + 1
+    assert (f"The time steps beside it are {step * 1e3:.3g}, {0.5 * step * 1e3:.3g}, {1.5 * step * 1e3:.3g}, "
+            f"{step * 1e3:.3g} ms where the run's median step is {step * 1e3:.3g} ms: a speed derived over uneven "
+            "time stamps") in str(err)
+
+
+def test_the_reports_and_the_command_line_name_uneven_time_steps(tmp_path, capsys, rig_frame):
+    from l1b2.closeloop.result import markdown_report
+    from l1b2.console import print_input_checks
+    from l1b2.data.coverage import data_check_lines, input_checks
+    from test_report_values import minimal_report
+    df = rig_frame.copy()
+    even = load_measurements(write(tmp_path, df, "even", {"slider_mass_kg": 0.12}))
+    assert input_checks(even, even)["uneven_time_steps"] == {"train": None, "test": None}
+    rows = np.flatnonzero(df["run"].to_numpy() == df["run"].iloc[0])
+    df.loc[rows[100], "time_s"] += 0.2 * float(np.median(np.diff(df["time_s"].to_numpy()[rows])))
+    m = load_measurements(write(tmp_path, df, "uneven", {"slider_mass_kg": 0.12}))
+    checks = input_checks(m, even)
+    assert checks["uneven_time_steps"] == {"train": pl.uneven_steps(m.df), "test": None}
+    assert checks["uneven_time_steps"]["train"]["uneven"] == 2
+    lines = pl.uneven_step_lines(checks["uneven_time_steps"])
+    assert len(lines) == 1 and data_check_lines(checks) == lines
+    text = markdown_report({**minimal_report(), "checks": checks}).splitlines()
+    at = text.index("Uneven time steps:")
+    assert text[at + 2] == f"* {lines[0]}"
+    assert "Uneven time steps:" not in markdown_report(minimal_report())
+    print_input_checks(checks, {}, data_check_lines(checks))
+    assert capsys.readouterr().out.splitlines() == [f"  warning: {lines[0]}"]
+
+
 @pytest.mark.parametrize("case, column, fragment", [
     ("temperature in degF", "temperature_C", "degF"),
     ("load in N", "load_kg", "load in N"),

@@ -577,8 +577,8 @@ def cmd_identify(args) -> int:
             x = m[kind]
             print(f"  {part:5s} {kind:8s} nrmse {pct(x['nrmse'])}  mean |rel| {pct(x['mean_abs_rel_error'])}  "
                   f"p95 |rel| {pct(x['p95_abs_rel_error'])}  (n={x['n_samples']})")
-    from .data.gaps import gap_lines
-    print_input_checks(rep["checks"], rep["metrics"], gap_lines(rep["checks"].get("gaps_filled")))
+    from .data.coverage import data_check_lines
+    print_input_checks(rep["checks"], rep["metrics"], data_check_lines(rep["checks"]))
     if rep.get("unidentifiable"):
         print(f"  warning: {len(rep['unidentifiable'])} parameter combination(s) the data cannot separate; "
               f"see {Path(args.out) / 'fit_report.txt'}")
@@ -685,14 +685,14 @@ def cmd_close_loop(args) -> int:
     print("time and evaluations per stage (fits: identifications, fold refits included):")
     print("\n".join(stage_lines(result.stages)))
     from .closeloop.report import channel_range_line
-    from .data.gaps import gap_lines
+    from .data.coverage import data_check_lines
     print_input_checks(result.checks, {"baseline " + k: v for k, v in result.baseline.items()},
-                       gap_lines(result.checks.get("gaps_filled"))
-                       + [channel_range_line(r) for r in d.get("channel_ranges") or ()])
+                       data_check_lines(result.checks) + [channel_range_line(r) for r in d.get("channel_ranges") or ()])
     print(f"wrote {Path(args.out) / 'report.json'} and report.md ({result.wall_time_s} s)")
     if args.export is not None:
         _print_calibrated(args.export, result.calibrated_note)
     return 0
+
 
 
 def _print_calibrated(out: Path, note: str = "") -> None:

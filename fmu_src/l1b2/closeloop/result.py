@@ -21,6 +21,7 @@ import pandas as pd
 from ..data import measurements as dataio
 from ..data import plots
 from ..data.gaps import gap_lines
+from ..data.plausibility import uneven_step_lines
 from ..jsonio import dumps, sig, strict_json
 from ..predictor.effects import ExtendedPredictor
 from . import residuals as res
@@ -326,6 +327,9 @@ def markdown_report(rep: dict) -> str:
     gaps = gap_lines((rep.get("checks") or {}).get("gaps_filled"))
     if gaps:
         lines += ["Gaps in optional input columns, filled on reading:", ""] + [f"* {g}" for g in gaps] + [""]
+    uneven = uneven_step_lines((rep.get("checks") or {}).get("uneven_time_steps"))
+    if uneven:
+        lines += ["Uneven time steps:", ""] + [f"* {g}" for g in uneven] + [""]
     lines += ["## Diagnosis", "", f"**{d['message']}**", ""]
     if d["significant"]:
         lines += [f"* traced to: {', '.join(d['traced_to'])}",

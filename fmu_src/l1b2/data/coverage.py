@@ -28,9 +28,12 @@ import pandas as pd
 
 from ..errors import DataFormatError
 from .measurements import DIRECTION, FREQUENCY, LOAD, POSITION, RUN, VOLTAGE, Measurements, run_slices
+from .gaps import gap_lines
+from .plausibility import uneven_step_lines, uneven_steps
 
 __all__ = ["RANGE_COLUMNS", "DEFAULT_TOLERANCE", "MIN_TOLERANCE", "data_range", "outside_range",
-           "summarize_outside", "values_outside", "FREQUENCY_REL_SPREAD", "run_frequencies", "frequency_varies", "input_checks", "RIG_SETTINGS",
+           "summarize_outside", "values_outside", "FREQUENCY_REL_SPREAD", "run_frequencies", "frequency_varies", "input_checks",
+           "data_check_lines", "RIG_SETTINGS",
            "check_same_rig"]
 
 #: The prediction inputs whose range is checked (unit in the name); a direction TRAIN never drove is outside.
@@ -143,7 +146,8 @@ def frequency_varies(*data: pd.DataFrame | Measurements | None) -> bool:
 
 def input_checks(train: Measurements, test: Measurements | None) -> dict:
     """The report's record of the data checks: unit findings (allowed or none), the gaps of optional input columns
-    filled on reading (per file and column: ``cells``, ``runs``, ``first_row``, ``first_line``) and TEST runs outside
+    filled on reading (per file and column: ``cells``, ``runs``, ``first_row``, ``first_line``), the uneven time
+    steps within runs (per file, :func:`l1b2.data.plausibility.uneven_steps`, None when even) and TEST runs outside
     TRAIN's range."""
     rng = data_range(train)
     flagged = outside_range(test, rng) if test is not None else []
@@ -154,11 +158,20 @@ def input_checks(train: Measurements, test: Measurements | None) -> dict:
                           "test": list(test.meta.get("unusual_units", [])) if test is not None else []},
         "gaps_filled": {"train": dict(train.meta.get("gaps_filled") or {}),
                         "test": dict(test.meta.get("gaps_filled") or {}) if test is not None else {}},
+        "uneven_time_steps": {"train": uneven_steps(train.df),
+                              "test": uneven_steps(test.df) if test is not None else None},
         "training_range": rng,
         "test_runs_outside_training_range": flagged,
         "extrapolation": summarize_outside(flagged, n_test),
     }
 
+
+
+def data_check_lines(checks: dict) -> list[str]:
+    """The warning lines of a report's ``checks`` (:func:`input_checks`) that need the package to be worded: the
+    gaps filled on reading (:func:`l1b2.data.gaps.gap_lines`) and the uneven time steps
+    (:func:`l1b2.data.plausibility.uneven_step_lines`)."""
+    return gap_lines(checks.get("gaps_filled")) + uneven_step_lines(checks.get("uneven_time_steps"))
 
 #: settings that describe the rig itself: TRAIN and TEST must agree on them (relative difference)
 RIG_SETTINGS: dict[str, float] = {"slider_mass_kg": 1e-6, "encoder_resolution_m": 1e-6, "drive_frequency_Hz": 1e-6}

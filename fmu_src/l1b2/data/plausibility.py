@@ -17,6 +17,12 @@ ultrasonic motor on a pulley rig (docs/data-format.md, the load convention):
 * **clock jumps** (:func:`clock_jump_finding`): within a run (one continuous
   traverse) a time step of more than :data:`CLOCK_JUMP_FACTOR` times the
   run's median step and at least :data:`MIN_CLOCK_JUMP_S`.
+* **uneven time steps** (:func:`uneven_steps`, a note, not a refusal): a
+  DAQ samples on its own clock, so within a run every step of ``time_s`` is
+  the same up to the column's written resolution. Steps that differ from
+  the run's median by more than :data:`UNEVEN_STEP_SHARE` of it come from
+  stamps given on arrival (a USB or network host) or a logger that drops
+  samples; a speed derived over such stamps is off by the same share.
 * **temperature scale** (:func:`temperature_finding`): a stator that never
   comes near room temperature (coolest sample above
   :data:`MAX_COOLEST_TEMPERATURE_C`) is more likely recorded in degF.
@@ -46,6 +52,9 @@ MIN_TRAVERSE_SPEED_M_S = 5e-3
 CLOCK_JUMP_FACTOR = 100.0
 #: ... when it is also at least this long [s]
 MIN_CLOCK_JUMP_S = 1.0
+#: a time step within a run further than this share of the run's median step from it is uneven: a speed derived
+#: over it is off by about that share, which the model's errors of a few percent would show
+UNEVEN_STEP_SHARE = 0.05
 #: the coolest stator temperature of a file above this suggests degF [degC]
 MAX_COOLEST_TEMPERATURE_C = 45.0
 #: t statistic above which the load's effect is taken to have the wrong sign
@@ -193,6 +202,68 @@ def clock_jump_finding(df: pd.DataFrame) -> Finding | None:
                            f"run {_fmt(run[i])}: time_s jumps by {_fmt(float(steps[bad[0]]))} s within the run "
                            f"(its median step is {_fmt(med)} s): a clock jump? (a run is one continuous traverse)")
     return None
+
+
+def uneven_steps(df: pd.DataFrame) -> dict | None:
+    """How uneven the time steps within runs are, or ``None`` when every step is within :data:`UNEVEN_STEP_SHARE`
+    of its run's median step.
+
+    Returns ``{"steps", "uneven", "runs", "first_row", "smallest_s", "largest_s", "median_s"}``: the number of
+    steps within runs, how many of them are uneven, in how many runs, the 1-based data row after the first uneven
+    step, and the smallest, largest and median (over runs) of the runs' median steps [s]. A clock jump
+    (:func:`clock_jump_finding`) counts as an uneven step too.
+    """
+    t = df[TIME].to_numpy(dtype=float)
+    run = df[RUN].to_numpy()
+    if t.size < 3:
+        return None
+    dt = np.diff(t)
+    change = np.flatnonzero(run[1:] != run[:-1]) + 1
+    n = uneven = runs = 0
+    first, lo, hi, meds = None, math.inf, -math.inf, []
+    for a, b in zip(np.r_[0, change], np.r_[change, t.size]):
+        steps = dt[a:b - 1]
+        if steps.size < 2:
+            continue
+        med = float(np.median(steps))
+        meds.append(med)
+        bad = np.flatnonzero(np.abs(steps - med) > UNEVEN_STEP_SHARE * med)
+        n += steps.size
+        lo, hi = min(lo, float(steps.min())), max(hi, float(steps.max()))
+        if bad.size:
+            uneven += int(bad.size)
+            runs += 1
+            first = int(a + bad[0] + 2) if first is None else first
+    if not uneven:
+        return None
+    return {"steps": int(n), "uneven": int(uneven), "runs": int(runs), "first_row": first, "smallest_s": lo,
+            "largest_s": hi, "median_s": float(np.median(meds))}
+
+
+def step_hint(t_s: np.ndarray, i: int) -> str:
+    """A hint when the time steps beside sample ``i`` of a run (times ``t_s``) differ from the run's median step by
+    more than :data:`UNEVEN_STEP_SHARE`: a speed derived over uneven stamps."""
+    steps = np.diff(t_s)
+    med = float(np.median(steps))
+    near = steps[max(i - 2, 0):i + 2]
+    if not near.size or np.all(np.abs(near - med) <= UNEVEN_STEP_SHARE * med):
+        return ""
+    shown = ", ".join(f"{x * 1e3:.3g}" for x in near)
+    return (f" The time steps beside it are {shown} ms where the run's median step is {med * 1e3:.3g} ms: a speed "
+            "derived over uneven time stamps (stamped on arrival, not by the DAQ's clock) is off there")
+
+def uneven_step_lines(records: dict) -> list[str]:
+    """One line per file part of a report's ``checks["uneven_time_steps"]`` (``{"train": record or None, "test":
+    ...}``, records of :func:`uneven_steps`)."""
+    out = []
+    for part, r in (records or {}).items():
+        if r:
+            out.append(f"{part.upper()} time_s: {r['uneven']} of {r['steps']} steps within runs ({r['runs']} run(s), "
+                       f"first at row {r['first_row']}) differ from their run's median step by more than "
+                       f"{UNEVEN_STEP_SHARE:.0%} (steps {_fmt(r['smallest_s'] * 1e3)} to {_fmt(r['largest_s'] * 1e3)}"
+                       f" ms, median {_fmt(r['median_s'] * 1e3)} ms): stamps given on arrival rather than by the "
+                       "DAQ's clock? A speed derived over them is off by as much")
+    return out
 
 
 def temperature_finding(df: pd.DataFrame) -> Finding | None:

@@ -77,6 +77,7 @@ from .columns import (
     PlausibleRange,
 )
 from .gaps import GAP_COLUMNS, fill_gaps, gap_record
+from .plausibility import step_hint
 
 __all__ = [
     "DataProblem", "validate_frame", "validate_frame_filled", "check_setting", "run_slices", "format_value",
@@ -643,6 +644,7 @@ MAX_SPEED_DEVIATION: float = 0.5
 def _speed_spike_problem(df: pd.DataFrame, judged: list[tuple[Any, int, float]]) -> DataProblem | None:
     """An isolated speed sample far from its neighbours (a glitch), in a run whose slope is consistent."""
     v = df[SPEED].to_numpy(dtype=float)
+    t = df[TIME].to_numpy(dtype=float)
     starts = {row for _, row, _ in judged}
     for rid, sl in run_slices(df[RUN]):
         seg = v[sl]
@@ -656,8 +658,9 @@ def _speed_spike_problem(df: pd.DataFrame, judged: list[tuple[Any, int, float]])
             return DataProblem(sl.start + i, _ORDER[SPEED], SPEED,
                                f"run {format_value(rid)}: speed_m_s = {seg[i]:.4g} m/s where its neighbours have "
                                f"{med[i]:.4g} m/s (more than {MAX_SPEED_DEVIATION:.0%} of the run's peak speed "
-                               "off): a glitch in the speed column?")
+                               f"off): a glitch in the speed column?{step_hint(t[sl], i)}")
     return None
+
 
 
 def _slope_hint(b: float) -> str:

@@ -22,7 +22,8 @@ covariance, ``(J_q^T P J_q)^-1`` (the Schur complement), inflated by the
 fit's median AR(1) factor like theta's. Beside them, ``f_b0``'s interval
 clustered by drive-frequency level (:func:`clustered_interval`: CR2 with
 Bell-McCaffrey degrees of freedom, on log f_b0; not available with fewer than
-:data:`CLUSTERED_MIN_LEVELS` levels or :data:`CLUSTERED_MIN_DOF`). The former estimation (a Nelder-Mead
+:data:`CLUSTERED_MIN_LEVELS` levels or :data:`CLUSTERED_MIN_DOF`, and "not identified" when it contains
+the whole range the fit searches). The former estimation (a Nelder-Mead
 search of the profile likelihood, standard errors from its curvature) is
 kept as :func:`fit_frequency_response_profile`, the benchmark's reference
 (``bench/bench_frequency.py``; measured figures in
@@ -471,8 +472,10 @@ def response_stderr(lin: "ResponseLinearisation", resp: FrequencyResponse) -> di
 
 
 #: the fewest drive-frequency levels, and the fewest Bell-McCaffrey degrees of freedom, for which
-#: :func:`clustered_record` states the clustered interval of ``f_b0`` as a number
-CLUSTERED_MIN_LEVELS = 3
+#: :func:`clustered_record` states the clustered interval of ``f_b0`` as a number. The gain's shape over the
+#: levels has three parameters (B''s scale, ``f_b0``, ``zeta_b``) that pass through three levels' gains exactly,
+#: so a level's shared error is measured only from a fourth level on.
+CLUSTERED_MIN_LEVELS = 4
 CLUSTERED_MIN_DOF = 1.0
 #: what :func:`clustered_record`'s interval is
 CLUSTERED_KIND = ("CR2 clustered by drive-frequency level, t on Bell-McCaffrey dof, delta method on log f_b0: "
@@ -488,7 +491,7 @@ def log_interval(value, se, t):
 
 
 def clustered_record(value_Hz: float, levels: int, stderr_Hz: float | None = None, dof: float | None = None,
-                     reason: str | None = None) -> dict:
+                     reason: str | None = None, search_Hz: tuple[float, float] | None = None) -> dict:
     """The record of ``f_b0``'s interval clustered by drive-frequency level (:data:`CLUSTERED_KIND`).
 
     ``value_Hz``: the estimate; ``levels``: the number of drive-frequency levels G; ``stderr_Hz``: the CR2
@@ -497,16 +500,19 @@ def clustered_record(value_Hz: float, levels: int, stderr_Hz: float | None = Non
     G >= :data:`CLUSTERED_MIN_LEVELS`, nu >= :data:`CLUSTERED_MIN_DOF` and finite positive se and estimate:
     then ``{"available": True, "t", "stderr_log", "ci95_Hz"}`` with ``t = t_{0.975, nu}``,
     ``stderr_log = se / f_b0`` and ``ci95_Hz`` of :func:`log_interval`. Otherwise ``"available": False`` and
-    ``"reason"`` says why (also when the ends overflow the floats). Every record has ``kind``, ``parameter``,
-    ``levels``, ``dof`` and ``stderr_Hz`` (None when not computed); all values are JSON-safe.
+    ``"reason"`` says why (also when the ends overflow the floats). ``search_Hz``: the range ``(lo, hi)`` the
+    fit searches ``f_b0`` in; an interval that reaches beyond both of its ends says no more than the search
+    does, and is ``"available": False`` with the reason "not identified" and the ends in it. Every record has
+    ``kind``, ``parameter``, ``levels``, ``dof`` and ``stderr_Hz`` (None when not computed); all values are
+    JSON-safe.
     """
     fin = lambda x: None if x is None or not np.isfinite(x) else float(x)   # noqa: E731
     rec: dict[str, Any] = {"kind": CLUSTERED_KIND, "parameter": "f_b0_Hz", "levels": int(levels),
                            "dof": fin(dof), "stderr_Hz": fin(stderr_Hz)}
     if reason is None and levels < CLUSTERED_MIN_LEVELS:
         reason = (f"{levels} drive-frequency level{'s' if levels != 1 else ''}: at least {CLUSTERED_MIN_LEVELS} are "
-                  "needed; the gain's scale and resonance take the contrast between two levels whole, so no "
-                  "shared error of a level is left to measure")
+                  "needed; the gain's scale, resonance and damping pass through three levels' gains exactly, so "
+                  "no shared error of a level is left to measure")
     if reason is None and not (rec["dof"] is not None and rec["stderr_Hz"] is not None and rec["stderr_Hz"] > 0
                                and np.isfinite(value_Hz) and value_Hz > 0):
         reason = "no finite clustered standard error"
@@ -521,6 +527,10 @@ def clustered_record(value_Hz: float, levels: int, stderr_Hz: float | None = Non
     if not (np.isfinite(hi) and lo > 0):
         return {**rec, "available": False, "t": t, "reason": "the interval's ends overflow: t se / f_b0 = "
                 f"{t * rec['stderr_Hz'] / value_Hz:.3g}, not identified"}
+    if search_Hz is not None and lo <= search_Hz[0] and hi >= search_Hz[1]:
+        return {**rec, "available": False, "t": t, "reason": f"not identified: the 95 % interval [{lo:.1f}, "
+                f"{hi:.1f}] Hz contains the whole range [{search_Hz[0]:.1f}, {search_Hz[1]:.1f}] Hz the fit "
+                "searches f_b0 in"}
     return {**rec, "available": True, "t": t, "stderr_log": rec["stderr_Hz"] / float(value_Hz),
             "ci95_Hz": [float(lo), float(hi)]}
 
@@ -532,7 +542,8 @@ def clustered_interval(lin: "ResponseLinearisation", data, at_bound=()) -> dict:
     ``lin.result.runs``); the standard error ``sqrt(sum_g u_g^2)`` of the CR2 rows
     (:meth:`ResponseLinearisation.cluster_influence` with ``cr2=True``, column ``f_b0_Hz``) and its dof
     (:meth:`ResponseLinearisation.bell_mccaffrey_dof`), computed with two levels or more. ``at_bound``:
-    :func:`bounds_hit`'s list; ``f_b0`` at a bound has no interval.
+    :func:`bounds_hit`'s list; ``f_b0`` at a bound has no interval. The search range passed on is
+    :data:`F_B0_REL_RANGE` times ``lin.f_ref``.
     """
     df = data.df if isinstance(data, Measurements) else data
     f_b0 = float(lin.q_fit[0] * lin.f_ref)
@@ -543,7 +554,8 @@ def clustered_interval(lin: "ResponseLinearisation", data, at_bound=()) -> dict:
     if G < 2:
         return clustered_record(f_b0, G)
     u = lin.cluster_influence(codes, cr2=True)[:, 0]
-    return clustered_record(f_b0, G, float(np.sqrt(u @ u)), lin.bell_mccaffrey_dof(codes, 0))
+    search = (F_B0_REL_RANGE[0] * lin.f_ref, F_B0_REL_RANGE[1] * lin.f_ref)
+    return clustered_record(f_b0, G, float(np.sqrt(u @ u)), lin.bell_mccaffrey_dof(codes, 0), search_Hz=search)
 
 
 def _prepared(data, slider_mass_kg, mask) -> tuple:
