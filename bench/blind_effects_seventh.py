@@ -16,6 +16,8 @@ speed noise, 2 % run-to-run contact scatter). Each kind draws from one random st
   force, ``f_l0 + K ((F / 50 N)^(1/3) - 1)`` (K drawn in 1400-1800 Hz: -0.9..+0.8 % of L1 over the range). B2 bends
   in the plate's plane, which the pads on its thickness faces barely hold: it is left as it is. The washer reads
   the force with 0.2 N of noise per sample (0.01 N resolution).
+* ``guide_rest_idle`` -- a control of ``guide_rest_aging``: its seed's pauses (the same draw), a guide that does not
+  age (``B = 0``). Nothing is injected, so nothing may be traced to the rests (``WANT`` empty).
 * ``guide_rest_aging`` -- no channel; a state that changes between runs only. The operator's pauses between runs
   are not the plan's 1 s but spread log-uniformly over 0.5-30 s (saving files, a look at the scope); the session
   starts after 60 s at rest. At rest, the crossed-roller guide's rollers squeeze the grease film out of their line
@@ -56,15 +58,17 @@ import blind_effects as be  # noqa: E402  (adds fmu_src to the path)
 from l1b2.data import measurements as dataio  # noqa: E402
 from l1b2.rig.experiment import scattered_motor  # noqa: E402
 
-KINDS = ("holder_clamp_force", "guide_rest_aging", "usb_timestamps", "acoustic_echo_decoy")
+KINDS = ("holder_clamp_force", "guide_rest_aging", "usb_timestamps", "acoustic_echo_decoy", "guide_rest_idle")
 #: the column each kind acts through (the decoy's: the column that must NOT be traced); None: none logged
 CHANNEL = {"holder_clamp_force": "holder_force_N", "guide_rest_aging": None, "usb_timestamps": "time_s",
-           "acoustic_echo_decoy": "mic_level_dB"}
+           "acoustic_echo_decoy": "mic_level_dB", "guide_rest_idle": None}
 #: the regressors accepted as the effect's when traced among the first two (fixed before any loop ran): the
 #: channel's own name, a regressor of the session clock for the rests, the time or speed chain for the stamps;
 #: the decoy has none (its column must not be traced at all)
 WANT = {"holder_clamp_force": ("holder_force_N",), "guide_rest_aging": ("time", "pause"),
-        "usb_timestamps": ("time", "speed"), "acoustic_echo_decoy": ()}
+        "usb_timestamps": ("time", "speed"), "acoustic_echo_decoy": (), "guide_rest_idle": ()}
+#: the kinds whose operator pauses irregularly between runs
+RESTS = ("guide_rest_aging", "guide_rest_idle")
 F_REF_N = 50.0
 REST_REF_S = 1.0
 FIRST_REST_S = 60.0
@@ -75,6 +79,8 @@ METER_TAU_S = 0.125
 
 def draw(kind: str, seed: int, n_runs: int) -> dict:
     """The kind's parameters and per-run values (its own random stream of ``seed``)."""
+    if kind == "guide_rest_idle":   # the rests' own pauses, a guide that does not age
+        return {**draw("guide_rest_aging", seed, n_runs), "B": 0.0}
     rng = np.random.default_rng([seed, 101, KINDS.index(kind) if kind in KINDS else 99])
     if kind == "holder_clamp_force":
         return {"K_Hz": float(rng.uniform(1400.0, 1800.0)), "F_N": rng.uniform(15.0, 90.0, n_runs)}
@@ -125,13 +131,13 @@ def meter_level_dB(t_s, v_m_s, L1_dB: float, Lbg_dB: float, tau_s: float = METER
 def experiment(kind: str, seed: int):
     """The 72-run experiment of one kind and its truth."""
     plan, nominal, conds, factors, p, every = be.setting(kind, seed, draw)
-    frames, per_run, t_next, u_at = [], [], FIRST_REST_S if kind == "guide_rest_aging" else 0.0, 0
+    frames, per_run, t_next, u_at = [], [], FIRST_REST_S if kind in RESTS else 0.0, 0
     rest = FIRST_REST_S
     for k, (V, L, d) in enumerate(conds):
         mp = scattered_motor(nominal, factors[k])
         if kind == "holder_clamp_force":
             mp = mp.replace(stator__f_l0_Hz=float(l1_frequency_Hz(mp.stator.f_l0_Hz, p["F_N"][k], p["K_Hz"])))
-        elif kind == "guide_rest_aging":
+        elif kind in RESTS:
             g = float(rest_factor(rest, p["B"], p["theta_s"]))
             mp = mp.replace(slider__mu_sd=mp.slider.mu_sd * g, slider__mu_ss=mp.slider.mu_ss * g)
         r = be.traverse(mp, nominal, plan, V, L, d)
@@ -152,7 +158,7 @@ def experiment(kind: str, seed: int):
         out = be.daq_frame(plan, t_next, k, t_log, s, V, L, d, **extra)
         frames.append(out)
         per_run.append({"run": k + 1, "f_l0_Hz": mp.stator.f_l0_Hz, "mu_sd": mp.slider.mu_sd, "rest_s": rest})
-        rest = float(p["pause_s"][k]) if kind == "guide_rest_aging" else plan.pause_s
+        rest = float(p["pause_s"][k]) if kind in RESTS else plan.pause_s
         t_next = float(out[dataio.TIME].iloc[-1]) + rest
     if kind == "usb_timestamps":
         p = {k: v for k, v in p.items() if k != "u"}

@@ -63,3 +63,11 @@ def test_draws_lie_in_their_ranges(audit):
         assert 10 <= p["N"] <= 25 and 0.3e-3 <= p["L_max_s"] <= 0.6e-3
         p = audit.draw("acoustic_echo_decoy", seed, 72)
         assert 55 <= p["L1_dB"] <= 62 and 38 <= p["Lbg_dB"] <= 42
+
+
+def test_the_idle_control_has_the_rests_pauses_and_a_guide_that_does_not_age(audit):
+    for seed in (1, 2, 3):
+        aging, idle = audit.draw("guide_rest_aging", seed, 72), audit.draw("guide_rest_idle", seed, 72)
+        np.testing.assert_array_equal(idle["pause_s"], aging["pause_s"])
+        assert idle["B"] == 0.0 and idle["theta_s"] == aging["theta_s"]
+        assert audit.rest_factor(idle["pause_s"], idle["B"], idle["theta_s"]) == pytest.approx(np.ones(72), abs=0)

@@ -97,6 +97,7 @@ from .baselines import choose_baseline, identify_families, retag_structural
 from .crosscheck import PureSlipCheck, identified_pick, score_of, withdrawn_note
 from .events import session, with_event_clocks
 from .lags import with_lagged_channels
+from .pauses import with_pause_channel
 from .evidence import channels_considered, order_traced, with_auxiliary, with_position_share
 from .guard import checked_fit
 from .intervals import added_parameters, identification, train_levels
@@ -157,6 +158,7 @@ class CloseLoop(EstimatorSettings):
         dtr, dte, aux_rec = with_usable_channels(dtr, dte, responses)   # flags, labels, gaps: numeric or listed
         dtr, dte, event_rec = with_event_clocks(dtr, dte, self.response_columns, sess)
         dtr, dte, lag_rec = with_lagged_channels(dtr, dte, self.response_columns, sess)
+        dtr, dte, pause_rec = with_pause_channel(dtr, dte, sess)
         mask_tr = np.array(train.mask)
         folds = stratified_folds(dtr, self.refit_folds, self.seed)   # TRAIN's run folds, one split for the fit
 
@@ -235,6 +237,7 @@ class CloseLoop(EstimatorSettings):
         diagnosis = {**self._diagnosis(it, first, analysis, ext_params, chain_rec), "auxiliary_columns": aux_rec,
                      "event_clocks": event_rec,
                      "lagged_channels": lag_rec,
+                     "pause_channel": pause_rec,
                      "unseen_levels": runlevel.unseen_test_levels(it.effects.candidates, dte),
                      "channel_ranges": runlevel.channel_ranges(it.effects.candidates, dtr, dte)}
         diagnosis["channels_considered"] = with_auxiliary(diagnosis["channels_considered"], aux_rec)

@@ -125,6 +125,8 @@ class Diagnosis(_Record):
     deviations (:meth:`l1b2.closeloop.runlevel.RunLevelAnalysis.to_dict`; None when not estimated);
     ``event_clocks`` the event clocks derived from logged step channels (:mod:`l1b2.closeloop.events`);
     ``lagged_channels`` the low-passes derived from logged run settings (:mod:`l1b2.closeloop.lags`);
+    ``pause_channel`` the pause before each run and whether its logarithm was derived as a channel
+    (:mod:`l1b2.closeloop.pauses`);
     ``unseen_levels`` the TEST values of an added categorical setting that TRAIN never had
     (:func:`l1b2.closeloop.runlevel.unseen_test_levels`); ``channel_ranges`` per logged channel an added effect
     reads, the share of TEST's samples and runs outside TRAIN's range of it
@@ -166,6 +168,7 @@ class Diagnosis(_Record):
     named_checks: list = field(default_factory=list)
     event_clocks: list = field(default_factory=list)
     lagged_channels: list = field(default_factory=list)
+    pause_channel: dict = field(default_factory=dict)
     unseen_levels: dict = field(default_factory=dict)
     channel_ranges: list = field(default_factory=list)
     physical_range: list = field(default_factory=list)
