@@ -1,6 +1,7 @@
 """The consequence test of logged columns (:mod:`l1b2.closeloop.responses`) on synthetic columns written out here:
-a response of the speed, a per-run cause, a drifting cause, a supply that sags with the load and the drive, a
-temperature the drive heats, a cause along the stroke; the low-pass and the sign test against formulas."""
+a response of the speed, a per-run cause, a drifting cause, a supply that sags with the load and the drive (one with
+a transient at the drive's switching on), a temperature the drive heats, a cause along the stroke; the low-pass,
+the drive's course and the sign test against formulas."""
 
 import math
 
@@ -13,8 +14,8 @@ from l1b2.cli import build_parser
 from l1b2.closeloop.evidence import with_response_test
 from l1b2.closeloop.report import response_test_lines
 from l1b2.closeloop.settings import response_setting
-from l1b2.closeloop.responses import (SHARE_MIN, _sign_test_p, classed_responses, response_statistic,
-                                      response_tests, speed_history, with_applied)
+from l1b2.closeloop.responses import (SHARE_MIN, _sign_test_p, classed_responses, drive_course,
+                                      response_statistic, response_tests, speed_history, with_applied)
 from l1b2.errors import L1B2Error
 
 DT = 1e-3
@@ -57,7 +58,7 @@ def _lowpass_from_rest(x, t_run, tau):
 
 
 def _with_columns():
-    """The session with its logged columns: one response and five causes."""
+    """The session with its logged columns: one response and six causes."""
     df, rng = _session()
     n = len(df)
     v2 = _lowpass_from_rest(df["true_speed"].to_numpy() ** 2 / 0.04, df["t_run"].to_numpy(), 0.125)
@@ -72,6 +73,9 @@ def _with_columns():
         # a supply that sags with the load's current and the drive switched on at the run's start (2 ms)
         "supply_V": (24 - 0.8 * df["load_kg"] - 0.02 * df["voltage_V"] / 200
                      - 0.1 * (1 - np.exp(-(df["t_run"] + DT) / 2e-3)) + rng.normal(0, 0.01, n)),
+        # a supply that sags by a share of the drive amplitude within 5 ms of the drive switching on, read with
+        # 1 mV of noise: a transient at the run's start far above its noise, ahead of the slider's 15 ms rise
+        "bus_V": 48 - 0.1 * df["voltage_V"] / 200 * (1 - np.exp(-(df["t_run"] + DT) / 5e-3)) + rng.normal(0, 1e-3, n),
         # a heat sink the drive heats while it runs (time constant 3 s, longer than a run)
         "sink_C": 30 + 0.8 * (1 - np.exp(-df["t_run"] / 3.0)) + 0.01 * df["time_s"] + rng.normal(0, 0.02, n),
         # a preload along the stroke, a cause that is a function of the position
@@ -97,6 +101,23 @@ def test_causes_stay_candidates(session, name):
     (rec,) = [r for r in response_tests(session) if r["channel"] == name]
     assert not rec["response"]
     assert rec["share"] < SHARE_MIN / 2
+
+
+def test_a_transient_of_the_drive_ahead_of_the_speed_stays_a_candidate(session):
+    (rec,) = [r for r in response_tests(session) if r["channel"] == "bus_V"]
+    # the speed's history explains most of it (its course is tied to the run's start as the speed's is) ...
+    assert rec["share"] >= SHARE_MIN and rec["p_value"] < 0.01
+    # ... but the drive's own course from the run's start explains more: the column moves ahead of the speed
+    assert rec["drive_share"] > rec["share"] and rec["drive_tau_s"] is not None and not rec["response"]
+    (mic,) = [r for r in response_tests(session) if r["channel"] == "mic_dB"]
+    assert mic["share"] > mic["drive_share"] > 0
+
+
+def test_drive_course_is_the_first_order_rise_from_each_runs_first_sample():
+    t = np.r_[np.arange(5), 10 + np.arange(3)] * DT
+    run = np.r_[np.zeros(5), np.ones(3)]
+    expected = np.r_[1 - np.exp(-(np.arange(5) + 1) * DT / 0.01), 1 - np.exp(-(np.arange(3) + 1) * DT / 0.01)]
+    assert np.allclose(drive_course(t, run, 0.01), expected)
 
 
 def test_a_column_exactly_a_polynomial_of_the_speed_is_explained_whole_and_noise_not_at_all(session):
@@ -167,5 +188,7 @@ def test_report_lines_name_each_tested_column_and_who_decided():
     (line,) = response_test_lines([rec])[3:]
     assert line == ("- `mic`: share 96% (sensor lag 0.03 s), above half in 56 of 56 runs (p 1.4e-17): a response; "
                     "not a candidate")
+    (line,) = response_test_lines([{**rec, "drive_share": 0.88}])[3:]
+    assert "(p 1.4e-17), the drive's course from the run's start 88%: a response" in line
     (line,) = response_test_lines([{**rec, "applied": False, "decided_by": "setting"}])[3:]
     assert line.endswith("a response (the response_columns setting decides); a candidate")

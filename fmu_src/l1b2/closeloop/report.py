@@ -229,9 +229,12 @@ def response_test_lines(tests) -> list:
         return []
     lines = ["", "Consequence test of the logged columns that vary within runs (the share of a column's within-run "
              "variation, beyond each run's level and trend and a function of the position, that a smooth function "
-             "of the speed explains; a response: at least half, in more runs than chance):", ""]
+             "of the speed explains; a response: at least half, in more runs than chance, and more than the drive's own "
+             "course from the run's start explains):", ""]
     return lines + [f"- `{r['channel']}`: share {r['share']:.0%} (sensor lag {r['tau_s']} s), above half in "
-                    f"{r['runs_above']} of {r['n_runs']} runs (p {r['p_value']:.2g}): "
+                    f"{r['runs_above']} of {r['n_runs']} runs (p {r['p_value']:.2g})"
+                    + (f", the drive's course from the run's start {r['drive_share']:.0%}" if r.get("drive_share")
+                       else "") + ": "
                     f"{'a response' if r['response'] else 'not a response'}"
                     f"{'' if r['decided_by'] == 'test' else ' (the response_columns setting decides)'}; "
                     f"{'not a candidate' if r['applied'] else 'a candidate'}" for r in tests]

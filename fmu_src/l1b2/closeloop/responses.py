@@ -17,14 +17,25 @@ time weighting), with ``tau`` on the grid :data:`TAUS_S`, and the smooth functio
 (:data:`DEGREE`) with one set of coefficients for every run (one law of the sensor).
 
 The statistic is the partial ``R^2`` of that polynomial, the share of the column's residual within-run variance it
-explains (the best ``tau``), and the decision rule is an effect size and a count of runs, neither growing with the
-number of samples:
+explains (the best ``tau``). What tells a response from a column that follows the drive (a supply that sags while
+the amplifier draws current, a stator's vibration, a heating) is the acceleration phase: the drive switches on at
+the run's start and the slider reaches its speed only after its mechanical rise, so a consequence of the drive
+moves ahead of the speed and a consequence of the motion with it or behind it. The drive's course is a fixed time
+course from the run's start, ``e_tau(t) = 1 - exp(-(t - t_0 + dt) / tau)`` (``t_0`` the run's first sample, the
+same grid of ``tau > 0``), either as a cubic of ``e_tau`` shared by the runs or as ``e_tau`` with an amplitude of
+each run's own (the drive's settings differ between runs); its ``drive_share`` is the best of these.
+
+The decision rule is an effect size, a comparison and a count of runs, none growing with the number of samples:
 
 * ``share >= SHARE_MIN`` (1/2): more of the column's within-run variation is a function of the motion than not. A
   cause's within-run course is its own (its noise, its dynamics), and the speed's within-run course is dominated by
   the start transient and the stop, which the drive and the end of the stroke make and no logged cause does;
 * the run's own share (the same fitted law) exceeds 1/2 in more runs than chance would give: a one-sided sign test
-  over TRAIN's runs, ``P(X >= k)`` for ``X ~ Binomial(n_runs, 1/2)``, below :data:`P_MAX`.
+  over TRAIN's runs, ``P(X >= k)`` for ``X ~ Binomial(n_runs, 1/2)``, below :data:`P_MAX`;
+* ``share > drive_share``: the speed explains the column better than any time course of the drive does (with the
+  same three parameters, or with one per run), so the column follows the slider's own rise, not the switching on.
+  A column whose own lag from the drive equals the slider's mechanical rise has the same course as the speed and
+  cannot be told from a response by this test.
 
 Columns that the model reads as inputs (the data format's drive frequency and temperature) are causes by the
 model's physics and are not tested; nor are the required columns and the speed. A column constant within every run
@@ -43,7 +54,7 @@ from ..data import measurements as dataio
 from .auxiliary import NOT_CANDIDATES, varies_within_runs
 
 __all__ = ["TAUS_S", "DEGREE", "SHARE_MIN", "P_MAX", "POSITION_DEGREE", "MODEL_INPUTS", "speed_history",
-           "response_statistic", "response_tests", "classed_responses"]
+           "drive_course", "response_statistic", "response_tests", "classed_responses"]
 
 #: the sensor time constants [s] searched: none (the instantaneous speed), then 10 ms to 0.3 s (a meter's fast
 #: time weighting is 125 ms; longer than the longest runs' acceleration, no transient is left to follow)
@@ -101,6 +112,42 @@ def _nuisance_residual(X: np.ndarray, run: np.ndarray, t: np.ndarray, P: np.ndar
     return R - Q @ (Q.T @ R)
 
 
+def drive_course(time_s, run, tau_s: float) -> np.ndarray:
+    """``1 - exp(-(t - t_0 + dt) / tau)`` per run [1]: the course of a first-order consequence of the drive switched
+    on at the run's first sample ``t_0`` (``dt`` the run's median sample interval: the first sample one step in)."""
+    t = np.asarray(time_s, float)
+    b = _run_bounds(np.asarray(run))
+    out = np.empty_like(t)
+    for i0, i1 in zip(b[:-1], b[1:]):
+        dt = float(np.median(np.diff(t[i0:i1]))) if i1 - i0 > 1 else 0.0
+        out[i0:i1] = 1.0 - np.exp(-(t[i0:i1] - t[i0] + dt) / tau_s)
+    return out
+
+
+def _share(X: np.ndarray, cr: np.ndarray, ss_tot: float) -> tuple[float, np.ndarray]:
+    """The share of ``cr``'s sum of squares that the least-squares fit on ``X`` explains, and the fit's residual."""
+    beta, *_ = np.linalg.lstsq(X, cr, rcond=None)
+    e = cr - X @ beta
+    return 1.0 - float(e @ e) / ss_tot, e
+
+
+def _drive_share(cr, ss_tot, run, t, P) -> tuple[float, float | None]:
+    """The best share of the drive's courses (:func:`drive_course`, a shared cubic or one amplitude per run) over
+    the ``tau > 0`` of :data:`TAUS_S`, and its ``tau``."""
+    b = _run_bounds(run)
+    best = (0.0, None)
+    for tau in TAUS_S[1:]:
+        e = drive_course(t, run, tau)
+        per_run = np.zeros((len(e), len(b) - 1))
+        for j, (i0, i1) in enumerate(zip(b[:-1], b[1:])):
+            per_run[i0:i1, j] = e[i0:i1]
+        for basis in (np.vander(e, DEGREE + 1, increasing=True)[:, 1:], per_run):
+            share, _ = _share(_nuisance_residual(basis, run, t, P), cr, ss_tot)
+            if share > best[0]:
+                best = (share, tau)
+    return best
+
+
 def _sign_test_p(k: int, n: int) -> float:
     """``P(X >= k)`` for ``X ~ Binomial(n, 1/2)``."""
     return float(sum(math.comb(n, j) for j in range(k, n + 1)) / 2.0 ** n) if n else 1.0
@@ -108,9 +155,11 @@ def _sign_test_p(k: int, n: int) -> float:
 
 def response_statistic(column, speed_m_s, time_s, position_m, run) -> dict:
     """The test of one column (arrays over the same samples, runs in consecutive blocks): ``{"share", "tau_s",
-    "runs_above", "n_runs", "p_value", "response"}``; ``share`` the partial R^2 of the module docstring at the best
-    ``tau_s``, ``runs_above`` the runs whose own share (same fitted law) exceeds :data:`SHARE_MIN`, ``p_value`` the
-    sign test's, ``response`` the rule (``share >= SHARE_MIN`` and ``p_value < P_MAX``)."""
+    "runs_above", "n_runs", "p_value", "drive_share", "drive_tau_s", "response"}``; ``share`` the partial R^2 of the
+    module docstring at the best ``tau_s``, ``runs_above`` the runs whose own share (same fitted law) exceeds
+    :data:`SHARE_MIN`, ``p_value`` the sign test's, ``drive_share`` the drive's best share (computed only when the
+    first two conditions hold; 0 otherwise), ``response`` the rule (``share >= SHARE_MIN``, ``p_value < P_MAX`` and
+    ``share > drive_share``)."""
     c = np.asarray(column, float)
     run = np.asarray(run)
     t = np.asarray(time_s, float)
@@ -121,23 +170,22 @@ def response_statistic(column, speed_m_s, time_s, position_m, run) -> dict:
     b = _run_bounds(run)
     n_runs = len(b) - 1
     ss_tot = float(cr @ cr)
-    best = {"share": 0.0, "tau_s": None, "runs_above": 0, "n_runs": n_runs, "p_value": 1.0, "response": False}
+    best = {"share": 0.0, "tau_s": None, "runs_above": 0, "n_runs": n_runs, "p_value": 1.0, "drive_share": 0.0,
+            "drive_tau_s": None, "response": False}
     if not ss_tot > 1e-12 * max(float(c @ c), 1e-300):
         return best
     vmax = float(np.max(np.abs(speed_m_s))) or 1.0
     for tau in TAUS_S:
         u = speed_history(speed_m_s, t, run, tau) / vmax
-        X = _nuisance_residual(np.vander(u, DEGREE + 1, increasing=True)[:, 1:], run, t, P)
-        beta, *_ = np.linalg.lstsq(X, cr, rcond=None)
-        e = cr - X @ beta
-        share = 1.0 - float(e @ e) / ss_tot
+        share, e = _share(_nuisance_residual(np.vander(u, DEGREE + 1, increasing=True)[:, 1:], run, t, P), cr, ss_tot)
         if share > best["share"]:
             per = [1.0 - float(e[i0:i1] @ e[i0:i1]) / float(cr[i0:i1] @ cr[i0:i1])
                    for i0, i1 in zip(b[:-1], b[1:]) if float(cr[i0:i1] @ cr[i0:i1]) > 0]
             k = int(np.sum(np.array(per) > SHARE_MIN))
-            best = {"share": share, "tau_s": tau, "runs_above": k, "n_runs": n_runs,
-                    "p_value": _sign_test_p(k, n_runs)}
-    best["response"] = bool(best["share"] >= SHARE_MIN and best["p_value"] < P_MAX)
+            best.update(share=share, tau_s=tau, runs_above=k, p_value=_sign_test_p(k, n_runs))
+    if best["share"] >= SHARE_MIN and best["p_value"] < P_MAX:
+        best["drive_share"], best["drive_tau_s"] = _drive_share(cr, ss_tot, run, t, P)
+        best["response"] = bool(best["share"] > best["drive_share"])
     return best
 
 
