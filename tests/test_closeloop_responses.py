@@ -14,7 +14,8 @@ from l1b2.cli import build_parser
 from l1b2.closeloop.evidence import with_response_test
 from l1b2.closeloop.report import response_test_lines
 from l1b2.closeloop.settings import response_setting
-from l1b2.closeloop.responses import (SHARE_MIN, _sign_test_p, classed_responses, drive_course,
+from l1b2.closeloop.responses import (SHARE_MIN, _nuisance_residual, _per_run_share, _sign_test_p,
+                                      classed_responses, drive_course,
                                       response_statistic, response_tests, speed_history, with_applied)
 from l1b2.errors import L1B2Error
 
@@ -118,6 +119,27 @@ def test_drive_course_is_the_first_order_rise_from_each_runs_first_sample():
     run = np.r_[np.zeros(5), np.ones(3)]
     expected = np.r_[1 - np.exp(-(np.arange(5) + 1) * DT / 0.01), 1 - np.exp(-(np.arange(3) + 1) * DT / 0.01)]
     assert np.allclose(drive_course(t, run, 0.01), expected)
+
+
+def test_the_per_run_amplitude_fit_equals_the_dense_least_squares():
+    rng = np.random.default_rng(3)
+    run = np.repeat(np.arange(6), [30, 41, 25, 50, 33, 27])
+    t = np.arange(len(run)) * DT
+    P = rng.normal(size=(len(run), 3))
+    x = rng.normal(size=len(run))
+    c = rng.normal(size=len(run)) + 2 * x + P @ [1.0, -0.5, 0.2]
+    zero = np.zeros((len(run), 0))
+    cr = _nuisance_residual(c[:, None], run, t, P)[:, 0]
+    b = np.r_[0, np.flatnonzero(np.diff(run)) + 1, len(run)]
+    dense = np.zeros((len(run), 6))
+    for j in range(6):
+        dense[run == j, j] = x[run == j]
+    X = _nuisance_residual(dense, run, t, P)
+    e = cr - X @ np.linalg.lstsq(X, cr, rcond=None)[0]
+    expected = 1 - (e @ e) / (cr @ cr)
+    got = _per_run_share(_nuisance_residual(x[:, None], run, t, zero)[:, 0], cr,
+                         _nuisance_residual(P, run, t, zero), b, float(cr @ cr))
+    assert got == pytest.approx(expected, rel=1e-9)
 
 
 def test_a_column_exactly_a_polynomial_of_the_speed_is_explained_whole_and_noise_not_at_all(session):

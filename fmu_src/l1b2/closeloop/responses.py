@@ -131,18 +131,38 @@ def _share(X: np.ndarray, cr: np.ndarray, ss_tot: float) -> tuple[float, np.ndar
     return 1.0 - float(e @ e) / ss_tot, e
 
 
+def _per_run_share(x: np.ndarray, cr: np.ndarray, Pr: np.ndarray, b: np.ndarray, ss_tot: float) -> float:
+    """The share of ``cr``'s sum of squares explained by ``x`` with one coefficient per run and the shared columns
+    ``Pr`` (all three already free of each run's mean and trend): the coefficients per run profiled out run by run
+    (``M_r = I - x_r x_r^T / |x_r|^2``), the shared ones from ``sum P_r^T M_r P_r g = sum P_r^T M_r c_r``, in memory
+    linear in the samples."""
+    def m(run_x, a):
+        xx = float(run_x @ run_x)
+        return a - np.outer(run_x, run_x @ a) / xx if xx > 0 else a
+    A = np.zeros((Pr.shape[1], Pr.shape[1]))
+    y = np.zeros(Pr.shape[1])
+    for i0, i1 in zip(b[:-1], b[1:]):
+        MP = m(x[i0:i1], Pr[i0:i1])
+        A += MP.T @ MP
+        y += MP.T @ cr[i0:i1]
+    g = np.linalg.lstsq(A, y, rcond=None)[0]
+    ss = sum(float(np.sum(m(x[i0:i1], (cr[i0:i1] - Pr[i0:i1] @ g)[:, None]) ** 2)) for i0, i1 in zip(b[:-1], b[1:]))
+    return 1.0 - ss / ss_tot
+
+
 def _drive_share(cr, ss_tot, run, t, P) -> tuple[float, float | None]:
     """The best share of the drive's courses (:func:`drive_course`, a shared cubic or one amplitude per run) over
     the ``tau > 0`` of :data:`TAUS_S`, and its ``tau``."""
     b = _run_bounds(run)
+    zero = np.zeros((len(t), 0))
+    Pr = _nuisance_residual(P, run, t, zero)
     best = (0.0, None)
     for tau in TAUS_S[1:]:
         e = drive_course(t, run, tau)
-        per_run = np.zeros((len(e), len(b) - 1))
-        for j, (i0, i1) in enumerate(zip(b[:-1], b[1:])):
-            per_run[i0:i1, j] = e[i0:i1]
-        for basis in (np.vander(e, DEGREE + 1, increasing=True)[:, 1:], per_run):
-            share, _ = _share(_nuisance_residual(basis, run, t, P), cr, ss_tot)
+        shared, _ = _share(_nuisance_residual(np.vander(e, DEGREE + 1, increasing=True)[:, 1:], run, t, P), cr,
+                           ss_tot)
+        per_run = _per_run_share(_nuisance_residual(e[:, None], run, t, zero)[:, 0], cr, Pr, b, ss_tot)
+        for share in (shared, per_run):
             if share > best[0]:
                 best = (share, tau)
     return best
