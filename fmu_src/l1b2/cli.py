@@ -279,9 +279,10 @@ def _close_loop_args(p: argparse.ArgumentParser) -> None:
                    "0.01, is still refit and cross-validated (finds drifts in time); 0: off")
     p.add_argument("--max-rounds", type=int, default=3, help="most effects added, one per round")
     p.add_argument("--response-column", action="append", dest="response_columns", metavar="NAME",
-                   help="a logged column that is a measured response of the motor, listed but never offered as a "
-                   "cause (repeatable; replaces the default list, tip_velocity_amp_m_s, the vibrometer's tip "
-                   "velocity the virtual rig logs)")
+                   help="a logged column that is a measured response of the motor, never offered as a cause "
+                   "(repeatable; replaces the default list, tip_velocity_amp_m_s, and the consequence test)")
+    p.add_argument("--no-response-columns", action="store_true", help="every logged column is a candidate cause: "
+                   "no default response list and no consequence test")
     p.add_argument("--noise-fit", choices=NOISE_FITS, default="alternate",
                    help="the baseline identification's search: " + NOISE_FIT_HELP + " (alternate is the search with "
                    "which the close loop was measured)")
@@ -661,12 +662,13 @@ def _fold_settings(args) -> dict:
 
 def _run_close_loop(args, say):
     from .workflows import run_close_loop
+    from .closeloop.settings import response_setting
     return run_close_loop(args.train, args.test, args.out, order=args.order, k_folds=args.folds,
                           alpha=args.alpha, min_gain=args.min_gain, seed=args.seed,
                           max_rounds=args.max_rounds, min_cv_gain=args.min_cv_gain,
                           min_cv_drop=args.min_cv_drop, screen_alpha=args.screen_alpha or None,
                           noise_fit=args.noise_fit, noise=args.noise, baseline=args.baseline, **_fold_settings(args),
-                          **({"response_columns": tuple(args.response_columns)} if args.response_columns else {}),
+                          **response_setting(args.response_columns, args.no_response_columns),
                           slider_mass_kg=args.slider_mass, plots_on=not args.no_plots, progress=say,
                           allow_unusual_units=args.allow_unusual_units, export_dir=args.export,
                           motor=_motor(args) if args.export is not None else None,

@@ -145,6 +145,24 @@ def channels_considered(channels, scores: list[Score], level: float, min_gain: f
     return out
 
 
+def with_response_test(rows: list[dict], tests) -> list[dict]:
+    """``channels_considered``'s rows with the consequence test of their column
+    (:func:`l1b2.closeloop.responses.response_tests`, with ``applied``/``decided_by``): the record as
+    ``response_test`` (None: not tested), and for a column the test made a response, the test's figures in the note."""
+    by = {r["channel"]: r for r in tests}
+    out = []
+    for row in rows:
+        t = by.get(row["channel"])
+        row = {**row, "response_test": t}
+        if t is not None and t["response"] and t["applied"] and t["decided_by"] == "test":
+            row["note"] = (f"classed a response of the motion: a smooth function of the speed explains "
+                           f"{t['share']:.0%} of its within-run variation (more than half in {t['runs_above']} of "
+                           f"{t['n_runs']} runs, sign test p {t['p_value']:.2g}): not a candidate; "
+                           "set response_columns to override")
+        out.append(row)
+    return out
+
+
 def with_auxiliary(rows: list[dict], auxiliary) -> list[dict]:
     """``channels_considered``'s rows with what :func:`l1b2.closeloop.auxiliary.with_usable_channels` did to the
     auxiliary columns: the note of a flag, a label or a filled column joined to its row (``prepared``: the action),

@@ -98,7 +98,8 @@ from .crosscheck import PureSlipCheck, identified_pick, score_of, withdrawn_note
 from .events import session, with_event_clocks
 from .lags import with_lagged_channels
 from .pauses import with_pause_channel
-from .evidence import channels_considered, order_traced, with_auxiliary, with_position_share
+from .responses import classed_responses, response_tests, with_applied
+from .evidence import channels_considered, order_traced, with_auxiliary, with_position_share, with_response_test
 from .guard import checked_fit
 from .intervals import added_parameters, identification, train_levels
 from .result import CloseLoopResult, ResidualAnalysis
@@ -156,8 +157,10 @@ class CloseLoop(EstimatorSettings):
         dte = test.df if test is not None else None
         sess = session(dtr, dte)   # the runs on the clock, for both derivations of logged channels
         dtr, dte, aux_rec = with_usable_channels(dtr, dte, responses)   # flags, labels, gaps: numeric or listed
-        dtr, dte, event_rec = with_event_clocks(dtr, dte, self.response_columns, sess)
-        dtr, dte, lag_rec = with_lagged_channels(dtr, dte, self.response_columns, sess)
+        response_rec = response_tests(dtr, responses)   # columns that follow the speed: responses unless set
+        responses = self.response_columns_ = classed_responses(self.response_columns, responses, response_rec)
+        dtr, dte, event_rec = with_event_clocks(dtr, dte, responses, sess)
+        dtr, dte, lag_rec = with_lagged_channels(dtr, dte, responses, sess)
         dtr, dte, pause_rec = with_pause_channel(dtr, dte, sess)
         mask_tr = np.array(train.mask)
         folds = stratified_folds(dtr, self.refit_folds, self.seed)   # TRAIN's run folds, one split for the fit
@@ -199,7 +202,7 @@ class CloseLoop(EstimatorSettings):
         analysis = analyse_residuals(fit_tr, start.predict_free_run(fit_tr), mask_tr, alpha=self.alpha,
                                      k=self.k_folds, seed=self.seed)
         ctx = candidate_context(start.predict_free_run, m_s, fit_tr, mask_tr, analysis.peak,
-                                response_columns=self.response_columns,
+                                response_columns=responses,
                                 damping=baseline_damping(start, fit_tr, mask_tr))
         library = self.library if self.library is not None else full_library()
         pool = retag_structural(library(ctx, fit_tr), start.params_.drive_law)
@@ -235,12 +238,14 @@ class CloseLoop(EstimatorSettings):
         first = it.first_scores or []
         chosen = it.chosen
         diagnosis = {**self._diagnosis(it, first, analysis, ext_params, chain_rec), "auxiliary_columns": aux_rec,
+                     "response_test": with_applied(response_rec, self.response_columns, responses),
                      "event_clocks": event_rec,
                      "lagged_channels": lag_rec,
                      "pause_channel": pause_rec,
                      "unseen_levels": runlevel.unseen_test_levels(it.effects.candidates, dte),
                      "channel_ranges": runlevel.channel_ranges(it.effects.candidates, dtr, dte)}
-        diagnosis["channels_considered"] = with_auxiliary(diagnosis["channels_considered"], aux_rec)
+        diagnosis["channels_considered"] = with_response_test(
+            with_auxiliary(diagnosis["channels_considered"], aux_rec), diagnosis["response_test"])
         self.result_ = CloseLoopResult(
             baseline=baseline, diagnosis=diagnosis, scores=first,
             significant=it.significant, chosen=chosen, extended=extended,
@@ -438,7 +443,7 @@ class CloseLoop(EstimatorSettings):
         """
         ch = chain.speed_channel(dtr, mask, k=self.k_folds, seed=self.seed)
         rec = {k: v for k, v in ch.items() if k != "filter"}
-        rec["sensor_gain"] = chain.stroke_gain(dtr, [c["name"] for c in channels_of(dtr, self.response_columns)
+        rec["sensor_gain"] = chain.stroke_gain(dtr, [c["name"] for c in channels_of(dtr, self.response_columns_)
                                                      if c["kind"] != "response"], alpha=self.alpha)
         if "filter" in ch:
             rec["filter"] = ch["filter"].to_dict()

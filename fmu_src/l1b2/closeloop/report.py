@@ -140,6 +140,9 @@ class Diagnosis(_Record):
     or ``refused``: a negative floor, the pick not added).
     ``auxiliary_columns``: what was done to each auxiliary column that was not numeric and finite as logged
     (flags, text labels, gaps; :func:`l1b2.closeloop.auxiliary.with_usable_channels`).
+    ``response_test``: the consequence test of each logged column that varies within runs, whether the speed's
+    history explains it as a response of the motion, with ``applied`` and ``decided_by``
+    (:func:`l1b2.closeloop.responses.response_tests`, :func:`l1b2.closeloop.responses.with_applied`).
     The nested evidence stays JSON-shaped.
     """
 
@@ -173,6 +176,7 @@ class Diagnosis(_Record):
     channel_ranges: list = field(default_factory=list)
     physical_range: list = field(default_factory=list)
     auxiliary_columns: list = field(default_factory=list)
+    response_test: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
         out = {f.name: getattr(self, f.name) for f in fields(self)}
@@ -221,6 +225,24 @@ def clip_sentence(clip: Mapping, applied: bool = True) -> str:
     return (f" The column saturates at {' and '.join(rails)}, {float(clip.get('share_at_rails', 0.0)):.1%} of the "
             f"samples; the clip's held-out gain over the chain without it {float(clip.get('cv_gain', 0.0)):.1%} "
             f"(p {float(clip.get('p_value', 1.0)):.2g}): {verdict}.")
+
+
+def response_test_lines(tests) -> list:
+    """report.md's lines on the consequence test (``diagnosis.response_test``): one per tested column with its share,
+    its runs and the outcome; empty when no column was tested."""
+    if not tests:
+        return []
+    lines = ["", "Consequence test of the logged columns that vary within runs (the share of a column's within-run "
+             "variation, beyond each run's level and trend and a function of the position, that a smooth function "
+             "of the speed explains; a response: at least half, in more runs than chance, and more than the drive's own "
+             "course from the run's start explains):", ""]
+    return lines + [f"- `{r['channel']}`: share {r['share']:.0%} (sensor lag {r['tau_s']} s), above half in "
+                    f"{r['runs_above']} of {r['n_runs']} runs (p {r['p_value']:.2g})"
+                    + (f", the drive's course from the run's start {r['drive_share']:.0%}" if r.get("drive_share")
+                       else "") + ": "
+                    f"{'a response' if r['response'] else 'not a response'}"
+                    f"{'' if r['decided_by'] == 'test' else ' (the response_columns setting decides)'}; "
+                    f"{'not a candidate' if r['applied'] else 'a candidate'}" for r in tests]
 
 
 def channel_range_line(rec: Mapping) -> str:

@@ -26,7 +26,8 @@ from ..jsonio import dumps, sig, strict_json
 from ..predictor.effects import ExtendedPredictor
 from . import residuals as res
 from .crosscheck import describe
-from .report import SCHEMA_VERSION, Diagnosis, ReportFormatError, Round, chain_line, channel_range_line
+from .report import (SCHEMA_VERSION, Diagnosis, ReportFormatError, Round, chain_line, channel_range_line,
+                     response_test_lines)
 from .selection import Score
 
 #: file names (without ``.png``) of the figures, in report order
@@ -399,6 +400,7 @@ def markdown_report(rep: dict) -> str:
             lines.append(f"| {c['channel']} | {c['kind']} | {c['regressor']} | {c['best'] or c['note']} | "
                          f"{_pct(c['cv_gain'], '.1%')} | {p} | {runl} | "
                          f"{'yes' if c['significant'] else 'no'} | {'yes' if c['added'] else 'no'} |")
+    lines += response_test_lines(d.get("response_test") or [])
     if d.get("auxiliary_columns"):
         lines += ["", "Auxiliary columns not numeric and finite as logged (flags, text labels, gaps):", ""]
         lines += [f"- `{a['channel']}`: {a['action']}: {a['note']}" for a in d["auxiliary_columns"]]

@@ -8,6 +8,7 @@ import inspect
 from dataclasses import dataclass, field, fields
 from typing import Any
 
+from ..errors import L1B2Error
 from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT_FOLDS, DEFAULT_REFIT_NFEV,
                          DEFAULT_REFIT_REPEATS)
 from .selection import DEFAULT_ALPHA, DEFAULT_PARSIMONY, SHORTLIST_MIN_GAIN
@@ -97,7 +98,9 @@ class LoopSettings:
     response_columns : tuple of str or None
         Logged columns that are measured responses of the motor: listed in ``channels_considered``, never
         offered as a cause. None: :data:`l1b2.predictor.effects.channels.RESPONSE_COLUMNS` (the virtual rig's
-        ``tip_velocity_amp_m_s``); a tuple replaces that list (``()``: every logged column is a candidate).
+        ``tip_velocity_amp_m_s``) and every column the consequence test classes a response of the motion
+        (:mod:`l1b2.closeloop.responses`); a tuple replaces that list and the test (``()``: every logged column is
+        a candidate).
 
     baseline : {"eq29", "best", "pure_slip"}
         The predictor family the loop starts from: ``"eq29"`` (default), ``"pure_slip"``, or ``"best"``,
@@ -155,6 +158,17 @@ class LoopSettings:
                 "clock_folds": self.clock_folds,
                 "response_columns": (list(self.response_columns) if self.response_columns is not None
                                      else None)}
+
+
+def response_setting(names, none: bool = False) -> dict:
+    """The loop's ``response_columns`` keyword from a command line: ``names`` (a list, None when not given), none
+    (``none``: every logged column a candidate, no test), or nothing (the default list and the consequence test).
+    Raises :class:`l1b2.errors.L1B2Error` when both are given."""
+    if none and names:
+        raise L1B2Error("--no-response-columns and --response-column contradict each other: give one")
+    if none:
+        return {"response_columns": ()}
+    return {"response_columns": tuple(names)} if names else {}
 
 
 def keyword_signature(record: type) -> inspect.Signature:

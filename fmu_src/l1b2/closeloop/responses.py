@@ -1,0 +1,242 @@
+"""Logged columns that are consequences of the motion: a statistical test that classes a column a response.
+
+A rig may log, beside the causes of the motion (a force, a temperature, a pressure), readings that the motion itself
+makes: an acoustic level, a vibration, a tip-velocity amplitude, a back-EMF. Such a column follows the slider's
+speed sample by sample; offered as a candidate cause it would stand in for the model, and a predictor that needs it
+as an input could not predict a run before the run is made (TEST's own column carries TEST's speeds).
+
+The test asks whether a column's variation *within runs* is a function of the measured speed's recent history. Per
+run, the column's mean and its linear trend in time are removed (a run-level cause, a per-run clamp force or a
+temperature, and a slow drift, a temperature that the drive heats, leave nothing else), and so is a smooth function
+of the position shared by all runs (a cause that varies along the stroke, a preload or a field, is a function of the
+position, which the integral of the speed also is). What is left of a cause is its own fluctuation; what is left of a
+response is the course it takes while the slider accelerates from rest, runs and stops, which a smooth function of
+the speed reproduces up to the column's own noise. The speed's history is ``u = h_tau * |v| / max|v|`` (a causal
+first-order low-pass of time constant ``tau``, from rest at each run's start: a sensor's own averaging, a meter's
+time weighting), with ``tau`` on the grid :data:`TAUS_S`, and the smooth function a cubic polynomial of ``u``
+(:data:`DEGREE`) with one set of coefficients for every run (one law of the sensor).
+
+The statistic is the partial ``R^2`` of that polynomial, the share of the column's residual within-run variance it
+explains (the best ``tau``). What tells a response from a column that follows the drive (a supply that sags while
+the amplifier draws current, a stator's vibration, a heating) is the acceleration phase: the drive switches on at
+the run's start and the slider reaches its speed only after its mechanical rise, so a consequence of the drive
+moves ahead of the speed and a consequence of the motion with it or behind it. The drive's course is a fixed time
+course from the run's start, ``e_tau(t) = 1 - exp(-(t - t_0 + dt) / tau)`` (``t_0`` the run's first sample, the
+same grid of ``tau > 0``), either as a cubic of ``e_tau`` shared by the runs or as ``e_tau`` with an amplitude of
+each run's own (the drive's settings differ between runs); its ``drive_share`` is the best of these.
+
+The decision rule is an effect size, a comparison and a count of runs, none growing with the number of samples:
+
+* ``share >= SHARE_MIN`` (1/2): more of the column's within-run variation is a function of the motion than not. A
+  cause's within-run course is its own (its noise, its dynamics), and the speed's within-run course is dominated by
+  the start transient and the stop, which the drive and the end of the stroke make and no logged cause does;
+* the run's own share (the same fitted law) exceeds 1/2 in more runs than chance would give: a one-sided sign test
+  over TRAIN's runs, ``P(X >= k)`` for ``X ~ Binomial(n_runs, 1/2)``, below :data:`P_MAX`;
+* ``share > drive_share``: the speed explains the column better than any time course of the drive does (with the
+  same three parameters, or with one per run), so the column follows the slider's own rise, not the switching on.
+  A column whose own lag from the drive equals the slider's mechanical rise has the same course as the speed and
+  cannot be told from a response by this test.
+
+Columns that the model reads as inputs (the data format's drive frequency and temperature) are causes by the
+model's physics and are not tested; nor are the required columns and the speed. A column constant within every run
+has no within-run course and is not tested (a run-level reading is a setting or a state, not an echo of the speed).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+from scipy.signal import lfilter
+
+from ..data import measurements as dataio
+from .auxiliary import NOT_CANDIDATES, varies_within_runs
+
+__all__ = ["TAUS_S", "DEGREE", "SHARE_MIN", "P_MAX", "POSITION_DEGREE", "MODEL_INPUTS", "speed_history",
+           "drive_course", "response_statistic", "response_tests", "classed_responses"]
+
+#: the sensor time constants [s] searched: none (the instantaneous speed), then 10 ms to 0.3 s (a meter's fast
+#: time weighting is 125 ms; longer than the longest runs' acceleration, no transient is left to follow)
+TAUS_S = (0.0, 0.01, 0.03, 0.1, 0.3)
+#: the degree of the polynomial in the speed's history (a level in dB of a power ~ v^2, an amplitude ~ v: smooth)
+DEGREE = 3
+#: the degree of the Legendre polynomial in the position (over TRAIN's stroke) removed as a cause along the stroke
+POSITION_DEGREE = 6
+#: the smallest share of the residual within-run variance the speed must explain for a response
+SHARE_MIN = 0.5
+#: the largest one-sided sign-test p-value over runs for a response
+P_MAX = 0.01
+#: logged columns the model reads as inputs: causes by the model's physics, never tested
+MODEL_INPUTS = frozenset({dataio.FREQUENCY, dataio.TEMPERATURE})
+
+
+def _run_bounds(run: np.ndarray) -> np.ndarray:
+    """The start of each run's block of consecutive samples, and the end."""
+    return np.flatnonzero(np.r_[True, run[1:] != run[:-1], True])
+
+
+def speed_history(speed_m_s, time_s, run, tau_s: float) -> np.ndarray:
+    """``h_tau * |v|`` per run [m/s]: the speed's magnitude through a causal first-order low-pass of time constant
+    ``tau_s`` [s] (0: unchanged), its state 0 (at rest) at each run's start, stepped at the run's median sample
+    interval (``y_i = y_(i-1) + (1 - exp(-dt/tau)) (|v_i| - y_(i-1))``)."""
+    v = np.abs(np.asarray(speed_m_s, float))
+    if tau_s <= 0:
+        return v
+    t = np.asarray(time_s, float)
+    b = _run_bounds(np.asarray(run))
+    out = np.empty_like(v)
+    for i0, i1 in zip(b[:-1], b[1:]):
+        dt = float(np.median(np.diff(t[i0:i1]))) if i1 - i0 > 1 else 0.0
+        a = 1.0 - math.exp(-dt / tau_s) if dt > 0 else 1.0
+        out[i0:i1] = lfilter([a], [1.0, a - 1.0], v[i0:i1])
+    return out
+
+
+def _nuisance_residual(X: np.ndarray, run: np.ndarray, t: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """``X`` (columns) with each run's mean and linear trend in ``t`` removed, then the shared position basis ``P``
+    (itself so residualised) projected out: the residual of the least-squares fit on both."""
+    b = _run_bounds(run)
+
+    def within(A):
+        out = np.array(A, float)
+        for i0, i1 in zip(b[:-1], b[1:]):
+            tt = t[i0:i1] - t[i0:i1].mean()
+            out[i0:i1] -= out[i0:i1].mean(axis=0)
+            ss = tt @ tt
+            if ss > 0:
+                out[i0:i1] -= np.outer(tt, tt @ out[i0:i1] / ss)
+        return out
+    R, Pr = within(X), within(P)
+    Q, _ = np.linalg.qr(Pr)
+    return R - Q @ (Q.T @ R)
+
+
+def drive_course(time_s, run, tau_s: float) -> np.ndarray:
+    """``1 - exp(-(t - t_0 + dt) / tau)`` per run [1]: the course of a first-order consequence of the drive switched
+    on at the run's first sample ``t_0`` (``dt`` the run's median sample interval: the first sample one step in)."""
+    t = np.asarray(time_s, float)
+    b = _run_bounds(np.asarray(run))
+    out = np.empty_like(t)
+    for i0, i1 in zip(b[:-1], b[1:]):
+        dt = float(np.median(np.diff(t[i0:i1]))) if i1 - i0 > 1 else 0.0
+        out[i0:i1] = 1.0 - np.exp(-(t[i0:i1] - t[i0] + dt) / tau_s)
+    return out
+
+
+def _share(X: np.ndarray, cr: np.ndarray, ss_tot: float) -> tuple[float, np.ndarray]:
+    """The share of ``cr``'s sum of squares that the least-squares fit on ``X`` explains, and the fit's residual."""
+    beta, *_ = np.linalg.lstsq(X, cr, rcond=None)
+    e = cr - X @ beta
+    return 1.0 - float(e @ e) / ss_tot, e
+
+
+def _per_run_share(x: np.ndarray, cr: np.ndarray, Pr: np.ndarray, b: np.ndarray, ss_tot: float) -> float:
+    """The share of ``cr``'s sum of squares explained by ``x`` with one coefficient per run and the shared columns
+    ``Pr`` (all three already free of each run's mean and trend): the coefficients per run profiled out run by run
+    (``M_r = I - x_r x_r^T / |x_r|^2``), the shared ones from ``sum P_r^T M_r P_r g = sum P_r^T M_r c_r``, in memory
+    linear in the samples."""
+    def m(run_x, a):
+        xx = float(run_x @ run_x)
+        return a - np.outer(run_x, run_x @ a) / xx if xx > 0 else a
+    A = np.zeros((Pr.shape[1], Pr.shape[1]))
+    y = np.zeros(Pr.shape[1])
+    for i0, i1 in zip(b[:-1], b[1:]):
+        MP = m(x[i0:i1], Pr[i0:i1])
+        A += MP.T @ MP
+        y += MP.T @ cr[i0:i1]
+    g = np.linalg.lstsq(A, y, rcond=None)[0]
+    ss = sum(float(np.sum(m(x[i0:i1], (cr[i0:i1] - Pr[i0:i1] @ g)[:, None]) ** 2)) for i0, i1 in zip(b[:-1], b[1:]))
+    return 1.0 - ss / ss_tot
+
+
+def _drive_share(cr, ss_tot, run, t, P) -> tuple[float, float | None]:
+    """The best share of the drive's courses (:func:`drive_course`, a shared cubic or one amplitude per run) over
+    the ``tau > 0`` of :data:`TAUS_S`, and its ``tau``."""
+    b = _run_bounds(run)
+    zero = np.zeros((len(t), 0))
+    Pr = _nuisance_residual(P, run, t, zero)
+    best = (0.0, None)
+    for tau in TAUS_S[1:]:
+        e = drive_course(t, run, tau)
+        shared, _ = _share(_nuisance_residual(np.vander(e, DEGREE + 1, increasing=True)[:, 1:], run, t, P), cr,
+                           ss_tot)
+        per_run = _per_run_share(_nuisance_residual(e[:, None], run, t, zero)[:, 0], cr, Pr, b, ss_tot)
+        for share in (shared, per_run):
+            if share > best[0]:
+                best = (share, tau)
+    return best
+
+
+def _sign_test_p(k: int, n: int) -> float:
+    """``P(X >= k)`` for ``X ~ Binomial(n, 1/2)``."""
+    return float(sum(math.comb(n, j) for j in range(k, n + 1)) / 2.0 ** n) if n else 1.0
+
+
+def response_statistic(column, speed_m_s, time_s, position_m, run) -> dict:
+    """The test of one column (arrays over the same samples, runs in consecutive blocks): ``{"share", "tau_s",
+    "runs_above", "n_runs", "p_value", "drive_share", "drive_tau_s", "response"}``; ``share`` the partial R^2 of the
+    module docstring at the best ``tau_s``, ``runs_above`` the runs whose own share (same fitted law) exceeds
+    :data:`SHARE_MIN`, ``p_value`` the sign test's, ``drive_share`` the drive's best share (computed only when the
+    first two conditions hold; 0 otherwise), ``response`` the rule (``share >= SHARE_MIN``, ``p_value < P_MAX`` and
+    ``share > drive_share``)."""
+    c = np.asarray(column, float)
+    run = np.asarray(run)
+    t = np.asarray(time_s, float)
+    s = np.asarray(position_m, float)
+    z = 2.0 * (s - s.min()) / (np.ptp(s) or 1.0) - 1.0
+    P = np.polynomial.legendre.legvander(z, POSITION_DEGREE)[:, 1:]
+    cr = _nuisance_residual(c[:, None], run, t, P)[:, 0]
+    b = _run_bounds(run)
+    n_runs = len(b) - 1
+    ss_tot = float(cr @ cr)
+    best = {"share": 0.0, "tau_s": None, "runs_above": 0, "n_runs": n_runs, "p_value": 1.0, "drive_share": 0.0,
+            "drive_tau_s": None, "response": False}
+    if not ss_tot > 1e-12 * max(float(c @ c), 1e-300):
+        return best
+    vmax = float(np.max(np.abs(speed_m_s))) or 1.0
+    for tau in TAUS_S:
+        u = speed_history(speed_m_s, t, run, tau) / vmax
+        share, e = _share(_nuisance_residual(np.vander(u, DEGREE + 1, increasing=True)[:, 1:], run, t, P), cr, ss_tot)
+        if share > best["share"]:
+            per = [1.0 - float(e[i0:i1] @ e[i0:i1]) / float(cr[i0:i1] @ cr[i0:i1])
+                   for i0, i1 in zip(b[:-1], b[1:]) if float(cr[i0:i1] @ cr[i0:i1]) > 0]
+            k = int(np.sum(np.array(per) > SHARE_MIN))
+            best.update(share=share, tau_s=tau, runs_above=k, p_value=_sign_test_p(k, n_runs))
+    if best["share"] >= SHARE_MIN and best["p_value"] < P_MAX:
+        best["drive_share"], best["drive_tau_s"] = _drive_share(cr, ss_tot, run, t, P)
+        best["response"] = bool(best["share"] > best["drive_share"])
+    return best
+
+
+def response_tests(df: pd.DataFrame, named=()) -> list[dict]:
+    """The test of every numeric, finite column of ``df`` beyond the required ones, the speed, the named responses
+    ``named`` and the model's inputs (:data:`MODEL_INPUTS`) that varies within some run: one ``{"channel", **``
+    :func:`response_statistic` ``}`` each, in column order."""
+    skip = NOT_CANDIDATES | MODEL_INPUTS | set(named)
+    out = []
+    for name in df.columns:
+        if name in skip or not pd.api.types.is_numeric_dtype(df[name]) or pd.api.types.is_bool_dtype(df[name]):
+            continue
+        c = df[name].to_numpy(float)
+        if not np.all(np.isfinite(c)) or not varies_within_runs(df, name):
+            continue
+        rec = response_statistic(c, df[dataio.SPEED], df[dataio.TIME], df[dataio.POSITION], df[dataio.RUN])
+        out.append({"channel": str(name), **rec})
+    return out
+
+
+def classed_responses(explicit, default, tests) -> tuple:
+    """The responses the loop uses: ``explicit`` (the user's setting, a tuple) when given, which wins over the test;
+    otherwise the ``default`` names and every column ``tests`` (:func:`response_tests`) classes a response."""
+    if explicit is not None:
+        return tuple(explicit)
+    return tuple(default) + tuple(r["channel"] for r in tests if r["response"] and r["channel"] not in default)
+
+
+def with_applied(tests, explicit, responses) -> list[dict]:
+    """``diagnosis.response_test``: each record of :func:`response_tests` with ``applied`` (the column is among the
+    loop's ``responses``, so never a candidate) and ``decided_by`` (``"setting"``: the user's explicit
+    ``response_columns`` decided, the test is reported only; ``"test"``: the test's rule decided)."""
+    by = "setting" if explicit is not None else "test"
+    return [{**r, "applied": r["channel"] in set(responses), "decided_by": by} for r in tests]
