@@ -696,7 +696,6 @@ def cmd_close_loop(args) -> int:
     return 0
 
 
-
 def _print_calibrated(out: Path, note: str = "") -> None:
     """Where each effect went, the held-out check of the calibrated SSP, the files written."""
     import json
