@@ -211,8 +211,9 @@ def chain_line(rec: Mapping) -> str:
 
 def clip_sentence(clip: Mapping, applied: bool = True) -> str:
     """The sentence on the speed channel's range test (``measurement_chain.clip``): the rails with their samples (and
-    the band a noisy rail's samples lie in) and the clipped chain's held-out gain over the chain without a clip; empty when no rail was found. ``applied``:
-    whether the chain was kept (the harm guard may refuse a chain whose test passed)."""
+    the band a noisy rail's samples lie in) and the clipped chain's held-out gain over the chain without a clip;
+    empty when no rail was found. ``applied``: whether the chain was kept (the harm guard may refuse a chain whose
+    test passed)."""
     rails = [f"{clip[f'{side}_m_s']:+.4g} m/s ({clip[f'n_{side}']} samples in {clip[f'runs_{side}']} runs"
              + (f", within {1e3 * clip[f'band_{side}_m_s']:.3g} mm/s of the column's extreme: a noisy rail"
                 if clip.get(f"band_{side}_m_s") else "") + ")"
