@@ -152,6 +152,24 @@ def test_a_column_exactly_a_polynomial_of_the_speed_is_explained_whole_and_noise
     assert noise["share"] < 0.01 and not noise["response"] and noise["runs_above"] == 0
 
 
+def test_a_signed_echo_of_the_speed_is_a_response_through_the_signed_history(session):
+    # reference: a controller's own velocity estimate from the same decoder, logged beside the speed (gain 1.02,
+    # offset 10 mm/s, 0.1 mm/s of its own noise): odd in the speed, it changes sign with the direction, which no
+    # function of the magnitude shared by the runs follows; an exact odd polynomial of the signed speed is
+    # explained whole by the signed history
+    v = session["speed_m_s"].to_numpy()
+    echo = 1.02 * v + 0.01 + np.random.default_rng(7).normal(0, 1e-4, len(v))
+    (rec,) = [r for r in response_tests(session.assign(echo_m_s=echo)) if r["channel"] == "echo_m_s"]
+    assert rec["response"] and rec["signed"] and rec["share"] >= 0.95 and rec["p_value"] < 1e-4
+    magnitude = response_statistic(np.abs(echo), session["speed_m_s"], session["time_s"], session["position_m"],
+                                   session["run"])
+    assert magnitude["response"] and magnitude["signed"] is False    # its magnitude: the magnitude's history
+    vs = v / np.abs(v).max()
+    exact = response_statistic(2 * vs - 3 * vs ** 3, session["speed_m_s"], session["time_s"], session["position_m"],
+                               session["run"])
+    assert exact["share"] == pytest.approx(1.0, abs=1e-9) and exact["signed"] and exact["tau_s"] == 0.0
+
+
 def test_a_column_constant_within_runs_is_not_tested(session):
     df = session.assign(setting=session["run"] * 1.0)
     assert "setting" not in [r["channel"] for r in response_tests(df)]

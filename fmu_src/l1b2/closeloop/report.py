@@ -237,7 +237,8 @@ def response_test_lines(tests) -> list:
              "variation, beyond each run's level and trend and a function of the position, that a smooth function "
              "of the speed explains; a response: at least half, in more runs than chance, and more than the drive's own "
              "course from the run's start explains):", ""]
-    return lines + [f"- `{r['channel']}`: share {r['share']:.0%} (sensor lag {r['tau_s']} s), above half in "
+    return lines + [f"- `{r['channel']}`: share {r['share']:.0%} (sensor lag {r['tau_s']} s"
+                    f"{', of the signed speed' if r.get('signed') else ''}), above half in "
                     f"{r['runs_above']} of {r['n_runs']} runs (p {r['p_value']:.2g})"
                     + (f", the drive's course from the run's start {r['drive_share']:.0%}" if r.get("drive_share")
                        else "") + ": "

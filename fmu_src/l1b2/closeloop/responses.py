@@ -14,7 +14,11 @@ response is the course it takes while the slider accelerates from rest, runs and
 the speed reproduces up to the column's own noise. The speed's history is ``u = h_tau * |v| / max|v|`` (a causal
 first-order low-pass of time constant ``tau``, from rest at each run's start: a sensor's own averaging, a meter's
 time weighting), with ``tau`` on the grid :data:`TAUS_S`, and the smooth function a cubic polynomial of ``u``
-(:data:`DEGREE`) with one set of coefficients for every run (one law of the sensor).
+(:data:`DEGREE`) with one set of coefficients for every run (one law of the sensor). The same is done with the
+signed speed ``h_tau * v / max|v|`` in place of its magnitude, and the better of the two counts: a response that
+is even in the speed (a sound level, an amplitude) follows the magnitude, one that is odd (a second velocity
+sensor, a back-EMF) changes sign with the direction, which no function of the magnitude shared by the runs
+follows.
 
 The statistic is the partial ``R^2`` of that polynomial, the share of the column's residual within-run variance it
 explains (the best ``tau``). What tells a response from a column that follows the drive (a supply that sags while
@@ -76,11 +80,11 @@ def _run_bounds(run: np.ndarray) -> np.ndarray:
     return np.flatnonzero(np.r_[True, run[1:] != run[:-1], True])
 
 
-def speed_history(speed_m_s, time_s, run, tau_s: float) -> np.ndarray:
-    """``h_tau * |v|`` per run [m/s]: the speed's magnitude through a causal first-order low-pass of time constant
-    ``tau_s`` [s] (0: unchanged), its state 0 (at rest) at each run's start, stepped at the run's median sample
-    interval (``y_i = y_(i-1) + (1 - exp(-dt/tau)) (|v_i| - y_(i-1))``)."""
-    v = np.abs(np.asarray(speed_m_s, float))
+def speed_history(speed_m_s, time_s, run, tau_s: float, signed: bool = False) -> np.ndarray:
+    """``h_tau * |v|`` per run [m/s]: the speed's magnitude (``signed``: the speed itself) through a causal
+    first-order low-pass of time constant ``tau_s`` [s] (0: unchanged), its state 0 (at rest) at each run's start,
+    stepped at the run's median sample interval (``y_i = y_(i-1) + (1 - exp(-dt/tau)) (|v_i| - y_(i-1))``)."""
+    v = np.asarray(speed_m_s, float) if signed else np.abs(np.asarray(speed_m_s, float))
     if tau_s <= 0:
         return v
     t = np.asarray(time_s, float)
@@ -175,8 +179,9 @@ def _sign_test_p(k: int, n: int) -> float:
 
 def response_statistic(column, speed_m_s, time_s, position_m, run) -> dict:
     """The test of one column (arrays over the same samples, runs in consecutive blocks): ``{"share", "tau_s",
-    "runs_above", "n_runs", "p_value", "drive_share", "drive_tau_s", "response"}``; ``share`` the partial R^2 of the
-    module docstring at the best ``tau_s``, ``runs_above`` the runs whose own share (same fitted law) exceeds
+    "signed", "runs_above", "n_runs", "p_value", "drive_share", "drive_tau_s", "response"}``; ``share`` the partial
+    R^2 of the module docstring at the best ``tau_s`` and history (``signed``: of the speed, else of its magnitude;
+    None when nothing is explained), ``runs_above`` the runs whose own share (same fitted law) exceeds
     :data:`SHARE_MIN`, ``p_value`` the sign test's, ``drive_share`` the drive's best share (computed only when the
     first two conditions hold; 0 otherwise), ``response`` the rule (``share >= SHARE_MIN``, ``p_value < P_MAX`` and
     ``share > drive_share``)."""
@@ -190,19 +195,21 @@ def response_statistic(column, speed_m_s, time_s, position_m, run) -> dict:
     b = _run_bounds(run)
     n_runs = len(b) - 1
     ss_tot = float(cr @ cr)
-    best = {"share": 0.0, "tau_s": None, "runs_above": 0, "n_runs": n_runs, "p_value": 1.0, "drive_share": 0.0,
-            "drive_tau_s": None, "response": False}
+    best = {"share": 0.0, "tau_s": None, "signed": None, "runs_above": 0, "n_runs": n_runs, "p_value": 1.0,
+            "drive_share": 0.0, "drive_tau_s": None, "response": False}
     if not ss_tot > 1e-12 * max(float(c @ c), 1e-300):
         return best
     vmax = float(np.max(np.abs(speed_m_s))) or 1.0
-    for tau in TAUS_S:
-        u = speed_history(speed_m_s, t, run, tau) / vmax
-        share, e = _share(_nuisance_residual(np.vander(u, DEGREE + 1, increasing=True)[:, 1:], run, t, P), cr, ss_tot)
-        if share > best["share"]:
-            per = [1.0 - float(e[i0:i1] @ e[i0:i1]) / float(cr[i0:i1] @ cr[i0:i1])
-                   for i0, i1 in zip(b[:-1], b[1:]) if float(cr[i0:i1] @ cr[i0:i1]) > 0]
-            k = int(np.sum(np.array(per) > SHARE_MIN))
-            best.update(share=share, tau_s=tau, runs_above=k, p_value=_sign_test_p(k, n_runs))
+    for signed in (False, True):
+        for tau in TAUS_S:
+            u = speed_history(speed_m_s, t, run, tau, signed) / vmax
+            share, e = _share(_nuisance_residual(np.vander(u, DEGREE + 1, increasing=True)[:, 1:], run, t, P), cr,
+                              ss_tot)
+            if share > best["share"]:
+                per = [1.0 - float(e[i0:i1] @ e[i0:i1]) / float(cr[i0:i1] @ cr[i0:i1])
+                       for i0, i1 in zip(b[:-1], b[1:]) if float(cr[i0:i1] @ cr[i0:i1]) > 0]
+                k = int(np.sum(np.array(per) > SHARE_MIN))
+                best.update(share=share, tau_s=tau, signed=signed, runs_above=k, p_value=_sign_test_p(k, n_runs))
     if best["share"] >= SHARE_MIN and best["p_value"] < P_MAX:
         best["drive_share"], best["drive_tau_s"] = _drive_share(cr, ss_tot, run, t, P)
         best["response"] = bool(best["share"] > best["drive_share"])
