@@ -41,16 +41,19 @@ SUFFIX = "_since_s"
 
 
 def run_table(frames, column: str) -> pd.DataFrame:
-    """One row per run of the frames (``start``, ``stop`` [s], ``value`` of ``column``), in session order."""
+    """One row per run of the frames (``start``, ``stop`` [s], ``value`` of ``column``, the run's id ``run`` and
+    ``frame``, the position of its frame in ``frames``), in session order."""
     rows = []
-    for df in frames:
+    for i, df in enumerate(frames):
         if df is None or column not in df.columns:
             continue
         g = df.groupby(dataio.RUN, sort=False)
-        rows.append(pd.DataFrame({"start": g[dataio.TIME].min().to_numpy(float),
-                                  "stop": g[dataio.TIME].max().to_numpy(float),
-                                  "value": g[column].first().to_numpy(float)}))
-    tab = pd.concat(rows, ignore_index=True) if rows else pd.DataFrame(columns=["start", "stop", "value"])
+        lo = g[dataio.TIME].min()
+        rows.append(pd.DataFrame({"start": lo.to_numpy(float), "stop": g[dataio.TIME].max().to_numpy(float),
+                                  "value": g[column].first().to_numpy(float), "run": lo.index.to_numpy(),
+                                  "frame": i}))
+    tab = (pd.concat(rows, ignore_index=True) if rows
+           else pd.DataFrame(columns=["start", "stop", "value", "run", "frame"]))
     return tab.sort_values("start", kind="stable").reset_index(drop=True)
 
 

@@ -49,17 +49,9 @@ REFERENCE_S = 1.0
 MIN_SPAN = 2.0
 
 
-def run_clock(df: pd.DataFrame, frame: int) -> pd.DataFrame:
-    """One row per run of ``df``: ``frame``, ``run`` (its id), ``start`` and ``stop`` [s] of its ``time_s``."""
-    g = df.groupby(dataio.RUN, sort=False)[dataio.TIME]
-    lo, hi = g.min(), g.max()
-    return pd.DataFrame({"frame": frame, "run": lo.index.to_numpy(), "start": lo.to_numpy(float),
-                         "stop": hi.to_numpy(float)})
-
-
 def pauses_s(clock: pd.DataFrame) -> np.ndarray:
-    """The pause before each run of ``clock`` (:func:`run_clock` rows, any order) [s], in the rows' order: its start
-    minus the stop of the run that starts last before it; NaN for the first run."""
+    """The pause before each run of ``clock`` (:func:`~l1b2.closeloop.events.run_table` rows, any order) [s], in the
+    rows' order: its start minus the stop of the run that starts last before it; NaN for the first run."""
     start, stop = clock["start"].to_numpy(float), clock["stop"].to_numpy(float)
     order = np.argsort(start, kind="stable")
     p = np.full(len(start), np.nan)
@@ -98,13 +90,13 @@ def with_pause_channel(train: pd.DataFrame, test: pd.DataFrame | None = None, se
     ``sess``: the frames' :func:`~l1b2.closeloop.events.session` when the caller has it (default: computed here).
     The frames are returned unchanged (not copied) when the column is not derived or TRAIN already has it.
     """
-    merged = (session(train, test) if sess is None else sess).one
+    sess = session(train, test) if sess is None else sess
+    merged = sess.one
     frames = [df for df in (train, test) if df is not None]
-    clocks = [run_clock(df, i) for i, df in enumerate(frames)]
+    clocks = [sess.runs[sess.runs["frame"] == i] for i in range(len(frames))]   # each frame's runs on the clock
     if merged:
-        both = pd.concat(clocks, ignore_index=True)
-        p = pauses_s(both)
-        per_frame = [p[(both["frame"] == i).to_numpy()] for i in range(len(frames))]
+        p = pauses_s(sess.runs)
+        per_frame = [p[(sess.runs["frame"] == i).to_numpy()] for i in range(len(frames))]
     else:
         per_frame = [pauses_s(c) for c in clocks]
     known = per_frame[0][np.isfinite(per_frame[0])]
