@@ -131,6 +131,7 @@ def test_the_per_run_amplitude_fit_equals_the_dense_least_squares():
     zero = np.zeros((len(run), 0))
     cr = _nuisance_residual(c[:, None], run, t, P)[:, 0]
     b = np.r_[0, np.flatnonzero(np.diff(run)) + 1, len(run)]
+    blocks = [slice(i0, i1) for i0, i1 in zip(b[:-1], b[1:])]
     dense = np.zeros((len(run), 6))
     for j in range(6):
         dense[run == j, j] = x[run == j]
@@ -138,7 +139,7 @@ def test_the_per_run_amplitude_fit_equals_the_dense_least_squares():
     e = cr - X @ np.linalg.lstsq(X, cr, rcond=None)[0]
     expected = 1 - (e @ e) / (cr @ cr)
     got = _per_run_share(_nuisance_residual(x[:, None], run, t, zero)[:, 0], cr,
-                         _nuisance_residual(P, run, t, zero), b, float(cr @ cr))
+                         _nuisance_residual(P, run, t, zero), blocks, float(cr @ cr))
     assert got == pytest.approx(expected, rel=1e-9)
 
 

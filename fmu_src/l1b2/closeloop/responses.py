@@ -75,11 +75,6 @@ P_MAX = 0.01
 MODEL_INPUTS = frozenset({dataio.FREQUENCY, dataio.TEMPERATURE})
 
 
-def _run_bounds(run: np.ndarray) -> np.ndarray:
-    """The start of each run's block of consecutive samples, and the end."""
-    return np.flatnonzero(np.r_[True, run[1:] != run[:-1], True])
-
-
 def speed_history(speed_m_s, time_s, run, tau_s: float, signed: bool = False) -> np.ndarray:
     """``h_tau * |v|`` per run [m/s]: the speed's magnitude (``signed``: the speed itself) through a causal
     first-order low-pass of time constant ``tau_s`` [s] (0: unchanged), its state 0 (at rest) at each run's start,
@@ -88,28 +83,28 @@ def speed_history(speed_m_s, time_s, run, tau_s: float, signed: bool = False) ->
     if tau_s <= 0:
         return v
     t = np.asarray(time_s, float)
-    b = _run_bounds(np.asarray(run))
+    blocks = [sl for _, sl in dataio.run_slices(run)]
     out = np.empty_like(v)
-    for i0, i1 in zip(b[:-1], b[1:]):
-        dt = float(np.median(np.diff(t[i0:i1]))) if i1 - i0 > 1 else 0.0
+    for sl in blocks:
+        dt = float(np.median(np.diff(t[sl]))) if sl.stop - sl.start > 1 else 0.0
         a = 1.0 - math.exp(-dt / tau_s) if dt > 0 else 1.0
-        out[i0:i1] = lfilter([a], [1.0, a - 1.0], v[i0:i1])
+        out[sl] = lfilter([a], [1.0, a - 1.0], v[sl])
     return out
 
 
 def _nuisance_residual(X: np.ndarray, run: np.ndarray, t: np.ndarray, P: np.ndarray) -> np.ndarray:
     """``X`` (columns) with each run's mean and linear trend in ``t`` removed, then the shared position basis ``P``
     (itself so residualised) projected out: the residual of the least-squares fit on both."""
-    b = _run_bounds(run)
+    blocks = [sl for _, sl in dataio.run_slices(run)]
 
     def within(A):
         out = np.array(A, float)
-        for i0, i1 in zip(b[:-1], b[1:]):
-            tt = t[i0:i1] - t[i0:i1].mean()
-            out[i0:i1] -= out[i0:i1].mean(axis=0)
+        for sl in blocks:
+            tt = t[sl] - t[sl].mean()
+            out[sl] -= out[sl].mean(axis=0)
             ss = tt @ tt
             if ss > 0:
-                out[i0:i1] -= np.outer(tt, tt @ out[i0:i1] / ss)
+                out[sl] -= np.outer(tt, tt @ out[sl] / ss)
         return out
     R, Pr = within(X), within(P)
     Q, _ = np.linalg.qr(Pr)
@@ -120,11 +115,11 @@ def drive_course(time_s, run, tau_s: float) -> np.ndarray:
     """``1 - exp(-(t - t_0 + dt) / tau)`` per run [1]: the course of a first-order consequence of the drive switched
     on at the run's first sample ``t_0`` (``dt`` the run's median sample interval: the first sample one step in)."""
     t = np.asarray(time_s, float)
-    b = _run_bounds(np.asarray(run))
+    blocks = [sl for _, sl in dataio.run_slices(run)]
     out = np.empty_like(t)
-    for i0, i1 in zip(b[:-1], b[1:]):
-        dt = float(np.median(np.diff(t[i0:i1]))) if i1 - i0 > 1 else 0.0
-        out[i0:i1] = 1.0 - np.exp(-(t[i0:i1] - t[i0] + dt) / tau_s)
+    for sl in blocks:
+        dt = float(np.median(np.diff(t[sl]))) if sl.stop - sl.start > 1 else 0.0
+        out[sl] = 1.0 - np.exp(-(t[sl] - t[sl.start] + dt) / tau_s)
     return out
 
 
@@ -135,7 +130,7 @@ def _share(X: np.ndarray, cr: np.ndarray, ss_tot: float) -> tuple[float, np.ndar
     return 1.0 - float(e @ e) / ss_tot, e
 
 
-def _per_run_share(x: np.ndarray, cr: np.ndarray, Pr: np.ndarray, b: np.ndarray, ss_tot: float) -> float:
+def _per_run_share(x: np.ndarray, cr: np.ndarray, Pr: np.ndarray, blocks: list[slice], ss_tot: float) -> float:
     """The share of ``cr``'s sum of squares explained by ``x`` with one coefficient per run and the shared columns
     ``Pr`` (all three already free of each run's mean and trend): the coefficients per run profiled out run by run
     (``M_r = I - x_r x_r^T / |x_r|^2``), the shared ones from ``sum P_r^T M_r P_r g = sum P_r^T M_r c_r``, in memory
@@ -145,19 +140,19 @@ def _per_run_share(x: np.ndarray, cr: np.ndarray, Pr: np.ndarray, b: np.ndarray,
         return a - np.outer(run_x, run_x @ a) / xx if xx > 0 else a
     A = np.zeros((Pr.shape[1], Pr.shape[1]))
     y = np.zeros(Pr.shape[1])
-    for i0, i1 in zip(b[:-1], b[1:]):
-        MP = m(x[i0:i1], Pr[i0:i1])
+    for sl in blocks:
+        MP = m(x[sl], Pr[sl])
         A += MP.T @ MP
-        y += MP.T @ cr[i0:i1]
+        y += MP.T @ cr[sl]
     g = np.linalg.lstsq(A, y, rcond=None)[0]
-    ss = sum(float(np.sum(m(x[i0:i1], (cr[i0:i1] - Pr[i0:i1] @ g)[:, None]) ** 2)) for i0, i1 in zip(b[:-1], b[1:]))
+    ss = sum(float(np.sum(m(x[sl], (cr[sl] - Pr[sl] @ g)[:, None]) ** 2)) for sl in blocks)
     return 1.0 - ss / ss_tot
 
 
 def _drive_share(cr, ss_tot, run, t, P) -> tuple[float, float | None]:
     """The best share of the drive's courses (:func:`drive_course`, a shared cubic or one amplitude per run) over
     the ``tau > 0`` of :data:`TAUS_S`, and its ``tau``."""
-    b = _run_bounds(run)
+    blocks = [sl for _, sl in dataio.run_slices(run)]
     zero = np.zeros((len(t), 0))
     Pr = _nuisance_residual(P, run, t, zero)
     best = (0.0, None)
@@ -165,7 +160,7 @@ def _drive_share(cr, ss_tot, run, t, P) -> tuple[float, float | None]:
         e = drive_course(t, run, tau)
         shared, _ = _share(_nuisance_residual(np.vander(e, DEGREE + 1, increasing=True)[:, 1:], run, t, P), cr,
                            ss_tot)
-        per_run = _per_run_share(_nuisance_residual(e[:, None], run, t, zero)[:, 0], cr, Pr, b, ss_tot)
+        per_run = _per_run_share(_nuisance_residual(e[:, None], run, t, zero)[:, 0], cr, Pr, blocks, ss_tot)
         for share in (shared, per_run):
             if share > best[0]:
                 best = (share, tau)
@@ -192,8 +187,8 @@ def response_statistic(column, speed_m_s, time_s, position_m, run) -> dict:
     z = 2.0 * (s - s.min()) / (np.ptp(s) or 1.0) - 1.0
     P = np.polynomial.legendre.legvander(z, POSITION_DEGREE)[:, 1:]
     cr = _nuisance_residual(c[:, None], run, t, P)[:, 0]
-    b = _run_bounds(run)
-    n_runs = len(b) - 1
+    blocks = [sl for _, sl in dataio.run_slices(run)]
+    n_runs = len(blocks)
     ss_tot = float(cr @ cr)
     best = {"share": 0.0, "tau_s": None, "signed": None, "runs_above": 0, "n_runs": n_runs, "p_value": 1.0,
             "drive_share": 0.0, "drive_tau_s": None, "response": False}
@@ -206,8 +201,8 @@ def response_statistic(column, speed_m_s, time_s, position_m, run) -> dict:
             share, e = _share(_nuisance_residual(np.vander(u, DEGREE + 1, increasing=True)[:, 1:], run, t, P), cr,
                               ss_tot)
             if share > best["share"]:
-                per = [1.0 - float(e[i0:i1] @ e[i0:i1]) / float(cr[i0:i1] @ cr[i0:i1])
-                       for i0, i1 in zip(b[:-1], b[1:]) if float(cr[i0:i1] @ cr[i0:i1]) > 0]
+                per = [1.0 - float(e[sl] @ e[sl]) / float(cr[sl] @ cr[sl])
+                       for sl in blocks if float(cr[sl] @ cr[sl]) > 0]
                 k = int(np.sum(np.array(per) > SHARE_MIN))
                 best.update(share=share, tau_s=tau, signed=signed, runs_above=k, p_value=_sign_test_p(k, n_runs))
     if best["share"] >= SHARE_MIN and best["p_value"] < P_MAX:
