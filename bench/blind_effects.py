@@ -45,6 +45,7 @@ import math
 import os
 import shutil
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -253,6 +254,28 @@ def run_cli(argv, doc: str, kinds, make, row_extra):
     print(json.dumps(row))
     if args.report:
         Path(args.report).write_text(json.dumps(res.to_dict(), default=str))
+
+
+def probe_args(argv, doc: str, kinds, modes) -> argparse.Namespace:
+    """The probes' command line: ``KIND SEED MODE [--cache DIR] [--out DIR]`` (``kinds`` an audit's, and ``clean``;
+    ``modes`` the probe's changes of the files)."""
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    ap.add_argument("kind", choices=tuple(kinds) + ("clean",))
+    ap.add_argument("seed", type=int)
+    ap.add_argument("mode", choices=tuple(modes))
+    ap.add_argument("--cache", default=default_cache())
+    ap.add_argument("--out", default="", help="the changed copy's folder (default: a temporary one)")
+    return ap.parse_args(argv)
+
+
+def probe_copy(args: argparse.Namespace, make) -> tuple[Path, Path]:
+    """``(src, dst)``: the cached experiment of ``args.kind`` at ``args.seed`` (made by ``make`` when absent, the
+    clean one for ``clean``) and a fresh copy of it in ``args.out`` (default: a new temporary folder)."""
+    src = data_dir(args.kind, args.seed, Path(args.cache), None if args.kind == "clean" else make)
+    dst = Path(args.out or tempfile.mkdtemp(prefix="l1b2_probe_"))
+    shutil.rmtree(dst, ignore_errors=True)
+    shutil.copytree(src, dst)
+    return src, dst
 
 
 def channel_field(channels: dict):

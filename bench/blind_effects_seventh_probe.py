@@ -20,12 +20,9 @@ makes it first):
 Usage: python bench/blind_effects_seventh_probe.py KIND SEED MODE [--out DIR]. Prints the row of
 ``bench/blind_effects.py`` (its ``loop_row``), then the evidence of the probed column, one JSON line each.
 """
-import argparse
 import functools
 import json
-import shutil
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -78,17 +75,8 @@ def changed(df: pd.DataFrame, mode: str, session: pd.DataFrame) -> pd.DataFrame:
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("kind", choices=seventh.KINDS + ("clean",))
-    ap.add_argument("seed", type=int)
-    ap.add_argument("mode", choices=("rest", "logrest", "regular", "allow", "response"))
-    ap.add_argument("--cache", default=be.default_cache())
-    ap.add_argument("--out", default="", help="the changed copy's folder (default: a temporary one)")
-    args = ap.parse_args(argv)
-    src = be.data_dir(args.kind, args.seed, Path(args.cache), None if args.kind == "clean" else seventh.experiment)
-    dst = Path(args.out or tempfile.mkdtemp(prefix="l1b2_probe_"))
-    shutil.rmtree(dst, ignore_errors=True)
-    shutil.copytree(src, dst)
+    args = be.probe_args(argv, __doc__, seventh.KINDS, ("rest", "logrest", "regular", "allow", "response"))
+    src, dst = be.probe_copy(args, seventh.experiment)
     session = pd.read_csv(src / "all.csv")
     for part in ("train", "test"):
         changed(pd.read_csv(src / f"{part}.csv"), args.mode, session).to_csv(dst / f"{part}.csv", index=False)

@@ -15,11 +15,8 @@ Usage: python bench/blind_effects_sixth_probe.py KIND SEED MODE [--out DIR]. Pri
 ``bench/blind_effects.py`` (its ``loop_row``), then the evidence of the probed column (and of its lags), one JSON
 line each.
 """
-import argparse
 import json
-import shutil
 import sys
-import tempfile
 from pathlib import Path
 
 import pandas as pd
@@ -45,17 +42,8 @@ def changed(df: pd.DataFrame, mode: str) -> pd.DataFrame:
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("kind", choices=sixth.KINDS + ("clean",))
-    ap.add_argument("seed", type=int)
-    ap.add_argument("mode", choices=("fill", "derived", "vcopy"))
-    ap.add_argument("--cache", default=be.default_cache())
-    ap.add_argument("--out", default="", help="the changed copy's folder (default: a temporary one)")
-    args = ap.parse_args(argv)
-    src = be.data_dir(args.kind, args.seed, Path(args.cache), None if args.kind == "clean" else sixth.experiment)
-    dst = Path(args.out or tempfile.mkdtemp(prefix="l1b2_probe_"))
-    shutil.rmtree(dst, ignore_errors=True)
-    shutil.copytree(src, dst)
+    args = be.probe_args(argv, __doc__, sixth.KINDS, ("fill", "derived", "vcopy"))
+    src, dst = be.probe_copy(args, sixth.experiment)
     for part in ("train", "test"):
         changed(pd.read_csv(src / f"{part}.csv"), args.mode).to_csv(dst / f"{part}.csv", index=False)
     row, res = be.loop_row(f"{args.kind}({args.mode})", args.seed, dst)
