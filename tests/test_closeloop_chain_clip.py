@@ -17,7 +17,7 @@ from l1b2.closeloop import chain
 from l1b2.closeloop.loop import ChainModel, _chain_note
 from l1b2.closeloop.report import chain_line
 from l1b2.data import measurements as dataio
-from l1b2.fmi.export import ExportError, export_calibrated
+from l1b2.fmi.export import export_calibrated
 from l1b2.predictor.effects import EffectSpecError, apply_output_filter
 from l1b2.predictor.effects.model import ExtendedPredictor
 from l1b2.predictor.model import example_params
@@ -144,15 +144,22 @@ def test_the_prediction_is_clipped_after_the_filter_whose_state_is_unclipped():
     np.testing.assert_allclose(plain.apply(df, np.r_[u, u])[:5], [0.1, 0.16, 0.23, 0.055, -0.0525], atol=1e-15)
 
 
-def test_the_exported_model_keeps_the_rails_and_predictor_fmu_refuses_them(tmp_path):
+def test_the_exported_model_keeps_the_rails_and_predictor_fmu_declares_them(tmp_path):
     setup = PredictorSetup(example_params(3), 0.1, 1e-3)
     filt = {"a": 0.0, "b0": 1.0, "b1": 0.0, "lo_m_s": LO, "hi_m_s": HI}
     model = ExtendedPredictor(setup, setup, output_filter=filt)
     assert ExtendedPredictor.from_dict(model.to_dict()).output_filter == filt
     plain = ExtendedPredictor(setup, setup, output_filter={"a": 0.2, "b0": 0.8, "b1": 0.0})
     assert ExtendedPredictor.from_dict(plain.to_dict()).output_filter == {"a": 0.2, "b0": 0.8, "b1": 0.0}
-    with pytest.raises(ExportError, match="range limit"):
-        export_calibrated(model, tmp_path)
+    from fmpy import read_model_description
+    export_calibrated(model, tmp_path)
+    var = {v.name: v for v in read_model_description(str(tmp_path / "fmus" / "Predictor.fmu")).modelVariables}
+    assert (float(var["speed_rail_lo"].start), float(var["speed_rail_hi"].start)) == (LO, HI)
+    assert var["speed_rail_lo"].unit == var["speed_rail_hi"].unit == "m/s"
+    only_hi = ExtendedPredictor(setup, setup, output_filter={"a": 0.0, "b0": 1.0, "b1": 0.0, "hi_m_s": HI})
+    export_calibrated(only_hi, tmp_path / "hi")
+    names = {v.name for v in read_model_description(str(tmp_path / "hi" / "fmus" / "Predictor.fmu")).modelVariables}
+    assert "speed_rail_hi" in names and "speed_rail_lo" not in names
 
 
 def test_the_column_noise_is_the_second_differences_scatter():

@@ -14,6 +14,7 @@ own prediction is checked on a real close-the-loop result in
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 import subprocess
 
@@ -39,8 +40,11 @@ T0 = 5.0                      # session time of the runs' start [s]
 #: runs did not hold constant are refused, tested below); not the categorical run-level family, whose every
 #: hypothesis reads a logged channel through an input of its own (tests/test_predictor_fmu_channels.py)
 CARRIED = tuple(k for k in fx.KINDS if fx.family(k).exportable and k != "run_level_category")
-KINDS = CARRIED + ("output_filter",)
+#: the output stages: the filter, and the filter with the speed channel's range (rails that cut both runs' speeds)
+STAGES = ("output_filter", "output_clip")
+KINDS = CARRIED + STAGES
 FILTER = {"a": 0.3, "b0": 0.5, "b1": 0.2}
+CLIP = {**FILTER, "lo_m_s": -0.18, "hi_m_s": 0.22}
 
 
 def _run_inputs(d, V0, load):
@@ -138,6 +142,7 @@ def models(pool) -> dict[str, ExtendedPredictor]:
         out[kind] = ExtendedPredictor(base, refit, effects, None, {"train": "synthetic test frame"})
     out["output_filter"] = ExtendedPredictor(base, refit, out["load_path_friction"].effects, FILTER,
                                              {"train": "synthetic test frame"})
+    out["output_clip"] = replace(out["output_filter"], output_filter=CLIP)
     return out
 
 
@@ -199,6 +204,11 @@ def test_extended_predictor_fmu_equals_the_extended_model_through_fmpy(kind, mod
         want = _free_run(ep, r)
         np.testing.assert_allclose(np.array(got), want, rtol=1e-10, atol=1e-14)
         assert np.max(np.abs(want - _free_run(plain, r))) > 1e-4   # not vacuous: the effect changes the speed
+    if kind == "output_clip":   # each run meets a rail, and the filtered speed beyond it is held there
+        free = [_free_run(replace(ep, output_filter=FILTER), r) for r in RUNS]
+        assert np.max(free[0]) > CLIP["hi_m_s"] and np.min(free[1]) < CLIP["lo_m_s"]
+        for f, got in zip(free, through_fmpy[kind]):
+            np.testing.assert_allclose(got, np.clip(f, CLIP["lo_m_s"], CLIP["hi_m_s"]), rtol=1e-10, atol=1e-14)
 
 
 def test_extended_predictor_fmu_declares_every_parameter_with_unit_and_provenance(models, built):
@@ -216,6 +226,11 @@ def test_extended_predictor_fmu_declares_every_parameter_with_unit_and_provenanc
                 assert float(var[n].start) == pytest.approx(p, rel=1e-15)
                 assert "standard error 0.01" in var[n].description and "synthetic test frame" in var[n].description
         assert ("T" in var) == models[kind].needs_temperature, kind
+        rails = {k: v for k, v in (models[kind].output_filter or {}).items() if k.endswith("_m_s")}
+        assert {n for n in var if n.startswith("speed_rail_")} == {f"speed_rail_{k[:2]}" for k in rails}, kind
+        for k, value in rails.items():
+            rail = var[f"speed_rail_{k[:2]}"]
+            assert rail.causality == "parameter" and rail.unit == "m/s" and float(rail.start) == value
         assert {"baseline_c_r", "c_r", "v_baseline", "F_extra"} <= set(var), kind
 
 
@@ -478,9 +493,9 @@ OUTPUTS = ("v", "v_steady", "v_baseline", "F_extra")
 
 
 def _native_kinds() -> tuple:
-    """The kinds of :data:`KINDS` whose model has a native FMU (a per-sample kernel), and the output filter."""
+    """The kinds of :data:`KINDS` whose model has a native FMU (a per-sample kernel), and the output stages."""
     from l1b2.predictor.effects.kernels import KERNEL_KINDS
-    return tuple(k for k in KINDS if k in KERNEL_KINDS or k == "output_filter")
+    return tuple(k for k in KINDS if k in KERNEL_KINDS or k in STAGES)
 
 
 def worker_outputs(paths: dict, runs: list, t0: float):
@@ -538,7 +553,7 @@ def test_native_extended_predictor_fmu_equals_the_python_fmu(kind, native_output
             assert want.shape == got.shape == (N, len(OUTPUTS))
             scale = np.max(np.abs(want), axis=0)
             np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12 * float(np.max(scale)), err_msg=f"FMI {ver}")
-            assert scale[OUTPUTS.index("F_extra")] > 1e-3 or kind == "output_filter"
+            assert scale[OUTPUTS.index("F_extra")] > 1e-3 or kind in STAGES
 
 
 def test_native_extended_predictor_fmus_validate(native_built):

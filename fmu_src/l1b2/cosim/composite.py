@@ -438,7 +438,9 @@ class ExtendedPredictorBlock(PredictorBlock):
        time (the session clock: start the simulation at the run's session
        time), ``v_base`` and ``a_base``;
     3. the model speed is advanced with ``F_extra`` added to its drive force,
-       and passed through the output filter.
+       and passed through the output filter; the output ``v`` is the filtered
+       speed held within the speed channel's range (``speed_rail_lo``/``speed_rail_hi``
+       [m/s], declared only for the rails the model carries), the filter's state is not.
 
     Its inputs (:meth:`inputs`, one list per carried model, the block's own
     ``INPUTS``): the plain predictor's, the measured stator temperature ``T``
@@ -475,6 +477,8 @@ class ExtendedPredictorBlock(PredictorBlock):
             self._values.update(zip(e.names, (float(p) for p in e.phi)))
         if setup.output_filter is not None:
             self._values.update({f"speed_filter_{k}": float(setup.output_filter[k]) for k in ("a", "b0", "b1")})
+            self._values.update({RAIL_PARAMETERS[k]: float(setup.output_filter[k]) for k in RAIL_PARAMETERS
+                                 if k in setup.output_filter})
         self.base_setup = setup.baseline
 
     @classmethod
@@ -495,6 +499,13 @@ class ExtendedPredictorBlock(PredictorBlock):
                 out.append(Var(f"speed_filter_{k}", "parameter", "1",
                                f"speed channel output filter y(k) = a y(k-1) + b0 u(k) + b1 u(k-1): {k}",
                                start=float(params.output_filter[k]), variability="fixed"))
+            for k, name in RAIL_PARAMETERS.items():
+                if k in params.output_filter:
+                    side = "lowest" if k == "lo_m_s" else "highest"
+                    out.append(Var(name, "parameter", "m/s",
+                                   f"the speed channel's {side} reading (its range limit, identified from {src}): "
+                                   "the output v is the filtered speed held within the range",
+                                   start=float(params.output_filter[k]), variability="fixed"))
         out = (out + list(cls.EXTRA_PARAMETERS) + cls.inputs(params) + cls.OUTPUTS + cls.EXT_OUTPUTS + cls.STATES
                + cls.EXT_STATES)
         names = [v.name for v in out]
@@ -532,6 +543,8 @@ class ExtendedPredictorBlock(PredictorBlock):
                                                   for e in ext.effects))
         self.filter = (None if ext.output_filter is None
                        else {k: self._values[f"speed_filter_{k}"] for k in ("a", "b0", "b1")})
+        self.rails = tuple(self._values.get(RAIL_PARAMETERS[k], default) for k, default in
+                           (("lo_m_s", -math.inf), ("hi_m_s", math.inf)))
 
     def initialize(self):
         self.rebuild_params()
@@ -557,7 +570,7 @@ class ExtendedPredictorBlock(PredictorBlock):
 
     def initialize_outputs(self):
         su = self.setup
-        self.v = float(self.v_state)
+        self.v = min(max(float(self.v_state), self.rails[0]), self.rails[1])   # the channel's range, last stage
         self.v_steady = float(pr.steady_state(su.params, self.s, self.V0, self.load, self.direction,
                                               su.slider_mass_kg, extra_force=getattr(self, "F_extra", 0.0)))
 
@@ -577,6 +590,10 @@ class ExtendedPredictorBlock(PredictorBlock):
         self.t_now = float(t) + h
         self.v_baseline = float(self.v_base)
         self.initialize_outputs()
+
+
+#: the speed channel's range limits (:data:`l1b2.predictor.effects.FILTER_RAILS`) as parameters of Predictor.fmu
+RAIL_PARAMETERS = {"lo_m_s": "speed_rail_lo", "hi_m_s": "speed_rail_hi"}
 
 
 def channel_input(column: str, start: float, source: str) -> Var:

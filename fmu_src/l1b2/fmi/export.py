@@ -314,17 +314,10 @@ CALIBRATED_SSV_DIR = "calibrated_ssv"
 
 def _refuse_sensor_stages(model) -> None:
     """ExportError when the model's speed output goes through a sensor stage ``Predictor.fmu`` has no code for: the
-    speed sensor's gain along the stroke, or the speed channel's range limit (the output filter's rails)."""
-    from ..predictor.effects import FILTER_RAILS
+    speed sensor's gain along the stroke (the output filter and its rails are stages of the FMU)."""
     if model.speed_gain is not None:
         raise ExportError("Predictor.fmu has no stage for the speed sensor's gain along the stroke (speed_gain): "
                           "the model predicts the recorded speed only through ExtendedPredictor.free_run")
-    rails = {k: v for k, v in (model.output_filter or {}).items() if k in FILTER_RAILS}
-    if rails:
-        raise ExportError("Predictor.fmu has no stage for the speed channel's range limit (output_filter rails "
-                          + ", ".join(f"{k} = {v:.6g}" for k, v in rails.items()) + "): its speed output would "
-                          "leave the range the recorded column saturates at; the model predicts the recorded speed "
-                          "only through ExtendedPredictor.free_run")
 
 
 def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None) -> dict:
@@ -357,8 +350,8 @@ def export_calibrated(model, out_dir: str | Path, mp: MotorParams | None = None)
         (:func:`l1b2.predictor.effects.channels.export_problem`: the FMU reads a run-level signal of V0, the
         load, the direction, the temperature or a logged channel as the input's current value); if the model
         carries a speed sensor's gain along the stroke (``ExtendedPredictor.speed_gain``: Predictor.fmu has no such
-        output stage) or a range limit of the speed channel (``output_filter`` rails ``lo_m_s``/``hi_m_s``: no
-        clip stage either).
+        output stage). The output filter and the speed channel's range limits (``output_filter`` rails
+        ``lo_m_s``/``hi_m_s``) are the FMU's last stages (parameters ``speed_filter_*``, ``speed_rail_lo/hi``).
 
     A logged channel an effect reads is an input of ``Predictor.fmu`` named after its column
     (:func:`l1b2.cosim.composite.channel_input`); the manifest lists it in ``inputs`` and ``channel_inputs``

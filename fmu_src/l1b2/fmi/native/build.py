@@ -226,7 +226,7 @@ def _drive_laws(tree) -> list[str]:
 
 def _extended_tables(ext: dict, vr: dict) -> list[str]:
     """The calibrated extended predictor's effects (kind codes, spec scalars, parameter value references) and
-    output filter for ``predictor_model.c`` (the kernels: :mod:`l1b2.predictor.effects.kernels`)."""
+    output filter with its rails for ``predictor_model.c`` (the kernels: :mod:`l1b2.predictor.effects.kernels`)."""
     from ...predictor.effects import EffectSpecError
     from ...predictor.effects.kernels import spec_scalars
     kinds, qs, phis = [], [], []
@@ -252,6 +252,8 @@ def _extended_tables(ext: dict, vr: dict) -> list[str]:
 
     return ["#define PRED_EXTENDED 1", f"#define PRED_HAS_T {int('T' in vr)}",
             f"#define PRED_HAS_FILTER {int(ext.get('output_filter') is not None)}",
+            f"#define PRED_HAS_RAIL_LO {int('lo_m_s' in (ext.get('output_filter') or {}))}",
+            f"#define PRED_HAS_RAIL_HI {int('hi_m_s' in (ext.get('output_filter') or {}))}",
             f"#define EFF_N {len(kinds)}", f"#define EFF_NPHI {max(1, sum(map(len, phis)))}",
             arr("int", "EFF_KIND", kinds), arr("int", "EFF_Q_OFF", offsets(qs)),
             arr("double", "EFF_Q", [v for q in qs for v in q], _c_double), arr("int", "EFF_PHI_OFF", offsets(phis)),

@@ -109,6 +109,12 @@ static void outputs(Instance* c)
     double* r = c->s.r;
     r[VR_v] = r[VR_v_state];
 #if PRED_EXTENDED
+#if PRED_HAS_RAIL_LO
+    r[VR_v] = fmax(r[VR_v], r[VR_speed_rail_lo]); /* the speed channel's range, its last stage */
+#endif
+#if PRED_HAS_RAIL_HI
+    r[VR_v] = fmin(r[VR_v], r[VR_speed_rail_hi]);
+#endif
     r[VR_v_steady] = steady_state(&c->s.ms.par, r[VR_s], r[VR_V0], r[VR_load], r[VR_direction], 1, r[VR_F_extra]);
     r[VR_v_baseline] = r[VR_v_base];
 #else
