@@ -482,7 +482,7 @@ class LikelihoodProblem:
         Frest = X + z0 * Fr
         dFk = core.dF(theta, vp, sgm, Ap, P, cols, rows=rows)
         dFr = core.dF(theta, np.zeros_like(vp), z0, Ap, P, cols, rows=rows)
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             a_r = (Frest / Fk) * (1.0 + vp * D / Fk)
             U = (h + vp / Fk)[:, None] * dFr - (vp * Frest / Fk**2)[:, None] * dFk
         U *= d[:, None]
