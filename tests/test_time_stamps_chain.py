@@ -144,3 +144,18 @@ def test_a_glitch_the_uneven_stamps_explain_is_not_refused_and_a_real_one_still_
     jumped[40] += 5e-4   # the position itself jumps there: its derivative on the regular clock is a glitch too
     v_j = np.gradient(jumped, t)
     assert speed_glitch(v_j, jumped, t, 0.5) is not None
+
+
+def test_the_report_line_names_the_stage_when_the_steps_are_uneven():
+    from l1b2.closeloop.report import stamps_sentence
+    assert stamps_sentence({"considered": False, "accepted": False}) == ""
+    kept = {"considered": True, "accepted": True, "cv_gain": 0.4846, "p_value": 1e-9, "gamma": 1.0013,
+            "gamma_of_baseline": {"gamma": 0.9877}}
+    assert stamps_sentence(kept) == (
+        " The time steps are uneven: a speed derived over stamps that are not the samples' times (logged speed = "
+        "r^gamma x the slider's, r the time step ratio) has held-out gain 48.5% (p 1e-09), gamma 1.001 (1: stamps "
+        "given on arrival, 0: true stamps): kept: the prediction is multiplied by r^gamma.")
+    refused = {"considered": True, "accepted": False, "cv_gain": -0.0001, "p_value": 0.996,
+               "gamma_of_baseline": {"gamma": 0.0028}}
+    assert stamps_sentence(refused).endswith("held-out gain -0.0% (p 1), gamma 0.003 (1: stamps given on arrival, "
+                                             "0: true stamps): not kept.")
