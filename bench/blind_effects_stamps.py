@@ -6,9 +6,10 @@ Same world and machinery as ``bench/blind_effects.py`` (imported) and the same d
 0-L_max), with one difference: here the latencies are in the sampling itself, not in the stamps. The DAQ takes the
 p-th packet's samples ``L_p`` late (a trigger that waits for the bus), so sample ``k`` is taken at ``k dt + L_p`` and
 stamped at that true time; the position is the slider's at that time (the co-simulation's 1 ms course through a
-monotone cubic (PCHIP, no overshoot at the end stops) held within the stroke, then the encoder's resolution), and the speed is derived over those true stamps. The logged
-``time_s`` has exactly the steps of ``usb_timestamps`` at the same seed, but the speed column is right. Nothing is
-injected: the loop must run as on ``clean`` and must not keep a form of the speed over the stamps.
+monotone cubic, PCHIP, with no overshoot at the end stops, held within the stroke, then the encoder's resolution),
+and the speed is derived over those true stamps. The logged ``time_s`` has exactly the steps of ``usb_timestamps``
+at the same seed, but the speed column is right. Nothing is injected: the loop must run as on ``clean`` and must not
+keep a form of the speed over the stamps.
 
 Kinds: ``true_uneven_stamps``. Usage: python bench/blind_effects_stamps.py KIND SEED [--cache DIR] [--report
 FILE]. Prints the row of ``bench/blind_effects.py`` plus ``traced_all`` and the stamps' stage record
