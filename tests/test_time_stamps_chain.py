@@ -159,3 +159,32 @@ def test_the_report_line_names_the_stage_when_the_steps_are_uneven():
                "gamma_of_baseline": {"gamma": 0.0028}}
     assert stamps_sentence(refused).endswith("held-out gain -0.0% (p 1), gamma 0.003 (1: stamps given on arrival, "
                                              "0: true stamps): not kept.")
+
+
+def test_the_loop_keeps_the_stage_as_round_1_and_fits_the_rounds_behind_it(monkeypatch):
+    """``CloseLoop._stamps``: a kept stage becomes the model's chain (round 1, ``time_step_ratio``) and the rounds'
+    frame is the logged speed over ``r^gamma``; a refused one falls through to the stroke gain (off: the frame)."""
+    from l1b2.closeloop.acceptance import EffectSet
+    from l1b2.closeloop.loop import CloseLoop, _Iteration
+
+    class Physics:
+        def predict_free_run(self, df):
+            return df[dataio.SPEED].to_numpy()
+
+        def predict_one_step(self, df):
+            return df[dataio.SPEED].to_numpy()
+    df, v = frame(True)
+    mask = np.ones(len(df), bool)
+    chain = stamps.StampChain(1.0, 0.01)
+    kept = {"considered": True, "accepted": True, "cv_gain": 0.5, "cv_free_run_gain": 0.3, "gamma": 1.0}
+    monkeypatch.setattr(stamps, "decide", lambda *a, **k: (kept, (Physics(), chain)))
+    it, rec = _Iteration(model=Physics(), effects=EffectSet(), rounds=[{"round": 0}]), {}
+    fit_tr = CloseLoop()._stamps(it, rec, df, None, mask, 0.1, [])
+    assert it.time_stamps is chain and rec["time_stamps"] is kept
+    assert [(r["round"], r["added"], r["regressors"]) for r in it.rounds[1:]] == [
+        (1, "speed_over_time_stamps", ["time_step_ratio"])]
+    np.testing.assert_allclose(fit_tr[dataio.SPEED], df[dataio.SPEED] / stamps.ratio(df), rtol=1e-12)
+    refused = {"considered": True, "accepted": False}
+    monkeypatch.setattr(stamps, "decide", lambda *a, **k: (refused, None))
+    it2 = _Iteration(model=Physics(), effects=EffectSet(), rounds=[{"round": 0}])
+    assert CloseLoop()._stamps(it2, {}, df, None, mask, 0.1, []) is df and it2.time_stamps is None
