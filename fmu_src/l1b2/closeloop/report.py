@@ -206,7 +206,21 @@ def chain_line(rec: Mapping) -> str:
     return (f"Measurement chain: the speed column differs from the position's derivative by "
             f"{float(rec['rel_rms_mismatch']):.1%} of the speed's rms; the speed channel's test "
             f"(held-out gain {float(rec.get('cv_gain', 0.0)):.1%}, p {float(rec.get('p_value', 1.0)):.2g}): {found}."
-            + clip_sentence(clip, applied=bool(rec.get("accepted"))))
+            + clip_sentence(clip, applied=bool(rec.get("accepted"))) + stamps_sentence(rec.get("time_stamps") or {}))
+
+
+def stamps_sentence(rec: Mapping) -> str:
+    """The sentence on the time stamps' chain (``measurement_chain.time_stamps``,
+    :func:`l1b2.closeloop.stamps.decide`): the screen's held-out gain and p-value, ``gamma`` and whether it was
+    kept; empty when the stage was not considered (even time steps)."""
+    if not rec.get("considered"):
+        return ""
+    g = rec.get("gamma") if rec.get("accepted") else (rec.get("gamma_of_baseline") or {}).get("gamma")
+    verdict = ("kept: the prediction is multiplied by r^gamma" if rec.get("accepted") else "not kept")
+    return (f" The time steps are uneven: a speed derived over stamps that are not the samples' times (logged speed"
+            f" = r^gamma x the slider's, r the time step ratio) has held-out gain {float(rec.get('cv_gain', 0.0)):.1%}"
+            f" (p {float(rec.get('p_value', 1.0)):.2g}), gamma {float(g if g is not None else float('nan')):.3f}"
+            f" (1: stamps given on arrival, 0: true stamps): {verdict}.")
 
 
 def clip_sentence(clip: Mapping, applied: bool = True) -> str:

@@ -22,7 +22,9 @@ ultrasonic motor on a pulley rig (docs/data-format.md, the load convention):
   the same up to the column's written resolution. Steps that differ from
   the run's median by more than :data:`UNEVEN_STEP_SHARE` of it come from
   stamps given on arrival (a USB or network host) or a logger that drops
-  samples; a speed derived over such stamps is off by the same share.
+  samples; a speed derived over such stamps is off by the same share. A
+  speed sample far from its neighbours beside such steps is not refused as
+  a glitch when the stamps explain it (:func:`speed_glitch`).
 * **temperature scale** (:func:`temperature_finding`): a stator that never
   comes near room temperature (coolest sample above
   :data:`MAX_COOLEST_TEMPERATURE_C`) is more likely recorded in degF.
@@ -43,6 +45,7 @@ import numpy as np
 import pandas as pd
 
 from .columns import DIRECTION, LOAD, PLAUSIBLE, RUN, SPEED, TEMPERATURE, TIME, VOLTAGE
+from .stamps import regular_clock_derivative
 
 #: standard gravity [m/s^2]
 GRAVITY_M_S2 = 9.80665
@@ -251,6 +254,39 @@ def step_hint(t_s: np.ndarray, i: int) -> str:
     shown = ", ".join(f"{x * 1e3:.3g}" for x in near)
     return (f" The time steps beside it are {shown} ms where the run's median step is {med * 1e3:.3g} ms: a speed "
             "derived over uneven time stamps (stamped on arrival, not by the DAQ's clock) is off there")
+
+def _median5(x: np.ndarray) -> np.ndarray:
+    """Each sample's median with its two neighbours on each side (the run's ends repeated)."""
+    return np.median(np.lib.stride_tricks.sliding_window_view(np.pad(x, 2, mode="edge"), 5), axis=1)
+
+
+def speed_glitch(v_m_s, s_m, t_s, share: float) -> tuple[int, float] | None:
+    """The first glitch of one run's speed column ``v_m_s`` [m/s], ``(i, median of its neighbours)``, or None (also
+    for a run of fewer than five samples).
+
+    A sample is far from its neighbours when it differs from the median of its five by more than ``share`` of the
+    run's peak (of those medians) + 10 mm/s + 6 x the robust noise level (1.4826 x the median absolute difference).
+    Such a sample is not a glitch when the time stamps explain it: a step beside it is uneven (:func:`step_hint`),
+    the sample is the position's derivative over the stamps (``numpy.gradient`` of ``s_m`` [m] over ``t_s`` [s])
+    within 10 mm/s + 6 x the noise level, and the position's derivative over the run's regular clock
+    (:func:`~l1b2.data.stamps.regular_clock_derivative`) is not far from its neighbours by the same rule: the
+    position moved smoothly on the DAQ's clock and the speed was derived over stamps that are not its times.
+    """
+    v = np.asarray(v_m_s, float)
+    if v.size < 5:
+        return None
+    t, s = np.asarray(t_s, float), np.asarray(s_m, float)
+    med = _median5(v)
+    tol = 0.01 + 6.0 * 1.4826 * float(np.median(np.abs(v - med)))   # a glitch does not move the noise level
+    limit = share * float(np.max(np.abs(med))) + tol
+    far = np.flatnonzero(np.abs(v - med) > limit)
+    if far.size and step_hint(t, int(far[0])):
+        u_reg = regular_clock_derivative(s, t)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            near = (np.abs(v - np.gradient(s, t)) <= tol) & (np.abs(u_reg - _median5(u_reg)) <= limit)
+        far = far[~np.array([bool(step_hint(t, int(i))) and near[i] for i in far])]
+    return (int(far[0]), float(med[far[0]])) if far.size else None
+
 
 def uneven_step_lines(records: dict) -> list[str]:
     """One line per file part of a report's ``checks["uneven_time_steps"]`` (``{"train": record or None, "test":

@@ -77,7 +77,7 @@ from .columns import (
     PlausibleRange,
 )
 from .gaps import GAP_COLUMNS, fill_gaps, gap_record
-from .plausibility import step_hint
+from .plausibility import speed_glitch, step_hint
 
 __all__ = [
     "DataProblem", "validate_frame", "validate_frame_filled", "check_setting", "run_slices", "format_value",
@@ -642,22 +642,17 @@ MAX_SPEED_DEVIATION: float = 0.5
 
 
 def _speed_spike_problem(df: pd.DataFrame, judged: list[tuple[Any, int, float]]) -> DataProblem | None:
-    """An isolated speed sample far from its neighbours (a glitch), in a run whose slope is consistent."""
-    v = df[SPEED].to_numpy(dtype=float)
-    t = df[TIME].to_numpy(dtype=float)
+    """An isolated speed sample far from its neighbours (a glitch, :func:`~l1b2.data.plausibility.speed_glitch`:
+    not one that the uneven time stamps beside it explain), in a run whose slope is consistent."""
+    v, s, t = (df[c].to_numpy(dtype=float) for c in (SPEED, POSITION, TIME))
     starts = {row for _, row, _ in judged}
     for rid, sl in run_slices(df[RUN]):
-        seg = v[sl]
-        if sl.start not in starts or seg.size < 5:
-            continue
-        med = np.median(np.lib.stride_tricks.sliding_window_view(np.pad(seg, 2, mode="edge"), 5), axis=1)
-        noise = 1.4826 * float(np.median(np.abs(seg - med)))  # robust noise level: a glitch does not move it
-        limit = MAX_SPEED_DEVIATION * float(np.max(np.abs(med))) + 0.01 + 6.0 * noise
-        i = _first(np.abs(seg - med) > limit)
-        if i is not None:
+        hit = speed_glitch(v[sl], s[sl], t[sl], MAX_SPEED_DEVIATION) if sl.start in starts else None
+        if hit is not None:
+            i, med = hit
             return DataProblem(sl.start + i, _ORDER[SPEED], SPEED,
-                               f"run {format_value(rid)}: speed_m_s = {seg[i]:.4g} m/s where its neighbours have "
-                               f"{med[i]:.4g} m/s (more than {MAX_SPEED_DEVIATION:.0%} of the run's peak speed "
+                               f"run {format_value(rid)}: speed_m_s = {v[sl][i]:.4g} m/s where its neighbours have "
+                               f"{med:.4g} m/s (more than {MAX_SPEED_DEVIATION:.0%} of the run's peak speed "
                                f"off): a glitch in the speed column?{step_hint(t[sl], i)}")
     return None
 

@@ -1,0 +1,244 @@
+"""The measurement chain of the time stamps: a speed derived over stamps that are not the samples' times.
+
+A DAQ samples on its own regular clock, but the logged ``time_s`` may be stamped by a host (on a packet's arrival,
+after a latency; a PC clock), so some steps of ``time_s`` within a run are uneven although the sampling was
+regular. A speed column the host derives from the position over its own stamps is then, at each sample, the
+slider's speed times the sample's time step ratio ``r`` (:func:`l1b2.data.stamps.time_step_ratio`: the run's median
+step over the effective step of the derivative over the stamps). When the stamps are the true times of unevenly
+taken samples, the speed column is right and ``r`` says nothing about it. A file cannot say which holds; the
+data can, and the stage lets them. The chain's form on the prediction's output (:class:`StampChain`) is
+
+    ``v_logged = r^gamma v``, ``gamma`` estimated (1: a speed derived over arrival stamps, 0: true stamps),
+
+and the physics behind it is fitted on the logged speed over ``r^gamma`` (:func:`stamp_frame`; the model runs on
+the logged stamps, whose error, a fraction of a step, moves a slow motion's prediction little). The stage is
+considered only when the steps of TRAIN's ``time_s`` are uneven (:func:`l1b2.data.plausibility.uneven_steps`): on an
+even clock ``r`` is 1 and the loop runs as before. It is decided as the speed sensor's gain is
+(:mod:`l1b2.closeloop.sensor`):
+
+* **screen** (:func:`screen`): the baseline's TRAIN residual (drive coordinates) regressed on the form's response
+  at ``gamma = 0``, ``d v_pred ln r`` (exact to first order: the form multiplies the output, no recursion), with
+  the baseline's nuisance responses in both models, cross-validated over the runs' folds; the held-out gain and
+  the runs' one-sided Wilcoxon p-value. Under true stamps the residual at an uneven step is not proportional to
+  ``v_pred ln r``, and there is no gain;
+* **fit** (:func:`fit_gamma`): given a model's free run ``v``, ``gamma`` is the least squares of
+  ``v_logged - r^gamma v`` (Gauss-Newton from 0);
+* **decision** (:func:`stamp_cv_errors`): the physics refitted behind the form against the baseline refitted on the
+  logged speed, per fold of the refit folds, the held-out logged speed predicted in free run (``gamma``
+  re-estimated on each fold's training runs only).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from ..cluster import run_tasks
+from ..data import measurements as dataio
+from ..data.plausibility import uneven_steps
+from ..data.stamps import time_step_ratio
+from ..errors import IdentificationError
+from . import residuals as res
+from .acceptance import EffectSet, RefitSettings, fold_error, fold_fit_data, refit
+from .folds import held_out_split
+from .selection import FoldSolver, finite_columns, linear_response, nuisance_forces
+
+#: the stage's name in reports
+STAMP_CHAIN = "speed_over_time_stamps"
+#: its regressor in ``diagnosis.traced_to``: the time stamps' step ratio per sample
+REGRESSOR = "time_step_ratio"
+DESCRIPTION = ("the speed column was derived over time stamps that are not the samples' times (a host's arrival "
+               "stamps): the logged speed is r^gamma times the slider's, r the run's median time step over the "
+               "sample's step of the derivative over the stamps")
+
+
+def ratio(df: pd.DataFrame) -> np.ndarray:
+    """The time step ratio per sample of ``df`` (:func:`l1b2.data.stamps.time_step_ratio`) [1]."""
+    return time_step_ratio(df[dataio.TIME].to_numpy(float), df[dataio.RUN].to_numpy())
+
+
+def uneven(df: pd.DataFrame) -> bool:
+    """Whether ``df``'s time steps within runs are uneven (:func:`l1b2.data.plausibility.uneven_steps`)."""
+    return uneven_steps(df) is not None
+
+
+class StampChain:
+    """The time stamps' chain ``v_logged = r^gamma v`` (the interface of
+    :class:`~l1b2.closeloop.chain.OutputFilter`: the physics is fitted on :meth:`frame`, its prediction of the
+    slider's speed is turned into the logged one by :meth:`apply`)."""
+
+    def __init__(self, gamma: float, stderr: float | None = None):
+        self.gamma, self.stderr = float(gamma), stderr
+
+    def frame(self, df: pd.DataFrame) -> pd.DataFrame:
+        """:func:`stamp_frame`."""
+        return stamp_frame(df, self.gamma)
+
+    def apply(self, df: pd.DataFrame, u) -> np.ndarray:
+        """The logged speed ``r^gamma u`` [m/s] at ``df``'s stamps."""
+        return ratio(df) ** self.gamma * np.asarray(u, float)
+
+    def to_dict(self) -> dict:
+        return {"gamma": self.gamma, "gamma_stderr": self.stderr}
+
+    def parameters(self) -> dict:
+        """The report's ``extended_parameters`` entry of ``gamma``."""
+        ci = None if self.stderr is None else [self.gamma - 1.96 * self.stderr, self.gamma + 1.96 * self.stderr]
+        return {"time_stamp_gamma": {"value": self.gamma, "stderr": self.stderr, "unit": "1", "ci95": ci}}
+
+
+def stamp_frame(df: pd.DataFrame, gamma: float) -> pd.DataFrame:
+    """A copy of ``df`` whose speed column is the slider's speed behind the stamps' chain, ``v_logged / r^gamma``
+    [m/s]."""
+    out = df.copy()
+    out[dataio.SPEED] = df[dataio.SPEED].to_numpy(float) / ratio(df) ** gamma
+    return out
+
+
+def fit_gamma(df: pd.DataFrame, mask, v_model, iterations: int = 20) -> StampChain:
+    """The chain whose ``r^gamma v_model`` fits the logged speed best on the masked samples (least squares,
+    Gauss-Newton from ``gamma = 0``), with a run-clustered standard error (sandwich at the solution)."""
+    m = np.asarray(mask, bool)
+    lr = np.log(ratio(df))[m]
+    v = np.asarray(v_model, float)[m]
+    y = df[dataio.SPEED].to_numpy(float)[m]
+    g = 0.0
+    for _ in range(iterations):
+        f = v * np.exp(g * lr)
+        J = f * lr
+        jj = float(J @ J)
+        if not jj > 0:
+            return StampChain(0.0, None)
+        step = float(J @ (y - f)) / jj
+        g += step
+        if abs(step) < 1e-10:
+            break
+    f = v * np.exp(g * lr)
+    J, e = f * lr, y - f
+    _, code = np.unique(df[dataio.RUN].to_numpy()[m], return_inverse=True)
+    score = np.bincount(code, weights=J * e)
+    return StampChain(g, float(np.sqrt(score @ score) / float(J @ J)))
+
+
+def response(df: pd.DataFrame, v_pred) -> np.ndarray:
+    """The logged speed's response to ``gamma`` at 0 in drive coordinates, ``d v_pred ln r`` (``v_pred`` [m/s] the
+    model's free run, data convention)."""
+    return df[dataio.DIRECTION].to_numpy(float) * np.asarray(v_pred, float) * np.log(ratio(df))
+
+
+def screen(df: pd.DataFrame, mask, v_pred, params, m_s: float, folds) -> dict:
+    """Cross-validated evidence of the form against the baseline ``params`` (free run ``v_pred`` [m/s]).
+
+    Returns ``{"cv_gain", "p_value", "runs_improved"}``: the pooled held-out share of the nuisance-only model's
+    sum of squares the form's response column (:func:`response`) removes, the one-sided Wilcoxon p-value of the
+    runs' reductions and the share of runs improved.
+    """
+    idx = np.flatnonzero(np.asarray(mask, bool))
+    d = df[dataio.DIRECTION].to_numpy(float)
+    v_pred = np.asarray(v_pred, float)
+    y = (d * (df[dataio.SPEED].to_numpy(float) - v_pred))[idx]
+    with np.errstate(over="ignore", invalid="ignore"):
+        N = finite_columns(linear_response(params, df, m_s, nuisance_forces(params, df, v_pred), v_pred=v_pred)[idx])
+    runs = df[dataio.RUN].to_numpy()[idx]
+    gain, per_run = FoldSolver(y, N, runs, folds).gain(response(df, v_pred)[idx][:, None])
+    return {"cv_gain": float(gain), "p_value": float(res.wilcoxon_greater(per_run)),
+            "runs_improved": float(np.mean(per_run > 0)) if len(per_run) else 0.0}
+
+
+def stamp_fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, init, settings: RefitSettings,
+                     v_base) -> tuple:
+    """One fold of the chain's model: on the training runs ``gamma`` from the baseline's free run ``v_base``
+    (:func:`fit_gamma`), the physics refitted behind it, ``gamma`` refitted on that model's free run; the held-out
+    runs' logged speed predicted as ``r^gamma`` times the physics' free run. Returns what
+    :func:`~l1b2.closeloop.acceptance.fold_error` returns: ``(sse, ss_meas, failed, nfev, run_sse)``."""
+    split = held_out_split(df, mask, held_runs)
+    train, test, m_tr = split.train, split.test, split.mask_train
+    try:
+        c0 = fit_gamma(train, m_tr, np.asarray(v_base, float)[~split.held])
+        est = refit(*fold_fit_data(c0.frame(train), m_tr), m_s, init, EffectSet(), settings)
+        c1 = fit_gamma(train, m_tr, est.predict_free_run(c0.frame(train)))
+        pred = c1.apply(test, est.predict_free_run(c1.frame(test)))
+    except (IdentificationError, np.linalg.LinAlgError):
+        return split.failed()
+    return split.score(pred, est.convergence_.get("nfev_total", 0))
+
+
+def stamp_cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init, settings: RefitSettings,
+                    v_base) -> dict:
+    """Held-out free-run sums of squares of the baseline (refitted on the logged speed) and of the chain's model
+    (:func:`stamp_fold_error`), both from ``init`` on the same ``folds``: ``{"sse_baseline", "sse_chain",
+    "ss_meas", "failed", "nfev", "folds_improved"}`` (per-fold arrays, totals)."""
+    task = settings.task()
+    args = ([(fold_error, (df, mask, m_s, fold, init, EffectSet(), task, None)) for fold in folds]
+            + [(stamp_fold_error, (df, mask, m_s, fold, init, task, v_base)) for fold in folds])
+    out = [None] * len(args)
+    for i, r in run_tasks(_call, args, client=settings.client, name="l1b2-stamp-chain-cv"):
+        out[i] = r
+    k = len(folds)
+    sse0 = np.array([r[0] for r in out[:k]])
+    sse1 = np.array([r[0] for r in out[k:]])
+    return {"sse_baseline": sse0, "sse_chain": sse1, "ss_meas": np.array([r[1] for r in out[:k]]),
+            "failed": sum(bool(r[2]) for r in out), "nfev": sum(int(r[3]) for r in out),
+            "folds_improved": int(np.sum(sse1 < sse0))}
+
+
+def _call(fn, args):
+    return fn(*args)
+
+
+def decide(df: pd.DataFrame, mask, m_s: float, folds, model, identify, settings: RefitSettings, *, alpha: float,
+           min_gain: float, min_cv_gain: float) -> tuple[dict, tuple | None]:
+    """The stage on TRAIN ``df`` against the current ``model`` (the baseline): ``(record, kept)``.
+
+    Considered only when ``df``'s time steps are uneven (:func:`uneven`). Screened (:func:`screen`) at ``alpha``
+    and the screen's smallest gain ``min_gain``, as every candidate is; kept when the physics refitted behind the
+    form lowers the cross-validated free-run sum of squares of the logged speed by at least ``min_cv_gain``, in
+    more than half of the folds (:func:`stamp_cv_errors`; the rule of the speed sensor's gain). ``identify(frame)``
+    fits the physics on a frame. ``kept``: None, or ``(physics model, StampChain)``: ``gamma`` from the baseline's
+    free run, the physics identified behind it, ``gamma`` refitted on that model's free run.
+    """
+    rec = {"effect": STAMP_CHAIN, "regressor": REGRESSOR, "considered": uneven(df), "accepted": False}
+    if not rec["considered"]:
+        return rec, None
+    v_base = model.predict_free_run(df)
+    rec.update(screen(df, mask, v_base, model.params_, m_s, folds))
+    rec["gamma_of_baseline"] = fit_gamma(df, mask, v_base).to_dict()
+    if not (rec["p_value"] < alpha and rec["cv_gain"] >= min_gain):
+        return rec, None
+    cv = stamp_cv_errors(df, mask, m_s, folds, model.params_, settings, v_base)
+    ssm = max(float(cv["ss_meas"].sum()), 1e-300)
+    sse0, sse1 = float(cv["sse_baseline"].sum()), float(cv["sse_chain"].sum())
+    gain = 1 - sse1 / sse0 if cv["failed"] == 0 and sse0 > 0 else 0.0
+    rec.update(cv_free_run_gain=gain, cv_free_run_nrmse_baseline=float(np.sqrt(sse0 / ssm)),
+               cv_free_run_nrmse_chain=float(np.sqrt(sse1 / ssm)), cv_folds_improved=cv["folds_improved"])
+    if not (gain >= min_cv_gain and cv["folds_improved"] > len(folds) / 2):
+        return rec, None
+    c0 = fit_gamma(df, mask, v_base)
+    est = identify(c0.frame(df))
+    c1 = fit_gamma(df, mask, est.predict_free_run(c0.frame(df)))
+    rec.update(accepted=True, description=DESCRIPTION, **c1.to_dict())
+    return rec, (est, c1)
+
+
+def stage_record(rec: dict, chain: StampChain) -> dict:
+    """The report's effect record of the kept stage (``rec``: its round)."""
+    return {"round": rec["round"], "effect": STAMP_CHAIN, "label": STAMP_CHAIN, "shape": "",
+            "regressors": [REGRESSOR], "generic": False, "structural": None,
+            "parameters": chain.parameters(),
+            "description": DESCRIPTION, "cv_gain": rec["cv"]["cv_gain"], "cv_free_run_nrmse_before": None,
+            "cv_free_run_nrmse_after": None, "folds_improved": None}
+
+
+def reading(chain: StampChain) -> str:
+    """The message's words on a kept stage."""
+    se = f" +- {chain.stderr:.3f}" if chain.stderr is not None else ""
+    return (f"speed derived over uneven time stamps (measurement chain, not a force): logged speed = "
+            f"r^gamma x the slider's, gamma {chain.gamma:.3f}{se} (1: stamps given on arrival, 0: true stamps)")
+
+
+def model_note(chain: StampChain | None) -> str:
+    """The calibrated model's note when the stage is kept ("" when not): the model is the physics behind it."""
+    if chain is None:
+        return ""
+    return ("; it is the physics behind the time stamps' chain: it predicts the slider's speed on the samples' "
+            f"clock (the logged speed over the stamps is r^gamma times it, gamma {chain.gamma:.3f}: not carried)")
