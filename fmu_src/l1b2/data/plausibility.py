@@ -255,6 +255,7 @@ def step_hint(t_s: np.ndarray, i: int) -> str:
     return (f" The time steps beside it are {shown} ms where the run's median step is {med * 1e3:.3g} ms: a speed "
             "derived over uneven time stamps (stamped on arrival, not by the DAQ's clock) is off there")
 
+
 def _median5(x: np.ndarray) -> np.ndarray:
     """Each sample's median with its two neighbours on each side (the run's ends repeated)."""
     return np.median(np.lib.stride_tricks.sliding_window_view(np.pad(x, 2, mode="edge"), 5), axis=1)
