@@ -515,7 +515,7 @@ class CloseLoop(EstimatorSettings):
             return dtr
         cv = sensor.gain_cv_errors(dtr, mask, m_s, folds, it.model.params_, self.refit_settings(), v_base)
         ssm = max(float(cv["ss_meas"].sum()), 1e-300)
-        sse0, sse1 = float(cv["sse_baseline"].sum()), float(cv["sse_gain"].sum())
+        sse0, sse1 = float(cv["sse_baseline"].sum()), float(cv["sse_stage"].sum())
         gain = 1 - sse1 / sse0 if cv["failed"] == 0 and sse0 > 0 else 0.0
         out.update(cv_free_run_gain=gain, cv_free_run_nrmse_baseline=float(np.sqrt(sse0 / ssm)),
                    cv_free_run_nrmse_gain=float(np.sqrt(sse1 / ssm)), cv_folds_improved=cv["folds_improved"])

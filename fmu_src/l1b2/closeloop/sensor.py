@@ -24,12 +24,11 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from ..cluster import run_tasks
 from ..data import measurements as dataio
 from ..errors import IdentificationError
 from ..predictor.effects.sensor import STROKE_GAIN_ORDER, SpeedSensorGain, stroke_basis
 from . import residuals as res
-from .acceptance import EffectSet, RefitSettings, fold_error, fold_fit_data, refit
+from .acceptance import EffectSet, RefitSettings, fold_fit_data, refit, stage_cv_errors
 from .folds import held_out_split
 from .selection import FoldSolver, finite_columns, linear_response, nuisance_forces
 
@@ -140,22 +139,8 @@ def gain_fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, i
 def gain_cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init, settings: RefitSettings,
                    v_base, order: int = STROKE_GAIN_ORDER) -> dict:
     """Held-out free-run sums of squares of the baseline (refitted on the recorded speed) and of the gain's model
-    (:func:`gain_fold_error`), both from ``init`` on the same ``folds``: ``{"sse_baseline", "sse_gain",
-    "ss_meas", "failed", "nfev", "folds_improved"}`` (per-fold arrays, totals)."""
-    task = settings.task()
-    s_range = position_range(df)
-    args = ([(fold_error, (df, mask, m_s, fold, init, EffectSet(), task, None)) for fold in folds]
-            + [(gain_fold_error, (df, mask, m_s, fold, init, task, v_base, s_range, order)) for fold in folds])
-    out = [None] * len(args)
-    for i, r in run_tasks(_call, args, client=settings.client, name="l1b2-sensor-gain-cv"):
-        out[i] = r
-    k = len(folds)
-    sse0 = np.array([r[0] for r in out[:k]])
-    sse1 = np.array([r[0] for r in out[k:]])
-    return {"sse_baseline": sse0, "sse_gain": sse1, "ss_meas": np.array([r[1] for r in out[:k]]),
-            "failed": sum(bool(r[2]) for r in out), "nfev": sum(int(r[3]) for r in out),
-            "folds_improved": int(np.sum(sse1 < sse0))}
-
-
-def _call(fn, args):
-    return fn(*args)
+    (:func:`gain_fold_error`), both from ``init`` on the same ``folds``
+    (:func:`~l1b2.closeloop.acceptance.stage_cv_errors`: ``{"sse_baseline", "sse_stage", "ss_meas", "failed",
+    "nfev", "folds_improved"}``)."""
+    return stage_cv_errors(df, mask, m_s, folds, init, settings, gain_fold_error,
+                           (v_base, position_range(df), order), "l1b2-sensor-gain-cv")

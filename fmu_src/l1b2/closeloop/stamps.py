@@ -33,13 +33,12 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from ..cluster import run_tasks
 from ..data import measurements as dataio
 from ..data.plausibility import uneven_steps
 from ..data.stamps import time_step_ratio
 from ..errors import IdentificationError
 from . import residuals as res
-from .acceptance import EffectSet, RefitSettings, fold_error, fold_fit_data, refit
+from .acceptance import EffectSet, RefitSettings, fold_fit_data, refit, stage_cv_errors
 from .folds import held_out_split
 from .selection import FoldSolver, finite_columns, linear_response, nuisance_forces
 
@@ -166,24 +165,10 @@ def stamp_fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, 
 def stamp_cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init, settings: RefitSettings,
                     v_base) -> dict:
     """Held-out free-run sums of squares of the baseline (refitted on the logged speed) and of the chain's model
-    (:func:`stamp_fold_error`), both from ``init`` on the same ``folds``: ``{"sse_baseline", "sse_chain",
-    "ss_meas", "failed", "nfev", "folds_improved"}`` (per-fold arrays, totals)."""
-    task = settings.task()
-    args = ([(fold_error, (df, mask, m_s, fold, init, EffectSet(), task, None)) for fold in folds]
-            + [(stamp_fold_error, (df, mask, m_s, fold, init, task, v_base)) for fold in folds])
-    out = [None] * len(args)
-    for i, r in run_tasks(_call, args, client=settings.client, name="l1b2-stamp-chain-cv"):
-        out[i] = r
-    k = len(folds)
-    sse0 = np.array([r[0] for r in out[:k]])
-    sse1 = np.array([r[0] for r in out[k:]])
-    return {"sse_baseline": sse0, "sse_chain": sse1, "ss_meas": np.array([r[1] for r in out[:k]]),
-            "failed": sum(bool(r[2]) for r in out), "nfev": sum(int(r[3]) for r in out),
-            "folds_improved": int(np.sum(sse1 < sse0))}
-
-
-def _call(fn, args):
-    return fn(*args)
+    (:func:`stamp_fold_error`), both from ``init`` on the same ``folds``
+    (:func:`~l1b2.closeloop.acceptance.stage_cv_errors`: ``{"sse_baseline", "sse_stage", "ss_meas", "failed",
+    "nfev", "folds_improved"}``)."""
+    return stage_cv_errors(df, mask, m_s, folds, init, settings, stamp_fold_error, (v_base,), "l1b2-stamp-chain-cv")
 
 
 def decide(df: pd.DataFrame, mask, m_s: float, folds, model, identify, settings: RefitSettings, *, alpha: float,
@@ -207,7 +192,7 @@ def decide(df: pd.DataFrame, mask, m_s: float, folds, model, identify, settings:
         return rec, None
     cv = stamp_cv_errors(df, mask, m_s, folds, model.params_, settings, v_base)
     ssm = max(float(cv["ss_meas"].sum()), 1e-300)
-    sse0, sse1 = float(cv["sse_baseline"].sum()), float(cv["sse_chain"].sum())
+    sse0, sse1 = float(cv["sse_baseline"].sum()), float(cv["sse_stage"].sum())
     gain = 1 - sse1 / sse0 if cv["failed"] == 0 and sse0 > 0 else 0.0
     rec.update(cv_free_run_gain=gain, cv_free_run_nrmse_baseline=float(np.sqrt(sse0 / ssm)),
                cv_free_run_nrmse_chain=float(np.sqrt(sse1 / ssm)), cv_folds_improved=cv["folds_improved"])
