@@ -81,3 +81,33 @@ def test_draws_lie_in_their_ranges(audit):
         p = audit.draw("strain_gauge_decoy", seed, 72)
         assert 20 <= p["k_ue_N"] <= 30 and 5 <= p["alpha_ue_K"] <= 10
         assert 0.5 <= p["A_T_K"] <= 1.0 and 150 <= p["Pi_s"] <= 250
+
+
+@pytest.fixture(scope="module")
+def probe(load_bench):
+    return load_bench("blind_effects_eighth_probe")
+
+
+def test_onset_keeps_each_run_from_its_last_sample_at_rest(probe):
+    import pandas as pd
+    s = np.concatenate([np.full(5, -0.02), -0.02 + 1e-5 * np.arange(1, 11)])   # 5 samples at rest, then moving
+    df = pd.DataFrame({"run": np.repeat([1, 2], 15), "position_m": np.concatenate([s, -s]),
+                       "time_s": np.arange(30) * 1e-3})
+    out = probe.onset_trimmed(df)
+    assert list(out.groupby("run").size()) == [11, 11]            # the 4 samples before the last one at rest dropped
+    assert out["time_s"].iloc[0] == pytest.approx(4e-3) and out["time_s"].iloc[11] == pytest.approx(19e-3)
+
+
+def test_fit_recovers_a_cyclic_error_from_runs_at_steady_speed(probe, audit):
+    import pandas as pd
+    P, A1, A2, p1, p2 = 1.5e-3, 8e-6, 3e-6, 0.4, 1.1
+    frames = []
+    for k, v in enumerate((0.05, 0.1, 0.15, 0.2)):
+        t = np.arange(0.0, 0.04 / v, 1e-3)
+        s = -0.02 + v * t
+        pos = s + audit.cyclic_error_m(s, P, A1, A2, p1, p2)
+        frames.append(pd.DataFrame({"run": k + 1, "time_s": t, "position_m": pos, "speed_m_s": np.gradient(pos, t)}))
+    got = probe.fit_cyclic_error(pd.concat(frames, ignore_index=True))
+    assert got["P_m"] == pytest.approx(P, rel=5e-3)
+    assert got["A1_m"] == pytest.approx(A1, rel=0.2) and got["A2_m"] == pytest.approx(A2, rel=0.4)
+    assert abs((got["phi1"] - p1 + math.pi) % (2 * math.pi) - math.pi) < 0.1
