@@ -278,6 +278,35 @@ def probe_copy(args: argparse.Namespace, make) -> tuple[Path, Path]:
     return src, dst
 
 
+def print_channel_evidence(res, prefix, keys: tuple, run_keys: tuple) -> None:
+    """Print one JSON line per channel the close loop ``res`` considered whose name starts with ``prefix`` (None or
+    "": none): the record's ``keys`` and its run-level signals' ``run_keys``."""
+    for c in res.diagnosis.get("channels_considered") or []:
+        if prefix and str(c.get("channel", "")).startswith(prefix):
+            print(json.dumps({k: c.get(k) for k in keys}
+                             | {"run_level": [{k: e.get(k) for k in run_keys} for e in c.get("run_level") or []]},
+                             default=str))
+
+
+def want_fields(channels: dict, want: dict):
+    """``row_extra`` of :func:`run_cli` for an audit with a pass rule: the kind's ``channel``, the regressors
+    accepted as the effect's (``want``) and every traced regressor (``traced_all``)."""
+    return lambda kind: {"channel": lambda names, diag: channels.get(kind),
+                         "want": lambda names, diag: list(want.get(kind, ())),
+                         "traced_all": lambda names, diag: list(diag["traced_to"])}
+
+
+def probe_loop(args, dst: Path, prefix) -> tuple[dict, object]:
+    """The close loop on a probe's changed copy ``dst``: prints its row (with ``traced_all``) and the evidence on
+    the channels named ``prefix*`` (:func:`print_channel_evidence`); returns ``(row, result)``."""
+    row, res = loop_row(f"{args.kind}({args.mode})", args.seed, dst,
+                        traced_all=lambda names, diag: list(diag["traced_to"]))
+    print(json.dumps(row))
+    print_channel_evidence(res, prefix, ("channel", "significant", "p_value", "cv_gain", "best"),
+                           ("signal", "significant", "p_value", "cv_gain", "dominated_by"))
+    return row, res
+
+
 def channel_field(channels: dict):
     """``row_extra`` of :func:`run_cli` for an audit whose kinds each act through one logged channel: the row's
     ``channel`` field is ``channels[kind]`` (None for a kind without one, and for ``clean``)."""

@@ -172,15 +172,9 @@ def experiment(kind: str, seed: int):
     return be.finish(kind, frames, per_run, p, nominal, plan)
 
 
-def row_extra(kind: str) -> dict:
-    """The printed row's extra fields: the kind's channel, the accepted regressors, every traced regressor."""
-    return {"channel": lambda names, diag: CHANNEL.get(kind),
-            "want": lambda names, diag: list(WANT.get(kind, ())),
-            "traced_all": lambda names, diag: list(diag["traced_to"])}
-
-
 def main(argv=None):
-    be.run_cli(argv, __doc__, KINDS, experiment, row_extra)
+    be.run_cli(argv, __doc__, KINDS, experiment, be.want_fields(CHANNEL, WANT))
+
 
 if __name__ == "__main__":
     main()

@@ -20,11 +20,8 @@ Modes, each on a copy of ``<cache>/<KIND>_<SEED>`` (``bench/blind_effects_eighth
 Usage: python bench/blind_effects_eighth_probe.py KIND SEED MODE [--out DIR]. Prints the row of
 ``bench/blind_effects.py`` (its ``loop_row``), then the evidence of the probed column, one JSON line each.
 """
-import argparse
 import json
-import shutil
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -125,33 +122,16 @@ def changed(df: pd.DataFrame, mode: str, truth: dict) -> pd.DataFrame:
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("kind", choices=eighth.KINDS + ("clean",))
-    ap.add_argument("seed", type=int)
-    ap.add_argument("mode", choices=("logp", "law", "onset", "undo", "fit"))
-    ap.add_argument("--cache", default=be.default_cache())
-    ap.add_argument("--out", default="", help="the changed copy's folder (default: a temporary one)")
-    args = ap.parse_args(argv)
-    src = be.data_dir(args.kind, args.seed, Path(args.cache), None if args.kind == "clean" else eighth.experiment)
-    dst = Path(args.out or tempfile.mkdtemp(prefix="l1b2_probe_"))
-    shutil.rmtree(dst, ignore_errors=True)
-    shutil.copytree(src, dst)
+    args = be.probe_args(argv, __doc__, eighth.KINDS, ("logp", "law", "onset", "undo", "fit"))
+    src, dst = be.probe_copy(args, eighth.experiment)
     truth = json.loads((src / "rig_truth.json").read_text())
     if args.mode == "fit":
         truth["fitted"] = fit_cyclic_error(pd.read_csv(src / "train.csv"))
         print(json.dumps({"fitted": truth["fitted"], "drawn": truth["parameters"]}))
     for part in ("train", "test"):
         changed(pd.read_csv(src / f"{part}.csv"), args.mode, truth).to_csv(dst / f"{part}.csv", index=False)
-    row, res = be.loop_row(f"{args.kind}({args.mode})", args.seed, dst,
-                           traced_all=lambda names, diag: list(diag["traced_to"]))
-    print(json.dumps(row))
-    col = COLUMN.get(args.mode)
-    keys = ("channel", "significant", "p_value", "cv_gain", "best")
-    for c in res.diagnosis.get("channels_considered") or []:
-        if col and str(c.get("channel", "")).startswith(col):
-            print(json.dumps({k: c.get(k) for k in keys}
-                             | {"run_level": [{k: e.get(k) for k in ("signal",) + keys[1:4] + ("dominated_by",)}
-                                              for e in c.get("run_level") or []]}, default=str))
+    be.probe_loop(args, dst, COLUMN.get(args.mode))
+
 
 if __name__ == "__main__":
     main()

@@ -21,7 +21,6 @@ Usage: python bench/blind_effects_seventh_probe.py KIND SEED MODE [--out DIR]. P
 ``bench/blind_effects.py`` (its ``loop_row``), then the evidence of the probed column, one JSON line each.
 """
 import functools
-import json
 import sys
 from pathlib import Path
 
@@ -84,16 +83,8 @@ def main(argv=None):
         be.load_measurements = functools.partial(be.load_measurements, allow_unusual_units=True)
     if args.mode == "response":
         be.close_loop = functools.partial(be.close_loop, response_columns=("mic_level_dB",))
-    row, res = be.loop_row(f"{args.kind}({args.mode})", args.seed, dst,
-                           traced_all=lambda names, diag: list(diag["traced_to"]))
-    print(json.dumps(row))
-    col = COLUMN.get(args.mode)
-    keys = ("channel", "significant", "p_value", "cv_gain", "best")
-    for c in res.diagnosis.get("channels_considered") or []:
-        if col and str(c.get("channel", "")).startswith(col):
-            print(json.dumps({k: c.get(k) for k in keys}
-                             | {"run_level": [{k: e.get(k) for k in ("signal",) + keys[1:4] + ("dominated_by",)}
-                                              for e in c.get("run_level") or []]}, default=str))
+    be.probe_loop(args, dst, COLUMN.get(args.mode))
+
 
 if __name__ == "__main__":
     main()

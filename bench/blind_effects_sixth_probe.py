@@ -48,13 +48,10 @@ def main(argv=None):
         changed(pd.read_csv(src / f"{part}.csv"), args.mode).to_csv(dst / f"{part}.csv", index=False)
     row, res = be.loop_row(f"{args.kind}({args.mode})", args.seed, dst)
     print(json.dumps(row))
-    col = COLUMN.get(args.mode)
-    keys = ("channel", "significant", "p_value", "cv_gain", "dominated_by")
-    for c in res.diagnosis.get("channels_considered") or []:
-        if col and str(c.get("channel", "")).startswith(col):
-            print(json.dumps({k: c.get(k) for k in keys}
-                             | {"run_level": [{k: e.get(k) for k in ("signal",) + keys[1:]}
-                                              for e in c.get("run_level") or []]}, default=str))
+    be.print_channel_evidence(res, COLUMN.get(args.mode), ("channel", "significant", "p_value", "cv_gain",
+                                                           "dominated_by"),
+                              ("signal", "significant", "p_value", "cv_gain", "dominated_by"))
+
 
 if __name__ == "__main__":
     main()
