@@ -234,6 +234,23 @@ def test_extended_predictor_fmu_declares_every_parameter_with_unit_and_provenanc
         assert {"baseline_c_r", "c_r", "v_baseline", "F_extra"} <= set(var), kind
 
 
+def test_a_parameter_without_a_finite_standard_error_is_declared_not_identifiable_on_its_own(models):
+    # reference: the declared descriptions; a finite standard error is stated, an infinite or missing one is not
+    # (the value is one point of a combination the data determine, not an identified value)
+    from l1b2.cosim.composite import ExtendedPredictorBlock
+    model = models["output_filter"]
+    e = model.effects[0]
+    assert len(e.names) >= 1
+    for se in (float("inf"), float("nan"), None):
+        odd = replace(model, effects=(replace(e, stderr=(se,) + tuple(e.stderr[1:])),) + model.effects[1:])
+        var = {v.name: v for v in ExtendedPredictorBlock.variables(odd)}
+        told = var[e.names[0]].description
+        assert "not identifiable on its own" in told and "standard error" not in told.replace("finite standard", "")
+        assert var[e.names[0]].start == e.phi[0]
+    var = {v.name: v for v in ExtendedPredictorBlock.variables(model)}
+    assert "identified" in var[e.names[0]].description and "standard error 0.01" in var[e.names[0]].description
+
+
 def _run_level_effect(channel: str, **spec) -> IdentifiedEffect:
     h = fx.family("run_level").hypotheses([{"channel": channel, "transform": "none", **spec}])[0]
     return IdentifiedEffect(h.family, h.family, h.spec, h.names, h.units, (0.1,) * len(h.names),

@@ -490,9 +490,11 @@ class ExtendedPredictorBlock(PredictorBlock):
         out += cls._setup_vars(params.baseline, "baseline_", "baseline Eq. 35 parameter (gives v_base)")
         for e in params.effects:
             for name, unit, phi, se in zip(e.names, e.units, e.phi, e.stderr):
-                sd = "n/a" if se is None else f"{se:.3g}"
-                out.append(Var(name, "parameter", _unit(unit),
-                               f"{e.label}: {e.description}; identified {phi:.6g} (standard error {sd}) from {src}",
+                told = (f"identified {phi:.6g} (standard error {float(se):.3g}) from {src}"
+                        if se is not None and math.isfinite(float(se)) else
+                        f"not identifiable on its own from {src} (no finite standard error): the data determine its "
+                        f"combination with the effect's other parameters, of which {phi:.6g} is one value")
+                out.append(Var(name, "parameter", _unit(unit), f"{e.label}: {e.description}; {told}",
                                start=float(phi), variability="fixed"))
         if params.output_filter is not None:
             for k in ("a", "b0", "b1"):
