@@ -17,14 +17,18 @@ which re-exports these names).
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, NamedTuple
+
+import numpy as np
+import pandas as pd
 
 from ..units import COLUMN_UNITS, SIDECAR_FIELD_UNITS, data_unit
 
 __all__ = [
     "TIME", "RUN", "POSITION", "VOLTAGE", "DIRECTION", "LOAD", "SPEED",
-    "FREQUENCY", "TEMPERATURE",
+    "FREQUENCY", "TEMPERATURE", "run_slices",
     "ColumnSpec", "KNOWN_COLUMNS", "COLUMN_SPECS", "REQUIRED_COLUMNS", "NUMERIC_COLUMNS",
     "SIDECAR_FIELDS", "LOAD_TIME_META", "NAN_TOKENS",
     "DEFAULT_DRIVE_FREQUENCY_HZ", "DEFAULT_ENCODER_RESOLUTION_M",
@@ -218,3 +222,31 @@ def sidecar_path(path: str | os.PathLike) -> Path:
         ``path`` with its suffix replaced by ``.json``.
     """
     return Path(path).with_suffix(".json")
+
+
+def run_slices(run: pd.Series | Sequence | np.ndarray) -> list[tuple[Any, slice]]:
+    """Contiguous blocks of equal run id, in order.
+
+    Parameters
+    ----------
+    run : array_like
+        Run id per sample.
+
+    Returns
+    -------
+    list of (run_id, slice)
+        One entry per block of consecutive equal ids; ``slice`` indexes
+        positions (not labels). With contiguous runs (as validated) there is
+        exactly one block per run.
+    """
+    values = run.to_numpy() if isinstance(run, pd.Series) else np.asarray(run)
+    n = len(values)
+    if n == 0:
+        return []
+    change = np.ones(n, dtype=bool)
+    if n > 1:
+        change[1:] = values[1:] != values[:-1]
+    starts = np.flatnonzero(change)
+    stops = np.append(starts[1:], n)
+    return [(values[a].item() if isinstance(values[a], np.generic) else values[a], slice(int(a), int(b)))
+            for a, b in zip(starts, stops)]

@@ -18,13 +18,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from .columns import run_slices
+
 __all__ = ["effective_steps_s", "time_step_ratio", "regular_clock_derivative"]
-
-
-def _run_bounds(runs) -> list[tuple[int, int]]:
-    runs = np.asarray(runs)
-    change = np.flatnonzero(runs[1:] != runs[:-1]) + 1
-    return list(zip(np.r_[0, change].tolist(), np.r_[change, runs.size].tolist()))
 
 
 def effective_steps_s(t_s, runs) -> np.ndarray:
@@ -33,7 +29,8 @@ def effective_steps_s(t_s, runs) -> np.ndarray:
     sample."""
     t = np.asarray(t_s, float)
     out = np.full(t.size, np.nan)
-    for a, b in _run_bounds(runs):
+    for _, sl in run_slices(runs):
+        a, b = sl.start, sl.stop
         if b - a < 2:
             continue
         h = np.diff(t[a:b])
@@ -49,7 +46,8 @@ def time_step_ratio(t_s, runs) -> np.ndarray:
     t = np.asarray(t_s, float)
     h = effective_steps_s(t, runs)
     out = np.ones(t.size)
-    for a, b in _run_bounds(runs):
+    for _, sl in run_slices(runs):
+        a, b = sl.start, sl.stop
         if b - a < 2:
             continue
         med = float(np.median(np.diff(t[a:b])))

@@ -38,7 +38,7 @@ from __future__ import annotations
 import math
 import os
 import re
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -47,6 +47,7 @@ import pandas as pd
 from ..errors import DataFormatError
 from .columns import (
     COLUMN_SPECS,
+    run_slices,
     DIRECTION,
     FREQUENCY,
     KNOWN_COLUMNS,
@@ -93,33 +94,6 @@ _ORDER = {c.name: k for k, c in enumerate(KNOWN_COLUMNS)}
 # --------------------------------------------------------------------------
 # Shared helpers: run blocks, message text
 # --------------------------------------------------------------------------
-
-def run_slices(run: pd.Series | Sequence | np.ndarray) -> list[tuple[Any, slice]]:
-    """Contiguous blocks of equal run id, in order.
-
-    Parameters
-    ----------
-    run : array_like
-        Run id per sample.
-
-    Returns
-    -------
-    list of (run_id, slice)
-        One entry per block of consecutive equal ids; ``slice`` indexes
-        positions (not labels). With contiguous runs (as validated) there is
-        exactly one block per run.
-    """
-    values = run.to_numpy() if isinstance(run, pd.Series) else np.asarray(run)
-    n = len(values)
-    if n == 0:
-        return []
-    change = np.ones(n, dtype=bool)
-    if n > 1:
-        change[1:] = values[1:] != values[:-1]
-    starts = np.flatnonzero(change)
-    stops = np.append(starts[1:], n)
-    return [(_py(values[a]), slice(int(a), int(b))) for a, b in zip(starts, stops)]
-
 
 def _py(value: Any) -> Any:
     """Numpy scalar -> Python scalar (for run ids in lists and messages)."""
