@@ -150,3 +150,34 @@ def test_the_report_line_names_the_pitch_and_both_gains():
         " (logged speed = (1 + e'(s)) x the slider's) has held-out gain 20.0% (p 0.0001), the bar's waviness at that"
         " pitch 5.0%: kept: the prediction is multiplied by 1 + e'(s).")
     assert cyclic_sentence({**kept, "accepted": False}).endswith("pitch 5.0%: not kept.")
+
+
+def test_the_loop_keeps_the_stage_after_the_time_stamps_and_fits_the_rounds_behind_it(monkeypatch):
+    """``CloseLoop._stamps``: when the time stamps' chain is not kept, a kept cyclic error becomes the model's chain
+    (round 1, ``position_cyclic_error``) and the rounds' frame is the one behind it; refused, the stroke gain (off:
+    TRAIN's frame)."""
+    from l1b2.closeloop import stamps
+    from l1b2.closeloop.acceptance import EffectSet
+    from l1b2.closeloop.loop import CloseLoop, _Iteration
+
+    class Physics:
+        def predict_free_run(self, df):
+            return df[dataio.SPEED].to_numpy()
+
+        def predict_one_step(self, df):
+            return df[dataio.SPEED].to_numpy()
+    df, v = frame(n_runs=2, n=50)
+    mask = np.ones(len(df), bool)
+    chain = encoder.CyclicChain(P, COEF)
+    kept = {"considered": True, "accepted": True, "cv_gain": 0.2, "cv_free_run_gain": 0.1}
+    monkeypatch.setattr(stamps, "decide", lambda *a, **k: ({"considered": False}, None))
+    monkeypatch.setattr(encoder, "decide", lambda *a, **k: (kept, (Physics(), chain)))
+    it, rec = _Iteration(model=Physics(), effects=EffectSet(), rounds=[{"round": 0}]), {}
+    fit_tr = CloseLoop()._stamps(it, rec, df, None, mask, 0.1, [])
+    assert it.time_stamps is chain and rec["position_cyclic_error"] is kept
+    assert [(r["round"], r["added"], r["regressors"]) for r in it.rounds[1:]] == [
+        (1, "position_sensor_cyclic_error", ["position_cyclic_error"])]
+    np.testing.assert_allclose(fit_tr[dataio.SPEED], chain.frame(df)[dataio.SPEED], rtol=1e-12)
+    monkeypatch.setattr(encoder, "decide", lambda *a, **k: ({"considered": True, "accepted": False}, None))
+    it2 = _Iteration(model=Physics(), effects=EffectSet(), rounds=[{"round": 0}])
+    assert CloseLoop()._stamps(it2, {}, df, None, mask, 0.1, []) is df and it2.time_stamps is None
