@@ -89,7 +89,7 @@ from .auxiliary import check_test_columns, with_usable_channels
 from .calibrated import calibrated_model
 from . import sensor
 from .sensor import GainChain
-from . import stamps
+from . import encoder, stamps
 from .acceptance import (Directions, EffectSet, RefitCV, RefitSettings, Validated, accepts, added_columns,
                          chain_cv_errors, collinear, cv_errors, fold_start_phi, materiality, named_reading, refit,
                          time_dependent, validated)
@@ -238,7 +238,7 @@ class CloseLoop(EstimatorSettings):
                                            {**_data_summary(train, test), "operating_points": _operating_points(dtr),
                                             **({"auxiliary_columns": aux_rec} if aux_rec else {})},
                                            levels, None if it.speed_gain is None else it.speed_gain.gain, dtr)
-        why += stamps.model_note(it.time_stamps) if calibrated is not None else ""
+        why += it.time_stamps.model_note() if calibrated is not None and it.time_stamps is not None else ""
         first = it.first_scores or []
         chosen = it.chosen
         diagnosis = {**self._diagnosis(it, first, analysis, ext_params, chain_rec), "auxiliary_columns": aux_rec,
@@ -486,11 +486,16 @@ class CloseLoop(EstimatorSettings):
                                   self.refit_settings(), alpha=self.alpha, min_gain=self.min_gain,
                                   min_cv_gain=self.min_cv_gain)
         rec["time_stamps"] = out
+        if kept is None:   # the position sensor's cyclic error (:func:`l1b2.closeloop.encoder.decide`)
+            out, kept = encoder.decide(dtr, mask, m_s, folds, it.model, lambda df: self._identify(df, m_s, mask),
+                                       self.refit_settings(), alpha=self.alpha, min_gain=self.min_gain,
+                                       min_cv_gain=self.min_cv_gain)
+            rec["position_cyclic_error"] = out
         if kept is None:
             return self._stroke_gain(it, rec, dtr, dte, mask, m_s, folds)
         it.model, it.time_stamps = kept
-        it.rounds.append({"round": len(it.rounds), "added": stamps.STAMP_CHAIN, "effect": stamps.STAMP_CHAIN,
-                          "regressors": [stamps.REGRESSOR], "cv": {k: out[k] for k in ("cv_gain", "cv_free_run_gain")},
+        it.rounds.append({"round": len(it.rounds), "added": kept[1].name, "effect": kept[1].name,
+                          "regressors": [kept[1].regressor], "cv": {k: out[k] for k in ("cv_gain", "cv_free_run_gain")},
                           "metrics": _metrics(ChainModel(it.model, it.time_stamps), dtr, dte)})
         return it.time_stamps.frame(dtr)
 
@@ -553,9 +558,9 @@ class CloseLoop(EstimatorSettings):
         effects = it.effects.candidates
         c = effects[0] if effects else None
         below = self._immaterial(it)
-        chain_rounds = ("speed_channel_filter", sensor.STROKE_GAIN, stamps.STAMP_CHAIN)
+        chain_rounds = ("speed_channel_filter", sensor.STROKE_GAIN, stamps.STAMP_CHAIN, encoder.CYCLIC_CHAIN)
         records = ([_filter_record(rec, ext_params) for rec in it.rounds if rec["added"] == "speed_channel_filter"]
-                   + [stamps.stage_record(r, it.time_stamps) for r in it.rounds if r["added"] == stamps.STAMP_CHAIN]
+                   + [it.time_stamps.record(r) for r in it.rounds if r["added"] in chain_rounds[2:]]
                    + [_gain_record(rec, ext_params) for rec in it.rounds if rec["added"] == sensor.STROKE_GAIN]
                    + [_effect_record(e, rec, ext_params) for e, rec in
                       zip(effects, [r for r in it.rounds[1:] if r["added"] not in chain_rounds])])
@@ -564,7 +569,7 @@ class CloseLoop(EstimatorSettings):
         traced_to = order_traced(effects, it.output_filter is not None, a.traced,
                                  evidence=[t.candidate for t in below], speed_evidence=chain_found,
                                  measured=(("position",) if it.speed_gain is not None else ())
-                                 + ((stamps.REGRESSOR,) if it.time_stamps is not None else ()))
+                                 + ((it.time_stamps.regressor,) if it.time_stamps is not None else ()))
         w = a.whiteness
         labels = "; ".join(f"{e.label} ({', '.join(e.regressors)})" + (", relaxes Eq. 29" if e.structural else "")
                            for e in effects)
@@ -580,7 +585,7 @@ class CloseLoop(EstimatorSettings):
                         else "no significant missing effect")
                        + _chain_note(it.output_filter)
                        + (f"; {_gain_reading(it.speed_gain.gain)}" if it.speed_gain is not None else "")
-                       + (f"; {stamps.reading(it.time_stamps)}" if it.time_stamps is not None else "")
+                       + (f"; {it.time_stamps.reading()}" if it.time_stamps is not None else "")
                        + withdrawn_note(it.checks)
                        + (f"; the speed column looks filtered (measurement chain, cross-validated gain "
                           f"{chain_rec['cv_gain']:.3f}) but a model behind the filter did not lower the "
@@ -624,7 +629,8 @@ class _Iteration:
     level: float = float("nan")
     output_filter: chain.OutputFilter | None = None
     speed_gain: GainChain | None = None   #: the speed sensor's gain along the stroke (measurement chain)
-    time_stamps: stamps.StampChain | None = None   #: the speed derived over the time stamps (measurement chain)
+    #: the speed derived over the time stamps, or the position sensor's cyclic error (measurement chain)
+    time_stamps: stamps.StampChain | encoder.CyclicChain | None = None
     channels: tuple = ()
     run_level: runlevel.RunLevelAnalysis | None = None
     checks: list = field(default_factory=list)    #: the named picks' checks from the pure-slip family
@@ -760,7 +766,7 @@ def candidate_context(baseline_free_run, m_s: float, df: pd.DataFrame, mask: np.
         time_range=(float(df[dataio.TIME].min()), float(df[dataio.TIME].max())),
         position_range=(float(pos.min()), float(pos.max())),
         temperature_ref=float(df[dataio.TEMPERATURE].median()) if dataio.TEMPERATURE in df.columns else None,
-        spectral_period_m=peak.get("period_m") if peak.get("power_ratio_to_median", 0) > 4 else None,
+        spectral_period_m=peak.get("period_m") if peak.get("power_ratio_to_median", 0) > res.LINE_POWER_RATIO else None,
         damping_N_s_per_m=damping,
         **({} if response_columns is None else {"response_columns": tuple(response_columns)}))
 

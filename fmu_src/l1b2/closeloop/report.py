@@ -206,7 +206,8 @@ def chain_line(rec: Mapping) -> str:
     return (f"Measurement chain: the speed column differs from the position's derivative by "
             f"{float(rec['rel_rms_mismatch']):.1%} of the speed's rms; the speed channel's test "
             f"(held-out gain {float(rec.get('cv_gain', 0.0)):.1%}, p {float(rec.get('p_value', 1.0)):.2g}): {found}."
-            + clip_sentence(clip, applied=bool(rec.get("accepted"))) + stamps_sentence(rec.get("time_stamps") or {}))
+            + clip_sentence(clip, applied=bool(rec.get("accepted"))) + stamps_sentence(rec.get("time_stamps") or {})
+            + cyclic_sentence(rec.get("position_cyclic_error") or {}))
 
 
 def stamps_sentence(rec: Mapping) -> str:
@@ -221,6 +222,20 @@ def stamps_sentence(rec: Mapping) -> str:
             f" = r^gamma x the slider's, r the time step ratio) has held-out gain {float(rec.get('cv_gain', 0.0)):.1%}"
             f" (p {float(rec.get('p_value', 1.0)):.2g}), gamma {float(g if g is not None else float('nan')):.3f}"
             f" (1: stamps given on arrival, 0: true stamps): {verdict}.")
+
+
+def cyclic_sentence(rec: Mapping) -> str:
+    """The sentence on the position sensor's cyclic error (``measurement_chain.position_cyclic_error``,
+    :func:`l1b2.closeloop.encoder.decide`): the pitch, the screen's held-out gain against the force family's at the
+    same pitch, and whether it was kept; empty when the stage was not considered (no line in the residual's
+    spectrum over the position)."""
+    if not rec.get("considered") or "cv_gain" not in rec:
+        return ""
+    verdict = "kept: the prediction is multiplied by 1 + e'(s)" if rec.get("accepted") else "not kept"
+    return (f" The residual's spectrum over the position has a line: a position sensor's cyclic error of pitch "
+            f"{float(rec['pitch_m']) * 1e3:.4f} mm (logged speed = (1 + e'(s)) x the slider's) has held-out gain "
+            f"{float(rec['cv_gain']):.1%} (p {float(rec.get('p_value', 1.0)):.2g}), the bar's waviness at that pitch "
+            f"{float(rec.get('force_cv_gain', 0.0)):.1%}: {verdict}.")
 
 
 def clip_sentence(clip: Mapping, applied: bool = True) -> str:

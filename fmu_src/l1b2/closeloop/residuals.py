@@ -43,6 +43,9 @@ from ..predictor.effects import bspline_basis  # noqa: F401  (re-exported)
 REGRESSORS = ("time", "position", "direction", "load", "voltage", "speed", "acceleration", "temperature")
 #: regressors constant within a run (their evidence is carried by run-to-run differences only)
 RUN_LEVEL = ("direction", "load", "voltage")
+#: a line of :func:`position_spectrum`: its power over the spectrum's median above this (the period is then offered
+#: to the position-periodic forms: the bar's waviness and the position sensor's cyclic error)
+LINE_POWER_RATIO = 4.0
 
 
 # ---------------------------------------------------------------------------

@@ -66,6 +66,8 @@ class StampChain:
     :class:`~l1b2.closeloop.chain.OutputFilter`: the physics is fitted on :meth:`frame`, its prediction of the
     slider's speed is turned into the logged one by :meth:`apply`)."""
 
+    name, regressor = STAMP_CHAIN, REGRESSOR
+
     def __init__(self, gamma: float, stderr: float | None = None):
         self.gamma, self.stderr = float(gamma), stderr
 
@@ -84,6 +86,18 @@ class StampChain:
         """The report's ``extended_parameters`` entry of ``gamma``."""
         ci = None if self.stderr is None else [self.gamma - 1.96 * self.stderr, self.gamma + 1.96 * self.stderr]
         return {"time_stamp_gamma": {"value": self.gamma, "stderr": self.stderr, "unit": "1", "ci95": ci}}
+
+    def record(self, rec: dict) -> dict:
+        """:func:`stage_record`."""
+        return stage_record(rec, self)
+
+    def reading(self) -> str:
+        """:func:`reading`."""
+        return reading(self)
+
+    def model_note(self) -> str:
+        """:func:`model_note`."""
+        return model_note(self)
 
 
 def stamp_frame(df: pd.DataFrame, gamma: float) -> pd.DataFrame:
