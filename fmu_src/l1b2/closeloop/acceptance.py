@@ -588,6 +588,21 @@ def stage_cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init,
             "folds_improved": int(np.sum(sse1 < sse0))}
 
 
+def stage_verdict(cv: dict, n_folds: int, min_cv_gain: float, name: str = "chain") -> tuple[dict, bool]:
+    """The decision on a measurement-chain stage from its :func:`stage_cv_errors` ``cv``: ``(fields, kept)``.
+
+    ``fields``: ``cv_free_run_gain`` (``1 - SSE_stage / SSE_baseline`` pooled over the folds; 0 when a fold failed),
+    the two held-out free-run nrmse (``cv_free_run_nrmse_baseline``, ``cv_free_run_nrmse_<name>``) and
+    ``cv_folds_improved``; ``kept`` when the gain is at least ``min_cv_gain`` in more than half of the ``n_folds``
+    folds."""
+    ssm = max(float(cv["ss_meas"].sum()), 1e-300)
+    sse0, sse1 = float(cv["sse_baseline"].sum()), float(cv["sse_stage"].sum())
+    gain = 1 - sse1 / sse0 if cv["failed"] == 0 and sse0 > 0 else 0.0
+    fields = {"cv_free_run_gain": gain, "cv_free_run_nrmse_baseline": float(np.sqrt(sse0 / ssm)),
+              f"cv_free_run_nrmse_{name}": float(np.sqrt(sse1 / ssm)), "cv_folds_improved": cv["folds_improved"]}
+    return fields, bool(gain >= min_cv_gain and cv["folds_improved"] > n_folds / 2)
+
+
 def _apply(fn, args):
     return fn(*args)
 

@@ -42,7 +42,7 @@ from ..data import measurements as dataio
 from ..errors import IdentificationError
 from ..predictor import effects as fx
 from . import residuals as res
-from .acceptance import EffectSet, RefitSettings, fold_fit_data, refit, stage_cv_errors
+from .acceptance import EffectSet, RefitSettings, fold_fit_data, refit, stage_cv_errors, stage_verdict
 from .folds import held_out_split
 from .selection import FoldSolver, finite_columns, linear_response, nuisance_forces
 
@@ -287,12 +287,9 @@ def decide(df: pd.DataFrame, mask, m_s: float, folds, model, identify, settings:
     if not screen_passes(rec, alpha, min_gain):
         return rec, None
     cv = cyclic_cv_errors(df, mask, m_s, folds, model.params_, settings, v_base, pitch, bin_per_m)
-    ssm = max(float(cv["ss_meas"].sum()), 1e-300)
-    sse0, sse1 = float(cv["sse_baseline"].sum()), float(cv["sse_stage"].sum())
-    gain = 1 - sse1 / sse0 if cv["failed"] == 0 and sse0 > 0 else 0.0
-    rec.update(cv_free_run_gain=gain, cv_free_run_nrmse_baseline=float(np.sqrt(sse0 / ssm)),
-               cv_free_run_nrmse_chain=float(np.sqrt(sse1 / ssm)), cv_folds_improved=cv["folds_improved"])
-    if not (gain >= min_cv_gain and cv["folds_improved"] > len(folds) / 2):
+    fields, kept = stage_verdict(cv, len(folds), min_cv_gain)
+    rec.update(fields)
+    if not kept:
         return rec, None
     c0 = fit_chain(df, mask, v_base, pitch)
     est = identify(c0.frame(df))

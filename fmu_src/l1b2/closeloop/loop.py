@@ -92,7 +92,7 @@ from .sensor import GainChain
 from . import encoder, stamps
 from .acceptance import (Directions, EffectSet, RefitCV, RefitSettings, Validated, accepts, added_columns,
                          chain_cv_errors, collinear, cv_errors, fold_start_phi, materiality, named_reading, refit,
-                         time_dependent, validated)
+                         stage_verdict, time_dependent, validated)
 from .folds import refit_schemes, screen_folds, stratified_folds
 from .baselines import choose_baseline, identify_families, retag_structural
 from .crosscheck import PureSlipCheck, identified_pick, score_of, withdrawn_note
@@ -519,12 +519,9 @@ class CloseLoop(EstimatorSettings):
         if not (out["p_value"] < self.alpha and out["cv_gain"] >= self.min_gain):
             return dtr
         cv = sensor.gain_cv_errors(dtr, mask, m_s, folds, it.model.params_, self.refit_settings(), v_base)
-        ssm = max(float(cv["ss_meas"].sum()), 1e-300)
-        sse0, sse1 = float(cv["sse_baseline"].sum()), float(cv["sse_stage"].sum())
-        gain = 1 - sse1 / sse0 if cv["failed"] == 0 and sse0 > 0 else 0.0
-        out.update(cv_free_run_gain=gain, cv_free_run_nrmse_baseline=float(np.sqrt(sse0 / ssm)),
-                   cv_free_run_nrmse_gain=float(np.sqrt(sse1 / ssm)), cv_folds_improved=cv["folds_improved"])
-        if not (gain >= self.min_cv_gain and cv["folds_improved"] > len(folds) / 2):
+        fields, kept = stage_verdict(cv, len(folds), self.min_cv_gain, "gain")
+        out.update(fields)
+        if not kept:
             return dtr
         s_range = sensor.position_range(dtr)
         g0 = sensor.fit_gain(dtr, mask, v_base, s_range)
@@ -534,7 +531,8 @@ class CloseLoop(EstimatorSettings):
         wrapped = ChainModel(model, it.speed_gain)
         out.update(accepted=True, gain=g1.to_dict(), names=list(g1.names()), description=sensor.DESCRIPTION)
         it.rounds.append({"round": len(it.rounds), "added": sensor.STROKE_GAIN, "effect": sensor.STROKE_GAIN,
-                          "regressors": ["position"], "cv": {"cv_gain": out["cv_gain"], "cv_free_run_gain": gain},
+                          "regressors": ["position"],
+                          "cv": {"cv_gain": out["cv_gain"], "cv_free_run_gain": out["cv_free_run_gain"]},
                           "metrics": _metrics(wrapped, dtr, dte)})
         return sensor.gain_frame(dtr, g1)
 
