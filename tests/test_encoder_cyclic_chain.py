@@ -128,7 +128,8 @@ def test_the_stage_is_not_considered_without_a_line_in_the_residual_spectrum():
 def test_a_kept_stage_puts_its_regressor_first_in_the_trace():
     assert order_traced((), False, ["voltage"], measured=(encoder.REGRESSOR,)) == ["position_cyclic_error", "voltage"]
     params = encoder.CyclicChain(P, COEF, np.full(4, 1e-7)).parameters()
-    assert params["cyclic_error_pitch_m"]["value"] == P
+    assert set(params) == {f"cyclic_error_{t}{h}_m" for h in (1, 2) for t in ("sin", "cos")}   # no pitch: no error
+    assert all(p["stderr"] == 1e-7 and p["unit"] == "m" for p in params.values())
     assert params["cyclic_error_sin1_m"]["value"] == COEF[0] and params["cyclic_error_cos2_m"]["value"] == COEF[3]
 
 

@@ -113,8 +113,10 @@ class CyclicChain:
                 "coef_stderr_m": None if self.stderr is None else self.stderr.tolist()}
 
     def parameters(self) -> dict:
-        """The report's ``extended_parameters`` entries: the pitch and the four coefficients."""
-        out = {"cyclic_error_pitch_m": {"value": self.pitch_m, "stderr": None, "unit": "m", "ci95": None}}
+        """The report's ``extended_parameters`` entries: the four coefficients with their standard errors (the
+        pitch is chosen from the residual's spectrum, not estimated with an error: it is the stage's shape, as a
+        waviness's period is its label's)."""
+        out = {}
         ses = self.stderr if self.stderr is not None else (None,) * len(self.coef)
         for (h, t), c, se in zip([(h, t) for h in HARMONICS for t in ("sin", "cos")], self.coef, ses):
             se = None if se is None else float(se)
