@@ -9,7 +9,8 @@ from ..data import onset
 from . import runlevel
 from .selection import Score, best_per_family, position_basis
 
-__all__ = ["with_onset", "order_traced", "channels_considered", "position_share", "with_position_share", "with_auxiliary"]
+__all__ = ["with_onset", "order_traced", "channels_considered", "position_share", "with_position_share",
+           "with_auxiliary"]
 
 
 def order_traced(effects, speed_filter: bool, residual_trace, evidence=(), speed_evidence: bool = False,

@@ -69,7 +69,7 @@ from .columns import (
     unit_of,
 )
 from .io import read_table_and_sidecar, write_table_and_sidecar
-from .onset import from_onset
+from .onset import from_onset, subset_record
 from .validate import format_value, run_slices, validate_frame, validate_frame_filled
 
 __all__ = [
@@ -436,6 +436,9 @@ def split_by_load(meas: Measurements, test_abs_loads: Sequence[float] = (0.05,),
         meta = dict(meas.meta)
         meta["subset"] = label
         meta["test_abs_loads"] = loads
-        return Measurements(df=meas.df.loc[mask], meta=meta, path=meas.path)
+        part = meas.df.loc[mask]
+        if "rest_before_onset" in meta:
+            meta["rest_before_onset"] = subset_record(meta["rest_before_onset"], pd.unique(part[RUN]))
+        return Measurements(df=part, meta=meta, path=meas.path)
 
     return subset(~is_test, "train"), subset(is_test, "test")

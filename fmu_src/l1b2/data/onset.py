@@ -17,9 +17,9 @@ free run starts from rest at the drive's start). The bands are the columns' nois
     ``band_s = z sqrt(2) sigma_s + q`` (the difference of two readings, plus one encoder count ``q``),
     ``band_v = z sigma_v + q / dt`` (plus the speed of one count per step, which the position cannot resolve),
 
-``sigma_s``, ``sigma_v`` the robust standard deviations of the file's within-run second differences of position
-(at the samples whose speed is within ``band_v``) and of speed, over ``sqrt(6)`` (white noise; a smooth motion's
-second differences over one step are far smaller), and
+``sigma_s``, ``sigma_v`` the robust standard deviations of the noise of the position and speed columns from their
+within-run fourth differences over even time steps (:func:`noise_sd`: a smooth motion adds nothing to them, white
+noise ``sqrt(70)`` times its standard deviation), and
 ``z`` the two-sided normal quantile at ``alpha / (4 N)`` (``N`` samples, two comparisons each): a file's samples at
 rest are all taken as at rest with probability at least ``1 - alpha``.
 
@@ -37,9 +37,10 @@ import numpy as np
 import pandas as pd
 
 from .columns import DIRECTION, FREQUENCY, LOAD, POSITION, RUN, SPEED, TIME, VOLTAGE
+from .plausibility import UNEVEN_STEP_SHARE
 
 __all__ = ["ALPHA", "DRIVE_INPUTS", "REGRESSOR", "noise_sd", "rest_bands", "onset_index", "from_onset",
-           "onset_lines"]
+           "subset_record", "onset_lines"]
 
 #: the family-wise chance that some sample of a file at rest is taken as moving
 ALPHA = 0.01
@@ -57,38 +58,44 @@ def _bounds(run) -> list[tuple[int, int]]:
     return list(zip(np.r_[0, change].tolist(), np.r_[change, run.size].tolist()))
 
 
-def noise_sd(x, run, where=None) -> float:
-    """The robust standard deviation of white noise on ``x`` (any unit): 1.4826 x the median absolute deviation of
-    the within-run second differences ``x[k+1] - 2 x[k] + x[k-1]``, over ``sqrt(6)``, at the samples ``k`` where
-    ``where`` holds (default: all); 0 when there are none."""
-    x = np.asarray(x, float)
-    ok = np.ones(x.size, bool) if where is None else np.asarray(where, bool)
-    d2 = np.concatenate([np.diff(x[a:b], 2)[ok[a + 1:b - 1]] for a, b in _bounds(run) if b - a >= 3]
-                        or [np.zeros(0)])
-    d2 = d2[np.isfinite(d2)]
-    if not d2.size:
+def noise_sd(x, t_s, run) -> float:
+    """The robust standard deviation of white noise on ``x`` (any unit; ``t_s`` the times [s], ``run`` the run per
+    sample): 1.4826 x the median absolute deviation of the within-run fourth differences, over ``sqrt(70)`` (the
+    sum of the squares of the difference's weights 1, -4, 6, -4, 1), over the windows of five samples whose four
+    time steps are even (each within :data:`~l1b2.data.plausibility.UNEVEN_STEP_SHARE` of its run's median step);
+    0 when there are none. On an even clock a motion whose fourth derivative is small over four steps (a cubic in
+    time: a start at constant jerk, a traverse at constant acceleration) adds nothing."""
+    x, t = np.asarray(x, float), np.asarray(t_s, float)
+    parts = []
+    for a, b in _bounds(run):
+        if b - a < 5:
+            continue
+        h = np.diff(t[a:b])
+        even = np.abs(h - np.median(h)) <= UNEVEN_STEP_SHARE * np.median(h)
+        ok = np.all(np.lib.stride_tricks.sliding_window_view(even, 4), axis=1)
+        parts.append(np.diff(x[a:b], 4)[ok])
+    d4 = np.concatenate(parts) if parts else np.zeros(0)
+    d4 = d4[np.isfinite(d4)]
+    if not d4.size:
         return 0.0
-    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0))
+    return float(1.4826 * np.median(np.abs(d4 - np.median(d4))) / np.sqrt(70.0))
 
 
 def rest_bands(df: pd.DataFrame, encoder_resolution_m: float, alpha: float = ALPHA) -> dict:
     """The bands of a sample at rest in ``df`` (module docstring): ``{"z", "sigma_position_m", "sigma_speed_m_s",
-    "band_position_m", "band_speed_m_s"}``. The position's noise is taken at the samples whose speed is within
-    the speed's band: at speed, a position's second differences also hold the motion's (a sensor's cyclic error
-    along the stroke), which is not the reading's noise at rest."""
+    "band_position_m", "band_speed_m_s"}``."""
     run = df[RUN].to_numpy()
     n = max(len(df), 1)
     z = -NormalDist().inv_cdf(alpha / (4.0 * n))
-    v = df[SPEED].to_numpy(float)
-    v_sd = noise_sd(v, run)
     t = df[TIME].to_numpy(float)
+    s_sd = noise_sd(df[POSITION].to_numpy(float), t, run)
+    v_sd = noise_sd(df[SPEED].to_numpy(float), t, run)
     steps = np.concatenate([np.diff(t[a:b]) for a, b in _bounds(run) if b - a >= 2] or [np.zeros(0)])
     dt = float(np.median(steps)) if steps.size else 0.0
     q = float(encoder_resolution_m)
-    band_v = z * v_sd + (q / dt if dt > 0 else 0.0)
-    s_sd = noise_sd(df[POSITION].to_numpy(float), run)
     return {"z": z, "sigma_position_m": s_sd, "sigma_speed_m_s": v_sd,
-            "band_position_m": float(z * np.sqrt(2.0) * s_sd + q), "band_speed_m_s": float(band_v)}
+            "band_position_m": float(z * np.sqrt(2.0) * s_sd + q),
+            "band_speed_m_s": float(z * v_sd + (q / dt if dt > 0 else 0.0))}
 
 
 def onset_index(s_m, v_m_s, band_s_m: float, band_v_m_s: float) -> int | None:
@@ -124,18 +131,20 @@ def from_onset(df: pd.DataFrame, encoder_resolution_m: float, *, cut: bool = Tru
 
     The kept rows keep their index (a file's row is its index + 1). The record: ``runs`` (runs cut), ``of_runs``,
     ``samples`` (samples dropped), ``median_delay_s`` and ``max_delay_s`` of the cut runs' onsets after their
-    first samples (None when none), ``first_row`` (1-based data row of the first cut run's first sample),
-    ``still_runs`` (runs that never leave the bands, kept whole), ``inputs_differ`` (runs at rest under other
-    drive inputs, kept whole), ``cut`` (whether the samples were dropped; with ``cut=False`` only counted) and the
-    bands (:func:`rest_bands`).
+    first samples (None when none), ``first_row`` (1-based data row of the first cut run's first sample, from
+    ``df``'s index), ``still_runs`` (runs that never leave the bands, kept whole), ``inputs_differ`` (runs at rest
+    under other drive inputs, kept whole), ``cut`` (whether the samples were dropped; with ``cut=False`` only
+    counted), the bands (:func:`rest_bands`) and ``per_run``: ``[run, samples dropped, delay [s], first row]`` of
+    each cut run.
     """
     bands = rest_bands(df, encoder_resolution_m, alpha)
     s = df[POSITION].to_numpy(float)
     v = df[SPEED].to_numpy(float)
     t = df[TIME].to_numpy(float)
     keep = np.ones(len(df), bool)
-    delays, first, still, differ, n_runs = [], None, 0, 0, 0
-    for a, b in _bounds(df[RUN].to_numpy()):
+    per_run, still, differ, n_runs = [], 0, 0, 0
+    run = df[RUN].to_numpy()
+    for a, b in _bounds(run):
         n_runs += 1
         k = onset_index(s[a:b], v[a:b], bands["band_position_m"], bands["band_speed_m_s"])
         if k is None:
@@ -147,13 +156,30 @@ def from_onset(df: pd.DataFrame, encoder_resolution_m: float, *, cut: bool = Tru
             differ += 1
             continue
         keep[a:a + k] = False
-        delays.append(float(t[a + k] - t[a]))
-        first = a + 1 if first is None else first
-    rec = {"runs": len(delays), "of_runs": n_runs, "samples": int((~keep).sum()),
-           "median_delay_s": float(np.median(delays)) if delays else None,
-           "max_delay_s": float(np.max(delays)) if delays else None, "first_row": first,
-           "still_runs": still, "inputs_differ": differ, "cut": bool(cut), **bands}
-    return (df.loc[keep] if cut and not keep.all() else df), rec
+        rid = run[a].item() if hasattr(run[a], "item") else run[a]
+        per_run.append([rid, int(k), float(t[a + k] - t[a]), int(df.index[a]) + 1])
+    return (df.loc[keep] if cut and not keep.all() else df), _record(per_run, n_runs, still, differ, cut, bands)
+
+
+def _record(per_run: list, n_runs: int, still: int, differ: int, cut: bool, bands: dict) -> dict:
+    delays = [d for _, _, d, _ in per_run]
+    return {"runs": len(per_run), "of_runs": n_runs, "samples": int(sum(k for _, k, _, _ in per_run)),
+            "median_delay_s": float(np.median(delays)) if delays else None,
+            "max_delay_s": float(np.max(delays)) if delays else None,
+            "first_row": per_run[0][3] if per_run else None, "still_runs": still, "inputs_differ": differ,
+            "cut": bool(cut), **bands, "per_run": per_run}
+
+
+def subset_record(record: dict | None, runs) -> dict | None:
+    """:func:`from_onset`'s ``record`` of a file restricted to the runs ``runs`` (a split of the file's runs); the
+    kept-whole counts are the file's."""
+    if record is None:
+        return None
+    keep = set(runs)
+    per_run = [r for r in record["per_run"] if r[0] in keep]
+    bands = {k: record[k] for k in ("z", "sigma_position_m", "sigma_speed_m_s", "band_position_m",
+                                    "band_speed_m_s")}
+    return _record(per_run, len(keep), record["still_runs"], record["inputs_differ"], record["cut"], bands)
 
 
 def onset_lines(records: dict) -> list[str]:
