@@ -90,6 +90,14 @@ def test_the_rest_is_cut_a_stalled_run_kept_whole_and_noise_alone_cuts_nothing()
     # noise only: the same runs moving at once and the stalled one: nothing cut
     out0, rec0 = onset.from_onset(frame([0] * 8, stalled=(3,)), Q)
     assert rec0["runs"] == 0 and rec0["still_runs"] == 1 and len(out0) == 8 * 400
+    # a rest of one step (the onset at sample 1) is the sample clock's own uncertainty of the start: not cut
+    s, v = motion(400, 1)
+    assert onset.onset_index(s, v, Q, 5e-3) == 1
+    one = frame([1, 0, 0, 0, 0, 0, 0, 0])
+    out2, rec2 = onset.from_onset(one, Q)
+    assert onset.onset_index(one["position_m"][:400], one["speed_m_s"][:400], rec2["band_position_m"],
+                             rec2["band_speed_m_s"]) == 1
+    assert rec2["runs"] == 0 and len(out2) == len(one)
     # counted, not cut
     out1, rec1 = onset.from_onset(df, Q, cut=False)
     assert rec1["runs"] == 2 and rec1["cut"] is False and len(out1) == len(df)

@@ -23,7 +23,8 @@ noise ``sqrt(70)`` times its standard deviation), and
 ``z`` the two-sided normal quantile at ``alpha / (4 N)`` (``N`` samples, two comparisons each): a file's samples at
 rest are all taken as at rest with probability at least ``1 - alpha``.
 
-A run is **cut** (:func:`from_onset`) only when its onset lies past its first sample, it moves after the onset and
+A run is **cut** (:func:`from_onset`) only when its onset lies :data:`MIN_REST_STEPS` or more samples past its
+first (a rest of one step is the sample clock's own uncertainty of the start), it moves after the onset and
 the drive inputs of the rest (:data:`DRIVE_INPUTS`: the median of each over the samples at rest) lie within their
 range over the motion: a run that never leaves the bands (a stalled run) is kept whole, and a rest under other
 logged inputs (a voltage logged at zero or ramping up) is the model's to predict and is kept too.
@@ -39,13 +40,16 @@ import pandas as pd
 from .columns import DIRECTION, FREQUENCY, LOAD, POSITION, RUN, SPEED, TIME, VOLTAGE
 from .plausibility import UNEVEN_STEP_SHARE
 
-__all__ = ["ALPHA", "DRIVE_INPUTS", "REGRESSOR", "noise_sd", "rest_bands", "onset_index", "from_onset",
+__all__ = ["ALPHA", "DRIVE_INPUTS", "MIN_REST_STEPS", "REGRESSOR", "noise_sd", "rest_bands", "onset_index", "from_onset",
            "subset_record", "onset_lines"]
 
 #: the family-wise chance that some sample of a file at rest is taken as moving
 ALPHA = 0.01
 #: the logged drive inputs that must be the same during the rest as during the motion for the rest to be cut
 DRIVE_INPUTS: tuple[str, ...] = (VOLTAGE, DIRECTION, LOAD, FREQUENCY)
+#: the fewest steps a rest must last to be cut: a drive that starts within a run's first step, at a phase the
+#: sample clock does not see, can leave the next sample within the bands
+MIN_REST_STEPS = 2
 #: the name of the cut in the close loop's ``diagnosis.traced_to``
 REGRESSOR = "rest_before_onset"
 
@@ -150,7 +154,7 @@ def from_onset(df: pd.DataFrame, encoder_resolution_m: float, *, cut: bool = Tru
         if k is None:
             still += 1
             continue
-        if k == 0:
+        if k < MIN_REST_STEPS:
             continue
         if not _inputs_hold(df, a, k, b):
             differ += 1
