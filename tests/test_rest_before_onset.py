@@ -146,6 +146,11 @@ def test_the_close_loop_names_the_cut_first_in_its_trace():
                               "after 37.5 ms median, 45 ms at most: a fact of the recording, cut on reading; every "
                               "run's free run starts at its onset)")
     assert out["rest_before_onset"] is rec
+    # report.json keeps the record
+    from l1b2.closeloop.report import Diagnosis
+    full = {**out, "significant": True, "effect": None, "effect_shape": None, "effect_description": None,
+            "effects": []}
+    assert Diagnosis.from_dict(full).to_dict()["rest_before_onset"] == rec
     # nothing cut, or only counted: the diagnosis as it was
     assert with_onset(d, {**rec, "runs": 0}) is d and with_onset(d, {**rec, "cut": False}) is d
     assert with_onset(d, None) is d
