@@ -5,10 +5,12 @@ from __future__ import annotations
 import numpy as np
 
 from ..data import measurements as dataio
+from ..data import onset
 from . import runlevel
 from .selection import Score, best_per_family, position_basis
 
-__all__ = ["order_traced", "channels_considered", "position_share", "with_position_share", "with_auxiliary"]
+__all__ = ["with_onset", "order_traced", "channels_considered", "position_share", "with_position_share",
+           "with_auxiliary"]
 
 
 def order_traced(effects, speed_filter: bool, residual_trace, evidence=(), speed_evidence: bool = False,
@@ -46,6 +48,21 @@ def order_traced(effects, speed_filter: bool, residual_trace, evidence=(), speed
     take(e for e in effects if e.structural)
     take(e for e in evidence if e.structural)
     return traced + [r for r in residual_trace if r not in traced]
+
+
+def with_onset(diagnosis: dict, record: dict | None) -> dict:
+    """``diagnosis`` with the rest cut before TRAIN's onsets (``record``: ``meta["rest_before_onset"]`` of
+    :func:`l1b2.data.onset.from_onset`) as the stage it is: removed on reading, before any round, its regressor
+    :data:`l1b2.data.onset.REGRESSOR` first in ``traced_to`` and its reading in the message, as a kept stage of the
+    measurement chain is reported. Unchanged when no run was cut."""
+    if not (record and record.get("runs") and record.get("cut")):
+        return diagnosis
+    traced = [onset.REGRESSOR] + [r for r in diagnosis.get("traced_to") or [] if r != onset.REGRESSOR]
+    note = (f"; {record['runs']} of {record['of_runs']} TRAIN runs rest at their start before the drive (onset "
+            f"after {record['median_delay_s'] * 1e3:.3g} ms median, {record['max_delay_s'] * 1e3:.3g} ms at most: a "
+            "fact of the recording, cut on reading; every run's free run starts at its onset)")
+    return {**diagnosis, "traced_to": traced, "message": diagnosis.get("message", "") + note,
+            "rest_before_onset": record}
 
 
 def position_share(values, basis) -> float:

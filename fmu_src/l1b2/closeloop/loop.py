@@ -100,7 +100,8 @@ from .events import session, with_event_clocks
 from .lags import with_lagged_channels
 from .pauses import with_pause_channel
 from .responses import classed_responses, response_tests, with_applied
-from .evidence import channels_considered, order_traced, with_auxiliary, with_position_share, with_response_test
+from .evidence import (channels_considered, order_traced, with_auxiliary, with_onset, with_position_share,
+                       with_response_test)
 from .guard import checked_fit
 from .intervals import added_parameters, identification, train_levels
 from .result import CloseLoopResult, ResidualAnalysis
@@ -251,7 +252,7 @@ class CloseLoop(EstimatorSettings):
         diagnosis["channels_considered"] = with_response_test(
             with_auxiliary(diagnosis["channels_considered"], aux_rec), diagnosis["response_test"])
         self.result_ = CloseLoopResult(
-            baseline=baseline, diagnosis=diagnosis, scores=first,
+            baseline=baseline, diagnosis=with_onset(diagnosis, train.meta.get("rest_before_onset")), scores=first,
             significant=it.significant, chosen=chosen, extended=extended,
             extended_parameters=ext_params, baseline_parameters=base.to_dict()["parameters"],
             data=_data_summary(train, test), wall_time_s=round(time.perf_counter() - t_start, 2),

@@ -143,6 +143,8 @@ class Diagnosis(_Record):
     ``response_test``: the consequence test of each logged column that varies within runs, whether the speed's
     history explains it as a response of the motion, with ``applied`` and ``decided_by``
     (:func:`l1b2.closeloop.responses.response_tests`, :func:`l1b2.closeloop.responses.with_applied`).
+    ``rest_before_onset``: TRAIN's runs at rest before their onset, cut on reading
+    (:func:`l1b2.data.onset.from_onset`'s record; None when none was cut; :func:`l1b2.closeloop.evidence.with_onset`).
     The nested evidence stays JSON-shaped.
     """
 
@@ -177,6 +179,7 @@ class Diagnosis(_Record):
     physical_range: list = field(default_factory=list)
     auxiliary_columns: list = field(default_factory=list)
     response_test: list = field(default_factory=list)
+    rest_before_onset: Any = None
 
     def to_dict(self) -> dict:
         out = {f.name: getattr(self, f.name) for f in fields(self)}

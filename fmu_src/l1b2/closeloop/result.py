@@ -21,6 +21,7 @@ import pandas as pd
 from ..data import measurements as dataio
 from ..data import plots
 from ..data.gaps import gap_lines
+from ..data.onset import onset_lines
 from ..data.plausibility import uneven_step_lines
 from ..jsonio import dumps, sig, strict_json
 from ..predictor.effects import ExtendedPredictor
@@ -331,6 +332,9 @@ def markdown_report(rep: dict) -> str:
     uneven = uneven_step_lines((rep.get("checks") or {}).get("uneven_time_steps"))
     if uneven:
         lines += ["Uneven time steps:", ""] + [f"* {g}" for g in uneven] + [""]
+    rest = onset_lines((rep.get("checks") or {}).get("rest_before_onset"))
+    if rest:
+        lines += ["Rest before each run's onset, cut on reading:", ""] + [f"* {g}" for g in rest] + [""]
     lines += ["## Diagnosis", "", f"**{d['message']}**", ""]
     if d["significant"]:
         lines += [f"* traced to: {', '.join(d['traced_to'])}",

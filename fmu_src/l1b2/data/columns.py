@@ -113,7 +113,7 @@ SIDECAR_FIELDS: dict[str, str] = SIDECAR_FIELD_UNITS
 
 #: ``meta`` keys computed at load time; never written to nor read from a sidecar.
 LOAD_TIME_META: tuple[str, ...] = ("source", "sidecar", "speed_derived", "frequency_filled", "unusual_units",
-                                    "allow_unusual_units", "gaps_filled")
+                                    "allow_unusual_units", "gaps_filled", "rest_before_onset")
 
 #: Texts (lower case, stripped) that mean "no value" (NaN) in a CSV cell.
 NAN_TOKENS: frozenset[str] = frozenset({

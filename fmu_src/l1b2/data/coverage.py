@@ -29,6 +29,7 @@ import pandas as pd
 from ..errors import DataFormatError
 from .measurements import DIRECTION, FREQUENCY, LOAD, POSITION, RUN, VOLTAGE, Measurements, run_slices
 from .gaps import gap_lines
+from .onset import onset_lines
 from .plausibility import uneven_step_lines, uneven_steps
 
 __all__ = ["RANGE_COLUMNS", "DEFAULT_TOLERANCE", "MIN_TOLERANCE", "data_range", "outside_range",
@@ -146,8 +147,9 @@ def frequency_varies(*data: pd.DataFrame | Measurements | None) -> bool:
 def input_checks(train: Measurements, test: Measurements | None) -> dict:
     """The report's record of the data checks: unit findings (allowed or none), the gaps of optional input columns
     filled on reading (per file and column: ``cells``, ``runs``, ``first_row``, ``first_line``), the uneven time
-    steps within runs (per file, :func:`l1b2.data.plausibility.uneven_steps`, None when even) and TEST runs outside
-    TRAIN's range."""
+    steps within runs (per file, :func:`l1b2.data.plausibility.uneven_steps`, None when even), the runs at rest
+    before their onset (per file, :func:`l1b2.data.onset.from_onset`'s record, None for data not read from a file)
+    and TEST runs outside TRAIN's range."""
     rng = data_range(train)
     flagged = outside_range(test, rng) if test is not None else []
     n_test = len(test.runs) if test is not None else 0
@@ -159,6 +161,8 @@ def input_checks(train: Measurements, test: Measurements | None) -> dict:
                         "test": dict(test.meta.get("gaps_filled") or {}) if test is not None else {}},
         "uneven_time_steps": {"train": uneven_steps(train.df),
                               "test": uneven_steps(test.df) if test is not None else None},
+        "rest_before_onset": {"train": train.meta.get("rest_before_onset"),
+                              "test": test.meta.get("rest_before_onset") if test is not None else None},
         "training_range": rng,
         "test_runs_outside_training_range": flagged,
         "extrapolation": summarize_outside(flagged, n_test),
@@ -168,9 +172,11 @@ def input_checks(train: Measurements, test: Measurements | None) -> dict:
 
 def data_check_lines(checks: dict) -> list[str]:
     """The warning lines of a report's ``checks`` (:func:`input_checks`) that need the package to be worded: the
-    gaps filled on reading (:func:`l1b2.data.gaps.gap_lines`) and the uneven time steps
-    (:func:`l1b2.data.plausibility.uneven_step_lines`)."""
-    return gap_lines(checks.get("gaps_filled")) + uneven_step_lines(checks.get("uneven_time_steps"))
+    gaps filled on reading (:func:`l1b2.data.gaps.gap_lines`), the uneven time steps
+    (:func:`l1b2.data.plausibility.uneven_step_lines`) and the rest before the runs' onsets
+    (:func:`l1b2.data.onset.onset_lines`)."""
+    return (gap_lines(checks.get("gaps_filled")) + uneven_step_lines(checks.get("uneven_time_steps"))
+            + onset_lines(checks.get("rest_before_onset")))
 
 #: settings that describe the rig itself: TRAIN and TEST must agree on them (relative difference)
 RIG_SETTINGS: dict[str, float] = {"slider_mass_kg": 1e-6, "encoder_resolution_m": 1e-6, "drive_frequency_Hz": 1e-6}

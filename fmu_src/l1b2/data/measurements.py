@@ -69,6 +69,7 @@ from .columns import (
     unit_of,
 )
 from .io import read_table_and_sidecar, write_table_and_sidecar
+from .onset import from_onset, subset_record
 from .validate import format_value, run_slices, validate_frame, validate_frame_filled
 
 __all__ = [
@@ -203,7 +204,9 @@ class Measurements:
         ``None``), ``speed_derived`` and ``frequency_filled`` (bool),
         ``gaps_filled`` (per optional input column whose gaps were bridged:
         ``cells``, ``runs``, ``first_row``, ``first_line``; empty when none),
-        plus any extra sidecar fields.
+        ``rest_before_onset`` (the runs at rest before their onset, cut on
+        reading: :func:`l1b2.data.onset.from_onset`), plus any extra sidecar
+        fields.
     path : pathlib.Path
         The CSV file the data came from.
 
@@ -265,7 +268,7 @@ class Measurements:
 def load_measurements(path: str | os.PathLike, *, slider_mass_kg: float | None = None,
                       encoder_resolution_m: float | None = None,
                       drive_frequency_Hz: float | None = None,
-                      allow_unusual_units: bool = False) -> Measurements:
+                      allow_unusual_units: bool = False, cut_rest_before_onset: bool = True) -> Measurements:
     """Read and validate a measured-data CSV (and its sidecar).
 
     Parameters
@@ -288,6 +291,11 @@ def load_measurements(path: str | os.PathLike, *, slider_mass_kg: float | None =
         position's derivative, ...; :func:`l1b2.data.validate.unusual_values`)
         instead of refusing them as a likely unit mistake. The findings are
         kept in ``meta['unusual_units']`` either way.
+    cut_rest_before_onset : bool
+        Drop each run's samples at rest before its motion's onset when the
+        drive inputs of its motion are logged during the rest
+        (:func:`l1b2.data.onset.from_onset`: the recording began before the
+        drive); counted in ``meta['rest_before_onset']`` either way.
 
     Returns
     -------
@@ -318,11 +326,15 @@ def load_measurements(path: str | os.PathLike, *, slider_mass_kg: float | None =
       is refused. A gap in any other known column is refused.
     * Whitespace around header names and values is ignored; blank lines at
       the end of the file are ignored, blank lines inside are refused.
+    * The checks above read every sample; the rest before each run's onset
+      is cut after them, the kept rows keep their index (file row = index
+      + 1).
     """
     df, meta = read_table_and_sidecar(path, slider_mass_kg=slider_mass_kg,
                                       encoder_resolution_m=encoder_resolution_m,
                                       drive_frequency_Hz=drive_frequency_Hz,
                                       allow_unusual_units=allow_unusual_units)
+    df, meta["rest_before_onset"] = from_onset(df, meta["encoder_resolution_m"], cut=cut_rest_before_onset)
     return Measurements(df=df, meta=meta, path=Path(path))
 
 
@@ -424,6 +436,9 @@ def split_by_load(meas: Measurements, test_abs_loads: Sequence[float] = (0.05,),
         meta = dict(meas.meta)
         meta["subset"] = label
         meta["test_abs_loads"] = loads
-        return Measurements(df=meas.df.loc[mask], meta=meta, path=meas.path)
+        part = meas.df.loc[mask]
+        if "rest_before_onset" in meta:
+            meta["rest_before_onset"] = subset_record(meta["rest_before_onset"], pd.unique(part[RUN]))
+        return Measurements(df=part, meta=meta, path=meas.path)
 
     return subset(~is_test, "train"), subset(is_test, "test")
