@@ -37,7 +37,7 @@ from statistics import NormalDist
 import numpy as np
 import pandas as pd
 
-from .columns import DIRECTION, FREQUENCY, LOAD, POSITION, RUN, SPEED, TIME, VOLTAGE
+from .columns import DIRECTION, FREQUENCY, LOAD, POSITION, RUN, SPEED, TIME, VOLTAGE, run_slices
 from .plausibility import UNEVEN_STEP_SHARE
 
 __all__ = ["ALPHA", "DRIVE_INPUTS", "MIN_REST_STEPS", "REGRESSOR", "noise_sd", "rest_bands", "onset_index", "from_onset",
@@ -54,14 +54,6 @@ MIN_REST_STEPS = 2
 REGRESSOR = "rest_before_onset"
 
 
-def _bounds(run) -> list[tuple[int, int]]:
-    run = np.asarray(run)
-    if not run.size:
-        return []
-    change = np.flatnonzero(run[1:] != run[:-1]) + 1
-    return list(zip(np.r_[0, change].tolist(), np.r_[change, run.size].tolist()))
-
-
 def noise_sd(x, t_s, run) -> float:
     """The robust standard deviation of white noise on ``x`` (any unit; ``t_s`` the times [s], ``run`` the run per
     sample): 1.4826 x the median absolute deviation of the within-run fourth differences, over ``sqrt(70)`` (the
@@ -71,7 +63,8 @@ def noise_sd(x, t_s, run) -> float:
     time: a start at constant jerk, a traverse at constant acceleration) adds nothing."""
     x, t = np.asarray(x, float), np.asarray(t_s, float)
     parts = []
-    for a, b in _bounds(run):
+    for _, sl in run_slices(run):
+        a, b = sl.start, sl.stop
         if b - a < 5:
             continue
         h = np.diff(t[a:b])
@@ -94,7 +87,8 @@ def rest_bands(df: pd.DataFrame, encoder_resolution_m: float, alpha: float = ALP
     t = df[TIME].to_numpy(float)
     s_sd = noise_sd(df[POSITION].to_numpy(float), t, run)
     v_sd = noise_sd(df[SPEED].to_numpy(float), t, run)
-    steps = np.concatenate([np.diff(t[a:b]) for a, b in _bounds(run) if b - a >= 2] or [np.zeros(0)])
+    steps = np.concatenate([np.diff(t[sl]) for _, sl in run_slices(run) if sl.stop - sl.start >= 2]
+                           or [np.zeros(0)])
     dt = float(np.median(steps)) if steps.size else 0.0
     q = float(encoder_resolution_m)
     return {"z": z, "sigma_position_m": s_sd, "sigma_speed_m_s": v_sd,
@@ -148,7 +142,8 @@ def from_onset(df: pd.DataFrame, encoder_resolution_m: float, *, cut: bool = Tru
     keep = np.ones(len(df), bool)
     per_run, still, differ, n_runs = [], 0, 0, 0
     run = df[RUN].to_numpy()
-    for a, b in _bounds(run):
+    for rid, sl in run_slices(run):
+        a, b = sl.start, sl.stop
         n_runs += 1
         k = onset_index(s[a:b], v[a:b], bands["band_position_m"], bands["band_speed_m_s"])
         if k is None:
@@ -160,7 +155,6 @@ def from_onset(df: pd.DataFrame, encoder_resolution_m: float, *, cut: bool = Tru
             differ += 1
             continue
         keep[a:a + k] = False
-        rid = run[a].item() if hasattr(run[a], "item") else run[a]
         per_run.append([rid, int(k), float(t[a + k] - t[a]), int(df.index[a]) + 1])
     return (df.loc[keep] if cut and not keep.all() else df), _record(per_run, n_runs, still, differ, cut, bands)
 
