@@ -179,12 +179,12 @@ def test_the_loop_keeps_the_stage_as_round_1_and_fits_the_rounds_behind_it(monke
     kept = {"considered": True, "accepted": True, "cv_gain": 0.5, "cv_free_run_gain": 0.3, "gamma": 1.0}
     monkeypatch.setattr(stamps, "decide", lambda *a, **k: (kept, (Physics(), chain)))
     it, rec = _Iteration(model=Physics(), effects=EffectSet(), rounds=[{"round": 0}]), {}
-    fit_tr = CloseLoop()._stamps(it, rec, df, None, mask, 0.1, [])
-    assert it.time_stamps is chain and rec["time_stamps"] is kept
+    fit_tr = CloseLoop()._sensor_stages(it, rec, df, None, mask, 0.1, [])
+    assert it.sensor_stage is chain and rec["time_stamps"] is kept
     assert [(r["round"], r["added"], r["regressors"]) for r in it.rounds[1:]] == [
         (1, "speed_over_time_stamps", ["time_step_ratio"])]
     np.testing.assert_allclose(fit_tr[dataio.SPEED], df[dataio.SPEED] / stamps.ratio(df), rtol=1e-12)
     refused = {"considered": True, "accepted": False}
     monkeypatch.setattr(stamps, "decide", lambda *a, **k: (refused, None))
     it2 = _Iteration(model=Physics(), effects=EffectSet(), rounds=[{"round": 0}])
-    assert CloseLoop()._stamps(it2, {}, df, None, mask, 0.1, []) is df and it2.time_stamps is None
+    assert CloseLoop()._sensor_stages(it2, {}, df, None, mask, 0.1, []) is df and it2.sensor_stage is None

@@ -197,7 +197,7 @@ class CloseLoop(EstimatorSettings):
         say("measurement chain: speed column against the position's derivative")
         chain_rec, fit_tr = self._chain(it, dtr, dte, mask_tr, m_s, folds)
         start = it.model     # the physics model the rounds extend (fitted on fit_tr)
-        stage = next((s for s in (it.output_filter, it.speed_gain, it.time_stamps) if s is not None), None)
+        stage = next((s for s in (it.output_filter, it.speed_gain, it.sensor_stage) if s is not None), None)
         wrap = (lambda mdl: ChainModel(mdl, stage)) if stage is not None else (lambda mdl: mdl)
 
         say("residual analysis on TRAIN")
@@ -227,8 +227,8 @@ class CloseLoop(EstimatorSettings):
                                             ("b1", it.output_filter.b1))})
             ext_params.update({f"speed_clip_{k}": {"value": v, "stderr": None, "ci95": None, "unit": "m/s"}
                                for k, v in it.output_filter.params().items() if k.endswith("_m_s")})
-        if it.time_stamps is not None:
-            ext_params.update(it.time_stamps.parameters())
+        if it.sensor_stage is not None:
+            ext_params.update(it.sensor_stage.parameters())
         if it.speed_gain is not None:
             g = it.speed_gain.gain
             ses = g.stderr or (None,) * len(g.coef)
@@ -239,7 +239,7 @@ class CloseLoop(EstimatorSettings):
                                            {**_data_summary(train, test), "operating_points": _operating_points(dtr),
                                             **({"auxiliary_columns": aux_rec} if aux_rec else {})},
                                            levels, None if it.speed_gain is None else it.speed_gain.gain, dtr)
-        why += it.time_stamps.model_note() if calibrated is not None and it.time_stamps is not None else ""
+        why += it.sensor_stage.model_note() if calibrated is not None and it.sensor_stage is not None else ""
         first = it.first_scores or []
         chosen = it.chosen
         diagnosis = {**self._diagnosis(it, first, analysis, ext_params, chain_rec), "auxiliary_columns": aux_rec,
@@ -453,7 +453,7 @@ class CloseLoop(EstimatorSettings):
         if "filter" in ch:
             rec["filter"] = ch["filter"].to_dict()
         if not ch["accepted"]:
-            return rec, self._stamps(it, rec, dtr, dte, mask, m_s, folds)
+            return rec, self._sensor_stages(it, rec, dtr, dte, mask, m_s, folds)
         ptr = chain.with_position_speed(dtr)
         filt = ChainModel(self._identify(ptr, m_s, mask), ch["filter"])
         v = dtr[dataio.SPEED].to_numpy(float)[mask]
@@ -471,7 +471,7 @@ class CloseLoop(EstimatorSettings):
         if not gain > 0:
             rec["accepted"] = False
             rec["refused_by_harm_guard"] = True  # found by the channel's test, not applied
-            return rec, self._stamps(it, rec, dtr, dte, mask, m_s, folds)
+            return rec, self._sensor_stages(it, rec, dtr, dte, mask, m_s, folds)
         it.model, it.output_filter = filt.model, ch["filter"]
         it.rounds.append({"round": len(it.rounds), "added": "speed_channel_filter", "effect": "speed_channel_filter",
                           "regressors": ["speed"], "cv": {"cv_gain": ch["cv_gain"], "cv_free_run_gain": gain,
@@ -479,26 +479,27 @@ class CloseLoop(EstimatorSettings):
                           "metrics": _metrics(filt, dtr, dte, train_free_run=fr1)})
         return rec, ptr
 
-    def _stamps(self, it: _Iteration, rec: dict, dtr, dte, mask, m_s, folds):
-        """The time stamps' chain (:func:`l1b2.closeloop.stamps.decide`, ``rec["time_stamps"]``) when the speed
-        channel kept no filter; when it is not kept, the speed sensor's gain (:meth:`_stroke_gain`). Returns the
-        TRAIN frame the rounds fit."""
+    def _sensor_stages(self, it: _Iteration, rec: dict, dtr, dte, mask, m_s, folds):
+        """The sensor stages when the speed channel kept no filter: the time stamps' chain
+        (:func:`l1b2.closeloop.stamps.decide`, ``rec["time_stamps"]``), else the position sensor's cyclic error
+        (:func:`l1b2.closeloop.encoder.decide`, ``rec["position_cyclic_error"]``), else the speed sensor's gain
+        (:meth:`_stroke_gain`). Returns the TRAIN frame the rounds fit."""
         out, kept = stamps.decide(dtr, mask, m_s, folds, it.model, lambda df: self._identify(df, m_s, mask),
                                   self.refit_settings(), alpha=self.alpha, min_gain=self.min_gain,
                                   min_cv_gain=self.min_cv_gain)
         rec["time_stamps"] = out
-        if kept is None:   # the position sensor's cyclic error (:func:`l1b2.closeloop.encoder.decide`)
+        if kept is None:
             out, kept = encoder.decide(dtr, mask, m_s, folds, it.model, lambda df: self._identify(df, m_s, mask),
                                        self.refit_settings(), alpha=self.alpha, min_gain=self.min_gain,
                                        min_cv_gain=self.min_cv_gain)
             rec["position_cyclic_error"] = out
         if kept is None:
             return self._stroke_gain(it, rec, dtr, dte, mask, m_s, folds)
-        it.model, it.time_stamps = kept
+        it.model, it.sensor_stage = kept
         it.rounds.append({"round": len(it.rounds), "added": kept[1].name, "effect": kept[1].name,
                           "regressors": [kept[1].regressor], "cv": {k: out[k] for k in ("cv_gain", "cv_free_run_gain")},
-                          "metrics": _metrics(ChainModel(it.model, it.time_stamps), dtr, dte)})
-        return it.time_stamps.frame(dtr)
+                          "metrics": _metrics(ChainModel(it.model, it.sensor_stage), dtr, dte)})
+        return it.sensor_stage.frame(dtr)
 
     def _stroke_gain(self, it: _Iteration, rec: dict, dtr, dte, mask, m_s, folds):
         """The speed sensor's gain along the stroke (:mod:`l1b2.closeloop.sensor`), when the speed channel kept no
@@ -559,7 +560,7 @@ class CloseLoop(EstimatorSettings):
         below = self._immaterial(it)
         chain_rounds = ("speed_channel_filter", sensor.STROKE_GAIN, stamps.STAMP_CHAIN, encoder.CYCLIC_CHAIN)
         records = ([_filter_record(rec, ext_params) for rec in it.rounds if rec["added"] == "speed_channel_filter"]
-                   + [it.time_stamps.record(r) for r in it.rounds if r["added"] in chain_rounds[2:]]
+                   + [it.sensor_stage.record(r) for r in it.rounds if r["added"] in chain_rounds[2:]]
                    + [_gain_record(rec, ext_params) for rec in it.rounds if rec["added"] == sensor.STROKE_GAIN]
                    + [_effect_record(e, rec, ext_params) for e, rec in
                       zip(effects, [r for r in it.rounds[1:] if r["added"] not in chain_rounds])])
@@ -568,13 +569,13 @@ class CloseLoop(EstimatorSettings):
         traced_to = order_traced(effects, it.output_filter is not None, a.traced,
                                  evidence=[t.candidate for t in below], speed_evidence=chain_found,
                                  measured=(("position",) if it.speed_gain is not None else ())
-                                 + ((it.time_stamps.regressor,) if it.time_stamps is not None else ()))
+                                 + ((it.sensor_stage.regressor,) if it.sensor_stage is not None else ()))
         w = a.whiteness
         labels = "; ".join(f"{e.label} ({', '.join(e.regressors)})" + (", relaxes Eq. 29" if e.structural else "")
                            for e in effects)
         return {
             "significant": c is not None or any(s is not None for s in (it.output_filter, it.speed_gain,
-                                                                          it.time_stamps)),
+                                                                          it.sensor_stage)),
             "traced_to": traced_to,
             "effect": records[0]["effect"] if records else None,
             "effect_shape": records[0]["shape"] if records else None,
@@ -584,7 +585,7 @@ class CloseLoop(EstimatorSettings):
                         else "no significant missing effect")
                        + _chain_note(it.output_filter)
                        + (f"; {_gain_reading(it.speed_gain.gain)}" if it.speed_gain is not None else "")
-                       + (f"; {it.time_stamps.reading()}" if it.time_stamps is not None else "")
+                       + (f"; {it.sensor_stage.reading()}" if it.sensor_stage is not None else "")
                        + withdrawn_note(it.checks)
                        + (f"; the speed column looks filtered (measurement chain, cross-validated gain "
                           f"{chain_rec['cv_gain']:.3f}) but a model behind the filter did not lower the "
@@ -629,7 +630,7 @@ class _Iteration:
     output_filter: chain.OutputFilter | None = None
     speed_gain: GainChain | None = None   #: the speed sensor's gain along the stroke (measurement chain)
     #: the speed derived over the time stamps, or the position sensor's cyclic error (measurement chain)
-    time_stamps: stamps.StampChain | encoder.CyclicChain | None = None
+    sensor_stage: stamps.StampChain | encoder.CyclicChain | None = None
     channels: tuple = ()
     run_level: runlevel.RunLevelAnalysis | None = None
     checks: list = field(default_factory=list)    #: the named picks' checks from the pure-slip family
