@@ -85,7 +85,7 @@ from . import runlevel
 from .candidates import Context, baseline_damping, channels_of, damping_floors, full_library, training_summary
 from .settings import LoopSettings, keyword_signature
 from .stages import StageClock
-from .auxiliary import check_test_columns, with_usable_channels
+from .auxiliary import check_test_columns
 from .calibrated import calibrated_model
 from . import sensor
 from .sensor import GainChain
@@ -96,6 +96,7 @@ from .acceptance import (Directions, EffectSet, RefitCV, RefitSettings, Validate
 from .folds import refit_schemes, screen_folds, stratified_folds
 from .baselines import choose_baseline, identify_families, retag_structural
 from .crosscheck import PureSlipCheck, identified_pick, score_of, withdrawn_note
+from .derived import prepare_channels
 from .events import session, with_event_clocks
 from .lags import with_lagged_channels
 from .pauses import with_pause_channel
@@ -158,7 +159,7 @@ class CloseLoop(EstimatorSettings):
         dtr = train.df
         dte = test.df if test is not None else None
         sess = session(dtr, dte)   # the runs on the clock, for both derivations of logged channels
-        dtr, dte, aux_rec = with_usable_channels(dtr, dte, responses)   # flags, labels, gaps: numeric or listed
+        dtr, dte, aux_rec, responses = prepare_channels(dtr, dte, responses)   # derivable names, flags, labels, gaps
         response_rec = response_tests(dtr, responses)   # columns that follow the speed: responses unless set
         responses = self.response_columns_ = classed_responses(self.response_columns, responses, response_rec)
         dtr, dte, event_rec = with_event_clocks(dtr, dte, responses, sess)

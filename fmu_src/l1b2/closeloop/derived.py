@@ -1,0 +1,89 @@
+"""The names of the channels the close loop derives from the log, kept free of logged columns.
+
+The loop derives channels from what every log carries (:mod:`~l1b2.closeloop.events`: the event clock
+``<column>_since_s`` of a step channel; :mod:`~l1b2.closeloop.lags`: the lags ``<column>_lag<n>r`` of a run
+setting; :mod:`~l1b2.closeloop.pauses`: the pause before each run, ``ln_pause_s``). A rig's own column may carry
+one of those names by chance (a logger that writes its own ``ln_pause_s``, an export that already holds a
+``voltage_V_lag3r``). Taken as the derived channel, such a column would replace the derivation (or be
+overwritten by it): either way something is lost without a word. So, before anything reads the frames, a logged
+column whose name a derivation could produce is **renamed** ``<name>_logged`` (``_logged2``, ... when that is
+taken too) in both frames and kept as an auxiliary column of its own; the rename is recorded with the other
+auxiliary columns' actions (:func:`l1b2.closeloop.auxiliary.with_usable_channels`), so the report lists it.
+
+A name a derivation *could* produce: exactly :data:`l1b2.closeloop.pauses.COLUMN`, or ``X + suffix`` for a column
+``X`` of the frame and a suffix of the event clock or of a lag of :data:`l1b2.closeloop.lags.TAU_RUNS` periods.
+The required columns and the speed are never renamed.
+"""
+
+from __future__ import annotations
+
+import pandas as pd
+
+from .auxiliary import NOT_CANDIDATES, with_usable_channels
+from .events import SUFFIX as EVENT_SUFFIX
+from .lags import TAU_RUNS, suffix as lag_suffix
+from .pauses import COLUMN as PAUSE_COLUMN
+
+__all__ = ["RENAMED_SUFFIX", "derived_suffixes", "is_derivable_name", "set_aside_derivable_names",
+           "prepare_channels"]
+
+#: what a logged column whose name a derivation could produce is renamed with (module docstring)
+RENAMED_SUFFIX = "_logged"
+
+
+def derived_suffixes() -> tuple[str, ...]:
+    """The suffixes the loop's derivations append to a column's name: the event clock's and each lag's."""
+    return (EVENT_SUFFIX,) + tuple(lag_suffix(n) for n in TAU_RUNS)
+
+
+def is_derivable_name(name: str, columns) -> bool:
+    """Whether a derivation of the loop could produce a channel called ``name`` from a frame with ``columns``
+    (module docstring)."""
+    if name == PAUSE_COLUMN:
+        return True
+    cols = set(columns)
+    return any(name.endswith(s) and name[:-len(s)] in cols for s in derived_suffixes())
+
+
+def _free_name(name: str, taken: set) -> str:
+    """``name + "_logged"``, or ``name + "_logged<k>"`` for the smallest k >= 2 that no column of ``taken`` has."""
+    new, k = name + RENAMED_SUFFIX, 2
+    while new in taken:
+        new, k = f"{name}{RENAMED_SUFFIX}{k}", k + 1
+    return new
+
+
+def set_aside_derivable_names(train: pd.DataFrame, test: pd.DataFrame | None = None):
+    """``(train, test, record)``: the frames with every logged column whose name a derivation could produce
+    renamed (module docstring), and ``record`` one dict per rename ``{"channel" (the new name), "action":
+    "renamed", "from", "note", "first_row": None}``. The frames are returned unchanged (not copied) when no
+    column is renamed; a TEST column is renamed when TRAIN's is, or when TEST's own columns make it derivable."""
+    frames = [df for df in (train, test) if df is not None]
+    taken = set().union(*(df.columns for df in frames))
+    names = []
+    for df in frames:
+        names += [c for c in df.columns if c not in NOT_CANDIDATES and c not in names
+                  and is_derivable_name(c, df.columns)]
+    if not names:
+        return train, test, []
+    mapping = {}
+    for name in names:
+        mapping[name] = _free_name(name, taken)
+        taken.add(mapping[name])
+    record = [{"channel": new, "action": "renamed", "from": old, "first_row": None,
+               "note": (f"logged as `{old}`, a name the loop derives from the log; read as `{new}` so that both "
+                        "are kept")} for old, new in mapping.items()]
+    train = train.rename(columns=mapping)
+    test = test.rename(columns=mapping) if test is not None else None
+    return train, test, record
+
+
+def prepare_channels(train: pd.DataFrame, test: pd.DataFrame | None = None, response_columns=()):
+    """``(train, test, record, response_columns)``: :func:`set_aside_derivable_names`, then
+    :func:`l1b2.closeloop.auxiliary.with_usable_channels` on its frames; ``record`` both records in that order, and
+    the response columns under their names in the returned frames (a renamed one keeps its role)."""
+    train, test, renamed = set_aside_derivable_names(train, test)
+    mapping = {r["from"]: r["channel"] for r in renamed}
+    responses = tuple(mapping.get(c, c) for c in response_columns)
+    train, test, usable = with_usable_channels(train, test, responses)
+    return train, test, renamed + usable, responses
