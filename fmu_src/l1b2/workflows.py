@@ -33,6 +33,7 @@ from .jsonio import dumps
 from .data.metrics import diverged_runs, evaluation_mask, report_metrics, speed_metrics
 from .errors import IdentificationError, OutputError
 from .predictor.setup import PredictorSetup
+from .cosim.master import pid_alive
 
 #: marker file in every output folder written by :func:`output_dir`
 OUTPUT_MARKER = ".l1b2-output.json"
@@ -41,18 +42,6 @@ OUTPUT_MARKER = ".l1b2-output.json"
 # ---------------------------------------------------------------------------
 # output folders
 # ---------------------------------------------------------------------------
-
-def _pid_alive(pid: int) -> bool:
-    if os.name != "posix":
-        return True  # no safe liveness probe: never take over a lock
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except OSError:
-        return True
-    return True
-
 
 def _acquire_lock(out: Path) -> Path:
     """Create ``.NAME.lock`` beside ``out`` exclusively; a lock of a dead process on this host is taken over."""
@@ -67,7 +56,7 @@ def _acquire_lock(out: Path) -> Path:
                 pid = int(pid_text)
             except (OSError, ValueError):
                 pid, host = -1, ""
-            if host.strip() == socket.gethostname() and pid > 0 and not _pid_alive(pid):
+            if host.strip() == socket.gethostname() and pid > 0 and not pid_alive(pid):
                 stale = lock.with_name(f"{lock.name}.stale-{os.getpid()}")
                 try:
                     os.replace(lock, stale)

@@ -74,7 +74,11 @@ _LIVE_TMP: set[str] = set()   # unpacked .ssp folders of live CoSimulation objec
 _swept = False
 
 
-def _pid_alive(pid: int) -> bool:
+def pid_alive(pid: int) -> bool:
+    """Whether the process ``pid`` of this host runs. True where no safe probe exists (not POSIX), so that a
+    caller never takes over or removes what a live process may hold."""
+    if os.name != "posix":
+        return True
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -98,7 +102,7 @@ def remove_stale_extractions(tmp_root: str | None = None) -> list[str]:
         return removed
     for folder in entries:
         pid_text = folder.name[len(EXTRACT_PREFIX):].split("-", 1)[0]
-        if pid_text.isdigit() and int(pid_text) != os.getpid() and not _pid_alive(int(pid_text)):
+        if pid_text.isdigit() and int(pid_text) != os.getpid() and not pid_alive(int(pid_text)):
             shutil.rmtree(folder, ignore_errors=True)
             removed.append(str(folder))
     return removed
