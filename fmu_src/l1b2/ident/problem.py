@@ -519,6 +519,18 @@ class LikelihoodProblem:
             U[fl == STEP_STUCK] = 0.0
         return U
 
+    def _start_factor(self, theta, c) -> np.ndarray:
+        """The free run's recursion factor ``a`` per step for the start gain (:meth:`start_gain`): the evaluation's,
+        with a reversing step's taken from its sensitivity row and a stuck step's set to 0 (``c``: ``evaluate(theta)``)."""
+        a, flags = c["a"], c["flags"]
+        if flags.any():
+            a = a.copy()
+            rev = np.flatnonzero(flags == STEP_REVERSAL)
+            if rev.size:
+                a[rev] = self._sensitivity_rows(theta, c, rev, [0])[0]
+            a[flags == STEP_STUCK] = 0.0
+        return a
+
     def start_gain(self, theta):
         """g = d v_pred / d v_start on the residual rows (free run; zeros for one_step).
 
@@ -528,14 +540,7 @@ class LikelihoodProblem:
         if self.criterion != "free_run":
             return np.zeros(self.sel.size)
         c = self.evaluate(theta)
-        a = c["a"]
-        flags = c["flags"]
-        if flags.any():
-            a = a.copy()
-            rev = np.flatnonzero(flags == STEP_REVERSAL)
-            if rev.size:
-                a[rev] = self._sensitivity_rows(theta, c, rev, [0])[0]
-            a[flags == STEP_STUCK] = 0.0
+        a = self._start_factor(theta, c)
         with np.errstate(over="ignore", invalid="ignore"):
             g = packed_linear_recursion(self.lay, a, np.zeros((self.lay.n, 1)), S0=1.0)
         g = g[self.sel, 0]
@@ -554,15 +559,8 @@ class LikelihoodProblem:
         if self.criterion != "free_run":
             return np.zeros(self.sel.size), np.zeros((self.sel.size, cols.size))
         c = self.evaluate(theta)
-        a = c["a"]
-        flags = c["flags"]
-        normal = flags == 0
-        if flags.any():
-            a = a.copy()
-            rev = np.flatnonzero(flags == STEP_REVERSAL)
-            if rev.size:
-                a[rev] = self._sensitivity_rows(theta, c, rev, [0])[0]
-            a[flags == STEP_STUCK] = 0.0
+        a = self._start_factor(theta, c)
+        normal = c["flags"] == 0
         core = self.core
         n1 = core.n1
         with np.errstate(over="ignore", invalid="ignore"):
