@@ -476,6 +476,15 @@ def bracketed_profile(obj, theta_start, n1, kappa, p_theta, settings=None, log=N
     return records, best
 
 
+def profile_stage(records, t0: float, c0: float) -> dict:
+    """The offset profile's stage record: its wall and CPU time since ``t0``/``c0`` [s] (``time.perf_counter``,
+    ``time.process_time``), its evaluations and each profile point's omega, c_r, log-likelihood and evaluations."""
+    return {"stage": "offset profile", "time_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0,
+            "nfev": int(sum(r["nfev"] for r in records)), "njev": int(sum(r.get("njev", 0) for r in records)),
+            "profile": [{"omega": r["omega"], "c_r": r["c_r"], "loglik": r["loglik"], "nfev": r["nfev"]}
+                        for r in records]}
+
+
 def offset_search(obj, theta_start, order, kappa, p_theta, max_nfev, tol, stat_tol, max_outer, grid=OMEGA_GRID,
                   log=None):
     """The drive-offset search (module docstring): the profile over omega, then the full search from its best.
@@ -488,10 +497,7 @@ def offset_search(obj, theta_start, order, kappa, p_theta, max_nfev, tol, stat_t
     n1 = order + 1
     t0, c0 = time.perf_counter(), time.process_time()
     records, best = profile(obj, theta_start, n1, kappa, p_theta, grid, log=log)
-    stage = {"stage": "offset profile", "time_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0,
-             "nfev": int(sum(r["nfev"] for r in records)), "njev": int(sum(r.get("njev", 0) for r in records)),
-             "profile": [{"omega": r["omega"], "c_r": r["c_r"], "loglik": r["loglik"], "nfev": r["nfev"]}
-                         for r in records]}
+    stage = profile_stage(records, t0, c0)
     theta0 = best["theta"] if np.isfinite(best["loglik"]) else theta_start
     lin = linear_positions(obj, p_theta, n1)
     search, outer, more = varpro_search(obj, lin, [obj.z_of(theta0)], max_nfev, tol, stat_tol, max_outer, 1, log)
@@ -568,10 +574,7 @@ def bracketed_offset_search(obj, theta_start, order, kappa, p_theta, max_nfev, t
     n1 = order + 1
     t0, c0 = time.perf_counter(), time.process_time()
     records, best = bracketed_profile(obj, theta_start, n1, kappa, p_theta, cfg, log=log)
-    stage = {"stage": "offset profile", "time_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0,
-             "nfev": int(sum(r["nfev"] for r in records)), "njev": int(sum(r.get("njev", 0) for r in records)),
-             "profile": [{"omega": r["omega"], "c_r": r["c_r"], "loglik": r["loglik"], "nfev": r["nfev"]}
-                         for r in records]}
+    stage = profile_stage(records, t0, c0)
     if not np.isfinite(best["loglik"]):
         search, outer, more = varpro_search(obj, linear_positions(obj, p_theta, n1), [obj.z_of(theta_start)],
                                             max_nfev, tol, stat_tol, max_outer, 1, log, cfg["final_min_gain"])
