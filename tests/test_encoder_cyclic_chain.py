@@ -175,7 +175,7 @@ def test_the_loop_keeps_the_stage_after_the_time_stamps_and_fits_the_rounds_behi
     monkeypatch.setattr(encoder, "decide", lambda *a, **k: (kept, (Physics(), chain)))
     it, rec = _Iteration(model=Physics(), effects=EffectSet(), rounds=[{"round": 0}]), {}
     fit_tr = CloseLoop()._sensor_stages(it, rec, df, None, mask, 0.1, [])
-    assert it.sensor_stage is chain and rec["position_cyclic_error"] is kept
+    assert it.sensor_stage.stages == (chain,) and rec["position_cyclic_error"] is kept
     assert [(r["round"], r["added"], r["regressors"]) for r in it.rounds[1:]] == [
         (1, "position_sensor_cyclic_error", ["position_cyclic_error"])]
     np.testing.assert_allclose(fit_tr[dataio.SPEED], chain.frame(df)[dataio.SPEED], rtol=1e-12)

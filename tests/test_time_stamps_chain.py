@@ -164,6 +164,7 @@ def test_the_report_line_names_the_stage_when_the_steps_are_uneven():
 def test_the_loop_keeps_the_stage_as_round_1_and_fits_the_rounds_behind_it(monkeypatch):
     """``CloseLoop._stamps``: a kept stage becomes the model's chain (round 1, ``time_step_ratio``) and the rounds'
     frame is the logged speed over ``r^gamma``; a refused one falls through to the stroke gain (off: the frame)."""
+    from l1b2.closeloop import encoder
     from l1b2.closeloop.acceptance import EffectSet
     from l1b2.closeloop.loop import CloseLoop, _Iteration
 
@@ -178,9 +179,10 @@ def test_the_loop_keeps_the_stage_as_round_1_and_fits_the_rounds_behind_it(monke
     chain = stamps.StampChain(1.0, 0.01)
     kept = {"considered": True, "accepted": True, "cv_gain": 0.5, "cv_free_run_gain": 0.3, "gamma": 1.0}
     monkeypatch.setattr(stamps, "decide", lambda *a, **k: (kept, (Physics(), chain)))
+    monkeypatch.setattr(encoder, "decide", lambda *a, **k: ({"considered": False}, None))
     it, rec = _Iteration(model=Physics(), effects=EffectSet(), rounds=[{"round": 0}]), {}
     fit_tr = CloseLoop()._sensor_stages(it, rec, df, None, mask, 0.1, [])
-    assert it.sensor_stage is chain and rec["time_stamps"] is kept
+    assert it.sensor_stage.stages == (chain,) and rec["time_stamps"] is kept
     assert [(r["round"], r["added"], r["regressors"]) for r in it.rounds[1:]] == [
         (1, "speed_over_time_stamps", ["time_step_ratio"])]
     np.testing.assert_allclose(fit_tr[dataio.SPEED], df[dataio.SPEED] / stamps.ratio(df), rtol=1e-12)

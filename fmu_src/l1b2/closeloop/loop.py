@@ -89,7 +89,8 @@ from .auxiliary import check_test_columns
 from .calibrated import calibrated_model
 from . import sensor
 from .sensor import GainChain
-from . import encoder, stamps
+from . import encoder, sensorchain, stamps
+from .sensorchain import SensorChain
 from .acceptance import (Directions, EffectSet, RefitCV, RefitSettings, Validated, accepts, added_columns,
                          chain_cv_errors, collinear, cv_errors, fold_start_phi, materiality, named_reading, refit,
                          stage_verdict, time_dependent, validated)
@@ -481,25 +482,22 @@ class CloseLoop(EstimatorSettings):
         return rec, ptr
 
     def _sensor_stages(self, it: _Iteration, rec: dict, dtr, dte, mask, m_s, folds):
-        """The sensor stages when the speed channel kept no filter: the time stamps' chain
-        (:func:`l1b2.closeloop.stamps.decide`, ``rec["time_stamps"]``), else the position sensor's cyclic error
-        (:func:`l1b2.closeloop.encoder.decide`, ``rec["position_cyclic_error"]``), else the speed sensor's gain
+        """The sensor stages when the speed channel kept no filter (:func:`l1b2.closeloop.sensorchain.decide_stages`:
+        the time stamps' chain, ``rec["time_stamps"]``, then the position sensor's cyclic error behind it,
+        ``rec["position_cyclic_error"]``), each kept one a round; none kept, the speed sensor's gain
         (:meth:`_stroke_gain`). Returns the TRAIN frame the rounds fit."""
-        out, kept = stamps.decide(dtr, mask, m_s, folds, it.model, lambda df: self._identify(df, m_s, mask),
-                                  self.refit_settings(), alpha=self.alpha, min_gain=self.min_gain,
-                                  min_cv_gain=self.min_cv_gain)
-        rec["time_stamps"] = out
-        if kept is None:
-            out, kept = encoder.decide(dtr, mask, m_s, folds, it.model, lambda df: self._identify(df, m_s, mask),
-                                       self.refit_settings(), alpha=self.alpha, min_gain=self.min_gain,
-                                       min_cv_gain=self.min_cv_gain)
-            rec["position_cyclic_error"] = out
-        if kept is None:
+        recs, kept = sensorchain.decide_stages(dtr, mask, m_s, folds, it.model,
+                                               lambda df: self._identify(df, m_s, mask), self.refit_settings(),
+                                               alpha=self.alpha, min_gain=self.min_gain, min_cv_gain=self.min_cv_gain)
+        rec.update(recs)
+        if not kept:
             return self._stroke_gain(it, rec, dtr, dte, mask, m_s, folds)
-        it.model, it.sensor_stage = kept
-        it.rounds.append({"round": len(it.rounds), "added": kept[1].name, "effect": kept[1].name,
-                          "regressors": [kept[1].regressor], "cv": {k: out[k] for k in ("cv_gain", "cv_free_run_gain")},
-                          "metrics": _metrics(ChainModel(it.model, it.sensor_stage), dtr, dte)})
+        for model, stage, out in kept:
+            it.model, it.sensor_stage = model, (it.sensor_stage or SensorChain(())).then(stage)
+            it.rounds.append({"round": len(it.rounds), "added": stage.name, "effect": stage.name,
+                              "regressors": [stage.regressor],
+                              "cv": {k: out[k] for k in ("cv_gain", "cv_free_run_gain")},
+                              "metrics": _metrics(ChainModel(it.model, it.sensor_stage), dtr, dte)})
         return it.sensor_stage.frame(dtr)
 
     def _stroke_gain(self, it: _Iteration, rec: dict, dtr, dte, mask, m_s, folds):
@@ -570,7 +568,7 @@ class CloseLoop(EstimatorSettings):
         traced_to = order_traced(effects, it.output_filter is not None, a.traced,
                                  evidence=[t.candidate for t in below], speed_evidence=chain_found,
                                  measured=(("position",) if it.speed_gain is not None else ())
-                                 + ((it.sensor_stage.regressor,) if it.sensor_stage is not None else ()))
+                                 + (it.sensor_stage.regressors if it.sensor_stage is not None else ()))
         w = a.whiteness
         labels = "; ".join(f"{e.label} ({', '.join(e.regressors)})" + (", relaxes Eq. 29" if e.structural else "")
                            for e in effects)
@@ -630,8 +628,8 @@ class _Iteration:
     level: float = float("nan")
     output_filter: chain.OutputFilter | None = None
     speed_gain: GainChain | None = None   #: the speed sensor's gain along the stroke (measurement chain)
-    #: the speed derived over the time stamps, or the position sensor's cyclic error (measurement chain)
-    sensor_stage: stamps.StampChain | encoder.CyclicChain | None = None
+    #: the kept sensor stages: the speed derived over the time stamps, the position sensor's cyclic error
+    sensor_stage: SensorChain | None = None
     channels: tuple = ()
     run_level: runlevel.RunLevelAnalysis | None = None
     checks: list = field(default_factory=list)    #: the named picks' checks from the pure-slip family
