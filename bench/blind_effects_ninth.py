@@ -30,7 +30,8 @@ speed noise, 2 % run-to-run contact scatter). Each kind draws from one random st
   supply holds its current and the capacitor discharges toward ``I_lim R_eq`` from the run's start, ``V_b(t) =
   I_lim R_eq + (V_s - I_lim R_eq) exp(-t / (R_eq C_b))``; otherwise ``V_b = V_s``. In the pause (1 s) the supply
   recharges the capacitor at ``I_lim`` (over 100 V/s, more than the bus lost), so every run starts at ``V_s``. The
-  drive's amplitude sags along the higher-V0 runs (by up to ~15 % at 324 V), while ``voltage_V`` logs the plan's.
+  drive's amplitude sags along the higher-V0 runs (by 10-26 % at 324 V by a run's end, measured), while
+  ``voltage_V`` logs the plan's.
 * ``grid_frequency_decoy`` -- a decoy, no effect on the motor: logged ``grid_frequency_Hz`` per sample, the mains
   frequency that the drive's power analyser reads (its display refreshed every 0.2 s, 1 mHz resolution). The
   drive runs from a regulated DC supply, so the mains frequency reaches nothing. It wanders on the session clock
