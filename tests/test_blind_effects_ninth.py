@@ -80,3 +80,17 @@ def test_draws_lie_in_their_ranges(audit):
         p = audit.draw("grid_frequency_decoy", seed, 72)
         assert 0.015 <= p["sigma_Hz"] <= 0.030 and 60 <= p["tau_s"] <= 300
         assert p["x_Hz"].size * audit.ANALYSER_S >= 1000.0
+
+
+@pytest.fixture(scope="module")
+def probe(load_bench):
+    return load_bench("blind_effects_ninth_probe")
+
+
+def test_setting_steps_hold_the_step_from_the_previous_setting(probe):
+    V = [220.0, 220.0, 324.0, 324.0, 255.0, 255.0, 255.0]
+    # the step from the previous different setting, held while V0 is unchanged
+    assert probe.setting_steps(V) == pytest.approx([0.0, 0.0, 104.0, 104.0, -69.0, -69.0, -69.0], abs=0)
+    # with the drive off before the session, the first setting's step is its V0
+    assert probe.setting_steps(V, from_off=True) == pytest.approx([220.0, 220.0, 104.0, 104.0, -69.0, -69.0, -69.0],
+                                                                  abs=0)
