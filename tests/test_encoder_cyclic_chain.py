@@ -35,7 +35,7 @@ def test_the_error_and_its_slope_are_the_written_out_ones():
 
 def frame(n_runs=12, n=500, seed=0, chain=True, force=None, params=None, noise=2e-4, speeds=(0.03, 0.25)):
     """Runs at steady speeds spread over ``speeds`` [m/s] over the stroke from -20 mm (directions alternate): the logged position
-    ``s + e(s)`` and speed ``v (1 + e'(s))`` when ``chain``; ``force``: forces' coefficients of the bar's waviness
+    ``s + e(s)`` when ``chain``, and the logged speed its derivative as a DAQ takes it (``numpy.gradient``); ``force``: forces' coefficients of the bar's waviness
     at the pitch added to the speed through the slider's linearised dynamics instead. Returns ``(frame, v)``."""
     rng = np.random.default_rng(seed)
     rows, vs = [], []
@@ -45,10 +45,9 @@ def frame(n_runs=12, n=500, seed=0, chain=True, force=None, params=None, noise=2
         t = 2.0 * r + np.arange(n) * 1e-3
         s = d * (-20e-3 + speed * (t - t[0]))
         e = encoder.error_m(s, P, COEF) if chain else 0.0
-        de = encoder.slope_basis(s, P) @ COEF if chain else 0.0
         v = np.full(n, d * speed)
         rows.append(pd.DataFrame({dataio.RUN: r, dataio.TIME: t, dataio.POSITION: s + e,
-                                  dataio.SPEED: v * (1 + de) + noise * rng.standard_normal(n),
+                                  dataio.SPEED: np.gradient(s + e, t) + noise * rng.standard_normal(n),
                                   dataio.VOLTAGE: 200.0 + 5 * r, dataio.LOAD: 0.0, dataio.DIRECTION: d}))
         vs.append(v)
     df, v = pd.concat(rows, ignore_index=True), np.concatenate(vs)
@@ -61,11 +60,33 @@ def frame(n_runs=12, n=500, seed=0, chain=True, force=None, params=None, noise=2
     return df, v
 
 
-def test_the_chain_and_its_frame_are_one_plus_the_slope():
+def test_the_ripple_is_the_derivative_stencils_and_the_slope_where_neighbours_are_close():
+    # steady runs without the error (logged positions linear in time, step dt): the central difference of
+    # sin(h k p) is cos(h k p) sin(h k D) / D with D = v dt, i.e. e'(p) with each harmonic attenuated by
+    # sin(h k D) / (h k D); the runs' first and last samples are one-sided differences
+    k = 2 * np.pi / P
+    for speed, slow in ((0.2, False), (0.005, True)):
+        df, v = frame(n_runs=2, n=40, chain=False, noise=0.0, speeds=(speed, speed))
+        got = encoder.slope_rows(df, P)
+        p = df[dataio.POSITION].to_numpy()
+        D = speed * 1e-3
+        inner = np.ones(len(df), bool)
+        inner[[0, 39, 40, 79]] = False
+        for j, (h, trig) in enumerate([(1, "s"), (1, "c"), (2, "s"), (2, "c")]):
+            att = 1.0 if slow else np.sin(h * k * D) / (h * k * D)
+            want = (h * k * (np.cos(h * k * p) if trig == "s" else -np.sin(h * k * p))) * att
+            np.testing.assert_allclose(got[inner, j], want[inner], rtol=0, atol=1e-9 * h * k)
+        if not slow:
+            assert np.sin(2 * k * D) / (2 * k * D) < 0.9     # the second harmonic visibly attenuated at 0.2 m/s
+        else:
+            np.testing.assert_array_equal(got, encoder.slope_basis(p, P))   # under 1 % of a pitch: the slope
+
+
+def test_the_chain_and_its_frame_are_one_plus_the_ripple():
     df, v = frame(n_runs=2, n=50)
     c = encoder.CyclicChain(P, COEF)
     p = df[dataio.POSITION].to_numpy()
-    de = encoder.slope_basis(p, P) @ COEF
+    de = encoder.slope_rows(df, P) @ COEF
     u = np.linspace(-0.3, 0.3, len(df))
     np.testing.assert_allclose(c.apply(df, u), u * (1 + de), rtol=1e-12)
     fr = c.frame(df)

@@ -17,14 +17,15 @@ GAMMA = 0.8
 
 
 def frame(n_runs=3, n=200, seed=0):
-    """Runs over the stroke with jittered time stamps (steps 0.7-1.3 ms), a logged position and a speed column."""
+    """Slow runs (5 mm/s: neighbours 5-13 um apart, under 1 % of the pitch, so the ripple is ``e'(p)``) with
+    jittered time stamps (steps 0.7-1.3 ms), a logged position and a speed column."""
     rng = np.random.default_rng(seed)
     rows = []
     for r in range(n_runs):
         t = 2.0 * r + np.cumsum(rng.uniform(0.7e-3, 1.3e-3, n))
-        s = -20e-3 + 0.1 * (t - t[0])
+        s = -20e-3 + 0.005 * (t - t[0])
         rows.append(pd.DataFrame({dataio.RUN: r + 1, dataio.TIME: t, dataio.POSITION: s,
-                                  dataio.SPEED: 0.1 + 1e-3 * rng.standard_normal(n), dataio.VOLTAGE: 200.0,
+                                  dataio.SPEED: 0.005 + 1e-4 * rng.standard_normal(n), dataio.VOLTAGE: 200.0,
                                   dataio.LOAD: 0.0, dataio.DIRECTION: 1.0}))
     return pd.concat(rows, ignore_index=True)
 

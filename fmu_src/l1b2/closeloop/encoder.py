@@ -12,7 +12,10 @@ position (a bar's waviness, :class:`l1b2.predictor.effects.bar.BarWaviness`) als
 but through the slider's inertia, so that its ripple falls as the speed (the ripple's frequency) rises. The
 chain's form on the prediction's output (:class:`CyclicChain`) is ``v_logged = v (1 + e'(p))`` (``e'`` at the
 logged position: the difference is of second order in ``e``), and the physics behind it is fitted on the frame
-``p - e(p)``, ``v_logged / (1 + e'(p))`` (:meth:`CyclicChain.frame`).
+``p - e(p)``, ``v_logged / (1 + e'(p))`` (:meth:`CyclicChain.frame`). ``e'`` is read as the speed column sees
+it (:func:`slope_rows`): the column is the position's discrete derivative over the logged stamps (the speed
+channel's test found no other), so its ripple is that derivative of ``e`` over the position's, which attenuates a
+harmonic whose wavelength is not long against a sample's travel (``sin(x) / x``, ``x = 2 pi h v dt / P``).
 
 It is decided as the time stamps' chain is (:mod:`l1b2.closeloop.stamps`):
 
@@ -39,6 +42,7 @@ import numpy as np
 import pandas as pd
 
 from ..data import measurements as dataio
+from ..data.columns import run_slices
 from ..errors import IdentificationError
 from ..predictor import effects as fx
 from . import residuals as res
@@ -77,6 +81,48 @@ def slope_basis(p, pitch_m: float) -> np.ndarray:
     return np.column_stack([col for h in HARMONICS for col in (h * k * np.cos(h * th), -h * k * np.sin(h * th))])
 
 
+def error_basis(p, pitch_m: float) -> np.ndarray:
+    """``de/dcoef`` per sample (n x 4) [1]: ``(sin(h theta), cos(h theta))``, h = 1, 2, so that ``e(p) =
+    error_basis(p, P) @ coef``."""
+    th = phase(p, pitch_m)
+    return np.column_stack([col for h in HARMONICS for col in (np.sin(h * th), np.cos(h * th))])
+
+
+#: the shortest span of two neighbouring samples' positions, in pitches, over which the speed column's ripple is
+#: read as a divided difference (under it the divided difference equals ``e'`` to about ``(pi h span / P)^2 / 6``,
+#: 4e-4 at h = 2: the slope itself is used)
+MIN_SPAN_PITCHES = 0.01
+
+
+def slope_rows(df: pd.DataFrame, pitch_m: float) -> np.ndarray:
+    """``de'/dcoef`` per sample (n x 4) [1] as a speed column derived from the logged position sees it.
+
+    The speed column passed the speed channel's test (it is the position's derivative over the logged stamps,
+    ``numpy.gradient`` within each run, or the sensor stages would not be considered), so its ripple is that
+    derivative of ``e`` over that of the position: ``G[e(p)] / G[p]``, a divided difference of ``e`` across the
+    neighbouring samples. It is ``e'(p)`` when the samples are close on the scale's pitch and smaller when a
+    sample's travel is a sizeable part of it (the difference's own attenuation of a fast ripple). Where the
+    neighbours span less than :data:`MIN_SPAN_PITCHES` of the pitch (slow motion, rest) the analytic slope
+    :func:`slope_basis` is used.
+    """
+    p = df[dataio.POSITION].to_numpy(float)
+    t = df[dataio.TIME].to_numpy(float)
+    out = slope_basis(p, pitch_m)
+    E = error_basis(p, pitch_m)
+    for _, sl in run_slices(df[dataio.RUN]):
+        if sl.stop - sl.start < 2:
+            continue
+        gp = np.gradient(p[sl], t[sl])
+        span = np.abs(np.gradient(p[sl])) * 2.0
+        ok = span > MIN_SPAN_PITCHES * pitch_m
+        if ok.any():
+            gE = np.gradient(E[sl], t[sl], axis=0)
+            block = out[sl]
+            block[ok] = gE[ok] / gp[ok, None]
+            out[sl] = block
+    return out
+
+
 class CyclicChain:
     """The position sensor's chain ``v_logged = v (1 + e'(p))`` (the interface of
     :class:`~l1b2.closeloop.chain.OutputFilter`: the physics is fitted on :meth:`frame`, its prediction of the
@@ -90,7 +136,7 @@ class CyclicChain:
 
     def slope(self, df: pd.DataFrame) -> np.ndarray:
         """``e'(p)`` [1] at ``df``'s logged positions."""
-        return slope_basis(df[dataio.POSITION].to_numpy(float), self.pitch_m) @ self.coef
+        return slope_rows(df, self.pitch_m) @ self.coef
 
     def frame(self, df: pd.DataFrame) -> pd.DataFrame:
         """A copy of ``df`` with the slider's position ``p - e(p)`` and speed ``v_logged / (1 + e'(p))``."""
@@ -148,7 +194,7 @@ class CyclicChain:
 def _design(df: pd.DataFrame, mask, v_model, pitch_m: float):
     m = np.asarray(mask, bool)
     v = np.asarray(v_model, float)[m]
-    X = v[:, None] * slope_basis(df[dataio.POSITION].to_numpy(float)[m], pitch_m)
+    X = v[:, None] * slope_rows(df, pitch_m)[m]
     return X, df[dataio.SPEED].to_numpy(float)[m] - v, m
 
 
@@ -196,7 +242,7 @@ def candidate_pitch(df: pd.DataFrame, mask, v_model) -> tuple[dict, float | None
 def response(df: pd.DataFrame, v_pred, pitch_m: float) -> np.ndarray:
     """The logged speed's response to ``(c_h, d_h)`` at 0 in drive coordinates, ``d v_pred de'/dcoef`` (n x 4)."""
     d = df[dataio.DIRECTION].to_numpy(float)
-    return (d * np.asarray(v_pred, float))[:, None] * slope_basis(df[dataio.POSITION].to_numpy(float), pitch_m)
+    return (d * np.asarray(v_pred, float))[:, None] * slope_rows(df, pitch_m)
 
 
 def force_response(df: pd.DataFrame, v_pred, params, m_s: float, pitch_m: float) -> np.ndarray:
