@@ -34,7 +34,7 @@ from .plausibility import uneven_step_lines, uneven_steps
 
 __all__ = ["RANGE_COLUMNS", "DEFAULT_TOLERANCE", "MIN_TOLERANCE", "data_range", "outside_range",
            "summarize_outside", "values_outside", "FREQUENCY_REL_SPREAD", "run_frequencies", "frequency_varies",
-           "input_checks", "data_check_lines", "RIG_SETTINGS", "check_same_rig"]
+           "input_checks", "data_check_lines", "RIG_SETTINGS", "check_same_rig", "shared_run", "runs_of_two"]
 
 #: The prediction inputs whose range is checked (unit in the name); a direction TRAIN never drove is outside.
 RANGE_COLUMNS: tuple[str, ...] = (VOLTAGE, LOAD, POSITION, DIRECTION, FREQUENCY)
@@ -197,6 +197,13 @@ def check_same_rig(train: Measurements, test: Measurements, *, explicit: Mapping
     in TEST's ``unusual_units``).
     """
     explicit = explicit or {}
+    shared = shared_run(train, test)
+    if shared is not None:
+        rid, row, train_rid = shared
+        raise DataFormatError(test.meta.get("source") or "TEST", RUN, row + 1,
+                              f"TEST run {rid} is TRAIN run {train_rid} (the same time stamps and positions): a "
+                              "held-out run must not be in TRAIN, or the TEST error is a training error (the same "
+                              "file given twice, or TEST cut from the TRAIN file?)")
     from .plausibility import load_effect_mismatch, run_table
     found = load_effect_mismatch(run_table(train.df), run_table(test.df))
     if found is not None:
@@ -221,3 +228,34 @@ def check_same_rig(train: Measurements, test: Measurements, *, explicit: Mapping
                                   f"TEST says {name} = {b:.6g} but TRAIN ({train.meta.get('sidecar') or 'defaults'}) "
                                   f"says {a:.6g}{hint}: both files must come from one rig; correct the sidecar or "
                                   "give the value as an option")
+
+
+def shared_run(train: Measurements, test: Measurements) -> tuple[Any, int, Any] | None:
+    """The first TEST run that is also a TRAIN run, or ``None``.
+
+    Two runs are the same recording when their ``time_s`` and
+    ``position_m`` columns are equal sample for sample (the clock runs on
+    over a rig's experiment, so two traverses never share their stamps).
+    Returns ``(test_run, first_row, train_run)`` with ``first_row`` the
+    0-based row of the TEST run's first sample.
+    """
+    def keys(m: Measurements) -> list[tuple[Any, int, bytes]]:
+        t = m.df["time_s"].to_numpy(dtype=float)
+        x = m.df[POSITION].to_numpy(dtype=float)
+        return [(rid, sl.start, t[sl].tobytes() + x[sl].tobytes()) for rid, sl in run_slices(m.df[RUN])]
+    seen = {key: rid for rid, _, key in keys(train)}
+    for rid, row, key in keys(test):
+        if key in seen:
+            return rid, row, seen[key]
+    return None
+
+
+def runs_of_two(m: Measurements, path) -> Measurements:
+    """``m`` when each run holds at least 2 samples (Eq. 29 predicts a sample from the one before it), else a
+    :class:`~l1b2.errors.DataFormatError` naming the file, the run and its first row."""
+    for rid, sl in run_slices(m.df[RUN]):
+        if sl.stop - sl.start < 2:
+            raise DataFormatError(path, RUN, sl.start + 1,
+                                  f"run {rid} has a single sample: a run is one traverse, and the predictor needs "
+                                  "at least 2 samples of it (a run cut by the export? leave it out)")
+    return m
