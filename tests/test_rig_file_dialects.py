@@ -93,6 +93,9 @@ def test_a_units_row_under_the_header_is_named_with_the_units_that_contradict_th
     assert "contradict" not in msg and "convert" not in msg
     msg = str(refused(write(tmp_path, [HEADER, "s,-,mm,V,-,g,mm/s"] + rows(), "mm.csv"), "units row", row=1))
     assert "'mm' for position_m [m]" in msg and "'g' for load_kg [kg]" in msg and "'V'" not in msg.split("gives")[1]
+    # the row below may hold a gap in an optional column
+    gap = [HEADER + ",temperature_C", UNITS + ",degC"] + [ln + ("," if k == 0 else ",25") for k, ln in enumerate(rows())]
+    assert "contradict" not in str(refused(write(tmp_path, gap, "gap.csv"), "a units row under the header?", row=1))
     # a first row of junk with digits is no units row: the value check names it
     msg = str(refused(write(tmp_path, [HEADER, "x1,1,y2,100,1,0.0,z3"] + rows(), "junk.csv"), "non-numeric",
                       row=1, column="time_s"))

@@ -127,8 +127,10 @@ def header_line_problem(text: str) -> str | None:
 
 
 def _no_number(cells: pd.Series) -> np.ndarray:
+    """Cells holding text that is neither a number nor a gap (empty, a NaN token)."""
     text = cells.astype(str).str.strip()
-    return pd.to_numeric(text, errors="coerce").isna().to_numpy() & ~text.str.lower().isin(NAN_TOKENS).to_numpy()
+    gap = (text == "").to_numpy() | text.str.lower().isin(NAN_TOKENS).to_numpy()
+    return pd.to_numeric(text, errors="coerce").isna().to_numpy() & ~gap
 
 
 def units_row(body: pd.DataFrame) -> str | None:
