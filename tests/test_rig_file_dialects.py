@@ -187,3 +187,17 @@ def test_a_test_run_that_is_a_train_run_is_refused(tmp_path):
     assert "TEST run 3 is TRAIN run 3" in str(info.value) and info.value.row == 1 and "cut.csv" in str(info.value)
     other = write(tmp_path, [HEADER] + rows(t0=10.0, runs=(5, 6)), "other.csv")  # same shape, another recording
     assert load_train_test(train, other)[1].runs == [5, 6]
+
+
+def test_a_test_speed_derived_while_trains_is_measured_is_named_in_the_checks(tmp_path):
+    from l1b2.data.coverage import data_check_lines, input_checks
+    train = write(tmp_path, [HEADER] + rows(runs=(1, 2)), "train.csv")
+    no_speed = [",".join(ln.split(",")[:-1]) for ln in [HEADER] + rows(t0=10.0, runs=(3, 4))]
+    checks = input_checks(*load_train_test(train, write(tmp_path, no_speed, "test.csv"))[:2])
+    assert checks["speed_derived"] == {"train": False, "test": True}
+    lines = [ln for ln in data_check_lines(checks) if "speed" in ln]
+    assert len(lines) == 1 and "TRAIN's speed is measured (speed_m_s) and TEST's derived from position_m" in lines[0]
+    alike = input_checks(*load_train_test(train, write(tmp_path, [HEADER] + rows(t0=10.0, runs=(3, 4)), "t2.csv"))[:2])
+    assert alike["speed_derived"] == {"train": False, "test": False}
+    assert not [ln for ln in data_check_lines(alike) if "speed" in ln]
+    assert input_checks(load_train_test(train)[0], None)["speed_derived"]["test"] is None
