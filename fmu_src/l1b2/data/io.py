@@ -8,8 +8,10 @@ bridges the gaps of the optional input columns), merges the
 settings (keyword > sidecar > default), derives ``speed_m_s`` / fills
 ``frequency_Hz`` when absent; :func:`write_table_and_sidecar` validates the
 same way and writes both files atomically. Problems of the files themselves
-(missing, not UTF-8, ragged lines, invalid JSON) are reported as
-:class:`~l1b2.errors.DataFormatError` naming file and line.
+(missing, not UTF-8, ragged lines, invalid JSON, and what exports write
+instead of the format, named by :mod:`~l1b2.data.dialects`: a units row, a
+preamble, a repeated header, an unnamed column, a binary file) are reported
+as :class:`~l1b2.errors.DataFormatError` naming file and line.
 
 The public entry points are :func:`l1b2.data.measurements.load_measurements`
 and :func:`l1b2.data.measurements.write_measurements`, which wrap these two

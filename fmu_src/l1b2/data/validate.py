@@ -322,10 +322,10 @@ def _order_problems(t: np.ndarray, run_col: pd.Series) -> list[DataProblem]:
     if len(t) > 1:
         bad = np.zeros(len(t), dtype=bool)
         bad[1:] = ~(t[1:] > t[:-1])
-        starts = {sl.start: rid for rid, sl in run_slices(run_col)}
+        ids = run_col.to_numpy()
         _add_first(problems, TIME, bad,
                    lambda i: f"time not increasing ({format_value(t[i])} after {format_value(t[i - 1])})"
-                   + time_order_hint(t, i, None if i not in starts else format_value(starts[i])))
+                   + time_order_hint(t, i, format_value(ids[i]) if ids[i] != ids[i - 1] else None))
     first_seen: dict[Any, int] = {}
     for rid, sl in run_slices(run_col):
         if rid in first_seen:
