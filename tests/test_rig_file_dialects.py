@@ -201,3 +201,16 @@ def test_a_test_speed_derived_while_trains_is_measured_is_named_in_the_checks(tm
     assert alike["speed_derived"] == {"train": False, "test": False}
     assert not [ln for ln in data_check_lines(alike) if "speed" in ln]
     assert input_checks(load_train_test(train)[0], None)["speed_derived"]["test"] is None
+
+
+def test_the_close_loops_report_names_a_test_speed_derived_while_trains_is_measured():
+    from l1b2.closeloop.result import markdown_report
+    from test_report_values import minimal_report
+    rep = minimal_report()
+    rep["checks"] = {**(rep.get("checks") or {}), "speed_derived": {"train": False, "test": True}}
+    lines = markdown_report(rep).splitlines()
+    assert "Speed source:" in lines
+    assert lines[lines.index("Speed source:") + 2].startswith(
+        "* TRAIN's speed is measured (speed_m_s) and TEST's derived from position_m")
+    rep["checks"]["speed_derived"] = {"train": True, "test": True}
+    assert "Speed source:" not in markdown_report(rep).splitlines()

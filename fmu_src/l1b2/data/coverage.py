@@ -173,7 +173,6 @@ def input_checks(train: Measurements, test: Measurements | None) -> dict:
     }
 
 
-
 def data_check_lines(checks: dict) -> list[str]:
     """The warning lines of a report's ``checks`` (:func:`input_checks`) that need the package to be worded: the
     gaps filled on reading (:func:`l1b2.data.gaps.gap_lines`), the uneven time steps
