@@ -1,4 +1,4 @@
-"""Lagged channels: a logged run setting seen through a store, its first-order low-pass on the session clock.
+"""A run setting's history: its low-pass on the session clock (a store), and the drive's step from its last setting.
 
 A rig may log a setting that the design changes from run to run (a heater's power, a coolant's flow, a bias
 current) while the motor feels it through a store: a thermal mass, a charge, a soaked film. The effect then follows
