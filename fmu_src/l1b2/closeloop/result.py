@@ -319,6 +319,21 @@ def run_level_line(r: dict) -> str:
             f"{r['significance_level']:.2g}): {', '.join(signals) or 'none'}.")
 
 
+def data_check_sections(checks: dict) -> list[str]:
+    """``report.md``'s sections on the data checks of ``checks`` (report.json's): the gaps filled on reading, the
+    uneven time steps, the rest before each run's onset and a TEST speed of another kind than TRAIN's, each a titled
+    list when it has lines."""
+    out = []
+    for title, lines in (("Gaps in optional input columns, filled on reading:", gap_lines(checks.get("gaps_filled"))),
+                         ("Uneven time steps:", uneven_step_lines(checks.get("uneven_time_steps"))),
+                         ("Rest before each run's onset, cut on reading:",
+                          onset_lines(checks.get("rest_before_onset"))),
+                         ("Speed source:", speed_source_lines(checks.get("speed_derived")))):
+        if lines:
+            out += [title, ""] + [f"* {g}" for g in lines] + [""]
+    return out
+
+
 def markdown_report(rep: dict) -> str:
     """``report.md`` from a report dict (:meth:`CloseLoopResult.to_dict`, plus ``figures`` when saved)."""
     d = rep["diagnosis"]
@@ -327,18 +342,7 @@ def markdown_report(rep: dict) -> str:
             if data.get("test") is not None else "no TEST data.")
     lines = ["# Close the loop: residual -> missing effect -> extended model", "",
              f"TRAIN: `{data['train']}` ({data['train_runs']} runs), {test}", ""]
-    gaps = gap_lines((rep.get("checks") or {}).get("gaps_filled"))
-    if gaps:
-        lines += ["Gaps in optional input columns, filled on reading:", ""] + [f"* {g}" for g in gaps] + [""]
-    uneven = uneven_step_lines((rep.get("checks") or {}).get("uneven_time_steps"))
-    if uneven:
-        lines += ["Uneven time steps:", ""] + [f"* {g}" for g in uneven] + [""]
-    rest = onset_lines((rep.get("checks") or {}).get("rest_before_onset"))
-    if rest:
-        lines += ["Rest before each run's onset, cut on reading:", ""] + [f"* {g}" for g in rest] + [""]
-    source = speed_source_lines((rep.get("checks") or {}).get("speed_derived"))
-    if source:
-        lines += ["Speed source:", ""] + [f"* {g}" for g in source] + [""]
+    lines += data_check_sections(rep.get("checks") or {})
     lines += ["## Diagnosis", "", f"**{d['message']}**", ""]
     if d["significant"]:
         lines += [f"* traced to: {', '.join(d['traced_to'])}",
