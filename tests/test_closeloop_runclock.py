@@ -147,3 +147,14 @@ def test_a_logged_column_named_like_the_run_clock_is_set_aside():
     tr, _, rec = with_run_clock(tr, None)
     assert rec["derived"] and (tr[COLUMN + "_logged"] == 9.0).all()
     np.testing.assert_allclose(tr[COLUMN].to_numpy(), np.tile(DT * np.arange(3), 2), atol=1e-12)
+
+
+def test_the_reports_run_clock_record_survives_a_round_trip_and_an_older_report_loads():
+    from l1b2.closeloop.report import Diagnosis
+    from l1b2.closeloop.runclock import with_run_clock
+    _, _, rec = with_run_clock(_session([0.0, 5.0], [3, 4]), None)
+    old = {"significant": False, "traced_to": [], "effect": None, "effect_shape": None,
+           "effect_description": None, "effects": [], "message": "no significant missing effect"}
+    assert Diagnosis.from_dict(old).run_clock == {}
+    d = Diagnosis.from_dict({**old, "run_clock": rec})
+    assert d.to_dict()["run_clock"] == rec and Diagnosis.from_dict(d.to_dict()) == d
