@@ -451,8 +451,9 @@ class CloseLoop(EstimatorSettings):
         """
         ch = chain.speed_channel(dtr, mask, k=self.k_folds, seed=self.seed)
         rec = {k: v for k, v in ch.items() if k != "filter"}
-        rec["sensor_gain"] = chain.stroke_gain(dtr, [c["name"] for c in channels_of(dtr, self.response_columns_)
-                                                     if c["kind"] not in ("response", "run_clock")], alpha=self.alpha)
+        rec["sensor_gain"] = chain.stroke_gain(   # run means: not of a response or of a sample-only kind
+            dtr, [c["name"] for c in channels_of(dtr, self.response_columns_)
+                  if c["kind"] not in ("response",) + fx_channels.SAMPLE_ONLY_KINDS], alpha=self.alpha)
         if "filter" in ch:
             rec["filter"] = ch["filter"].to_dict()
         if not ch["accepted"]:
