@@ -163,3 +163,40 @@ def load_bench():
         spec.loader.exec_module(mod)
         return mod
     return load
+
+
+# ---------------------------------------------------------------------------
+# Close loop (l1b2.closeloop.loop): the sensor stages' wiring with their decisions given
+# ---------------------------------------------------------------------------
+
+class OwnSpeedPhysics:
+    """A physics model that predicts a frame's own speed column, in free run and one step ahead."""
+
+    def predict_free_run(self, df):
+        from l1b2.data.columns import SPEED
+        return df[SPEED].to_numpy()
+
+    def predict_one_step(self, df):
+        return self.predict_free_run(df)
+
+
+@pytest.fixture
+def sensor_stages(monkeypatch):
+    """``run(df, **decided)``: ``CloseLoop._sensor_stages`` on TRAIN ``df`` (every sample on the mask, no TEST)
+    from round 0 of a model that predicts each frame's own speed (:class:`OwnSpeedPhysics`), with the decisions of
+    the stages named in ``decided`` (``stamps``, ``encoder``) replaced by ``(record, stage or None)`` (a kept stage
+    comes with that same model; the others decide as they do). Returns ``(iteration, record, the TRAIN frame the
+    rounds fit)``."""
+    import numpy as np
+    from l1b2.closeloop import encoder, stamps
+    from l1b2.closeloop.acceptance import EffectSet
+    from l1b2.closeloop.loop import CloseLoop, _Iteration
+    modules = {"stamps": stamps, "encoder": encoder}
+
+    def run(df, **decided):
+        for name, (rec, stage) in decided.items():
+            out = (rec, None if stage is None else (OwnSpeedPhysics(), stage))
+            monkeypatch.setattr(modules[name], "decide", lambda *a, _out=out, **k: _out)
+        it, rec = _Iteration(model=OwnSpeedPhysics(), effects=EffectSet(), rounds=[{"round": 0}]), {}
+        return it, rec, CloseLoop()._sensor_stages(it, rec, df, None, np.ones(len(df), bool), 0.1, [])
+    return run

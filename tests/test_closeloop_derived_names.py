@@ -32,6 +32,8 @@ def test_the_names_a_derivation_could_produce():
     assert is_derivable_name("voltage_V_lag10r", cols)          # and of 10
     assert not is_derivable_name("voltage_V_lag4r", cols)       # no lag of 4 periods is ever derived
     assert not is_derivable_name("x_lag3r", cols)               # no column x
+    assert is_derivable_name("voltage_V_step", cols)            # a setting's step from the previous one
+    assert not is_derivable_name("door_step", cols)             # no column door
     assert not is_derivable_name("door_since_s", cols)          # no column door
     assert not is_derivable_name("heater", cols)
     assert not is_derivable_name("ln_pause", cols)

@@ -101,3 +101,44 @@ def test_the_drive_amplitude_is_lagged_when_the_plan_changes_it_from_run_to_run_
     blocks = df.copy()
     blocks["voltage_V"] = np.repeat([220.0] * 4 + [324.0] * 4, 3)       # one change in 8 runs: not a run setting
     assert run_settings(blocks) == []
+
+
+def test_a_settings_step_is_from_the_previous_different_setting_held_and_from_the_state_before_the_session():
+    # reference: the steps written out run by run for a plan 220, 220, 324, 255, 255, 255, 324, 220 V from the drive
+    # off (0 V): +220 (from 0), held, +104, -69, held, held, +69, -104
+    from l1b2.closeloop.lags import setting_steps
+    v = [220.0, 220.0, 324.0, 255.0, 255.0, 255.0, 324.0, 220.0]
+    np.testing.assert_array_equal(setting_steps(v, 0.0), [220.0, 220.0, 104.0, -69.0, -69.0, -69.0, 69.0, -104.0])
+    # a first setting equal to the state before: no step until the first change
+    np.testing.assert_array_equal(setting_steps([5.0, 5.0, 7.0, 7.0, 4.0], 5.0), [0.0, 0.0, 2.0, 2.0, -3.0])
+    assert setting_steps([], 0.0).shape == (0,)
+
+
+def test_the_drive_amplitudes_step_crosses_from_train_into_test_and_each_session_starts_from_the_drive_off():
+    from l1b2.closeloop.lags import STEP_SUFFIX, with_lagged_channels
+    v = [220.0, 324.0, 324.0, 255.0, 324.0, 220.0, 290.0, 290.0, 255.0, 220.0]
+    whole = _frame([0.0] * len(v)).drop(columns=["heater", "stepped"])
+    whole["voltage_V"] = np.repeat(v, 3)
+    col = "voltage_V" + STEP_SUFFIX
+    want = [220.0, 104.0, 104.0, -69.0, 69.0, -104.0, 70.0, 70.0, -35.0, -35.0]   # written out, from 0 V
+    train, test = whole.iloc[:18].reset_index(drop=True), whole.iloc[18:].reset_index(drop=True)
+    tr, te, rec = with_lagged_channels(train, test)
+    assert rec[0]["step"] == col and rec[0]["step_from"] == 0.0 and rec[0]["one_session"]
+    got = pd.concat([tr, te]).groupby("run", sort=False)[col]
+    assert (got.nunique() == 1).all()                                  # constant within each run
+    np.testing.assert_array_equal(got.first(), want)
+    assert col not in train.columns
+    # TEST on a clock of its own (overlapping TRAIN): its first run's step is from the drive off again
+    other = test.copy()
+    other["time_s"] -= 12.0
+    _, te2, rec2 = with_lagged_channels(train, other)
+    assert not rec2[0]["one_session"]
+    np.testing.assert_array_equal(te2.groupby("run", sort=False)[col].first(), [290.0, 290.0, -35.0, -35.0])
+
+
+def test_a_logged_run_setting_gets_lags_but_no_step():
+    # its state before the session is not known (module docstring): no column, the record says so
+    from l1b2.closeloop.lags import STEP_SUFFIX, with_lagged_channels
+    tr, _, rec = with_lagged_channels(_frame([0.0, 2.0, 4.0, 2.0, 0.0, 4.0, 2.0, 4.0]), None)
+    assert [(r["channel"], r["step"], r["step_from"]) for r in rec] == [("heater", None, None)]
+    assert not [c for c in tr.columns if c.endswith(STEP_SUFFIX)]

@@ -111,6 +111,12 @@ def test_the_coefficients_and_the_pitch_are_recovered_by_least_squares():
     # from a pitch half a spectral bin (1 / 40 mm) off, the refined pitch is the true one
     got = encoder.refine_pitch(df, mask, v, 1 / (1 / P + 12.5), 25.0)
     assert got == pytest.approx(P, rel=2e-3)
+    # the stage's fit refines the pitch and fits there; its refit keeps the pitch it was given
+    c_ref = encoder.fit_refined(df, mask, v, 1 / (1 / P + 12.5), 25.0)
+    assert c_ref.pitch_m == got
+    np.testing.assert_allclose(c_ref.coef, COEF, atol=0.3e-6)
+    off = encoder.CyclicChain(1.1 * P, np.zeros(4)).refit(df, mask, v)
+    assert off.pitch_m == 1.1 * P and np.max(np.abs(off.coef)) < 1e-6
     clean, v0 = frame(chain=False)
     assert np.max(np.abs(encoder.fit_chain(clean, mask, v0, P).coef)) < 0.1e-6
 
@@ -174,32 +180,17 @@ def test_the_report_line_names_the_pitch_and_both_gains():
     assert cyclic_sentence({**kept, "accepted": False}).endswith("pitch 5.0%: not kept.")
 
 
-def test_the_loop_keeps_the_stage_after_the_time_stamps_and_fits_the_rounds_behind_it(monkeypatch):
-    """``CloseLoop._stamps``: when the time stamps' chain is not kept, a kept cyclic error becomes the model's chain
-    (round 1, ``position_cyclic_error``) and the rounds' frame is the one behind it; refused, the stroke gain (off:
-    TRAIN's frame)."""
-    from l1b2.closeloop import stamps
-    from l1b2.closeloop.acceptance import EffectSet
-    from l1b2.closeloop.loop import CloseLoop, _Iteration
-
-    class Physics:
-        def predict_free_run(self, df):
-            return df[dataio.SPEED].to_numpy()
-
-        def predict_one_step(self, df):
-            return df[dataio.SPEED].to_numpy()
+def test_the_loop_keeps_the_stage_after_the_time_stamps_and_fits_the_rounds_behind_it(sensor_stages):
+    """``CloseLoop._sensor_stages``: when the time stamps' chain is not kept, a kept cyclic error becomes the
+    model's chain (round 1, ``position_cyclic_error``) and the rounds' frame is the one behind it; refused, the
+    stroke gain (off: TRAIN's frame)."""
     df, v = frame(n_runs=2, n=50)
-    mask = np.ones(len(df), bool)
     chain = encoder.CyclicChain(P, COEF)
     kept = {"considered": True, "accepted": True, "cv_gain": 0.2, "cv_free_run_gain": 0.1}
-    monkeypatch.setattr(stamps, "decide", lambda *a, **k: ({"considered": False}, None))
-    monkeypatch.setattr(encoder, "decide", lambda *a, **k: (kept, (Physics(), chain)))
-    it, rec = _Iteration(model=Physics(), effects=EffectSet(), rounds=[{"round": 0}]), {}
-    fit_tr = CloseLoop()._sensor_stages(it, rec, df, None, mask, 0.1, [])
+    it, rec, fit_tr = sensor_stages(df, stamps=({"considered": False}, None), encoder=(kept, chain))
     assert it.sensor_stage.stages == (chain,) and rec["position_cyclic_error"] is kept
     assert [(r["round"], r["added"], r["regressors"]) for r in it.rounds[1:]] == [
         (1, "position_sensor_cyclic_error", ["position_cyclic_error"])]
     np.testing.assert_allclose(fit_tr[dataio.SPEED], chain.frame(df)[dataio.SPEED], rtol=1e-12)
-    monkeypatch.setattr(encoder, "decide", lambda *a, **k: ({"considered": True, "accepted": False}, None))
-    it2 = _Iteration(model=Physics(), effects=EffectSet(), rounds=[{"round": 0}])
-    assert CloseLoop()._sensor_stages(it2, {}, df, None, mask, 0.1, []) is df and it2.sensor_stage is None
+    it2, _, fit2 = sensor_stages(df, encoder=({"considered": True, "accepted": False}, None))
+    assert fit2 is df and it2.sensor_stage is None

@@ -113,6 +113,12 @@ def test_fit_recovers_a_gain_and_the_frame_removes_it():
     np.testing.assert_allclose(g.coef, COEF, rtol=0, atol=1e-10)
     assert all(e < 1e-8 for e in g.stderr)
     np.testing.assert_allclose(sensor.gain_frame(rec, g)[dataio.SPEED].to_numpy(), v_model, rtol=1e-9, atol=1e-14)
+    # the stage's fit on TRAIN's position range and its refit on a gain's range and order are the same least squares
+    staged = sensor.stage_fit(rec)(rec, mask, v_model)
+    assert (staged.gain.s_lo, staged.gain.s_hi) == (s.min(), s.max())
+    np.testing.assert_allclose(staged.gain.coef, COEF, rtol=0, atol=1e-10)
+    again = sensor.GainChain(SpeedSensorGain(S_LO, S_HI, (0.0,) * 3)).refit(rec, mask, v_model)
+    assert again.gain.order == 2 and (again.gain.s_lo, again.gain.s_hi) == (S_LO, S_HI)
 
 
 def test_fit_standard_errors_are_clustered_by_run():

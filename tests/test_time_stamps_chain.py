@@ -88,6 +88,7 @@ def test_gamma_is_recovered_by_least_squares(gamma_true):
     df, v = frame(True, gamma_true=gamma_true)
     chain = stamps.fit_gamma(df, np.ones(len(df), bool), v)
     assert chain.gamma == pytest.approx(gamma_true, abs=0.02)
+    assert stamps.StampChain(0.3).refit(df, np.ones(len(df), bool), v).gamma == chain.gamma   # anew from 0
     assert 0 < chain.stderr < 0.02
     df0, v0 = frame(False)
     assert abs(stamps.fit_gamma(df0, np.ones(len(df0), bool), v0).gamma) < 0.02
@@ -161,32 +162,17 @@ def test_the_report_line_names_the_stage_when_the_steps_are_uneven():
                                              "0: true stamps): not kept.")
 
 
-def test_the_loop_keeps_the_stage_as_round_1_and_fits_the_rounds_behind_it(monkeypatch):
-    """``CloseLoop._stamps``: a kept stage becomes the model's chain (round 1, ``time_step_ratio``) and the rounds'
-    frame is the logged speed over ``r^gamma``; a refused one falls through to the stroke gain (off: the frame)."""
-    from l1b2.closeloop import encoder
-    from l1b2.closeloop.acceptance import EffectSet
-    from l1b2.closeloop.loop import CloseLoop, _Iteration
-
-    class Physics:
-        def predict_free_run(self, df):
-            return df[dataio.SPEED].to_numpy()
-
-        def predict_one_step(self, df):
-            return df[dataio.SPEED].to_numpy()
+def test_the_loop_keeps_the_stage_as_round_1_and_fits_the_rounds_behind_it(sensor_stages):
+    """``CloseLoop._sensor_stages``: a kept stage becomes the model's chain (round 1, ``time_step_ratio``) and the
+    rounds' frame is the logged speed over ``r^gamma``; a refused one falls through to the cyclic error (no line in
+    a zero residual) and the stroke gain (off: the frame)."""
     df, v = frame(True)
-    mask = np.ones(len(df), bool)
     chain = stamps.StampChain(1.0, 0.01)
     kept = {"considered": True, "accepted": True, "cv_gain": 0.5, "cv_free_run_gain": 0.3, "gamma": 1.0}
-    monkeypatch.setattr(stamps, "decide", lambda *a, **k: (kept, (Physics(), chain)))
-    monkeypatch.setattr(encoder, "decide", lambda *a, **k: ({"considered": False}, None))
-    it, rec = _Iteration(model=Physics(), effects=EffectSet(), rounds=[{"round": 0}]), {}
-    fit_tr = CloseLoop()._sensor_stages(it, rec, df, None, mask, 0.1, [])
+    it, rec, fit_tr = sensor_stages(df, stamps=(kept, chain))
     assert it.sensor_stage.stages == (chain,) and rec["time_stamps"] is kept
     assert [(r["round"], r["added"], r["regressors"]) for r in it.rounds[1:]] == [
         (1, "speed_over_time_stamps", ["time_step_ratio"])]
     np.testing.assert_allclose(fit_tr[dataio.SPEED], df[dataio.SPEED] / stamps.ratio(df), rtol=1e-12)
-    refused = {"considered": True, "accepted": False}
-    monkeypatch.setattr(stamps, "decide", lambda *a, **k: (refused, None))
-    it2 = _Iteration(model=Physics(), effects=EffectSet(), rounds=[{"round": 0}])
-    assert CloseLoop()._sensor_stages(it2, {}, df, None, mask, 0.1, []) is df and it2.sensor_stage is None
+    it2, rec2, fit2 = sensor_stages(df, stamps=({"considered": True, "accepted": False}, None))
+    assert fit2 is df and it2.sensor_stage is None and not rec2["position_cyclic_error"]["considered"]

@@ -28,7 +28,7 @@ import pandas as pd
 
 from .data import measurements as dataio
 from .data import plots
-from .data.coverage import check_same_rig, input_checks, outside_range
+from .data.coverage import check_same_rig, input_checks, outside_range, runs_of_two
 from .jsonio import dumps
 from .data.metrics import diverged_runs, evaluation_mask, report_metrics, speed_metrics
 from .errors import IdentificationError, OutputError
@@ -298,9 +298,9 @@ def load_train_test(train_path, test_path=None, *, test_abs_loads=TEST_ABS_LOADS
     :class:`l1b2.data.measurements.Measurements`.
     """
     kw = dict(slider_mass_kg=slider_mass_kg, allow_unusual_units=allow_unusual_units)
-    train = dataio.load_measurements(train_path, **kw)
+    train = runs_of_two(dataio.load_measurements(train_path, **kw), train_path)
     if test_path is not None:
-        test = dataio.load_measurements(test_path, **kw)
+        test = runs_of_two(dataio.load_measurements(test_path, **kw), test_path)
         check_same_rig(train, test, explicit={"slider_mass_kg": slider_mass_kg}, allow_unusual_units=allow_unusual_units)
         note = f"test file {test_path}"
         _check_train_runs(train, train_path, note)

@@ -567,46 +567,6 @@ def chain_cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init_
     return tuple(_fold_errors(args, 2, len(folds), settings.client, "l1b2-chain-cv"))
 
 
-def stage_cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init, settings: RefitSettings,
-                    stage_fold, stage_args: tuple, name: str) -> dict:
-    """Held-out free-run sums of squares of the baseline (:func:`fold_error`, refitted on the recorded speed) and of
-    a measurement-chain stage's model (``stage_fold(df, mask, m_s, fold, init, task, *stage_args)``, returning what
-    :func:`fold_error` returns), both from ``init`` on the same ``folds``, every fold of both one task of
-    :func:`l1b2.cluster.run_tasks` named ``name``: ``{"sse_baseline", "sse_stage", "ss_meas", "failed", "nfev",
-    "folds_improved"}`` (per-fold arrays, totals)."""
-    task = settings.task()
-    args = ([(fold_error, (df, mask, m_s, fold, init, EffectSet(), task, None)) for fold in folds]
-            + [(stage_fold, (df, mask, m_s, fold, init, task, *stage_args)) for fold in folds])
-    out = [None] * len(args)
-    for i, r in run_tasks(_apply, args, client=settings.client, name=name):
-        out[i] = r
-    k = len(folds)
-    sse0 = np.array([r[0] for r in out[:k]])
-    sse1 = np.array([r[0] for r in out[k:]])
-    return {"sse_baseline": sse0, "sse_stage": sse1, "ss_meas": np.array([r[1] for r in out[:k]]),
-            "failed": sum(bool(r[2]) for r in out), "nfev": sum(int(r[3]) for r in out),
-            "folds_improved": int(np.sum(sse1 < sse0))}
-
-
-def stage_verdict(cv: dict, n_folds: int, min_cv_gain: float, name: str = "chain") -> tuple[dict, bool]:
-    """The decision on a measurement-chain stage from its :func:`stage_cv_errors` ``cv``: ``(fields, kept)``.
-
-    ``fields``: ``cv_free_run_gain`` (``1 - SSE_stage / SSE_baseline`` pooled over the folds; 0 when a fold failed),
-    the two held-out free-run nrmse (``cv_free_run_nrmse_baseline``, ``cv_free_run_nrmse_<name>``) and
-    ``cv_folds_improved``; ``kept`` when the gain is at least ``min_cv_gain`` in more than half of the ``n_folds``
-    folds."""
-    ssm = max(float(cv["ss_meas"].sum()), 1e-300)
-    sse0, sse1 = float(cv["sse_baseline"].sum()), float(cv["sse_stage"].sum())
-    gain = 1 - sse1 / sse0 if cv["failed"] == 0 and sse0 > 0 else 0.0
-    fields = {"cv_free_run_gain": gain, "cv_free_run_nrmse_baseline": float(np.sqrt(sse0 / ssm)),
-              f"cv_free_run_nrmse_{name}": float(np.sqrt(sse1 / ssm)), "cv_folds_improved": cv["folds_improved"]}
-    return fields, bool(gain >= min_cv_gain and cv["folds_improved"] > n_folds / 2)
-
-
-def _apply(fn, args):
-    return fn(*args)
-
-
 def _fold_errors(args: list, n_groups: int, n_folds: int, client, name: str, repeats: int = 1) -> list[FoldErrors]:
     """Run :func:`fold_error` on every argument tuple (tasks of :func:`l1b2.cluster.run_tasks`); one
     :class:`FoldErrors` per group of ``n_folds`` consecutive tuples, ``n_groups`` of them (their folds from

@@ -12,8 +12,8 @@ taken too) in both frames and kept as an auxiliary column of its own; the rename
 auxiliary columns' actions (:func:`l1b2.closeloop.auxiliary.with_usable_channels`), so the report lists it.
 
 A name a derivation *could* produce: exactly :data:`l1b2.closeloop.pauses.COLUMN` or
-:data:`l1b2.closeloop.runclock.COLUMN`, or ``X + suffix`` for a column
-``X`` of the frame and a suffix of the event clock or of a lag of :data:`l1b2.closeloop.lags.TAU_RUNS` periods.
+:data:`l1b2.closeloop.runclock.COLUMN`, or ``X + suffix`` for a column ``X`` of the frame and a suffix of the event
+clock, of a lag of :data:`l1b2.closeloop.lags.TAU_RUNS` periods or of a setting's step (``_step``).
 The required columns and the speed are never renamed.
 """
 
@@ -23,7 +23,7 @@ import pandas as pd
 
 from .auxiliary import NOT_CANDIDATES, with_usable_channels
 from .events import SUFFIX as EVENT_SUFFIX
-from .lags import TAU_RUNS, suffix as lag_suffix
+from .lags import STEP_SUFFIX, TAU_RUNS, suffix as lag_suffix
 from .pauses import COLUMN as PAUSE_COLUMN
 from .runclock import COLUMN as RUN_CLOCK_COLUMN
 
@@ -35,8 +35,8 @@ RENAMED_SUFFIX = "_logged"
 
 
 def derived_suffixes() -> tuple[str, ...]:
-    """The suffixes the loop's derivations append to a column's name: the event clock's and each lag's."""
-    return (EVENT_SUFFIX,) + tuple(lag_suffix(n) for n in TAU_RUNS)
+    """The suffixes the loop's derivations append to a column's name: the event clock's, each lag's, the step's."""
+    return (EVENT_SUFFIX,) + tuple(lag_suffix(n) for n in TAU_RUNS) + (STEP_SUFFIX,)
 
 
 def is_derivable_name(name: str, columns) -> bool:

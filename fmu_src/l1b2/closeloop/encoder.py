@@ -17,7 +17,7 @@ it (:func:`slope_rows`): the column is the position's discrete derivative over t
 channel's test found no other), so its ripple is that derivative of ``e`` over the position's, which attenuates a
 harmonic whose wavelength is not long against a sample's travel (``sin(x) / x``, ``x = 2 pi h v dt / P``).
 
-It is decided as the time stamps' chain is (:mod:`l1b2.closeloop.stamps`):
+It is decided as every sensor stage is (:mod:`l1b2.closeloop.stagefit`):
 
 * **considered** (:func:`candidate_pitch`) when the baseline's TRAIN residual has a line in its spectrum over the
   position (:func:`l1b2.closeloop.residuals.position_spectrum`) whose power is more than
@@ -31,24 +31,25 @@ It is decided as the time stamps' chain is (:mod:`l1b2.closeloop.stamps`):
   significant and when its held-out gain exceeds the force family's;
 * **fit** (:func:`fit_chain`): given a model's free run ``v``, ``c_h, d_h`` are the least squares of
   ``v_logged - v (1 + e'(p))`` (linear), with run-clustered standard errors;
-* **decision** (:func:`cyclic_cv_errors`): the physics refitted behind the form against the baseline, per fold of
-  the refit folds, the held-out logged speed predicted in free run (the chain re-estimated on each fold's training
-  runs only).
+* **decision** (:func:`l1b2.closeloop.stagefit.stage_cv_errors` with :func:`fit_refined`): the physics refitted
+  behind the form against the baseline, per fold of the refit folds, the held-out logged speed predicted in free
+  run (the pitch refined and the chain re-estimated on each fold's training runs only).
 """
 
 from __future__ import annotations
+
+from functools import partial
 
 import numpy as np
 import pandas as pd
 
 from ..data import measurements as dataio
 from ..data.columns import run_slices
-from ..errors import IdentificationError
 from ..predictor import effects as fx
 from . import residuals as res
-from .acceptance import EffectSet, RefitSettings, fold_fit_data, refit, stage_cv_errors, stage_verdict
-from .folds import held_out_split
-from .selection import FoldSolver, finite_columns, linear_response, nuisance_forces
+from . import stagefit
+from .acceptance import RefitSettings
+from .selection import linear_response
 
 #: the stage's name in reports
 CYCLIC_CHAIN = "position_sensor_cyclic_error"
@@ -150,6 +151,10 @@ class CyclicChain:
         """The logged speed ``u (1 + e'(p))`` [m/s] at ``df``'s logged positions."""
         return np.asarray(u, float) * (1.0 + self.slope(df))
 
+    def refit(self, df: pd.DataFrame, mask, v_model) -> CyclicChain:
+        """:func:`fit_chain` at this chain's pitch."""
+        return fit_chain(df, mask, v_model, self.pitch_m)
+
     def amplitudes_m(self) -> list:
         """``A_h = hypot(c_h, d_h)`` [m] per harmonic."""
         return [float(np.hypot(c, d)) for c, d in zip(self.coef[0::2], self.coef[1::2])]
@@ -215,6 +220,11 @@ def fit_chain(df: pd.DataFrame, mask, v_model, pitch_m: float) -> CyclicChain:
     return CyclicChain(pitch_m, coef, np.sqrt(np.clip(np.diag(cov), 0.0, None)))
 
 
+def fit_refined(df: pd.DataFrame, mask, v_model, pitch_m: float, bin_per_m: float) -> CyclicChain:
+    """:func:`fit_chain` at the pitch :func:`refine_pitch` finds within one bin of ``pitch_m`` on the same samples."""
+    return fit_chain(df, mask, v_model, refine_pitch(df, mask, v_model, pitch_m, bin_per_m))
+
+
 def refine_pitch(df: pd.DataFrame, mask, v_model, pitch_m: float, bin_per_m: float, points: int = 81) -> float:
     """The pitch [m] within one spectral bin (``bin_per_m`` [1/m]) of ``1 / pitch_m`` whose chain
     (:func:`fit_chain`'s least squares) leaves the smallest sum of squares on the masked samples."""
@@ -257,59 +267,22 @@ def force_response(df: pd.DataFrame, v_pred, params, m_s: float, pitch_m: float)
 
 def screen(df: pd.DataFrame, mask, v_pred, params, m_s: float, folds, pitch_m: float) -> dict:
     """Cross-validated evidence of the form against the baseline ``params`` (free run ``v_pred`` [m/s]) and of the
-    force family at the same pitch, on the same folds and nuisance.
+    force family at the same pitch, on the same folds and nuisance (:func:`l1b2.closeloop.stagefit.screen`).
 
     Returns ``{"cv_gain", "p_value", "runs_improved", "force_cv_gain"}``: the pooled held-out share of the
     nuisance-only model's sum of squares the form's columns (:func:`response`) remove, the runs' one-sided Wilcoxon
     p-value, the share of runs improved, and the held-out share the force family's columns
     (:func:`force_response`) remove.
     """
-    idx = np.flatnonzero(np.asarray(mask, bool))
-    v_pred = np.asarray(v_pred, float)
-    y = res.drive_residual(df, v_pred)[idx]
     with np.errstate(over="ignore", invalid="ignore"):
-        N = finite_columns(linear_response(params, df, m_s, nuisance_forces(params, df, v_pred), v_pred=v_pred)[idx])
-        Ff = force_response(df, v_pred, params, m_s, pitch_m)[idx]
-    runs = df[dataio.RUN].to_numpy()[idx]
-    solver = FoldSolver(y, N, runs, folds)
-    gain, per_run = solver.gain(response(df, v_pred, pitch_m)[idx])
-    force_gain, _ = solver.gain(Ff)
-    return {"cv_gain": float(gain), "p_value": float(res.wilcoxon_greater(per_run)),
-            "runs_improved": float(np.mean(per_run > 0)) if len(per_run) else 0.0, "force_cv_gain": float(force_gain)}
+        force = force_response(df, v_pred, params, m_s, pitch_m)
+    return stagefit.screen(df, mask, v_pred, params, m_s, folds, response(df, v_pred, pitch_m), {"force": force})
 
 
 def screen_passes(rec: dict, alpha: float, min_gain: float) -> bool:
     """Whether the screen (:func:`screen`'s record) is significant at ``alpha``, gains at least ``min_gain`` and
     more than the force family at the same pitch."""
     return bool(rec["p_value"] < alpha and rec["cv_gain"] >= min_gain and rec["cv_gain"] > rec["force_cv_gain"])
-
-
-def cyclic_fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, init, settings: RefitSettings,
-                      v_base, pitch_m: float, bin_per_m: float) -> tuple:
-    """One fold of the chain's model: on the training runs the pitch refined and the chain fitted from the
-    baseline's free run ``v_base``, the physics refitted behind it, the chain refitted on that model's free run;
-    the held-out runs' logged speed predicted as ``(1 + e'(p))`` times the physics' free run. Returns what
-    :func:`~l1b2.closeloop.acceptance.fold_error` returns: ``(sse, ss_meas, failed, nfev, run_sse)``."""
-    split = held_out_split(df, mask, held_runs)
-    train, test, m_tr = split.train, split.test, split.mask_train
-    try:
-        vb = np.asarray(v_base, float)[~split.held]
-        P = refine_pitch(train, m_tr, vb, pitch_m, bin_per_m)
-        c0 = fit_chain(train, m_tr, vb, P)
-        est = refit(*fold_fit_data(c0.frame(train), m_tr), m_s, init, EffectSet(), settings)
-        c1 = fit_chain(train, m_tr, est.predict_free_run(c0.frame(train)), P)
-        pred = c1.apply(test, est.predict_free_run(c1.frame(test)))
-    except (IdentificationError, np.linalg.LinAlgError):
-        return split.failed()
-    return split.score(pred, est.convergence_.get("nfev_total", 0))
-
-
-def cyclic_cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init, settings: RefitSettings, v_base,
-                     pitch_m: float, bin_per_m: float) -> dict:
-    """Held-out free-run sums of squares of the baseline and of the chain's model (:func:`cyclic_fold_error`) on
-    the same ``folds`` (:func:`~l1b2.closeloop.acceptance.stage_cv_errors`)."""
-    return stage_cv_errors(df, mask, m_s, folds, init, settings, cyclic_fold_error, (v_base, pitch_m, bin_per_m),
-                           "l1b2-cyclic-chain-cv")
 
 
 def decide(df: pd.DataFrame, mask, m_s: float, folds, model, identify, settings: RefitSettings, *, alpha: float,
@@ -320,9 +293,10 @@ def decide(df: pd.DataFrame, mask, m_s: float, folds, model, identify, settings:
     Screened (:func:`screen`) at ``alpha`` and the screen's smallest gain ``min_gain``, as every candidate is, and
     only when its held-out gain exceeds the force family's at the same pitch; kept when the physics refitted behind
     the form lowers the cross-validated free-run sum of squares of the logged speed by at least ``min_cv_gain``, in
-    more than half of the folds (:func:`cyclic_cv_errors`; the rule of the time stamps' chain). ``kept``: None, or
-    ``(physics model, CyclicChain)``: the chain from the baseline's free run, the physics identified behind it
-    (``identify(frame)``), the chain refitted on that model's free run.
+    more than half of the folds (:func:`l1b2.closeloop.stagefit.stage_verdict`; the pitch refined anew on each
+    fold's training runs, :func:`fit_refined`). ``kept``: None, or ``(physics model, CyclicChain)``: the chain from
+    the baseline's free run at the pitch refined on TRAIN, the physics identified behind it (``identify(frame)``),
+    the chain refitted on that model's free run.
     """
     v_base = model.predict_free_run(df)
     peak, pitch, bin_per_m = candidate_pitch(df, mask, v_base)
@@ -334,13 +308,12 @@ def decide(df: pd.DataFrame, mask, m_s: float, folds, model, identify, settings:
     rec.update(screen(df, mask, v_base, model.params_, m_s, folds, pitch), pitch_m=pitch)
     if not screen_passes(rec, alpha, min_gain):
         return rec, None
-    cv = cyclic_cv_errors(df, mask, m_s, folds, model.params_, settings, v_base, pitch, bin_per_m)
-    fields, kept = stage_verdict(cv, len(folds), min_cv_gain)
+    cv = stagefit.stage_cv_errors(df, mask, m_s, folds, model.params_, settings, v_base,
+                                  partial(fit_refined, pitch_m=pitch, bin_per_m=bin_per_m), "l1b2-cyclic-chain-cv")
+    fields, kept = stagefit.stage_verdict(cv, len(folds), min_cv_gain)
     rec.update(fields)
     if not kept:
         return rec, None
-    c0 = fit_chain(df, mask, v_base, pitch)
-    est = identify(c0.frame(df))
-    c1 = fit_chain(df, mask, est.predict_free_run(c0.frame(df)), pitch)
+    est, c1 = stagefit.physics_behind(df, mask, v_base, partial(fit_chain, pitch_m=pitch), identify)
     rec.update(accepted=True, description=DESCRIPTION, **c1.to_dict())
     return rec, (est, c1)

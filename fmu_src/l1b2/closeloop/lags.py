@@ -1,4 +1,4 @@
-"""Lagged channels: a logged run setting seen through a store, its first-order low-pass on the session clock.
+"""A run setting's history: its low-pass on the session clock (a store), and the drive's step from its last setting.
 
 A rig may log a setting that the design changes from run to run (a heater's power, a coolant's flow, a bias
 current) while the motor feels it through a store: a thermal mass, a charge, a soaked film. The effect then follows
@@ -25,6 +25,20 @@ the previous runs (the stator's heat, a piezoceramic's de-ageing under a strong 
 its effect follows the voltage's low-pass while the current run's voltage is already a model input. When the
 plan's ``voltage_V`` is a run setting by the rule above, its lags ``voltage_V_lag<n>r`` are derived like a logged
 column's; the voltage itself stays an input, never a channel.
+
+**The setting's step.** A stored input's state before the session is known (:data:`BEFORE_SESSION`: the drive
+off, 0 V), and how a setting was *reached* leaves a state of its own that a low-pass starting at the session's first
+value cannot see: an operator who overshoots a knob by a share of the step, a range relay or a hysteresis side
+chosen by the direction of the last change. For each stored input that is a run setting the loop therefore also
+derives ``<column>_step`` (:data:`STEP_SUFFIX`, :func:`setting_steps`), per run in session order:
+
+    the run's setting minus the previous *different* setting, held while the setting is unchanged (a state set by a
+    change lasts until the next change); the previous setting of the session's first run is the state before the
+    session,
+
+constant within each run, one more logged channel like the lags (the same merge of one session; two sessions each
+from their own first run and the drive off before each). A logged run setting gets no step: its state before the
+session is not known, and a step of 0 for its first setting would state one (decision 0120).
 """
 
 from __future__ import annotations
@@ -41,6 +55,10 @@ from .events import MIN_BLOCK_RUNS, Session, event_times, run_table, session
 TAU_RUNS = (3, 10)
 #: the model inputs whose lags are derived when they are run settings (the drive's history: module docstring)
 STORED_INPUTS = (dataio.VOLTAGE,)
+#: the state of each stored input before the session (the drive off): the previous setting of the first run
+BEFORE_SESSION = {dataio.VOLTAGE: 0.0}
+#: the column suffix of a stored input's step from its previous setting (module docstring)
+STEP_SUFFIX = "_step"
 
 
 def suffix(n) -> str:
@@ -62,6 +80,16 @@ def lowpass(t, c, tau: float) -> np.ndarray:
     for i in range(1, len(c)):
         y[i] = c[i - 1] + (y[i - 1] - c[i - 1]) * decay[i - 1]
     return y
+
+
+def setting_steps(values, before: float) -> np.ndarray:
+    """Per run (``values``: each run's setting in session order), its setting minus the previous different setting,
+    held while the setting is unchanged; the first run's previous setting is ``before`` (a first run at ``before``
+    has step 0 until the first change)."""
+    v = np.asarray(values, float)
+    d = v - np.concatenate([[float(before)], v[:-1]])
+    last = np.maximum.accumulate(np.where(d != 0, np.arange(len(v)), -1))   # the latest change at or before each
+    return np.where(last >= 0, d[np.maximum(last, 0)], 0.0)
 
 
 def is_run_setting(tab: pd.DataFrame, within_run: bool) -> bool:
@@ -89,8 +117,10 @@ def run_period(tab: pd.DataFrame) -> float:
 
 def with_lagged_channels(train: pd.DataFrame, test: pd.DataFrame | None = None, response_columns=None,
                          sess: Session | None = None):
-    """``(train, test, record)``: copies of the frames with the lags of every run setting of ``train`` appended
-    (``test`` None stays None), and ``record`` ``[{"channel", "lags", "tau_s", "one_session"}]``.
+    """``(train, test, record)``: copies of the frames with the lags of every run setting of ``train`` appended, and
+    the step of each that is a stored input (``test`` None stays None), and ``record`` ``[{"channel", "lags",
+    "tau_s", "one_session", "step", "step_from"}]`` (``step`` the step's column or None, ``step_from`` the state
+    before the session it starts from or None).
 
     ``sess``: the frames' :func:`~l1b2.closeloop.events.session` when the caller has it (default: computed here).
     The frames are returned unchanged (not copied) when TRAIN has no run setting.
@@ -117,6 +147,19 @@ def with_lagged_channels(train: pd.DataFrame, test: pd.DataFrame | None = None, 
                 for df in group:
                     df[name + suffix(n)] = y[k:k + len(df)]
                     k += len(df)
+            if name in BEFORE_SESSION:
+                _add_steps(group, name)
         record.append({"channel": name, "lags": [name + suffix(n) for n in TAU_RUNS],
-                       "tau_s": [float(x) for x in taus], "one_session": merged})
+                       "tau_s": [float(x) for x in taus], "one_session": merged,
+                       "step": name + STEP_SUFFIX if name in BEFORE_SESSION else None,
+                       "step_from": BEFORE_SESSION.get(name)})
     return train, test, record
+
+
+def _add_steps(group, name: str) -> None:
+    """Write ``<name>_step`` (:func:`setting_steps` from :data:`BEFORE_SESSION`) into the frames of one session."""
+    tab = run_table(group, name)
+    tab["step"] = setting_steps(tab["value"], BEFORE_SESSION[name])
+    for i, df in enumerate(group):
+        per_run = tab[tab["frame"] == i].set_index("run")["step"]
+        df[name + STEP_SUFFIX] = df[dataio.RUN].map(per_run).to_numpy(float)

@@ -93,7 +93,8 @@ from . import encoder, sensorchain, stamps
 from .sensorchain import SensorChain
 from .acceptance import (Directions, EffectSet, RefitCV, RefitSettings, Validated, accepts, added_columns,
                          chain_cv_errors, collinear, cv_errors, fold_start_phi, materiality, named_reading, refit,
-                         stage_verdict, time_dependent, validated)
+                         time_dependent, validated)
+from .stagefit import physics_behind, stage_cv_errors, stage_verdict
 from .folds import refit_schemes, screen_folds, stratified_folds
 from .baselines import choose_baseline, identify_families, retag_structural
 from .crosscheck import PureSlipCheck, identified_pick, score_of, withdrawn_note
@@ -521,23 +522,21 @@ class CloseLoop(EstimatorSettings):
                                     **sensor.screen(dtr, mask, v_base, it.model.params_, m_s, folds)}
         if not (out["p_value"] < self.alpha and out["cv_gain"] >= self.min_gain):
             return dtr
-        cv = sensor.gain_cv_errors(dtr, mask, m_s, folds, it.model.params_, self.refit_settings(), v_base)
+        fit = sensor.stage_fit(dtr)
+        cv = stage_cv_errors(dtr, mask, m_s, folds, it.model.params_, self.refit_settings(), v_base, fit,
+                             "l1b2-sensor-gain-cv")
         fields, kept = stage_verdict(cv, len(folds), self.min_cv_gain, "gain")
         out.update(fields)
         if not kept:
             return dtr
-        s_range = sensor.position_range(dtr)
-        g0 = sensor.fit_gain(dtr, mask, v_base, s_range)
-        model = self._identify(sensor.gain_frame(dtr, g0), m_s, mask)
-        g1 = sensor.fit_gain(dtr, mask, model.predict_free_run(sensor.gain_frame(dtr, g0)), s_range)
-        it.model, it.speed_gain = model, sensor.GainChain(g1)
-        wrapped = ChainModel(model, it.speed_gain)
+        it.model, it.speed_gain = physics_behind(dtr, mask, v_base, fit, lambda df: self._identify(df, m_s, mask))
+        g1, wrapped = it.speed_gain.gain, ChainModel(it.model, it.speed_gain)
         out.update(accepted=True, gain=g1.to_dict(), names=list(g1.names()), description=sensor.DESCRIPTION)
         it.rounds.append({"round": len(it.rounds), "added": sensor.STROKE_GAIN, "effect": sensor.STROKE_GAIN,
                           "regressors": ["position"],
                           "cv": {"cv_gain": out["cv_gain"], "cv_free_run_gain": out["cv_free_run_gain"]},
                           "metrics": _metrics(wrapped, dtr, dte)})
-        return sensor.gain_frame(dtr, g1)
+        return it.speed_gain.frame(dtr)
 
     def _immaterial(self, it: _Iteration) -> list[RefitCV]:
         """Candidates of the last round that pass every acceptance rule but the materiality threshold.

@@ -124,7 +124,8 @@ class Diagnosis(_Record):
     evidence of its run mean for the runs' own deviations); ``run_level`` the first round's run-level
     deviations (:meth:`l1b2.closeloop.runlevel.RunLevelAnalysis.to_dict`; None when not estimated);
     ``event_clocks`` the event clocks derived from logged step channels (:mod:`l1b2.closeloop.events`);
-    ``lagged_channels`` the low-passes derived from logged run settings (:mod:`l1b2.closeloop.lags`);
+    ``lagged_channels`` the low-passes derived from logged run settings and the drive amplitude's step from its
+    previous setting (:mod:`l1b2.closeloop.lags`);
     ``pause_channel`` the pause before each run and whether its logarithm was derived as a channel
     (:mod:`l1b2.closeloop.pauses`); ``run_clock`` whether the time since each run's start was derived as a
     channel and TRAIN's run durations (:mod:`l1b2.closeloop.runclock`);

@@ -21,6 +21,7 @@ import pandas as pd
 from ..data import measurements as dataio
 from ..data import plots
 from ..data.gaps import gap_lines
+from ..data.coverage import speed_source_lines
 from ..data.onset import onset_lines
 from ..data.plausibility import uneven_step_lines
 from ..jsonio import dumps, sig, strict_json
@@ -335,6 +336,9 @@ def markdown_report(rep: dict) -> str:
     rest = onset_lines((rep.get("checks") or {}).get("rest_before_onset"))
     if rest:
         lines += ["Rest before each run's onset, cut on reading:", ""] + [f"* {g}" for g in rest] + [""]
+    source = speed_source_lines((rep.get("checks") or {}).get("speed_derived"))
+    if source:
+        lines += ["Speed source:", ""] + [f"* {g}" for g in source] + [""]
     lines += ["## Diagnosis", "", f"**{d['message']}**", ""]
     if d["significant"]:
         lines += [f"* traced to: {', '.join(d['traced_to'])}",

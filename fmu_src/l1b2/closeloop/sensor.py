@@ -5,32 +5,32 @@ A speed recorded through a position transducer whose scale factor varies along t
 the recorded column is still the recorded position's derivative, so the speed channel's own test
 (:func:`l1b2.closeloop.chain.speed_channel`) cannot see it; only the physics model's residual can. The stage:
 
+It is decided as every sensor stage is (:mod:`l1b2.closeloop.stagefit`):
+
 * **screen** (:func:`screen`): the baseline's TRAIN residual (drive coordinates) regressed on the gain's response
   columns ``P_j(x) v_pred`` (exact: the gain multiplies the output, no recursion), with the baseline's nuisance
   responses (:func:`l1b2.closeloop.selection.nuisance_forces`) in both models, cross-validated over the runs'
   folds (:class:`~l1b2.closeloop.selection.FoldSolver`); evidence: the held-out gain and the runs' one-sided
   Wilcoxon p-value;
-* **fit** (:func:`fit_gain`): given a model's free run ``v``, the coefficients are the least squares of
-  ``v_rec - v`` on ``P_j(x) v`` (linear in ``c``), with standard errors clustered by run (a run's residual is
-  correlated along it);
-* **decision** (:func:`gain_cv_errors`): the physics refitted behind the gain (on ``v_rec / g(s)``,
-  :func:`gain_frame`) against the baseline refitted on the recorded speed, both per fold of the refit folds,
-  the held-out recorded speed predicted in free run (the gain's coefficients re-estimated on each fold's
-  training runs only).
+* **fit** (:func:`fit_gain`, as a stage :func:`fit_chain`): given a model's free run ``v``, the coefficients are
+  the least squares of ``v_rec - v`` on ``P_j(x) v`` (linear in ``c``), with standard errors clustered by run (a
+  run's residual is correlated along it);
+* **decision** (:func:`l1b2.closeloop.stagefit.stage_cv_errors` with :func:`fit_chain`): the physics refitted
+  behind the gain (on ``v_rec / g(s)``, :func:`gain_frame`) against the baseline refitted on the recorded speed,
+  both per fold of the refit folds, the held-out recorded speed predicted in free run (the gain's coefficients
+  re-estimated on each fold's training runs only).
 """
 
 from __future__ import annotations
+
+from functools import partial
 
 import numpy as np
 import pandas as pd
 
 from ..data import measurements as dataio
-from ..errors import IdentificationError
 from ..predictor.effects.sensor import STROKE_GAIN_ORDER, SpeedSensorGain, stroke_basis
-from . import residuals as res
-from .acceptance import EffectSet, RefitSettings, fold_fit_data, refit, stage_cv_errors
-from .folds import held_out_split
-from .selection import FoldSolver, finite_columns, linear_response, nuisance_forces
+from . import stagefit
 
 #: the family's name in reports
 STROKE_GAIN = "sensor_stroke_gain"
@@ -53,6 +53,10 @@ class GainChain:
     def apply(self, df: pd.DataFrame, u) -> np.ndarray:
         """The recorded speed ``g(s) u`` [m/s] at ``df``'s recorded positions."""
         return self.gain.apply(df[dataio.POSITION].to_numpy(float), u)
+
+    def refit(self, df: pd.DataFrame, mask, v_model) -> GainChain:
+        """:func:`fit_chain` on this gain's position range and order."""
+        return fit_chain(df, mask, v_model, (self.gain.s_lo, self.gain.s_hi), self.gain.order)
 
 
 def gain_frame(df: pd.DataFrame, gain: SpeedSensorGain) -> pd.DataFrame:
@@ -88,6 +92,18 @@ def fit_gain(df: pd.DataFrame, mask, v_model, s_range, order: int = STROKE_GAIN_
                            tuple(float(np.sqrt(max(c, 0.0))) for c in np.diag(cov)))
 
 
+def fit_chain(df: pd.DataFrame, mask, v_model, s_range, order: int = STROKE_GAIN_ORDER) -> GainChain:
+    """:func:`fit_gain` as a stage of the measurement chain (:class:`GainChain`)."""
+    return GainChain(fit_gain(df, mask, v_model, s_range, order))
+
+
+def stage_fit(df: pd.DataFrame, order: int = STROKE_GAIN_ORDER):
+    """The gain's fit function on TRAIN ``df`` (:func:`fit_chain`, its basis scaled to ``df``'s position range,
+    :func:`position_range`): what :func:`l1b2.closeloop.stagefit.stage_cv_errors` and
+    :func:`~l1b2.closeloop.stagefit.physics_behind` take."""
+    return partial(fit_chain, s_range=position_range(df), order=order)
+
+
 def gain_columns(df: pd.DataFrame, v_pred, order: int = STROKE_GAIN_ORDER) -> np.ndarray:
     """``(n, order + 1)``: the recorded speed's response to the gain's coefficients in drive coordinates,
     ``d P_j(x) v_pred`` (:meth:`~l1b2.predictor.effects.sensor.SpeedSensorGain.response`; ``x`` scaled to
@@ -98,49 +114,7 @@ def gain_columns(df: pd.DataFrame, v_pred, order: int = STROKE_GAIN_ORDER) -> np
 
 
 def screen(df: pd.DataFrame, mask, v_pred, params, m_s: float, folds, order: int = STROKE_GAIN_ORDER) -> dict:
-    """Cross-validated evidence of the gain against the baseline ``params`` (free run ``v_pred`` [m/s]).
-
-    Returns ``{"cv_gain", "p_value", "runs_improved"}``: the pooled held-out share of the nuisance-only model's
-    sum of squares the gain's response columns remove, the one-sided Wilcoxon p-value of the runs' reductions and
-    the share of runs improved.
-    """
-    m = np.asarray(mask, bool)
-    idx = np.flatnonzero(m)
-    d = df[dataio.DIRECTION].to_numpy(float)
-    v_pred = np.asarray(v_pred, float)
-    y = (d * (df[dataio.SPEED].to_numpy(float) - v_pred))[idx]
-    with np.errstate(over="ignore", invalid="ignore"):
-        N = finite_columns(linear_response(params, df, m_s, nuisance_forces(params, df, v_pred), v_pred=v_pred)[idx])
-    S = gain_columns(df, v_pred, order)[idx]
-    runs = df[dataio.RUN].to_numpy()[idx]
-    gain, per_run = FoldSolver(y, N, runs, folds).gain(S)
-    return {"cv_gain": float(gain), "p_value": float(res.wilcoxon_greater(per_run)),
-            "runs_improved": float(np.mean(per_run > 0)) if len(per_run) else 0.0}
-
-
-def gain_fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, init, settings: RefitSettings,
-                    v_base, s_range, order: int = STROKE_GAIN_ORDER) -> tuple:
-    """One fold of the gain's model: on the training runs the gain from the baseline's free run ``v_base``
-    (:func:`fit_gain`), the physics refitted behind it, the gain refitted on that model's free run; the held-out
-    runs' recorded speed predicted as ``g(s)`` times the physics' free run. Returns what
-    :func:`~l1b2.closeloop.acceptance.fold_error` returns: ``(sse, ss_meas, failed, nfev, run_sse)``."""
-    split = held_out_split(df, mask, held_runs)
-    train, test, m_tr = split.train, split.test, split.mask_train
-    try:
-        g0 = fit_gain(train, m_tr, np.asarray(v_base, float)[~split.held], s_range, order)
-        est = refit(*fold_fit_data(gain_frame(train, g0), m_tr), m_s, init, EffectSet(), settings)
-        g1 = fit_gain(train, m_tr, est.predict_free_run(gain_frame(train, g0)), s_range, order)
-        pred = g1.apply(test[dataio.POSITION].to_numpy(float), est.predict_free_run(gain_frame(test, g1)))
-    except (IdentificationError, np.linalg.LinAlgError):
-        return split.failed()
-    return split.score(pred, est.convergence_.get("nfev_total", 0))
-
-
-def gain_cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init, settings: RefitSettings,
-                   v_base, order: int = STROKE_GAIN_ORDER) -> dict:
-    """Held-out free-run sums of squares of the baseline (refitted on the recorded speed) and of the gain's model
-    (:func:`gain_fold_error`), both from ``init`` on the same ``folds``
-    (:func:`~l1b2.closeloop.acceptance.stage_cv_errors`: ``{"sse_baseline", "sse_stage", "ss_meas", "failed",
-    "nfev", "folds_improved"}``)."""
-    return stage_cv_errors(df, mask, m_s, folds, init, settings, gain_fold_error,
-                           (v_base, position_range(df), order), "l1b2-sensor-gain-cv")
+    """Cross-validated evidence of the gain against the baseline ``params`` (free run ``v_pred`` [m/s]):
+    :func:`l1b2.closeloop.stagefit.screen` of the gain's response columns (:func:`gain_columns`), ``{"cv_gain",
+    "p_value", "runs_improved"}``."""
+    return stagefit.screen(df, mask, v_pred, params, m_s, folds, gain_columns(df, v_pred, order))

@@ -13,8 +13,8 @@ data can, and the stage lets them. The chain's form on the prediction's output (
 and the physics behind it is fitted on the logged speed over ``r^gamma`` (:func:`stamp_frame`; the model runs on
 the logged stamps, whose error, a fraction of a step, moves a slow motion's prediction little). The stage is
 considered only when the steps of TRAIN's ``time_s`` are uneven (:func:`l1b2.data.plausibility.uneven_steps`): on an
-even clock ``r`` is 1 and the loop runs as before. It is decided as the speed sensor's gain is
-(:mod:`l1b2.closeloop.sensor`):
+even clock ``r`` is 1 and the loop runs as before. It is decided as every sensor stage is
+(:mod:`l1b2.closeloop.stagefit`):
 
 * **screen** (:func:`screen`): the baseline's TRAIN residual (drive coordinates) regressed on the form's response
   at ``gamma = 0``, ``d v_pred ln r`` (exact to first order: the form multiplies the output, no recursion), with
@@ -23,9 +23,9 @@ even clock ``r`` is 1 and the loop runs as before. It is decided as the speed se
   ``v_pred ln r``, and there is no gain;
 * **fit** (:func:`fit_gamma`): given a model's free run ``v``, ``gamma`` is the least squares of
   ``v_logged - r^gamma v`` (Gauss-Newton from 0);
-* **decision** (:func:`stamp_cv_errors`): the physics refitted behind the form against the baseline refitted on the
-  logged speed, per fold of the refit folds, the held-out logged speed predicted in free run (``gamma``
-  re-estimated on each fold's training runs only).
+* **decision** (:func:`l1b2.closeloop.stagefit.stage_cv_errors` with :func:`fit_gamma`): the physics refitted
+  behind the form against the baseline refitted on the logged speed, per fold of the refit folds, the held-out
+  logged speed predicted in free run (``gamma`` re-estimated on each fold's training runs only).
 """
 
 from __future__ import annotations
@@ -36,11 +36,8 @@ import pandas as pd
 from ..data import measurements as dataio
 from ..data.plausibility import uneven_steps
 from ..data.stamps import time_step_ratio
-from ..errors import IdentificationError
-from . import residuals as res
-from .acceptance import EffectSet, RefitSettings, fold_fit_data, refit, stage_cv_errors, stage_verdict
-from .folds import held_out_split
-from .selection import FoldSolver, finite_columns, linear_response, nuisance_forces
+from .acceptance import RefitSettings
+from . import stagefit
 
 #: the stage's name in reports
 STAMP_CHAIN = "speed_over_time_stamps"
@@ -78,6 +75,10 @@ class StampChain:
     def apply(self, df: pd.DataFrame, u) -> np.ndarray:
         """The logged speed ``r^gamma u`` [m/s] at ``df``'s stamps."""
         return ratio(df) ** self.gamma * np.asarray(u, float)
+
+    def refit(self, df: pd.DataFrame, mask, v_model) -> StampChain:
+        """:func:`fit_gamma` (``gamma`` estimated anew from 0)."""
+        return fit_gamma(df, mask, v_model)
 
     def to_dict(self) -> dict:
         return {"gamma": self.gamma, "gamma_stderr": self.stderr}
@@ -140,49 +141,10 @@ def response(df: pd.DataFrame, v_pred) -> np.ndarray:
 
 
 def screen(df: pd.DataFrame, mask, v_pred, params, m_s: float, folds) -> dict:
-    """Cross-validated evidence of the form against the baseline ``params`` (free run ``v_pred`` [m/s]).
-
-    Returns ``{"cv_gain", "p_value", "runs_improved"}``: the pooled held-out share of the nuisance-only model's
-    sum of squares the form's response column (:func:`response`) removes, the one-sided Wilcoxon p-value of the
-    runs' reductions and the share of runs improved.
-    """
-    idx = np.flatnonzero(np.asarray(mask, bool))
-    d = df[dataio.DIRECTION].to_numpy(float)
-    v_pred = np.asarray(v_pred, float)
-    y = (d * (df[dataio.SPEED].to_numpy(float) - v_pred))[idx]
-    with np.errstate(over="ignore", invalid="ignore"):
-        N = finite_columns(linear_response(params, df, m_s, nuisance_forces(params, df, v_pred), v_pred=v_pred)[idx])
-    runs = df[dataio.RUN].to_numpy()[idx]
-    gain, per_run = FoldSolver(y, N, runs, folds).gain(response(df, v_pred)[idx][:, None])
-    return {"cv_gain": float(gain), "p_value": float(res.wilcoxon_greater(per_run)),
-            "runs_improved": float(np.mean(per_run > 0)) if len(per_run) else 0.0}
-
-
-def stamp_fold_error(df: pd.DataFrame, mask: np.ndarray, m_s: float, held_runs, init, settings: RefitSettings,
-                     v_base) -> tuple:
-    """One fold of the chain's model: on the training runs ``gamma`` from the baseline's free run ``v_base``
-    (:func:`fit_gamma`), the physics refitted behind it, ``gamma`` refitted on that model's free run; the held-out
-    runs' logged speed predicted as ``r^gamma`` times the physics' free run. Returns what
-    :func:`~l1b2.closeloop.acceptance.fold_error` returns: ``(sse, ss_meas, failed, nfev, run_sse)``."""
-    split = held_out_split(df, mask, held_runs)
-    train, test, m_tr = split.train, split.test, split.mask_train
-    try:
-        c0 = fit_gamma(train, m_tr, np.asarray(v_base, float)[~split.held])
-        est = refit(*fold_fit_data(c0.frame(train), m_tr), m_s, init, EffectSet(), settings)
-        c1 = fit_gamma(train, m_tr, est.predict_free_run(c0.frame(train)))
-        pred = c1.apply(test, est.predict_free_run(c1.frame(test)))
-    except (IdentificationError, np.linalg.LinAlgError):
-        return split.failed()
-    return split.score(pred, est.convergence_.get("nfev_total", 0))
-
-
-def stamp_cv_errors(df: pd.DataFrame, mask: np.ndarray, m_s: float, folds, init, settings: RefitSettings,
-                    v_base) -> dict:
-    """Held-out free-run sums of squares of the baseline (refitted on the logged speed) and of the chain's model
-    (:func:`stamp_fold_error`), both from ``init`` on the same ``folds``
-    (:func:`~l1b2.closeloop.acceptance.stage_cv_errors`: ``{"sse_baseline", "sse_stage", "ss_meas", "failed",
-    "nfev", "folds_improved"}``)."""
-    return stage_cv_errors(df, mask, m_s, folds, init, settings, stamp_fold_error, (v_base,), "l1b2-stamp-chain-cv")
+    """Cross-validated evidence of the form against the baseline ``params`` (free run ``v_pred`` [m/s]):
+    :func:`l1b2.closeloop.stagefit.screen` of the form's response column (:func:`response`), ``{"cv_gain",
+    "p_value", "runs_improved"}``."""
+    return stagefit.screen(df, mask, v_pred, params, m_s, folds, response(df, v_pred))
 
 
 def decide(df: pd.DataFrame, mask, m_s: float, folds, model, identify, settings: RefitSettings, *, alpha: float,
@@ -192,7 +154,7 @@ def decide(df: pd.DataFrame, mask, m_s: float, folds, model, identify, settings:
     Considered only when ``df``'s time steps are uneven (:func:`uneven`). Screened (:func:`screen`) at ``alpha``
     and the screen's smallest gain ``min_gain``, as every candidate is; kept when the physics refitted behind the
     form lowers the cross-validated free-run sum of squares of the logged speed by at least ``min_cv_gain``, in
-    more than half of the folds (:func:`stamp_cv_errors`; the rule of the speed sensor's gain). ``identify(frame)``
+    more than half of the folds (:func:`l1b2.closeloop.stagefit.stage_verdict`). ``identify(frame)``
     fits the physics on a frame. ``kept``: None, or ``(physics model, StampChain)``: ``gamma`` from the baseline's
     free run, the physics identified behind it, ``gamma`` refitted on that model's free run.
     """
@@ -204,14 +166,13 @@ def decide(df: pd.DataFrame, mask, m_s: float, folds, model, identify, settings:
     rec["gamma_of_baseline"] = fit_gamma(df, mask, v_base).to_dict()
     if not (rec["p_value"] < alpha and rec["cv_gain"] >= min_gain):
         return rec, None
-    cv = stamp_cv_errors(df, mask, m_s, folds, model.params_, settings, v_base)
-    fields, kept = stage_verdict(cv, len(folds), min_cv_gain)
+    cv = stagefit.stage_cv_errors(df, mask, m_s, folds, model.params_, settings, v_base, fit_gamma,
+                                  "l1b2-stamp-chain-cv")
+    fields, kept = stagefit.stage_verdict(cv, len(folds), min_cv_gain)
     rec.update(fields)
     if not kept:
         return rec, None
-    c0 = fit_gamma(df, mask, v_base)
-    est = identify(c0.frame(df))
-    c1 = fit_gamma(df, mask, est.predict_free_run(c0.frame(df)))
+    est, c1 = stagefit.physics_behind(df, mask, v_base, fit_gamma, identify)
     rec.update(accepted=True, description=DESCRIPTION, **c1.to_dict())
     return rec, (est, c1)
 

@@ -34,7 +34,8 @@ from .plausibility import uneven_step_lines, uneven_steps
 
 __all__ = ["RANGE_COLUMNS", "DEFAULT_TOLERANCE", "MIN_TOLERANCE", "data_range", "outside_range",
            "summarize_outside", "values_outside", "FREQUENCY_REL_SPREAD", "run_frequencies", "frequency_varies",
-           "input_checks", "data_check_lines", "RIG_SETTINGS", "check_same_rig"]
+           "input_checks", "data_check_lines", "RIG_SETTINGS", "check_same_rig", "shared_run", "runs_of_two",
+           "speed_source_lines"]
 
 #: The prediction inputs whose range is checked (unit in the name); a direction TRAIN never drove is outside.
 RANGE_COLUMNS: tuple[str, ...] = (VOLTAGE, LOAD, POSITION, DIRECTION, FREQUENCY)
@@ -148,8 +149,9 @@ def input_checks(train: Measurements, test: Measurements | None) -> dict:
     """The report's record of the data checks: unit findings (allowed or none), the gaps of optional input columns
     filled on reading (per file and column: ``cells``, ``runs``, ``first_row``, ``first_line``), the uneven time
     steps within runs (per file, :func:`l1b2.data.plausibility.uneven_steps`, None when even), the runs at rest
-    before their onset (per file, :func:`l1b2.data.onset.from_onset`'s record, None for data not read from a file)
-    and TEST runs outside TRAIN's range."""
+    before their onset (per file, :func:`l1b2.data.onset.from_onset`'s record, None for data not read from a file),
+    whether each file's speed was derived from position (``speed_derived``; TEST None without TEST) and TEST runs
+    outside TRAIN's range."""
     rng = data_range(train)
     flagged = outside_range(test, rng) if test is not None else []
     n_test = len(test.runs) if test is not None else 0
@@ -163,11 +165,12 @@ def input_checks(train: Measurements, test: Measurements | None) -> dict:
                               "test": uneven_steps(test.df) if test is not None else None},
         "rest_before_onset": {"train": train.meta.get("rest_before_onset"),
                               "test": test.meta.get("rest_before_onset") if test is not None else None},
+        "speed_derived": {"train": bool(train.meta.get("speed_derived")),
+                          "test": bool(test.meta.get("speed_derived")) if test is not None else None},
         "training_range": rng,
         "test_runs_outside_training_range": flagged,
         "extrapolation": summarize_outside(flagged, n_test),
     }
-
 
 
 def data_check_lines(checks: dict) -> list[str]:
@@ -176,7 +179,18 @@ def data_check_lines(checks: dict) -> list[str]:
     (:func:`l1b2.data.plausibility.uneven_step_lines`) and the rest before the runs' onsets
     (:func:`l1b2.data.onset.onset_lines`)."""
     return (gap_lines(checks.get("gaps_filled")) + uneven_step_lines(checks.get("uneven_time_steps"))
-            + onset_lines(checks.get("rest_before_onset")))
+            + onset_lines(checks.get("rest_before_onset")) + speed_source_lines(checks.get("speed_derived")))
+
+
+def speed_source_lines(derived: Mapping[str, bool | None] | None) -> list[str]:
+    """A warning when TRAIN's speed is measured and TEST's derived from position, or the reverse: the TEST errors
+    are then scored on another quantity (a derived speed carries no measurement noise of its own, so its one-step
+    error is smaller) and do not compare with TRAIN's."""
+    if not derived or derived.get("test") is None or derived["train"] == derived["test"]:
+        return []
+    how = {True: "derived from position_m", False: "measured (speed_m_s)"}
+    return [f"TRAIN's speed is {how[derived['train']]} and TEST's {how[derived['test']]}: the TEST errors "
+            "are scored on another speed than TRAIN's and do not compare with them; give both files alike"]
 
 #: settings that describe the rig itself: TRAIN and TEST must agree on them (relative difference)
 RIG_SETTINGS: dict[str, float] = {"slider_mass_kg": 1e-6, "encoder_resolution_m": 1e-6, "drive_frequency_Hz": 1e-6}
@@ -197,6 +211,13 @@ def check_same_rig(train: Measurements, test: Measurements, *, explicit: Mapping
     in TEST's ``unusual_units``).
     """
     explicit = explicit or {}
+    shared = shared_run(train, test)
+    if shared is not None:
+        rid, row, train_rid = shared
+        raise DataFormatError(test.meta.get("source") or "TEST", RUN, row + 1,
+                              f"TEST run {rid} is TRAIN run {train_rid} (the same time stamps and positions): a "
+                              "held-out run must not be in TRAIN, or the TEST error is a training error (the same "
+                              "file given twice, or TEST cut from the TRAIN file?)")
     from .plausibility import load_effect_mismatch, run_table
     found = load_effect_mismatch(run_table(train.df), run_table(test.df))
     if found is not None:
@@ -221,3 +242,34 @@ def check_same_rig(train: Measurements, test: Measurements, *, explicit: Mapping
                                   f"TEST says {name} = {b:.6g} but TRAIN ({train.meta.get('sidecar') or 'defaults'}) "
                                   f"says {a:.6g}{hint}: both files must come from one rig; correct the sidecar or "
                                   "give the value as an option")
+
+
+def shared_run(train: Measurements, test: Measurements) -> tuple[Any, int, Any] | None:
+    """The first TEST run that is also a TRAIN run, or ``None``.
+
+    Two runs are the same recording when their ``time_s`` and
+    ``position_m`` columns are equal sample for sample (the clock runs on
+    over a rig's experiment, so two traverses never share their stamps).
+    Returns ``(test_run, first_row, train_run)`` with ``first_row`` the
+    0-based row of the TEST run's first sample.
+    """
+    def keys(m: Measurements) -> list[tuple[Any, int, bytes]]:
+        t = m.df["time_s"].to_numpy(dtype=float)
+        x = m.df[POSITION].to_numpy(dtype=float)
+        return [(rid, sl.start, t[sl].tobytes() + x[sl].tobytes()) for rid, sl in run_slices(m.df[RUN])]
+    seen = {key: rid for rid, _, key in keys(train)}
+    for rid, row, key in keys(test):
+        if key in seen:
+            return rid, row, seen[key]
+    return None
+
+
+def runs_of_two(m: Measurements, path) -> Measurements:
+    """``m`` when each run holds at least 2 samples (Eq. 29 predicts a sample from the one before it), else a
+    :class:`~l1b2.errors.DataFormatError` naming the file, the run and its first row."""
+    for rid, sl in run_slices(m.df[RUN]):
+        if sl.stop - sl.start < 2:
+            raise DataFormatError(path, RUN, sl.start + 1,
+                                  f"run {rid} has a single sample: a run is one traverse, and the predictor needs "
+                                  "at least 2 samples of it (a run cut by the export? leave it out)")
+    return m

@@ -8,8 +8,10 @@ bridges the gaps of the optional input columns), merges the
 settings (keyword > sidecar > default), derives ``speed_m_s`` / fills
 ``frequency_Hz`` when absent; :func:`write_table_and_sidecar` validates the
 same way and writes both files atomically. Problems of the files themselves
-(missing, not UTF-8, ragged lines, invalid JSON) are reported as
-:class:`~l1b2.errors.DataFormatError` naming file and line.
+(missing, not UTF-8, ragged lines, invalid JSON, and what exports write
+instead of the format, named by :mod:`~l1b2.data.dialects`: a units row, a
+preamble, a repeated header, an unnamed column, a binary file) are reported
+as :class:`~l1b2.errors.DataFormatError` naming file and line.
 
 The public entry points are :func:`l1b2.data.measurements.load_measurements`
 and :func:`l1b2.data.measurements.write_measurements`, which wrap these two
@@ -46,6 +48,7 @@ from .columns import (
     TIME,
     sidecar_path,
 )
+from .dialects import binary_kind, header_line_problem, repeated_header, units_row, unnamed_columns
 from .plausibility import physics_findings
 from .validate import (
     check_setting,
@@ -248,6 +251,9 @@ def _read_table(path: Path) -> pd.DataFrame:
         raw = path.read_bytes()
     except OSError as exc:
         raise DataFormatError(path, None, None, f"cannot read file: {exc.strerror or exc}") from None
+    kind = binary_kind(raw[:32])
+    if kind is not None:
+        raise DataFormatError(path, None, None, kind)
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
@@ -257,6 +263,9 @@ def _read_table(path: Path) -> pd.DataFrame:
                               f"not UTF-8 text (byte 0x{raw[exc.start]:02x} on line {line})") from None
     if not text.strip():
         raise DataFormatError(path, None, None, "file is empty")
+    why = header_line_problem(text)
+    if why is not None:
+        raise DataFormatError(path, None, None, why)
     _check_separator(path, text)
     try:
         table = pd.read_csv(StringIO(text), header=None, dtype=str, keep_default_na=False,
@@ -275,15 +284,32 @@ def _read_table(path: Path) -> pd.DataFrame:
     header = [str(h).strip() for h in table.iloc[0].tolist()]
     if not any(header):
         raise DataFormatError(path, None, None, "header line (line 1) is blank")
-    header = [h if h else f"Unnamed: {k}" for k, h in enumerate(header)]
     body = table.iloc[1:].reset_index(drop=True)
+    drop, why = unnamed_columns(header, body)
+    if why is not None:
+        raise DataFormatError(path, None, None, why)
+    keep = [k for k in range(len(header)) if k not in drop]
+    header = [header[k] for k in keep]
+    body = body.iloc[:, keep]
     body.columns = header
+    _check_body(path, body, header)
     # drop blank lines at the end of the file (blank lines inside are refused
     # later as empty values, so data rows keep mapping to line = row + 1)
     n = len(body)
     while n > 0 and is_blank_row(body.iloc[n - 1]):
         n -= 1
     return body.iloc[:n]
+
+
+def _check_body(path: Path, body: pd.DataFrame, header: list[str]) -> None:
+    """Refuse a units row under the header and a header line repeated inside the data, naming the row."""
+    why = units_row(body)
+    if why is not None:
+        raise DataFormatError(path, None, 1, why)
+    k = repeated_header(body, header)
+    if k is not None:
+        raise DataFormatError(path, None, k + 1, "the header line again inside the data (two files "
+                              "concatenated?): one file has one header line, on line 1; delete this line")
 
 
 def _check_separator(path: Path, text: str) -> None:

@@ -77,6 +77,7 @@ from .columns import (
     VOLTAGE,
     PlausibleRange,
 )
+from .dialects import time_order_hint, value_hint
 from .gaps import GAP_COLUMNS, fill_gaps, gap_record
 from .plausibility import speed_glitch, step_hint
 
@@ -229,10 +230,7 @@ def _parse_numeric(col: pd.Series) -> tuple[np.ndarray, int | None, str]:
     elif isinstance(raw, float) and np.isnan(raw):
         what = "NaN value"
     else:
-        hint = ""
-        if isinstance(raw, str) and re.fullmatch(r"[+-]?\d+,\d*([eE][+-]?\d+)?", raw):
-            hint = " (decimal comma? the format requires a decimal point)"
-        what = f"non-numeric value {raw!r}{hint}"
+        what = f"non-numeric value {raw!r}{value_hint(raw) if isinstance(raw, str) else ''}"
     return values, i, what
 
 
@@ -324,8 +322,10 @@ def _order_problems(t: np.ndarray, run_col: pd.Series) -> list[DataProblem]:
     if len(t) > 1:
         bad = np.zeros(len(t), dtype=bool)
         bad[1:] = ~(t[1:] > t[:-1])
+        ids = run_col.to_numpy()
         _add_first(problems, TIME, bad,
-                   lambda i: f"time not increasing ({format_value(t[i])} after {format_value(t[i - 1])})")
+                   lambda i: f"time not increasing ({format_value(t[i])} after {format_value(t[i - 1])})"
+                   + time_order_hint(t, i, format_value(ids[i]) if ids[i] != ids[i - 1] else None))
     first_seen: dict[Any, int] = {}
     for rid, sl in run_slices(run_col):
         if rid in first_seen:
@@ -415,7 +415,7 @@ def _missing_hint(missing: list[str], columns: list[str]) -> str:
                       "the format requires ','"
     stem = missing[0].split("_")[0].lower()
     near = [c for c in columns if c.lower() == missing[0].lower()
-            or (c.lower().split("_")[0] == stem and c not in COLUMN_SPECS)]
+            or (re.split(r"[_\s\[(]", c.lower())[0] == stem and c not in COLUMN_SPECS)]
     if near:
         hint += "; found " + ", ".join(repr(c) for c in near) + \
                 f": names are case-sensitive and the unit must be SI " \
