@@ -186,7 +186,8 @@ def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
 
     One ``{"name", "kind", "mean", "sd", "lo", "hi", "within_run", "run_spread"}`` each (``lo``/``hi``: the
     smallest and largest value; ``kind``:
-    ``"logged"``, ``"protocol"`` for the session clock ``time_s``,
+    ``"logged"``, ``"protocol"`` for the session clock ``time_s``, ``"run_clock"`` for the run's own clock
+    :data:`l1b2.predictor.effects.channels.RUN_CLOCK` (:mod:`l1b2.closeloop.runclock`: offered along the stroke only),
     ``"response"`` for a measured response of the motor (``response_columns``, default
     :data:`l1b2.predictor.effects.channels.RESPONSE_COLUMNS`: listed, no hypothesis), or ``"label"`` for a text
     column coded by :func:`l1b2.closeloop.auxiliary.with_usable_channels` (its codes have no order: only the
@@ -206,8 +207,8 @@ def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
         if not np.all(np.isfinite(c)):
             continue
         within = varies_within_runs(df, name)
-        kind = ("protocol" if name == dataio.TIME else "response" if name in responses
-                else "label" if name in labels else "logged")
+        kind = ("protocol" if name == dataio.TIME else "run_clock" if name == fx.channels.RUN_CLOCK
+                else "response" if name in responses else "label" if name in labels else "logged")
         out.append({"name": str(name), "kind": kind, "mean": float(np.mean(c)), "sd": float(np.std(c)),
                     "lo": float(np.min(c)), "hi": float(np.max(c)), "within_run": within,
                     "run_spread": fx.channels.run_spread(c, df[dataio.RUN])})

@@ -2,7 +2,8 @@
 
 The loop derives channels from what every log carries (:mod:`~l1b2.closeloop.events`: the event clock
 ``<column>_since_s`` of a step channel; :mod:`~l1b2.closeloop.lags`: the lags ``<column>_lag<n>r`` of a run
-setting; :mod:`~l1b2.closeloop.pauses`: the pause before each run, ``ln_pause_s``). A rig's own column may carry
+setting; :mod:`~l1b2.closeloop.pauses`: the pause before each run, ``ln_pause_s``; :mod:`~l1b2.closeloop.runclock`:
+the time since each run's first sample, ``time_in_run_s``). A rig's own column may carry
 one of those names by chance (a logger that writes its own ``ln_pause_s``, an export that already holds a
 ``voltage_V_lag3r``). Taken as the derived channel, such a column would replace the derivation (or be
 overwritten by it): either way something is lost without a word. So, before anything reads the frames, a logged
@@ -10,9 +11,9 @@ column whose name a derivation could produce is **renamed** ``<name>_logged`` (`
 taken too) in both frames and kept as an auxiliary column of its own; the rename is recorded with the other
 auxiliary columns' actions (:func:`l1b2.closeloop.auxiliary.with_usable_channels`), so the report lists it.
 
-A name a derivation *could* produce: exactly :data:`l1b2.closeloop.pauses.COLUMN`, or ``X + suffix`` for a column
-``X`` of the frame and a suffix of the event clock, of a lag of :data:`l1b2.closeloop.lags.TAU_RUNS` periods or
-of a setting's step (``_step``).
+A name a derivation *could* produce: exactly :data:`l1b2.closeloop.pauses.COLUMN` or
+:data:`l1b2.closeloop.runclock.COLUMN`, or ``X + suffix`` for a column ``X`` of the frame and a suffix of the event
+clock, of a lag of :data:`l1b2.closeloop.lags.TAU_RUNS` periods or of a setting's step (``_step``).
 The required columns and the speed are never renamed.
 """
 
@@ -24,6 +25,7 @@ from .auxiliary import NOT_CANDIDATES, with_usable_channels
 from .events import SUFFIX as EVENT_SUFFIX
 from .lags import STEP_SUFFIX, TAU_RUNS, suffix as lag_suffix
 from .pauses import COLUMN as PAUSE_COLUMN
+from .runclock import COLUMN as RUN_CLOCK_COLUMN
 
 __all__ = ["RENAMED_SUFFIX", "derived_suffixes", "is_derivable_name", "set_aside_derivable_names",
            "prepare_channels"]
@@ -40,7 +42,7 @@ def derived_suffixes() -> tuple[str, ...]:
 def is_derivable_name(name: str, columns) -> bool:
     """Whether a derivation of the loop could produce a channel called ``name`` from a frame with ``columns``
     (module docstring)."""
-    if name == PAUSE_COLUMN:
+    if name in (PAUSE_COLUMN, RUN_CLOCK_COLUMN):
         return True
     cols = set(columns)
     return any(name.endswith(s) and name[:-len(s)] in cols for s in derived_suffixes())

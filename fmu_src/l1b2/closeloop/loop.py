@@ -102,6 +102,7 @@ from .derived import prepare_channels
 from .events import session, with_event_clocks
 from .lags import with_lagged_channels
 from .pauses import with_pause_channel
+from .runclock import with_run_clock
 from .responses import classed_responses, response_tests, with_applied
 from .evidence import (channels_considered, order_traced, with_auxiliary, with_onset, with_position_share,
                        with_response_test)
@@ -158,8 +159,7 @@ class CloseLoop(EstimatorSettings):
         say = StageClock(self.progress or _quiet)  # times every stage it announces (report.json "stages")
         t_start = time.perf_counter()
         m_s = train.slider_mass_kg
-        dtr = train.df
-        dte = test.df if test is not None else None
+        dtr, dte = train.df, (test.df if test is not None else None)
         sess = session(dtr, dte)   # the runs on the clock, for both derivations of logged channels
         dtr, dte, aux_rec, responses = prepare_channels(dtr, dte, responses)   # derivable names, flags, labels, gaps
         response_rec = response_tests(dtr, responses)   # columns that follow the speed: responses unless set
@@ -167,6 +167,7 @@ class CloseLoop(EstimatorSettings):
         dtr, dte, event_rec = with_event_clocks(dtr, dte, responses, sess)
         dtr, dte, lag_rec = with_lagged_channels(dtr, dte, responses, sess)
         dtr, dte, pause_rec = with_pause_channel(dtr, dte, sess)
+        dtr, dte, clock_rec = with_run_clock(dtr, dte)   # the time since each run's start, along the stroke only
         mask_tr = np.array(train.mask)
         folds = stratified_folds(dtr, self.refit_folds, self.seed)   # TRAIN's run folds, one split for the fit
 
@@ -249,7 +250,7 @@ class CloseLoop(EstimatorSettings):
                      "response_test": with_applied(response_rec, self.response_columns, responses),
                      "event_clocks": event_rec,
                      "lagged_channels": lag_rec,
-                     "pause_channel": pause_rec,
+                     "pause_channel": pause_rec, "run_clock": clock_rec,
                      "unseen_levels": runlevel.unseen_test_levels(it.effects.candidates, dte),
                      "channel_ranges": runlevel.channel_ranges(it.effects.candidates, dtr, dte)}
         diagnosis["channels_considered"] = with_response_test(
@@ -451,8 +452,9 @@ class CloseLoop(EstimatorSettings):
         """
         ch = chain.speed_channel(dtr, mask, k=self.k_folds, seed=self.seed)
         rec = {k: v for k, v in ch.items() if k != "filter"}
-        rec["sensor_gain"] = chain.stroke_gain(dtr, [c["name"] for c in channels_of(dtr, self.response_columns_)
-                                                     if c["kind"] != "response"], alpha=self.alpha)
+        rec["sensor_gain"] = chain.stroke_gain(   # run means: not of a response or of a sample-only kind
+            dtr, [c["name"] for c in channels_of(dtr, self.response_columns_)
+                  if c["kind"] not in ("response",) + fx_channels.SAMPLE_ONLY_KINDS], alpha=self.alpha)
         if "filter" in ch:
             rec["filter"] = ch["filter"].to_dict()
         if not ch["accepted"]:

@@ -42,7 +42,9 @@ response that saturates, which the even square cannot take); a logged channel on
 the linear shape, its curvature is the generic time spline's, :mod:`l1b2.predictor.effects.generic`; and at one of
 two levels: ``run`` (``c`` is the run's mean of the channel: an effect that differs between runs, not along the
 stroke) or ``sample`` (``c`` is the sample's value: along the stroke; listed only for a channel that varies within
-runs).
+runs). The run's own clock :data:`RUN_CLOCK` (kind ``run_clock``, :data:`SAMPLE_ONLY_KINDS`) is listed at the
+``sample`` level only (:func:`levels_of`) and has no run-level signal: its run mean is half the run's duration, a
+response of the motor's speed, not a cause. Its effect growing with V0 is its ``force_factor`` form.
 
 A channel's effect may also grow with an input of the model (``by``, :data:`INTERACTIONS`): the form's force times
 ``(1 + u)``-like, two sets of columns, ``factor shape(z)`` and ``factor shape(z) u``, ``u = |m| / m_max`` (the
@@ -73,7 +75,8 @@ deviation of a sample's value from its run's mean, in the signal's units) and
 the export refuses one whose spread exceeds :data:`RUN_CONSTANT_TOL` standard
 deviations of the signal. The session clock ``time_s`` has no input (the FMU's
 own time is the session clock; its run mean changes along the run): a model
-reading it as a channel is not exported.
+reading it as a channel is not exported. The run clock :data:`RUN_CLOCK` is an input named after it, at the
+sample level only: the host computes it from its own clock (the time since the run's drive started).
 """
 
 from __future__ import annotations
@@ -104,6 +107,12 @@ INTERACTIONS = ("load",)
 INTERACTION_SHAPES = ("linear", "quadratic")
 #: the session clock's column: the recording protocol's signal, always a candidate
 SESSION_TIME = "time_s"
+#: the run's own clock, the time since the run's first sample [s] (derived by :mod:`l1b2.closeloop.runclock`): a
+#: channel of kind ``"run_clock"``, a kind of :data:`SAMPLE_ONLY_KINDS`
+RUN_CLOCK = "time_in_run_s"
+#: the channel kinds offered at the ``sample`` level only: no run-level form, no run-level signal. A run's mean of
+#: its own clock is half the run's duration, set by the motor's speed over the stroke: a response, not a cause
+SAMPLE_ONLY_KINDS = ("run_clock",)
 #: logged columns that are measured *responses* of the motor, not causes: listed, never candidates. A regressor
 #: that is the motor's own response (the vibrometer's tip-velocity amplitude follows the drive force the model
 #: predicts) would stand in for the model instead of explaining it, and a predictor needing it could not predict
@@ -136,11 +145,13 @@ def fmu_signal(key: str) -> str | None:
     A signal of :data:`SIGNALS` is itself; ``col:<column>`` and ``run:<column>`` of a column of
     :data:`INPUT_COLUMNS` are that input; of the session clock :data:`SESSION_TIME`, None; of any other column,
     ``col:<column>``, the signal of the column's own input (:func:`channel_inputs`). Either level is the input's
-    current value: for ``run:`` exact when the input is constant within a run.
+    current value: for ``run:`` exact when the input is constant within a run. The run clock :data:`RUN_CLOCK`
+    is an input at the sample level only: its run mean (half the run's duration) is known only when the run ends,
+    so ``run:`` of it is None.
     """
     if key in SIGNALS:
         return key
-    if key[:4] in ("col:", "run:") and key[4:] and key[4:] != SESSION_TIME:
+    if key[:4] in ("col:", "run:") and key[4:] and key[4:] != SESSION_TIME and key != "run:" + RUN_CLOCK:
         return INPUT_COLUMNS.get(key[4:], "col:" + key[4:])
     return None
 
@@ -299,7 +310,7 @@ class Channel(Effect):
             load_abs = float(train.ranges.get("load_abs", 0.0)) if logged else 0.0
             damping = np.nan if train.damping_N_s_per_m is None else float(train.damping_N_s_per_m)
             m_s = float(getattr(train, "m_s", 0.0) or 0.0) if logged else 0.0
-            for level in LEVELS if ch.get("within_run", True) else ("run",):
+            for level in levels_of(ch):
                 for shape in SHAPES if logged else SHAPES[:1]:
                     for by in ("",) + (INTERACTIONS if load_abs > 0 and shape in INTERACTION_SHAPES else ()):
                         for form in _forms(logged and not by, m_s, shape):
@@ -327,6 +338,15 @@ class Channel(Effect):
             family=f"channel_{name}", regressor=reg, generic=True, also=(regressor_of(_BY_COLUMN[by]),) if by else (),
             description=f"{ch.get('kind', 'logged')} channel {name} ({'run mean' if level == 'run' else 'per sample'}"
                         f"{extra}) {_FORM_TEXT[form]}{', growing with the load' if by else ''}")
+
+
+def levels_of(ch) -> tuple:
+    """The levels a channel record (:func:`l1b2.closeloop.candidates.channels_of`) is offered at: ``sample`` only
+    for a kind of :data:`SAMPLE_ONLY_KINDS` (the run clock), both :data:`LEVELS` for a channel that varies within
+    runs, ``run`` only for one constant within every run."""
+    if ch.get("kind") in SAMPLE_ONLY_KINDS:
+        return ("sample",)
+    return LEVELS if ch.get("within_run", True) else ("run",)
 
 
 def _forms(own: bool, m_s: float, shape: str) -> tuple:
@@ -593,10 +613,12 @@ class RunLevel(Effect):
         return out
 
     def grid(self, train):
-        """The run-level hypothesis of every candidate channel (standardised by TRAIN's sample mean and sd) and
-        of the session clock. The loop does not list these: its run-level analysis offers :meth:`hypotheses`
-        standardised by the runs' own values, for the signals whose evidence is significant."""
-        chans = [ch for ch in train.channels if ch.get("sd", 0) > 0 and ch.get("kind") not in ("response", "label")]
+        """The run-level hypothesis of every candidate channel (standardised by TRAIN's sample mean and sd; not a
+        response, a label or a kind of :data:`SAMPLE_ONLY_KINDS`) and of the session clock. The loop does not list
+        these: its run-level analysis offers :meth:`hypotheses` standardised by the runs' own values, for the signals
+        whose evidence is significant."""
+        chans = [ch for ch in train.channels if ch.get("sd", 0) > 0
+                 and ch.get("kind") not in ("response", "label") + SAMPLE_ONLY_KINDS]
         if not any(ch["name"] == SESSION_TIME for ch in chans):
             t0, t1 = train.time_range
             chans.append({"name": SESSION_TIME, "mean": 0.5 * (t0 + t1), "sd": (t1 - t0) / np.sqrt(12.0)})

@@ -1,0 +1,63 @@
+"""The run's own clock: the time since each run's first sample, as a channel offered along the stroke only.
+
+A drive or supply state that evolves after the drive starts (a bench supply in current limit whose bus sags as
+the bridge draws, a driver's soft start, a warm-up of the bridge) is a function of the time since the run began,
+not of the session clock and not of the position: within one direction the distance from the start end is the
+run's clock only at one speed, and runs at several speeds reach the same distance at different times. For every
+session the loop therefore derives the logged column :data:`COLUMN`:
+
+    ``t - t_0(run)`` [s], ``t_0(run)`` the run's earliest ``time_s`` (its first sample),
+
+and considers it as one more candidate channel of kind ``"run_clock"``
+(:data:`l1b2.predictor.effects.channels.SAMPLE_ONLY_KINDS`): every form and shape of
+:mod:`l1b2.predictor.effects.channels` (its ``force_factor`` form is the effect that grows with V0), at the
+``sample`` level only (:func:`l1b2.predictor.effects.channels.levels_of`), with no run-level signal
+(:func:`l1b2.closeloop.runlevel.run_signals`) and no run-level hypothesis. The rule is general: a run's mean of its
+own clock is half the run's duration, which the motor's speed over the stroke sets, so a run-level form of it would
+read a response of the motor as a cause. The derivation reads only the clock and the run ids, each run on its own
+(no session order, no imputation), and is the same for TRAIN and TEST.
+
+The column is derived when some TRAIN run lasts longer than zero (a run of one sample has no clock). ``Predictor.fmu``
+reads it like any logged channel's, an input named after it: the host computes it from its own clock as defined
+above (the time since the run's drive started).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from ..data import measurements as dataio
+from ..predictor.effects.channels import RUN_CLOCK
+
+#: the derived column: the time since the run's first sample [s]
+COLUMN = RUN_CLOCK
+
+
+def time_in_run_s(df: pd.DataFrame) -> np.ndarray:
+    """Each sample's time since its run's first sample [s]: ``time_s`` minus the run's smallest ``time_s``."""
+    t = df[dataio.TIME].to_numpy(float)
+    return t - df.groupby(dataio.RUN, sort=False)[dataio.TIME].transform("min").to_numpy(float)
+
+
+def with_run_clock(train: pd.DataFrame, test: pd.DataFrame | None = None):
+    """``(train, test, record)``: copies of the frames with :data:`COLUMN` appended when some TRAIN run lasts
+    longer than zero (``test`` None stays None), and ``record`` ``{"column", "derived", "duration_s": {"min",
+    "median", "max"}}`` (TRAIN's run durations; module docstring).
+
+    The frames are returned unchanged (not copied) when the column is not derived or TRAIN already has it.
+    """
+    dur = train.groupby(dataio.RUN, sort=False)[dataio.TIME].agg(np.ptp).to_numpy(float)
+    record = {"column": COLUMN, "derived": False,
+              "duration_s": ({"min": float(dur.min()), "median": float(np.median(dur)), "max": float(dur.max())}
+                             if dur.size else {})}
+    if COLUMN in train.columns or not (dur.size and dur.max() > 0):
+        return train, test, record
+    out = []
+    for df in (train, test):
+        if df is not None:
+            df = df.copy()
+            df[COLUMN] = time_in_run_s(df)
+        out.append(df)
+    record["derived"] = True
+    return out[0], out[1], record

@@ -1,0 +1,160 @@
+"""The run's own clock as a channel: the time since each run's first sample, offered along the stroke only.
+
+Fast tests against the definition written out (``t - t_0(run)``) and against the rule that the run clock has no
+run-level form, no run-level signal and no FMU input for its run mean, while a logged channel with the very same
+values keeps all of those (so each assertion could fail)."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+DT = 0.1   # the clock's sample interval [s]
+
+
+def _session(starts, lengths, run0=1):
+    """Runs of ``lengths[k]`` samples DT apart starting at ``starts[k]`` [s]; V0, load and direction vary by run."""
+    rows = []
+    for k, (t0, n) in enumerate(zip(starts, lengths)):
+        for i in range(n):
+            rows.append({"time_s": t0 + DT * i, "run": run0 + k, "position_m": 0.001 * i,
+                         "voltage_V": 200.0 + 20.0 * k, "direction": 1 if k % 2 == 0 else -1,
+                         "load_kg": 0.01 * (k % 3), "speed_m_s": 0.1})
+    return pd.DataFrame(rows)
+
+
+def test_the_column_is_each_samples_time_since_its_runs_first_sample():
+    from l1b2.closeloop.runclock import COLUMN, with_run_clock
+    train = _session([0.0, 5.0, 12.3], [4, 6, 3])
+    test = _session([2.0, 20.0], [5, 2], run0=11)
+    test = test.iloc[::-1].reset_index(drop=True)          # rows out of time order: the run's first sample is its
+    tr, te, rec = with_run_clock(train, test)              # earliest, not its first row
+    assert rec["derived"] and COLUMN == "time_in_run_s"
+    # written out: sample i of a run is i DT after the run's start
+    want_tr = np.concatenate([DT * np.arange(n) for n in (4, 6, 3)])
+    np.testing.assert_allclose(tr[COLUMN].to_numpy(), want_tr, atol=1e-12)
+    want_te = np.concatenate([DT * np.arange(n) for n in (5, 2)])[::-1]
+    np.testing.assert_allclose(te[COLUMN].to_numpy(), want_te, atol=1e-12)
+    assert COLUMN not in train.columns and COLUMN not in test.columns   # copies, the inputs untouched
+    assert rec["duration_s"] == pytest.approx({"min": 2 * DT, "median": 3 * DT, "max": 5 * DT})
+
+
+def test_runs_of_one_sample_give_no_column_and_a_present_column_is_kept():
+    from l1b2.closeloop.runclock import COLUMN, with_run_clock
+    train = _session([0.0, 1.0, 2.0], [1, 1, 1])
+    tr, te, rec = with_run_clock(train, None)
+    assert tr is train and te is None and not rec["derived"]
+    two = _session([0.0, 1.0], [3, 3])
+    two[COLUMN] = 7.0
+    tr, _, rec = with_run_clock(two, None)
+    assert tr is two and not rec["derived"] and (tr[COLUMN] == 7.0).all()
+
+
+def _channels(df):
+    from l1b2.closeloop.candidates import channels_of
+    return {c["name"]: c for c in channels_of(df)}
+
+
+def _with_clock_and_twin():
+    """A TRAIN frame with the run clock and ``twin_s``, a logged channel holding the very same values."""
+    from l1b2.closeloop.runclock import COLUMN, with_run_clock
+    tr, _, _ = with_run_clock(_session([0.0, 5.0, 12.3, 20.0, 31.0, 40.0], [4, 6, 3, 5, 4, 6]), None)
+    tr["twin_s"] = tr[COLUMN]
+    return tr, COLUMN
+
+
+def _summary(df):
+    """A TRAIN summary with the frame's channel records (slider 0.04 kg, largest load 0.02 kg)."""
+    from l1b2.predictor import effects as fx
+    return fx.TrainingSummary(0.04, (0.0, 41.0), (0.0, 0.006), 250.0, {"load_abs": 0.02},
+                              channels=tuple(_channels(df).values()))
+
+
+def test_the_run_clock_is_offered_at_the_sample_level_only():
+    from l1b2.predictor import effects as fx
+    tr, col = _with_clock_and_twin()
+    chans = _channels(tr)
+    assert chans[col]["kind"] == "run_clock" and chans[col]["within_run"]
+    assert chans["twin_s"]["kind"] == "logged"
+    hyps = fx.family("channel").grid(_summary(tr))
+    mine = [h for h in hyps if h.spec["channel"] == col]
+    twin = [h for h in hyps if h.spec["channel"] == "twin_s"]
+    assert mine and {h.spec["level"] for h in mine} == {"sample"}
+    assert {h.spec["level"] for h in twin} == {"sample", "run"}          # the same values as a logged channel
+    # the sample-level forms are all the logged channel's: every form, shape and the load interaction; the form
+    # that grows with V0 (force_factor) among them
+    assert ({(h.spec["form"], h.spec.get("shape", "linear"), h.spec.get("by", "")) for h in mine}
+            == {(h.spec["form"], h.spec.get("shape", "linear"), h.spec.get("by", "")) for h in twin
+                if h.spec["level"] == "sample"})
+    assert any(h.spec["form"] == "force_factor" for h in mine)
+    assert all(h.family == f"channel_{col}" for h in mine)
+    # no run-level hypothesis of the run-level family either
+    runs = {h.spec["channel"] for h in fx.family("run_level").grid(_summary(tr))}
+    assert "twin_s" in runs and col not in runs
+
+
+def test_the_run_clock_has_no_run_level_signal():
+    from l1b2.closeloop.runlevel import run_signals
+    tr, col = _with_clock_and_twin()
+    names = {sg["channel"] for sg in run_signals(tr, tuple(_channels(tr).values()))}
+    assert "twin_s" in names and col not in names
+    assert "voltage_V" in names                                          # the inputs' signals are still there
+
+
+def test_the_levels_rule():
+    from l1b2.predictor.effects.channels import LEVELS, levels_of
+    assert levels_of({"kind": "run_clock", "within_run": True}) == ("sample",)
+    assert levels_of({"kind": "logged", "within_run": True}) == LEVELS
+    assert levels_of({"kind": "logged", "within_run": False}) == ("run",)
+
+
+def test_the_fmu_reads_the_run_clock_as_an_input_along_the_run_and_refuses_its_run_mean():
+    from l1b2.closeloop.runclock import COLUMN
+    from l1b2.predictor.effects.channels import channel_inputs, export_problem, fmu_signal
+    assert fmu_signal("col:" + COLUMN) == "col:" + COLUMN
+    assert fmu_signal("run:" + COLUMN) is None
+    assert fmu_signal("run:twin_s") == "col:twin_s"                       # a logged channel's run mean has one
+    spec = {"kind": "channel", "channel": COLUMN, "form": "force_factor", "level": "sample", "mean": 1.5, "sd": 0.8}
+    assert export_problem(spec) is None
+    assert channel_inputs([spec]) == {COLUMN: pytest.approx(1.5)}
+    assert export_problem({**spec, "level": "run", "run_spread": 0.0}) == "no input: run:" + COLUMN
+
+
+def test_the_fmu_block_declares_the_run_clock_as_an_input_in_seconds():
+    from test_predictor_fmu_channels import _effect, _setups
+    from l1b2.cosim.composite import PredictorBlock
+    from l1b2.predictor.effects import ExtendedPredictor
+    from l1b2.predictor import effects as fx
+    tr, col = _with_clock_and_twin()
+    h = next(h for h in fx.family("channel").grid(_summary(tr)) if h.spec["channel"] == col
+             and h.spec["form"] == "force_factor" and h.spec.get("shape", "linear") == "linear"
+             and not h.spec.get("by"))
+    base, refit = _setups()
+    ep = ExtendedPredictor(base, refit, (_effect(h, (0.05,)),), None, {"train": "train.csv"})
+    assert ep.channel_inputs == pytest.approx({col: h.spec["mean"]})
+    ins = {v.name: v for v in PredictorBlock.variables(ep) if v.causality == "input"}
+    assert col in ins and ins[col].unit == "s"
+
+
+def test_a_logged_column_named_like_the_run_clock_is_set_aside():
+    from l1b2.closeloop.derived import is_derivable_name, set_aside_derivable_names
+    from l1b2.closeloop.runclock import COLUMN, with_run_clock
+    assert is_derivable_name(COLUMN, ["time_s"]) and not is_derivable_name("time_in_runs", ["time_s"])
+    train = _session([0.0, 5.0], [3, 3])
+    train[COLUMN] = 9.0                                                  # a logger's own column of that name
+    tr, _, record = set_aside_derivable_names(train, None)
+    assert COLUMN + "_logged" in tr.columns and COLUMN not in tr.columns
+    assert record[0]["from"] == COLUMN
+    tr, _, rec = with_run_clock(tr, None)
+    assert rec["derived"] and (tr[COLUMN + "_logged"] == 9.0).all()
+    np.testing.assert_allclose(tr[COLUMN].to_numpy(), np.tile(DT * np.arange(3), 2), atol=1e-12)
+
+
+def test_the_reports_run_clock_record_survives_a_round_trip_and_an_older_report_loads():
+    from l1b2.closeloop.report import Diagnosis
+    from l1b2.closeloop.runclock import with_run_clock
+    _, _, rec = with_run_clock(_session([0.0, 5.0], [3, 4]), None)
+    old = {"significant": False, "traced_to": [], "effect": None, "effect_shape": None,
+           "effect_description": None, "effects": [], "message": "no significant missing effect"}
+    assert Diagnosis.from_dict(old).run_clock == {}
+    d = Diagnosis.from_dict({**old, "run_clock": rec})
+    assert d.to_dict()["run_clock"] == rec and Diagnosis.from_dict(d.to_dict()) == d
