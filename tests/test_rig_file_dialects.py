@@ -187,6 +187,13 @@ def test_a_test_run_that_is_a_train_run_is_refused(tmp_path):
     assert "TEST run 3 is TRAIN run 3" in str(info.value) and info.value.row == 1 and "cut.csv" in str(info.value)
     other = write(tmp_path, [HEADER] + rows(t0=10.0, runs=(5, 6)), "other.csv")  # same shape, another recording
     assert load_train_test(train, other)[1].runs == [5, 6]
+    # the same plan simulated twice: equal stamps and positions, another measured speed (its own noise): accepted
+    resim = [ln.rsplit(",", 1)[0] + f",{float(ln.rsplit(',', 1)[1]) * 1.01}" for ln in rows(runs=(1, 2, 3, 4))]
+    assert load_train_test(train, write(tmp_path, [HEADER] + resim, "resim.csv"))[1].runs == [1, 2, 3, 4]
+    # without TEST's speed column (derived from position) the stamps and positions decide: refused
+    no_speed = [ln.rsplit(",", 1)[0] for ln in [HEADER] + rows(runs=(1, 2, 3, 4))[8:]]
+    with pytest.raises(DataFormatError, match="TEST run 3 is TRAIN run 3"):
+        load_train_test(train, write(tmp_path, no_speed, "derived.csv"))
 
 
 def test_a_test_speed_derived_while_trains_is_measured_is_named_in_the_checks(tmp_path):

@@ -27,7 +27,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import DataFormatError
-from .measurements import DIRECTION, FREQUENCY, LOAD, POSITION, RUN, VOLTAGE, Measurements, run_slices
+from .measurements import DIRECTION, FREQUENCY, LOAD, POSITION, RUN, SPEED, VOLTAGE, Measurements, run_slices
 from .gaps import gap_lines
 from .onset import onset_lines
 from .plausibility import uneven_step_lines, uneven_steps
@@ -215,7 +215,7 @@ def check_same_rig(train: Measurements, test: Measurements, *, explicit: Mapping
     if shared is not None:
         rid, row, train_rid = shared
         raise DataFormatError(test.meta.get("source") or "TEST", RUN, row + 1,
-                              f"TEST run {rid} is TRAIN run {train_rid} (the same time stamps and positions): a "
+                              f"TEST run {rid} is TRAIN run {train_rid} (the same recorded samples): a "
                               "held-out run must not be in TRAIN, or the TEST error is a training error (the same "
                               "file given twice, or TEST cut from the TRAIN file?)")
     from .plausibility import load_effect_mismatch, run_table
@@ -247,16 +247,20 @@ def check_same_rig(train: Measurements, test: Measurements, *, explicit: Mapping
 def shared_run(train: Measurements, test: Measurements) -> tuple[Any, int, Any] | None:
     """The first TEST run that is also a TRAIN run, or ``None``.
 
-    Two runs are the same recording when their ``time_s`` and
-    ``position_m`` columns are equal sample for sample (the clock runs on
-    over a rig's experiment, so two traverses never share their stamps).
-    Returns ``(test_run, first_row, train_run)`` with ``first_row`` the
-    0-based row of the TEST run's first sample.
+    Two runs are the same recording when their ``time_s``, ``position_m``
+    and, when both files log it, ``speed_m_s`` columns are equal sample for
+    sample (the clock runs on over a rig's experiment, so two traverses never
+    share their stamps, and a measured speed carries its own noise: two
+    simulated runs of one plan may share stamps and positions, never a
+    measured speed). Returns ``(test_run, first_row, train_run)`` with
+    ``first_row`` the 0-based row of the TEST run's first sample.
     """
+    measured = not (train.meta.get("speed_derived") or test.meta.get("speed_derived"))
+    cols = ["time_s", POSITION] + ([SPEED] if measured and SPEED in train.df and SPEED in test.df else [])
+
     def keys(m: Measurements) -> list[tuple[Any, int, bytes]]:
-        t = m.df["time_s"].to_numpy(dtype=float)
-        x = m.df[POSITION].to_numpy(dtype=float)
-        return [(rid, sl.start, t[sl].tobytes() + x[sl].tobytes()) for rid, sl in run_slices(m.df[RUN])]
+        arrays = [m.df[c].to_numpy(dtype=float) for c in cols]
+        return [(rid, sl.start, b"".join(a[sl].tobytes() for a in arrays)) for rid, sl in run_slices(m.df[RUN])]
     seen = {key: rid for rid, _, key in keys(train)}
     for rid, row, key in keys(test):
         if key in seen:
