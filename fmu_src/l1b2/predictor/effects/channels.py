@@ -113,6 +113,9 @@ RUN_CLOCK = "time_in_run_s"
 #: the channel kinds offered at the ``sample`` level only: no run-level form, no run-level signal. A run's mean of
 #: its own clock is half the run's duration, set by the motor's speed over the stroke: a response, not a cause
 SAMPLE_ONLY_KINDS = ("run_clock",)
+#: the channel kinds with no run-level hypothesis and no run-level signal: a response (never a candidate), a label
+#: (its codes have no order: its categorical family only) and the sample-only kinds
+NO_RUN_LEVEL_KINDS = ("response", "label") + SAMPLE_ONLY_KINDS
 #: logged columns that are measured *responses* of the motor, not causes: listed, never candidates. A regressor
 #: that is the motor's own response (the vibrometer's tip-velocity amplitude follows the drive force the model
 #: predicts) would stand in for the model instead of explaining it, and a predictor needing it could not predict
@@ -614,11 +617,11 @@ class RunLevel(Effect):
 
     def grid(self, train):
         """The run-level hypothesis of every candidate channel (standardised by TRAIN's sample mean and sd; not a
-        response, a label or a kind of :data:`SAMPLE_ONLY_KINDS`) and of the session clock. The loop does not list
+        kind of :data:`NO_RUN_LEVEL_KINDS`) and of the session clock. The loop does not list
         these: its run-level analysis offers :meth:`hypotheses` standardised by the runs' own values, for the signals
         whose evidence is significant."""
         chans = [ch for ch in train.channels if ch.get("sd", 0) > 0
-                 and ch.get("kind") not in ("response", "label") + SAMPLE_ONLY_KINDS]
+                 and ch.get("kind") not in NO_RUN_LEVEL_KINDS]
         if not any(ch["name"] == SESSION_TIME for ch in chans):
             t0, t1 = train.time_range
             chans.append({"name": SESSION_TIME, "mean": 0.5 * (t0 + t1), "sd": (t1 - t0) / np.sqrt(12.0)})
