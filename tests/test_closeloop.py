@@ -178,6 +178,24 @@ def test_control_without_effect_reports_nothing(seed, record_property):
     assert _check_control(res), res.diagnosis["message"]
     assert res.diagnosis["traced_to"] == [] and res.diagnosis["effect"] is None
     assert res.extended is None
+    _check_reasons(res)
+
+
+def _check_reasons(res):
+    """Every significant row of channels_considered that added nothing says why, in line with the refit trials,
+    and the report's table shows it."""
+    d = res.diagnosis
+    refit = {(r, t["effect"]) for r, rnd in enumerate(d["refit_trials"], 1) for t in rnd}
+    md = res.markdown()
+    for row in d["channels_considered"]:
+        why = row["not_added"]
+        assert (why is not None) == (row["significant"] and not row["added"]), row
+        assert why is None or f"no: {why}" in md, why
+        if why and why.startswith("refit in round "):
+            assert (int(why.split()[3].rstrip(":")), f"channel_{row['channel']}") in refit or any(
+                (int(why.split()[3].rstrip(":")), f"run_level_{e['signal']}") in refit for e in row["run_level"])
+        elif why:
+            assert f"channel_{row['channel']}" not in {f for _, f in refit}, (why, refit)
 
 
 @pytest.mark.slow
@@ -188,6 +206,8 @@ def test_control_ten_seeds(record_property):
         record_property("case", case_row("reference", f"clean {seed}", res))
     quiet = [_check_control(res) for res in runs]
     assert sum(quiet) >= 9
+    for res in runs:
+        _check_reasons(res)
 
 
 @pytest.fixture(scope="module")

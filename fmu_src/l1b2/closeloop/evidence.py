@@ -10,7 +10,7 @@ from . import runlevel
 from .selection import Score, best_per_family, position_basis
 
 __all__ = ["with_onset", "order_traced", "channels_considered", "position_share", "with_position_share",
-           "with_auxiliary"]
+           "with_auxiliary", "not_added_reason"]
 
 
 def order_traced(effects, speed_filter: bool, residual_trace, evidence=(), speed_evidence: bool = False,
@@ -96,7 +96,7 @@ def with_position_share(channels, df, mask, params) -> tuple:
 
 
 def channels_considered(channels, scores: list[Score], level: float, min_gain: float, added,
-                        run_level: runlevel.RunLevelAnalysis | None = None) -> list[dict]:
+                        run_level: runlevel.RunLevelAnalysis | None = None, trials=()) -> list[dict]:
     """``diagnosis.channels_considered``: every candidate channel and run-level signal with its first-round evidence.
 
     Per channel (:func:`l1b2.closeloop.candidates.channels_of`): its kind,
@@ -114,7 +114,8 @@ def channels_considered(channels, scores: list[Score], level: float, min_gain: f
     families of the candidate table). ``position_share``: the channel record's (:func:`with_position_share`; None
     when it has none): how much of the channel is a function of the position in the baseline's own series. What is,
     the baseline's re-identification absorbs, so a within-run form is credited only for the rest, and a channel
-    near 1 cannot be told from the position along the stroke.
+    near 1 cannot be told from the position along the stroke. ``not_added``: for a significant row that was not
+    added, why (:func:`not_added_reason` over ``trials``, the rounds' refit trials as dicts), else None.
     """
     from ..predictor.effects.channels import INPUT_SIGNALS, regressor_of
     best = {s.candidate.family: s for s in best_per_family(scores)}
@@ -159,7 +160,30 @@ def channels_considered(channels, scores: list[Score], level: float, min_gain: f
                     "note": "an input of the model: run-level evidence only" if rows
                     else "constant on TRAIN or not tested: no run-level evidence",
                     "run_level": [e.to_dict() for e in rows]})
+    for rec in out:
+        fams = {f"channel_{rec['channel']}"} | {f"run_level_{e['signal']}" for e in rec["run_level"]}
+        rec["not_added"] = (not_added_reason(fams, trials) if rec["significant"] and not rec["added"] else None)
     return out
+
+
+def not_added_reason(families, trials) -> str:
+    """Why significant evidence of ``families`` (a channel's family and its run-level forms) added nothing.
+
+    ``trials``: the loop's refit trials per round (:meth:`l1b2.closeloop.acceptance.RefitCV.to_dict`). When a
+    family was refit, its last trial's figures (it was refused by the acceptance rules); otherwise it was never
+    shortlisted: each round refits its strongest candidates first, and the first round's are named.
+    """
+    hits = [(r, t) for r, rnd in enumerate(trials, 1) for t in rnd if t["effect"] in families]
+    if hits:
+        r, t = hits[-1]
+        return (f"refit in round {r}: CV gain {t['cv_gain']:.1%}, {t['folds_improved']}/{t['folds']} folds "
+                f"improved, CV nrmse {t['cv_free_run_nrmse_current']:.2%} -> {t['cv_free_run_nrmse_refit']:.2%}: "
+                "refused")
+    if not trials or not trials[0]:
+        return "not refit: the loop refit no candidate"
+    first = ", ".join(dict.fromkeys(t["label"] for t in trials[0]))
+    return (f"not refit: stronger candidates were refit first (round 1: {first}); the loop ended after "
+            f"round {len(trials)}")
 
 
 def with_response_test(rows: list[dict], tests) -> list[dict]:

@@ -411,7 +411,8 @@ def markdown_report(rep: dict) -> str:
                              for e in c.get("run_level") or []) or "-"
             lines.append(f"| {c['channel']} | {c['kind']} | {c['regressor']} | {c['best'] or c['note']} | "
                          f"{_pct(c['cv_gain'], '.1%')} | {p} | {runl} | "
-                         f"{'yes' if c['significant'] else 'no'} | {'yes' if c['added'] else 'no'} |")
+                         f"{'yes' if c['significant'] else 'no'} | "
+                         f"{'yes' if c['added'] else ('no: ' + c['not_added'] if c.get('not_added') else 'no')} |")
     lines += response_test_lines(d.get("response_test") or [])
     if d.get("auxiliary_columns"):
         lines += ["", "Auxiliary columns not numeric and finite as logged (flags, text labels, gaps):", ""]
