@@ -4,7 +4,6 @@ from types import SimpleNamespace
 
 import numpy as np
 from l1b2.closeloop.evidence import channels_considered, not_added_reason
-from l1b2.closeloop.result import CloseLoopResult
 from l1b2.closeloop.selection import Score
 
 
