@@ -153,7 +153,7 @@ def test_a_channel_named_like_a_predictor_variable_is_refused_and_the_drive_freq
 
 def test_a_settings_step_is_an_input_of_its_own_that_the_host_computes_not_the_drive_amplitude():
     # reference: the run-level force written out, F = z (a V0/300 + b + c g d m), z = (step - mean)/sd, read from the
-    # input named after the derived column (closeloop.lags: voltage_V_step), never from V0
+    # input named after the derived column (closeloop.lags: voltage_V_step), never from V0; in V, the voltage's unit
     from l1b2.closeloop.lags import STEP_SUFFIX
     name = "voltage_V" + STEP_SUFFIX
     assert ch.fmu_signal("run:" + name) == "col:" + name and ch.fmu_signal("run:voltage_V") == "V0"
@@ -164,7 +164,7 @@ def test_a_settings_step_is_an_input_of_its_own_that_the_host_computes_not_the_d
     ep = ExtendedPredictor(base, refit, (_effect(h, (a, b, c)),), None, {})
     ins = {v.name: v for v in PredictorBlock.variables(ep) if v.causality == "input"}
     assert list(ins) == ["V0", "s", "load", "direction", "frequency_Hz", name]
-    assert ins[name].start == pytest.approx(12.0) and ins[name].unit == "1"
+    assert ins[name].start == pytest.approx(12.0) and ins[name].unit == "V"
     V0, m, d = 290.0, 0.02, 1.0
     f = _stepped_force(ep, V0=V0, load=m, direction=d, **{name: 72.0})
     assert f == pytest.approx((72.0 - 12.0) / 60.0 * (a * V0 / 300.0 + b + c * G * d * m), rel=1e-12)

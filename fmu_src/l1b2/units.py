@@ -16,6 +16,7 @@ This is the bottom layer: it imports nothing of the package.
 from __future__ import annotations
 
 import math
+import re
 
 from dataclasses import dataclass
 
@@ -72,6 +73,7 @@ UNITS: dict[str, UnitDef] = {
     "N/K2": UnitDef(kg=1, m=1, s=-2, K=-2),
     "N/m": UnitDef(kg=1, s=-2),
     "N.s/m": UnitDef(kg=1, s=-1),
+    "K": UnitDef(K=1),
     # units a rig's logged auxiliary channel may name in its column's suffix (:func:`column_unit`)
     "A": UnitDef(A=1),
     "W": UnitDef(kg=1, m=2, s=-3),
@@ -143,25 +145,82 @@ def data_unit(name: str | None) -> str | None:
 #: ``temperature_C``)
 SUFFIX_UNITS: dict[str, str] = {"C": "degC"}
 
+#: the name of a channel derived as the low-pass of column ``X`` over ``n`` run periods is ``X + lag_suffix(n)``
+#: (:func:`lag_suffix`); this pattern matches that suffix for any ``n``
+LAG_SUFFIX_RE = re.compile(r"_lag[0-9]+r$")
+#: the name of a channel derived as a setting's step from its previous different setting: ``X + STEP_SUFFIX``
+STEP_SUFFIX = "_step"
+#: the name of a channel that is the natural logarithm of a quantity in a unit: ``LOG_PREFIX + Q`` where ``Q``
+#: names the quantity with its unit by the naming rule (``ln_pause_s``: ``ln(pause / 1 s)``)
+LOG_PREFIX = "ln_"
+#: the unit of a difference of two values of an offset unit (a step of a temperature in degC is in K)
+DIFFERENCE_UNITS: dict[str, str] = {"degC": "K"}
+
+
+def lag_suffix(n) -> str:
+    """The suffix of the channel derived as a column's low-pass over ``n`` run periods (``_lag3r``)."""
+    return f"_lag{n}r"
+
+
+def _derived_base(name: str) -> tuple[str, str] | None:
+    """``(kind, base)`` of a name built as ``base + suffix`` (kind ``"lag"`` or ``"step"``), or ``LOG_PREFIX + base``
+    (kind ``"log"``); None for any other name."""
+    m = LAG_SUFFIX_RE.search(name)
+    if m and m.start() > 0:
+        return "lag", name[:m.start()]
+    if name.endswith(STEP_SUFFIX) and len(name) > len(STEP_SUFFIX):
+        return "step", name[:-len(STEP_SUFFIX)]
+    if name.startswith(LOG_PREFIX) and len(name) > len(LOG_PREFIX):
+        return "log", name[len(LOG_PREFIX):]
+    return None
+
 
 def column_unit(name: str) -> str | None:
     """The unit of a measured-data column as a key of :data:`UNITS`, None when neither the data format nor the
     name says it.
 
-    A column of the data format has its unit (:func:`data_unit`, ``"-"`` as ``"1"``); any other column's name
-    gives it by its suffix, the rig's naming rule (``line_pressure_bar``, ``supply_V``, ``belt_speed_m_s``): the
-    last two ``_``-separated parts read as a quotient (``m_s`` -> ``m/s``) or the last part, when that is a unit
-    of :data:`UNITS` other than ``1`` or of :data:`SUFFIX_UNITS` (``C`` -> ``degC``).
+    A column of the data format has its unit (:func:`data_unit`, ``"-"`` as ``"1"``). A name built from another by
+    the naming rule of derived channels has the unit its construction gives, when the other name has one:
+
+    * ``X_lag<n>r`` (:data:`LAG_SUFFIX_RE`, a low-pass of ``X``): ``X``'s unit;
+    * ``X_step`` (:data:`STEP_SUFFIX`, a difference of two values of ``X``): ``X``'s unit, an offset unit's
+      coherent one (:data:`DIFFERENCE_UNITS`: degC -> K);
+    * ``ln_Q`` (:data:`LOG_PREFIX`, ``ln(Q / 1 unit)`` of a quantity ``Q`` in a unit): ``1`` (:func:`unit_note` says
+      of what, in which unit).
+
+    Any other column's name gives it by its suffix, the rig's naming rule (``line_pressure_bar``, ``supply_V``,
+    ``belt_speed_m_s``, the event clock ``X_since_s``): the last two ``_``-separated parts read as a quotient
+    (``m_s`` -> ``m/s``) or the last part, when that is a unit of :data:`UNITS` other than ``1`` or of
+    :data:`SUFFIX_UNITS` (``C`` -> ``degC``).
     """
     known = data_unit(name)
     if known is not None:
         return "1" if known == "-" else known
+    derived = _derived_base(str(name))
+    if derived is not None:
+        kind, base = derived
+        unit = column_unit(base)
+        if unit is not None:
+            return "1" if kind == "log" else DIFFERENCE_UNITS.get(unit, unit) if kind == "step" else unit
     parts = str(name).split("_")[1:]
     for suffix in (["/".join(parts[-2:])] if len(parts) >= 2 else []) + parts[-1:]:
         unit = SUFFIX_UNITS.get(suffix, suffix)
         if unit in UNITS and unit != "1":   # a trailing number is an index, not the unit 1
             return unit
     return None
+
+
+def unit_note(name: str) -> str:
+    """What the unit of column ``name`` (:func:`column_unit`) does not say, for a description: for a logarithm
+    ``ln_Q`` whose ``Q`` has a unit ``u``, ``"ln(Q / 1 u): the natural logarithm of Q in u, dimensionless"``; for a
+    lag or a step of such a logarithm the same; else ``""``."""
+    derived = _derived_base(str(name))
+    while derived is not None and derived[0] != "log":
+        derived = _derived_base(derived[1])
+    if derived is None or column_unit(derived[1]) is None:
+        return ""
+    q, u = derived[1], column_unit(derived[1])
+    return f"ln({q} / 1 {u}): the natural logarithm of {q} in {u}, dimensionless"
 
 
 def tidy_float(x: float, digits: int = 12) -> float:

@@ -47,6 +47,8 @@ import numpy as np
 import pandas as pd
 
 from ..data import measurements as dataio
+# the suffixes of the lags and of the step (``_lag<n>r``, ``_step``): the naming rule that gives each its column's unit
+from ..units import STEP_SUFFIX, lag_suffix
 from .auxiliary import varies_within_runs
 from .candidates import channels_of
 from .events import MIN_BLOCK_RUNS, Session, event_times, run_table, session
@@ -57,13 +59,12 @@ TAU_RUNS = (3, 10)
 STORED_INPUTS = (dataio.VOLTAGE,)
 #: the state of each stored input before the session (the drive off): the previous setting of the first run
 BEFORE_SESSION = {dataio.VOLTAGE: 0.0}
-#: the column suffix of a stored input's step from its previous setting (module docstring)
-STEP_SUFFIX = "_step"
 
 
 def suffix(n) -> str:
-    """The column suffix of the lag of ``n`` run periods."""
-    return f"_lag{n}r"
+    """The column suffix of the lag of ``n`` run periods (:func:`l1b2.units.lag_suffix`, whose naming rule gives the
+    lag its column's unit)."""
+    return lag_suffix(n)
 
 
 def lowpass(t, c, tau: float) -> np.ndarray:

@@ -38,11 +38,14 @@ import numpy as np
 import pandas as pd
 
 from ..data import measurements as dataio
+from ..units import LOG_PREFIX
 from .events import Session, session
 
-#: the derived column: the logarithm of the pause before each run over :data:`REFERENCE_S`
-COLUMN = "ln_pause_s"
-#: the reference time [s] of the logarithm (the unit: the standardised channel does not depend on it)
+#: the derived column: the logarithm of the pause before each run over :data:`REFERENCE_S`, named by the naming rule
+#: of a logarithm (:data:`l1b2.units.LOG_PREFIX`): ``ln(pause_s / 1 s)``, dimensionless (:func:`l1b2.units.column_unit`)
+COLUMN = LOG_PREFIX + "pause_s"
+#: the reference time [s] of the logarithm: 1 s, the unit the column's name states (the standardised channel does
+#: not depend on it)
 REFERENCE_S = 1.0
 #: the smallest ratio of TRAIN's longest to its shortest known pause for the column to be derived: a doubling of
 #: the rest, a third of a decade of the log law (a span below it carries the log law's effect over less than that)

@@ -28,7 +28,7 @@ from ..predictor.effects import ExtendedPredictor
 from ..predictor.frequency import FrequencyResponse, effective_voltage
 from ..predictor.model import PredictorParams
 from ..predictor.setup import PredictorSetup
-from ..units import COLUMN_UNITS, column_unit
+from ..units import COLUMN_UNITS, column_unit, unit_note
 from .blocks import SUBSYSTEM_BLOCKS, Block, Var, parameter_vars
 from .engine import InProcessMotor, state_getter
 
@@ -601,14 +601,16 @@ RAIL_PARAMETERS = {"lo_m_s": "speed_rail_lo", "hi_m_s": "speed_rail_hi"}
 def channel_input(column: str, start: float, source: str) -> Var:
     """The input of ``Predictor.fmu`` that gives a logged channel's signals to the effects reading it.
 
-    Named after the column; its unit from the column's name (:func:`l1b2.units.column_unit`; ``1`` when the name
-    does not say it, which the description states); its start value ``start``, TRAIN's mean of the channel;
-    unbounded (a non-finite value is refused).
+    Named after the column; its unit from the column's name (:func:`l1b2.units.column_unit`, a derived channel's
+    by the naming rule of its derivation; ``1`` when the name does not say it, which the description states; a
+    logarithm's description says of what in which unit, :func:`l1b2.units.unit_note`); its start value ``start``,
+    TRAIN's mean of the channel; unbounded (a non-finite value is refused).
     """
-    unit = column_unit(column)
+    unit, note = column_unit(column), unit_note(column)
     return Var(column, "input", unit or "1",
                f"logged channel {column} of the calibration data ({source}), read by the identified effects (a "
                "run-level effect reads its current value as the run's); start: TRAIN's mean"
+               + (f"; {note}" if note else "")
                + ("" if unit else "; its unit is not known from its name: the column's own"), start=float(start))
 
 

@@ -21,7 +21,7 @@ the range than ``tolerance`` x the range's width (at least
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import pandas as pd
@@ -34,7 +34,7 @@ from .plausibility import uneven_step_lines, uneven_steps
 
 __all__ = ["RANGE_COLUMNS", "DEFAULT_TOLERANCE", "MIN_TOLERANCE", "data_range", "outside_range",
            "summarize_outside", "values_outside", "FREQUENCY_REL_SPREAD", "run_frequencies", "frequency_varies",
-           "input_checks", "data_check_lines", "RIG_SETTINGS", "check_same_rig", "shared_run", "runs_of_two",
+           "input_checks", "data_check_lines", "RIG_SETTINGS", "check_same_rig", "SHARED_SHARE", "SharedRun", "shared_run", "runs_of_two",
            "speed_source_lines"]
 
 #: The prediction inputs whose range is checked (unit in the name); a direction TRAIN never drove is outside.
@@ -213,11 +213,12 @@ def check_same_rig(train: Measurements, test: Measurements, *, explicit: Mapping
     explicit = explicit or {}
     shared = shared_run(train, test)
     if shared is not None:
-        rid, row, train_rid = shared
-        raise DataFormatError(test.meta.get("source") or "TEST", RUN, row + 1,
-                              f"TEST run {rid} is TRAIN run {train_rid} (the same recorded samples): a "
-                              "held-out run must not be in TRAIN, or the TEST error is a training error (the same "
-                              "file given twice, or TEST cut from the TRAIN file?)")
+        what = (f"is TRAIN run {shared.train_run} (the same recorded samples)" if shared.same
+                else f"shares {shared.shared} of its {shared.samples} samples with TRAIN run {shared.train_run} (the "
+                     "same time stamp, position and speed; the first at this row)")
+        raise DataFormatError(test.meta.get("source") or "TEST", RUN, shared.row,
+                              f"TEST run {shared.run} {what}: a held-out run must not be in TRAIN, or the TEST error "
+                              "is a training error (the same file given twice, or TEST cut from the TRAIN file?)")
     from .plausibility import load_effect_mismatch, run_table
     found = load_effect_mismatch(run_table(train.df), run_table(test.df))
     if found is not None:
@@ -244,28 +245,72 @@ def check_same_rig(train: Measurements, test: Measurements, *, explicit: Mapping
                                   "give the value as an option")
 
 
-def shared_run(train: Measurements, test: Measurements) -> tuple[Any, int, Any] | None:
-    """The first TEST run that is also a TRAIN run, or ``None``.
+#: the share of a TEST run's samples that are TRAIN samples from which the run is refused (:func:`shared_run`)
+SHARED_SHARE: float = 0.5
 
-    Two runs are the same recording when their ``time_s``, ``position_m``
-    and, when both files log it, ``speed_m_s`` columns are equal sample for
-    sample (the clock runs on over a rig's experiment, so two traverses never
-    share their stamps, and a measured speed carries its own noise: two
-    simulated runs of one plan may share stamps and positions, never a
-    measured speed). Returns ``(test_run, first_row, train_run)`` with
-    ``first_row`` the 0-based row of the TEST run's first sample.
+
+class SharedRun(NamedTuple):
+    """A TEST run that shares samples with TRAIN (:func:`shared_run`)."""
+
+    #: the TEST run
+    run: Any
+    #: the 1-based data row of its first sample that is a TRAIN sample (the file's row: the frame's index + 1)
+    row: int
+    #: the TRAIN run that holds most of the shared samples (the first such run in TRAIN's order on a tie)
+    train_run: Any
+    #: how many of the TEST run's samples are TRAIN samples
+    shared: int
+    #: the TEST run's samples
+    samples: int
+    #: whether the TEST run is that TRAIN run whole: every sample of each is a sample of the other
+    same: bool
+
+
+def shared_run(train: Measurements, test: Measurements, share: float = SHARED_SHARE) -> SharedRun | None:
+    """The first TEST run (file order) at least ``share`` of whose samples are TRAIN samples, or ``None``.
+
+    A sample is a TRAIN sample when a TRAIN sample has the same ``time_s``, ``position_m`` and, when both files
+    log it (neither speed derived from position), ``speed_m_s``, each equal. The clock runs on over a rig's
+    experiment, so two traverses never share their stamps, and a measured speed carries its own noise: two
+    simulated runs of one plan may share stamps and positions, never a measured speed, and share no sample. A
+    speed derived from position adds nothing to the stamp and the position, which then decide alone. A few
+    samples may still repeat between two recordings by chance (a clock restarted at 0 in each file, a slider at
+    rest at one encoder count), never most of a run; whereas a TEST run cut from a TRAIN run, or one whose
+    export dropped or reordered rows, shares all its samples. Hence the threshold :data:`SHARED_SHARE`, half the
+    run: any share from a few samples to nearly all would separate the two cases.
+
+    Vectorised: TEST's samples whose stamp is one of TRAIN's (``numpy.isin``), then a hash join of those on all
+    the columns compared.
     """
     measured = not (train.meta.get("speed_derived") or test.meta.get("speed_derived"))
     cols = ["time_s", POSITION] + ([SPEED] if measured and SPEED in train.df and SPEED in test.df else [])
-
-    def keys(m: Measurements) -> list[tuple[Any, int, bytes]]:
-        arrays = [m.df[c].to_numpy(dtype=float) for c in cols]
-        return [(rid, sl.start, b"".join(a[sl].tobytes() for a in arrays)) for rid, sl in run_slices(m.df[RUN])]
-    seen = {key: rid for rid, _, key in keys(train)}
-    for rid, row, key in keys(test):
-        if key in seen:
-            return rid, row, seen[key]
-    return None
+    tr, te = train.df, test.df
+    t_tr, t_te = tr["time_s"].to_numpy(float), te["time_s"].to_numpy(float)
+    cand = np.flatnonzero(np.isin(t_te, t_tr))                     # TEST samples at one of TRAIN's stamps
+    if cand.size == 0:
+        return None
+    keep = np.flatnonzero(np.isin(t_tr, t_te[cand]))               # and the TRAIN samples at theirs
+    left = pd.DataFrame({c: te[c].to_numpy(float)[cand] for c in cols})
+    right = pd.DataFrame({c: tr[c].to_numpy(float)[keep] for c in cols}).assign(_train_pos=keep)
+    right = right.drop_duplicates(cols, keep="first")              # one match per sample, TRAIN's first
+    hit = left.merge(right, on=cols, how="left", sort=False)["_train_pos"].to_numpy(float)   # NaN: no match
+    pos, train_pos = cand[np.isfinite(hit)], hit[np.isfinite(hit)].astype(np.int64)
+    slices = run_slices(te[RUN])
+    starts = np.array([sl.start for _, sl in slices], dtype=np.int64)
+    sizes = np.array([sl.stop - sl.start for _, sl in slices], dtype=np.int64)
+    counts = np.bincount(np.searchsorted(starts, pos, side="right") - 1, minlength=len(starts))
+    over = np.flatnonzero((counts > 0) & (counts >= share * sizes))
+    if over.size == 0:
+        return None
+    i = int(over[0])
+    rid, sl = slices[i]
+    mine = (pos >= sl.start) & (pos < sl.stop)
+    n, k, where = int(sizes[i]), int(counts[i]), train_pos[mine]
+    tr_runs = tr[RUN].to_numpy()
+    runs, first, per_run = np.unique(tr_runs[where], return_index=True, return_counts=True)
+    best = min(range(len(runs)), key=lambda j: (-per_run[j], where[first[j]]))
+    same = bool(k == n == per_run[best] == np.count_nonzero(tr_runs == runs[best]))
+    return SharedRun(rid, int(te.index[pos[mine][0]]) + 1, runs[best], k, n, same)
 
 
 def runs_of_two(m: Measurements, path) -> Measurements:
