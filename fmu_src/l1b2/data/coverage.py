@@ -34,8 +34,8 @@ from .plausibility import uneven_step_lines, uneven_steps
 
 __all__ = ["RANGE_COLUMNS", "DEFAULT_TOLERANCE", "MIN_TOLERANCE", "data_range", "outside_range",
            "summarize_outside", "values_outside", "FREQUENCY_REL_SPREAD", "run_frequencies", "frequency_varies",
-           "input_checks", "data_check_lines", "RIG_SETTINGS", "check_same_rig", "SHARED_SHARE", "SharedRun", "shared_run", "runs_of_two",
-           "speed_source_lines"]
+           "input_checks", "data_check_lines", "RIG_SETTINGS", "check_same_rig", "SHARED_SHARE", "SharedRun",
+           "shared_run", "runs_of_two", "speed_source_lines"]
 
 #: The prediction inputs whose range is checked (unit in the name); a direction TRAIN never drove is outside.
 RANGE_COLUMNS: tuple[str, ...] = (VOLTAGE, LOAD, POSITION, DIRECTION, FREQUENCY)
