@@ -177,6 +177,17 @@ def test_a_run_of_one_sample_is_refused_naming_file_run_and_row(tmp_path):
     assert "data.csv" in msg and info.value.column == "run" and info.value.row == 9 and "single sample" in msg
 
 
+def test_a_run_of_one_sample_is_named_by_its_file_row_after_rows_were_cut_on_reading(tmp_path):
+    # property: the row is the file's (the frame's index + 1), not the frame's position, when reading cut rows
+    from l1b2.data.coverage import runs_of_two
+    from l1b2.data.measurements import Measurements
+    m = load_measurements(write(tmp_path, [HEADER] + rows() + rows(t0=2.0, runs=(3,), n=1)))
+    cut = Measurements(m.df.iloc[2:], m.meta, m.path)      # two rows of run 1 cut, the index kept
+    with pytest.raises(DataFormatError) as info:
+        runs_of_two(cut, "data.csv")
+    assert info.value.row == 9
+
+
 def test_a_test_run_that_is_a_train_run_is_refused(tmp_path):
     train = write(tmp_path, [HEADER] + rows(runs=(1, 2, 3, 4)), "train.csv")
     with pytest.raises(DataFormatError, match="TEST run 1 is TRAIN run 1"):

@@ -315,10 +315,11 @@ def shared_run(train: Measurements, test: Measurements, share: float = SHARED_SH
 
 def runs_of_two(m: Measurements, path) -> Measurements:
     """``m`` when each run holds at least 2 samples (Eq. 29 predicts a sample from the one before it), else a
-    :class:`~l1b2.errors.DataFormatError` naming the file, the run and its first row."""
+    :class:`~l1b2.errors.DataFormatError` naming the file, the run and its first row (the file's 1-based data row:
+    the frame's index + 1, which rows cut on reading keep)."""
     for rid, sl in run_slices(m.df[RUN]):
         if sl.stop - sl.start < 2:
-            raise DataFormatError(path, RUN, sl.start + 1,
+            raise DataFormatError(path, RUN, int(m.df.index[sl.start]) + 1,
                                   f"run {rid} has a single sample: a run is one traverse, and the predictor needs "
                                   "at least 2 samples of it (a run cut by the export? leave it out)")
     return m
