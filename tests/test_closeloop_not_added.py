@@ -26,8 +26,20 @@ def test_a_refit_family_is_named_with_its_last_trials_figures():
     # property: the last round that refit the family gives the reason, with its CV gain, folds and nrmse
     trials = [[_trial("a", "a"), _trial("channel_aux", "channel_aux[x]", 0.5, 1, 4, 0.03, 0.029)],
               [_trial("channel_aux", "channel_aux[x]", -0.021, 1, 4, 0.0251, 0.0256)]]
-    r = not_added_reason({"channel_aux"}, trials)
-    assert r == "refit in round 2: CV gain -2.1%, 1/4 folds improved, CV nrmse 2.51% -> 2.56%: refused"
+    r = not_added_reason({"channel_aux"}, trials, ["a"])
+    assert r == ("refit in round 2: CV gain -2.1%, 1/4 folds improved, CV nrmse 2.51% -> 2.56%: refused by the "
+                 "acceptance rules")
+
+
+def test_a_family_that_passed_the_rules_names_what_its_round_added_instead():
+    trials = [[_trial("a", "a[x]"), {**_trial("run_level_aux", "run_level_aux[run]", 0.4, 4, 4, 0.03, 0.01),
+                                     "accepted": True}],
+              [{**_trial("channel_aux", "channel_aux[x]", 0.2, 3, 4, 0.01, 0.009), "accepted": True}]]
+    assert not_added_reason({"run_level_aux"}, trials, ["a[x]"]) == (
+        "refit in round 1: CV gain 40.0%, 4/4 folds improved, CV nrmse 3.00% -> 1.00%: passed the acceptance "
+        "rules, but round 1 added a[x] instead")
+    assert not_added_reason({"channel_aux"}, trials, ["a[x]"]).endswith(
+        "passed the acceptance rules, but a later check of round 2 added nothing")
 
 
 def test_a_family_never_refit_names_the_first_rounds_candidates_and_the_last_round():
@@ -43,6 +55,7 @@ def test_only_significant_rows_that_were_not_added_carry_a_reason():
     trials = [[_trial("channel_aux", "channel_aux[force, sample]", 0.02, 2, 4)]]
     rows = {r["channel"]: r for r in channels_considered(CHANNELS, scores, 1e-3, 0.05, set(), None, trials)}
     assert rows["aux"]["significant"] and rows["aux"]["not_added"].startswith("refit in round 1: CV gain 2.0%")
+    assert rows["aux"]["not_added"].endswith("refused by the acceptance rules")
     assert not rows["weak"]["significant"] and rows["weak"]["not_added"] is None
     added = {r["channel"]: r for r in channels_considered(CHANNELS, scores, 1e-3, 0.05, {"channel_aux"}, None,
                                                           trials)}

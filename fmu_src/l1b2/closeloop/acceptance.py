@@ -64,6 +64,11 @@ class EffectSet:
     def families(self) -> set:
         return {c.family for c in self.candidates}
 
+    @property
+    def labels(self) -> list[str]:
+        """The accepted candidates' labels, in order (round ``r`` added ``labels[r - 1]``)."""
+        return [c.label for c in self.candidates]
+
     def start(self) -> np.ndarray:
         """The parameters' start values, each candidate's inside its physical range."""
         return np.concatenate([c.clip(p) for c, p in zip(self.candidates, self.phi)]) if self.phi else np.zeros(0)

@@ -96,7 +96,7 @@ def with_position_share(channels, df, mask, params) -> tuple:
 
 
 def channels_considered(channels, scores: list[Score], level: float, min_gain: float, added,
-                        run_level: runlevel.RunLevelAnalysis | None = None, trials=()) -> list[dict]:
+                        run_level: runlevel.RunLevelAnalysis | None = None, trials=(), picked=()) -> list[dict]:
     """``diagnosis.channels_considered``: every candidate channel and run-level signal with its first-round evidence.
 
     Per channel (:func:`l1b2.closeloop.candidates.channels_of`): its kind,
@@ -115,7 +115,8 @@ def channels_considered(channels, scores: list[Score], level: float, min_gain: f
     when it has none): how much of the channel is a function of the position in the baseline's own series. What is,
     the baseline's re-identification absorbs, so a within-run form is credited only for the rest, and a channel
     near 1 cannot be told from the position along the stroke. ``not_added``: for a significant row that was not
-    added, why (:func:`not_added_reason` over ``trials``, the rounds' refit trials as dicts), else None.
+    added, why (:func:`not_added_reason` over ``trials``, the rounds' refit trials as dicts, and ``picked``, the
+    label each round added), else None.
     """
     from ..predictor.effects.channels import INPUT_SIGNALS, regressor_of
     best = {s.candidate.family: s for s in best_per_family(scores)}
@@ -162,23 +163,30 @@ def channels_considered(channels, scores: list[Score], level: float, min_gain: f
                     "run_level": [e.to_dict() for e in rows]})
     for rec in out:
         fams = {f"channel_{rec['channel']}"} | {f"run_level_{e['signal']}" for e in rec["run_level"]}
-        rec["not_added"] = (not_added_reason(fams, trials) if rec["significant"] and not rec["added"] else None)
+        rec["not_added"] = (not_added_reason(fams, trials, picked) if rec["significant"] and not rec["added"]
+                            else None)
     return out
 
 
-def not_added_reason(families, trials) -> str:
+def not_added_reason(families, trials, picked=()) -> str:
     """Why significant evidence of ``families`` (a channel's family and its run-level forms) added nothing.
 
-    ``trials``: the loop's refit trials per round (:meth:`l1b2.closeloop.acceptance.RefitCV.to_dict`). When a
-    family was refit, its last trial's figures (it was refused by the acceptance rules); otherwise it was never
+    ``trials``: the loop's refit trials per round (:meth:`l1b2.closeloop.acceptance.RefitCV.to_dict`, with
+    ``accepted``: whether it passed the acceptance rules); ``picked``: the label each round added, in order. When a
+    family was refit, its last trial's figures and either that the rules refused it or, when it passed them, what
+    its round added instead (another passing candidate, chosen by the round's rule); otherwise it was never
     shortlisted: each round refits its strongest candidates first, and the first round's are named.
     """
     hits = [(r, t) for r, rnd in enumerate(trials, 1) for t in rnd if t["effect"] in families]
     if hits:
         r, t = hits[-1]
-        return (f"refit in round {r}: CV gain {t['cv_gain']:.1%}, {t['folds_improved']}/{t['folds']} folds "
-                f"improved, CV nrmse {t['cv_free_run_nrmse_current']:.2%} -> {t['cv_free_run_nrmse_refit']:.2%}: "
-                "refused")
+        figures = (f"refit in round {r}: CV gain {t['cv_gain']:.1%}, {t['folds_improved']}/{t['folds']} folds "
+                   f"improved, CV nrmse {t['cv_free_run_nrmse_current']:.2%} -> {t['cv_free_run_nrmse_refit']:.2%}")
+        if not t.get("accepted"):
+            return figures + ": refused by the acceptance rules"
+        pick = picked[r - 1] if r - 1 < len(picked) else None
+        return figures + (f": passed the acceptance rules, but round {r} added {pick} instead" if pick
+                          else f": passed the acceptance rules, but a later check of round {r} added nothing")
     if not trials or not trials[0]:
         return "not refit: the loop refit no candidate"
     first = ", ".join(dict.fromkeys(t["label"] for t in trials[0]))

@@ -607,9 +607,10 @@ class CloseLoop(EstimatorSettings):
                           "median_rho1": float(np.median([x["rho1"] for x in w])) if w else None},
             "position_spectrum_peak": a.peak,
             "measurement_chain": chain_rec,
-            "channels_considered": channels_considered(it.channels, scores, it.level, self.min_gain,
-                                                       it.effects.families, it.run_level,
-                                                       [[t.to_dict() for t in rnd] for rnd in it.trials]),
+            "channels_considered": channels_considered(
+                it.channels, scores, it.level, self.min_gain, it.effects.families, it.run_level,
+                [[{**t.to_dict(), "accepted": accepts(t, min_gain=self.min_cv_gain, min_drop=materiality(
+                    t.candidate, self.min_cv_drop))} for t in rnd] for rnd in it.trials], it.effects.labels),
             "run_level": it.run_level.to_dict() if it.run_level is not None else None,
             "named_checks": list(it.checks),
             "physical_range": list(it.ranges),
