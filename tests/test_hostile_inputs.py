@@ -431,3 +431,24 @@ def test_test_loads_in_another_unit_show_another_load_effect(tmp_path, capsys, f
         assert any("as much as TRAIN's" in u for u in t.meta["unusual_units"])
     else:
         load_train_test(tr, te)
+
+
+def test_the_load_effects_refusal_names_the_file_row_when_rows_were_cut_on_reading(tmp_path):
+    # property: the row is TEST's file row (the frame's index + 1) of the heaviest run's first sample, unchanged
+    # when rows before it were cut on reading (the onset's rest cut keeps the index)
+    from l1b2.data.coverage import check_same_rig
+    from l1b2.data.measurements import Measurements
+    from rigcache import rig_dir
+    side = {"slider_mass_kg": 0.3}
+    tr = load_measurements(write(tmp_path, pd.read_csv(rig_dir() / "train.csv"), "train", side))
+    test = pd.read_csv(rig_dir() / "test.csv")
+    te = load_measurements(write(tmp_path, test.assign(load_kg=test["load_kg"] / 0.45359237), "test", side))
+    cut = Measurements(te.df.iloc[2:], te.meta, te.path)     # two rows of the first run cut
+    rows = []
+    for m in (te, cut):
+        with pytest.raises(DataFormatError, match="as much as TRAIN's") as info:
+            check_same_rig(tr, m)
+        rows.append(info.value.row)
+    heavy = te.df.loc[rows[0] - 1, "run"]                    # the run named, its first sample in the file
+    assert rows[0] - 1 == te.df.index[te.df["run"] == heavy][0]
+    assert rows[1] - 1 == cut.df.index[cut.df["run"] == heavy][0], rows   # its first kept sample's file row

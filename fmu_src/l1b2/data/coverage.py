@@ -223,11 +223,11 @@ def check_same_rig(train: Measurements, test: Measurements, *, explicit: Mapping
     found = load_effect_mismatch(run_table(train.df), run_table(test.df))
     if found is not None:
         where = test.meta.get("source") or "TEST"
+        row = int(test.df.index[found.row]) + 1       # the file's row: rows cut on reading keep their index
         if not allow_unusual_units:
-            raise DataFormatError(where, found.column, found.row + 1,
+            raise DataFormatError(where, found.column, row,
                                   found.text + " (if the values are right, allow them with --allow-unusual-units)")
-        test.meta.setdefault("unusual_units", []).append(str(DataFormatError(where, found.column, found.row + 1,
-                                                                             found.text)))
+        test.meta.setdefault("unusual_units", []).append(str(DataFormatError(where, found.column, row, found.text)))
     for name, rel in RIG_SETTINGS.items():
         if explicit.get(name) is not None:
             continue
