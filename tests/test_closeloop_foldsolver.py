@@ -189,7 +189,7 @@ def test_gains_and_insample_fits_with_shared_work_arrays_equal_the_fresh_array_f
     assert np.array_equal(sel.insample_fits(solver.A, y, S_all, widths)[1][2][1], fits_ref[2][1])
 
 
-def test_scores_equal_the_fresh_array_scoring_to_the_last_bit():
+def test_scores_equal_the_fresh_array_scoring_to_round_off():
     from l1b2.closeloop.candidates import CandidateForce
     p, df, base, r, rng = _simulated_case()
     mask = np.abs(base) > 0.01
@@ -208,8 +208,13 @@ def test_scores_equal_the_fresh_array_scoring_to_the_last_bit():
         ref = _scores_written_out(cs, r, df, mask, p, 0.1, base)
         assert len(got) == len(ref) == len(cs)
         for g, (gain, pv, imp, dbic, phi, daic) in zip(got, ref):
-            assert (g.cv_gain, g.p_value, g.runs_improved, g.delta_bic, g.delta_aic) == (gain, pv, imp, dbic, daic)
-            assert np.array_equal(g.phi, phi)
+            # to round-off: the BLAS kernels' last bits may depend on the arrays' alignment (OpenBLAS builds)
+            np.testing.assert_allclose((g.cv_gain, g.p_value, g.delta_bic, g.delta_aic), (gain, pv, dbic, daic),
+                                       rtol=1e-10, atol=1e-14)
+            assert g.runs_improved == imp
+            # phi to round-off of its scale: a column inside the nuisance span (s, of the position series) has a
+            # coefficient of pure round-off (order 1e-24), whose last bits depend on the LAPACK build
+            np.testing.assert_allclose(g.phi, phi, rtol=1e-9, atol=1e-12 * float(np.max(np.abs(phi))))
     assert got[1].cv_gain == 0.0 and got[0].cv_gain != 0.0
     # folds given (whole conditions): the gains are those of the same scoring on those folds
     from l1b2.closeloop.folds import condition_folds
