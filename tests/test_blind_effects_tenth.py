@@ -89,3 +89,11 @@ def test_touchdown_traverse_steps_the_load_at_the_zones_edge(audit):
         assert r["Slider.s"][before] == pytest.approx(whole["Slider.s"][:before.sum()], abs=1e-12)
         n = min(len(r["time"]), len(whole["time"]))
         assert np.max(np.abs(r["Slider.s"][:n] - whole["Slider.s"][:n])) > 1e-4
+
+
+def test_probe_pulley_distance_is_measured_from_the_loads_pulley_end(load_bench):
+    probe = load_bench("blind_effects_tenth_probe")
+    s = np.array([-0.021, 0.0, 0.021])
+    assert probe.pulley_distance_mm(s, np.full(3, 0.05)) == pytest.approx([0.0, 21.0, 42.0], abs=1e-12)
+    assert probe.pulley_distance_mm(s, np.full(3, -0.05)) == pytest.approx([42.0, 21.0, 0.0], abs=1e-12)
+    assert probe.pulley_distance_mm(s, np.zeros(3)) == pytest.approx([0.0, 0.0, 0.0], abs=0)
