@@ -10,10 +10,13 @@ case's files, one change per mode:
 * ``pulley`` -- a column ``pulley_distance_mm`` added: each sample's distance [mm] from the stroke's end nearest
   the load's pulley (``s - s_min`` for a positive load, ``s_max - s`` for a negative one; 0 without a load), the
   weight's height above its lowest point.
+* ``repeats3`` -- the files unchanged, the loop with ``refit_repeats=3`` (its acceptance's folds from three
+  splits of the runs, 12 folds, instead of one split's 4).
 
 Usage: python bench/blind_effects_tenth_probe.py KIND SEED MODE [--out DIR]. Prints one JSON line: the row of
 ``bench/blind_effects.py`` (its ``loop_row``, with ``traced_all``) and the evidence on the probe's column.
 """
+import functools
 import json
 import sys
 from pathlib import Path
@@ -25,8 +28,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import blind_effects as be  # noqa: E402
 import blind_effects_tenth as tenth  # noqa: E402
 
-MODES = ("law", "since", "pulley")
-COLUMN = {"law": "track_drop_um", "since": "traverses_since_wipe", "pulley": "pulley_distance_mm"}
+MODES = ("law", "since", "pulley", "repeats3")
+COLUMN = {"law": "track_drop_um", "since": "traverses_since_wipe", "pulley": "pulley_distance_mm",
+          "repeats3": None}
+SETTINGS = {"repeats3": {"refit_repeats": 3}}
 S_MIN_MM, S_MAX_MM = -21.0, 21.0
 
 
@@ -59,6 +64,8 @@ def main(argv=None):
     truth = json.loads((src / "rig_truth.json").read_text())
     for part in ("train", "test"):
         changed(pd.read_csv(src / f"{part}.csv"), args.mode, truth).to_csv(dst / f"{part}.csv", index=False)
+    if args.mode in SETTINGS:
+        be.close_loop = functools.partial(be.close_loop, **SETTINGS[args.mode])
     be.probe_loop(args, dst, COLUMN[args.mode])
 
 
