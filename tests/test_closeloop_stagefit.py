@@ -132,3 +132,28 @@ def test_the_screen_takes_one_column_or_many_and_scores_rivals_on_the_same_folds
     assert got["noise_cv_gain"] < 0.1
     flat = stagefit.screen(df, mask, v_pred, params, 0.1, folds, S[:, None])
     assert flat == {k: got[k] for k in ("cv_gain", "p_value", "runs_improved")}
+
+
+def test_columns_that_diverge_or_vanish_score_no_gain_and_do_not_break_the_screen():
+    """A stage or rival whose linearised response is not finite somewhere (or is all zero) scores as the candidates'
+    screen scores it, no gain and p-value 1, and the other columns keep their scores."""
+    df = frame(n_runs=6, n=60)
+    params = example_params(3)
+    folds = [[0, 1], [2, 3], [4, 5]]
+    v = df[dataio.SPEED].to_numpy()
+    d = df[dataio.DIRECTION].to_numpy()
+    S = np.sin(40 * df[dataio.POSITION].to_numpy()) * np.abs(v)
+    v_pred = v - d * 0.3 * S
+    mask = np.ones(len(df), bool)
+    bad = np.column_stack([S, S])
+    bad[7, 1] = np.nan
+    inf = np.full((len(df), 2), np.inf)
+    got = stagefit.screen(df, mask, v_pred, params, 0.1, folds, S, {"nan": bad, "inf": inf, "zero": 0 * S})
+    assert got["cv_gain"] > 0.9
+    assert got["nan_cv_gain"] == 0.0 and got["inf_cv_gain"] == 0.0 and got["zero_cv_gain"] == 0.0
+    assert stagefit.screen(df, mask, v_pred, params, 0.1, folds, bad) == {"cv_gain": 0.0, "p_value": 1.0,
+                                                                          "runs_improved": 0.0}
+    # a value that is not finite on a sample the mask leaves out is not read
+    m2 = mask.copy()
+    m2[7] = False
+    assert stagefit.screen(df, m2, v_pred, params, 0.1, folds, bad)["cv_gain"] > 0.9

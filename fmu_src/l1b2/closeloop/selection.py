@@ -311,6 +311,13 @@ def finite_columns(X: np.ndarray) -> np.ndarray:
     return X if ok.all() else X[:, ok]
 
 
+def usable_response(S) -> bool:
+    """Whether a candidate's response columns ``S`` can be scored: every value finite (its linearised recursion
+    does not diverge, :func:`linear_response`) and not all zero."""
+    S = np.asarray(S, float)
+    return bool(np.all(np.isfinite(S)) and not np.allclose(S, 0))
+
+
 def design(candidate: CandidateForce, r_drive, df, mask, params, m_s, *, v_pred):
     """``(y, A, S, runs)`` on the masked samples: residual, intercept + nuisance responses (those that are finite,
     :func:`finite_columns`), candidate response (not finite where its linearised recursion diverges)."""
@@ -474,8 +481,7 @@ def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5,
     solver = FoldSolver(y, N, runs_m, folds)
     time_solver = FoldSolver(y, N, runs_m, time_folds) if time_folds is not None else solver
     A = solver.A
-    usable = [bool(np.all(np.isfinite(S_all[:, a:a + w])) and not np.allclose(S_all[:, a:a + w], 0))
-              for a, w in zip(np.cumsum([0] + widths[:-1]), widths)]
+    usable = [usable_response(S_all[:, a:a + w]) for a, w in zip(np.cumsum([0] + widths[:-1]), widths)]
     cols = np.concatenate([np.arange(a, a + w) for a, w, u in zip(np.cumsum([0] + widths[:-1]), widths, usable) if u]
                           + [np.zeros(0, int)]).astype(int)
     w_ok = [w for w, u in zip(widths, usable) if u]

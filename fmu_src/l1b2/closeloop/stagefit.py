@@ -36,7 +36,7 @@ from ..errors import IdentificationError
 from . import residuals as res
 from .acceptance import EffectSet, RefitSettings, fold_error, fold_fit_data, refit
 from .folds import held_out_split
-from .selection import FoldSolver, finite_columns, linear_response, nuisance_forces
+from .selection import FoldSolver, finite_columns, linear_response, nuisance_forces, usable_response
 
 
 def screen(df: pd.DataFrame, mask, v_pred, params, m_s: float, folds, columns, rivals: dict | None = None) -> dict:
@@ -46,7 +46,10 @@ def screen(df: pd.DataFrame, mask, v_pred, params, m_s: float, folds, columns, r
     of ``df`` (one column or ``(n, k)``); ``rivals``: other responses (name -> columns) screened on the same folds
     and nuisance. Returns ``{"cv_gain", "p_value", "runs_improved"}``: the pooled held-out share of the
     nuisance-only model's sum of squares the stage's columns remove, the one-sided Wilcoxon p-value of the runs'
-    reductions and the share of runs improved; and ``<name>_cv_gain``, the held-out share each rival removes.
+    reductions and the share of runs improved; and ``<name>_cv_gain``, the held-out share each rival removes. Columns
+    that are not all finite on the masked samples (a linearised response that diverges) or all zero score as the
+    candidates' screen scores them (:func:`l1b2.closeloop.selection.usable_response`): no gain, p-value 1, no run
+    improved.
     """
     idx = np.flatnonzero(np.asarray(mask, bool))
     v_pred = np.asarray(v_pred, float)
@@ -54,11 +57,15 @@ def screen(df: pd.DataFrame, mask, v_pred, params, m_s: float, folds, columns, r
     with np.errstate(over="ignore", invalid="ignore"):
         N = finite_columns(linear_response(params, df, m_s, nuisance_forces(params, df, v_pred), v_pred=v_pred)[idx])
     solver = FoldSolver(y, N, df[dataio.RUN].to_numpy()[idx], folds)
-    gain, per_run = solver.gain(np.asarray(columns, float).reshape(len(df), -1)[idx])
-    out = {"cv_gain": float(gain), "p_value": float(res.wilcoxon_greater(per_run)),
-           "runs_improved": float(np.mean(per_run > 0)) if len(per_run) else 0.0}
+    S = np.asarray(columns, float).reshape(len(df), -1)[idx]
+    out = {"cv_gain": 0.0, "p_value": 1.0, "runs_improved": 0.0}
+    if usable_response(S):
+        gain, per_run = solver.gain(S)
+        out = {"cv_gain": float(gain), "p_value": float(res.wilcoxon_greater(per_run)),
+               "runs_improved": float(np.mean(per_run > 0)) if len(per_run) else 0.0}
     for name, cols in (rivals or {}).items():
-        out[f"{name}_cv_gain"] = float(solver.gain(np.asarray(cols, float).reshape(len(df), -1)[idx])[0])
+        R = np.asarray(cols, float).reshape(len(df), -1)[idx]
+        out[f"{name}_cv_gain"] = float(solver.gain(R)[0]) if usable_response(R) else 0.0
     return out
 
 
