@@ -116,6 +116,7 @@ def test_trains_run_folds_are_computed_once_per_fit_and_shared_by_their_three_us
     (["--refit-repeats", "0"], "l1b2: error: --refit-repeats must be a whole number >= 1, got '0'"),
     (["--refit-repeats", "two"], "l1b2: error: --refit-repeats must be a whole number >= 1, got 'two'"),
     (["--refit-repeats", "1.5"], "l1b2: error: --refit-repeats must be a whole number >= 1, got '1.5'"),
+    (["--tie-repeats", "0"], "l1b2: error: --tie-repeats must be a whole number >= 1, got '0'"),
 ])
 def test_a_bad_fold_flag_is_one_line_before_any_file_is_read(tmp_path, capsys, flags, message):
     from l1b2.cli import main

@@ -300,6 +300,9 @@ def _close_loop_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--refit-repeats", metavar="N", default="1", help="splits of TRAIN's runs into the refit's "
                    "folds for a round's acceptance (repeated cross-validation, each run held out N times; "
                    "N times the refits)")
+    p.add_argument("--tie-repeats", metavar="N", default="3", help="splits over which a round whose fold vote is "
+                   "tied (exactly half the folds improved, every other rule met) is cross-validated again; not above "
+                   "--refit-repeats: off")
     p.add_argument("--seed", type=int, default=0, help="seed of the multi-start and of the fold assignment")
     p.add_argument("--slider-mass", type=float, help="slider mass [kg] (overrides the sidecars)")
     p.add_argument("--allow-unusual-units", action="store_true", help=UNUSUAL_UNITS_HELP)
@@ -645,19 +648,21 @@ def cmd_compare(args) -> int:
 
 
 def _fold_settings(args) -> dict:
-    """``--clock-folds``, ``--fold-unit`` and ``--refit-repeats`` as the loop's settings; L1B2Error (one line) for a
-    bad value."""
+    """``--clock-folds``, ``--fold-unit``, ``--refit-repeats`` and ``--tie-repeats`` as the loop's settings; L1B2Error
+    (one line) for a bad value."""
     if args.clock_folds not in CLOCK_FOLDS:
         raise L1B2Error(f"--clock-folds must be one of {', '.join(CLOCK_FOLDS)}, got {args.clock_folds!r}")
     if args.fold_unit not in FOLD_UNITS:
         raise L1B2Error(f"--fold-unit must be one of {', '.join(FOLD_UNITS)}, got {args.fold_unit!r}")
-    try:
-        repeats = int(args.refit_repeats)
-    except ValueError:
-        repeats = 0
-    if repeats < 1:
-        raise L1B2Error(f"--refit-repeats must be a whole number >= 1, got {args.refit_repeats!r}")
-    return {"clock_folds": args.clock_folds, "fold_unit": args.fold_unit, "refit_repeats": repeats}
+    out = {"clock_folds": args.clock_folds, "fold_unit": args.fold_unit}
+    for name in ("refit_repeats", "tie_repeats"):
+        try:
+            out[name] = int(getattr(args, name))
+        except ValueError:
+            out[name] = 0
+        if out[name] < 1:
+            raise L1B2Error(f"--{name.replace('_', '-')} must be a whole number >= 1, got {getattr(args, name)!r}")
+    return out
 
 
 def _run_close_loop(args, say):

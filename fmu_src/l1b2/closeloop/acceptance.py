@@ -43,6 +43,8 @@ from .candidates import CandidateForce
 DEFAULT_REFIT_FOLDS = 4
 #: splits of TRAIN's runs into the refit's folds (repeated cross-validation, :func:`repeated_folds`)
 DEFAULT_REFIT_REPEATS = 1
+#: splits of TRAIN's runs over which a round whose fold vote is tied is cross-validated again (:func:`tied`)
+DEFAULT_TIE_REPEATS = 3
 DEFAULT_REFIT_NFEV = 10
 DEFAULT_MIN_CV_GAIN = 0.03
 #: smallest fall of the cross-validated free-run nrmse (absolute, share of the speed's rms): a relative gain of a
@@ -389,6 +391,31 @@ def accepts(r: RefitCV, *, min_gain: float = DEFAULT_MIN_CV_GAIN, min_drop: floa
     k = len(r.current.sse)
     return (r.extended.failed == 0 and r.gain >= min_gain and r.folds_improved > k / 2
             and r.current.nrmse - r.extended.nrmse >= min_drop)
+
+
+def tied(r: RefitCV, *, min_gain: float = DEFAULT_MIN_CV_GAIN, min_drop: float = DEFAULT_MIN_CV_DROP) -> bool:
+    """Whether ``r`` meets every rule of :func:`accepts` but the fold majority, with exactly half of its folds
+    improved: a vote that does not decide (two of four folds), which more splits of the same runs can."""
+    k = len(r.current.sse)
+    return (r.extended.failed == 0 and r.gain >= min_gain and 2 * r.folds_improved == k
+            and r.current.nrmse - r.extended.nrmse >= min_drop)
+
+
+def immaterial(trials: list, effects: EffectSet, min_gain: float = DEFAULT_MIN_CV_GAIN) -> list:
+    """Trials of the last round (``trials``: the rounds' :class:`RefitCV` lists) that pass every acceptance rule
+    but the materiality threshold, largest CV gain first; none when the last round added its pick (its other
+    trials were against an earlier model; ``effects``: the added ones).
+
+    They were cross-validated against the final model (its residual) and improve it in most folds by at least
+    ``min_gain``: significant evidence of a regressor, too small to add (``min_cv_drop``, which only structural
+    terms must meet, so these are structural).
+    """
+    if not trials or not trials[-1] or len(trials) <= len(effects.candidates):
+        return []
+    added = effects.families
+    last = [t for t in trials[-1]
+            if t.candidate.family not in added and accepts(t, min_gain=min_gain, min_drop=-np.inf)]
+    return sorted(last, key=lambda t: -t.gain)
 
 
 def materiality(candidate: CandidateForce, min_drop: float) -> float:

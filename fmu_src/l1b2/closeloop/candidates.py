@@ -267,6 +267,20 @@ def damping_floors(effects, model, df: pd.DataFrame, mask, channels) -> dict:
     return {c.label: fx.channels.damping_floor(c.spec, p, *rng[c.spec["channel"]], D) for c, p in picks}
 
 
+def range_check(effects, model, df: pd.DataFrame, mask, channels, n_rnd: int, label: str) -> dict | None:
+    """The physical-range check of a joint refit (``effects`` with their fitted ``phi``, ``model``) that added
+    ``label`` in round ``n_rnd``: ``{"round", "label", "damping_floor_N_s_per_m", "outcome"}`` with
+    :func:`damping_floors`, ``outcome`` ``"kept"`` or ``"refused: negative total damping (<labels>)"`` when the
+    total viscous damping of a channel's damping form turns negative within TRAIN's range of the channel; None
+    when no damping form of a channel is among ``effects``."""
+    floors = damping_floors(effects, model, df, mask, channels)
+    if not floors:
+        return None
+    low = sorted(k for k, v in floors.items() if not v >= 0)
+    return {"round": n_rnd, "label": label, "damping_floor_N_s_per_m": floors,
+            "outcome": f"refused: negative total damping ({', '.join(low)})" if low else "kept"}
+
+
 def group_candidates(groups, ctx: Context, df_train: pd.DataFrame) -> list[CandidateForce]:
     """Every hypothesis of the registered families of ``groups``, in group then registration order."""
     train = training_summary(ctx, df_train)

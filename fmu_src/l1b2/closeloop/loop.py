@@ -82,7 +82,7 @@ from ..predictor.effects import channels as fx_channels
 from . import chain
 from . import residuals as res
 from . import runlevel
-from .candidates import Context, baseline_damping, channels_of, damping_floors, full_library, training_summary
+from .candidates import Context, baseline_damping, channels_of, full_library, range_check, training_summary
 from .settings import LoopSettings, keyword_signature
 from .stages import StageClock
 from .auxiliary import check_test_columns
@@ -92,8 +92,8 @@ from .sensor import GainChain
 from . import encoder, sensorchain, stamps
 from .sensorchain import SensorChain
 from .acceptance import (Directions, EffectSet, RefitCV, RefitSettings, Validated, accepts, added_columns,
-                         chain_cv_errors, collinear, cv_errors, fold_start_phi, materiality, named_reading, refit,
-                         time_dependent, validated)
+                         chain_cv_errors, collinear, cv_errors, fold_start_phi, immaterial, materiality, named_reading,
+                         refit, tied, time_dependent, validated)
 from .stagefit import physics_behind, stage_cv_errors, stage_verdict
 from .folds import refit_schemes, screen_folds, stratified_folds
 from .baselines import choose_baseline, identify_families, retag_structural
@@ -340,9 +340,7 @@ class CloseLoop(EstimatorSettings):
             if not short:
                 it.trials.append([])
                 break
-            errs = self._cross_validate(it, short, cur, cur_err, schemes, r, dtr, mask, m_s, v_cur, say, n_rnd)
-            trials = [RefitCV(s.candidate, cur_err[time_dependent(s.candidate)], err, s.cv_gain, s.phi)
-                      for s, err in zip(short, errs)]
+            trials = self._trials(it, short, cur, cur_err, schemes, (r, dtr, mask, m_s, v_cur), say, n_rnd)
             it.trials.append(trials)
             ok = simplest_within_one_se([t for t in trials if accepts(
                 t, min_gain=self.min_cv_gain, min_drop=materiality(t.candidate, self.min_cv_drop))])
@@ -392,18 +390,29 @@ class CloseLoop(EstimatorSettings):
 
     @staticmethod
     def _refused_range(it, effects, model, dtr, mask, n_rnd, pick, say) -> bool:
-        """Whether the joint refit with ``pick`` leaves a channel's damping form with a negative total viscous
-        damping over TRAIN's range of the channel (:func:`~l1b2.closeloop.candidates.damping_floors`); the check
-        goes to ``it.ranges``, and a refused pick is not added (the model stays the previous round's)."""
-        floors = damping_floors(effects, model, dtr, mask, it.channels)
-        low = sorted(k for k, v in floors.items() if not v >= 0)
-        if floors:
-            it.ranges.append({"round": n_rnd, "label": pick.candidate.label, "damping_floor_N_s_per_m": floors,
-                              "outcome": f"refused: negative total damping ({', '.join(low)})" if low else "kept"})
-        if low:
-            say(f"round {n_rnd}: {pick.candidate.label} refused: the total viscous damping of {', '.join(low)} "
-                "turns negative within TRAIN's range of the channel")
-        return bool(low)
+        """Whether the joint refit with ``pick`` is refused by :func:`~l1b2.closeloop.candidates.range_check` (its
+        record goes to ``it.ranges``; a refused pick is not added, the model stays the previous round's)."""
+        rec = range_check(effects, model, dtr, mask, it.channels, n_rnd, pick.candidate.label)
+        it.ranges += [rec] if rec else []
+        if rec and rec["outcome"] != "kept":
+            say(f"round {n_rnd}: {pick.candidate.label} {rec['outcome']} within TRAIN's range of the channel")
+        return bool(rec) and rec["outcome"] != "kept"
+
+    def _trials(self, it, short, cur, cur_err: dict, schemes: dict, frame: tuple, say, n_rnd) -> list[RefitCV]:
+        """The round's refit trials (:class:`RefitCV`, in the order of ``short``) on ``schemes``; when one over the
+        run folds is :func:`tied`, those over the run folds again on ``tie_repeats`` splits (settings)."""
+        def trials(sch: dict, err: dict) -> list:
+            errs = self._cross_validate(it, short, cur, err, sch, *frame, say, n_rnd)
+            return [None if e is None else RefitCV(s.candidate, err[time_dependent(s.candidate)], e, s.cv_gain, s.phi)
+                    for s, e in zip(short, errs)]
+        out = trials(schemes, cur_err)
+        if self.tie_repeats > self.refit_repeats and any(not time_dependent(t.candidate) and tied(
+                t, min_gain=self.min_cv_gain, min_drop=materiality(t.candidate, self.min_cv_drop)) for t in out):
+            say(f"round {n_rnd}: a tied fold vote; the refits over run folds again over {self.tie_repeats} splits")
+            more = refit_schemes(frame[1], self.refit_folds, self.tie_repeats, self.seed, self.clock_folds,
+                                 self.fold_unit)
+            out = [t2 or t for t, t2 in zip(out, trials({False: more[False]}, {}))]
+        return out
 
     def _cross_validate(self, it, short, cur, cur_err: dict, schemes: dict, r, dtr, mask, m_s, v_cur, say,
                         n_rnd) -> list:
@@ -538,26 +547,12 @@ class CloseLoop(EstimatorSettings):
                           "metrics": _metrics(wrapped, dtr, dte)})
         return it.speed_gain.frame(dtr)
 
-    def _immaterial(self, it: _Iteration) -> list[RefitCV]:
-        """Candidates of the last round that pass every acceptance rule but the materiality threshold.
-
-        They were cross-validated against the final model (its residual) and improve it in most folds by at
-        least ``min_cv_gain``: significant evidence of a regressor, too small to add (``min_cv_drop``, which
-        only structural terms must meet, so these are structural); largest CV gain first.
-        """
-        if not it.trials or not it.trials[-1] or len(it.trials) <= len(it.effects.candidates):
-            return []   # the last round added its pick: its other trials were against an earlier model
-        added = {e.family for e in it.effects.candidates}
-        last = [t for t in it.trials[-1] if t.candidate.family not in added
-                and accepts(t, min_gain=self.min_cv_gain, min_drop=-np.inf)]
-        return sorted(last, key=lambda t: -t.gain)
-
     def _diagnosis(self, it: _Iteration, scores: list[Score], a: ResidualAnalysis, ext_params,
                    chain_rec: dict) -> dict:
         """The report's ``diagnosis`` section (``chain_rec``: the measurement chain's record)."""
         effects = it.effects.candidates
         c = effects[0] if effects else None
-        below = self._immaterial(it)
+        below = immaterial(it.trials, it.effects, self.min_cv_gain)
         chain_rounds = ("speed_channel_filter", sensor.STROKE_GAIN, stamps.STAMP_CHAIN, encoder.CYCLIC_CHAIN)
         records = ([_filter_record(rec, ext_params) for rec in it.rounds if rec["added"] == "speed_channel_filter"]
                    + [it.sensor_stage.record(r) for r in it.rounds if r["added"] in chain_rounds[2:]]

@@ -10,7 +10,7 @@ from typing import Any
 
 from ..errors import L1B2Error
 from .acceptance import (DEFAULT_MIN_CV_DROP, DEFAULT_MIN_CV_GAIN, DEFAULT_REFIT_FOLDS, DEFAULT_REFIT_NFEV,
-                         DEFAULT_REFIT_REPEATS)
+                         DEFAULT_REFIT_REPEATS, DEFAULT_TIE_REPEATS)
 from .selection import DEFAULT_ALPHA, DEFAULT_PARSIMONY, SHORTLIST_MIN_GAIN
 
 __all__ = ["LoopSettings", "keyword_signature"]
@@ -62,6 +62,12 @@ class LoopSettings:
     refit_repeats : int
         Splits of the runs into ``refit_folds`` folds for a round's acceptance
         (:func:`~l1b2.closeloop.folds.refit_schemes`, from ``seed``).
+    tie_repeats : int
+        When a round's refit over the run folds meets every acceptance rule but the fold majority with exactly
+        half of its folds improved (:func:`~l1b2.closeloop.acceptance.tied`), the round's refits over the run
+        folds (the current model's and every such trial's) are cross-validated again over this many splits
+        (:func:`~l1b2.closeloop.folds.refit_schemes`; the first is the round's own) and decided there. Not
+        above ``refit_repeats``: off. The session's folds are one split: a clock candidate's tie stays a refusal.
     min_cv_gain : float
         Smallest relative fall of the cross-validated free-run sum of squares (in most folds) to add an effect.
     min_cv_drop : float
@@ -127,6 +133,7 @@ class LoopSettings:
     shortlist: int = 2
     refit_folds: int = DEFAULT_REFIT_FOLDS
     refit_repeats: int = DEFAULT_REFIT_REPEATS
+    tie_repeats: int = DEFAULT_TIE_REPEATS
     min_cv_gain: float = DEFAULT_MIN_CV_GAIN
     min_cv_drop: float = DEFAULT_MIN_CV_DROP
     refit_nfev: int = DEFAULT_REFIT_NFEV
@@ -151,7 +158,7 @@ class LoopSettings:
         that decide what is added; ``response_columns`` as a list (None: the default list)."""
         return {"min_gain": self.min_gain, "alpha": self.alpha, "parsimony": self.parsimony,
                 "k_folds": self.k_folds, "shortlist": self.shortlist, "refit_folds": self.refit_folds,
-                "refit_repeats": self.refit_repeats, "min_cv_gain": self.min_cv_gain,
+                "refit_repeats": self.refit_repeats, "tie_repeats": self.tie_repeats, "min_cv_gain": self.min_cv_gain,
                 "min_cv_drop": self.min_cv_drop, "screen_alpha": self.screen_alpha,
                 "noise_fit": self.noise_fit, "noise": self.noise, "fold_unit": self.fold_unit,
                 "max_rounds": self.max_rounds, "run_level": self.run_level, "stroke_speed_gain": self.stroke_speed_gain,
