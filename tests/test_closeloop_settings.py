@@ -15,14 +15,15 @@ from l1b2.predictor.simulate import design_grid, simulate_dataset
 #: the constructor's keywords and defaults, in order, written out
 DEFAULTS = {"order": 8, "k_folds": 5, "alpha": 0.01, "min_gain": 0.05, "parsimony": 0.9, "seed": 0, "n_starts": 4,
             "library": None, "progress": None, "max_rounds": 3, "shortlist": 2, "refit_folds": 4,
-            "refit_repeats": 1, "min_cv_gain": 0.03, "min_cv_drop": 0.005, "refit_nfev": 10, "final_nfev": 60,
+            "refit_repeats": 1, "tie_repeats": 3, "min_cv_gain": 0.03, "min_cv_drop": 0.005, "refit_nfev": 10,
+            "final_nfev": 60,
             "screen_alpha": 0.01, "noise_fit": "alternate", "noise": "common", "client": None, "baseline": "eq29",
             "run_level": True, "stroke_speed_gain": False, "response_columns": None, "clock_folds": "blocks",
             "fold_unit": "run"}
 
 #: settings other than the defaults for every rule the report records
 CHANGED = {"order": 3, "n_starts": 1, "max_rounds": 0, "min_gain": 0.07, "alpha": 0.02, "parsimony": 0.8,
-           "k_folds": 3, "shortlist": 1, "refit_folds": 2, "refit_repeats": 2, "min_cv_gain": 0.04,
+           "k_folds": 3, "shortlist": 1, "refit_folds": 2, "refit_repeats": 2, "tie_repeats": 5, "min_cv_gain": 0.04,
            "min_cv_drop": 0.006, "screen_alpha": None, "noise_fit": "profile", "noise": "per_run",
            "run_level": False, "stroke_speed_gain": True, "clock_folds": "rotation",
            "response_columns": ("aux_a", "aux_b"),
@@ -57,7 +58,7 @@ def test_the_report_records_the_rules_as_given():
     # reference: the rules written out for settings other than the defaults; the list of response columns as a
     # list (JSON), in report.json as in the result
     rules = {"min_gain": 0.07, "alpha": 0.02, "parsimony": 0.8, "k_folds": 3, "shortlist": 1, "refit_folds": 2,
-             "refit_repeats": 2, "min_cv_gain": 0.04, "min_cv_drop": 0.006, "screen_alpha": None,
+             "refit_repeats": 2, "tie_repeats": 5, "min_cv_gain": 0.04, "min_cv_drop": 0.006, "screen_alpha": None,
              "noise_fit": "profile", "noise": "per_run", "fold_unit": "condition", "max_rounds": 0, "run_level": False,
              "stroke_speed_gain": True, "clock_folds": "rotation", "response_columns": ["aux_a", "aux_b"]}
     assert CloseLoop(**CHANGED).settings.rules() == rules
@@ -134,14 +135,15 @@ def test_the_fold_flags_reach_the_loop_and_its_report(tmp_path):
     assert set(cli.CLOCK_FOLDS) == set(CLOCK_FOLDS) and set(cli.FOLD_UNITS) == set(UNIT_FOLDS)
     args = cli.build_parser().parse_args(["close-loop", "--train", "x.csv", "--out", "o"])
     assert cli._fold_settings(args) == {"clock_folds": LoopSettings().clock_folds, "fold_unit": LoopSettings().fold_unit,
-                                        "refit_repeats": LoopSettings().refit_repeats}
+                                        "refit_repeats": LoopSettings().refit_repeats,
+                                        "tie_repeats": LoopSettings().tie_repeats}
     for name, seed in (("train", 1), ("test", 2)):
         small_train(seed).df.to_csv(tmp_path / f"{name}.csv", index=False)
     out = tmp_path / "cl"
     assert cli.main(["close-loop", "--train", str(tmp_path / "train.csv"), "--test", str(tmp_path / "test.csv"),
                      "--slider-mass", "0.1", "--order", "3", "--max-rounds", "0", "--out", str(out), "--quiet",
                      "--no-plots", "--workers", "1", "--clock-folds", "rotation", "--refit-repeats", "3",
-                     "--fold-unit", "condition"]) == 0
+                     "--fold-unit", "condition", "--tie-repeats", "4"]) == 0
     rules = json.loads((out / "report.json").read_text())["diagnosis"]["rules"]
     assert (rules["clock_folds"], rules["refit_repeats"], rules["max_rounds"]) == ("rotation", 3, 0)
-    assert rules["fold_unit"] == "condition"
+    assert rules["fold_unit"] == "condition" and rules["tie_repeats"] == 4
