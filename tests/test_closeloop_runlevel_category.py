@@ -271,3 +271,36 @@ def test_a_categorical_effect_recorded_as_the_run_level_transform_reads_as_its_o
     assert IdentifiedEffect.from_dict(e.to_dict()) == e
     new = dict(rec, spec={k: v for k, v in old_spec.items() if k != "transform"} | {"kind": "run_level_category"})
     assert IdentifiedEffect.from_dict(new) == e
+
+
+def test_identified_columns_drop_each_column_in_the_span_of_those_before():
+    rng = np.random.default_rng(3)
+    a, b = rng.normal(size=(8, 2)), rng.normal(size=(8, 2))
+    X = np.stack([a, b, np.zeros((8, 2)), 2 * a - b, rng.normal(size=(8, 2))], axis=2)   # (n, p, k)
+    assert rl.identified_columns(X) == [0, 1, 4]
+    assert rl.identified_columns(X[:, :, [0, 1, 4]]) == [0, 1, 2]
+
+
+def test_a_category_whose_load_slopes_the_runs_do_not_identify_is_tested_on_the_rest():
+    # two levels' runs carry no load (w = 0): their centred load columns Z_j w = -s_j w are both proportional to w,
+    # so the mean's design [1, Z, Z w] lacks a rank (a small plan: a V0 step's values against three loads). The
+    # identified columns give the offset [1, Z, w, ind_3 w]: written out as ordinary least squares, chi-square with
+    # 3 + 3 + 2 = 8 degrees of freedom; the cross-validated gain is computed too (no singular fit)
+    c, theta = _category_runs()
+    s2 = 1.0
+    n = len(c)
+    w = np.where(c <= 2, 0.0, np.where(np.arange(n) % 2 == 0, 0.5, -1.0))
+    dev = rl.RunDeviations(np.arange(n), theta, np.repeat(np.eye(2)[None] * s2, n, axis=0), np.full(n, 400), w)
+    levels, shares = ch.category_levels(c)
+    Z = ch.category_columns(c, levels, shares)
+    assert len(rl.identified_columns(rl.signal_design(Z, w))) == 2 + 3 * 3 - 1
+    b, p, dof = rl.joint_test(dev, Z)
+    A = np.column_stack([np.ones(n), np.eye(4)[c.astype(int) - 1][:, :3]])
+    chi2 = 0.0
+    for k, Ak in ((0, A), (1, np.column_stack([A, w, (c == 3) * w]))):
+        y = theta[:, k]
+        chi2 += (np.sum((y - y.mean()) ** 2) - np.sum((y - Ak @ np.linalg.lstsq(Ak, y, rcond=None)[0]) ** 2)) / s2
+    assert dof == 8 and len(b) == 9
+    assert p == pytest.approx(stats.chi2.sf(chi2, 8), rel=2e-3)
+    gain, per_run = rl.cv_signal_gain(dev.theta, dev.cov, Z, [np.arange(i, n, 4) for i in range(4)], w)
+    assert np.isfinite(gain) and np.all(np.isfinite(per_run))

@@ -157,6 +157,19 @@ def signal_design(z: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
     return np.stack([np.hstack(gain), np.hstack(off)], axis=1)
 
 
+def identified_columns(X: np.ndarray) -> list:
+    """The columns of a mean's design ``X`` (n, p, k) that the runs identify, in order: each is kept when it is
+    not in the span of the columns kept before it (numerical rank of the stacked ``(n p, k)`` design). All of them
+    when the design has full rank; a categorical signal's load column of a value whose runs share one load, or whose
+    runs carry no load, is not identified."""
+    A = np.asarray(X, float).reshape(-1, np.shape(X)[2])
+    keep: list = []
+    for j in range(A.shape[1]):
+        if np.linalg.matrix_rank(A[:, keep + [j]]) == len(keep) + 1:
+            keep.append(j)
+    return keep
+
+
 def signal_index(q: int, load: bool) -> list:
     """The coefficients of a signal of ``q`` columns in :func:`signal_design` (gain, offset[, load] slopes):
     ``[1, 3, 4]`` for one column with the load, ``3 q`` (``2 q`` without) in all, the joint test's degrees of
@@ -379,6 +392,7 @@ def cv_signal_gain(theta, cov, z, folds_idx, w=None, null_fits: dict | None = No
     for te in folds_idx:
         tr = np.setdiff1d(np.arange(n), te)
         X1 = signal_design(Z if Z.shape[1] == 1 else Z[:, independent_columns(Z[tr])], w)
+        X1 = X1[:, :, identified_columns(X1[tr])]
         f0 = null_fold_fit(theta, cov, te, null_fits)
         f1 = reml(theta[tr], cov[tr], X1[tr], n_iter=100)
         s0[te] = _weighted_sse(theta[te], cov[te], f0.T, X0[te], f0.beta)
@@ -428,17 +442,26 @@ def signal_evidence(dev: RunDeviations, signals_, *, alpha: float, k: int, seed:
 def joint_test(dev: RunDeviations, z: np.ndarray) -> tuple[np.ndarray, float, int]:
     """``(b, p, dof)``: a signal's coefficients in the REML mean of :func:`signal_design` (:func:`signal_index`),
     the p-value of their joint Wald test ``b' C^-1 b`` (``C`` their block of REML's ``beta_cov``) against
-    chi-square with ``dof = len(b)`` degrees of freedom: 3 per column of ``z`` (2 without load variation)."""
+    chi-square with ``dof = len(b)`` degrees of freedom: 3 per column of ``z`` (2 without load variation).
+
+    A coefficient the runs do not identify (:func:`identified_columns`) is left out of the mean and of the test: its
+    ``b`` is 0 and ``dof`` counts the identified ones only (none: ``p`` 1)."""
     Z = np.asarray(z, float).reshape(len(z), -1)
     idx = signal_index(Z.shape[1], dev.load is not None)
-    fit = reml(dev.theta, dev.cov, signal_design(z, dev.load))
-    b = fit.beta[idx]
-    C = fit.beta_cov[np.ix_(idx, idx)]
+    X = signal_design(z, dev.load)
+    keep = identified_columns(X)
+    fit = reml(dev.theta, dev.cov, X[:, :, keep])
+    at = {j: i for i, j in enumerate(keep)}
+    tested = [at[j] for j in idx if j in at]
+    b = np.array([fit.beta[at[j]] if j in at else 0.0 for j in idx])
+    if not tested:
+        return b, 1.0, 0
+    bt, C = fit.beta[tested], fit.beta_cov[np.ix_(tested, tested)]
     try:
-        p = float(stats.chi2.sf(float(b @ np.linalg.solve(C, b)), len(idx)))
+        p = float(stats.chi2.sf(float(bt @ np.linalg.solve(C, bt)), len(tested)))
     except np.linalg.LinAlgError:
         p = 1.0
-    return b, p, len(idx)
+    return b, p, len(tested)
 
 
 def _beyond(z: np.ndarray, given: np.ndarray) -> np.ndarray:
