@@ -154,3 +154,33 @@ def test_the_close_loop_names_the_cut_first_in_its_trace():
     # nothing cut, or only counted: the diagnosis as it was
     assert with_onset(d, {**rec, "runs": 0}) is d and with_onset(d, {**rec, "cut": False}) is d
     assert with_onset(d, None) is d
+
+
+def _fast_daq_file(seed=0):
+    """Eight runs sampled at 5 kHz: slow starts (0.6 m/s^2, a low V0 against a heavy load) from the first sample in
+    runs 1-7, and run 8 at rest for 20 ms first (a drive that starts late), 1 mm/s speed noise, 50 nm counts."""
+    dt, n, acc = 2e-4, 1500, 0.6
+    rng = np.random.default_rng(seed)
+    parts = []
+    for i in range(8):
+        k = 100 if i == 7 else 0
+        tau = np.clip(np.arange(n) * dt - k * dt, 0.0, None)
+        d = 1 if i % 2 == 0 else -1
+        s = d * np.round(0.5 * acc * tau ** 2 / Q) * Q
+        parts.append(pd.DataFrame({"time_s": 10.0 * i + np.arange(n) * dt, "run": i + 1, "position_m": s,
+                                   "voltage_V": 200.0, "direction": d, "load_kg": 0.0,
+                                   "speed_m_s": d * acc * tau + SIGMA_V * rng.standard_normal(n)}))
+    return pd.concat(parts, ignore_index=True)
+
+
+def test_at_a_fast_daq_a_slow_start_is_not_cut_and_a_rest_of_milliseconds_is():
+    # property: the rest is cut by its duration, not its sample count: a slow start stays within the position band
+    # for about 0.8 ms (0.5 a t^2 = 0.19 um at 0.6 m/s^2), 4 steps at 5 kHz, under MIN_REST_S; a 20 ms rest is cut
+    df = _fast_daq_file()
+    bands = onset.rest_bands(df, Q)
+    ks = [onset.onset_index(g["position_m"].to_numpy(), g["speed_m_s"].to_numpy(), bands["band_position_m"],
+                            bands["band_speed_m_s"]) for _, g in df.groupby("run")]
+    assert all(onset.MIN_REST_STEPS <= k < onset.MIN_REST_S / 2e-4 for k in ks[:7]), ks   # rests of 2+ steps
+    cut, rec = onset.from_onset(df, Q)
+    assert rec["runs"] == 1 and rec["per_run"][0][0] == 8 and rec["per_run"][0][1] >= 100, rec["per_run"]
+    assert len(df) - len(cut) == rec["samples"]

@@ -23,8 +23,9 @@ noise ``sqrt(70)`` times its standard deviation), and
 ``z`` the two-sided normal quantile at ``alpha / (4 N)`` (``N`` samples, two comparisons each): a file's samples at
 rest are all taken as at rest with probability at least ``1 - alpha``.
 
-A run is **cut** (:func:`from_onset`) only when its onset lies :data:`MIN_REST_STEPS` or more samples past its
-first (a rest of one step is the sample clock's own uncertainty of the start), it moves after the onset and
+A run is **cut** (:func:`from_onset`) only when its onset lies :data:`MIN_REST_STEPS` or more samples and
+:data:`MIN_REST_S` or more seconds past its first (a rest of one step is the sample clock's own uncertainty of the
+start; a slow start stays within the bands for about a millisecond at any sample rate), it moves after the onset and
 the drive inputs of the rest (:data:`DRIVE_INPUTS`: the median of each over the samples at rest) lie within their
 range over the motion: a run that never leaves the bands (a stalled run) is kept whole, and a rest under other
 logged inputs (a voltage logged at zero or ramping up) is the model's to predict and is kept too.
@@ -40,8 +41,8 @@ import pandas as pd
 from .columns import DIRECTION, FREQUENCY, LOAD, POSITION, RUN, SPEED, TIME, VOLTAGE, run_slices
 from .plausibility import UNEVEN_STEP_SHARE
 
-__all__ = ["ALPHA", "DRIVE_INPUTS", "MIN_REST_STEPS", "REGRESSOR", "noise_sd", "rest_bands", "onset_index", "from_onset",
-           "subset_record", "onset_lines"]
+__all__ = ["ALPHA", "DRIVE_INPUTS", "MIN_REST_STEPS", "MIN_REST_S", "REGRESSOR", "noise_sd", "rest_bands",
+           "onset_index", "from_onset", "subset_record", "onset_lines"]
 
 #: the family-wise chance that some sample of a file at rest is taken as moving
 ALPHA = 0.01
@@ -50,6 +51,10 @@ DRIVE_INPUTS: tuple[str, ...] = (VOLTAGE, DIRECTION, LOAD, FREQUENCY)
 #: the fewest steps a rest must last to be cut: a drive that starts within a run's first step, at a phase the
 #: sample clock does not see, can leave the next sample within the bands
 MIN_REST_STEPS = 2
+#: the shortest time [s] a rest must last to be cut, whatever the sample rate: a driven slider that starts slowly
+#: (low V0 against a heavy load, under 1 m/s^2) stays within the position band for up to about a millisecond, which
+#: is several steps of a fast DAQ; at the 1 kHz the rule was first measured on, 2 ms are its 2 steps
+MIN_REST_S = 2e-3
 #: the name of the cut in the close loop's ``diagnosis.traced_to``
 REGRESSOR = "rest_before_onset"
 
@@ -149,7 +154,7 @@ def from_onset(df: pd.DataFrame, encoder_resolution_m: float, *, cut: bool = Tru
         if k is None:
             still += 1
             continue
-        if k < MIN_REST_STEPS:
+        if k < MIN_REST_STEPS or t[a + k] - t[a] < MIN_REST_S * (1 - 1e-6):
             continue
         if not _inputs_hold(df, a, k, b):
             differ += 1
