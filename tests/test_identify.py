@@ -440,20 +440,25 @@ def test_profile_search_statistical_stop_and_settings_errors():
             PredictorIdentifier(order=3, **bad).fit(df, M_S)
 
 
-@pytest.mark.parametrize("noise, stop", [("per_run", "no step increases the log-likelihood"),
-                                         ("common", "iteration limit")])
-def test_profile_search_stalled_on_exact_data_is_polished_to_the_optimum(noise, stop):
+#: the ways the profile search stops (its convergence message's start); which one ends a search short of an exact
+#: optimum depends on the last bits of its steps, so on the BLAS kernels of the machine
+PROFILE_STOPS = ("no step increases the log-likelihood", "iteration limit", "statistical convergence")
+
+
+@pytest.mark.parametrize("noise", ["per_run", "common"])
+def test_profile_search_stalled_on_exact_data_is_polished_to_the_optimum(noise):
     """Noise-free data, every parameter varied: the damped Gauss-Newton of the profile search ends about
-    6e-8 m/s rms short of the exact fit -- with per-run variances it stalls (no step gains), with the
-    common variance it creeps to its iteration limit; least-squares refits continue from there to the
-    exact optimum (residual at rounding level), and the report says why and how."""
+    6e-8 m/s rms short of the exact fit -- it stalls (no step gains), creeps to its iteration limit or stops
+    by its statistical rule, as the round-off of the machine's BLAS has it; least-squares refits continue from
+    there to the exact optimum (residual at rounding level), and the report says why and how."""
     prm, th, names = _truth(3)
     df = simulate_dataset(prm, SMALL, M_S, noise_std=0.0)
     idf = PredictorIdentifier(order=3, n_starts=2, seed=0, solver="joint", noise_fit="profile", noise=noise).fit(
         df, M_S, mask=evaluation_mask(df))
     assert idf.residual_rms_ < 1e-9
     conv = idf.convergence_
-    assert conv["message"].startswith(stop)
+    stop = next((x for x in PROFILE_STOPS if conv["message"].startswith(x)), None)
+    assert stop is not None, conv["message"]
     assert "least-squares refit(s) at the ML variances" in conv["message"]
     assert "polish" in conv["outer"][-1] and stop in conv["outer"][-1]["polish"]
     ll = [h["loglik"] for h in conv["outer"]]
