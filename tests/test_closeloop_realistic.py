@@ -45,8 +45,15 @@ def test_realistic_logged_temperature_is_traced(record_property):
                   case="thermal_drift 12, temperature logged")
 
 
+#: bar_bump 8's named reading (bar_waviness, 8 parameters) lies at the identifiability threshold: on some BLAS
+#: builds its joint covariance has no finite block (no Wald statistic), the reading is refused as not identified
+#: and position is not traced (decision 0129); a non-strict xfail, so that both machines' outcomes are accepted
+#: and the case still runs
+BORDERLINE = pytest.mark.xfail(strict=False, raises=AssertionError,
+                               reason="named reading at the identifiability threshold on some BLAS builds (0129)")
 SINGLE = [("thermal_drift", 4), ("direction_asymmetry", 2), ("bar_waviness", 2), ("pulley_friction", 11),
-          ("drive_saturation", 3), ("thermal_drift", 12), ("direction_asymmetry", 13), ("bar_bump", 8),
+          ("drive_saturation", 3), ("thermal_drift", 12), ("direction_asymmetry", 13),
+          pytest.param("bar_bump", 8, marks=BORDERLINE),
           ("drive_saturation", 11), ("drive_saturation", 12), ("speed_lowpass", 11)]
 
 
