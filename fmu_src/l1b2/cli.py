@@ -298,11 +298,9 @@ def _close_loop_args(p: argparse.ArgumentParser) -> None:
                    "run (runs dealt to the folds) or condition (whole conditions, a drive amplitude and a load with "
                    "all their runs, dealt to the folds)")
     p.add_argument("--refit-repeats", metavar="N", default="1", help="splits of TRAIN's runs into the refit's "
-                   "folds for a round's acceptance (repeated cross-validation, each run held out N times; "
-                   "N times the refits)")
-    p.add_argument("--tie-repeats", metavar="N", default="3", help="splits over which a round whose fold vote is "
-                   "tied (exactly half the folds improved, every other rule met) is cross-validated again; not above "
-                   "--refit-repeats: off")
+                   "folds for a round's acceptance (each run held out N times; N times the refits)")
+    p.add_argument("--tie-repeats", metavar="N", default="3", help="splits over which a round with a tied fold "
+                   "vote is cross-validated again (not above --refit-repeats: off)")
     p.add_argument("--seed", type=int, default=0, help="seed of the multi-start and of the fold assignment")
     p.add_argument("--slider-mass", type=float, help="slider mass [kg] (overrides the sidecars)")
     p.add_argument("--allow-unusual-units", action="store_true", help=UNUSUAL_UNITS_HELP)
@@ -656,12 +654,10 @@ def _fold_settings(args) -> dict:
         raise L1B2Error(f"--fold-unit must be one of {', '.join(FOLD_UNITS)}, got {args.fold_unit!r}")
     out = {"clock_folds": args.clock_folds, "fold_unit": args.fold_unit}
     for name in ("refit_repeats", "tie_repeats"):
-        try:
-            out[name] = int(getattr(args, name))
-        except ValueError:
-            out[name] = 0
+        given = getattr(args, name)
+        out[name] = int(given) if str(given).isdigit() else 0
         if out[name] < 1:
-            raise L1B2Error(f"--{name.replace('_', '-')} must be a whole number >= 1, got {getattr(args, name)!r}")
+            raise L1B2Error(f"--{name.replace('_', '-')} must be a whole number >= 1, got {given!r}")
     return out
 
 
