@@ -86,3 +86,9 @@ def check_control(res, case, record):
 def known_miss(why: str):
     """A case the loop is known to miss (a detection-power limit, measured): strict, so a pass is noticed too."""
     return pytest.mark.xfail(strict=True, raises=AssertionError, reason=why)
+
+
+def machine_borderline(why: str):
+    """A case whose verdict differs between machines' BLAS builds with the same packages (decision 0129): it
+    passes on some and misses on others, so both are accepted (non-strict) and the case still runs."""
+    return pytest.mark.xfail(strict=False, raises=AssertionError, reason=why)

@@ -8,11 +8,13 @@ strict xfail with its measured reason, so that a pass is noticed.
 """
 
 import pytest
-from realistic_cases import check_effects, known_miss, run_case
+from realistic_cases import check_effects, known_miss, machine_borderline, run_case
 
 PAIRS = [(("pulley_friction", "drive_saturation"), 5),
          pytest.param(("direction_asymmetry", "thermal_drift"), 6, marks=known_miss("time not traced")),
-         (("bar_waviness", "pulley_friction"), 7), (("bar_bump", "direction_asymmetry"), 9),
+         (("bar_waviness", "pulley_friction"), 7),
+         pytest.param(("bar_bump", "direction_asymmetry"), 9, marks=machine_borderline(
+             "bar_waviness's named reading withdrawn on some BLAS builds, position traced fourth (0129)")),
          (("drive_saturation", "bar_waviness"), 10)]
 
 
