@@ -388,17 +388,19 @@ def accepts(r: RefitCV, *, min_gain: float = DEFAULT_MIN_CV_GAIN, min_drop: floa
 
     With folds from ``R`` splits (:func:`repeated_folds`) the gain and the nrmse are pooled over all ``R * k``
     held-out folds (each run counted ``R`` times) and the majority is over the ``R * k`` folds."""
-    k = len(r.current.sse)
-    return (r.extended.failed == 0 and r.gain >= min_gain and r.folds_improved > k / 2
-            and r.current.nrmse - r.extended.nrmse >= min_drop)
+    return 2 * r.folds_improved > len(r.current.sse) and _other_rules(r, min_gain, min_drop)
 
 
 def tied(r: RefitCV, *, min_gain: float = DEFAULT_MIN_CV_GAIN, min_drop: float = DEFAULT_MIN_CV_DROP) -> bool:
     """Whether ``r`` meets every rule of :func:`accepts` but the fold majority, with exactly half of its folds
     improved: a vote that does not decide (two of four folds), which more splits of the same runs can."""
-    k = len(r.current.sse)
-    return (r.extended.failed == 0 and r.gain >= min_gain and 2 * r.folds_improved == k
-            and r.current.nrmse - r.extended.nrmse >= min_drop)
+    return 2 * r.folds_improved == len(r.current.sse) and _other_rules(r, min_gain, min_drop)
+
+
+def _other_rules(r: RefitCV, min_gain: float, min_drop: float) -> bool:
+    """The acceptance rules beside the fold vote (:func:`accepts`, :func:`tied`): no fold failed, the pooled gain at
+    least ``min_gain`` and the pooled held-out nrmse lower by at least ``min_drop``."""
+    return r.extended.failed == 0 and r.gain >= min_gain and r.current.nrmse - r.extended.nrmse >= min_drop
 
 
 def immaterial(trials: list, effects: EffectSet, min_gain: float = DEFAULT_MIN_CV_GAIN) -> list:

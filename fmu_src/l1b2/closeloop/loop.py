@@ -342,8 +342,7 @@ class CloseLoop(EstimatorSettings):
                 break
             trials = self._trials(it, short, cur, cur_err, schemes, (r, dtr, mask, m_s, v_cur), say, n_rnd)
             it.trials.append(trials)
-            ok = simplest_within_one_se([t for t in trials if accepts(
-                t, min_gain=self.min_cv_gain, min_drop=materiality(t.candidate, self.min_cv_drop))])
+            ok = simplest_within_one_se([t for t in trials if accepts(t, **self._rules(t))])
             if not ok:
                 break
             pick, model, checks = self._identified_pick(
@@ -394,9 +393,15 @@ class CloseLoop(EstimatorSettings):
         record goes to ``it.ranges``; a refused pick is not added, the model stays the previous round's)."""
         rec = range_check(effects, model, dtr, mask, it.channels, n_rnd, pick.candidate.label)
         it.ranges += [rec] if rec else []
-        if rec and rec["outcome"] != "kept":
+        refused = bool(rec) and rec["outcome"] != "kept"
+        if refused:
             say(f"round {n_rnd}: {pick.candidate.label} {rec['outcome']} within TRAIN's range of the channel")
-        return bool(rec) and rec["outcome"] != "kept"
+        return refused
+
+    def _rules(self, t: RefitCV) -> dict:
+        """The thresholds a refit trial ``t`` is judged by (:func:`accepts`, :func:`tied`): ``min_cv_gain``, and
+        ``min_cv_drop`` when it is structural (:func:`materiality`)."""
+        return {"min_gain": self.min_cv_gain, "min_drop": materiality(t.candidate, self.min_cv_drop)}
 
     def _trials(self, it, short, cur, cur_err: dict, schemes: dict, frame: tuple, say, n_rnd) -> list[RefitCV]:
         """The round's refit trials (:class:`RefitCV`, in the order of ``short``) on ``schemes``; when one over the
@@ -406,8 +411,8 @@ class CloseLoop(EstimatorSettings):
             return [None if e is None else RefitCV(s.candidate, err[time_dependent(s.candidate)], e, s.cv_gain, s.phi)
                     for s, e in zip(short, errs)]
         out = trials(schemes, cur_err)
-        if self.tie_repeats > self.refit_repeats and any(not time_dependent(t.candidate) and tied(
-                t, min_gain=self.min_cv_gain, min_drop=materiality(t.candidate, self.min_cv_drop)) for t in out):
+        if self.tie_repeats > self.refit_repeats and any(not time_dependent(t.candidate) and tied(t, **self._rules(t))
+                                                         for t in out):
             say(f"round {n_rnd}: a tied fold vote; the refits over run folds again over {self.tie_repeats} splits")
             more = refit_schemes(frame[1], self.refit_folds, self.tie_repeats, self.seed, self.clock_folds,
                                  self.fold_unit)
@@ -604,8 +609,8 @@ class CloseLoop(EstimatorSettings):
             "measurement_chain": chain_rec,
             "channels_considered": channels_considered(
                 it.channels, scores, it.level, self.min_gain, it.effects.families, it.run_level,
-                [[{**t.to_dict(), "accepted": accepts(t, min_gain=self.min_cv_gain, min_drop=materiality(
-                    t.candidate, self.min_cv_drop))} for t in rnd] for rnd in it.trials], it.effects.labels),
+                [[{**t.to_dict(), "accepted": accepts(t, **self._rules(t))} for t in rnd] for rnd in it.trials],
+                it.effects.labels),
             "run_level": it.run_level.to_dict() if it.run_level is not None else None,
             "named_checks": list(it.checks),
             "physical_range": list(it.ranges),
