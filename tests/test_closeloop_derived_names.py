@@ -81,7 +81,8 @@ def test_the_pause_channel_is_derived_beside_a_logged_column_of_its_name():
 
 def test_a_lag_is_no_longer_written_over_a_logged_column_of_its_name():
     from l1b2.closeloop.derived import prepare_channels
-    from l1b2.closeloop.lags import suffix, with_lagged_channels
+    from l1b2.closeloop.lags import with_lagged_channels
+    from l1b2.units import lag_suffix as suffix
     volts = [200, 220, 180, 240, 200, 260, 180, 220, 240, 200, 260, 180]
     starts = [2.0 * k for k in range(len(volts))]
     own = np.arange(len(volts), dtype=float) * 7.0

@@ -23,7 +23,8 @@ import pandas as pd
 
 from .auxiliary import NOT_CANDIDATES, with_usable_channels
 from .events import SUFFIX as EVENT_SUFFIX
-from .lags import STEP_SUFFIX, TAU_RUNS, suffix as lag_suffix
+from ..units import STEP_SUFFIX, lag_suffix
+from .lags import TAU_RUNS
 from .pauses import COLUMN as PAUSE_COLUMN
 from .runclock import COLUMN as RUN_CLOCK_COLUMN
 

@@ -61,12 +61,6 @@ STORED_INPUTS = (dataio.VOLTAGE,)
 BEFORE_SESSION = {dataio.VOLTAGE: 0.0}
 
 
-def suffix(n) -> str:
-    """The column suffix of the lag of ``n`` run periods (:func:`l1b2.units.lag_suffix`, whose naming rule gives the
-    lag its column's unit)."""
-    return lag_suffix(n)
-
-
 def lowpass(t, c, tau: float) -> np.ndarray:
     """The first-order low-pass of the samples ``c`` at times ``t`` (sorted) with time constant ``tau`` [s]: ``c``
     held between samples, the start at ``c[0]`` (module docstring)."""
@@ -104,9 +98,9 @@ def run_settings(df: pd.DataFrame, response_columns=None) -> list[str]:
     settings, then the logged channels in column order."""
     inputs = [c for c in STORED_INPUTS if c in df.columns
               and is_run_setting(run_table([df], c), varies_within_runs(df, c))]
-    return [c for c in inputs if not any(c + suffix(n) in df.columns for n in TAU_RUNS)] + [
+    return [c for c in inputs if not any(c + lag_suffix(n) in df.columns for n in TAU_RUNS)] + [
         ch["name"] for ch in channels_of(df, response_columns)
-        if ch["kind"] == "logged" and not any(ch["name"] + suffix(n) in df.columns for n in TAU_RUNS)
+        if ch["kind"] == "logged" and not any(ch["name"] + lag_suffix(n) in df.columns for n in TAU_RUNS)
         and is_run_setting(run_table([df], ch["name"]), ch["within_run"])]
 
 
@@ -146,11 +140,11 @@ def with_lagged_channels(train: pd.DataFrame, test: pd.DataFrame | None = None, 
                 y[order] = lowpass(t[order], c[order], tau)
                 k = 0
                 for df in group:
-                    df[name + suffix(n)] = y[k:k + len(df)]
+                    df[name + lag_suffix(n)] = y[k:k + len(df)]
                     k += len(df)
             if name in BEFORE_SESSION:
                 _add_steps(group, name)
-        record.append({"channel": name, "lags": [name + suffix(n) for n in TAU_RUNS],
+        record.append({"channel": name, "lags": [name + lag_suffix(n) for n in TAU_RUNS],
                        "tau_s": [float(x) for x in taus], "one_session": merged,
                        "step": name + STEP_SUFFIX if name in BEFORE_SESSION else None,
                        "step_from": BEFORE_SESSION.get(name)})
