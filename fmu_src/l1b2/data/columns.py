@@ -28,7 +28,7 @@ from ..units import COLUMN_UNITS, SIDECAR_FIELD_UNITS, data_unit
 
 __all__ = [
     "TIME", "RUN", "POSITION", "VOLTAGE", "DIRECTION", "LOAD", "SPEED",
-    "FREQUENCY", "TEMPERATURE", "run_slices",
+    "FREQUENCY", "TEMPERATURE", "run_slices", "file_row",
     "ColumnSpec", "KNOWN_COLUMNS", "COLUMN_SPECS", "REQUIRED_COLUMNS", "NUMERIC_COLUMNS",
     "SIDECAR_FIELDS", "LOAD_TIME_META", "NAN_TOKENS",
     "DEFAULT_DRIVE_FREQUENCY_HZ", "DEFAULT_ENCODER_RESOLUTION_M",
@@ -250,3 +250,9 @@ def run_slices(run: pd.Series | Sequence | np.ndarray) -> list[tuple[Any, slice]
     stops = np.append(starts[1:], n)
     return [(values[a].item() if isinstance(values[a], np.generic) else values[a], slice(int(a), int(b)))
             for a, b in zip(starts, stops)]
+
+
+def file_row(df: pd.DataFrame, position: int) -> int:
+    """The file's 1-based data row of the frame's row at ``position`` (0-based): the frame's index there + 1. A
+    measured-data frame keeps the file's row numbers as its index, also after rows were cut on reading."""
+    return int(df.index[position]) + 1

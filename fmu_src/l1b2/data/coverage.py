@@ -27,6 +27,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import DataFormatError
+from .columns import file_row
 from .measurements import DIRECTION, FREQUENCY, LOAD, POSITION, RUN, SPEED, VOLTAGE, Measurements, run_slices
 from .gaps import gap_lines
 from .onset import onset_lines
@@ -223,7 +224,7 @@ def check_same_rig(train: Measurements, test: Measurements, *, explicit: Mapping
     found = load_effect_mismatch(run_table(train.df), run_table(test.df))
     if found is not None:
         where = test.meta.get("source") or "TEST"
-        row = int(test.df.index[found.row]) + 1       # the file's row: rows cut on reading keep their index
+        row = file_row(test.df, found.row)
         if not allow_unusual_units:
             raise DataFormatError(where, found.column, row,
                                   found.text + " (if the values are right, allow them with --allow-unusual-units)")
@@ -310,16 +311,16 @@ def shared_run(train: Measurements, test: Measurements, share: float = SHARED_SH
     runs, first, per_run = np.unique(tr_runs[where], return_index=True, return_counts=True)
     best = min(range(len(runs)), key=lambda j: (-per_run[j], where[first[j]]))
     same = bool(k == n == per_run[best] == np.count_nonzero(tr_runs == runs[best]))
-    return SharedRun(rid, int(te.index[pos[mine][0]]) + 1, runs[best], k, n, same)
+    return SharedRun(rid, file_row(te, pos[mine][0]), runs[best], k, n, same)
 
 
 def runs_of_two(m: Measurements, path) -> Measurements:
     """``m`` when each run holds at least 2 samples (Eq. 29 predicts a sample from the one before it), else a
-    :class:`~l1b2.errors.DataFormatError` naming the file, the run and its first row (the file's 1-based data row:
-    the frame's index + 1, which rows cut on reading keep)."""
+    :class:`~l1b2.errors.DataFormatError` naming the file, the run and its first row
+    (:func:`~l1b2.data.columns.file_row`)."""
     for rid, sl in run_slices(m.df[RUN]):
         if sl.stop - sl.start < 2:
-            raise DataFormatError(path, RUN, int(m.df.index[sl.start]) + 1,
+            raise DataFormatError(path, RUN, file_row(m.df, sl.start),
                                   f"run {rid} has a single sample: a run is one traverse, and the predictor needs "
                                   "at least 2 samples of it (a run cut by the export? leave it out)")
     return m

@@ -38,7 +38,7 @@ from statistics import NormalDist
 import numpy as np
 import pandas as pd
 
-from .columns import DIRECTION, FREQUENCY, LOAD, POSITION, RUN, SPEED, TIME, VOLTAGE, run_slices
+from .columns import DIRECTION, FREQUENCY, LOAD, POSITION, RUN, SPEED, TIME, VOLTAGE, file_row, run_slices
 from .plausibility import UNEVEN_STEP_SHARE
 
 __all__ = ["ALPHA", "DRIVE_INPUTS", "MIN_REST_STEPS", "MIN_REST_S", "REGRESSOR", "noise_sd", "rest_bands",
@@ -160,7 +160,7 @@ def from_onset(df: pd.DataFrame, encoder_resolution_m: float, *, cut: bool = Tru
             differ += 1
             continue
         keep[a:a + k] = False
-        per_run.append([rid, int(k), float(t[a + k] - t[a]), int(df.index[a]) + 1])
+        per_run.append([rid, int(k), float(t[a + k] - t[a]), file_row(df, a)])
     return (df.loc[keep] if cut and not keep.all() else df), _record(per_run, n_runs, still, differ, cut, bands)
 
 
