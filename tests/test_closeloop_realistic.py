@@ -6,12 +6,13 @@ baseline of the same seed without the effect); without one (control), the held-o
 2 % (relative) above the baseline, and what was added reported.
 
 Fast set (``make test``): one control seed, a control with a logged constant temperature and the speed-channel
-detector, and the slow cases marked ``ci_slow``: the eleven single effects, the logged-temperature case and the
-measurement-chain case (a strict xfail). The pairs, the ten control seeds and the command line's report are in
-``test_closeloop_realistic_pairs.py`` and ``test_closeloop_realistic_controls.py``: whole modules are what
-``make test``'s two workers share out (``tests/conftest.py``, ``COSTLY_FIRST``). The cases the loop is known to
-miss are strict xfails with their measured reasons, so that a pass is noticed. Each case's figures are recorded
-(``pytest --junitxml=F``, then ``python bench/case_table.py F``); what was measured, session by session:
+detector, and the slow cases marked ``ci_slow``: one seed of each single effect (the other seeds with
+``make test-slow``), the logged-temperature case and the measurement-chain case (a strict xfail). The pairs, the
+ten control seeds and the command line's report are in ``test_closeloop_realistic_pairs.py`` and
+``test_closeloop_realistic_controls.py``: whole modules are what ``make test``'s two workers share out
+(``tests/conftest.py``, ``COSTLY_FIRST``). The cases the loop is known to miss are strict xfails with their
+measured reasons, so that a pass is noticed. Each case's figures are recorded (``pytest --junitxml=F``, then
+``python bench/case_table.py F``); what was measured, session by session:
 ``docs/decisions/0005-realistic-world-close-loop-checks.md``.
 """
 
@@ -50,14 +51,17 @@ def test_realistic_logged_temperature_is_traced(record_property):
 #: and position is not traced (decision 0129); a non-strict xfail, so that both machines' outcomes are accepted
 #: and the case still runs
 BORDERLINE = machine_borderline("named reading at the identifiability threshold on some BLAS builds (0129)")
-SINGLE = [("thermal_drift", 4), ("direction_asymmetry", 2), ("bar_waviness", 2), ("pulley_friction", 11),
-          ("drive_saturation", 3), ("thermal_drift", 12), ("direction_asymmetry", 13),
+#: one seed of every kind runs in ``make test`` (``ci_slow``); the other seeds and the borderline bar_bump 8 run with
+#: ``make test-slow`` (decision 0131: ``make test``'s time on a slower machine)
+CI = pytest.mark.ci_slow
+SINGLE = [pytest.param("thermal_drift", 4, marks=CI), pytest.param("direction_asymmetry", 2, marks=CI),
+          pytest.param("bar_waviness", 2, marks=CI), pytest.param("pulley_friction", 11, marks=CI),
+          pytest.param("drive_saturation", 3, marks=CI), ("thermal_drift", 12), ("direction_asymmetry", 13),
           pytest.param("bar_bump", 8, marks=BORDERLINE),
-          ("drive_saturation", 11), ("drive_saturation", 12), ("speed_lowpass", 11)]
+          ("drive_saturation", 11), ("drive_saturation", 12), pytest.param("speed_lowpass", 11, marks=CI)]
 
 
 @pytest.mark.slow
-@pytest.mark.ci_slow    # all eleven single effects (decision 0074)
 @pytest.mark.parametrize("effect,seed", SINGLE)
 def test_realistic_single_effect(effect, seed, record_property):
     res, truth = run_case((effect,), seed)
