@@ -36,15 +36,16 @@ before). Each kind draws from one random stream of its seed. The kinds:
   goes slack, it does not push) and the weight obeys ``|m| d2z/dt2 = |m| g - T``. The slider feels ``T`` toward the
   pulley (set through its load input as ``sign(m) T / g`` with ``load_inertia`` 0: the weight's inertia is in the
   thread's model, not the slider's). At each run's start the slider leaves the weight behind, then the weight
-  follows through the thread: a ringing at 3-35 Hz that decays over the run, larger with heavier loads and none
-  without a load. The thread's own mass and the pulley's inertia are left out.
+  follows through the thread: a ringing at 7.5-21 Hz (``sqrt(k / |m|) / 2 pi`` over the plan's 30-90 g) that
+  decays over the run, larger with heavier loads and none without a load. The thread's own mass and the pulley's
+  inertia are left out.
 * ``relay_coil_decoy`` -- a decoy, no effect on the motor: logged ``relay_coil_temp_C`` per sample, a thermistor on
   the coil of the relay that swaps the drive's CH1 and CH2 for backward runs (glued there after a relay burned out).
   The DAQ program energises the relay for each backward run and releases it at the run's end; the coil's
   temperature follows its dissipation first order on the session clock, ``d theta/dt = (Theta on - theta) / tau``
   (``on`` 1 during a backward run, else 0; ``Theta`` drawn in 25-40 K, the coil's rise when held on; ``tau`` in
-  15-30 s), ``25 degC + theta``, 0.05 K of noise and 0.01 K resolution. It follows the direction, the time in a
-  backward run and the session clock; the relay's contacts are closed either way, so it acts on nothing: it must
+  15-30 s), ``25 degC + theta``, 0.05 K of noise and 0.01 K resolution. It follows the session clock, and the
+  direction and the time in a run through a rise of up to ~0.5 K within each backward run; the relay's contacts are closed either way, so it acts on nothing: it must
   not be traced.
 
 Pass rule (fixed before any loop ran; the eighth, ninth and tenth audits'): a kind passes when a regressor of
