@@ -45,7 +45,8 @@ before). Each kind draws from one random stream of its seed. The kinds:
   temperature follows its dissipation first order on the session clock, ``d theta/dt = (Theta on - theta) / tau``
   (``on`` 1 during a backward run, else 0; ``Theta`` drawn in 25-40 K, the coil's rise when held on; ``tau`` in
   15-30 s), ``25 degC + theta``, 0.05 K of noise and 0.01 K resolution. It follows the session clock, and the
-  direction and the time in a run through a rise of up to ~0.5 K within each backward run; the relay's contacts are closed either way, so it acts on nothing: it must
+  direction and the time in a run through a rise of 0.15-1.1 K within each backward run (longer for slower runs);
+  the relay's contacts are closed either way, so it acts on nothing: it must
   not be traced.
 
 Pass rule (fixed before any loop ran; the eighth, ninth and tenth audits'): a kind passes when a regressor of
