@@ -127,3 +127,100 @@ def test_close_loop_exits_non_zero_in_one_line_when_the_baseline_diverges(tmp_pa
     rec = "recommended"
     assert fits == [(4, 0, rec), (8, 1, rec), (None, None, None), (1, 0, rec)]
     assert not (out / "report.json").exists()
+
+
+class _Fit(_Pred):
+    """A prediction with a fitted identifier's log-likelihood (``result_.loglik``)."""
+
+    def __init__(self, f, loglik):
+        super().__init__(f)
+        self.result_ = type("R", (), {"loglik": loglik})()
+
+
+def _ramped(n_runs=4, n=60):
+    """Runs whose speed ramps from 0.5 to 1.5 times the run's level: each run's median misses it by a known share."""
+    df = _frame(n_runs, n)
+    ramp = np.tile(np.linspace(0.5, 1.5, n), n_runs)
+    return df.assign(speed_m_s=df["speed_m_s"] * ramp)
+
+
+def test_plateau_nrmse_is_each_runs_median_speed_written_out():
+    df = _ramped()
+    mask = np.ones(len(df), bool)
+    mask[::7] = False
+    v = df["speed_m_s"].to_numpy()
+    e = []
+    for r in df["run"].unique():
+        sel = (df["run"].to_numpy() == r)
+        e.append(v[sel & mask] - np.median(v[sel & mask]))
+    e = np.concatenate(e)
+    assert guard.plateau_nrmse(df, mask) == pytest.approx(np.sqrt(np.sum(e ** 2) / np.sum(v[mask] ** 2)), rel=1e-12)
+    # a run with no sample on the mask counts as a zero level where it has none: it adds nothing
+    m2 = mask & (df["run"].to_numpy() != 0)
+    assert np.isfinite(guard.plateau_nrmse(df, m2))
+
+
+def test_a_fit_below_the_run_plateau_is_searched_again_and_the_higher_likelihood_kept():
+    df = _ramped()
+    mask = np.ones(len(df), bool)
+    plateau = guard.plateau_nrmse(df, mask)
+    # predictions g v have nrmse |1 - g|: 0.6 v misses 40 %, above the plateau (about 28 %); 0.9 v misses 10 %
+    wrong, right = _Fit(lambda v: 0.6 * v, 100.0), _Fit(lambda v: 0.9 * v, 250.0)
+    assert guard.free_run_nrmse(wrong, df, mask)[0] == pytest.approx(0.4) and plateau < 0.4
+    calls, rec = [], {}
+
+    def attempt(name, model):
+        def run():
+            calls.append(name)
+            return model
+        return run
+    got = guard.checked_fit(attempt("fit", wrong), attempt("retry", right), df, mask, "x", attempt("rescue", right),
+                            record=rec)
+    assert got is right and calls == ["fit", "rescue"]
+    assert rec["searched_again"] and rec["kept"] == "rescue"
+    assert rec["loglik"] == {"first": 100.0, "rescue": 250.0}
+    assert rec["train_free_run_nrmse"] == pytest.approx(0.4) and rec["run_plateau_nrmse"] == pytest.approx(plateau)
+    # a usable retry (after a broken fit) is compared as well
+    calls.clear()
+    broken = _Fit(lambda v: 0 * v, 1e9)
+    assert guard.checked_fit(attempt("fit", broken), attempt("retry", wrong), df, mask, "x",
+                             attempt("rescue", right)) is right
+    assert calls == ["fit", "retry", "rescue"]
+    # the rescue of the lower likelihood is not kept, whatever its error
+    rec.clear()
+    worse = _Fit(lambda v: 0.9 * v, 50.0)
+    assert guard.checked_fit(attempt("fit", wrong), attempt("retry", right), df, mask, "x", attempt("rescue", worse),
+                             record=rec) is wrong
+    assert rec["kept"] == "first"
+    # a fit above the plateau's level is not searched again; a failing rescue leaves the first
+    calls.clear()
+    rec.clear()
+    assert guard.checked_fit(attempt("fit", right), attempt("retry", wrong), df, mask, "x", attempt("rescue", wrong),
+                             record=rec) is right
+    assert calls == ["fit"] and rec["searched_again"] is False
+
+    def fails():
+        raise IdentificationError("no")
+    rec.clear()
+    assert guard.checked_fit(attempt("fit", wrong), attempt("retry", right), df, mask, "x", fails, record=rec) is wrong
+    assert rec["kept"] == "first" and rec["rescue_failed"] == "no"
+
+
+def test_without_likelihoods_the_lower_error_is_better_and_a_broken_one_never():
+    df = _ramped()
+    mask = np.ones(len(df), bool)
+    a, b = _Pred(lambda v: 0.6 * v), _Pred(lambda v: 0.8 * v)
+    assert guard.better(a, b, df, mask) and not guard.better(b, a, df, mask)
+    assert not guard.better(a, _Fit(lambda v: 0 * v, 1e9), df, mask)
+
+
+def test_the_report_says_when_a_baseline_was_searched_again():
+    from l1b2.closeloop.result import search_line
+    assert search_line("eq29", {"searched_again": False, "train_free_run_nrmse": 0.04}) is None
+    line = search_line("eq29", {"searched_again": True, "train_free_run_nrmse": 0.3657, "run_plateau_nrmse": 0.1255,
+                                "loglik": {"first": 18944.61, "rescue": 41496.34}, "kept": "rescue",
+                                "rescue_train_free_run_nrmse": 0.0730})
+    assert "36.57%" in line and "12.55%" in line and "41496.3 against 18944.6" in line
+    assert line.endswith("kept the seed-free search's fit")
+    failed = search_line("pure_slip", {"searched_again": True, "kept": "first", "rescue_failed": "singular"})
+    assert "failed (singular)" in failed and failed.endswith("kept the multistart's fit")

@@ -11,6 +11,14 @@ multistart (and, when given, once more by a rescue: the seed-free search of
 the identifier without pins, continued with the pins) and raises
 :class:`~l1b2.errors.FitDivergedError` when every attempt is broken (or
 fails outright).
+
+A usable fit can still sit in a wrong basin of the multi-modal likelihood. A
+fit is *below the run plateau* (:func:`plateau_nrmse`) when its free-run nrmse
+on its training data is above that of each run's own median measured speed: a
+motor model that predicts the speed levels of the runs worse than the levels
+themselves has missed what Eq. 29 is about. Then :func:`checked_fit` searches
+again by the rescue (when given) and keeps the fit of the higher
+log-likelihood (:func:`better`); ``record`` says what was compared.
 """
 
 from __future__ import annotations
@@ -29,42 +37,88 @@ from ..errors import FitDivergedError, IdentificationError
 MAX_FIT_NRMSE = 0.5
 
 
-def broken(model, df: pd.DataFrame, mask: np.ndarray) -> str | None:
-    """Why ``model`` (fitted on ``df``) is broken, or None when it is usable.
-
-    Broken: its free run on ``df`` raises a numerical error or is non-finite
-    on the mask, or its free-run nrmse on the mask is at least :data:`MAX_FIT_NRMSE`.
-    """
+def free_run_nrmse(model, df: pd.DataFrame, mask: np.ndarray) -> tuple[float, str | None]:
+    """``(nrmse, why)``: the free-run nrmse of ``model`` on ``df`` over ``mask`` (share of the measured speed's rms),
+    or ``(nan, why)`` when its free run raises a numerical error or is non-finite on the mask."""
     m = np.asarray(mask, bool)
     try:
         with np.errstate(all="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             pred = np.asarray(model.predict_free_run(df), float)
     except (FloatingPointError, OverflowError, ValueError, np.linalg.LinAlgError) as exc:
-        return f"its free run fails ({type(exc).__name__}: {' '.join(str(exc).split())})"
+        return float("nan"), f"its free run fails ({type(exc).__name__}: {' '.join(str(exc).split())})"
     e = df[dataio.SPEED].to_numpy(float)[m] - pred[m]
     bad = ~np.isfinite(e)
     if bad.any():
-        return f"its free run is non-finite on {int(bad.sum())} of {len(e)} evaluated samples"
+        return float("nan"), f"its free run is non-finite on {int(bad.sum())} of {len(e)} evaluated samples"
     ss = float(np.sum(df[dataio.SPEED].to_numpy(float)[m] ** 2))
-    nrmse = float(np.sqrt(np.sum(e ** 2) / max(ss, 1e-300)))
+    return float(np.sqrt(np.sum(e ** 2) / max(ss, 1e-300))), None
+
+
+def broken(model, df: pd.DataFrame, mask: np.ndarray) -> str | None:
+    """Why ``model`` (fitted on ``df``) is broken, or None when it is usable.
+
+    Broken: its free run on ``df`` raises a numerical error or is non-finite
+    on the mask, or its free-run nrmse on the mask is at least :data:`MAX_FIT_NRMSE`.
+    """
+    nrmse, why = free_run_nrmse(model, df, mask)
+    if why is not None:
+        return why
     if not nrmse < MAX_FIT_NRMSE:
         return (f"its free-run nrmse on its own training data is {100 * nrmse:.1f} % "
                 f"(broken from {100 * MAX_FIT_NRMSE:.0f} %)")
     return None
 
 
+def plateau_nrmse(df: pd.DataFrame, mask: np.ndarray) -> float:
+    """The nrmse over ``mask`` of each run's median measured speed (the median of the run's samples on the mask;
+    a run without one predicts 0): what the runs' speed levels alone explain, with no model."""
+    m = np.asarray(mask, bool)
+    v = df[dataio.SPEED].to_numpy(float)
+    level = pd.Series(np.where(m, v, np.nan)).groupby(df[dataio.RUN].to_numpy()).transform("median")
+    e = v[m] - level.fillna(0.0).to_numpy(float)[m]
+    return float(np.sqrt(np.sum(e ** 2) / max(float(np.sum(v[m] ** 2)), 1e-300)))
+
+
+def _loglik(model) -> float:
+    result = getattr(model, "result_", None)
+    return float(getattr(result, "loglik", float("nan")))
+
+
+def _finite(x: float) -> float | None:
+    return float(x) if np.isfinite(x) else None
+
+
+def better(first, second, df: pd.DataFrame, mask: np.ndarray) -> bool:
+    """Whether ``second`` is the better fit of the same data than ``first``: the higher log-likelihood when
+    both are fitted identifiers (``result_.loglik``), else the lower free-run nrmse on ``mask``; an unusable
+    ``second`` (:func:`broken`) never is."""
+    if broken(second, df, mask) is not None:
+        return False
+    a, b = _loglik(first), _loglik(second)
+    if np.isfinite(a) and np.isfinite(b):
+        return b > a
+    return free_run_nrmse(second, df, mask)[0] < free_run_nrmse(first, df, mask)[0]
+
+
 def checked_fit(fit: Callable[[], object], retry: Callable[[], object], df: pd.DataFrame, mask: np.ndarray,
-                what: str, rescue: Callable[[], object] | None = None) -> object:
+                what: str, rescue: Callable[[], object] | None = None, record: dict | None = None) -> object:
     """``fit()``, or ``retry()`` when that fails or is :func:`broken`, or ``rescue()`` (when given) when both do;
     :class:`FitDivergedError` naming every attempt's reason when all are.
+
+    A usable ``fit()`` or ``retry()`` whose free-run nrmse on ``mask`` is above :func:`plateau_nrmse` is compared
+    with ``rescue()`` (when given) and the better (:func:`better`) is returned; a rescue that fails outright
+    leaves the first. ``record`` (a dict, filled when given): ``train_free_run_nrmse`` (of the first usable
+    fit), ``run_plateau_nrmse``, ``searched_again`` and, when it did, ``loglik`` of both and ``kept``
+    (``"first"`` or ``"rescue"``).
 
     ``fit``/``retry``/``rescue``: callables returning a fitted model (an
     :class:`~l1b2.errors.IdentificationError` counts as a failure); ``what``
     names the fit in the message (e.g. ``"the baseline identification on TRAIN"``).
     """
     why = []
-    for attempt in (fit, retry) + ((rescue,) if rescue is not None else ()):
+    record = {} if record is None else record
+    for i, attempt in enumerate((fit, retry) + ((rescue,) if rescue is not None else ())):
         try:
             model = attempt()
         except IdentificationError as exc:
@@ -72,8 +126,27 @@ def checked_fit(fit: Callable[[], object], retry: Callable[[], object], df: pd.D
             continue
         reason = broken(model, df, mask)
         if reason is None:
-            return model
+            return model if i == 2 else _against_plateau(model, rescue, df, mask, record)
         why.append(reason)
     rescued = f"; from the seed-free search without pins, then with them: {why[2]}" if rescue is not None else ""
     raise FitDivergedError(f"{what} diverged: {why[0]}; retried from the identifier's multistart: {why[1]}{rescued}; "
                            "no diagnosis is drawn from a broken fit (check the data's units and runs)")
+
+
+def _against_plateau(model, rescue, df, mask, record: dict):
+    """``model``, or ``rescue()`` when ``model`` is below the run plateau and the rescue is :func:`better`."""
+    nrmse, plateau = free_run_nrmse(model, df, mask)[0], plateau_nrmse(df, mask)
+    again = rescue is not None and nrmse > plateau
+    record.update(train_free_run_nrmse=_finite(nrmse), run_plateau_nrmse=plateau, searched_again=bool(again))
+    if not again:
+        return model
+    try:
+        other = rescue()
+    except IdentificationError as exc:
+        record.update(kept="first", rescue_failed=" ".join(str(exc).split()))
+        return model
+    keep = better(model, other, df, mask)
+    record.update(loglik={"first": _finite(_loglik(model)), "rescue": _finite(_loglik(other))},
+                  rescue_train_free_run_nrmse=_finite(free_run_nrmse(other, df, mask)[0]),
+                  kept="rescue" if keep else "first")
+    return other if keep else model

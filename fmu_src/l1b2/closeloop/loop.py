@@ -173,13 +173,14 @@ class CloseLoop(EstimatorSettings):
 
         if self.baseline not in ("best",) + DRIVE_LAWS:
             raise ValueError(f"baseline must be 'best' or one of {DRIVE_LAWS}, got {self.baseline!r}")
-        self.frequency_ = None
+        self.frequency_, searches = None, {}   # searches: per family, the baseline's check against the run plateau
         def fit_family(family, df=dtr, what="baseline"):
             say(f"{what}: identifying the {family} predictor on TRAIN")
             est = checked_fit(lambda: self._identify(df, m_s, mask_tr, model=family),
                               lambda: self._identify(df, m_s, mask_tr, retry=True, model=family), df,
                               mask_tr, f"the {family} {what} identification on TRAIN",
-                              lambda: self._identify(df, m_s, mask_tr, model=family, rescue=True))
+                              lambda: self._identify(df, m_s, mask_tr, model=family, rescue=True),
+                              record=searches.setdefault(family, {}))
             say.count(1, nfev_of(est))
             return est
         fits, failed = identify_families(DRIVE_LAWS if self.baseline == "best" else (self.baseline,), fit_family)
@@ -191,6 +192,7 @@ class CloseLoop(EstimatorSettings):
                 min_drop=self.min_cv_drop)
             say.count(*(sum(r[k] for r in self.baseline_choice_["families"].values()) for k in ("refits", "nfev")))
         self.baseline_choice_["families"].update({f: {"fit_failed": why} for f, why in failed.items()})
+        self.baseline_choice_["search"] = searches
         base = fits[family]
         #: the baseline's drive-frequency response (estimated when TRAIN's frequency varies): every refit holds it
         self.frequency_ = base.result_.frequency_response
