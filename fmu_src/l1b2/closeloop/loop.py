@@ -180,7 +180,7 @@ class CloseLoop(EstimatorSettings):
                               lambda: self._identify(df, m_s, mask_tr, retry=True, model=family), df,
                               mask_tr, f"the {family} {what} identification on TRAIN",
                               lambda: self._identify(df, m_s, mask_tr, model=family, rescue=True),
-                              record=searches.setdefault(family, {}))
+                              record=searches.setdefault(family + ("" if what == "baseline" else f" ({what})"), {}))
             say.count(1, nfev_of(est))
             return est
         fits, failed = identify_families(DRIVE_LAWS if self.baseline == "best" else (self.baseline,), fit_family)

@@ -309,8 +309,8 @@ def stages_table(stages: list) -> str:
 
 
 def search_line(family: str, r: dict) -> str | None:
-    """The report's line on a baseline searched again (:func:`l1b2.closeloop.guard.checked_fit`'s record), or
-    None when it was not."""
+    """The report's line on a fit of a drive law searched again (:func:`l1b2.closeloop.guard.checked_fit`'s record;
+    ``family``: the drive law, with the fit's purpose when it is not the baseline), or None when it was not."""
     if not r.get("searched_again"):
         return None
     ll = r.get("loglik") or {}
@@ -318,7 +318,7 @@ def search_line(family: str, r: dict) -> str | None:
     rescue = (f"failed ({r['rescue_failed']})" if r.get("rescue_failed") else
               f"log-likelihood {_num(ll.get('rescue'))} against {_num(ll.get('first'))}, TRAIN free-run nrmse "
               f"{_pct(r.get('rescue_train_free_run_nrmse'), '.2%')}")
-    return (f"the {family} baseline's TRAIN free-run nrmse {_pct(r.get('train_free_run_nrmse'), '.2%')} was above "
+    return (f"the {family} fit's TRAIN free-run nrmse {_pct(r.get('train_free_run_nrmse'), '.2%')} was above "
             f"that of each run's median speed ({_pct(r.get('run_plateau_nrmse'), '.2%')}): searched again from the "
             f"seed-free search without pins ({rescue}); kept {kept}")
 
