@@ -42,6 +42,15 @@ Variants (the extra columns are logged in TRAIN and TEST alike unless said other
 * ``two_voltages`` -- TRAIN holds only its runs at 220 V and 324 V; TEST as it is.
 * ``effect_noise16`` -- the effect case plus ``noise16``'s 16 channels.
 * ``effect_renamed`` -- the effect case with ``track_offset_mm`` renamed ``track offset [mm]``.
+* ``quasi_const`` -- ``rate_Hz`` the sample rate the logger computes from its stamps, 1 / (t[k] - t[k-1]) within
+  each run: 1000 Hz up to floating-point round-off (relative spread ~1e-13).
+* ``test_only`` -- ``probe_mV`` white noise logged in TEST only.
+* ``affine_direction`` -- ``relay_ch1`` 1 when the direction is +1, else 0.
+* ``nan_test_all`` -- ``humidity_pct`` read every sample in TRAIN, never in TEST (every cell empty).
+* ``effect_twins`` -- the effect case with ``track_offset_mm`` logged twice (``track_offset_copy_mm``).
+* ``effect_scaled`` / ``effect_tiny`` -- the effect case with ``track_offset_mm`` multiplied by 1e9 / 1e-9 (and
+  renamed): the loop standardises channels, so its result should not move.
+* ``effect_sparse`` -- the effect case with ``track_offset_mm`` read every 10th sample, empty in between.
 
 Usage: python bench/valid_oddities.py [VARIANT ...] [--seed 1] [--cache DIR] [--work DIR] [--rows FILE]
 (no VARIANT: all). Prints one JSON line per variant: rc, the last stderr line, every traced regressor, the added
@@ -97,6 +106,13 @@ def _session_counter(tr, te):
     rank = np.empty(len(t), dtype=np.int64)
     rank[np.argsort(t, kind="stable")] = np.arange(len(t))
     return rank[:len(tr)], rank[len(tr):]
+
+
+def _rate_Hz(df):
+    """The sample rate a logger computes from its own time stamps, 1 / (t[k] - t[k-1]) within each run (the first
+    sample takes the second's): 1000 Hz up to the stamps' floating-point round-off."""
+    dt = df.groupby("run", sort=False)["time_s"].diff().bfill().to_numpy(float)
+    return 1.0 / dt
 
 
 def _sparse(df, rng, every, level=45.0):
@@ -188,6 +204,27 @@ def variant(name: str, tr: pd.DataFrame, te: pd.DataFrame, rng) -> tuple[pd.Data
         tr, te = _cut_runs(tr, 5, rng), _cut_runs(te, 4, rng)
     elif name == "two_voltages":
         tr = tr[tr["voltage_V"].isin((220.0, 324.0))]
+    elif name == "quasi_const":
+        _both(tr, te, lambda df, w: {"rate_Hz": _rate_Hz(df)})
+    elif name == "test_only":
+        te["probe_mV"] = np.round(rng.standard_normal(n(te)), 4)
+    elif name == "affine_direction":
+        _both(tr, te, lambda df, w: {"relay_ch1": (df["direction"] > 0).astype(int)})
+    elif name == "nan_test_all":
+        tr["humidity_pct"] = _sparse(tr, rng, 1)
+        te["humidity_pct"] = np.nan
+    elif name == "effect_twins":
+        _both(tr, te, lambda df, w: {"track_offset_copy_mm": df["track_offset_mm"].copy()})
+    elif name in ("effect_scaled", "effect_tiny"):
+        f, new = (1e9, "track_offset_pm_e3") if name == "effect_scaled" else (1e-9, "track_offset_Mm_e3")
+        tr, te = (d.rename(columns={"track_offset_mm": new}) for d in (tr, te))
+        for d in (tr, te):
+            d[new] = d[new] * f
+    elif name == "effect_sparse":
+        for d in (tr, te):
+            keep = np.zeros(len(d), bool)
+            keep[::10] = True
+            d["track_offset_mm"] = d["track_offset_mm"].where(keep)
     else:
         raise SystemExit(f"unknown variant {name}")
     return tr, te
@@ -196,7 +233,10 @@ def variant(name: str, tr: pd.DataFrame, te: pd.DataFrame, rng) -> tuple[pd.Data
 VARIANTS = ("clean", "noise16", "noise8_run", "int_run3", "int_sample3", "limit_switch", "const_train", "const_all",
             "low_rate", "twins", "affine_voltage", "affine_load", "huge", "tiny", "offset_1e9", "epoch_clock",
             "counter", "outlier_run", "nan_sparse", "nan_test", "speed_copy", "position_copy", "odd_names",
-            "short_runs", "two_voltages", "effect", "effect_noise16", "effect_renamed")
+            "short_runs", "two_voltages", "effect", "effect_noise16", "effect_renamed",
+            # a second batch (appended: the earlier variants keep their random streams)
+            "quasi_const", "test_only", "affine_direction", "nan_test_all", "effect_twins", "effect_scaled",
+            "effect_tiny", "effect_sparse")
 
 
 def _non_finite(obj) -> list:
