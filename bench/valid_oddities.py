@@ -51,6 +51,13 @@ Variants (the extra columns are logged in TRAIN and TEST alike unless said other
 * ``effect_scaled`` / ``effect_tiny`` -- the effect case with ``track_offset_mm`` multiplied by 1e9 / 1e-9 (and
   renamed): the loop standardises channels, so its result should not move.
 * ``effect_sparse`` -- the effect case with ``track_offset_mm`` read every 10th sample, empty in between.
+* ``noise40`` -- 40 channels of white noise per sample.
+* ``one_direction`` -- TRAIN and TEST hold only their runs at direction +1.
+* ``single_load`` -- TRAIN holds only its runs at no load (8 runs); TEST as it is.
+* ``single_voltage`` -- TRAIN holds only its runs at 324 V; TEST as it is.
+* ``test_one_run`` -- TEST holds only its first run.
+* ``long_pause`` -- the session spans two days: every stamp after the session's median time moves on by 86 400 s
+  (TRAIN and TEST alike; the gap falls between two runs).
 
 Usage: python bench/valid_oddities.py [VARIANT ...] [--seed 1] [--cache DIR] [--work DIR] [--rows FILE]
 (no VARIANT: all). Prints one JSON line per variant: rc, the last stderr line, every traced regressor, the added
@@ -225,6 +232,21 @@ def variant(name: str, tr: pd.DataFrame, te: pd.DataFrame, rng) -> tuple[pd.Data
             keep = np.zeros(len(d), bool)
             keep[::10] = True
             d["track_offset_mm"] = d["track_offset_mm"].where(keep)
+    elif name == "noise40":
+        _both(tr, te, lambda df, w: _noise(rng, n(df), 40, "aux_"))
+    elif name == "one_direction":
+        tr, te = tr[tr["direction"] > 0], te[te["direction"] > 0]
+    elif name == "single_load":
+        tr = tr[tr["load_kg"] == 0.0]
+    elif name == "single_voltage":
+        tr = tr[tr["voltage_V"] == 324.0]
+    elif name == "test_one_run":
+        te = te[te["run"] == pd.unique(te["run"])[0]]
+    elif name == "long_pause":
+        starts = np.sort(np.concatenate([d.groupby("run", sort=False)["time_s"].min() for d in (tr, te)]))
+        t_mid = starts[len(starts) // 2]                       # a run's first stamp: the gap falls before it
+        for d in (tr, te):
+            d["time_s"] = np.round(d["time_s"] + np.where(d["time_s"] >= t_mid, 86400.0, 0.0), 3)
     else:
         raise SystemExit(f"unknown variant {name}")
     return tr, te
@@ -236,7 +258,9 @@ VARIANTS = ("clean", "noise16", "noise8_run", "int_run3", "int_sample3", "limit_
             "short_runs", "two_voltages", "effect", "effect_noise16", "effect_renamed",
             # a second batch (appended: the earlier variants keep their random streams)
             "quasi_const", "test_only", "affine_direction", "nan_test_all", "effect_twins", "effect_scaled",
-            "effect_tiny", "effect_sparse")
+            "effect_tiny", "effect_sparse",
+            # a third batch: plans and clocks
+            "noise40", "one_direction", "single_load", "single_voltage", "test_one_run", "long_pause")
 
 
 def _non_finite(obj) -> list:
