@@ -75,3 +75,20 @@ def test_a_noise_update_on_a_blown_up_residual_gives_nan_without_a_warning():
     med = np.median(var)
     np.testing.assert_allclose(nm.R, list(np.maximum(var, 0.1 * med)) + [med])
     assert change == np.max(np.abs(nm.R - 1.0))
+
+
+def test_the_baselines_parameters_train_does_not_determine_are_named_in_a_warning():
+    """A TRAIN at one load (or one drive amplitude) leaves a direction of the baseline's parameters without a
+    standard error: the close loop's warnings (CLI and report.md) name the varied ones; pinned parameters
+    (``vary`` false) and determined ones are not named, and ordinary data give no line."""
+    from l1b2.closeloop.report import loop_check_lines, undetermined_line
+    params = {"c_r": {"value": 244.8, "vary": True, "identifiable": False},
+              "sigma": {"value": 47.5, "vary": False, "identifiable": False},
+              "alpha_0": {"value": 5.6, "vary": True, "identifiable": False},
+              "alpha_1": {"value": -0.03, "vary": True, "identifiable": True}}
+    line = undetermined_line(params)
+    assert "c_r, alpha_0 " in line and "sigma" not in line and "alpha_1" not in line
+    ordinary = {k: dict(v, identifiable=True) for k, v in params.items()}
+    assert undetermined_line(ordinary) == "" and undetermined_line({}) == "" and undetermined_line(None) == ""
+    assert loop_check_lines({"channel_ranges": []}, ordinary) == []
+    assert loop_check_lines({}, params) == [line]
