@@ -687,10 +687,10 @@ def cmd_close_loop(args) -> int:
     print(result.before_after_table())
     print("time and evaluations per stage (fits: identifications, fold refits included):")
     print("\n".join(stage_lines(result.stages)))
-    from .closeloop.report import channel_range_line
+    from .closeloop.report import loop_check_lines
     from .data.coverage import data_check_lines
     print_input_checks(result.checks, {"baseline " + k: v for k, v in result.baseline.items()},
-                       data_check_lines(result.checks) + [channel_range_line(r) for r in d.get("channel_ranges") or ()])
+                       data_check_lines(result.checks) + loop_check_lines(d, result.baseline_parameters))
     print(f"wrote {Path(args.out) / 'report.json'} and report.md ({result.wall_time_s} s)")
     if args.export is not None:
         _print_calibrated(args.export, result.calibrated_note)

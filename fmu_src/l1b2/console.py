@@ -42,7 +42,7 @@ def stage_lines(stages: list) -> list[str]:
 def print_input_checks(checks: dict, metrics: dict, test_lines=()) -> None:
     """Warnings of a report's input checks and diverged runs (shared by identify and close-loop); ``test_lines``:
     more checks, one warning each (empty lines skipped; the gaps filled on reading, :func:`l1b2.data.gaps.gap_lines`,
-    and the close loop's logged channels outside TRAIN's range, :func:`l1b2.closeloop.report.channel_range_line`)."""
+    and the close loop's own, :func:`l1b2.closeloop.report.loop_check_lines`)."""
     found = [m for part in ("train", "test") for m in checks.get("unusual_units", {}).get(part, [])]
     if checks.get("allow_unusual_units") and found:
         print(f"  warning: --allow-unusual-units accepted {len(found)} likely unit mistake(s), e.g.: {found[0]}")

@@ -293,3 +293,26 @@ def channel_range_line(rec: Mapping) -> str:
     return (f"TEST has {rec['samples_outside']:.1%} of its samples ({rec['runs_outside']} of {rec['test_runs']} "
             f"runs) with {rec['signal']} outside TRAIN's range [{lo:.4g}, {hi:.4g}] (TEST: "
             f"[{rec['test'][0]:.4g}, {rec['test'][1]:.4g}]): the effects of it there {effects}")
+
+
+def undetermined_line(parameters: Mapping) -> str:
+    """One line naming the varied parameters of a model's ``parameters`` (the report's ``baseline_parameters``:
+    name -> ``{"vary", "identifiable", ...}``) that TRAIN does not determine (no finite standard error: a
+    direction of the parameters along which the predictions do not change, e.g. TRAIN at one load or one drive
+    amplitude); empty when every varied one is determined. Their values are one point of that direction: TEST's
+    figures then depend on where it lies."""
+    names = [n for n, p in (parameters or {}).items()
+             if isinstance(p, Mapping) and p.get("vary") and p.get("identifiable") is False]
+    if not names:
+        return ""
+    return (f"TRAIN does not determine the baseline's {', '.join(names)} (no standard error: the predictions do not "
+            "change along a direction of them): their values are one point of it, and predictions beyond TRAIN's "
+            "plan (TEST) depend on where it lies")
+
+
+def loop_check_lines(diagnosis: Mapping, baseline_parameters: Mapping) -> list:
+    """The close loop's warnings beyond the data's checks, one line each: the logged channels whose TEST values
+    leave TRAIN's range (:func:`channel_range_line`) and the baseline's parameters TRAIN does not determine
+    (:func:`undetermined_line`); no empty line."""
+    lines = [channel_range_line(r) for r in diagnosis.get("channel_ranges") or ()]
+    return [line for line in lines + [undetermined_line(baseline_parameters)] if line]

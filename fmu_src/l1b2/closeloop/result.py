@@ -28,7 +28,7 @@ from ..jsonio import dumps, sig, strict_json
 from ..predictor.effects import ExtendedPredictor
 from . import residuals as res
 from .crosscheck import describe
-from .report import (SCHEMA_VERSION, Diagnosis, ReportFormatError, Round, chain_line, channel_range_line,
+from .report import (SCHEMA_VERSION, Diagnosis, ReportFormatError, Round, chain_line, loop_check_lines,
                      response_test_lines)
 from .selection import Score
 
@@ -389,7 +389,7 @@ def markdown_report(rep: dict) -> str:
         lines.append(f"* TEST has {u['runs']} run(s) at {u['channel']} = {values}, a value TRAIN never had: "
                      f"`{label}` gives them TRAIN's average over runs (its prediction there carries no effect of "
                      "that value)")
-    lines += [f"* {line}" for r in d.get("channel_ranges") or [] if (line := channel_range_line(r))]
+    lines += [f"* {line}" for line in loop_check_lines(d, rep.get("baseline_parameters"))]
     bc = d.get("baseline_choice") or {}
     lines += [f"* {line}" for fam, r in (bc.get("search") or {}).items() if (line := search_line(fam, r))]
     if bc.get("families"):

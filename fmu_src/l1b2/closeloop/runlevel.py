@@ -433,7 +433,9 @@ def signal_evidence(dev: RunDeviations, signals_, *, alpha: float, k: int, seed:
                                   levels=tuple(sg["levels"]) if cat else None,
                                   shares=tuple(sg["shares"]) if cat else None, dof=dof))
         zs.append(z)
-    dominated = dominated_signals(dev, [e.significant for e in out], zs, level)
+    plan = {col for col, _ in fx.channels.INPUT_SIGNALS}
+    dominated = dominated_signals(dev, [e.significant for e in out], zs, level,
+                                  plan=[sg["channel"] in plan for sg in signals_])
     for e, dom in zip(out, dominated):
         e.dominated_by = out[dom].label if dom is not None else None
     return sorted(out, key=lambda e: (e.dominated_by is not None, e.p_value, -e.cv_gain))
@@ -507,7 +509,7 @@ def run_correlation(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.linalg.svd(qa.T @ qb, compute_uv=False).max())
 
 
-def dominated_signals(dev: RunDeviations, significant, zs, level: float = 0.0) -> list:
+def dominated_signals(dev: RunDeviations, significant, zs, level: float = 0.0, plan=None) -> list:
     """Per signal, the index of a significant signal that dominates it, else None.
 
     Two significant signals whose run values correlate (:func:`run_correlation` ``>=`` :data:`DOMINANCE_CORR`: a
@@ -515,7 +517,11 @@ def dominated_signals(dev: RunDeviations, significant, zs, level: float = 0.0) -
     deviations on their own; the one whose evidence given the other (:func:`conditional_p`) is the weaker is
     dominated and is offered after every undominated one. When one is nested in the other (a channel's value in
     its category's indicators), the larger dominates only if its evidence beyond the smaller is below ``level``;
-    else the smaller does. The rest keep the order of their own evidence.
+    else the smaller does. Two that are nested in each other carry the same run values (a logged read-back of the
+    drive amplitude, a load logged in newtons): a signal of the plan's own inputs (``plan[i]`` true: the columns
+    of :data:`~l1b2.predictor.effects.channels.INPUT_SIGNALS`, which the operator set and ``Predictor.fmu`` takes
+    as inputs) dominates one that is not; otherwise the first listed does. The rest keep the order of their own
+    evidence.
     """
     out = [None] * len(zs)
     sig = [i for i, s in enumerate(significant) if s]
@@ -526,7 +532,9 @@ def dominated_signals(dev: RunDeviations, significant, zs, level: float = 0.0) -
             rest = {(i, j): _beyond(zs[i], zs[j]) for i, j in ((a, b), (b, a))}
             pa, pb = conditional_p(dev, zs[a], zs[b], rest[a, b]), conditional_p(dev, zs[b], zs[a], rest[b, a])
             nested = [i for i, j in ((a, b), (b, a)) if rest[i, j].reshape(len(zs[i]), -1).shape[1] == 0]
-            if nested:
+            if len(nested) == 2 and plan is not None and plan[a] != plan[b]:
+                (loser, winner) = (b, a) if plan[a] else (a, b)
+            elif nested:
                 small = nested[0]
                 big = b if small == a else a
                 (loser, winner) = (small, big) if min(pa, pb) < level else (big, small)

@@ -26,6 +26,15 @@ from .kernels import scaled_whitened, whitened
 __all__ = ["NoiseModel"]
 
 
+def _finite_stat(fn, x) -> float:
+    """``fn`` (``np.max``, ``np.median``) of the entries of ``x`` that are not NaN, NaN when none is: the value of
+    ``np.nanmax`` / ``np.nanmedian`` without their warning on an all-NaN array (a trial step whose free run blew
+    up, rejected by the caller)."""
+    x = np.asarray(x, float)
+    x = x[~np.isnan(x)]
+    return float(fn(x)) if x.size else float("nan")
+
+
 class NoiseModel:
     """Gaussian residual covariance: per run ``R_r (I + g g^T)``.
 
@@ -140,12 +149,12 @@ class NoiseModel:
             new = np.full(self.n_runs, max(float(np.sum(ss)) / max(self.n, 1), 1e-300))
         else:
             var = np.where(cnt > 0, ss / np.maximum(cnt, 1), np.nan)
-            med = float(np.nanmedian(var)) if np.any(cnt > 0) else 1.0
+            med = _finite_stat(np.median, var) if np.any(cnt > 0) else 1.0
             if not np.isfinite(med) or med <= 0:
                 med = 1e-300
             new = np.where(np.isfinite(var), np.maximum(var, 0.1 * med), med)
         with np.errstate(divide="ignore", invalid="ignore"):
-            change = float(np.nanmax(np.abs(new / self.R - 1.0)))
+            change = _finite_stat(np.max, np.abs(new / self.R - 1.0))
         self.R = new
         self._sqrtR = np.sqrt(new[self.run_sel])
         return change
