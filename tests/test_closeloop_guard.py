@@ -225,3 +225,15 @@ def test_the_report_says_when_a_baseline_was_searched_again():
     assert line.endswith("kept the seed-free search's fit")
     failed = search_line("pure_slip", {"searched_again": True, "kept": "first", "rescue_failed": "singular"})
     assert "failed (singular)" in failed and failed.endswith("kept the multistart's fit")
+
+
+def test_checked_identification_runs_the_three_searches_in_order():
+    df = _frame()
+    mask = np.ones(len(df), bool)
+    calls = []
+
+    def identify(**kw):
+        calls.append(kw)
+        return _Pred(lambda v: 0 * v) if not kw.get("rescue") else _Pred(lambda v: v)
+    assert guard.checked_identification(identify, df, mask, "x").f(np.ones(2)).tolist() == [1.0, 1.0]
+    assert calls == [{}, {"retry": True}, {"rescue": True}]

@@ -133,6 +133,14 @@ def checked_fit(fit: Callable[[], object], retry: Callable[[], object], df: pd.D
                            "no diagnosis is drawn from a broken fit (check the data's units and runs)")
 
 
+def checked_identification(identify: Callable[..., object], df: pd.DataFrame, mask: np.ndarray, what: str,
+                           record: dict | None = None) -> object:
+    """:func:`checked_fit` of one identification by its three searches: ``identify()`` (the multistart),
+    ``identify(retry=True)`` (more starts, another seed) and ``identify(rescue=True)`` (the seed-free search
+    without pins, continued with the pins)."""
+    return checked_fit(identify, lambda: identify(retry=True), df, mask, what, lambda: identify(rescue=True), record)
+
+
 def _against_plateau(model, rescue, df, mask, record: dict):
     """``model``, or ``rescue()`` when ``model`` is below the run plateau and the rescue is :func:`better`."""
     nrmse, plateau = free_run_nrmse(model, df, mask)[0], plateau_nrmse(df, mask)

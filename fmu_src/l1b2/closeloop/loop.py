@@ -106,7 +106,7 @@ from .runclock import with_run_clock
 from .responses import classed_responses, response_tests, with_applied
 from .evidence import (channels_considered, order_traced, with_auxiliary, with_onset, with_position_share,
                        with_response_test)
-from .guard import checked_fit
+from .guard import checked_fit, checked_identification
 from .intervals import added_parameters, identification, train_levels
 from .result import CloseLoopResult, ResidualAnalysis
 from .selection import (Score, best_per_family, design, named_alternatives, nuisance_forces, score_candidates,
@@ -176,11 +176,9 @@ class CloseLoop(EstimatorSettings):
         self.frequency_, searches = None, {}   # searches: per family, the baseline's check against the run plateau
         def fit_family(family, df=dtr, what="baseline"):
             say(f"{what}: identifying the {family} predictor on TRAIN")
-            est = checked_fit(lambda: self._identify(df, m_s, mask_tr, model=family),
-                              lambda: self._identify(df, m_s, mask_tr, retry=True, model=family), df,
-                              mask_tr, f"the {family} {what} identification on TRAIN",
-                              lambda: self._identify(df, m_s, mask_tr, model=family, rescue=True),
-                              record=searches.setdefault(family + ("" if what == "baseline" else f" ({what})"), {}))
+            est = checked_identification(lambda **kw: self._identify(df, m_s, mask_tr, model=family, **kw), df, mask_tr,
+                                         f"the {family} {what} identification on TRAIN",
+                                         searches.setdefault(family + ("" if what == "baseline" else f" ({what})"), {}))
             say.count(1, nfev_of(est))
             return est
         fits, failed = identify_families(DRIVE_LAWS if self.baseline == "best" else (self.baseline,), fit_family)
