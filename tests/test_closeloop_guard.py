@@ -215,8 +215,8 @@ def test_without_likelihoods_the_lower_error_is_better_and_a_broken_one_never():
 
 
 def test_the_report_says_when_a_baseline_was_searched_again():
-    from l1b2.closeloop.result import search_line
-    assert search_line("eq29", {"searched_again": False, "train_free_run_nrmse": 0.04}) is None
+    from l1b2.closeloop.report import loop_check_lines, search_line
+    assert search_line("eq29", {"searched_again": False, "train_free_run_nrmse": 0.04}) == ""
     line = search_line("eq29", {"searched_again": True, "train_free_run_nrmse": 0.3657, "run_plateau_nrmse": 0.1255,
                                 "loglik": {"first": 18944.61, "rescue": 41496.34}, "kept": "rescue",
                                 "rescue_train_free_run_nrmse": 0.0730})
@@ -225,6 +225,10 @@ def test_the_report_says_when_a_baseline_was_searched_again():
     assert line.endswith("kept the seed-free search's fit")
     failed = search_line("pure_slip", {"searched_again": True, "kept": "first", "rescue_failed": "singular"})
     assert "failed (singular)" in failed and failed.endswith("kept the multistart's fit")
+    # the CLI's warnings and report.md's list carry it; a fit not searched again adds no line
+    diag = {"baseline_choice": {"search": {"eq29": {"searched_again": False}, "pure_slip": {
+        "searched_again": True, "kept": "first", "rescue_failed": "singular"}}}}
+    assert loop_check_lines(diag, {}) == [failed]
 
 
 def test_checked_identification_runs_the_three_searches_in_order():

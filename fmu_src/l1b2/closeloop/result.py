@@ -308,25 +308,6 @@ def stages_table(stages: list) -> str:
     return "\n".join(rows)
 
 
-def search_line(family: str, r: dict) -> str | None:
-    """The report's line on a fit of a drive law searched again (:func:`l1b2.closeloop.guard.checked_fit`'s record;
-    ``family``: the drive law, with the fit's purpose when it is not the baseline), or None when it was not."""
-    if not r.get("searched_again"):
-        return None
-    ll = r.get("loglik") or {}
-    kept = "the seed-free search's fit" if r.get("kept") == "rescue" else "the multistart's fit"
-    rescue = (f"failed ({r['rescue_failed']})" if r.get("rescue_failed") else
-              f"log-likelihood {_num(ll.get('rescue'))} against {_num(ll.get('first'))}, TRAIN free-run nrmse "
-              f"{_pct(r.get('rescue_train_free_run_nrmse'), '.2%')}")
-    return (f"the {family} fit's TRAIN free-run nrmse {_pct(r.get('train_free_run_nrmse'), '.2%')} was above "
-            f"that of each run's median speed ({_pct(r.get('run_plateau_nrmse'), '.2%')}): searched again from the "
-            f"seed-free search without pins ({rescue}); kept {kept}")
-
-
-def _num(x) -> str:
-    return "-" if x is None else f"{x:.6g}"
-
-
 def run_level_line(r: dict) -> str:
     """``report.md``'s line on the first round's run-level deviations (``diagnosis.run_level``): their spread, the
     heterogeneity test and the significant signals, each that a correlated one explains marked as not traced."""
@@ -391,7 +372,6 @@ def markdown_report(rep: dict) -> str:
                      "that value)")
     lines += [f"* {line}" for line in loop_check_lines(d, rep.get("baseline_parameters"))]
     bc = d.get("baseline_choice") or {}
-    lines += [f"* {line}" for fam, r in (bc.get("search") or {}).items() if (line := search_line(fam, r))]
     if bc.get("families"):
         lines += ["", f"## Baseline family (chosen: `{bc['chosen']}`, by TRAIN's cross-validated free-run nrmse over "
                   f"{bc.get('folds')} run folds)", "", "| family | CV nrmse | TRAIN nrmse | failed folds |",
