@@ -40,6 +40,7 @@ Prints one JSON line: traced (first two), added, TEST free-run nrmse before and 
 whether the effect's channel was among them, and the CPU time of the close loop (``time.process_time``).
 """
 import argparse
+import functools
 import json
 import math
 import os
@@ -305,6 +306,22 @@ def probe_loop(args, dst: Path, prefix) -> tuple[dict, object]:
     print_channel_evidence(res, prefix, ("channel", "significant", "p_value", "cv_gain", "best"),
                            ("signal", "significant", "p_value", "cv_gain", "dominated_by"))
     return row, res
+
+
+def probe_truth_main(argv, doc: str, audit, modes, changed, column: dict, settings: dict) -> None:
+    """A probe's whole command (:func:`probe_args`): the audit's case copied (:func:`probe_copy`), each part
+    rewritten by ``changed(frame, mode, truth)`` (``truth``: the case's ``rig_truth.json``), the close loop run with
+    ``settings[mode]`` (none when absent) and its row and the evidence on ``column[mode]`` printed
+    (:func:`probe_loop`). ``audit``: the audit's module (``KINDS``, ``experiment``)."""
+    global close_loop
+    args = probe_args(argv, doc, audit.KINDS, modes)
+    src, dst = probe_copy(args, audit.experiment)
+    truth = json.loads((src / "rig_truth.json").read_text())
+    for part in ("train", "test"):
+        changed(pd.read_csv(src / f"{part}.csv"), args.mode, truth).to_csv(dst / f"{part}.csv", index=False)
+    if args.mode in settings:
+        close_loop = functools.partial(close_loop, **settings[args.mode])
+    probe_loop(args, dst, column[args.mode])
 
 
 def channel_field(channels: dict):

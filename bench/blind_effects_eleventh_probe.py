@@ -12,8 +12,6 @@ of a case's files, one change per mode:
 Usage: python bench/blind_effects_eleventh_probe.py KIND SEED MODE [--out DIR]. Prints one JSON line: the row of
 ``bench/blind_effects.py`` (its ``loop_row``, with ``traced_all``) and the evidence on the probe's column.
 """
-import functools
-import json
 import sys
 from pathlib import Path
 
@@ -39,14 +37,7 @@ def changed(df: pd.DataFrame, mode: str, truth: dict) -> pd.DataFrame:
 
 
 def main(argv=None):
-    args = be.probe_args(argv, __doc__, eleventh.KINDS, MODES)
-    src, dst = be.probe_copy(args, eleventh.experiment)
-    truth = json.loads((src / "rig_truth.json").read_text())
-    for part in ("train", "test"):
-        changed(pd.read_csv(src / f"{part}.csv"), args.mode, truth).to_csv(dst / f"{part}.csv", index=False)
-    if args.mode in SETTINGS:
-        be.close_loop = functools.partial(be.close_loop, **SETTINGS[args.mode])
-    be.probe_loop(args, dst, COLUMN[args.mode])
+    be.probe_truth_main(argv, __doc__, eleventh, MODES, changed, COLUMN, SETTINGS)
 
 
 if __name__ == "__main__":
