@@ -13,12 +13,13 @@ the identifier without pins, continued with the pins) and raises
 fails outright).
 
 A usable fit can still sit in a wrong basin of the multi-modal likelihood. A
-fit is *below the run plateau* (:func:`plateau_nrmse`) when its free-run nrmse
-on its training data is above that of each run's own median measured speed: a
-motor model that predicts the speed levels of the runs worse than the levels
-themselves has missed what Eq. 29 is about. Then :func:`checked_fit` searches
-again by the rescue (when given) and keeps the fit of the higher
-log-likelihood (:func:`better`); ``record`` says what was compared.
+fit is *below the level law* (:func:`level_law_nrmse`) when its free-run nrmse
+on its training data is above that of an affine law of the runs' speed levels
+in V0 and the load: a motor model that predicts the runs worse than the
+simplest form of its own steady state has missed what Eq. 29 is about. Then
+:func:`checked_fit` searches again by the rescue (when given) and keeps the fit
+of the higher log-likelihood (:func:`better`); ``record`` says what was
+compared.
 """
 
 from __future__ import annotations
@@ -70,13 +71,26 @@ def broken(model, df: pd.DataFrame, mask: np.ndarray) -> str | None:
     return None
 
 
-def plateau_nrmse(df: pd.DataFrame, mask: np.ndarray) -> float:
-    """The nrmse over ``mask`` of each run's median measured speed (the median of the run's samples on the mask;
-    a run without one predicts 0): what the runs' speed levels alone explain, with no model."""
+def level_law_nrmse(df: pd.DataFrame, mask: np.ndarray) -> float:
+    """The nrmse over ``mask`` of the runs' speed levels' affine law: each run's level is its median measured speed
+    on the mask, in drive coordinates (times its direction ``d``); the levels are fitted by least squares on
+    ``(1, V0, d m)`` over the runs that have one, and each sample is predicted by its run's fitted level times
+    ``d`` (a run with no sample on the mask predicts 0). That is the steady-state law Eq. 29 holds (the drive's
+    speed affine in V0 and the load in drive coordinates), with no transient and nothing along the stroke."""
     m = np.asarray(mask, bool)
     v = df[dataio.SPEED].to_numpy(float)
-    level = pd.Series(np.where(m, v, np.nan)).groupby(df[dataio.RUN].to_numpy()).transform("median")
-    e = v[m] - level.fillna(0.0).to_numpy(float)[m]
+    runs = pd.DataFrame({"v": np.where(m, v, np.nan), "run": df[dataio.RUN].to_numpy(),
+                         "V": df[dataio.VOLTAGE].to_numpy(float), "d": df[dataio.DIRECTION].to_numpy(float),
+                         "m": df[dataio.LOAD].to_numpy(float)}).groupby("run", sort=False).agg(
+        v=("v", "median"), V=("V", "first"), d=("d", "first"), m=("m", "first"))
+    X = np.column_stack([np.ones(len(runs)), runs["V"], runs["d"] * runs["m"]])
+    has = np.isfinite(runs["v"].to_numpy(float))
+    level = np.zeros(len(runs))
+    if has.any():
+        coef = np.linalg.lstsq(X[has], (runs["v"] * runs["d"]).to_numpy(float)[has], rcond=None)[0]
+        level = np.where(has, X @ coef * runs["d"].to_numpy(float), 0.0)
+    pred = df[dataio.RUN].map(dict(zip(runs.index, level))).to_numpy(float)
+    e = v[m] - pred[m]
     return float(np.sqrt(np.sum(e ** 2) / max(float(np.sum(v[m] ** 2)), 1e-300)))
 
 
@@ -106,10 +120,10 @@ def checked_fit(fit: Callable[[], object], retry: Callable[[], object], df: pd.D
     """``fit()``, or ``retry()`` when that fails or is :func:`broken`, or ``rescue()`` (when given) when both do;
     :class:`FitDivergedError` naming every attempt's reason when all are.
 
-    A usable ``fit()`` or ``retry()`` whose free-run nrmse on ``mask`` is above :func:`plateau_nrmse` is compared
+    A usable ``fit()`` or ``retry()`` whose free-run nrmse on ``mask`` is above :func:`level_law_nrmse` is compared
     with ``rescue()`` (when given) and the better (:func:`better`) is returned; a rescue that fails outright
     leaves the first. ``record`` (a dict, filled when given): ``train_free_run_nrmse`` (of the first usable
-    fit), ``run_plateau_nrmse``, ``searched_again`` and, when it did, ``loglik`` of both and ``kept``
+    fit), ``level_law_nrmse``, ``searched_again`` and, when it did, ``loglik`` of both and ``kept``
     (``"first"`` or ``"rescue"``).
 
     ``fit``/``retry``/``rescue``: callables returning a fitted model (an
@@ -126,7 +140,7 @@ def checked_fit(fit: Callable[[], object], retry: Callable[[], object], df: pd.D
             continue
         reason = broken(model, df, mask)
         if reason is None:
-            return model if i == 2 else _against_plateau(model, rescue, df, mask, record)
+            return model if i == 2 else _against_level_law(model, rescue, df, mask, record)
         why.append(reason)
     rescued = f"; from the seed-free search without pins, then with them: {why[2]}" if rescue is not None else ""
     raise FitDivergedError(f"{what} diverged: {why[0]}; retried from the identifier's multistart: {why[1]}{rescued}; "
@@ -141,11 +155,11 @@ def checked_identification(identify: Callable[..., object], df: pd.DataFrame, ma
     return checked_fit(identify, lambda: identify(retry=True), df, mask, what, lambda: identify(rescue=True), record)
 
 
-def _against_plateau(model, rescue, df, mask, record: dict):
-    """``model``, or ``rescue()`` when ``model`` is below the run plateau and the rescue is :func:`better`."""
-    nrmse, plateau = free_run_nrmse(model, df, mask)[0], plateau_nrmse(df, mask)
-    again = rescue is not None and nrmse > plateau
-    record.update(train_free_run_nrmse=_finite(nrmse), run_plateau_nrmse=plateau, searched_again=bool(again))
+def _against_level_law(model, rescue, df, mask, record: dict):
+    """``model``, or ``rescue()`` when ``model`` is below the level law and the rescue is :func:`better`."""
+    nrmse, law = free_run_nrmse(model, df, mask)[0], level_law_nrmse(df, mask)
+    again = rescue is not None and nrmse > law
+    record.update(train_free_run_nrmse=_finite(nrmse), level_law_nrmse=law, searched_again=bool(again))
     if not again:
         return model
     try:

@@ -173,7 +173,7 @@ class CloseLoop(EstimatorSettings):
 
         if self.baseline not in ("best",) + DRIVE_LAWS:
             raise ValueError(f"baseline must be 'best' or one of {DRIVE_LAWS}, got {self.baseline!r}")
-        self.frequency_, searches = None, {}   # searches: per family, the baseline's check against the run plateau
+        self.frequency_, searches = None, {}   # searches: per family, the baseline's check against the level law
         def fit_family(family, df=dtr, what="baseline"):
             say(f"{what}: identifying the {family} predictor on TRAIN")
             est = checked_identification(lambda **kw: self._identify(df, m_s, mask_tr, model=family, **kw), df, mask_tr,

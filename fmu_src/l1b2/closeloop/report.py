@@ -315,7 +315,7 @@ def _pct(x) -> str:
 
 
 def search_line(family: str, r: Mapping) -> str:
-    """The line on a fit of a drive law searched again because it was below the run plateau
+    """The line on a fit of a drive law searched again because it was below the level law
     (:func:`l1b2.closeloop.guard.checked_fit`'s record; ``family``: the drive law, with the fit's purpose when it
     is not the baseline); empty when it was not searched again."""
     if not r.get("searched_again"):
@@ -326,15 +326,15 @@ def search_line(family: str, r: Mapping) -> str:
     rescue = (f"failed ({r['rescue_failed']})" if r.get("rescue_failed") else
               f"log-likelihood {num(ll.get('rescue'))} against {num(ll.get('first'))}, TRAIN free-run nrmse "
               f"{_pct(r.get('rescue_train_free_run_nrmse'))}")
-    return (f"the {family} fit's TRAIN free-run nrmse {_pct(r.get('train_free_run_nrmse'))} was above that of each "
-            f"run's median speed ({_pct(r.get('run_plateau_nrmse'))}): searched again from the seed-free search "
-            f"without pins ({rescue}); kept {kept}")
+    return (f"the {family} fit's TRAIN free-run nrmse {_pct(r.get('train_free_run_nrmse'))} was above that of an "
+            f"affine law of the runs' speed levels in V0 and the load ({_pct(r.get('level_law_nrmse'))}): searched "
+            f"again from the seed-free search without pins ({rescue}); kept {kept}")
 
 
 def loop_check_lines(diagnosis: Mapping, baseline_parameters: Mapping) -> list:
     """The close loop's warnings beyond the data's checks, one line each: the logged channels whose TEST values
     leave TRAIN's range (:func:`channel_range_line`), the baseline's parameters TRAIN does not determine
-    (:func:`undetermined_line`) and the fits searched again below the run plateau (:func:`search_line`); no empty
+    (:func:`undetermined_line`) and the fits searched again below the level law (:func:`search_line`); no empty
     line."""
     lines = [channel_range_line(r) for r in diagnosis.get("channel_ranges") or ()]
     lines += [undetermined_line(baseline_parameters)]
