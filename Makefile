@@ -8,8 +8,8 @@ export OPENBLAS_NUM_THREADS ?= 1
 export MPLBACKEND ?= Agg
 # pytest-xdist workers for `make test` (the CI machine has 2 cores); modules stay whole on one worker and are
 # handed out in collection order, the costliest modules first (tests/conftest.py COSTLY_FIRST, decision 0030).
-# `make test` runs the not-slow tests and the slow ones marked ci_slow: the realistic world's close-loop cases (one seed per single effect,
-# ten control seeds, the CLI report, a logged channel; decisions 0054, 0074, 0080, 0095 and 0100), in three
+# `make test` runs the not-slow tests and the slow ones marked ci_slow: the realistic world's close-loop cases (four single effects,
+# five of the ten control seeds, a logged channel; decisions 0074, 0080, 0095, 0100 and 0131), in three
 # modules that the two workers share out; the other slow tests (the realistic pairs and run-level cases among
 # them) run with `make test-slow`
 TEST_WORKERS ?= 2

@@ -6,8 +6,8 @@ baseline of the same seed without the effect); without one (control), the held-o
 2 % (relative) above the baseline, and what was added reported.
 
 Fast set (``make test``): one control seed, a control with a logged constant temperature and the speed-channel
-detector, and the slow cases marked ``ci_slow``: one seed of each single effect (the other seeds with
-``make test-slow``), the logged-temperature case and the measurement-chain case (a strict xfail). The pairs, the
+detector, and the slow cases marked ``ci_slow``: one seed of four single effects (the other seeds and kinds, the
+logged-temperature case and the measurement-chain case, a strict xfail, with ``make test-slow``). The pairs, the
 ten control seeds and the command line's report are in ``test_closeloop_realistic_pairs.py`` and
 ``test_closeloop_realistic_controls.py``: whole modules are what ``make test``'s two workers share out
 (``tests/conftest.py``, ``COSTLY_FIRST``). The cases the loop is known to miss are strict xfails with their
@@ -36,8 +36,7 @@ def test_realistic_control_with_a_logged_temperature(record_property):
     assert "temperature" not in res.diagnosis["traced_to"]
 
 
-@pytest.mark.slow
-@pytest.mark.ci_slow    # a logged channel traced (decision 0054)
+@pytest.mark.slow    # a logged channel traced (decision 0054); make test-slow (0131)
 def test_realistic_logged_temperature_is_traced(record_property):
     # reference: issue 11's check, with the stator temperature logged (data format's temperature_C): the
     # self-heating drift is traced to the temperature among the first two, and the held-out cut in quadrature
@@ -51,14 +50,14 @@ def test_realistic_logged_temperature_is_traced(record_property):
 #: and position is not traced (decision 0129); a non-strict xfail, so that both machines' outcomes are accepted
 #: and the case still runs
 BORDERLINE = machine_borderline("named reading at the identifiability threshold on some BLAS builds (0129)")
-#: one seed of every kind runs in ``make test`` (``ci_slow``); the other seeds and the borderline bar_bump 8 run with
-#: ``make test-slow`` (decision 0131: ``make test``'s time on a slower machine)
+#: one seed of four kinds runs in ``make test`` (``ci_slow``); the other seeds and kinds and the borderline bar_bump 8
+#: run with ``make test-slow`` (decision 0131: ``make test``'s time on a slower machine)
 CI = pytest.mark.ci_slow
-SINGLE = [pytest.param("thermal_drift", 4, marks=CI), pytest.param("direction_asymmetry", 2, marks=CI),
+SINGLE = [("thermal_drift", 4), pytest.param("direction_asymmetry", 2, marks=CI),
           pytest.param("bar_waviness", 2, marks=CI), pytest.param("pulley_friction", 11, marks=CI),
           pytest.param("drive_saturation", 3, marks=CI), ("thermal_drift", 12), ("direction_asymmetry", 13),
           pytest.param("bar_bump", 8, marks=BORDERLINE),
-          ("drive_saturation", 11), ("drive_saturation", 12), pytest.param("speed_lowpass", 11, marks=CI)]
+          ("drive_saturation", 11), ("drive_saturation", 12), ("speed_lowpass", 11)]
 
 
 @pytest.mark.slow
@@ -83,8 +82,7 @@ def test_measurement_chain_filter_is_found_from_position_and_speed_alone():
     assert ch["filter"].to_dict()["dc_gain"] == pytest.approx(1.0, abs=0.02)
 
 
-@pytest.mark.slow
-@pytest.mark.ci_slow    # decision 0080
+@pytest.mark.slow    # decision 0080; make test-slow (0131)
 @pytest.mark.xfail(strict=True, raises=AssertionError,
                    reason="the issue's check passes (speed traced first, TEST 3.03 -> 1.98 %), but the filter is "
                    "refused: its cross-validated free-run nrmse 4.19 % vs the baseline's 4.15 %")
