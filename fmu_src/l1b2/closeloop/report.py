@@ -310,8 +310,11 @@ def undetermined_line(parameters: Mapping) -> str:
             "plan (TEST) depend on where it lies")
 
 
-def _pct(x) -> str:
-    return "-" if x is None else f"{100 * x:.2f}%"
+def pct(x, spec: str = ".2%") -> str:
+    """A report value as a percentage: ``"-"`` for None (NaN), the rule's ``"inf"``/``"-inf"`` as written."""
+    if x is None:
+        return "-"
+    return x if isinstance(x, str) else format(x, spec)
 
 
 def search_line(family: str, r: Mapping) -> str:
@@ -325,9 +328,9 @@ def search_line(family: str, r: Mapping) -> str:
     num = (lambda x: "-" if x is None else f"{x:.6g}")
     rescue = (f"failed ({r['rescue_failed']})" if r.get("rescue_failed") else
               f"log-likelihood {num(ll.get('rescue'))} against {num(ll.get('first'))}, TRAIN free-run nrmse "
-              f"{_pct(r.get('rescue_train_free_run_nrmse'))}")
-    return (f"the {family} fit's TRAIN free-run nrmse {_pct(r.get('train_free_run_nrmse'))} was above that of an "
-            f"affine law of the runs' speed levels in V0 and the load ({_pct(r.get('level_law_nrmse'))}): searched "
+              f"{pct(r.get('rescue_train_free_run_nrmse'))}")
+    return (f"the {family} fit's TRAIN free-run nrmse {pct(r.get('train_free_run_nrmse'))} was above that of an "
+            f"affine law of the runs' speed levels in V0 and the load ({pct(r.get('level_law_nrmse'))}): searched "
             f"again from the seed-free search without pins ({rescue}); kept {kept}")
 
 

@@ -28,7 +28,7 @@ from ..jsonio import dumps, sig, strict_json
 from ..predictor.effects import ExtendedPredictor
 from . import residuals as res
 from .crosscheck import describe
-from .report import (SCHEMA_VERSION, Diagnosis, ReportFormatError, Round, chain_line, loop_check_lines,
+from .report import (SCHEMA_VERSION, Diagnosis, ReportFormatError, Round, chain_line, loop_check_lines, pct,
                      response_test_lines)
 from .selection import Score
 
@@ -243,13 +243,6 @@ class CloseLoopResult:
 # text
 # ---------------------------------------------------------------------------
 
-def _pct(x, spec: str) -> str:
-    """A report value as a percentage: ``"-"`` for None (NaN), the rule's ``"inf"``/``"-inf"`` as written."""
-    if x is None:
-        return "-"
-    return x if isinstance(x, str) else format(x, spec)
-
-
 def _interval_kind(p: dict) -> str:
     """The report's name of the clustering behind a parameter's interval (``interval`` of its record)."""
     kind = p.get("interval")
@@ -261,7 +254,7 @@ def _interval_kind(p: dict) -> str:
 def before_after_table(report: dict) -> str:
     """Plain-text table of the error metrics before and after (TEST and TRAIN) of a report dict."""
     def f(x):
-        return _pct(x, ".2%")
+        return pct(x, ".2%")
 
     lines = [f"{'':8s}{'':10s}{'nrmse':>18s}{'mean |rel|':>22s}{'p95 |rel|':>22s}",
              f"{'data':8s}{'kind':10s}{'before':>9s}{'after':>9s}{'before':>11s}{'after':>11s}"
@@ -281,7 +274,7 @@ def before_after_table(report: dict) -> str:
 def rounds_table(report: dict) -> str:
     """Per round: the effect added, its cross-validated (refit) gain and the free-run nrmse before/after it."""
     def f(x):
-        return _pct(x, ".2%")
+        return pct(x, ".2%")
 
     rounds = report.get("rounds") or []
     lines = [f"{'round':6s}{'added':44s}{'CV gain':>9s}{'train before':>14s}{'train after':>13s}"
@@ -377,7 +370,7 @@ def markdown_report(rep: dict) -> str:
                   f"{bc.get('folds')} run folds)", "", "| family | CV nrmse | TRAIN nrmse | failed folds |",
                   "|---|---|---|---|"]
         for fam, r in bc["families"].items():
-            lines.append(f"| {fam} | {_pct(r['cv_free_run_nrmse'], '.2%')} | {_pct(r['train_free_run_nrmse'], '.2%')} "
+            lines.append(f"| {fam} | {pct(r['cv_free_run_nrmse'], '.2%')} | {pct(r['train_free_run_nrmse'], '.2%')} "
                          f"| {r['folds_failed']} |")
     lines += ["", "## Rounds (free-run nrmse before/after each added effect; CV gain = held-out free-run "
               "sum of squares of the re-identified model over run folds)", "", "```", rounds_table(rep), "```"]
@@ -388,10 +381,10 @@ def markdown_report(rep: dict) -> str:
                       "| SE over runs | folds improved | runs improved |", "|---|---|---|---|---|---|---|---|---|"]
             for t in trials:
                 runs = f"{t['runs_improved']}/{t['runs']}" if t.get("runs") else "-"
-                lines.append(f"| {t['label']} | {', '.join(t['regressors'])} | {_pct(t['linearised_gain'], '.1%')} | "
-                             f"{_pct(t['cv_free_run_nrmse_current'], '.2%')} | "
-                             f"{_pct(t['cv_free_run_nrmse_refit'], '.2%')} | {_pct(t['cv_gain'], '.1%')} | "
-                             f"{_pct(t.get('cv_gain_se_runs'), '.1%')} | {t['folds_improved']}/{t['folds']} | {runs} |")
+                lines.append(f"| {t['label']} | {', '.join(t['regressors'])} | {pct(t['linearised_gain'], '.1%')} | "
+                             f"{pct(t['cv_free_run_nrmse_current'], '.2%')} | "
+                             f"{pct(t['cv_free_run_nrmse_refit'], '.2%')} | {pct(t['cv_gain'], '.1%')} | "
+                             f"{pct(t.get('cv_gain_se_runs'), '.1%')} | {t['folds_improved']}/{t['folds']} | {runs} |")
     lines += ["", "## Error before and after (all rounds)", "", "```", before_after_table(rep), "```", "",
               "## Candidates (best of each family, by held-out gain)", "",
               "| effect | regressor | params | held-out gain | p (runs) | runs improved | dAIC | dBIC |",
@@ -410,7 +403,7 @@ def markdown_report(rep: dict) -> str:
             runl = "; ".join(f"{e['signal']}: p {e['p_value']:.2g}, gain {e['cv_gain']:.1%}"
                              for e in c.get("run_level") or []) or "-"
             lines.append(f"| {c['channel']} | {c['kind']} | {c['regressor']} | {c['best'] or c['note']} | "
-                         f"{_pct(c['cv_gain'], '.1%')} | {p} | {runl} | "
+                         f"{pct(c['cv_gain'], '.1%')} | {p} | {runl} | "
                          f"{'yes' if c['significant'] else 'no'} | "
                          f"{'yes' if c['added'] else ('no: ' + c['not_added'] if c.get('not_added') else 'no')} |")
     lines += response_test_lines(d.get("response_test") or [])
