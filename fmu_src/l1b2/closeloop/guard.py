@@ -62,7 +62,11 @@ def broken(model, df: pd.DataFrame, mask: np.ndarray) -> str | None:
     Broken: its free run on ``df`` raises a numerical error or is non-finite
     on the mask, or its free-run nrmse on the mask is at least :data:`MAX_FIT_NRMSE`.
     """
-    nrmse, why = free_run_nrmse(model, df, mask)
+    return _why_broken(*free_run_nrmse(model, df, mask))
+
+
+def _why_broken(nrmse: float, why: str | None) -> str | None:
+    """:func:`broken`'s answer from :func:`free_run_nrmse`'s ``(nrmse, why)``."""
     if why is not None:
         return why
     if not nrmse < MAX_FIT_NRMSE:
@@ -107,12 +111,17 @@ def better(first, second, df: pd.DataFrame, mask: np.ndarray) -> bool:
     """Whether ``second`` is the better fit of the same data than ``first``: the higher log-likelihood when
     both are fitted identifiers (``result_.loglik``), else the lower free-run nrmse on ``mask``; an unusable
     ``second`` (:func:`broken`) never is."""
-    if broken(second, df, mask) is not None:
+    return _prefers_second(first, second, free_run_nrmse(first, df, mask)[0], free_run_nrmse(second, df, mask)[0])
+
+
+def _prefers_second(first, second, first_nrmse: float, second_nrmse: float) -> bool:
+    """:func:`better` given both fits' free-run nrmse on the mask (NaN: the free run failed)."""
+    if not second_nrmse < MAX_FIT_NRMSE:
         return False
     a, b = _loglik(first), _loglik(second)
     if np.isfinite(a) and np.isfinite(b):
         return b > a
-    return free_run_nrmse(second, df, mask)[0] < free_run_nrmse(first, df, mask)[0]
+    return second_nrmse < first_nrmse
 
 
 def checked_fit(fit: Callable[[], object], retry: Callable[[], object], df: pd.DataFrame, mask: np.ndarray,
@@ -138,9 +147,10 @@ def checked_fit(fit: Callable[[], object], retry: Callable[[], object], df: pd.D
         except IdentificationError as exc:
             why.append(f"failed ({' '.join(str(exc).split())})")
             continue
-        reason = broken(model, df, mask)
+        nrmse, failed = free_run_nrmse(model, df, mask)
+        reason = _why_broken(nrmse, failed)
         if reason is None:
-            return model if i == 2 else _against_level_law(model, rescue, df, mask, record)
+            return model if i == 2 else _against_level_law(model, nrmse, rescue, df, mask, record)
         why.append(reason)
     rescued = f"; from the seed-free search without pins, then with them: {why[2]}" if rescue is not None else ""
     raise FitDivergedError(f"{what} diverged: {why[0]}; retried from the identifier's multistart: {why[1]}{rescued}; "
@@ -155,9 +165,10 @@ def checked_identification(identify: Callable[..., object], df: pd.DataFrame, ma
     return checked_fit(identify, lambda: identify(retry=True), df, mask, what, lambda: identify(rescue=True), record)
 
 
-def _against_level_law(model, rescue, df, mask, record: dict):
-    """``model``, or ``rescue()`` when ``model`` is below the level law and the rescue is :func:`better`."""
-    nrmse, law = free_run_nrmse(model, df, mask)[0], level_law_nrmse(df, mask)
+def _against_level_law(model, nrmse: float, rescue, df, mask, record: dict):
+    """``model`` (its free-run nrmse on ``mask``: ``nrmse``), or ``rescue()`` when ``model`` is below the level law
+    and the rescue is :func:`better`."""
+    law = level_law_nrmse(df, mask)
     again = rescue is not None and nrmse > law
     record.update(train_free_run_nrmse=_finite(nrmse), level_law_nrmse=law, searched_again=bool(again))
     if not again:
@@ -167,8 +178,8 @@ def _against_level_law(model, rescue, df, mask, record: dict):
     except IdentificationError as exc:
         record.update(kept="first", rescue_failed=" ".join(str(exc).split()))
         return model
-    keep = better(model, other, df, mask)
+    other_nrmse = free_run_nrmse(other, df, mask)[0]
+    keep = _prefers_second(model, other, nrmse, other_nrmse)
     record.update(loglik={"first": _finite(_loglik(model)), "rescue": _finite(_loglik(other))},
-                  rescue_train_free_run_nrmse=_finite(free_run_nrmse(other, df, mask)[0]),
-                  kept="rescue" if keep else "first")
+                  rescue_train_free_run_nrmse=_finite(other_nrmse), kept="rescue" if keep else "first")
     return other if keep else model
