@@ -98,11 +98,8 @@ from .stagefit import physics_behind, stage_cv_errors, stage_verdict
 from .folds import refit_schemes, screen_folds, stratified_folds
 from .baselines import choose_baseline, identify_families, retag_structural
 from .crosscheck import PureSlipCheck, identified_pick, score_of, withdrawn_note
-from .derived import prepare_channels
-from .events import session, with_event_clocks
-from .lags import with_lagged_channels
-from .pauses import with_pause_channel
-from .runclock import with_run_clock
+from .derived import prepare_channels, with_protocol_channels
+from .events import session
 from .responses import classed_responses, response_tests, with_applied
 from .evidence import (channels_considered, order_traced, with_auxiliary, with_onset, with_position_share,
                        with_response_test)
@@ -164,10 +161,7 @@ class CloseLoop(EstimatorSettings):
         dtr, dte, aux_rec, responses = prepare_channels(dtr, dte, responses)   # derivable names, flags, labels, gaps
         response_rec = response_tests(dtr, responses)   # columns that follow the speed: responses unless set
         responses = self.response_columns_ = classed_responses(self.response_columns, responses, response_rec)
-        dtr, dte, event_rec = with_event_clocks(dtr, dte, responses, sess)
-        dtr, dte, lag_rec = with_lagged_channels(dtr, dte, responses, sess)
-        dtr, dte, pause_rec = with_pause_channel(dtr, dte, sess)
-        dtr, dte, clock_rec = with_run_clock(dtr, dte)   # the time since each run's start, along the stroke only
+        dtr, dte, derived_rec = with_protocol_channels(dtr, dte, responses, sess)   # clocks, lags, pause, history
         mask_tr = np.array(train.mask)
         folds = stratified_folds(dtr, self.refit_folds, self.seed)   # TRAIN's run folds, one split for the fit
 
@@ -248,9 +242,7 @@ class CloseLoop(EstimatorSettings):
         chosen = it.chosen
         diagnosis = {**self._diagnosis(it, first, analysis, ext_params, chain_rec), "auxiliary_columns": aux_rec,
                      "response_test": with_applied(response_rec, self.response_columns, responses),
-                     "event_clocks": event_rec,
-                     "lagged_channels": lag_rec,
-                     "pause_channel": pause_rec, "run_clock": clock_rec,
+                     **derived_rec,
                      "unseen_levels": runlevel.unseen_test_levels(it.effects.candidates, dte),
                      "channel_ranges": runlevel.channel_ranges(it.effects.candidates, dtr, dte)}
         diagnosis["channels_considered"] = with_response_test(
