@@ -21,7 +21,7 @@ import pandas as pd
 from ..data import measurements as dataio
 from ..data import plots
 from ..data.gaps import gap_lines
-from ..data.coverage import speed_source_lines
+from ..data.coverage import channel_outside_lines, speed_source_lines
 from ..data.onset import onset_lines
 from ..data.plausibility import uneven_step_lines
 from ..jsonio import dumps, sig, strict_json
@@ -314,14 +314,16 @@ def run_level_line(r: dict) -> str:
 
 def data_check_sections(checks: dict) -> list[str]:
     """``report.md``'s sections on the data checks of ``checks`` (report.json's): the gaps filled on reading, the
-    uneven time steps, the rest before each run's onset and a TEST speed of another kind than TRAIN's, each a titled
-    list when it has lines."""
+    uneven time steps, the rest before each run's onset, a TEST speed of another kind than TRAIN's and the logged
+    channels TEST takes outside TRAIN's values, each a titled list when it has lines."""
     out = []
     for title, lines in (("Gaps in optional input columns, filled on reading:", gap_lines(checks.get("gaps_filled"))),
                          ("Uneven time steps:", uneven_step_lines(checks.get("uneven_time_steps"))),
                          ("Rest before each run's onset, cut on reading:",
                           onset_lines(checks.get("rest_before_onset"))),
-                         ("Speed source:", speed_source_lines(checks.get("speed_derived")))):
+                         ("Speed source:", speed_source_lines(checks.get("speed_derived"))),
+                         ("Logged channels outside TRAIN's values:",
+                          channel_outside_lines(checks.get("channels_outside")))):
         if lines:
             out += [title, ""] + [f"* {g}" for g in lines] + [""]
     return out

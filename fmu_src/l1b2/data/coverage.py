@@ -28,7 +28,7 @@ import pandas as pd
 
 from ..errors import DataFormatError
 from .columns import file_row
-from .measurements import DIRECTION, FREQUENCY, LOAD, POSITION, RUN, SPEED, VOLTAGE, Measurements, run_slices
+from .measurements import DIRECTION, FREQUENCY, LOAD, POSITION, RUN, SPEED, TIME, VOLTAGE, Measurements, run_slices
 from .gaps import gap_lines
 from .onset import onset_lines
 from .plausibility import uneven_step_lines, uneven_steps
@@ -36,7 +36,7 @@ from .plausibility import uneven_step_lines, uneven_steps
 __all__ = ["RANGE_COLUMNS", "DEFAULT_TOLERANCE", "MIN_TOLERANCE", "data_range", "outside_range",
            "summarize_outside", "values_outside", "FREQUENCY_REL_SPREAD", "run_frequencies", "frequency_varies",
            "input_checks", "data_check_lines", "RIG_SETTINGS", "check_same_rig", "SHARED_SHARE", "SharedRun",
-           "shared_run", "runs_of_two", "speed_source_lines"]
+           "shared_run", "runs_of_two", "speed_source_lines", "NOISE_SDS", "channels_outside", "channel_outside_lines"]
 
 #: The prediction inputs whose range is checked (unit in the name); a direction TRAIN never drove is outside.
 RANGE_COLUMNS: tuple[str, ...] = (VOLTAGE, LOAD, POSITION, DIRECTION, FREQUENCY)
@@ -49,6 +49,11 @@ FREQUENCY_REL_SPREAD: float = 1e-3
 #: Smallest absolute tolerance per column (1 mV, 1 mg, 1 um, 25 Hz = half the frequency spread that counts at
 #: 48.5 kHz: a TRAIN at one frequency flags TEST runs beyond it).
 MIN_TOLERANCE: dict[str, float] = {VOLTAGE: 1e-3, LOAD: 1e-6, POSITION: 1e-6, DIRECTION: 1e-6, FREQUENCY: 25.0}
+
+
+#: How far, in TRAIN's typical within-run standard deviation of a logged channel, a TEST run's value of it may lie
+#: outside TRAIN's runs' before the run is flagged (:func:`channels_outside`): a noisy sensor's scatter is no change.
+NOISE_SDS: float = 3.0
 
 
 def _frame(data: pd.DataFrame | Measurements) -> pd.DataFrame:
@@ -151,8 +156,8 @@ def input_checks(train: Measurements, test: Measurements | None) -> dict:
     filled on reading (per file and column: ``cells``, ``runs``, ``first_row``, ``first_line``), the uneven time
     steps within runs (per file, :func:`l1b2.data.plausibility.uneven_steps`, None when even), the runs at rest
     before their onset (per file, :func:`l1b2.data.onset.from_onset`'s record, None for data not read from a file),
-    whether each file's speed was derived from position (``speed_derived``; TEST None without TEST) and TEST runs
-    outside TRAIN's range."""
+    whether each file's speed was derived from position (``speed_derived``; TEST None without TEST), TEST runs
+    outside TRAIN's range and the logged channels TEST takes outside TRAIN's (:func:`channels_outside`)."""
     rng = data_range(train)
     flagged = outside_range(test, rng) if test is not None else []
     n_test = len(test.runs) if test is not None else 0
@@ -170,6 +175,7 @@ def input_checks(train: Measurements, test: Measurements | None) -> dict:
                           "test": bool(test.meta.get("speed_derived")) if test is not None else None},
         "training_range": rng,
         "test_runs_outside_training_range": flagged,
+        "channels_outside": channels_outside(train, test) if test is not None else [],
         "extrapolation": summarize_outside(flagged, n_test),
     }
 
@@ -177,10 +183,12 @@ def input_checks(train: Measurements, test: Measurements | None) -> dict:
 def data_check_lines(checks: dict) -> list[str]:
     """The warning lines of a report's ``checks`` (:func:`input_checks`) that need the package to be worded: the
     gaps filled on reading (:func:`l1b2.data.gaps.gap_lines`), the uneven time steps
-    (:func:`l1b2.data.plausibility.uneven_step_lines`) and the rest before the runs' onsets
-    (:func:`l1b2.data.onset.onset_lines`)."""
+    (:func:`l1b2.data.plausibility.uneven_step_lines`), the rest before the runs' onsets
+    (:func:`l1b2.data.onset.onset_lines`), the speed's source (:func:`speed_source_lines`) and the logged channels
+    TEST takes outside TRAIN's range (:func:`channel_outside_lines`)."""
     return (gap_lines(checks.get("gaps_filled")) + uneven_step_lines(checks.get("uneven_time_steps"))
-            + onset_lines(checks.get("rest_before_onset")) + speed_source_lines(checks.get("speed_derived")))
+            + onset_lines(checks.get("rest_before_onset")) + speed_source_lines(checks.get("speed_derived"))
+            + channel_outside_lines(checks.get("channels_outside")))
 
 
 def speed_source_lines(derived: Mapping[str, bool | None] | None) -> list[str]:
@@ -192,6 +200,63 @@ def speed_source_lines(derived: Mapping[str, bool | None] | None) -> list[str]:
     how = {True: "derived from position_m", False: "measured (speed_m_s)"}
     return [f"TRAIN's speed is {how[derived['train']]} and TEST's {how[derived['test']]}: the TEST errors "
             "are scored on another speed than TRAIN's and do not compare with them; give both files alike"]
+
+def channels_outside(train: pd.DataFrame | Measurements, test: pd.DataFrame | Measurements,
+                     *, tolerance: float = DEFAULT_TOLERANCE) -> list[dict]:
+    """The logged channels beyond the model's inputs whose values in some TEST runs TRAIN never had: no effect of
+    them could be learnt there (a channel constant in TRAIN above all: the model cannot know what it does).
+
+    Every numeric column of both frames other than the run, the clock, the speed and :data:`RANGE_COLUMNS` is read
+    per run (its median). A TEST run is outside when its value lies outside ``[min, max]`` of TRAIN's runs' by more
+    than the largest of ``tolerance`` x that range's width, :data:`NOISE_SDS` x TRAIN's median within-run standard
+    deviation of the channel (a noisy sensor's scatter) and ``1e-9`` x the largest magnitude (rounding). Runs whose
+    value is not finite are left out.
+
+    Returns
+    -------
+    list of dict
+        One per channel with a TEST run outside, in TEST's column order: ``channel``, ``train`` ([min, max] of
+        TRAIN's run values), ``constant_in_train`` (TRAIN's run values all within the tolerance), ``test`` ([min,
+        max] of the runs outside), ``runs_outside``, ``test_runs`` and ``first_run`` (the first run outside, in
+        file order).
+    """
+    tr, te = _frame(train), _frame(test)
+    skip = {RUN, TIME, SPEED, *RANGE_COLUMNS}
+    out = []
+    for col in te.columns:
+        if col in skip or col not in tr.columns or not (pd.api.types.is_numeric_dtype(tr[col])
+                                                        and pd.api.types.is_numeric_dtype(te[col])):
+            continue
+        a = tr.groupby(RUN, sort=False)[col].median().to_numpy(float)
+        b = te.groupby(RUN, sort=False)[col].median()
+        a, ok = a[np.isfinite(a)], np.isfinite(b.to_numpy(float))
+        if not a.size or not ok.any():
+            continue
+        sd = tr.groupby(RUN, sort=False)[col].std(ddof=1).to_numpy(float)
+        sd = float(np.median(sd[np.isfinite(sd)])) if np.isfinite(sd).any() else 0.0
+        lo, hi = float(a.min()), float(a.max())
+        scale = max(abs(lo), abs(hi), float(np.nanmax(np.abs(b.to_numpy(float)))))
+        tol = max(tolerance * (hi - lo), NOISE_SDS * sd, 1e-9 * scale)
+        vals = b[ok]
+        bad = vals[(vals < lo - tol) | (vals > hi + tol)]
+        if len(bad):
+            out.append({"channel": str(col), "train": [lo, hi], "constant_in_train": bool(hi - lo <= tol),
+                        "test": [float(bad.min()), float(bad.max())], "runs_outside": int(len(bad)),
+                        "test_runs": int(len(vals)), "first_run": getattr(bad.index[0], "item", lambda: bad.index[0])()})
+    return out
+
+
+def channel_outside_lines(records) -> list[str]:
+    """One warning per record of :func:`channels_outside`."""
+    lines = []
+    for r in records or []:
+        (lo, hi), (tlo, thi) = r["train"], r["test"]
+        train = f"constant at {lo:.6g}" if r["constant_in_train"] else f"{lo:.6g} to {hi:.6g}"
+        lines.append(f"TEST's `{r['channel']}` lies outside TRAIN's values in {r['runs_outside']} of {r['test_runs']} "
+                     f"runs (TRAIN {train}, those runs {tlo:.6g} to {thi:.6g}; first run {r['first_run']}): no effect "
+                     "of it could be learnt there, and the predictions assume it acts as in TRAIN")
+    return lines
+
 
 #: settings that describe the rig itself: TRAIN and TEST must agree on them (relative difference)
 RIG_SETTINGS: dict[str, float] = {"slider_mass_kg": 1e-6, "encoder_resolution_m": 1e-6, "drive_frequency_Hz": 1e-6}
