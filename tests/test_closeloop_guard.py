@@ -168,6 +168,21 @@ def test_level_law_is_the_runs_median_speeds_affine_law_written_out():
     assert np.isfinite(guard.level_law_nrmse(df, mask & (run != 0)))
 
 
+def test_the_level_law_check_and_its_warning():
+    from l1b2.data.coverage import data_check_lines
+    from l1b2.data.metrics import level_law_check, level_law_lines
+    df = _ramped(n_runs=6)
+    mask = np.ones(len(df), bool)
+    law = guard.level_law_nrmse(df, mask)
+    above, below = level_law_check(df, mask, law * 1.01), level_law_check(df, mask, law * 0.99)
+    assert above["above"] and not below["above"] and above["level_law_nrmse"] == pytest.approx(law)
+    assert not level_law_check(df, mask, float("nan"))["above"]      # no free run: nothing to compare
+    assert level_law_lines(below) == [] and level_law_lines(None) == []
+    line = level_law_lines({"train_free_run_nrmse": 0.3657, "level_law_nrmse": 0.134, "above": True})[0]
+    assert "36.57 %" in line and "13.40 %" in line and "--starts" in line
+    assert data_check_lines({"level_law": above}) == level_law_lines(above)
+
+
 def test_a_fit_below_the_level_law_is_searched_again_and_the_higher_likelihood_kept():
     df = _ramped()
     mask = np.ones(len(df), bool)

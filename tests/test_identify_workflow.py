@@ -37,6 +37,10 @@ def test_paper_split_and_report_contents(identified):
     assert len(rep["figures"]) == 16 and all((out / f.split("/")[-1]).exists() for f in rep["figures"])
     assert "aic" in rep and "bic" in rep
     assert (out / "fit_report.txt").read_text().strip()
+    # the fit against the runs' level law: a good fit of the rig's data beats it, so no warning
+    law = rep["checks"]["level_law"]
+    assert law["train_free_run_nrmse"] == pytest.approx(rep["metrics"]["train"]["free_run"]["nrmse"])
+    assert 0 < law["train_free_run_nrmse"] < law["level_law_nrmse"] and not law["above"]
 
 
 @pytest.mark.parametrize("problem", ["missing_column", "mm_positions", "bad_direction", "time_backwards"])

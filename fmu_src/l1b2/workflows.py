@@ -30,7 +30,7 @@ from .data import measurements as dataio
 from .data import plots
 from .data.coverage import check_same_rig, input_checks, outside_range, runs_of_two
 from .jsonio import dumps
-from .data.metrics import diverged_runs, evaluation_mask, report_metrics, speed_metrics
+from .data.metrics import diverged_runs, evaluation_mask, level_law_check, report_metrics, speed_metrics
 from .errors import IdentificationError, OutputError
 from .predictor.setup import PredictorSetup
 from .cosim.master import pid_alive
@@ -420,6 +420,8 @@ def run_identification(train_path, out_dir, test_path=None, *, order=8, criterio
                         "test": metrics_for(est, test) if test is not None else None},
             "predictor": PredictorSetup(est.params_, est.m_s_, est.T_s_, est.result_.frequency_response).to_dict(),
         }
+        sections["checks"]["level_law"] = level_law_check(train.df, train.mask,
+                                                          sections["metrics"]["train"]["free_run"]["nrmse"])
         sections["figures"] = _test_figures(est, test, tmp, out) if plots_on and test is not None else []
         est.result_.save(tmp, **sections)  # identification.json (strict JSON) and fit_report.txt
     return {**est.to_dict(), **sections}

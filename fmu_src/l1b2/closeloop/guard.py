@@ -31,6 +31,7 @@ import numpy as np
 import pandas as pd
 
 from ..data import measurements as dataio
+from ..data.metrics import level_law_nrmse
 from ..errors import FitDivergedError, IdentificationError
 
 
@@ -73,29 +74,6 @@ def _why_broken(nrmse: float, why: str | None) -> str | None:
         return (f"its free-run nrmse on its own training data is {100 * nrmse:.1f} % "
                 f"(broken from {100 * MAX_FIT_NRMSE:.0f} %)")
     return None
-
-
-def level_law_nrmse(df: pd.DataFrame, mask: np.ndarray) -> float:
-    """The nrmse over ``mask`` of the runs' speed levels' affine law: each run's level is its median measured speed
-    on the mask, in drive coordinates (times its direction ``d``); the levels are fitted by least squares on
-    ``(1, V0, d m)`` over the runs that have one, and each sample is predicted by its run's fitted level times
-    ``d`` (a run with no sample on the mask predicts 0). That is the steady-state law Eq. 29 holds (the drive's
-    speed affine in V0 and the load in drive coordinates), with no transient and nothing along the stroke."""
-    m = np.asarray(mask, bool)
-    v = df[dataio.SPEED].to_numpy(float)
-    runs = pd.DataFrame({"v": np.where(m, v, np.nan), "run": df[dataio.RUN].to_numpy(),
-                         "V": df[dataio.VOLTAGE].to_numpy(float), "d": df[dataio.DIRECTION].to_numpy(float),
-                         "m": df[dataio.LOAD].to_numpy(float)}).groupby("run", sort=False).agg(
-        v=("v", "median"), V=("V", "first"), d=("d", "first"), m=("m", "first"))
-    X = np.column_stack([np.ones(len(runs)), runs["V"], runs["d"] * runs["m"]])
-    has = np.isfinite(runs["v"].to_numpy(float))
-    level = np.zeros(len(runs))
-    if has.any():
-        coef = np.linalg.lstsq(X[has], (runs["v"] * runs["d"]).to_numpy(float)[has], rcond=None)[0]
-        level = np.where(has, X @ coef * runs["d"].to_numpy(float), 0.0)
-    pred = df[dataio.RUN].map(dict(zip(runs.index, level))).to_numpy(float)
-    e = v[m] - pred[m]
-    return float(np.sqrt(np.sum(e ** 2) / max(float(np.sum(v[m] ** 2)), 1e-300)))
 
 
 def _loglik(model) -> float:

@@ -30,6 +30,7 @@ from ..errors import DataFormatError
 from .columns import file_row
 from .measurements import DIRECTION, FREQUENCY, LOAD, POSITION, RUN, SPEED, TIME, VOLTAGE, Measurements, run_slices
 from .gaps import gap_lines
+from .metrics import level_law_lines
 from .onset import onset_lines
 from .plausibility import uneven_step_lines, uneven_steps
 
@@ -184,11 +185,12 @@ def data_check_lines(checks: dict) -> list[str]:
     """The warning lines of a report's ``checks`` (:func:`input_checks`) that need the package to be worded: the
     gaps filled on reading (:func:`l1b2.data.gaps.gap_lines`), the uneven time steps
     (:func:`l1b2.data.plausibility.uneven_step_lines`), the rest before the runs' onsets
-    (:func:`l1b2.data.onset.onset_lines`), the speed's source (:func:`speed_source_lines`) and the logged channels
-    TEST takes outside TRAIN's range (:func:`channel_outside_lines`)."""
+    (:func:`l1b2.data.onset.onset_lines`), the speed's source (:func:`speed_source_lines`), the logged channels
+    TEST takes outside TRAIN's range (:func:`channel_outside_lines`) and an identification worse on TRAIN than the
+    runs' level law (``level_law``, :func:`l1b2.data.metrics.level_law_lines`)."""
     return (gap_lines(checks.get("gaps_filled")) + uneven_step_lines(checks.get("uneven_time_steps"))
             + onset_lines(checks.get("rest_before_onset")) + speed_source_lines(checks.get("speed_derived"))
-            + channel_outside_lines(checks.get("channels_outside")))
+            + channel_outside_lines(checks.get("channels_outside")) + level_law_lines(checks.get("level_law")))
 
 
 def speed_source_lines(derived: Mapping[str, bool | None] | None) -> list[str]:

@@ -35,8 +35,11 @@ import pandas as pd
 from .measurements import (
     END_EXCLUSION_M,
     MIN_EVAL_SPEED_M_S,
+    DIRECTION,
+    LOAD,
     RUN,
     SPEED,
+    VOLTAGE,
     Measurements,
     as_1d,
     evaluation_mask,
@@ -45,7 +48,8 @@ from .measurements import (
 
 __all__ = [
     "MIN_EVAL_SPEED_M_S", "END_EXCLUSION_M", "P95_PERCENTILE", "METRIC_KEYS", "DIVERGED_FACTOR",
-    "evaluation_mask", "speed_metrics", "report_metrics", "diverged_runs",
+    "evaluation_mask", "speed_metrics", "report_metrics", "diverged_runs", "level_law_nrmse", "level_law_check",
+    "level_law_lines",
 ]
 
 #: A prediction faster than this many times the run's fastest measured speed (at least 5 mm/s) has diverged.
@@ -197,3 +201,44 @@ def diverged_runs(df: pd.DataFrame, v_pred: Any, mask: Any = None) -> list:
                 (judged.any() and float(np.max(np.abs(p[judged]))) > limit):
             out.append(rid)
     return out
+
+
+def level_law_nrmse(df: pd.DataFrame, mask: np.ndarray) -> float:
+    """The nrmse over ``mask`` of the runs' speed levels' affine law: each run's level is its median measured speed
+    on the mask, in drive coordinates (times its direction ``d``); the levels are fitted by least squares on
+    ``(1, V0, d m)`` over the runs that have one, and each sample is predicted by its run's fitted level times
+    ``d`` (a run with no sample on the mask predicts 0). That is the steady-state law Eq. 29 holds (the drive's
+    speed affine in V0 and the load in drive coordinates), with no transient and nothing along the stroke."""
+    m = np.asarray(mask, bool)
+    v = df[SPEED].to_numpy(float)
+    runs = pd.DataFrame({"v": np.where(m, v, np.nan), "run": df[RUN].to_numpy(),
+                         "V": df[VOLTAGE].to_numpy(float), "d": df[DIRECTION].to_numpy(float),
+                         "m": df[LOAD].to_numpy(float)}).groupby("run", sort=False).agg(
+        v=("v", "median"), V=("V", "first"), d=("d", "first"), m=("m", "first"))
+    X = np.column_stack([np.ones(len(runs)), runs["V"], runs["d"] * runs["m"]])
+    has = np.isfinite(runs["v"].to_numpy(float))
+    level = np.zeros(len(runs))
+    if has.any():
+        coef = np.linalg.lstsq(X[has], (runs["v"] * runs["d"]).to_numpy(float)[has], rcond=None)[0]
+        level = np.where(has, X @ coef * runs["d"].to_numpy(float), 0.0)
+    pred = df[RUN].map(dict(zip(runs.index, level))).to_numpy(float)
+    e = v[m] - pred[m]
+    return float(np.sqrt(np.sum(e ** 2) / max(float(np.sum(v[m] ** 2)), 1e-300)))
+
+def level_law_check(df: pd.DataFrame, mask: Any, train_free_run_nrmse: float) -> dict:
+    """``{"train_free_run_nrmse", "level_law_nrmse", "above"}``: a fit's free-run nrmse on TRAIN against
+    :func:`level_law_nrmse` of TRAIN, and whether the fit is worse than that law (then it has missed the steady state
+    its own model holds: a wrong basin of the search, or a model that does not fit these data)."""
+    law = level_law_nrmse(df, mask)
+    x = float(train_free_run_nrmse)
+    return {"train_free_run_nrmse": x, "level_law_nrmse": law, "above": bool(np.isfinite(x) and x > law)}
+
+
+def level_law_lines(rec: dict | None) -> list[str]:
+    """A warning when :func:`level_law_check` found the fit above the level law (none otherwise)."""
+    if not rec or not rec.get("above"):
+        return []
+    return [f"TRAIN's free run ({100 * rec['train_free_run_nrmse']:.2f} % nrmse) is worse than the runs' level law "
+            f"({100 * rec['level_law_nrmse']:.2f} %: each run's median speed, affine in V0 and the load): the fit "
+            "may have stopped in a wrong basin; try more starts (--starts) or another --seed, and compare the "
+            "log-likelihoods"]
