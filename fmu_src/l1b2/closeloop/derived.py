@@ -13,9 +13,9 @@ taken too) in both frames and kept as an auxiliary column of its own; the rename
 auxiliary columns' actions (:func:`l1b2.closeloop.auxiliary.with_usable_channels`), so the report lists it.
 
 A name a derivation *could* produce: exactly :data:`l1b2.closeloop.pauses.COLUMN`,
-:data:`l1b2.closeloop.runclock.COLUMN` or :data:`l1b2.closeloop.history.COLUMN`, or ``X + suffix`` for a column ``X`` of the frame and a suffix of the event
-clock, of a lag of :data:`l1b2.closeloop.lags.TAU_RUNS` periods or of a setting's step (``_step``).
-The required columns and the speed are never renamed.
+:data:`l1b2.closeloop.runclock.COLUMN` or :data:`l1b2.closeloop.history.COLUMN`, or ``X + suffix`` for a column
+``X`` of the frame and a suffix of the event clock, of a lag of :data:`l1b2.closeloop.lags.TAU_RUNS` periods or of
+a setting's step (``_step``). The required columns and the speed are never renamed.
 """
 
 from __future__ import annotations

@@ -128,8 +128,8 @@ class Diagnosis(_Record):
     previous setting (:mod:`l1b2.closeloop.lags`);
     ``pause_channel`` the pause before each run and whether its logarithm was derived as a channel
     (:mod:`l1b2.closeloop.pauses`); ``previous_pass`` whether the previous run's speed was derived as a channel and
-    TRAIN's range of it (:mod:`l1b2.closeloop.history`); ``run_clock`` whether the time since each run's start was derived as a
-    channel and TRAIN's run durations (:mod:`l1b2.closeloop.runclock`);
+    TRAIN's range of it (:mod:`l1b2.closeloop.history`); ``run_clock`` whether the time since each run's start was
+    derived as a channel and TRAIN's run durations (:mod:`l1b2.closeloop.runclock`);
     ``unseen_levels`` the TEST values of an added categorical setting that TRAIN never had
     (:func:`l1b2.closeloop.runlevel.unseen_test_levels`); ``channel_ranges`` per logged channel an added effect
     reads, the share of TEST's samples and runs outside TRAIN's range of it

@@ -244,7 +244,8 @@ def channels_outside(train: pd.DataFrame | Measurements, test: pd.DataFrame | Me
         if len(bad):
             out.append({"channel": str(col), "train": [lo, hi], "constant_in_train": bool(hi - lo <= tol),
                         "test": [float(bad.min()), float(bad.max())], "runs_outside": int(len(bad)),
-                        "test_runs": int(len(vals)), "first_run": getattr(bad.index[0], "item", lambda: bad.index[0])()})
+                        "test_runs": int(len(vals)),
+                        "first_run": getattr(bad.index[0], "item", lambda: bad.index[0])()})
     return out
 
 
