@@ -89,4 +89,4 @@ def test_a_logged_column_of_its_name_is_set_aside_and_the_channel_derived_beside
     tr, _, recs = with_protocol_channels(tr, None, (), sess)
     assert recs["previous_pass"]["derived"]
     assert _per_run(tr, COLUMN)["min"].tolist()[1:] == pytest.approx([0.05, 0.08, 0.11, 0.03])
-    assert set(recs) == {"event_clocks", "lagged_channels", "pause_channel", "previous_pass", "run_clock"}
+    assert set(recs) == {"event_clocks", "lagged_channels", "pause_channel", "break_clock", "previous_pass", "run_clock"}

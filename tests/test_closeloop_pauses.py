@@ -97,3 +97,44 @@ def test_a_run_level_effect_of_the_column_is_exported_through_an_input_named_aft
     assert fmu_signal("run:" + COLUMN) == "col:" + COLUMN
     assert export_problem(spec) is None
     assert channel_inputs([spec]) == {COLUMN: pytest.approx(spec["mean"])}
+
+
+def test_the_break_clock_is_the_time_since_the_latest_run_after_a_break():
+    from l1b2.closeloop.pauses import BREAK_COLUMN, BREAK_FACTOR, with_break_clock
+    # runs every 1.3 s (median period 1.3 s); two breaks: before run 7 (600 s) and before run 13 (100 s)
+    starts = [1.3 * k for k in range(6)]
+    starts += [starts[-1] + 600.0 + 1.3 * k for k in range(6)]
+    starts += [starts[-1] + 100.0 + 1.3 * k for k in range(6)]
+    assert 100.0 >= BREAK_FACTOR * 1.3
+    whole = _session(starts)
+    train = whole[whole["run"] % 4 != 0].reset_index(drop=True)
+    test = whole[whole["run"] % 4 == 0].reset_index(drop=True)
+    tr, te, rec = with_break_clock(train, test)
+    assert rec["derived"] and rec["one_session"] and rec["breaks_s"] == pytest.approx([starts[6], starts[12]])
+    for df in (tr, te):
+        t = df["time_s"].to_numpy()
+        origin = np.where(t >= starts[12], starts[12], np.where(t >= starts[6], starts[6], starts[0]))
+        assert df[BREAK_COLUMN].to_numpy() == pytest.approx(t - origin)
+    assert BREAK_COLUMN not in train.columns
+
+
+def test_no_break_clock_without_breaks_or_with_too_many():
+    from l1b2.closeloop.events import MIN_BLOCK_RUNS
+    from l1b2.closeloop.pauses import BREAK_FACTOR, break_starts, with_break_clock
+    from l1b2.closeloop.events import run_table
+    regular = _session([1.3 * k for k in range(12)])
+    tr, _, rec = with_break_clock(regular, None)
+    assert tr is regular and not rec["derived"] and rec["breaks_s"] == []
+    # a pause just under / at the factor times the median period
+    under = _session([0.0, 1.3, 2.6, 2.6 + 1.3 * BREAK_FACTOR * 0.99 + 0.3, 2.6 + 1.3 * BREAK_FACTOR * 0.99 + 1.6])
+    at = _session([0.0, 1.3, 2.6, 2.6 + 1.3 * BREAK_FACTOR + 0.3, 2.6 + 1.3 * BREAK_FACTOR + 1.6])
+    assert len(break_starts(run_table([under], "time_s"))) == 0
+    assert len(break_starts(run_table([at], "time_s"))) == 1
+    # breaks more often than once per MIN_BLOCK_RUNS runs: a rig that pauses irregularly, not a session of segments
+    starts, t = [], 0.0
+    for k in range(12):
+        starts.append(t)
+        t += 1.3 if k % 2 == 0 else 1.3 + 30.0
+    busy = _session(starts)
+    assert len(break_starts(run_table([busy], "time_s"))) > 12 / MIN_BLOCK_RUNS
+    assert not with_break_clock(busy, None)[2]["derived"]

@@ -30,6 +30,20 @@ a column with no information, and it would add one family to the significance co
 
 ``Predictor.fmu`` reads the column like any logged channel's (an input named after it): the host computes it
 from its own clock as defined above.
+
+**Breaks.** A session may stop for a while (a meal, a night, a re-mount of the weight): the motor cools, a film
+drains, and the state the runs had built up starts again. An effect that builds up over the runs after each break
+(a warm-up) is a function of the time since the latest break, a sawtooth in session time that no form of the
+session clock can express. A pause is a *break* when it lasts at least :data:`BREAK_FACTOR` times the session's
+median run period (start to start). For a session with breaks (at least one, at most one per
+:data:`l1b2.closeloop.events.MIN_BLOCK_RUNS` runs on average, some TRAIN run after one) the loop derives the logged
+column :data:`BREAK_COLUMN` per sample:
+
+    ``t - t_b(t)`` [s], ``t_b(t)`` the start of the latest run at or before ``t`` that follows a break (before the
+    first break: the session's first time),
+
+one more logged channel (every form, shape and level). TRAIN and TEST are merged as for the pause; frames of their
+own sessions are each read on their own. The host computes it from its own clock and run log.
 """
 
 from __future__ import annotations
@@ -39,7 +53,7 @@ import pandas as pd
 
 from ..data import measurements as dataio
 from ..units import LOG_PREFIX
-from .events import Session, session
+from .events import MIN_BLOCK_RUNS, Session, since_event, session
 
 #: the derived column: the logarithm of the pause before each run over :data:`REFERENCE_S`, named by the naming rule
 #: of a logarithm (:data:`l1b2.units.LOG_PREFIX`): ``ln(pause_s / 1 s)``, dimensionless (:func:`l1b2.units.column_unit`)
@@ -50,6 +64,10 @@ REFERENCE_S = 1.0
 #: the smallest ratio of TRAIN's longest to its shortest known pause for the column to be derived: a doubling of
 #: the rest, a third of a decade of the log law (a span below it carries the log law's effect over less than that)
 MIN_SPAN = 2.0
+#: the break clock's column: the time since the latest run that follows a break [s]
+BREAK_COLUMN = "since_break_s"
+#: a pause is a break when it lasts at least this many median run periods (start to start)
+BREAK_FACTOR = 10.0
 
 
 def pauses_s(clock: pd.DataFrame) -> np.ndarray:
@@ -120,4 +138,47 @@ def with_pause_channel(train: pd.DataFrame, test: pd.DataFrame | None = None, se
         df[COLUMN] = df[dataio.RUN].map(dict(zip(clock["run"], value))).to_numpy(float)
         out.append(df)
     record.update(derived=True, floor_s=floor)
+    return out[0], (out[1] if test is not None else None), record
+
+
+def break_starts(clock: pd.DataFrame) -> np.ndarray:
+    """The start times [s] of the runs of ``clock`` (:func:`~l1b2.closeloop.events.run_table` rows, any order) whose
+    pause before (:func:`pauses_s`) is a break: at least :data:`BREAK_FACTOR` times the median run period (start to
+    start), sorted. Empty for fewer than three runs."""
+    start = np.sort(clock["start"].to_numpy(float))
+    if len(start) < 3:
+        return np.empty(0)
+    period = float(np.median(np.diff(start)))
+    p = pauses_s(clock)
+    starts = clock["start"].to_numpy(float)[np.isfinite(p) & (p >= BREAK_FACTOR * period)]
+    return np.sort(starts)
+
+
+def with_break_clock(train: pd.DataFrame, test: pd.DataFrame | None = None, sess: Session | None = None):
+    """``(train, test, record)``: copies of the frames with :data:`BREAK_COLUMN` appended when the session has
+    breaks (module docstring; ``test`` None stays None), and ``record`` ``{"column", "derived", "one_session",
+    "breaks_s"}`` (the start times of the runs after a break: the merged session's, else TRAIN's).
+
+    ``sess``: the frames' :func:`~l1b2.closeloop.events.session` when the caller has it (default: computed here).
+    The frames are returned unchanged (not copied) when the column is not derived or TRAIN already has it.
+    """
+    sess = session(train, test) if sess is None else sess
+    frames = [df for df in (train, test) if df is not None]
+    clocks = [sess.runs[sess.runs["frame"] == i] for i in range(len(frames))]
+    own = [sess.runs] * len(frames) if sess.one else clocks     # the runs each frame's breaks are read from
+    breaks = [break_starts(c) for c in own]
+    tr_start = clocks[0]["start"].to_numpy(float)
+    n_runs = len(own[0])
+    record = {"column": BREAK_COLUMN, "derived": False, "one_session": bool(sess.one),
+              "breaks_s": [float(x) for x in breaks[0]]}
+    b0 = breaks[0]
+    usable = 1 <= len(b0) <= n_runs / MIN_BLOCK_RUNS and bool(np.any(tr_start >= b0[0]))
+    if BREAK_COLUMN in train.columns or not usable:
+        return train, test, record
+    out = []
+    for df, c, b in zip(frames, own, breaks):
+        df = df.copy()
+        df[BREAK_COLUMN] = since_event(df[dataio.TIME].to_numpy(float), b, float(c["start"].min()))
+        out.append(df)
+    record["derived"] = True
     return out[0], (out[1] if test is not None else None), record

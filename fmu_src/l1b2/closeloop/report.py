@@ -127,9 +127,10 @@ class Diagnosis(_Record):
     ``lagged_channels`` the low-passes derived from logged run settings and the drive amplitude's step from its
     previous setting (:mod:`l1b2.closeloop.lags`);
     ``pause_channel`` the pause before each run and whether its logarithm was derived as a channel
-    (:mod:`l1b2.closeloop.pauses`); ``previous_pass`` whether the previous run's speed was derived as a channel and
-    TRAIN's range of it (:mod:`l1b2.closeloop.history`); ``run_clock`` whether the time since each run's start was
-    derived as a channel and TRAIN's run durations (:mod:`l1b2.closeloop.runclock`);
+    (:mod:`l1b2.closeloop.pauses`); ``break_clock`` whether the time since the latest break was derived
+    (:func:`l1b2.closeloop.pauses.with_break_clock`); ``previous_pass`` whether the previous run's speed was
+    derived as a channel and TRAIN's range of it (:mod:`l1b2.closeloop.history`); ``run_clock`` whether the time
+    since each run's start was derived as a channel and TRAIN's run durations (:mod:`l1b2.closeloop.runclock`);
     ``unseen_levels`` the TEST values of an added categorical setting that TRAIN never had
     (:func:`l1b2.closeloop.runlevel.unseen_test_levels`); ``channel_ranges`` per logged channel an added effect
     reads, the share of TEST's samples and runs outside TRAIN's range of it
@@ -177,6 +178,7 @@ class Diagnosis(_Record):
     event_clocks: list = field(default_factory=list)
     lagged_channels: list = field(default_factory=list)
     pause_channel: dict = field(default_factory=dict)
+    break_clock: dict = field(default_factory=dict)
     previous_pass: dict = field(default_factory=dict)
     run_clock: dict = field(default_factory=dict)
     unseen_levels: dict = field(default_factory=dict)
