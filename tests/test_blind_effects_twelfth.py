@@ -18,6 +18,7 @@ def test_the_guide_factor_is_flat_at_a_clearance_and_a_10_9_power_above(audit):
     assert audit.guide_factor(-4.0, 1.2, 4.0) == 1.0
     assert audit.guide_factor(0.0, 1.2, 4.0) == 1.0
     assert audit.guide_factor(8.0, 1.2, 4.0) == pytest.approx(1.3, rel=1e-14)
+    assert audit.guide_factor(8.0, 1.2, 3.0) == pytest.approx(1.4, rel=1e-14)
     # 4 um: N8 0.5^(10/9)
     assert audit.guide_factor(4.0, 1.2, 4.0) == pytest.approx(1 + 1.2 * 0.5 ** (10 / 9) / 4.0, rel=1e-14)
     d = np.linspace(0.1, 8.0, 40)
