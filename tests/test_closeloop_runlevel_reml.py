@@ -136,10 +136,14 @@ def test_runs_that_do_not_differ_beyond_their_sampling_error_have_no_between_run
 
 def test_a_start_on_a_saddle_of_the_cholesky_factor_is_left_for_the_optimum():
     # Tw = diag(0, 1): the Cholesky factor's first column is 0, where the gradient in it vanishes although l_R
-    # grows with T's gain variance; the boundary's first-order condition sends the search on to the optimum
+    # grows with T's gain variance (the solver alone stays there); the boundary's first-order condition sends the
+    # search on to the optimum
     theta, S, X = _world(n=40, seed=2)
     ref = rm.reml(theta, S, X)
     A = rm._whitener(S)
+    stuck = rm._search(theta, S, X, A, rm._lower_factor(np.diag([0.0, 1.0])), rm.REML_ITER, rm.REML_TOL)
+    assert stuck[0][0, 0] == 0.0 and stuck[2]                    # a zero gradient, and l_R grows from there:
+    assert rm._kkt(A, stuck[4], len(theta))[0] > rm.KKT_TOL
     T, it, ok = rm._maximise(theta, S, X, A, np.diag([0.0, 1.0]), rm.REML_ITER, rm.REML_TOL)
     assert ok and ref.T[0, 0] > 1e-5
     np.testing.assert_allclose(T, ref.T, rtol=1e-4, atol=1e-6 * np.max(np.abs(ref.T)))
@@ -173,3 +177,23 @@ def test_the_fold_fits_of_a_realistic_session_converge_before_the_cap(monkeypatc
     rl.signal_evidence(dev, sigs, alpha=0.01, k=5, seed=0)
     assert len(fits) >= 2 * (1 + 5)
     assert all(f.converged and f.iterations < rm.REML_ITER for f in fits)
+    # and fast: one fold fit's optimum is on the rank-one boundary with l_R flat across it, which the Cholesky
+    # factor alone approaches in about 300 iterations; its face is searched instead
+    assert max(f.iterations for f in fits) <= 2 * rm.FULL_CHUNK
+
+
+def test_a_search_that_makes_no_progress_ends_at_the_cap_unconverged(monkeypatch):
+    # a stretch of the solver that stops at once (a line search that cannot lower -l_R) still counts: the loop
+    # over stretches ends at the iteration cap and says it did not converge
+    theta, S, X = _world(n=20, seed=4)
+    calls = []
+
+    def stalled(theta, S, X, A, B0, maxiter, tol):
+        calls.append(maxiter)
+        assert len(calls) < 1000, "the loop over stretches does not end"
+        ll, G = rm.restricted_loglik(theta, S, X, A @ B0 @ B0.T @ A.T)
+        return B0 @ B0.T, 0, False, ll, G
+
+    monkeypatch.setattr(rm, "_search", stalled)
+    fit = rm.reml(theta, S, X, n_iter=30)
+    assert not fit.converged and fit.iterations >= 30

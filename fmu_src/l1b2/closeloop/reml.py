@@ -143,10 +143,19 @@ def _search(theta, S, X, A, B0: np.ndarray, maxiter: int, tol: float) -> tuple:
     """``(Tw, iterations, gradient_ok, l_R, dl_R/dT)``: L-BFGS on the factor ``B`` (``Tw = B B'``) from ``B0``."""
     p, q = B0.shape
     opt = optimize.minimize(_objective, _params(B0), args=(theta, S, X, A, q), jac=True, method="L-BFGS-B",
-                            options={"maxiter": max(maxiter, 1), "gtol": 1e-2 * tol, "ftol": 1e-15})
+                            options={"maxiter": max(maxiter, 1), "maxfun": 5 * max(maxiter, 1) + 20,
+                                     "gtol": 1e-2 * tol, "ftol": 1e-15})
     B = _factor(opt.x, p, q)
     ll, G = restricted_loglik(theta, S, X, A @ B @ B.T @ A.T)
     return B @ B.T, int(opt.nit), bool(np.max(np.abs(opt.jac), initial=0.0) <= tol), ll, G
+
+
+def _lower_factor(Tw: np.ndarray) -> np.ndarray:
+    """A lower-triangular ``L`` with ``L L' = Tw`` for a positive semidefinite ``Tw`` (negative eigenvalues of
+    rounding set to 0): ``R'`` of the QR decomposition of ``(U sqrt(lambda))'``; a zero direction of ``Tw`` stays
+    an exact zero of ``L``."""
+    lam, U = np.linalg.eigh(0.5 * (Tw + Tw.T))
+    return np.linalg.qr((U * np.sqrt(np.maximum(lam, 0.0))).T, mode="r").T
 
 
 def _kkt(A, G, n: int) -> tuple[float, np.ndarray]:
@@ -175,9 +184,8 @@ def _maximise(theta, S, X, A, Tw, n_iter: int, tol: float) -> tuple[np.ndarray, 
     n, p = theta.shape
     used, restarts = 0, 0
     while True:
-        L0 = np.linalg.cholesky(Tw + 1e-12 * max(float(np.trace(Tw)), 1.0) * np.eye(p))
-        Tw, it, grad_ok, ll, G = _search(theta, S, X, A, L0, min(FULL_CHUNK, n_iter - used), tol)
-        used += it
+        Tw, it, grad_ok, ll, G = _search(theta, S, X, A, _lower_factor(Tw), min(FULL_CHUNK, n_iter - used), tol)
+        used += max(it, 1)             # every stretch counts: the cap bounds the loop
         lam, v = _kkt(A, G, n)
         if grad_ok and lam <= KKT_TOL and used < n_iter:
             return A @ Tw @ A.T, used, True
@@ -186,7 +194,7 @@ def _maximise(theta, S, X, A, Tw, n_iter: int, tol: float) -> tuple[np.ndarray, 
         if not big.all():
             if big.any():
                 Tf, it, f_ok, llf, Gf = _search(theta, S, X, A, U[:, big] * np.sqrt(ev[big]), n_iter - used, tol)
-                used += it
+                used += max(it, 1)             # every stretch counts: the cap bounds the loop
             else:
                 Tf, f_ok = np.zeros((p, p)), True
                 llf, Gf = restricted_loglik(theta, S, X, np.zeros((p, p)))
