@@ -249,8 +249,8 @@ def _gain_by_hand(theta, cov, z, folds):
     s0, s1 = np.zeros(n), np.zeros(n)
     for te in folds:
         tr = np.setdiff1d(np.arange(n), te)
-        f0 = rl.reml(theta[tr], cov[tr], X0[tr], n_iter=100)
-        f1 = rl.reml(theta[tr], cov[tr], X1[tr], n_iter=100)
+        f0 = rl.reml(theta[tr], cov[tr], X0[tr])
+        f1 = rl.reml(theta[tr], cov[tr], X1[tr])
         for out, X, beta in ((s0, X0, f0.beta), (s1, X1, f1.beta)):
             r = theta[te] - np.einsum("rpk,k->rp", X[te], beta)
             out[te] = np.einsum("rp,rpq,rq->r", r, np.linalg.inv(f0.T[None] + cov[te]), r)
@@ -275,7 +275,7 @@ def test_the_null_fold_fits_are_shared_by_value_of_the_runs_and_the_folds():
     tr = np.setdiff1d(np.arange(30), te)
     again = rl.null_fold_fit(dev.theta, dev.cov, te.copy(), memo)
     assert again is rl.null_fold_fit(dev.theta, dev.cov, te, memo)           # taken from the memo
-    fresh = rl.reml(dev.theta[tr], dev.cov[tr], rl.design_rows(None, 30, 2)[tr], n_iter=100)
+    fresh = rl.reml(dev.theta[tr], dev.cov[tr], rl.design_rows(None, 30, 2)[tr])
     assert np.array_equal(again.T, fresh.T) and np.array_equal(again.beta, fresh.beta)
 
 

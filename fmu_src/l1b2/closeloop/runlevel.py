@@ -10,9 +10,10 @@ estimates and explains:
    per run by least squares on ``[B'(s) V0 / <B' V0>, 1]``: a gain of the model's drive force (a share of it)
    and an offset [N]. Their sampling covariance is the least-squares one with the residual variance inflated
    for lag-1 autocorrelation (``(1 + rho) / (1 - rho)``).
-2. **Shrinkage** (:func:`reml`): the runs' ``theta_r`` (gain, offset) are a random-effects model
+2. **Shrinkage** (:func:`~l1b2.closeloop.reml.reml`): the runs' ``theta_r`` (gain, offset) are a random-effects model
    ``theta_r = X_r beta + u_r + e_r``, ``u_r ~ N(0, T)`` between runs, ``e_r ~ N(0, S_r)`` the sampling error;
-   ``T`` (2 x 2) is estimated by restricted maximum likelihood (EM iterations) and each run's deviation is its
+   ``T`` (2 x 2) is estimated by restricted maximum likelihood (:mod:`l1b2.closeloop.reml`: the restricted
+   log-likelihood maximised over a Cholesky factor of ``T``) and each run's deviation is its
    best linear unbiased prediction ``X_r beta + T W_r (theta_r - X_r beta)``, ``W_r = (T + S_r)^-1``.
 3. **Explanation** (:func:`signal_evidence`): each run-level signal ``z`` (standardised) enters the mean
    (:func:`signal_design`): the gain as ``g0 + g1 z_r``, the offset as ``o0 + o1 z_r + o2 z_r w_r`` with
@@ -46,12 +47,10 @@ from ..data.coverage import values_outside
 from ..predictor import effects as fx
 from ..predictor import model as pr
 from . import residuals as res
+from .reml import REMLFit, design_rows, reml
 
 #: run-value correlation above which two significant signals are compared by their evidence given each other
 DOMINANCE_CORR = 0.5
-#: EM iterations of the REML fit and its relative tolerance on T
-REML_ITER = 400
-REML_TOL = 1e-8
 
 
 @dataclass
@@ -121,24 +120,6 @@ def run_deviations(df: pd.DataFrame, model, mask: np.ndarray) -> RunDeviations:
                          np.array(ns), w / scale if scale > 0 else None)
 
 
-@dataclass
-class REMLFit:
-    """A random-effects fit: ``T`` between-run covariance, ``beta`` the mean's coefficients with covariance
-    ``beta_cov``, ``blup`` each run's shrunk deviation, ``iterations`` of the EM."""
-
-    T: np.ndarray
-    beta: np.ndarray
-    beta_cov: np.ndarray
-    blup: np.ndarray
-    iterations: int
-
-
-def design_rows(z: np.ndarray | None, n: int, p: int) -> np.ndarray:
-    """The mean's design per run, ``(n, p, p * q)``: ``I_p (x) [1, z_r...]`` (``z`` (n, q) or None: intercepts)."""
-    x = np.ones((n, 1)) if z is None else np.column_stack([np.ones(n), np.asarray(z, float).reshape(n, -1)])
-    return np.einsum("ij,rk->rijk", np.eye(p), x).reshape(n, p, p * x.shape[1])
-
-
 def signal_design(z: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
     """The mean's design of a signal, ``(n, 2, 5)`` (``(n, 2, 4)`` without ``w``): gain row ``[1, z, 0, 0, 0]``,
     offset row ``[0, 0, 1, z, z w]``; coefficients ``(g0, g1, o0, o1, o2)``.
@@ -177,49 +158,6 @@ def signal_index(q: int, load: bool) -> list:
     gain = list(range(1, 1 + q))
     off = list(range(2 + q, 2 + 2 * q))
     return gain + off + (list(range(2 + 2 * q, 2 + 3 * q)) if load else [])
-
-
-def reml(theta: np.ndarray, cov: np.ndarray, X: np.ndarray | None = None, *, n_iter: int = REML_ITER,
-         tol: float = REML_TOL) -> REMLFit:
-    """Restricted maximum likelihood of ``theta_r = X_r beta + u_r + e_r`` by EM (``theta`` (n, p), ``cov``
-    (n, p, p) the sampling covariances, ``X`` (n, p, k) the mean's design, default intercepts).
-
-    EM step: ``T <- mean_r (b_r b_r' + T - T W_r T + T W_r X_r C X_r' W_r T)`` with ``W_r = (T + S_r)^-1``,
-    ``C = (sum X' W X)^-1`` and ``b_r = T W_r (theta_r - X_r beta)`` (the last term is REML's correction for
-    the estimated mean). Scalar, equal ``S_r = s2``, intercept only: ``T = max(0, var(theta, ddof=1) - s2)``.
-    """
-    theta = np.asarray(theta, float)
-    n, p = theta.shape
-    X = design_rows(None, n, p) if X is None else np.asarray(X, float)
-    S = np.asarray(cov, float)
-    # start from above (the residuals' spread about the unweighted mean fit): EM moves a variance component
-    # started near zero only very slowly
-    r0 = theta - np.einsum("rpk,k->rp", X, np.linalg.lstsq(X.reshape(-1, X.shape[2]), theta.ravel(), rcond=None)[0])
-    T = np.diag(np.maximum(np.mean(r0 ** 2, axis=0), 1e-300))
-    it = 0
-    for it in range(1, n_iter + 1):
-        W = np.linalg.inv(T[None] + S)
-        XtW = np.einsum("rpk,rpq->rkq", X, W)
-        C = np.linalg.inv(np.einsum("rkq,rqj->kj", XtW, X))
-        beta = C @ np.einsum("rkq,rq->k", XtW, theta)
-        resid = theta - np.einsum("rpk,k->rp", X, beta)
-        TW = np.einsum("pq,rqs->rps", T, W)
-        b = np.einsum("rps,rs->rp", TW, resid)
-        TWX = np.einsum("rps,rsk->rpk", TW, X)
-        corr = np.einsum("rpk,kj,rqj->rpq", TWX, C, TWX)
-        T_new = np.mean(b[:, :, None] * b[:, None, :] + T[None] - np.einsum("rps,qs->rpq", TW, T) + corr, axis=0)
-        T_new = 0.5 * (T_new + T_new.T)
-        done = np.max(np.abs(T_new - T)) <= tol * max(np.max(np.abs(T)), 1e-300)
-        T = T_new
-        if done:
-            break
-    W = np.linalg.inv(T[None] + S)
-    XtW = np.einsum("rpk,rpq->rkq", X, W)
-    C = np.linalg.inv(np.einsum("rkq,rqj->kj", XtW, X))
-    beta = C @ np.einsum("rkq,rq->k", XtW, theta)
-    mean = np.einsum("rpk,k->rp", X, beta)
-    blup = mean + np.einsum("pq,rqs,rs->rp", T, W, theta - mean)
-    return REMLFit(T, beta, C, blup, it)
 
 
 def heterogeneity(theta: np.ndarray, cov: np.ndarray) -> tuple[float, float]:
@@ -371,7 +309,7 @@ def null_fold_fit(theta, cov, te, memo: dict | None = None) -> REMLFit:
         return memo[key]
     n, p = theta.shape
     tr = np.setdiff1d(np.arange(n), te)
-    fit = reml(theta[tr], cov[tr], design_rows(None, n, p)[tr], n_iter=100)
+    fit = reml(theta[tr], cov[tr], design_rows(None, n, p)[tr])
     if memo is not None:
         memo[key] = fit
     return fit
@@ -394,7 +332,7 @@ def cv_signal_gain(theta, cov, z, folds_idx, w=None, null_fits: dict | None = No
         X1 = signal_design(Z if Z.shape[1] == 1 else Z[:, independent_columns(Z[tr])], w)
         X1 = X1[:, :, identified_columns(X1[tr])]
         f0 = null_fold_fit(theta, cov, te, null_fits)
-        f1 = reml(theta[tr], cov[tr], X1[tr], n_iter=100)
+        f1 = reml(theta[tr], cov[tr], X1[tr])
         s0[te] = _weighted_sse(theta[te], cov[te], f0.T, X0[te], f0.beta)
         s1[te] = _weighted_sse(theta[te], cov[te], f0.T, X1[te], f1.beta)
     gain = float(1 - s1.sum() / s0.sum()) if s0.sum() > 0 else 0.0
