@@ -1,27 +1,31 @@
-"""The previous pass: the speed of the run before each run, read from the log, as a channel.
+"""The previous run: the speed of the last pass at another setting, and the previous run's load, as channels.
 
-A run can meet a state that the run before it left on the motor: the bar's oil film that the last pass entrained
+A run can meet a state that the runs before it left on the motor: the bar's oil film that the last pass entrained
 (its thickness follows the speed of that pass), the wear debris or transfer layer it smeared, the heat its friction
-dissipated in the contact. Such a state is set by what the previous run *did*, not by the plan's settings alone
-(two passes at the same voltage and load run at different speeds when the motor's state differs), so neither the
-current run's inputs nor a low-pass of the drive amplitude (:mod:`~l1b2.closeloop.lags`) carries it. For every
-session the loop therefore derives the logged column :data:`COLUMN`, constant within each run:
+dissipated in the contact, a weight still hanging from the run before. Such a state is set by what the previous runs
+*did*, not by the current run's settings, so neither the current run's inputs nor a low-pass of the drive
+amplitude (:mod:`~l1b2.closeloop.lags`) carries it. For every session the loop therefore derives two logged columns,
+constant within each run:
 
-    the mean speed of the run that ended last before the run started [m/s], ``|s_last - s_first| / (t_last -
-    t_first)`` of that run's ``position_m`` and ``time_s`` (its stroke over its duration),
+* :data:`COLUMN`, the **previous pass**: the mean speed [m/s] (``|s_last - s_first| / (t_last - t_first)`` of
+  ``position_m`` and ``time_s``, its stroke over its duration) of the run that ended last before the run started
+  *among the runs at another setting* (V0 or load differs from the run's). A run at the run's own setting (a
+  backward run's forward twin) is skipped: its speed is largely the run's own condition's response, so it would
+  stand in for the run's own speed and explain whatever the model misses at that condition;
+* :data:`LOAD_COLUMN`, the **previous run's load** [kg]: the ``load_kg`` of the run that ended last before the run
+  started (any setting: a setting of the plan carries no response).
 
-and considers it as one more logged channel (every form and shape of :mod:`l1b2.predictor.effects.channels` at the
-run level, and the run-level evidence: one family). The value is a measurement of a run that is over when the run
-starts: a host that predicts a run knows it (``Predictor.fmu`` reads it like any logged channel's, an input named
-after it), and it is never the current run's own response.
+Each is one more logged channel (every form and shape of :mod:`l1b2.predictor.effects.channels` at the run level,
+and the run-level evidence: one family each). Both are known when the run starts: a host that predicts a run knows
+them (``Predictor.fmu`` reads each like any logged channel's, an input named after it).
 
-The first run of a session has no previous run (the pass before the session is not in the log); it gets TRAIN's
-median of the known values, the rig's typical pass, which puts the run at the channel's centre and gives it no
-leverage. A run of one sample or of zero duration has no speed; a run after it gets the same median. TRAIN and TEST
-are merged in time order when they are one session (:func:`l1b2.closeloop.events.one_session`), so a TEST run whose
-previous run is a TRAIN run reads that run's speed; otherwise each frame's runs are ordered on their own.
+A run with no such earlier run (the session's first, or the runs of the session's first setting for the pass) gets
+TRAIN's median of the known values, the rig's typical value, which puts the run at the channel's centre and gives
+it no leverage; so does a run whose pass had zero duration. TRAIN and TEST are merged in time order when they are
+one session (:func:`l1b2.closeloop.events.one_session`), so a TEST run reads a TRAIN run before it; otherwise each
+frame's runs are ordered on their own.
 
-The column is derived when TRAIN has at least :data:`MIN_KNOWN_RUNS` known values and they vary (their range above
+A column is derived when TRAIN has at least :data:`MIN_KNOWN_RUNS` known values and they vary (their range above
 :data:`VARY_RTOL` times the largest).
 """
 
@@ -33,8 +37,10 @@ import pandas as pd
 from ..data import measurements as dataio
 from .events import Session, session
 
-#: the derived column: the previous run's mean speed [m/s] (the rig's naming rule gives the unit)
+#: the previous pass's column: the mean speed [m/s] of the last run at another setting (the name gives the unit)
 COLUMN = "prev_run_speed_m_s"
+#: the previous run's load column [kg]
+LOAD_COLUMN = "prev_run_load_kg"
 #: the fewest TRAIN runs with a known previous pass for the column to be derived
 MIN_KNOWN_RUNS = 3
 #: the relative spread below which TRAIN's known values count as one (the clock's and the encoder's rounding)
@@ -52,52 +58,78 @@ def run_speeds_m_s(df: pd.DataFrame) -> pd.Series:
         return (ds.abs() / dt).where(dt > 0)
 
 
-def previous_values(runs: pd.DataFrame, speed: dict) -> np.ndarray:
+def run_settings(df: pd.DataFrame) -> pd.DataFrame:
+    """Each run's setting, indexed by run id: ``voltage_V`` (its median) and ``load_kg`` (its first value)."""
+    g = df.groupby(dataio.RUN, sort=False)
+    return pd.DataFrame({dataio.VOLTAGE: g[dataio.VOLTAGE].median(), dataio.LOAD: g[dataio.LOAD].first()})
+
+
+def previous_values(runs: pd.DataFrame, value: dict, setting: dict | None = None) -> np.ndarray:
     """Per row of ``runs`` (:func:`~l1b2.closeloop.events.run_table` rows: ``start``, ``frame``, ``run``; any
-    order), the speed (``speed[(frame, run)]``) of the row that starts last before it; NaN for the first row."""
+    order), ``value[(frame, run)]`` of the row that starts last before it; with ``setting`` (``(frame, run)`` ->
+    a hashable setting), of the last such row whose setting differs from the row's own. NaN when there is none."""
     start = runs["start"].to_numpy(float)
     keys = list(zip(runs["frame"].to_numpy(), runs["run"].to_numpy()))
-    order = np.argsort(start, kind="stable")
     out = np.full(len(start), np.nan)
-    for a, b in zip(order[:-1], order[1:]):
-        out[b] = speed.get(keys[a], np.nan)
+    seen: list = []     # earlier rows in start order
+    for b in np.argsort(start, kind="stable"):
+        for a in reversed(seen):
+            if setting is None or setting.get(keys[a]) != setting.get(keys[b]):
+                out[b] = value.get(keys[a], np.nan)
+                break
+        seen.append(b)
     return out
 
 
-def with_previous_pass(train: pd.DataFrame, test: pd.DataFrame | None = None, sess: Session | None = None):
-    """``(train, test, record)``: copies of the frames with :data:`COLUMN` appended when TRAIN has at least
-    :data:`MIN_KNOWN_RUNS` known values that vary (``test`` None stays None), and ``record`` ``{"column",
-    "derived", "one_session", "speed_m_s": {"min", "median", "max"}, "imputed_runs"}`` (module docstring).
-
-    ``sess``: the frames' :func:`~l1b2.closeloop.events.session` when the caller has it (default: computed here).
-    The frames are returned unchanged (not copied) when the column is not derived or TRAIN already has it.
-    """
-    sess = session(train, test) if sess is None else sess
-    frames = [df for df in (train, test) if df is not None]
-    speed = {}
-    for i, df in enumerate(frames):
-        speed.update({(i, r): float(v) for r, v in run_speeds_m_s(df).items()})
-    runs = sess.runs
-    if sess.one:
-        prev = previous_values(runs, speed)
-        per_frame = [prev[(runs["frame"] == i).to_numpy()] for i in range(len(frames))]
-    else:
-        per_frame = [previous_values(runs[runs["frame"] == i], speed) for i in range(len(frames))]
-    clocks = [runs[runs["frame"] == i] for i in range(len(frames))]
+def _append(frames, clocks, per_frame, column: str, record: dict):
+    """The frames with ``column`` appended from each frame's run values ``per_frame`` (NaN: TRAIN's median of its
+    known values); ``record`` gains ``imputed_runs`` and ``derived``. Unchanged frames when TRAIN has fewer than
+    :data:`MIN_KNOWN_RUNS` known values or they do not vary."""
     known = per_frame[0][np.isfinite(per_frame[0])]
-    record = {"column": COLUMN, "derived": False, "one_session": bool(sess.one),
-              "speed_m_s": ({"min": float(known.min()), "median": float(np.median(known)),
-                             "max": float(known.max())} if known.size else {}),
-              "imputed_runs": 0}
-    if COLUMN in train.columns or known.size < MIN_KNOWN_RUNS or not np.ptp(known) > VARY_RTOL * np.abs(known).max():
-        return train, test, record
+    record.update({"range": ({"min": float(known.min()), "median": float(np.median(known)),
+                              "max": float(known.max())} if known.size else {}), "imputed_runs": 0})
+    if (column in frames[0].columns or known.size < MIN_KNOWN_RUNS
+            or not np.ptp(known) > VARY_RTOL * np.abs(known).max()):
+        return frames
     fill = float(np.median(known))
     out = []
     for df, clock, p in zip(frames, clocks, per_frame):
         record["imputed_runs"] += int(np.isnan(p).sum())
-        value = np.where(np.isnan(p), fill, p)
         df = df.copy()
-        df[COLUMN] = df[dataio.RUN].map(dict(zip(clock["run"], value))).to_numpy(float)
+        df[column] = df[dataio.RUN].map(dict(zip(clock["run"], np.where(np.isnan(p), fill, p)))).to_numpy(float)
         out.append(df)
     record["derived"] = True
-    return out[0], (out[1] if test is not None else None), record
+    return out
+
+
+def with_previous_pass(train: pd.DataFrame, test: pd.DataFrame | None = None, sess: Session | None = None):
+    """``(train, test, record)``: copies of the frames with :data:`COLUMN` and :data:`LOAD_COLUMN` appended, each
+    when TRAIN has at least :data:`MIN_KNOWN_RUNS` known values that vary (``test`` None stays None), and
+    ``record`` ``{"one_session", "columns": [{"column", "derived", "range": {"min", "median", "max"},
+    "imputed_runs"}, ...]}`` (module docstring).
+
+    ``sess``: the frames' :func:`~l1b2.closeloop.events.session` when the caller has it (default: computed here).
+    The frames are returned unchanged (not copied) when no column is derived; a column TRAIN already has is not.
+    """
+    sess = session(train, test) if sess is None else sess
+    frames = [df for df in (train, test) if df is not None]
+    speed, load, setting = {}, {}, {}
+    for i, df in enumerate(frames):
+        speed.update({(i, r): float(v) for r, v in run_speeds_m_s(df).items()})
+        st = run_settings(df)
+        load.update({(i, r): float(v) for r, v in st[dataio.LOAD].items()})
+        setting.update({(i, r): (round(float(v), 6), round(float(m), 9)) for r, v, m in
+                        zip(st.index, st[dataio.VOLTAGE], st[dataio.LOAD])})
+    runs = sess.runs
+    clocks = [runs[runs["frame"] == i] for i in range(len(frames))]
+    record = {"one_session": bool(sess.one), "columns": []}
+    for column, value, same in ((COLUMN, speed, setting), (LOAD_COLUMN, load, None)):
+        if sess.one:
+            prev = previous_values(runs, value, same)
+            per_frame = [prev[(runs["frame"] == i).to_numpy()] for i in range(len(frames))]
+        else:
+            per_frame = [previous_values(c, value, same) for c in clocks]
+        rec = {"column": column, "derived": False}
+        frames = _append(frames, clocks, per_frame, column, rec)
+        record["columns"].append(rec)
+    return frames[0], (frames[1] if test is not None else None), record
