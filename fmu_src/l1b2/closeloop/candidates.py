@@ -181,6 +181,41 @@ def candidate(ctx: Context, h: fx.Hypothesis) -> CandidateForce:
                           bounds=tuple(tuple(b) for b in h.bounds))
 
 
+#: the share of a logged channel's variation within runs that a function of the position (one per direction) must
+#: hold for the channel to be read along the stroke only (:func:`along_stroke_share`), and that function's degree
+ALONG_STROKE_SHARE = 0.9
+ALONG_STROKE_DEGREE = 8
+#: the fewest samples within runs (beyond one per run) per coefficient of that function for the share to be read
+ALONG_STROKE_SAMPLES = 10
+
+
+def along_stroke_share(df: pd.DataFrame, name: str) -> float:
+    """The share of the column ``name``'s variation within runs that a function of the position holds: the column
+    and the Legendre polynomials ``P_1 .. P_8`` of the position (scaled to its range over ``df``), one set per
+    direction, each taken about its run's mean, and ``1 - SSE / SST`` of the least squares of the first on the
+    second. NaN when the column does not vary within runs, or when the samples within runs (beyond one per run) are
+    fewer than :data:`ALONG_STROKE_SAMPLES` per coefficient (a short log: a polynomial would follow any column).
+
+    A channel near 1 is a function of where the slider is (a homing probe's field, a limit switch, a second position
+    sensor): its mean over a run's samples weighs each position by the time the slider spent there, so it follows
+    how the run moved, the motor's response, not a setting of the run."""
+    runs = df[dataio.RUN].to_numpy()
+    c = df[name].to_numpy(float)
+    c = c - pd.Series(c).groupby(runs).transform("mean").to_numpy()
+    sst = float(np.sum(c ** 2))
+    if not sst > 0 or len(c) - len(pd.unique(runs)) < ALONG_STROKE_SAMPLES * 2 * ALONG_STROKE_DEGREE:
+        return float("nan")
+    s = df[dataio.POSITION].to_numpy(float)
+    lo, hi = float(s.min()), float(s.max())
+    x = (2.0 * s - lo - hi) / max(hi - lo, 1e-300)
+    P = np.polynomial.legendre.legvander(x, ALONG_STROKE_DEGREE)[:, 1:]
+    d = df[dataio.DIRECTION].to_numpy(float)
+    B = np.concatenate([P * (d > 0)[:, None], P * (d <= 0)[:, None]], axis=1)
+    B = B - pd.DataFrame(B).groupby(runs).transform("mean").to_numpy()
+    coef = np.linalg.lstsq(B, c, rcond=None)[0]
+    return float(min(max(1.0 - float(np.sum((c - B @ coef) ** 2)) / sst, 0.0), 1.0))
+
+
 def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
     """The candidate channels of a frame: every numeric column beyond the required ones and the speed, then the clock.
 
@@ -194,7 +229,9 @@ def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
     categorical run-level family reads them);
     ``sd`` 0 for a constant column, which is listed but gets no hypothesis;
     ``within_run``: it varies inside some run; ``run_spread``:
-    :func:`l1b2.predictor.effects.channels.run_spread`).
+    :func:`l1b2.predictor.effects.channels.run_spread`; ``along_stroke``: a logged channel whose variation within
+    runs is a function of the position (:func:`along_stroke_share` at least :data:`ALONG_STROKE_SHARE`), offered at
+    the sample level only and with no run-level signal).
     """
     required = NOT_CANDIDATES - {dataio.TIME}
     responses = set(fx.channels.RESPONSE_COLUMNS if response_columns is None else response_columns)
@@ -209,9 +246,10 @@ def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
         within = varies_within_runs(df, name)
         kind = ("protocol" if name == dataio.TIME else "run_clock" if name == fx.channels.RUN_CLOCK
                 else "response" if name in responses else "label" if name in labels else "logged")
+        along = bool(kind == "logged" and within and along_stroke_share(df, name) >= ALONG_STROKE_SHARE)
         out.append({"name": str(name), "kind": kind, "mean": float(np.mean(c)), "sd": float(np.std(c)),
                     "lo": float(np.min(c)), "hi": float(np.max(c)), "within_run": within,
-                    "run_spread": fx.channels.run_spread(c, df[dataio.RUN])})
+                    "run_spread": fx.channels.run_spread(c, df[dataio.RUN]), "along_stroke": along})
     return tuple(out)
 
 

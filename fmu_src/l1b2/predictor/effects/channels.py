@@ -345,9 +345,10 @@ class Channel(Effect):
 
 def levels_of(ch) -> tuple:
     """The levels a channel record (:func:`l1b2.closeloop.candidates.channels_of`) is offered at: ``sample`` only
-    for a kind of :data:`SAMPLE_ONLY_KINDS` (the run clock), both :data:`LEVELS` for a channel that varies within
-    runs, ``run`` only for one constant within every run."""
-    if ch.get("kind") in SAMPLE_ONLY_KINDS:
+    for a kind of :data:`SAMPLE_ONLY_KINDS` (the run clock) and for a channel read along the stroke
+    (``along_stroke``: a function of the position, whose run mean follows how the run moved), both :data:`LEVELS`
+    for a channel that varies within runs, ``run`` only for one constant within every run."""
+    if ch.get("kind") in SAMPLE_ONLY_KINDS or ch.get("along_stroke"):
         return ("sample",)
     return LEVELS if ch.get("within_run", True) else ("run",)
 
