@@ -114,3 +114,12 @@ def test_the_pass_skips_runs_at_the_runs_own_setting_and_the_load_is_the_previou
     assert rec["columns"][0]["imputed_runs"] == 2
     # the load: the run just before, twin or not
     assert _per_run(tr, LOAD_COLUMN)["min"].tolist() == pytest.approx([float(np.median(loads[:-1]))] + loads[:-1])
+
+
+def test_one_setting_allows_a_logged_amplitudes_scatter():
+    from l1b2.closeloop.history import SAME_LOAD_KG, SAME_VOLTAGE_REL, same_setting
+    assert same_setting((300.0, 0.1), (300.0 * (1 + 0.9 * SAME_VOLTAGE_REL), 0.1))
+    assert not same_setting((300.0, 0.1), (300.0 * (1 + 1.1 * SAME_VOLTAGE_REL), 0.1))
+    assert same_setting((300.0, 0.1), (300.0, 0.1 + 0.9 * SAME_LOAD_KG))
+    assert not same_setting((300.0, 0.1), (300.0, 0.1 + 1.1 * SAME_LOAD_KG))
+    assert not same_setting((300.0, 0.1), (300.0, -0.1))                # the load's side is part of the setting

@@ -41,8 +41,12 @@ from .events import Session, session
 COLUMN = "prev_run_speed_m_s"
 #: the previous run's load column [kg]
 LOAD_COLUMN = "prev_run_load_kg"
-#: the fewest TRAIN runs with a known previous pass for the column to be derived
+#: the fewest TRAIN runs with a known value for a column to be derived
 MIN_KNOWN_RUNS = 3
+#: two runs are at one setting when their V0 differ by at most this share (a logged amplitude's scatter) and their
+#: loads by at most :data:`SAME_LOAD_KG`
+SAME_VOLTAGE_REL = 0.01
+SAME_LOAD_KG = 1e-6
 #: the relative spread below which TRAIN's known values count as one (the clock's and the encoder's rounding)
 VARY_RTOL = 1e-9
 
@@ -64,17 +68,23 @@ def run_settings(df: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame({dataio.VOLTAGE: g[dataio.VOLTAGE].median(), dataio.LOAD: g[dataio.LOAD].first()})
 
 
+def same_setting(a, b) -> bool:
+    """Whether two runs' settings ``(V0 [V], load [kg])`` are one: V0 within :data:`SAME_VOLTAGE_REL` of the larger
+    and the loads within :data:`SAME_LOAD_KG`."""
+    return bool(abs(a[0] - b[0]) <= SAME_VOLTAGE_REL * max(abs(a[0]), abs(b[0])) and abs(a[1] - b[1]) <= SAME_LOAD_KG)
+
+
 def previous_values(runs: pd.DataFrame, value: dict, setting: dict | None = None) -> np.ndarray:
     """Per row of ``runs`` (:func:`~l1b2.closeloop.events.run_table` rows: ``start``, ``frame``, ``run``; any
     order), ``value[(frame, run)]`` of the row that starts last before it; with ``setting`` (``(frame, run)`` ->
-    a hashable setting), of the last such row whose setting differs from the row's own. NaN when there is none."""
+    ``(V0, load)``), of the last such row at another setting (:func:`same_setting`). NaN when there is none."""
     start = runs["start"].to_numpy(float)
     keys = list(zip(runs["frame"].to_numpy(), runs["run"].to_numpy()))
     out = np.full(len(start), np.nan)
     seen: list = []     # earlier rows in start order
     for b in np.argsort(start, kind="stable"):
         for a in reversed(seen):
-            if setting is None or setting.get(keys[a]) != setting.get(keys[b]):
+            if setting is None or not same_setting(setting[keys[a]], setting[keys[b]]):
                 out[b] = value.get(keys[a], np.nan)
                 break
         seen.append(b)
@@ -118,8 +128,7 @@ def with_previous_pass(train: pd.DataFrame, test: pd.DataFrame | None = None, se
         speed.update({(i, r): float(v) for r, v in run_speeds_m_s(df).items()})
         st = run_settings(df)
         load.update({(i, r): float(v) for r, v in st[dataio.LOAD].items()})
-        setting.update({(i, r): (round(float(v), 6), round(float(m), 9)) for r, v, m in
-                        zip(st.index, st[dataio.VOLTAGE], st[dataio.LOAD])})
+        setting.update({(i, r): (float(v), float(m)) for r, v, m in zip(st.index, st[dataio.VOLTAGE], st[dataio.LOAD])})
     runs = sess.runs
     clocks = [runs[runs["frame"] == i] for i in range(len(frames))]
     record = {"one_session": bool(sess.one), "columns": []}
