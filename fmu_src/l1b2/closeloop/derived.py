@@ -3,9 +3,9 @@
 The loop derives channels from what every log carries (:mod:`~l1b2.closeloop.events`: the event clock
 ``<column>_since_s`` of a step channel; :mod:`~l1b2.closeloop.lags`: the lags ``<column>_lag<n>r`` of a run
 setting; :mod:`~l1b2.closeloop.pauses`: the pause before each run, ``ln_pause_s``, and the time since the latest
-break, ``since_break_s``; :mod:`~l1b2.closeloop.history`: the previous pass's speed and the previous run's load,
-``prev_run_speed_m_s`` and ``prev_run_load_kg``; :mod:`~l1b2.closeloop.runclock`: the time since each run's first
-sample, ``time_in_run_s``; :func:`with_protocol_channels` derives them all). A rig's own column may carry
+break, ``since_break_s``; :mod:`~l1b2.closeloop.history`: the previous run's load, ``prev_run_load_kg``;
+:mod:`~l1b2.closeloop.runclock`: the time since each run's first sample, ``time_in_run_s``;
+:func:`with_protocol_channels` derives them all). A rig's own column may carry
 one of those names by chance (a logger that writes its own ``ln_pause_s``, an export that already holds a
 ``voltage_V_lag3r``). Taken as the derived channel, such a column would replace the derivation (or be
 overwritten by it): either way something is lost without a word. So, before anything reads the frames, a logged
@@ -14,10 +14,10 @@ taken too) in both frames and kept as an auxiliary column of its own; the rename
 auxiliary columns' actions (:func:`l1b2.closeloop.auxiliary.with_usable_channels`), so the report lists it.
 
 A name a derivation *could* produce: exactly :data:`l1b2.closeloop.pauses.COLUMN`,
-:data:`l1b2.closeloop.pauses.BREAK_COLUMN`, :data:`l1b2.closeloop.runclock.COLUMN`,
-:data:`l1b2.closeloop.history.COLUMN` or :data:`~l1b2.closeloop.history.LOAD_COLUMN`, or ``X + suffix`` for a
-column ``X`` of the frame and a suffix of the event clock, of a lag of :data:`l1b2.closeloop.lags.TAU_RUNS` periods
-or of a setting's step (``_step``). The required columns and the speed are never renamed.
+:data:`l1b2.closeloop.pauses.BREAK_COLUMN`, :data:`l1b2.closeloop.runclock.COLUMN` or
+:data:`l1b2.closeloop.history.LOAD_COLUMN`, or ``X + suffix`` for a column ``X`` of the frame and a suffix of the
+event clock, of a lag of :data:`l1b2.closeloop.lags.TAU_RUNS` periods or of a setting's step (``_step``). The
+required columns and the speed are never renamed.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ import pandas as pd
 from .auxiliary import NOT_CANDIDATES, with_usable_channels
 from .events import SUFFIX as EVENT_SUFFIX, Session, with_event_clocks
 from ..units import STEP_SUFFIX, lag_suffix
-from .history import COLUMN as PREVIOUS_PASS_COLUMN, LOAD_COLUMN as PREVIOUS_LOAD_COLUMN, with_previous_pass
+from .history import LOAD_COLUMN as PREVIOUS_LOAD_COLUMN, with_previous_pass
 from .lags import TAU_RUNS, with_lagged_channels
 from .pauses import BREAK_COLUMN, COLUMN as PAUSE_COLUMN, with_break_clock, with_pause_channel
 from .runclock import COLUMN as RUN_CLOCK_COLUMN, with_run_clock
@@ -47,7 +47,7 @@ def derived_suffixes() -> tuple[str, ...]:
 def is_derivable_name(name: str, columns) -> bool:
     """Whether a derivation of the loop could produce a channel called ``name`` from a frame with ``columns``
     (module docstring)."""
-    if name in (PAUSE_COLUMN, BREAK_COLUMN, RUN_CLOCK_COLUMN, PREVIOUS_PASS_COLUMN, PREVIOUS_LOAD_COLUMN):
+    if name in (PAUSE_COLUMN, BREAK_COLUMN, RUN_CLOCK_COLUMN, PREVIOUS_LOAD_COLUMN):
         return True
     cols = set(columns)
     return any(name.endswith(s) and name[:-len(s)] in cols for s in derived_suffixes())
@@ -101,7 +101,7 @@ def with_protocol_channels(train: pd.DataFrame, test: pd.DataFrame | None, respo
     """``(train, test, records)``: the frames with every channel the loop derives from the log appended, in this
     order: the event clocks (:func:`l1b2.closeloop.events.with_event_clocks`), the lags and steps
     (:func:`l1b2.closeloop.lags.with_lagged_channels`), the pause (:func:`l1b2.closeloop.pauses.with_pause_channel`),
-    the break clock (:func:`l1b2.closeloop.pauses.with_break_clock`), the previous pass
+    the break clock (:func:`l1b2.closeloop.pauses.with_break_clock`), the previous run's load
     (:func:`l1b2.closeloop.history.with_previous_pass`) and the run clock
     (:func:`l1b2.closeloop.runclock.with_run_clock`); ``records`` their records under ``"event_clocks"``,
     ``"lagged_channels"``, ``"pause_channel"``, ``"break_clock"``, ``"previous_pass"`` and ``"run_clock"``.
