@@ -34,13 +34,23 @@ def test_the_share_is_the_within_run_least_squares_written_out():
     cw, Bw = demean(c), demean(B)
     coef = np.linalg.lstsq(Bw, cw, rcond=None)[0]
     want = 1 - np.sum((cw - Bw @ coef) ** 2) / np.sum(cw ** 2)
-    assert along_stroke_share(df, "probe") == pytest.approx(want, rel=1e-9)
+    assert along_stroke_share(df, "probe")[0] == pytest.approx(want, rel=1e-9)
     assert 0.5 < want < 1.0
-    assert np.isnan(along_stroke_share(df, "level"))              # constant within every run
-    assert along_stroke_share(df, "noise") < 0.05
+    # the same least squares on the time since each run's first sample
+    t = df["time_s"].to_numpy()
+    tr = t - pd.Series(t).groupby(run).transform("min").to_numpy()
+    xt = (2 * tr - tr.min() - tr.max()) / (tr.max() - tr.min())
+    cols = [np.polynomial.legendre.Legendre.basis(k)(xt) for k in range(1, ALONG_STROKE_DEGREE + 1)]
+    Bt = demean(np.column_stack([p * (d > 0) for p in cols] + [p * (d <= 0) for p in cols]))
+    coef = np.linalg.lstsq(Bt, cw, rcond=None)[0]
+    want_t = 1 - np.sum((cw - Bt @ coef) ** 2) / np.sum(cw ** 2)
+    assert along_stroke_share(df, "probe")[1] == pytest.approx(want_t, rel=1e-9)
+    assert want_t < want - 0.05                                    # runs at different speeds: the clock holds less
+    assert np.isnan(along_stroke_share(df, "level")).all()         # constant within every run
+    assert along_stroke_share(df, "noise")[0] < 0.05
     # fewer samples within runs than ALONG_STROKE_SAMPLES per coefficient: not read (152 < 160 here)
-    assert np.isnan(along_stroke_share(df.groupby("run").head(20), "probe"))
-    assert np.isfinite(along_stroke_share(df.groupby("run").head(21), "probe"))
+    assert np.isnan(along_stroke_share(df.groupby("run").head(20), "probe")).all()
+    assert np.isfinite(along_stroke_share(df.groupby("run").head(21), "probe")).all()
 
 
 def test_a_position_channel_is_flagged_offered_at_the_sample_level_and_has_no_run_signal():
@@ -57,3 +67,18 @@ def test_a_position_channel_is_flagged_offered_at_the_sample_level_and_has_no_ru
     assert not ch["level"]["along_stroke"] and levels_of(ch["level"]) == ("run",)
     names = {sg["channel"] for sg in run_signals(df, channels_of(df))}
     assert "temp_C" in names and "level" in names and "hall_mT" not in names
+
+
+def test_a_channel_of_the_runs_clock_is_not_read_along_the_stroke():
+    from l1b2.closeloop.candidates import along_stroke_share, is_along_stroke
+    df = _runs()
+    t = df["time_s"].to_numpy()
+    t_run = t - df.groupby("run")["time_s"].transform("min").to_numpy()
+    df = df.assign(sag_V=24.0 - 0.5 * (1 - np.exp(-t_run / 0.1)) + 0.001 * df["noise"])
+    pos, clock = along_stroke_share(df, "sag_V")
+    assert clock > 0.99 and pos < clock and not is_along_stroke(df, "sag_V")
+    # every run moving alike: the position and the clock are one variable, the runs' weights equal
+    same = df.assign(time_s=df["run"] * 10.0 + (df["position_m"] * df["direction"] + 0.02) / 0.1)
+    same = same.assign(hall_mT=5.0 * np.exp(-(same["position_m"] / 0.006) ** 2))
+    pos, clock = along_stroke_share(same, "hall_mT")
+    assert pos == pytest.approx(clock, abs=1e-6) and not is_along_stroke(same, "hall_mT")

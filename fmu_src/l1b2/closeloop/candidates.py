@@ -187,33 +187,54 @@ ALONG_STROKE_SHARE = 0.9
 ALONG_STROKE_DEGREE = 8
 #: the fewest samples within runs (beyond one per run) per coefficient of that function for the share to be read
 ALONG_STROKE_SAMPLES = 10
+#: how much more of the within-run variation the position must hold than the run's clock
+ALONG_STROKE_MARGIN = 0.05
 
 
-def along_stroke_share(df: pd.DataFrame, name: str) -> float:
-    """The share of the column ``name``'s variation within runs that a function of the position holds: the column
-    and the Legendre polynomials ``P_1 .. P_8`` of the position (scaled to its range over ``df``), one set per
-    direction, each taken about its run's mean, and ``1 - SSE / SST`` of the least squares of the first on the
-    second. NaN when the column does not vary within runs, or when the samples within runs (beyond one per run) are
-    fewer than :data:`ALONG_STROKE_SAMPLES` per coefficient (a short log: a polynomial would follow any column).
-
-    A channel near 1 is a function of where the slider is (a homing probe's field, a limit switch, a second position
-    sensor): its mean over a run's samples weighs each position by the time the slider spent there, so it follows
-    how the run moved, the motor's response, not a setting of the run."""
-    runs = df[dataio.RUN].to_numpy()
-    c = df[name].to_numpy(float)
-    c = c - pd.Series(c).groupby(runs).transform("mean").to_numpy()
-    sst = float(np.sum(c ** 2))
-    if not sst > 0 or len(c) - len(pd.unique(runs)) < ALONG_STROKE_SAMPLES * 2 * ALONG_STROKE_DEGREE:
-        return float("nan")
-    s = df[dataio.POSITION].to_numpy(float)
-    lo, hi = float(s.min()), float(s.max())
-    x = (2.0 * s - lo - hi) / max(hi - lo, 1e-300)
+def _within_run_share(c, runs, x, d) -> float:
+    """``1 - SSE / SST`` of the column ``c`` on Legendre polynomials ``P_1 .. P_8`` of ``x`` (in [-1, 1]), one set
+    per direction ``d``, both taken about their run's mean (``runs``)."""
     P = np.polynomial.legendre.legvander(x, ALONG_STROKE_DEGREE)[:, 1:]
-    d = df[dataio.DIRECTION].to_numpy(float)
     B = np.concatenate([P * (d > 0)[:, None], P * (d <= 0)[:, None]], axis=1)
     B = B - pd.DataFrame(B).groupby(runs).transform("mean").to_numpy()
     coef = np.linalg.lstsq(B, c, rcond=None)[0]
-    return float(min(max(1.0 - float(np.sum((c - B @ coef) ** 2)) / sst, 0.0), 1.0))
+    return float(min(max(1.0 - float(np.sum((c - B @ coef) ** 2)) / float(np.sum(c ** 2)), 0.0), 1.0))
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    lo, hi = float(v.min()), float(v.max())
+    return (2.0 * v - lo - hi) / max(hi - lo, 1e-300)
+
+
+def along_stroke_share(df: pd.DataFrame, name: str) -> tuple[float, float]:
+    """``(position, clock)``: the shares of the column ``name``'s variation within runs that a function of the
+    position and a function of the time since the run's first sample hold. Each is ``1 - SSE / SST`` of the least
+    squares of the column on Legendre polynomials ``P_1 .. P_8`` of the variable (scaled to its range over ``df``),
+    one set per direction, the column and the basis each taken about their run's mean. NaN when the column does not
+    vary within runs, or when the samples within runs (beyond one per run) are fewer than
+    :data:`ALONG_STROKE_SAMPLES` per coefficient (a short log: a polynomial would follow any column).
+
+    A channel that the position holds (at least :data:`ALONG_STROKE_SHARE`) better than the run's clock (by
+    :data:`ALONG_STROKE_MARGIN`) is a function of where the slider is (a homing probe's field, a limit switch, a
+    second position sensor): its mean over a run's samples weighs each position by the time the slider spent there,
+    so it follows how the run moved, the motor's response, not a setting of the run. When every run moves alike the
+    two shares are equal, and so are the runs' weights."""
+    runs = df[dataio.RUN].to_numpy()
+    c = df[name].to_numpy(float)
+    c = c - pd.Series(c).groupby(runs).transform("mean").to_numpy()
+    if not float(np.sum(c ** 2)) > 0 or len(c) - len(pd.unique(runs)) < ALONG_STROKE_SAMPLES * 2 * ALONG_STROKE_DEGREE:
+        return float("nan"), float("nan")
+    d = df[dataio.DIRECTION].to_numpy(float)
+    t = df[dataio.TIME].to_numpy(float)
+    t_run = t - pd.Series(t).groupby(runs).transform("min").to_numpy()
+    return (_within_run_share(c, runs, _unit(df[dataio.POSITION].to_numpy(float)), d),
+            _within_run_share(c, runs, _unit(t_run), d))
+
+
+def is_along_stroke(df: pd.DataFrame, name: str) -> bool:
+    """Whether the column ``name`` is read along the stroke only (:func:`along_stroke_share`)."""
+    pos, clock = along_stroke_share(df, name)
+    return bool(pos >= ALONG_STROKE_SHARE and pos >= clock + ALONG_STROKE_MARGIN)
 
 
 def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
@@ -230,8 +251,8 @@ def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
     ``sd`` 0 for a constant column, which is listed but gets no hypothesis;
     ``within_run``: it varies inside some run; ``run_spread``:
     :func:`l1b2.predictor.effects.channels.run_spread`; ``along_stroke``: a logged channel whose variation within
-    runs is a function of the position (:func:`along_stroke_share` at least :data:`ALONG_STROKE_SHARE`), offered at
-    the sample level only and with no run-level signal).
+    runs is a function of the position rather than of the run's clock (:func:`is_along_stroke`), offered at the
+    sample level only and with no run-level signal).
     """
     required = NOT_CANDIDATES - {dataio.TIME}
     responses = set(fx.channels.RESPONSE_COLUMNS if response_columns is None else response_columns)
@@ -246,7 +267,7 @@ def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
         within = varies_within_runs(df, name)
         kind = ("protocol" if name == dataio.TIME else "run_clock" if name == fx.channels.RUN_CLOCK
                 else "response" if name in responses else "label" if name in labels else "logged")
-        along = bool(kind == "logged" and within and along_stroke_share(df, name) >= ALONG_STROKE_SHARE)
+        along = bool(kind == "logged" and within and is_along_stroke(df, name))
         out.append({"name": str(name), "kind": kind, "mean": float(np.mean(c)), "sd": float(np.std(c)),
                     "lo": float(np.min(c)), "hi": float(np.max(c)), "within_run": within,
                     "run_spread": fx.channels.run_spread(c, df[dataio.RUN]), "along_stroke": along})
