@@ -76,6 +76,25 @@ def session(train: pd.DataFrame, test: pd.DataFrame | None = None) -> Session:
     return Session(clock, one_session(clock))
 
 
+def frame_run_values(sess: Session, n_frames: int, of) -> list:
+    """Per frame ``i < n_frames``, the value ``of(runs)`` gives each of its runs (``runs``: :func:`run_table` rows,
+    ``of`` returning one value per row in their order), in the order of the frame's rows of ``sess.runs``: read over
+    the merged session's runs when the frames are one session (a run's neighbour may be the other frame's), else over
+    each frame's own runs."""
+    if sess.one:
+        v = np.asarray(of(sess.runs))
+        return [v[(sess.runs["frame"] == i).to_numpy()] for i in range(n_frames)]
+    return [np.asarray(of(sess.runs[sess.runs["frame"] == i])) for i in range(n_frames)]
+
+
+def with_run_column(df: pd.DataFrame, clock: pd.DataFrame, values, column: str) -> pd.DataFrame:
+    """A copy of ``df`` with ``column``: each sample its run's value (``values`` per row of ``clock``, the frame's
+    :func:`run_table` rows)."""
+    out = df.copy()
+    out[column] = out[dataio.RUN].map(dict(zip(clock["run"], values))).to_numpy(float)
+    return out
+
+
 def event_times(tab: pd.DataFrame) -> np.ndarray:
     """The start times [s] of the runs whose value differs from the run before (``tab`` in session order)."""
     v = tab["value"].to_numpy(float)

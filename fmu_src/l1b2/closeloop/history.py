@@ -28,7 +28,7 @@ import numpy as np
 import pandas as pd
 
 from ..data import measurements as dataio
-from .events import Session, session
+from .events import Session, frame_run_values, session, with_run_column
 
 #: the previous run's load column [kg]
 LOAD_COLUMN = "prev_run_load_kg"
@@ -50,31 +50,10 @@ def previous_values(runs: pd.DataFrame, value: dict) -> np.ndarray:
     return out
 
 
-def _append(frames, clocks, per_frame, column: str, record: dict):
-    """The frames with ``column`` appended from each frame's run values ``per_frame`` (NaN: TRAIN's median of its
-    known values); ``record`` gains ``imputed_runs`` and ``derived``. Unchanged frames when TRAIN has fewer than
-    :data:`MIN_KNOWN_RUNS` known values or they do not vary."""
-    known = per_frame[0][np.isfinite(per_frame[0])]
-    record.update({"range": ({"min": float(known.min()), "median": float(np.median(known)),
-                              "max": float(known.max())} if known.size else {}), "imputed_runs": 0})
-    if (column in frames[0].columns or known.size < MIN_KNOWN_RUNS
-            or not np.ptp(known) > VARY_RTOL * np.abs(known).max()):
-        return frames
-    fill = float(np.median(known))
-    out = []
-    for df, clock, p in zip(frames, clocks, per_frame):
-        record["imputed_runs"] += int(np.isnan(p).sum())
-        df = df.copy()
-        df[column] = df[dataio.RUN].map(dict(zip(clock["run"], np.where(np.isnan(p), fill, p)))).to_numpy(float)
-        out.append(df)
-    record["derived"] = True
-    return out
-
-
 def with_previous_pass(train: pd.DataFrame, test: pd.DataFrame | None = None, sess: Session | None = None):
     """``(train, test, record)``: copies of the frames with :data:`LOAD_COLUMN` appended when TRAIN has at least
-    :data:`MIN_KNOWN_RUNS` known values that vary (``test`` None stays None), and ``record`` ``{"one_session",
-    "columns": [{"column", "derived", "range": {"min", "median", "max"}, "imputed_runs"}]}`` (module docstring).
+    :data:`MIN_KNOWN_RUNS` known values that vary (``test`` None stays None), and ``record`` ``{"column",
+    "derived", "one_session", "range": {"min", "median", "max"}, "imputed_runs"}`` (module docstring).
 
     ``sess``: the frames' :func:`~l1b2.closeloop.events.session` when the caller has it (default: computed here).
     The frames are returned unchanged (not copied) when the column is not derived or TRAIN already has it.
@@ -84,13 +63,19 @@ def with_previous_pass(train: pd.DataFrame, test: pd.DataFrame | None = None, se
     load = {}
     for i, df in enumerate(frames):
         load.update({(i, r): float(v) for r, v in df.groupby(dataio.RUN, sort=False)[dataio.LOAD].first().items()})
-    runs = sess.runs
-    clocks = [runs[runs["frame"] == i] for i in range(len(frames))]
-    if sess.one:
-        prev = previous_values(runs, load)
-        per_frame = [prev[(runs["frame"] == i).to_numpy()] for i in range(len(frames))]
-    else:
-        per_frame = [previous_values(c, load) for c in clocks]
-    rec = {"column": LOAD_COLUMN, "derived": False}
-    frames = _append(frames, clocks, per_frame, LOAD_COLUMN, rec)
-    return frames[0], (frames[1] if test is not None else None), {"one_session": bool(sess.one), "columns": [rec]}
+    clocks = [sess.runs[sess.runs["frame"] == i] for i in range(len(frames))]
+    per_frame = frame_run_values(sess, len(frames), lambda runs: previous_values(runs, load))
+    known = per_frame[0][np.isfinite(per_frame[0])]
+    record = {"column": LOAD_COLUMN, "derived": False, "one_session": bool(sess.one),
+              "range": ({"min": float(known.min()), "median": float(np.median(known)),
+                         "max": float(known.max())} if known.size else {}), "imputed_runs": 0}
+    if (LOAD_COLUMN in train.columns or known.size < MIN_KNOWN_RUNS
+            or not np.ptp(known) > VARY_RTOL * np.abs(known).max()):
+        return train, test, record
+    fill = float(np.median(known))
+    out = []
+    for df, clock, p in zip(frames, clocks, per_frame):
+        record["imputed_runs"] += int(np.isnan(p).sum())
+        out.append(with_run_column(df, clock, np.where(np.isnan(p), fill, p), LOAD_COLUMN))
+    record["derived"] = True
+    return out[0], (out[1] if test is not None else None), record

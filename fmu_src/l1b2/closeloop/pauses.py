@@ -53,7 +53,7 @@ import pandas as pd
 
 from ..data import measurements as dataio
 from ..units import LOG_PREFIX
-from .events import MIN_BLOCK_RUNS, Session, since_event, session
+from .events import MIN_BLOCK_RUNS, Session, frame_run_values, session, since_event, with_run_column
 
 #: the derived column: the logarithm of the pause before each run over :data:`REFERENCE_S`, named by the naming rule
 #: of a logarithm (:data:`l1b2.units.LOG_PREFIX`): ``ln(pause_s / 1 s)``, dimensionless (:func:`l1b2.units.column_unit`)
@@ -115,11 +115,7 @@ def with_pause_channel(train: pd.DataFrame, test: pd.DataFrame | None = None, se
     merged = sess.one
     frames = [df for df in (train, test) if df is not None]
     clocks = [sess.runs[sess.runs["frame"] == i] for i in range(len(frames))]   # each frame's runs on the clock
-    if merged:
-        p = pauses_s(sess.runs)
-        per_frame = [p[(sess.runs["frame"] == i).to_numpy()] for i in range(len(frames))]
-    else:
-        per_frame = [pauses_s(c) for c in clocks]
+    per_frame = frame_run_values(sess, len(frames), pauses_s)
     known = per_frame[0][np.isfinite(per_frame[0])]
     record = {"column": COLUMN, "derived": False, "one_session": bool(merged), "floor_s": 0.0,
               "reference_s": REFERENCE_S, "pauses_s": ({"min": float(known.min()), "median": float(np.median(known)),
@@ -133,10 +129,7 @@ def with_pause_channel(train: pd.DataFrame, test: pd.DataFrame | None = None, se
     for df, clock, p in zip(frames, clocks, per_frame):
         value = log_pause(p, floor)
         record["imputed_runs"] += int(np.isnan(value).sum())
-        value = np.where(np.isnan(value), fill, value)
-        df = df.copy()
-        df[COLUMN] = df[dataio.RUN].map(dict(zip(clock["run"], value))).to_numpy(float)
-        out.append(df)
+        out.append(with_run_column(df, clock, np.where(np.isnan(value), fill, value), COLUMN))
     record.update(derived=True, floor_s=floor)
     return out[0], (out[1] if test is not None else None), record
 
