@@ -7,6 +7,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # tiny dense problems: threa
 import json
 
 import numpy as np
+from objectives import central_difference
 import pandas as pd
 import pytest
 from scipy.stats import chi2
@@ -63,11 +64,7 @@ def test_jacobian_matches_finite_differences(noisy_small, criterion):
         assert np.any(flags == 1), "no reversal step in the test data"
     Jfd = np.empty_like(J)
     for j in cols:
-        h = 1e-6 * max(abs(theta[j]), 1e-3)
-        tp, tm = theta.copy(), theta.copy()
-        tp[j] += h
-        tm[j] -= h
-        Jfd[:, j] = (prob.residual(tp) - prob.residual(tm)) / (2 * h)
+        Jfd[:, j] = central_difference(prob.residual, theta, j, 1e-3)
     rel = np.abs(J - Jfd).max(axis=0) / np.abs(Jfd).max(axis=0)
     assert rel.max() < 1e-5, dict(zip(names, rel))
     # sensitivity of the free run to the measured start speed
@@ -94,11 +91,7 @@ def test_equation_error_jacobian():
     g, Jg = reduced_of_theta(th, 8, M_S, 0.5, jac=True)
     Jfd = np.empty_like(Jg)
     for j in range(th.size):
-        h = 1e-6 * max(abs(th[j]), 1e-3)
-        tp, tm = th.copy(), th.copy()
-        tp[j] += h
-        tm[j] -= h
-        Jfd[:, j] = (reduced_of_theta(tp, 8, M_S, 0.5) - reduced_of_theta(tm, 8, M_S, 0.5)) / (2 * h)
+        Jfd[:, j] = central_difference(lambda t: reduced_of_theta(t, 8, M_S, 0.5), th, j, 1e-3)
     assert np.abs(Jg - Jfd).max() / np.abs(Jfd).max() < 1e-7
 
 

@@ -13,6 +13,7 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # tiny dense problems: threa
 import json
 
 import numpy as np
+from objectives import central_difference
 import pytest
 from l1b2.errors import IdentificationError
 from l1b2.ident.estimator import PredictorIdentifier, evaluation_mask
@@ -157,11 +158,7 @@ def test_jacobian_wrt_phi_matches_finite_differences(criterion):
         assert np.any(flags == 1), "no reversal step in the test data"
     Jfd = np.empty_like(J)
     for j in cols:
-        h = 1e-6 * max(abs(theta[j]), 1e-3)
-        tp, tm = theta.copy(), theta.copy()
-        tp[j] += h
-        tm[j] -= h
-        Jfd[:, j] = (prob.residual(tp) - prob.residual(tm)) / (2 * h)
+        Jfd[:, j] = central_difference(prob.residual, theta, j, 1e-3)
     rel = np.abs(J - Jfd).max(axis=0) / np.abs(Jfd).max(axis=0)
     assert rel.max() < 1e-5, dict(zip(NAMES + ["asym", "bump"], rel))
     assert np.abs(Jfd[:, -2:]).max() > 0  # the extras do act on the residuals

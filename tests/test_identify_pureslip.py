@@ -1,6 +1,7 @@
 """Identification of the pure-slip predictor family: Jacobian, recovery, Eq. 29 misfit on its data, serialisation."""
 
 import numpy as np
+from objectives import central_difference
 import pytest
 from l1b2.data.metrics import evaluation_mask
 from l1b2.errors import IdentificationError
@@ -37,11 +38,7 @@ def test_pure_slip_jacobian_matches_finite_differences(data, criterion):
     J = prob.jacobian(theta, cols)
     Jfd = np.empty_like(J)
     for j in cols:
-        h = 1e-6 * max(abs(theta[j]), 1e-3)
-        tp, tm = theta.copy(), theta.copy()
-        tp[j] += h
-        tm[j] -= h
-        Jfd[:, j] = (prob.residual(tp) - prob.residual(tm)) / (2 * h)
+        Jfd[:, j] = central_difference(prob.residual, theta, j, 1e-3)
     scale = np.abs(Jfd).max(axis=0)
     ok = scale > 0
     assert np.all(np.abs(J[:, ~ok]) == 0)              # k0: no effect in this family
