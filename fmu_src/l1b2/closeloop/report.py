@@ -302,16 +302,18 @@ def channel_range_line(rec: Mapping) -> str:
 def undetermined_line(parameters: Mapping) -> str:
     """One line naming the varied parameters of a model's ``parameters`` (the report's ``baseline_parameters``:
     name -> ``{"vary", "identifiable", ...}``) that TRAIN does not determine (no finite standard error: a
-    direction of the parameters along which the predictions do not change, e.g. TRAIN at one load or one drive
-    amplitude); empty when every varied one is determined. Their values are one point of that direction: TEST's
+    direction of the parameters along which the predictions do not change to first order at the fitted values: TRAIN
+    at one load or one drive amplitude, or a fit where a parameter's effect vanishes); empty when every varied one is
+    determined. Their values are one point of that direction: TEST's
     figures then depend on where it lies."""
     names = [n for n, p in (parameters or {}).items()
              if isinstance(p, Mapping) and p.get("vary") and p.get("identifiable") is False]
     if not names:
         return ""
-    return (f"TRAIN does not determine the baseline's {', '.join(names)} (no standard error: the predictions do not "
-            "change along a direction of them): their values are one point of it, and predictions beyond TRAIN's "
-            "plan (TEST) depend on where it lies")
+    return (f"TRAIN does not determine the baseline's {', '.join(names)} (no standard error: at the fitted values "
+            "the predictions do not change, to first order, along a direction of them; the data may lack it, or the "
+            "fit may sit where a parameter's effect vanishes): their values are one point of that direction, and "
+            "predictions beyond TRAIN's plan (TEST) depend on where it lies")
 
 
 def pct(x, spec: str = ".2%") -> str:
