@@ -14,9 +14,10 @@ from l1b2.cli import build_parser
 from l1b2.closeloop.evidence import with_response_test
 from l1b2.closeloop.report import response_test_lines
 from l1b2.closeloop.settings import response_setting
-from l1b2.closeloop.responses import (SHARE_MIN, _nuisance_residual, _per_run_share, _sign_test_p,
-                                      classed_responses, drive_course,
-                                      response_statistic, response_tests, speed_history, with_applied)
+from l1b2.closeloop.responses import (POSITION_DEGREE, RATE_TAUS_S, SHARE_MIN, TAUS_S, _nuisance_residual,
+                                      _per_run_share, _share, _sign_test_p,
+                                      classed_responses, drive_course, history_columns,
+                                      response_statistic, response_tests, speed_history, speed_rate, with_applied)
 from l1b2.errors import L1B2Error
 
 DT = 1e-3
@@ -185,6 +186,63 @@ def test_speed_history_is_the_first_order_step_response():
     y2 = speed_history(np.full(100, 0.2), np.r_[t, t + 5.0], np.r_[np.zeros(50), np.ones(50)], 0.01)
     assert np.allclose(y2[50:], y2[:50])                      # from rest again at the next run
     assert np.array_equal(speed_history([-0.1, 0.2], [0, DT], [0, 0], 0.0), [0.1, 0.2])
+
+
+def test_speed_rate_is_the_derivative_of_the_first_order_step_response():
+    # a step of the signed speed from rest: the low-pass is V (1 - exp(-(k+1) dt/tau)), its rate V exp(-(k+1) dt/tau)
+    # / tau, the same sign as the speed, from rest again at each run's start
+    t = np.arange(40) * DT
+    k = np.arange(40)
+    for V, tau in ((-0.2, 0.003), (0.15, 0.01)):
+        assert np.allclose(speed_rate(np.full(40, V), t, np.zeros(40), tau), V * np.exp(-(k + 1) * DT / tau) / tau)
+    two = speed_rate(np.full(80, 0.1), np.r_[t, t + 3.0], np.r_[np.zeros(40), np.ones(40)], 0.003)
+    assert np.allclose(two[40:], two[:40])
+    with pytest.raises(ValueError, match="not positive"):
+        speed_rate([0.1, 0.1], [0, DT], [0, 0], 0.0)
+
+
+def test_the_rate_history_is_the_bank_of_scaled_rates():
+    rng = np.random.default_rng(11)
+    run = np.repeat([0, 1], 60)
+    t = np.arange(120) * DT
+    v = np.r_[np.linspace(0, 0.2, 60), -np.linspace(0, 0.1, 60)] + rng.normal(0, 1e-3, 120)
+    X = history_columns(v, t, run, "rate")
+    assert X.shape == (120, len(RATE_TAUS_S))
+    for j, tau in enumerate(RATE_TAUS_S):
+        r = speed_rate(v, t, run, tau)
+        assert np.allclose(X[:, j], r / np.abs(r).max())
+    u = np.abs(v) / np.abs(v).max()
+    assert np.allclose(history_columns(v, t, run, "magnitude", 0.0), np.column_stack([u, u ** 2, u ** 3]))
+    with pytest.raises(ValueError, match="not one of"):
+        history_columns(v, t, run, "jerk", 0.0)
+
+
+def test_an_accelerometer_on_the_slider_is_a_response_through_the_rate(session):
+    # reference: a MEMS accelerometer on the slider (the acceleration of the true speed through its 60 Hz
+    # anti-alias filter, a bias, 0.005 g of noise, in g), written out sample by sample: the rate's bank takes it
+    df, rng = _session(seed=2)
+    v = df["true_speed"].to_numpy() * df["direction"].to_numpy()
+    acc = np.empty_like(v)
+    for r in np.unique(df["run"]):
+        i = np.flatnonzero(df["run"].to_numpy() == r)
+        acc[i] = np.r_[v[i[0]] / DT, np.diff(v[i]) / DT]          # from rest at the run's start
+    tau = 1.0 / (2 * np.pi * 60.0)
+    filtered = _lowpass_from_rest(acc, df["t_run"].to_numpy(), tau)
+    accel_g = filtered / 9.81 + 0.01 + rng.normal(0, 0.005, len(v))
+    args = (df["speed_m_s"], df["time_s"], df["position_m"], df["run"])
+    rec = response_statistic(accel_g, *args)
+    assert rec["response"] and rec["history"] == "rate" and rec["tau_s"] is None and rec["share"] >= 0.8
+    assert rec["share"] > rec["drive_share"]
+    # in this session the slider's rise is a first-order lag, so within a run a = (V_r - v) / tau_mech: the signed
+    # speed's cubic explains much of it too, but less than the rate's bank
+    t, run, s_m = (df[c].to_numpy() for c in ("time_s", "run", "position_m"))
+    P = np.polynomial.legendre.legvander(2 * (s_m - s_m.min()) / np.ptp(s_m) - 1, POSITION_DEGREE)[:, 1:]
+    cr = _nuisance_residual(accel_g[:, None], run, t, P)[:, 0]
+    cubic = max(_share(_nuisance_residual(history_columns(df["speed_m_s"].to_numpy(), t, run, h, tau), run, t, P),
+                       cr, float(cr @ cr))[0] for h in ("magnitude", "signed") for tau in TAUS_S)
+    assert cubic < rec["share"] - 0.1
+    report = response_test_lines(with_applied([{"channel": "accel_g", **rec}], None, ("accel_g",)))
+    assert any("`accel_g`" in line and "rate" in line and "a response" in line for line in report)
 
 
 def test_sign_test_is_the_binomial_tail():

@@ -267,6 +267,14 @@ def clip_sentence(clip: Mapping, applied: bool = True) -> str:
             f"(p {float(clip.get('p_value', 1.0)):.2g}): {verdict}.")
 
 
+def _history_text(r: Mapping) -> str:
+    """How report.md names a consequence test's best history of the speed (a record's ``history`` and ``tau_s``)."""
+    if r.get("history") == "rate":
+        return "the speed's rate through a bank of first-order filters"
+    signed = r.get("history") == "signed" or (r.get("history") is None and r.get("signed"))
+    return f"sensor lag {r['tau_s']} s{', of the signed speed' if signed else ''}"
+
+
 def response_test_lines(tests) -> list:
     """report.md's lines on the consequence test (``diagnosis.response_test``): one per tested column with its share,
     its runs and the outcome; empty when no column was tested."""
@@ -274,10 +282,9 @@ def response_test_lines(tests) -> list:
         return []
     lines = ["", "Consequence test of the logged columns that vary within runs (the share of a column's within-run "
              "variation, beyond each run's level and trend and a function of the position, that a smooth function "
-             "of the speed explains; a response: at least half, in more runs than chance, and more than the drive's own "
-             "course from the run's start explains):", ""]
-    return lines + [f"- `{r['channel']}`: share {r['share']:.0%} (sensor lag {r['tau_s']} s"
-                    f"{', of the signed speed' if r.get('signed') else ''}), above half in "
+             "of the speed or a filter of its rate explains; a response: at least half, in more runs than chance, "
+             "and more than the drive's own course from the run's start explains):", ""]
+    return lines + [f"- `{r['channel']}`: share {r['share']:.0%} ({_history_text(r)}), above half in "
                     f"{r['runs_above']} of {r['n_runs']} runs (p {r['p_value']:.2g})"
                     + (f", the drive's course from the run's start {r['drive_share']:.0%}" if r.get("drive_share")
                        else "") + ": "

@@ -15,10 +15,17 @@ the speed reproduces up to the column's own noise. The speed's history is ``u = 
 first-order low-pass of time constant ``tau``, from rest at each run's start: a sensor's own averaging, a meter's
 time weighting), with ``tau`` on the grid :data:`TAUS_S`, and the smooth function a cubic polynomial of ``u``
 (:data:`DEGREE`) with one set of coefficients for every run (one law of the sensor). The same is done with the
-signed speed ``h_tau * v / max|v|`` in place of its magnitude, and the better of the two counts: a response that
-is even in the speed (a sound level, an amplitude) follows the magnitude, one that is odd (a second velocity
-sensor, a back-EMF) changes sign with the direction, which no function of the magnitude shared by the runs
-follows.
+signed speed ``h_tau * v / max|v|`` in place of its magnitude: a response that is even in the speed (a sound
+level, an amplitude) follows the magnitude, one that is odd (a second velocity sensor, a back-EMF) changes sign with
+the direction, which no function of the magnitude shared by the runs follows. A third history is the speed's rate,
+``d/dt (h_tau * v) = (v - h_tau * v) / tau`` [m/s^2] (the signed speed's low-pass differentiated: the acceleration
+through a first-order filter of time constant ``tau``), for a reading of the motion's changes (an accelerometer on
+the slider, an inertial force), which is no function of the speed: it peaks while the slider rises from rest and is
+nil at a steady speed. A sensor's filter is no single first-order lag and the measured speed's noise grows when
+differentiated, so the rate enters as a bank: a linear combination of the rates at every ``tau`` of
+:data:`RATE_TAUS_S`, one set of coefficients for every run (a filter of the acceleration with a fitted response;
+as many parameters as the cubic's, plus one). Each history is normalised by its largest magnitude, and the best
+of the three counts.
 
 The statistic is the partial ``R^2`` of that polynomial, the share of the column's residual within-run variance it
 explains (the best ``tau``). What tells a response from a column that follows the drive (a supply that sags while
@@ -57,12 +64,19 @@ from scipy.signal import lfilter
 from ..data import measurements as dataio
 from .auxiliary import NOT_CANDIDATES, varies_within_runs
 
-__all__ = ["TAUS_S", "DEGREE", "SHARE_MIN", "P_MAX", "POSITION_DEGREE", "MODEL_INPUTS", "speed_history",
-           "drive_course", "response_statistic", "response_tests", "classed_responses"]
+__all__ = ["TAUS_S", "RATE_TAUS_S", "HISTORIES", "DEGREE", "SHARE_MIN", "P_MAX", "POSITION_DEGREE", "MODEL_INPUTS",
+           "speed_history", "drive_course", "speed_rate", "history_columns", "response_statistic", "response_tests",
+           "classed_responses"]
 
 #: the sensor time constants [s] searched: none (the instantaneous speed), then 10 ms to 0.3 s (a meter's fast
 #: time weighting is 125 ms; longer than the longest runs' acceleration, no transient is left to follow)
 TAUS_S = (0.0, 0.01, 0.03, 0.1, 0.3)
+#: the time constants [s] of the speed's rate bank (:func:`speed_rate`): the grid of :data:`TAUS_S` continued down
+#: to 1 ms (a rate needs a filter: the bank's lags span 5 Hz to 160 Hz)
+RATE_TAUS_S = (0.001, 0.003, 0.01, 0.03)
+#: the speed's histories the test reads: its magnitude, the signed speed (each a cubic, on :data:`TAUS_S`) and the
+#: signed speed's rate (the bank of :data:`RATE_TAUS_S`)
+HISTORIES = ("magnitude", "signed", "rate")
 #: the degree of the polynomial in the speed's history (a level in dB of a power ~ v^2, an amplitude ~ v: smooth)
 DEGREE = 3
 #: the degree of the Legendre polynomial in the position (over TRAIN's stroke) removed as a cause along the stroke
@@ -90,6 +104,35 @@ def speed_history(speed_m_s, time_s, run, tau_s: float, signed: bool = False) ->
         a = 1.0 - math.exp(-dt / tau_s) if dt > 0 else 1.0
         out[sl] = lfilter([a], [1.0, a - 1.0], v[sl])
     return out
+
+
+def speed_rate(speed_m_s, time_s, run, tau_s: float) -> np.ndarray:
+    """``(v - h_tau * v) / tau`` per run [m/s^2]: the rate of the signed speed's first-order low-pass of time
+    constant ``tau_s`` [s] (> 0; :func:`speed_history` with ``signed``), the derivative ``dy/dt = (v - y) / tau`` of
+    the filter's output: the acceleration read through that filter, from rest at each run's start."""
+    if not tau_s > 0:
+        raise ValueError(f"speed_rate: the time constant {tau_s} s is not positive")
+    v = np.asarray(speed_m_s, float)
+    return (v - speed_history(v, time_s, run, tau_s, signed=True)) / tau_s
+
+
+def _scaled(a: np.ndarray) -> np.ndarray:
+    """``a``'s columns, each over its largest magnitude (a column of zeros as it is)."""
+    top = np.max(np.abs(a), axis=0)
+    return a / np.where(top > 0, top, 1.0)
+
+
+def history_columns(speed_m_s, time_s, run, history: str, tau_s: float | None = None) -> np.ndarray:
+    """The columns of a history of :data:`HISTORIES` [1]: ``u``, ``u^2``, ``u^3`` of the speed's magnitude or the
+    signed speed through the low-pass of ``tau_s`` (:func:`speed_history`), ``u`` over its largest magnitude; for
+    ``rate``, the bank: :func:`speed_rate` at every ``tau`` of :data:`RATE_TAUS_S`, each over its largest
+    magnitude (``tau_s`` unused)."""
+    if history == "rate":
+        return _scaled(np.column_stack([speed_rate(speed_m_s, time_s, run, tau) for tau in RATE_TAUS_S]))
+    if history not in HISTORIES:
+        raise ValueError(f"history {history!r} is not one of {', '.join(HISTORIES)}")
+    u = _scaled(speed_history(speed_m_s, time_s, run, tau_s, signed=history == "signed")[:, None])[:, 0]
+    return np.vander(u, DEGREE + 1, increasing=True)[:, 1:]
 
 
 def _nuisance_residual(X: np.ndarray, run: np.ndarray, t: np.ndarray, P: np.ndarray) -> np.ndarray:
@@ -174,12 +217,13 @@ def _sign_test_p(k: int, n: int) -> float:
 
 def response_statistic(column, speed_m_s, time_s, position_m, run) -> dict:
     """The test of one column (arrays over the same samples, runs in consecutive blocks): ``{"share", "tau_s",
-    "signed", "runs_above", "n_runs", "p_value", "drive_share", "drive_tau_s", "response"}``; ``share`` the partial
-    R^2 of the module docstring at the best ``tau_s`` and history (``signed``: of the speed, else of its magnitude;
-    None when nothing is explained), ``runs_above`` the runs whose own share (same fitted law) exceeds
-    :data:`SHARE_MIN`, ``p_value`` the sign test's, ``drive_share`` the drive's best share (computed only when the
-    first two conditions hold; 0 otherwise), ``response`` the rule (``share >= SHARE_MIN``, ``p_value < P_MAX`` and
-    ``share > drive_share``)."""
+    "signed", "history", "runs_above", "n_runs", "p_value", "drive_share", "drive_tau_s", "response"}``; ``share``
+    the partial R^2 of the module docstring at the best ``tau_s`` and history (``history``: one of
+    :data:`HISTORIES`, the rate's ``tau_s`` None: its bank spans :data:`RATE_TAUS_S`; ``signed``: of the signed
+    speed or its rate, else of its magnitude; both None when nothing is explained), ``runs_above`` the runs whose
+    own share (same fitted law) exceeds :data:`SHARE_MIN`, ``p_value`` the sign test's, ``drive_share`` the
+    drive's best share (computed only when the first two conditions hold; 0 otherwise), ``response`` the rule
+    (``share >= SHARE_MIN``, ``p_value < P_MAX`` and ``share > drive_share``)."""
     c = np.asarray(column, float)
     run = np.asarray(run)
     t = np.asarray(time_s, float)
@@ -190,21 +234,20 @@ def response_statistic(column, speed_m_s, time_s, position_m, run) -> dict:
     blocks = [sl for _, sl in dataio.run_slices(run)]
     n_runs = len(blocks)
     ss_tot = float(cr @ cr)
-    best = {"share": 0.0, "tau_s": None, "signed": None, "runs_above": 0, "n_runs": n_runs, "p_value": 1.0,
-            "drive_share": 0.0, "drive_tau_s": None, "response": False}
+    best = {"share": 0.0, "tau_s": None, "signed": None, "history": None, "runs_above": 0, "n_runs": n_runs,
+            "p_value": 1.0, "drive_share": 0.0, "drive_tau_s": None, "response": False}
     if not ss_tot > 1e-12 * max(float(c @ c), 1e-300):
         return best
-    vmax = float(np.max(np.abs(speed_m_s))) or 1.0
-    for signed in (False, True):
-        for tau in TAUS_S:
-            u = speed_history(speed_m_s, t, run, tau, signed) / vmax
-            share, e = _share(_nuisance_residual(np.vander(u, DEGREE + 1, increasing=True)[:, 1:], run, t, P), cr,
-                              ss_tot)
+    for history in HISTORIES:
+        for tau in (None,) if history == "rate" else TAUS_S:
+            X = history_columns(speed_m_s, t, run, history, tau)
+            share, e = _share(_nuisance_residual(X, run, t, P), cr, ss_tot)
             if share > best["share"]:
                 per = [1.0 - float(e[sl] @ e[sl]) / float(cr[sl] @ cr[sl])
                        for sl in blocks if float(cr[sl] @ cr[sl]) > 0]
                 k = int(np.sum(np.array(per) > SHARE_MIN))
-                best.update(share=share, tau_s=tau, signed=signed, runs_above=k, p_value=_sign_test_p(k, n_runs))
+                best.update(share=share, tau_s=tau, signed=history != "magnitude", history=history, runs_above=k,
+                            p_value=_sign_test_p(k, n_runs))
     if best["share"] >= SHARE_MIN and best["p_value"] < P_MAX:
         best["drive_share"], best["drive_tau_s"] = _drive_share(cr, ss_tot, run, t, P)
         best["response"] = bool(best["share"] > best["drive_share"])
