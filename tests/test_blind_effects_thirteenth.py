@@ -56,6 +56,10 @@ def test_the_accelerometer_reads_a_first_order_filtered_acceleration_in_g(audit)
     assert out[1] == pytest.approx(0.01 + (1 - e) * 2.0 / 9.81, rel=1e-12)
     assert out[2] == pytest.approx(0.01 + (1 - e * e) * 2.0 / 9.81, rel=1e-12)
     assert out[-1] == pytest.approx(0.01 + 2.0 / 9.81, rel=1e-9)
+    # a ramp of the acceleration: the filter holds each sample's acceleration over the step after it
+    q = audit.accelerometer_g(t, t * t, 50.0, 0.0)  # dv/dt: 1e-3 (one-sided) at t = 0, then 2 t
+    assert q[1] == pytest.approx((1 - e) * 1e-3 / 9.81, rel=1e-9)
+    assert q[2] == pytest.approx((e * (1 - e) * 1e-3 + (1 - e) * 2e-3) / 9.81, rel=1e-9)
 
 
 def test_the_runs_setup_scales_the_slip_friction_and_caps_the_supply(audit, load_bench):
