@@ -11,7 +11,9 @@ copy of a case's files, one change per mode:
 * ``left_after`` -- no change of the files: the close loop on the case as it is, then each TRAIN run's mean relative
   speed error of the final model's free run (measured minus predicted over the measured, in drive coordinates,
   ``|s| < 15 mm``) against the run's mean ``mains_V`` and the truth's supply deficit (the ``deficit`` mode's),
-  over all runs and over the runs at 324 V; printed as one JSON line after the row.
+  over all runs and over the runs at 324 V; and the run-level evidence (``closeloop.runlevel.analyse``, alpha 0.01,
+  5 folds) of ``mains_V``'s run mean and of the plan's inputs against that final model, the loop's own test of a
+  run-level signal in a round after the last; printed as one JSON line after the row.
 
 Usage: python bench/blind_effects_thirteenth_probe.py KIND SEED MODE [--cache DIR] [--out DIR]. Prints the row of
 ``bench/blind_effects.py`` (its ``loop_row``, with ``traced_all``) and the evidence on the probe's column.
@@ -86,7 +88,22 @@ def left_after(argv) -> None:
                       "sd_rel_324_pct": round(100 * float(hi["rel"].std()), 3),
                       "r_mains_all": r(runs["rel"], runs["mains"]), "r_mains_324": r(hi["rel"], hi["mains"]),
                       "r_deficit_all": r(runs["rel"], runs["deficit"]),
-                      "dropped_runs": int((runs["deficit"] < 0).sum())}))
+                      "dropped_runs": int((runs["deficit"] < 0).sum()),
+                      "run_level_after": run_level_after(res, dst, model)}))
+
+
+def run_level_after(res, dst: Path, model) -> list:
+    """The run-level evidence of ``mains_V`` and the plan's inputs against the final ``model`` (mode
+    ``left_after``): per signal its label, p-value, cv gain, significance at this test's own level and dominance."""
+    from l1b2.closeloop import runlevel
+    from l1b2.data.measurements import load_measurements
+    mask = np.array(load_measurements(dst / "train.csv").mask)
+    assert len(mask) == len(res.train_df)
+    rl = runlevel.analyse(res.train_df, model, mask, [{"name": "mains_V", "kind": "logged"}], alpha=0.01, k=5,
+                          seed=0)
+    return [{"signal": e.label, "p_value": float(e.p_value), "cv_gain": round(float(e.cv_gain), 4),
+             "significant": bool(e.significant), "dominated_by": e.dominated_by, "level": rl.level}
+            for e in rl.evidence]
 
 
 def main(argv=None):
