@@ -490,3 +490,17 @@ def test_stage_clock_times_each_announced_stage():
     assert (recs[0]["identifications"], recs[0]["nfev"], recs[1]["identifications"], recs[1]["nfev"]) == (2, 30, 1, 0)
     assert recs[0]["cpu_s"] >= 0.045 and recs[0]["wall_s"] >= recs[0]["cpu_s"] - 0.01 and recs[1]["cpu_s"] < 0.045
     assert clock.close() == recs   # closing again adds nothing
+
+
+def test_the_final_models_run_level_evidence_is_recorded_when_the_last_round_added_an_effect():
+    # reference: one round that adds the pulley's friction, then the run-level analysis against the final model
+    d = rig_dir("pulley_friction_1", injections=["pulley_friction"], injection_seed=1,
+                plan=RigPlan(step_s=1e-3, seed=1))
+    res = close_loop(load_measurements(d / "train.csv"), load_measurements(d / "test.csv"), max_rounds=1)
+    diag = res.diagnosis
+    assert diag["traced_to"] and res.extended is not None
+    rounds = diag["run_level_rounds"]
+    assert [r["round"] for r in rounds] == [1, None]
+    assert rounds[0]["significant_signals"] == diag["run_level"]["significant_signals"]
+    assert "Run-level evidence left against the final model (the runs' deviations from it, after the last round)" \
+        in res.markdown()

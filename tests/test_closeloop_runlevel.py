@@ -409,3 +409,28 @@ def test_a_sagging_supply_is_logged_and_slows_its_runs():
     ratio = (sag.groupby("run")["speed_m_s"].apply(lambda v: np.abs(v).max()).to_numpy()
              / clean.groupby("run")["speed_m_s"].apply(lambda v: np.abs(v).max()).to_numpy())
     assert np.all(np.sign(ratio - 1) == np.sign(factors - 1)), (ratio, factors)
+
+
+def test_each_rounds_run_level_record_lists_every_signal_by_p_and_the_report_says_what_is_left():
+    from l1b2.closeloop.report import left_line
+    dev, z, rng = _deviations()
+    sigs = [{"channel": "noise", "transform": "none", "values": rng.normal(size=len(z))},
+            {"channel": "weak", "transform": "none", "values": 0.3 * z + rng.normal(size=len(z))},
+            {"channel": "aux", "transform": "none", "values": 3.0 + 2.0 * z}]
+    ev = sorted(rl.signal_evidence(dev, sigs, alpha=0.01, k=4, seed=0), key=lambda e: -e.p_value)
+    assert len({e.p_value for e in ev}) == 3       # the analysis lists them largest p first: the record sorts them
+    analysis = rl.RunLevelAnalysis(dev, None, float("nan"), 1.0, ev, 0.01 / 3)
+    rec = analysis.round_record(2)
+    assert rec["round"] == 2 and rec["significant_signals"] == [e.label for e in ev if e.significant]
+    ps = [s["p_value"] for s in rec["signals"]]
+    assert ps == sorted(ps) and sorted(s["signal"] for s in rec["signals"]) == ["aux", "noise", "weak"]
+    by = {s["signal"]: s for s in rec["signals"]}
+    for e in ev:
+        assert by[e.label]["p_value"] == e.p_value and by[e.label]["significant"] == e.significant
+    line = left_line([{"round": 1, "significance_level": 1.0, "signals": []}, analysis.round_record(None)])
+    assert "after the last round" in line and f"aux (p {by['aux']['p_value']:.2g})" in line.split("not significant")[0]
+    assert "noise" not in line or by["noise"]["p_value"] < 0.05
+    near = [s for s in rec["signals"] if not s["significant"] and s["p_value"] < 0.05]
+    assert all(f"{s['signal']} (p" in line.split("not significant")[1] for s in near)
+    assert left_line([]) == ""
+    assert "in round 3" in left_line([analysis.round_record(3)])

@@ -300,6 +300,7 @@ class CloseLoop(EstimatorSettings):
             other, dtr, mask, m_s, lambda c: schemes[time_dependent(c)], self.refit_settings(),
             min_gain=self.min_cv_gain, final_nfev=self.final_nfev, clock=say)
         cur_err: dict = {}
+        rl_of = None     # the model the latest run-level analysis was made against
         for rnd in range(1, self.max_rounds + 1):
             n_rnd, cur = len(it.rounds), it.model
             say(f"round {n_rnd}: the current model's residual; screening the candidates against the added effects")
@@ -319,6 +320,8 @@ class CloseLoop(EstimatorSettings):
             if self.run_level and ctx is not None:
                 say(f"round {n_rnd}: run-level deviations and the signals that explain them")
                 rl = runlevel.analyse(dtr, cur, mask, it.channels, alpha=self.alpha, k=self.k_folds, seed=self.seed)
+                rl_of = cur
+                it.run_levels.append(rl.round_record(rnd))
                 offered = runlevel.offer(runlevel.candidates(rl, ctx), short, lambda c: (
                     c.family not in it.effects.families and not collinear(c, it.effects, dtr, mask, added=added)
                     and not geo.conflicts(c, it.effects)))
@@ -357,6 +360,9 @@ class CloseLoop(EstimatorSettings):
             it.rounds.append({"round": n_rnd, "added": pick.candidate.label, "effect": pick.candidate.family,
                               "regressors": list(pick.candidate.regressors), "cv": pick.to_dict(),
                               "metrics": report(model)})
+        if rl_of is not None and rl_of is not it.model:     # the last round added an effect: what it leaves
+            it.run_levels.append(runlevel.analyse(dtr, it.model, mask, it.channels, alpha=self.alpha, k=self.k_folds,
+                                                  seed=self.seed).round_record(None))
 
     def _identified_pick(self, it, ok, choose, confirm, cur, dtr, mask, m_s, n_rnd, say) -> tuple:
         """``(pick, model, checks)``: :func:`~l1b2.closeloop.crosscheck.identified_pick` of the accepted trials
@@ -604,6 +610,7 @@ class CloseLoop(EstimatorSettings):
                 [[{**t.to_dict(), "accepted": accepts(t, **self._rules(t))} for t in rnd] for rnd in it.trials],
                 it.effects.labels),
             "run_level": it.run_level.to_dict() if it.run_level is not None else None,
+            "run_level_rounds": list(it.run_levels),
             "named_checks": list(it.checks),
             "physical_range": list(it.ranges),
         }
@@ -627,6 +634,7 @@ class _Iteration:
     sensor_stage: SensorChain | None = None
     channels: tuple = ()
     run_level: runlevel.RunLevelAnalysis | None = None
+    run_levels: list = field(default_factory=list)   #: each round's run-level record, then the final model's
     checks: list = field(default_factory=list)    #: the named picks' checks from the pure-slip family
     ranges: list = field(default_factory=list)    #: the damping forms' physical-range checks after each refit
 

@@ -123,6 +123,9 @@ class Diagnosis(_Record):
     and protocol signal with its first-round evidence, significant or not (its ``run_level`` entries: the
     evidence of its run mean for the runs' own deviations); ``run_level`` the first round's run-level
     deviations (:meth:`l1b2.closeloop.runlevel.RunLevelAnalysis.to_dict`; None when not estimated);
+    ``run_level_rounds`` the run-level analysis of every round against the model entering it, then, when the last
+    round added an effect, against the final model (:meth:`l1b2.closeloop.runlevel.RunLevelAnalysis.round_record`:
+    its last entry is what the final model leaves);
     ``event_clocks`` the event clocks derived from logged step channels (:mod:`l1b2.closeloop.events`);
     ``lagged_channels`` the low-passes derived from logged run settings and the drive amplitude's step from its
     previous setting (:mod:`l1b2.closeloop.lags`);
@@ -187,6 +190,7 @@ class Diagnosis(_Record):
     auxiliary_columns: list = field(default_factory=list)
     response_test: list = field(default_factory=list)
     rest_before_onset: Any = None
+    run_level_rounds: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
         out = {f.name: getattr(self, f.name) for f in fields(self)}
@@ -321,6 +325,22 @@ def undetermined_line(parameters: Mapping) -> str:
             "the predictions do not change, to first order, along a direction of them; the data may lack it, or the "
             "fit may sit where a parameter's effect vanishes): their values are one point of that direction, and "
             "predictions beyond TRAIN's plan (TEST) depend on where it lies")
+
+
+def left_line(rounds: list, p_show: float = 0.05) -> str:
+    """``report.md``'s line on the run-level evidence against the final model (the last entry of
+    ``diagnosis.run_level_rounds``): the signals it leaves significant at the Bonferroni level and those below
+    ``p_show`` that are not, each with its p-value; empty when no analysis was made."""
+    if not rounds:
+        return ""
+    last = rounds[-1]
+    sig = [f"{s['signal']} (p {s['p_value']:.2g})" for s in last["signals"] if s["significant"]]
+    near = [f"{s['signal']} (p {s['p_value']:.2g})" for s in last["signals"]
+            if not s["significant"] and s["p_value"] < p_show]
+    return (f"Run-level evidence left against the final model (the runs' deviations from it, "
+            f"{'after the last round' if last['round'] is None else 'in round ' + str(last['round'])}): "
+            f"significant at the Bonferroni level {last['significance_level']:.2g}: {', '.join(sig) or 'none'}; "
+            f"below p {p_show:g} but not significant: {', '.join(near) or 'none'}.")
 
 
 def pct(x, spec: str = ".2%") -> str:

@@ -28,8 +28,8 @@ from ..jsonio import dumps, sig, strict_json
 from ..predictor.effects import ExtendedPredictor
 from . import residuals as res
 from .crosscheck import describe
-from .report import (SCHEMA_VERSION, Diagnosis, ReportFormatError, Round, chain_line, loop_check_lines, pct,
-                     response_test_lines)
+from .report import (SCHEMA_VERSION, Diagnosis, ReportFormatError, Round, chain_line, left_line, loop_check_lines,
+                     pct, response_test_lines)
 from .selection import Score
 
 #: file names (without ``.png``) of the figures, in report order
@@ -414,6 +414,8 @@ def markdown_report(rep: dict) -> str:
         lines += [f"- `{a['channel']}`: {a['action']}: {a['note']}" for a in d["auxiliary_columns"]]
     if d.get("run_level"):
         lines += ["", run_level_line(d["run_level"])]
+    if line := left_line(d.get("run_level_rounds") or []):
+        lines += ["", line]
     lines += ["", "## Residual evidence per regressor (first round, cross-validated over runs)", "",
               "| regressor | held-out gain | p (runs) |", "|---|---|---|"]
     for e in d["regressor_evidence"][0] if d["regressor_evidence"] else []:

@@ -514,6 +514,17 @@ class RunLevelAnalysis:
                 "dominated_signals": {e.label: e.dominated_by for e in self.significant if e.dominated_by}}
 
 
+    def round_record(self, round_: int | None) -> dict:
+        """One entry of ``diagnosis.run_level_rounds``: this analysis against the model entering round ``round_``
+        (None: the final model, after a last round that added an effect), the summary of :meth:`to_dict` and every
+        signal's evidence (``signal``, ``p_value``, ``cv_gain``, ``significant``, ``dominated_by``), the smallest
+        p-value first."""
+        rows = sorted(self.evidence, key=lambda e: e.p_value)
+        return {"round": round_, **self.to_dict(),
+                "signals": [{"signal": e.label, "p_value": float(e.p_value), "cv_gain": float(e.cv_gain),
+                             "significant": bool(e.significant), "dominated_by": e.dominated_by} for e in rows]}
+
+
 def analyse(df: pd.DataFrame, model, mask: np.ndarray, channels, *, alpha: float, k: int,
             seed: int) -> RunLevelAnalysis:
     """Deviations of every run from ``model``, their REML shrinkage and every run-level signal's evidence."""
