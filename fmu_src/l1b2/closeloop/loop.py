@@ -361,6 +361,7 @@ class CloseLoop(EstimatorSettings):
                               "regressors": list(pick.candidate.regressors), "cv": pick.to_dict(),
                               "metrics": report(model)})
         if rl_of is not None and rl_of is not it.model:     # the last round added an effect: what it leaves
+            say("the final model: run-level deviations and the signals left")
             it.run_levels.append(runlevel.analyse(dtr, it.model, mask, it.channels, alpha=self.alpha, k=self.k_folds,
                                                   seed=self.seed).round_record(None))
 
