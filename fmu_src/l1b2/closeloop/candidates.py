@@ -240,8 +240,8 @@ def is_along_stroke(df: pd.DataFrame, name: str) -> bool:
 def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
     """The candidate channels of a frame: every numeric column beyond the required ones and the speed, then the clock.
 
-    One ``{"name", "kind", "mean", "sd", "lo", "hi", "within_run", "run_values", "run_spread"}`` each (``lo``/``hi``: the
-    smallest and largest value; ``kind``:
+    One ``{"name", "kind", "mean", "sd", "lo", "hi", "within_run", "run_values", "run_spread"}`` each (``lo``/``hi``:
+    the smallest and largest value; ``kind``:
     ``"logged"``, ``"protocol"`` for the session clock ``time_s``, ``"run_clock"`` for the run's own clock
     :data:`l1b2.predictor.effects.channels.RUN_CLOCK` (:mod:`l1b2.closeloop.runclock`: offered along the stroke only),
     ``"response"`` for a measured response of the motor (``response_columns``, default

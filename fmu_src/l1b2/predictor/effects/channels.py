@@ -38,7 +38,11 @@ enters in one of four generic forms, each linear in one parameter ``a``
 in one of three shapes, Hermite polynomials of ``zc`` (``z`` clipped to TRAIN's range of the channel, flat
 beyond it): ``linear`` (the factor times ``a z``, one parameter, unclipped), ``quadratic`` (``a zc + b (zc^2 -
 1)``: an even part, a response that peaks inside the range) or ``odd`` (``a zc + c (zc^3 - 3 zc)``: an odd part, a
-response that saturates, which the even square cannot take); a logged channel only: the session clock keeps
+response that saturates, which the even square cannot take), and, at the run level for a logged channel with at
+least :data:`PEAK_MIN_RUN_VALUES` distinct run values, ``peak`` (:func:`peak_column`: ``a (1 / (1 + ((zc - z0) /
+w)^2) - its mean over TRAIN's range)``, a response confined to a band of the channel, a resonance; ``z0`` and ``w``
+chosen on :func:`peak_grid`, one hypothesis per grid point, each recording the grid's size ``grid_points``); a
+logged channel only: the session clock keeps
 the linear shape, its curvature is the generic time spline's, :mod:`l1b2.predictor.effects.generic`; and at one of
 two levels: ``run`` (``c`` is the run's mean of the channel: an effect that differs between runs, not along the
 stroke) or ``sample`` (``c`` is the sample's value: along the stroke; listed only for a channel that varies within
