@@ -180,17 +180,18 @@ def peak_profile(scores: list[Score], family: str) -> dict | None:
     half width the screen chose (``z0_sd``, ``w_sd`` in standard deviations of the channel; ``centre``,
     ``half_width`` in its units), its form, gain and p-value (already multiplied by the grid's size,
     ``grid_points``). ``profile_95``: the ranges of centre and half width over the grid points of that form whose
-    in-sample log-likelihood (``n_eff log SSE``, the screen's AIC less its parameter term) is within
-    :data:`CHI2_2_95` / 2 of the best point's: the values the data do not tell from the chosen one, given the
-    grid (an interval on the grid, not a fitted value's standard error)."""
+    in-sample log-likelihood, counting each TRAIN run once (``n_runs log SSE``, :attr:`Score.dll_runs`: a run-level
+    shape is informed by the runs, not by their correlated samples), is within :data:`CHI2_2_95` / 2 of the best
+    point's: the values the data do not tell from the chosen one, given the grid (an interval on the grid, not a
+    fitted value's standard error)."""
     peaks = [s for s in scores if s.candidate.family == family and s.candidate.spec.get("shape") == "peak"]
     if not peaks:
         return None
     best = max(peaks, key=lambda s: s.cv_gain)
     spec = best.candidate.spec
     form = [s for s in peaks if s.candidate.spec.get("form") == spec.get("form")]
-    top = min(s.delta_aic for s in form)
-    near = [s.candidate.spec for s in form if s.delta_aic - top <= CHI2_2_95]
+    top = min(s.dll_runs for s in form)
+    near = [s.candidate.spec for s in form if s.dll_runs - top <= CHI2_2_95]
     mean, sd = float(spec["mean"]), float(spec["sd"])
     return {"best": best.candidate.label, "form": spec.get("form"), "z0_sd": float(spec["z0"]),
             "w_sd": float(spec["w"]), "centre": mean + float(spec["z0"]) * sd, "half_width": float(spec["w"]) * sd,

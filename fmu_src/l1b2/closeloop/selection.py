@@ -152,6 +152,10 @@ class Score:
     delta_bic: float
     phi: np.ndarray
     delta_aic: float = 0.0
+    #: the in-sample log-likelihood change counting each TRAIN run once, ``n_runs log(SSE_1 / SSE_0)``: the scale of
+    #: a run-level shape's profile over its grid (:func:`l1b2.closeloop.evidence.peak_profile`), where the samples
+    #: of one run do not inform the shape independently
+    dll_runs: float = 0.0
 
     def to_dict(self) -> dict:
         """The report's row of this candidate (``effect`` is the candidate's family)."""
@@ -488,6 +492,7 @@ def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5,
     y, runs_m = r_drive[idx], runs[idx]
     folds = res.run_folds(runs_m, k, seed) if folds is None else folds
     n_eff = _effective_n(y, runs_m)
+    n_runs = len(pd.unique(runs_m))
     feats = [np.asarray(c.features(df), float).reshape(len(df), -1) for c in candidates]
     widths = [f.shape[1] for f in feats]
     with np.errstate(over="ignore", invalid="ignore"):   # a diverging response is left out below, not warned of
@@ -524,14 +529,14 @@ def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5,
         sse1, coef = next(fits)
         dll = n_eff * math.log(max(sse1, 1e-300) / max(sse0, 1e-300))
         if not next(kept):
-            out.append(Score(c, 0.0, 1.0, 0.0, dll + w * math.log(n_eff), coef, dll + 2 * w))
+            out.append(Score(c, 0.0, 1.0, 0.0, dll + w * math.log(n_eff), coef, dll + 2 * w, dll * n_runs / n_eff))
             continue
         gain, per_run = next(cv)
         if time_solver is not solver and time_dependent(c):   # scored on session blocks
             gain, per_run = time_solver.gain(np.ascontiguousarray(S_all[:, start:start + w]))
         p = min(1.0, res.wilcoxon_greater(per_run) * search_count(c))
         out.append(Score(c, gain, p, float(np.mean(per_run > 0)),
-                         dll + w * math.log(n_eff), coef, dll + 2 * w))
+                         dll + w * math.log(n_eff), coef, dll + 2 * w, dll * n_runs / n_eff))
     return out
 
 
