@@ -190,3 +190,45 @@ def test_predictor_fmu_evaluates_the_peak_as_the_loop_fitted_it():
         x = {"V0": np.array([V0]), "d": np.array([1.0]), "run:line_pressure_bar": np.array([value])}
         assert got == pytest.approx(float(fx.effect_features(h.spec, x)[0, 0] * a), rel=1e-12)
     assert abs(_stepped_force(ep, V0=V0, line_pressure_bar=2.3 + h.spec["z0"] * 0.4)) > 0.3 * a
+
+
+def test_the_exported_fmu_reproduces_the_free_run_of_the_loops_peak(tmp_path, isolated):
+    # reference: the identification's own free run (l1b2.predictor.simulate.free_run with the candidate's force, the
+    # run-level pressure each run's mean by groupby) of a peak of a logged run setting; the Predictor.fmu exported
+    # from it, driven through fmpy with the channel as its input, within 1e-10 relative
+    import test_predictor_fmu_channels as tf
+    from l1b2.data import measurements as dataio
+    from l1b2.fmi.export import export_calibrated
+    from l1b2.predictor.effects import ExtendedPredictor
+    from l1b2.predictor.simulate import free_run
+    base, refit = tf._setups()
+    df = tf._frame()
+    rec = next(c for c in channels_of(df) if c["name"] == "line_pressure_bar")
+    summary = fx.TrainingSummary(1.0, (0.0, 10.0), (-0.02, 0.02), 300.0, {},
+                                 channels=({**rec, "run_values": ch.PEAK_MIN_RUN_VALUES},))
+    h = next(h for h in fx.family("channel").grid(summary) if h.spec.get("shape") == "peak"
+             and h.spec["form"] == "force_factor" and h.spec["w"] == 0.5 and abs(h.spec["z0"]) < 0.5)
+    F = np.asarray(candidate(tf._ctx(base), h).features(df))[:, 0]
+    phi = 0.1 / np.sqrt(np.mean(F ** 2))
+    run = df[dataio.RUN].to_numpy()
+    v_start = [0.1 * d for d, *_ in tf.RUN_TABLE]
+    args = (df[dataio.POSITION], df[dataio.VOLTAGE], df[dataio.LOAD], df[dataio.DIRECTION], df[dataio.TIME], v_start,
+            refit.slider_mass_kg, run)
+    want = free_run(refit.params, *args, extra_force=F * phi)
+    assert np.max(np.abs(want - free_run(refit.params, *args))) > 1e-4   # not vacuous
+    ep = ExtendedPredictor(base, refit, (tf._effect(h, (phi,)),), None, {"train": "synthetic"})
+    man = export_calibrated(ep, tmp_path / "out")
+    assert man["inputs"] == ["V0", "s", "load", "direction", "line_pressure_bar"]
+    assert man["native"]["Predictor"]["included"] is False
+    path = tmp_path / "out" / "fmus" / "Predictor.fmu"
+    names = ["V0", "s", "load", "direction", "line_pressure_bar"]
+    runs = []
+    for i, v0 in enumerate(v_start):
+        sel_ = df[dataio.RUN] == i
+        r = {"t": df.loc[sel_, dataio.TIME].tolist(), "v_start": v0}
+        for name, col in zip(names, (dataio.VOLTAGE, dataio.POSITION, dataio.LOAD, dataio.DIRECTION,
+                                     "line_pressure_bar")):
+            r[name] = df.loc[sel_, col].tolist()
+        runs.append(r)
+    got = np.concatenate(isolated(tf.__file__, "worker_fmpy", str(path), runs, names).value)
+    np.testing.assert_allclose(got[:, 0], want, rtol=1e-10, atol=1e-14)
