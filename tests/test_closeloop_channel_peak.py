@@ -232,3 +232,24 @@ def test_the_exported_fmu_reproduces_the_free_run_of_the_loops_peak(tmp_path, is
         runs.append(r)
     got = np.concatenate(isolated(tf.__file__, "worker_fmpy", str(path), runs, names).value)
     np.testing.assert_allclose(got[:, 0], want, rtol=1e-10, atol=1e-14)
+
+
+def test_the_profile_region_is_the_grid_points_near_the_best_widened_to_their_cells():
+    # reference: a grid on [-1.5, 1.5] (sd 2, mean 10), run-counted log-likelihoods written by hand: the best point
+    # (z0 -0.25, w 0.25), a neighbour 4 below the 5.99 limit, the rest far; the region spans both points' cells
+    # (centre +- half the spacing 0.25 of its width's centres; half width / sqrt 2 .. * sqrt 2), in channel units
+    spec = {"kind": "channel", "form": "force", "mean": 10.0, "sd": 2.0, "lo": 7.0, "hi": 13.0, "shape": "peak"}
+    grid = ch.peak_grid(-1.5, 1.5)
+    ll = {(-0.25, 0.25): -50.0, (0.0, 0.25): -46.0}
+
+    def score(i, z0, w):
+        c = sel.CandidateForce("channel_aux", "aux", str(i), ("a",), ("N",), lambda d: None,
+                               spec={**spec, "z0": z0, "w": w, "grid_points": len(grid)})
+        return sel.Score(c, 0.2 if (z0, w) == (-0.25, 0.25) else 0.0, 0.5, 0.0, 0.0, np.zeros(1), 0.0,
+                         ll.get((z0, w), 0.0))
+    prof = peak_profile([score(i, z0, w) for i, (z0, w) in enumerate(grid)], "channel_aux")
+    assert (prof["z0_sd"], prof["w_sd"], prof["centre"], prof["half_width"]) == (-0.25, 0.25, 9.5, 0.5)
+    assert prof["profile_95"]["grid_points"] == 2
+    np.testing.assert_allclose(prof["profile_95"]["centre"], [10.0 + 2.0 * -0.375, 10.0 + 2.0 * 0.125])
+    np.testing.assert_allclose(prof["profile_95"]["half_width"], [0.5 / np.sqrt(2.0), 0.5 * np.sqrt(2.0)])
+    assert peak_profile([score(0, 0.0, 0.25)], "channel_other") is None

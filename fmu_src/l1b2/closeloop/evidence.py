@@ -182,8 +182,10 @@ def peak_profile(scores: list[Score], family: str) -> dict | None:
     ``grid_points``). ``profile_95``: the ranges of centre and half width over the grid points of that form whose
     in-sample log-likelihood, counting each TRAIN run once (``n_runs log SSE``, :attr:`Score.dll_runs`: a run-level
     shape is informed by the runs, not by their correlated samples), is within :data:`CHI2_2_95` / 2 of the best
-    point's: the values the data do not tell from the chosen one, given the grid (an interval on the grid, not a
-    fitted value's standard error)."""
+    point's: the values the data do not tell from the chosen one, given the grid, each widened to its grid cell (a
+    centre by half its width's centre spacing, within TRAIN's range; a half width by a factor sqrt(2), half the
+    grid's factor 2), since the best value between grid points is as likely as the point (an interval on the grid,
+    not a fitted value's standard error)."""
     peaks = [s for s in scores if s.candidate.family == family and s.candidate.spec.get("shape") == "peak"]
     if not peaks:
         return None
@@ -193,12 +195,17 @@ def peak_profile(scores: list[Score], family: str) -> dict | None:
     top = min(s.dll_runs for s in form)
     near = [s.candidate.spec for s in form if s.dll_runs - top <= CHI2_2_95]
     mean, sd = float(spec["mean"]), float(spec["sd"])
+    z_lo, z_hi = (float(spec["lo"]) - mean) / sd, (float(spec["hi"]) - mean) / sd
+    half = {w: 0.5 * (z_hi - z_lo) / max(np.ceil((z_hi - z_lo) / w - 1e-9), 1.0) for w in {n["w"] for n in near}}
+    c_lo = max(z_lo, min(n["z0"] - half[n["w"]] for n in near))
+    c_hi = min(z_hi, max(n["z0"] + half[n["w"]] for n in near))
     return {"best": best.candidate.label, "form": spec.get("form"), "z0_sd": float(spec["z0"]),
             "w_sd": float(spec["w"]), "centre": mean + float(spec["z0"]) * sd, "half_width": float(spec["w"]) * sd,
             "grid_points": int(spec.get("grid_points", 1)), "cv_gain": float(best.cv_gain),
             "p_value": float(best.p_value),
-            "profile_95": {"centre": [mean + min(n["z0"] for n in near) * sd, mean + max(n["z0"] for n in near) * sd],
-                           "half_width": [min(n["w"] for n in near) * sd, max(n["w"] for n in near) * sd],
+            "profile_95": {"centre": [mean + c_lo * sd, mean + c_hi * sd],
+                           "half_width": [min(n["w"] for n in near) * sd / np.sqrt(2.0),
+                                          max(n["w"] for n in near) * sd * np.sqrt(2.0)],
                            "grid_points": len(near)}}
 
 
