@@ -253,3 +253,19 @@ def test_the_profile_region_is_the_grid_points_near_the_best_widened_to_their_ce
     np.testing.assert_allclose(prof["profile_95"]["centre"], [10.0 + 2.0 * -0.375, 10.0 + 2.0 * 0.125])
     np.testing.assert_allclose(prof["profile_95"]["half_width"], [0.5 / np.sqrt(2.0), 0.5 * np.sqrt(2.0)])
     assert peak_profile([score(0, 0.0, 0.25)], "channel_other") is None
+
+
+def test_between_families_the_parsimony_rule_counts_the_peaks_centre_and_width():
+    # reference: prefer's rule, fewest parameters within the parsimony of the best gain: a peak (1 amplitude + centre
+    # and width on a grid = 3) loses to a two-parameter quadratic of another channel whose gain is within it, and wins
+    # against a four-parameter one
+    from types import SimpleNamespace
+    from l1b2.closeloop.loop import prefer
+
+    def trial(fam, shape, k, gain):
+        c = sel.CandidateForce(fam, fam, shape, tuple(f"p{i}" for i in range(k)), ("N",) * k, lambda d: None,
+                               generic=True, spec={"kind": "channel", "level": "run", "shape": shape})
+        return SimpleNamespace(candidate=c, gain=gain)
+    peak = trial("channel_a", "peak", 1, 0.50)
+    assert prefer([peak, trial("channel_b", "quadratic", 2, 0.48)], 0.9).candidate.family == "channel_b"
+    assert prefer([peak, trial("channel_b", "quadratic", 4, 0.48)], 0.9).candidate.family == "channel_a"
