@@ -240,8 +240,8 @@ def is_along_stroke(df: pd.DataFrame, name: str) -> bool:
 def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
     """The candidate channels of a frame: every numeric column beyond the required ones and the speed, then the clock.
 
-    One ``{"name", "kind", "mean", "sd", "lo", "hi", "within_run", "run_spread"}`` each (``lo``/``hi``: the
-    smallest and largest value; ``kind``:
+    One ``{"name", "kind", "mean", "sd", "lo", "hi", "within_run", "run_values", "run_spread"}`` each (``lo``/``hi``:
+    the smallest and largest value; ``kind``:
     ``"logged"``, ``"protocol"`` for the session clock ``time_s``, ``"run_clock"`` for the run's own clock
     :data:`l1b2.predictor.effects.channels.RUN_CLOCK` (:mod:`l1b2.closeloop.runclock`: offered along the stroke only),
     ``"response"`` for a measured response of the motor (``response_columns``, default
@@ -249,7 +249,7 @@ def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
     column coded by :func:`l1b2.closeloop.auxiliary.with_usable_channels` (its codes have no order: only the
     categorical run-level family reads them);
     ``sd`` 0 for a constant column, which is listed but gets no hypothesis;
-    ``within_run``: it varies inside some run; ``run_spread``:
+    ``within_run``: it varies inside some run; ``run_values``: how many distinct run means it has; ``run_spread``:
     :func:`l1b2.predictor.effects.channels.run_spread`; ``along_stroke``: a logged channel whose variation within
     runs is a function of the position rather than of the run's clock (:func:`is_along_stroke`), offered at the
     sample level only and with no run-level signal).
@@ -268,8 +268,9 @@ def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
         kind = ("protocol" if name == dataio.TIME else "run_clock" if name == fx.channels.RUN_CLOCK
                 else "response" if name in responses else "label" if name in labels else "logged")
         along = bool(kind == "logged" and within and is_along_stroke(df, name))
+        run_values = len(np.unique(df.groupby(dataio.RUN, sort=False)[name].mean().to_numpy(float)))
         out.append({"name": str(name), "kind": kind, "mean": float(np.mean(c)), "sd": float(np.std(c)),
-                    "lo": float(np.min(c)), "hi": float(np.max(c)), "within_run": within,
+                    "lo": float(np.min(c)), "hi": float(np.max(c)), "within_run": within, "run_values": run_values,
                     "run_spread": fx.channels.run_spread(c, df[dataio.RUN]), "along_stroke": along})
     return tuple(out)
 

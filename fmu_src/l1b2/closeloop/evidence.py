@@ -116,7 +116,7 @@ def channels_considered(channels, scores: list[Score], level: float, min_gain: f
     the baseline's re-identification absorbs, so a within-run form is credited only for the rest, and a channel
     near 1 cannot be told from the position along the stroke. ``not_added``: for a significant row that was not
     added, why (:func:`not_added_reason` over ``trials``, the rounds' refit trials as dicts, and ``picked``, the
-    label each round added), else None.
+    label each round added), else None. ``peak``: :func:`peak_profile` of the family (None: no peak listed).
     """
     from ..predictor.effects.channels import INPUT_SIGNALS, regressor_of
     best = {s.candidate.family: s for s in best_per_family(scores)}
@@ -149,13 +149,14 @@ def channels_considered(channels, scores: list[Score], level: float, min_gain: f
         else:
             rec.update(best=s.candidate.label, cv_gain=float(s.cv_gain), p_value=float(s.p_value),
                        significant=bool(s.cv_gain >= min_gain and s.p_value < level and s.delta_aic < 0))
+        rec["peak"] = peak_profile(scores, fam)
         rec["run_level"] = [e.to_dict() for e in ev.get(ch["name"], [])]
         rec["added"] = rec["added"] or any(f"run_level_{e.label}" in added for e in ev.get(ch["name"], []))
         out.append(rec)
     for col in dict.fromkeys(c for c, _ in INPUT_SIGNALS):
         rows = ev.get(col, [])
         out.append({"channel": col, "kind": "input", "regressor": regressor_of(col), "varies_within_runs": False,
-                    "best": None, "cv_gain": None, "p_value": None, "position_share": None,
+                    "best": None, "cv_gain": None, "p_value": None, "position_share": None, "peak": None,
                     "significant": any(e.significant for e in rows),
                     "added": any(f"run_level_{e.label}" in added for e in rows),
                     "note": "an input of the model: run-level evidence only" if rows
@@ -166,6 +167,46 @@ def channels_considered(channels, scores: list[Score], level: float, min_gain: f
         rec["not_added"] = (not_added_reason(fams, trials, picked) if rec["significant"] and not rec["added"]
                             else None)
     return out
+
+
+#: the 95 % point of the chi-square law with two degrees of freedom (the peak's centre and width jointly)
+CHI2_2_95 = 5.991
+
+
+def peak_profile(scores: list[Score], family: str) -> dict | None:
+    """The peak of a channel's family on its grid, with the profile likelihood's 95 % region (None: no peak scored).
+
+    The best-gain peak hypothesis of ``family`` (:data:`l1b2.predictor.effects.channels.PEAK`) names the centre and
+    half width the screen chose (``z0_sd``, ``w_sd`` in standard deviations of the channel; ``centre``,
+    ``half_width`` in its units), its form, gain and p-value (already multiplied by the grid's size,
+    ``grid_points``). ``profile_95``: the ranges of centre and half width over the grid points of that form whose
+    in-sample log-likelihood, counting each TRAIN run once (``n_runs log SSE``, :attr:`Score.dll_runs`: a run-level
+    shape is informed by the runs, not by their correlated samples), is within :data:`CHI2_2_95` / 2 of the best
+    point's: the values the data do not tell from the chosen one, given the grid, each widened to its grid cell (a
+    centre by half its width's centre spacing, within TRAIN's range; a half width by a factor sqrt(2), half the
+    grid's factor 2), since the best value between grid points is as likely as the point (an interval on the grid,
+    not a fitted value's standard error)."""
+    peaks = [s for s in scores if s.candidate.family == family and s.candidate.spec.get("shape") == "peak"]
+    if not peaks:
+        return None
+    best = max(peaks, key=lambda s: s.cv_gain)
+    spec = best.candidate.spec
+    form = [s for s in peaks if s.candidate.spec.get("form") == spec.get("form")]
+    top = min(s.dll_runs for s in form)
+    near = [s.candidate.spec for s in form if s.dll_runs - top <= CHI2_2_95]
+    mean, sd = float(spec["mean"]), float(spec["sd"])
+    z_lo, z_hi = (float(spec["lo"]) - mean) / sd, (float(spec["hi"]) - mean) / sd
+    half = {w: 0.5 * (z_hi - z_lo) / max(np.ceil((z_hi - z_lo) / w - 1e-9), 1.0) for w in {n["w"] for n in near}}
+    c_lo = max(z_lo, min(n["z0"] - half[n["w"]] for n in near))
+    c_hi = min(z_hi, max(n["z0"] + half[n["w"]] for n in near))
+    return {"best": best.candidate.label, "form": spec.get("form"), "z0_sd": float(spec["z0"]),
+            "w_sd": float(spec["w"]), "centre": mean + float(spec["z0"]) * sd, "half_width": float(spec["w"]) * sd,
+            "grid_points": int(spec.get("grid_points", 1)), "cv_gain": float(best.cv_gain),
+            "p_value": float(best.p_value),
+            "profile_95": {"centre": [mean + c_lo * sd, mean + c_hi * sd],
+                           "half_width": [min(n["w"] for n in near) * sd / np.sqrt(2.0),
+                                          max(n["w"] for n in near) * sd * np.sqrt(2.0)],
+                           "grid_points": len(near)}}
 
 
 def not_added_reason(families, trials, picked=()) -> str:
@@ -230,5 +271,5 @@ def with_auxiliary(rows: list[dict], auxiliary) -> list[dict]:
             out.append({"channel": aux["channel"], "kind": "unusable", "regressor": None, "varies_within_runs": None,
                         "best": None, "cv_gain": None, "p_value": None, "significant": False, "added": False,
                         "prepared": "unusable", "note": aux["note"], "forms": {}, "run_level": [],
-                        "position_share": None})
+                        "position_share": None, "peak": None})
     return out

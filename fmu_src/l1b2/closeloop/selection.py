@@ -152,6 +152,10 @@ class Score:
     delta_bic: float
     phi: np.ndarray
     delta_aic: float = 0.0
+    #: the in-sample log-likelihood change counting each TRAIN run once, ``n_runs log(SSE_1 / SSE_0)``: the scale of
+    #: a run-level shape's profile over its grid (:func:`l1b2.closeloop.evidence.peak_profile`), where the samples
+    #: of one run do not inform the shape independently
+    dll_runs: float = 0.0
 
     def to_dict(self) -> dict:
         """The report's row of this candidate (``effect`` is the candidate's family)."""
@@ -380,6 +384,20 @@ def named_alternatives(short: list[Score], scores: list[Score], share, *, min_ga
     return out
 
 
+def search_count(candidate: CandidateForce) -> int:
+    """How many hypotheses a candidate's shape was chosen among (its spec's ``grid_points``, 1 without one): a
+    channel's peak is one point of a grid of centres and widths (:func:`l1b2.predictor.effects.channels.peak_grid`)
+    that the screen searches, so its run-level p-value is multiplied by the grid's size (Bonferroni over the grid,
+    on top of the correction over families)."""
+    return max(int(candidate.spec.get("grid_points", 1)), 1)
+
+
+def searched_params(candidate: CandidateForce) -> int:
+    """How many shape parameters of a candidate were chosen on a grid rather than fitted: 2 for a channel's peak
+    (its centre and width), else 0 (the parsimony rule of :func:`simplest_within_one_se` counts them)."""
+    return 2 if shape_of(candidate) == "peak" else 0
+
+
 def shape_of(candidate: CandidateForce) -> str:
     """The shape of a candidate within its family: its spec's ``shape`` (a channel's ``linear``, ``quadratic`` or
     ``odd``; ``linear`` for a spec without one)."""
@@ -421,7 +439,8 @@ def simplest_within_one_se(accepted: list) -> list:
     Per family of ``accepted`` (:class:`~l1b2.closeloop.acceptance.RefitCV` trials; a family has several when
     :func:`shape_alternatives` sent its other shapes to the refit), the trial with the largest cross-validated gain
     (:func:`best_per_family`) and every trial whose gain is below it by at most one standard error of the gap are
-    candidates; the simplest is kept: fewest parameters, then the lowest :func:`shape_degree`, then the largest
+    candidates; the simplest is kept: fewest parameters (those a grid chose counted, :func:`searched_params`), then
+    the lowest :func:`shape_degree`, then the largest
     gain. The gap and its standard error are paired per held-out run
     (:func:`~l1b2.closeloop.acceptance.one_se_gap_per_run`, on the same folds and current model): per run ``r``,
     ``delta_r = (SSE_trial_r - SSE_best_r) / mean_r SSE_current_r``, the gap ``mean(delta)`` (the pooled gains'
@@ -441,7 +460,7 @@ def simplest_within_one_se(accepted: list) -> list:
     for t in accepted:
         if close(t):
             f = t.candidate.family
-            key = (t.candidate.n_params, shape_degree(t.candidate), -t.gain)
+            key = (t.candidate.n_params + searched_params(t.candidate), shape_degree(t.candidate), -t.gain)
             if f not in keep or key < keep[f][0]:
                 keep[f] = (key, t)
     kept = {id(t) for _, t in keep.values()}
@@ -450,7 +469,11 @@ def simplest_within_one_se(accepted: list) -> list:
 
 def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5, seed=0,
                      time_folds=None, folds=None) -> list[Score]:
-    """Cross-validated gain, run-level p-value and AIC/BIC change of every candidate.
+    """Cross-validated gain, run-level p-value (times :func:`search_count`) and AIC/BIC change of every candidate.
+
+    A searched shape's grid (a channel's peak) is profiled first: of each group's points only the best in-sample
+    fit is cross-validated (:func:`profile_choice`); the others get gain 0 and p-value 1 with their in-sample AIC
+    and BIC change (the profile likelihood over the grid).
 
     The regression of the TRAIN residual on a candidate's free-run response
     includes the nuisance responses (:func:`nuisance_forces`) in both the
@@ -469,6 +492,7 @@ def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5,
     y, runs_m = r_drive[idx], runs[idx]
     folds = res.run_folds(runs_m, k, seed) if folds is None else folds
     n_eff = _effective_n(y, runs_m)
+    n_runs = len(pd.unique(runs_m))
     feats = [np.asarray(c.features(df), float).reshape(len(df), -1) for c in candidates]
     widths = [f.shape[1] for f in feats]
     with np.errstate(over="ignore", invalid="ignore"):   # a diverging response is left out below, not warned of
@@ -487,22 +511,48 @@ def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5,
     w_ok = [w for w, u in zip(widths, usable) if u]
     S_ok = S_all if all(usable) else S_all[:, cols]   # a copy only when a candidate is left out
     work = (np.empty(S_ok.shape), np.empty(S_ok.shape)) if w_ok else None
-    cv = iter(solver.gains(S_ok, w_ok, work)) if w_ok else iter(())
     sse0, fits = insample_fits(A, y, S_ok, w_ok, work) if w_ok else (0.0, [])
-    fits = iter(fits)
+    kept = profile_choice([c for c, u in zip(candidates, usable) if u], [f[0] for f in fits])
+    if not all(kept):   # the grid points no better in-sample than their group's best are not cross-validated
+        starts = np.cumsum([0] + w_ok[:-1])
+        S_ok = S_ok[:, np.concatenate([np.arange(a, a + w) for a, w, k in zip(starts, w_ok, kept) if k]
+                                      + [np.zeros(0, int)]).astype(int)]
+        work = (np.empty(S_ok.shape), np.empty(S_ok.shape))
+    w_cv = [w for w, k in zip(w_ok, kept) if k]
+    cv = iter(solver.gains(S_ok, w_cv, work)) if w_cv else iter(())
+    fits, kept = iter(fits), iter(kept)
     out = []
     for c, w, u, start in zip(candidates, widths, usable, np.cumsum([0] + widths[:-1])):
         if not u:
             out.append(Score(c, 0.0, 1.0, 0.0, 0.0, np.zeros(w)))
             continue
-        gain, per_run = next(cv)
         sse1, coef = next(fits)
+        dll = n_eff * math.log(max(sse1, 1e-300) / max(sse0, 1e-300))
+        if not next(kept):
+            out.append(Score(c, 0.0, 1.0, 0.0, dll + w * math.log(n_eff), coef, dll + 2 * w, dll * n_runs / n_eff))
+            continue
+        gain, per_run = next(cv)
         if time_solver is not solver and time_dependent(c):   # scored on session blocks
             gain, per_run = time_solver.gain(np.ascontiguousarray(S_all[:, start:start + w]))
-        dll = n_eff * math.log(max(sse1, 1e-300) / max(sse0, 1e-300))
-        out.append(Score(c, gain, res.wilcoxon_greater(per_run), float(np.mean(per_run > 0)),
-                         dll + w * math.log(n_eff), coef, dll + 2 * w))
+        p = min(1.0, res.wilcoxon_greater(per_run) * search_count(c))
+        out.append(Score(c, gain, p, float(np.mean(per_run > 0)),
+                         dll + w * math.log(n_eff), coef, dll + 2 * w, dll * n_runs / n_eff))
     return out
+
+
+def profile_choice(candidates, sse) -> list[bool]:
+    """Which candidates the screen cross-validates: every one but the grid points of a searched shape (a
+    :func:`search_count` above 1) that are not their group's best in-sample fit (smallest ``sse``, the first of
+    equals); a group is a family's shape at one form and level (a channel's peak of one form: its grid of centres
+    and widths, profiled on TRAIN). The others are scored by their in-sample fit only (gain 0, p-value 1)."""
+    best: dict = {}
+    for i, c in enumerate(candidates):
+        if search_count(c) > 1:
+            key = (c.family, c.spec.get("form"), c.spec.get("level"), shape_of(c))
+            if key not in best or sse[i] < sse[best[key]]:
+                best[key] = i
+    chosen = set(best.values())
+    return [search_count(c) <= 1 or i in chosen for i, c in enumerate(candidates)]
 
 
 # ---------------------------------------------------------------------------

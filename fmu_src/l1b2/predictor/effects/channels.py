@@ -38,7 +38,11 @@ enters in one of four generic forms, each linear in one parameter ``a``
 in one of three shapes, Hermite polynomials of ``zc`` (``z`` clipped to TRAIN's range of the channel, flat
 beyond it): ``linear`` (the factor times ``a z``, one parameter, unclipped), ``quadratic`` (``a zc + b (zc^2 -
 1)``: an even part, a response that peaks inside the range) or ``odd`` (``a zc + c (zc^3 - 3 zc)``: an odd part, a
-response that saturates, which the even square cannot take); a logged channel only: the session clock keeps
+response that saturates, which the even square cannot take), and, at the run level for a logged channel with at
+least :data:`PEAK_MIN_RUN_VALUES` distinct run values, ``peak`` (:func:`peak_column`: ``a (1 / (1 + ((zc - z0) /
+w)^2) - its mean over TRAIN's range)``, a response confined to a band of the channel, a resonance; ``z0`` and ``w``
+chosen on :func:`peak_grid`, one hypothesis per grid point, each recording the grid's size ``grid_points``); a
+logged channel only: the session clock keeps
 the linear shape, its curvature is the generic time spline's, :mod:`l1b2.predictor.effects.generic`; and at one of
 two levels: ``run`` (``c`` is the run's mean of the channel: an effect that differs between runs, not along the
 stroke) or ``sample`` (``c`` is the sample's value: along the stroke; listed only for a channel that varies within
@@ -101,6 +105,26 @@ LEVELS = ("run", "sample")
 #: a channel's shapes: linear in ``z``, or ``z`` clipped to TRAIN's range and its second or third Hermite
 #: polynomial (:func:`shape_basis`)
 SHAPES = ("linear", "quadratic", "odd")
+#: a channel's peaked shape (:func:`peak_column`): a Lorentzian bump of ``zc`` centred at ``z0`` with half width ``w``
+#: (both in standard deviations of the channel, chosen on :func:`peak_grid`), minus its mean over TRAIN's range of
+#: ``zc``; one parameter. Not one of :data:`SHAPES` (the Hermite shapes, whose kernels the native FMU has): listed at
+#: the run level only (:data:`PEAK_LEVELS`), in :data:`PEAK_FORMS`, for a logged channel with at least
+#: :data:`PEAK_MIN_RUN_VALUES` distinct run values
+PEAK = "peak"
+#: the half widths of the peak's grid [standard deviations of the channel]: a factor 2 apart, from a quarter of one
+#: to one (two Lorentzians of half widths a factor 2 apart correlate at 0.94 at most, so the grid loses little)
+PEAK_WIDTHS = (0.25, 0.5, 1.0)
+#: the fewest distinct run values of a channel for its peak to be listed: a centre and a width need runs on both
+#: sides of the bump and beyond it
+PEAK_MIN_RUN_VALUES = 8
+#: the levels the peak is listed at: the run mean only. A run's value is one point of the bump, judged by the runs
+#: it separates (the screen's p-value counts runs); along the stroke a channel that drifts within a run would give a
+#: bump of the run's clock, which the generic time terms already offer
+PEAK_LEVELS = ("run",)
+#: the forms the peak is listed in: a resonance or a band of a logged setting changes a dissipation or a drive gain
+#: (the friction, the force factor, a force, the viscous damping); a moving mass that peaks in a setting is no
+#: generic physics, so the inertia form is left out, as is the load interaction
+PEAK_FORMS = FORCE_FORMS + ("damping",)
 #: the inputs a channel's effect may grow with (``by``): the load's size ``|m|/load_abs`` (:func:`interaction_basis`)
 INTERACTIONS = ("load",)
 #: the shapes listed with an interaction (:meth:`Channel.grid`)
@@ -294,7 +318,7 @@ class Channel(Effect):
         return interaction_basis(spec, x, factor[:, None] * shape_basis(spec, z))
 
     def width(self, spec):
-        n = 1 if spec.get("shape", "linear") == "linear" else 2
+        n = 1 if spec.get("shape", "linear") in ("linear", PEAK) else 2
         return 2 * n if spec.get("by") else n + (spec.get("form") == "inertia")
 
     def grid(self, train):
@@ -318,13 +342,25 @@ class Channel(Effect):
                     for by in ("",) + (INTERACTIONS if load_abs > 0 and shape in INTERACTION_SHAPES else ()):
                         for form in _forms(logged and not by, m_s, shape):
                             out.append(self._hypothesis(ch, reg, form, level, shape, by, load_abs, m_s, damping))
+                if logged and level in PEAK_LEVELS and int(ch.get("run_values", 0)) >= PEAK_MIN_RUN_VALUES:
+                    out += self._peaks(ch, reg, level, damping)
         return out
 
-    def _hypothesis(self, ch, reg, form, level, shape, by="", load_abs=0.0, m_s=0.0, damping=np.nan):
+    def _peaks(self, ch, reg, level, damping=np.nan) -> list:
+        """The peak's hypotheses of a channel at a level: one per form of :data:`PEAK_FORMS` and point ``(z0, w)``
+        of :func:`peak_grid` over TRAIN's range of the channel, each recording the grid's size (``grid_points``:
+        the screen's p-value of each is multiplied by it, :func:`l1b2.closeloop.selection.search_count`)."""
+        grid = peak_grid(*_z_range(ch, ch["lo"], ch["hi"]))
+        return [self._hypothesis(ch, reg, form, level, PEAK, damping=damping, peak=(z0, w, len(grid)))
+                for form in PEAK_FORMS for z0, w in grid]
+
+    def _hypothesis(self, ch, reg, form, level, shape, by="", load_abs=0.0, m_s=0.0, damping=np.nan, peak=None):
         name = ch["name"]
         spec = {"channel": name, "form": form, "level": level, "mean": float(ch["mean"]), "sd": float(ch["sd"]),
                 **run_spread_entry(ch, level), **({"m_s": float(m_s)} if form == "inertia" else {})}
         names = [f"{name}_{form}_{level}"]
+        if shape == PEAK:
+            return self._peak_hypothesis(ch, reg, spec, peak, damping)
         if shape != "linear":
             spec.update(shape=shape, lo=float(ch["lo"]), hi=float(ch["hi"]))
             names = ([f"{name}_{form}_{level}_lin", f"{name}_{form}_{level}_sq"] if shape == "quadratic" else
@@ -341,6 +377,40 @@ class Channel(Effect):
             family=f"channel_{name}", regressor=reg, generic=True, also=(regressor_of(_BY_COLUMN[by]),) if by else (),
             description=f"{ch.get('kind', 'logged')} channel {name} ({'run mean' if level == 'run' else 'per sample'}"
                         f"{extra}) {_FORM_TEXT[form]}{', growing with the load' if by else ''}")
+
+
+    def _peak_hypothesis(self, ch, reg, spec, peak, damping):
+        """A peak hypothesis (``peak``: its grid point ``z0``, ``w`` and the grid's size): the shape's text names the
+        point and the grid it was chosen on; the damping form keeps the total damping non-negative (bounds over
+        TRAIN's range: the centred bump's column lies between its values at the range's ends and at ``z0``)."""
+        z0, w, n = peak
+        name, form, level = ch["name"], spec["form"], spec["level"]
+        spec.update(shape=PEAK, lo=float(ch["lo"]), hi=float(ch["hi"]), z0=float(z0), w=float(w), grid_points=int(n))
+        shape = f"{form}, {level}, peak z0 {z0:+.2f} w {w:.2f} of {n}"
+        bounds = peak_damping_bounds(spec, damping) if form == "damping" else ()
+        return self.hypothesis(
+            [f"{name}_{form}_{level}_peak"], ["N"], spec, shape, bounds=bounds, family=f"channel_{name}",
+            regressor=reg, generic=True,
+            description=f"{ch.get('kind', 'logged')} channel {name} ({'run mean' if level == 'run' else 'per sample'}"
+                        f", a Lorentzian peak centred {z0:+.3g} sd from TRAIN's mean, half width {w:.3g} sd, both "
+                        f"chosen on a grid of {n} points) {_FORM_TEXT[form]}")
+
+
+def peak_damping_bounds(spec, damping: float) -> tuple:
+    """The range of the peak damping form's ``a`` [N] that keeps the total viscous damping ``damping + a p(zc) /
+    SPEED_REF`` non-negative over TRAIN's range, ``p`` the centred bump (:func:`peak_column`): ``p`` lies in
+    ``[p_min, p_max]`` (``p_max`` at ``z0``, ``p_min`` at an end of the range; ``p_min < 0 < p_max``), so
+    ``-damping SPEED_REF / p_max <= a <= damping SPEED_REF / (-p_min)``: ``((lower, upper),)``; ``()`` when
+    ``damping`` is not a positive number."""
+    if not damping > 0:
+        return ()
+    z_lo, z_hi = _z_range(spec, spec["lo"], spec["hi"])
+    z0, w = float(spec["z0"]), float(spec["w"])
+    p = peak_column(np.array([z_lo, z_hi, z0]), z0, w, z_lo, z_hi)
+    p_min, p_max = float(np.min(p)), float(np.max(p))
+    if not p_min < 0 < p_max:
+        return ()
+    return ((-damping * SPEED_REF / p_max, damping * SPEED_REF / -p_min),)
 
 
 def levels_of(ch) -> tuple:
@@ -452,6 +522,8 @@ def _shape_extremes(spec, phi, z_lo: float, z_hi: float) -> np.ndarray:
     elif shape == "odd" and phi[1] != 0 and 1.0 - phi[0] / (3.0 * phi[1]) > 0:
         r = np.sqrt(1.0 - phi[0] / (3.0 * phi[1]))
         z += [-r, r]
+    elif shape == PEAK:
+        z.append(num(spec, "z0"))
     return np.array([v for v in z if z_lo <= v <= z_hi], float)
 
 
@@ -468,13 +540,45 @@ def mass_floor(spec, phi, lo: float, hi: float) -> float:
     return float(num(spec, "m_s") * (1.0 + np.min(cols @ phi)))
 
 
+def peak_grid(z_lo: float, z_hi: float) -> list[tuple[float, float]]:
+    """The peak's grid of ``(z0, w)`` over TRAIN's range ``[z_lo, z_hi]`` of a channel's standardised value: for
+    each half width ``w`` of :data:`PEAK_WIDTHS`, the centres evenly spaced from ``z_lo`` to ``z_hi``, both ends
+    included, at most ``w`` apart (``ceil((z_hi - z_lo) / w) + 1`` of them). Empty for an empty range."""
+    if not z_hi > z_lo:
+        return []
+    out = []
+    for w in PEAK_WIDTHS:
+        n = int(np.ceil((z_hi - z_lo) / w - 1e-9)) + 1
+        out += [(float(z0), float(w)) for z0 in np.linspace(z_lo, z_hi, n)]
+    return out
+
+
+def peak_mean(z0: float, w: float, z_lo: float, z_hi: float) -> float:
+    """The mean of the bump ``1 / (1 + ((z - z0) / w)^2)`` over ``z`` uniform in ``[z_lo, z_hi]``:
+    ``w (atan((z_hi - z0) / w) - atan((z_lo - z0) / w)) / (z_hi - z_lo)`` (the peak's centring)."""
+    return float(w * (np.arctan((z_hi - z0) / w) - np.arctan((z_lo - z0) / w)) / (z_hi - z_lo))
+
+
+def peak_column(zc, z0: float, w: float, z_lo: float, z_hi: float) -> np.ndarray:
+    """The peak shape's column for clipped standardised values ``zc``: ``1 / (1 + ((zc - z0) / w)^2)`` minus
+    :func:`peak_mean` (its mean over TRAIN's range ``[z_lo, z_hi]``, so that its constant is not the baseline's)."""
+    if not w > 0:
+        raise EffectSpecError(f"channel shape 'peak': the half width w {w} is not positive")
+    u = (np.asarray(zc, float) - z0) / w
+    return 1.0 / (1.0 + u * u) - peak_mean(z0, w, z_lo, z_hi)
+
+
 def shape_basis(spec, z) -> np.ndarray:
     """The columns of a channel's shape for its standardised values ``z``: ``z`` (``linear``), or ``zc`` and
-    ``zc^2 - 1`` (``quadratic``) or ``zc`` and ``zc^3 - 3 zc`` (``odd``), ``zc`` = ``z`` clipped to TRAIN's range
+    ``zc^2 - 1`` (``quadratic``) or ``zc`` and ``zc^3 - 3 zc`` (``odd``), or the one column of :func:`peak_column`
+    with the spec's ``z0`` and ``w`` (``peak``), ``zc`` = ``z`` clipped to TRAIN's range
     ``[(lo - mean)/sd, (hi - mean)/sd]``."""
     shape = spec.get("shape", "linear")
     if shape == "linear":
         return np.asarray(z, float)[:, None]
+    if shape == PEAK:
+        z_lo, z_hi = _z_range(spec, num(spec, "lo"), num(spec, "hi"))
+        return peak_column(np.clip(z, z_lo, z_hi), num(spec, "z0"), num(spec, "w"), z_lo, z_hi)[:, None]
     if shape not in SHAPES:
         raise EffectSpecError(f"channel shape {shape!r} is not one of {', '.join(SHAPES)}")
     mean, sd = num(spec, "mean"), num(spec, "sd")
