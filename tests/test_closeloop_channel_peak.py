@@ -72,6 +72,8 @@ def test_the_channel_lists_the_peak_at_the_run_level_in_its_forms_with_the_grids
     rng = np.random.default_rng(4)
     runs = np.repeat(np.arange(12), 5)
     vals = {"aux": rng.uniform(0.0, 4.0, 12), "few": np.arange(12) % 7}  # 12 and 7 distinct run values
+    # the loop's derived histories of a setting (a low-pass over run periods, a step), 12 run values each
+    vals.update({"aux_lag3r": rng.uniform(0.0, 4.0, 12), "aux_step": rng.uniform(-2.0, 2.0, 12)})
     df = pd.DataFrame({"time_s": np.arange(60) * 0.1 + runs, "run": runs, "position_m": 0.0, "voltage_V": 300.0,
                        "direction": 1.0, "load_kg": 0.0, "speed_m_s": 0.1,
                        **{k: v[runs].astype(float) for k, v in vals.items()}})
@@ -80,7 +82,9 @@ def test_the_channel_lists_the_peak_at_the_run_level_in_its_forms_with_the_grids
     assert rec["aux"]["run_values"] == 12 and rec["few"]["run_values"] == 7
     hyps = fx.family("channel").grid(train)
     peaks = [h for h in hyps if h.spec.get("shape") == "peak"]
-    assert {h.spec["channel"] for h in peaks} == {"aux"}       # 7 distinct run values: not listed
+    assert {h.spec["channel"] for h in peaks} == {"aux"}       # 7 distinct run values, or a history: not listed
+    assert rec["aux_lag3r"]["run_values"] == rec["aux_step"]["run_values"] == 12
+    assert {h.spec["channel"] for h in hyps} >= {"aux_lag3r", "aux_step"}    # their Hermite shapes stay
     z_lo, z_hi = ((rec["aux"]["lo"] - rec["aux"]["mean"]) / rec["aux"]["sd"],
                   (rec["aux"]["hi"] - rec["aux"]["mean"]) / rec["aux"]["sd"])
     n = len(ch.peak_grid(z_lo, z_hi))

@@ -175,6 +175,13 @@ def _derived_base(name: str) -> tuple[str, str] | None:
     return None
 
 
+def is_setting_history(name: str) -> bool:
+    """Whether a channel's name is that of a setting's history the loop derives: a low-pass of a column over run
+    periods (``X_lag<n>r``) or a setting's step from its previous different setting (``X_step``)."""
+    derived = _derived_base(name)
+    return derived is not None and derived[0] in ("lag", "step")
+
+
 def column_unit(name: str) -> str | None:
     """The unit of a measured-data column as a key of :data:`UNITS`, None when neither the data format nor the
     name says it.

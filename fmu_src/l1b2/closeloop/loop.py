@@ -107,8 +107,7 @@ from .guard import checked_fit, checked_identification
 from .intervals import added_parameters, identification, train_levels
 from .result import CloseLoopResult, ResidualAnalysis
 from .selection import (Score, best_per_family, design, named_alternatives, nuisance_forces, score_candidates,
-                        screened, searched_params, shape_alternatives, significance_level,
-                        simplest_within_one_se)
+                        screened, searched_params, shape_alternatives, significance_level, simplest_within_one_se)
 
 
 def _quiet(msg: str) -> None:
@@ -301,7 +300,9 @@ class CloseLoop(EstimatorSettings):
             other, dtr, mask, m_s, lambda c: schemes[time_dependent(c)], self.refit_settings(),
             min_gain=self.min_cv_gain, final_nfev=self.final_nfev, clock=say)
         cur_err: dict = {}
-        rl_of = None     # the model the latest run-level analysis was made against
+        def analyse(mdl):   # the run-level analysis against a model; rl_of: the model of the latest one
+            return runlevel.analyse(dtr, mdl, mask, it.channels, alpha=self.alpha, k=self.k_folds, seed=self.seed)
+        rl_of = None
         for rnd in range(1, self.max_rounds + 1):
             n_rnd, cur = len(it.rounds), it.model
             say(f"round {n_rnd}: the current model's residual; screening the candidates against the added effects")
@@ -320,8 +321,7 @@ class CloseLoop(EstimatorSettings):
             rl = None
             if self.run_level and ctx is not None:
                 say(f"round {n_rnd}: run-level deviations and the signals that explain them")
-                rl = runlevel.analyse(dtr, cur, mask, it.channels, alpha=self.alpha, k=self.k_folds, seed=self.seed)
-                rl_of = cur
+                rl, rl_of = analyse(cur), cur
                 it.run_levels.append(rl.round_record(rnd))
                 offered = runlevel.offer(runlevel.candidates(rl, ctx), short, lambda c: (
                     c.family not in it.effects.families and not collinear(c, it.effects, dtr, mask, added=added)
@@ -363,8 +363,7 @@ class CloseLoop(EstimatorSettings):
                               "metrics": report(model)})
         if rl_of is not None and rl_of is not it.model:     # the last round added an effect: what it leaves
             say("the final model: run-level deviations and the signals left")
-            it.run_levels.append(runlevel.analyse(dtr, it.model, mask, it.channels, alpha=self.alpha, k=self.k_folds,
-                                                  seed=self.seed).round_record(None))
+            it.run_levels.append(analyse(it.model).round_record(None))
 
     def _identified_pick(self, it, ok, choose, confirm, cur, dtr, mask, m_s, n_rnd, say) -> tuple:
         """``(pick, model, checks)``: :func:`~l1b2.closeloop.crosscheck.identified_pick` of the accepted trials
@@ -632,8 +631,7 @@ class _Iteration:
     level: float = float("nan")
     output_filter: chain.OutputFilter | None = None
     speed_gain: GainChain | None = None   #: the speed sensor's gain along the stroke (measurement chain)
-    #: the kept sensor stages: the speed derived over the time stamps, the position sensor's cyclic error
-    sensor_stage: SensorChain | None = None
+    sensor_stage: SensorChain | None = None   #: the kept sensor stages (speed over the time stamps, cyclic error)
     channels: tuple = ()
     run_level: runlevel.RunLevelAnalysis | None = None
     run_levels: list = field(default_factory=list)   #: each round's run-level record, then the final model's

@@ -39,7 +39,8 @@ in one of three shapes, Hermite polynomials of ``zc`` (``z`` clipped to TRAIN's 
 beyond it): ``linear`` (the factor times ``a z``, one parameter, unclipped), ``quadratic`` (``a zc + b (zc^2 -
 1)``: an even part, a response that peaks inside the range) or ``odd`` (``a zc + c (zc^3 - 3 zc)``: an odd part, a
 response that saturates, which the even square cannot take), and, at the run level for a logged channel with at
-least :data:`PEAK_MIN_RUN_VALUES` distinct run values, ``peak`` (:func:`peak_column`: ``a (1 / (1 + ((zc - z0) /
+least :data:`PEAK_MIN_RUN_VALUES` distinct run values that is no derived history of a setting (:func:`peaked`),
+``peak`` (:func:`peak_column`: ``a (1 / (1 + ((zc - z0) /
 w)^2) - its mean over TRAIN's range)``, a response confined to a band of the channel, a resonance; ``z0`` and ``w``
 chosen on :func:`peak_grid`, one hypothesis per grid point, each recording the grid's size ``grid_points``); a
 logged channel only: the session clock keeps
@@ -88,6 +89,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from ...units import is_setting_history
 from .base import SIGNALS, SPEED_REF, V_REF, Effect, EffectSpecError, family, needs, num, register, signal
 
 FORMS = ("friction", "force_factor", "force", "inertia", "damping")
@@ -109,7 +111,7 @@ SHAPES = ("linear", "quadratic", "odd")
 #: (both in standard deviations of the channel, chosen on :func:`peak_grid`), minus its mean over TRAIN's range of
 #: ``zc``; one parameter. Not one of :data:`SHAPES` (the Hermite shapes, whose kernels the native FMU has): listed at
 #: the run level only (:data:`PEAK_LEVELS`), in :data:`PEAK_FORMS`, for a logged channel with at least
-#: :data:`PEAK_MIN_RUN_VALUES` distinct run values
+#: :data:`PEAK_MIN_RUN_VALUES` distinct run values that is no derived history of a setting (:func:`peaked`)
 PEAK = "peak"
 #: the half widths of the peak's grid [standard deviations of the channel]: a factor 2 apart, from a quarter of one
 #: to one (two Lorentzians of half widths a factor 2 apart correlate at 0.94 at most, so the grid loses little)
@@ -342,7 +344,7 @@ class Channel(Effect):
                     for by in ("",) + (INTERACTIONS if load_abs > 0 and shape in INTERACTION_SHAPES else ()):
                         for form in _forms(logged and not by, m_s, shape):
                             out.append(self._hypothesis(ch, reg, form, level, shape, by, load_abs, m_s, damping))
-                if logged and level in PEAK_LEVELS and int(ch.get("run_values", 0)) >= PEAK_MIN_RUN_VALUES:
+                if logged and level in PEAK_LEVELS and peaked(ch):
                     out += self._peaks(ch, reg, level, damping)
         return out
 
@@ -411,6 +413,15 @@ def peak_damping_bounds(spec, damping: float) -> tuple:
     if not p_min < 0 < p_max:
         return ()
     return ((-damping * SPEED_REF / p_max, damping * SPEED_REF / -p_min),)
+
+
+def peaked(ch) -> bool:
+    """Whether a logged channel's record (:func:`l1b2.closeloop.candidates.channels_of`) lists the peak: at least
+    :data:`PEAK_MIN_RUN_VALUES` distinct run values, and not a setting's history the loop derives (a low-pass over
+    run periods or a step from the previous setting, :func:`l1b2.units.is_setting_history`): a band of response
+    belongs to the setting itself, which carries its own peak, while its history stands for a memory (a heating, an
+    ageing) whose law the Hermite shapes take."""
+    return int(ch.get("run_values", 0)) >= PEAK_MIN_RUN_VALUES and not is_setting_history(str(ch["name"]))
 
 
 def levels_of(ch) -> tuple:
