@@ -107,7 +107,7 @@ from .guard import checked_fit, checked_identification
 from .intervals import added_parameters, identification, train_levels
 from .result import CloseLoopResult, ResidualAnalysis
 from .selection import (Score, best_per_family, design, named_alternatives, nuisance_forces, score_candidates,
-                        screened, searched_params, shape_alternatives, significance_level, simplest_within_one_se)
+                        screened, counted_params, shape_alternatives, significance_level, simplest_within_one_se)
 
 
 def _quiet(msg: str) -> None:
@@ -667,15 +667,14 @@ def prefer(accepted: list[RefitCV], parsimony: float, run_level: runlevel.RunLev
     """The candidate added among the accepted ones: within ``parsimony`` of the best CV gain, named before
     generic, then a form constant along the stroke (:func:`l1b2.closeloop.runlevel.is_run_level`) whose
     regressor the run-level evidence names (when the evidence is run-level, the simpler run-level form), then
-    the fewest parameters (those a grid chose counted, :func:`~l1b2.closeloop.selection.searched_params`), then the
+    the fewest parameters (:func:`~l1b2.closeloop.selection.counted_params`: a grid's choices counted), then the
     largest gain."""
     best_gain = max(t.gain for t in accepted)
     named = {e.regressor for e in run_level.significant} if run_level is not None else set()
 
     def key(t):
         c = t.candidate
-        return (c.generic, not (runlevel.is_run_level(c) and c.regressor in named), c.n_params + searched_params(c),
-                -t.gain)
+        return (c.generic, not (runlevel.is_run_level(c) and c.regressor in named), counted_params(c), -t.gain)
     return min((t for t in accepted if t.gain >= parsimony * best_gain), key=key)
 
 

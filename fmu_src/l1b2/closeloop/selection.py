@@ -398,6 +398,12 @@ def searched_params(candidate: CandidateForce) -> int:
     return 2 if shape_of(candidate) == "peak" else 0
 
 
+def counted_params(candidate: CandidateForce) -> int:
+    """The parameters the parsimony rules count for a candidate: its fitted ones and those a grid chose
+    (:func:`searched_params`)."""
+    return candidate.n_params + searched_params(candidate)
+
+
 def shape_of(candidate: CandidateForce) -> str:
     """The shape of a candidate within its family: its spec's ``shape`` (a channel's ``linear``, ``quadratic`` or
     ``odd``; ``linear`` for a spec without one)."""
@@ -439,9 +445,8 @@ def simplest_within_one_se(accepted: list) -> list:
     Per family of ``accepted`` (:class:`~l1b2.closeloop.acceptance.RefitCV` trials; a family has several when
     :func:`shape_alternatives` sent its other shapes to the refit), the trial with the largest cross-validated gain
     (:func:`best_per_family`) and every trial whose gain is below it by at most one standard error of the gap are
-    candidates; the simplest is kept: fewest parameters (those a grid chose counted, :func:`searched_params`), then
-    the lowest :func:`shape_degree`, then the largest
-    gain. The gap and its standard error are paired per held-out run
+    candidates; the simplest is kept: fewest parameters (:func:`counted_params`), then the lowest
+    :func:`shape_degree`, then the largest gain. The gap and its standard error are paired per held-out run
     (:func:`~l1b2.closeloop.acceptance.one_se_gap_per_run`, on the same folds and current model): per run ``r``,
     ``delta_r = (SSE_trial_r - SSE_best_r) / mean_r SSE_current_r``, the gap ``mean(delta)`` (the pooled gains'
     difference exactly) and ``se = sd(delta) / sqrt(n_runs)``. A gap beyond its standard error, or one that cannot
@@ -460,7 +465,7 @@ def simplest_within_one_se(accepted: list) -> list:
     for t in accepted:
         if close(t):
             f = t.candidate.family
-            key = (t.candidate.n_params + searched_params(t.candidate), shape_degree(t.candidate), -t.gain)
+            key = (counted_params(t.candidate), shape_degree(t.candidate), -t.gain)
             if f not in keep or key < keep[f][0]:
                 keep[f] = (key, t)
     kept = {id(t) for _, t in keep.values()}
