@@ -324,6 +324,26 @@ def test_the_uncorrected_fallback_judges_a_family_by_its_best_hypothesis_that_pa
     assert sel.screened(scores[:1], level=0.001, min_gain=0.05, size=2, fallback_level=0.01) == ([], 0.01)
 
 
+def test_a_failing_searched_hypothesis_does_not_judge_its_family():
+    # reference: a family stands or falls with its best-gain hypothesis, but a grid point of a searched shape (a
+    # channel's peak, p-value times the grid's size) represents its family only when it passes: failing, the family
+    # is judged by its best-gain unsearched hypothesis; passing with the best gain, it is the family's pick. An
+    # unsearched best-gain hypothesis that fails still sinks its family
+    def peak(family, p, gain):
+        c = CandidateForce(family, "aux", "", (f"{family}_peak_{gain}",), ("N",), features=None, generic=True,
+                           spec={"kind": "channel", "shape": "peak", "grid_points": 27})
+        return sel.Score(c, gain, p, 1.0, 0.0, np.zeros(1), -5.0)
+    quad = _shaped("channel_h", "quadratic", 1e-4, 0.30)
+    failing, passing = peak("channel_h", 0.2, 0.45), peak("channel_h", 1e-5, 0.45)
+    other = _shaped("channel_k", "linear", 1e-4, 0.20)
+    assert sel.shortlist([failing, quad, other], level=1e-3, min_gain=0.05, size=3) == [quad, other]
+    assert sel.shortlist([passing, quad, other], level=1e-3, min_gain=0.05, size=3) == [passing, other]
+    assert sel.shortlist([failing, other], level=1e-3, min_gain=0.05, size=3) == [other]
+    weak = _shaped("channel_h", "odd", 0.01, 0.40)                 # unsearched, best gain, fails: the family is out
+    assert sel.shortlist([weak, quad, failing, other], level=1e-3, min_gain=0.05, size=3) == [other]
+    assert sel.shortlist([weak, quad, passing, other], level=1e-3, min_gain=0.05, size=3) == [passing, other]
+
+
 def test_significance_is_bonferroni_over_the_families_tested():
     scores = [_score("a", 0.001), _score("a", 0.2), _score("b", 0.004), _score("c", 0.5), _score("d", 0.02)]
     level = sel.significance_level(scores, alpha=0.02)

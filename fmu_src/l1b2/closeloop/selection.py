@@ -338,12 +338,15 @@ def shortlist(scores: list[Score], *, level: float, min_gain: float, size: int,
               within_family: bool = False) -> list[Score]:
     """The best candidate of each family passing the linearised screen (gain, run-level p, AIC), best ``size``.
 
-    By default a family is judged by its best-gain candidate (the screen's level is corrected over families);
+    By default a family is judged by its best-gain candidate (the screen's level is corrected over families), a
+    searched one (a grid point of a shape, :func:`search_count` above 1) only when it passes: a failing searched
+    hypothesis is no evidence against its family's others, so a family passes when its best-gain unsearched
+    candidate does, or when a better searched one does (its p-value carries the grid's correction).
     ``within_family``: by the best-gain candidate of those that pass (for an uncorrected level)."""
     def passes(s):
         return s.cv_gain >= min_gain and s.p_value < level and s.delta_aic < 0
     ok = best_per_family([s for s in scores if passes(s)]) if within_family else [
-        s for s in best_per_family(scores) if passes(s)]
+        s for s in best_per_family([s for s in scores if search_count(s.candidate) <= 1 or passes(s)]) if passes(s)]
     return ok[:size]
 
 
