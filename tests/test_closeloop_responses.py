@@ -17,7 +17,8 @@ from l1b2.closeloop.settings import response_setting
 from l1b2.closeloop.responses import (POSITION_DEGREE, RATE_TAUS_S, SHARE_MIN, TAUS_S, _nuisance_residual,
                                       _per_run_share, _share, _sign_test_p,
                                       classed_responses, drive_course, history_columns,
-                                      response_statistic, response_tests, speed_history, speed_rate, with_applied)
+                                      response_statistic, response_tests, speed_histories, speed_history, speed_rate,
+                                      with_applied)
 from l1b2.errors import L1B2Error
 
 DT = 1e-3
@@ -113,6 +114,20 @@ def test_a_transient_of_the_drive_ahead_of_the_speed_stays_a_candidate(session):
     assert rec["drive_share"] > rec["share"] and rec["drive_tau_s"] is not None and not rec["response"]
     (mic,) = [r for r in response_tests(session) if r["channel"] == "mic_dB"]
     assert mic["share"] > mic["drive_share"] > 0
+
+
+def test_every_column_is_tested_against_the_frames_histories_computed_once(session):
+    # reference: the histories depend on the motion only: the frame's shared set (every history at every time
+    # constant, the rate once, in the test's order) gives each column the record of its own computation
+    args = (session["speed_m_s"], session["time_s"], session["position_m"], session["run"])
+    hist = speed_histories(*args)
+    assert [(h, tau) for h, tau, _ in hist] == ([("magnitude", tau) for tau in TAUS_S]
+                                                 + [("signed", tau) for tau in TAUS_S] + [("rate", None)])
+    own = {name: response_statistic(session[name].to_numpy(float), *args) for name in ("mic_dB", "room_C")}
+    for rec in response_tests(session):
+        if rec["channel"] in own:
+            assert {k: v for k, v in rec.items() if k != "channel"} == own[rec["channel"]]
+    assert own["mic_dB"]["response"] and not own["room_C"]["response"]
 
 
 def test_drive_course_is_the_first_order_rise_from_each_runs_first_sample():

@@ -65,8 +65,8 @@ from ..data import measurements as dataio
 from .auxiliary import NOT_CANDIDATES, varies_within_runs
 
 __all__ = ["TAUS_S", "RATE_TAUS_S", "HISTORIES", "DEGREE", "SHARE_MIN", "P_MAX", "POSITION_DEGREE", "MODEL_INPUTS",
-           "speed_history", "drive_course", "speed_rate", "history_columns", "response_statistic", "response_tests",
-           "classed_responses"]
+           "speed_history", "drive_course", "speed_rate", "history_columns", "speed_histories", "response_statistic",
+           "response_tests", "classed_responses"]
 
 #: the sensor time constants [s] searched: none (the instantaneous speed), then 10 ms to 0.3 s (a meter's fast
 #: time weighting is 125 ms; longer than the longest runs' acceleration, no transient is left to follow)
@@ -215,7 +215,26 @@ def _sign_test_p(k: int, n: int) -> float:
     return float(sum(math.comb(n, j) for j in range(k, n + 1)) / 2.0 ** n) if n else 1.0
 
 
-def response_statistic(column, speed_m_s, time_s, position_m, run) -> dict:
+def _position_basis(position_m) -> np.ndarray:
+    """The Legendre polynomials of degree 1 to :data:`POSITION_DEGREE` of the position over its range (columns)."""
+    s = np.asarray(position_m, float)
+    z = 2.0 * (s - s.min()) / (np.ptp(s) or 1.0) - 1.0
+    return np.polynomial.legendre.legvander(z, POSITION_DEGREE)[:, 1:]
+
+
+def speed_histories(speed_m_s, time_s, position_m, run) -> list[tuple[str, float | None, np.ndarray]]:
+    """Every history the test reads (:func:`history_columns` of each of :data:`HISTORIES`, at each of
+    :data:`TAUS_S`, the rate's once), its columns free of each run's mean and linear trend in time and of the
+    position's polynomials: ``(history, tau_s, columns)`` in the test's order. They depend on the motion only, so
+    one computation serves every column of a frame (:func:`response_statistic`'s ``histories``)."""
+    run = np.asarray(run)
+    t = np.asarray(time_s, float)
+    P = _position_basis(position_m)
+    return [(history, tau, _nuisance_residual(history_columns(speed_m_s, t, run, history, tau), run, t, P))
+            for history in HISTORIES for tau in ((None,) if history == "rate" else TAUS_S)]
+
+
+def response_statistic(column, speed_m_s, time_s, position_m, run, histories=None) -> dict:
     """The test of one column (arrays over the same samples, runs in consecutive blocks): ``{"share", "tau_s",
     "signed", "history", "runs_above", "n_runs", "p_value", "drive_share", "drive_tau_s", "response"}``; ``share``
     the partial R^2 of the module docstring at the best ``tau_s`` and history (``history``: one of
@@ -223,13 +242,12 @@ def response_statistic(column, speed_m_s, time_s, position_m, run) -> dict:
     speed or its rate, else of its magnitude; both None when nothing is explained), ``runs_above`` the runs whose
     own share (same fitted law) exceeds :data:`SHARE_MIN`, ``p_value`` the sign test's, ``drive_share`` the
     drive's best share (computed only when the first two conditions hold; 0 otherwise), ``response`` the rule
-    (``share >= SHARE_MIN``, ``p_value < P_MAX`` and ``share > drive_share``)."""
+    (``share >= SHARE_MIN``, ``p_value < P_MAX`` and ``share > drive_share``). ``histories``: the frame's
+    :func:`speed_histories` when already computed (the same for every column), else computed here."""
     c = np.asarray(column, float)
     run = np.asarray(run)
     t = np.asarray(time_s, float)
-    s = np.asarray(position_m, float)
-    z = 2.0 * (s - s.min()) / (np.ptp(s) or 1.0) - 1.0
-    P = np.polynomial.legendre.legvander(z, POSITION_DEGREE)[:, 1:]
+    P = _position_basis(position_m)
     cr = _nuisance_residual(c[:, None], run, t, P)[:, 0]
     blocks = [sl for _, sl in dataio.run_slices(run)]
     n_runs = len(blocks)
@@ -238,16 +256,14 @@ def response_statistic(column, speed_m_s, time_s, position_m, run) -> dict:
             "p_value": 1.0, "drive_share": 0.0, "drive_tau_s": None, "response": False}
     if not ss_tot > 1e-12 * max(float(c @ c), 1e-300):
         return best
-    for history in HISTORIES:
-        for tau in (None,) if history == "rate" else TAUS_S:
-            X = history_columns(speed_m_s, t, run, history, tau)
-            share, e = _share(_nuisance_residual(X, run, t, P), cr, ss_tot)
-            if share > best["share"]:
-                per = [1.0 - float(e[sl] @ e[sl]) / float(cr[sl] @ cr[sl])
-                       for sl in blocks if float(cr[sl] @ cr[sl]) > 0]
-                k = int(np.sum(np.array(per) > SHARE_MIN))
-                best.update(share=share, tau_s=tau, signed=history != "magnitude", history=history, runs_above=k,
-                            p_value=_sign_test_p(k, n_runs))
+    for history, tau, Xr in speed_histories(speed_m_s, t, position_m, run) if histories is None else histories:
+        share, e = _share(Xr, cr, ss_tot)
+        if share > best["share"]:
+            per = [1.0 - float(e[sl] @ e[sl]) / float(cr[sl] @ cr[sl])
+                   for sl in blocks if float(cr[sl] @ cr[sl]) > 0]
+            k = int(np.sum(np.array(per) > SHARE_MIN))
+            best.update(share=share, tau_s=tau, signed=history != "magnitude", history=history, runs_above=k,
+                        p_value=_sign_test_p(k, n_runs))
     if best["share"] >= SHARE_MIN and best["p_value"] < P_MAX:
         best["drive_share"], best["drive_tau_s"] = _drive_share(cr, ss_tot, run, t, P)
         best["response"] = bool(best["share"] > best["drive_share"])
@@ -260,13 +276,17 @@ def response_tests(df: pd.DataFrame, named=()) -> list[dict]:
     :func:`response_statistic` ``}`` each, in column order."""
     skip = NOT_CANDIDATES | MODEL_INPUTS | set(named)
     out = []
+    histories = None
     for name in df.columns:
         if name in skip or not pd.api.types.is_numeric_dtype(df[name]) or pd.api.types.is_bool_dtype(df[name]):
             continue
         c = df[name].to_numpy(float)
         if not np.all(np.isfinite(c)) or not varies_within_runs(df, name):
             continue
-        rec = response_statistic(c, df[dataio.SPEED], df[dataio.TIME], df[dataio.POSITION], df[dataio.RUN])
+        if histories is None:
+            histories = speed_histories(df[dataio.SPEED], df[dataio.TIME], df[dataio.POSITION], df[dataio.RUN])
+        rec = response_statistic(c, df[dataio.SPEED], df[dataio.TIME], df[dataio.POSITION], df[dataio.RUN],
+                                 histories)
         out.append({"channel": str(name), **rec})
     return out
 
