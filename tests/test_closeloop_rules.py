@@ -342,6 +342,10 @@ def test_a_failing_searched_hypothesis_does_not_judge_its_family():
     weak = _shaped("channel_h", "odd", 0.01, 0.40)                 # unsearched, best gain, fails: the family is out
     assert sel.shortlist([weak, quad, failing, other], level=1e-3, min_gain=0.05, size=3) == [other]
     assert sel.shortlist([weak, quad, passing, other], level=1e-3, min_gain=0.05, size=3) == [passing, other]
+    # the public rule `choose` counts a grid's choices too: the peak's 1 + 2 parameters against the linear's 1
+    lin = _shaped("channel_h", "linear", 1e-5, 0.44, n=1)
+    assert sel.most_parsimonious([passing, lin], parsimony=0.9) is lin
+    assert sel.most_parsimonious([passing, _shaped("channel_h", "odd", 1e-5, 0.44, n=4)], parsimony=0.9) is passing
 
 
 def test_significance_is_bonferroni_over_the_families_tested():

@@ -579,12 +579,13 @@ def significant(scores: list[Score], *, level: float, min_gain: float = DEFAULT_
 
 
 def most_parsimonious(scores: list[Score], *, parsimony: float = DEFAULT_PARSIMONY) -> Score | None:
-    """Among ``scores``, those within ``parsimony`` of the best gain: named before generic, then fewest parameters."""
+    """Among ``scores``, those within ``parsimony`` of the best gain: named before generic, then fewest parameters
+    (:func:`counted_params`: a grid's choices count), then the largest gain."""
     if not scores:
         return None
     best = max(s.cv_gain for s in scores)
     close = [s for s in scores if s.cv_gain >= parsimony * best]
-    close.sort(key=lambda s: (s.candidate.generic, s.candidate.n_params, -s.cv_gain))
+    close.sort(key=lambda s: (s.candidate.generic, counted_params(s.candidate), -s.cv_gain))
     return close[0]
 
 
