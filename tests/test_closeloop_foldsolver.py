@@ -1,6 +1,8 @@
 """The linearised scoring's cross-validated gains: the same numbers whatever arrays hold the folds' rows."""
 
 import numpy as np
+import pandas as pd
+import pytest
 from l1b2.closeloop import residuals as res
 from l1b2.closeloop import selection as sel
 
@@ -224,6 +226,71 @@ def test_scores_equal_the_fresh_array_scoring_to_round_off():
     assert [g.cv_gain for g in got] == [x[0] for x in ref] and [g.p_value for g in got] == [x[1] for x in ref]
     assert [g.cv_gain for g in got] != [g.cv_gain for g in sel.score_candidates(cands, r, df, mask, p, 0.1,
                                                                                  v_pred=base)]
+
+
+def _cand(df, name, f):
+    from l1b2.closeloop.candidates import CandidateForce
+    k = f(df).reshape(len(df), -1).shape[1]
+    return CandidateForce(name, "x", "", tuple(f"c{i}" for i in range(k)), ("N",) * k, f)
+
+
+def test_candidate_responses_in_blocks_equal_one_integration_to_the_last_bit():
+    # reference: the responses of all the forces side by side integrated at once (fresh arrays), cut to the rows
+    p, df, base, _, rng = _simulated_case()
+    n = len(df)
+    s = df["position_m"].to_numpy(float)
+    cands = [_cand(df, "a", lambda d: np.column_stack([np.sign(base), s])), _cand(df, "b", lambda d: s ** 2),
+             _cand(df, "c", lambda d: np.column_stack([np.sin(40 * s), np.cos(40 * s), np.ones(len(d))]))]
+    F = np.column_stack([np.asarray(c.features(df), float).reshape(n, -1) for c in cands])
+    idx = np.flatnonzero(rng.random(n) < 0.3)
+    ref = _linear_response_written_out(p, df, 0.1, F, base)[idx]
+    for block in (1, 2 * n, 3 * n, 10 ** 9):    # each alone (c wider than a block), a+b then c, all together
+        got, widths = sel.candidate_responses(cands, df, idx, p, 0.1, v_pred=base, block_values=block)
+        assert widths == [2, 1, 3] and np.array_equal(got, ref)
+    from dataclasses import replace
+    liar = replace(_cand(df, "d", lambda d: s), names=("x", "y"), units=("N", "N"))
+    with pytest.raises(ValueError, match="1 columns for 2 parameters"):
+        sel.candidate_responses([liar], df, idx, p, 0.1)
+
+
+def test_the_screen_scores_every_masked_sample_at_1_khz_and_every_qth_of_each_run_faster():
+    from l1b2.ident.coarse import decimation
+    rng = np.random.default_rng(8)
+    lengths = [23, 7, 31, 12]
+    run = np.repeat(np.arange(4), lengths)
+    for dt, q in ((1e-3, 1), (2e-4, 5), (5e-4, 2), (3e-3, 1)):
+        t = np.concatenate([r + dt * np.arange(k) for r, k in enumerate(lengths)])
+        df = pd.DataFrame({"time_s": t, "run": run})
+        mask = rng.random(len(df)) < 0.8
+        assert decimation(df) == q
+        # written out: a sample is kept when masked and its place in its run is a multiple of q
+        place = np.concatenate([np.arange(k) for k in lengths])
+        assert np.array_equal(sel.screen_rows(df, mask), np.flatnonzero(mask & (place % q == 0)))
+
+
+def test_a_fast_log_is_scored_on_every_qth_sample_of_the_responses_over_all_samples():
+    # reference: the fresh-array scoring written out, given the mask thinned to every 5th sample of each run: the
+    # responses are still integrated over every sample (the recursion at the log's own step), only compared on those
+    from l1b2.predictor.model import example_params
+    from l1b2.predictor.simulate import design_grid, free_run, simulate_dataset
+    p = example_params(2).replace(sigma=8.0, c_r=5.0, alpha=(0.05, 0.005, 0.0))
+    df = simulate_dataset(p, design_grid(voltages=(200.0, 260.0, 300.0), loads=(0.0, 0.03)), 0.1, dt=2e-4)
+    cols = [df[c].to_numpy(float) for c in ("position_m", "voltage_V", "load_kg", "direction", "time_s")]
+    v = df["speed_m_s"].to_numpy(float)
+    base = free_run(p, *cols[:4], cols[4], v, 0.1, df["run"].to_numpy())
+    r = cols[3] * (v - base) + np.random.default_rng(6).normal(0.0, 1e-3, len(df))
+    mask = np.abs(base) > 0.01
+    s = cols[0]
+    cands = [_cand(df, "a", lambda d: np.column_stack([np.sign(base), s])), _cand(df, "b", lambda d: s ** 2)]
+    place = df.groupby("run").cumcount().to_numpy()
+    thinned = mask & (place % 5 == 0)
+    got = sel.score_candidates(cands, r, df, mask, p, 0.1, v_pred=base)
+    ref = _scores_written_out(cands, r, df, thinned, p, 0.1, base)
+    for g, (gain, pv, imp, dbic, phi, daic) in zip(got, ref):
+        np.testing.assert_allclose((g.cv_gain, g.p_value, g.delta_bic, g.delta_aic), (gain, pv, dbic, daic),
+                                   rtol=1e-10, atol=1e-14)
+        assert g.runs_improved == imp
+    assert got[0].cv_gain != _scores_written_out(cands, r, df, mask, p, 0.1, base)[0][0]
 
 
 def test_a_diverging_nuisance_response_is_left_out_and_a_diverging_candidate_scores_nothing(monkeypatch):

@@ -34,6 +34,7 @@ import numpy as np
 import pandas as pd
 
 from ..data import measurements as dataio
+from ..ident.coarse import decimation, every_qth
 from ..predictor import model as pr
 from . import residuals as res
 from .acceptance import NAMED_SHARE, one_se_gap_per_run, pooled_gain, time_dependent
@@ -97,6 +98,52 @@ def linear_response(params: pr.PredictorParams, df: pd.DataFrame, m_s: float, F:
         f[act] = S[cur + 1]
         S[cur + 1] = a[cur, None] * S[cur] + h[cur, None] * f_cur
     return S
+
+
+#: the most float64 values of candidates' forces over all samples integrated at once (:func:`candidate_responses`;
+#: 128 MB)
+BLOCK_VALUES = 1 << 24
+
+
+def screen_rows(df: pd.DataFrame, mask) -> np.ndarray:
+    """The rows the linearised screen scores: ``mask``'s samples that are every ``q``-th of their run
+    (:func:`l1b2.ident.coarse.every_qth`), ``q`` = :func:`l1b2.ident.coarse.decimation` (one sample per
+    :data:`l1b2.ident.coarse.COARSE_PERIOD_S` at most: every masked sample at 1 kHz or slower), increasing. The
+    responses are integrated over every sample; only the rows they are compared on are thinned, which keeps the
+    screen's arrays, and its cost, those of a 1 kHz log."""
+    keep = np.asarray(mask, bool) & every_qth(df[dataio.RUN].to_numpy(), decimation(df))
+    return np.flatnonzero(keep)
+
+
+def candidate_responses(candidates, df: pd.DataFrame, idx: np.ndarray, params: pr.PredictorParams, m_s: float, *,
+                        v_pred=None, block_values: int = BLOCK_VALUES) -> tuple[np.ndarray, list[int]]:
+    """The candidates' free-run responses (:func:`linear_response`) at the rows ``idx`` of ``df``, side by side
+    (``len(idx)`` x the sum of their widths), and each candidate's width (its features' columns, which must be
+    its ``n_params``). The forces are evaluated and integrated over all of ``df``'s samples in blocks of
+    consecutive candidates holding at most ``block_values`` values (a wider candidate alone), so no array over
+    every sample holds more than a block; the recursion acts column by column, so the values are those of one
+    integration of all the forces, to the last bit."""
+    n = len(df)
+    out = np.empty((len(idx), sum(c.n_params for c in candidates)))
+    widths, pending, done = [], [], 0
+
+    def flush(done: int) -> int:
+        S = linear_response(params, df, m_s, np.column_stack(pending), v_pred=v_pred, overwrite_F=True)
+        out[:, done:done + S.shape[1]] = S[idx]
+        pending.clear()
+        return done + S.shape[1]
+    for c in candidates:
+        f = np.asarray(c.features(df), float).reshape(n, -1)
+        if f.shape[1] != c.n_params:
+            raise ValueError(f"candidate {c.label}: its features have {f.shape[1]} columns for {c.n_params} "
+                             "parameters")
+        if pending and n * (sum(p.shape[1] for p in pending) + f.shape[1]) > block_values:
+            done = flush(done)
+        pending.append(f)
+        widths.append(f.shape[1])
+    if pending:
+        flush(done)
+    return out, widths
 
 
 def _rows_in_place(X: np.ndarray, idx: np.ndarray, block: int = 256) -> np.ndarray:
@@ -491,24 +538,21 @@ def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5,
     folds of the candidates that depend on the session clock,
     :func:`l1b2.closeloop.acceptance.time_dependent`, e.g. contiguous blocks of the session; ``folds``, when
     given: those of the other candidates, else ``k`` folds of the runs shuffled by ``seed``,
-    :func:`l1b2.closeloop.residuals.run_folds`).
+    :func:`l1b2.closeloop.residuals.run_folds`). The rows scored are :func:`screen_rows`: the masked samples,
+    every ``q``-th of each run when the log is sampled faster than one sample per millisecond.
     """
     if not candidates:
         return []
     runs = df[dataio.RUN].to_numpy()
-    idx = np.flatnonzero(mask)
+    idx = screen_rows(df, mask)
     y, runs_m = r_drive[idx], runs[idx]
     folds = res.run_folds(runs_m, k, seed) if folds is None else folds
     n_eff = _effective_n(y, runs_m)
     n_runs = len(pd.unique(runs_m))
-    feats = [np.asarray(c.features(df), float).reshape(len(df), -1) for c in candidates]
-    widths = [f.shape[1] for f in feats]
     with np.errstate(over="ignore", invalid="ignore"):   # a diverging response is left out below, not warned of
         N = _rows_in_place(linear_response(params, df, m_s, nuisance_forces(params, df, v_pred), v_pred=v_pred,
                                            overwrite_F=True), idx)
-        # the candidates' responses are written over their forces and cut to the masked rows in place
-        S_all = _rows_in_place(linear_response(params, df, m_s, np.column_stack(feats), v_pred=v_pred,
-                                               overwrite_F=True), idx)
+        S_all, widths = candidate_responses(candidates, df, idx, params, m_s, v_pred=v_pred)
     N = finite_columns(N)
     solver = FoldSolver(y, N, runs_m, folds)
     time_solver = FoldSolver(y, N, runs_m, time_folds) if time_folds is not None else solver

@@ -30,7 +30,7 @@ from ..data import measurements as dataio
 from .estimator import clone
 from .frequency import resolve as resolve_frequency
 
-__all__ = ["COARSE_PERIOD_S", "decimation", "decimate", "coarse_to_fine", "nfev_of"]
+__all__ = ["COARSE_PERIOD_S", "decimation", "every_qth", "decimate", "coarse_to_fine", "nfev_of"]
 
 #: the sampling period of the coarse stage [s] (one sample per millisecond)
 COARSE_PERIOD_S = 1e-3
@@ -56,8 +56,19 @@ def decimation(data, period_s: float = COARSE_PERIOD_S) -> int:
     return max(1, int(math.floor(period_s / ts * (1 + 1e-9))))
 
 
+def every_qth(run, q: int) -> np.ndarray:
+    """Which samples are every ``q``-th of their run (its first always kept; runs in consecutive blocks): a
+    boolean array over ``run``'s samples, all True for ``q <= 1``."""
+    run = np.asarray(run)
+    if q <= 1:
+        return np.ones(len(run), bool)
+    new_run = np.r_[True, run[1:] != run[:-1]]
+    start = np.maximum.accumulate(np.where(new_run, np.arange(len(run)), 0))
+    return (np.arange(len(run)) - start) % q == 0
+
+
 def decimate(df: pd.DataFrame, mask, q: int) -> tuple[pd.DataFrame, np.ndarray]:
-    """Every ``q``-th sample of each run (its first always kept), and the mask on those samples.
+    """Every ``q``-th sample of each run (its first always kept, :func:`every_qth`), and the mask on those samples.
 
     The rows keep their order and values (time, position, speed as logged); the index is renumbered.
     ``q = 1`` returns the frame and mask unchanged.
@@ -65,10 +76,7 @@ def decimate(df: pd.DataFrame, mask, q: int) -> tuple[pd.DataFrame, np.ndarray]:
     mask = np.asarray(mask, bool)
     if q <= 1:
         return df, mask
-    run = df[dataio.RUN].to_numpy()
-    new_run = np.r_[True, run[1:] != run[:-1]]
-    start = np.maximum.accumulate(np.where(new_run, np.arange(len(run)), 0))
-    keep = (np.arange(len(run)) - start) % q == 0
+    keep = every_qth(df[dataio.RUN].to_numpy(), q)
     return df.loc[keep].reset_index(drop=True), mask[keep]
 
 
