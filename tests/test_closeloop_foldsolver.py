@@ -265,6 +265,7 @@ def test_the_screen_scores_every_masked_sample_at_1_khz_and_every_qth_of_each_ru
         assert decimation(df) == q
         # written out: a sample is kept when masked and its place in its run is a multiple of q
         place = np.concatenate([np.arange(k) for k in lengths])
+        assert np.array_equal(sel.screen_mask(df, mask), mask & (place % q == 0))
         assert np.array_equal(sel.screen_rows(df, mask), np.flatnonzero(mask & (place % q == 0)))
 
 

@@ -106,8 +106,9 @@ from .evidence import (channels_considered, order_traced, with_auxiliary, with_o
 from .guard import checked_fit, checked_identification
 from .intervals import added_parameters, identification, train_levels
 from .result import CloseLoopResult, ResidualAnalysis
-from .selection import (Score, best_per_family, design, named_alternatives, nuisance_forces, score_candidates,
-                        screened, counted_params, shape_alternatives, significance_level, simplest_within_one_se)
+from .selection import (Score, best_per_family, counted_params, design, named_alternatives, nuisance_forces,
+                        score_candidates, screen_mask, screened, shape_alternatives, significance_level,
+                        simplest_within_one_se)
 
 
 def _quiet(msg: str) -> None:
@@ -179,9 +180,8 @@ class CloseLoop(EstimatorSettings):
         family, self.baseline_choice_ = next(iter(fits)), {"chosen": next(iter(fits)), "families": {}}
         if len(fits) > 1:
             say("baseline: cross-validating both families on TRAIN's run folds")
-            family, self.baseline_choice_ = choose_baseline(
-                fits, dtr, mask_tr, m_s, folds, self.refit_settings(),
-                min_drop=self.min_cv_drop)
+            family, self.baseline_choice_ = choose_baseline(fits, dtr, mask_tr, m_s, folds, self.refit_settings(),
+                                                            min_drop=self.min_cv_drop)
             say.count(*(sum(r[k] for r in self.baseline_choice_["families"].values()) for k in ("refits", "nfev")))
         self.baseline_choice_["families"].update({f: {"fit_failed": why} for f, why in failed.items()})
         self.baseline_choice_["search"] = searches
@@ -307,11 +307,11 @@ class CloseLoop(EstimatorSettings):
             n_rnd, cur = len(it.rounds), it.model
             say(f"round {n_rnd}: the current model's residual; screening the candidates against the added effects")
             v_cur = cur.predict_free_run(dtr)
-            r = res.drive_residual(dtr, v_cur)
-            added = added_columns(it.effects, dtr, mask) if it.effects.candidates else None
-            geo = Directions(dtr, mask, nuisance_forces(cur.params_, dtr, v_cur))   # named vs generic, issue 28
+            r, sm = res.drive_residual(dtr, v_cur), screen_mask(dtr, mask)   # sm: the screen's (thinned) rows
+            added = added_columns(it.effects, dtr, sm) if it.effects.candidates else None
+            geo = Directions(dtr, sm, nuisance_forces(cur.params_, dtr, v_cur))   # named vs generic, issue 28
             cands = [c for c in pool if c.family not in it.effects.families
-                     and not collinear(c, it.effects, dtr, mask, added=added) and not geo.conflicts(c, it.effects)]
+                     and not collinear(c, it.effects, dtr, sm, added=added) and not geo.conflicts(c, it.effects)]
             say(f"round {n_rnd}: scoring {len(cands)} candidate effects (linearised)")
             scores = score_candidates(cands, r, dtr, mask, cur.params_, m_s, v_pred=v_cur, folds=screen_runs,
                                       time_folds=screen_blocks)
@@ -380,9 +380,8 @@ class CloseLoop(EstimatorSettings):
                 dtr, mask, f"the joint re-identification with {pick.candidate.label} (round {n_rnd})")
             say.count(1, model.convergence_.get("nfev_total", 0))
             return model
-        pick, model, checks, records = identified_pick(
-            ok, choose, confirm, fit, lambda m, c: identification(m, c.names, train_levels(m, dtr), self.alpha),
-            n_rnd)
+        pick, model, checks, records = identified_pick(ok, choose, confirm, fit, lambda m, c: identification(
+            m, c.names, train_levels(m, dtr), self.alpha), n_rnd)
         it.checks += records
         return pick, model, checks
 

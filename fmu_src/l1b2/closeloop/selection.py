@@ -105,14 +105,18 @@ def linear_response(params: pr.PredictorParams, df: pd.DataFrame, m_s: float, F:
 BLOCK_VALUES = 1 << 24
 
 
-def screen_rows(df: pd.DataFrame, mask) -> np.ndarray:
-    """The rows the linearised screen scores: ``mask``'s samples that are every ``q``-th of their run
+def screen_mask(df: pd.DataFrame, mask) -> np.ndarray:
+    """The samples the linearised screen compares on: ``mask``'s samples that are every ``q``-th of their run
     (:func:`l1b2.ident.coarse.every_qth`), ``q`` = :func:`l1b2.ident.coarse.decimation` (one sample per
-    :data:`l1b2.ident.coarse.COARSE_PERIOD_S` at most: every masked sample at 1 kHz or slower), increasing. The
-    responses are integrated over every sample; only the rows they are compared on are thinned, which keeps the
-    screen's arrays, and its cost, those of a 1 kHz log."""
-    keep = np.asarray(mask, bool) & every_qth(df[dataio.RUN].to_numpy(), decimation(df))
-    return np.flatnonzero(keep)
+    :data:`l1b2.ident.coarse.COARSE_PERIOD_S` at most: ``mask`` itself at 1 kHz or slower), a boolean array. The
+    responses are integrated over every sample; only the rows they are compared on (and the collinearity checks'
+    rows) are thinned, which keeps the screen's arrays, and its cost, those of a 1 kHz log."""
+    return np.asarray(mask, bool) & every_qth(df[dataio.RUN].to_numpy(), decimation(df))
+
+
+def screen_rows(df: pd.DataFrame, mask) -> np.ndarray:
+    """The rows of :func:`screen_mask`, increasing."""
+    return np.flatnonzero(screen_mask(df, mask))
 
 
 def candidate_responses(candidates, df: pd.DataFrame, idx: np.ndarray, params: pr.PredictorParams, m_s: float, *,
