@@ -294,6 +294,35 @@ def test_a_fast_log_is_scored_on_every_qth_sample_of_the_responses_over_all_samp
     assert got[0].cv_gain != _scores_written_out(cands, r, df, mask, p, 0.1, base)[0][0]
 
 
+def test_a_fast_log_goes_through_the_loop_with_every_check_on_the_screens_rows(monkeypatch):
+    # reference: a 5 kHz log of the Eq. 29 predictor with a load-path friction (0.4 g |m|) and a friction level set
+    # per run by a logged channel; the loop adds the load's effect, then the channel's, and every check of a
+    # candidate against the added effects (the run-level offer's included, called here on every candidate it is
+    # given) reads the same thinned rows as the added effects' columns
+    from l1b2.closeloop import runlevel
+    from l1b2.closeloop.loop import close_loop
+    from l1b2.data.measurements import Measurements
+    from l1b2.predictor.model import example_params
+    from l1b2.predictor.simulate import design_grid, simulate_dataset
+    aux = np.random.default_rng(3).normal(0.0, 1.0, 18)
+
+    def extra(c):
+        return -0.02 * (aux[np.asarray(c["run"])] + 2.0) - 0.4 * 9.81 * np.abs(np.asarray(c["load_kg"]))
+    df = simulate_dataset(example_params(3), design_grid(voltages=(220.0, 270.0, 324.0), loads=(-0.05, 0.0, 0.05)),
+                          0.1, dt=2e-4, noise_std=1e-3, seed=1, extra_force=extra)
+    df["aux_C"] = aux[df["run"].to_numpy()]
+    calls, offer = [], runlevel.offer
+
+    def spy(found, short, allowed):
+        calls.append([allowed(c) for c in found] + [allowed(s.candidate) for s in short])
+        return offer(found, short, allowed)
+    monkeypatch.setattr(runlevel, "offer", spy)
+    res = close_loop(Measurements(df=df, meta={"slider_mass_kg": 0.1}, path="train.csv"), order=3, n_starts=1,
+                     max_rounds=2)
+    assert [e.effect for e in res.diagnosis.effects] == ["load_path_friction", "channel_aux_C"]
+    assert len(calls) == 2 and calls[1]     # round 2 checked candidates against the added effect
+
+
 def test_a_diverging_nuisance_response_is_left_out_and_a_diverging_candidate_scores_nothing(monkeypatch):
     # reference: the same scoring with the diverging nuisance columns removed from nuisance_forces beforehand,
     # computed by the written-out scoring; a candidate whose response diverges gets gain 0, p-value 1

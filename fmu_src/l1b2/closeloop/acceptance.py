@@ -129,6 +129,9 @@ def collinear(candidate: CandidateForce, effects: EffectSet, df: pd.DataFrame, m
     if not effects.candidates:
         return False
     F = added_columns(effects, df, mask) if added is None else added
+    if len(F) != int(np.count_nonzero(mask)):
+        raise ValueError(f"collinear: the added columns have {len(F)} rows for {int(np.count_nonzero(mask))} masked "
+                         "samples (computed on another mask)")
     nf = np.linalg.norm(F, axis=0)
     F = F[:, nf > 0]
     if not F.shape[1]:

@@ -324,7 +324,7 @@ class CloseLoop(EstimatorSettings):
                 rl, rl_of = analyse(cur), cur
                 it.run_levels.append(rl.round_record(rnd))
                 offered = runlevel.offer(runlevel.candidates(rl, ctx), short, lambda c: (
-                    c.family not in it.effects.families and not collinear(c, it.effects, dtr, mask, added=added)
+                    c.family not in it.effects.families and not collinear(c, it.effects, dtr, sm, added=added)
                     and not geo.conflicts(c, it.effects)))
                 short = short + score_candidates(offered, r, dtr, mask, cur.params_, m_s, v_pred=v_cur,
                                                  folds=screen_runs, time_folds=screen_blocks)
