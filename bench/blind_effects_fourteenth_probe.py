@@ -13,9 +13,9 @@ copy of a case's files, or with one setting changed, one change per mode:
 * ``segment_no_lags`` -- both: the ``segment`` column added and the voltage's history columns switched off.
 * ``lag_truth`` -- no loop: each run's ``voltage_V_lag10r`` and ``voltage_V_lag3r`` (the loop's derivation,
   ``closeloop.lags.with_lagged_channels`` on TRAIN and TEST) and the truth's extra load (the second operator's hook
-  in the run, in drive coordinates ``d (m_true - m_logged)``), with the correlations of each lag's run value with
-  the runs after the handover (an indicator), with the session clock and with the first run's V0; printed as one
-  JSON line.
+  in the run, in drive coordinates ``d (m_true - m_logged)``), with the correlations of each lag's TRAIN run values with the runs
+  after the handover (an indicator) and with the session clock, the first conditions' V0 and the slow lag's first
+  runs; printed as one JSON line.
 
 Usage: python bench/blind_effects_fourteenth_probe.py KIND SEED MODE [--cache DIR] [--out DIR]. Prints the row of
 ``bench/blind_effects.py`` (its ``loop_row``, with ``traced_all``) and the evidence on the probe's column.
@@ -84,10 +84,11 @@ def lag_truth(args) -> None:
                       "first_conditions_V0": runs["V0"].iloc[:12].tolist(),
                       "lag10_first_runs": [round(x, 1) for x in runs["lag10"].iloc[:24]],
                       "train": {lag: {"r_after": r(tr_runs[lag], tr_runs["after"]),
-                                      "r_clock": r(tr_runs[lag], tr_runs["start"]),
-                                      "r_after_x_w": r(tr_runs[lag] * np.sign(tr_runs["d"] * tr_runs["m"]),
-                                                       tr_runs["extra_drive"])}
+                                      "r_clock": r(tr_runs[lag], tr_runs["start"])}
                                 for lag in ("lag10", "lag3")},
+                      "lag10_after_rest": round(float(runs["lag10"].loc[k + 1]), 1),
+                      "V0_before_rest": float(runs["V0"].loc[k]),
+                      "extra_drive_after_kg": sorted({round(float(x), 4) for x in runs["extra_drive"][runs.index > k]}),
                       "r_clock_after": r(tr_runs["start"], tr_runs["after"])}))
 
 
