@@ -27,6 +27,7 @@ def test_the_names_a_derivation_could_produce():
     from l1b2.closeloop.derived import is_derivable_name
     cols = ["time_s", "run", "voltage_V", "heater", "heater_since_s", "ln_pause_s", "x_lag3r"]
     assert is_derivable_name("ln_pause_s", cols)
+    assert is_derivable_name("since_break_s", cols) and is_derivable_name("breaks_before", cols)
     assert is_derivable_name("heater_since_s", cols)            # the event clock of a column the frame has
     assert is_derivable_name("voltage_V_lag3r", cols)           # a lag of 3 run periods
     assert is_derivable_name("voltage_V_lag10r", cols)          # and of 10

@@ -100,7 +100,7 @@ def test_a_run_level_effect_of_the_column_is_exported_through_an_input_named_aft
 
 
 def test_the_break_clock_is_the_time_since_the_latest_run_after_a_break():
-    from l1b2.closeloop.pauses import BREAK_COLUMN, BREAK_FACTOR, with_break_clock
+    from l1b2.closeloop.pauses import BREAK_COLUMN, BREAK_COUNT_COLUMN, BREAK_FACTOR, with_break_clock
     # runs every 1.3 s (median period 1.3 s); two breaks: before run 7 (600 s) and before run 13 (100 s)
     starts = [1.3 * k for k in range(6)]
     starts += [starts[-1] + 600.0 + 1.3 * k for k in range(6)]
@@ -111,11 +111,14 @@ def test_the_break_clock_is_the_time_since_the_latest_run_after_a_break():
     test = whole[whole["run"] % 4 == 0].reset_index(drop=True)
     tr, te, rec = with_break_clock(train, test)
     assert rec["derived"] and rec["one_session"] and rec["breaks_s"] == pytest.approx([starts[6], starts[12]])
+    assert rec["count_column"] == BREAK_COUNT_COLUMN
     for df in (tr, te):
         t = df["time_s"].to_numpy()
         origin = np.where(t >= starts[12], starts[12], np.where(t >= starts[6], starts[6], starts[0]))
         assert df[BREAK_COLUMN].to_numpy() == pytest.approx(t - origin)
-    assert BREAK_COLUMN not in train.columns
+        # the count: 0 for the first six runs, 1 for the next six (after the first break), 2 for the last six
+        assert np.array_equal(df[BREAK_COUNT_COLUMN].to_numpy(), ((df["run"].to_numpy() - 1) // 6).astype(float))
+    assert BREAK_COLUMN not in train.columns and BREAK_COUNT_COLUMN not in train.columns
 
 
 def test_no_break_clock_without_breaks_or_with_too_many():

@@ -2,8 +2,9 @@
 
 The loop derives channels from what every log carries (:mod:`~l1b2.closeloop.events`: the event clock
 ``<column>_since_s`` of a step channel; :mod:`~l1b2.closeloop.lags`: the lags ``<column>_lag<n>r`` of a run
-setting; :mod:`~l1b2.closeloop.pauses`: the pause before each run, ``ln_pause_s``, and the time since the latest
-break, ``since_break_s``; :mod:`~l1b2.closeloop.history`: the previous run's load, ``prev_run_load_kg``;
+setting; :mod:`~l1b2.closeloop.pauses`: the pause before each run, ``ln_pause_s``, the time since the latest
+break, ``since_break_s``, and the count of breaks before, ``breaks_before``; :mod:`~l1b2.closeloop.history`: the
+previous run's load, ``prev_run_load_kg``;
 :mod:`~l1b2.closeloop.runclock`: the time since each run's first sample, ``time_in_run_s``;
 :func:`with_protocol_channels` derives them all). A rig's own column may carry
 one of those names by chance (a logger that writes its own ``ln_pause_s``, an export that already holds a
@@ -14,7 +15,8 @@ taken too) in both frames and kept as an auxiliary column of its own; the rename
 auxiliary columns' actions (:func:`l1b2.closeloop.auxiliary.with_usable_channels`), so the report lists it.
 
 A name a derivation *could* produce: exactly :data:`l1b2.closeloop.pauses.COLUMN`,
-:data:`l1b2.closeloop.pauses.BREAK_COLUMN`, :data:`l1b2.closeloop.runclock.COLUMN` or
+:data:`l1b2.closeloop.pauses.BREAK_COLUMN`, :data:`l1b2.closeloop.pauses.BREAK_COUNT_COLUMN`,
+:data:`l1b2.closeloop.runclock.COLUMN` or
 :data:`l1b2.closeloop.history.LOAD_COLUMN`, or ``X + suffix`` for a column ``X`` of the frame and a suffix of the
 event clock, of a lag of :data:`l1b2.closeloop.lags.TAU_RUNS` periods or of a setting's step (``_step``). The
 required columns and the speed are never renamed.
@@ -29,7 +31,7 @@ from .events import SUFFIX as EVENT_SUFFIX, Session, with_event_clocks
 from ..units import STEP_SUFFIX, lag_suffix
 from .history import LOAD_COLUMN as PREVIOUS_LOAD_COLUMN, with_previous_pass
 from .lags import TAU_RUNS, with_lagged_channels
-from .pauses import BREAK_COLUMN, COLUMN as PAUSE_COLUMN, with_break_clock, with_pause_channel
+from .pauses import BREAK_COLUMN, BREAK_COUNT_COLUMN, COLUMN as PAUSE_COLUMN, with_break_clock, with_pause_channel
 from .runclock import COLUMN as RUN_CLOCK_COLUMN, with_run_clock
 
 __all__ = ["RENAMED_SUFFIX", "derived_suffixes", "is_derivable_name", "set_aside_derivable_names",
@@ -47,7 +49,7 @@ def derived_suffixes() -> tuple[str, ...]:
 def is_derivable_name(name: str, columns) -> bool:
     """Whether a derivation of the loop could produce a channel called ``name`` from a frame with ``columns``
     (module docstring)."""
-    if name in (PAUSE_COLUMN, BREAK_COLUMN, RUN_CLOCK_COLUMN, PREVIOUS_LOAD_COLUMN):
+    if name in (PAUSE_COLUMN, BREAK_COLUMN, BREAK_COUNT_COLUMN, RUN_CLOCK_COLUMN, PREVIOUS_LOAD_COLUMN):
         return True
     cols = set(columns)
     return any(name.endswith(s) and name[:-len(s)] in cols for s in derived_suffixes())

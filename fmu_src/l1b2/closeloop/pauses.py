@@ -42,8 +42,15 @@ column :data:`BREAK_COLUMN` per sample:
     ``t - t_b(t)`` [s], ``t_b(t)`` the start of the latest run at or before ``t`` that follows a break (before the
     first break: the session's first time),
 
-one more logged channel (every form, shape and level). TRAIN and TEST are merged as for the pause; frames of their
-own sessions are each read on their own. The host computes it from its own clock and run log.
+one more logged channel (every form, shape and level), and the logged column :data:`BREAK_COUNT_COLUMN` per sample:
+
+    the number of breaks at or before ``t`` (of the runs that follow a break, those starting at or before ``t``),
+
+a step at every break, constant within each run (so read at the run level). A change of the rig or its use at a
+break (a repair, a re-mount, another operator's weights or tools) is a step of the session that a smooth form of
+the clock cannot take and the time since the break does not carry; the count carries it, and its run-level
+evidence is read as any logged channel's. TRAIN and TEST are merged as for the pause; frames of their own sessions
+are each read on their own. The host computes both from its own clock and run log.
 """
 
 from __future__ import annotations
@@ -68,6 +75,8 @@ MIN_SPAN = 2.0
 BREAK_COLUMN = "since_break_s"
 #: a pause is a break when it lasts at least this many median run periods (start to start)
 BREAK_FACTOR = 10.0
+#: the break count's column: the number of breaks at or before each sample (a step at every break)
+BREAK_COUNT_COLUMN = "breaks_before"
 
 
 def pauses_s(clock: pd.DataFrame) -> np.ndarray:
@@ -148,9 +157,10 @@ def break_starts(clock: pd.DataFrame) -> np.ndarray:
 
 
 def with_break_clock(train: pd.DataFrame, test: pd.DataFrame | None = None, sess: Session | None = None):
-    """``(train, test, record)``: copies of the frames with :data:`BREAK_COLUMN` appended when the session has
-    breaks (module docstring; ``test`` None stays None), and ``record`` ``{"column", "derived", "one_session",
-    "breaks_s"}`` (the start times of the runs after a break: the merged session's, else TRAIN's).
+    """``(train, test, record)``: copies of the frames with :data:`BREAK_COLUMN` and :data:`BREAK_COUNT_COLUMN`
+    appended when the session has breaks (module docstring; ``test`` None stays None), and ``record``
+    ``{"column", "count_column", "derived", "one_session", "breaks_s"}`` (the start times of the runs after a break:
+    the merged session's, else TRAIN's).
 
     ``sess``: the frames' :func:`~l1b2.closeloop.events.session` when the caller has it (default: computed here).
     The frames are returned unchanged (not copied) when the column is not derived or TRAIN already has it.
@@ -162,16 +172,18 @@ def with_break_clock(train: pd.DataFrame, test: pd.DataFrame | None = None, sess
     breaks = [break_starts(c) for c in own]
     tr_start = clocks[0]["start"].to_numpy(float)
     n_runs = len(own[0])
-    record = {"column": BREAK_COLUMN, "derived": False, "one_session": bool(sess.one),
-              "breaks_s": [float(x) for x in breaks[0]]}
+    record = {"column": BREAK_COLUMN, "count_column": BREAK_COUNT_COLUMN, "derived": False,
+              "one_session": bool(sess.one), "breaks_s": [float(x) for x in breaks[0]]}
     b0 = breaks[0]
     usable = 1 <= len(b0) <= n_runs / MIN_BLOCK_RUNS and bool(np.any(tr_start >= b0[0]))
-    if BREAK_COLUMN in train.columns or not usable:
+    if BREAK_COLUMN in train.columns or BREAK_COUNT_COLUMN in train.columns or not usable:
         return train, test, record
     out = []
     for df, c, b in zip(frames, own, breaks):
         df = df.copy()
-        df[BREAK_COLUMN] = since_event(df[dataio.TIME].to_numpy(float), b, float(c["start"].min()))
+        t = df[dataio.TIME].to_numpy(float)
+        df[BREAK_COLUMN] = since_event(t, b, float(c["start"].min()))
+        df[BREAK_COUNT_COLUMN] = np.searchsorted(b, t, side="right").astype(float)
         out.append(df)
     record["derived"] = True
     return out[0], (out[1] if test is not None else None), record
