@@ -175,13 +175,6 @@ def _derived_base(name: str) -> tuple[str, str] | None:
     return None
 
 
-def is_session_lowpass(name: str) -> bool:
-    """Whether a channel's name is that of a low-pass of a column over run periods on the session clock
-    (``X_lag<n>r``): a state of the session's history, which starts from the session's first value."""
-    derived = _derived_base(name)
-    return derived is not None and derived[0] == "lag"
-
-
 def is_setting_history(name: str) -> bool:
     """Whether a channel's name is that of a setting's history the loop derives: a low-pass of a column over run
     periods (``X_lag<n>r``) or a setting's step from its previous different setting (``X_step``)."""

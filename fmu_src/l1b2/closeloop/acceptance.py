@@ -36,7 +36,6 @@ from ..errors import IdentificationError
 from ..ident.coarse import decimate, decimation
 from ..ident.estimator import ExtraForces, PredictorIdentifier
 from ..predictor import effects as fx
-from ..units import is_session_lowpass
 from . import chain
 from .folds import held_out_split, held_out_times
 from .candidates import CandidateForce
@@ -216,15 +215,11 @@ SESSION_SIGNALS = frozenset({"t", "col:time_s", "run:time_s"})
 
 
 def time_dependent(candidate: CandidateForce) -> bool:
-    """Whether a candidate's force depends on the session clock: its spec reads ``t``, the ``time_s`` channel or a
-    low-pass of a channel on the session clock (``X_lag<n>r``, :func:`l1b2.units.is_session_lowpass`: a store
-    filled from the session's first value, whose start is a course of the session clock); a candidate without a
-    spec: ``time`` among its regressors."""
+    """Whether a candidate's force depends on the session clock (its spec reads ``t`` or the ``time_s`` channel;
+    a candidate without a spec: ``time`` among its regressors)."""
     if candidate.spec:
         try:
-            keys = fx.needs(candidate.spec)
-            return bool(keys & SESSION_SIGNALS) or any(is_session_lowpass(k.split(":", 1)[1]) for k in keys
-                                                       if k.startswith(("col:", "run:")))
+            return bool(fx.needs(candidate.spec) & SESSION_SIGNALS)
         except fx.EffectSpecError:
             pass
     return "time" in candidate.regressors

@@ -20,7 +20,7 @@ estimates and explains:
    ``w_r = d m / max|m|`` the run's drive-coordinate load (a signal that changes the contact changes the load's
    slope as well as the drive); its evidence is the Wald test of ``(g1, o1, o2)`` (chi-square, 3 degrees of
    freedom; 2 without load variation) and the cross-validated share of the runs' weighted held-out deviation
-   it removes (folds over runs: contiguous blocks of the session for the session clock and its low-passes,
+   it removes (folds over runs: contiguous blocks of the session for the session clock,
    :func:`l1b2.closeloop.folds.session_blocks`).
    A signal is significant when its p-value is below ``alpha`` / number of signals tested (Bonferroni) and its
    cross-validated gain is positive. Of two significant signals whose run values correlate, the one with the
@@ -46,7 +46,6 @@ from ..data import measurements as dataio
 from ..data.coverage import values_outside
 from ..predictor import effects as fx
 from ..predictor import model as pr
-from ..units import is_session_lowpass
 from . import residuals as res
 from .reml import REMLFit, design_rows, reml
 
@@ -363,7 +362,7 @@ def signal_evidence(dev: RunDeviations, signals_, *, alpha: float, k: int, seed:
     for sg in signals_:
         z, mean, sd = signal_columns(sg)
         b, p, dof = joint_test(dev, z)
-        blocked = sg["channel"] == fx.channels.SESSION_TIME or is_session_lowpass(sg["channel"])
+        blocked = sg["channel"] == fx.channels.SESSION_TIME
         gain, per_run = cv_signal_gain(dev.theta, dev.cov, z, blocks if blocked else rand, dev.load, null_fits)
         cat = _is_category(sg)
         label = _category().label(sg["channel"]) if cat else fx.channels.signal_label(sg["channel"], sg["transform"])
