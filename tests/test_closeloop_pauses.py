@@ -119,6 +119,12 @@ def test_the_break_clock_is_the_time_since_the_latest_run_after_a_break():
         # the count: 0 for the first six runs, 1 for the next six (after the first break), 2 for the last six
         assert np.array_equal(df[BREAK_COUNT_COLUMN].to_numpy(), ((df["run"].to_numpy() - 1) // 6).astype(float))
     assert BREAK_COLUMN not in train.columns and BREAK_COUNT_COLUMN not in train.columns
+    # TEST holds the first run after each break: its count is the merged session's (TRAIN alone would place the
+    # breaks one run late)
+    held = whole["run"].isin([7, 13, 16])
+    tr, te, rec = with_break_clock(whole[~held].reset_index(drop=True), whole[held].reset_index(drop=True))
+    for df in (tr, te):
+        assert np.array_equal(df[BREAK_COUNT_COLUMN].to_numpy(), ((df["run"].to_numpy() - 1) // 6).astype(float))
 
 
 def test_no_break_clock_without_breaks_or_with_too_many():
