@@ -13,8 +13,8 @@ copy of a case's files, or with one setting changed, one change per mode:
 * ``segment_no_lags`` -- both: the ``segment`` column added and the voltage's history columns switched off.
 * ``lag_truth`` -- no loop: each run's ``voltage_V_lag10r`` and ``voltage_V_lag3r`` (the loop's derivation,
   ``closeloop.lags.with_lagged_channels`` on TRAIN and TEST) and the truth's extra load (the second operator's hook
-  in the run, in drive coordinates ``d (m_true - m_logged)``), with the correlations of each lag's TRAIN run values with the runs
-  after the handover (an indicator) and with the session clock, the first conditions' V0 and the slow lag's first
+  in the run, in drive coordinates ``d (m_true - m_logged)``), with the correlations of each lag's TRAIN run values
+  with the runs after the handover (an indicator) and with the session clock, the first conditions' V0 and the slow lag's first
   runs; printed as one JSON line.
 
 Usage: python bench/blind_effects_fourteenth_probe.py KIND SEED MODE [--cache DIR] [--out DIR]. Prints the row of

@@ -131,9 +131,10 @@ class Diagnosis(_Record):
     previous setting (:mod:`l1b2.closeloop.lags`);
     ``pause_channel`` the pause before each run and whether its logarithm was derived as a channel
     (:mod:`l1b2.closeloop.pauses`); ``break_clock`` whether the time since the latest break and the count of
-    breaks were derived (:func:`l1b2.closeloop.pauses.with_break_clock`); ``previous_pass`` whether the previous run's load was
-    derived as a channel and TRAIN's range of it (:mod:`l1b2.closeloop.history`); ``run_clock`` whether the time
-    since each run's start was derived as a channel and TRAIN's run durations (:mod:`l1b2.closeloop.runclock`);
+    breaks were derived (:func:`l1b2.closeloop.pauses.with_break_clock`); ``previous_pass`` whether the previous
+    run's load was derived as a channel and TRAIN's range of it (:mod:`l1b2.closeloop.history`); ``run_clock``
+    whether the time since each run's start was derived as a channel and TRAIN's run durations
+    (:mod:`l1b2.closeloop.runclock`);
     ``unseen_levels`` the TEST values of an added categorical setting that TRAIN never had
     (:func:`l1b2.closeloop.runlevel.unseen_test_levels`); ``channel_ranges`` per logged channel an added effect
     reads, the share of TEST's samples and runs outside TRAIN's range of it

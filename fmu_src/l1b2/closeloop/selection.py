@@ -129,19 +129,19 @@ def candidate_responses(candidates, df: pd.DataFrame, idx: np.ndarray, params: p
     integration of all the forces, to the last bit."""
     n = len(df)
     out = np.empty((len(idx), sum(c.n_params for c in candidates)))
-    widths, pending, done = [], [], 0
+    widths, pending, done = [], [], 0      # done: the columns of ``out`` written
 
-    def flush(done: int) -> int:
+    def flush(start: int) -> int:
         S = linear_response(params, df, m_s, np.column_stack(pending), v_pred=v_pred, overwrite_F=True)
-        out[:, done:done + S.shape[1]] = S[idx]
+        out[:, start:start + S.shape[1]] = S[idx]
         pending.clear()
-        return done + S.shape[1]
+        return start + S.shape[1]
     for c in candidates:
         f = np.asarray(c.features(df), float).reshape(n, -1)
         if f.shape[1] != c.n_params:
             raise ValueError(f"candidate {c.label}: its features have {f.shape[1]} columns for {c.n_params} "
                              "parameters")
-        if pending and n * (sum(p.shape[1] for p in pending) + f.shape[1]) > block_values:
+        if pending and n * (sum(widths) - done + f.shape[1]) > block_values:
             done = flush(done)
         pending.append(f)
         widths.append(f.shape[1])
