@@ -14,8 +14,8 @@ copy of a case's files, or with one setting changed, one change per mode:
 * ``lag_truth`` -- no loop: each run's ``voltage_V_lag10r`` and ``voltage_V_lag3r`` (the loop's derivation,
   ``closeloop.lags.with_lagged_channels`` on TRAIN and TEST) and the truth's extra load (the second operator's hook
   in the run, in drive coordinates ``d (m_true - m_logged)``), with the correlations of each lag's TRAIN run values
-  with the runs after the handover (an indicator) and with the session clock, the first conditions' V0 and the slow lag's first
-  runs; printed as one JSON line.
+  with the runs after the handover (an indicator) and with the session clock, the first conditions' V0 and the slow
+  lag's first runs; printed as one JSON line.
 
 Usage: python bench/blind_effects_fourteenth_probe.py KIND SEED MODE [--cache DIR] [--out DIR]. Prints the row of
 ``bench/blind_effects.py`` (its ``loop_row``, with ``traced_all``) and the evidence on the probe's column.
