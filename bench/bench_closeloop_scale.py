@@ -137,8 +137,9 @@ def rig_files(rate: float, n_train: int, cache: Path) -> Path:
     return out
 
 
-def scoring_part(folder: Path, names) -> dict:
-    """CPU [s] per variant of one round's collinearity screen and scoring (one effect added) on a fixed model."""
+def scoring_setup(folder: Path):
+    """``(m, est, v, r, pool)``: TRAIN's measurements, the Eq. 29 predictor identified on them once (a short
+    search), its free run, the drive residual and the candidate library on the frame."""
     m = dataio.load_measurements(folder / "train.csv")
     df, mask = m.df, np.array(m.mask)
     est = PredictorIdentifier(order=8, criterion="free_run", fixed="recommended", n_starts=1, seed=0, max_nfev=30)
@@ -146,6 +147,13 @@ def scoring_part(folder: Path, names) -> dict:
     v = est.predict_free_run(df)
     r = res.drive_residual(df, v)
     pool = full_library()(candidate_context(est.predict_free_run, m.slider_mass_kg, df, mask, {}), df)
+    return m, est, v, r, pool
+
+
+def scoring_part(folder: Path, names) -> dict:
+    """CPU [s] per variant of one round's collinearity screen and scoring (one effect added) on a fixed model."""
+    m, est, v, r, pool = scoring_setup(folder)
+    df, mask = m.df, np.array(m.mask)
     added = next(c for c in pool if c.family == "load_path_friction")
     effects = acceptance.EffectSet().add(added, np.zeros(added.n_params))
     out = {}

@@ -70,24 +70,15 @@ def with_channels(folder: Path, n_channels: int) -> Path:
 
 def child(variant: str, folder: Path) -> dict:
     """One variant's scoring in this process: CPU [s] of the scoring call, peak memory [MB], candidates, best."""
-    from l1b2.closeloop import residuals as res
+    from bench_closeloop_scale import scoring_setup
     from l1b2.closeloop import selection as sel
-    from l1b2.closeloop.candidates import full_library
-    from l1b2.closeloop.loop import candidate_context
-    from l1b2.data import measurements as dataio
-    from l1b2.ident.estimator import PredictorIdentifier
     if variant == "d0143":
         sel.screen_rows = lambda df, mask: np.flatnonzero(mask)
         sel.BLOCK_VALUES = 1 << 62
         blocked = sel.candidate_responses
         sel.candidate_responses = lambda *a, **k: blocked(*a, **{**k, "block_values": 1 << 62})
-    m = dataio.load_measurements(folder / "train.csv")
+    m, est, v, r, pool = scoring_setup(folder)
     df, mask = m.df, np.array(m.mask)
-    est = PredictorIdentifier(order=8, criterion="free_run", fixed="recommended", n_starts=1, seed=0, max_nfev=30)
-    est.fit(df, slider_mass_kg=m.slider_mass_kg, mask=mask)
-    v = est.predict_free_run(df)
-    r = res.drive_residual(df, v)
-    pool = full_library()(candidate_context(est.predict_free_run, m.slider_mass_kg, df, mask, {}), df)
     before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     c0 = time.process_time()
     scores = sel.score_candidates(pool, r, df, mask, est.params_, m.slider_mass_kg, v_pred=v)
