@@ -297,6 +297,26 @@ def want_fields(channels: dict, want: dict):
                          "traced_all": lambda names, diag: list(diag["traced_to"])}
 
 
+def accepted_by(want: dict, not_want: dict, kind: str, name: str) -> bool:
+    """Whether the traced regressor ``name`` is ``kind``'s: it holds a word of ``want[kind]`` and none of
+    ``not_want[kind]``."""
+    n = str(name)
+    return any(w in n for w in want.get(kind, ())) and not any(w in n for w in not_want.get(kind, ()))
+
+
+def run_audit(argv, doc: str, kinds, make, channels: dict, want: dict, not_want: dict) -> None:
+    """:func:`run_cli` for an audit whose pass rule reads the first two traced regressors: the row's
+    :func:`want_fields` and ``accepted_in_first_two`` (:func:`accepted_by` of one of them)."""
+    fields = want_fields(channels, want)
+
+    def extra(kind):
+        out = fields(kind)
+        out["accepted_in_first_two"] = lambda names, diag: any(accepted_by(want, not_want, kind, x)
+                                                                for x in diag["traced_to"][:2])
+        return out
+    run_cli(argv, doc, kinds, make, extra)
+
+
 def probe_loop(args, dst: Path, prefix) -> tuple[dict, object]:
     """The close loop on a probe's changed copy ``dst``: prints its row (with ``traced_all``) and the evidence on
     the channels named ``prefix*`` (:func:`print_channel_evidence`); returns ``(row, result)``."""

@@ -202,18 +202,11 @@ def experiment(kind: str, seed: int):
 
 def accepted(kind: str, name: str) -> bool:
     """Whether the traced regressor ``name`` is the kind's (a word of ``WANT`` and none of ``NOT_WANT``)."""
-    n = str(name)
-    return (any(w in n for w in WANT.get(kind, ())) and not any(w in n for w in NOT_WANT.get(kind, ())))
+    return be.accepted_by(WANT, NOT_WANT, kind, name)
 
 
 def main(argv=None):
-    fields = be.want_fields(CHANNEL, WANT)
-
-    def extra(kind):
-        out = fields(kind)
-        out["accepted_in_first_two"] = lambda names, diag: any(accepted(kind, x) for x in diag["traced_to"][:2])
-        return out
-    be.run_cli(argv, __doc__, KINDS, experiment, extra)
+    be.run_audit(argv, __doc__, KINDS, experiment, CHANNEL, WANT, NOT_WANT)
 
 
 if __name__ == "__main__":
