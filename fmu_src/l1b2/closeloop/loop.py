@@ -302,12 +302,12 @@ class CloseLoop(EstimatorSettings):
         cur_err: dict = {}
         def analyse(mdl):   # the run-level analysis against a model; rl_of: the model of the latest one
             return runlevel.analyse(dtr, mdl, mask, it.channels, alpha=self.alpha, k=self.k_folds, seed=self.seed)
-        rl_of = None
+        rl_of, sm = None, screen_mask(dtr, mask)   # sm: the screen's (thinned) rows, the same every round
         for rnd in range(1, self.max_rounds + 1):
             n_rnd, cur = len(it.rounds), it.model
             say(f"round {n_rnd}: the current model's residual; screening the candidates against the added effects")
             v_cur = cur.predict_free_run(dtr)
-            r, sm = res.drive_residual(dtr, v_cur), screen_mask(dtr, mask)   # sm: the screen's (thinned) rows
+            r = res.drive_residual(dtr, v_cur)
             added = added_columns(it.effects, dtr, sm) if it.effects.candidates else None
             geo = Directions(dtr, sm, nuisance_forces(cur.params_, dtr, v_cur))   # named vs generic, issue 28
             cands = [c for c in pool if c.family not in it.effects.families
