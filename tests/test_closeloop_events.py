@@ -142,3 +142,50 @@ def test_a_correlated_signal_that_only_follows_the_cause_is_dominated_and_ranks_
     summary = rl.RunLevelAnalysis(dev, None, np.nan, np.nan, got, 0.01).to_dict()   # the report's run_level entry
     assert summary["significant_signals"] == ["cause", "other", "decoy"]
     assert summary["dominated_signals"] == {"decoy": "cause"}
+
+
+def _lowpass_runs(x, n_runs, reset):
+    """A first-order low-pass over run periods (``y += (x - y) / n_runs``) from ``x[0]``, restarted at run
+    ``reset`` (written out here as the derived ``X_lag<n>r`` channel of a session with one break)."""
+    out, y = np.empty(len(x)), float(x[0])
+    for k, v in enumerate(x):
+        y = float(v) if k == reset else y
+        y += (v - y) / n_runs
+        out[k] = y
+    return out
+
+
+def test_a_setting_history_contests_another_signal_beyond_its_source():
+    """Runs deviate with the drive amplitude and by a step after a break. The amplitude's 10-run low-pass restarts
+    at the break, so it follows both. Against the break's count alone it is the stronger (it also carries the
+    amplitude); beyond the amplitude, its only own evidence is its memory, and the count's step is the stronger:
+    with the signals' sources known the count dominates the low-pass, not the reverse."""
+    from l1b2.units import history_source
+    assert history_source("voltage_V_lag10r") == history_source("voltage_V_step") == "voltage_V"
+    assert history_source("breaks_before") is None and history_source("ln_pause_s") is None
+    rng = np.random.default_rng(4)
+    n, k = 56, 24
+    V = np.repeat([255.0, 290.0, 220.0, 324.0, 220.0, 255.0, 324.0, 290.0], 7)
+    B = (np.arange(n) >= k).astype(float)
+    L = _lowpass_runs(V, 10, k)
+    S = np.array([[4e-4, 0.0], [0.0, 0.01]])
+    theta = (np.array([1.0, 0.0]) + np.outer((V - V.mean()) / V.std(), [0.0, 0.3]) + np.outer(B, [0.0, 0.25])
+             + rng.multivariate_normal([0, 0], np.diag([1e-4, 4e-3]), n) + rng.multivariate_normal([0, 0], S, n))
+    dev = rl.RunDeviations(np.arange(n), theta, np.repeat(S[None], n, axis=0), np.full(n, 500))
+    sigs = [{"channel": "voltage_V", "transform": "none", "values": V},
+            {"channel": "voltage_V_lag10r", "transform": "none", "values": L},
+            {"channel": "breaks_before", "transform": "none", "values": B}]
+    zs = [s["values"] for s in sigs]
+    assert rl.history_sources([s["channel"] for s in sigs]) == [None, 0, None]
+    assert rl.run_correlation(L, B) >= rl.DOMINANCE_CORR > rl.run_correlation(V, B)
+    # the pair alone: the low-pass's evidence beyond the count is the stronger
+    assert rl.dominated_signals(dev, [True] * 3, zs, 0.003) == [None, None, 1]
+    # beyond the amplitude too (written out: both conditional tests hold the source's signal)
+    pl = rl.conditional_p(dev, L, np.column_stack([B, V]))
+    pb = rl.conditional_p(dev, B, np.column_stack([L, V]))
+    assert pb < pl
+    got = {e.channel: e for e in rl.signal_evidence(dev, sigs, alpha=0.01, k=4, seed=0)}
+    assert all(e.significant for e in got.values())
+    assert got["voltage_V_lag10r"].dominated_by == "breaks_before" and got["breaks_before"].dominated_by is None
+    # a source that is not significant is not held: the pair's own contest decides
+    assert rl.dominated_signals(dev, [False, True, True], zs, 0.003, sources=[None, 0, None]) == [None, None, 1]

@@ -178,8 +178,13 @@ def _derived_base(name: str) -> tuple[str, str] | None:
 def is_setting_history(name: str) -> bool:
     """Whether a channel's name is that of a setting's history the loop derives: a low-pass of a column over run
     periods (``X_lag<n>r``) or a setting's step from its previous different setting (``X_step``)."""
+    return history_source(name) is not None
+
+
+def history_source(name: str) -> str | None:
+    """The column whose setting history a derived channel is (``X`` of ``X_lag<n>r`` or ``X_step``), else None."""
     derived = _derived_base(name)
-    return derived is not None and derived[0] in ("lag", "step")
+    return derived[1] if derived is not None and derived[0] in ("lag", "step") else None
 
 
 def column_unit(name: str) -> str | None:

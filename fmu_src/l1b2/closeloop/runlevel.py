@@ -46,6 +46,7 @@ from ..data import measurements as dataio
 from ..data.coverage import values_outside
 from ..predictor import effects as fx
 from ..predictor import model as pr
+from ..units import history_source
 from . import residuals as res
 from .reml import REMLFit, design_rows, reml
 
@@ -375,7 +376,8 @@ def signal_evidence(dev: RunDeviations, signals_, *, alpha: float, k: int, seed:
         zs.append(z)
     plan = {col for col, _ in fx.channels.INPUT_SIGNALS}
     dominated = dominated_signals(dev, [e.significant for e in out], zs, level,
-                                  plan=[sg["channel"] in plan for sg in signals_])
+                                  plan=[sg["channel"] in plan for sg in signals_],
+                                  sources=history_sources([sg["channel"] for sg in signals_]))
     for e, dom in zip(out, dominated):
         e.dominated_by = out[dom].label if dom is not None else None
     return sorted(out, key=lambda e: (e.dominated_by is not None, e.p_value, -e.cv_gain))
@@ -449,7 +451,17 @@ def run_correlation(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.linalg.svd(qa.T @ qb, compute_uv=False).max())
 
 
-def dominated_signals(dev: RunDeviations, significant, zs, level: float = 0.0, plan=None) -> list:
+def history_sources(channels) -> list:
+    """Per signal's channel, the index of the first signal of the column it is a setting history of
+    (:func:`l1b2.units.history_source`: ``X`` of ``X_lag<n>r`` or ``X_step``), None when it is none or ``X`` has no
+    signal."""
+    first: dict = {}
+    for i, ch in enumerate(channels):
+        first.setdefault(ch, i)
+    return [first.get(history_source(str(ch))) for ch in channels]
+
+
+def dominated_signals(dev: RunDeviations, significant, zs, level: float = 0.0, plan=None, sources=None) -> list:
     """Per signal, the index of a significant signal that dominates it, else None.
 
     Two significant signals whose run values correlate (:func:`run_correlation` ``>=`` :data:`DOMINANCE_CORR`: a
@@ -462,15 +474,26 @@ def dominated_signals(dev: RunDeviations, significant, zs, level: float = 0.0, p
     of :data:`~l1b2.predictor.effects.channels.INPUT_SIGNALS`, which the operator set and ``Predictor.fmu`` takes
     as inputs) dominates one that is not; otherwise the first listed does. The rest keep the order of their own
     evidence.
+
+    ``sources[i]``: the index of the signal whose setting history signal ``i`` is (:func:`history_sources`), or
+    None. A history's own evidence is its memory, what it adds beyond its source's present value: when one of the
+    two is a history of a significant third signal, both conditional p-values also hold that source's signal.
     """
     out = [None] * len(zs)
     sig = [i for i, s in enumerate(significant) if s]
+    held = _held_sources(sources, significant, len(zs))
     for a in sig:
         for b in sig:
             if b <= a or run_correlation(zs[a], zs[b]) < DOMINANCE_CORR:
                 continue
             rest = {(i, j): _beyond(zs[i], zs[j]) for i, j in ((a, b), (b, a))}
-            pa, pb = conditional_p(dev, zs[a], zs[b], rest[a, b]), conditional_p(dev, zs[b], zs[a], rest[b, a])
+            also = [zs[c] for c in sorted((held[a] | held[b]) - {a, b})]
+            if also:
+                ga, gb = (np.column_stack([np.asarray(z, float).reshape(len(z), -1) for z in (zs[j], *also)])
+                          for j in (b, a))
+                pa, pb = conditional_p(dev, zs[a], ga), conditional_p(dev, zs[b], gb)
+            else:
+                pa, pb = conditional_p(dev, zs[a], zs[b], rest[a, b]), conditional_p(dev, zs[b], zs[a], rest[b, a])
             nested = [i for i, j in ((a, b), (b, a)) if rest[i, j].reshape(len(zs[i]), -1).shape[1] == 0]
             if len(nested) == 2 and plan is not None and plan[a] != plan[b]:
                 (loser, winner) = (b, a) if plan[a] else (a, b)
@@ -483,6 +506,13 @@ def dominated_signals(dev: RunDeviations, significant, zs, level: float = 0.0, p
             if out[loser] is None:
                 out[loser] = winner
     return out
+
+
+def _held_sources(sources, significant, n: int) -> list[set]:
+    """Per signal, the set of significant signals it is a setting history of (empty without ``sources``)."""
+    if sources is None:
+        return [set() for _ in range(n)]
+    return [{c} if c is not None and c != i and significant[c] else set() for i, c in enumerate(sources)]
 
 
 @dataclass
