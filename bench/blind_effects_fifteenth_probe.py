@@ -14,6 +14,9 @@ copy of a case's files, or with one setting changed, one change per mode:
   humidity at each run's start, ``hood_rh_truth_pct``, with no noise: the cause exactly, one value per run.
 * ``rotation`` -- no change of the files: the close loop with ``clock_folds="rotation"`` (the session clock's
   candidates scored on conditions dealt in turn, interpolating the clock) instead of contiguous blocks.
+* ``shunt_on_clean`` / ``log_shunt_on_clean`` -- the shunt's control (the same draws, no effect): the clean case's
+  files at the seed with the box's setting of each run added, as ``sense_shunt_ohm`` or as its decimal logarithm
+  ``sense_shunt_log10_ohm`` (KIND ``sense_electrode_shunt``; the clean case must be in the cache).
 * ``walk_truth`` -- a column ``reseat_walk`` added: the truth's walk ``w`` of each run, with no noise (the ideal
   regressor of the walk).
 
@@ -24,21 +27,36 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import blind_effects as be  # noqa: E402
 import blind_effects_fifteenth as fifteenth  # noqa: E402
 
-MODES = ("log_shunt", "tray_exact", "tray_no_load", "no_voltage_lags", "rh_truth", "walk_truth", "rotation")
+MODES = ("log_shunt", "tray_exact", "tray_no_load", "no_voltage_lags", "rh_truth", "walk_truth", "rotation",
+         "shunt_on_clean", "log_shunt_on_clean")
+CACHE = [be.default_cache()]   # the cache the command line names (the clean case's folder for ``*_on_clean``)
 COLUMN = {"log_shunt": "sense_shunt", "tray_exact": "tray", "tray_no_load": "tray", "no_voltage_lags": "time",
-          "rh_truth": "hood_rh", "walk_truth": "reseat", "rotation": "time"}
+          "rh_truth": "hood_rh", "walk_truth": "reseat", "rotation": "time",
+          "shunt_on_clean": "sense_shunt", "log_shunt_on_clean": "sense_shunt"}
 
 
 def changed(df, mode: str, truth: dict):
     """The part ``df`` as ``mode`` changes it (``truth``: the case's ``rig_truth.json``)."""
     out = df.copy()
     per_run = {r["run"]: r for r in truth["per_run"]}
-    if mode == "log_shunt":
+    if mode in ("shunt_on_clean", "log_shunt_on_clean"):
+        R = out.groupby("run")["sense_shunt_ohm"].first()
+        src = Path(CACHE[0]) / f"clean_{int(truth['plan']['seed'])}"
+        part = next(p for p in ("train", "test") if set(pd.read_csv(src / f"{p}.csv", usecols=["run"])["run"])
+                    == set(R.index))
+        out = pd.read_csv(src / f"{part}.csv")
+        r = out["run"].map(R)
+        if mode == "shunt_on_clean":
+            out["sense_shunt_ohm"] = r
+        else:
+            out["sense_shunt_log10_ohm"] = np.log10(r)
+    elif mode == "log_shunt":
         out["sense_shunt_log10_ohm"] = np.log10(out.pop("sense_shunt_ohm"))
     elif mode == "tray_exact":
         out["tray_mass_g"] = fifteenth.RACK_G - 1000.0 * out["load_kg"].abs()
@@ -55,6 +73,8 @@ def changed(df, mode: str, truth: dict):
 
 def main(argv=None):
     argv = list(sys.argv[1:] if argv is None else argv)
+    if "--cache" in argv:
+        CACHE[0] = argv[argv.index("--cache") + 1]
     if len(argv) >= 3 and argv[2] == "no_voltage_lags":
         from l1b2.closeloop import lags
         lags.STORED_INPUTS = ()
