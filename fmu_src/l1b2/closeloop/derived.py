@@ -6,6 +6,7 @@ setting; :mod:`~l1b2.closeloop.pauses`: the pause before each run, ``ln_pause_s`
 break, ``since_break_s``, and the count of breaks before, ``breaks_before``; :mod:`~l1b2.closeloop.history`: the
 previous run's load, ``prev_run_load_kg``;
 :mod:`~l1b2.closeloop.runclock`: the time since each run's first sample, ``time_in_run_s``;
+:mod:`~l1b2.closeloop.logscale`: the logarithm ``ln_<column>`` of a logged channel that spans decades;
 :func:`with_protocol_channels` derives them all). A rig's own column may carry
 one of those names by chance (a logger that writes its own ``ln_pause_s``, an export that already holds a
 ``voltage_V_lag3r``). Taken as the derived channel, such a column would replace the derivation (or be
@@ -18,8 +19,9 @@ A name a derivation *could* produce: exactly :data:`l1b2.closeloop.pauses.COLUMN
 :data:`l1b2.closeloop.pauses.BREAK_COLUMN`, :data:`l1b2.closeloop.pauses.BREAK_COUNT_COLUMN`,
 :data:`l1b2.closeloop.runclock.COLUMN` or
 :data:`l1b2.closeloop.history.LOAD_COLUMN`, or ``X + suffix`` for a column ``X`` of the frame and a suffix of the
-event clock, of a lag of :data:`l1b2.closeloop.lags.TAU_RUNS` periods or of a setting's step (``_step``). The
-required columns and the speed are never renamed.
+event clock, of a lag of :data:`l1b2.closeloop.lags.TAU_RUNS` periods or of a setting's step (``_step``), or
+``LOG_PREFIX + X`` (:data:`l1b2.units.LOG_PREFIX`) for a column ``X`` of the frame. The required columns and the
+speed are never renamed.
 """
 
 from __future__ import annotations
@@ -27,10 +29,12 @@ from __future__ import annotations
 import pandas as pd
 
 from .auxiliary import NOT_CANDIDATES, with_usable_channels
+from .candidates import channels_of
 from .events import SUFFIX as EVENT_SUFFIX, Session, with_event_clocks
-from ..units import STEP_SUFFIX, lag_suffix
+from ..units import LOG_PREFIX, STEP_SUFFIX, lag_suffix
 from .history import LOAD_COLUMN as PREVIOUS_LOAD_COLUMN, with_previous_pass
 from .lags import TAU_RUNS, with_lagged_channels
+from .logscale import with_log_channels
 from .pauses import BREAK_COLUMN, BREAK_COUNT_COLUMN, COLUMN as PAUSE_COLUMN, with_break_clock, with_pause_channel
 from .runclock import COLUMN as RUN_CLOCK_COLUMN, with_run_clock
 
@@ -52,6 +56,8 @@ def is_derivable_name(name: str, columns) -> bool:
     if name in (PAUSE_COLUMN, BREAK_COLUMN, BREAK_COUNT_COLUMN, RUN_CLOCK_COLUMN, PREVIOUS_LOAD_COLUMN):
         return True
     cols = set(columns)
+    if name.startswith(LOG_PREFIX) and name[len(LOG_PREFIX):] in cols:
+        return True
     return any(name.endswith(s) and name[:-len(s)] in cols for s in derived_suffixes())
 
 
@@ -104,15 +110,19 @@ def with_protocol_channels(train: pd.DataFrame, test: pd.DataFrame | None, respo
     order: the event clocks (:func:`l1b2.closeloop.events.with_event_clocks`), the lags and steps
     (:func:`l1b2.closeloop.lags.with_lagged_channels`), the pause (:func:`l1b2.closeloop.pauses.with_pause_channel`),
     the break clock (:func:`l1b2.closeloop.pauses.with_break_clock`), the previous run's load
-    (:func:`l1b2.closeloop.history.with_previous_pass`) and the run clock
-    (:func:`l1b2.closeloop.runclock.with_run_clock`); ``records`` their records under ``"event_clocks"``,
-    ``"lagged_channels"``, ``"pause_channel"``, ``"break_clock"``, ``"previous_pass"`` and ``"run_clock"``.
+    (:func:`l1b2.closeloop.history.with_previous_pass`), the run clock
+    (:func:`l1b2.closeloop.runclock.with_run_clock`) and the logarithms of the logged channels that span decades
+    (:func:`l1b2.closeloop.logscale.with_log_channels`: of the channels logged, not of those derived here);
+    ``records`` their records under ``"event_clocks"``, ``"lagged_channels"``, ``"pause_channel"``,
+    ``"break_clock"``, ``"previous_pass"``, ``"run_clock"`` and ``"log_channels"``.
     ``sess``: the frames' :func:`~l1b2.closeloop.events.session` before any derivation."""
     rec = {}
+    logged = [ch["name"] for ch in channels_of(train, response_columns) if ch["kind"] == "logged"]
     train, test, rec["event_clocks"] = with_event_clocks(train, test, response_columns, sess)
     train, test, rec["lagged_channels"] = with_lagged_channels(train, test, response_columns, sess)
     train, test, rec["pause_channel"] = with_pause_channel(train, test, sess)
     train, test, rec["break_clock"] = with_break_clock(train, test, sess)
     train, test, rec["previous_pass"] = with_previous_pass(train, test, sess)
     train, test, rec["run_clock"] = with_run_clock(train, test)   # along the stroke only
+    train, test, rec["log_channels"] = with_log_channels(train, test, logged)
     return train, test, rec
