@@ -237,6 +237,23 @@ def is_along_stroke(df: pd.DataFrame, name: str) -> bool:
     return bool(pos >= ALONG_STROKE_SHARE and pos >= clock + ALONG_STROKE_MARGIN)
 
 
+def channel_kinds(df: pd.DataFrame, response_columns=None) -> list[tuple[str, str]]:
+    """``(name, kind)`` of every candidate channel of a frame, in :func:`channels_of`'s order and with its kinds:
+    every numeric column beyond the required ones and the speed whose values are all finite, then the clock."""
+    required = NOT_CANDIDATES - {dataio.TIME}
+    responses = set(fx.channels.RESPONSE_COLUMNS if response_columns is None else response_columns)
+    labels = set(label_columns(df))
+    names = [c for c in df.columns if c not in required and c != dataio.TIME
+             and pd.api.types.is_numeric_dtype(df[c]) and not pd.api.types.is_bool_dtype(df[c])]
+    out = []
+    for name in names + [dataio.TIME]:
+        if not np.all(np.isfinite(df[name].to_numpy(float))):
+            continue
+        out.append((str(name), "protocol" if name == dataio.TIME else "run_clock" if name == fx.channels.RUN_CLOCK
+                    else "response" if name in responses else "label" if name in labels else "logged"))
+    return out
+
+
 def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
     """The candidate channels of a frame: every numeric column beyond the required ones and the speed, then the clock.
 
@@ -254,19 +271,10 @@ def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
     runs is a function of the position rather than of the run's clock (:func:`is_along_stroke`), offered at the
     sample level only and with no run-level signal).
     """
-    required = NOT_CANDIDATES - {dataio.TIME}
-    responses = set(fx.channels.RESPONSE_COLUMNS if response_columns is None else response_columns)
-    labels = set(label_columns(df))
     out = []
-    names = [c for c in df.columns if c not in required and c != dataio.TIME
-             and pd.api.types.is_numeric_dtype(df[c]) and not pd.api.types.is_bool_dtype(df[c])]
-    for name in names + [dataio.TIME]:
+    for name, kind in channel_kinds(df, response_columns):
         c = df[name].to_numpy(float)
-        if not np.all(np.isfinite(c)):
-            continue
         within = varies_within_runs(df, name)
-        kind = ("protocol" if name == dataio.TIME else "run_clock" if name == fx.channels.RUN_CLOCK
-                else "response" if name in responses else "label" if name in labels else "logged")
         along = bool(kind == "logged" and within and is_along_stroke(df, name))
         run_values = len(np.unique(df.groupby(dataio.RUN, sort=False)[name].mean().to_numpy(float)))
         out.append({"name": str(name), "kind": kind, "mean": float(np.mean(c)), "sd": float(np.std(c)),

@@ -29,7 +29,7 @@ from __future__ import annotations
 import pandas as pd
 
 from .auxiliary import NOT_CANDIDATES, with_usable_channels
-from .candidates import channels_of
+from .candidates import channel_kinds
 from .events import SUFFIX as EVENT_SUFFIX, Session, with_event_clocks
 from ..units import LOG_PREFIX, STEP_SUFFIX, lag_suffix
 from .history import LOAD_COLUMN as PREVIOUS_LOAD_COLUMN, with_previous_pass
@@ -117,7 +117,7 @@ def with_protocol_channels(train: pd.DataFrame, test: pd.DataFrame | None, respo
     ``"break_clock"``, ``"previous_pass"``, ``"run_clock"`` and ``"log_channels"``.
     ``sess``: the frames' :func:`~l1b2.closeloop.events.session` before any derivation."""
     rec = {}
-    logged = [ch["name"] for ch in channels_of(train, response_columns) if ch["kind"] == "logged"]
+    logged = [name for name, kind in channel_kinds(train, response_columns) if kind == "logged"]
     train, test, rec["event_clocks"] = with_event_clocks(train, test, response_columns, sess)
     train, test, rec["lagged_channels"] = with_lagged_channels(train, test, response_columns, sess)
     train, test, rec["pause_channel"] = with_pause_channel(train, test, sess)

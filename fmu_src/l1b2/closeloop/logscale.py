@@ -8,7 +8,7 @@ decade, where a line or a parabola of ``Q`` cannot follow it. For every such log
 ``ln(Q / 1 unit)``, dimensionless (:func:`l1b2.units.column_unit`, :func:`l1b2.units.unit_note`). It is one more
 channel with every form, shape and level; the logged column keeps its own.
 
-Which channels (:func:`log_candidates`): a logged channel of TRAIN (:func:`l1b2.closeloop.candidates.channels_of`,
+Which channels (:func:`log_candidates`): a logged channel of TRAIN (:func:`l1b2.closeloop.candidates.channel_kinds`,
 kind ``"logged"``: not the required columns, a response, a text label or a channel the loop derives) whose values
 are finite and positive in TRAIN and, when TEST has the column, in TEST, whose largest TRAIN value is at least
 :data:`SPAN_RATIO` times its smallest, and whose unit is not an offset unit (:data:`l1b2.units.DIFFERENCE_UNITS`:
