@@ -64,7 +64,7 @@ def test_the_naming_rule_of_derived_names():
             "_lag3r": None, "voltage_V_lagr": None, "voltage_V_lag3r_logged": None}
     assert {n: column_unit(n) for n in want} == want
     assert unit_note("ln_pause_s_lag3r") == unit_note("ln_pause_s")
-    assert unit_note("ln_foo") == ""
+    assert unit_note("ln_foo") == "ln(foo): the natural logarithm of foo in its column's own unit"   # no unit named
 
 
 def _run_level(channel: str, mean: float, sd: float) -> IdentifiedEffect:

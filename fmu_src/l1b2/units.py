@@ -224,14 +224,17 @@ def column_unit(name: str) -> str | None:
 
 def unit_note(name: str) -> str:
     """What the unit of column ``name`` (:func:`column_unit`) does not say, for a description: for a logarithm
-    ``ln_Q`` whose ``Q`` has a unit ``u``, ``"ln(Q / 1 u): the natural logarithm of Q in u, dimensionless"``; for a
-    lag or a step of such a logarithm the same; else ``""``."""
+    ``ln_Q`` whose ``Q`` has a unit ``u``, ``"ln(Q / 1 u): the natural logarithm of Q in u, dimensionless"``, whose
+    ``Q``'s name gives no unit, ``"ln(Q): the natural logarithm of Q in its column's own unit"``; for a lag or a step
+    of such a logarithm the same; else ``""``."""
     derived = _derived_base(str(name))
     while derived is not None and derived[0] != "log":
         derived = _derived_base(derived[1])
-    if derived is None or column_unit(derived[1]) is None:
+    if derived is None:
         return ""
     q, u = derived[1], column_unit(derived[1])
+    if u is None:
+        return f"ln({q}): the natural logarithm of {q} in its column's own unit"
     return f"ln({q} / 1 {u}): the natural logarithm of {q} in {u}, dimensionless"
 
 
