@@ -143,7 +143,11 @@ def test_time_dependent_candidates_are_those_reading_the_session_clock():
                                                              "s_hi": 0.012, "V_lo": 220.0, "V_hi": 324.0,
                                                              "load_abs": 0.09, "v_lo": 0.0, "v_hi": 0.3},
                                channels=({"name": "aux", "kind": "logged", "mean": 1.0, "sd": 0.5,
-                                          "within_run": False},))
+                                          "within_run": False},
+                                         {"name": "aux_since_s", "kind": "logged", "mean": 8.0, "sd": 4.0,
+                                          "within_run": True},
+                                         {"name": "since_s_aux", "kind": "logged", "mean": 8.0, "sd": 4.0,
+                                          "within_run": False}))
 
     def cands(kind):
         return [CandidateForce(h.family, h.regressor, h.shape, h.names, h.units, None, also=h.also, spec=h.spec)
@@ -152,8 +156,10 @@ def test_time_dependent_candidates_are_those_reading_the_session_clock():
     assert smooth["smooth_time"] and not smooth["smooth_load"] and not smooth["smooth_position"]
     chan = {(c.spec["channel"], c.spec["level"]): acc.time_dependent(c) for c in cands("channel")}
     assert chan["time_s", "run"] and chan["time_s", "sample"] and not chan["aux", "run"]
+    # an event clock (the session's time since a logged step, <column>_since_s) is a clock of the session too
+    assert chan["aux_since_s", "run"] and chan["aux_since_s", "sample"] and not chan["since_s_aux", "run"]
     runl = {c.spec["channel"]: acc.time_dependent(c) for c in cands("run_level")}
-    assert runl == {"aux": False, "time_s": True}
+    assert runl == {"aux": False, "time_s": True, "aux_since_s": True, "since_s_aux": False}
     assert not any(acc.time_dependent(c) for c in cands("load_path_friction"))
     assert all(acc.time_dependent(c) for c in cands("thermal_drift"))
 

@@ -39,6 +39,7 @@ from ..predictor import effects as fx
 from . import chain
 from .folds import held_out_split, held_out_times
 from .candidates import CandidateForce
+from .events import SUFFIX as EVENT_SUFFIX
 
 DEFAULT_REFIT_FOLDS = 4
 #: splits of TRAIN's runs into the refit's folds (repeated cross-validation, :func:`repeated_folds`)
@@ -215,11 +216,14 @@ SESSION_SIGNALS = frozenset({"t", "col:time_s", "run:time_s"})
 
 
 def time_dependent(candidate: CandidateForce) -> bool:
-    """Whether a candidate's force depends on the session clock (its spec reads ``t`` or the ``time_s`` channel;
-    a candidate without a spec: ``time`` among its regressors)."""
+    """Whether a candidate's force depends on the session clock (its spec reads ``t``, the ``time_s`` channel or
+    an event clock ``<column>_since_s``, the session's time since a logged step; a candidate without a spec:
+    ``time`` among its regressors)."""
     if candidate.spec:
         try:
-            return bool(fx.needs(candidate.spec) & SESSION_SIGNALS)
+            signals = fx.needs(candidate.spec)
+            return bool(signals & SESSION_SIGNALS) or any(
+                s.partition(":")[2].endswith(EVENT_SUFFIX) for s in signals if s.startswith(("col:", "run:")))
         except fx.EffectSpecError:
             pass
     return "time" in candidate.regressors
