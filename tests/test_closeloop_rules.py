@@ -571,3 +571,125 @@ def test_the_loops_refit_folds_are_repeated_only_for_the_stratified_scheme():
     loop = CloseLoop(refit_repeats=3)
     assert loop.get_params()["refit_repeats"] == 3 and CloseLoop().refit_repeats == acc.DEFAULT_REFIT_REPEATS == 1
     assert loop.set_params(refit_repeats=2).refit_repeats == 2
+
+
+def _reader(family, regressor, run_sse, cur, n=1, also=()):
+    """A refit trial of a candidate of ``family`` reading ``regressor`` (and ``also``), per-run SSEs ``run_sse``."""
+    c = CandidateForce(family, regressor, "", tuple(f"{family}_{i}" for i in range(n)), ("N",) * n, None,
+                       also=tuple(also))
+    return acc.RefitCV(c, cur, _errors(run_sse))
+
+
+def test_reads_auxiliary_names_every_regressor_beyond_the_inputs_and_the_clock():
+    cur = _errors([10] * 8)
+    for reg in ("position", "direction", "load", "voltage", "speed", "acceleration", "temperature", "frequency",
+                "time"):
+        assert not acc.reads_auxiliary(_reader("f", reg, [5] * 8, cur).candidate)
+    for reg in ("tray_mass_g", "voltage_V_lag10r", "prev_run_load_kg", "ln_sense_shunt_ohm", "time_in_run_s"):
+        assert acc.reads_auxiliary(_reader("f", reg, [5] * 8, cur).candidate)
+    assert acc.reads_auxiliary(_reader("f", "load", [5] * 8, cur, also=("tray_mass_g",)).candidate)
+
+
+def test_the_inputs_replace_an_auxiliary_pick_within_one_standard_error_that_they_mostly_explain():
+    # reference written out: current per-run SSE mean 10; the channel's [5, 6, 4, 5, 4.5, 5.5, 5, 5] (gain 0.5),
+    # the load's [7.5, 5.5, 5.5, 4, 3, 6.5, 4, 6.5]: delta = (load - channel) / 10 has mean 0.03125 and se 0.05256
+    # (the per-run test above): within one SE
+    cur = _errors([10, 12, 8, 10, 9, 11, 10, 10])
+    chan = _reader("channel_tray", "tray_mass_g", [5, 6, 4, 5, 4.5, 5.5, 5, 5], cur)
+    load = _reader("load_path_friction", "load", [7.5, 5.5, 5.5, 4, 3, 6.5, 4, 6.5], cur)
+    explains = {"load_path_friction": 0.8, "run_level_load": 0.8, "channel_other": 0.9, "time_drift": 0.9}
+    share = lambda n, g: explains[n.candidate.family]   # noqa: E731
+    log = []
+    assert acc.input_reading(chan, [chan, load], share, log=log, round_no=2) is load
+    assert log == [{"round": 2, "pick": "channel_tray", "taken": "load_path_friction",
+                    "gap": pytest.approx(0.03125, rel=1e-12), "se": pytest.approx(0.05256, rel=1e-3),
+                    "share": 0.8}]
+    # the inputs explain too little of the channel's force (below NAMED_SHARE = 0.5): the channel stays
+    assert acc.input_reading(chan, [chan, load], lambda n, g: 0.49) is chan
+    assert acc.input_reading(chan, [chan, load], lambda n, g: 0.5) is load
+    # beyond one SE (the `mid` trial above: gap 0.0325, se 0.01206): the channel stays
+    mid = _reader("run_level_load", "load", [5.9, 6, 4.5, 5, 5.2, 5.6, 5.3, 5.1], cur)
+    assert acc.input_reading(chan, [chan, mid], share) is chan
+    # a pick of the inputs, another auxiliary channel, or the clock is never an alternative; an input pick stays
+    other = _reader("channel_other", "aux7", [7.5, 5.5, 5.5, 4, 3, 6.5, 4, 6.5], cur)
+    clock = _reader("time_drift", "time", [7.5, 5.5, 5.5, 4, 3, 6.5, 4, 6.5], cur)
+    assert acc.input_reading(chan, [chan, other, clock], share) is chan
+    assert acc.input_reading(load, [chan, load], share) is load
+    # an interaction of the channel with the load reads the channel: replaced as well
+    inter = _reader("channel_tray", "tray_mass_g", [5, 6, 4, 5, 4.5, 5.5, 5, 5], cur, also=("load",))
+    assert acc.input_reading(inter, [inter, load], share) is load
+    # not cross-validated against the same current model's runs: no paired gap, the channel stays
+    other_cur = _reader("load_path_friction", "load", [7.5, 5.5, 5.5, 4, 3, 6.5, 4, 6.5],
+                        _errors([10, 12, 8, 10, 9, 11, 10, 10.5]))
+    assert acc.input_reading(chan, [chan, other_cur], share) is chan
+    # of two such input trials the larger gain, then the fewer parameters
+    # gain 0.47625 against the load's 0.46875; delta from the channel's mean 0.02375, se 0.0290: within one SE
+    near = _reader("run_level_load", "load", [6.5, 5.8, 5, 4.5, 3.8, 6, 4.5, 5.8], cur)
+    assert acc.input_reading(chan, [chan, load, near], share) is near
+    twin = _reader("run_level_load", "load", [7.5, 5.5, 5.5, 4, 3, 6.5, 4, 6.5], cur, n=3)
+    assert acc.input_reading(chan, [chan, twin, load], share) is load
+
+
+def test_the_loop_reads_an_auxiliary_pick_as_the_inputs_it_stands_for(monkeypatch):
+    """``_iterate``'s choice of the round's pick applies :func:`input_reading` after ``prefer`` and
+    ``named_reading``, with the round's geometry, and logs the replacement in ``it.readings``."""
+    import types
+    from l1b2.closeloop import loop as loop_mod
+    from l1b2.closeloop.loop import CloseLoop
+    cur = _errors([10, 12, 8, 10, 9, 11, 10, 10])
+    chan = _reader("channel_tray", "tray_mass_g", [5, 6, 4, 5, 4.5, 5.5, 5, 5], cur)
+    load = _reader("load_path_friction", "load", [7.5, 5.5, 5.5, 4, 3, 6.5, 4, 6.5], cur)
+    chosen = {}
+
+    class Stop(Exception):
+        pass
+
+    class Geo:
+        def __init__(self, *a):
+            pass
+
+        def of_trials(self, named, generic):
+            return 0.8 if (named.candidate.family, generic.candidate.family) == ("load_path_friction",
+                                                                                 "channel_tray") else 0.0
+
+    def identified_pick(it, ok, choose, *a):
+        chosen["pick"] = choose(ok)
+        raise Stop
+    for name, fake in (("refit_schemes", lambda *a: {False: [], True: []}), ("screen_folds", lambda *a: ([], [])),
+                       ("Directions", Geo), ("nuisance_forces", lambda *a: None),
+                       ("score_candidates", lambda *a, **k: []), ("significance_level", lambda *a: 0.01),
+                       ("screened", lambda *a, **k: ([object()], 0.01)),
+                       ("named_alternatives", lambda *a, **k: []), ("shape_alternatives", lambda *a, **k: []),
+                       ("accepts", lambda *a, **k: True), ("simplest_within_one_se", lambda t: list(t)),
+                       ("screen_mask", lambda d, m: m)):
+        monkeypatch.setattr(loop_mod, name, fake)
+    monkeypatch.setattr(loop_mod.res, "drive_residual", lambda d, v: np.zeros(len(d)))
+    est = CloseLoop(run_level=False)
+    monkeypatch.setattr(est, "_trials", lambda *a: [chan, load])
+    monkeypatch.setattr(est, "_identified_pick", identified_pick)
+    model = types.SimpleNamespace(predict_free_run=lambda d: np.zeros(len(d)), params_=None)
+    it = loop_mod._Iteration(model=model, effects=acc.EffectSet(), rounds=[{}])
+    with pytest.raises(Stop):
+        est._iterate(it, [], pd.DataFrame({"run": [0, 1]}), np.ones(2, bool), 0.1, None, lambda *a: None)
+    assert chosen["pick"] is load                  # prefer's pick (the channel: the larger gain) read as the load's
+    assert [(r["round"], r["pick"], r["taken"]) for r in it.readings] == [(1, "channel_tray", "load_path_friction")]
+
+
+def test_the_report_names_each_channel_read_as_the_inputs_and_an_older_report_still_loads():
+    from l1b2.closeloop.report import Diagnosis
+    from l1b2.closeloop.result import markdown_report
+    from test_report_values import minimal_report
+    rec = {"round": 2, "pick": "channel_tray_mass_g[force_factor, run]", "taken": "load_path_friction",
+           "gap": 0.04528, "se": 0.07304, "share": 0.8534}
+    rep = minimal_report()
+    rep["diagnosis"] = {**rep["diagnosis"], "input_readings": [rec]}
+    want = ("* round 2: `channel_tray_mass_g[force_factor, run]` reads a channel that the model's inputs stand for: "
+            "`load_path_friction` taken instead (its CV gain 0.045 lower, within one SE 0.073; it explains 85% of "
+            "the channel's force)")
+    assert want in markdown_report(rep).splitlines()
+    assert "stand for" not in markdown_report(minimal_report())
+    old = {"significant": False, "traced_to": [], "effect": None, "effect_shape": None,
+           "effect_description": None, "effects": [], "message": "no significant missing effect"}
+    assert Diagnosis.from_dict(old).input_readings == []
+    d = Diagnosis.from_dict({**old, "input_readings": [rec]})
+    assert Diagnosis.from_dict(d.to_dict()) == d

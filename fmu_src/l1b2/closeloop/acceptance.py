@@ -514,6 +514,55 @@ def named_reading(pick: RefitCV, accepted: list, share, min_share: float = NAMED
     return pick if best is None else best
 
 
+#: the regressors the predictor reads from its own inputs (``Predictor.fmu``: V0, load, direction, temperature,
+#: drive frequency) and from its own motion (position, speed, acceleration): what a host always gives it. Every
+#: other regressor (a logged auxiliary channel, a history the loop derives, the session clock) is not an input.
+INPUT_REGRESSORS = ("position", "direction", "load", "voltage", "speed", "acceleration", "temperature", "frequency")
+
+
+def reads_auxiliary(candidate) -> bool:
+    """Whether a candidate reads a logged channel or a derived history beyond the predictor's inputs: one of its
+    regressors is neither in :data:`INPUT_REGRESSORS` nor the session clock ``time``."""
+    return any(r not in INPUT_REGRESSORS and r != "time" for r in candidate.regressors)
+
+
+def input_reading(pick: RefitCV, accepted: list, share, min_share: float = NAMED_SHARE,
+                  log: list | None = None, round_no: int | None = None) -> RefitCV:
+    """The model's own inputs instead of an auxiliary channel that stands in for them.
+
+    When ``pick`` reads an auxiliary channel (:func:`reads_auxiliary`), an accepted trial that reads only the
+    predictor's inputs (:data:`INPUT_REGRESSORS`) replaces it if (a) its span explains at least ``min_share`` of the
+    pick's fitted force (``share(trial, pick)``, :func:`explained_share` after the nuisance) and (b) the pick's CV
+    gain exceeds the trial's by no more than one standard error of that gap, paired per held-out run
+    (:func:`one_se_gap_per_run`; None, when the two were not cross-validated on the same folds, keeps the pick).
+    The one-standard-error rule of :func:`named_reading`, with the inputs as the simpler model: a channel is read as
+    a cause only when it explains the runs beyond what the inputs it follows explain, and a predictor that needs it
+    needs a channel its host may not have. Among several such trials, the largest CV gain, then the fewest
+    parameters. ``log`` (a list) gets ``{"round", "pick", "taken", "gap", "se", "share"}`` when the pick is
+    replaced (``round``: ``round_no``).
+    """
+    if not reads_auxiliary(pick.candidate):
+        return pick
+    best, seen = None, None
+    for t in accepted:
+        if t is pick or not all(r in INPUT_REGRESSORS for r in t.candidate.regressors):
+            continue
+        gap = one_se_gap_per_run(t, pick)
+        if gap is None or gap[0] > gap[1]:
+            continue
+        s = share(t, pick)
+        if s < min_share:
+            continue
+        if best is None or (t.gain, -t.candidate.n_params) > (best.gain, -best.candidate.n_params):
+            best, seen = t, (gap, s)
+    if best is None:
+        return pick
+    if log is not None:
+        log.append({"round": round_no, "pick": pick.candidate.label, "taken": best.candidate.label, "gap": seen[0][0],
+                    "se": seen[0][1], "share": float(seen[1])})
+    return best
+
+
 class Directions:
     """The candidates' forces on the masked samples with the current model's nuisance directions projected off.
 
@@ -542,6 +591,10 @@ class Directions:
     def share(self, named: CandidateForce, generic: CandidateForce, phi) -> float:
         """:func:`explained_share` of the generic candidate's force with parameters ``phi`` by the named one's span."""
         return explained_share(self.columns(generic) @ np.asarray(phi, float).ravel(), self.columns(named))
+
+    def of_trials(self, named: RefitCV, generic: RefitCV) -> float:
+        """:meth:`share` of two refit trials: the second's force (its fitted ``phi``) by the first's span."""
+        return self.share(named.candidate, generic.candidate, generic.phi)
 
     def conflicts(self, c: CandidateForce, effects: EffectSet, r2: float = SHARED_R2) -> bool:
         """Whether ``c`` shares a direction (:data:`SHARED_R2`) with an added effect of the other kind (a named effect

@@ -41,13 +41,13 @@ Procedure (TEST is never used for fitting or choosing):
       (:func:`~l1b2.closeloop.selection.shape_alternatives`: the refit chooses a channel's shape);
    b. *acceptance* (:mod:`l1b2.closeloop.acceptance`): current model and
       current model + candidate re-identified on ``refit_folds`` - 1 run folds
-      (warm start, bounded budget) and predicting the held-out fold in free
-      run; accepted when the pooled held-out sum of squares falls by
-      ``min_cv_gain`` in most folds; of a family's accepted shapes the simplest within one standard error of
-      its best (:func:`~l1b2.closeloop.selection.simplest_within_one_se`); the most parsimonious within
-      ``parsimony`` of the best CV gain is added, a named family instead of a generic term it explains
-      unless the generic one is better by more than one standard error
-      (:func:`~l1b2.closeloop.acceptance.named_reading`); from the Eq. 29 baseline a named pick must be accepted
+      (warm start, bounded budget) and predicting the held-out fold in free run; accepted when the pooled held-out
+      sum of squares falls by ``min_cv_gain`` in most folds; of a family's accepted shapes the simplest within one
+      standard error of its best (:func:`~l1b2.closeloop.selection.simplest_within_one_se`); the most parsimonious
+      within ``parsimony`` of the best CV gain is added, a named family instead of a generic term it explains unless
+      the generic one is better by more than one standard error (:func:`~l1b2.closeloop.acceptance.named_reading`),
+      the inputs' trial instead of an auxiliary channel they explain on the same terms
+      (:func:`~l1b2.closeloop.acceptance.input_reading`); from the Eq. 29 baseline a named pick must be accepted
       again from the pure-slip family, else its reading is withdrawn and the same force is added as a generic
       term of the reduced model (:func:`~l1b2.closeloop.crosscheck.confirmed_pick`, decision 0043); a pick read
       as physics is named only when its parameters are jointly different from zero under the reported
@@ -92,8 +92,8 @@ from .sensor import GainChain
 from . import encoder, sensorchain, stamps
 from .sensorchain import SensorChain
 from .acceptance import (Directions, EffectSet, RefitCV, RefitSettings, Validated, accepts, added_columns,
-                         chain_cv_errors, collinear, cv_errors, fold_start_phi, immaterial, materiality, named_reading,
-                         refit, tied, time_dependent, validated)
+                         chain_cv_errors, collinear, cv_errors, fold_start_phi, immaterial, input_reading, materiality,
+                         named_reading, refit, tied, time_dependent, validated)
 from .stagefit import physics_behind, stage_cv_errors, stage_verdict
 from .folds import refit_schemes, screen_folds, stratified_folds
 from .baselines import choose_baseline, identify_families, retag_structural
@@ -342,8 +342,8 @@ class CloseLoop(EstimatorSettings):
             if not ok:
                 break
             pick, model, checks = self._identified_pick(
-                it, ok, lambda tr: named_reading(prefer(tr, self.parsimony, rl), tr,
-                                                 lambda n, g: geo.share(n.candidate, g.candidate, g.phi)),
+                it, ok, lambda tr: input_reading(named_reading(prefer(tr, self.parsimony, rl), tr, geo.of_trials), tr,
+                                                 geo.of_trials, log=it.readings, round_no=n_rnd),
                 (lambda t: check(t, it.effects, n_rnd, True)) if check is not None else (lambda t: None),
                 cur, dtr, mask, m_s, n_rnd, say)
             if pick is None:
@@ -611,8 +611,7 @@ class CloseLoop(EstimatorSettings):
                 it.effects.labels),
             "run_level": it.run_level.to_dict() if it.run_level is not None else None,
             "run_level_rounds": list(it.run_levels),
-            "named_checks": list(it.checks),
-            "physical_range": list(it.ranges),
+            "named_checks": list(it.checks), "physical_range": list(it.ranges), "input_readings": list(it.readings),
         }
 
 
@@ -636,6 +635,7 @@ class _Iteration:
     run_levels: list = field(default_factory=list)   #: each round's run-level record, then the final model's
     checks: list = field(default_factory=list)    #: the named picks' checks from the pure-slip family
     ranges: list = field(default_factory=list)    #: the damping forms' physical-range checks after each refit
+    readings: list = field(default_factory=list)  #: the picks of an auxiliary channel read as the inputs instead
 
 
 class ChainModel:

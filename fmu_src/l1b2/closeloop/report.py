@@ -147,6 +147,9 @@ class Diagnosis(_Record):
     ``physical_range``: after each joint refit with a channel's damping form, the total viscous damping's smallest
     value over TRAIN's range of the channel per such form (``damping_floor_N_s_per_m``) and the outcome (``kept``,
     or ``refused``: a negative floor, the pick not added).
+    ``input_readings``: each pick of an auxiliary channel that the predictor's own inputs replaced within one
+    standard error (:func:`l1b2.closeloop.acceptance.input_reading`: ``round``, ``pick``, ``taken``, ``gap``,
+    ``se``, ``share``).
     ``auxiliary_columns``: what was done to each auxiliary column that was not numeric and finite as logged
     (flags, text labels, gaps; :func:`l1b2.closeloop.auxiliary.with_usable_channels`).
     ``response_test``: the consequence test of each logged column that varies within runs, whether the speed's
@@ -190,6 +193,7 @@ class Diagnosis(_Record):
     unseen_levels: dict = field(default_factory=dict)
     channel_ranges: list = field(default_factory=list)
     physical_range: list = field(default_factory=list)
+    input_readings: list = field(default_factory=list)
     auxiliary_columns: list = field(default_factory=list)
     response_test: list = field(default_factory=list)
     rest_before_onset: Any = None

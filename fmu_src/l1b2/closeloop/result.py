@@ -360,6 +360,9 @@ def markdown_report(rep: dict) -> str:
               f"TRAIN's range of the channel (" + ", ".join(f"{k}: {v:.3g} N s/m" for k, v in
                                                             c["damping_floor_N_s_per_m"].items()) + ")"
               for c in d.get("physical_range", []) if c["outcome"] != "kept"]
+    lines += [f"* round {c['round']}: `{c['pick']}` reads a channel that the model's inputs stand for: `{c['taken']}` "
+              f"taken instead (its CV gain {c['gap']:.3f} lower, within one SE {c['se']:.3f}; it explains "
+              f"{c['share']:.0%} of the channel's force)" for c in d.get("input_readings", [])]
     for label, u in (d.get("unseen_levels") or {}).items():
         values = ", ".join(format(v, "g") for v in u["values"])
         lines.append(f"* TEST has {u['runs']} run(s) at {u['channel']} = {values}, a value TRAIN never had: "
