@@ -127,6 +127,21 @@ def test_the_decoys_column_and_the_ramps_made_data(audit, load_bench):
     assert moved(r1) > moved(r0) + 0.02
 
 
+def test_the_ramps_made_data(audit, load_bench):
+    df, truth, nominal, plan = audit.experiment("softstart_ramp", 2, first=2)
+    p = truth["parameters"]
+    factors = load_bench("blind_effects").setting("softstart_ramp", 2, audit.draw)[3]
+    from l1b2.rig.experiment import scattered_motor
+    for k in (1, 2):
+        run = df[df["run"] == k]
+        T_ms = p["T_r_ms"][k - 1]
+        assert run["softstart_ms"].tolist() == [T_ms] * len(run)
+        assert truth["per_run"][k - 1]["T_r_s"] == T_ms / 1000.0
+        L, V, d = float(run["load_kg"].iloc[0]), float(run["voltage_V"].iloc[0]), int(run["direction"].iloc[0])
+        r = audit.traverse_ramped(scattered_motor(nominal, factors[k - 1]), nominal, plan, V, L, d, T_ms / 1000.0)
+        assert truth["per_run"][k - 1]["duration_s"] == float(r["time"][-1])
+
+
 def test_the_accepted_regressors_and_the_pass_rule(audit):
     assert audit.accepted("stribeck_viscosity", "oil_viscosity_mPa_s")
     assert audit.accepted("stribeck_viscosity", "log10_oil_viscosity_mPa_s")
