@@ -95,14 +95,17 @@ def test_a_logged_channel_is_its_own_inputs_signal_and_the_session_clock_has_non
 
 
 def test_a_column_names_its_unit_by_its_suffix():
-    # reference: the data format's table, then the name's last part (or last two as a quotient) when it is a unit
+    # reference: the data format's table, then the name's last two parts as a product or a quotient, or its last
+    # part, when it is a unit
     from l1b2.units import UNITS, column_unit
     want = {"line_pressure_bar": "bar", "supply_V": "V", "belt_speed_m_s": "m/s", "coolant_C": "degC",
+            "oil_viscosity_mPa_s": "mPa.s", "glycerol_Pa_s": "Pa.s", "dwell_s": "s",
             "heater_W": "W", "coil_current_A": "A", "payload_g": "g", "temperature_C": "degC", "direction": "1",
             "fixture_id": None, "aux_relay": None, "sensor_1": None, "V": None}
     assert {n: column_unit(n) for n in want} == want
     assert UNITS["bar"].base_unit_attributes() == {"kg": "1", "m": "-1", "s": "-2", "factor": "100000.0"}
     assert UNITS["g"].base_unit_attributes() == {"kg": "1", "factor": "0.001"}
+    assert UNITS["mPa.s"].base_unit_attributes() == {"kg": "1", "m": "-1", "s": "-1", "factor": "0.001"}
 
 
 def test_the_block_declares_one_input_per_logged_channel_with_unit_start_and_provenance():

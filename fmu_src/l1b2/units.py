@@ -80,6 +80,8 @@ UNITS: dict[str, UnitDef] = {
     "Pa": UnitDef(kg=1, m=-1, s=-2),
     "bar": UnitDef(kg=1, m=-1, s=-2, factor=1e5),
     "g": UnitDef(kg=1, factor=1e-3),
+    "Pa.s": UnitDef(kg=1, m=-1, s=-1),
+    "mPa.s": UnitDef(kg=1, m=-1, s=-1, factor=1e-3),
 }
 
 
@@ -201,9 +203,9 @@ def column_unit(name: str) -> str | None:
       of what, in which unit).
 
     Any other column's name gives it by its suffix, the rig's naming rule (``line_pressure_bar``, ``supply_V``,
-    ``belt_speed_m_s``, the event clock ``X_since_s``): the last two ``_``-separated parts read as a quotient
-    (``m_s`` -> ``m/s``) or the last part, when that is a unit of :data:`UNITS` other than ``1`` or of
-    :data:`SUFFIX_UNITS` (``C`` -> ``degC``).
+    ``belt_speed_m_s``, ``oil_viscosity_mPa_s``, the event clock ``X_since_s``): the last two ``_``-separated parts
+    read as a product (``mPa_s`` -> ``mPa.s``), else as a quotient (``m_s`` -> ``m/s``), else the last part, the
+    first of these that is a unit of :data:`UNITS` other than ``1`` or of :data:`SUFFIX_UNITS` (``C`` -> ``degC``).
     """
     known = data_unit(name)
     if known is not None:
@@ -215,7 +217,7 @@ def column_unit(name: str) -> str | None:
         if unit is not None:
             return "1" if kind == "log" else DIFFERENCE_UNITS.get(unit, unit) if kind == "step" else unit
     parts = str(name).split("_")[1:]
-    for suffix in (["/".join(parts[-2:])] if len(parts) >= 2 else []) + parts[-1:]:
+    for suffix in ([".".join(parts[-2:]), "/".join(parts[-2:])] if len(parts) >= 2 else []) + parts[-1:]:
         unit = SUFFIX_UNITS.get(suffix, suffix)
         if unit in UNITS and unit != "1":   # a trailing number is an index, not the unit 1
             return unit
