@@ -14,7 +14,7 @@ from l1b2.cli import build_parser
 from l1b2.closeloop.evidence import with_response_test
 from l1b2.closeloop.report import response_test_lines
 from l1b2.closeloop.settings import response_setting
-from l1b2.closeloop.responses import (POSITION_DEGREE, RATE_TAUS_S, SHARE_MIN, TAUS_S, _nuisance_residual,
+from l1b2.closeloop.responses import (POSITION_DEGREE, RATE_TAUS_S, SHARE_MIN, TAUS_S, _nuisance_residual, active_runs,
                                       _per_run_share, _share, _sign_test_p,
                                       classed_responses, drive_course, history_columns,
                                       response_statistic, response_tests, speed_histories, speed_history, speed_rate,
@@ -125,8 +125,9 @@ def test_every_column_is_tested_against_the_frames_histories_computed_once(sessi
                                                  + [("signed", tau) for tau in TAUS_S] + [("rate", None)])
     own = {name: response_statistic(session[name].to_numpy(float), *args) for name in ("mic_dB", "room_C")}
     for rec in response_tests(session):
+        assert rec["runs_constant"] == 0                             # every column varies in every run
         if rec["channel"] in own:
-            assert {k: v for k, v in rec.items() if k != "channel"} == own[rec["channel"]]
+            assert {k: v for k, v in rec.items() if k not in ("channel", "runs_constant")} == own[rec["channel"]]
     assert own["mic_dB"]["response"] and not own["room_C"]["response"]
 
 
@@ -185,6 +186,33 @@ def test_a_signed_echo_of_the_speed_is_a_response_through_the_signed_history(ses
     exact = response_statistic(2 * vs - 3 * vs ** 3, session["speed_m_s"], session["time_s"], session["position_m"],
                                session["run"])
     assert exact["share"] == pytest.approx(1.0, abs=1e-9) and exact["signed"] and exact["tau_s"] == 0.0
+
+
+def test_a_sensor_silent_in_some_runs_is_tested_on_the_runs_where_it_reads(session):
+    # reference: a tachometer gated by the load (it reads only in the runs with a load of 0.1 kg, 0 in the others)
+    # echoes the speed through its 125 ms filter where it reads. Judged on those runs alone its record is the one
+    # response_statistic gives on that sub-frame; a law shared with the silent runs would have to give a constant
+    # from a moving speed there
+    gated = session["load_kg"].to_numpy() == 0.1
+    df = session.assign(tach=np.where(gated, session["mic_dB"], 0.0))
+    (rec,) = [r for r in response_tests(df) if r["channel"] == "tach"]
+    runs = df.loc[gated, "run"].unique()
+    sub = df[df["run"].isin(runs)]
+    own = response_statistic(sub["tach"].to_numpy(float), sub["speed_m_s"], sub["time_s"], sub["position_m"],
+                             sub["run"])
+    assert {k: v for k, v in rec.items() if k not in ("channel", "runs_constant")} == own
+    assert rec["n_runs"] == len(runs) and rec["runs_constant"] == df["run"].nunique() - len(runs) > 0
+    assert rec["response"]
+    whole = response_statistic(df["tach"].to_numpy(float), df["speed_m_s"], df["time_s"], df["position_m"], df["run"])
+    assert whole["share"] < rec["share"] and not whole["response"]   # the silent runs pull the law off the echo
+    assert active_runs(df, "tach").tolist() == list(runs)
+    (line,) = [x for x in response_test_lines(with_applied([rec], None, ("tach",))) if "`tach`" in x]
+    assert f"above half in {rec['runs_above']} of {len(runs)} runs" in line
+    assert f"constant in {rec['runs_constant']} other runs (not tested there)" in line and "a response" in line
+    # a cause that is held in some runs stays a cause on the runs where it moves
+    held = session.assign(room=np.where(gated, session["room_C"], 22.0))
+    (c,) = [r for r in response_tests(held) if r["channel"] == "room"]
+    assert not c["response"] and c["runs_constant"] > 0
 
 
 def test_a_column_constant_within_runs_is_not_tested(session):

@@ -297,6 +297,8 @@ def response_test_lines(tests) -> list:
              "and more than the drive's own course from the run's start explains):", ""]
     return lines + [f"- `{r['channel']}`: share {r['share']:.0%} ({_history_text(r)}), above half in "
                     f"{r['runs_above']} of {r['n_runs']} runs (p {r['p_value']:.2g})"
+                    + (f", constant in {r['runs_constant']} other runs (not tested there)" if r.get("runs_constant")
+                       else "")
                     + (f", the drive's course from the run's start {r['drive_share']:.0%}" if r.get("drive_share")
                        else "") + ": "
                     f"{'a response' if r['response'] else 'not a response'}"

@@ -51,6 +51,8 @@ The decision rule is an effect size, a comparison and a count of runs, none grow
 Columns that the model reads as inputs (the data format's drive frequency and temperature) are causes by the
 model's physics and are not tested; nor are the required columns and the speed. A column constant within every run
 has no within-run course and is not tested (a run-level reading is a setting or a state, not an echo of the speed).
+A column constant within some runs only (a sensor switched off or gated by a setting in those runs) is tested on the
+runs where it varies (:func:`active_runs`).
 """
 
 from __future__ import annotations
@@ -66,7 +68,7 @@ from .auxiliary import NOT_CANDIDATES, varies_within_runs
 
 __all__ = ["TAUS_S", "RATE_TAUS_S", "HISTORIES", "DEGREE", "SHARE_MIN", "P_MAX", "POSITION_DEGREE", "MODEL_INPUTS",
            "speed_history", "drive_course", "speed_rate", "history_columns", "speed_histories", "response_statistic",
-           "response_tests", "classed_responses"]
+           "active_runs", "response_tests", "classed_responses"]
 
 #: the sensor time constants [s] searched: none (the instantaneous speed), then 10 ms to 0.3 s (a meter's fast
 #: time weighting is 125 ms; longer than the longest runs' acceleration, no transient is left to follow)
@@ -270,24 +272,40 @@ def response_statistic(column, speed_m_s, time_s, position_m, run, histories=Non
     return best
 
 
+def active_runs(df: pd.DataFrame, name: str) -> np.ndarray:
+    """The run ids of ``df`` (in order of appearance) inside which the numeric column ``name`` takes more than one
+    value: where it has a within-run course."""
+    ptp = df.groupby(dataio.RUN, sort=False)[name].agg(np.ptp)
+    return ptp.index[ptp.to_numpy(float) > 0].to_numpy()
+
+
 def response_tests(df: pd.DataFrame, named=()) -> list[dict]:
     """The test of every numeric, finite column of ``df`` beyond the required ones, the speed, the named responses
     ``named`` and the model's inputs (:data:`MODEL_INPUTS`) that varies within some run: one ``{"channel", **``
-    :func:`response_statistic` ``}`` each, in column order."""
+    :func:`response_statistic` ``, "runs_constant"}`` each, in column order.
+
+    A column is tested on the runs in which it varies (:func:`active_runs`): a sensor that is silent or held in
+    some runs (switched off, gated by a setting) has no within-run course there, and a law shared by the runs
+    cannot be asked to give a constant from a speed that moves. ``n_runs`` counts the runs tested and
+    ``runs_constant`` the others; with every run active the test reads the whole frame."""
     skip = NOT_CANDIDATES | MODEL_INPUTS | set(named)
     out = []
-    histories = None
+    histories: dict = {}
     for name in df.columns:
         if name in skip or not pd.api.types.is_numeric_dtype(df[name]) or pd.api.types.is_bool_dtype(df[name]):
             continue
-        c = df[name].to_numpy(float)
-        if not np.all(np.isfinite(c)) or not varies_within_runs(df, name):
+        if not np.all(np.isfinite(df[name].to_numpy(float))) or not varies_within_runs(df, name):
             continue
-        if histories is None:
-            histories = speed_histories(df[dataio.SPEED], df[dataio.TIME], df[dataio.POSITION], df[dataio.RUN])
-        rec = response_statistic(c, df[dataio.SPEED], df[dataio.TIME], df[dataio.POSITION], df[dataio.RUN],
-                                 histories)
-        out.append({"channel": str(name), **rec})
+        runs = active_runs(df, name)
+        n_all = df[dataio.RUN].nunique()
+        sub = df if len(runs) == n_all else df[df[dataio.RUN].isin(runs)]
+        key = tuple(runs) if len(runs) < n_all else None
+        if key not in histories:
+            histories[key] = speed_histories(sub[dataio.SPEED], sub[dataio.TIME], sub[dataio.POSITION],
+                                             sub[dataio.RUN])
+        rec = response_statistic(sub[name].to_numpy(float), sub[dataio.SPEED], sub[dataio.TIME],
+                                 sub[dataio.POSITION], sub[dataio.RUN], histories[key])
+        out.append({"channel": str(name), **rec, "runs_constant": int(n_all - len(runs))})
     return out
 
 
