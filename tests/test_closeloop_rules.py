@@ -688,6 +688,9 @@ def test_the_report_names_each_channel_read_as_the_inputs_and_an_older_report_st
             "the channel's force)")
     assert want in markdown_report(rep).splitlines()
     assert "stand for" not in markdown_report(minimal_report())
+    # the inputs' trial may have the larger gain (the pick came first by another rule of the choice)
+    rep["diagnosis"]["input_readings"] = [{**rec, "gap": -0.0362}]
+    assert any("(its CV gain 0.036 higher, within one SE 0.073;" in x for x in markdown_report(rep).splitlines())
     old = {"significant": False, "traced_to": [], "effect": None, "effect_shape": None,
            "effect_description": None, "effects": [], "message": "no significant missing effect"}
     assert Diagnosis.from_dict(old).input_readings == []

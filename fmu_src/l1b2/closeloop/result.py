@@ -361,7 +361,8 @@ def markdown_report(rep: dict) -> str:
                                                             c["damping_floor_N_s_per_m"].items()) + ")"
               for c in d.get("physical_range", []) if c["outcome"] != "kept"]
     lines += [f"* round {c['round']}: `{c['pick']}` reads a channel that the model's inputs stand for: `{c['taken']}` "
-              f"taken instead (its CV gain {c['gap']:.3f} lower, within one SE {c['se']:.3f}; it explains "
+              f"taken instead (its CV gain {abs(c['gap']):.3f} {'lower' if c['gap'] >= 0 else 'higher'}, within one "
+              f"SE {c['se']:.3f}; it explains "
               f"{c['share']:.0%} of the channel's force)" for c in d.get("input_readings", [])]
     for label, u in (d.get("unseen_levels") or {}).items():
         values = ", ".join(format(v, "g") for v in u["values"])
