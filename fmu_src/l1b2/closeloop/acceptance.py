@@ -502,16 +502,27 @@ def named_reading(pick: RefitCV, accepted: list, share, min_share: float = NAMED
     """
     if not pick.candidate.generic:
         return pick
+    found = within_one_se(pick, [t for t in accepted if not t.candidate.generic], one_se_gap, share, min_share)
+    return pick if found is None else found[0]
+
+
+def within_one_se(pick: RefitCV, trials: list, gap_of, share, min_share: float) -> tuple | None:
+    """``(trial, (gap, se), share)`` of the trial that replaces ``pick`` under the one-standard-error rule of
+    :func:`named_reading` and :func:`input_reading`, None when none does: of ``trials``, those whose gap to the pick
+    (``gap_of(trial, pick)``, :func:`one_se_gap` or :func:`one_se_gap_per_run`) is within its standard error and
+    whose span explains at least ``min_share`` of the pick's force (``share(trial, pick)``); of several, the largest
+    CV gain, then the fewest parameters."""
     best = None
-    for t in accepted:
-        if t.candidate.generic:
+    for t in trials:
+        gap = gap_of(t, pick)
+        if gap is None or gap[0] > gap[1]:
             continue
-        gap = one_se_gap(t, pick)
-        if gap is None or gap[0] > gap[1] or share(t, pick) < min_share:
+        s = share(t, pick)
+        if s < min_share:
             continue
-        if best is None or (t.gain, -t.candidate.n_params) > (best.gain, -best.candidate.n_params):
-            best = t
-    return pick if best is None else best
+        if best is None or (t.gain, -t.candidate.n_params) > (best[0].gain, -best[0].candidate.n_params):
+            best = (t, gap, float(s))
+    return best
 
 
 #: the regressors the predictor reads from its own inputs (``Predictor.fmu``: V0, load, direction, temperature,
@@ -543,23 +554,14 @@ def input_reading(pick: RefitCV, accepted: list, share, min_share: float = NAMED
     """
     if not reads_auxiliary(pick.candidate):
         return pick
-    best, seen = None, None
-    for t in accepted:
-        if t is pick or not all(r in INPUT_REGRESSORS for r in t.candidate.regressors):
-            continue
-        gap = one_se_gap_per_run(t, pick)
-        if gap is None or gap[0] > gap[1]:
-            continue
-        s = share(t, pick)
-        if s < min_share:
-            continue
-        if best is None or (t.gain, -t.candidate.n_params) > (best.gain, -best.candidate.n_params):
-            best, seen = t, (gap, s)
-    if best is None:
+    inputs = [t for t in accepted if all(r in INPUT_REGRESSORS for r in t.candidate.regressors)]
+    found = within_one_se(pick, inputs, one_se_gap_per_run, share, min_share)
+    if found is None:
         return pick
+    best, (gap, se), s = found
     if log is not None:
-        log.append({"round": round_no, "pick": pick.candidate.label, "taken": best.candidate.label, "gap": seen[0][0],
-                    "se": seen[0][1], "share": float(seen[1])})
+        log.append({"round": round_no, "pick": pick.candidate.label, "taken": best.candidate.label, "gap": gap,
+                    "se": se, "share": s})
     return best
 
 
@@ -592,9 +594,9 @@ class Directions:
         """:func:`explained_share` of the generic candidate's force with parameters ``phi`` by the named one's span."""
         return explained_share(self.columns(generic) @ np.asarray(phi, float).ravel(), self.columns(named))
 
-    def of_trials(self, named: RefitCV, generic: RefitCV) -> float:
-        """:meth:`share` of two refit trials: the second's force (its fitted ``phi``) by the first's span."""
-        return self.share(named.candidate, generic.candidate, generic.phi)
+    def of_trials(self, explaining: RefitCV, explained: RefitCV) -> float:
+        """:meth:`share` of two refit trials: ``explained``'s force (its fitted ``phi``) by ``explaining``'s span."""
+        return self.share(explaining.candidate, explained.candidate, explained.phi)
 
     def conflicts(self, c: CandidateForce, effects: EffectSet, r2: float = SHARED_R2) -> bool:
         """Whether ``c`` shares a direction (:data:`SHARED_R2`) with an added effect of the other kind (a named effect

@@ -64,7 +64,7 @@ import pandas as pd
 from scipy.signal import lfilter
 
 from ..data import measurements as dataio
-from .auxiliary import NOT_CANDIDATES, varies_within_runs
+from .auxiliary import NOT_CANDIDATES
 
 __all__ = ["TAUS_S", "RATE_TAUS_S", "HISTORIES", "DEGREE", "SHARE_MIN", "P_MAX", "POSITION_DEGREE", "MODEL_INPUTS",
            "speed_history", "drive_course", "speed_rate", "history_columns", "speed_histories", "response_statistic",
@@ -291,15 +291,16 @@ def response_tests(df: pd.DataFrame, named=()) -> list[dict]:
     skip = NOT_CANDIDATES | MODEL_INPUTS | set(named)
     out = []
     histories: dict = {}
+    n_all = df[dataio.RUN].nunique()
     for name in df.columns:
         if name in skip or not pd.api.types.is_numeric_dtype(df[name]) or pd.api.types.is_bool_dtype(df[name]):
             continue
-        if not np.all(np.isfinite(df[name].to_numpy(float))) or not varies_within_runs(df, name):
+        if not np.all(np.isfinite(df[name].to_numpy(float))):
             continue
         runs = active_runs(df, name)
-        n_all = df[dataio.RUN].nunique()
-        sub = df if len(runs) == n_all else df[df[dataio.RUN].isin(runs)]
-        key = tuple(runs) if len(runs) < n_all else None
+        if not len(runs):       # constant within every run: no within-run course
+            continue
+        key, sub = (None, df) if len(runs) == n_all else (tuple(runs), df[df[dataio.RUN].isin(runs)])
         if key not in histories:
             histories[key] = speed_histories(sub[dataio.SPEED], sub[dataio.TIME], sub[dataio.POSITION],
                                              sub[dataio.RUN])
