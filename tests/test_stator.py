@@ -127,6 +127,46 @@ def test_envelope_step_is_exact_vs_many_small_steps(Y):
     assert abs(complex(two_halves) - exact) < 1e-12 * scale
 
 
+@pytest.mark.parametrize("Y", [0.0, 2.0e6 + 5.0e5j, -1.0e6j, 3.0e7j, -2.0e8 - 3.0e8j])
+def test_envelope_growth_rate_is_the_homogeneous_steps_modulus(Y):
+    # reference: with no excitation the exact step multiplies Q by exp(lambda h), so |Q1/Q0| = exp(rate h)
+    w0 = 2 * np.pi * F0_TEST
+    K, C, w = M_TEST * w0 ** 2, 2 * 0.01 * M_TEST * w0, 1.003 * w0
+    h, Q0 = 2e-5, 1e-7 - 2e-7j
+    rate = st.envelope_growth_rate_scalar(complex(Y), w, M_TEST, K, C)
+    ratio = abs(complex(st.envelope_step(Q0, 0.0, Y, w, M_TEST, K, C, h))) / abs(Q0)
+    assert ratio == pytest.approx(np.exp(rate * h), rel=1e-10)
+    # an interface load with a negative quadrature part (-Im Y > w C) feeds the mode, a positive one damps it
+    assert (rate > 0) == (-complex(Y).imag > w * C * (1 + 1e-9))
+
+
+def test_coupled_step_holds_a_force_that_would_feed_a_mode(motor):
+    # the interface's generalised force -G on a mode is the describing function -Y Q (Y = G/Q) when that damps
+    # the mode, and a held excitation F - G when Y would make the step grow (here a 0.5 N friction fundamental
+    # on a bending mode of 1e-10 m, as at a start from zero under a pulling load): the step's growth is then
+    # bounded by the forced response instead of exp(rate h)
+    props = st.modal_properties(motor.stator, 70.0)
+    w, h, eta = 2 * np.pi * 48500.0, 2e-4, props.eta_T
+    Q_l, Q_b = 1e-8 + 0j, 1e-10 + 0j
+
+    def step(F_T1):  # (F_T1_sin, F_T1_cos) in the normal frame; phase_l 0, no normal force, no drive
+        out = st.coupled_envelope_step(Q_l.real, Q_l.imag, Q_b.real, Q_b.imag, 0.0, 0.0, 0.0, F_T1.real,
+                                       F_T1.imag, 0.0, 0.0, eta, w, props.M_l, props.K_l, props.C_l, props.M_b,
+                                       props.K_b, props.C_b, h, eta)
+        return complex(out[2], out[3])
+
+    args = (w, props.M_b, props.K_b, props.C_b, h)
+    for F_T1, feeds in ((0.5j, False), (-0.5j, True), (0.3 - 0.4j, True)):
+        G = eta * F_T1
+        Y = G / Q_b
+        assert (st.envelope_growth_rate_scalar(Y, *args[:4]) > 0) == feeds
+        expected = st.envelope_step(Q_b, -G, 0.0, *args) if feeds else st.envelope_step(Q_b, 0.0, Y, *args)
+        assert step(F_T1) == pytest.approx(complex(expected), rel=1e-12, abs=1e-25)
+        if feeds:  # the describing function would have amplified Q by more than e^10; the held force does not
+            assert abs(complex(st.envelope_step(Q_b, 0.0, Y, *args))) > np.exp(10) * abs(Q_b)
+            assert abs(step(F_T1)) <= abs(Q_b) + abs(G) * h / (2 * w * props.M_b) * 1.01
+
+
 def test_envelope_steady_state_is_eq12_13():
     # reference: after many time constants the envelope equals F/Z, whose modulus is Eq. 12-13
     w0 = 2 * np.pi * F0_TEST

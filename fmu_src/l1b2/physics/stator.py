@@ -653,6 +653,13 @@ def envelope_step_scalar(Q, F, Y, w, M, K, C, h):
     return Qs + (Q - Qs) * cmath.exp(-Zt / (2j * w * M + C) * h)
 
 
+def envelope_growth_rate_scalar(Y, w, M, K, C):
+    """The real part of the envelope's exponent in :func:`envelope_step` with the interface load ``Y`` [1/s]:
+    positive when ``Y`` feeds the mode (the step then amplifies ``Q - Q_s`` by ``exp(rate h)``)."""
+    Zt = K - w * w * M + 1j * w * C + Y
+    return (-Zt / (2j * w * M + C)).real
+
+
 def tip_motion_scalar(Q_l, Q_b, eta_T):
     """:func:`tip_motion` for complex phasors: ``(U_l, U_w, phase_l, phase_w, delta)`` [m, m, rad, rad, rad]."""
     N, W = ETA_N * Q_l, eta_T * Q_b
@@ -669,8 +676,12 @@ def coupled_envelope_step(Q_l_re, Q_l_im, Q_b_re, Q_b_im, phase_l, F_N1_sin, F_N
     * the interface force fundamentals ``F1 = (F1_sin + j F1_cos) e^{j phase_l}``
       rotated from the normal-displacement frame to the absolute phasor frame;
     * describing functions ``Y_l = ETA_N F1_N / Q_l`` and ``Y_b = eta_T F1_T / Q_b``
-      (generalised interface force ``-Y Q``), or, for a mode at rest
-      (``|Q| <= 1e-15`` m), the force moved into the excitation;
+      (generalised interface force ``-Y Q``, implicit in the step); for a mode at rest
+      (``|Q| <= 1e-15`` m), or one that ``Y`` would feed
+      (:func:`envelope_growth_rate_scalar` ``> 0``), the force held as an excitation over the step
+      instead: a force that does not scale with the amplitude (friction under a pulling load at a
+      near-zero amplitude) would otherwise be amplified by ``exp(rate h)``, without bound as
+      ``|Q| -> 0``;
     * :func:`envelope_step` for each mode with the real excitation amplitudes
       ``F_l_re``, ``F_b_re`` [N] (:func:`excitation_phasors` at zero voltage phase);
     * :func:`tip_motion` of the new phasors with the tip coefficient ``eta_T_new``
@@ -686,16 +697,20 @@ def coupled_envelope_step(Q_l_re, Q_l_im, Q_b_re, Q_b_im, phase_l, F_N1_sin, F_N
     F1_T = complex(F_T1_sin, F_T1_cos) * rot
     F_l = complex(F_l_re, 0.0)
     F_b = complex(F_b_re, 0.0)
+    G_l = ETA_N * F1_N  # the generalised interface forces on the modes are -G
+    G_b = eta_T * F1_T
     Y_l = complex(0.0, 0.0)
     Y_b = complex(0.0, 0.0)
     if abs(Q_l) > 1e-15:
-        Y_l = ETA_N * F1_N / Q_l
-    else:
-        F_l = F_l - ETA_N * F1_N
+        Y_l = G_l / Q_l
+    if abs(Q_l) <= 1e-15 or envelope_growth_rate_scalar(Y_l, omega, M_l, K_l, C_l) > 0.0:
+        Y_l = complex(0.0, 0.0)
+        F_l = F_l - G_l
     if abs(Q_b) > 1e-15:
-        Y_b = eta_T * F1_T / Q_b
-    else:
-        F_b = F_b - eta_T * F1_T
+        Y_b = G_b / Q_b
+    if abs(Q_b) <= 1e-15 or envelope_growth_rate_scalar(Y_b, omega, M_b, K_b, C_b) > 0.0:
+        Y_b = complex(0.0, 0.0)
+        F_b = F_b - G_b
     Q_l = envelope_step_scalar(Q_l, F_l, Y_l, omega, M_l, K_l, C_l, h)
     Q_b = envelope_step_scalar(Q_b, F_b, Y_b, omega, M_b, K_b, C_b, h)
     U_l, U_w, ph_l, ph_w, delta = tip_motion_scalar(Q_l, Q_b, eta_T_new)
@@ -709,7 +724,8 @@ def kernel_family() -> dict:
     """The stator's plain-float functions that compiled code calls, by name (for
     :func:`l1b2.physics.jit.compile_family`): the envelope step with its helpers, the temperature step,
     the bar deviation and the modal table's interpolant."""
-    return {f.__name__: f for f in (envelope_step_scalar, tip_motion_scalar, coupled_envelope_step,
+    return {f.__name__: f for f in (envelope_step_scalar, envelope_growth_rate_scalar, tip_motion_scalar,
+                                    coupled_envelope_step,
                                     temperature_step_scalar, bar_deviation_scalar, table_lookup, stiffness_damping,
                                     l1_omega_scalar)}
 

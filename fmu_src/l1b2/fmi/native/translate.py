@@ -593,6 +593,7 @@ def motor_kernel_family() -> dict:
 #: parameter types that are not double: complex phasors, the vectors and the table cell, counts
 PARAM_TYPES = {
     "envelope_step_scalar": {"Q": CPX, "F": CPX, "Y": CPX},
+    "envelope_growth_rate_scalar": {"Y": CPX},
     "tip_motion_scalar": {"Q_l": CPX, "Q_b": CPX},
     "table_lookup": {"cell": "cell"},
     "motor_substeps": {"x": "double*", "p": "const double*", "cell": "cell", "cell_k": LONG, "n": LONG},
