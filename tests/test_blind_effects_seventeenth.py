@@ -165,3 +165,20 @@ def test_the_accepted_regressors_and_the_pass_rule(audit):
     assert not audit.verdict(row)["passes"]
     assert audit.verdict(row | {"traced_all": ["voltage", "load"]})["passes"]
     assert not audit.verdict(row | {"traced_all": ["voltage"], "after": 3.31})["passes"]
+
+
+def test_the_probes_columns(load_bench):
+    import pandas as pd
+    probe = load_bench("blind_effects_seventeenth_probe")
+    be = load_bench("blind_effects")
+    loads = [c[1] for c in be.plan_runs(be.plan_of(2))]
+    df = pd.DataFrame({"run": [1, 1, 2, 3], "load_kg": [loads[0], loads[0], loads[1], loads[2]],
+                       "position_m": [0.0, 0.0125, -0.025, 0.02], "voltage_V": [220.0, 220.0, 324.0, 255.0]})
+    truth = {"plan": {"seed": 2}, "parameters": {"b_um": [4.0, -2.0, 1.0], "P_i_W": 1.0, "P_a_W": 6.0}}
+    cum = probe.changed(df, "cum_load", truth)["cum_load_kg"].tolist()
+    assert cum == pytest.approx([0.0, 0.0, loads[0], loads[0] + loads[1]], abs=1e-9)
+    bow = probe.changed(df, "bow_truth", truth)["bow_preload_N"].tolist()
+    assert bow == pytest.approx([0.3, 0.225, 0.0, 0.027], abs=1e-9)           # 75 kN/m x b x (1 - (s / 25 mm)^2)
+    power = probe.changed(df, "power_only", truth)["drive_energy_J"].tolist()
+    assert power == pytest.approx([round(1 + 6 * (220 / 324) ** 2, 3)] * 2 + [7.0, round(1 + 6 * (255 / 324) ** 2, 3)],
+                                  abs=1e-12)
