@@ -304,6 +304,22 @@ def accepted_by(want: dict, not_want: dict, kind: str, name: str) -> bool:
     return any(w in n for w in want.get(kind, ())) and not any(w in n for w in not_want.get(kind, ()))
 
 
+def audit_verdict(row: dict, b0: dict, decoys: dict, accepted) -> dict:
+    """The audits' pass rule on a printed row (``kind``, ``seed``, ``traced``, ``traced_all``, ``before``, ``after``
+    in %): ``bound`` = sqrt(b0^2 + (b^2 - b0^2) / 4) with ``b0[seed]`` the clean control's before (a decoy's: 1.02 b),
+    ``attributed`` (``accepted(kind, name)`` for one of the first two traced; for a decoy of ``decoys`` (kind ->
+    column), its column nowhere in ``traced_all``) and ``passes`` (both, and ``a <= bound``)."""
+    kind, b, a = row["kind"], float(row["before"]), float(row["after"])
+    if kind in decoys:
+        bound = 1.02 * b
+        attributed = not any(decoys[kind] in str(x) for x in row.get("traced_all") or row["traced"])
+    else:
+        b_0 = b0[int(row["seed"])]
+        bound = math.sqrt(b_0 ** 2 + (b ** 2 - b_0 ** 2) / 4.0)
+        attributed = any(accepted(kind, x) for x in row["traced"][:2])
+    return {"bound": bound, "attributed": attributed, "passes": attributed and a <= bound}
+
+
 def run_audit(argv, doc: str, kinds, make, channels: dict, want: dict, not_want: dict) -> None:
     """:func:`run_cli` for an audit whose pass rule reads the first two traced regressors: the row's
     :func:`want_fields` and ``accepted_in_first_two`` (:func:`accepted_by` of one of them)."""

@@ -219,15 +219,7 @@ def verdict(row: dict) -> dict:
     """The pass rule on a printed row (``kind``, ``seed``, ``traced``, ``traced_all``, ``before``, ``after`` in %):
     ``bound`` = sqrt(b0^2 + (b^2 - b0^2) / 4) (the decoy's: 1.02 b), ``attributed`` (a regressor of ``WANT`` among
     the first two; for the decoy, its column nowhere in ``traced_all``) and ``passes`` (both, ``a <= bound``)."""
-    kind, b, a = row["kind"], float(row["before"]), float(row["after"])
-    if kind in DECOY:
-        bound = 1.02 * b
-        attributed = not any(DECOY[kind] in str(x) for x in row.get("traced_all") or row["traced"])
-    else:
-        b0 = B0[int(row["seed"])]
-        bound = math.sqrt(b0 ** 2 + (b ** 2 - b0 ** 2) / 4.0)
-        attributed = any(accepted(kind, x) for x in row["traced"][:2])
-    return {"bound": bound, "attributed": attributed, "passes": attributed and a <= bound}
+    return be.audit_verdict(row, B0, DECOY, accepted)
 
 
 def main(argv=None):
