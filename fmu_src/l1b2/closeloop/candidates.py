@@ -237,6 +237,41 @@ def is_along_stroke(df: pd.DataFrame, name: str) -> bool:
     return bool(pos >= ALONG_STROKE_SHARE and pos >= clock + ALONG_STROKE_MARGIN)
 
 
+#: the share of a logged channel's spread of run means that its course in the run's clock carries through the
+#: runs' lengths (:func:`run_length_share`) from which its run mean is taken for a reading of the run's length
+RUN_LENGTH_SHARE = 0.5
+
+
+def run_length_share(df: pd.DataFrame, name: str) -> float:
+    """The share of the column ``name``'s spread of run means that the runs' lengths carry through its course in the
+    run's clock. Per run ``r``: the least-squares slope ``b_r`` of the column on the time since the run's first
+    sample, whose mean over the run's samples is ``tbar_r``; ``delta_r = b_r (tbar_r - min_r tbar_r)`` is how far
+    the run's mean moved from the column's value at the shortest run's mean time. The share is
+    ``sum (delta_r - mean delta)^2 / sum (m_r - mean m)^2`` (``m_r`` the run means), clipped to [0, 1]; NaN when
+    the run means do not vary.
+
+    A reading that accumulates over each run from its start (an energy or charge meter, a counter, a clock reset
+    at each start) has a run mean that is its rate times half the run's length: how long the run lasted, the
+    motor's response, not a setting of the run (a share near 1). A setting, a level, or a temperature whose drift
+    within a run is small beside its spread between runs has a share near 0."""
+    runs = df[dataio.RUN].to_numpy()
+    t = df[dataio.TIME].to_numpy(float)
+    c = df[name].to_numpy(float)
+    g = pd.DataFrame({"run": runs, "t": t - pd.Series(t).groupby(runs).transform("min").to_numpy(), "c": c})
+    g["tt"], g["tc"] = g["t"] * g["t"], g["t"] * g["c"]
+    sums = g.groupby("run", sort=False).agg(n=("c", "size"), t=("t", "mean"), c=("c", "mean"), tt=("tt", "mean"),
+                                             tc=("tc", "mean"))
+    var_t = (sums["tt"] - sums["t"] ** 2).to_numpy(float)
+    cov_tc = (sums["tc"] - sums["t"] * sums["c"]).to_numpy(float)
+    slope = np.divide(cov_tc, var_t, out=np.zeros_like(cov_tc), where=var_t > 0)
+    tbar, m = sums["t"].to_numpy(float), sums["c"].to_numpy(float)
+    delta = slope * (tbar - tbar.min())
+    sst = float(np.sum((m - m.mean()) ** 2))
+    if not sst > 0:
+        return float("nan")
+    return float(min(float(np.sum((delta - delta.mean()) ** 2)) / sst, 1.0))
+
+
 def channel_kinds(df: pd.DataFrame, response_columns=None) -> list[tuple[str, str]]:
     """``(name, kind)`` of every candidate channel of a frame, in :func:`channels_of`'s order and with its kinds:
     every numeric column beyond the required ones and the speed whose values are all finite, then the clock."""
@@ -269,17 +304,20 @@ def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
     ``within_run``: it varies inside some run; ``run_values``: how many distinct run means it has; ``run_spread``:
     :func:`l1b2.predictor.effects.channels.run_spread`; ``along_stroke``: a logged channel whose variation within
     runs is a function of the position rather than of the run's clock (:func:`is_along_stroke`), offered at the
-    sample level only and with no run-level signal).
+    sample level only and with no run-level signal; ``run_length``: a logged channel whose run means follow the
+    runs' lengths (:func:`run_length_share` at least :data:`RUN_LENGTH_SHARE`), offered likewise).
     """
     out = []
     for name, kind in channel_kinds(df, response_columns):
         c = df[name].to_numpy(float)
         within = varies_within_runs(df, name)
         along = bool(kind == "logged" and within and is_along_stroke(df, name))
+        length = bool(kind == "logged" and within and not along and run_length_share(df, name) >= RUN_LENGTH_SHARE)
         run_values = len(np.unique(df.groupby(dataio.RUN, sort=False)[name].mean().to_numpy(float)))
         out.append({"name": str(name), "kind": kind, "mean": float(np.mean(c)), "sd": float(np.std(c)),
                     "lo": float(np.min(c)), "hi": float(np.max(c)), "within_run": within, "run_values": run_values,
-                    "run_spread": fx.channels.run_spread(c, df[dataio.RUN]), "along_stroke": along})
+                    "run_spread": fx.channels.run_spread(c, df[dataio.RUN]), "along_stroke": along,
+                    "run_length": length})
     return tuple(out)
 
 

@@ -407,7 +407,8 @@ def markdown_report(rep: dict) -> str:
         for c in d["channels_considered"]:
             p = "-" if c["p_value"] is None else format(c["p_value"], ".2g")
             runl = "; ".join(f"{e['signal']}: p {e['p_value']:.2g}, gain {e['cv_gain']:.1%}"
-                             for e in c.get("run_level") or []) or "-"
+                             for e in c.get("run_level") or []) or (
+                f"none ({c['per_sample_only']})" if c.get("per_sample_only") else "-")
             lines.append(f"| {c['channel']} | {c['kind']} | {c['regressor']} | {c['best'] or c['note']} | "
                          f"{pct(c['cv_gain'], '.1%')} | {p} | {runl} | "
                          f"{'yes' if c['significant'] else 'no'} | "

@@ -220,7 +220,8 @@ class SignalEvidence:
 
 def run_signals(df: pd.DataFrame, channels) -> list[dict]:
     """The run-level signals of a frame: each candidate channel's run mean (not a kind of
-    :data:`~l1b2.predictor.effects.channels.NO_RUN_LEVEL_KINDS`, not one read along the stroke, not constant ones)
+    :data:`~l1b2.predictor.effects.channels.NO_RUN_LEVEL_KINDS`, not one read along the stroke or following the
+    runs' lengths, not constant ones)
     and the inputs of
     :data:`~l1b2.predictor.effects.channels.INPUT_SIGNALS`; ``{"channel", "transform", "values", "run_spread"}`` with
     one value per run (in run order) and the largest deviation of a sample's value from its run's
@@ -228,10 +229,10 @@ def run_signals(df: pd.DataFrame, channels) -> list[dict]:
     out = []
     first = df.groupby(dataio.RUN, sort=False)
     for ch in channels:
-        if (ch.get("kind") in fx.channels.NO_RUN_LEVEL_KINDS or ch.get("along_stroke")
+        if (ch.get("kind") in fx.channels.NO_RUN_LEVEL_KINDS or ch.get("along_stroke") or ch.get("run_length")
                 or ch["name"] not in df.columns):
             continue   # a label's codes have no order: its categorical signal below only; the run clock's run mean
-            # is half the run's duration, a response of the speed
+            # is half the run's duration, a response of the speed, and so is an accumulating reading's
         out.append({"channel": ch["name"], "transform": "none", "values": first[ch["name"]].mean().to_numpy(float),
                     "run_spread": fx.channels.run_spread(df[ch["name"]], df[dataio.RUN])})
     out += category_signals(df, channels)

@@ -427,9 +427,10 @@ def peaked(ch) -> bool:
 def levels_of(ch) -> tuple:
     """The levels a channel record (:func:`l1b2.closeloop.candidates.channels_of`) is offered at: ``sample`` only
     for a kind of :data:`SAMPLE_ONLY_KINDS` (the run clock) and for a channel read along the stroke
-    (``along_stroke``: a function of the position, whose run mean follows how the run moved), both :data:`LEVELS`
-    for a channel that varies within runs, ``run`` only for one constant within every run."""
-    if ch.get("kind") in SAMPLE_ONLY_KINDS or ch.get("along_stroke"):
+    (``along_stroke``: a function of the position, whose run mean follows how the run moved) or whose run means
+    follow the runs' lengths (``run_length``: a reading that accumulates over each run), both :data:`LEVELS` for a
+    channel that varies within runs, ``run`` only for one constant within every run."""
+    if ch.get("kind") in SAMPLE_ONLY_KINDS or ch.get("along_stroke") or ch.get("run_length"):
         return ("sample",)
     return LEVELS if ch.get("within_run", True) else ("run",)
 
