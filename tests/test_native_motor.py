@@ -43,6 +43,9 @@ SCENARIOS = {
     "temperature-dependent B2, constant temperature": (
         {"Slider.s0": 0.003, "Stator.df_dT_b_Hz_per_K": -8.0}, {},
         [(67.1, 1.0, 48500.0, 35.0, 1.0, 0.0, 1e-3)] * 30),
+    "a supply ramped from zero under a load pulling the slider its way (an interface force held over a step)": (
+        {"Slider.s0": -0.021}, {},
+        [(67.1 * min(1.0, (k + 1) * 2e-4 / 0.07), 1.0, 48500.0, 25.0, 1.0, -0.09, 2e-4) for k in range(60)]),
     "pure slip": (
         {"Slider.s0": 0.0, "internal_step_s": 1e-4}, {"Interface.pure_slip": True},
         [(*_BASE, 1e-3)] * 40 + [(67.1, 1.0, 48500.0, 25.0, -1.0, 0.05, 2e-4)] * 30),
