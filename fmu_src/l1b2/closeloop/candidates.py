@@ -259,8 +259,7 @@ def run_length_share(df: pd.DataFrame, name: str) -> float:
     c = df[name].to_numpy(float)
     g = pd.DataFrame({"run": runs, "t": t - pd.Series(t).groupby(runs).transform("min").to_numpy(), "c": c})
     g["tt"], g["tc"] = g["t"] * g["t"], g["t"] * g["c"]
-    sums = g.groupby("run", sort=False).agg(n=("c", "size"), t=("t", "mean"), c=("c", "mean"), tt=("tt", "mean"),
-                                             tc=("tc", "mean"))
+    sums = g.groupby("run", sort=False).agg(t=("t", "mean"), c=("c", "mean"), tt=("tt", "mean"), tc=("tc", "mean"))
     var_t = (sums["tt"] - sums["t"] ** 2).to_numpy(float)
     cov_tc = (sums["tc"] - sums["t"] * sums["c"]).to_numpy(float)
     slope = np.divide(cov_tc, var_t, out=np.zeros_like(cov_tc), where=var_t > 0)
