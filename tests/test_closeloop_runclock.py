@@ -74,12 +74,16 @@ def test_the_run_clock_is_offered_at_the_sample_level_only():
     tr, col = _with_clock_and_twin()
     chans = _channels(tr)
     assert chans[col]["kind"] == "run_clock" and chans[col]["within_run"]
-    assert chans["twin_s"]["kind"] == "logged"
+    # the same values logged: its run means follow the runs' lengths (candidates.run_length_share), so it is
+    # offered per sample only by its values; the run clock is by its kind, whatever its record says
+    assert chans["twin_s"]["kind"] == "logged" and chans["twin_s"]["run_length"]
+    assert set(fx.channels.levels_of({**chans["twin_s"], "run_length": False})) == {"sample", "run"}
+    assert fx.channels.levels_of({**chans[col], "run_length": False}) == ("sample",)
     hyps = fx.family("channel").grid(_summary(tr))
     mine = [h for h in hyps if h.spec["channel"] == col]
     twin = [h for h in hyps if h.spec["channel"] == "twin_s"]
     assert mine and {h.spec["level"] for h in mine} == {"sample"}
-    assert {h.spec["level"] for h in twin} == {"sample", "run"}          # the same values as a logged channel
+    assert {h.spec["level"] for h in twin} == {"sample"}
     # the sample-level forms are all the logged channel's: every form, shape and the load interaction; the form
     # that grows with V0 (force_factor) among them
     assert ({(h.spec["form"], h.spec.get("shape", "linear"), h.spec.get("by", "")) for h in mine}
@@ -89,15 +93,19 @@ def test_the_run_clock_is_offered_at_the_sample_level_only():
     assert all(h.family == f"channel_{col}" for h in mine)
     # no run-level hypothesis of the run-level family either
     runs = {h.spec["channel"] for h in fx.family("run_level").grid(_summary(tr))}
-    assert "twin_s" in runs and col not in runs
+    assert "twin_s" not in runs and col not in runs and "time_s" in runs
 
 
 def test_the_run_clock_has_no_run_level_signal():
     from l1b2.closeloop.runlevel import run_signals
     tr, col = _with_clock_and_twin()
-    names = {sg["channel"] for sg in run_signals(tr, tuple(_channels(tr).values()))}
-    assert "twin_s" in names and col not in names
+    chans = tuple(_channels(tr).values())
+    names = {sg["channel"] for sg in run_signals(tr, chans)}
+    assert "twin_s" not in names and col not in names                    # the twin by its values (run_length)
     assert "voltage_V" in names                                          # the inputs' signals are still there
+    unflagged = tuple({**ch, "run_length": False} for ch in chans)
+    names = {sg["channel"] for sg in run_signals(tr, unflagged)}
+    assert "twin_s" in names and col not in names                        # the run clock by its kind
 
 
 def test_the_levels_rule():

@@ -734,11 +734,12 @@ class RunLevel(Effect):
 
     def grid(self, train):
         """The run-level hypothesis of every candidate channel (standardised by TRAIN's sample mean and sd; not a
-        kind of :data:`NO_RUN_LEVEL_KINDS`) and of the session clock. The loop does not list
+        kind of :data:`NO_RUN_LEVEL_KINDS`, not one read along the stroke or whose run means follow the runs'
+        lengths: :func:`levels_of`) and of the session clock. The loop does not list
         these: its run-level analysis offers :meth:`hypotheses` standardised by the runs' own values, for the signals
         whose evidence is significant."""
         chans = [ch for ch in train.channels if ch.get("sd", 0) > 0
-                 and ch.get("kind") not in NO_RUN_LEVEL_KINDS]
+                 and ch.get("kind") not in NO_RUN_LEVEL_KINDS and "run" in levels_of(ch)]
         if not any(ch["name"] == SESSION_TIME for ch in chans):
             t0, t1 = train.time_range
             chans.append({"name": SESSION_TIME, "mean": 0.5 * (t0 + t1), "sd": (t1 - t0) / np.sqrt(12.0)})
