@@ -3,13 +3,17 @@
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
+from scipy import stats
 
 from ..data import measurements as dataio
 from ..data import onset
+from ..predictor.effects import channels as fx_channels
+from ..units import tidy_float
 from . import runlevel
 from .selection import Score, best_per_family, position_basis
 
-__all__ = ["with_onset", "order_traced", "channels_considered", "position_share", "with_position_share",
+__all__ = ["with_onset", "onset_explanation", "order_traced", "channels_considered", "position_share", "with_position_share",
            "with_auxiliary", "not_added_reason"]
 
 
@@ -50,19 +54,64 @@ def order_traced(effects, speed_filter: bool, residual_trace, evidence=(), speed
     return traced + [r for r in residual_trace if r not in traced]
 
 
-def with_onset(diagnosis: dict, record: dict | None) -> dict:
+#: the fewest TRAIN runs cut at rest before their onset for their delays to be explained by a run-level signal
+ONSET_MIN_RUNS = 3
+
+
+def onset_explanation(df: pd.DataFrame, record: dict | None, channels, alpha: float) -> dict | None:
+    """What explains the rests cut before TRAIN's onsets beyond the plan's inputs, or None.
+
+    Each TRAIN run's delay (``record``'s ``per_run``; 0 for a run not cut) is fitted by least squares on a constant
+    and the inputs' run signals (V0, the drive-coordinate load, its size, the direction:
+    :data:`l1b2.predictor.effects.channels.INPUT_SIGNALS`; a heavier load delays any late start), and every other
+    run-level signal of :func:`l1b2.closeloop.runlevel.run_signals` (a channel's run mean, not a label's codes) is
+    tested by Spearman's rank correlation with the residual, Bonferroni over those signals. The strongest one below
+    ``alpha`` explains the rests: ``{"signal", "regressor", "rho", "p_value"`` (multiplied by ``signals_tested``),
+    ``"signals_tested", "runs"}``. None with fewer than :data:`ONSET_MIN_RUNS` runs cut, or none below ``alpha``."""
+    if not (record and record.get("cut") and record.get("runs", 0) >= ONSET_MIN_RUNS):
+        return None
+    delays = {r: d for r, _, d, _ in record["per_run"]}
+    y = np.array([delays.get(r, 0.0) for r in pd.unique(df[dataio.RUN])], float)
+    inputs = set(fx_channels.INPUT_SIGNALS)
+    sigs = runlevel.run_signals(df, channels)
+    X = np.column_stack([np.ones(len(y))] + [s["values"] for s in sigs if (s["channel"], s["transform"]) in inputs])
+    resid = y - X @ np.linalg.lstsq(X, y, rcond=None)[0]
+    others = [s for s in sigs if (s["channel"], s["transform"]) not in inputs and s["transform"] == "none"]
+    if not others or not np.std(resid) > 0:
+        return None
+    # ranks of the run values to 12 digits (a run mean carries round-off in its last bits, which would part ties);
+    # a tie of p (a monotone transform the loop derives has its column's ranks): the signal listed first
+    tests = [(stats.spearmanr([tidy_float(v) for v in s["values"]], resid), s["channel"]) for s in others]
+    k = len(tests)
+    p, _, name, rho = min(((float(t.pvalue) * k, i, c, float(t.statistic)) for i, (t, c) in enumerate(tests)
+                           if np.isfinite(t.pvalue)), default=(np.inf, 0, None, np.nan))
+    if not p < alpha:
+        return None
+    return {"signal": name, "regressor": fx_channels.regressor_of(name), "rho": rho, "p_value": min(p, 1.0),
+            "signals_tested": k, "runs": int(record["runs"])}
+
+
+def with_onset(diagnosis: dict, record: dict | None, df: pd.DataFrame | None = None, channels=(),
+               alpha: float = 0.05) -> dict:
     """``diagnosis`` with the rest cut before TRAIN's onsets (``record``: ``meta["rest_before_onset"]`` of
     :func:`l1b2.data.onset.from_onset`) as the stage it is: removed on reading, before any round, its regressor
     :data:`l1b2.data.onset.REGRESSOR` first in ``traced_to`` and its reading in the message, as a kept stage of the
-    measurement chain is reported. Unchanged when no run was cut."""
+    measurement chain is reported. With TRAIN's frame ``df`` (and its candidate ``channels``), the signal that
+    explains the rests beyond the plan's inputs (:func:`onset_explanation` at ``alpha``) is traced second and named
+    in the message (the record's ``explained_by``). Unchanged when no run was cut."""
     if not (record and record.get("runs") and record.get("cut")):
         return diagnosis
-    traced = [onset.REGRESSOR] + [r for r in diagnosis.get("traced_to") or [] if r != onset.REGRESSOR]
+    explained = None if df is None else onset_explanation(df, record, channels, alpha)
+    first = [onset.REGRESSOR] + ([explained["regressor"]] if explained else [])
+    traced = first + [r for r in diagnosis.get("traced_to") or [] if r not in first]
     note = (f"; {record['runs']} of {record['of_runs']} TRAIN runs rest at their start before the drive (onset "
             f"after {record['median_delay_s'] * 1e3:.3g} ms median, {record['max_delay_s'] * 1e3:.3g} ms at most: a "
-            "fact of the recording, cut on reading; every run's free run starts at its onset)")
-    return {**diagnosis, "traced_to": traced, "message": diagnosis.get("message", "") + note,
-            "rest_before_onset": record}
+            "fact of the recording, cut on reading; every run's free run starts at its onset")
+    if explained:
+        note += (f"; the rests follow {explained['signal']} beyond the plan's inputs (Spearman rho "
+                 f"{explained['rho']:+.2f}, p {explained['p_value']:.2g} over {explained['signals_tested']} signals)")
+    return {**diagnosis, "traced_to": traced, "message": diagnosis.get("message", "") + note + ")",
+            "rest_before_onset": {**record, "explained_by": explained} if explained else record}
 
 
 def position_share(values, basis) -> float:

@@ -247,8 +247,9 @@ class CloseLoop(EstimatorSettings):
                      "channel_ranges": runlevel.channel_ranges(it.effects.candidates, dtr, dte)}
         diagnosis["channels_considered"] = with_response_test(
             with_auxiliary(diagnosis["channels_considered"], aux_rec), diagnosis["response_test"])
+        diagnosis = with_onset(diagnosis, train.meta.get("rest_before_onset"), dtr, it.channels, self.alpha)
         self.result_ = CloseLoopResult(
-            baseline=baseline, diagnosis=with_onset(diagnosis, train.meta.get("rest_before_onset")), scores=first,
+            baseline=baseline, diagnosis=diagnosis, scores=first,
             significant=it.significant, chosen=chosen, extended=extended,
             extended_parameters=ext_params, baseline_parameters=base.to_dict()["parameters"],
             data=_data_summary(train, test), wall_time_s=round(time.perf_counter() - t_start, 2),
