@@ -13,8 +13,8 @@ from ..units import tidy_float
 from . import runlevel
 from .selection import Score, best_per_family, position_basis
 
-__all__ = ["with_onset", "onset_explanation", "order_traced", "channels_considered", "position_share", "with_position_share",
-           "with_auxiliary", "not_added_reason"]
+__all__ = ["with_onset", "onset_explanation", "ONSET_MIN_RUNS", "order_traced", "channels_considered",
+           "position_share", "with_position_share", "with_auxiliary", "not_added_reason"]
 
 
 def order_traced(effects, speed_filter: bool, residual_trace, evidence=(), speed_evidence: bool = False,
