@@ -37,6 +37,7 @@ from ..predictor.model import viscous_damping
 from ..predictor.effects import SPEED_REF, V_REF  # noqa: F401  (re-exported: the features' scales)
 from ..predictor.effects.interactions import EQ29_LINEARISATION  # noqa: F401  (re-exported)
 from .auxiliary import NOT_CANDIDATES, label_columns, varies_within_runs
+from .runclock import time_in_run_s
 
 
 @dataclass(frozen=True)
@@ -225,10 +226,8 @@ def along_stroke_share(df: pd.DataFrame, name: str) -> tuple[float, float]:
     if not float(np.sum(c ** 2)) > 0 or len(c) - len(pd.unique(runs)) < ALONG_STROKE_SAMPLES * 2 * ALONG_STROKE_DEGREE:
         return float("nan"), float("nan")
     d = df[dataio.DIRECTION].to_numpy(float)
-    t = df[dataio.TIME].to_numpy(float)
-    t_run = t - pd.Series(t).groupby(runs).transform("min").to_numpy()
     return (_within_run_share(c, runs, _unit(df[dataio.POSITION].to_numpy(float)), d),
-            _within_run_share(c, runs, _unit(t_run), d))
+            _within_run_share(c, runs, _unit(time_in_run_s(df)), d))
 
 
 def is_along_stroke(df: pd.DataFrame, name: str) -> bool:
@@ -254,10 +253,7 @@ def run_length_share(df: pd.DataFrame, name: str) -> float:
     at each start) has a run mean that is its rate times half the run's length: how long the run lasted, the
     motor's response, not a setting of the run (a share near 1). A setting, a level, or a temperature whose drift
     within a run is small beside its spread between runs has a share near 0."""
-    runs = df[dataio.RUN].to_numpy()
-    t = df[dataio.TIME].to_numpy(float)
-    c = df[name].to_numpy(float)
-    g = pd.DataFrame({"run": runs, "t": t - pd.Series(t).groupby(runs).transform("min").to_numpy(), "c": c})
+    g = pd.DataFrame({"run": df[dataio.RUN].to_numpy(), "t": time_in_run_s(df), "c": df[name].to_numpy(float)})
     g["tt"], g["tc"] = g["t"] * g["t"], g["t"] * g["c"]
     sums = g.groupby("run", sort=False).agg(t=("t", "mean"), c=("c", "mean"), tt=("tt", "mean"), tc=("tc", "mean"))
     var_t = (sums["tt"] - sums["t"] ** 2).to_numpy(float)

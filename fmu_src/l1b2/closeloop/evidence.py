@@ -185,8 +185,7 @@ def channels_considered(channels, scores: list[Score], level: float, min_gain: f
         rec = {"channel": ch["name"], "kind": ch["kind"], "regressor": regressor_of(ch["name"]),
                "varies_within_runs": bool(ch["within_run"]), "best": None, "cv_gain": None, "p_value": None,
                "significant": False, "added": fam in added, "note": "", "position_share": ch.get("position_share"),
-               "per_sample_only": ("its run means follow the runs' lengths" if ch.get("run_length") else
-                                   "read along the stroke" if ch.get("along_stroke") else None),
+               "per_sample_only": fx_channels.sample_only_reason(ch),
                "forms": {f: {"best": b.candidate.label, "cv_gain": float(b.cv_gain), "p_value": float(b.p_value)}
                          for (g, f), b in forms.items() if g == fam}}
         if ch["kind"] == "response":

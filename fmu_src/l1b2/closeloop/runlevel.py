@@ -229,7 +229,7 @@ def run_signals(df: pd.DataFrame, channels) -> list[dict]:
     out = []
     first = df.groupby(dataio.RUN, sort=False)
     for ch in channels:
-        if (ch.get("kind") in fx.channels.NO_RUN_LEVEL_KINDS or ch.get("along_stroke") or ch.get("run_length")
+        if (ch.get("kind") in fx.channels.NO_RUN_LEVEL_KINDS or "run" not in fx.channels.levels_of(ch)
                 or ch["name"] not in df.columns):
             continue   # a label's codes have no order: its categorical signal below only; the run clock's run mean
             # is half the run's duration, a response of the speed, and so is an accumulating reading's

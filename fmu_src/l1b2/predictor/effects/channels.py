@@ -424,13 +424,21 @@ def peaked(ch) -> bool:
     return int(ch.get("run_values", 0)) >= PEAK_MIN_RUN_VALUES and not is_setting_history(str(ch["name"]))
 
 
+def sample_only_reason(ch) -> str | None:
+    """Why a logged channel's record (:func:`l1b2.closeloop.candidates.channels_of`) is offered per sample only,
+    its run mean following how the run went, the motor's response: read along the stroke (``along_stroke``: a
+    function of the position, whose run mean follows how the run moved), or a reading that accumulates over each
+    run (``run_length``: its run means follow the runs' lengths); None for neither."""
+    if ch.get("run_length"):
+        return "its run means follow the runs' lengths"
+    return "read along the stroke" if ch.get("along_stroke") else None
+
+
 def levels_of(ch) -> tuple:
     """The levels a channel record (:func:`l1b2.closeloop.candidates.channels_of`) is offered at: ``sample`` only
-    for a kind of :data:`SAMPLE_ONLY_KINDS` (the run clock) and for a channel read along the stroke
-    (``along_stroke``: a function of the position, whose run mean follows how the run moved) or whose run means
-    follow the runs' lengths (``run_length``: a reading that accumulates over each run), both :data:`LEVELS` for a
-    channel that varies within runs, ``run`` only for one constant within every run."""
-    if ch.get("kind") in SAMPLE_ONLY_KINDS or ch.get("along_stroke") or ch.get("run_length"):
+    for a kind of :data:`SAMPLE_ONLY_KINDS` (the run clock) and for a channel with a :func:`sample_only_reason`,
+    both :data:`LEVELS` for a channel that varies within runs, ``run`` only for one constant within every run."""
+    if ch.get("kind") in SAMPLE_ONLY_KINDS or sample_only_reason(ch):
         return ("sample",)
     return LEVELS if ch.get("within_run", True) else ("run",)
 
