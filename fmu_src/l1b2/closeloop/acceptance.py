@@ -218,9 +218,13 @@ SESSION_SIGNALS = frozenset({"t", "col:time_s", "run:time_s"})
 def time_dependent(candidate: CandidateForce) -> bool:
     """Whether a candidate's force depends on the session clock (its spec reads ``t``, the ``time_s`` channel or
     an event clock ``<column>_since_s``, the session's time since a logged step; a candidate without a spec:
-    ``time`` among its regressors)."""
+    ``time`` among its regressors). A family that reads the clock only to place each run in a block whose level the
+    runs within it carry (``run_folds``: :class:`l1b2.predictor.effects.blocks.SessionBlocks`) does not: it is
+    cross-validated over runs."""
     if candidate.spec:
         try:
+            if getattr(fx.family(candidate.spec.get("kind")), "run_folds", False):
+                return False
             signals = fx.needs(candidate.spec)
             return bool(signals & SESSION_SIGNALS) or any(
                 s.partition(":")[2].endswith(EVENT_SUFFIX) for s in signals if s.startswith(("col:", "run:")))

@@ -31,7 +31,10 @@ estimates and explains:
    every other candidate.
 
 Signals (:func:`run_signals`): each candidate channel's run mean (the logged columns, the session clock
-``time_s``, which also orders the runs), V0, the drive-coordinate load ``d m``, its size and the direction.
+``time_s``, which also orders the runs), V0, the drive-coordinate load ``d m``, its size and the direction. When
+none of them is significant, a cut of the session into contiguous blocks (:func:`block_signal`,
+:mod:`l1b2.closeloop.blocks`: its p-value corrected for the search) is tested as one more signal and offered as a
+:class:`~l1b2.predictor.effects.blocks.SessionBlocks` candidate.
 """
 
 from __future__ import annotations
@@ -47,7 +50,7 @@ from ..data.coverage import values_outside
 from ..predictor import effects as fx
 from ..predictor import model as pr
 from ..units import history_source
-from . import residuals as res
+from . import blocks as blk, residuals as res
 from .reml import REMLFit, design_rows, reml
 
 #: run-value correlation above which two significant signals are compared by their evidence given each other
@@ -201,6 +204,10 @@ class SignalEvidence:
     shares: tuple | None = None
     #: the joint test's degrees of freedom
     dof: int = 0
+    #: a segmentation's edges [s] between its blocks of the session (:mod:`l1b2.closeloop.blocks`; ``shares`` its
+    #: blocks' shares of the runs but the last, ``coef`` as a category's, ``p_value`` times its search count);
+    #: None: no segmentation
+    edges: tuple | None = None
 
     def to_dict(self) -> dict:
         out = {"signal": self.label, "regressor": self.regressor, "p_value": self.p_value, "cv_gain": self.cv_gain,
@@ -208,6 +215,9 @@ class SignalEvidence:
                "load_offset_per_sd_N": self.coef[2], "significant": self.significant,
                "folds": "session blocks" if self.blocked_folds else "runs", "dominated_by": self.dominated_by,
                "dof": self.dof}
+        if self.edges is not None:
+            out.update(gain_per_sd=None, offset_per_sd_N=None, load_offset_per_sd_N=None,
+                       edges_s=list(self.edges), blocks=len(self.edges) + 1)
         if self.levels is not None:
             q = len(self.levels) - 1
             c = list(self.coef) + [0.0] * (3 * q - len(self.coef))
@@ -254,6 +264,44 @@ def _is_category(sg) -> bool:
     return sg.get("transform") == fx.category.CATEGORY
 
 
+def _blocks() -> fx.Effect:
+    """The session's blocks (:class:`l1b2.predictor.effects.blocks.SessionBlocks`)."""
+    return fx.family("session_blocks")
+
+
+def _is_blocks(sg) -> bool:
+    return sg.get("transform") == fx.blocks.BLOCKS
+
+
+def block_signal(dev: RunDeviations, t_run_s: np.ndarray, T: np.ndarray, *, level: float, k: int,
+                 seed: int) -> dict | None:
+    """The segmentation of the session into contiguous blocks (:func:`l1b2.closeloop.blocks.segmentations`) as a
+    signal (``{"channel": "time_s", "transform": "blocks", "values", "edges", "shares", "search_count"}``), or None
+    when the search finds none. ``t_run_s``: each run's mean session time, in ``dev.runs``' order; ``T``: the
+    runs' REML between-run covariance without blocks.
+
+    The number of blocks is chosen by the folds: of the segmentations whose p-value times their search count is
+    below ``level``, the fewest blocks whose cross-validated gain (:func:`cv_signal_gain` over the ``k`` run folds
+    of ``seed``, as :func:`signal_evidence` scores every signal) is at least
+    :data:`~l1b2.closeloop.blocks.PARSIMONY` of the largest; when none is below ``level``, the smallest corrected
+    p-value (the record of what was searched; ties: the fewer blocks)."""
+    segs = blk.segmentations(dev.theta, dev.cov, T, t_run_s)
+    if not segs:
+        return None
+    cols = [fx.blocks.index_columns(sg["values"], sg["shares"]) for sg in segs]
+    p = [min(1.0, joint_test(dev, z)[1] * sg["search_count"]) for z, sg in zip(cols, segs)]
+    passed = [i for i in range(len(segs)) if p[i] < level]
+    if passed:
+        folds = [np.flatnonzero(np.isin(dev.runs, f)) for f in res.run_folds(dev.runs, k, seed)]
+        memo: dict = {}
+        gain = {i: cv_signal_gain(dev.theta, dev.cov, cols[i], folds, dev.load, memo)[0] for i in passed}
+        best = max(gain.values())
+        pick = min(i for i in passed if gain[i] >= (blk.PARSIMONY * best if best > 0 else best))
+    else:
+        pick = min(range(len(segs)), key=lambda i: (p[i], i))
+    return {"channel": fx.channels.SESSION_TIME, "transform": fx.blocks.BLOCKS, **segs[pick]}
+
+
 def category_signals(df: pd.DataFrame, channels) -> list[dict]:
     """The categorical signals of a frame: each channel the categorical family takes
     (:meth:`~l1b2.predictor.effects.category.RunLevelCategory.takes`) whose values per run are a category
@@ -278,6 +326,8 @@ def signal_columns(sg: dict) -> tuple[np.ndarray, float, float]:
     v = np.asarray(sg["values"], float)
     if _is_category(sg):
         return _category().columns(sg), 0.0, 1.0
+    if _is_blocks(sg):
+        return fx.blocks.index_columns(sg["values"], sg["shares"]), 0.0, 1.0
     mean, sd = float(np.mean(v)), float(np.std(v))
     return (v - mean) / sd, mean, sd
 
@@ -364,16 +414,20 @@ def signal_evidence(dev: RunDeviations, signals_, *, alpha: float, k: int, seed:
     for sg in signals_:
         z, mean, sd = signal_columns(sg)
         b, p, dof = joint_test(dev, z)
-        blocked = sg["channel"] == fx.channels.SESSION_TIME
+        p = min(1.0, p * sg.get("search_count", 1))   # a segmentation's search (module blocks)
+        cat, seg = _is_category(sg), _is_blocks(sg)
+        blocked = sg["channel"] == fx.channels.SESSION_TIME and not seg   # a block's level: from runs within it
         gain, per_run = cv_signal_gain(dev.theta, dev.cov, z, blocks if blocked else rand, dev.load, null_fits)
-        cat = _is_category(sg)
-        label = _category().label(sg["channel"]) if cat else fx.channels.signal_label(sg["channel"], sg["transform"])
-        out.append(SignalEvidence(sg["channel"], sg["transform"], label, fx.channels.regressor_of(sg["channel"]),
+        label = (_category().label(sg["channel"]) if cat else _blocks().label(len(sg["edges"]) + 1) if seg
+                 else fx.channels.signal_label(sg["channel"], sg["transform"]))
+        reg = _blocks().regressor if seg else fx.channels.regressor_of(sg["channel"])
+        out.append(SignalEvidence(sg["channel"], sg["transform"], label, reg,
                                   mean, sd, p, gain, tuple(float(x) for x in b) + (0.0,) * (3 - len(b)),
                                   bool(p < level and gain > 0),
                                   blocked, per_run, sg.get("run_spread"),
                                   levels=tuple(sg["levels"]) if cat else None,
-                                  shares=tuple(sg["shares"]) if cat else None, dof=dof))
+                                  shares=tuple(sg["shares"]) if cat or seg else None, dof=dof,
+                                  edges=tuple(sg["edges"]) if seg else None))
         zs.append(z)
     plan = {col for col, _ in fx.channels.INPUT_SIGNALS}
     dominated = dominated_signals(dev, [e.significant for e in out], zs, level,
@@ -564,13 +618,19 @@ def analyse(df: pd.DataFrame, model, mask: np.ndarray, channels, *, alpha: float
     keep = pd.Index(pd.unique(df[dataio.RUN])).get_indexer(dev.runs)
     sigs = [_kept(s, keep) for s in sigs]
     sigs = [s for s in sigs if s is not None]
-    start = df.groupby(dataio.RUN, sort=False)[dataio.TIME].min().to_numpy(float)[keep]
-    level = alpha / max(len(sigs), 1)
+    times = df.groupby(dataio.RUN, sort=False)[dataio.TIME]
+    start = times.min().to_numpy(float)[keep]
     if len(dev.runs) < 6:
-        return RunLevelAnalysis(dev, None, float("nan"), 1.0, [], level)
+        return RunLevelAnalysis(dev, None, float("nan"), 1.0, [], alpha / max(len(sigs), 1))
     q, qp = heterogeneity(dev.theta, dev.cov)
-    return RunLevelAnalysis(dev, reml(dev.theta, dev.cov), q, qp,
-                            signal_evidence(dev, sigs, alpha=alpha, k=k, seed=seed, session_order=start), level)
+    fit = reml(dev.theta, dev.cov)
+    evidence = signal_evidence(dev, sigs, alpha=alpha, k=k, seed=seed, session_order=start)
+    level = alpha / (len(sigs) + 1)
+    if not any(e.significant for e in evidence):   # blocks of the session: the evidence of last resort
+        seg = block_signal(dev, times.mean().to_numpy(float)[keep], fit.T, level=level, k=k, seed=seed)
+        if seg is not None:
+            evidence += signal_evidence(dev, [seg], alpha=level, k=k, seed=seed, session_order=start)
+    return RunLevelAnalysis(dev, fit, q, qp, evidence, alpha / max(len(sigs), 1))
 
 
 def _kept(sg: dict, keep: np.ndarray) -> dict | None:
@@ -584,6 +644,9 @@ def candidates(analysis: RunLevelAnalysis, ctx) -> list:
     from .candidates import candidate
     out = []
     for e in analysis.significant:
+        if e.edges is not None:
+            out += [candidate(ctx, h) for h in _blocks().hypotheses([{"edges": e.edges, "shares": e.shares}])]
+            continue
         fam = fx.family("run_level") if e.levels is None else _category()
         sg = {"channel": e.channel, "transform": e.transform, "mean": e.mean, "sd": e.sd,
               **({} if e.run_spread is None else {"run_spread": float(e.run_spread)}),
@@ -595,7 +658,7 @@ def candidates(analysis: RunLevelAnalysis, ctx) -> list:
 def is_run_level(c) -> bool:
     """Whether a candidate is constant along the stroke by construction (a run-level family or a channel's run mean)."""
     spec = c.spec or {}
-    return spec.get("kind") in ("run_level", _category().kind) or (spec.get("kind") == "channel"
+    return spec.get("kind") in ("run_level", _category().kind, _blocks().kind) or (spec.get("kind") == "channel"
                                                                   and spec.get("level") == "run")
 
 

@@ -19,7 +19,9 @@ Families (registration order = the library's candidate order):
 :mod:`~.generic` (``smooth``, ``smooth_pair``) and :mod:`~.channels` (``channel``: every
 logged channel and the protocol's clock in generic forms; ``run_level``: a run-level signal explaining the runs'
 own deviations, offered by the close loop's run-level analysis, not by a library) and :mod:`~.category`
-(``run_level_category``: a logged run setting's values, each its own run-level effect, offered the same way).
+(``run_level_category``: a logged run setting's values, each its own run-level effect, offered the same way) and
+:mod:`~.blocks` (``session_blocks``: contiguous blocks of the session's runs, each its own run-level effect, offered
+the same way).
 """
 
 from __future__ import annotations
@@ -38,7 +40,7 @@ from .plugins import load_all as _load_plugins
 
 #: the package's family modules, imported (and so registered) in this order: the candidate library's order
 FAMILY_MODULES = ("thermal", "direction", "bar", "load_path", "drive", "motion", "interactions", "generic", "channels",
-                  "category")
+                  "category", "blocks")
 for _m in FAMILY_MODULES:
     importlib.import_module(f"{__name__}.{_m}")
 _load_plugins()

@@ -1,0 +1,148 @@
+"""Contiguous blocks of the session (issue 28, items 3 and 7): the family ``session_blocks`` and the run-level
+analysis's segmentation search (l1b2.closeloop.blocks, l1b2.closeloop.runlevel.block_signal).
+
+Fast unit tests (seconds), each against a formula or an enumeration written out here: the block of a session time
+at and around the edges, the centred indicators, the family's force ``x_j V0/V_ref``, a block's weighted scatter
+about its generalised least-squares mean, every cost of the dynamic programme, the optimal cuts against every cut
+enumerated, the search count against counted cuts, the edges midway, the search correction of the p-value, and the
+search on made deviations: blocks found where they were made, nothing significant where none were.
+"""
+
+import itertools
+from math import comb
+
+import numpy as np
+import pytest
+from l1b2.closeloop import blocks as blk
+from l1b2.closeloop import runlevel as rl
+from l1b2.closeloop.acceptance import time_dependent
+from l1b2.closeloop.candidates import CandidateForce
+from l1b2.predictor import effects as fx
+from l1b2.predictor.effects import blocks as fb
+from l1b2.predictor.effects.base import V_REF
+from l1b2.predictor.effects.channels import export_problem
+from l1b2.closeloop.reml import reml
+
+
+def test_a_run_is_in_the_block_of_the_edges_at_or_below_its_session_time():
+    edges = (10.0, 20.0, 35.0)
+    t = np.array([0.0, 9.99, 10.0, 19.0, 20.0, 34.0, 35.0, 99.0])
+    np.testing.assert_array_equal(fb.block_index(t, edges), [0, 0, 1, 1, 2, 2, 3, 3])
+
+
+def test_the_block_columns_are_centred_indicators_without_the_last_block():
+    shares = (0.25, 0.5)
+    idx = np.array([0, 1, 2, 1])
+    want = np.array([[1 - 0.25, -0.5], [-0.25, 1 - 0.5], [-0.25, -0.5], [-0.25, 1 - 0.5]])
+    np.testing.assert_allclose(fb.index_columns(idx, shares), want)
+    np.testing.assert_allclose(fb.block_columns([1.0, 15.0, 50.0, 12.0], (10.0, 20.0), shares), want)
+
+
+def test_the_family_scales_the_drive_force_per_block_and_reads_the_session_clock():
+    h = fx.family("session_blocks").hypotheses([{"edges": (10.0, 20.0), "shares": (0.25, 0.5)}])[0]
+    assert h.family == "session_blocks(3)" and h.regressor == "session_block" and h.generic
+    assert h.names == ("block_0_run_gain", "block_1_run_gain") and h.units == ("N", "N")
+    V0 = np.array([220.0, 324.0, 290.0, 255.0])
+    x = {"V0": V0, "d": np.array([1.0, -1.0, 1.0, -1.0]), "run:time_s": np.array([1.0, 15.0, 50.0, 12.0])}
+    F = fx.effect_features(h.spec, x)
+    ind = np.array([[0.75, -0.5], [-0.25, 0.5], [-0.25, -0.5], [-0.25, 0.5]])
+    np.testing.assert_allclose(F, ind * (V0 / V_REF)[:, None])
+    assert fx.family("session_blocks").width(h.spec) == 2
+    assert export_problem(h.spec) == "no input: run:time_s"   # the session clock has no input of Predictor.fmu
+    c = CandidateForce("session_blocks(3)[run]", "session_block", "run", h.names, h.units, features=None,
+                       spec=h.spec)
+    assert not time_dependent(c)     # cross-validated over runs: a block's level from the runs within it
+    with pytest.raises(fx.EffectSpecError, match="increasing edges"):
+        fb.blocks_spec((20.0, 10.0), (0.5, 0.25))
+
+
+def _made(n, seed=0):
+    rng = np.random.default_rng(seed)
+    theta = rng.normal(size=(n, 2))
+    A = rng.normal(size=(n, 2, 2))
+    return theta, np.einsum("rij,rkj->rik", A, A) + 0.5 * np.eye(2)
+
+
+def test_a_blocks_scatter_is_about_its_generalised_least_squares_mean():
+    theta, W = _made(5)
+    m = np.linalg.solve(W.sum(axis=0), sum(W[r] @ theta[r] for r in range(5)))
+    want = sum((theta[r] - m) @ W[r] @ (theta[r] - m) for r in range(5))
+    assert blk.segment_cost(theta, W) == pytest.approx(want, rel=1e-12)
+    # the mean is the minimiser: any other centre scatters more
+    assert blk.segment_cost(theta, W) < sum((theta[r] - m - 0.01) @ W[r] @ (theta[r] - m - 0.01) for r in range(5))
+
+
+def test_every_cost_of_the_programme_is_the_blocks_scatter_and_short_blocks_are_barred():
+    theta, W = _made(9, seed=1)
+    C = blk.cost_matrix(theta, W, min_runs=3)
+    for a in range(10):
+        for b in range(10):
+            if b - a >= 3:
+                assert C[a, b] == pytest.approx(blk.segment_cost(theta[a:b], W[a:b]), rel=1e-9, abs=1e-12)
+            else:
+                assert np.isinf(C[a, b])
+
+
+def _total(theta, W, starts, n):
+    return sum(blk.segment_cost(theta[a:b], W[a:b]) for a, b in zip((0,) + starts, starts + (n,)))
+
+
+def test_the_cuts_are_the_least_scatter_of_every_cut_enumerated():
+    n, m = 15, 3
+    theta, W = _made(n, seed=2)
+    segs = blk.optimal_segmentations(theta, W, max_blocks=5, min_runs=m)
+    assert [len(s) + 1 for s in segs] == [2, 3, 4, 5]
+    for starts in segs:
+        cuts = [c for c in itertools.combinations(range(1, n), len(starts))
+                if all(b - a >= m for a, b in zip((0,) + c, c + (n,)))]
+        best = min(_total(theta, W, c, n) for c in cuts)
+        assert _total(theta, W, starts, n) == pytest.approx(best, rel=1e-10)
+        assert all(b - a >= m for a, b in zip((0,) + starts, starts + (n,)))
+
+
+def test_the_search_count_is_the_number_of_cuts_into_blocks_of_the_fewest_runs():
+    for n, B, m in ((12, 3, 3), (15, 4, 2), (10, 2, 1), (9, 3, 3), (8, 3, 3)):
+        counted = sum(1 for c in itertools.combinations(range(1, n), B - 1)
+                      if all(b - a >= m for a, b in zip((0,) + c, c + (n,))))
+        assert blk.search_count(n, B, m) == counted
+    assert blk.search_count(56, 4, 1) == comb(55, 3)
+
+
+def test_the_edges_lie_midway_between_the_last_run_of_a_block_and_the_first_of_the_next():
+    assert blk.edges_of([1.0, 3.0, 7.0, 8.0, 20.0], (2, 4)) == (5.0, 14.0)
+
+
+def _deviations(levels_by_run, seed, sd_between=0.01, se=0.004):
+    """Made run deviations: each run's gain its block's level plus a between-run scatter and sampling noise."""
+    rng = np.random.default_rng(seed)
+    n = len(levels_by_run)
+    theta = np.column_stack([levels_by_run + rng.normal(0, sd_between, n) + rng.normal(0, se, n),
+                             rng.normal(0, 0.05, n)])
+    cov = np.broadcast_to(np.diag([se ** 2, 0.05 ** 2]), (n, 2, 2)).copy()
+    return rl.RunDeviations(np.arange(n), theta, cov, np.full(n, 200), None)
+
+
+def test_the_search_finds_made_blocks_and_corrects_its_p_value():
+    n = 48
+    level = np.repeat([0.0, 0.06, -0.04, 0.03], 12)
+    dev = _deviations(level, seed=3)
+    t = np.arange(n) * 5.0 + 1.0
+    sg = rl.block_signal(dev, t, reml(dev.theta, dev.cov).T, level=0.001, k=4, seed=0)
+    # the made edges, midway between runs 11 and 12, 23 and 24, 35 and 36, are all found (the runs' own scatter
+    # may cut a block once more)
+    assert {58.5, 118.5, 178.5} <= set(sg["edges"]) and len(sg["edges"]) <= 4
+    p_raw = rl.joint_test(dev, fb.index_columns(sg["values"], sg["shares"]))[1]
+    assert sg["search_count"] == blk.search_count(n, len(sg["edges"]) + 1) * (blk.MAX_BLOCKS - 1)
+    ev = rl.signal_evidence(dev, [sg], alpha=0.01, k=4, seed=0)[0]
+    assert ev.p_value == pytest.approx(min(1.0, p_raw * sg["search_count"]))
+    assert ev.significant and ev.edges == sg["edges"] and ev.label == f"session_blocks({len(sg['edges']) + 1})"
+    assert ev.regressor == "session_block" and not ev.blocked_folds
+
+
+def test_without_blocks_in_the_session_no_segmentation_is_significant():
+    n = 48
+    for seed in range(5):
+        dev = _deviations(np.zeros(n), seed=10 + seed)
+        sg = rl.block_signal(dev, np.arange(n) * 5.0, reml(dev.theta, dev.cov).T, level=0.001, k=4, seed=0)
+        ev = rl.signal_evidence(dev, [sg], alpha=0.01, k=4, seed=0)[0]
+        assert not ev.significant, (seed, ev.p_value)
