@@ -198,7 +198,8 @@ class Effect:
         ``"Component.parameter"`` of the subsystem FMUs that model the same physics (empty: none).
     exportable : bool
         False when ``Predictor.fmu`` cannot evaluate the family's specs: a model carrying it is not exported
-        (:func:`l1b2.predictor.effects.channels.export_problem`). Every family of the package is.
+        (:func:`l1b2.predictor.effects.channels.export_problem`). Every family of the package is but the session's
+        blocks (:mod:`l1b2.predictor.effects.blocks`: the session clock is no input of the FMU).
     """
 
     kind: str = ""

@@ -21,9 +21,9 @@ segmentation. The family reads the session clock's run mean (``run:time_s``) onl
 a block's level is estimated from TRAIN runs within it, which is how a TEST run interleaved in the same block is
 predicted; the refit acceptance cross-validates it over runs (:attr:`SessionBlocks.run_folds`), not over blocks of
 the session, which would hold out whole blocks whose levels no other run carries. ``Predictor.fmu`` has no input
-for the session clock, so a model carrying this family is not exported
-(:func:`l1b2.predictor.effects.channels.export_problem`: no input), like every effect of the session clock: the
-blocks are a fact of the recorded session, not of the motor.
+for the session clock, so the family is not exportable and a model carrying it is not exported
+(:func:`l1b2.predictor.effects.channels.export_problem`), like every effect of the session clock: the blocks are a
+fact of the recorded session, not of the motor.
 """
 
 from __future__ import annotations
@@ -89,6 +89,8 @@ class SessionBlocks(Effect):
                    "(constant along the stroke)")
     #: cross-validated over runs, not over blocks of the session (module docstring)
     run_folds = True
+    #: ``Predictor.fmu`` has no input for the session clock (module docstring)
+    exportable = False
 
     @staticmethod
     def label(n_blocks: int) -> str:
