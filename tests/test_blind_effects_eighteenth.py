@@ -244,3 +244,14 @@ def test_the_accepted_regressors_and_the_pass_rule(audit):
     assert not audit.verdict(row)["passes"]
     assert audit.verdict(row | {"traced_all": ["voltage", "load"]})["passes"]
     assert not audit.verdict(row | {"traced_all": ["voltage"], "after": 3.31})["passes"]
+
+
+def test_the_probes_columns(load_bench):
+    import pandas as pd
+    probe = load_bench("blind_effects_eighteenth_probe")
+    df = pd.DataFrame({"run": [1, 1, 2], "direction": [1, 1, -1], "voltage_V": [220.0, 220.0, 324.0],
+                       "drive_phase_deg": [91.1, 90.9, -92.0]})
+    truth = {"parameters": {"eps_deg": 2.0}}
+    assert probe.changed(df, "sign_only", truth)["drive_phase_deg"].tolist() == [90.0, 90.0, -90.0]
+    size = probe.changed(df, "size_only", truth)["drive_phase_deg"].tolist()
+    assert size == pytest.approx([round(90 + 2 * (220 / 324) ** 2, 2)] * 2 + [92.0], abs=1e-12)
