@@ -146,3 +146,28 @@ def test_without_blocks_in_the_session_no_segmentation_is_significant():
         sg = rl.block_signal(dev, np.arange(n) * 5.0, reml(dev.theta, dev.cov).T, level=0.001, k=4, seed=0)
         ev = rl.signal_evidence(dev, [sg], alpha=0.01, k=4, seed=0)[0]
         assert not ev.significant, (seed, ev.p_value)
+
+
+def test_a_session_recorded_in_files_with_their_own_drive_tuning_gets_its_blocks_and_exports_their_average(
+        load_bench, tmp_path):
+    # reference: the sixteenth audit's file blocks (bench/blind_effects_sixteenth.py, seed 2): the realistic world,
+    # the drive's frequency re-tuned at each file of 6-12 runs, nothing logged; the loop traces the session's blocks
+    # first, lowers TEST's error, and the calibrated model leaves the blocks out and says so
+    from l1b2.closeloop.loop import close_loop
+    from l1b2.data.measurements import load_measurements
+    audit, be = load_bench("blind_effects_sixteenth"), load_bench("blind_effects")
+    d = be.data_dir("autotune_file_blocks", 2, tmp_path, make=audit.experiment)
+    res = close_loop(load_measurements(d / "train.csv"), load_measurements(d / "test.csv"))
+    diag = res.diagnosis
+    blocks = [e for e in diag["effects"] if e["effect"].startswith("session_blocks(")]
+    assert len(blocks) == 1 and "session_block" in diag["traced_to"][:2], diag["message"]
+    assert res.after["test"]["free_run"]["nrmse"] < res.before["test"]["free_run"]["nrmse"]
+    ep = res.calibrated_model
+    assert [e.label for e in ep.effects] == [e["label"] for e in diag["effects"] if e is not blocks[0]]
+    assert res.calibrated_note.endswith(f"left out: {blocks[0]['label']} (a fact of the recorded session, centred "
+                                        "on TRAIN's runs: the model predicts the session's average)")
+    # one drive-force level per block but the last, each with a standard error
+    n = int(blocks[0]["effect"][len("session_blocks("):-1])
+    pars = blocks[0]["parameters"]
+    assert list(pars) == [f"block_{j}_run_gain" for j in range(n - 1)]
+    assert all(p["unit"] == "N" and p["stderr"] is not None and p["stderr"] > 0 for p in pars.values())

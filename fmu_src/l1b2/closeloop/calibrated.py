@@ -21,7 +21,7 @@ import numpy as np
 import pandas as pd
 
 from ..data import measurements as dataio
-from ..predictor.effects import ExtendedPredictor, IdentifiedEffect
+from ..predictor.effects import ExtendedPredictor, IdentifiedEffect, family
 from ..predictor.effects import channels as fx_channels
 from ..predictor.setup import PredictorSetup
 from .intervals import reported_covariance, reported_uncertainty
@@ -74,6 +74,9 @@ def calibrated_model(base, ext, effects, output_filter, source: dict, groups=Non
     effect has no spec (a user's candidate with a Python feature function
     only) or ``Predictor.fmu`` cannot evaluate it as identified
     (:func:`l1b2.predictor.effects.channels.export_problem`), the note says which.
+    An effect of a family that is a fact of the recorded session, centred on TRAIN's runs (``session_average``:
+    :class:`l1b2.predictor.effects.blocks.SessionBlocks`), is left out, and the note names it: its columns average
+    to zero over TRAIN's runs, so the model without it predicts the session's average.
     """
     base_setup = PredictorSetup(base.params_, base.m_s_, base.T_s_, base.result_.frequency_response)
     if ext is None:
@@ -82,12 +85,15 @@ def calibrated_model(base, ext, effects, output_filter, source: dict, groups=Non
     missing = [c.label for c in effects.candidates if not c.spec]
     if missing:
         return None, f"effects without a serialisable spec (custom candidates): {', '.join(missing)}"
+    session = [c.label for c in effects.candidates if getattr(family(c.spec.get("kind")), "session_average", False)]
+    left = (f"; left out: {', '.join(session)} (a fact of the recorded session, centred on TRAIN's runs: the model "
+            "predicts the session's average)") if session else ""
     recs = [IdentifiedEffect(c.family, c.label, dict(c.spec), tuple(c.names), tuple(c.units),
                              tuple(float(p) for p in phi),
                              tuple(reported_uncertainty(ext, n, groups)["stderr"] for n in c.names),
                              c.description, tuple(c.regressors), c.structural,
                              reported_covariance(ext, c.names, groups))
-            for c, phi in zip(effects.candidates, effects.phi)]
+            for c, phi in zip(effects.candidates, effects.phi) if c.label not in session]
     filt = None if output_filter is None else output_filter.params()
     ext_setup = PredictorSetup(ext.params_, ext.m_s_, ext.T_s_, ext.result_.frequency_response)
 
@@ -102,5 +108,5 @@ def calibrated_model(base, ext, effects, output_filter, source: dict, groups=Non
             recs[i] = replace(recs[i], spec={**recs[i].spec, "run_feed": max(share[c] for c in cols)})
     logged = [f"{r.label} ({why})" for r in recs if (why := fx_channels.export_problem(r.spec))]
     if logged:
-        return None, f"effects Predictor.fmu cannot evaluate as identified: {', '.join(logged)}"
-    return build(recs), "the final extended model"
+        return None, f"effects Predictor.fmu cannot evaluate as identified: {', '.join(logged)}" + left
+    return build(recs), "the final extended model" + left

@@ -21,9 +21,10 @@ segmentation. The family reads the session clock's run mean (``run:time_s``) onl
 a block's level is estimated from TRAIN runs within it, which is how a TEST run interleaved in the same block is
 predicted; the refit acceptance cross-validates it over runs (:attr:`SessionBlocks.run_folds`), not over blocks of
 the session, which would hold out whole blocks whose levels no other run carries. ``Predictor.fmu`` has no input
-for the session clock, so the family is not exportable and a model carrying it is not exported
-(:func:`l1b2.predictor.effects.channels.export_problem`), like every effect of the session clock: the blocks are a
-fact of the recorded session, not of the motor.
+for the session clock, so the family is not exportable (:func:`l1b2.predictor.effects.channels.export_problem`),
+like every effect of the session clock: the blocks are a fact of the recorded session, not of the motor. Its
+columns average to zero over TRAIN's runs, so the calibrated model leaves it out and predicts the session's average
+(:attr:`SessionBlocks.session_average`, :func:`l1b2.closeloop.calibrated.calibrated_model`).
 """
 
 from __future__ import annotations
@@ -91,6 +92,9 @@ class SessionBlocks(Effect):
     run_folds = True
     #: ``Predictor.fmu`` has no input for the session clock (module docstring)
     exportable = False
+    #: a fact of the recorded session whose columns average to zero over TRAIN's runs: the calibrated model leaves it
+    #: out and predicts the session's average (:func:`l1b2.closeloop.calibrated.calibrated_model`)
+    session_average = True
 
     @staticmethod
     def label(n_blocks: int) -> str:
