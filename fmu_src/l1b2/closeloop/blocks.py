@@ -38,6 +38,18 @@ PARSIMONY = 0.9
 MAX_BLOCKS = 12
 
 
+def load_size_folds(load) -> list[np.ndarray] | None:
+    """Folds of the runs by the size of their load (``load``: each run's drive-coordinate load ``d m / max|m|``, or
+    None): the indices of the runs at each distinct ``|load|`` (to 1e-9), smallest first; None with fewer than two
+    sizes. A block's level is a fact of the session, so it must hold for the runs of a load size that the fit did
+    not see, as for a TEST set of its own load (the paper's split)."""
+    if load is None:
+        return None
+    size = np.round(np.abs(np.asarray(load, float)), 9)
+    levels = np.unique(size)
+    return [np.flatnonzero(size == v) for v in levels] if len(levels) >= 2 else None
+
+
 def weights(T: np.ndarray, cov: np.ndarray) -> np.ndarray:
     """``W_r = (T + S_r)^-1``, ``(n, 2, 2)``."""
     return np.linalg.inv(np.asarray(T, float)[None] + np.asarray(cov, float))

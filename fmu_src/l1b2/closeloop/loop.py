@@ -665,16 +665,17 @@ class ChainModel:
 
 def prefer(accepted: list[RefitCV], parsimony: float, run_level: runlevel.RunLevelAnalysis | None = None) -> RefitCV:
     """The candidate added among the accepted ones: within ``parsimony`` of the best CV gain, named before
-    generic, then a form constant along the stroke (:func:`l1b2.closeloop.runlevel.is_run_level`) whose
-    regressor the run-level evidence names (when the evidence is run-level, the simpler run-level form), then
-    the fewest parameters (:func:`~l1b2.closeloop.selection.counted_params`: a grid's choices counted), then the
-    largest gain."""
+    generic, the session's blocks (:func:`l1b2.closeloop.runlevel.is_last_resort`) after every other, then a form
+    constant along the stroke (:func:`l1b2.closeloop.runlevel.is_run_level`) whose regressor the run-level
+    evidence names (when the evidence is run-level, the simpler run-level form), then the fewest parameters
+    (:func:`~l1b2.closeloop.selection.counted_params`: a grid's choices counted), then the largest gain."""
     best_gain = max(t.gain for t in accepted)
     named = {e.regressor for e in run_level.significant} if run_level is not None else set()
 
     def key(t):
         c = t.candidate
-        return (c.generic, not (runlevel.is_run_level(c) and c.regressor in named), counted_params(c), -t.gain)
+        return (c.generic, runlevel.is_last_resort(c), not (runlevel.is_run_level(c) and c.regressor in named),
+                counted_params(c), -t.gain)
     return min((t for t in accepted if t.gain >= parsimony * best_gain), key=key)
 
 

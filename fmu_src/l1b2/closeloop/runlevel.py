@@ -281,25 +281,27 @@ def block_signal(dev: RunDeviations, t_run_s: np.ndarray, T: np.ndarray, *, leve
     runs' REML between-run covariance without blocks.
 
     The number of blocks is chosen by the folds: of the segmentations whose p-value times their search count is
-    below ``level``, the fewest blocks whose cross-validated gain (:func:`cv_signal_gain` over the ``k`` run folds
-    of ``seed``, as :func:`signal_evidence` scores every signal) is at least
+    below ``level``, the fewest blocks whose cross-validated gain (:func:`cv_signal_gain` over the runs' load sizes,
+    :func:`l1b2.closeloop.blocks.load_size_folds`, else the ``k`` run folds of ``seed``) is at least
     :data:`~l1b2.closeloop.blocks.PARSIMONY` of the largest; when none is below ``level``, the smallest corrected
-    p-value (the record of what was searched; ties: the fewer blocks)."""
+    p-value (the record of what was searched; ties: the fewer blocks). The signal carries its folds (``folds``):
+    :func:`signal_evidence` scores it on them."""
     segs = blk.segmentations(dev.theta, dev.cov, T, t_run_s)
     if not segs:
         return None
     cols = [fx.blocks.index_columns(sg["values"], sg["shares"]) for sg in segs]
     p = [min(1.0, joint_test(dev, z)[1] * sg["search_count"]) for z, sg in zip(cols, segs)]
     passed = [i for i in range(len(segs)) if p[i] < level]
+    folds = blk.load_size_folds(dev.load) or [np.flatnonzero(np.isin(dev.runs, f))
+                                              for f in res.run_folds(dev.runs, k, seed)]
     if passed:
-        folds = [np.flatnonzero(np.isin(dev.runs, f)) for f in res.run_folds(dev.runs, k, seed)]
         memo: dict = {}
         gain = {i: cv_signal_gain(dev.theta, dev.cov, cols[i], folds, dev.load, memo)[0] for i in passed}
         best = max(gain.values())
         pick = min(i for i in passed if gain[i] >= (blk.PARSIMONY * best if best > 0 else best))
     else:
         pick = min(range(len(segs)), key=lambda i: (p[i], i))
-    return {"channel": fx.channels.SESSION_TIME, "transform": fx.blocks.BLOCKS, **segs[pick]}
+    return {"channel": fx.channels.SESSION_TIME, "transform": fx.blocks.BLOCKS, **segs[pick], "folds": folds}
 
 
 def category_signals(df: pd.DataFrame, channels) -> list[dict]:
@@ -417,7 +419,8 @@ def signal_evidence(dev: RunDeviations, signals_, *, alpha: float, k: int, seed:
         p = min(1.0, p * sg.get("search_count", 1))   # a segmentation's search (module blocks)
         cat, seg = _is_category(sg), _is_blocks(sg)
         blocked = sg["channel"] == fx.channels.SESSION_TIME and not seg   # a block's level: from runs within it
-        gain, per_run = cv_signal_gain(dev.theta, dev.cov, z, blocks if blocked else rand, dev.load, null_fits)
+        folds = sg.get("folds") or (blocks if blocked else rand)   # a segmentation's own (block_signal)
+        gain, per_run = cv_signal_gain(dev.theta, dev.cov, z, folds, dev.load, null_fits)
         label = (_category().label(sg["channel"]) if cat else _blocks().label(len(sg["edges"]) + 1) if seg
                  else fx.channels.signal_label(sg["channel"], sg["transform"]))
         reg = _blocks().regressor if seg else fx.channels.regressor_of(sg["channel"])
@@ -660,6 +663,13 @@ def is_run_level(c) -> bool:
     spec = c.spec or {}
     return spec.get("kind") in ("run_level", _category().kind, _blocks().kind) or (spec.get("kind") == "channel"
                                                                   and spec.get("level") == "run")
+
+
+def is_last_resort(c) -> bool:
+    """Whether a candidate is the session's blocks (:class:`~l1b2.predictor.effects.blocks.SessionBlocks`): enough
+    blocks follow any misfit of the runs, so among the accepted candidates within the parsimony band it is added only
+    when no other is (:func:`l1b2.closeloop.loop.prefer`)."""
+    return (c.spec or {}).get("kind") == _blocks().kind
 
 
 def offer(found: list, short: list, allowed) -> list:
