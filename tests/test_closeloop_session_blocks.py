@@ -171,3 +171,32 @@ def test_a_session_recorded_in_files_with_their_own_drive_tuning_gets_its_blocks
     pars = blocks[0]["parameters"]
     assert list(pars) == [f"block_{j}_run_gain" for j in range(n - 1)]
     assert all(p["unit"] == "N" and p["stderr"] is not None and p["stderr"] > 0 for p in pars.values())
+
+
+def test_the_folds_of_a_block_level_are_the_runs_load_sizes():
+    load = np.array([0.0, 1.0, -1.0, 0.5, -0.5 + 1e-12, 0.0, 1.0])
+    folds = blk.load_size_folds(load)
+    assert [f.tolist() for f in folds] == [[0, 5], [3, 4], [1, 2, 6]]     # |load| 0, 0.5, 1: every run once
+    assert blk.load_size_folds(np.array([0.5, -0.5, 0.5])) is None          # one size: no such fold
+    assert blk.load_size_folds(None) is None
+
+
+def _trial(family, gain, n, spec, regressor):
+    from l1b2.closeloop import acceptance as acc
+    c = CandidateForce(family, regressor, "", tuple(f"p{i}" for i in range(n)), ("N",) * n, None, generic=True,
+                       spec=spec)
+    return acc.RefitCV(c, acc.FoldErrors(np.ones(4), np.full(4, 100.0)),
+                       acc.FoldErrors(np.full(4, 1.0 - gain), np.full(4, 100.0)))
+
+
+def test_the_blocks_are_added_only_when_no_other_accepted_candidate_is_within_the_parsimony_band():
+    from types import SimpleNamespace
+    from l1b2.closeloop.loop import prefer
+    spec = {"kind": "session_blocks", **fb.blocks_spec((10.0, 20.0), (0.3, 0.4))}
+    blocks = _trial("session_blocks(3)", 0.42, 2, spec, "session_block")
+    chan = _trial("channel_x", 0.40, 2, {"kind": "channel", "channel": "x", "level": "run"}, "x")
+    ev = SimpleNamespace(significant=[SimpleNamespace(regressor="session_block")])
+    assert rl.is_last_resort(blocks.candidate) and not rl.is_last_resort(chan.candidate)
+    assert prefer([blocks, chan], 0.9, ev) is chan          # named by the run-level evidence, still after the channel
+    far = _trial("channel_x", 0.30, 2, {"kind": "channel", "channel": "x", "level": "run"}, "x")
+    assert prefer([blocks, far], 0.9, ev) is blocks         # the channel outside the band: the blocks
