@@ -223,7 +223,7 @@ def time_dependent(candidate: CandidateForce) -> bool:
     cross-validated over runs."""
     if candidate.spec:
         try:
-            if getattr(fx.family(candidate.spec.get("kind")), "run_folds", False):
+            if fx.family(candidate.spec.get("kind")).run_folds:
                 return False
             signals = fx.needs(candidate.spec)
             return bool(signals & SESSION_SIGNALS) or any(

@@ -85,7 +85,7 @@ def calibrated_model(base, ext, effects, output_filter, source: dict, groups=Non
     missing = [c.label for c in effects.candidates if not c.spec]
     if missing:
         return None, f"effects without a serialisable spec (custom candidates): {', '.join(missing)}"
-    session = [c.label for c in effects.candidates if getattr(family(c.spec.get("kind")), "session_average", False)]
+    session = [c.label for c in effects.candidates if family(c.spec.get("kind")).session_average]
     left = (f"; left out: {', '.join(session)} (a fact of the recorded session, centred on TRAIN's runs: the model "
             "predicts the session's average)") if session else ""
     recs = [IdentifiedEffect(c.family, c.label, dict(c.spec), tuple(c.names), tuple(c.units),

@@ -664,11 +664,10 @@ class ChainModel:
 
 
 def prefer(accepted: list[RefitCV], parsimony: float, run_level: runlevel.RunLevelAnalysis | None = None) -> RefitCV:
-    """The candidate added among the accepted ones: within ``parsimony`` of the best CV gain, named before
-    generic, the session's blocks (:func:`l1b2.closeloop.runlevel.is_last_resort`) after every other, then a form
-    constant along the stroke (:func:`l1b2.closeloop.runlevel.is_run_level`) whose regressor the run-level
-    evidence names (when the evidence is run-level, the simpler run-level form), then the fewest parameters
-    (:func:`~l1b2.closeloop.selection.counted_params`: a grid's choices counted), then the largest gain."""
+    """The candidate added among the accepted ones: within ``parsimony`` of the best CV gain, named before generic,
+    the session's blocks (:func:`~l1b2.closeloop.runlevel.is_last_resort`) after every other, then a form constant
+    along the stroke (:func:`~l1b2.closeloop.runlevel.is_run_level`) whose regressor the run-level evidence names,
+    then the fewest parameters (:func:`~l1b2.closeloop.selection.counted_params`), then the largest gain."""
     best_gain = max(t.gain for t in accepted)
     named = {e.regressor for e in run_level.significant} if run_level is not None else set()
 

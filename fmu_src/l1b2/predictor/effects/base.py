@@ -200,6 +200,13 @@ class Effect:
         False when ``Predictor.fmu`` cannot evaluate the family's specs: a model carrying it is not exported
         (:func:`l1b2.predictor.effects.channels.export_problem`). Every family of the package is but the session's
         blocks (:mod:`l1b2.predictor.effects.blocks`: the session clock is no input of the FMU).
+    run_folds : bool
+        True when the family reads the session clock only to place each run in a block whose level the runs within
+        it carry: its refits are cross-validated over runs, not over blocks of the session
+        (:func:`l1b2.closeloop.acceptance.time_dependent`).
+    session_average : bool
+        True when the family is a fact of the recorded session whose columns average to zero over TRAIN's runs: the
+        calibrated model leaves it out (:func:`l1b2.closeloop.calibrated.calibrated_model`).
     """
 
     kind: str = ""
@@ -211,6 +218,8 @@ class Effect:
     structural: str = ""
     home: tuple = ()
     exportable: bool = True
+    run_folds: bool = False
+    session_average: bool = False
 
     def needs(self, spec: Mapping) -> set:
         """The signals a spec of this family reads."""
