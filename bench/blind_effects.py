@@ -123,6 +123,20 @@ def traverse(mp, nominal, plan, V0, load, d, T=None, f_of_t=None):
     return m.run(plan.max_run_s, record=rec, until=lambda mm: mm.value("Slider.at_stop") == d)
 
 
+def load_in_slider_motor(mp, L: float, kind: str):
+    """The motor ``mp`` for a run with load ``L`` whose load input will carry an extra force of ``kind``: the load's
+    inertia moved into the slider's mass (``m' = m_s + load_inertia |L|``, ``load_inertia`` 0), and the guide's
+    Coulomb levels ``mu_sd``, ``mu_ss`` times ``m_s / m'`` and its preload share ``kappa`` times ``m' / m_s``, so the
+    guide's friction ``mu (kappa F_p + g m_s)`` is the motor's at every preload. Needs ``pulley_mu = 0``."""
+    sl = mp.slider
+    if sl.pulley_mu != 0:
+        raise ValueError(f"{kind} moves the load's inertia into the slider: it needs pulley_mu = 0")
+    m2 = sl.mass_kg + sl.load_inertia * abs(L)
+    r = sl.mass_kg / m2
+    return mp.replace(slider__mass_kg=m2, slider__load_inertia=0.0, slider__mu_sd=sl.mu_sd * r,
+                      slider__mu_ss=sl.mu_ss * r, slider__kappa=sl.kappa / r)
+
+
 def setting(kind: str, seed: int, draw_of) -> tuple:
     """``(plan, nominal, conds, factors, p, every)`` of an audit's experiment: the seed's plan, the realistic motor,
     the plan's runs ``(V0, load, direction)``, each run's contact factors, the kind's draw ``draw_of(kind, seed,

@@ -196,17 +196,10 @@ def air_force_N(u):
 
 
 def knife_motor(mp, L: float):
-    """The motor ``mp`` for a run with load ``L`` whose load input will carry the jet's push: the load's inertia moved
-    into the slider's mass (``m' = m_s + load_inertia |L|``, ``load_inertia`` 0), and the guide's Coulomb levels
-    ``mu_sd``, ``mu_ss`` times ``m_s / m'`` and its preload share ``kappa`` times ``m' / m_s``, so the guide's
-    friction ``mu (kappa F_p + g m_s)`` is the motor's at every preload. Needs ``pulley_mu = 0``."""
-    sl = mp.slider
-    if sl.pulley_mu != 0:
-        raise ValueError("air_knife moves the load's inertia into the slider: it needs pulley_mu = 0")
-    m2 = sl.mass_kg + sl.load_inertia * abs(L)
-    r = sl.mass_kg / m2
-    return mp.replace(slider__mass_kg=m2, slider__load_inertia=0.0, slider__mu_sd=sl.mu_sd * r,
-                      slider__mu_ss=sl.mu_ss * r, slider__kappa=sl.kappa / r)
+    """The motor ``mp`` for a run with load ``L`` whose load input will carry the jet's push
+    (:func:`blind_effects.load_in_slider_motor`: the guide's friction, the moving mass and the load's force are the
+    motor's). Needs ``pulley_mu = 0``."""
+    return be.load_in_slider_motor(mp, L, "air_knife")
 
 
 def phase_reading_deg(t_s, V0: float, d: int, p: dict):

@@ -32,7 +32,8 @@ random stream of its seed. The kinds:
   strands' internal friction adds a hysteresis that grows with the bending and opposes the motion,
   ``-eta k_c |s - s_n| tanh(v / 5 mm/s)`` (eta drawn in 0.2-0.35). Set through the slider's load input as the
   equivalent mass ``m_load - F_c / g``, with the load's inertia moved into the slider's mass
-  (``load_inertia`` 0, ``mass_kg + |m_load|``), so the moving mass is the motor's.
+  (``load_inertia`` 0, ``mass_kg + |m_load|``) and the guide's Coulomb levels and preload share rescaled
+  (:func:`blind_effects.load_in_slider_motor`), so the moving mass and the guide's friction are the motor's.
 * ``drawwire_sensor`` -- a measurement effect along the stroke, no channel. The position is measured by a
   draw-wire (string-pot) sensor mounted on the axis's negative side at a distance D (drawn 36-40 mm from s = 0)
   and a lateral offset h (drawn 17-20 mm: a compact rig's mount, the wire 42-53 deg off the axis at the near
@@ -164,10 +165,7 @@ def run_motor(kind: str, mp, L: float, p: dict, P0_k: float | None):
     if kind == "pneumatic_preload":
         return mp.replace(stator__P0_N=P0_k), None
     if kind == "cable_loop":
-        sl = mp.slider
-        if sl.pulley_mu != 0:
-            raise ValueError("cable_loop moves the load's inertia into the slider: it needs pulley_mu = 0")
-        mp = mp.replace(slider__mass_kg=sl.mass_kg + sl.load_inertia * abs(L), slider__load_inertia=0.0)
+        mp = be.load_in_slider_motor(mp, L, "cable_loop")
         k_c, s_n, eta = p["k_c_N_per_m"], p["s_n_m"], p["eta"]
         return mp, lambda t, s, v: L - float(cable_force_N(s, v, k_c, s_n, eta)) / G_M_S2
     return mp, None

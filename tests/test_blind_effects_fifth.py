@@ -83,3 +83,26 @@ def test_draws_lie_in_their_ranges(audit):
         assert 3 <= p["k_c_N_per_m"] <= 5 and -0.030 <= p["s_n_m"] <= -0.024 and 0.2 <= p["eta"] <= 0.35
         p = audit.draw("drawwire_sensor", seed, 72)
         assert 0.036 <= p["D_m"] <= 0.040 and 0.017 <= p["h_m"] <= 0.020
+
+
+def test_the_cables_run_keeps_the_motors_guide_friction_and_moving_mass(audit, load_bench):
+    from l1b2.physics.slider import force_levels
+    be = load_bench("blind_effects")
+    plan, nominal, conds, factors, p, every = be.setting("cable_loop", 1, audit.draw)
+    s = nominal.slider
+    for L in (0.09, -0.05, 0.0):
+        mp, law = audit.run_motor("cable_loop", nominal, L, p, None)
+        k = mp.slider
+        assert k.load_inertia == 0.0 and k.mass_kg == pytest.approx(s.mass_kg + s.load_inertia * abs(L), rel=1e-15)
+        for F_p in (5.5, 6.0, 7.2):
+            m0, Fx0, Fc0, Fs0 = force_levels(1.0, F_p, L, s.mass_kg, s.load_inertia, s.pulley_mu, s.mu_sd, s.mu_ss,
+                                             s.kappa)
+            m1, Fx1, Fc1, Fs1 = force_levels(1.0, F_p, L, k.mass_kg, k.load_inertia, k.pulley_mu, k.mu_sd,
+                                             k.mu_ss, k.kappa)
+            # the guide's Coulomb levels mu (kappa F_p + g m_s) and the moving mass are the motor's
+            assert (m1, Fx1, Fc1, Fs1) == pytest.approx((m0, Fx0, Fc0, Fs0), rel=1e-13)
+        s_m, v = 0.01, 0.02
+        F_c = -p["k_c_N_per_m"] * (s_m - p["s_n_m"]) * (1 + p["eta"] * math.tanh(v / 0.005))
+        assert law(0.0, s_m, v) == pytest.approx(L - F_c / 9.81, rel=1e-12)
+    with pytest.raises(ValueError, match="cable_loop"):
+        audit.run_motor("cable_loop", nominal.replace(slider__pulley_mu=0.1), 0.05, p, None)
