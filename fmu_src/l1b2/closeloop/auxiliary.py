@@ -36,7 +36,8 @@ from ..data import measurements as dataio
 from ..data.gaps import fill_gaps
 from ..errors import DataFormatError
 
-__all__ = ["MAX_LABELS", "MAX_TOKEN_SHARE", "LABELS_ATTR", "with_usable_channels", "label_codes",
+__all__ = ["MAX_LABELS", "MAX_TOKEN_SHARE", "LABELS_ATTR", "DERIVED_ATTR", "derived_columns", "with_usable_channels",
+           "label_codes",
            "label_columns", "check_test_columns"]
 
 #: the most distinct text values a label column may have over TRAIN's runs to be coded
@@ -51,6 +52,16 @@ LABELS_ATTR = "l1b2_label_columns"
 def label_columns(df: pd.DataFrame) -> tuple:
     """The columns of ``df`` that :func:`with_usable_channels` coded as labels of more than two values."""
     return tuple(df.attrs.get(LABELS_ATTR, ()))
+
+
+#: the frames' ``attrs`` key naming the channels the loop derived from the log
+#: (:func:`l1b2.closeloop.derived.with_protocol_channels`)
+DERIVED_ATTR = "l1b2_derived_columns"
+
+
+def derived_columns(df: pd.DataFrame) -> tuple:
+    """The columns of ``df`` that :func:`l1b2.closeloop.derived.with_protocol_channels` derived from the log."""
+    return tuple(df.attrs.get(DERIVED_ATTR, ()))
 
 
 #: The columns that are never auxiliary (candidate) channels: the required ones (the plan, the run id and the

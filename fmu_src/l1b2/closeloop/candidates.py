@@ -36,7 +36,8 @@ from ..predictor.frequency import contact_angle, sample_frequency
 from ..predictor.model import viscous_damping
 from ..predictor.effects import SPEED_REF, V_REF  # noqa: F401  (re-exported: the features' scales)
 from ..predictor.effects.interactions import EQ29_LINEARISATION  # noqa: F401  (re-exported)
-from .auxiliary import NOT_CANDIDATES, label_columns, varies_within_runs
+from .auxiliary import NOT_CANDIDATES, derived_columns, label_columns, varies_within_runs
+from .relabels import follows_plan
 from .runclock import time_in_run_s
 
 
@@ -292,7 +293,12 @@ def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
     ``"logged"``, ``"protocol"`` for the session clock ``time_s``, ``"run_clock"`` for the run's own clock
     :data:`l1b2.predictor.effects.channels.RUN_CLOCK` (:mod:`l1b2.closeloop.runclock`: offered along the stroke only),
     ``"response"`` for a measured response of the motor (``response_columns``, default
-    :data:`l1b2.predictor.effects.channels.RESPONSE_COLUMNS`: listed, no hypothesis), or ``"label"`` for a text
+    :data:`l1b2.predictor.effects.channels.RESPONSE_COLUMNS`: listed, no hypothesis), ``"relabel"`` for a logged
+    channel that is, run by run, a function of one or two of the plan's inputs
+    (:func:`l1b2.closeloop.relabels.follows_plan`, those inputs under ``follows``: listed, no hypothesis; never a
+    channel the loop derived, :func:`l1b2.closeloop.auxiliary.derived_columns`: its histories have their own
+    rules), or
+    ``"label"`` for a text
     column coded by :func:`l1b2.closeloop.auxiliary.with_usable_channels` (its codes have no order: only the
     categorical run-level family reads them);
     ``sd`` 0 for a constant column, which is listed but gets no hypothesis;
@@ -302,9 +308,11 @@ def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
     sample level only and with no run-level signal; ``run_length``: a logged channel whose run means follow the
     runs' lengths (:func:`run_length_share` at least :data:`RUN_LENGTH_SHARE`), offered likewise).
     """
-    out = []
+    out, derived = [], set(derived_columns(df))
     for name, kind in channel_kinds(df, response_columns):
         c = df[name].to_numpy(float)
+        follows = follows_plan(df, name) if kind == "logged" and name not in derived else ()
+        kind = "relabel" if follows else kind
         within = varies_within_runs(df, name)
         along = bool(kind == "logged" and within and is_along_stroke(df, name))
         length = bool(kind == "logged" and within and not along and run_length_share(df, name) >= RUN_LENGTH_SHARE)
@@ -312,7 +320,7 @@ def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
         out.append({"name": str(name), "kind": kind, "mean": float(np.mean(c)), "sd": float(np.std(c)),
                     "lo": float(np.min(c)), "hi": float(np.max(c)), "within_run": within, "run_values": run_values,
                     "run_spread": fx.channels.run_spread(c, df[dataio.RUN]), "along_stroke": along,
-                    "run_length": length})
+                    "run_length": length, **({"follows": follows} if follows else {})})
     return tuple(out)
 
 

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import pandas as pd
 
-from .auxiliary import NOT_CANDIDATES, with_usable_channels
+from .auxiliary import DERIVED_ATTR, NOT_CANDIDATES, derived_columns, with_usable_channels
 from .candidates import channel_kinds
 from .events import SUFFIX as EVENT_SUFFIX, Session, with_event_clocks
 from ..units import LOG_PREFIX, STEP_SUFFIX, lag_suffix
@@ -114,9 +114,11 @@ def with_protocol_channels(train: pd.DataFrame, test: pd.DataFrame | None, respo
     (:func:`l1b2.closeloop.runclock.with_run_clock`) and the logarithms of the logged channels that span decades
     (:func:`l1b2.closeloop.logscale.with_log_channels`: of the channels logged, not of those derived here);
     ``records`` their records under ``"event_clocks"``, ``"lagged_channels"``, ``"pause_channel"``,
-    ``"break_clock"``, ``"previous_pass"``, ``"run_clock"`` and ``"log_channels"``.
+    ``"break_clock"``, ``"previous_pass"``, ``"run_clock"`` and ``"log_channels"``. Each returned frame names the
+    columns derived here in its ``attrs`` (:func:`l1b2.closeloop.auxiliary.derived_columns`).
     ``sess``: the frames' :func:`~l1b2.closeloop.events.session` before any derivation."""
     rec = {}
+    before = set(train.columns)
     logged = [name for name, kind in channel_kinds(train, response_columns) if kind == "logged"]
     train, test, rec["event_clocks"] = with_event_clocks(train, test, response_columns, sess)
     train, test, rec["lagged_channels"] = with_lagged_channels(train, test, response_columns, sess)
@@ -125,4 +127,7 @@ def with_protocol_channels(train: pd.DataFrame, test: pd.DataFrame | None, respo
     train, test, rec["previous_pass"] = with_previous_pass(train, test, sess)
     train, test, rec["run_clock"] = with_run_clock(train, test)   # along the stroke only
     train, test, rec["log_channels"] = with_log_channels(train, test, logged)
+    for df in (train, test):
+        if df is not None:
+            df.attrs[DERIVED_ATTR] = derived_columns(df) + tuple(c for c in df.columns if c not in before)
     return train, test, rec

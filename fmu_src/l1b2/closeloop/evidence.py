@@ -138,7 +138,7 @@ def with_position_share(channels, df, mask, params) -> tuple:
     basis = position_basis(params, df[dataio.POSITION].to_numpy(float)[m])
     out = []
     for ch in channels:
-        ok = ch.get("sd", 0) > 0 and ch.get("kind") != "response" and ch["name"] in df.columns
+        ok = ch.get("sd", 0) > 0 and ch.get("kind") not in fx_channels.NOT_CAUSE_KINDS and ch["name"] in df.columns
         share = position_share(df[ch["name"]].to_numpy(float)[m], basis) if ok else float("nan")
         out.append({**ch, "position_share": share if np.isfinite(share) else None})
     return tuple(out)
@@ -190,6 +190,10 @@ def channels_considered(channels, scores: list[Score], level: float, min_gain: f
                          for (g, f), b in forms.items() if g == fam}}
         if ch["kind"] == "response":
             rec["note"] = "a measured response of the motor, not a cause: not a candidate"
+        elif ch["kind"] == "relabel":
+            rec["follows"] = list(ch["follows"])
+            rec["note"] = (f"run by run a function of the plan's {' and '.join(ch['follows'])} on TRAIN, constant "
+                           "within runs up to noise: read as those inputs, not a candidate")
         elif not ch["sd"] > 0:
             rec["note"] = "constant on TRAIN: no evidence possible"
         elif ch["kind"] == "label":

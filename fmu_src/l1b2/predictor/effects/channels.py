@@ -139,9 +139,12 @@ RUN_CLOCK = "time_in_run_s"
 #: the channel kinds offered at the ``sample`` level only: no run-level form, no run-level signal. A run's mean of
 #: its own clock is half the run's duration, set by the motor's speed over the stroke: a response, not a cause
 SAMPLE_ONLY_KINDS = ("run_clock",)
-#: the channel kinds with no run-level hypothesis and no run-level signal: a response (never a candidate), a label
+#: the channel kinds that are never candidates: a measured response of the motor and a reading that relabels the
+#: plan's inputs run by run (:mod:`l1b2.closeloop.relabels`): listed, no hypothesis
+NOT_CAUSE_KINDS = ("response", "relabel")
+#: the channel kinds with no run-level hypothesis and no run-level signal: those that are never candidates, a label
 #: (its codes have no order: its categorical family only) and the sample-only kinds
-NO_RUN_LEVEL_KINDS = ("response", "label") + SAMPLE_ONLY_KINDS
+NO_RUN_LEVEL_KINDS = NOT_CAUSE_KINDS + ("label",) + SAMPLE_ONLY_KINDS
 #: logged columns that are measured *responses* of the motor, not causes: listed, never candidates. A regressor
 #: that is the motor's own response (the vibrometer's tip-velocity amplitude follows the drive force the model
 #: predicts) would stand in for the model instead of explaining it, and a predictor needing it could not predict
@@ -331,9 +334,10 @@ class Channel(Effect):
                           "sd": (t1 - t0) / np.sqrt(12.0), "within_run": True, "lo": t0, "hi": t1})
         out = []
         for ch in chans:
-            if not ch.get("sd", 0) > 0 or ch.get("kind") in ("response", "label"):
-                continue   # constant on TRAIN (no evidence possible), a measured response (not a cause) or a
-                # label's unordered codes (categorical run-level family only): considered, no value form
+            if not ch.get("sd", 0) > 0 or ch.get("kind") in NOT_CAUSE_KINDS + ("label",):
+                continue   # constant on TRAIN (no evidence possible), a measured response or a relabel of the
+                # plan's inputs (not a cause) or a label's unordered codes (categorical run-level family only):
+                # considered, no value form
             reg = regressor_of(ch["name"])
             logged = "lo" in ch and "hi" in ch and ch["name"] != SESSION_TIME
             load_abs = float(train.ranges.get("load_abs", 0.0)) if logged else 0.0
