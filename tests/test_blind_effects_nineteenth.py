@@ -238,3 +238,14 @@ def test_the_accepted_regressors_and_the_pass_rule(audit):
     assert not audit.verdict(row)["passes"]
     assert audit.verdict(row | {"traced_all": ["voltage", "load"]})["passes"]
     assert not audit.verdict(row | {"traced_all": ["voltage"], "after": 2.88})["passes"]
+
+
+def test_the_probes_columns(load_bench):
+    import pandas as pd
+    probe = load_bench("blind_effects_nineteenth_probe")
+    truth = {"parameters": {"v_hard": 0.2},
+             "per_run": [{"v_arrival_m_s": v} for v in (0.25, 0.1, 0.3, 0.15)]}
+    df = pd.DataFrame({"run": [1, 1, 2, 3, 4, 4], "speed_m_s": [0.1] * 6})
+    assert probe.changed(df, "prev_arrival", truth)["prev_arrival_m_s"].tolist() == [0.1, 0.1, 0.25, 0.1, 0.3, 0.3]
+    assert probe.changed(df, "prev_hard", truth)["prev_hard_arrival"].tolist() == [0, 0, 1, 0, 1, 1]
+    assert "prev_hard_arrival" not in probe.changed(df, "prev_arrival", truth).columns
