@@ -246,6 +246,7 @@ def test_the_probes_columns(load_bench):
     truth = {"parameters": {"v_hard": 0.2},
              "per_run": [{"v_arrival_m_s": v} for v in (0.25, 0.1, 0.3, 0.15)]}
     df = pd.DataFrame({"run": [1, 1, 2, 3, 4, 4], "speed_m_s": [0.1] * 6})
-    assert probe.changed(df, "prev_arrival", truth)["prev_arrival_m_s"].tolist() == [0.1, 0.1, 0.25, 0.1, 0.3, 0.3]
+    # run 1: the median of the others' previous arrivals, 0.25, 0.1 and 0.3
+    assert probe.changed(df, "prev_arrival", truth)["prev_arrival_m_s"].tolist() == [0.25, 0.25, 0.25, 0.1, 0.3, 0.3]
     assert probe.changed(df, "prev_hard", truth)["prev_hard_arrival"].tolist() == [0, 0, 1, 0, 1, 1]
     assert "prev_hard_arrival" not in probe.changed(df, "prev_arrival", truth).columns
