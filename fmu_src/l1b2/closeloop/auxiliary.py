@@ -37,8 +37,7 @@ from ..data.gaps import fill_gaps
 from ..errors import DataFormatError
 
 __all__ = ["MAX_LABELS", "MAX_TOKEN_SHARE", "LABELS_ATTR", "DERIVED_ATTR", "derived_columns", "with_usable_channels",
-           "label_codes",
-           "label_columns", "check_test_columns"]
+           "label_codes", "label_columns", "check_test_columns"]
 
 #: the most distinct text values a label column may have over TRAIN's runs to be coded
 MAX_LABELS = 12
