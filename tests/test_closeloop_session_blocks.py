@@ -173,6 +173,19 @@ def test_a_session_recorded_in_files_with_their_own_drive_tuning_gets_its_blocks
     assert all(p["unit"] == "N" and p["stderr"] is not None and p["stderr"] > 0 for p in pars.values())
 
 
+def test_the_blocks_are_searched_only_when_no_signal_has_wald_evidence():
+    # a signal whose p-value is below the level is evidence even when its folds do not confirm it (the session
+    # clock's trend over held-out blocks of the session): blocks, cross-validated over interleaved runs, would fit
+    # the same trend in steps, so they are not searched
+    from types import SimpleNamespace as E
+    level = 0.001
+    assert rl.searches_blocks([], level)
+    assert rl.searches_blocks([E(p_value=0.002, significant=False), E(p_value=0.5, significant=False)], level)
+    assert not rl.searches_blocks([E(p_value=0.002, significant=False), E(p_value=0.0009, significant=False)], level)
+    assert not rl.searches_blocks([E(p_value=0.0002, significant=True)], level)
+    assert rl.searches_blocks([E(p_value=level, significant=False)], level)      # the level itself: no evidence
+
+
 def test_the_folds_of_a_block_level_are_the_runs_load_sizes():
     load = np.array([0.0, 1.0, -1.0, 0.5, -0.5 + 1e-12, 0.0, 1.0])
     folds = blk.load_size_folds(load)

@@ -32,9 +32,11 @@ estimates and explains:
 
 Signals (:func:`run_signals`): each candidate channel's run mean (the logged columns, the session clock
 ``time_s``, which also orders the runs), V0, the drive-coordinate load ``d m``, its size and the direction. When
-none of them is significant, a cut of the session into contiguous blocks (:func:`block_signal`,
-:mod:`l1b2.closeloop.blocks`: its p-value corrected for the search) is tested as one more signal and offered as a
-:class:`~l1b2.predictor.effects.blocks.SessionBlocks` candidate.
+none of them has Wald evidence (no p-value below the Bonferroni level, whatever its cross-validated gain), a cut of
+the session into contiguous blocks (:func:`block_signal`, :mod:`l1b2.closeloop.blocks`: its p-value corrected for
+the search) is tested as one more signal and offered as a :class:`~l1b2.predictor.effects.blocks.SessionBlocks`
+candidate. A signal with evidence that its folds do not confirm (the session clock's trend over held-out blocks of
+the session) is not replaced by blocks, whose level is cross-validated over interleaved runs.
 """
 
 from __future__ import annotations
@@ -629,11 +631,17 @@ def analyse(df: pd.DataFrame, model, mask: np.ndarray, channels, *, alpha: float
     fit = reml(dev.theta, dev.cov)
     evidence = signal_evidence(dev, sigs, alpha=alpha, k=k, seed=seed, session_order=start)
     level = alpha / (len(sigs) + 1)
-    if not any(e.significant for e in evidence):   # blocks of the session: the evidence of last resort
+    if searches_blocks(evidence, alpha / max(len(sigs), 1)):   # blocks of the session: the evidence of last resort
         seg = block_signal(dev, times.mean().to_numpy(float)[keep], fit.T, level=level, k=k, seed=seed)
         if seg is not None:
             evidence += signal_evidence(dev, [seg], alpha=level, k=k, seed=seed, session_order=start)
     return RunLevelAnalysis(dev, fit, q, qp, evidence, alpha / max(len(sigs), 1))
+
+
+def searches_blocks(evidence, level: float) -> bool:
+    """Whether the session's blocks are searched (module docstring): no signal of ``evidence`` has a p-value below
+    ``level``, the signals' Bonferroni level, whether or not its folds confirm it."""
+    return not any(e.p_value < level for e in evidence)
 
 
 def _kept(sg: dict, keep: np.ndarray) -> dict | None:
