@@ -293,7 +293,9 @@ def block_signal(dev: RunDeviations, t_run_s: np.ndarray, T: np.ndarray, *, leve
     :func:`l1b2.closeloop.blocks.load_size_folds`, else the ``k`` run folds of ``seed``) is at least
     :data:`~l1b2.closeloop.blocks.PARSIMONY` of the largest; when none is below ``level``, the smallest corrected
     p-value (the record of what was searched; ties: the fewer blocks). The signal carries its folds (``folds``):
-    :func:`signal_evidence` scores it on them."""
+    :func:`signal_evidence` scores it on them; ``p_value`` is its corrected p-value. A segmentation's Wald test and
+    gain read one level per block on the gain (``gain_only`` of :func:`joint_test`, :func:`cv_signal_gain`), the
+    family's own form."""
     segs = blk.segmentations(dev.theta, dev.cov, T, t_run_s)
     if not segs:
         return None
@@ -309,7 +311,8 @@ def block_signal(dev: RunDeviations, t_run_s: np.ndarray, T: np.ndarray, *, leve
         pick = min(i for i in passed if gain[i] >= (blk.PARSIMONY * best if best > 0 else best))
     else:
         pick = min(range(len(segs)), key=lambda i: (p[i], i))
-    return {"channel": fx.channels.SESSION_TIME, "transform": fx.blocks.BLOCKS, **segs[pick], "folds": folds}
+    return {"channel": fx.channels.SESSION_TIME, "transform": fx.blocks.BLOCKS, **segs[pick], "folds": folds,
+            "p_value": p[pick]}
 
 
 def category_signals(df: pd.DataFrame, channels) -> list[dict]:
