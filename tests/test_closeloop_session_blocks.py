@@ -131,12 +131,71 @@ def test_the_search_finds_made_blocks_and_corrects_its_p_value():
     # the made edges, midway between runs 11 and 12, 23 and 24, 35 and 36, are all found (the runs' own scatter
     # may cut a block once more)
     assert {58.5, 118.5, 178.5} <= set(sg["edges"]) and len(sg["edges"]) <= 4
-    p_raw = rl.joint_test(dev, fb.index_columns(sg["values"], sg["shares"]))[1]
+    p_raw = rl.joint_test(dev, fb.index_columns(sg["values"], sg["shares"]), gain_only=True)[1]
     assert sg["search_count"] == blk.search_count(n, len(sg["edges"]) + 1) * (blk.MAX_BLOCKS - 1)
     ev = rl.signal_evidence(dev, [sg], alpha=0.01, k=4, seed=0)[0]
-    assert ev.p_value == pytest.approx(min(1.0, p_raw * sg["search_count"]))
+    assert ev.p_value == pytest.approx(min(1.0, p_raw * sg["search_count"]), rel=1e-9, abs=0)
+    assert sg["p_value"] == pytest.approx(ev.p_value, rel=1e-9, abs=0)   # the search's p is the evidence's
+    cols = fb.index_columns(sg["values"], sg["shares"])
+    assert ev.cv_gain == pytest.approx(rl.cv_signal_gain(dev.theta, dev.cov, cols, sg["folds"], dev.load,
+                                                         gain_only=True)[0], rel=1e-9)
     assert ev.significant and ev.edges == sg["edges"] and ev.label == f"session_blocks({len(sg['edges']) + 1})"
     assert ev.regressor == "session_block" and not ev.blocked_folds
+
+
+def test_a_segmentations_evidence_is_one_level_per_block_on_the_gain():
+    # the family fits one drive-force level per block (no offset, no load term), so the search's Wald test and
+    # cross-validated gain read the gain row only: written out here with the REML mean's design and the folds
+    from scipy import stats
+    n = 36
+    dev = _deviations(np.repeat([0.0, 0.05, -0.03], 12), seed=4)
+    Z = fb.index_columns(np.repeat([0.0, 1.0, 2.0], 12), (1 / 3, 1 / 3))          # (n, 2) centred indicators
+    one, zero = np.ones((n, 1)), np.zeros((n, 1))
+    X = np.stack([np.hstack([one, Z, zero]), np.hstack([zero, 0 * Z, one])], axis=1)   # gain [1 Z 0], offset [0 0 1]
+    assert rl.signal_design(Z, None, gain_only=True) == pytest.approx(X, abs=0)
+    assert rl.signal_index(2, True, gain_only=True) == [1, 2]
+    fit = reml(dev.theta, dev.cov, X)
+    b, C = fit.beta[1:3], fit.beta_cov[1:3, 1:3]
+    want_p = stats.chi2.sf(float(b @ np.linalg.solve(C, b)), 2)
+    got_b, got_p, dof = rl.joint_test(dev, Z, gain_only=True)
+    assert dof == 2 and got_b == pytest.approx(b, rel=1e-9) and got_p == pytest.approx(want_p, rel=1e-9, abs=0)
+    # the held-out share: for each fold, the null's and the signal's REML fits on the other runs, the held-out
+    # runs' squared deviations weighted by the null fit's (T0 + S_r)^-1
+    folds = [np.arange(j, n, 4) for j in range(4)]
+    s0 = s1 = 0.0
+    for te in folds:
+        tr = np.setdiff1d(np.arange(n), te)
+        f0 = reml(dev.theta[tr], dev.cov[tr])
+        f1 = reml(dev.theta[tr], dev.cov[tr], X[tr])
+        W = np.linalg.inv(f0.T[None] + dev.cov[te])
+        r0 = dev.theta[te] - f0.beta[None, :]
+        r1 = dev.theta[te] - np.einsum("rpk,k->rp", X[te], f1.beta)
+        s0 += np.einsum("rp,rpq,rq->", r0, W, r0)
+        s1 += np.einsum("rp,rpq,rq->", r1, W, r1)
+    gain = rl.cv_signal_gain(dev.theta, dev.cov, Z, folds, None, gain_only=True)[0]
+    assert gain == pytest.approx(1 - s1 / s0, rel=1e-9) and gain > 0.2
+    # the run-level family's design (gain, offset and load slopes per column) gives another gain and test
+    assert rl.cv_signal_gain(dev.theta, dev.cov, Z, folds, None)[0] != pytest.approx(gain, rel=1e-3)
+    assert rl.joint_test(dev, Z)[2] == 4
+
+
+def test_the_number_of_blocks_is_the_fewest_within_the_parsimony_of_the_best_gain():
+    # written out: every segmentation's corrected p (one level per block on the gain), the gains of those below
+    # the level over the run folds, and the fewest blocks whose gain is at least PARSIMONY of the best
+    from l1b2.closeloop import residuals as res
+    n = 48
+    dev = _deviations(np.repeat([0.0, 0.02, -0.015, 0.01, -0.02, 0.015], 8), seed=7, sd_between=0.006)
+    t, T = np.arange(n) * 5.0 + 1.0, reml(dev.theta, dev.cov).T
+    segs = blk.segmentations(dev.theta, dev.cov, T, t)
+    folds = [np.flatnonzero(np.isin(dev.runs, f)) for f in res.run_folds(dev.runs, 4, 0)]
+    cols = [fb.index_columns(g["values"], g["shares"]) for g in segs]
+    p = [min(1.0, rl.joint_test(dev, z, gain_only=True)[1] * g["search_count"]) for z, g in zip(cols, segs)]
+    passed = [i for i in range(len(segs)) if p[i] < 0.001]
+    gain = {i: rl.cv_signal_gain(dev.theta, dev.cov, cols[i], folds, None, gain_only=True)[0] for i in passed}
+    best = max(gain.values())
+    pick = min(i for i in passed if gain[i] >= blk.PARSIMONY * best)
+    sg = rl.block_signal(dev, t, T, level=0.001, k=4, seed=0)
+    assert len(passed) >= 2 and sg["edges"] == segs[pick]["edges"] and sg["p_value"] == pytest.approx(p[pick])
 
 
 def test_without_blocks_in_the_session_no_segmentation_is_significant():
@@ -171,6 +230,19 @@ def test_a_session_recorded_in_files_with_their_own_drive_tuning_gets_its_blocks
     pars = blocks[0]["parameters"]
     assert list(pars) == [f"block_{j}_run_gain" for j in range(n - 1)]
     assert all(p["unit"] == "N" and p["stderr"] is not None and p["stderr"] > 0 for p in pars.values())
+
+
+def test_the_blocks_are_searched_only_when_no_signal_has_wald_evidence():
+    # a signal whose p-value is below the level is evidence even when its folds do not confirm it (the session
+    # clock's trend over held-out blocks of the session): blocks, cross-validated over interleaved runs, would fit
+    # the same trend in steps, so they are not searched
+    from types import SimpleNamespace as E
+    level = 0.001
+    assert rl.searches_blocks([], level)
+    assert rl.searches_blocks([E(p_value=0.002, significant=False), E(p_value=0.5, significant=False)], level)
+    assert not rl.searches_blocks([E(p_value=0.002, significant=False), E(p_value=0.0009, significant=False)], level)
+    assert not rl.searches_blocks([E(p_value=0.0002, significant=True)], level)
+    assert rl.searches_blocks([E(p_value=level, significant=False)], level)      # the level itself: no evidence
 
 
 def test_the_folds_of_a_block_level_are_the_runs_load_sizes():

@@ -32,9 +32,11 @@ estimates and explains:
 
 Signals (:func:`run_signals`): each candidate channel's run mean (the logged columns, the session clock
 ``time_s``, which also orders the runs), V0, the drive-coordinate load ``d m``, its size and the direction. When
-none of them is significant, a cut of the session into contiguous blocks (:func:`block_signal`,
-:mod:`l1b2.closeloop.blocks`: its p-value corrected for the search) is tested as one more signal and offered as a
-:class:`~l1b2.predictor.effects.blocks.SessionBlocks` candidate.
+none of them has Wald evidence (no p-value below the Bonferroni level, whatever its cross-validated gain), a cut of
+the session into contiguous blocks (:func:`block_signal`, :mod:`l1b2.closeloop.blocks`: its p-value corrected for
+the search) is tested as one more signal and offered as a :class:`~l1b2.predictor.effects.blocks.SessionBlocks`
+candidate. A signal with evidence that its folds do not confirm (the session clock's trend over held-out blocks of
+the session) is not replaced by blocks, whose level is cross-validated over interleaved runs.
 """
 
 from __future__ import annotations
@@ -124,16 +126,20 @@ def run_deviations(df: pd.DataFrame, model, mask: np.ndarray) -> RunDeviations:
                          np.array(ns), w / scale if scale > 0 else None)
 
 
-def signal_design(z: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
+def signal_design(z: np.ndarray, w: np.ndarray | None = None, gain_only: bool = False) -> np.ndarray:
     """The mean's design of a signal, ``(n, 2, 5)`` (``(n, 2, 4)`` without ``w``): gain row ``[1, z, 0, 0, 0]``,
     offset row ``[0, 0, 1, z, z w]``; coefficients ``(g0, g1, o0, o1, o2)``.
 
     ``z`` (n, q), q columns (a categorical signal's centred level indicators): ``(n, 2, 2 + 3 q)``, gain row
-    ``[1, Z, 0, 0.., 0..]``, offset row ``[0, 0.., 1, Z, Z w]`` (:func:`signal_index`: where the signal's are)."""
+    ``[1, Z, 0, 0.., 0..]``, offset row ``[0, 0.., 1, Z, Z w]`` (:func:`signal_index`: where the signal's are).
+    ``gain_only``: the signal acts on the gain alone (the session's blocks, one level each:
+    :mod:`l1b2.predictor.effects.blocks`), ``(n, 2, 2 + q)``, gain row ``[1, Z, 0]``, offset row ``[0, 0.., 1]``."""
     z = np.asarray(z, float)
     n = len(z)
     Z = z.reshape(n, -1)
     one, zero = np.ones((n, 1)), np.zeros(Z.shape)
+    if gain_only:
+        return np.stack([np.hstack([one, Z, 0 * one]), np.hstack([0 * one, zero, one])], axis=1)
     gain = [one, Z, 0 * one, zero]
     off = [0 * one, zero, one, Z]
     if w is not None:
@@ -155,11 +161,13 @@ def identified_columns(X: np.ndarray) -> list:
     return keep
 
 
-def signal_index(q: int, load: bool) -> list:
+def signal_index(q: int, load: bool, gain_only: bool = False) -> list:
     """The coefficients of a signal of ``q`` columns in :func:`signal_design` (gain, offset[, load] slopes):
     ``[1, 3, 4]`` for one column with the load, ``3 q`` (``2 q`` without) in all, the joint test's degrees of
-    freedom."""
+    freedom; ``1 ... q`` for a signal on the gain alone (``gain_only``)."""
     gain = list(range(1, 1 + q))
+    if gain_only:
+        return gain
     off = list(range(2 + q, 2 + 2 * q))
     return gain + off + (list(range(2 + 2 * q, 2 + 3 * q)) if load else [])
 
@@ -285,23 +293,26 @@ def block_signal(dev: RunDeviations, t_run_s: np.ndarray, T: np.ndarray, *, leve
     :func:`l1b2.closeloop.blocks.load_size_folds`, else the ``k`` run folds of ``seed``) is at least
     :data:`~l1b2.closeloop.blocks.PARSIMONY` of the largest; when none is below ``level``, the smallest corrected
     p-value (the record of what was searched; ties: the fewer blocks). The signal carries its folds (``folds``):
-    :func:`signal_evidence` scores it on them."""
+    :func:`signal_evidence` scores it on them; ``p_value`` is its corrected p-value. A segmentation's Wald test and
+    gain read one level per block on the gain (``gain_only`` of :func:`joint_test`, :func:`cv_signal_gain`), the
+    family's own form."""
     segs = blk.segmentations(dev.theta, dev.cov, T, t_run_s)
     if not segs:
         return None
     cols = [fx.blocks.index_columns(sg["values"], sg["shares"]) for sg in segs]
-    p = [min(1.0, joint_test(dev, z)[1] * sg["search_count"]) for z, sg in zip(cols, segs)]
+    p = [min(1.0, joint_test(dev, z, True)[1] * sg["search_count"]) for z, sg in zip(cols, segs)]
     passed = [i for i in range(len(segs)) if p[i] < level]
     folds = blk.load_size_folds(dev.load) or [np.flatnonzero(np.isin(dev.runs, f))
                                               for f in res.run_folds(dev.runs, k, seed)]
     if passed:
         memo: dict = {}
-        gain = {i: cv_signal_gain(dev.theta, dev.cov, cols[i], folds, dev.load, memo)[0] for i in passed}
+        gain = {i: cv_signal_gain(dev.theta, dev.cov, cols[i], folds, dev.load, memo, True)[0] for i in passed}
         best = max(gain.values())
         pick = min(i for i in passed if gain[i] >= (blk.PARSIMONY * best if best > 0 else best))
     else:
         pick = min(range(len(segs)), key=lambda i: (p[i], i))
-    return {"channel": fx.channels.SESSION_TIME, "transform": fx.blocks.BLOCKS, **segs[pick], "folds": folds}
+    return {"channel": fx.channels.SESSION_TIME, "transform": fx.blocks.BLOCKS, **segs[pick], "folds": folds,
+            "p_value": p[pick]}
 
 
 def category_signals(df: pd.DataFrame, channels) -> list[dict]:
@@ -371,7 +382,8 @@ def null_fold_fit(theta, cov, te, memo: dict | None = None) -> REMLFit:
     return fit
 
 
-def cv_signal_gain(theta, cov, z, folds_idx, w=None, null_fits: dict | None = None) -> tuple[float, np.ndarray]:
+def cv_signal_gain(theta, cov, z, folds_idx, w=None, null_fits: dict | None = None,
+                   gain_only: bool = False) -> tuple[float, np.ndarray]:
     """Held-out share of the runs' weighted deviation that the signal ``z`` removes, and the per-run reductions.
 
     For each fold (indices of held-out runs) the null (intercepts) and the signal's model are fitted by REML on
@@ -385,7 +397,7 @@ def cv_signal_gain(theta, cov, z, folds_idx, w=None, null_fits: dict | None = No
     s0, s1 = np.zeros(n), np.zeros(n)
     for te in folds_idx:
         tr = np.setdiff1d(np.arange(n), te)
-        X1 = signal_design(Z if Z.shape[1] == 1 else Z[:, independent_columns(Z[tr])], w)
+        X1 = signal_design(Z if Z.shape[1] == 1 else Z[:, independent_columns(Z[tr])], w, gain_only)
         X1 = X1[:, :, identified_columns(X1[tr])]
         f0 = null_fold_fit(theta, cov, te, null_fits)
         f1 = reml(theta[tr], cov[tr], X1[tr])
@@ -415,12 +427,12 @@ def signal_evidence(dev: RunDeviations, signals_, *, alpha: float, k: int, seed:
     null_fits: dict = {}     # the null model's fold fits, shared by every signal (same deviations, same folds)
     for sg in signals_:
         z, mean, sd = signal_columns(sg)
-        b, p, dof = joint_test(dev, z)
-        p = min(1.0, p * sg.get("search_count", 1))   # a segmentation's search (module blocks)
         cat, seg = _is_category(sg), _is_blocks(sg)
+        b, p, dof = joint_test(dev, z, seg)     # a segmentation: one level per block, on the gain
+        p = min(1.0, p * sg.get("search_count", 1))   # a segmentation's search (module blocks)
         blocked = sg["channel"] == fx.channels.SESSION_TIME and not seg   # a block's level: from runs within it
         folds = sg.get("folds") or (blocks if blocked else rand)   # a segmentation's own (block_signal)
-        gain, per_run = cv_signal_gain(dev.theta, dev.cov, z, folds, dev.load, null_fits)
+        gain, per_run = cv_signal_gain(dev.theta, dev.cov, z, folds, dev.load, null_fits, seg)
         label = (_category().label(sg["channel"]) if cat else _blocks().label(len(sg["edges"]) + 1) if seg
                  else fx.channels.signal_label(sg["channel"], sg["transform"]))
         reg = _blocks().regressor if seg else fx.channels.regressor_of(sg["channel"])
@@ -441,7 +453,7 @@ def signal_evidence(dev: RunDeviations, signals_, *, alpha: float, k: int, seed:
     return sorted(out, key=lambda e: (e.dominated_by is not None, e.p_value, -e.cv_gain))
 
 
-def joint_test(dev: RunDeviations, z: np.ndarray) -> tuple[np.ndarray, float, int]:
+def joint_test(dev: RunDeviations, z: np.ndarray, gain_only: bool = False) -> tuple[np.ndarray, float, int]:
     """``(b, p, dof)``: a signal's coefficients in the REML mean of :func:`signal_design` (:func:`signal_index`),
     the p-value of their joint Wald test ``b' C^-1 b`` (``C`` their block of REML's ``beta_cov``) against
     chi-square with ``dof = len(b)`` degrees of freedom: 3 per column of ``z`` (2 without load variation).
@@ -449,8 +461,8 @@ def joint_test(dev: RunDeviations, z: np.ndarray) -> tuple[np.ndarray, float, in
     A coefficient the runs do not identify (:func:`identified_columns`) is left out of the mean and of the test: its
     ``b`` is 0 and ``dof`` counts the identified ones only (none: ``p`` 1)."""
     Z = np.asarray(z, float).reshape(len(z), -1)
-    idx = signal_index(Z.shape[1], dev.load is not None)
-    X = signal_design(z, dev.load)
+    idx = signal_index(Z.shape[1], dev.load is not None, gain_only)
+    X = signal_design(z, dev.load, gain_only)
     keep = identified_columns(X)
     fit = reml(dev.theta, dev.cov, X[:, :, keep])
     at = {j: i for i, j in enumerate(keep)}
@@ -629,11 +641,17 @@ def analyse(df: pd.DataFrame, model, mask: np.ndarray, channels, *, alpha: float
     fit = reml(dev.theta, dev.cov)
     evidence = signal_evidence(dev, sigs, alpha=alpha, k=k, seed=seed, session_order=start)
     level = alpha / (len(sigs) + 1)
-    if not any(e.significant for e in evidence):   # blocks of the session: the evidence of last resort
+    if searches_blocks(evidence, alpha / max(len(sigs), 1)):   # blocks of the session: the evidence of last resort
         seg = block_signal(dev, times.mean().to_numpy(float)[keep], fit.T, level=level, k=k, seed=seed)
         if seg is not None:
             evidence += signal_evidence(dev, [seg], alpha=level, k=k, seed=seed, session_order=start)
     return RunLevelAnalysis(dev, fit, q, qp, evidence, alpha / max(len(sigs), 1))
+
+
+def searches_blocks(evidence, level: float) -> bool:
+    """Whether the session's blocks are searched (module docstring): no signal of ``evidence`` has a p-value below
+    ``level``, the signals' Bonferroni level, whether or not its folds confirm it."""
+    return not any(e.p_value < level for e in evidence)
 
 
 def _kept(sg: dict, keep: np.ndarray) -> dict | None:
