@@ -640,12 +640,12 @@ def analyse(df: pd.DataFrame, model, mask: np.ndarray, channels, *, alpha: float
     q, qp = heterogeneity(dev.theta, dev.cov)
     fit = reml(dev.theta, dev.cov)
     evidence = signal_evidence(dev, sigs, alpha=alpha, k=k, seed=seed, session_order=start)
-    level = alpha / (len(sigs) + 1)
-    if searches_blocks(evidence, alpha / max(len(sigs), 1)):   # blocks of the session: the evidence of last resort
+    signals_level, level = alpha / max(len(sigs), 1), alpha / (len(sigs) + 1)
+    if searches_blocks(evidence, signals_level):   # blocks of the session: the evidence of last resort
         seg = block_signal(dev, times.mean().to_numpy(float)[keep], fit.T, level=level, k=k, seed=seed)
         if seg is not None:
             evidence += signal_evidence(dev, [seg], alpha=level, k=k, seed=seed, session_order=start)
-    return RunLevelAnalysis(dev, fit, q, qp, evidence, alpha / max(len(sigs), 1))
+    return RunLevelAnalysis(dev, fit, q, qp, evidence, signals_level)
 
 
 def searches_blocks(evidence, level: float) -> bool:
