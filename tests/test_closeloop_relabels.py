@@ -3,7 +3,6 @@ test, the cells' chi-square written out, the smallest set of cells, and the chan
 
 import numpy as np
 import pandas as pd
-import pytest
 from scipy import stats
 
 V0S = (220.0, 255.0, 290.0, 324.0)
