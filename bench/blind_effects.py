@@ -334,15 +334,16 @@ def audit_verdict(row: dict, b0: dict, decoys: dict, accepted) -> dict:
     return {"bound": bound, "attributed": attributed, "passes": attributed and a <= bound}
 
 
-def run_audit(argv, doc: str, kinds, make, channels: dict, want: dict, not_want: dict) -> None:
+def run_audit(argv, doc: str, kinds, make, channels: dict, want: dict, not_want: dict, accepted=None) -> None:
     """:func:`run_cli` for an audit whose pass rule reads the first two traced regressors: the row's
-    :func:`want_fields` and ``accepted_in_first_two`` (:func:`accepted_by` of one of them)."""
+    :func:`want_fields` and ``accepted_in_first_two`` (``accepted(kind, name)`` of one of them; default
+    :func:`accepted_by` of ``want`` and ``not_want``)."""
     fields = want_fields(channels, want)
+    accept = accepted or (lambda kind, name: accepted_by(want, not_want, kind, name))
 
     def extra(kind):
         out = fields(kind)
-        out["accepted_in_first_two"] = lambda names, diag: any(accepted_by(want, not_want, kind, x)
-                                                                for x in diag["traced_to"][:2])
+        out["accepted_in_first_two"] = lambda names, diag: any(accept(kind, x) for x in diag["traced_to"][:2])
         return out
     run_cli(argv, doc, kinds, make, extra)
 

@@ -74,9 +74,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import blind_effects as be  # noqa: E402  (adds fmu_src to the path)
 
-from l1b2.cosim.engine import InProcessMotor  # noqa: E402
 from l1b2.data import measurements as dataio  # noqa: E402
-from l1b2.physics import driver as drv  # noqa: E402
 from l1b2.rig.experiment import scattered_motor  # noqa: E402
 
 KINDS = ("hardstop_gib_reseat", "glovebox_oxygen", "lining_wlf_grosch", "weight_laser_decoy",
@@ -211,16 +209,6 @@ def run_motor(kind: str, mp, p: dict, k: int, V0: float, n: int = 0):
     return mp
 
 
-def traverse_in(mp, nominal, plan, V0, load, d):
-    """One traverse (as :func:`blind_effects.traverse`): the supply set for ``V0`` at 25 degC and the plan's f."""
-    V_s = float(drv.supply_for_voltage_V(nominal.driver, V0, 1.0, plan.f_drive_Hz, plan.ambient_degC))
-    s0 = mp.slider.s_min_m if d > 0 else mp.slider.s_max_m
-    m = InProcessMotor(mp, h_s=plan.step_s)
-    m.initialize(V_s=V_s, f_s=plan.f_drive_Hz, T=plan.ambient_degC, direction=d, m_load=load, s0=s0)
-    return m.run(plan.max_run_s, record=("Slider.s", "Stator.T_stator"),
-                 until=lambda mm: mm.value("Slider.at_stop") == d)
-
-
 def experiment(kind: str, seed: int, first: int | None = None):
     """The 72-run experiment of one kind and its truth (``first``: only the first runs, the same draws)."""
     plan, nominal, conds, factors, p, every = be.setting(kind, seed, draw)
@@ -229,7 +217,7 @@ def experiment(kind: str, seed: int, first: int | None = None):
     frames, per_run, t_next, n = [], [], 0.0, 0
     for k, (V, L, d) in enumerate(conds_run):
         mp = run_motor(kind, scattered_motor(nominal, factors[k]), p, k, V, n)
-        r = traverse_in(mp, nominal, plan, V, L, d)
+        r = be.traverse(mp, nominal, plan, V, L, d)
         stop = mp.slider.s_max_m if d > 0 else mp.slider.s_min_m
         v_arr = arrival_speed(r["time"], r["Slider.s"], d, stop)
         idx = np.arange(0, len(r["time"]), every)
@@ -274,13 +262,7 @@ def verdict(row: dict) -> dict:
 
 
 def main(argv=None):
-    fields = be.want_fields(CHANNEL, WANT)
-
-    def extra(kind):
-        out = fields(kind)
-        out["accepted_in_first_two"] = lambda names, diag: any(accepted(kind, x) for x in diag["traced_to"][:2])
-        return out
-    be.run_cli(argv, __doc__, KINDS, experiment, extra)
+    be.run_audit(argv, __doc__, KINDS, experiment, CHANNEL, WANT, NOT_WANT, accepted)
 
 
 if __name__ == "__main__":

@@ -152,7 +152,7 @@ def test_the_reseats_made_data(audit, load_bench):
     k = 3
     V, L, d = (float(df[df["run"] == k + 1][c].iloc[0]) for c in ("voltage_V", "load_kg", "direction"))
     mp = scattered_motor(nominal, factors[k]).replace(stator__P0_N=pr[k]["P0_N"])
-    r = audit.traverse_in(mp, nominal, plan, V, L, int(d))
+    r = be.traverse(mp, nominal, plan, V, L, int(d))
     stop = mp.slider.s_max_m if d > 0 else mp.slider.s_min_m
     assert pr[k]["v_arrival_m_s"] == pytest.approx(audit.arrival_speed(r["time"], r["Slider.s"], int(d), stop),
                                                    rel=1e-12)
