@@ -273,3 +273,20 @@ def test_the_accepted_regressors_and_the_pass_rule(audit):
     assert not audit.verdict(row)["passes"]
     assert audit.verdict(row | {"traced_all": ["voltage", "load"]})["passes"]
     assert not audit.verdict(row | {"traced_all": ["voltage"], "after": 3.31})["passes"]
+
+
+def test_the_probes_columns(load_bench):
+    import pandas as pd
+    probe = load_bench("blind_effects_twentieth_probe")
+    truth = {"parameters": {"f_u_Hz": 25e3, "x_share": 0.4, "a_um": [0.0, 1.0, 0.5]}}
+    df = pd.DataFrame({"run": [1, 2, 2, 3], "speed_m_s": [0.1] * 4})
+    v = pd.Series([0.2, 0.1, 0.1], index=[1, 2, 3])
+    V_d = 2 * math.pi * 25e3 * 1e-6                                   # 0.157 m/s at 1 um, 0.0785 at 0.5 um
+    relief = probe.changed(df, "relief", truth, v)["dither_relief"].tolist()
+    assert relief == [0.0, round(0.4 * (1 - 2 / math.pi * math.asin(0.1 / V_d)), 4),
+                      round(0.4 * (1 - 2 / math.pi * math.asin(0.1 / V_d)), 4), 0.0]
+    assert probe.changed(df, "ratio", truth, v)["dither_ratio"].tolist() == [0.0, round(V_d / 0.1, 4),
+                                                                           round(V_d / 0.1, 4), round(V_d / 0.2, 4)]
+    clean = pd.DataFrame({"run": [1, 1, 1, 2], "position_m": [-0.02, 0.0, 0.01, 0.0],
+                          "speed_m_s": [0.5, 0.1, 0.3, -0.2]})
+    assert probe.clean_speeds([clean]).tolist() == [pytest.approx(0.2), pytest.approx(0.2)]
