@@ -767,8 +767,8 @@ def channel_ranges(added, dtr: pd.DataFrame, dte: pd.DataFrame | None) -> list:
     range of it (``diagnosis.channel_ranges``).
 
     ``added``: the added candidates (their specs); the ``channel`` family's (its level, ``sample`` or ``run``) and
-    the ``run_level`` family's (a categorical setting's TEST values are :func:`unseen_test_levels`' check). One record per
-    signal, in the order first read: ``channel``, ``level``, ``transform``, ``signal`` (the report's name),
+    the ``run_level`` family's (a categorical setting's TEST values are :func:`unseen_test_levels`' check). One record
+    per signal, in the order first read: ``channel``, ``level``, ``transform``, ``signal`` (the report's name),
     ``effects`` (label -> ``extrapolates`` for a form linear in the signal, ``clipped`` for the quadratic, odd and
     peak shapes, flat beyond TRAIN's range) and :func:`l1b2.data.coverage.values_outside` of the signal (TRAIN's and
     TEST's signal per sample). Empty without TEST.
