@@ -285,6 +285,19 @@ def test_the_signal_count_takes_value_signals_by_their_tests_and_each_category_a
     assert rl.effective_signal_count([cat]) == 1.0 and rl.effective_signal_count([]) == 1.0
 
 
+def test_a_channels_copies_do_not_dilute_another_signals_evidence_by_their_number():
+    dev, z, rng = _deviations(slope=(0.04 * 0.24, 0.3 * 0.24))      # a weak signal
+    u = rng.normal(size=len(z))
+    sigs = [{"channel": "aux", "transform": "none", "values": 3.0 + 2.0 * z}] + [
+        {"channel": f"u{j}", "transform": "none", "values": u + 0.05 * rng.normal(size=len(z))} for j in range(5)]
+    lam = np.clip(np.linalg.eigvalsh(np.corrcoef(np.column_stack([s["values"] for s in sigs]).T)), 0, None)
+    m_eff = np.sqrt(lam).sum() ** 2 / lam.sum()
+    assert 1.8 < m_eff < 2.2                                  # aux and one channel read five times
+    e = {x.channel: x for x in rl.signal_evidence(dev, sigs, alpha=0.01, k=4, seed=0)}["aux"]
+    assert 0.01 / 6 < e.p_value < 0.01 / m_eff and e.cv_gain > 0   # between the two levels: the count decides
+    assert e.significant
+
+
 def _gain_by_hand(theta, cov, z, folds):
     """:func:`runlevel.cv_signal_gain` written out: per fold both REML fits on the other runs, the held-out runs'
     weighted squared deviations with the null fit's between-run covariance."""
