@@ -238,13 +238,64 @@ def test_a_signal_explaining_the_runs_deviations_is_significant_and_noise_is_not
     assert ev["aux"].coef[0] == pytest.approx(0.04 * np.std(z), rel=0.3)
     assert ev["aux"].coef[1] == pytest.approx(0.3 * np.std(z), rel=0.3)
     assert not ev["noise"].significant
-    for e in ev.values():                      # Bonferroni over the three signals, and a positive held-out gain
-        assert e.significant == (e.p_value < 0.01 / 3 and e.cv_gain > 0)
+    lam = np.clip(np.linalg.eigvalsh(np.corrcoef(np.column_stack([s["values"] for s in sigs]).T)), 0, None)
+    m_eff = np.sqrt(lam).sum() ** 2 / lam.sum()          # Galwey's count of the three signals' tests
+    assert 2.5 < m_eff < 3.0
+    for e in ev.values():                      # Bonferroni over the signals' tests, and a positive held-out gain
+        assert e.significant == (e.p_value < 0.01 / m_eff and e.cv_gain > 0)
     assert ev["time_s"].blocked_folds and not ev["aux"].blocked_folds
     # with the runs' loads the Wald test has three degrees of freedom (gain, offset, offset x load)
     dev.load = np.where(np.arange(len(z)) % 2 == 0, 0.5, -1.0)
     e = rl.signal_evidence(dev, sigs[:1], alpha=0.01, k=4, seed=0)[0]
     assert e.significant and e.coef[2] == pytest.approx(0.0, abs=0.1)
+
+
+def test_effective_tests_count_orthogonal_columns_fully_and_copies_once():
+    n = 64
+    H = np.array([[1.0]])
+    while len(H) < n:
+        H = np.block([[H, H], [H, -H]])                    # Sylvester's Hadamard matrix: orthogonal +-1 columns
+    assert rl.effective_tests(H[:, 1:6]) == pytest.approx(5.0, abs=1e-12)
+    x = H[:, 1] + 0.5 * H[:, 2]
+    assert rl.effective_tests(np.column_stack([x, 3 * x - 2, -x])) == pytest.approx(1.0, abs=1e-9)
+    for r in (0.0, 0.3, 0.8, 0.99):                        # two columns with correlation r: 1 + sqrt(1 - r^2)
+        y = r * H[:, 1] + np.sqrt(1 - r * r) * H[:, 2]
+        assert rl.effective_tests(np.column_stack([H[:, 1], y])) == pytest.approx(1 + np.sqrt(1 - r * r), abs=1e-9)
+    rng = np.random.default_rng(5)
+    Z = rng.normal(size=(40, 6)) @ rng.normal(size=(6, 6))
+    lam = np.linalg.eigvalsh(np.corrcoef(Z.T))
+    assert rl.effective_tests(Z) == pytest.approx(np.sqrt(lam).sum() ** 2 / 6, rel=1e-9)
+    assert rl.effective_tests(np.column_stack([Z[:, :2], np.ones(40)])) == pytest.approx(
+        1 + rl.effective_tests(Z[:, :2]), rel=1e-12)        # a constant column: a test of its own
+    assert rl.effective_tests(np.zeros((40, 0))) == 0.0 and rl.effective_tests(Z[:, :1]) == 1.0
+
+
+def test_the_signal_count_takes_value_signals_by_their_tests_and_each_category_as_one():
+    rng = np.random.default_rng(2)
+    v = rng.normal(size=30)
+    value = {"channel": "a", "transform": "none", "values": v}
+    lagged = {"channel": "a_lag3r", "transform": "none", "values": 2 * v + 1}
+    other = {"channel": "b", "transform": "none", "values": rng.normal(size=30)}
+    cat = {"channel": "c", "transform": rl.fx.category.CATEGORY, "values": np.repeat([0.0, 1.0, 2.0], 10)}
+    assert rl.effective_signal_count([value, lagged]) == pytest.approx(1.0)
+    r = np.corrcoef(v, other["values"])[0, 1]
+    # the correlations [[1, 1, r], [1, 1, r], [r, r, 1]]: eigenvalues 0 and (3 +- sqrt(1 + 8 r^2)) / 2
+    lam = (3 + np.array([1, -1]) * np.sqrt(1 + 8 * r * r)) / 2
+    assert rl.effective_signal_count([value, lagged, other, cat]) == pytest.approx(1 + np.sqrt(lam).sum() ** 2 / 3)
+    assert rl.effective_signal_count([cat]) == 1.0 and rl.effective_signal_count([]) == 1.0
+
+
+def test_a_channels_copies_do_not_dilute_another_signals_evidence_by_their_number():
+    dev, z, rng = _deviations(slope=(0.04 * 0.24, 0.3 * 0.24))      # a weak signal
+    u = rng.normal(size=len(z))
+    sigs = [{"channel": "aux", "transform": "none", "values": 3.0 + 2.0 * z}] + [
+        {"channel": f"u{j}", "transform": "none", "values": u + 0.05 * rng.normal(size=len(z))} for j in range(5)]
+    lam = np.clip(np.linalg.eigvalsh(np.corrcoef(np.column_stack([s["values"] for s in sigs]).T)), 0, None)
+    m_eff = np.sqrt(lam).sum() ** 2 / lam.sum()
+    assert 1.8 < m_eff < 2.2                                  # aux and one channel read five times
+    e = {x.channel: x for x in rl.signal_evidence(dev, sigs, alpha=0.01, k=4, seed=0)}["aux"]
+    assert 0.01 / 6 < e.p_value < 0.01 / m_eff and e.cv_gain > 0   # between the two levels: the count decides
+    assert e.significant
 
 
 def _gain_by_hand(theta, cov, z, folds):

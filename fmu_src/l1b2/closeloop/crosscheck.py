@@ -206,7 +206,8 @@ class PureSlipCheck:
 
     def estimates_of(self, m, c: CandidateForce) -> dict:
         """``{name: {"value", "stderr", "interval"}}`` of ``c``'s parameters in the joint fit ``m`` (fitted on the
-        check's TRAIN frame): the value and the report's interval (:func:`l1b2.closeloop.intervals.reported_uncertainty`)."""
+        check's TRAIN frame): the value and the report's interval
+        (:func:`l1b2.closeloop.intervals.reported_uncertainty`)."""
         groups = train_levels(m, self.df)
         out = {}
         for n in c.names:

@@ -3,8 +3,8 @@
 :class:`CloseLoopResult` is returned by :func:`l1b2.closeloop.loop.close_loop`
 (and kept as ``CloseLoop.result_``). It computes nothing new: it presents.
 ``to_dict()`` is the content of ``report.json`` (strict JSON under the
-package's one rule, :mod:`l1b2.jsonio`: NaN -> ``null``, +-inf -> ``"inf"``/``"-inf"``), ``markdown()`` that of ``report.md``, ``plot()``
-returns the figures, and ``save(dir)`` is the only method that writes files
+package's one rule, :mod:`l1b2.jsonio`: NaN -> ``null``, +-inf -> ``"inf"``/``"-inf"``), ``markdown()`` that of
+``report.md``, ``plot()`` returns the figures, and ``save(dir)`` is the only method that writes files
 (``report.json``, ``report.md`` and the PNGs).
 """
 

@@ -22,8 +22,9 @@ estimates and explains:
    freedom; 2 without load variation) and the cross-validated share of the runs' weighted held-out deviation
    it removes (folds over runs: contiguous blocks of the session for the session clock,
    :func:`l1b2.closeloop.folds.session_blocks`).
-   A signal is significant when its p-value is below ``alpha`` / number of signals tested (Bonferroni) and its
-   cross-validated gain is positive. Of two significant signals whose run values correlate, the one with the
+   A signal is significant when its p-value is below ``alpha`` / the effective number of signals tested
+   (Bonferroni over :func:`effective_signal_count`: value signals that follow each other count as fewer tests) and
+   its cross-validated gain is positive. Of two significant signals whose run values correlate, the one with the
    weaker evidence given the other is *dominated* and ranks after every undominated one
    (:func:`dominated_signals`: a logged channel that only follows the cause). The loop offers the strongest
    significant one (:func:`offer`) as a
@@ -407,6 +408,31 @@ def cv_signal_gain(theta, cov, z, folds_idx, w=None, null_fits: dict | None = No
     return gain, (s0 - s1) / max(s0.mean(), 1e-300)
 
 
+def effective_tests(Z: np.ndarray) -> float:
+    """Galwey's effective number of tests among the columns of ``Z`` (n, m): ``(sum_i sqrt(l_i))^2 / sum_i l_i``
+    over the eigenvalues ``l_i`` of the columns' correlation matrix (negative ones, round-off, as 0). ``m`` for
+    uncorrelated columns, 1 for columns that are one column scaled; 0 for no column. A constant column counts as
+    one test of its own."""
+    Z = np.asarray(Z, float).reshape(len(Z), -1)
+    m = Z.shape[1]
+    if m <= 1:
+        return float(m)
+    sd = Z.std(axis=0)
+    flat = ~(sd > 0)
+    Zs = (Z[:, ~flat] - Z[:, ~flat].mean(axis=0)) / sd[~flat]
+    lam = np.clip(np.linalg.eigvalsh(Zs.T @ Zs / len(Zs)), 0.0, None) if Zs.shape[1] else np.zeros(0)
+    return float(flat.sum()) + (float(np.sqrt(lam).sum() ** 2 / lam.sum()) if lam.sum() > 0 else 0.0)
+
+
+def effective_signal_count(signals_) -> float:
+    """How many tests the run-level signals ``signals_`` (:func:`run_signals`' dicts) count as, at least 1: the
+    value signals' :func:`effective_tests` over their run values (a channel's lags, its logarithm and the inputs it
+    follows are not as many independent tests as signals), plus one per categorical signal or segmentation."""
+    values = [np.asarray(sg["values"], float) for sg in signals_ if not (_is_category(sg) or _is_blocks(sg))]
+    other = len(signals_) - len(values)
+    return max(1.0, other + (effective_tests(np.column_stack(values)) if values else 0.0))
+
+
 def signal_evidence(dev: RunDeviations, signals_, *, alpha: float, k: int, seed: int,
                     session_order: np.ndarray | None = None) -> list[SignalEvidence]:
     """Every signal's evidence (:class:`SignalEvidence`), strongest first: undominated before dominated
@@ -419,7 +445,7 @@ def signal_evidence(dev: RunDeviations, signals_, *, alpha: float, k: int, seed:
     out = []
     if n < 6:
         return out
-    level = alpha / max(len(signals_), 1)
+    level = alpha / effective_signal_count(signals_)
     rand = [np.flatnonzero(np.isin(dev.runs, f)) for f in res.run_folds(dev.runs, k, seed)]
     order = np.argsort(session_order) if session_order is not None else np.arange(n)
     blocks = [np.sort(b) for b in np.array_split(order, min(k, n))]
@@ -636,11 +662,12 @@ def analyse(df: pd.DataFrame, model, mask: np.ndarray, channels, *, alpha: float
     times = df.groupby(dataio.RUN, sort=False)[dataio.TIME]
     start = times.min().to_numpy(float)[keep]
     if len(dev.runs) < 6:
-        return RunLevelAnalysis(dev, None, float("nan"), 1.0, [], alpha / max(len(sigs), 1))
+        return RunLevelAnalysis(dev, None, float("nan"), 1.0, [], alpha / effective_signal_count(sigs))
     q, qp = heterogeneity(dev.theta, dev.cov)
     fit = reml(dev.theta, dev.cov)
     evidence = signal_evidence(dev, sigs, alpha=alpha, k=k, seed=seed, session_order=start)
-    signals_level, level = alpha / max(len(sigs), 1), alpha / (len(sigs) + 1)
+    m = effective_signal_count(sigs)
+    signals_level, level = alpha / m, alpha / (m + 1)
     if searches_blocks(evidence, signals_level):   # blocks of the session: the evidence of last resort
         seg = block_signal(dev, times.mean().to_numpy(float)[keep], fit.T, level=level, k=k, seed=seed)
         if seg is not None:
@@ -740,8 +767,8 @@ def channel_ranges(added, dtr: pd.DataFrame, dte: pd.DataFrame | None) -> list:
     range of it (``diagnosis.channel_ranges``).
 
     ``added``: the added candidates (their specs); the ``channel`` family's (its level, ``sample`` or ``run``) and
-    the ``run_level`` family's (a categorical setting's TEST values are :func:`unseen_test_levels`' check). One record per
-    signal, in the order first read: ``channel``, ``level``, ``transform``, ``signal`` (the report's name),
+    the ``run_level`` family's (a categorical setting's TEST values are :func:`unseen_test_levels`' check). One record
+    per signal, in the order first read: ``channel``, ``level``, ``transform``, ``signal`` (the report's name),
     ``effects`` (label -> ``extrapolates`` for a form linear in the signal, ``clipped`` for the quadratic, odd and
     peak shapes, flat beyond TRAIN's range) and :func:`l1b2.data.coverage.values_outside` of the signal (TRAIN's and
     TEST's signal per sample). Empty without TEST.

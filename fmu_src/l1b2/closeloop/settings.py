@@ -91,9 +91,9 @@ class LoopSettings:
     run_level : bool
         Each round, estimate every run's own deviation from the current model (a drive-force gain and an
         offset, shrunk as random effects) and offer the run-level signal that best explains them
-        (:mod:`l1b2.closeloop.runlevel`, Bonferroni over the signals) as one more candidate of the
-        cross-validated refit; among accepted candidates within ``parsimony`` of the best, a form constant along
-        the stroke is preferred over a within-run form when the run-level evidence names its regressor.
+        (:mod:`l1b2.closeloop.runlevel`, Bonferroni over the signals' effective number of tests) as one more
+        candidate of the cross-validated refit; among accepted candidates within ``parsimony`` of the best, a form
+        constant along the stroke is preferred over a within-run form when the run-level evidence names its regressor.
     clock_folds : {"blocks", "rotation"}
         Folds of the candidates that depend on the session clock (screen and refit, whatever ``run_level``):
         ``"blocks"`` k contiguous blocks, ``"rotation"`` conditions dealt in turn (:mod:`~l1b2.closeloop.acceptance`).
