@@ -434,18 +434,19 @@ def effective_signal_count(signals_) -> float:
 
 
 def signal_evidence(dev: RunDeviations, signals_, *, alpha: float, k: int, seed: int,
-                    session_order: np.ndarray | None = None) -> list[SignalEvidence]:
+                    session_order: np.ndarray | None = None, tests: float | None = None) -> list[SignalEvidence]:
     """Every signal's evidence (:class:`SignalEvidence`), strongest first: undominated before dominated
     (:func:`dominated_signals`), then the smallest p-value.
 
     ``signals_`` as :func:`run_signals` (values in ``dev.runs``' order); ``session_order``: each run's start
-    time (its rank orders the contiguous session blocks of the session clock's folds).
+    time (its rank orders the contiguous session blocks of the session clock's folds); ``tests``: the number of
+    tests ``alpha`` is divided by (None: :func:`effective_signal_count` of ``signals_``).
     """
     n = len(dev.runs)
     out = []
     if n < 6:
         return out
-    level = alpha / effective_signal_count(signals_)
+    level = alpha / (effective_signal_count(signals_) if tests is None else tests)
     rand = [np.flatnonzero(np.isin(dev.runs, f)) for f in res.run_folds(dev.runs, k, seed)]
     order = np.argsort(session_order) if session_order is not None else np.arange(n)
     blocks = [np.sort(b) for b in np.array_split(order, min(k, n))]
@@ -665,8 +666,8 @@ def analyse(df: pd.DataFrame, model, mask: np.ndarray, channels, *, alpha: float
         return RunLevelAnalysis(dev, None, float("nan"), 1.0, [], alpha / effective_signal_count(sigs))
     q, qp = heterogeneity(dev.theta, dev.cov)
     fit = reml(dev.theta, dev.cov)
-    evidence = signal_evidence(dev, sigs, alpha=alpha, k=k, seed=seed, session_order=start)
     m = effective_signal_count(sigs)
+    evidence = signal_evidence(dev, sigs, alpha=alpha, k=k, seed=seed, session_order=start, tests=m)
     signals_level, level = alpha / m, alpha / (m + 1)
     if searches_blocks(evidence, signals_level):   # blocks of the session: the evidence of last resort
         seg = block_signal(dev, times.mean().to_numpy(float)[keep], fit.T, level=level, k=k, seed=seed)
