@@ -14,9 +14,7 @@ Usage: python bench/crowded_rig.py AUDIT KIND SEED N [--cache DIR] [--out DIR]  
 import argparse
 import importlib
 import json
-import shutil
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -57,10 +55,7 @@ def main(argv=None):
     ap.add_argument("--out", default="")
     args = ap.parse_args(argv)
     audit = importlib.import_module(args.audit)
-    src = be.data_dir(args.kind, args.seed, Path(args.cache), None if args.kind == "clean" else audit.experiment)
-    dst = Path(args.out or tempfile.mkdtemp(prefix="l1b2_crowded_"))
-    shutil.rmtree(dst, ignore_errors=True)
-    shutil.copytree(src, dst)
+    src, dst = be.probe_copy(args, audit.experiment)
     parts = {p: pd.read_csv(src / f"{p}.csv") for p in ("train", "test")}
     n_runs = int(max(df["run"].max() for df in parts.values()))
     for p, df in parts.items():
