@@ -40,6 +40,7 @@ from . import chain
 from .folds import held_out_split, held_out_times
 from .candidates import CandidateForce
 from .events import SUFFIX as EVENT_SUFFIX
+from ..units import LAG_SUFFIX_RE
 
 DEFAULT_REFIT_FOLDS = 4
 #: splits of TRAIN's runs into the refit's folds (repeated cross-validation, :func:`repeated_folds`)
@@ -231,6 +232,37 @@ def time_dependent(candidate: CandidateForce) -> bool:
         except fx.EffectSpecError:
             pass
     return "time" in candidate.regressors
+
+
+def session_curve(candidate: CandidateForce) -> bool:
+    """Whether a candidate that does not depend on the session clock (:func:`time_dependent`) reads a setting's
+    low-pass over the last runs, ``<column>_lag<n>r`` (:mod:`l1b2.closeloop.lags`): a smooth curve of the session,
+    whose refit accepted over run folds must pass over the session's blocks too (:func:`block_checked`)."""
+    if not candidate.spec or time_dependent(candidate):
+        return False
+    try:
+        signals = fx.needs(candidate.spec)
+    except fx.EffectSpecError:
+        return False
+    return any(LAG_SUFFIX_RE.search(s.partition(":")[2]) for s in signals if s.startswith(("col:", "run:")))
+
+
+def block_checked(trials: list, rules, refit_on_blocks) -> list:
+    """The round's refit trials with each one that reads a lag (:func:`session_curve`) and is accepted over run
+    folds checked over the session's blocks: when its refit there fails :func:`accepts`, that trial replaces it
+    (so it is refused and recorded as refused on the blocks); otherwise it stays as it was.
+
+    ``rules(t)``: the keywords of :func:`accepts` for a trial; ``refit_on_blocks(indices)``: the trials
+    (:class:`RefitCV`) of those shortlist entries refitted on the session's blocks, against the current model on
+    the same blocks. A lag's form can follow a slow drift of the session between a held-out run's fitted
+    neighbours, which shuffled run folds reward and a held-out stretch of the session does not."""
+    which = [i for i, t in enumerate(trials)
+             if t is not None and session_curve(t.candidate) and accepts(t, **rules(t))]
+    out = list(trials)
+    for i, t in zip(which, refit_on_blocks(which) if which else []):
+        if t is not None and not accepts(t, **rules(t)):
+            out[i] = t
+    return out
 
 
 @dataclass(frozen=True)

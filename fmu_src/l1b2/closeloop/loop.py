@@ -92,8 +92,8 @@ from .sensor import GainChain
 from . import encoder, sensorchain, stamps
 from .sensorchain import SensorChain
 from .acceptance import (Directions, EffectSet, RefitCV, RefitSettings, Validated, accepts, added_columns,
-                         chain_cv_errors, collinear, cv_errors, fold_start_phi, immaterial, input_reading, materiality,
-                         named_reading, refit, tied, time_dependent, validated)
+                         block_checked, chain_cv_errors, collinear, cv_errors, fold_start_phi, immaterial,
+                         input_reading, materiality, named_reading, refit, tied, time_dependent, validated)
 from .stagefit import physics_behind, stage_cv_errors, stage_verdict
 from .folds import refit_schemes, screen_folds, stratified_folds
 from .baselines import choose_baseline, identify_families, retag_structural
@@ -289,10 +289,9 @@ class CloseLoop(EstimatorSettings):
         Extends ``it`` in place; ``report(model)`` gives a round's metrics (on the measured speed); ``say`` is
         the job's :class:`~l1b2.closeloop.stages.StageClock` (refits and evaluations are counted on it).
         ``other``: None, or the pure-slip baseline's fit (a callable) from which every named pick is confirmed
-        (:mod:`l1b2.closeloop.crosscheck`; the checks go to ``it.checks``).
-        Candidates that depend on the session clock are scored and cross-validated on the session's folds
-        (``clock_folds``), the others on the stratified run folds; the current model is cross-validated on the
-        same folds as each. ``folds``: ``stratified_folds(dtr, refit_folds, seed)`` when the caller has it.
+        (:mod:`l1b2.closeloop.crosscheck`; the checks go to ``it.checks``). Candidates that depend on the session
+        clock are scored and cross-validated on the session's folds (``clock_folds``), the others on the run folds;
+        the current model on the same folds as each. ``folds``: ``stratified_folds(dtr, refit_folds, seed)`` if given.
         """
         schemes = refit_schemes(dtr, self.refit_folds, self.refit_repeats, self.seed, self.clock_folds, self.fold_unit,
                                 folds if self.fold_unit == "run" else None)
@@ -404,11 +403,13 @@ class CloseLoop(EstimatorSettings):
 
     def _trials(self, it, short, cur, cur_err: dict, schemes: dict, frame: tuple, say, n_rnd) -> list[RefitCV]:
         """The round's refit trials (:class:`RefitCV`, in the order of ``short``) on ``schemes``; when one over the
-        run folds is :func:`tied`, those over the run folds again on ``tie_repeats`` splits (settings)."""
-        def trials(sch: dict, err: dict) -> list:
-            errs = self._cross_validate(it, short, cur, err, sch, *frame, say, n_rnd)
-            return [None if e is None else RefitCV(s.candidate, err[time_dependent(s.candidate)], e, s.cv_gain, s.phi)
-                    for s, e in zip(short, errs)]
+        run folds is :func:`tied`, those over the run folds again on ``tie_repeats`` splits (settings); an accepted
+        one of a lag's form checked on the session's blocks too (:func:`block_checked`)."""
+        def trials(sch: dict, err: dict, sub=None, key=time_dependent) -> list:
+            sub = short if sub is None else [short[i] for i in sub]
+            errs = self._cross_validate(it, sub, cur, err, sch, *frame, say, n_rnd, key)
+            return [None if e is None else RefitCV(s.candidate, err[key(s.candidate)], e, s.cv_gain, s.phi)
+                    for s, e in zip(sub, errs)]
         out = trials(schemes, cur_err)
         if self.tie_repeats > self.refit_repeats and any(not time_dependent(t.candidate) and tied(t, **self._rules(t))
                                                          for t in out):
@@ -416,16 +417,16 @@ class CloseLoop(EstimatorSettings):
             more = refit_schemes(frame[1], self.refit_folds, self.tie_repeats, self.seed, self.clock_folds,
                                  self.fold_unit)
             out = [t2 or t for t, t2 in zip(out, trials({False: more[False]}, {}))]
-        return out
+        return block_checked(out, self._rules, lambda w: trials({True: schemes[True]}, cur_err, w, lambda c: True))
 
     def _cross_validate(self, it, short, cur, cur_err: dict, schemes: dict, r, dtr, mask, m_s, v_cur, say,
-                        n_rnd) -> list:
+                        n_rnd, key=time_dependent) -> list:
         """The shortlist's cross-validated refits (:class:`FoldErrors` per candidate, in order), each on its folds
-        (``schemes[time_dependent(c)]``); the current model's errors on a scheme's folds are computed once per
-        round into ``cur_err``."""
+        (``schemes[key(c)]``, by default whether it depends on the session clock); the current model's errors on a
+        scheme's folds are computed once per round into ``cur_err``."""
         errs: list = [None] * len(short)
         for blocked, folds in schemes.items():
-            which = [i for i, s in enumerate(short) if time_dependent(s.candidate) == blocked]
+            which = [i for i, s in enumerate(short) if key(s.candidate) == blocked]
             if not which:
                 continue
             jobs = [] if blocked in cur_err else [(it.effects, None)]
@@ -594,8 +595,7 @@ class CloseLoop(EstimatorSettings):
             "immaterial_evidence": [t.to_dict() for t in below],
             "residual_trace": a.traced,
             "candidates": [s.to_dict() for s in best_per_family(scores)],
-            "n_candidates_scored": len(scores),
-            "significance_level": it.level,
+            "n_candidates_scored": len(scores), "significance_level": it.level,
             "refit_trials": [[t.to_dict() for t in rnd] for rnd in it.trials],
             "baseline_choice": getattr(self, "baseline_choice_", {}),
             "rules": self.settings.rules(),
