@@ -7,9 +7,10 @@ A real rig logs what its engineers chose, many channels that act on nothing. Eac
 and its lags as for any such channel. It acts on nothing. The case's own files (TRAIN, TEST, truth) are otherwise
 unchanged: the row answers whether the case's cause is still traced when the rig logs more.
 
-Usage: python bench/crowded_rig.py AUDIT KIND SEED N [--cache DIR] [--out DIR]   (AUDIT: a ``bench`` module with an
-``experiment(kind, seed)``, e.g. ``blind_effects_twentieth``). Prints the row of ``bench/blind_effects.py`` (its
-``loop_row``, with ``traced_all`` and ``bystanders_traced``: the bystanders among every traced regressor).
+Usage: python bench/crowded_rig.py AUDIT KIND SEED N [--cache DIR] [--out DIR] [--report FILE]   (AUDIT: a
+``bench`` module with an ``experiment(kind, seed)``, e.g. ``blind_effects_twentieth``). Prints the row of
+``bench/blind_effects.py`` (its ``loop_row``, with ``traced_all`` and ``bystanders_traced``: the bystanders among
+every traced regressor); ``--report``: the loop's whole result, as the audits' ``--report`` writes it.
 """
 import argparse
 import importlib
@@ -53,6 +54,7 @@ def main(argv=None):
     ap.add_argument("n", type=int)
     ap.add_argument("--cache", default=be.default_cache())
     ap.add_argument("--out", default="")
+    ap.add_argument("--report", default="", help="write the close loop's whole result (report.json's content) here")
     args = ap.parse_args(argv)
     audit = importlib.import_module(args.audit)
     src, dst = be.probe_copy(args, audit.experiment)
@@ -60,10 +62,12 @@ def main(argv=None):
     n_runs = int(max(df["run"].max() for df in parts.values()))
     for p, df in parts.items():
         crowded(df, args.seed, args.n, n_runs).to_csv(dst / f"{p}.csv", index=False)
-    row, _ = be.loop_row(f"{args.kind}(+{args.n})", args.seed, dst,
+    row, res = be.loop_row(f"{args.kind}(+{args.n})", args.seed, dst,
                          traced_all=lambda names, diag: list(diag["traced_to"]),
                          bystanders_traced=lambda names, diag: [t for t in diag["traced_to"] if PREFIX in str(t)])
     print(json.dumps(row))
+    if args.report:
+        Path(args.report).write_text(json.dumps(res.to_dict(), default=str))
 
 
 if __name__ == "__main__":
