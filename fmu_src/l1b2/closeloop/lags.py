@@ -12,9 +12,10 @@ it. For each *run setting* the loop therefore derives the logged columns ``<colu
 solved exactly sample to sample (``y_i = c_(i-1) + (y_(i-1) - c_(i-1)) exp(-(t_i - t_(i-1)) / tau)``), and considers
 each as one more logged channel (every form, shape and level of :mod:`l1b2.predictor.effects.channels` and the
 run-level evidence). A lag is a smooth curve of the session, so a form of it accepted over run folds must pass over
-contiguous blocks of the session too (:func:`l1b2.closeloop.acceptance.block_checked`). The derivation reads only the logged channel and the clock, never a response; TRAIN and TEST
-are merged in time order when they are one session (:func:`l1b2.closeloop.events.one_session`), so TEST's first run
-carries the store TRAIN's runs filled; otherwise each frame from its own runs.
+contiguous blocks of the session too (:func:`l1b2.closeloop.acceptance.block_checked`). The derivation reads only
+the logged channel and the clock, never a response; TRAIN and TEST are merged in time order when they are one session
+(:func:`l1b2.closeloop.events.one_session`), so TEST's first run carries the store TRAIN's runs filled; otherwise
+each frame from its own runs.
 
 A column is a run setting (:func:`run_settings`) when it is a logged candidate channel, constant within every run and
 changes between consecutive runs more often than a step channel may (more than once per
