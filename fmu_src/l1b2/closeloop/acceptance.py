@@ -227,11 +227,16 @@ def time_dependent(candidate: CandidateForce) -> bool:
             if fx.family(candidate.spec.get("kind")).run_folds:
                 return False
             signals = fx.needs(candidate.spec)
-            return bool(signals & SESSION_SIGNALS) or any(
-                s.partition(":")[2].endswith(EVENT_SUFFIX) for s in signals if s.startswith(("col:", "run:")))
+            return bool(signals & SESSION_SIGNALS) or any(c.endswith(EVENT_SUFFIX) for c in columns_read(signals))
         except fx.EffectSpecError:
             pass
     return "time" in candidate.regressors
+
+
+def columns_read(signals) -> list:
+    """The logged columns among a spec's signals (:func:`l1b2.predictor.effects.needs`): ``X`` of every ``col:X``
+    (along the stroke) and ``run:X`` (its run value)."""
+    return [s.partition(":")[2] for s in signals if s.startswith(("col:", "run:"))]
 
 
 def session_curve(candidate: CandidateForce) -> bool:
@@ -241,10 +246,9 @@ def session_curve(candidate: CandidateForce) -> bool:
     if not candidate.spec or time_dependent(candidate):
         return False
     try:
-        signals = fx.needs(candidate.spec)
+        return any(LAG_SUFFIX_RE.search(c) for c in columns_read(fx.needs(candidate.spec)))
     except fx.EffectSpecError:
         return False
-    return any(LAG_SUFFIX_RE.search(s.partition(":")[2]) for s in signals if s.startswith(("col:", "run:")))
 
 
 def block_checked(trials: list, rules, refit_on_blocks) -> list:
