@@ -251,6 +251,18 @@ def loop_row(kind: str, seed: int, d: Path, **extra) -> tuple[dict, object]:
     return row, res
 
 
+def report_option(ap: argparse.ArgumentParser) -> None:
+    """The ``--report FILE`` option of the loop's command lines (:func:`write_report`)."""
+    ap.add_argument("--report", default="", help="write the close loop's whole result (report.json's content) here")
+
+
+def write_report(path: str, res) -> None:
+    """The close loop's whole result ``res`` (report.json's content) as JSON at ``path``; nothing when ``path`` is
+    empty."""
+    if path:
+        Path(path).write_text(json.dumps(res.to_dict(), default=str))
+
+
 def run_cli(argv, doc: str, kinds, make, row_extra):
     """The audits' command line: ``KIND SEED [--cache DIR] [--data-only] [--report FILE]``; ``make(kind, seed)``
     makes an experiment, ``row_extra(kind)`` gives the printed row's extra fields (see :func:`loop_row`)."""
@@ -259,7 +271,7 @@ def run_cli(argv, doc: str, kinds, make, row_extra):
     ap.add_argument("seed", type=int)
     ap.add_argument("--cache", default=default_cache())
     ap.add_argument("--data-only", action="store_true", help="make (or find) the data and stop")
-    ap.add_argument("--report", default="", help="write the close loop's whole result (report.json's content) here")
+    report_option(ap)
     args = ap.parse_args(argv)
     d = data_dir(args.kind, args.seed, Path(args.cache), None if args.kind == "clean" else make)
     if args.data_only:
@@ -267,8 +279,7 @@ def run_cli(argv, doc: str, kinds, make, row_extra):
         return
     row, res = loop_row(args.kind, args.seed, d, **row_extra(args.kind))
     print(json.dumps(row))
-    if args.report:
-        Path(args.report).write_text(json.dumps(res.to_dict(), default=str))
+    write_report(args.report, res)
 
 
 def probe_args(argv, doc: str, kinds, modes) -> argparse.Namespace:

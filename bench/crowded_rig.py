@@ -54,7 +54,7 @@ def main(argv=None):
     ap.add_argument("n", type=int)
     ap.add_argument("--cache", default=be.default_cache())
     ap.add_argument("--out", default="")
-    ap.add_argument("--report", default="", help="write the close loop's whole result (report.json's content) here")
+    be.report_option(ap)
     args = ap.parse_args(argv)
     audit = importlib.import_module(args.audit)
     src, dst = be.probe_copy(args, audit.experiment)
@@ -66,8 +66,7 @@ def main(argv=None):
                          traced_all=lambda names, diag: list(diag["traced_to"]),
                          bystanders_traced=lambda names, diag: [t for t in diag["traced_to"] if PREFIX in str(t)])
     print(json.dumps(row))
-    if args.report:
-        Path(args.report).write_text(json.dumps(res.to_dict(), default=str))
+    be.write_report(args.report, res)
 
 
 if __name__ == "__main__":
