@@ -458,10 +458,7 @@ class CloseLoop(EstimatorSettings):
         filter is the channel's own test, this guards against harm), over the
         refit folds with both models refitted per fold
         (:func:`~l1b2.closeloop.acceptance.chain_cv_errors`), as every effect is
-        decided. (Until the ninth session TRAIN's in-sample sum of squares
-        decided. On the realistic world's speed_lowpass 8 both refuse the filter:
-        TRAIN -1.4 %, CV nrmse 4.19 % against the baseline's 4.15 %.) TRAIN's
-        gain is still reported. The rounds then extend that model on the
+        decided. TRAIN's gain is still reported. The rounds then extend that model on the
         derivative data. Otherwise TRAIN is returned unchanged.
         """
         ch = chain.speed_channel(dtr, mask, k=self.k_folds, seed=self.seed)
