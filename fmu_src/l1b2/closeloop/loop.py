@@ -106,9 +106,9 @@ from .evidence import (channels_considered, order_traced, with_auxiliary, with_o
 from .guard import checked_fit, checked_identification
 from .intervals import added_parameters, identification, train_levels
 from .result import CloseLoopResult, ResidualAnalysis
-from .selection import (Score, best_per_family, counted_params, design, named_alternatives, nuisance_forces,
-                        score_candidates, screen_mask, screened, shape_alternatives, significance_level,
-                        simplest_within_one_se)
+from .selection import (Score, best_per_family, carried, counted_params, design, named_alternatives,
+                        nuisance_forces, score_candidates, screen_mask, screened, shape_alternatives,
+                        significance_level, simplest_within_one_se, to_carry)
 
 
 def _quiet(msg: str) -> None:
@@ -302,7 +302,7 @@ class CloseLoop(EstimatorSettings):
         cur_err: dict = {}
         def analyse(mdl):   # the run-level analysis against a model; rl_of: the model of the latest one
             return runlevel.analyse(dtr, mdl, mask, it.channels, alpha=self.alpha, k=self.k_folds, seed=self.seed)
-        rl_of, sm = None, screen_mask(dtr, mask)   # sm: the screen's (thinned) rows, the same every round
+        rl_of, sm, carry = None, screen_mask(dtr, mask), []   # sm: the screen's (thinned) rows, every round
         for rnd in range(1, self.max_rounds + 1):
             n_rnd, cur = len(it.rounds), it.model
             say(f"round {n_rnd}: the current model's residual; screening the candidates against the added effects")
@@ -318,16 +318,18 @@ class CloseLoop(EstimatorSettings):
             level = significance_level(scores, self.alpha)
             short, screen = screened(scores, level=level, min_gain=self.min_gain, size=self.shortlist,
                                      fallback_level=self.screen_alpha)
-            rl = None
+            rl, offered = None, []
+            def allowed(c):   # not added, not collinear with what is, no named/generic conflict
+                return (c.family not in it.effects.families and not collinear(c, it.effects, dtr, sm, added=added)
+                        and not geo.conflicts(c, it.effects))
             if self.run_level and ctx is not None:
                 say(f"round {n_rnd}: run-level deviations and the signals that explain them")
                 rl, rl_of = analyse(cur), cur
                 it.run_levels.append(rl.round_record(rnd))
-                offered = runlevel.offer(runlevel.candidates(rl, ctx), short, lambda c: (
-                    c.family not in it.effects.families and not collinear(c, it.effects, dtr, sm, added=added)
-                    and not geo.conflicts(c, it.effects)))
-                short = short + score_candidates(offered, r, dtr, mask, cur.params_, m_s, v_pred=v_cur,
-                                                 folds=screen_runs, time_folds=screen_blocks)
+                offered = runlevel.offer(runlevel.candidates(rl, ctx), short, allowed)
+            offered += carried(carry, {s.candidate.family for s in short} | {c.family for c in offered}, allowed)
+            short = short + score_candidates(offered, r, dtr, mask, cur.params_, m_s, v_pred=v_cur,
+                                             folds=screen_runs, time_folds=screen_blocks)
             short = short + named_alternatives(short, scores, lambda n, g: geo.share(n, g.candidate, g.phi),
                                                min_gain=self.min_gain)
             short = short + shape_alternatives(short, scores, level=screen, min_gain=self.min_gain)
@@ -351,7 +353,8 @@ class CloseLoop(EstimatorSettings):
             if rnd == 1:
                 it.chosen = score_of(pick, short)
                 it.significant = [s for s in short if any(t.candidate is s.candidate for t in ok)]
-            effects = it.effects.add(pick.candidate, pick.phi)
+            effects, carry = it.effects.add(pick.candidate, pick.phi), to_carry(trials, pick, lambda t: accepts(
+                t, **self._rules(t)))
             if self._refused_range(it, effects.with_phi(model.phi_), model, dtr, mask, n_rnd, pick, say):
                 break
             it.model, it.effects = model, effects.with_phi(model.phi_)

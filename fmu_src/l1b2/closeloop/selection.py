@@ -526,6 +526,28 @@ def simplest_within_one_se(accepted: list) -> list:
     return [t for t in accepted if id(t) in kept]
 
 
+def to_carry(trials: list, pick, accepted) -> list:
+    """What a round accepted and did not add that points elsewhere: the candidates of ``trials``
+    (:class:`~l1b2.closeloop.acceptance.RefitCV`, None for a missing one) that ``accepted(trial)``, not of
+    ``pick``'s family and sharing no regressor with ``pick``, best held-out gain first.
+
+    The next round offers the first of them that is still allowed (:func:`carried`): a cause whose evidence
+    passed this round's screen or run-level level and the cross-validated refit is refit again against the model
+    with ``pick`` added, rather than lost when the next round's level (corrected for every channel the rig logs)
+    no longer reaches it."""
+    regs = set(pick.candidate.regressors)
+    ok = [t for t in trials if t is not None and t.candidate.family != pick.candidate.family
+          and not regs & set(t.candidate.regressors) and accepted(t)]
+    return [t.candidate for t in sorted(ok, key=lambda t: -t.gain)]
+
+
+def carried(carry: list, taken: set, allowed) -> list:
+    """The one candidate of the previous round's :func:`to_carry` list offered again (none when the list is empty):
+    the first whose family is not in ``taken`` (the families this round refits already) and that
+    ``allowed(candidate)`` (not added, not collinear with what is, no named/generic conflict)."""
+    return [c for c in carry if c.family not in taken and allowed(c)][:1]
+
+
 def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5, seed=0,
                      time_folds=None, folds=None) -> list[Score]:
     """Cross-validated gain, run-level p-value (times :func:`search_count`) and AIC/BIC change of every candidate.

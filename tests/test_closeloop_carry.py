@@ -1,0 +1,50 @@
+"""What a round accepted and did not add, pointing elsewhere, is offered again in the next round
+(``selection.to_carry``, ``selection.carried``)."""
+
+import numpy as np
+from l1b2.closeloop import acceptance as acc
+from l1b2.closeloop.candidates import CandidateForce
+from l1b2.closeloop.selection import carried, to_carry
+
+SS = np.full(4, 1.0)
+CUR = acc.FoldErrors(np.array([0.04, 0.07, 0.10, 0.10]), SS)
+
+
+def _cand(family, *regressors):
+    return CandidateForce(family, regressors[0], "", ("a",), ("N",), None, also=tuple(regressors[1:]))
+
+
+def _trial(cand, ext):
+    return acc.RefitCV(cand, CUR, acc.FoldErrors(np.asarray(ext, float), SS))
+
+
+def _gain(t):
+    # written out: 1 - sum(SSE_refit) / sum(SSE_current) over the folds
+    return 1.0 - float(np.sum(t.extended.sse)) / float(np.sum(CUR.sse))
+
+
+def test_to_carry_keeps_the_accepted_trials_that_share_no_regressor_with_the_pick_best_first():
+    voltage = _trial(_cand("run_level_voltage_V", "voltage"), [0.02, 0.03, 0.05, 0.05])
+    load_voltage = _trial(_cand("smooth_load_x_voltage", "load", "voltage"), [0.01, 0.02, 0.04, 0.04])
+    dither = _trial(_cand("run_level_rail_dither_um", "rail_dither_um"), [0.03, 0.05, 0.07, 0.08])
+    temp = _trial(_cand("channel_temp_C", "temp_C"), [0.02, 0.04, 0.06, 0.07])
+    refused = _trial(_cand("channel_aux", "aux"), [0.05, 0.08, 0.11, 0.12])
+    trials = [load_voltage, voltage, dither, None, refused, temp]
+    assert {t.candidate.regressors for t in trials if t is not None} >= {("voltage",), ("load", "voltage")}
+    out = to_carry(trials, voltage, lambda t: t is not refused)
+    # load_voltage shares "voltage" with the pick; refused is not accepted; the rest by decreasing gain
+    assert [c.family for c in out] == ["channel_temp_C", "run_level_rail_dither_um"]
+    assert _gain(temp) > _gain(dither) > 0
+    # the pick's own family is never carried, even with other regressors
+    other_form = _trial(_cand("run_level_voltage_V", "load"), [0.01, 0.02, 0.03, 0.03])
+    assert to_carry([other_form, dither], voltage, lambda t: True) == [dither.candidate]
+    assert to_carry([voltage], voltage, lambda t: True) == []
+
+
+def test_carried_offers_the_first_allowed_candidate_not_refit_already():
+    a, b, c = _cand("fam_a", "x"), _cand("fam_b", "y"), _cand("fam_c", "z")
+    assert carried([a, b, c], set(), lambda k: True) == [a]
+    assert carried([a, b, c], {"fam_a"}, lambda k: True) == [b]               # already shortlisted
+    assert carried([a, b, c], set(), lambda k: k is not a and k is not b) == [c]   # collinear / added
+    assert carried([a, b], {"fam_b"}, lambda k: k is not a) == []
+    assert carried([], set(), lambda k: True) == []
