@@ -4,7 +4,7 @@
 import numpy as np
 from l1b2.closeloop import acceptance as acc
 from l1b2.closeloop.candidates import CandidateForce
-from l1b2.closeloop.selection import carried, to_carry
+from l1b2.closeloop.selection import Score, carried, to_carry
 
 SS = np.full(4, 1.0)
 CUR = acc.FoldErrors(np.array([0.04, 0.07, 0.10, 0.10]), SS)
@@ -41,10 +41,31 @@ def test_to_carry_keeps_the_accepted_trials_that_share_no_regressor_with_the_pic
     assert to_carry([voltage], voltage, lambda t: True) == []
 
 
-def test_carried_offers_the_first_allowed_candidate_not_refit_already():
+def _scores(evidence):
+    """A stand-in for the linearised screen: each candidate's ``(gain, p, delta_aic)`` from ``evidence`` by family,
+    recording which candidates it was asked to score."""
+    asked = []
+
+    def score(cands):
+        asked.append([c.family for c in cands])
+        return [Score(c, *evidence[c.family][:2], 30.0, -1.0, np.zeros(1), evidence[c.family][2]) for c in cands]
+    return score, asked
+
+
+def test_carried_refits_the_first_allowed_candidate_not_refit_already_that_the_screen_still_shows():
     a, b, c = _cand("fam_a", "x"), _cand("fam_b", "y"), _cand("fam_c", "z")
-    assert carried([a, b, c], set(), lambda k: True) == [a]
-    assert carried([a, b, c], {"fam_a"}, lambda k: True) == [b]               # already shortlisted
-    assert carried([a, b, c], set(), lambda k: k is not a and k is not b) == [c]   # collinear / added
-    assert carried([a, b], {"fam_b"}, lambda k: k is not a) == []
-    assert carried([], set(), lambda k: True) == []
+    strong = {"fam_a": (0.2, 1e-4, -50.0), "fam_b": (0.3, 1e-3, -80.0), "fam_c": (0.1, 5e-3, -20.0)}
+    score, asked = _scores(strong)
+    assert [s.candidate for s in carried([a, b, c], [], lambda k: True, score, level=0.01, min_gain=0.05)] == [a]
+    assert asked == [["fam_a", "fam_b", "fam_c"]]
+    taken = [Score(a, 0.5, 1e-9, 50.0, -1.0, np.zeros(1), -9.0)]                  # fam_a already refit this round
+    assert [s.candidate for s in carried([a, b, c], taken, lambda k: True, score, level=0.01, min_gain=0.05)] == [b]
+    assert [s.candidate for s in carried([a, b, c], [], lambda k: k is c, score, level=0.01, min_gain=0.05)] == [c]
+    # what the added effect explained is not offered: the screen's gain, p-value and AIC each decide
+    for weak in ((0.04, 1e-4, -50.0), (0.2, 0.01, -50.0), (0.2, 1e-4, 0.0)):
+        score, _ = _scores({**strong, "fam_a": weak})
+        got = carried([a, b], [], lambda k: True, score, level=0.01, min_gain=0.05)
+        assert [s.candidate for s in got] == [b], weak
+    score, asked = _scores(strong)
+    assert carried([], [], lambda k: True, score, level=0.01, min_gain=0.05) == [] and asked == []
+    assert carried([a], [], lambda k: False, score, level=0.01, min_gain=0.05) == [] and asked == []

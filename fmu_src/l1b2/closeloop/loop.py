@@ -322,14 +322,17 @@ class CloseLoop(EstimatorSettings):
             def allowed(c):   # not added, not collinear with what is, no named/generic conflict
                 return (c.family not in it.effects.families and not collinear(c, it.effects, dtr, sm, added=added)
                         and not geo.conflicts(c, it.effects))
+            def score(cands):   # further candidates' linearised scores against the current model
+                return score_candidates(cands, r, dtr, mask, cur.params_, m_s, v_pred=v_cur, folds=screen_runs,
+                                        time_folds=screen_blocks)
             if self.run_level and ctx is not None:
                 say(f"round {n_rnd}: run-level deviations and the signals that explain them")
                 rl, rl_of = analyse(cur), cur
                 it.run_levels.append(rl.round_record(rnd))
                 offered = runlevel.offer(runlevel.candidates(rl, ctx), short, allowed)
-            offered += carried(carry, {s.candidate.family for s in short} | {c.family for c in offered}, allowed)
-            short = short + score_candidates(offered, r, dtr, mask, cur.params_, m_s, v_pred=v_cur,
-                                             folds=screen_runs, time_folds=screen_blocks)
+            short = short + score(offered)
+            short = short + carried(carry, short, allowed, score, level=self.screen_alpha or level,
+                                    min_gain=self.min_gain)
             short = short + named_alternatives(short, scores, lambda n, g: geo.share(n, g.candidate, g.phi),
                                                min_gain=self.min_gain)
             short = short + shape_alternatives(short, scores, level=screen, min_gain=self.min_gain)
@@ -743,9 +746,7 @@ def close_loop(train: dataio.Measurements, test: dataio.Measurements | None = No
     return CloseLoop(**settings).fit(train, test).result_
 
 
-# ---------------------------------------------------------------------------
-# stages
-# ---------------------------------------------------------------------------
+# -- stages -----------------------------------------------------------------
 
 def analyse_residuals(df: pd.DataFrame, v_pred: np.ndarray, mask: np.ndarray, *, alpha: float, k: int,
                       seed: int) -> ResidualAnalysis:
