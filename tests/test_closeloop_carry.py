@@ -3,8 +3,10 @@
 
 import numpy as np
 from l1b2.closeloop import acceptance as acc
+from l1b2.closeloop import runlevel as rl
 from l1b2.closeloop.candidates import CandidateForce
 from l1b2.closeloop.selection import Score, carried, to_carry
+from l1b2.predictor import effects as fx
 
 SS = np.full(4, 1.0)
 CUR = acc.FoldErrors(np.array([0.04, 0.07, 0.10, 0.10]), SS)
@@ -41,6 +43,10 @@ def test_to_carry_keeps_the_accepted_trials_that_share_no_regressor_with_the_pic
     assert to_carry([voltage], voltage, lambda t: True) == []
 
 
+def NO_RUN_P(c):
+    return None
+
+
 def _scores(evidence):
     """A stand-in for the linearised screen: each candidate's ``(gain, p, delta_aic)`` from ``evidence`` by family,
     recording which candidates it was asked to score."""
@@ -56,16 +62,44 @@ def test_carried_refits_the_first_allowed_candidate_not_refit_already_that_the_s
     a, b, c = _cand("fam_a", "x"), _cand("fam_b", "y"), _cand("fam_c", "z")
     strong = {"fam_a": (0.2, 1e-4, -50.0), "fam_b": (0.3, 1e-3, -80.0), "fam_c": (0.1, 5e-3, -20.0)}
     score, asked = _scores(strong)
-    assert [s.candidate for s in carried([a, b, c], [], lambda k: True, score, level=0.01, min_gain=0.05)] == [a]
+    assert [s.candidate for s in carried([a, b, c], [], lambda k: True, score, NO_RUN_P, level=0.01, min_gain=0.05)] == [a]
     assert asked == [["fam_a", "fam_b", "fam_c"]]
     taken = [Score(a, 0.5, 1e-9, 50.0, -1.0, np.zeros(1), -9.0)]                  # fam_a already refit this round
-    assert [s.candidate for s in carried([a, b, c], taken, lambda k: True, score, level=0.01, min_gain=0.05)] == [b]
-    assert [s.candidate for s in carried([a, b, c], [], lambda k: k is c, score, level=0.01, min_gain=0.05)] == [c]
+    assert [s.candidate for s in carried([a, b, c], taken, lambda k: True, score, NO_RUN_P, level=0.01, min_gain=0.05)] == [b]
+    assert [s.candidate for s in carried([a, b, c], [], lambda k: k is c, score, NO_RUN_P, level=0.01, min_gain=0.05)] == [c]
     # what the added effect explained is not offered: the screen's gain, p-value and AIC each decide
     for weak in ((0.04, 1e-4, -50.0), (0.2, 0.01, -50.0), (0.2, 1e-4, 0.0)):
         score, _ = _scores({**strong, "fam_a": weak})
-        got = carried([a, b], [], lambda k: True, score, level=0.01, min_gain=0.05)
+        got = carried([a, b], [], lambda k: True, score, NO_RUN_P, level=0.01, min_gain=0.05)
         assert [s.candidate for s in got] == [b], weak
     score, asked = _scores(strong)
-    assert carried([], [], lambda k: True, score, level=0.01, min_gain=0.05) == [] and asked == []
-    assert carried([a], [], lambda k: False, score, level=0.01, min_gain=0.05) == [] and asked == []
+    assert carried([], [], lambda k: True, score, NO_RUN_P, level=0.01, min_gain=0.05) == [] and asked == []
+    assert carried([a], [], lambda k: False, score, NO_RUN_P, level=0.01, min_gain=0.05) == [] and asked == []
+
+
+def test_a_run_level_candidate_is_carried_by_its_signals_run_level_p_not_by_the_screen():
+    a, b = _cand("run_level_aux", "aux"), _cand("fam_b", "y")
+    weak_screen = {"run_level_aux": (0.26, 0.25, -2600.0), "fam_b": (0.3, 1e-3, -80.0)}
+    score, _ = _scores(weak_screen)
+    for p, first in ((0.00076, a), (0.0099, a), (0.01, b), (0.041, b)):
+        got = carried([a, b], [], lambda k: True, score, lambda c: p if c is a else None, level=0.01, min_gain=0.05)
+        assert [s.candidate for s in got] == [first], p
+
+
+def _analysis(entries):
+    ev = [rl.SignalEvidence(channel=ch, transform=tr, label=ch, regressor=ch, mean=0.0, sd=1.0, p_value=pv)
+          for ch, tr, pv in entries]
+    return rl.RunLevelAnalysis(None, None, float("nan"), 1.0, ev, 0.001)
+
+
+def test_signal_p_reads_the_candidates_own_signal_and_transform():
+    fam = fx.family("run_level")
+    (h_none,), (h_abs,) = (fam.hypotheses([{"channel": "aux", "transform": t, "mean": 0.0, "sd": 1.0}])
+                           for t in ("none", "abs"))
+    c_none, c_abs = (CandidateForce(h.family, h.regressor, h.shape, h.names, h.units, None, spec=h.spec)
+                     for h in (h_none, h_abs))
+    ana = _analysis([("aux", "none", 0.004), ("aux", "abs", 0.3), ("other", "none", 1e-9)])
+    assert rl.signal_p(ana, c_none) == 0.004 and rl.signal_p(ana, c_abs) == 0.3
+    assert rl.signal_p(_analysis([("other", "none", 1e-9)]), c_none) == 1.0     # not tested in this round
+    assert rl.signal_p(None, c_none) is None                                     # no run-level analysis
+    assert rl.signal_p(ana, _cand("fam_b", "y")) is None                         # not a run-level form

@@ -58,10 +58,9 @@ Procedure (TEST is never used for fitting or choosing):
 
    The rounds stop when no shortlisted candidate is accepted. Otherwise
    "no significant missing effect" and the baseline is kept.
-5. Both the baseline and the final model are reported on TEST, with the
-   metrics after every round. ``diagnosis.traced_to`` lists the regressors of
-   the added effects strongest first, the terms that only relax Eq. 29's own
-   linearisation after the missing effects (:func:`l1b2.closeloop.evidence.order_traced`).
+5. Both the baseline and the final model are reported on TEST, with the metrics after every round.
+   ``diagnosis.traced_to`` lists the regressors of the added effects strongest first, the terms that only relax
+   Eq. 29's own linearisation after the missing effects (:func:`l1b2.closeloop.evidence.order_traced`).
 """
 
 from __future__ import annotations
@@ -331,8 +330,8 @@ class CloseLoop(EstimatorSettings):
                 it.run_levels.append(rl.round_record(rnd))
                 offered = runlevel.offer(runlevel.candidates(rl, ctx), short, allowed)
             short = short + score(offered)
-            short = short + carried(carry, short, allowed, score, level=self.screen_alpha or level,
-                                    min_gain=self.min_gain)
+            short = short + carried(carry, short, allowed, score, lambda c: runlevel.signal_p(rl, c),
+                                    level=self.screen_alpha or level, min_gain=self.min_gain)
             short = short + named_alternatives(short, scores, lambda n, g: geo.share(n, g.candidate, g.phi),
                                                min_gain=self.min_gain)
             short = short + shape_alternatives(short, scores, level=screen, min_gain=self.min_gain)

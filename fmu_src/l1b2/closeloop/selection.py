@@ -541,16 +541,22 @@ def to_carry(trials: list, pick, accepted) -> list:
     return [t.candidate for t in sorted(ok, key=lambda t: -t.gain)]
 
 
-def carried(carry: list, short: list, allowed, score, *, level: float, min_gain: float) -> list:
+def carried(carry: list, short: list, allowed, score, run_p, *, level: float, min_gain: float) -> list:
     """The one candidate of the previous round's :func:`to_carry` list that this round refits again, as a
     :class:`Score` (none when no candidate qualifies): the first, in ``carry``'s order, whose family is not in
     ``short`` (this round's scores so far), that ``allowed(candidate)`` (not added, not collinear with what is, no
-    named/generic conflict) and whose linearised score against the current model (``score(candidates)``, e.g.
-    :func:`score_candidates`) is still :func:`significant` at ``level`` with ``min_gain``: what the added effect
-    explained is not offered again."""
+    named/generic conflict) and whose evidence against the current model still holds at the uncorrected
+    ``level``: the kind of evidence that offered it. ``run_p(candidate)``: the run-level analysis's p-value of a
+    run-level candidate's signal (None for any other candidate), below ``level``; otherwise its linearised score
+    (``score(candidates)``, e.g. :func:`score_candidates`) :func:`significant` at ``level`` with ``min_gain``.
+    What the added effect explained is not offered again."""
     fams = {s.candidate.family for s in short}
     cands = [c for c in carry if c.family not in fams and allowed(c)]
-    return significant(score(cands), level=level, min_gain=min_gain)[:1] if cands else []
+
+    def shown(s) -> bool:
+        p = run_p(s.candidate)
+        return bool(significant([s], level=level, min_gain=min_gain)) if p is None else p < level
+    return [s for s in score(cands) if shown(s)][:1] if cands else []
 
 
 def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5, seed=0,
