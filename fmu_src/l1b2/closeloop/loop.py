@@ -330,8 +330,8 @@ class CloseLoop(EstimatorSettings):
                 it.run_levels.append(rl.round_record(rnd))
                 offered = runlevel.offer(runlevel.candidates(rl, ctx), short, allowed)
             short = short + score(offered)
-            short = short + carried(carry, short, allowed, score, lambda c: runlevel.signal_p(rl, c),
-                                    level=self.screen_alpha or level, min_gain=self.min_gain)
+            short = short or carried(carry, short, allowed, score, lambda c: runlevel.signal_p(rl, c),
+                                     level=self.screen_alpha or level, min_gain=self.min_gain)   # nothing else
             short = short + named_alternatives(short, scores, lambda n, g: geo.share(n, g.candidate, g.phi),
                                                min_gain=self.min_gain)
             short = short + shape_alternatives(short, scores, level=screen, min_gain=self.min_gain)

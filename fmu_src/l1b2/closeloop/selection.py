@@ -531,10 +531,10 @@ def to_carry(trials: list, pick, accepted) -> list:
     (:class:`~l1b2.closeloop.acceptance.RefitCV`, None for a missing one) that ``accepted(trial)``, not of
     ``pick``'s family and sharing no regressor with ``pick``, best held-out gain first.
 
-    The next round offers the first of them that is still allowed (:func:`carried`): a cause whose evidence
-    passed this round's screen or run-level level and the cross-validated refit is refit again against the model
-    with ``pick`` added, rather than lost when the next round's level (corrected for every channel the rig logs)
-    no longer reaches it."""
+    When the next round has nothing else to refit, it refits the first of them that is still allowed and still
+    shown (:func:`carried`): a cause whose evidence passed this round's screen or run-level level and the
+    cross-validated refit is refit against the model with ``pick`` added, rather than lost when the next round's
+    level (corrected for every channel the rig logs) no longer reaches it."""
     regs = set(pick.candidate.regressors)
     ok = [t for t in trials if t is not None and t.candidate.family != pick.candidate.family
           and not regs & set(t.candidate.regressors) and accepted(t)]
@@ -542,8 +542,9 @@ def to_carry(trials: list, pick, accepted) -> list:
 
 
 def carried(carry: list, short: list, allowed, score, run_p, *, level: float, min_gain: float) -> list:
-    """The one candidate of the previous round's :func:`to_carry` list that this round refits again, as a
-    :class:`Score` (none when no candidate qualifies): the first, in ``carry``'s order, whose family is not in
+    """The one candidate of the previous round's :func:`to_carry` list that this round refits when it has nothing
+    else to refit, as a :class:`Score` (none when no candidate qualifies): the first, in ``carry``'s order, whose
+    family is not in
     ``short`` (this round's scores so far), that ``allowed(candidate)`` (not added, not collinear with what is, no
     named/generic conflict) and whose evidence against the current model still holds at the uncorrected
     ``level``: the kind of evidence that offered it. ``run_p(candidate)``: the run-level analysis's p-value of a
