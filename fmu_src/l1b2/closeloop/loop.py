@@ -107,7 +107,7 @@ from .intervals import added_parameters, identification, train_levels
 from .result import CloseLoopResult, ResidualAnalysis
 from .selection import (Score, best_per_family, carried, counted_params, design, named_alternatives,
                         nuisance_forces, score_candidates, screen_mask, screened, shape_alternatives,
-                        significance_level, simplest_within_one_se, to_carry)
+                        signal_p, significance_level, simplest_within_one_se, to_carry)
 
 
 def _quiet(msg: str) -> None:
@@ -330,7 +330,7 @@ class CloseLoop(EstimatorSettings):
                 it.run_levels.append(rl.round_record(rnd))
                 offered = runlevel.offer(runlevel.candidates(rl, ctx), short, allowed)
             short = short + score(offered)
-            short = short or carried(carry, short, allowed, score, lambda c: runlevel.signal_p(rl, c),
+            short = short or carried(carry, short, allowed, score, lambda c: signal_p(rl, c),
                                      level=self.screen_alpha or level, min_gain=self.min_gain)   # nothing else
             short = short + named_alternatives(short, scores, lambda n, g: geo.share(n, g.candidate, g.phi),
                                                min_gain=self.min_gain)

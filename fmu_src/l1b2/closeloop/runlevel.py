@@ -711,17 +711,6 @@ def is_run_level(c) -> bool:
                                                                   and spec.get("level") == "run")
 
 
-def signal_p(analysis: RunLevelAnalysis | None, c) -> float | None:
-    """The uncorrected run-level p-value in ``analysis`` of the signal a run-level candidate ``c`` reads (the
-    ``run_level`` or categorical family: its spec's channel and transform); 1.0 when that signal was not tested;
-    None when ``c`` is not such a candidate or there is no analysis (its evidence is then the screen's)."""
-    spec = c.spec or {}
-    if analysis is None or spec.get("kind") not in ("run_level", _category().kind):
-        return None
-    key = (spec.get("channel"), spec.get("transform", "none"))
-    return next((e.p_value for e in analysis.evidence if e.edges is None and (e.channel, e.transform) == key), 1.0)
-
-
 def is_last_resort(c) -> bool:
     """Whether a candidate is the session's blocks (:class:`~l1b2.predictor.effects.blocks.SessionBlocks`): enough
     blocks follow any misfit of the runs, so among the accepted candidates within the parsimony band it is added only

@@ -35,6 +35,7 @@ import pandas as pd
 
 from ..data import measurements as dataio
 from ..ident.coarse import decimation, every_qth
+from ..predictor import effects as fx
 from ..predictor import model as pr
 from . import residuals as res
 from .acceptance import NAMED_SHARE, one_se_gap_per_run, pooled_gain, time_dependent
@@ -539,6 +540,18 @@ def to_carry(trials: list, pick, accepted) -> list:
     ok = [t for t in trials if t is not None and t.candidate.family != pick.candidate.family
           and not regs & set(t.candidate.regressors) and accepted(t)]
     return [t.candidate for t in sorted(ok, key=lambda t: -t.gain)]
+
+
+def signal_p(analysis, c) -> float | None:
+    """The uncorrected run-level p-value in ``analysis`` (a :class:`l1b2.closeloop.runlevel.RunLevelAnalysis`) of
+    the signal a run-level candidate ``c`` reads (the ``run_level`` or ``run_level_category`` family: its spec's
+    channel and transform); 1.0 when that signal was not tested; None when ``c`` is not such a candidate or there
+    is no analysis (its evidence is then the screen's)."""
+    spec = c.spec or {}
+    if analysis is None or spec.get("kind") not in ("run_level", fx.family("run_level_category").kind):
+        return None
+    key = (spec.get("channel"), spec.get("transform", "none"))
+    return next((e.p_value for e in analysis.evidence if e.edges is None and (e.channel, e.transform) == key), 1.0)
 
 
 def carried(carry: list, short: list, allowed, score, run_p, *, level: float, min_gain: float) -> list:
