@@ -38,9 +38,11 @@ Procedure (TEST is never used for fitting or choosing):
       :func:`~l1b2.closeloop.selection.screened`), and for a shortlisted generic term the named family that
       explains most of its force (:func:`~l1b2.closeloop.selection.named_alternatives`), and for a shortlisted
       family the best of each of its other shapes that passes the same screen
-      (:func:`~l1b2.closeloop.selection.shape_alternatives`: the refit chooses a channel's shape);
-   b. *acceptance* (:mod:`l1b2.closeloop.acceptance`): current model and
-      current model + candidate re-identified on ``refit_folds`` - 1 run folds
+      (:func:`~l1b2.closeloop.selection.shape_alternatives`: the refit chooses a channel's shape); with nothing
+      to refit, the last round's accepted candidate that points elsewhere and is still shown
+      (:func:`~l1b2.closeloop.selection.carried`);
+   b. *acceptance* (:mod:`l1b2.closeloop.acceptance`): current model and current model + candidate re-identified
+      on ``refit_folds`` - 1 run folds
       (warm start, bounded budget) and predicting the held-out fold in free run; accepted when the pooled held-out
       sum of squares falls by ``min_cv_gain`` in most folds; of a family's accepted shapes the simplest within one
       standard error of its best (:func:`~l1b2.closeloop.selection.simplest_within_one_se`); the most parsimonious
@@ -56,8 +58,8 @@ Procedure (TEST is never used for fitting or choosing):
    c. *joint re-identification* of the model with every accepted effect
       (warm start).
 
-   The rounds stop when no shortlisted candidate is accepted. Otherwise
-   "no significant missing effect" and the baseline is kept.
+   The rounds stop when no shortlisted candidate is accepted. Otherwise "no significant missing effect" and the
+   baseline is kept.
 5. Both the baseline and the final model are reported on TEST, with the metrics after every round.
    ``diagnosis.traced_to`` lists the regressors of the added effects strongest first, the terms that only relax
    Eq. 29's own linearisation after the missing effects (:func:`l1b2.closeloop.evidence.order_traced`).

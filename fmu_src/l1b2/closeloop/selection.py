@@ -557,13 +557,12 @@ def signal_p(analysis, c) -> float | None:
 def carried(carry: list, short: list, allowed, score, run_p, *, level: float, min_gain: float) -> list:
     """The one candidate of the previous round's :func:`to_carry` list that this round refits when it has nothing
     else to refit, as a :class:`Score` (none when no candidate qualifies): the first, in ``carry``'s order, whose
-    family is not in
-    ``short`` (this round's scores so far), that ``allowed(candidate)`` (not added, not collinear with what is, no
-    named/generic conflict) and whose evidence against the current model still holds at the uncorrected
-    ``level``: the kind of evidence that offered it. ``run_p(candidate)``: the run-level analysis's p-value of a
-    run-level candidate's signal (None for any other candidate), below ``level``; otherwise its linearised score
-    (``score(candidates)``, e.g. :func:`score_candidates`) :func:`significant` at ``level`` with ``min_gain``.
-    What the added effect explained is not offered again."""
+    family is not in ``short`` (this round's scores so far), that ``allowed(candidate)`` (not added, not collinear
+    with what is, no named/generic conflict) and whose evidence against the current model still holds at the
+    uncorrected ``level``, the kind of evidence that offered it: ``run_p(candidate)`` (:func:`signal_p`: a
+    run-level candidate's signal's run-level p-value, None for any other candidate) below ``level``; otherwise
+    its linearised score (``score(candidates)``, e.g. :func:`score_candidates`) :func:`significant` at ``level``
+    with ``min_gain``. What the added effect explained is not offered again."""
     fams = {s.candidate.family for s in short}
     cands = [c for c in carry if c.family not in fams and allowed(c)]
 
