@@ -42,10 +42,10 @@ Procedure (TEST is never used for fitting or choosing):
       to refit, the last round's accepted candidate that points elsewhere and is still shown
       (:func:`~l1b2.closeloop.selection.carried`);
    b. *acceptance* (:mod:`l1b2.closeloop.acceptance`): current model and current model + candidate re-identified
-      on ``refit_folds`` - 1 run folds
-      (warm start, bounded budget) and predicting the held-out fold in free run; accepted when the pooled held-out
-      sum of squares falls by ``min_cv_gain`` in most folds; of a family's accepted shapes the simplest within one
-      standard error of its best (:func:`~l1b2.closeloop.selection.simplest_within_one_se`); the most parsimonious
+      on ``refit_folds`` - 1 run folds (warm start, bounded budget) and predicting the held-out fold in free run;
+      accepted when the pooled held-out sum of squares falls by ``min_cv_gain`` in most folds; of a family's
+      accepted shapes the simplest within one standard error of its best
+      (:func:`~l1b2.closeloop.selection.simplest_within_one_se`); the most parsimonious
       within ``parsimony`` of the best CV gain is added, a named family instead of a generic term it explains unless
       the generic one is better by more than one standard error (:func:`~l1b2.closeloop.acceptance.named_reading`),
       the inputs' trial instead of an auxiliary channel they explain on the same terms
@@ -748,7 +748,6 @@ def close_loop(train: dataio.Measurements, test: dataio.Measurements | None = No
 
 
 # -- stages -----------------------------------------------------------------
-
 def analyse_residuals(df: pd.DataFrame, v_pred: np.ndarray, mask: np.ndarray, *, alpha: float, k: int,
                       seed: int) -> ResidualAnalysis:
     """Drive-coordinate residual, whiteness, position spectrum and regressor trace (TRAIN)."""
