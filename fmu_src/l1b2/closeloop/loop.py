@@ -41,20 +41,19 @@ Procedure (TEST is never used for fitting or choosing):
       (:func:`~l1b2.closeloop.selection.shape_alternatives`: the refit chooses a channel's shape); with nothing
       to refit, the last round's accepted candidate that points elsewhere and is still shown
       (:func:`~l1b2.closeloop.selection.carried`);
-   b. *acceptance* (:mod:`l1b2.closeloop.acceptance`): current model and current model + candidate re-identified
-      on ``refit_folds`` - 1 run folds (warm start, bounded budget) and predicting the held-out fold in free run;
-      accepted when the pooled held-out sum of squares falls by ``min_cv_gain`` in most folds; of a family's
-      accepted shapes the simplest within one standard error of its best
-      (:func:`~l1b2.closeloop.selection.simplest_within_one_se`); the most parsimonious
-      within ``parsimony`` of the best CV gain is added, a named family instead of a generic term it explains unless
-      the generic one is better by more than one standard error (:func:`~l1b2.closeloop.acceptance.named_reading`),
-      the inputs' trial instead of an auxiliary channel they explain on the same terms
-      (:func:`~l1b2.closeloop.acceptance.input_reading`); from the Eq. 29 baseline a named pick must be accepted
-      again from the pure-slip family, else its reading is withdrawn and the same force is added as a generic
-      term of the reduced model (:func:`~l1b2.closeloop.crosscheck.confirmed_pick`, decision 0043); a pick read
-      as physics is named only when its parameters are jointly different from zero under the reported
-      covariance at ``alpha``, else the round's next trial is taken
-      (:func:`~l1b2.closeloop.crosscheck.identified_pick`);
+   b. *acceptance* (:mod:`l1b2.closeloop.acceptance`): current model and current model + candidate re-identified on
+      ``refit_folds`` - 1 run folds (warm start, bounded budget) and predicting the held-out fold in free run;
+      accepted when the pooled held-out sum of squares falls by ``min_cv_gain`` in most folds; of a family's accepted
+      shapes the simplest within one standard error of its best
+      (:func:`~l1b2.closeloop.selection.simplest_within_one_se`); the most parsimonious within ``parsimony`` of the
+      best CV gain is added, a named family instead of a generic term it explains unless the generic one is better by
+      more than one standard error (:func:`~l1b2.closeloop.acceptance.named_reading`), the inputs' trial instead of an
+      auxiliary channel they explain on the same terms (:func:`~l1b2.closeloop.acceptance.input_reading`); from the
+      Eq. 29 baseline a named pick must be accepted again from the pure-slip family, else its reading is withdrawn and
+      the same force is added as a generic term of the reduced model
+      (:func:`~l1b2.closeloop.crosscheck.confirmed_pick`, decision 0043); a pick read as physics is named only when
+      its parameters are jointly different from zero under the reported covariance at ``alpha``, else the round's next
+      trial is taken (:func:`~l1b2.closeloop.crosscheck.identified_pick`);
    c. *joint re-identification* of the model with every accepted effect
       (warm start).
 
