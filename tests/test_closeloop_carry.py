@@ -26,21 +26,21 @@ def _gain(t):
 
 
 def test_to_carry_keeps_the_accepted_trials_that_share_no_regressor_with_the_pick_best_first():
+    # the loop passes the round's accepted trials (``accepts``); to_carry chooses among them
     voltage = _trial(_cand("run_level_voltage_V", "voltage"), [0.02, 0.03, 0.05, 0.05])
     load_voltage = _trial(_cand("smooth_load_x_voltage", "load", "voltage"), [0.01, 0.02, 0.04, 0.04])
     dither = _trial(_cand("run_level_rail_dither_um", "rail_dither_um"), [0.03, 0.05, 0.07, 0.08])
     temp = _trial(_cand("channel_temp_C", "temp_C"), [0.02, 0.04, 0.06, 0.07])
-    refused = _trial(_cand("channel_aux", "aux"), [0.05, 0.08, 0.11, 0.12])
-    trials = [load_voltage, voltage, dither, None, refused, temp]
-    assert {t.candidate.regressors for t in trials if t is not None} >= {("voltage",), ("load", "voltage")}
-    out = to_carry(trials, voltage, lambda t: t is not refused)
-    # load_voltage shares "voltage" with the pick; refused is not accepted; the rest by decreasing gain
+    accepted = [load_voltage, voltage, dither, temp]
+    assert {t.candidate.regressors for t in accepted} >= {("voltage",), ("load", "voltage")}
+    out = to_carry(accepted, voltage)
+    # load_voltage shares "voltage" with the pick; the rest by decreasing gain
     assert [c.family for c in out] == ["channel_temp_C", "run_level_rail_dither_um"]
     assert _gain(temp) > _gain(dither) > 0
     # the pick's own family is never carried, even with other regressors
     other_form = _trial(_cand("run_level_voltage_V", "load"), [0.01, 0.02, 0.03, 0.03])
-    assert to_carry([other_form, dither], voltage, lambda t: True) == [dither.candidate]
-    assert to_carry([voltage], voltage, lambda t: True) == []
+    assert to_carry([other_form, dither], voltage) == [dither.candidate]
+    assert to_carry([voltage], voltage) == [] and to_carry([], voltage) == []
 
 
 def NO_RUN_P(c):
@@ -58,23 +58,25 @@ def _scores(evidence):
     return score, asked
 
 
-def test_carried_refits_the_first_allowed_candidate_not_refit_already_that_the_screen_still_shows():
+def _carried(carry, allowed, score, run_p=NO_RUN_P):
+    return [s.candidate for s in carried(carry, allowed, score, run_p, level=0.01, min_gain=0.05)]
+
+
+def test_carried_refits_the_first_allowed_candidate_that_the_screen_still_shows():
     a, b, c = _cand("fam_a", "x"), _cand("fam_b", "y"), _cand("fam_c", "z")
     strong = {"fam_a": (0.2, 1e-4, -50.0), "fam_b": (0.3, 1e-3, -80.0), "fam_c": (0.1, 5e-3, -20.0)}
     score, asked = _scores(strong)
-    assert [s.candidate for s in carried([a, b, c], [], lambda k: True, score, NO_RUN_P, level=0.01, min_gain=0.05)] == [a]
+    assert _carried([a, b, c], lambda k: True, score) == [a]
     assert asked == [["fam_a", "fam_b", "fam_c"]]
-    taken = [Score(a, 0.5, 1e-9, 50.0, -1.0, np.zeros(1), -9.0)]                  # fam_a already refit this round
-    assert [s.candidate for s in carried([a, b, c], taken, lambda k: True, score, NO_RUN_P, level=0.01, min_gain=0.05)] == [b]
-    assert [s.candidate for s in carried([a, b, c], [], lambda k: k is c, score, NO_RUN_P, level=0.01, min_gain=0.05)] == [c]
+    assert _carried([a, b, c], lambda k: k is not a, score) == [b]           # added, collinear or in conflict
+    assert _carried([a, b, c], lambda k: k is c, score) == [c]
     # what the added effect explained is not offered: the screen's gain, p-value and AIC each decide
     for weak in ((0.04, 1e-4, -50.0), (0.2, 0.01, -50.0), (0.2, 1e-4, 0.0)):
         score, _ = _scores({**strong, "fam_a": weak})
-        got = carried([a, b], [], lambda k: True, score, NO_RUN_P, level=0.01, min_gain=0.05)
-        assert [s.candidate for s in got] == [b], weak
+        assert _carried([a, b], lambda k: True, score) == [b], weak
     score, asked = _scores(strong)
-    assert carried([], [], lambda k: True, score, NO_RUN_P, level=0.01, min_gain=0.05) == [] and asked == []
-    assert carried([a], [], lambda k: False, score, NO_RUN_P, level=0.01, min_gain=0.05) == [] and asked == []
+    assert _carried([], lambda k: True, score) == [] and asked == []
+    assert _carried([a], lambda k: False, score) == [] and asked == []
 
 
 def test_a_run_level_candidate_is_carried_by_its_signals_run_level_p_not_by_the_screen():
@@ -82,8 +84,7 @@ def test_a_run_level_candidate_is_carried_by_its_signals_run_level_p_not_by_the_
     weak_screen = {"run_level_aux": (0.26, 0.25, -2600.0), "fam_b": (0.3, 1e-3, -80.0)}
     score, _ = _scores(weak_screen)
     for p, first in ((0.00076, a), (0.0099, a), (0.01, b), (0.041, b)):
-        got = carried([a, b], [], lambda k: True, score, lambda c: p if c is a else None, level=0.01, min_gain=0.05)
-        assert [s.candidate for s in got] == [first], p
+        assert _carried([a, b], lambda k: True, score, lambda c: p if c is a else None) == [first], p
 
 
 def _analysis(entries):

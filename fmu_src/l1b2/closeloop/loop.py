@@ -331,7 +331,7 @@ class CloseLoop(EstimatorSettings):
                 it.run_levels.append(rl.round_record(rnd))
                 offered = runlevel.offer(runlevel.candidates(rl, ctx), short, allowed)
             short = short + score(offered)
-            short = short or carried(carry, short, allowed, score, lambda c: signal_p(rl, c),
+            short = short or carried(carry, allowed, score, lambda c: signal_p(rl, c),
                                      level=self.screen_alpha or level, min_gain=self.min_gain)   # nothing else
             short = short + named_alternatives(short, scores, lambda n, g: geo.share(n, g.candidate, g.phi),
                                                min_gain=self.min_gain)
@@ -343,7 +343,8 @@ class CloseLoop(EstimatorSettings):
                 break
             trials = self._trials(it, short, cur, cur_err, schemes, (r, dtr, mask, m_s, v_cur), say, n_rnd)
             it.trials.append(trials)
-            ok = simplest_within_one_se([t for t in trials if accepts(t, **self._rules(t))])
+            accepted = [t for t in trials if accepts(t, **self._rules(t))]
+            ok = simplest_within_one_se(accepted)
             if not ok:
                 break
             pick, model, checks = self._identified_pick(
@@ -356,8 +357,7 @@ class CloseLoop(EstimatorSettings):
             if rnd == 1:
                 it.chosen = score_of(pick, short)
                 it.significant = [s for s in short if any(t.candidate is s.candidate for t in ok)]
-            effects, carry = it.effects.add(pick.candidate, pick.phi), to_carry(trials, pick, lambda t: accepts(
-                t, **self._rules(t)))
+            effects, carry = it.effects.add(pick.candidate, pick.phi), to_carry(accepted, pick)
             if self._refused_range(it, effects.with_phi(model.phi_), model, dtr, mask, n_rnd, pick, say):
                 break
             it.model, it.effects = model, effects.with_phi(model.phi_)

@@ -527,18 +527,17 @@ def simplest_within_one_se(accepted: list) -> list:
     return [t for t in accepted if id(t) in kept]
 
 
-def to_carry(trials: list, pick, accepted) -> list:
-    """What a round accepted and did not add that points elsewhere: the candidates of ``trials``
-    (:class:`~l1b2.closeloop.acceptance.RefitCV`, None for a missing one) that ``accepted(trial)``, not of
-    ``pick``'s family and sharing no regressor with ``pick``, best held-out gain first.
+def to_carry(accepted: list, pick) -> list:
+    """What a round accepted and did not add that points elsewhere: the candidates of the round's ``accepted``
+    refit trials (:class:`~l1b2.closeloop.acceptance.RefitCV`) not of ``pick``'s family and sharing no regressor
+    with ``pick``, best held-out gain first.
 
     When the next round has nothing else to refit, it refits the first of them that is still allowed and still
     shown (:func:`carried`): a cause whose evidence passed this round's screen or run-level level and the
     cross-validated refit is refit against the model with ``pick`` added, rather than lost when the next round's
     level (corrected for every channel the rig logs) no longer reaches it."""
     regs = set(pick.candidate.regressors)
-    ok = [t for t in trials if t is not None and t.candidate.family != pick.candidate.family
-          and not regs & set(t.candidate.regressors) and accepted(t)]
+    ok = [t for t in accepted if t.candidate.family != pick.candidate.family and not regs & set(t.candidate.regressors)]
     return [t.candidate for t in sorted(ok, key=lambda t: -t.gain)]
 
 
@@ -554,17 +553,16 @@ def signal_p(analysis, c) -> float | None:
     return next((e.p_value for e in analysis.evidence if e.edges is None and (e.channel, e.transform) == key), 1.0)
 
 
-def carried(carry: list, short: list, allowed, score, run_p, *, level: float, min_gain: float) -> list:
-    """The one candidate of the previous round's :func:`to_carry` list that this round refits when it has nothing
-    else to refit, as a :class:`Score` (none when no candidate qualifies): the first, in ``carry``'s order, whose
-    family is not in ``short`` (this round's scores so far), that ``allowed(candidate)`` (not added, not collinear
-    with what is, no named/generic conflict) and whose evidence against the current model still holds at the
-    uncorrected ``level``, the kind of evidence that offered it: ``run_p(candidate)`` (:func:`signal_p`: a
-    run-level candidate's signal's run-level p-value, None for any other candidate) below ``level``; otherwise
-    its linearised score (``score(candidates)``, e.g. :func:`score_candidates`) :func:`significant` at ``level``
-    with ``min_gain``. What the added effect explained is not offered again."""
-    fams = {s.candidate.family for s in short}
-    cands = [c for c in carry if c.family not in fams and allowed(c)]
+def carried(carry: list, allowed, score, run_p, *, level: float, min_gain: float) -> list:
+    """The one candidate of the previous round's :func:`to_carry` list that a round refits when it has nothing else
+    to refit, as a :class:`Score` (none when no candidate qualifies): the first, in ``carry``'s order, that
+    ``allowed(candidate)`` (not added, not collinear with what is, no named/generic conflict) and whose evidence
+    against the current model still holds at the uncorrected ``level``, the kind of evidence that offered it:
+    ``run_p(candidate)`` (:func:`signal_p`: a run-level candidate's signal's run-level p-value, None for any other
+    candidate) below ``level``; otherwise its linearised score (``score(candidates)``, e.g.
+    :func:`score_candidates`) :func:`significant` at ``level`` with ``min_gain``. What the added effect explained is
+    not offered again."""
+    cands = [c for c in carry if allowed(c)]
 
     def shown(s) -> bool:
         p = run_p(s.candidate)
