@@ -336,16 +336,25 @@ def test_the_null_fold_fits_are_shared_by_value_of_the_runs_and_the_folds():
     assert np.array_equal(again.T, fresh.T) and np.array_equal(again.beta, fresh.beta)
 
 
-def test_run_level_offers_a_candidate_of_another_regressor_when_the_shortlist_has_its_regressor():
+def test_run_level_offer_adds_the_strongest_signal_of_an_unread_second_regressor():
     def cand(fam, reg):
         return CandidateForce(fam, reg, "", ("a",), ("N",), None)
     short = [types.SimpleNamespace(candidate=CandidateForce("load_slope_voltage", "load", "", ("a",), ("N",), None,
                                                            also=("voltage",)))]
-    found = [cand("run_level_voltage_V", "voltage"), cand("run_level_d*load_kg", "load"),
-             cand("run_level_time_s", "time")]
-    assert [c.family for c in rl.offer(found, short, lambda c: True)] == ["run_level_voltage_V", "run_level_time_s"]
-    assert [c.family for c in rl.offer(found[2:], short, lambda c: True)] == ["run_level_time_s"]
-    assert [c.family for c in rl.offer(found, [], lambda c: True)] == ["run_level_voltage_V"]
+    found = [cand("run_level_voltage_V", "voltage"), cand("run_level_voltage_V_step", "voltage"),
+             cand("run_level_d*load_kg", "load"), cand("run_level_time_s", "time"), cand("run_level_aux_C", "aux_C")]
+    fams = lambda cs: [c.family for c in cs]   # noqa: E731
+    # the shortlist reads voltage and load: the second is the first of another regressor it does not read
+    assert fams(rl.offer(found, short, lambda c: True)) == ["run_level_voltage_V", "run_level_time_s"]
+    # no shortlist: the first of another regressor than the strongest's, whichever regressors follow
+    assert fams(rl.offer(found, [], lambda c: True)) == ["run_level_voltage_V", "run_level_d*load_kg"]
+    # the strongest of a regressor the shortlist does not read is offered with the next such one
+    assert fams(rl.offer(found[3:], short, lambda c: True)) == ["run_level_time_s", "run_level_aux_C"]
+    # a shortlisted family is not offered again; what is not allowed is skipped, not replaced by its order
+    assert fams(rl.offer(found, [types.SimpleNamespace(candidate=found[0])], lambda c: True)) == \
+        ["run_level_voltage_V_step", "run_level_d*load_kg"]
+    assert fams(rl.offer(found, [], lambda c: c.regressor != "load")) == ["run_level_voltage_V", "run_level_time_s"]
+    assert fams(rl.offer(found[:2], [], lambda c: True)) == ["run_level_voltage_V"]   # one regressor: one offer
     assert rl.offer(found, short, lambda c: False) == []
 
 

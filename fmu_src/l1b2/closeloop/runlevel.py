@@ -722,19 +722,18 @@ def offer(found: list, short: list, allowed) -> list:
     """The run-level candidates offered to a round's cross-validated refit (at most two, strongest first).
 
     ``found``: :func:`candidates` (strongest first); ``short``: the round's shortlisted scores; ``allowed(c)``:
-    not added yet and not collinear with what is. The strongest allowed one whose family is not shortlisted;
-    when its regressor is already among the shortlist's, also the strongest allowed one of another regressor
-    (the run-level evidence then points somewhere the linearised screen did not look).
+    not added yet and not collinear with what is. The strongest allowed one whose family is not shortlisted, and
+    the strongest allowed one of another regressor that no shortlisted candidate reads: when the runs' deviations
+    follow signals of two regressors, the refit over the run folds, not the ranking of their p-values, decides
+    which of them explains the runs (a signal that follows the other's cause by chance can have the smaller
+    p-value).
     """
     fams = {s.candidate.family for s in short}
     regs = {r for s in short for r in s.candidate.regressors}
     ok = [c for c in found if c.family not in fams and allowed(c)]
     if not ok:
         return []
-    out = ok[:1]
-    if out[0].regressor in regs:
-        out += [c for c in ok[1:] if c.regressor not in regs and c.regressor != out[0].regressor][:1]
-    return out
+    return ok[:1] + [c for c in ok[1:] if c.regressor not in regs and c.regressor != ok[0].regressor][:1]
 
 
 def unseen_test_levels(added, df: pd.DataFrame | None) -> dict:
