@@ -68,6 +68,8 @@ def test_carried_refits_the_first_allowed_candidate_that_the_screen_still_shows(
     score, asked = _scores(strong)
     assert _carried([a, b, c], lambda k: True, score) == [a]
     assert asked == [["fam_a", "fam_b", "fam_c"]]
+    [s] = carried([a, b, c], lambda k: True, score, NO_RUN_P, level=0.01, min_gain=0.05)
+    assert s.origin == "carried" and (s.cv_gain, s.p_value) == strong["fam_a"][:2]     # the report's offered_by
     assert _carried([a, b, c], lambda k: k is not a, score) == [b]           # added, collinear or in conflict
     assert _carried([a, b, c], lambda k: k is c, score) == [c]
     # what the added effect explained is not offered: the screen's gain, p-value and AIC each decide

@@ -95,7 +95,7 @@ class _Recorder(CloseLoop):
 
 def test_the_loop_checks_a_lags_accepted_refit_on_the_session_blocks():
     lag, plain = _lag(), _plain()
-    short = [SimpleNamespace(candidate=c, cv_gain=0.1, phi=np.zeros(1)) for c in (plain, lag)]
+    short = [SimpleNamespace(candidate=c, cv_gain=0.1, phi=np.zeros(1), origin="screen") for c in (plain, lag)]
     runs = np.repeat(np.arange(16), 5)
     df = pd.DataFrame({"run": runs, "direction": np.where(runs % 2, 1, -1), "voltage_V": 200.0,
                        "load_kg": 0.0, "time_s": np.arange(len(runs)) * 1e-3})
@@ -107,3 +107,23 @@ def test_the_loop_checks_a_lags_accepted_refit_on_the_session_blocks():
         assert loop.calls == [({False: 4, True: 3}, [plain.label, lag.label]), ({True: 3}, [lag.label])]
         assert acc.accepts(out[0], **loop._rules(out[0]))
         assert acc.accepts(out[1], **loop._rules(out[1])) == accepted
+
+
+def test_each_trial_records_why_the_round_refit_it_also_when_the_blocks_replace_it():
+    # the score's origin (selection.ORIGINS) goes to its trial and to report.json's offered_by, whichever folds
+    # the trial was last refit on
+    from l1b2.closeloop.selection import ORIGINS
+    lag, plain = _lag(), _plain()
+    short = [SimpleNamespace(candidate=plain, cv_gain=0.1, phi=np.zeros(1), origin="carried"),
+             SimpleNamespace(candidate=lag, cv_gain=0.1, phi=np.zeros(1), origin="run_level")]
+    runs = np.repeat(np.arange(16), 5)
+    df = pd.DataFrame({"run": runs, "direction": np.where(runs % 2, 1, -1), "voltage_V": 200.0,
+                       "load_kg": 0.0, "time_s": np.arange(len(runs)) * 1e-3})
+    for on_blocks in (BAD, GOOD):
+        answers = {(plain.label, False): GOOD, (lag.label, False): GOOD, (lag.label, True): on_blocks}
+        loop = _Recorder(answers, refit_folds=4, tie_repeats=1)
+        out = loop._trials(None, short, None, {}, {False: [None] * 4, True: [None] * 3}, (None, df, None, 0.1, None),
+                           lambda *a: None, 1)
+        assert [t.origin for t in out] == ["carried", "run_level"]
+        assert [t.to_dict()["offered_by"] for t in out] == ["carried", "run_level"]
+    assert acc.RefitCV(plain, CUR, CUR).to_dict()["offered_by"] == "screen" and set(ORIGINS) >= {"screen", "carried"}

@@ -170,7 +170,9 @@ def test_named_alternatives_adds_the_best_named_family_that_explains_a_shortlist
     share = lambda n, g: shares[(n.family, g.candidate.family)]   # noqa: E731
     scores = [gen, other_gen, strong, weak, tiny]
     got = named_alternatives([gen, other_gen], scores, share, min_gain=0.05)
-    assert got == [strong]                      # named_b explains too little, named_c gains too little, each once
+    # named_b explains too little, named_c gains too little, each once; offered as a named reading
+    assert [s.candidate for s in got] == [strong.candidate] and [s.origin for s in got] == ["named"]
+    assert got[0].cv_gain == strong.cv_gain and got[0].phi is strong.phi and strong.origin == "screen"
     assert named_alternatives([gen, strong], scores, share, min_gain=0.05) == []     # already shortlisted
     assert named_alternatives([weak], scores, share, min_gain=0.05) == []             # only for generic terms
 

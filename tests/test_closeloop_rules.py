@@ -147,11 +147,13 @@ def test_every_shape_of_a_shortlisted_family_that_passes_the_screen_is_cross_val
     scores = [odd, quad, quad2, lin, lin_p, odd2, other, weak, weak_alt]
     level = 0.01
     alt = sel.shape_alternatives([odd], scores, level=level, min_gain=0.05)
-    assert [a is b for a, b in zip(alt, [quad, lin])] == [True, True] and len(alt) == 2
+    assert [a.candidate is b.candidate for a, b in zip(alt, [quad, lin])] == [True, True] and len(alt) == 2
+    assert [a.origin for a in alt] == ["shape", "shape"] and [a.p_value for a in alt] == [quad.p_value, lin.p_value]
     assert sel.shape_of(odd.candidate) == "odd" and sel.shape_of(CandidateForce(
         "x", "time", "", ("a",), ("N",), features=None)) == "linear"
     # with the level at 0.5 the linear shape's best passing hypothesis is lin_p (larger gain)
-    assert [s is lin_p for s in sel.shape_alternatives([odd], scores, level=0.5, min_gain=0.05)] == [False, True]
+    assert [s.candidate is lin_p.candidate
+            for s in sel.shape_alternatives([odd], scores, level=0.5, min_gain=0.05)] == [False, True]
     assert sel.shape_alternatives([weak], scores, level=level, min_gain=0.05) == []
     assert sel.shape_alternatives([], scores, level=level, min_gain=0.05) == []
     # the refit then chooses: the quadratic shape's cross-validated gain beats the odd one's

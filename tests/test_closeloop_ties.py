@@ -49,7 +49,7 @@ class _Recorder(CloseLoop):
 
 
 def _short(*trials):
-    return [SimpleNamespace(candidate=t.candidate, cv_gain=0.1, phi=np.zeros(1)) for t in trials]
+    return [SimpleNamespace(candidate=t.candidate, cv_gain=0.1, phi=np.zeros(1), origin="screen") for t in trials]
 
 
 def _frame():

@@ -101,14 +101,15 @@ def test_close_loop_report_md_prints_each_refit_trials_evidence_over_runs():
     trial = {"effect": "run_level", "label": "run_level_category(fixture_id)[run]", "regressors": ["fixture_id"],
              "cv_free_run_nrmse_current": 0.028534, "cv_free_run_nrmse_refit": 0.026813, "cv_gain": 0.117,
              "folds_improved": 2, "folds": 4, "cv_gain_se_runs": 0.1956, "runs_improved": 29, "runs": 56,
-             "linearised_gain": 0.25}
-    rep["diagnosis"] = {**rep["diagnosis"], "refit_trials": [[trial, {**trial, "label": "x", "cv_gain_se_runs": None,
+             "linearised_gain": 0.25, "offered_by": "run_level"}
+    old = {k: v for k, v in trial.items() if k != "offered_by"}    # a report written before the key
+    rep["diagnosis"] = {**rep["diagnosis"], "refit_trials": [[trial, {**old, "label": "x", "cv_gain_se_runs": None,
                                                                       "runs_improved": None, "runs": None}]]}
     rows = [line for line in markdown_report(rep).splitlines() if line.startswith("| run_level_category")
             or line.startswith("| x |")]
-    assert rows == ["| run_level_category(fixture_id)[run] | fixture_id | 25.0% | 2.85% | 2.68% | 11.7% | 19.6% | 2/4 "
-                    "| 29/56 |",
-                    "| x | fixture_id | 25.0% | 2.85% | 2.68% | 11.7% | - | 2/4 | - |"]
+    assert rows == ["| run_level_category(fixture_id)[run] | run_level | fixture_id | 25.0% | 2.85% | 2.68% | 11.7% "
+                    "| 19.6% | 2/4 | 29/56 |",
+                    "| x | - | fixture_id | 25.0% | 2.85% | 2.68% | 11.7% | - | 2/4 | - |"]
 
 
 def test_close_loop_report_md_says_which_significant_run_level_signal_another_explains():

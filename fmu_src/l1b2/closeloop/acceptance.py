@@ -386,6 +386,8 @@ class RefitCV:
     extended: FoldErrors
     linear_gain: float = 0.0
     phi: np.ndarray = field(default=None, repr=False)
+    #: why the round refit it (:data:`l1b2.closeloop.selection.ORIGINS`), the report's ``offered_by``
+    origin: str = "screen"
 
     @property
     def gain(self) -> float:
@@ -405,7 +407,7 @@ class RefitCV:
                 "repeats": self.current.repeats,
                 "cv_gain_se_runs": None if ev is None else ev[1],
                 "runs_improved": None if ev is None else ev[2], "runs": None if ev is None else ev[3],
-                "linearised_gain": self.linear_gain}
+                "linearised_gain": self.linear_gain, "offered_by": self.origin}
 
 
 def run_evidence(r: RefitCV) -> tuple[float, float, int, int] | None:

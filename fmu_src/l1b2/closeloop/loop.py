@@ -67,7 +67,7 @@ Procedure (TEST is never used for fitting or choosing):
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
@@ -330,7 +330,7 @@ class CloseLoop(EstimatorSettings):
                 rl, rl_of = analyse(cur), cur
                 it.run_levels.append(rl.round_record(rnd))
                 offered = runlevel.offer(runlevel.candidates(rl, ctx), short, allowed)
-            short = short + score(offered)
+            short = short + [replace(s, origin="run_level") for s in score(offered)]
             short = short or carried(carry, allowed, score, lambda c: signal_p(rl, c),
                                      level=self.screen_alpha or level, min_gain=self.min_gain)   # nothing else
             short = short + named_alternatives(short, scores, lambda n, g: geo.share(n, g.candidate, g.phi),
@@ -414,7 +414,7 @@ class CloseLoop(EstimatorSettings):
         def trials(sch: dict, err: dict, sub=None, key=time_dependent) -> list:
             sub = short if sub is None else [short[i] for i in sub]
             errs = self._cross_validate(it, sub, cur, err, sch, *frame, say, n_rnd, key)
-            return [None if e is None else RefitCV(s.candidate, err[key(s.candidate)], e, s.cv_gain, s.phi)
+            return [None if e is None else RefitCV(s.candidate, err[key(s.candidate)], e, s.cv_gain, s.phi, s.origin)
                     for s, e in zip(sub, errs)]
         out = trials(schemes, cur_err)
         if self.tie_repeats > self.refit_repeats and any(not time_dependent(t.candidate) and tied(t, **self._rules(t))

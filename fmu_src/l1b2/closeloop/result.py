@@ -329,6 +329,26 @@ def data_check_sections(checks: dict) -> list[str]:
     return out
 
 
+def refit_trial_lines(rounds: list) -> list[str]:
+    """report.md's table of each round's refit trials (``diagnosis.refit_trials``): why the round refit each
+    (``offered_by``, "-" in a report written before the key) and its cross-validated evidence."""
+    lines = []
+    for i, trials in enumerate(rounds, 1):
+        if trials:
+            lines += ["", f"Round {i}: candidates refit and cross-validated:", "",
+                      "| candidate | offered by | regressors | linearised gain | CV nrmse current | CV nrmse refit "
+                      "| CV gain | SE over runs | folds improved | runs improved |",
+                      "|---|---|---|---|---|---|---|---|---|---|"]
+            for t in trials:
+                runs = f"{t['runs_improved']}/{t['runs']}" if t.get("runs") else "-"
+                lines.append(f"| {t['label']} | {t.get('offered_by', '-')} | {', '.join(t['regressors'])} | "
+                             f"{pct(t['linearised_gain'], '.1%')} | "
+                             f"{pct(t['cv_free_run_nrmse_current'], '.2%')} | "
+                             f"{pct(t['cv_free_run_nrmse_refit'], '.2%')} | {pct(t['cv_gain'], '.1%')} | "
+                             f"{pct(t.get('cv_gain_se_runs'), '.1%')} | {t['folds_improved']}/{t['folds']} | {runs} |")
+    return lines
+
+
 def markdown_report(rep: dict) -> str:
     """``report.md`` from a report dict (:meth:`CloseLoopResult.to_dict`, plus ``figures`` when saved)."""
     d = rep["diagnosis"]
@@ -380,17 +400,7 @@ def markdown_report(rep: dict) -> str:
                          f"| {r['folds_failed']} |")
     lines += ["", "## Rounds (free-run nrmse before/after each added effect; CV gain = held-out free-run "
               "sum of squares of the re-identified model over run folds)", "", "```", rounds_table(rep), "```"]
-    for i, trials in enumerate(d.get("refit_trials", []), 1):
-        if trials:
-            lines += ["", f"Round {i}: candidates refit and cross-validated:", "",
-                      "| candidate | regressors | linearised gain | CV nrmse current | CV nrmse refit | CV gain "
-                      "| SE over runs | folds improved | runs improved |", "|---|---|---|---|---|---|---|---|---|"]
-            for t in trials:
-                runs = f"{t['runs_improved']}/{t['runs']}" if t.get("runs") else "-"
-                lines.append(f"| {t['label']} | {', '.join(t['regressors'])} | {pct(t['linearised_gain'], '.1%')} | "
-                             f"{pct(t['cv_free_run_nrmse_current'], '.2%')} | "
-                             f"{pct(t['cv_free_run_nrmse_refit'], '.2%')} | {pct(t['cv_gain'], '.1%')} | "
-                             f"{pct(t.get('cv_gain_se_runs'), '.1%')} | {t['folds_improved']}/{t['folds']} | {runs} |")
+    lines += refit_trial_lines(d.get("refit_trials", []))
     lines += ["", "## Error before and after (all rounds)", "", "```", before_after_table(rep), "```", "",
               "## Candidates (best of each family, by held-out gain)", "",
               "| effect | regressor | params | held-out gain | p (runs) | runs improved | dAIC | dBIC |",

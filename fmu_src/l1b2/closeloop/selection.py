@@ -27,7 +27,7 @@ smooth terms, then fewer parameters).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -193,6 +193,13 @@ def nuisance_forces(params: pr.PredictorParams, df: pd.DataFrame, v_pred: np.nda
 # scoring
 # ---------------------------------------------------------------------------
 
+#: why a round refits a candidate (:attr:`Score.origin`, a trial's ``offered_by`` in ``report.json``): it passed the
+#: linearised screen, the run-level evidence offered it (:func:`l1b2.closeloop.runlevel.offer`), the round before
+#: accepted it and added another (:func:`carried`), it is a named family beside a generic term
+#: (:func:`named_alternatives`) or another shape of a shortlisted family (:func:`shape_alternatives`)
+ORIGINS = ("screen", "run_level", "carried", "named", "shape")
+
+
 @dataclass
 class Score:
     """A candidate's evidence: held-out gain, run-level p-value, runs improved, AIC/BIC change, fitted phi."""
@@ -208,6 +215,8 @@ class Score:
     #: a run-level shape's profile over its grid (:func:`l1b2.closeloop.evidence.peak_profile`), where the samples
     #: of one run do not inform the shape independently
     dll_runs: float = 0.0
+    #: why a round refits it (:data:`ORIGINS`)
+    origin: str = "screen"
 
     def to_dict(self) -> dict:
         """The report's row of this candidate (``effect`` is the candidate's family)."""
@@ -433,7 +442,7 @@ def named_alternatives(short: list[Score], scores: list[Score], share, *, min_ga
     for g in (s for s in short if s.candidate.generic):
         for s in named:     # by decreasing gain
             if s.candidate.family not in taken and share(s.candidate, g) >= min_share:
-                out.append(s)
+                out.append(replace(s, origin="named"))
                 taken.add(s.candidate.family)
                 break
     return out
@@ -481,7 +490,7 @@ def shape_alternatives(short: list[Score], scores: list[Score], *, level: float,
     pool = [s for s in significant(scores, level=level, min_gain=min_gain)
             if s.candidate.family in families and (s.candidate.family, shape_of(s.candidate)) not in taken
             and id(s.candidate) not in listed]
-    return best_per_family(pool, key=lambda c: (c.family, shape_of(c)))
+    return [replace(s, origin="shape") for s in best_per_family(pool, key=lambda c: (c.family, shape_of(c)))]
 
 
 #: a shape's polynomial degree in the channel's standardised value (:func:`shape_degree`)
@@ -567,7 +576,7 @@ def carried(carry: list, allowed, score, run_p, *, level: float, min_gain: float
     def shown(s) -> bool:
         p = run_p(s.candidate)
         return bool(significant([s], level=level, min_gain=min_gain)) if p is None else p < level
-    return [s for s in score(cands) if shown(s)][:1] if cands else []
+    return [replace(s, origin="carried") for s in score(cands) if shown(s)][:1] if cands else []
 
 
 def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5, seed=0,
