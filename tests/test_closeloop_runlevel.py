@@ -350,7 +350,7 @@ def test_run_level_offer_adds_the_strongest_signal_of_an_unread_second_regressor
     assert fams(rl.offer(found, [], lambda c: True)) == ["run_level_voltage_V", "run_level_d*load_kg"]
     # the strongest of a regressor the shortlist does not read is offered with the next such one
     assert fams(rl.offer(found[3:], short, lambda c: True)) == ["run_level_time_s", "run_level_aux_C"]
-    # a shortlisted family is not offered again; what is not allowed is skipped, not replaced by its order
+    # a shortlisted family is not offered again, and a candidate that is not allowed is skipped
     assert fams(rl.offer(found, [types.SimpleNamespace(candidate=found[0])], lambda c: True)) == \
         ["run_level_voltage_V_step", "run_level_d*load_kg"]
     assert fams(rl.offer(found, [], lambda c: c.regressor != "load")) == ["run_level_voltage_V", "run_level_time_s"]
