@@ -93,17 +93,25 @@ class _Recorder(CloseLoop):
                 if key(s.candidate) in schemes else None for s in short]
 
 
-def test_the_loop_checks_a_lags_accepted_refit_on_the_session_blocks():
-    lag, plain = _lag(), _plain()
-    short = [SimpleNamespace(candidate=c, cv_gain=0.1, phi=np.zeros(1), origin="screen") for c in (plain, lag)]
+def _run_trials(short, on_blocks):
+    """``(loop, trials)``: ``CloseLoop._trials`` on ``short`` (the plain channel and the lag) over four run folds
+    and three session blocks, both accepted over the run folds and the lag's blocks' errors ``on_blocks``."""
+    plain, lag = (s.candidate for s in short)
     runs = np.repeat(np.arange(16), 5)
     df = pd.DataFrame({"run": runs, "direction": np.where(runs % 2, 1, -1), "voltage_V": 200.0,
                        "load_kg": 0.0, "time_s": np.arange(len(runs)) * 1e-3})
-    frame = (None, df, None, 0.1, None)
+    answers = {(plain.label, False): GOOD, (lag.label, False): GOOD, (lag.label, True): on_blocks}
+    loop = _Recorder(answers, refit_folds=4, tie_repeats=1)
+    out = loop._trials(None, short, None, {}, {False: [None] * 4, True: [None] * 3}, (None, df, None, 0.1, None),
+                       lambda *a: None, 1)
+    return loop, out
+
+
+def test_the_loop_checks_a_lags_accepted_refit_on_the_session_blocks():
+    lag, plain = _lag(), _plain()
+    short = [SimpleNamespace(candidate=c, cv_gain=0.1, phi=np.zeros(1), origin="screen") for c in (plain, lag)]
     for on_blocks, accepted in ((BAD, False), (GOOD, True)):
-        answers = {(plain.label, False): GOOD, (lag.label, False): GOOD, (lag.label, True): on_blocks}
-        loop = _Recorder(answers, refit_folds=4, tie_repeats=1)
-        out = loop._trials(None, short, None, {}, {False: [None] * 4, True: [None] * 3}, frame, lambda *a: None, 1)
+        loop, out = _run_trials(short, on_blocks)
         assert loop.calls == [({False: 4, True: 3}, [plain.label, lag.label]), ({True: 3}, [lag.label])]
         assert acc.accepts(out[0], **loop._rules(out[0]))
         assert acc.accepts(out[1], **loop._rules(out[1])) == accepted
@@ -116,14 +124,8 @@ def test_each_trial_records_why_the_round_refit_it_also_when_the_blocks_replace_
     lag, plain = _lag(), _plain()
     short = [SimpleNamespace(candidate=plain, cv_gain=0.1, phi=np.zeros(1), origin="carried"),
              SimpleNamespace(candidate=lag, cv_gain=0.1, phi=np.zeros(1), origin="run_level")]
-    runs = np.repeat(np.arange(16), 5)
-    df = pd.DataFrame({"run": runs, "direction": np.where(runs % 2, 1, -1), "voltage_V": 200.0,
-                       "load_kg": 0.0, "time_s": np.arange(len(runs)) * 1e-3})
     for on_blocks in (BAD, GOOD):
-        answers = {(plain.label, False): GOOD, (lag.label, False): GOOD, (lag.label, True): on_blocks}
-        loop = _Recorder(answers, refit_folds=4, tie_repeats=1)
-        out = loop._trials(None, short, None, {}, {False: [None] * 4, True: [None] * 3}, (None, df, None, 0.1, None),
-                           lambda *a: None, 1)
+        _, out = _run_trials(short, on_blocks)
         assert [t.origin for t in out] == ["carried", "run_level"]
         assert [t.to_dict()["offered_by"] for t in out] == ["carried", "run_level"]
     assert acc.RefitCV(plain, CUR, CUR).to_dict()["offered_by"] == "screen" and set(ORIGINS) >= {"screen", "carried"}
