@@ -5,7 +5,7 @@ import numpy as np
 from l1b2.closeloop import acceptance as acc
 from l1b2.closeloop import runlevel as rl
 from l1b2.closeloop.candidates import CandidateForce
-from l1b2.closeloop.selection import Score, carried, signal_p, to_carry
+from l1b2.closeloop.selection import Score, carried, to_carry
 from l1b2.predictor import effects as fx
 
 SS = np.full(4, 1.0)
@@ -102,7 +102,6 @@ def test_signal_p_reads_the_candidates_own_signal_and_transform():
     c_none, c_abs = (CandidateForce(h.family, h.regressor, h.shape, h.names, h.units, None, spec=h.spec)
                      for h in (h_none, h_abs))
     ana = _analysis([("aux", "none", 0.004), ("aux", "abs", 0.3), ("other", "none", 1e-9)])
-    assert signal_p(ana, c_none) == 0.004 and signal_p(ana, c_abs) == 0.3
-    assert signal_p(_analysis([("other", "none", 1e-9)]), c_none) == 1.0     # not tested in this round
-    assert signal_p(None, c_none) is None                                     # no run-level analysis
-    assert signal_p(ana, _cand("fam_b", "y")) is None                         # not a run-level form
+    assert ana.signal_p(c_none) == 0.004 and ana.signal_p(c_abs) == 0.3
+    assert _analysis([("other", "none", 1e-9)]).signal_p(c_none) == 1.0     # not tested in this round
+    assert ana.signal_p(_cand("fam_b", "y")) is None                         # not a run-level form

@@ -10,7 +10,7 @@ import types
 import numpy as np
 import pandas as pd
 import pytest
-from l1b2.closeloop import runlevel as rl
+from l1b2.closeloop import ranges
 from l1b2.closeloop.report import Diagnosis, channel_range_line
 from l1b2.data.coverage import values_outside
 
@@ -61,7 +61,7 @@ def test_values_outside_counts_samples_and_runs_beyond_trains_range_and_its_tole
 
 
 def test_channel_ranges_records_every_signal_an_added_effect_reads_with_the_share_of_test_outside():
-    recs = rl.channel_ranges(ADDED, TRAIN, TEST)
+    recs = ranges.channel_ranges(ADDED, TRAIN, TEST)
     assert [(r["channel"], r["level"], r["transform"]) for r in recs] == [
         ("coil_A", "sample", "none"), ("coil_A", "run", "none"), ("load_kg", "run", "drive"),
         ("load_kg", "run", "abs")]     # no category (unseen levels' own check), no column TEST lacks, no named effect
@@ -76,11 +76,11 @@ def test_channel_ranges_records_every_signal_an_added_effect_reads_with_the_shar
     assert drive["signal"] == "d*load_kg (run mean)" and drive["train"] == pytest.approx([-0.1, 0.2])
     assert drive["samples_outside"] == pytest.approx(11 / 33) and drive["runs_outside"] == 1
     assert size["runs_outside"] == 0 and size["samples_outside"] == 0.0
-    assert rl.channel_ranges(ADDED, TRAIN, None) == []
+    assert ranges.channel_ranges(ADDED, TRAIN, None) == []
 
 
 def test_the_report_prints_one_line_per_channel_outside_and_none_for_a_channel_inside():
-    sample, run, drive, size = rl.channel_ranges(ADDED, TRAIN, TEST)
+    sample, run, drive, size = ranges.channel_ranges(ADDED, TRAIN, TEST)
     assert channel_range_line(sample) == (
         "TEST has 15.2% of its samples (1 of 3 runs) with coil_A outside TRAIN's range [0, 4] (TEST: [-0.05, 4.5]): "
         "the effects of it there `A` extrapolate linearly; `B` are held at TRAIN's range's end (saturate)")
@@ -98,7 +98,7 @@ def test_the_report_prints_one_line_per_channel_outside_and_none_for_a_channel_i
 
 def test_the_cli_warns_per_channel_outside_and_an_older_report_without_the_field_still_loads(capsys):
     from l1b2.console import print_input_checks
-    sample, run, drive, size = rl.channel_ranges(ADDED, TRAIN, TEST)
+    sample, run, drive, size = ranges.channel_ranges(ADDED, TRAIN, TEST)
     print_input_checks({}, {}, [channel_range_line(sample), channel_range_line(size)])
     assert capsys.readouterr().out.splitlines() == [f"  warning: {channel_range_line(sample)}"]
     old = {"significant": False, "traced_to": [], "effect": None, "effect_shape": None,

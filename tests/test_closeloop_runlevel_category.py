@@ -13,7 +13,7 @@ import types
 import numpy as np
 import pandas as pd
 import pytest
-from l1b2.closeloop import runlevel as rl
+from l1b2.closeloop import ranges, runlevel as rl
 from l1b2.predictor import effects as fx
 from l1b2.predictor.effects import category as ch
 from l1b2.predictor.effects import channels
@@ -183,10 +183,10 @@ def test_test_runs_at_a_value_train_never_had_are_recorded():
              types.SimpleNamespace(spec={"kind": "run_level", "channel": "fixture_id", "transform": "none"},
                                    label="run_level_fixture_id[run]")]
     test = pd.DataFrame({"run": np.repeat(np.arange(5), 2), "fixture_id": np.repeat([1.0, 5.0, 2.0, 5.0, 7.0], 2)})
-    assert rl.unseen_test_levels(added, test) == {
+    assert ranges.unseen_test_levels(added, test) == {
         "run_level_category(fixture_id)[run]": {"channel": "fixture_id", "values": [5.0, 7.0], "runs": 3}}
-    assert rl.unseen_test_levels(added, test[test.fixture_id < 3]) == {}
-    assert rl.unseen_test_levels(added, None) == {}
+    assert ranges.unseen_test_levels(added, test[test.fixture_id < 3]) == {}
+    assert ranges.unseen_test_levels(added, None) == {}
 
 
 def _dominated_reference(dev, significant, zs, level):

@@ -81,7 +81,7 @@ from ..predictor.model import DRIVE_LAWS
 from ..predictor.effects import channels as fx_channels
 from . import chain
 from . import residuals as res
-from . import runlevel
+from . import ranges, runlevel
 from .candidates import Context, baseline_damping, channels_of, full_library, range_check, training_summary
 from .settings import LoopSettings, keyword_signature
 from .stages import StageClock
@@ -108,7 +108,7 @@ from .intervals import added_parameters, identification, train_levels
 from .result import CloseLoopResult, ResidualAnalysis
 from .selection import (Score, best_per_family, carried, counted_params, design, named_alternatives,
                         nuisance_forces, score_candidates, screen_mask, screened, shape_alternatives,
-                        signal_p, significance_level, simplest_within_one_se, to_carry)
+                        significance_level, simplest_within_one_se, to_carry)
 
 
 def _quiet(msg: str) -> None:
@@ -243,8 +243,8 @@ class CloseLoop(EstimatorSettings):
         diagnosis = {**self._diagnosis(it, first, analysis, ext_params, chain_rec), "auxiliary_columns": aux_rec,
                      "response_test": with_applied(response_rec, self.response_columns, responses),
                      **derived_rec,
-                     "unseen_levels": runlevel.unseen_test_levels(it.effects.candidates, dte),
-                     "channel_ranges": runlevel.channel_ranges(it.effects.candidates, dtr, dte)}
+                     "unseen_levels": ranges.unseen_test_levels(it.effects.candidates, dte),
+                     "channel_ranges": ranges.channel_ranges(it.effects.candidates, dtr, dte)}
         diagnosis["channels_considered"] = with_response_test(
             with_auxiliary(diagnosis["channels_considered"], aux_rec), diagnosis["response_test"])
         diagnosis = with_onset(diagnosis, train.meta.get("rest_before_onset"), dtr, it.channels, self.alpha)
@@ -331,7 +331,7 @@ class CloseLoop(EstimatorSettings):
                 it.run_levels.append(rl.round_record(rnd))
                 offered = runlevel.offer(runlevel.candidates(rl, ctx), short, allowed)
             short = short + [replace(s, origin="run_level") for s in score(offered)]
-            short = short or carried(carry, allowed, score, lambda c: signal_p(rl, c),
+            short = short or carried(carry, allowed, score, lambda c: rl and rl.signal_p(c),
                                      level=self.screen_alpha or level, min_gain=self.min_gain)   # nothing else
             short = short + named_alternatives(short, scores, lambda n, g: geo.share(n, g.candidate, g.phi),
                                                min_gain=self.min_gain)

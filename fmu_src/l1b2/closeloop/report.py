@@ -137,9 +137,9 @@ class Diagnosis(_Record):
     (:mod:`l1b2.closeloop.runclock`); ``log_channels`` the logarithms derived from logged channels that span decades
     (:mod:`l1b2.closeloop.logscale`);
     ``unseen_levels`` the TEST values of an added categorical setting that TRAIN never had
-    (:func:`l1b2.closeloop.runlevel.unseen_test_levels`); ``channel_ranges`` per logged channel an added effect
+    (:func:`l1b2.closeloop.ranges.unseen_test_levels`); ``channel_ranges`` per logged channel an added effect
     reads, the share of TEST's samples and runs outside TRAIN's range of it
-    (:func:`l1b2.closeloop.runlevel.channel_ranges`, the report's line: :func:`channel_range_line`).
+    (:func:`l1b2.closeloop.ranges.channel_ranges`, the report's line: :func:`channel_range_line`).
     ``named_checks``: every named pick of a round from the Eq. 29 baseline, cross-validated again from the
     pure-slip family (:mod:`l1b2.closeloop.crosscheck`), with its figures and outcome; every named pick read as
     physics also carries ``identification``, the joint Wald test of its parameters against zero under the

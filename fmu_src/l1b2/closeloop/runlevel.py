@@ -49,7 +49,6 @@ import pandas as pd
 from scipy import stats
 
 from ..data import measurements as dataio
-from ..data.coverage import values_outside
 from ..predictor import effects as fx
 from ..predictor import model as pr
 from ..units import history_source
@@ -640,6 +639,15 @@ class RunLevelAnalysis:
                 "significant_signals": [e.label for e in self.significant],
                 "dominated_signals": {e.label: e.dominated_by for e in self.significant if e.dominated_by}}
 
+    def signal_p(self, c) -> float | None:
+        """The uncorrected p-value of the signal a run-level candidate ``c`` reads (the ``run_level`` or categorical
+        family: its spec's channel and transform); 1.0 when that signal was not tested; None when ``c`` is not such a
+        candidate (its evidence is then the screen's)."""
+        spec = c.spec or {}
+        if spec.get("kind") not in ("run_level", _category().kind):
+            return None
+        key = (spec.get("channel"), spec.get("transform", "none"))
+        return next((e.p_value for e in self.evidence if e.edges is None and (e.channel, e.transform) == key), 1.0)
 
     def round_record(self, round_: int | None) -> dict:
         """One entry of ``diagnosis.run_level_rounds``: this analysis against the model entering round ``round_``
@@ -734,60 +742,3 @@ def offer(found: list, short: list, allowed) -> list:
     if not ok:
         return []
     return ok[:1] + [c for c in ok[1:] if c.regressor not in regs and c.regressor != ok[0].regressor][:1]
-
-
-def unseen_test_levels(added, df: pd.DataFrame | None) -> dict:
-    """``{label: {"channel", "values", "runs"}}`` of every added categorical run-level effect whose channel takes
-    a value in ``df`` (TEST) that TRAIN never had: those runs get TRAIN's average over runs (0 in the level
-    columns), so their prediction cannot carry that value's own effect (``diagnosis.unseen_levels``)."""
-    out: dict = {}
-    fam = _category()
-    for c in added if df is not None else ():
-        spec = c.spec or {}
-        col = spec.get("channel")
-        if spec.get("kind") != fam.kind or col not in df.columns:
-            continue
-        unseen = fam.unseen(spec, df.groupby(dataio.RUN, sort=False)[col].first().to_numpy(float))
-        if unseen:
-            out[c.label] = {"channel": col, **unseen}
-    return out
-
-
-def _signal_values(df: pd.DataFrame, col: str, level: str, transform: str) -> np.ndarray:
-    """An effect's signal per sample of ``df``: the channel's value (``sample``) or its run's mean (``run``), under a
-    run-level ``transform`` (:func:`l1b2.predictor.effects.channels.transformed`)."""
-    c = (df[col].to_numpy(float) if level == "sample"
-         else df.groupby(dataio.RUN, sort=False)[col].transform("mean").to_numpy(float))
-    return fx.channels.transformed(c, df[dataio.DIRECTION].to_numpy(float) if transform == "drive" else None,
-                                   transform)
-
-
-def channel_ranges(added, dtr: pd.DataFrame, dte: pd.DataFrame | None) -> list:
-    """For every logged channel (or protocol signal) an added effect reads, how much of TEST lies outside TRAIN's
-    range of it (``diagnosis.channel_ranges``).
-
-    ``added``: the added candidates (their specs); the ``channel`` family's (its level, ``sample`` or ``run``) and
-    the ``run_level`` family's (a categorical setting's TEST values are :func:`unseen_test_levels`' check). One record
-    per signal, in the order first read: ``channel``, ``level``, ``transform``, ``signal`` (the report's name),
-    ``effects`` (label -> ``extrapolates`` for a form linear in the signal, ``clipped`` for the quadratic, odd and
-    peak shapes, flat beyond TRAIN's range) and :func:`l1b2.data.coverage.values_outside` of the signal (TRAIN's and
-    TEST's signal per sample). Empty without TEST.
-    """
-    out: dict = {}
-    for c in added if dte is not None else ():
-        spec = c.spec or {}
-        kind, col, tr = spec.get("kind"), spec.get("channel"), spec.get("transform", "none")
-        if kind not in ("channel", "run_level"):
-            continue
-        if col not in dtr.columns or col not in dte.columns:
-            continue
-        level = str(spec.get("level", "run"))
-        key = (col, level, tr)
-        if key not in out:
-            vals = values_outside(_signal_values(dtr, col, level, tr), _signal_values(dte, col, level, tr),
-                                  dte[dataio.RUN].to_numpy())
-            name = fx.channels.signal_label(col, tr) + (" (run mean)" if level == "run" else "")
-            out[key] = {"channel": col, "level": level, "transform": tr, "signal": name, "effects": {}, **vals}
-        clipped = kind == "channel" and spec.get("shape", "linear") != "linear"
-        out[key]["effects"][c.label] = "clipped" if clipped else "extrapolates"
-    return list(out.values())

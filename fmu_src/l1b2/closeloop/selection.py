@@ -35,7 +35,6 @@ import pandas as pd
 
 from ..data import measurements as dataio
 from ..ident.coarse import decimation, every_qth
-from ..predictor import effects as fx
 from ..predictor import model as pr
 from . import residuals as res
 from .acceptance import NAMED_SHARE, one_se_gap_per_run, pooled_gain, time_dependent
@@ -550,25 +549,13 @@ def to_carry(accepted: list, pick) -> list:
     return [t.candidate for t in sorted(ok, key=lambda t: -t.gain)]
 
 
-def signal_p(analysis, c) -> float | None:
-    """The uncorrected run-level p-value in ``analysis`` (a :class:`l1b2.closeloop.runlevel.RunLevelAnalysis`) of
-    the signal a run-level candidate ``c`` reads (the ``run_level`` or ``run_level_category`` family: its spec's
-    channel and transform); 1.0 when that signal was not tested; None when ``c`` is not such a candidate or there
-    is no analysis (its evidence is then the screen's)."""
-    spec = c.spec or {}
-    if analysis is None or spec.get("kind") not in ("run_level", fx.family("run_level_category").kind):
-        return None
-    key = (spec.get("channel"), spec.get("transform", "none"))
-    return next((e.p_value for e in analysis.evidence if e.edges is None and (e.channel, e.transform) == key), 1.0)
-
-
 def carried(carry: list, allowed, score, run_p, *, level: float, min_gain: float) -> list:
     """The one candidate of the previous round's :func:`to_carry` list that a round refits when it has nothing else
     to refit, as a :class:`Score` (none when no candidate qualifies): the first, in ``carry``'s order, that
     ``allowed(candidate)`` (not added, not collinear with what is, no named/generic conflict) and whose evidence
     against the current model still holds at the uncorrected ``level``, the kind of evidence that offered it:
-    ``run_p(candidate)`` (:func:`signal_p`: a run-level candidate's signal's run-level p-value, None for any other
-    candidate) below ``level``; otherwise its linearised score (``score(candidates)``, e.g.
+    ``run_p(candidate)`` (:meth:`~l1b2.closeloop.runlevel.RunLevelAnalysis.signal_p`: a run-level candidate's
+    signal's run-level p-value, None for any other candidate or without a run-level analysis) below ``level``; otherwise its linearised score (``score(candidates)``, e.g.
     :func:`score_candidates`) :func:`significant` at ``level`` with ``min_gain``. What the added effect explained is
     not offered again."""
     cands = [c for c in carry if allowed(c)]
