@@ -5,7 +5,7 @@ import numpy as np
 from l1b2.closeloop import acceptance as acc
 from l1b2.closeloop import runlevel as rl
 from l1b2.closeloop.candidates import CandidateForce
-from l1b2.closeloop.selection import Score, carried, to_carry
+from l1b2.closeloop.selection import Score, carried, refit_list, to_carry
 from l1b2.predictor import effects as fx
 
 SS = np.full(4, 1.0)
@@ -105,3 +105,42 @@ def test_signal_p_reads_the_candidates_own_signal_and_transform():
     assert ana.signal_p(c_none) == 0.004 and ana.signal_p(c_abs) == 0.3
     assert _analysis([("other", "none", 1e-9)]).signal_p(c_none) == 1.0     # not tested in this round
     assert ana.signal_p(_cand("fam_b", "y")) is None                         # not a run-level form
+
+
+def _refit_list(short, offered, carry, scores=(), share=lambda n, g: 0.0, run_p=NO_RUN_P, allowed=lambda c: True):
+    score, asked = _scores(EVIDENCE)
+    out = refit_list(list(short), offered, carry, list(scores), allowed=allowed, score=score, run_p=run_p,
+                     share=share, level=0.01, screen=0.01, min_gain=0.05)
+    return [(s.candidate.family, s.origin) for s in out], asked
+
+
+EVIDENCE = {"fam_a": (0.2, 1e-4, -50.0), "run_level_aux": (0.3, 0.2, -80.0), "gen_g": (0.1, 1e-3, -20.0),
+            "named_n": (0.15, 2e-3, -30.0)}
+
+
+def test_a_rounds_refit_list_carries_only_when_neither_the_screen_nor_the_run_level_analysis_offers():
+    a, rl_aux, g = _cand("fam_a", "x"), _cand("run_level_aux", "aux"), _cand("gen_g", "y")
+    screen_a = Score(a, 0.2, 1e-4, 30.0, -1.0, np.zeros(1), -50.0)
+    # the screen's shortlist first, then the offered run-level form, scored and tagged; carry is not asked
+    out, asked = _refit_list([screen_a], [rl_aux], [g])
+    assert out == [("fam_a", "screen"), ("run_level_aux", "run_level")] and asked == [["run_level_aux"]]
+    out, asked = _refit_list([], [rl_aux], [g])                     # an offered run-level form alone: no carry
+    assert out == [("run_level_aux", "run_level")] and asked == [["run_level_aux"]]
+    out, asked = _refit_list([screen_a], [], [g])
+    assert out == [("fam_a", "screen")] and asked == [[]]
+    # nothing from the screen or the run-level analysis: the carried candidate, by its own evidence
+    out, asked = _refit_list([], [], [g])
+    assert out == [("gen_g", "carried")] and asked == [[], ["gen_g"]]
+    # without a run-level analysis a run-level form's evidence is the screen's (run_p None), else its signal's p
+    assert _refit_list([], [], [rl_aux])[0] == []                    # the screen's p 0.2 is not below 0.01
+    assert _refit_list([], [], [rl_aux], run_p=lambda c: 0.004)[0] == [("run_level_aux", "carried")]
+    assert _refit_list([], [], [g], allowed=lambda c: False)[0] == []
+
+
+def test_a_carried_generic_term_gets_its_named_alternative():
+    g = CandidateForce("gen_g", "y", "", ("a",), ("N",), None, generic=True)
+    n = _cand("named_n", "y")
+    scores = [Score(n, 0.15, 2e-3, 30.0, -1.0, np.zeros(1), -30.0)]
+    out, _ = _refit_list([], [], [g], scores, share=lambda named, gen: 0.9)
+    assert out == [("gen_g", "carried"), ("named_n", "named")]
+    assert _refit_list([], [], [g], scores, share=lambda named, gen: 0.0)[0] == [("gen_g", "carried")]

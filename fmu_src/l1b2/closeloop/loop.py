@@ -67,7 +67,7 @@ Procedure (TEST is never used for fitting or choosing):
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -106,9 +106,9 @@ from .evidence import (channels_considered, order_traced, with_auxiliary, with_o
 from .guard import checked_fit, checked_identification
 from .intervals import added_parameters, identification, train_levels
 from .result import CloseLoopResult, ResidualAnalysis
-from .selection import (Score, best_per_family, carried, counted_params, design, named_alternatives,
-                        nuisance_forces, score_candidates, screen_mask, screened, shape_alternatives,
-                        significance_level, simplest_within_one_se, to_carry)
+from .selection import (Score, best_per_family, counted_params, design, nuisance_forces, refit_list,
+                        score_candidates, screen_mask, screened, significance_level, simplest_within_one_se,
+                        to_carry)
 
 
 def _quiet(msg: str) -> None:
@@ -330,12 +330,10 @@ class CloseLoop(EstimatorSettings):
                 rl, rl_of = analyse(cur), cur
                 it.run_levels.append(rl.round_record(rnd))
                 offered = runlevel.offer(runlevel.candidates(rl, ctx), short, allowed)
-            short = short + [replace(s, origin="run_level") for s in score(offered)]
-            short = short or carried(carry, allowed, score, lambda c: rl and rl.signal_p(c),
-                                     level=self.screen_alpha or level, min_gain=self.min_gain)   # nothing else
-            short = short + named_alternatives(short, scores, lambda n, g: geo.share(n, g.candidate, g.phi),
-                                               min_gain=self.min_gain)
-            short = short + shape_alternatives(short, scores, level=screen, min_gain=self.min_gain)
+            short = refit_list(short, offered, carry, scores, allowed=allowed, score=score,
+                               run_p=lambda c: rl and rl.signal_p(c),
+                               share=lambda n, g: geo.share(n, g.candidate, g.phi),
+                               level=self.screen_alpha or level, screen=screen, min_gain=self.min_gain)
             if rnd == 1:
                 it.first_scores, it.level, it.run_level = scores, level, rl
             if not short:

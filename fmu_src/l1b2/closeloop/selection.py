@@ -555,8 +555,9 @@ def carried(carry: list, allowed, score, run_p, *, level: float, min_gain: float
     ``allowed(candidate)`` (not added, not collinear with what is, no named/generic conflict) and whose evidence
     against the current model still holds at the uncorrected ``level``, the kind of evidence that offered it:
     ``run_p(candidate)`` (:meth:`~l1b2.closeloop.runlevel.RunLevelAnalysis.signal_p`: a run-level candidate's
-    signal's run-level p-value, None for any other candidate or without a run-level analysis) below ``level``; otherwise its linearised score (``score(candidates)``, e.g.
-    :func:`score_candidates`) :func:`significant` at ``level`` with ``min_gain``. What the added effect explained is
+    signal's run-level p-value, None for any other candidate or without a run-level analysis) below ``level``;
+    otherwise its linearised score (``score(candidates)``, e.g. :func:`score_candidates`) :func:`significant` at
+    ``level`` with ``min_gain``. What the added effect explained is
     not offered again."""
     cands = [c for c in carry if allowed(c)]
 
@@ -564,6 +565,20 @@ def carried(carry: list, allowed, score, run_p, *, level: float, min_gain: float
         p = run_p(s.candidate)
         return bool(significant([s], level=level, min_gain=min_gain)) if p is None else p < level
     return [replace(s, origin="carried") for s in score(cands) if shown(s)][:1] if cands else []
+
+
+def refit_list(short: list[Score], offered: list, carry: list, scores: list[Score], *, allowed, score, run_p,
+               share, level: float, screen: float, min_gain: float) -> list[Score]:
+    """What a round cross-validates by refitting, each :class:`Score` tagged with why (``origin``), in this order:
+    the screen's shortlist ``short``; the run-level candidates ``offered``
+    (:func:`l1b2.closeloop.runlevel.offer`) as scored by ``score``; when both are empty, the :func:`carried`
+    candidate of ``carry`` (``allowed``, ``score``, ``run_p`` at ``level``); then the list's
+    :func:`named_alternatives` (``share``) and :func:`shape_alternatives` (at ``screen``) among the round's
+    ``scores``, all with ``min_gain``."""
+    out = short + [replace(s, origin="run_level") for s in score(offered)]
+    out = out or carried(carry, allowed, score, run_p, level=level, min_gain=min_gain)
+    out = out + named_alternatives(out, scores, share, min_gain=min_gain)
+    return out + shape_alternatives(out, scores, level=screen, min_gain=min_gain)
 
 
 def score_candidates(candidates, r_drive, df, mask, params, m_s, *, v_pred, k=5, seed=0,
