@@ -16,7 +16,7 @@ from l1b2.cli import build_parser
 from l1b2.closeloop import acceptance as acc
 from l1b2.closeloop import folds as fo
 from l1b2.closeloop import runlevel as rl
-from l1b2.closeloop.candidates import CandidateForce, channels_of
+from l1b2.closeloop.candidates import CandidateForce, candidate, channels_of
 from l1b2.closeloop.loop import CloseLoop, prefer
 from l1b2.predictor import effects as fx
 from l1b2.rig import experiment as rig
@@ -356,6 +356,65 @@ def test_run_level_offer_adds_the_strongest_signal_of_an_unread_second_regressor
     assert fams(rl.offer(found, [], lambda c: c.regressor != "load")) == ["run_level_voltage_V", "run_level_time_s"]
     assert fams(rl.offer(found[:2], [], lambda c: True)) == ["run_level_voltage_V"]   # one regressor: one offer
     assert rl.offer(found, short, lambda c: False) == []
+
+
+def _balanced_runs():
+    """12 runs, 40 samples each: V0 in (220, 290, 324) V x load in (0.03, 0.07) kg x both directions, so that the
+    runs' drive-coordinate loads d m average to exactly 0."""
+    rows = []
+    for k, (v, m, d) in enumerate((v, m, d) for v in (220.0, 290.0, 324.0) for m in (0.03, 0.07) for d in (1.0, -1.0)):
+        rows.append(pd.DataFrame({"run": k, "time_s": 10.0 * k + 1e-3 * np.arange(40),
+                                  "position_m": d * np.linspace(-0.01, 0.01, 40), "voltage_V": v, "direction": d,
+                                  "load_kg": m, "speed_m_s": 0.1 * d}))
+    return pd.concat(rows, ignore_index=True)
+
+
+def _run_level_form(df, channel, transform, drop=None):
+    runs = df.groupby("run", sort=False)
+    v = fx.channels.transformed(runs[channel].mean().to_numpy(float), runs["direction"].first().to_numpy(float),
+                                transform)
+    [h] = fx.family("run_level").hypotheses([{"channel": channel, "transform": transform, "mean": float(v.mean()),
+                                              "sd": float(v.std()), **({"drop": drop} if drop else {})}])
+    return candidate(None, h)
+
+
+def test_a_run_level_load_form_after_the_voltage_form_is_offered_without_their_shared_column():
+    # written out: the V0 form's load column z_V g d m = g (V0 d m - mean_V d m) / sd_V; with mean(d m) = 0 the load
+    # form's gain and offset columns z_w V0 / V_ref and z_w = d m / sd_w span both V0 d m and d m, so the full load
+    # form can reproduce an added column; without its gain (or its offset) it cannot
+    from l1b2.closeloop.acceptance import EffectSet, collinear
+    df = _balanced_runs()
+    mask = np.ones(len(df), bool)
+    dm = df["direction"].to_numpy() * df["load_kg"].to_numpy()
+    assert abs(df.groupby("run")["direction"].first().to_numpy() @ df.groupby("run")["load_kg"].first().to_numpy()) \
+        < 1e-12 and np.ptp(dm) > 0
+    added = EffectSet().add(_run_level_form(df, "voltage_V", "none"), np.zeros(3))
+    full = _run_level_form(df, "load_kg", "drive")
+    reduced = [_run_level_form(df, "load_kg", "drive", d) for d in rl.REDUCED]
+    assert [c.shape for c in reduced] == ["run, no gain", "run, no load", "run, no offset"]
+    assert collinear(full, added, df, mask)
+    assert [collinear(c, added, df, mask) for c in reduced] == [False, True, False]
+    # candidates(): every significant signal's full form, strongest first, then their reduced forms
+    def ev(channel, transform, p):
+        return rl.SignalEvidence(channel, transform, channel, channel, 0.0, 1.0, p_value=p, significant=True)
+    ana = rl.RunLevelAnalysis(None, None, float("nan"), 1.0, [ev("load_kg", "drive", 1e-6),
+                                                              ev("load_kg", "abs", 1e-4)], 0.001)
+    found = rl.candidates(ana, None)
+    assert [c.label for c in found] == ["run_level_d*load_kg[run]", "run_level_|load_kg|[run]"] + [
+        f"run_level_{s}[run, no {d}]" for s in ("d*load_kg", "|load_kg|") for d in rl.REDUCED]
+    assert {c.regressor for c in found} == {"load"}
+
+    # the offer takes a reduced form only when no full form of its regressor is allowed
+    def allowed(c):
+        return not collinear(c, added, df, mask)
+    found = [full] + reduced
+    assert [c.label for c in rl.offer(found, [], allowed)] == ["run_level_d*load_kg[run, no gain]"]
+    assert [c.label for c in rl.offer(found, [], lambda c: True)] == ["run_level_d*load_kg[run]"]
+    size = _run_level_form(df, "load_kg", "abs")
+    assert not collinear(size, added, df, mask) and size.regressor == full.regressor
+    assert [c.label for c in rl.offer([full, size] + reduced, [], allowed)] == ["run_level_|load_kg|[run]"]
+    with pytest.raises(fx.EffectSpecError, match="drop 'slope' is not one of gain, offset, load"):
+        _run_level_form(df, "load_kg", "drive", "slope").features(df)
 
 
 def test_one_step_force_deviations_are_recovered_per_run():

@@ -307,24 +307,32 @@ def test_run_spread_is_the_largest_deviation_from_the_runs_mean():
     assert run_spread(np.array([]), np.array([])) == 0.0
 
 
-def test_exported_run_level_voltage_model_reproduces_the_identifications_prediction(pool, tmp_path, isolated):
+@pytest.mark.parametrize("drop", [None, "gain"])
+def test_exported_run_level_voltage_model_reproduces_the_identifications_prediction(pool, tmp_path, isolated,
+                                                                                    drop):
     # reference: the identification's own free run of a model with a run-level voltage effect (the re-identified
     # setup's l1b2.predictor.simulate.free_run with the candidate's force, whose run-level voltage is each run's
-    # mean by groupby), against export_calibrated's Predictor.fmu and its native FMU through fmpy, 1e-10 relative
+    # mean by groupby), against export_calibrated's Predictor.fmu and its native FMU through fmpy, 1e-10 relative;
+    # the reduced form without the gain: the full form's offset and load columns
     from l1b2.fmi.export import export_calibrated
     from l1b2.predictor.simulate import free_run
     base, refit = _setups()
     df = _frame()
     c = next(c for c in pool if c.spec["kind"] == "run_level" and c.spec["channel"] == dataio.VOLTAGE)
-    phi = np.array([0.3, -0.2, 0.5]) * 0.1 / np.sqrt(np.mean(np.asarray(c.features(df)) ** 2, axis=0))
-    force = np.asarray(c.features(df)) @ phi
+    keep = [0, 1, 2] if drop is None else [1, 2]
+    cols = np.asarray(c.features(df))[:, keep]
+    phi = np.array([0.3, -0.2, 0.5])[keep] * 0.1 / np.sqrt(np.mean(cols ** 2, axis=0))
+    force = cols @ phi
+    if drop is not None:
+        [h] = fx.family("run_level").hypotheses([{**c.spec, "drop": drop}])
+        c = replace(c, shape=h.shape, names=h.names, units=h.units, spec=h.spec)
     want = free_run(refit.params, df[dataio.POSITION], df[dataio.VOLTAGE], df[dataio.LOAD], df[dataio.DIRECTION],
                     df[dataio.TIME], [r["v_start"] for r in RUNS], refit.slider_mass_kg, df[dataio.RUN].to_numpy(),
                     extra_force=force)
     plain = free_run(refit.params, df[dataio.POSITION], df[dataio.VOLTAGE], df[dataio.LOAD], df[dataio.DIRECTION],
                      df[dataio.TIME], [r["v_start"] for r in RUNS], refit.slider_mass_kg, df[dataio.RUN].to_numpy())
     assert np.max(np.abs(want - plain)) > 1e-4   # not vacuous: the run-level voltage effect moves the speed
-    eff = IdentifiedEffect(c.family, c.label, c.spec, c.names, c.units, tuple(phi), (0.01,) * 3, c.description,
+    eff = IdentifiedEffect(c.family, c.label, c.spec, c.names, c.units, tuple(phi), (0.01,) * len(phi), c.description,
                            c.regressors, c.structural)
     man = export_calibrated(ExtendedPredictor(base, refit, (eff,), None, {"train": "synthetic"}), tmp_path / "out")
     assert man["native"]["Predictor"]["included"], man["native"]
@@ -493,6 +501,19 @@ def test_run_level_kernels_equal_the_features_on_runs_that_hold_their_inputs(poo
     # V0, d*load, |load|, direction, temperature; its channel's 3 forms x (3 shapes + 2 shapes x load) and the
     # inertia form in the 3 shapes and the damping form in the linear and quadratic shapes (run)
     assert n_checked == 4 + 1 + 3 * (3 + 2) + 3 + 2
+    # a reduced form (without one column) is the full form with that column's parameter 0: features and kernel
+    for h in hyps:
+        for j, drop in enumerate(("gain", "offset", "load")):
+            [r] = fx.family("run_level").hypotheses([{**h.spec, "drop": drop}])
+            phi = rng.normal(0.0, 1.0, 2)
+            full_phi = np.insert(phi, j, 0.0)
+            want = fx.effect_features(h.spec, x) @ full_phi
+            np.testing.assert_allclose(fx.effect_features(r.spec, x) @ phi, want, rtol=1e-13, atol=1e-13)
+            kind, q = ek.spec_scalars(r.spec)
+            got = np.array([ek.effect_force(kind, row.tolist(), q, phi.tolist()) for row in rows])
+            np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * max(1.0, np.max(np.abs(want))))
+            assert r.family == h.family and len(r.names) == 2 and r.names == tuple(
+                n for k, n in enumerate(h.names) if k != j)
     varied = dict(hyps[0].spec, run_spread=0.02 * hyps[0].spec["sd"])
     with pytest.raises(fx.EffectSpecError, match="not constant within runs"):
         ek.spec_scalars(varied)

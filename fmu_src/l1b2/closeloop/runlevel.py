@@ -55,6 +55,9 @@ from ..units import history_source
 from . import blocks as blk, residuals as res
 from .reml import REMLFit, design_rows, reml
 
+#: the columns a reduced run-level form leaves out, in the order :func:`offer` tries them: the drive gain and the
+#: load term (whose products with a signal of V0 or of the load are what two run-level forms share), then the offset
+REDUCED = ("gain", "load", "offset")
 #: run-value correlation above which two significant signals are compared by their evidence given each other
 DOMINANCE_CORR = 0.5
 
@@ -697,19 +700,24 @@ def _kept(sg: dict, keep: np.ndarray) -> dict | None:
 
 
 def candidates(analysis: RunLevelAnalysis, ctx) -> list:
-    """The :class:`~l1b2.closeloop.candidates.CandidateForce` of every significant signal, strongest first."""
+    """The :class:`~l1b2.closeloop.candidates.CandidateForce` of every significant signal, strongest first, then
+    the reduced forms of its value signals (each without one column: :data:`REDUCED`), strongest first: a reduced
+    form is offered (:func:`offer`) only when no full form of its regressor is allowed, as when the full form
+    shares a column with an added effect."""
     from .candidates import candidate
-    out = []
+    full, reduced = [], []
     for e in analysis.significant:
         if e.edges is not None:
-            out += [candidate(ctx, h) for h in _blocks().hypotheses([{"edges": e.edges, "shares": e.shares}])]
+            full += [candidate(ctx, h) for h in _blocks().hypotheses([{"edges": e.edges, "shares": e.shares}])]
             continue
         fam = fx.family("run_level") if e.levels is None else _category()
         sg = {"channel": e.channel, "transform": e.transform, "mean": e.mean, "sd": e.sd,
               **({} if e.run_spread is None else {"run_spread": float(e.run_spread)}),
               **({} if e.levels is None else {"levels": e.levels, "shares": e.shares})}
-        out += [candidate(ctx, h) for h in fam.hypotheses([sg])]
-    return out
+        full += [candidate(ctx, h) for h in fam.hypotheses([sg])]
+        if e.levels is None:
+            reduced += [candidate(ctx, h) for h in fam.hypotheses([{**sg, "drop": d} for d in REDUCED])]
+    return full + reduced
 
 
 def is_run_level(c) -> bool:
@@ -731,7 +739,10 @@ def offer(found: list, short: list, allowed) -> list:
 
     ``found``: :func:`candidates` (strongest first); ``short``: the round's shortlisted scores; ``allowed(c)``:
     not added yet and not collinear with what is. The strongest allowed one whose family is not shortlisted, and
-    the strongest allowed one of another regressor that no shortlisted candidate reads: when the runs' deviations
+    the strongest allowed one of another regressor that no shortlisted candidate reads (``found`` lists the
+    reduced forms after every full form: a reduced one is taken only when no full form of its regressor is
+    allowed, as when the full form's span holds a column of an added effect, such as the V0 x load product that
+    run-level forms of V0 and of the load share): when the runs' deviations
     follow signals of two regressors, the refit over the run folds, not the ranking of their p-values, decides
     which of them explains the runs (a signal that follows the other's cause by chance can have the smaller
     p-value).

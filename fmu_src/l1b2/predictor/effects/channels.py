@@ -643,6 +643,9 @@ _FORM_TEXT = {"friction": "scaling the friction level", "force_factor": "scaling
 G_N_PER_KG = 9.81
 INPUT_SIGNALS = (("voltage_V", "none"), ("load_kg", "drive"), ("load_kg", "abs"), ("direction", "none"))
 TRANSFORMS = ("none", "drive", "abs")
+#: the columns of a run-level form (:func:`run_level_columns`): a drive gain, a force, a load term; a reduced form
+#: (spec ``drop``) leaves one of them out
+RUN_LEVEL_COLUMNS = ("gain", "offset", "load")
 REGRESSOR_NAMES.update({"voltage_V": "voltage", "load_kg": "load", "direction": "direction"})
 
 
@@ -663,6 +666,16 @@ def run_level_columns(x, Z) -> np.ndarray:
     Z = np.asarray(Z, float)
     gain, load = signal(x, "V0") / V_REF, G_N_PER_KG * signal(x, "d") * signal(x, "load")
     return np.column_stack([col for j in range(Z.shape[1]) for col in (gain * Z[:, j], Z[:, j], load * Z[:, j])])
+
+
+def kept_columns(spec) -> list[int]:
+    """The indices of :data:`RUN_LEVEL_COLUMNS` a run-level spec keeps: all, or all but its ``drop``
+    (:class:`EffectSpecError` for a ``drop`` that is not one of them)."""
+    drop = spec.get("drop")
+    if drop is not None and drop not in RUN_LEVEL_COLUMNS:
+        raise EffectSpecError(f"run-level spec of {spec.get('channel')!r}: drop {drop!r} is not one of "
+                              f"{', '.join(RUN_LEVEL_COLUMNS)}")
+    return [j for j, n in enumerate(RUN_LEVEL_COLUMNS) if n != drop]
 
 
 def transformed(c, d, transform: str) -> np.ndarray:
@@ -723,25 +736,30 @@ class RunLevel(Effect):
         if not sd > 0:
             raise EffectSpecError(f"run-level signal {spec.get('channel')!r}: standard deviation {sd} is not positive")
         z = (c - num(spec, "mean")) / sd
-        return run_level_columns(x, z[:, None])
+        return run_level_columns(x, z[:, None])[:, kept_columns(spec)]
 
     def width(self, spec):
-        return 3
+        return len(kept_columns(spec))
 
     def hypotheses(self, signals_: list) -> list:
         """One hypothesis per run-level signal ``{"channel", "transform", "mean", "sd"}`` (``sd`` > 0; with
-        ``run_spread``, TRAIN's largest deviation from the run's value, when known: the export checks it)."""
+        ``run_spread``, TRAIN's largest deviation from the run's value, when known: the export checks it; with
+        ``drop``, one of :data:`RUN_LEVEL_COLUMNS`, the reduced form without that column, shape ``run, no <drop>``)."""
         out = []
         for sg in signals_:
             col, tr = sg["channel"], sg.get("transform", "none")
             label, stem = signal_label(col, tr), parameter_stem(col, tr)
+            spec = {"channel": col, "transform": tr, "mean": float(sg["mean"]), "sd": float(sg["sd"]),
+                    **run_spread_entry(sg), **({"drop": sg["drop"]} if sg.get("drop") else {})}
+            keep = kept_columns(spec)
+            names = [f"{stem}_run_{n}" for n in RUN_LEVEL_COLUMNS]
             out.append(self.hypothesis(
-                [f"{stem}_run_gain", f"{stem}_run_offset", f"{stem}_run_load"], ["N", "N", "1"],
-                {"channel": col, "transform": tr, "mean": float(sg["mean"]), "sd": float(sg["sd"]), **run_spread_entry(sg)},
-                "run",
+                [names[j] for j in keep], [("N", "N", "1")[j] for j in keep], spec,
+                f"run, no {spec['drop']}" if "drop" in spec else "run",
                 family=f"run_level_{label}", regressor=regressor_of(col), generic=True,
                 description=f"run-level {label} scaling the drive force, adding a force and scaling the "
-                            "load's force (run mean, constant along the stroke)"))
+                            "load's force (run mean, constant along the stroke)"
+                            + (f"; without the {spec['drop']} column" if "drop" in spec else "")))
         return out
 
     def grid(self, train):

@@ -33,7 +33,8 @@ import math
 
 from ...units import G_M_S2
 from .base import SIGNALS, SPEED_REF, V_REF, EffectSpecError
-from .channels import FORMS, G_N_PER_KG, INTERACTIONS, SHAPES, TRANSFORMS, export_problem, fmu_signal, signal_key
+from .channels import (FORMS, G_N_PER_KG, INTERACTIONS, RUN_LEVEL_COLUMNS, SHAPES, TRANSFORMS, export_problem,
+                       fmu_signal, kept_columns, signal_key)
 
 #: index of each signal in ``x``
 SIG_T, SIG_S, SIG_V0, SIG_LOAD, SIG_D, SIG_TEMP, SIG_VB, SIG_AB = range(len(SIGNALS))
@@ -78,6 +79,8 @@ QUADRATIC = len(FORMS)
 ODD = 2 * len(FORMS)
 BY_LOAD = len(SHAPES) * len(FORMS)
 TR_NONE, TR_DRIVE, TR_ABS = range(len(TRANSFORMS))
+#: the codes in a run-level spec's ``q[4]`` of the column its reduced form leaves out (-1: none)
+RL_GAIN, RL_OFFSET, RL_LOAD = range(len(RUN_LEVEL_COLUMNS))
 #: the offsets of the range scalars in ``q`` (smooth: after the regressor; pair: after both)
 R_T_LO, R_T_HI, R_S_LO, R_S_HI, R_N_INNER, R_LOAD_ABS, R_V_LO, R_V_HI, R_VB_LO, R_VB_HI, R_M_S, R_TEMP_LO, \
     R_TEMP_HI = range(len(RANGE_KEYS))
@@ -147,6 +150,9 @@ def _signal_scalars(spec) -> list[float]:
         return [float(SIGNAL_INDEX[sig])] + _channel_shape_scalars(spec, code, mean, sd) + [m_s]
     if kind == "channel" and (spec.get("shape", "linear") != "linear" or spec.get("by")):
         return [float(SIGNAL_INDEX[sig])] + _channel_shape_scalars(spec, code, mean, sd)
+    if kind == "run_level":
+        drop = [j for j in range(len(RUN_LEVEL_COLUMNS)) if j not in kept_columns(spec)]
+        return [float(SIGNAL_INDEX[sig]), float(code), mean, sd, float(drop[0] if drop else -1)]
     return [float(SIGNAL_INDEX[sig]), float(code), mean, sd]
 
 
@@ -421,7 +427,8 @@ def channel_force(x, q, phi):
 
 def run_level_force(x, q, phi):
     """``RunLevel.features`` @ phi: ``z (a V0/V_REF + b + c g d m)``, ``z`` = (c - mean)/sd of the input ``q[0]``
-    transformed by ``q[1]`` (none, times the direction, its size)."""
+    transformed by ``q[1]`` (none, times the direction, its size); ``q[4]`` the column a reduced form leaves out
+    (:data:`RL_GAIN`, :data:`RL_OFFSET`, :data:`RL_LOAD`; -1: none), whose parameter it does not have."""
     c = input_signal(x, int(q[0]))
     tr = int(q[1])
     if tr == TR_DRIVE:
@@ -429,8 +436,16 @@ def run_level_force(x, q, phi):
     elif tr == TR_ABS:
         c = abs(c)
     z = (c - q[2]) / q[3]
-    return (x[SIG_V0] / V_REF * z * phi[0] + z * phi[1]
-            + G_N_PER_KG * x[SIG_D] * x[SIG_LOAD] * z * phi[2])
+    g = x[SIG_V0] / V_REF * z
+    w = G_N_PER_KG * x[SIG_D] * x[SIG_LOAD] * z
+    drop = int(q[4])
+    if drop == RL_GAIN:
+        return z * phi[0] + w * phi[1]
+    if drop == RL_OFFSET:
+        return g * phi[0] + w * phi[1]
+    if drop == RL_LOAD:
+        return g * phi[0] + z * phi[1]
+    return g * phi[0] + z * phi[1] + w * phi[2]
 
 
 def effect_force(kind, x, q, phi):
