@@ -557,8 +557,7 @@ def carried(carry: list, allowed, score, run_p, *, level: float, min_gain: float
     ``run_p(candidate)`` (:meth:`~l1b2.closeloop.runlevel.RunLevelAnalysis.signal_p`: a run-level candidate's
     signal's run-level p-value, None for any other candidate or without a run-level analysis) below ``level``;
     otherwise its linearised score (``score(candidates)``, e.g. :func:`score_candidates`) :func:`significant` at
-    ``level`` with ``min_gain``. What the added effect explained is
-    not offered again."""
+    ``level`` with ``min_gain``. What the added effect explained is not offered again."""
     cands = [c for c in carry if allowed(c)]
 
     def shown(s) -> bool:

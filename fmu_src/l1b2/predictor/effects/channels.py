@@ -706,9 +706,10 @@ class RunLevel(Effect):
     ``dF = z (a V0/V_ref + b + c g d m)`` with ``z = (c - mean) / sd`` (TRAIN's run values), ``g d m`` the load's
     weight in drive coordinates: it scales the drive force, adds a force and scales the load's force (a signal
     that changes the contact changes the load's slope too); constant along the stroke, three parameters
-    (``a``, ``b`` [N per standard deviation], ``c`` [1 per standard deviation]). Not listed by any candidate
-    library: the loop offers the hypotheses of this family whose run-level evidence is significant (report
-    family ``run_level_<signal>``).
+    (``a``, ``b`` [N per standard deviation], ``c`` [1 per standard deviation]); a reduced form (spec ``drop``:
+    ``gain``, ``offset`` or ``load``) has the other two, the full form with that parameter 0. Not listed by any
+    candidate library: the loop offers the hypotheses of this family whose run-level evidence is significant
+    (report family ``run_level_<signal>``).
 
     In ``Predictor.fmu`` (and :meth:`~l1b2.predictor.effects.model.ExtendedPredictor.free_run`) the run-level
     value of an input's signal (V0, the load, the direction, the temperature: :data:`INPUT_COLUMNS`, or a logged
