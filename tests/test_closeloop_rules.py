@@ -661,7 +661,7 @@ def test_the_loop_reads_an_auxiliary_pick_as_the_inputs_it_stands_for(monkeypatc
                        ("Directions", Geo), ("nuisance_forces", lambda *a: None),
                        ("score_candidates", lambda *a, **k: []), ("significance_level", lambda *a: 0.01),
                        ("screened", lambda *a, **k: ([object()], 0.01)),
-                       ("named_alternatives", lambda *a, **k: []), ("shape_alternatives", lambda *a, **k: []),
+                       ("refit_list", lambda short, *a, **k: list(short)),
                        ("accepts", lambda *a, **k: True), ("simplest_within_one_se", lambda t: list(t)),
                        ("screen_mask", lambda d, m: m)):
         monkeypatch.setattr(loop_mod, name, fake)
