@@ -668,14 +668,22 @@ def run_level_columns(x, Z) -> np.ndarray:
     return np.column_stack([col for j in range(Z.shape[1]) for col in (gain * Z[:, j], Z[:, j], load * Z[:, j])])
 
 
-def kept_columns(spec) -> list[int]:
-    """The indices of :data:`RUN_LEVEL_COLUMNS` a run-level spec keeps: all, or all but its ``drop``
+def dropped_column(spec) -> int:
+    """The index in :data:`RUN_LEVEL_COLUMNS` of the column a run-level spec's ``drop`` leaves out, -1 for none
     (:class:`EffectSpecError` for a ``drop`` that is not one of them)."""
     drop = spec.get("drop")
-    if drop is not None and drop not in RUN_LEVEL_COLUMNS:
+    if drop is None:
+        return -1
+    if drop not in RUN_LEVEL_COLUMNS:
         raise EffectSpecError(f"run-level spec of {spec.get('channel')!r}: drop {drop!r} is not one of "
                               f"{', '.join(RUN_LEVEL_COLUMNS)}")
-    return [j for j, n in enumerate(RUN_LEVEL_COLUMNS) if n != drop]
+    return RUN_LEVEL_COLUMNS.index(drop)
+
+
+def kept_columns(spec) -> list[int]:
+    """The indices of :data:`RUN_LEVEL_COLUMNS` a run-level spec keeps: all but its :func:`dropped_column`."""
+    drop = dropped_column(spec)
+    return [j for j in range(len(RUN_LEVEL_COLUMNS)) if j != drop]
 
 
 def transformed(c, d, transform: str) -> np.ndarray:

@@ -33,8 +33,8 @@ import math
 
 from ...units import G_M_S2
 from .base import SIGNALS, SPEED_REF, V_REF, EffectSpecError
-from .channels import (FORMS, G_N_PER_KG, INTERACTIONS, RUN_LEVEL_COLUMNS, SHAPES, TRANSFORMS, export_problem,
-                       fmu_signal, kept_columns, signal_key)
+from .channels import (FORMS, G_N_PER_KG, INTERACTIONS, RUN_LEVEL_COLUMNS, SHAPES, TRANSFORMS, dropped_column,
+                       export_problem, fmu_signal, signal_key)
 
 #: index of each signal in ``x``
 SIG_T, SIG_S, SIG_V0, SIG_LOAD, SIG_D, SIG_TEMP, SIG_VB, SIG_AB = range(len(SIGNALS))
@@ -151,8 +151,7 @@ def _signal_scalars(spec) -> list[float]:
     if kind == "channel" and (spec.get("shape", "linear") != "linear" or spec.get("by")):
         return [float(SIGNAL_INDEX[sig])] + _channel_shape_scalars(spec, code, mean, sd)
     if kind == "run_level":
-        drop = [j for j in range(len(RUN_LEVEL_COLUMNS)) if j not in kept_columns(spec)]
-        return [float(SIGNAL_INDEX[sig]), float(code), mean, sd, float(drop[0] if drop else -1)]
+        return [float(SIGNAL_INDEX[sig]), float(code), mean, sd, float(dropped_column(spec))]
     return [float(SIGNAL_INDEX[sig]), float(code), mean, sd]
 
 
