@@ -749,7 +749,9 @@ def offer(found: list, short: list, allowed) -> list:
     """
     fams = {s.candidate.family for s in short}
     regs = {r for s in short for r in s.candidate.regressors}
-    ok = [c for c in found if c.family not in fams and allowed(c)]
-    if not ok:
+    first = next((c for c in found if c.family not in fams and allowed(c)), None)   # allowed last: a fit per call
+    if first is None:
         return []
-    return ok[:1] + [c for c in ok[1:] if c.regressor not in regs and c.regressor != ok[0].regressor][:1]
+    second = next((c for c in found if c.family not in fams and c.regressor not in regs | {first.regressor}
+                   and allowed(c)), None)
+    return [first] + ([second] if second is not None else [])
