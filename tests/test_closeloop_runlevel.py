@@ -415,6 +415,28 @@ def test_a_run_level_load_form_after_the_voltage_form_is_offered_without_their_s
         _run_level_form(df, "load_kg", "drive", "slope").features(df)
 
 
+def test_a_run_level_voltage_form_after_the_full_load_form_is_refused_and_offered_without_its_load_column():
+    # the other order, written out: the added load form's gain and offset columns z_w V0 / V_ref and z_w = d m / sd_w
+    # span V0 d m and d m, so the V0 form's load column g (V0 d m - mean_V d m) / sd_V lies in the added span while no
+    # added column lies in the V0 form's span: only the check of the candidate's columns finds it
+    from l1b2.closeloop.acceptance import EffectSet, collinear
+    df = _balanced_runs()
+    mask = np.ones(len(df), bool)
+    load = _run_level_form(df, "load_kg", "drive")
+    added = EffectSet().add(load, np.zeros(3))
+    full = _run_level_form(df, "voltage_V", "none")
+    F, C = (np.asarray(c.features(df), float) for c in (load, full))
+    own = np.linalg.lstsq(C, F, rcond=None)[0]                      # one way: every added column misses C's span
+    assert np.all(np.linalg.norm(F - C @ own, axis=0) > 0.1 * np.linalg.norm(F, axis=0))
+    col = np.linalg.lstsq(F, C[:, 2], rcond=None)[0]                # the other: C's load column is in F's span
+    assert np.linalg.norm(F @ col - C[:, 2]) < 1e-9 * np.linalg.norm(C[:, 2])
+    assert collinear(full, added, df, mask)
+    reduced = [_run_level_form(df, "voltage_V", "none", d) for d in rl.REDUCED]
+    assert [collinear(c, added, df, mask) for c in reduced] == [True, False, True]
+    assert [c.label for c in rl.offer([full] + reduced, [], lambda c: not collinear(c, added, df, mask))] == \
+        ["run_level_voltage_V[run, no load]"]
+
+
 def test_one_step_force_deviations_are_recovered_per_run():
     # a stub model whose one-step prediction misses, in run r, the force g_r x (model drive force / its mean) + o_r
     n_runs, n = 5, 60

@@ -118,15 +118,17 @@ COLLINEAR_RTOL = 1e-3
 
 def collinear(candidate: CandidateForce, effects: EffectSet, df: pd.DataFrame, mask: np.ndarray,
               rtol: float = COLLINEAR_RTOL, added: np.ndarray | None = None) -> bool:
-    """Whether ``candidate`` can reproduce a force already added: some added column lies in its span.
+    """Whether ``candidate`` and the added effects share a direction: a column of one lies in the other's span.
 
-    Each column ``f`` of the added effects' features (on the masked samples) is
-    fitted by least squares on the candidate's columns; collinear when the
-    residual's norm is below ``rtol`` of ``|f|``. Both in one model would trade
-    their parameters against each other (a pulley coefficient of -22.9
-    cancelled by a generic load term of -20.4), so such a candidate is not
-    offered once the effect is in. ``added``: :func:`added_columns` of ``effects``, computed once for many
-    candidates (default: computed here).
+    Both ways are checked on the masked samples. Each added column ``f`` is fitted
+    by least squares on the candidate's columns, and each candidate column ``c``
+    on the added columns together; collinear when a residual's norm is below
+    ``rtol`` of ``|f|`` (or ``|c|``). Both in one model would trade their
+    parameters against each other (a pulley coefficient of -22.9 cancelled by a
+    generic load term of -20.4), or leave a parameter without a standard error,
+    so such a candidate is not offered once the effect is in. ``added``:
+    :func:`added_columns` of ``effects``, computed once for many candidates
+    (default: computed here).
     """
     if not effects.candidates:
         return False
@@ -140,7 +142,11 @@ def collinear(candidate: CandidateForce, effects: EffectSet, df: pd.DataFrame, m
         return False
     C = np.asarray(candidate.features(df), float).reshape(len(df), -1)[np.asarray(mask, bool)]
     coef = np.linalg.lstsq(C, F, rcond=None)[0]   # one factorisation of C for every added column
-    return bool(np.any(np.linalg.norm(F - C @ coef, axis=0) < rtol * nf[nf > 0]))
+    if np.any(np.linalg.norm(F - C @ coef, axis=0) < rtol * nf[nf > 0]):
+        return True
+    nc = np.linalg.norm(C, axis=0)
+    C, Q = C[:, nc > 0], _orth(F / nf[nf > 0])    # the other way: a candidate column in the added columns' span
+    return bool(np.any(np.linalg.norm(C - Q @ (Q.T @ C), axis=0) < rtol * nc[nc > 0]))
 
 
 def added_columns(effects: EffectSet, df: pd.DataFrame, mask: np.ndarray) -> np.ndarray:
