@@ -117,7 +117,7 @@ COLLINEAR_RTOL = 1e-3
 
 
 def collinear(candidate: CandidateForce, effects: EffectSet, df: pd.DataFrame, mask: np.ndarray,
-              rtol: float = COLLINEAR_RTOL, added: np.ndarray | None = None) -> bool:
+              rtol: float = COLLINEAR_RTOL, added: AddedColumns | None = None) -> bool:
     """Whether ``candidate`` and the added effects share a direction: a column of one lies in the other's span.
 
     Both ways are checked on the masked samples. Each added column ``f`` is fitted
@@ -132,28 +132,40 @@ def collinear(candidate: CandidateForce, effects: EffectSet, df: pd.DataFrame, m
     """
     if not effects.candidates:
         return False
-    F = added_columns(effects, df, mask) if added is None else added
-    if len(F) != int(np.count_nonzero(mask)):
-        raise ValueError(f"collinear: the added columns have {len(F)} rows for {int(np.count_nonzero(mask))} masked "
+    a = added_columns(effects, df, mask) if added is None else added
+    if a.rows != int(np.count_nonzero(mask)):
+        raise ValueError(f"collinear: the added columns have {a.rows} rows for {int(np.count_nonzero(mask))} masked "
                          "samples (computed on another mask)")
-    nf = np.linalg.norm(F, axis=0)
-    F = F[:, nf > 0]
-    if not F.shape[1]:
+    if not a.columns.shape[1]:
         return False
     C = np.asarray(candidate.features(df), float).reshape(len(df), -1)[np.asarray(mask, bool)]
-    coef = np.linalg.lstsq(C, F, rcond=None)[0]   # one factorisation of C for every added column
-    if np.any(np.linalg.norm(F - C @ coef, axis=0) < rtol * nf[nf > 0]):
+    coef = np.linalg.lstsq(C, a.columns, rcond=None)[0]   # one factorisation of C for every added column
+    if np.any(np.linalg.norm(a.columns - C @ coef, axis=0) < rtol * a.norms):
         return True
     nc = np.linalg.norm(C, axis=0)
-    C, Q = C[:, nc > 0], _orth(F / nf[nf > 0])    # the other way: a candidate column in the added columns' span
+    C, Q = C[:, nc > 0], a.basis                  # the other way: a candidate column in the added columns' span
     return bool(np.any(np.linalg.norm(C - Q @ (Q.T @ C), axis=0) < rtol * nc[nc > 0]))
 
 
-def added_columns(effects: EffectSet, df: pd.DataFrame, mask: np.ndarray) -> np.ndarray:
+@dataclass(frozen=True)
+class AddedColumns:
+    """The added effects' non-zero feature columns on the masked samples (:func:`added_columns`), with what
+    :func:`collinear` reads of them for every candidate: their norms and an orthonormal basis of their span (each
+    column scaled to unit norm first, so a small column keeps its direction)."""
+    rows: int
+    columns: np.ndarray
+    norms: np.ndarray
+    basis: np.ndarray
+
+
+def added_columns(effects: EffectSet, df: pd.DataFrame, mask: np.ndarray) -> AddedColumns:
     """The added effects' feature columns side by side on the masked samples (:func:`collinear`'s ``added``)."""
     m = np.asarray(mask, bool)
-    return np.column_stack([np.asarray(c.features(df), float).reshape(len(df), -1)[m] for c in effects.candidates]
-                           + [np.zeros((int(m.sum()), 0))])
+    F = np.column_stack([np.asarray(c.features(df), float).reshape(len(df), -1)[m] for c in effects.candidates]
+                        + [np.zeros((int(m.sum()), 0))])
+    nf = np.linalg.norm(F, axis=0)
+    F, nf = F[:, nf > 0], nf[nf > 0]
+    return AddedColumns(len(F), F, nf, _orth(F / nf) if F.shape[1] else np.zeros((len(F), 0)))
 
 
 #: squared canonical correlation at and above which a named effect and a generic term share a direction (after the
