@@ -73,7 +73,6 @@ import numpy as np
 import pandas as pd
 
 from ..data import measurements as dataio
-from ..data.metrics import report_metrics
 from ..ident.coarse import coarse_to_fine, nfev_of
 from ..ident.convention import EstimatorSettings
 from ..ident.estimator import PredictorIdentifier
@@ -81,7 +80,8 @@ from ..predictor.model import DRIVE_LAWS
 from ..predictor.effects import channels as fx_channels
 from . import chain
 from . import residuals as res
-from . import ranges, runlevel
+from . import othersession, ranges, runlevel
+from .othersession import metrics
 from .candidates import Context, baseline_damping, channels_of, full_library, range_check, training_summary
 from .settings import LoopSettings, keyword_signature
 from .stages import StageClock
@@ -189,7 +189,7 @@ class CloseLoop(EstimatorSettings):
         #: the baseline's drive-frequency response (estimated when TRAIN's frequency varies): every refit holds it
         self.frequency_ = base.result_.frequency_response
         v_te = base.predict_free_run(dte) if dte is not None else None
-        baseline = _metrics(base, dtr, dte)
+        baseline = metrics(base, dtr, dte)
         it = _Iteration(model=base, effects=EffectSet(), rounds=[{"round": 0, "added": None, "metrics": baseline}])
 
         say("measurement chain: speed column against the position's derivative")
@@ -210,12 +210,15 @@ class CloseLoop(EstimatorSettings):
         # a named pick from Eq. 29 is confirmed from the pure-slip family (decision 0043): that family's fit
         other = (None if start.params_.drive_law != "eq29" else (lambda: fits["pure_slip"]) if (
             "pure_slip" in fits and fit_tr is dtr) else (lambda: fit_family("pure_slip", fit_tr, "named-effect check")))
-        self._iterate(it, pool, fit_tr, mask_tr, m_s, lambda mdl: _metrics(wrap(mdl), dtr, dte), say, ctx, other,
-                      folds)
+        one = dte is None or sess.one    # TEST on TRAIN's clock: else a fact of TRAIN's session predicts its average
+        tested = lambda mdl: wrap(othersession.for_test(mdl, it.effects, one))  # noqa: E731
+        self._iterate(it, pool, fit_tr, mask_tr, m_s, lambda mdl: metrics(wrap(mdl), dtr, dte, test_model=tested(mdl)),
+                      say, ctx, other, folds)
+        ext_te = tested(it.model)
         it.model = wrap(it.model)
 
         ext = it.model if (it.effects.candidates or stage is not None) else None
-        v_te_ext = ext.predict_free_run(dte) if (ext is not None and dte is not None) else None
+        v_te_ext = ext_te.predict_free_run(dte) if (ext is not None and dte is not None) else None
         extended = it.rounds[-1]["metrics"] if ext is not None else None
         levels = train_levels(ext, fit_tr) if ext is not None else None    # the reported interval's clusters
         ext_params = added_parameters(ext, it.effects, levels) if ext is not None else None
@@ -244,6 +247,7 @@ class CloseLoop(EstimatorSettings):
                      "response_test": with_applied(response_rec, self.response_columns, responses),
                      **derived_rec,
                      "unseen_levels": ranges.unseen_test_levels(it.effects.candidates, dte),
+                     "test_session": othersession.record(one, it.effects),
                      "channel_ranges": ranges.channel_ranges(it.effects.candidates, dtr, dte)}
         diagnosis["channels_considered"] = with_response_test(
             with_auxiliary(diagnosis["channels_considered"], aux_rec), diagnosis["response_test"])
@@ -496,7 +500,7 @@ class CloseLoop(EstimatorSettings):
         it.rounds.append({"round": len(it.rounds), "added": "speed_channel_filter", "effect": "speed_channel_filter",
                           "regressors": ["speed"], "cv": {"cv_gain": ch["cv_gain"], "cv_free_run_gain": gain,
                                                           "train_free_run_gain": rec["train_free_run_gain"]},
-                          "metrics": _metrics(filt, dtr, dte, train_free_run=fr1)})
+                          "metrics": metrics(filt, dtr, dte, train_free_run=fr1)})
         return rec, ptr
 
     def _sensor_stages(self, it: _Iteration, rec: dict, dtr, dte, mask, m_s, folds):
@@ -515,7 +519,7 @@ class CloseLoop(EstimatorSettings):
             it.rounds.append({"round": len(it.rounds), "added": stage.name, "effect": stage.name,
                               "regressors": [stage.regressor],
                               "cv": {k: out[k] for k in ("cv_gain", "cv_free_run_gain")},
-                              "metrics": _metrics(ChainModel(it.model, it.sensor_stage), dtr, dte)})
+                              "metrics": metrics(ChainModel(it.model, it.sensor_stage), dtr, dte)})
         return it.sensor_stage.frame(dtr)
 
     def _stroke_gain(self, it: _Iteration, rec: dict, dtr, dte, mask, m_s, folds):
@@ -550,7 +554,7 @@ class CloseLoop(EstimatorSettings):
         it.rounds.append({"round": len(it.rounds), "added": sensor.STROKE_GAIN, "effect": sensor.STROKE_GAIN,
                           "regressors": ["position"],
                           "cv": {"cv_gain": out["cv_gain"], "cv_free_run_gain": out["cv_free_run_gain"]},
-                          "metrics": _metrics(wrapped, dtr, dte)})
+                          "metrics": metrics(wrapped, dtr, dte)})
         return it.speed_gain.frame(dtr)
 
     def _diagnosis(self, it: _Iteration, scores: list[Score], a: ResidualAnalysis, ext_params,
@@ -717,14 +721,6 @@ def _gain_reading(g) -> str:
     gs = g.gain(np.linspace(g.s_lo, g.s_hi, 201))
     return (f"speed sensor's gain along the stroke (measurement, not a force): g(s) = 1 + sum c_j P_j, {coef}; "
             f"g from {gs.min():.3f} to {gs.max():.3f} over the stroke")
-
-
-def _metrics(model, dtr, dte, train_free_run=None) -> dict:
-    """TRAIN and TEST metrics of ``model`` (``train_free_run``: its free run on ``dtr``, when already computed)."""
-    fr = model.predict_free_run(dtr) if train_free_run is None else train_free_run
-    return {"train": report_metrics(dtr, model.predict_one_step(dtr), fr),
-            "test": (report_metrics(dte, model.predict_one_step(dte), model.predict_free_run(dte))
-                     if dte is not None else None)}
 
 
 def _effect_record(c, rec: dict, params: dict | None) -> dict:

@@ -140,6 +140,8 @@ class Diagnosis(_Record):
     (:func:`l1b2.closeloop.ranges.unseen_test_levels`); ``channel_ranges`` per logged channel an added effect
     reads, the share of TEST's samples and runs outside TRAIN's range of it
     (:func:`l1b2.closeloop.ranges.channel_ranges`, the report's line: :func:`channel_range_line`).
+    ``test_session``: whether TRAIN and TEST are one session on the clock and the added effects that predict
+    TRAIN's session average on a TEST of another session (:func:`l1b2.closeloop.othersession.record`).
     ``named_checks``: every named pick of a round from the Eq. 29 baseline, cross-validated again from the
     pure-slip family (:mod:`l1b2.closeloop.crosscheck`), with its figures and outcome; every named pick read as
     physics also carries ``identification``, the joint Wald test of its parameters against zero under the
@@ -192,6 +194,7 @@ class Diagnosis(_Record):
     log_channels: list = field(default_factory=list)
     unseen_levels: dict = field(default_factory=dict)
     channel_ranges: list = field(default_factory=list)
+    test_session: dict = field(default_factory=dict)
     physical_range: list = field(default_factory=list)
     input_readings: list = field(default_factory=list)
     auxiliary_columns: list = field(default_factory=list)
@@ -319,6 +322,16 @@ def channel_range_line(rec: Mapping) -> str:
             f"[{rec['test'][0]:.4g}, {rec['test'][1]:.4g}]): the effects of it there {effects}")
 
 
+def other_session_line(rec: Mapping | None) -> str:
+    """One line on a TEST of another session whose model left effects at TRAIN's session average (a
+    ``diagnosis.test_session`` record, :func:`l1b2.closeloop.othersession.record`); empty otherwise."""
+    if not rec or rec.get("one_session", True) or not rec.get("session_average"):
+        return ""
+    return ("TEST's runs overlap TRAIN's in time (TEST was recorded on a clock of its own): "
+            + ", ".join(f"`{x}`" for x in rec["session_average"])
+            + " predict TRAIN's session average on TEST, not the level of the block its times fall in")
+
+
 def undetermined_line(parameters: Mapping) -> str:
     """One line naming the varied parameters of a model's ``parameters`` (the report's ``baseline_parameters``:
     name -> ``{"vary", "identifiable", ...}``) that TRAIN does not determine (no finite standard error: a
@@ -378,10 +391,12 @@ def search_line(family: str, r: Mapping) -> str:
 
 def loop_check_lines(diagnosis: Mapping, baseline_parameters: Mapping) -> list:
     """The close loop's warnings beyond the data's checks, one line each: the logged channels whose TEST values
-    leave TRAIN's range (:func:`channel_range_line`), the baseline's parameters TRAIN does not determine
+    leave TRAIN's range (:func:`channel_range_line`), the effects at TRAIN's session average on a TEST of another
+    session (:func:`other_session_line`), the baseline's parameters TRAIN does not determine
     (:func:`undetermined_line`) and the fits searched again below the level law (:func:`search_line`); no empty
     line."""
     lines = [channel_range_line(r) for r in diagnosis.get("channel_ranges") or ()]
+    lines += [other_session_line(diagnosis.get("test_session"))]
     lines += [undetermined_line(baseline_parameters)]
     lines += [search_line(f, r) for f, r in ((diagnosis.get("baseline_choice") or {}).get("search") or {}).items()]
     return [line for line in lines if line]
