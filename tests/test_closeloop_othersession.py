@@ -34,6 +34,6 @@ def test_the_report_names_the_effects_held_at_the_session_average_on_another_ses
     assert other_session_line(None) == "" and other_session_line(osn.record(True, effects)) == ""
     assert other_session_line({"one_session": False, "session_average": []}) == ""
     line = other_session_line(osn.record(False, effects))
-    assert line == (f"TEST's runs overlap TRAIN's in time (TEST was recorded on a clock of its own): `{label}` "
-                    "predict TRAIN's session average on TEST, not the level of the block its times fall in")
+    assert line == ("TEST's runs overlap TRAIN's in time (TEST was recorded on a clock of its own): TEST is predicted "
+                    f"at TRAIN's session average of `{label}`, not at the level of the block its times fall in")
     assert loop_check_lines({"test_session": osn.record(False, effects)}, {}) == [line]

@@ -249,8 +249,8 @@ def test_a_session_recorded_in_files_with_their_own_drive_tuning_gets_its_blocks
     np.testing.assert_allclose(apart.test_free_run_after, v_avg, rtol=0, atol=1e-6)
     v_blocks = apart.extended_model.predict_free_run(apart.test_df)     # the blocks read at TEST's own times
     assert np.max(np.abs(v_blocks - v_avg)) > 1e-3
-    assert ("predict TRAIN's session average on TEST, not the level of the block its times fall in"
-            in apart.markdown())
+    assert (f"TEST is predicted at TRAIN's session average of `{labels[0]}`, not at the level of the block its times "
+            "fall in" in apart.markdown())
 
 
 def test_the_blocks_are_searched_only_when_no_signal_has_wald_evidence():

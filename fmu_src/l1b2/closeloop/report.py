@@ -327,9 +327,9 @@ def other_session_line(rec: Mapping | None) -> str:
     ``diagnosis.test_session`` record, :func:`l1b2.closeloop.othersession.record`); empty otherwise."""
     if not rec or rec.get("one_session", True) or not rec.get("session_average"):
         return ""
-    return ("TEST's runs overlap TRAIN's in time (TEST was recorded on a clock of its own): "
-            + ", ".join(f"`{x}`" for x in rec["session_average"])
-            + " predict TRAIN's session average on TEST, not the level of the block its times fall in")
+    return ("TEST's runs overlap TRAIN's in time (TEST was recorded on a clock of its own): TEST is predicted at "
+            "TRAIN's session average of " + ", ".join(f"`{x}`" for x in rec["session_average"])
+            + ", not at the level of the block its times fall in")
 
 
 def undetermined_line(parameters: Mapping) -> str:
