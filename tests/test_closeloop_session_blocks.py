@@ -230,7 +230,7 @@ def test_a_session_recorded_in_files_with_their_own_drive_tuning_gets_its_blocks
     pars = blocks[0]["parameters"]
     assert list(pars) == [f"block_{j}_run_gain" for j in range(n - 1)]
     assert all(p["unit"] == "N" and p["stderr"] is not None and p["stderr"] > 0 for p in pars.values())
-    assert diag["test_session"] == {"one_session": True, "session_average": []}
+    assert diag["test_session"] == {"one_session": True, "session_average": [], "own_clock": []}
     # the same TEST on a clock of its own (each run re-timed one after the other from 0, as a file recorded
     # apart): its runs overlap TRAIN's, so its times say nothing of TRAIN's blocks. The loop scores TEST at TRAIN's
     # session average: the free run of the calibrated model, which leaves the blocks out, a path of its own
@@ -244,7 +244,8 @@ def test_a_session_recorded_in_files_with_their_own_drive_tuning_gets_its_blocks
     df["time_s"] = df["time_s"] - first + 1.5 * df["run"].map({r: i for i, r in enumerate(pd.unique(df["run"]))})
     apart = close_loop(load_measurements(d / "train.csv"), dataclasses.replace(te, df=df))
     labels = [e["label"] for e in apart.diagnosis["effects"] if e["effect"].startswith("session_blocks(")]
-    assert labels and apart.diagnosis["test_session"] == {"one_session": False, "session_average": labels}
+    rec = apart.diagnosis["test_session"]
+    assert labels and rec["one_session"] is False and rec["session_average"] == labels
     v_avg = frame_free_run(apart.calibrated_model, apart.test_df)
     np.testing.assert_allclose(apart.test_free_run_after, v_avg, rtol=0, atol=1e-6)
     v_blocks = apart.extended_model.predict_free_run(apart.test_df)     # the blocks read at TEST's own times

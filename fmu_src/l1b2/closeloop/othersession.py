@@ -13,7 +13,7 @@ the model predicts TRAIN's session average (:func:`averaged`), as the calibrated
 
 TEST runs that do not overlap TRAIN's but lie before or after them are one session with TRAIN's: the first or the
 last block holds them (the family's contract). Effects of the session clock that are not facts of the session (a
-drift in ``time_s``) read TEST's own clock as logged.
+drift in ``time_s``) read TEST's own clock as logged; the report names them (:func:`clock_readers`).
 """
 
 from __future__ import annotations
@@ -23,16 +23,33 @@ from dataclasses import replace
 import numpy as np
 
 from ..data.metrics import report_metrics
+from ..predictor import effects as fx
 from ..predictor.effects import family
-from .acceptance import validated
+from .acceptance import SESSION_SIGNALS, validated
 
-__all__ = ["session_facts", "SessionAverage", "averaged", "for_test", "metrics", "record"]
+__all__ = ["session_facts", "clock_readers", "SessionAverage", "averaged", "for_test", "metrics", "record"]
 
 
 def session_facts(effects) -> list[str]:
     """The labels of the effects in ``effects`` (an :class:`~l1b2.closeloop.acceptance.EffectSet`) whose family is
     a fact of the recorded session (``session_average``)."""
     return [c.label for c in effects.candidates if family((c.spec or {}).get("kind")).session_average]
+
+
+def clock_readers(effects) -> list[str]:
+    """The labels of the effects in ``effects`` that read the session clock ``time_s`` (along the stroke or as a
+    run's value) and are not facts of the session: on a TEST of another session they read TEST's own times as if
+    they were TRAIN's (a warm-up since the session's start repeats in a new session, a wear over the rig's life
+    does not)."""
+    out = []
+    for c in effects.candidates:
+        try:
+            reads = bool(c.spec) and bool(fx.needs(c.spec) & SESSION_SIGNALS)
+        except fx.EffectSpecError:
+            reads = False
+        if reads and not family(c.spec.get("kind")).session_average:
+            out.append(c.label)
+    return out
 
 
 class SessionAverage:
@@ -84,6 +101,8 @@ def metrics(model, dtr, dte, train_free_run=None, test_model=None) -> dict:
 
 
 def record(one_session: bool, effects) -> dict:
-    """The report's ``test_session``: ``{"one_session", "session_average"}``, the labels of the effects that
-    predict TRAIN's session average on TEST (empty when TRAIN and TEST are one session)."""
-    return {"one_session": bool(one_session), "session_average": [] if one_session else session_facts(effects)}
+    """The report's ``test_session``: ``{"one_session", "session_average", "own_clock"}``, the labels of the
+    effects that predict TRAIN's session average on TEST (:func:`session_facts`) and of those that read TEST's own
+    clock (:func:`clock_readers`); both empty when TRAIN and TEST are one session."""
+    return {"one_session": bool(one_session), "session_average": [] if one_session else session_facts(effects),
+            "own_clock": [] if one_session else clock_readers(effects)}

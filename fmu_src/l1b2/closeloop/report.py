@@ -323,13 +323,20 @@ def channel_range_line(rec: Mapping) -> str:
 
 
 def other_session_line(rec: Mapping | None) -> str:
-    """One line on a TEST of another session whose model left effects at TRAIN's session average (a
-    ``diagnosis.test_session`` record, :func:`l1b2.closeloop.othersession.record`); empty otherwise."""
-    if not rec or rec.get("one_session", True) or not rec.get("session_average"):
+    """One line on a TEST of another session whose model left effects at TRAIN's session average or reads TEST's
+    own clock (a ``diagnosis.test_session`` record, :func:`l1b2.closeloop.othersession.record`); empty
+    otherwise."""
+    if not rec or rec.get("one_session", True) or not (rec.get("session_average") or rec.get("own_clock")):
         return ""
-    return ("TEST's runs overlap TRAIN's in time (TEST was recorded on a clock of its own): TEST is predicted at "
-            "TRAIN's session average of " + ", ".join(f"`{x}`" for x in rec["session_average"])
-            + ", not at the level of the block its times fall in")
+    parts = []
+    if rec.get("session_average"):
+        parts.append("TEST is predicted at TRAIN's session average of "
+                     + ", ".join(f"`{x}`" for x in rec["session_average"])
+                     + ", not at the level of the block its times fall in")
+    if rec.get("own_clock"):
+        parts.append(", ".join(f"`{x}`" for x in rec["own_clock"]) + " read TEST's own times as TRAIN's session "
+                     "clock (right for a course since the session's start, not for one over the rig's life)")
+    return "TEST's runs overlap TRAIN's in time (TEST was recorded on a clock of its own): " + "; ".join(parts)
 
 
 def undetermined_line(parameters: Mapping) -> str:
