@@ -38,6 +38,10 @@ def test_only_the_facts_of_the_session_are_held_at_its_average_and_only_on_anoth
     assert osn.clock_readers(drift) == [_clock().label] and osn.session_facts(drift) == [label]
     assert osn.record(False, drift)["own_clock"] == [_clock().label]
     assert osn.record(True, drift)["own_clock"] == []
+    # a user's candidate with a feature function and no spec is neither (no family to ask)
+    own = CandidateForce("my_term", "x", "", ("k",), ("N",), lambda df: df["x"].to_numpy(), generic=True)
+    assert osn.record(False, drift.add(own, [0.0])) == {"one_session": False, "session_average": [label],
+                                                        "own_clock": [_clock().label]}
     assert osn.for_test("model", effects, True) == "model"            # one session: the model as fitted
     assert osn.averaged("model", EffectSet()) == "model"                 # nothing to hold: the model as fitted
 

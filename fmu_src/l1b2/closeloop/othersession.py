@@ -32,8 +32,9 @@ __all__ = ["session_facts", "clock_readers", "SessionAverage", "averaged", "for_
 
 def session_facts(effects) -> list[str]:
     """The labels of the effects in ``effects`` (an :class:`~l1b2.closeloop.acceptance.EffectSet`) whose family is
-    a fact of the recorded session (``session_average``)."""
-    return [c.label for c in effects.candidates if family((c.spec or {}).get("kind")).session_average]
+    a fact of the recorded session (``session_average``); a candidate without a spec (a user's, with a Python
+    feature function only) is none."""
+    return [c.label for c in effects.candidates if c.spec and family(c.spec.get("kind")).session_average]
 
 
 def clock_readers(effects) -> list[str]:
