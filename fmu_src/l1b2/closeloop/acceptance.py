@@ -152,10 +152,14 @@ class AddedColumns:
     """The added effects' non-zero feature columns on the masked samples (:func:`added_columns`), with what
     :func:`collinear` reads of them for every candidate: their norms and an orthonormal basis of their span (each
     column scaled to unit norm first, so a small column keeps its direction)."""
-    rows: int
     columns: np.ndarray
     norms: np.ndarray
     basis: np.ndarray
+
+    @property
+    def rows(self) -> int:
+        """The masked samples the columns were computed on."""
+        return self.columns.shape[0]
 
 
 def added_columns(effects: EffectSet, df: pd.DataFrame, mask: np.ndarray) -> AddedColumns:
@@ -165,7 +169,7 @@ def added_columns(effects: EffectSet, df: pd.DataFrame, mask: np.ndarray) -> Add
                         + [np.zeros((int(m.sum()), 0))])
     nf = np.linalg.norm(F, axis=0)
     F, nf = F[:, nf > 0], nf[nf > 0]
-    return AddedColumns(len(F), F, nf, _orth(F / nf) if F.shape[1] else np.zeros((len(F), 0)))
+    return AddedColumns(F, nf, _orth(F / nf) if F.shape[1] else np.zeros((len(F), 0)))
 
 
 #: squared canonical correlation at and above which a named effect and a generic term share a direction (after the
