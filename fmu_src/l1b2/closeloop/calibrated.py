@@ -21,10 +21,11 @@ import numpy as np
 import pandas as pd
 
 from ..data import measurements as dataio
-from ..predictor.effects import ExtendedPredictor, IdentifiedEffect, family
+from ..predictor.effects import ExtendedPredictor, IdentifiedEffect
 from ..predictor.effects import channels as fx_channels
 from ..predictor.setup import PredictorSetup
 from .intervals import reported_covariance, reported_uncertainty
+from .othersession import session_facts
 
 __all__ = ["calibrated_model", "frame_free_run", "run_feed"]
 
@@ -85,7 +86,7 @@ def calibrated_model(base, ext, effects, output_filter, source: dict, groups=Non
     missing = [c.label for c in effects.candidates if not c.spec]
     if missing:
         return None, f"effects without a serialisable spec (custom candidates): {', '.join(missing)}"
-    session = [c.label for c in effects.candidates if family(c.spec.get("kind")).session_average]
+    session = session_facts(effects)
     left = (f"; left out: {', '.join(session)} (a fact of the recorded session, centred on TRAIN's runs: the model "
             "predicts the session's average)") if session else ""
     recs = [IdentifiedEffect(c.family, c.label, dict(c.spec), tuple(c.names), tuple(c.units),
