@@ -42,13 +42,14 @@ def clock_readers(effects) -> list[str]:
     run's value) and are not facts of the session: on a TEST of another session they read TEST's own times as if
     they were TRAIN's (a warm-up since the session's start repeats in a new session, a wear over the rig's life
     does not)."""
+    facts = set(session_facts(effects))
     out = []
     for c in effects.candidates:
         try:
             reads = bool(c.spec) and bool(fx.needs(c.spec) & SESSION_SIGNALS)
         except fx.EffectSpecError:
             reads = False
-        if reads and not family(c.spec.get("kind")).session_average:
+        if reads and c.label not in facts:
             out.append(c.label)
     return out
 

@@ -140,8 +140,9 @@ class Diagnosis(_Record):
     (:func:`l1b2.closeloop.ranges.unseen_test_levels`); ``channel_ranges`` per logged channel an added effect
     reads, the share of TEST's samples and runs outside TRAIN's range of it
     (:func:`l1b2.closeloop.ranges.channel_ranges`, the report's line: :func:`channel_range_line`).
-    ``test_session``: whether TRAIN and TEST are one session on the clock and the added effects that predict
-    TRAIN's session average on a TEST of another session (:func:`l1b2.closeloop.othersession.record`).
+    ``test_session``: whether TRAIN and TEST are one session on the clock, the added effects that predict
+    TRAIN's session average on a TEST of another session and those that read its own times as the session clock
+    (:func:`l1b2.closeloop.othersession.record`).
     ``named_checks``: every named pick of a round from the Eq. 29 baseline, cross-validated again from the
     pure-slip family (:mod:`l1b2.closeloop.crosscheck`), with its figures and outcome; every named pick read as
     physics also carries ``identification``, the joint Wald test of its parameters against zero under the
@@ -326,7 +327,7 @@ def other_session_line(rec: Mapping | None) -> str:
     """One line on a TEST of another session whose model left effects at TRAIN's session average or reads TEST's
     own clock (a ``diagnosis.test_session`` record, :func:`l1b2.closeloop.othersession.record`); empty
     otherwise."""
-    if not rec or rec.get("one_session", True) or not (rec.get("session_average") or rec.get("own_clock")):
+    if not rec or rec.get("one_session", True):
         return ""
     parts = []
     if rec.get("session_average"):
@@ -336,7 +337,8 @@ def other_session_line(rec: Mapping | None) -> str:
     if rec.get("own_clock"):
         parts.append(", ".join(f"`{x}`" for x in rec["own_clock"]) + " read TEST's own times as TRAIN's session "
                      "clock (right for a course since the session's start, not for one over the rig's life)")
-    return "TEST's runs overlap TRAIN's in time (TEST was recorded on a clock of its own): " + "; ".join(parts)
+    return ("TEST's runs overlap TRAIN's in time (TEST was recorded on a clock of its own): " + "; ".join(parts)
+            if parts else "")
 
 
 def undetermined_line(parameters: Mapping) -> str:
