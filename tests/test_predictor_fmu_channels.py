@@ -393,3 +393,27 @@ def test_a_logged_setting_with_sensor_noise_is_exported_when_its_samples_barely_
     spec_v = {"kind": "run_level", "channel": "voltage_V", "transform": "none", "mean": 300.0, "sd": 20.0,
               "run_spread": 5.0, "run_feed": 0.0}
     assert ch.export_problem(spec_v).startswith("not constant within runs: voltage_V")
+
+
+def test_a_model_that_also_reads_the_session_clock_gets_no_run_feed_and_is_not_exported():
+    # reference: run_feed evaluates the model's free run, which has no input for the session clock; with an effect
+    # of time_s beside a noisy logged setting the model cannot be exported whatever the setting's feed, so the specs
+    # come back unchanged (before: the free run raised for the missing run:time_s signal) and the export names it
+    from l1b2.closeloop.calibrated import run_feed, with_run_feeds
+    base, refit = _setups()
+    df = _frame(pressure_noise_bar=0.01)
+    noisy = _effect(_hypotheses(df)["pressure_run"], (0.3, -0.2, 0.5))
+    sigs = [{**sg, "mean": float(np.mean(sg["values"])), "sd": float(np.std(sg["values"]))}
+            for sg in run_signals(df, channels_of(df)) if sg["channel"] == "time_s"]
+    clock = _effect(fx.family("run_level").hypotheses(sigs)[0], (0.1, 0.0, 0.0))
+
+    def build(recs):
+        return ExtendedPredictor(base, refit, tuple(recs), None, {"train": "synthetic"})
+    both = [noisy, clock]
+    assert with_run_feeds(both, build, df) == both
+    assert ch.export_problem(clock.spec) and ch.export_problem(noisy.spec)
+    # the logged setting alone gets its feed, the value run_feed gives
+    fed = with_run_feeds([noisy], build, df)
+    assert fed[0].spec["run_feed"] == pytest.approx(run_feed(build([noisy]), df, "line_pressure_bar"), rel=1e-12)
+    assert ch.export_problem(fed[0].spec) is None
+    assert with_run_feeds([noisy], build, None) == [noisy]

@@ -27,7 +27,7 @@ from ..predictor.setup import PredictorSetup
 from .intervals import reported_covariance, reported_uncertainty
 from .othersession import session_facts
 
-__all__ = ["calibrated_model", "frame_free_run", "run_feed"]
+__all__ = ["calibrated_model", "frame_free_run", "run_feed", "with_run_feeds"]
 
 
 def frame_free_run(model: ExtendedPredictor, df: pd.DataFrame, channels: dict | None = None) -> np.ndarray:
@@ -60,6 +60,22 @@ def _spread_columns(spec) -> list[str]:
     (:func:`~l1b2.predictor.effects.channels.run_spread_excess`)."""
     return [col for col, spread, _ in fx_channels.run_spread_excess(spec)
             if np.isfinite(spread) and col not in fx_channels.INPUT_COLUMNS and col != fx_channels.SESSION_TIME]
+
+
+def with_run_feeds(recs: list, build, df: pd.DataFrame | None) -> list:
+    """``recs`` (:class:`IdentifiedEffect`) with ``run_feed`` in the spec of every run-level effect of a logged
+    setting that TRAIN's runs did not hold constant (:func:`run_feed` of the model ``build(recs)`` on TRAIN ``df``,
+    the largest over its columns). Unchanged without ``df`` or a column of those, and when another effect cannot be
+    exported whatever its feed (an effect of the session clock): the model is then not exported, and its free run
+    cannot be evaluated without the signals such an effect reads."""
+    spread = {i: cols for i, r in enumerate(recs) if (cols := _spread_columns(r.spec))}
+    if (not spread or df is None or not all(c in df.columns for cols in spread.values() for c in cols)
+            or any(fx_channels.export_problem(r.spec) for i, r in enumerate(recs) if i not in spread)):
+        return recs
+    model = build(recs)
+    share = {c: run_feed(model, df, c) for c in sorted({c for cols in spread.values() for c in cols})}
+    return [replace(r, spec={**r.spec, "run_feed": max(share[c] for c in spread[i])}) if i in spread else r
+            for i, r in enumerate(recs)]
 
 
 def calibrated_model(base, ext, effects, output_filter, source: dict, groups=None, speed_gain=None, df=None):
@@ -101,12 +117,7 @@ def calibrated_model(base, ext, effects, output_filter, source: dict, groups=Non
     def build(effects_):
         return ExtendedPredictor(base_setup, ext_setup, tuple(effects_), filt, dict(source),
                                  None if speed_gain is None else speed_gain.to_dict())
-    spread = {i: cols for i, r in enumerate(recs) if (cols := _spread_columns(r.spec))}
-    if spread and df is not None and all(c in df.columns for cols in spread.values() for c in cols):
-        model = build(recs)
-        share = {c: run_feed(model, df, c) for c in sorted({c for cols in spread.values() for c in cols})}
-        for i, cols in spread.items():
-            recs[i] = replace(recs[i], spec={**recs[i].spec, "run_feed": max(share[c] for c in cols)})
+    recs = with_run_feeds(recs, build, df)
     logged = [f"{r.label} ({why})" for r in recs if (why := fx_channels.export_problem(r.spec))]
     if logged:
         return None, f"effects Predictor.fmu cannot evaluate as identified: {', '.join(logged)}" + left
