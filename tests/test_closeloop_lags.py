@@ -35,6 +35,18 @@ def _frame(values, t0=0.0, run0=1, n=3, period=2.0):
     return pd.DataFrame(rows)
 
 
+def test_a_test_on_a_clock_of_its_own_starts_its_lags_at_its_own_first_setting():
+    from l1b2.closeloop.lags import TAU_RUNS, lowpass, with_lagged_channels
+    train = _frame([1.0, 2.0, 4.0, 2.0, 0.0, 4.0, 2.0, 4.0, 0.0, 2.0, 0.0, 4.0])
+    test = _frame([8.0, 0.0, 6.0, 6.0], t0=0.1, run0=100)          # overlaps TRAIN in time: two sessions
+    tr, te, rec = with_lagged_channels(train, test)
+    assert not rec[0]["one_session"] and rec[0]["start"] == [1.0, 8.0]
+    for n, tau in zip(TAU_RUNS, rec[0]["tau_s"]):
+        np.testing.assert_allclose(te[f"heater_lag{n}r"], lowpass(test["time_s"], test["heater"], tau))
+        np.testing.assert_allclose(tr[f"heater_lag{n}r"], lowpass(train["time_s"], train["heater"], tau))
+        assert te[f"heater_lag{n}r"].iloc[0] == 8.0 and tr[f"heater_lag{n}r"].iloc[0] == 1.0
+
+
 def test_a_run_setting_changes_more_often_than_a_step_channel_may():
     from l1b2.closeloop.events import run_table
     from l1b2.closeloop.lags import is_run_setting
@@ -51,6 +63,7 @@ def test_lags_of_one_session_continue_from_train_into_test():
     train, test = whole.iloc[:27].reset_index(drop=True), whole.iloc[27:].reset_index(drop=True)
     tr, te, rec = with_lagged_channels(train, test)
     assert [r["channel"] for r in rec] == ["heater"]      # the stepped column is a step channel, not lagged
+    assert rec[0]["start"] == [0.0]                         # one session: the first run's setting
     for n, tau in zip(TAU_RUNS, rec[0]["tau_s"]):
         assert tau == pytest.approx(2.0 * n)               # n median run periods (start to start 2 s)
         want = lowpass(whole["time_s"], whole["heater"], tau)

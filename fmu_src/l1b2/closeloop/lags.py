@@ -116,8 +116,9 @@ def with_lagged_channels(train: pd.DataFrame, test: pd.DataFrame | None = None, 
                          sess: Session | None = None):
     """``(train, test, record)``: copies of the frames with the lags of every run setting of ``train`` appended, and
     the step of each that is a stored input (``test`` None stays None), and ``record`` ``[{"channel", "lags",
-    "tau_s", "one_session", "step", "step_from"}]`` (``step`` the step's column or None, ``step_from`` the state
-    before the session it starts from or None).
+    "tau_s", "one_session", "start", "step", "step_from"}]`` (``start`` the lags' value at the first sample of each
+    session, TRAIN's first: the session's first setting, which a host computing the lags starts from; ``step``
+    the step's column or None, ``step_from`` the state before the session it starts from or None).
 
     ``sess``: the frames' :func:`~l1b2.closeloop.events.session` when the caller has it (default: computed here).
     The frames are returned unchanged (not copied) when TRAIN has no run setting.
@@ -132,11 +133,12 @@ def with_lagged_channels(train: pd.DataFrame, test: pd.DataFrame | None = None, 
     taus = [n * period for n in TAU_RUNS]
     record = []
     for name in names:
-        frames = [df for df in (train, test) if df is not None and name in df.columns]
+        frames, starts = [df for df in (train, test) if df is not None and name in df.columns], []
         for group in [frames] if merged else [[df] for df in frames]:
             t = np.concatenate([df[dataio.TIME].to_numpy(float) for df in group])
             c = np.concatenate([df[name].to_numpy(float) for df in group])
             order = np.argsort(t, kind="stable")
+            starts.append(float(c[order][0]) if len(c) else float("nan"))
             for n, tau in zip(TAU_RUNS, taus):
                 y = np.empty_like(c)
                 y[order] = lowpass(t[order], c[order], tau)
@@ -147,7 +149,7 @@ def with_lagged_channels(train: pd.DataFrame, test: pd.DataFrame | None = None, 
             if name in BEFORE_SESSION:
                 _add_steps(group, name)
         record.append({"channel": name, "lags": [name + lag_suffix(n) for n in TAU_RUNS],
-                       "tau_s": [float(x) for x in taus], "one_session": merged,
+                       "tau_s": [float(x) for x in taus], "one_session": merged, "start": starts,
                        "step": name + STEP_SUFFIX if name in BEFORE_SESSION else None,
                        "step_from": BEFORE_SESSION.get(name)})
     return train, test, record
