@@ -138,7 +138,7 @@ def with_lagged_channels(train: pd.DataFrame, test: pd.DataFrame | None = None, 
             t = np.concatenate([df[dataio.TIME].to_numpy(float) for df in group])
             c = np.concatenate([df[name].to_numpy(float) for df in group])
             order = np.argsort(t, kind="stable")
-            starts.append(float(c[order][0]) if len(c) else float("nan"))
+            starts.append(float(c[order][0]))
             for n, tau in zip(TAU_RUNS, taus):
                 y = np.empty_like(c)
                 y[order] = lowpass(t[order], c[order], tau)
