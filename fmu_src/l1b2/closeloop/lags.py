@@ -138,10 +138,11 @@ def with_lagged_channels(train: pd.DataFrame, test: pd.DataFrame | None = None, 
             t = np.concatenate([df[dataio.TIME].to_numpy(float) for df in group])
             c = np.concatenate([df[name].to_numpy(float) for df in group])
             order = np.argsort(t, kind="stable")
-            starts.append(float(c[order][0]))
+            t_o, c_o = t[order], c[order]
+            starts.append(float(c_o[0]))
             for n, tau in zip(TAU_RUNS, taus):
                 y = np.empty_like(c)
-                y[order] = lowpass(t[order], c[order], tau)
+                y[order] = lowpass(t_o, c_o, tau)
                 k = 0
                 for df in group:
                     df[name + lag_suffix(n)] = y[k:k + len(df)]
