@@ -58,8 +58,9 @@ def _ctx(base) -> Context:
 
 
 def _hypotheses(df) -> dict:
-    """The loop's hypotheses on the frame: the run-level ones of ``line_pressure_bar`` and ``supply_V`` (its run
-    values' mean and sd, TRAIN's within-run spread) and the sample-level force-factor one of ``supply_V``."""
+    """The loop's hypotheses on the frame: the run-level ones of ``line_pressure_bar``, ``supply_V`` and the session
+    clock ``time_s`` (its run values' mean and sd, TRAIN's within-run spread) and the sample-level force-factor one
+    of ``supply_V``."""
     sigs = [{**sg, "mean": float(np.mean(sg["values"])), "sd": float(np.std(sg["values"]))}
             for sg in run_signals(df, channels_of(df)) if sg.get("transform") == "none"]
     run = {h.spec["channel"]: h for h in fx.family("run_level").hypotheses(sigs)}
@@ -67,7 +68,8 @@ def _hypotheses(df) -> dict:
     sample = next(h for h in fx.family("channel").grid(summary)
                   if h.spec["channel"] == "supply_V" and h.spec["level"] == "sample"
                   and h.spec["form"] == "force_factor" and h.spec.get("shape", "linear") == "linear")
-    return {"pressure_run": run["line_pressure_bar"], "supply_run": run["supply_V"], "supply_sample": sample}
+    return {"pressure_run": run["line_pressure_bar"], "supply_run": run["supply_V"], "clock_run": run["time_s"],
+            "supply_sample": sample}
 
 
 def _effect(h, phi) -> IdentifiedEffect:
@@ -402,10 +404,9 @@ def test_a_model_that_also_reads_the_session_clock_gets_no_run_feed_and_is_not_e
     from l1b2.closeloop.calibrated import run_feed, with_run_feeds
     base, refit = _setups()
     df = _frame(pressure_noise_bar=0.01)
-    noisy = _effect(_hypotheses(df)["pressure_run"], (0.3, -0.2, 0.5))
-    sigs = [{**sg, "mean": float(np.mean(sg["values"])), "sd": float(np.std(sg["values"]))}
-            for sg in run_signals(df, channels_of(df)) if sg["channel"] == "time_s"]
-    clock = _effect(fx.family("run_level").hypotheses(sigs)[0], (0.1, 0.0, 0.0))
+    hyp = _hypotheses(df)
+    noisy = _effect(hyp["pressure_run"], (0.3, -0.2, 0.5))
+    clock = _effect(hyp["clock_run"], (0.1, 0.0, 0.0))
 
     def build(recs):
         return ExtendedPredictor(base, refit, tuple(recs), None, {"train": "synthetic"})
