@@ -53,6 +53,7 @@ from ..predictor import effects as fx
 from ..predictor import model as pr
 from ..units import history_source
 from . import blocks as blk, residuals as res
+from .auxiliary import derived_columns
 from .reml import REMLFit, design_rows, reml
 
 #: the columns a reduced run-level form leaves out, in the order :func:`offer` tries them: the drive gain and the
@@ -256,14 +257,21 @@ def run_signals(df: pd.DataFrame, channels) -> list[dict]:
             # is half the run's duration, a response of the speed, and so is an accumulating reading's
         out.append({"channel": ch["name"], "transform": "none", "values": first[ch["name"]].mean().to_numpy(float),
                     "run_spread": fx.channels.run_spread(df[ch["name"]], df[dataio.RUN])})
-    out += category_signals(df, channels)
     d = first[dataio.DIRECTION].first().to_numpy(float)
+    derived = set(derived_columns(df))
+    out += [{**sg, "transform": "drive", "values": sg["values"] * d} for sg in list(out)
+            if sg["channel"] not in derived and _kind_of(channels, sg["channel"]) == "logged"]
+    out += category_signals(df, channels)
     for col, tr in fx.channels.INPUT_SIGNALS:
         values = fx.channels.transformed(first[col].mean().to_numpy(float), d, tr)
         samples = fx.channels.transformed(df[col].to_numpy(float), df[dataio.DIRECTION].to_numpy(float), tr)
         out.append({"channel": col, "transform": tr, "values": values,
                     "run_spread": fx.channels.run_spread(samples, df[dataio.RUN])})
     return [s for s in out if np.all(np.isfinite(s["values"])) and np.std(s["values"]) > 0]
+
+
+def _kind_of(channels, name: str) -> str | None:
+    return next((ch.get("kind") for ch in channels if ch["name"] == name), None)
 
 
 def _category() -> fx.Effect:
