@@ -16,6 +16,7 @@ from l1b2.cli import build_parser
 from l1b2.closeloop import acceptance as acc
 from l1b2.closeloop import folds as fo
 from l1b2.closeloop import runlevel as rl
+from l1b2.closeloop.auxiliary import DERIVED_ATTR
 from l1b2.closeloop.candidates import CandidateForce, candidate, channels_of
 from l1b2.closeloop.loop import CloseLoop, prefer
 from l1b2.predictor import effects as fx
@@ -296,6 +297,66 @@ def test_a_channels_copies_do_not_dilute_another_signals_evidence_by_their_numbe
     e = {x.channel: x for x in rl.signal_evidence(dev, sigs, alpha=0.01, k=4, seed=0)}["aux"]
     assert 0.01 / 6 < e.p_value < 0.01 / m_eff and e.cv_gain > 0   # between the two levels: the count decides
     assert e.significant
+
+
+def _runs_frame(directions, seed=6):
+    """Runs of 5 samples with a logged per-run channel ``aux``, a column the loop derived from it (``aux_lag3r``,
+    named in the frame's derived columns) and the session clock; the runs' directions as given."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for r, d in enumerate(directions):
+        a = rng.uniform(-20.0, 20.0)
+        rows.append(pd.DataFrame({"run": r, "time_s": 2.0 * r + 0.01 * np.arange(5),
+                                  "position_m": d * np.linspace(-0.01, 0.01, 5), "voltage_V": 220.0 + 10.0 * (r % 3),
+                                  "direction": float(d), "load_kg": 0.05 * ((r // 2) % 3 - 1), "speed_m_s": 0.1 * d,
+                                  "aux": a + 0.01 * rng.normal(size=5), "aux_lag3r": 0.5 * a + r}))
+    df = pd.concat(rows, ignore_index=True)
+    df.attrs[DERIVED_ATTR] = ("aux_lag3r",)
+    return df
+
+
+def test_a_logged_channels_run_mean_times_the_direction_is_a_signal_of_its_own_a_derived_ones_is_not():
+    d = np.array([1, -1, -1, 1, 1, -1, 1, -1, -1, 1, -1, 1], float)
+    df = _runs_frame(d)
+    chans = channels_of(df)
+    assert {c["name"]: c["kind"] for c in chans if c["name"] in ("aux", "aux_lag3r")} == {"aux": "logged",
+                                                                                       "aux_lag3r": "logged"}
+    sigs = {(s["channel"], s["transform"]): s for s in rl.run_signals(df, chans)}
+    mean = df.groupby("run")["aux"].mean().to_numpy()
+    np.testing.assert_allclose(sigs[("aux", "none")]["values"], mean)
+    assert sigs[("aux", "drive")]["centre"] == pytest.approx(mean.mean())
+    np.testing.assert_allclose(sigs[("aux", "drive")]["values"], d * (mean - mean.mean()))   # d*aux, centred
+    assert "centre" not in sigs[("load_kg", "drive")]
+    assert sigs[("aux", "drive")]["run_spread"] == sigs[("aux", "none")]["run_spread"]
+    assert ("aux_lag3r", "none") in sigs and ("aux_lag3r", "drive") not in sigs   # a history the loop derived
+    assert ("time_s", "drive") not in sigs                                         # the protocol's clock
+    assert ("load_kg", "drive") in sigs                                            # the plan's input, as before
+    one_way = {(s["channel"], s["transform"]) for s in rl.run_signals(_runs_frame(np.ones(12)), chans)}
+    assert ("aux", "none") in one_way and ("aux", "drive") not in one_way        # d*aux would copy aux
+    h = fx.family("run_level").hypotheses([{**sigs[("aux", "drive")], "mean": 0.5, "sd": 2.0}])[0]
+    assert h.family == "run_level_d*aux" and h.regressor == "aux" and h.spec["centre"] == pytest.approx(mean.mean())
+    # the hypothesis's features: z = (d (run mean - centre) - 0.5) / 2 in the run-level form
+    V0, dd, load = np.array([300.0, 220.0]), np.array([1.0, -1.0]), np.array([0.05, -0.05])
+    x = {"V0": V0, "d": dd, "load": load, "run:aux": np.array([4.0, -3.0])}
+    z = (dd * (x["run:aux"] - h.spec["centre"]) - 0.5) / 2.0
+    np.testing.assert_allclose(fx.effect_features(h.spec, x),
+                               np.column_stack([V0 / 300.0 * z, z, 9.81 * dd * load * z]))
+
+
+def test_a_gain_that_follows_the_channel_times_the_direction_shows_in_that_signal_alone():
+    dev, z, rng = _deviations(slope=(0.04, 0.0))
+    d = np.where(rng.uniform(size=len(z)) < 0.5, -1.0, 1.0)
+    dev.theta[:, 0] = 1.0 + (dev.theta[:, 0] - 1.0 - 0.04 * z) + 0.04 * d * z   # the gain follows d z, not z
+    c = 3.0 + 2.0 * z
+    sigs = [{"channel": "aux", "transform": "none", "values": c},
+            {"channel": "aux", "transform": "drive", "values": d * (c - c.mean()), "centre": c.mean()},
+            {"channel": "direction", "transform": "none", "values": d}]
+    ev = {(e.channel, e.transform): e for e in rl.signal_evidence(dev, sigs, alpha=0.01, k=4, seed=0)}
+    assert ev[("aux", "drive")].significant and ev[("aux", "drive")].p_value < 1e-6
+    assert not ev[("aux", "none")].significant and not ev[("direction", "none")].significant
+    offered = rl.offered_signal(ev[("aux", "drive")])          # what the loop offers to the run-level family
+    assert offered["centre"] == pytest.approx(c.mean()) and offered["transform"] == "drive"
+    assert "centre" not in rl.offered_signal(ev[("aux", "none")])
 
 
 def _gain_by_hand(theta, cov, z, folds):

@@ -32,7 +32,11 @@ estimates and explains:
    every other candidate.
 
 Signals (:func:`run_signals`): each candidate channel's run mean (the logged columns, the session clock
-``time_s``, which also orders the runs), V0, the drive-coordinate load ``d m``, its size and the direction. When
+``time_s``, which also orders the runs), V0, the drive-coordinate load ``d m``, its size and the direction, and each
+logged column's run mean, centred on its mean over the runs ``c0``, times the run's direction, ``d (c - c0)``
+(``d*<column>``): a condition that speeds one direction and slows the other (a coupling asymmetry set by a
+gradient, a tilt, a field) leaves the run's gain following ``d (c - c0)``, which neither ``c`` nor ``d`` alone
+carries, as ``d m`` is the load's (centred, the product holds no copy of the direction's own signal). When
 none of them has Wald evidence (no p-value below the Bonferroni level, whatever its cross-validated gain), a cut of
 the session into contiguous blocks (:func:`block_signal`, :mod:`l1b2.closeloop.blocks`: its p-value corrected for
 the search) is tested as one more signal and offered as a :class:`~l1b2.predictor.effects.blocks.SessionBlocks`
@@ -220,6 +224,8 @@ class SignalEvidence:
     #: blocks' shares of the runs but the last, ``coef`` as a category's, ``p_value`` times its search count);
     #: None: no segmentation
     edges: tuple | None = None
+    #: the value a ``drive`` signal of a logged channel is centred on before the direction multiplies it
+    centre: float = 0.0
 
     def to_dict(self) -> dict:
         out = {"signal": self.label, "regressor": self.regressor, "p_value": self.p_value, "cv_gain": self.cv_gain,
@@ -243,7 +249,10 @@ class SignalEvidence:
 def run_signals(df: pd.DataFrame, channels) -> list[dict]:
     """The run-level signals of a frame: each candidate channel's run mean (not a kind of
     :data:`~l1b2.predictor.effects.channels.NO_RUN_LEVEL_KINDS`, not one read along the stroke or following the
-    runs' lengths, not constant ones)
+    runs' lengths, not constant ones); for a logged channel that the loop did not derive
+    (:func:`l1b2.closeloop.auxiliary.derived_columns`) its run mean less its mean over the runs (``centre``) times
+    the run's direction too (transform ``drive``, ``d*<column>``), when the runs go both ways; the categorical
+    signals;
     and the inputs of
     :data:`~l1b2.predictor.effects.channels.INPUT_SIGNALS`; ``{"channel", "transform", "values", "run_spread"}`` with
     one value per run (in run order) and the largest deviation of a sample's value from its run's
@@ -259,8 +268,9 @@ def run_signals(df: pd.DataFrame, channels) -> list[dict]:
                     "run_spread": fx.channels.run_spread(df[ch["name"]], df[dataio.RUN])})
     d = first[dataio.DIRECTION].first().to_numpy(float)
     derived = set(derived_columns(df))
-    out += [{**sg, "transform": "drive", "values": sg["values"] * d} for sg in list(out)
-            if sg["channel"] not in derived and _kind_of(channels, sg["channel"]) == "logged"]
+    out += [{**sg, "transform": "drive", "centre": float(np.mean(sg["values"])),
+             "values": (sg["values"] - np.mean(sg["values"])) * d} for sg in list(out)
+            if np.ptp(d) > 0 and sg["channel"] not in derived and _kind_of(channels, sg["channel"]) == "logged"]
     out += category_signals(df, channels)
     for col, tr in fx.channels.INPUT_SIGNALS:
         values = fx.channels.transformed(first[col].mean().to_numpy(float), d, tr)
@@ -271,6 +281,7 @@ def run_signals(df: pd.DataFrame, channels) -> list[dict]:
 
 
 def _kind_of(channels, name: str) -> str | None:
+    """The ``kind`` of the candidate channel ``name`` (:func:`~l1b2.closeloop.candidates.channels_of`), else None."""
     return next((ch.get("kind") for ch in channels if ch["name"] == name), None)
 
 
@@ -479,7 +490,7 @@ def signal_evidence(dev: RunDeviations, signals_, *, alpha: float, k: int, seed:
                                   blocked, per_run, sg.get("run_spread"),
                                   levels=tuple(sg["levels"]) if cat else None,
                                   shares=tuple(sg["shares"]) if cat or seg else None, dof=dof,
-                                  edges=tuple(sg["edges"]) if seg else None))
+                                  edges=tuple(sg["edges"]) if seg else None, centre=float(sg.get("centre", 0.0))))
         zs.append(z)
     plan = {col for col, _ in fx.channels.INPUT_SIGNALS}
     dominated = dominated_signals(dev, [e.significant for e in out], zs, level,
@@ -719,13 +730,21 @@ def candidates(analysis: RunLevelAnalysis, ctx) -> list:
             full += [candidate(ctx, h) for h in _blocks().hypotheses([{"edges": e.edges, "shares": e.shares}])]
             continue
         fam = fx.family("run_level") if e.levels is None else _category()
-        sg = {"channel": e.channel, "transform": e.transform, "mean": e.mean, "sd": e.sd,
-              **({} if e.run_spread is None else {"run_spread": float(e.run_spread)}),
-              **({} if e.levels is None else {"levels": e.levels, "shares": e.shares})}
+        sg = offered_signal(e)
         full += [candidate(ctx, h) for h in fam.hypotheses([sg])]
         if e.levels is None:
             reduced += [candidate(ctx, h) for h in fam.hypotheses([{**sg, "drop": d} for d in REDUCED])]
     return full + reduced
+
+
+def offered_signal(e: SignalEvidence) -> dict:
+    """The signal a value or categorical signal's evidence ``e`` offers to its family's ``hypotheses``: its channel,
+    transform, mean and sd, with its ``run_spread``, ``centre`` and a category's ``levels`` and ``shares`` when it has
+    them."""
+    return {"channel": e.channel, "transform": e.transform, "mean": e.mean, "sd": e.sd,
+            **({} if e.run_spread is None else {"run_spread": float(e.run_spread)}),
+            **({"centre": e.centre} if e.centre else {}),
+            **({} if e.levels is None else {"levels": e.levels, "shares": e.shares})}
 
 
 def is_run_level(c) -> bool:

@@ -698,10 +698,11 @@ def transformed(c, d, transform: str) -> np.ndarray:
     raise EffectSpecError(f"run-level transform {transform!r} is not one of {', '.join(TRANSFORMS)}")
 
 
-def run_signal(x, column: str, transform: str) -> np.ndarray:
-    """Each sample's run-level value of a signal: the run's mean of ``column``, times ``d`` (``drive``) or its size."""
-    return transformed(signal(x, signal_key(column, "run")), signal(x, "d") if transform == "drive" else None,
-                       transform)
+def run_signal(x, column: str, transform: str, centre: float = 0.0) -> np.ndarray:
+    """Each sample's run-level value of a signal: the run's mean of ``column`` less ``centre``, times ``d``
+    (``drive``) or its size."""
+    return transformed(signal(x, signal_key(column, "run")) - centre,
+                       signal(x, "d") if transform == "drive" else None, transform)
 
 
 @register
@@ -709,8 +710,9 @@ class RunLevel(Effect):
     """``run_level``: a run's deviation from the model, a force gain and an offset, explained by a run-level signal.
 
     Each run's own deviation from the current model is estimated as a gain of the drive force and an offset
-    (:mod:`l1b2.closeloop.runlevel`); a run-level signal ``c`` (a channel's run mean, the session clock's run mean,
-    V0, the drive-coordinate load, its size, the direction) that explains them enters as
+    (:mod:`l1b2.closeloop.runlevel`); a run-level signal ``c`` (a channel's run mean, a logged channel's centred run
+    mean times the direction, the session clock's run mean, V0, the drive-coordinate load, its size, the direction)
+    that explains them enters as
     ``dF = z (a V0/V_ref + b + c g d m)`` with ``z = (c - mean) / sd`` (TRAIN's run values), ``g d m`` the load's
     weight in drive coordinates: it scales the drive force, adds a force and scales the load's force (a signal
     that changes the contact changes the load's slope too); constant along the stroke, three parameters
@@ -740,7 +742,7 @@ class RunLevel(Effect):
         return super().needs(spec) | {signal_key(str(spec.get("channel")), "run")}
 
     def features(self, spec, x):
-        c = run_signal(x, str(spec.get("channel")), str(spec.get("transform", "none")))
+        c = run_signal(x, str(spec.get("channel")), str(spec.get("transform", "none")), float(spec.get("centre", 0.0)))
         sd = num(spec, "sd")
         if not sd > 0:
             raise EffectSpecError(f"run-level signal {spec.get('channel')!r}: standard deviation {sd} is not positive")
@@ -752,6 +754,8 @@ class RunLevel(Effect):
 
     def hypotheses(self, signals_: list) -> list:
         """One hypothesis per run-level signal ``{"channel", "transform", "mean", "sd"}`` (``sd`` > 0; with
+        ``centre``, the value the run mean is centred on before its transform, a logged channel's ``drive`` signal
+        ``d (c - centre)``: :func:`run_signal`; with
         ``run_spread``, TRAIN's largest deviation from the run's value, when known: the export checks it; with
         ``drop``, one of :data:`RUN_LEVEL_COLUMNS`, the reduced form without that column, shape ``run, no <drop>``)."""
         out = []
@@ -759,6 +763,7 @@ class RunLevel(Effect):
             col, tr = sg["channel"], sg.get("transform", "none")
             label, stem = signal_label(col, tr), parameter_stem(col, tr)
             spec = {"channel": col, "transform": tr, "mean": float(sg["mean"]), "sd": float(sg["sd"]),
+                    **({"centre": float(sg["centre"])} if sg.get("centre") else {}),
                     **run_spread_entry(sg), **({"drop": sg["drop"]} if sg.get("drop") else {})}
             keep = kept_columns(spec)
             names = [f"{stem}_run_{n}" for n in RUN_LEVEL_COLUMNS]
