@@ -79,6 +79,16 @@ def test_channel_ranges_records_every_signal_an_added_effect_reads_with_the_shar
     assert ranges.channel_ranges(ADDED, TRAIN, None) == []
 
 
+def test_a_logged_channels_signal_times_the_direction_is_ranged_about_its_centre():
+    # d (run mean - 2): TRAIN's runs -1.5, 0.5, 0.5, -1.5 (tolerance 2 % of 2); TEST's -0.5, -2.0, +2.0: two runs
+    # outside (uncentred, d * run mean: TRAIN [-3.5, 2.5], TEST 1.5, -4.0, 0.0, one run)
+    [rec] = ranges.channel_ranges([_added("I", kind="run_level", channel="coil_A", transform="drive", centre=2.0,
+                                          mean=0.0, sd=1.0)], TRAIN, TEST)
+    assert rec["signal"] == "d*coil_A (run mean)" and rec["train"] == pytest.approx([-1.5, 0.5])
+    assert rec["test"] == pytest.approx([-2.0, 2.0])
+    assert rec["runs_outside"] == 2 and rec["samples_outside"] == pytest.approx(22 / 33)
+
+
 def test_the_report_prints_one_line_per_channel_outside_and_none_for_a_channel_inside():
     sample, run, drive, size = ranges.channel_ranges(ADDED, TRAIN, TEST)
     assert channel_range_line(sample) == (

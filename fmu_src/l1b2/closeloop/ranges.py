@@ -33,11 +33,11 @@ def unseen_test_levels(added, df: pd.DataFrame | None) -> dict:
     return out
 
 
-def _signal_values(df: pd.DataFrame, col: str, level: str, transform: str) -> np.ndarray:
-    """An effect's signal per sample of ``df``: the channel's value (``sample``) or its run's mean (``run``), under a
-    run-level ``transform`` (:func:`l1b2.predictor.effects.channels.transformed`)."""
+def _signal_values(df: pd.DataFrame, col: str, level: str, transform: str, centre: float = 0.0) -> np.ndarray:
+    """An effect's signal per sample of ``df``: the channel's value (``sample``) or its run's mean (``run``) less
+    ``centre``, under a run-level ``transform`` (:func:`l1b2.predictor.effects.channels.run_signal`)."""
     c = (df[col].to_numpy(float) if level == "sample"
-         else df.groupby(dataio.RUN, sort=False)[col].transform("mean").to_numpy(float))
+         else df.groupby(dataio.RUN, sort=False)[col].transform("mean").to_numpy(float)) - centre
     return fx.channels.transformed(c, df[dataio.DIRECTION].to_numpy(float) if transform == "drive" else None,
                                    transform)
 
@@ -61,11 +61,11 @@ def channel_ranges(added, dtr: pd.DataFrame, dte: pd.DataFrame | None) -> list:
             continue
         if col not in dtr.columns or col not in dte.columns:
             continue
-        level = str(spec.get("level", "run"))
+        level, centre = str(spec.get("level", "run")), float(spec.get("centre", 0.0))
         key = (col, level, tr)
         if key not in out:
-            vals = values_outside(_signal_values(dtr, col, level, tr), _signal_values(dte, col, level, tr),
-                                  dte[dataio.RUN].to_numpy())
+            vals = values_outside(_signal_values(dtr, col, level, tr, centre),
+                                  _signal_values(dte, col, level, tr, centre), dte[dataio.RUN].to_numpy())
             name = fx.channels.signal_label(col, tr) + (" (run mean)" if level == "run" else "")
             out[key] = {"channel": col, "level": level, "transform": tr, "signal": name, "effects": {}, **vals}
         clipped = kind == "channel" and spec.get("shape", "linear") != "linear"
