@@ -62,14 +62,16 @@ def _hypotheses(df) -> dict:
     clock ``time_s`` (its run values' mean and sd, TRAIN's within-run spread) and the sample-level force-factor one
     of ``supply_V``."""
     sigs = [{**sg, "mean": float(np.mean(sg["values"])), "sd": float(np.std(sg["values"]))}
-            for sg in run_signals(df, channels_of(df)) if sg.get("transform") == "none"]
-    run = {h.spec["channel"]: h for h in fx.family("run_level").hypotheses(sigs)}
+            for sg in run_signals(df, channels_of(df)) if sg.get("transform") in ("none", "drive")]
+    hyps = fx.family("run_level").hypotheses(sigs)
+    run = {h.spec["channel"]: h for h in hyps if h.spec["transform"] == "none"}
+    drive = {h.spec["channel"]: h for h in hyps if h.spec["transform"] == "drive"}
     summary = fx.TrainingSummary(1.0, (T0, T0 + 1.5), (-0.02, 0.02), 300.0, {}, channels=channels_of(df))
     sample = next(h for h in fx.family("channel").grid(summary)
                   if h.spec["channel"] == "supply_V" and h.spec["level"] == "sample"
                   and h.spec["form"] == "force_factor" and h.spec.get("shape", "linear") == "linear")
     return {"pressure_run": run["line_pressure_bar"], "supply_run": run["supply_V"], "clock_run": run["time_s"],
-            "supply_sample": sample}
+            "supply_sample": sample, "pressure_drive": drive["line_pressure_bar"]}
 
 
 def _effect(h, phi) -> IdentifiedEffect:
@@ -321,7 +323,8 @@ def test_the_exported_fmu_driven_with_the_channel_inputs_reproduces_the_identifi
     hs = _hypotheses(df)
     ctx = _ctx(base)
     parts = []
-    for key, phi in (("pressure_run", (0.3, -0.2, 0.5)), ("supply_sample", (0.4,))):
+    for key, phi in (("pressure_run", (0.3, -0.2, 0.5)), ("supply_sample", (0.4,)),
+                     ("pressure_drive", (-0.2, 0.3, 0.1))):
         F = np.asarray(candidate(ctx, hs[key]).features(df))
         parts.append((key, np.asarray(phi) * 0.1 / np.sqrt(np.mean(F ** 2, axis=0)), F))
     force = sum(F @ phi for _, phi, F in parts)
@@ -341,7 +344,8 @@ def test_the_exported_fmu_driven_with_the_channel_inputs_reproduces_the_identifi
     recs = {r["name"]: r for r in man["channel_inputs"]}
     assert recs["line_pressure_bar"]["unit"] == "bar" and recs["supply_V"]["unit"] == "V"
     assert recs["line_pressure_bar"]["start"] == pytest.approx(np.mean([2.0, 2.6, 2.3]), rel=1e-12)
-    assert recs["line_pressure_bar"]["effects"] == ["run_level_line_pressure_bar"]
+    assert recs["line_pressure_bar"]["effects"] == ["run_level_line_pressure_bar", "run_level_d*line_pressure_bar"]
+    assert hs["pressure_drive"].spec["centre"] == pytest.approx(np.mean([2.0, 2.6, 2.3]), rel=1e-12)
     assert man["native"]["Predictor"]["included"] is False
     assert "logged channel 'line_pressure_bar' through an input of its own" in man["native"]["Predictor"]["reason"]
     path = tmp_path / "out" / "fmus" / "Predictor.fmu"
