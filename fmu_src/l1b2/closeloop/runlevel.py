@@ -267,10 +267,10 @@ def run_signals(df: pd.DataFrame, channels) -> list[dict]:
         out.append({"channel": ch["name"], "transform": "none", "values": first[ch["name"]].mean().to_numpy(float),
                     "run_spread": fx.channels.run_spread(df[ch["name"]], df[dataio.RUN])})
     d = first[dataio.DIRECTION].first().to_numpy(float)
-    derived = set(derived_columns(df))
+    derived = set(derived_columns(df)) if np.ptp(d) > 0 else None    # None: every run goes one way, d*c copies c
     out += [{**sg, "transform": "drive", "centre": float(np.mean(sg["values"])),
              "values": (sg["values"] - np.mean(sg["values"])) * d} for sg in list(out)
-            if np.ptp(d) > 0 and sg["channel"] not in derived and _kind_of(channels, sg["channel"]) == "logged"]
+            if derived is not None and sg["channel"] not in derived and _kind_of(channels, sg["channel"]) == "logged"]
     out += category_signals(df, channels)
     for col, tr in fx.channels.INPUT_SIGNALS:
         values = fx.channels.transformed(first[col].mean().to_numpy(float), d, tr)
