@@ -267,10 +267,10 @@ def run_signals(df: pd.DataFrame, channels) -> list[dict]:
         out.append({"channel": ch["name"], "transform": "none", "values": first[ch["name"]].mean().to_numpy(float),
                     "run_spread": fx.channels.run_spread(df[ch["name"]], df[dataio.RUN])})
     d = first[dataio.DIRECTION].first().to_numpy(float)
-    derived = set(derived_columns(df)) if np.ptp(d) > 0 else None    # None: every run goes one way, d*c copies c
-    out += [{**sg, "transform": "drive", "centre": float(np.mean(sg["values"])),
-             "values": (sg["values"] - np.mean(sg["values"])) * d} for sg in list(out)
-            if derived is not None and sg["channel"] not in derived and _kind_of(channels, sg["channel"]) == "logged"]
+    if np.ptp(d) > 0:    # runs both ways (else d*c only copies c)
+        derived, kinds = set(derived_columns(df)), {ch["name"]: ch.get("kind") for ch in channels}
+        out += [_times_direction(sg, d) for sg in list(out)
+                if sg["channel"] not in derived and kinds.get(sg["channel"]) == "logged"]
     out += category_signals(df, channels)
     for col, tr in fx.channels.INPUT_SIGNALS:
         values = fx.channels.transformed(first[col].mean().to_numpy(float), d, tr)
@@ -280,9 +280,10 @@ def run_signals(df: pd.DataFrame, channels) -> list[dict]:
     return [s for s in out if np.all(np.isfinite(s["values"])) and np.std(s["values"]) > 0]
 
 
-def _kind_of(channels, name: str) -> str | None:
-    """The ``kind`` of the candidate channel ``name`` (:func:`~l1b2.closeloop.candidates.channels_of`), else None."""
-    return next((ch.get("kind") for ch in channels if ch["name"] == name), None)
+def _times_direction(sg: dict, d: np.ndarray) -> dict:
+    """A value signal's ``drive`` copy: its run values less their mean (``centre``), times the runs' direction."""
+    c0 = float(np.mean(sg["values"]))
+    return {**sg, "transform": "drive", "centre": c0, "values": (sg["values"] - c0) * d}
 
 
 def _category() -> fx.Effect:
