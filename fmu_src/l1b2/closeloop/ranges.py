@@ -34,12 +34,14 @@ def unseen_test_levels(added, df: pd.DataFrame | None) -> dict:
 
 
 def _signal_values(df: pd.DataFrame, col: str, level: str, transform: str, centre: float = 0.0) -> np.ndarray:
-    """An effect's signal per sample of ``df``: the channel's value (``sample``) or its run's mean (``run``) less
-    ``centre``, under a run-level ``transform`` (:func:`l1b2.predictor.effects.channels.run_signal`)."""
-    c = (df[col].to_numpy(float) if level == "sample"
-         else df.groupby(dataio.RUN, sort=False)[col].transform("mean").to_numpy(float)) - centre
-    return fx.channels.transformed(c, df[dataio.DIRECTION].to_numpy(float) if transform == "drive" else None,
-                                   transform)
+    """An effect's signal per sample of ``df``: the channel's value (``sample``), or the run-level signal the effect
+    reads (``run``: :func:`l1b2.predictor.effects.channels.run_signal` of the run's mean, ``transform`` and
+    ``centre``)."""
+    if level == "sample":
+        return df[col].to_numpy(float)
+    x = {fx.channels.signal_key(col, "run"): df.groupby(dataio.RUN, sort=False)[col].transform("mean"),
+         "d": df[dataio.DIRECTION]}
+    return fx.channels.run_signal(x, col, transform, centre)
 
 
 def channel_ranges(added, dtr: pd.DataFrame, dte: pd.DataFrame | None) -> list:
