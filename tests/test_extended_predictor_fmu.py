@@ -514,6 +514,16 @@ def test_run_level_kernels_equal_the_features_on_runs_that_hold_their_inputs(poo
             np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * max(1.0, np.max(np.abs(want))))
             assert r.family == h.family and len(r.names) == 2 and r.names == tuple(
                 n for k, n in enumerate(h.names) if k != j)
+    # a logged temperature's run mean centred on 29 degC times the direction (the loop's d*<column> signal)
+    [h] = fx.family("run_level").hypotheses([{"channel": dataio.TEMPERATURE, "transform": "drive", "centre": 29.0,
+                                              "mean": 0.1, "sd": 2.0, "run_spread": 0.0}])
+    phi = rng.normal(0.0, 1.0, 3)
+    z = (x["d"] * (x["T"] - 29.0) - 0.1) / 2.0
+    want = np.column_stack([x["V0"] / 300.0 * z, z, 9.81 * x["d"] * x["load"] * z]) @ phi
+    np.testing.assert_allclose(fx.effect_features(h.spec, x) @ phi, want, rtol=1e-13, atol=1e-13)
+    kind, q = ek.spec_scalars(h.spec)
+    got = np.array([ek.effect_force(kind, row.tolist(), q, phi.tolist()) for row in rows])
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * max(1.0, np.max(np.abs(want))))
     varied = dict(hyps[0].spec, run_spread=0.02 * hyps[0].spec["sd"])
     with pytest.raises(fx.EffectSpecError, match="not constant within runs"):
         ek.spec_scalars(varied)

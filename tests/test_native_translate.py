@@ -234,6 +234,9 @@ def _effect_specs():
               for c, tr, m, sd in (("voltage_V", "none", 280.0, 40.0), ("load_kg", "drive", 0.01, 0.2),
                                    ("load_kg", "abs", 0.15, 0.1), ("direction", "none", 0.0, 1.0),
                                    ("temperature_C", "none", 30.0, 3.0))]
+    # a logged temperature's run mean centred on its runs' mean, times the direction (the loop's d*<column>)
+    specs += [{"kind": "run_level", "channel": "temperature_C", "transform": "drive", "centre": 31.0, "mean": 0.2,
+               "sd": 3.0, "run_spread": 0.0}]
     # the reduced run-level forms, each without one of its three columns (two parameters)
     specs += [{"kind": "run_level", "channel": "load_kg", "transform": "drive", "mean": 0.01, "sd": 0.2,
                "run_spread": 0.0, "drop": d} for d in ("gain", "offset", "load")]

@@ -151,7 +151,8 @@ def _signal_scalars(spec) -> list[float]:
     if kind == "channel" and (spec.get("shape", "linear") != "linear" or spec.get("by")):
         return [float(SIGNAL_INDEX[sig])] + _channel_shape_scalars(spec, code, mean, sd)
     if kind == "run_level":
-        return [float(SIGNAL_INDEX[sig]), float(code), mean, sd, float(dropped_column(spec))]
+        return [float(SIGNAL_INDEX[sig]), float(code), mean, sd, float(dropped_column(spec)),
+                float(spec.get("centre", 0.0))]
     return [float(SIGNAL_INDEX[sig]), float(code), mean, sd]
 
 
@@ -426,9 +427,10 @@ def channel_force(x, q, phi):
 
 def run_level_force(x, q, phi):
     """``RunLevel.features`` @ phi: ``z (a V0/V_REF + b + c g d m)``, ``z`` = (c - mean)/sd of the input ``q[0]``
-    transformed by ``q[1]`` (none, times the direction, its size); ``q[4]`` the column a reduced form leaves out
-    (:data:`RL_GAIN`, :data:`RL_OFFSET`, :data:`RL_LOAD`; -1: none), whose parameter it does not have."""
-    c = input_signal(x, int(q[0]))
+    less its centre ``q[5]``, transformed by ``q[1]`` (none, times the direction, its size); ``q[4]`` the column a
+    reduced form leaves out (:data:`RL_GAIN`, :data:`RL_OFFSET`, :data:`RL_LOAD`; -1: none), whose parameter it
+    does not have."""
+    c = input_signal(x, int(q[0])) - q[5]
     tr = int(q[1])
     if tr == TR_DRIVE:
         c = c * x[SIG_D]
