@@ -152,6 +152,25 @@ def test_the_stage_is_not_considered_without_a_line_in_the_residual_spectrum():
     assert pitch == pytest.approx(P, rel=0.05) and bin_per_m > 0
 
 
+def test_a_smooth_misfit_near_the_stops_is_no_pitch():
+    # the logged speed loses up to a fifth of itself past 14 mm on the run's way (a drag in proportion to the speed
+    # over part of the travel, as near a stop): a smooth misfit of the position, not a repeat of it. Its spectrum's
+    # largest usable bin is a "line" by the power rule alone, at a period the stroke holds three times: no pitch.
+    df, v = frame(chain=False, noise=2e-5)
+    s = df[dataio.POSITION].to_numpy()
+    d = df[dataio.DIRECTION].to_numpy()
+    near = np.clip((d * s - 0.014) / 0.006, 0.0, 1.0)
+    df[dataio.SPEED] -= 0.2 * near ** 2 * v
+    peak, pitch, _ = encoder.candidate_pitch(df, np.ones(len(df), bool), v)
+    assert peak["power_ratio_to_median"] > 4 and peak["repeats"] < encoder.MIN_REPEATS
+    assert pitch is None
+    # the true cyclic error on the same stroke repeats often enough
+    wavy, vw = frame()
+    peak_w, pitch_w, _ = encoder.candidate_pitch(wavy, np.ones(len(wavy), bool), vw)
+    assert peak_w["repeats"] == pytest.approx(np.ptp(wavy[dataio.POSITION]) / peak_w["period_m"])
+    assert pitch_w == pytest.approx(P, rel=0.05)
+
+
 def test_a_kept_stage_puts_its_regressor_first_in_the_trace():
     assert order_traced((), False, ["voltage"], measured=(encoder.REGRESSOR,)) == ["position_cyclic_error", "voltage"]
     params = encoder.CyclicChain(P, COEF, np.full(4, 1e-7)).parameters()

@@ -22,8 +22,11 @@ It is decided as every sensor stage is (:mod:`l1b2.closeloop.stagefit`):
 * **considered** (:func:`candidate_pitch`) when the baseline's TRAIN residual has a line in its spectrum over the
   position (:func:`l1b2.closeloop.residuals.position_spectrum`) whose power is more than
   :data:`l1b2.closeloop.residuals.LINE_POWER_RATIO` times the spectrum's median, the rule by which the same period
-  is offered to the force family; the pitch is that line's period refined within one bin of the spectrum
-  (:func:`refine_pitch`: the smallest TRAIN sum of squares of the chain's linear fit);
+  is offered to the force family, and whose period the TRAIN stroke holds at least :data:`MIN_REPEATS` times (a
+  cyclic error is told from a smooth function of the position by its repeats: over fewer, the form's two harmonics
+  fit any slow misfit along the stroke, which is where a red residual spectrum's largest usable bin lies); the pitch
+  is that line's period refined within one bin of the spectrum (:func:`refine_pitch`: the smallest TRAIN sum of
+  squares of the chain's linear fit);
 * **screen** (:func:`screen`): the baseline's TRAIN residual (drive coordinates) regressed on the form's response,
   ``d v_pred de'/dtheta_h`` (exact to first order), with the baseline's nuisance responses, cross-validated over the
   runs' folds; and, on the same folds and nuisance, on the force family's response at the same pitch (its forces
@@ -55,6 +58,8 @@ from .selection import linear_response
 CYCLIC_CHAIN = "position_sensor_cyclic_error"
 #: its regressor in ``diagnosis.traced_to``
 REGRESSOR = "position_cyclic_error"
+#: the fewest times the TRAIN stroke must hold a spectral line's period for the line to be a pitch (module docstring)
+MIN_REPEATS = 4.0
 #: the harmonics of the pitch the form holds
 HARMONICS = (1, 2)
 #: the force family the stage competes with at the same pitch
@@ -242,10 +247,15 @@ def refine_pitch(df: pd.DataFrame, mask, v_model, pitch_m: float, bin_per_m: flo
 def candidate_pitch(df: pd.DataFrame, mask, v_model) -> tuple[dict, float | None, float]:
     """The line of the residual's spectrum over the position (:func:`l1b2.closeloop.residuals.position_spectrum`):
     ``(peak, pitch or None, bin [1/m])``; the pitch is the peak's period when its power exceeds
-    :data:`~l1b2.closeloop.residuals.LINE_POWER_RATIO` times the median."""
-    freq, _, peak = res.position_spectrum(res.drive_residual(df, v_model), df, np.asarray(mask, bool))
+    :data:`~l1b2.closeloop.residuals.LINE_POWER_RATIO` times the median and the masked positions' span holds it at
+    least :data:`MIN_REPEATS` times (the peak records ``repeats``, the span over the period)."""
+    mask = np.asarray(mask, bool)
+    freq, _, peak = res.position_spectrum(res.drive_residual(df, v_model), df, mask)
     ratio = peak.get("power_ratio_to_median", 0.0)
-    line = bool(np.isfinite(ratio) and ratio > res.LINE_POWER_RATIO)   # a zero median (no residual): no line
+    if peak:
+        peak["repeats"] = float(np.ptp(df[dataio.POSITION].to_numpy(float)[mask]) / peak["period_m"])
+    line = bool(np.isfinite(ratio) and ratio > res.LINE_POWER_RATIO   # a zero median (no residual): no line
+                and peak.get("repeats", 0.0) >= MIN_REPEATS)
     return peak, (peak["period_m"] if line else None), (float(freq[1] - freq[0]) if len(freq) > 1 else 0.0)
 
 
