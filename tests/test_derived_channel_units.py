@@ -2,9 +2,9 @@
 
 The rule is the naming rule of :func:`l1b2.units.column_unit`: a lag (``X_lag<n>r``) or a step (``X_step``) of a
 column has the column's unit (a step of an offset unit its coherent one), an event clock (``X_since_s``) and the run's
-clock (``time_in_run_s``) are in s, a logarithm (``ln_Q``) is dimensionless and its description says of what in
-which unit. References: the units written out per channel, and the base units of FMI 2.0's ``UnitDefinitions``
-written out (V = kg m2 s-3 A-1).
+clock (``time_in_run_s``) are in s, the run's travel (``travel_in_run_m``) in m, a logarithm (``ln_Q``) is
+dimensionless and its description says of what in which unit. References: the units written out per channel, and
+the base units of FMI 2.0's ``UnitDefinitions`` written out (V = kg m2 s-3 A-1).
 """
 
 from __future__ import annotations
@@ -39,20 +39,22 @@ def test_every_channel_the_loop_derives_from_a_session_has_its_unit():
     from l1b2.closeloop.events import with_event_clocks
     from l1b2.closeloop.lags import with_lagged_channels
     from l1b2.closeloop.pauses import COLUMN, REFERENCE_S, with_pause_channel
-    from l1b2.closeloop.runclock import with_run_clock
+    from l1b2.closeloop.runclock import with_run_clock, with_run_travel
     df = _session()
     d, _, _ = with_event_clocks(df, None)
     d, _, _ = with_lagged_channels(d, None)
     d, _, _ = with_pause_channel(d, None)
     d, _, _ = with_run_clock(d, None)
+    d, _, _ = with_run_travel(d, None)
     derived = [c for c in d.columns if c not in df.columns]
     want = {"clamp_id_since_s": "s", "voltage_V_lag3r": "V", "voltage_V_lag10r": "V", "voltage_V_step": "V",
-            "heater_W_lag3r": "W", "heater_W_lag10r": "W", "ln_pause_s": "1", "time_in_run_s": "s"}
+            "heater_W_lag3r": "W", "heater_W_lag10r": "W", "ln_pause_s": "1", "time_in_run_s": "s",
+            "travel_in_run_m": "m"}
     assert sorted(derived) == sorted(want)                       # not vacuous: each derivation made its channel
     assert {c: column_unit(c) for c in derived} == want
     assert COLUMN == "ln_pause_s" and REFERENCE_S == 1.0         # the name states ln(p / 1 s)
     assert unit_note(COLUMN) == "ln(pause_s / 1 s): the natural logarithm of pause_s in s, dimensionless"
-    assert unit_note("voltage_V_step") == unit_note("heater_W_lag3r") == unit_note("time_in_run_s") == ""
+    assert unit_note("voltage_V_step") == unit_note("heater_W_lag3r") == unit_note("time_in_run_s") == unit_note("travel_in_run_m") == ""
 
 
 def test_the_naming_rule_of_derived_names():

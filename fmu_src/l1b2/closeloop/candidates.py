@@ -281,6 +281,7 @@ def channel_kinds(df: pd.DataFrame, response_columns=None) -> list[tuple[str, st
         if not np.all(np.isfinite(df[name].to_numpy(float))):
             continue
         out.append((str(name), "protocol" if name == dataio.TIME else "run_clock" if name == fx.channels.RUN_CLOCK
+                    else "run_travel" if name == fx.channels.RUN_TRAVEL
                     else "response" if name in responses else "label" if name in labels else "logged"))
     return out
 
@@ -291,7 +292,9 @@ def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
     One ``{"name", "kind", "mean", "sd", "lo", "hi", "within_run", "run_values", "run_spread"}`` each (``lo``/``hi``:
     the smallest and largest value; ``kind``:
     ``"logged"``, ``"protocol"`` for the session clock ``time_s``, ``"run_clock"`` for the run's own clock
-    :data:`l1b2.predictor.effects.channels.RUN_CLOCK` (:mod:`l1b2.closeloop.runclock`: offered along the stroke only),
+    :data:`l1b2.predictor.effects.channels.RUN_CLOCK` and ``"run_travel"`` for its own travel
+    :data:`~l1b2.predictor.effects.channels.RUN_TRAVEL` (:mod:`l1b2.closeloop.runclock`: offered along the stroke
+    only),
     ``"response"`` for a measured response of the motor (``response_columns``, default
     :data:`l1b2.predictor.effects.channels.RESPONSE_COLUMNS`: listed, no hypothesis), ``"relabel"`` for a logged
     channel that is, run by run, a function of one or two of the plan's inputs

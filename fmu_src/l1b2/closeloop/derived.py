@@ -5,7 +5,8 @@ The loop derives channels from what every log carries (:mod:`~l1b2.closeloop.eve
 setting; :mod:`~l1b2.closeloop.pauses`: the pause before each run, ``ln_pause_s``, the time since the latest
 break, ``since_break_s``, and the count of breaks before, ``breaks_before``; :mod:`~l1b2.closeloop.history`: the
 previous run's load, ``prev_run_load_kg``;
-:mod:`~l1b2.closeloop.runclock`: the time since each run's first sample, ``time_in_run_s``;
+:mod:`~l1b2.closeloop.runclock`: the time since each run's first sample, ``time_in_run_s``, and the way gone since,
+``travel_in_run_m``;
 :mod:`~l1b2.closeloop.logscale`: the logarithm ``ln_<column>`` of a logged channel that spans decades;
 :func:`with_protocol_channels` derives them all). A rig's own column may carry
 one of those names by chance (a logger that writes its own ``ln_pause_s``, an export that already holds a
@@ -17,7 +18,7 @@ auxiliary columns' actions (:func:`l1b2.closeloop.auxiliary.with_usable_channels
 
 A name a derivation *could* produce: exactly :data:`l1b2.closeloop.pauses.COLUMN`,
 :data:`l1b2.closeloop.pauses.BREAK_COLUMN`, :data:`l1b2.closeloop.pauses.BREAK_COUNT_COLUMN`,
-:data:`l1b2.closeloop.runclock.COLUMN` or
+:data:`l1b2.closeloop.runclock.COLUMN`, :data:`l1b2.closeloop.runclock.TRAVEL_COLUMN` or
 :data:`l1b2.closeloop.history.LOAD_COLUMN`, or ``X + suffix`` for a column ``X`` of the frame and a suffix of the
 event clock, of a lag of :data:`l1b2.closeloop.lags.TAU_RUNS` periods or of a setting's step (``_step``), or
 ``LOG_PREFIX + X`` (:data:`l1b2.units.LOG_PREFIX`) for a column ``X`` of the frame. The required columns and the
@@ -36,7 +37,7 @@ from .history import LOAD_COLUMN as PREVIOUS_LOAD_COLUMN, with_previous_pass
 from .lags import TAU_RUNS, with_lagged_channels
 from .logscale import with_log_channels
 from .pauses import BREAK_COLUMN, BREAK_COUNT_COLUMN, COLUMN as PAUSE_COLUMN, with_break_clock, with_pause_channel
-from .runclock import COLUMN as RUN_CLOCK_COLUMN, with_run_clock
+from .runclock import COLUMN as RUN_CLOCK_COLUMN, TRAVEL_COLUMN, with_run_clock, with_run_travel
 
 __all__ = ["RENAMED_SUFFIX", "derived_suffixes", "is_derivable_name", "set_aside_derivable_names",
            "prepare_channels", "with_protocol_channels"]
@@ -53,7 +54,7 @@ def derived_suffixes() -> tuple[str, ...]:
 def is_derivable_name(name: str, columns) -> bool:
     """Whether a derivation of the loop could produce a channel called ``name`` from a frame with ``columns``
     (module docstring)."""
-    if name in (PAUSE_COLUMN, BREAK_COLUMN, BREAK_COUNT_COLUMN, RUN_CLOCK_COLUMN, PREVIOUS_LOAD_COLUMN):
+    if name in (PAUSE_COLUMN, BREAK_COLUMN, BREAK_COUNT_COLUMN, RUN_CLOCK_COLUMN, TRAVEL_COLUMN, PREVIOUS_LOAD_COLUMN):
         return True
     cols = set(columns)
     if name.startswith(LOG_PREFIX) and name[len(LOG_PREFIX):] in cols:
@@ -110,11 +111,12 @@ def with_protocol_channels(train: pd.DataFrame, test: pd.DataFrame | None, respo
     order: the event clocks (:func:`l1b2.closeloop.events.with_event_clocks`), the lags and steps
     (:func:`l1b2.closeloop.lags.with_lagged_channels`), the pause (:func:`l1b2.closeloop.pauses.with_pause_channel`),
     the break clock (:func:`l1b2.closeloop.pauses.with_break_clock`), the previous run's load
-    (:func:`l1b2.closeloop.history.with_previous_pass`), the run clock
-    (:func:`l1b2.closeloop.runclock.with_run_clock`) and the logarithms of the logged channels that span decades
-    (:func:`l1b2.closeloop.logscale.with_log_channels`: of the channels logged, not of those derived here);
-    ``records`` their records under ``"event_clocks"``, ``"lagged_channels"``, ``"pause_channel"``,
-    ``"break_clock"``, ``"previous_pass"``, ``"run_clock"`` and ``"log_channels"``. Each returned frame names the
+    (:func:`l1b2.closeloop.history.with_previous_pass`), the run's clock and travel
+    (:func:`l1b2.closeloop.runclock.with_run_clock`, :func:`~l1b2.closeloop.runclock.with_run_travel`) and the
+    logarithms of the logged channels that span decades (:func:`l1b2.closeloop.logscale.with_log_channels`: of the
+    channels logged, not of those derived here);
+    ``records`` their records under ``"event_clocks"``, ``"lagged_channels"``, ``"pause_channel"``, ``"break_clock"``,
+    ``"previous_pass"``, ``"run_clock"``, ``"run_travel"`` and ``"log_channels"``. Each returned frame names the
     columns derived here in its ``attrs`` (:func:`l1b2.closeloop.auxiliary.derived_columns`).
     ``sess``: the frames' :func:`~l1b2.closeloop.events.session` before any derivation."""
     rec = {}
@@ -126,6 +128,7 @@ def with_protocol_channels(train: pd.DataFrame, test: pd.DataFrame | None, respo
     train, test, rec["break_clock"] = with_break_clock(train, test, sess)
     train, test, rec["previous_pass"] = with_previous_pass(train, test, sess)
     train, test, rec["run_clock"] = with_run_clock(train, test)   # along the stroke only
+    train, test, rec["run_travel"] = with_run_travel(train, test)   # along the stroke only
     train, test, rec["log_channels"] = with_log_channels(train, test, logged)
     for df in (train, test):
         if df is not None:

@@ -134,8 +134,9 @@ class Diagnosis(_Record):
     breaks were derived (:func:`l1b2.closeloop.pauses.with_break_clock`); ``previous_pass`` whether the previous
     run's load was derived as a channel and TRAIN's range of it (:mod:`l1b2.closeloop.history`); ``run_clock``
     whether the time since each run's start was derived as a channel and TRAIN's run durations
-    (:mod:`l1b2.closeloop.runclock`); ``log_channels`` the logarithms derived from logged channels that span decades
-    (:mod:`l1b2.closeloop.logscale`);
+    (:mod:`l1b2.closeloop.runclock`); ``run_travel`` whether the way gone since each run's start was derived as a
+    channel and TRAIN's runs' spans of the position (:func:`l1b2.closeloop.runclock.with_run_travel`);
+    ``log_channels`` the logarithms derived from logged channels that span decades (:mod:`l1b2.closeloop.logscale`);
     ``unseen_levels`` the TEST values of an added categorical setting that TRAIN never had
     (:func:`l1b2.closeloop.ranges.unseen_test_levels`); ``channel_ranges`` per logged channel an added effect
     reads, the share of TEST's samples and runs outside TRAIN's range of it
@@ -192,6 +193,7 @@ class Diagnosis(_Record):
     break_clock: dict = field(default_factory=dict)
     previous_pass: dict = field(default_factory=dict)
     run_clock: dict = field(default_factory=dict)
+    run_travel: dict = field(default_factory=dict)
     log_channels: list = field(default_factory=list)
     unseen_levels: dict = field(default_factory=dict)
     channel_ranges: list = field(default_factory=list)

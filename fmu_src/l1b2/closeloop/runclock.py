@@ -1,4 +1,5 @@
-"""The run's own clock: the time since each run's first sample, as a channel offered along the stroke only.
+"""The run's own clock and travel: the time since each run's first sample and the way the slider has gone since,
+as channels offered along the stroke only.
 
 A drive or supply state that evolves after the drive starts (a bench supply in current limit whose bus sags as
 the bridge draws, a driver's soft start, a warm-up of the bridge) is a function of the time since the run began,
@@ -20,6 +21,20 @@ read a response of the motor as a cause. The derivation reads only the clock and
 The column is derived when some TRAIN run lasts longer than zero (a run of one sample has no clock). ``Predictor.fmu``
 reads it like any logged channel's, an input named after it: the host computes it from its own clock as defined
 above (the time since the run's drive started).
+
+Its twin in space: a state that the slider meets at a place of its way (an end stop's cushion or damper, a cable
+that pays out, a seal or a magnet it passes) acts at a distance from where the run began, which runs at several
+speeds reach at different times. The loop derives :data:`TRAVEL_COLUMN` too:
+
+    ``d (s - s_0(run))`` [m], ``d`` the run's direction and ``s_0(run)`` the position at its earliest ``time_s``,
+
+the way the slider has gone in its own direction since the run's first sample, and considers it as a candidate
+channel of kind ``"run_travel"`` (also of :data:`~l1b2.predictor.effects.channels.SAMPLE_ONLY_KINDS`: a run's mean
+of it is half the run's travel, set by the stroke and by how far the motor got, not a cause between runs). The
+loop's forms of the position are forces or stiffness-like profiles of ``s``; the channel's forms add what they lack,
+such as a drag in proportion to the speed over part of the way (its ``damping`` form) or a share of the drive's
+force (``force_factor``). It is derived when some TRAIN run's positions span more than zero; ``Predictor.fmu``
+reads it as an input named after it, which the host computes from its own position reading and the run's start.
 """
 
 from __future__ import annotations
@@ -28,10 +43,12 @@ import numpy as np
 import pandas as pd
 
 from ..data import measurements as dataio
-from ..predictor.effects.channels import RUN_CLOCK
+from ..predictor.effects.channels import RUN_CLOCK, RUN_TRAVEL
 
 #: the derived column: the time since the run's first sample [s]
 COLUMN = RUN_CLOCK
+#: the derived column: the way gone in the run's direction since its first sample [m]
+TRAVEL_COLUMN = RUN_TRAVEL
 
 
 def time_in_run_s(df: pd.DataFrame) -> np.ndarray:
@@ -58,6 +75,37 @@ def with_run_clock(train: pd.DataFrame, test: pd.DataFrame | None = None):
         if df is not None:
             df = df.copy()
             df[COLUMN] = time_in_run_s(df)
+        out.append(df)
+    record["derived"] = True
+    return out[0], out[1], record
+
+
+def travel_in_run_m(df: pd.DataFrame) -> np.ndarray:
+    """Each sample's way gone in its run's direction since the run's first sample [m]: ``d (s - s_0)``, ``s_0`` the
+    position at the run's smallest ``time_s``."""
+    first = df.loc[df.groupby(dataio.RUN, sort=False)[dataio.TIME].idxmin(), [dataio.RUN, dataio.POSITION]]
+    s0 = df[dataio.RUN].map(dict(zip(first[dataio.RUN], first[dataio.POSITION]))).to_numpy(float)
+    return df[dataio.DIRECTION].to_numpy(float) * (df[dataio.POSITION].to_numpy(float) - s0)
+
+
+def with_run_travel(train: pd.DataFrame, test: pd.DataFrame | None = None):
+    """``(train, test, record)``: copies of the frames with :data:`TRAVEL_COLUMN` appended when some TRAIN run's
+    positions span more than zero (``test`` None stays None), and ``record`` ``{"column", "derived", "span_m":
+    {"min", "median", "max"}}`` (TRAIN's runs' spans of the position; module docstring).
+
+    The frames are returned unchanged (not copied) when the column is not derived or TRAIN already has it.
+    """
+    span = train.groupby(dataio.RUN, sort=False)[dataio.POSITION].agg(np.ptp).to_numpy(float)
+    record = {"column": TRAVEL_COLUMN, "derived": False,
+              "span_m": ({"min": float(span.min()), "median": float(np.median(span)), "max": float(span.max())}
+                         if span.size else {})}
+    if TRAVEL_COLUMN in train.columns or not (span.size and span.max() > 0):
+        return train, test, record
+    out = []
+    for df in (train, test):
+        if df is not None:
+            df = df.copy()
+            df[TRAVEL_COLUMN] = travel_in_run_m(df)
         out.append(df)
     record["derived"] = True
     return out[0], out[1], record

@@ -47,9 +47,10 @@ logged channel only: the session clock keeps
 the linear shape, its curvature is the generic time spline's, :mod:`l1b2.predictor.effects.generic`; and at one of
 two levels: ``run`` (``c`` is the run's mean of the channel: an effect that differs between runs, not along the
 stroke) or ``sample`` (``c`` is the sample's value: along the stroke; listed only for a channel that varies within
-runs). The run's own clock :data:`RUN_CLOCK` (kind ``run_clock``, :data:`SAMPLE_ONLY_KINDS`) is listed at the
-``sample`` level only (:func:`levels_of`) and has no run-level signal: its run mean is half the run's duration, a
-response of the motor's speed, not a cause. Its effect growing with V0 is its ``force_factor`` form.
+runs). The run's own clock :data:`RUN_CLOCK` (kind ``run_clock``) and travel :data:`RUN_TRAVEL` (kind
+``run_travel``, both :data:`SAMPLE_ONLY_KINDS`) are listed at the ``sample`` level only (:func:`levels_of`) and
+have no run-level signal: a run's mean of them is half its duration or half its way, a response of the motor, not a
+cause. An effect of them growing with V0 is their ``force_factor`` form.
 
 A channel's effect may also grow with an input of the model (``by``, :data:`INTERACTIONS`): the form's force times
 ``(1 + u)``-like, two sets of columns, ``factor shape(z)`` and ``factor shape(z) u``, ``u = |m| / m_max`` (the
@@ -80,8 +81,9 @@ deviation of a sample's value from its run's mean, in the signal's units) and
 the export refuses one whose spread exceeds :data:`RUN_CONSTANT_TOL` standard
 deviations of the signal. The session clock ``time_s`` has no input (the FMU's
 own time is the session clock; its run mean changes along the run): a model
-reading it as a channel is not exported. The run clock :data:`RUN_CLOCK` is an input named after it, at the
-sample level only: the host computes it from its own clock (the time since the run's drive started).
+reading it as a channel is not exported. The run clock :data:`RUN_CLOCK` and travel :data:`RUN_TRAVEL` are
+inputs named after them, at the sample level only: the host computes them from its own clock (the time since the
+run's drive started) and position reading (the way gone in the run's direction since then).
 """
 
 from __future__ import annotations
@@ -136,9 +138,15 @@ SESSION_TIME = "time_s"
 #: the run's own clock, the time since the run's first sample [s] (derived by :mod:`l1b2.closeloop.runclock`): a
 #: channel of kind ``"run_clock"``, a kind of :data:`SAMPLE_ONLY_KINDS`
 RUN_CLOCK = "time_in_run_s"
+#: the run's own travel, the way gone in the run's direction since its first sample [m] (derived by
+#: :mod:`l1b2.closeloop.runclock`): a channel of kind ``"run_travel"``, a kind of :data:`SAMPLE_ONLY_KINDS`
+RUN_TRAVEL = "travel_in_run_m"
 #: the channel kinds offered at the ``sample`` level only: no run-level form, no run-level signal. A run's mean of
-#: its own clock is half the run's duration, set by the motor's speed over the stroke: a response, not a cause
-SAMPLE_ONLY_KINDS = ("run_clock",)
+#: its own clock is half the run's duration, set by the motor's speed over the stroke, and of its own travel half
+#: the way it went: responses, not causes
+SAMPLE_ONLY_KINDS = ("run_clock", "run_travel")
+#: the channels of :data:`SAMPLE_ONLY_KINDS`, whose run means no input carries
+RUN_OWN = (RUN_CLOCK, RUN_TRAVEL)
 #: the channel kinds that are never candidates: a measured response of the motor and a reading that relabels the
 #: plan's inputs run by run (:mod:`l1b2.closeloop.relabels`): listed, no hypothesis
 NOT_CAUSE_KINDS = ("response", "relabel")
@@ -178,12 +186,13 @@ def fmu_signal(key: str) -> str | None:
     :data:`INPUT_COLUMNS` are that input; of the session clock :data:`SESSION_TIME`, None; of any other column,
     ``col:<column>``, the signal of the column's own input (:func:`channel_inputs`). Either level is the input's
     current value: for ``run:`` exact when the input is constant within a run. The run clock :data:`RUN_CLOCK`
-    is an input at the sample level only: its run mean (half the run's duration) is known only when the run ends,
-    so ``run:`` of it is None.
+    and travel :data:`RUN_TRAVEL` are inputs at the sample level only: their run means (half the run's duration,
+    half its way) are known only when the run ends, so ``run:`` of them is None.
     """
     if key in SIGNALS:
         return key
-    if key[:4] in ("col:", "run:") and key[4:] and key[4:] != SESSION_TIME and key != "run:" + RUN_CLOCK:
+    run_own = key[:4] == "run:" and key[4:] in RUN_OWN
+    if key[:4] in ("col:", "run:") and key[4:] and key[4:] != SESSION_TIME and not run_own:
         return INPUT_COLUMNS.get(key[4:], "col:" + key[4:])
     return None
 
@@ -440,8 +449,9 @@ def sample_only_reason(ch) -> str | None:
 
 def levels_of(ch) -> tuple:
     """The levels a channel record (:func:`l1b2.closeloop.candidates.channels_of`) is offered at: ``sample`` only
-    for a kind of :data:`SAMPLE_ONLY_KINDS` (the run clock) and for a channel with a :func:`sample_only_reason`,
-    both :data:`LEVELS` for a channel that varies within runs, ``run`` only for one constant within every run."""
+    for a kind of :data:`SAMPLE_ONLY_KINDS` (the run's clock and travel) and for a channel with a
+    :func:`sample_only_reason`, both :data:`LEVELS` for a channel that varies within runs, ``run`` only for one
+    constant within every run."""
     if ch.get("kind") in SAMPLE_ONLY_KINDS or sample_only_reason(ch):
         return ("sample",)
     return LEVELS if ch.get("within_run", True) else ("run",)
