@@ -142,8 +142,7 @@ RUN_CLOCK = "time_in_run_s"
 #: :mod:`l1b2.closeloop.runclock`): a channel of kind ``"run_travel"``, a kind of :data:`SAMPLE_ONLY_KINDS`
 RUN_TRAVEL = "travel_in_run_m"
 #: the channel kinds offered at the ``sample`` level only: no run-level form, no run-level signal. A run's mean of
-#: its own clock is half the run's duration, set by the motor's speed over the stroke, and of its own travel half
-#: the way it went: responses, not causes
+#: its own clock (travel) is half its duration (way), set by the motor's speed over the stroke: a response
 SAMPLE_ONLY_KINDS = ("run_clock", "run_travel")
 #: the channels of :data:`SAMPLE_ONLY_KINDS`, whose run means no input carries
 RUN_OWN = (RUN_CLOCK, RUN_TRAVEL)
