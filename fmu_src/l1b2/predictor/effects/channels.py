@@ -47,10 +47,9 @@ logged channel only: the session clock keeps
 the linear shape, its curvature is the generic time spline's, :mod:`l1b2.predictor.effects.generic`; and at one of
 two levels: ``run`` (``c`` is the run's mean of the channel: an effect that differs between runs, not along the
 stroke) or ``sample`` (``c`` is the sample's value: along the stroke; listed only for a channel that varies within
-runs). The run's own clock :data:`RUN_CLOCK` (kind ``run_clock``) and travel :data:`RUN_TRAVEL` (kind
-``run_travel``, both :data:`SAMPLE_ONLY_KINDS`) are listed at the ``sample`` level only (:func:`levels_of`) and
-have no run-level signal: a run's mean of them is half its duration or half its way, a response of the motor, not a
-cause. An effect of them growing with V0 is their ``force_factor`` form.
+runs). The run's own clock :data:`RUN_CLOCK` and travel :data:`RUN_TRAVEL` (:data:`SAMPLE_ONLY_KINDS`) are listed
+at the ``sample`` level only (:func:`levels_of`), with no run-level signal: a run's mean of them is half its duration
+or way, a response of the motor, not a cause. An effect of them growing with V0 is their ``force_factor`` form.
 
 A channel's effect may also grow with an input of the model (``by``, :data:`INTERACTIONS`): the form's force times
 ``(1 + u)``-like, two sets of columns, ``factor shape(z)`` and ``factor shape(z) u``, ``u = |m| / m_max`` (the
