@@ -65,19 +65,7 @@ def with_run_clock(train: pd.DataFrame, test: pd.DataFrame | None = None):
     The frames are returned unchanged (not copied) when the column is not derived or TRAIN already has it.
     """
     dur = train.groupby(dataio.RUN, sort=False)[dataio.TIME].agg(np.ptp).to_numpy(float)
-    record = {"column": COLUMN, "derived": False,
-              "duration_s": ({"min": float(dur.min()), "median": float(np.median(dur)), "max": float(dur.max())}
-                             if dur.size else {})}
-    if COLUMN in train.columns or not (dur.size and dur.max() > 0):
-        return train, test, record
-    out = []
-    for df in (train, test):
-        if df is not None:
-            df = df.copy()
-            df[COLUMN] = time_in_run_s(df)
-        out.append(df)
-    record["derived"] = True
-    return out[0], out[1], record
+    return _appended(train, test, COLUMN, time_in_run_s, dur, "duration_s")
 
 
 def travel_in_run_m(df: pd.DataFrame) -> np.ndarray:
@@ -96,16 +84,23 @@ def with_run_travel(train: pd.DataFrame, test: pd.DataFrame | None = None):
     The frames are returned unchanged (not copied) when the column is not derived or TRAIN already has it.
     """
     span = train.groupby(dataio.RUN, sort=False)[dataio.POSITION].agg(np.ptp).to_numpy(float)
-    record = {"column": TRAVEL_COLUMN, "derived": False,
-              "span_m": ({"min": float(span.min()), "median": float(np.median(span)), "max": float(span.max())}
-                         if span.size else {})}
-    if TRAVEL_COLUMN in train.columns or not (span.size and span.max() > 0):
+    return _appended(train, test, TRAVEL_COLUMN, travel_in_run_m, span, "span_m")
+
+
+def _appended(train: pd.DataFrame, test: pd.DataFrame | None, column: str, derive, extent: np.ndarray, key: str):
+    """``(train, test, record)`` of :func:`with_run_clock` and :func:`with_run_travel`: ``column`` = ``derive(df)``
+    appended to copies of the frames when some TRAIN run's ``extent`` (one value per run) is above zero and TRAIN
+    lacks the column; ``record[key]`` the extents' min, median and max (``{}`` without runs)."""
+    record = {"column": column, "derived": False,
+              key: ({"min": float(extent.min()), "median": float(np.median(extent)), "max": float(extent.max())}
+                    if extent.size else {})}
+    if column in train.columns or not (extent.size and extent.max() > 0):
         return train, test, record
     out = []
     for df in (train, test):
         if df is not None:
             df = df.copy()
-            df[TRAVEL_COLUMN] = travel_in_run_m(df)
+            df[column] = derive(df)
         out.append(df)
     record["derived"] = True
     return out[0], out[1], record
