@@ -144,9 +144,14 @@ def pll_law(mp, f0: float, kappa: float, tau: float, s0: float):
     return law
 
 
-def traverse(mp, nominal, plan, V0, load, d, f_law=None, load_law=None):
+#: the recording of a traverse that needs the slider's speed as well as its position
+POSITION_AND_SPEED = ("Slider.s", "Slider.v")
+
+
+def traverse(mp, nominal, plan, V0, load, d, f_law=None, load_law=None, record=("Slider.s",)):
     """One traverse of the co-simulation with the drive frequency and the load input given as laws of the slider's
-    state (None: the plan's frequency and the run's load); the operator's supply is set at 25 degC and f0."""
+    state (None: the plan's frequency and the run's load), recording the outputs ``record``; the operator's supply
+    is set at 25 degC and f0. Returns the recording and the frequency input."""
     V_s = float(drv.supply_for_voltage_V(nominal.driver, V0, 1.0, plan.f_drive_Hz, plan.ambient_degC))
     s0 = mp.slider.s_min_m if d > 0 else mp.slider.s_max_m
     m = InProcessMotor(mp, h_s=plan.step_s)
@@ -156,7 +161,7 @@ def traverse(mp, nominal, plan, V0, load, d, f_law=None, load_law=None):
     for u in (f_in, l_in):
         if isinstance(u, StateInput):
             u.motor = m
-    r = m.run(plan.max_run_s, record=("Slider.s",), until=lambda mm: mm.value("Slider.at_stop") == d)
+    r = m.run(plan.max_run_s, record=record, until=lambda mm: mm.value("Slider.at_stop") == d)
     return r, f_in
 
 

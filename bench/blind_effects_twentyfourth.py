@@ -78,9 +78,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import blind_effects as be  # noqa: E402  (adds fmu_src to the path)
 import blind_effects_fifth as b5  # noqa: E402
 
-from l1b2.cosim.engine import InProcessMotor  # noqa: E402
 from l1b2.data import measurements as dataio  # noqa: E402
-from l1b2.physics import driver as drv  # noqa: E402
 from l1b2.physics.slider import G_M_S2  # noqa: E402
 from l1b2.rig.experiment import scattered_motor  # noqa: E402
 
@@ -185,21 +183,6 @@ def run_motor(kind: str, mp, p: dict, k: int, L: float, t_s: float = 0.0):
     return mp, None
 
 
-def traverse(mp, nominal, plan, V0, load, d, load_law=None):
-    """One traverse of the co-simulation recording the slider's position and speed, with the load input given as a
-    law of the slider's state (None: the run's load); the operator's supply is set from the nominal drive at 25 degC
-    and f0."""
-    V_s = float(drv.supply_for_voltage_V(nominal.driver, V0, 1.0, plan.f_drive_Hz, plan.ambient_degC))
-    s0 = mp.slider.s_min_m if d > 0 else mp.slider.s_max_m
-    m = InProcessMotor(mp, h_s=plan.step_s)
-    l_in = load if load_law is None else b5.StateInput(load_law, s0)
-    m.initialize(V_s=V_s, f_s=plan.f_drive_Hz, T=plan.ambient_degC, direction=d, m_load=l_in, s0=s0)
-    if load_law is not None:
-        l_in.motor = m
-    return m.run(plan.max_run_s, record=("Slider.s", "Slider.v"),
-                 until=lambda mm: mm.value("Slider.at_stop") == d)
-
-
 def experiment(kind: str, seed: int, first: int | None = None):
     """The 72-run experiment of one kind and its truth (``first``: only the first runs, the same draws)."""
     plan, nominal, conds, factors, p, every = be.setting(kind, seed, draw)
@@ -207,7 +190,7 @@ def experiment(kind: str, seed: int, first: int | None = None):
     frames, per_run, t_next = [], [], 0.0
     for k, (V, L, d) in enumerate(conds_run):
         mp, load_law = run_motor(kind, scattered_motor(nominal, factors[k]), p, k, L, t_next)
-        r = traverse(mp, nominal, plan, V, L, d, load_law)
+        r = b5.traverse(mp, nominal, plan, V, L, d, load_law=load_law, record=b5.POSITION_AND_SPEED)[0]
         idx = np.arange(0, len(r["time"]), every)
         t, s = r["time"][idx], r["Slider.s"][idx]
         extra = {}
