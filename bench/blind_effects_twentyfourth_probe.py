@@ -18,7 +18,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import blind_effects_twentyfourth  # noqa: E402,F401  (adds fmu_src to the path)
+import blind_effects_twentyfourth  # noqa: E402  (adds fmu_src to the path)
 
 from l1b2.closeloop import derived, runlevel  # noqa: E402
 
@@ -43,7 +43,7 @@ def patch(mode: str) -> None:
 
 def main(argv=None) -> None:
     argv = sys.argv[1:] if argv is None else list(argv)
-    audit = "blind_effects_twentyfourth"
+    audit = blind_effects_twentyfourth.__name__
     if argv[:1] == ["--audit"] and len(argv) > 1:
         audit, argv = argv[1], argv[2:]
     if not argv or argv[0] not in MODES:
