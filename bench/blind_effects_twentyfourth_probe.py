@@ -1,6 +1,7 @@
 #!/usr/bin/env python
-"""Probes of the twenty-fourth blind audit's misses (``bench/blind_effects_twentyfourth.py``): the audit's own command
-on its cached case, with one rule of the close loop replaced for the run:
+"""Probes of the twenty-fourth and twenty-fifth blind audits' misses (``bench/blind_effects_twentyfourth.py``,
+``bench/blind_effects_twentyfifth.py``): an audit's own command on its cached case, with one rule of the close loop
+replaced for the run:
 
 * ``blocks`` -- the session's blocks are searched in every run-level analysis
   (:func:`l1b2.closeloop.runlevel.searches_blocks` always true), not only when no signal has Wald evidence: a
@@ -8,6 +9,11 @@ on its cached case, with one rule of the close loop replaced for the run:
   and preferred by the loop's unchanged rules.
 * ``notravel`` -- the run's travel is never derived (:func:`l1b2.closeloop.derived.with_run_travel` returns the
   frames as they are, with an empty record): the loop as it was before the travel was a channel.
+* ``square`` -- every logged channel's ``d*<column>`` run-level signal is replaced by ``(c - c0)^2`` (``c`` the
+  run's mean of the channel, ``c0`` its mean over the runs): an extremum of the channel's effect inside its range.
+  Unlike the twenty-third audit's ``q`` probe, the run-level form the loop then offers is realised with the same
+  values (:func:`l1b2.predictor.effects.channels.run_signal` of a logged channel's ``drive`` transform squared), so
+  the rows are the probe's; a calibrated model's native kernels are not patched.
 
 Usage: python bench/blind_effects_twentyfourth_probe.py MODE KIND SEED [--cache DIR] [--report FILE] (the audit's
 arguments after MODE). Other audits' kinds run through ``--audit MODULE`` before MODE (a ``bench`` module with a
@@ -20,9 +26,11 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import blind_effects_twentyfourth  # noqa: E402  (adds fmu_src to the path)
 
+import numpy as np  # noqa: E402
 from l1b2.closeloop import derived, runlevel  # noqa: E402
+from l1b2.predictor.effects import channels  # noqa: E402
 
-MODES = ("blocks", "notravel")
+MODES = ("blocks", "notravel", "square")
 
 
 def no_travel(train, test):
@@ -37,6 +45,18 @@ def patch(mode: str) -> None:
         runlevel.searches_blocks = lambda evidence, level: True
     elif mode == "notravel":
         derived.with_run_travel = no_travel
+    elif mode == "square":
+        inputs, realised = {col for col, _ in channels.INPUT_SIGNALS}, channels.run_signal
+
+        def squared(sg, d):
+            c0 = float(np.mean(sg["values"]))
+            return {**sg, "transform": "drive", "centre": c0, "values": (sg["values"] - c0) ** 2}
+
+        def run_signal(x, column, transform, centre=0.0):
+            if transform == "drive" and column not in inputs:
+                return (channels.signal(x, channels.signal_key(column, "run")) - centre) ** 2
+            return realised(x, column, transform, centre)
+        runlevel._times_direction, channels.run_signal = squared, run_signal
     else:
         raise ValueError(f"mode {mode!r}: not one of {', '.join(MODES)}")
 

@@ -1,5 +1,5 @@
-"""The twenty-fourth audit's probes (``bench/blind_effects_twentyfourth_probe.py``): the patched rules in the loop's
-own functions, on a frame made here."""
+"""The twenty-fourth and twenty-fifth audits' probes (``bench/blind_effects_twentyfourth_probe.py``): the patched
+rules in the loop's own functions, on frames and signals made here."""
 import numpy as np
 import pandas as pd
 import pytest
@@ -8,7 +8,9 @@ import pytest
 @pytest.fixture
 def probe(load_bench, monkeypatch):
     from l1b2.closeloop import derived, runlevel
-    for mod, name in ((runlevel, "searches_blocks"), (derived, "with_run_travel")):
+    from l1b2.predictor.effects import channels
+    for mod, name in ((runlevel, "searches_blocks"), (derived, "with_run_travel"), (runlevel, "_times_direction"),
+                      (channels, "run_signal")):
         monkeypatch.setattr(mod, name, getattr(mod, name))     # restored after the test
     return load_bench("blind_effects_twentyfourth_probe")
 
@@ -50,10 +52,27 @@ def test_notravel_leaves_the_frames_as_they_are(probe):
     assert np.array_equal(tr.columns, train.columns)
 
 
+def test_square_replaces_a_logged_channels_drive_signal_and_its_realisation(probe):
+    from l1b2.closeloop import runlevel
+    from l1b2.predictor.effects import channels
+    sg = {"channel": "fibre_angle_deg", "transform": "none", "values": np.array([-60.0, 0.0, 30.0, 150.0])}
+    d = np.array([1.0, -1.0, 1.0, -1.0])
+    assert runlevel._times_direction(sg, d)["values"] == pytest.approx([-90.0, 30.0, 0.0, -120.0])    # (c - 30) d
+    probe.patch("square")
+    out = runlevel._times_direction(sg, d)
+    assert out["values"] == pytest.approx([90.0 ** 2, 30.0 ** 2, 0.0, 120.0 ** 2])
+    assert out["transform"] == "drive" and out["centre"] == 30.0 and out["channel"] == "fibre_angle_deg"
+    x = {"run:fibre_angle_deg": np.array([-60.0, 30.0]), "run:load_kg": np.array([0.05, -0.02]),
+         "d": np.array([1.0, -1.0])}
+    assert channels.run_signal(x, "fibre_angle_deg", "drive", 30.0) == pytest.approx([90.0 ** 2, 0.0])
+    assert channels.run_signal(x, "fibre_angle_deg", "none", 30.0) == pytest.approx([-90.0, 0.0])   # kept
+    assert channels.run_signal(x, "load_kg", "drive") == pytest.approx([0.05, 0.02])    # an input's: d m, kept
+
+
 def test_a_bad_mode_is_refused(probe):
-    with pytest.raises(ValueError, match="blocks, notravel"):
+    with pytest.raises(ValueError, match="blocks, notravel, square"):
         probe.patch("sideways")
-    with pytest.raises(SystemExit, match="MODE: one of blocks, notravel"):
+    with pytest.raises(SystemExit, match="MODE: one of blocks, notravel, square"):
         probe.main(["sideways", "stop_magnet_latch", "1"])
-    with pytest.raises(SystemExit, match="MODE: one of blocks, notravel"):
+    with pytest.raises(SystemExit, match="MODE: one of blocks, notravel, square"):
         probe.main(["--audit", "blind_effects"])
