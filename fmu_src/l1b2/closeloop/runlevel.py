@@ -36,7 +36,10 @@ Signals (:func:`run_signals`): each candidate channel's run mean (the logged col
 logged column's run mean, centred on its mean over the runs ``c0``, times the run's direction, ``d (c - c0)``
 (``d*<column>``): a condition that speeds one direction and slows the other (a coupling asymmetry set by a
 gradient, a tilt, a field) leaves the run's gain following ``d (c - c0)``, which neither ``c`` nor ``d`` alone
-carries, as ``d m`` is the load's (centred, the product holds no copy of the direction's own signal). When
+carries, as ``d m`` is the load's (centred, the product holds no copy of the direction's own signal); and that
+centred run mean squared, ``(c - c0)^2`` (``<column>^2``): a condition whose effect has an extremum inside the
+range the runs cover (an optimum, a resonance, a least friction at one setting) leaves the runs' gain following its
+square, which the channel's linear value misses. When
 none of them has Wald evidence (no p-value below the Bonferroni level, whatever its cross-validated gain), a cut of
 the session into contiguous blocks (:func:`block_signal`, :mod:`l1b2.closeloop.blocks`: its p-value corrected for
 the search) is tested as one more signal and offered as a :class:`~l1b2.predictor.effects.blocks.SessionBlocks`
@@ -251,8 +254,8 @@ def run_signals(df: pd.DataFrame, channels) -> list[dict]:
     :data:`~l1b2.predictor.effects.channels.NO_RUN_LEVEL_KINDS`, not one read along the stroke or following the
     runs' lengths, not constant ones); for a logged channel that the loop did not derive
     (:func:`l1b2.closeloop.auxiliary.derived_columns`) its run mean less its mean over the runs (``centre``) times
-    the run's direction too (transform ``drive``, ``d*<column>``), when the runs go both ways; the categorical
-    signals;
+    the run's direction too (transform ``drive``, ``d*<column>``), when the runs go both ways, and that centred run
+    mean squared (transform ``square``, ``<column>^2``); the categorical signals;
     and the inputs of
     :data:`~l1b2.predictor.effects.channels.INPUT_SIGNALS`; ``{"channel", "transform", "values", "run_spread"}`` with
     one value per run (in run order) and the largest deviation of a sample's value from its run's
@@ -267,10 +270,11 @@ def run_signals(df: pd.DataFrame, channels) -> list[dict]:
         out.append({"channel": ch["name"], "transform": "none", "values": first[ch["name"]].mean().to_numpy(float),
                     "run_spread": fx.channels.run_spread(df[ch["name"]], df[dataio.RUN])})
     d = first[dataio.DIRECTION].first().to_numpy(float)
+    derived, kinds = set(derived_columns(df)), {ch["name"]: ch.get("kind") for ch in channels}
+    logged = [sg for sg in out if sg["channel"] not in derived and kinds.get(sg["channel"]) == "logged"]
     if np.ptp(d) > 0:    # runs both ways (else d*c only copies c)
-        derived, kinds = set(derived_columns(df)), {ch["name"]: ch.get("kind") for ch in channels}
-        out += [_times_direction(sg, d) for sg in list(out)
-                if sg["channel"] not in derived and kinds.get(sg["channel"]) == "logged"]
+        out += [_times_direction(sg, d) for sg in logged]
+    out += [_squared(sg) for sg in logged]
     out += category_signals(df, channels)
     for col, tr in fx.channels.INPUT_SIGNALS:
         values = fx.channels.transformed(first[col].mean().to_numpy(float), d, tr)
@@ -284,6 +288,12 @@ def _times_direction(sg: dict, d: np.ndarray) -> dict:
     """A value signal's ``drive`` copy: its run values less their mean (``centre``), times the runs' direction."""
     c0 = float(np.mean(sg["values"]))
     return {**sg, "transform": "drive", "centre": c0, "values": (sg["values"] - c0) * d}
+
+
+def _squared(sg: dict) -> dict:
+    """A value signal's ``square`` copy: its run values less their mean (``centre``), squared."""
+    c0 = float(np.mean(sg["values"]))
+    return {**sg, "transform": "square", "centre": c0, "values": (sg["values"] - c0) ** 2}
 
 
 def _category() -> fx.Effect:

@@ -650,7 +650,7 @@ _FORM_TEXT = {"friction": "scaling the friction level", "force_factor": "scaling
 #: standard gravity [m/s^2]: the load's weight per kg in the run-level family's load column
 G_N_PER_KG = 9.81
 INPUT_SIGNALS = (("voltage_V", "none"), ("load_kg", "drive"), ("load_kg", "abs"), ("direction", "none"))
-TRANSFORMS = ("none", "drive", "abs")
+TRANSFORMS = ("none", "drive", "abs", "square")
 #: the columns of a run-level form (:func:`run_level_columns`): a drive gain, a force, a load term; a reduced form
 #: (spec ``drop``) leaves one of them out
 RUN_LEVEL_COLUMNS = ("gain", "offset", "load")
@@ -658,14 +658,14 @@ REGRESSOR_NAMES.update({"voltage_V": "voltage", "load_kg": "load", "direction": 
 
 
 def signal_label(column: str, transform: str = "none") -> str:
-    """The report's name of a run-level signal: the column, ``d*<column>`` or ``|<column>|``."""
-    return {"none": column, "drive": f"d*{column}", "abs": f"|{column}|"}[transform]
+    """The report's name of a run-level signal: the column, ``d*<column>``, ``|<column>|`` or ``<column>^2``."""
+    return {"none": column, "drive": f"d*{column}", "abs": f"|{column}|", "square": f"{column}^2"}[transform]
 
 
 def parameter_stem(column: str, transform: str = "none") -> str:
-    """The stem of a run-level signal's parameter names: the column, ``d_<column>`` or ``abs_<column>`` (a legal
-    FMI structured name, unlike the report's :func:`signal_label`: the parameters are FMU variables)."""
-    return {"none": column, "drive": f"d_{column}", "abs": f"abs_{column}"}[transform]
+    """The stem of a run-level signal's parameter names: the column, ``d_``, ``abs_`` or ``sq_<column>`` (a legal FMI
+    structured name, unlike the report's :func:`signal_label`: the parameters are FMU variables)."""
+    return {"none": column, "drive": f"d_{column}", "abs": f"abs_{column}", "square": f"sq_{column}"}[transform]
 
 
 def run_level_columns(x, Z) -> np.ndarray:
@@ -696,11 +696,11 @@ def kept_columns(spec) -> list[int]:
 
 def transformed(c, d, transform: str) -> np.ndarray:
     """A signal's values ``c`` under a run-level transform (:data:`TRANSFORMS`): as they are (``none``), times the
-    direction ``d`` (``drive``) or their size (``abs``)."""
+    direction ``d`` (``drive``), their size (``abs``) or their square (``square``)."""
     if transform == "drive":
         return np.asarray(c, float) * np.asarray(d, float)
-    if transform == "abs":
-        return np.abs(c)
+    if transform in ("abs", "square"):
+        return np.abs(c) if transform == "abs" else np.square(np.asarray(c, float))
     if transform == "none":
         return c
     raise EffectSpecError(f"run-level transform {transform!r} is not one of {', '.join(TRANSFORMS)}")
@@ -708,7 +708,7 @@ def transformed(c, d, transform: str) -> np.ndarray:
 
 def run_signal(x, column: str, transform: str, centre: float = 0.0) -> np.ndarray:
     """Each sample's run-level value of a signal: the run's mean of ``column`` less ``centre``, times ``d``
-    (``drive``) or its size."""
+    (``drive``), its size (``abs``) or its square (``square``)."""
     return transformed(signal(x, signal_key(column, "run")) - centre,
                        signal(x, "d") if transform == "drive" else None, transform)
 
@@ -718,8 +718,8 @@ class RunLevel(Effect):
     """``run_level``: a run's deviation from the model, a force gain and an offset, explained by a run-level signal.
 
     Each run's own deviation from the current model is estimated as a gain of the drive force and an offset
-    (:mod:`l1b2.closeloop.runlevel`); a run-level signal ``c`` (a channel's run mean, a logged channel's centred run
-    mean times the direction, the session clock's run mean, V0, the drive-coordinate load, its size, the direction)
+    (:mod:`l1b2.closeloop.runlevel`); a run-level signal ``c`` (a channel's run mean, a logged one's centred run mean
+    times the direction or squared, the session clock's run mean, V0, the drive-coordinate load, its size, the run's d)
     that explains them enters as
     ``dF = z (a V0/V_ref + b + c g d m)`` with ``z = (c - mean) / sd`` (TRAIN's run values), ``g d m`` the load's
     weight in drive coordinates: it scales the drive force, adds a force and scales the load's force (a signal
@@ -763,7 +763,7 @@ class RunLevel(Effect):
     def hypotheses(self, signals_: list) -> list:
         """One hypothesis per run-level signal ``{"channel", "transform", "mean", "sd"}`` (``sd`` > 0; with
         ``centre``, the value the run mean is centred on before its transform, a logged channel's ``drive`` signal
-        ``d (c - centre)``: :func:`run_signal`; with
+        ``d (c - centre)`` or ``square`` signal ``(c - centre)^2``: :func:`run_signal`; with
         ``run_spread``, TRAIN's largest deviation from the run's value, when known: the export checks it; with
         ``drop``, one of :data:`RUN_LEVEL_COLUMNS`, the reduced form without that column, shape ``run, no <drop>``)."""
         out = []
