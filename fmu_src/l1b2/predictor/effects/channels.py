@@ -1,15 +1,12 @@
 """``channel`` (an open set of regressors): a logged channel or a signal of the recording protocol, in generic
 physical forms.
 
-Any numeric column of the measurements beyond the required ones (the data
-format's optional ``frequency_Hz`` and ``temperature_C`` included, and
-whatever else the rig logs, but the measured responses of
-:data:`RESPONSE_COLUMNS`) is a candidate channel; so is the recording
-protocol's own clock, the session time ``time_s`` (which also orders the
-runs). Nothing about a channel's physics is assumed: its standardised value
-``z = (c - mean) / sd`` (TRAIN's mean and standard deviation of the samples)
-enters in one of four generic forms, each linear in one parameter ``a``
-[N per standard deviation]:
+Any numeric column of the measurements beyond the required ones (the data format's optional ``frequency_Hz`` and
+``temperature_C`` included, and whatever else the rig logs, but the measured responses of
+:data:`RESPONSE_COLUMNS`) is a candidate channel; so is the recording protocol's own clock, the session time
+``time_s`` (which also orders the runs). Nothing about a channel's physics is assumed: its standardised value
+``z = (c - mean) / sd`` (TRAIN's mean and standard deviation of the samples) enters in one of four generic forms,
+each linear in one parameter ``a`` [N per standard deviation]:
 
 * ``friction``: it scales the friction level, ``dF = -a z`` (drive
   coordinates: a force opposing the motion, whichever the direction);
@@ -645,10 +642,10 @@ _FORM_TEXT = {"friction": "scaling the friction level", "force_factor": "scaling
               "damping": "scaling the viscous damping"}
 
 
-#: the required inputs that are run-level signals of the recording protocol: ``(column, transform)``; ``drive``
-#: multiplies the run's value by the direction (the load in drive coordinates, opposing > 0), ``abs`` takes its size
 #: standard gravity [m/s^2]: the load's weight per kg in the run-level family's load column
 G_N_PER_KG = 9.81
+#: the required inputs that are run-level signals of the recording protocol: ``(column, transform)``; ``drive``
+#: multiplies the run's value by the direction (the load in drive coordinates, opposing > 0), ``abs`` takes its size
 INPUT_SIGNALS = (("voltage_V", "none"), ("load_kg", "drive"), ("load_kg", "abs"), ("direction", "none"))
 TRANSFORMS = ("none", "drive", "abs", "square")
 #: the columns of a run-level form (:func:`run_level_columns`): a drive gain, a force, a load term; a reduced form
@@ -690,8 +687,7 @@ def dropped_column(spec) -> int:
 
 def kept_columns(spec) -> list[int]:
     """The indices of :data:`RUN_LEVEL_COLUMNS` a run-level spec keeps: all but its :func:`dropped_column`."""
-    drop = dropped_column(spec)
-    return [j for j in range(len(RUN_LEVEL_COLUMNS)) if j != drop]
+    return [j for j in range(len(RUN_LEVEL_COLUMNS)) if j != dropped_column(spec)]
 
 
 def transformed(c, d, transform: str) -> np.ndarray:
@@ -706,11 +702,12 @@ def transformed(c, d, transform: str) -> np.ndarray:
     raise EffectSpecError(f"run-level transform {transform!r} is not one of {', '.join(TRANSFORMS)}")
 
 
-def run_signal(x, column: str, transform: str, centre: float = 0.0) -> np.ndarray:
-    """Each sample's run-level value of a signal: the run's mean of ``column`` less ``centre``, times ``d``
-    (``drive``), its size (``abs``) or its square (``square``)."""
-    return transformed(signal(x, signal_key(column, "run")) - centre,
-                       signal(x, "d") if transform == "drive" else None, transform)
+def run_signal(x, column: str, transform: str, centre: float = 0.0, slope: float = 0.0) -> np.ndarray:
+    """Each sample's run-level value of a signal: the run's mean of ``column`` less ``centre``, ``u``, times ``d``
+    (``drive``), its size (``abs``) or ``u^2 - slope u`` (``square``)."""
+    u = signal(x, signal_key(column, "run")) - centre
+    out = transformed(u, signal(x, "d") if transform == "drive" else None, transform)
+    return out - slope * u if transform == "square" else out
 
 
 @register
@@ -750,7 +747,8 @@ class RunLevel(Effect):
         return super().needs(spec) | {signal_key(str(spec.get("channel")), "run")}
 
     def features(self, spec, x):
-        c = run_signal(x, str(spec.get("channel")), str(spec.get("transform", "none")), float(spec.get("centre", 0.0)))
+        c = run_signal(x, str(spec.get("channel")), str(spec.get("transform", "none")),
+                       *(float(spec.get(k, 0.0)) for k in ("centre", "slope")))
         sd = num(spec, "sd")
         if not sd > 0:
             raise EffectSpecError(f"run-level signal {spec.get('channel')!r}: standard deviation {sd} is not positive")
@@ -761,17 +759,17 @@ class RunLevel(Effect):
         return len(kept_columns(spec))
 
     def hypotheses(self, signals_: list) -> list:
-        """One hypothesis per run-level signal ``{"channel", "transform", "mean", "sd"}`` (``sd`` > 0; with
-        ``centre``, the value the run mean is centred on before its transform, a logged channel's ``drive`` signal
-        ``d (c - centre)`` or ``square`` signal ``(c - centre)^2``: :func:`run_signal`; with
-        ``run_spread``, TRAIN's largest deviation from the run's value, when known: the export checks it; with
-        ``drop``, one of :data:`RUN_LEVEL_COLUMNS`, the reduced form without that column, shape ``run, no <drop>``)."""
+        """One hypothesis per run-level signal ``{"channel", "transform", "mean", "sd"}`` (``sd`` > 0; with ``centre``
+        and ``slope``, a logged channel's ``d (c - centre)`` or ``(c - centre)^2 - slope (c - centre)``:
+        :func:`run_signal`; with ``run_spread``, TRAIN's largest deviation from the run's value: the export checks
+        it; with ``drop``, one of :data:`RUN_LEVEL_COLUMNS`, the reduced form without it, shape ``run, no <drop>``)."""
         out = []
         for sg in signals_:
             col, tr = sg["channel"], sg.get("transform", "none")
             label, stem = signal_label(col, tr), parameter_stem(col, tr)
             spec = {"channel": col, "transform": tr, "mean": float(sg["mean"]), "sd": float(sg["sd"]),
                     **({"centre": float(sg["centre"])} if sg.get("centre") else {}),
+                    **({"slope": float(sg["slope"])} if sg.get("slope") else {}),
                     **run_spread_entry(sg), **({"drop": sg["drop"]} if sg.get("drop") else {})}
             keep = kept_columns(spec)
             names = [f"{stem}_run_{n}" for n in RUN_LEVEL_COLUMNS]

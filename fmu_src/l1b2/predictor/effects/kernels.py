@@ -152,7 +152,7 @@ def _signal_scalars(spec) -> list[float]:
         return [float(SIGNAL_INDEX[sig])] + _channel_shape_scalars(spec, code, mean, sd)
     if kind == "run_level":
         return [float(SIGNAL_INDEX[sig]), float(code), mean, sd, float(dropped_column(spec)),
-                float(spec.get("centre", 0.0))]
+                float(spec.get("centre", 0.0)), float(spec.get("slope", 0.0))]
     return [float(SIGNAL_INDEX[sig]), float(code), mean, sd]
 
 
@@ -427,7 +427,8 @@ def channel_force(x, q, phi):
 
 def run_level_force(x, q, phi):
     """``RunLevel.features`` @ phi: ``z (a V0/V_REF + b + c g d m)``, ``z`` = (c - mean)/sd of the input ``q[0]``
-    less its centre ``q[5]``, transformed by ``q[1]`` (none, times the direction, its size, its square); ``q[4]``
+    less its centre ``q[5]``, transformed by ``q[1]`` (none, times the direction, its size, its square less ``q[6]``
+    times it); ``q[4]``
     the column a reduced form leaves out (:data:`RL_GAIN`, :data:`RL_OFFSET`, :data:`RL_LOAD`; -1: none), whose
     parameter it does not have."""
     c = input_signal(x, int(q[0])) - q[5]
@@ -437,7 +438,7 @@ def run_level_force(x, q, phi):
     elif tr == TR_ABS:
         c = abs(c)
     elif tr == TR_SQUARE:
-        c = c * c
+        c = c * c - q[6] * c
     z = (c - q[2]) / q[3]
     g = x[SIG_V0] / V_REF * z
     w = G_N_PER_KG * x[SIG_D] * x[SIG_LOAD] * z
