@@ -52,10 +52,10 @@ def patch(mode: str) -> None:
             c0 = float(np.mean(sg["values"]))
             return {**sg, "transform": "drive", "centre": c0, "values": (sg["values"] - c0) ** 2}
 
-        def run_signal(x, column, transform, centre=0.0):
+        def run_signal(x, column, transform, centre=0.0, slope=0.0):
             if transform == "drive" and column not in inputs:
                 return (channels.signal(x, channels.signal_key(column, "run")) - centre) ** 2
-            return realised(x, column, transform, centre)
+            return realised(x, column, transform, centre, slope)
         runlevel._times_direction, channels.run_signal = squared, run_signal
     else:
         raise ValueError(f"mode {mode!r}: not one of {', '.join(MODES)}")

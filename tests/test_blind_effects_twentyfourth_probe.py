@@ -66,6 +66,7 @@ def test_square_replaces_a_logged_channels_drive_signal_and_its_realisation(prob
          "d": np.array([1.0, -1.0])}
     assert channels.run_signal(x, "fibre_angle_deg", "drive", 30.0) == pytest.approx([90.0 ** 2, 0.0])
     assert channels.run_signal(x, "fibre_angle_deg", "none", 30.0) == pytest.approx([-90.0, 0.0])   # kept
+    assert channels.run_signal(x, "fibre_angle_deg", "square", 30.0, 2.0) == pytest.approx([8280.0, 0.0])   # kept
     assert channels.run_signal(x, "load_kg", "drive") == pytest.approx([0.05, 0.02])    # an input's: d m, kept
 
 

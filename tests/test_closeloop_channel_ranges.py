@@ -89,6 +89,16 @@ def test_a_logged_channels_signal_times_the_direction_is_ranged_about_its_centre
     assert rec["runs_outside"] == 2 and rec["samples_outside"] == pytest.approx(22 / 33)
 
 
+def test_a_logged_channels_curvature_is_ranged_about_its_centre_less_its_line():
+    # (m - 2)^2 - (m - 2): TRAIN's runs 3.75, 0.75, -0.25, 0.75 (tolerance 2 % of 4); TEST's 0.75, 2.0, 6.0: one
+    # run outside (without the line, (m - 2)^2: TRAIN [0.25, 2.25], TEST 0.25, 4.0, 4.0, two runs)
+    [rec] = ranges.channel_ranges([_added("Q", kind="run_level", channel="coil_A", transform="square", centre=2.0,
+                                          slope=1.0, mean=0.0, sd=1.0)], TRAIN, TEST)
+    assert rec["signal"] == "coil_A^2 (run mean)" and rec["train"] == pytest.approx([-0.25, 3.75])
+    assert rec["test"] == pytest.approx([0.75, 6.0])
+    assert rec["runs_outside"] == 1 and rec["samples_outside"] == pytest.approx(11 / 33)
+
+
 def test_the_report_prints_one_line_per_channel_outside_and_none_for_a_channel_inside():
     sample, run, drive, size = ranges.channel_ranges(ADDED, TRAIN, TEST)
     assert channel_range_line(sample) == (

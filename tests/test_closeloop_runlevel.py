@@ -359,6 +359,53 @@ def test_a_gain_that_follows_the_channel_times_the_direction_shows_in_that_signa
     assert "centre" not in rl.offered_signal(ev[("aux", "none")])
 
 
+def test_a_logged_channels_centred_run_mean_squared_is_a_signal_of_its_own_a_derived_ones_is_not():
+    d = np.array([1, -1, -1, 1, 1, -1, 1, -1, -1, 1, -1, 1], float)
+    df = _runs_frame(d)
+    chans = channels_of(df)
+    sigs = {(s["channel"], s["transform"]): s for s in rl.run_signals(df, chans)}
+    mean = df.groupby("run")["aux"].mean().to_numpy()
+    u = mean - mean.mean()
+    slope = np.polyfit(u, u ** 2, 1)[0]                                # the square's least-squares line in u
+    assert abs(slope) > 0.05 * np.std(u)                               # the runs' spread is uneven
+    sq = sigs[("aux", "square")]
+    assert sq["centre"] == pytest.approx(mean.mean()) and sq["slope"] == pytest.approx(slope, rel=1e-9)
+    np.testing.assert_allclose(sq["values"], u ** 2 - slope * u)
+    assert abs(np.corrcoef(sq["values"], u)[0, 1]) < 1e-9              # the curvature alone
+    assert sigs[("aux", "square")]["run_spread"] == sigs[("aux", "none")]["run_spread"]
+    assert ("aux_lag3r", "square") not in sigs and ("time_s", "square") not in sigs   # derived; the clock
+    assert not any(tr == "square" for ch, tr in sigs if ch in ("voltage_V", "load_kg", "direction"))   # inputs
+    one_way = {(s["channel"], s["transform"]) for s in rl.run_signals(_runs_frame(np.ones(12)), chans)}
+    assert ("aux", "square") in one_way                                           # no direction needed
+    h = fx.family("run_level").hypotheses([{**sq, "mean": 90.0, "sd": 80.0}])[0]
+    assert h.family == "run_level_aux^2" and h.regressor == "aux" and h.names[0] == "sq_aux_run_gain"
+    assert h.spec["slope"] == sq["slope"] and h.spec["centre"] == sq["centre"]
+    V0, dd, load = np.array([300.0, 220.0]), np.array([1.0, -1.0]), np.array([0.05, -0.05])
+    x = {"V0": V0, "d": dd, "load": load, "run:aux": np.array([4.0, -13.0])}
+    ux = x["run:aux"] - mean.mean()
+    z = (ux ** 2 - slope * ux - 90.0) / 80.0
+    np.testing.assert_allclose(fx.effect_features(h.spec, x),
+                               np.column_stack([V0 / 300.0 * z, z, 9.81 * dd * load * z]))
+
+
+def test_a_gain_with_an_extremum_inside_the_channels_range_shows_in_its_square_alone():
+    dev, z, rng = _deviations(slope=(0.04, 0.0))
+    dev.theta[:, 0] = 1.0 + (dev.theta[:, 0] - 1.0 - 0.04 * z) + 0.04 * (z * z - np.mean(z * z))   # least at z 0
+    c = 3.0 + 2.0 * z
+    u = c - c.mean()
+    slope = np.mean(u ** 3) / np.mean(u ** 2)
+    sigs = [{"channel": "aux", "transform": "none", "values": c},
+            {"channel": "aux", "transform": "square", "values": u ** 2 - slope * u, "centre": c.mean(),
+             "slope": slope}]
+    ev = {(e.channel, e.transform): e for e in rl.signal_evidence(dev, sigs, alpha=0.01, k=4, seed=0)}
+    assert ev[("aux", "square")].significant and ev[("aux", "square")].p_value < 1e-6
+    assert not ev[("aux", "none")].significant
+    offered = rl.offered_signal(ev[("aux", "square")])
+    assert offered["centre"] == pytest.approx(c.mean()) and offered["transform"] == "square"
+    assert offered["slope"] == pytest.approx(slope)
+    assert ev[("aux", "square")].label == "aux^2"
+
+
 def _gain_by_hand(theta, cov, z, folds):
     """:func:`runlevel.cv_signal_gain` written out: per fold both REML fits on the other runs, the held-out runs'
     weighted squared deviations with the null fit's between-run covariance."""

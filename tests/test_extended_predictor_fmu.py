@@ -524,6 +524,16 @@ def test_run_level_kernels_equal_the_features_on_runs_that_hold_their_inputs(poo
     kind, q = ek.spec_scalars(h.spec)
     got = np.array([ek.effect_force(kind, row.tolist(), q, phi.tolist()) for row in rows])
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * max(1.0, np.max(np.abs(want))))
+    # the same run mean centred on 29 degC, squared, less 0.7 times itself (the loop's <column>^2 signal)
+    [h] = fx.family("run_level").hypotheses([{"channel": dataio.TEMPERATURE, "transform": "square", "centre": 29.0,
+                                              "slope": 0.7, "mean": 4.0, "sd": 1.5, "run_spread": 0.0}])
+    assert h.family == "run_level_temperature_C^2" and h.names[0] == "sq_temperature_C_run_gain"
+    z = ((x["T"] - 29.0) ** 2 - 0.7 * (x["T"] - 29.0) - 4.0) / 1.5
+    want = np.column_stack([x["V0"] / 300.0 * z, z, 9.81 * x["d"] * x["load"] * z]) @ phi
+    np.testing.assert_allclose(fx.effect_features(h.spec, x) @ phi, want, rtol=1e-13, atol=1e-13)
+    kind, q = ek.spec_scalars(h.spec)
+    got = np.array([ek.effect_force(kind, row.tolist(), q, phi.tolist()) for row in rows])
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * max(1.0, np.max(np.abs(want))))
     varied = dict(hyps[0].spec, run_spread=0.02 * hyps[0].spec["sd"])
     with pytest.raises(fx.EffectSpecError, match="not constant within runs"):
         ek.spec_scalars(varied)

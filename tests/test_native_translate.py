@@ -237,6 +237,9 @@ def _effect_specs():
     # a logged temperature's run mean centred on its runs' mean, times the direction (the loop's d*<column>)
     specs += [{"kind": "run_level", "channel": "temperature_C", "transform": "drive", "centre": 31.0, "mean": 0.2,
                "sd": 3.0, "run_spread": 0.0}]
+    # and that run mean centred and squared (the loop's <column>^2)
+    specs += [{"kind": "run_level", "channel": "temperature_C", "transform": "square", "centre": 31.0, "slope": -1.3,
+               "mean": 9.0, "sd": 6.0, "run_spread": 0.0}]
     # the reduced run-level forms, each without one of its three columns (two parameters)
     specs += [{"kind": "run_level", "channel": "load_kg", "transform": "drive", "mean": 0.01, "sd": 0.2,
                "run_spread": 0.0, "drop": d} for d in ("gain", "offset", "load")]

@@ -33,15 +33,16 @@ def unseen_test_levels(added, df: pd.DataFrame | None) -> dict:
     return out
 
 
-def _signal_values(df: pd.DataFrame, col: str, level: str, transform: str, centre: float = 0.0) -> np.ndarray:
+def _signal_values(df: pd.DataFrame, col: str, level: str, transform: str, centre: float = 0.0,
+                   slope: float = 0.0) -> np.ndarray:
     """An effect's signal per sample of ``df``: the channel's value (``sample``), or the run-level signal the effect
-    reads (``run``: :func:`l1b2.predictor.effects.channels.run_signal` of the run's mean, ``transform`` and
-    ``centre``)."""
+    reads (``run``: :func:`l1b2.predictor.effects.channels.run_signal` of the run's mean, ``transform``,
+    ``centre`` and ``slope``)."""
     if level == "sample":
         return df[col].to_numpy(float)
     x = {fx.channels.signal_key(col, "run"): df.groupby(dataio.RUN, sort=False)[col].transform("mean"),
          "d": df[dataio.DIRECTION]}
-    return fx.channels.run_signal(x, col, transform, centre)
+    return fx.channels.run_signal(x, col, transform, centre, slope)
 
 
 def channel_ranges(added, dtr: pd.DataFrame, dte: pd.DataFrame | None) -> list:
@@ -63,11 +64,11 @@ def channel_ranges(added, dtr: pd.DataFrame, dte: pd.DataFrame | None) -> list:
             continue
         if col not in dtr.columns or col not in dte.columns:
             continue
-        level, centre = str(spec.get("level", "run")), float(spec.get("centre", 0.0))
+        level, at = str(spec.get("level", "run")), (float(spec.get("centre", 0.0)), float(spec.get("slope", 0.0)))
         key = (col, level, tr)
         if key not in out:
-            vals = values_outside(_signal_values(dtr, col, level, tr, centre),
-                                  _signal_values(dte, col, level, tr, centre), dte[dataio.RUN].to_numpy())
+            vals = values_outside(_signal_values(dtr, col, level, tr, *at),
+                                  _signal_values(dte, col, level, tr, *at), dte[dataio.RUN].to_numpy())
             name = fx.channels.signal_label(col, tr) + (" (run mean)" if level == "run" else "")
             out[key] = {"channel": col, "level": level, "transform": tr, "signal": name, "effects": {}, **vals}
         clipped = kind == "channel" and spec.get("shape", "linear") != "linear"

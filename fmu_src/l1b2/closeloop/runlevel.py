@@ -36,8 +36,11 @@ Signals (:func:`run_signals`): each candidate channel's run mean (the logged col
 logged column's run mean, centred on its mean over the runs ``c0``, times the run's direction, ``d (c - c0)``
 (``d*<column>``): a condition that speeds one direction and slows the other (a coupling asymmetry set by a
 gradient, a tilt, a field) leaves the run's gain following ``d (c - c0)``, which neither ``c`` nor ``d`` alone
-carries, as ``d m`` is the load's (centred, the product holds no copy of the direction's own signal). When
-none of them has Wald evidence (no p-value below the Bonferroni level, whatever its cross-validated gain), a cut of
+carries, as ``d m`` is the load's (centred, the product holds no copy of the direction's own signal); and that
+centred run mean's square less its line over the runs (``<column>^2``): a condition whose effect has an extremum
+inside the runs' range (an optimum, a resonance, a least friction at one setting) leaves the runs' gain following
+that curvature, which the channel's linear value misses. When none of them has Wald evidence (no p-value below the
+Bonferroni level, whatever its cross-validated gain), a cut of
 the session into contiguous blocks (:func:`block_signal`, :mod:`l1b2.closeloop.blocks`: its p-value corrected for
 the search) is tested as one more signal and offered as a :class:`~l1b2.predictor.effects.blocks.SessionBlocks`
 candidate. A signal with evidence that its folds do not confirm (the session clock's trend over held-out blocks of
@@ -224,8 +227,9 @@ class SignalEvidence:
     #: blocks' shares of the runs but the last, ``coef`` as a category's, ``p_value`` times its search count);
     #: None: no segmentation
     edges: tuple | None = None
-    #: the value a ``drive`` signal of a logged channel is centred on before the direction multiplies it
+    #: the value a logged channel's ``drive`` or ``square`` signal is centred on, a ``square`` one's line taken off
     centre: float = 0.0
+    slope: float = 0.0
 
     def to_dict(self) -> dict:
         out = {"signal": self.label, "regressor": self.regressor, "p_value": self.p_value, "cv_gain": self.cv_gain,
@@ -251,9 +255,8 @@ def run_signals(df: pd.DataFrame, channels) -> list[dict]:
     :data:`~l1b2.predictor.effects.channels.NO_RUN_LEVEL_KINDS`, not one read along the stroke or following the
     runs' lengths, not constant ones); for a logged channel that the loop did not derive
     (:func:`l1b2.closeloop.auxiliary.derived_columns`) its run mean less its mean over the runs (``centre``) times
-    the run's direction too (transform ``drive``, ``d*<column>``), when the runs go both ways; the categorical
-    signals;
-    and the inputs of
+    the run's direction too (transform ``drive``, ``d*<column>``), when the runs go both ways, and its curvature
+    (transform ``square``, ``<column>^2``: :func:`_squared`); the categorical signals; and the inputs of
     :data:`~l1b2.predictor.effects.channels.INPUT_SIGNALS`; ``{"channel", "transform", "values", "run_spread"}`` with
     one value per run (in run order) and the largest deviation of a sample's value from its run's
     (:func:`l1b2.predictor.effects.channels.run_spread`: what the export checks)."""
@@ -267,10 +270,11 @@ def run_signals(df: pd.DataFrame, channels) -> list[dict]:
         out.append({"channel": ch["name"], "transform": "none", "values": first[ch["name"]].mean().to_numpy(float),
                     "run_spread": fx.channels.run_spread(df[ch["name"]], df[dataio.RUN])})
     d = first[dataio.DIRECTION].first().to_numpy(float)
+    derived, kinds = set(derived_columns(df)), {ch["name"]: ch.get("kind") for ch in channels}
+    logged = [sg for sg in out if sg["channel"] not in derived and kinds.get(sg["channel"]) == "logged"]
     if np.ptp(d) > 0:    # runs both ways (else d*c only copies c)
-        derived, kinds = set(derived_columns(df)), {ch["name"]: ch.get("kind") for ch in channels}
-        out += [_times_direction(sg, d) for sg in list(out)
-                if sg["channel"] not in derived and kinds.get(sg["channel"]) == "logged"]
+        out += [_times_direction(sg, d) for sg in logged]
+    out += [_squared(sg) for sg in logged]
     out += category_signals(df, channels)
     for col, tr in fx.channels.INPUT_SIGNALS:
         values = fx.channels.transformed(first[col].mean().to_numpy(float), d, tr)
@@ -284,6 +288,15 @@ def _times_direction(sg: dict, d: np.ndarray) -> dict:
     """A value signal's ``drive`` copy: its run values less their mean (``centre``), times the runs' direction."""
     c0 = float(np.mean(sg["values"]))
     return {**sg, "transform": "drive", "centre": c0, "values": (sg["values"] - c0) * d}
+
+
+def _squared(sg: dict) -> dict:
+    """A value signal's ``square`` copy: ``u^2 - slope u``, ``u`` its run values less their mean (``centre``), less
+    the square's least-squares line in ``u`` (``slope = mean(u^3)/mean(u^2)``): the curvature alone."""
+    u = sg["values"] - float(np.mean(sg["values"]))
+    slope = float(np.mean(u ** 3) / np.mean(u * u)) if np.ptp(u) > 0 else 0.0
+    return {**sg, "transform": "square", "centre": float(np.mean(sg["values"])), "slope": slope,
+            "values": u * u - slope * u}
 
 
 def _category() -> fx.Effect:
@@ -491,7 +504,8 @@ def signal_evidence(dev: RunDeviations, signals_, *, alpha: float, k: int, seed:
                                   blocked, per_run, sg.get("run_spread"),
                                   levels=tuple(sg["levels"]) if cat else None,
                                   shares=tuple(sg["shares"]) if cat or seg else None, dof=dof,
-                                  edges=tuple(sg["edges"]) if seg else None, centre=float(sg.get("centre", 0.0))))
+                                  edges=tuple(sg["edges"]) if seg else None, centre=float(sg.get("centre", 0.0)),
+                                  slope=float(sg.get("slope", 0.0))))
         zs.append(z)
     plan = {col for col, _ in fx.channels.INPUT_SIGNALS}
     dominated = dominated_signals(dev, [e.significant for e in out], zs, level,
@@ -740,11 +754,11 @@ def candidates(analysis: RunLevelAnalysis, ctx) -> list:
 
 def offered_signal(e: SignalEvidence) -> dict:
     """The signal a value or categorical signal's evidence ``e`` offers to its family's ``hypotheses``: its channel,
-    transform, mean and sd, with its ``run_spread``, ``centre`` and a category's ``levels`` and ``shares`` when it has
-    them."""
+    transform, mean and sd, with its ``run_spread``, ``centre``, ``slope`` and a category's ``levels`` and ``shares``
+    when it has them."""
     return {"channel": e.channel, "transform": e.transform, "mean": e.mean, "sd": e.sd,
             **({} if e.run_spread is None else {"run_spread": float(e.run_spread)}),
-            **({"centre": e.centre} if e.centre else {}),
+            **({"centre": e.centre} if e.centre else {}), **({"slope": e.slope} if e.slope else {}),
             **({} if e.levels is None else {"levels": e.levels, "shares": e.shares})}
 
 

@@ -1,15 +1,12 @@
 """``channel`` (an open set of regressors): a logged channel or a signal of the recording protocol, in generic
 physical forms.
 
-Any numeric column of the measurements beyond the required ones (the data
-format's optional ``frequency_Hz`` and ``temperature_C`` included, and
-whatever else the rig logs, but the measured responses of
-:data:`RESPONSE_COLUMNS`) is a candidate channel; so is the recording
-protocol's own clock, the session time ``time_s`` (which also orders the
-runs). Nothing about a channel's physics is assumed: its standardised value
-``z = (c - mean) / sd`` (TRAIN's mean and standard deviation of the samples)
-enters in one of four generic forms, each linear in one parameter ``a``
-[N per standard deviation]:
+Any numeric column of the measurements beyond the required ones (the data format's optional ``frequency_Hz`` and
+``temperature_C`` included, and whatever else the rig logs, but the measured responses of
+:data:`RESPONSE_COLUMNS`) is a candidate channel; so is the recording protocol's own clock, the session time
+``time_s`` (which also orders the runs). Nothing about a channel's physics is assumed: its standardised value
+``z = (c - mean) / sd`` (TRAIN's mean and standard deviation of the samples) enters in one of four generic forms,
+each linear in one parameter ``a`` [N per standard deviation]:
 
 * ``friction``: it scales the friction level, ``dF = -a z`` (drive
   coordinates: a force opposing the motion, whichever the direction);
@@ -645,12 +642,12 @@ _FORM_TEXT = {"friction": "scaling the friction level", "force_factor": "scaling
               "damping": "scaling the viscous damping"}
 
 
-#: the required inputs that are run-level signals of the recording protocol: ``(column, transform)``; ``drive``
-#: multiplies the run's value by the direction (the load in drive coordinates, opposing > 0), ``abs`` takes its size
 #: standard gravity [m/s^2]: the load's weight per kg in the run-level family's load column
 G_N_PER_KG = 9.81
+#: the required inputs that are run-level signals of the recording protocol: ``(column, transform)``; ``drive``
+#: multiplies the run's value by the direction (the load in drive coordinates, opposing > 0), ``abs`` takes its size
 INPUT_SIGNALS = (("voltage_V", "none"), ("load_kg", "drive"), ("load_kg", "abs"), ("direction", "none"))
-TRANSFORMS = ("none", "drive", "abs")
+TRANSFORMS = ("none", "drive", "abs", "square")
 #: the columns of a run-level form (:func:`run_level_columns`): a drive gain, a force, a load term; a reduced form
 #: (spec ``drop``) leaves one of them out
 RUN_LEVEL_COLUMNS = ("gain", "offset", "load")
@@ -658,14 +655,14 @@ REGRESSOR_NAMES.update({"voltage_V": "voltage", "load_kg": "load", "direction": 
 
 
 def signal_label(column: str, transform: str = "none") -> str:
-    """The report's name of a run-level signal: the column, ``d*<column>`` or ``|<column>|``."""
-    return {"none": column, "drive": f"d*{column}", "abs": f"|{column}|"}[transform]
+    """The report's name of a run-level signal: the column, ``d*<column>``, ``|<column>|`` or ``<column>^2``."""
+    return {"none": column, "drive": f"d*{column}", "abs": f"|{column}|", "square": f"{column}^2"}[transform]
 
 
 def parameter_stem(column: str, transform: str = "none") -> str:
-    """The stem of a run-level signal's parameter names: the column, ``d_<column>`` or ``abs_<column>`` (a legal
-    FMI structured name, unlike the report's :func:`signal_label`: the parameters are FMU variables)."""
-    return {"none": column, "drive": f"d_{column}", "abs": f"abs_{column}"}[transform]
+    """The stem of a run-level signal's parameter names: the column, ``d_``, ``abs_`` or ``sq_<column>`` (a legal FMI
+    structured name, unlike the report's :func:`signal_label`: the parameters are FMU variables)."""
+    return {"none": column, "drive": f"d_{column}", "abs": f"abs_{column}", "square": f"sq_{column}"}[transform]
 
 
 def run_level_columns(x, Z) -> np.ndarray:
@@ -690,27 +687,27 @@ def dropped_column(spec) -> int:
 
 def kept_columns(spec) -> list[int]:
     """The indices of :data:`RUN_LEVEL_COLUMNS` a run-level spec keeps: all but its :func:`dropped_column`."""
-    drop = dropped_column(spec)
-    return [j for j in range(len(RUN_LEVEL_COLUMNS)) if j != drop]
+    return [j for j in range(len(RUN_LEVEL_COLUMNS)) if j != dropped_column(spec)]
 
 
 def transformed(c, d, transform: str) -> np.ndarray:
     """A signal's values ``c`` under a run-level transform (:data:`TRANSFORMS`): as they are (``none``), times the
-    direction ``d`` (``drive``) or their size (``abs``)."""
+    direction ``d`` (``drive``), their size (``abs``) or their square (``square``)."""
     if transform == "drive":
         return np.asarray(c, float) * np.asarray(d, float)
-    if transform == "abs":
-        return np.abs(c)
+    if transform in ("abs", "square"):
+        return np.abs(c) if transform == "abs" else np.square(np.asarray(c, float))
     if transform == "none":
         return c
     raise EffectSpecError(f"run-level transform {transform!r} is not one of {', '.join(TRANSFORMS)}")
 
 
-def run_signal(x, column: str, transform: str, centre: float = 0.0) -> np.ndarray:
-    """Each sample's run-level value of a signal: the run's mean of ``column`` less ``centre``, times ``d``
-    (``drive``) or its size."""
-    return transformed(signal(x, signal_key(column, "run")) - centre,
-                       signal(x, "d") if transform == "drive" else None, transform)
+def run_signal(x, column: str, transform: str, centre: float = 0.0, slope: float = 0.0) -> np.ndarray:
+    """Each sample's run-level value of a signal: the run's mean of ``column`` less ``centre``, ``u``, times ``d``
+    (``drive``), its size (``abs``) or ``u^2 - slope u`` (``square``)."""
+    u = signal(x, signal_key(column, "run")) - centre
+    out = transformed(u, signal(x, "d") if transform == "drive" else None, transform)
+    return out - slope * u if transform == "square" else out
 
 
 @register
@@ -718,9 +715,9 @@ class RunLevel(Effect):
     """``run_level``: a run's deviation from the model, a force gain and an offset, explained by a run-level signal.
 
     Each run's own deviation from the current model is estimated as a gain of the drive force and an offset
-    (:mod:`l1b2.closeloop.runlevel`); a run-level signal ``c`` (a channel's run mean, a logged channel's centred run
-    mean times the direction, the session clock's run mean, V0, the drive-coordinate load, its size, the direction)
-    that explains them enters as
+    (:mod:`l1b2.closeloop.runlevel`); a run-level signal ``c`` (a channel's run mean, a logged one's centred run mean
+    times the direction or squared, the session clock's run mean, V0, the drive-coordinate load, its size, the
+    direction) that explains them enters as
     ``dF = z (a V0/V_ref + b + c g d m)`` with ``z = (c - mean) / sd`` (TRAIN's run values), ``g d m`` the load's
     weight in drive coordinates: it scales the drive force, adds a force and scales the load's force (a signal
     that changes the contact changes the load's slope too); constant along the stroke, three parameters
@@ -750,7 +747,8 @@ class RunLevel(Effect):
         return super().needs(spec) | {signal_key(str(spec.get("channel")), "run")}
 
     def features(self, spec, x):
-        c = run_signal(x, str(spec.get("channel")), str(spec.get("transform", "none")), float(spec.get("centre", 0.0)))
+        c = run_signal(x, str(spec.get("channel")), str(spec.get("transform", "none")),
+                       *(float(spec.get(k, 0.0)) for k in ("centre", "slope")))
         sd = num(spec, "sd")
         if not sd > 0:
             raise EffectSpecError(f"run-level signal {spec.get('channel')!r}: standard deviation {sd} is not positive")
@@ -761,17 +759,17 @@ class RunLevel(Effect):
         return len(kept_columns(spec))
 
     def hypotheses(self, signals_: list) -> list:
-        """One hypothesis per run-level signal ``{"channel", "transform", "mean", "sd"}`` (``sd`` > 0; with
-        ``centre``, the value the run mean is centred on before its transform, a logged channel's ``drive`` signal
-        ``d (c - centre)``: :func:`run_signal`; with
-        ``run_spread``, TRAIN's largest deviation from the run's value, when known: the export checks it; with
-        ``drop``, one of :data:`RUN_LEVEL_COLUMNS`, the reduced form without that column, shape ``run, no <drop>``)."""
+        """One hypothesis per run-level signal ``{"channel", "transform", "mean", "sd"}`` (``sd`` > 0; with ``centre``
+        and ``slope``, a logged channel's ``d (c - centre)`` or ``(c - centre)^2 - slope (c - centre)``:
+        :func:`run_signal`; with ``run_spread``, TRAIN's largest deviation from the run's value: the export checks
+        it; with ``drop``, one of :data:`RUN_LEVEL_COLUMNS`, the reduced form without it, shape ``run, no <drop>``)."""
         out = []
         for sg in signals_:
             col, tr = sg["channel"], sg.get("transform", "none")
             label, stem = signal_label(col, tr), parameter_stem(col, tr)
             spec = {"channel": col, "transform": tr, "mean": float(sg["mean"]), "sd": float(sg["sd"]),
                     **({"centre": float(sg["centre"])} if sg.get("centre") else {}),
+                    **({"slope": float(sg["slope"])} if sg.get("slope") else {}),
                     **run_spread_entry(sg), **({"drop": sg["drop"]} if sg.get("drop") else {})}
             keep = kept_columns(spec)
             names = [f"{stem}_run_{n}" for n in RUN_LEVEL_COLUMNS]

@@ -78,7 +78,7 @@ FORM_FRICTION, FORM_FORCE_FACTOR, FORM_FORCE, FORM_INERTIA, FORM_DAMPING = range
 QUADRATIC = len(FORMS)
 ODD = 2 * len(FORMS)
 BY_LOAD = len(SHAPES) * len(FORMS)
-TR_NONE, TR_DRIVE, TR_ABS = range(len(TRANSFORMS))
+TR_NONE, TR_DRIVE, TR_ABS, TR_SQUARE = range(len(TRANSFORMS))
 #: the codes in a run-level spec's ``q[4]`` of the column its reduced form leaves out (-1: none)
 RL_GAIN, RL_OFFSET, RL_LOAD = range(len(RUN_LEVEL_COLUMNS))
 #: the offsets of the range scalars in ``q`` (smooth: after the regressor; pair: after both)
@@ -152,7 +152,7 @@ def _signal_scalars(spec) -> list[float]:
         return [float(SIGNAL_INDEX[sig])] + _channel_shape_scalars(spec, code, mean, sd)
     if kind == "run_level":
         return [float(SIGNAL_INDEX[sig]), float(code), mean, sd, float(dropped_column(spec)),
-                float(spec.get("centre", 0.0))]
+                float(spec.get("centre", 0.0)), float(spec.get("slope", 0.0))]
     return [float(SIGNAL_INDEX[sig]), float(code), mean, sd]
 
 
@@ -427,15 +427,18 @@ def channel_force(x, q, phi):
 
 def run_level_force(x, q, phi):
     """``RunLevel.features`` @ phi: ``z (a V0/V_REF + b + c g d m)``, ``z`` = (c - mean)/sd of the input ``q[0]``
-    less its centre ``q[5]``, transformed by ``q[1]`` (none, times the direction, its size); ``q[4]`` the column a
-    reduced form leaves out (:data:`RL_GAIN`, :data:`RL_OFFSET`, :data:`RL_LOAD`; -1: none), whose parameter it
-    does not have."""
+    less its centre ``q[5]``, transformed by ``q[1]`` (none, times the direction, its size, its square less ``q[6]``
+    times it); ``q[4]``
+    the column a reduced form leaves out (:data:`RL_GAIN`, :data:`RL_OFFSET`, :data:`RL_LOAD`; -1: none), whose
+    parameter it does not have."""
     c = input_signal(x, int(q[0])) - q[5]
     tr = int(q[1])
     if tr == TR_DRIVE:
         c = c * x[SIG_D]
     elif tr == TR_ABS:
         c = abs(c)
+    elif tr == TR_SQUARE:
+        c = c * c - q[6] * c
     z = (c - q[2]) / q[3]
     g = x[SIG_V0] / V_REF * z
     w = G_N_PER_KG * x[SIG_D] * x[SIG_LOAD] * z
