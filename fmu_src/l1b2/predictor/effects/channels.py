@@ -716,8 +716,8 @@ class RunLevel(Effect):
 
     Each run's own deviation from the current model is estimated as a gain of the drive force and an offset
     (:mod:`l1b2.closeloop.runlevel`); a run-level signal ``c`` (a channel's run mean, a logged one's centred run mean
-    times the direction or squared, the session clock's run mean, V0, the drive-coordinate load, its size, the
-    direction) that explains them enters as
+    times the direction or its curvature, the square less its line, the session clock's run mean, V0, the
+    drive-coordinate load, its size, the direction) that explains them enters as
     ``dF = z (a V0/V_ref + b + c g d m)`` with ``z = (c - mean) / sd`` (TRAIN's run values), ``g d m`` the load's
     weight in drive coordinates: it scales the drive force, adds a force and scales the load's force (a signal
     that changes the contact changes the load's slope too); constant along the stroke, three parameters
