@@ -359,7 +359,7 @@ def test_a_gain_that_follows_the_channel_times_the_direction_shows_in_that_signa
     assert "centre" not in rl.offered_signal(ev[("aux", "none")])
 
 
-def test_a_logged_channels_centred_run_mean_squared_is_a_signal_of_its_own_a_derived_ones_is_not():
+def test_a_logged_channels_curvature_over_the_runs_is_a_signal_of_its_own_a_derived_ones_is_not():
     d = np.array([1, -1, -1, 1, 1, -1, 1, -1, -1, 1, -1, 1], float)
     df = _runs_frame(d)
     chans = channels_of(df)
@@ -388,7 +388,23 @@ def test_a_logged_channels_centred_run_mean_squared_is_a_signal_of_its_own_a_der
                                np.column_stack([V0 / 300.0 * z, z, 9.81 * dd * load * z]))
 
 
-def test_a_gain_with_an_extremum_inside_the_channels_range_shows_in_its_square_alone():
+def test_a_gain_linear_in_a_skewed_channel_shows_in_its_square_but_not_in_its_curvature():
+    dev, z, rng = _deviations(slope=(0.0, 0.0))
+    c = np.exp(z)                                                          # runs spread unevenly (log-normal)
+    dev.theta[:, 0] += 0.04 * (c - c.mean()) / c.std()                     # monotone in the channel
+    u = c - c.mean()
+    slope = np.mean(u ** 3) / np.mean(u ** 2)
+    sigs = [{"channel": "aux", "transform": "none", "values": c},
+            {"channel": "sq", "transform": "none", "values": u ** 2},     # the plain square, for contrast
+            {"channel": "aux", "transform": "square", "values": u ** 2 - slope * u, "centre": c.mean(),
+             "slope": slope}]
+    ev = {(e.channel, e.transform): e for e in rl.signal_evidence(dev, sigs, alpha=0.01, k=4, seed=0)}
+    assert ev[("aux", "none")].significant and ev[("aux", "none")].p_value < 1e-6
+    assert ev[("sq", "none")].p_value < 1e-3                               # the square copies the channel in part
+    assert not ev[("aux", "square")].significant and ev[("aux", "square")].p_value > 0.01
+
+
+def test_a_gain_with_an_extremum_inside_the_channels_range_shows_in_its_curvature_alone():
     dev, z, rng = _deviations(slope=(0.04, 0.0))
     dev.theta[:, 0] = 1.0 + (dev.theta[:, 0] - 1.0 - 0.04 * z) + 0.04 * (z * z - np.mean(z * z))   # least at z 0
     c = 3.0 + 2.0 * z

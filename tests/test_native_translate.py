@@ -237,7 +237,7 @@ def _effect_specs():
     # a logged temperature's run mean centred on its runs' mean, times the direction (the loop's d*<column>)
     specs += [{"kind": "run_level", "channel": "temperature_C", "transform": "drive", "centre": 31.0, "mean": 0.2,
                "sd": 3.0, "run_spread": 0.0}]
-    # and that run mean centred and squared (the loop's <column>^2)
+    # and that run mean centred, squared, less -1.3 times itself (the loop's <column>^2, a channel's curvature)
     specs += [{"kind": "run_level", "channel": "temperature_C", "transform": "square", "centre": 31.0, "slope": -1.3,
                "mean": 9.0, "sd": 6.0, "run_spread": 0.0}]
     # the reduced run-level forms, each without one of its three columns (two parameters)
