@@ -104,7 +104,7 @@ import blind_effects as be  # noqa: E402  (adds fmu_src to the path)
 import blind_effects_fifth as b5  # noqa: E402
 
 from l1b2.data import measurements as dataio  # noqa: E402
-from l1b2.physics.stator import BETA_L_B2, modal_mass_b_kg, modal_mass_l_kg  # noqa: E402
+from l1b2.physics.stator import b2_mode_shape, modal_mass_b_kg, modal_mass_l_kg, phi_b  # noqa: E402
 from l1b2.rig.experiment import scattered_motor  # noqa: E402
 
 KINDS = ("axis_incline", "amp_thermal_foldback", "grip_node_offset", "breath_co2_decoy")
@@ -173,18 +173,10 @@ def foldback_factor(x_K, x_k_K: float, k_d_per_K: float):
     return 1.0 - k_d_per_K * np.maximum(0.0, np.asarray(x_K, float) - x_k_K)
 
 
-def b2_shape(x_m, length_m: float):
-    """The unloaded B2 mode shape at ``x_m`` (from the plate's end), normalised to ``int_0^L phi^2 dx = L`` with
-    ``phi(L) > 0``: ``D (sin(k xi) + c sinh(k xi))``, ``xi = x - L / 2``, ``k = 7.8532 / L``, ``c = sin(k L / 2) /
-    sinh(k L / 2)``."""
-    k, h = BETA_L_B2 / length_m, length_m / 2.0
-    c = math.sin(k * h) / math.sinh(k * h)
-    # int phi^2 / D^2; its cross term 2 c (sin(k h) cosh(k h) - cos(k h) sinh(k h)) / k is nought by B2's frequency
-    # equation tan(k h) = tanh(k h)
-    norm2 = h - math.sin(2 * k * h) / (2 * k) + c * c * (math.sinh(2 * k * h) / (2 * k) - h)
-    D = math.copysign(math.sqrt(length_m / norm2), math.sin(k * h))
-    xi = np.asarray(x_m, float) - h
-    return D * (np.sin(k * xi) + c * np.sinh(k * xi))
+def b2_shape(x_m, sp):
+    """The stator's unloaded B2 mode shape at ``x_m`` (from the plate's end): the model's own
+    (:func:`l1b2.physics.stator.b2_mode_shape` at no axial force), ``int_0^L phi^2 dx = L``, ``phi(L) > 0``."""
+    return phi_b(b2_mode_shape(sp, 0.0), x_m)
 
 
 def grip_modes(sp, delta_m: float, k_s_N_m: float, eta: float) -> dict:
@@ -194,7 +186,7 @@ def grip_modes(sp, delta_m: float, k_s_N_m: float, eta: float) -> dict:
     (``phi_l = cos(pi x / L)``, ``phi_b``: :func:`b2_shape`)."""
     x_p = sp.length_m / 2.0 + delta_m
     e_l = k_s_N_m * math.cos(math.pi * x_p / sp.length_m) ** 2 / (modal_mass_l_kg(sp) * (2 * math.pi * sp.f_l0_Hz) ** 2)
-    e_b = k_s_N_m * float(b2_shape(x_p, sp.length_m)) ** 2 / (modal_mass_b_kg(sp) * (2 * math.pi * sp.f_b0_Hz) ** 2)
+    e_b = k_s_N_m * float(b2_shape(x_p, sp)) ** 2 / (modal_mass_b_kg(sp) * (2 * math.pi * sp.f_b0_Hz) ** 2)
     return {"f_l0_Hz": sp.f_l0_Hz * math.sqrt(1.0 + e_l), "f_b0_Hz": sp.f_b0_Hz * math.sqrt(1.0 + e_b),
             "zeta_l": (sp.zeta_l + eta * e_l / 2.0) / math.sqrt(1.0 + e_l),
             "zeta_b": (sp.zeta_b + eta * e_b / 2.0) / math.sqrt(1.0 + e_b)}

@@ -113,11 +113,11 @@ def test_the_b2_shape_and_the_grips_modes(audit, world):
     from l1b2.physics import stator as st
     sp = world[1].stator
     x = np.linspace(0.0, L_PLATE, 31)
-    assert audit.b2_shape(x, L_PLATE) == pytest.approx(b2(x), rel=1e-7, abs=1e-9)
-    assert audit.b2_shape(x, L_PLATE) == pytest.approx(st.phi_b(st.b2_mode_shape(sp, 0.0), x), rel=1e-9, abs=1e-12)
-    assert float(audit.b2_shape(L_PLATE, L_PLATE)) == pytest.approx(2.0, rel=1e-9)             # the tip
-    assert float(audit.b2_shape(L_PLATE / 2, L_PLATE)) == pytest.approx(0.0, abs=1e-12)         # the centre's node
-    slope = (float(audit.b2_shape(0.0151, L_PLATE)) - float(audit.b2_shape(0.0149, L_PLATE))) / 2e-4
+    assert audit.b2_shape(x, sp) == pytest.approx(b2(x), rel=1e-7, abs=1e-9)
+    assert audit.b2_shape(x, sp) == pytest.approx(st.phi_b(st.b2_mode_shape(sp, 0.0), x), rel=1e-9, abs=1e-12)
+    assert float(audit.b2_shape(L_PLATE, sp)) == pytest.approx(2.0, rel=1e-9)             # the tip
+    assert float(audit.b2_shape(L_PLATE / 2, sp)) == pytest.approx(0.0, abs=1e-12)         # the centre's node
+    slope = (float(audit.b2_shape(0.0151, sp)) - float(audit.b2_shape(0.0149, sp))) / 2e-4
     assert slope == pytest.approx(-360.0, abs=0.5)                                            # -360 delta / m
     for delta, k_s, eta in ((1e-3, 1e7, 0.08), (-0.6e-3, 0.7e7, 0.05), (1.35e-3, 1.2e7, 0.10), (0.0, 1e7, 0.1)):
         got = audit.grip_modes(sp, delta, k_s, eta)
