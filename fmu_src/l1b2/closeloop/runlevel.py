@@ -59,7 +59,7 @@ from ..data import measurements as dataio
 from ..predictor import effects as fx
 from ..predictor import model as pr
 from ..units import history_source
-from . import blocks as blk, residuals as res
+from . import blocks as blk, cycle as cyc, residuals as res
 from .auxiliary import derived_columns
 from .reml import REMLFit, reml
 from .runstats import cv_signal_gain, joint_test, signal_design, signal_index
@@ -173,7 +173,8 @@ class SignalEvidence:
     #: given it (:func:`dominated_signals`); None: not dominated
     dominated_by: str | None = None
     #: a categorical signal's TRAIN levels and the runs' shares of all but the last (None: a value signal); its
-    #: ``coef`` is then ``(gain, offset, load)`` per level but the last, against the runs' average, flat
+    #: ``coef`` is then ``(gain, offset, load)`` per level but the last, against the runs' average, flat; a cycle's
+    #: ``shares`` are its waves' means over the runs
     levels: tuple | None = None
     shares: tuple | None = None
     #: the joint test's degrees of freedom
@@ -182,6 +183,9 @@ class SignalEvidence:
     #: blocks' shares of the runs but the last, ``coef`` as a category's, ``p_value`` times its search count);
     #: None: no segmentation
     edges: tuple | None = None
+    #: a cycle's period [s] (:mod:`l1b2.closeloop.cycle`: ``coef`` its cosine's and sine's gains, ``p_value`` times
+    #: its search count); None: no cycle
+    period_s: float | None = None
     #: the value a logged channel's ``drive`` or ``square`` signal is centred on, a ``square`` one's line taken off
     centre: float = 0.0
     slope: float = 0.0
@@ -195,6 +199,9 @@ class SignalEvidence:
         if self.edges is not None:
             out.update(gain_per_sd=None, offset_per_sd_N=None, load_offset_per_sd_N=None,
                        edges_s=list(self.edges), blocks=len(self.edges) + 1)
+        if self.period_s is not None:
+            out.update(gain_per_sd=None, offset_per_sd_N=None, load_offset_per_sd_N=None, period_s=self.period_s,
+                       cos_gain=self.coef[0], sin_gain=self.coef[1])
         if self.levels is not None:
             q = len(self.levels) - 1
             c = list(self.coef) + [0.0] * (3 * q - len(self.coef))
@@ -272,6 +279,15 @@ def _is_blocks(sg) -> bool:
     return sg.get("transform") == fx.blocks.BLOCKS
 
 
+def _cycle() -> fx.Effect:
+    """The session's cycle (:class:`l1b2.predictor.effects.cycle.SessionCycle`)."""
+    return fx.family("session_cycle")
+
+
+def _is_cycle(sg) -> bool:
+    return sg.get("transform") == fx.cycle.CYCLE
+
+
 def block_signal(dev: RunDeviations, t_run_s: np.ndarray, T: np.ndarray, *, level: float, k: int,
                  seed: int) -> dict | None:
     """The segmentation of the session into contiguous blocks (:func:`l1b2.closeloop.blocks.segmentations`) as a
@@ -332,6 +348,8 @@ def signal_columns(sg: dict) -> tuple[np.ndarray, float, float]:
         return _category().columns(sg), 0.0, 1.0
     if _is_blocks(sg):
         return fx.blocks.index_columns(sg["values"], sg["shares"]), 0.0, 1.0
+    if _is_cycle(sg):
+        return np.asarray(sg["columns"], float), 0.0, 1.0
     mean, sd = float(np.mean(v)), float(np.std(v))
     return (v - mean) / sd, mean, sd
 
@@ -356,7 +374,8 @@ def effective_signal_count(signals_) -> float:
     """How many tests the run-level signals ``signals_`` (:func:`run_signals`' dicts) count as, at least 1: the
     value signals' :func:`effective_tests` over their run values (a channel's lags, its logarithm and the inputs it
     follows are not as many independent tests as signals), plus one per categorical signal or segmentation."""
-    values = [np.asarray(sg["values"], float) for sg in signals_ if not (_is_category(sg) or _is_blocks(sg))]
+    values = [np.asarray(sg["values"], float) for sg in signals_
+              if not (_is_category(sg) or _is_blocks(sg) or _is_cycle(sg))]
     other = len(signals_) - len(values)
     return max(1.0, other + (effective_tests(np.column_stack(values)) if values else 0.0))
 
@@ -382,21 +401,23 @@ def signal_evidence(dev: RunDeviations, signals_, *, alpha: float, k: int, seed:
     null_fits: dict = {}     # the null model's fold fits, shared by every signal (same deviations, same folds)
     for sg in signals_:
         z, mean, sd = signal_columns(sg)
-        cat, seg = _is_category(sg), _is_blocks(sg)
-        b, p, dof = joint_test(dev, z, seg)     # a segmentation: one level per block, on the gain
-        p = min(1.0, p * sg.get("search_count", 1))   # a segmentation's search (module blocks)
+        cat, seg, cy = _is_category(sg), _is_blocks(sg), _is_cycle(sg)
+        b, p, dof = joint_test(dev, z, seg or cy)     # a segmentation or a cycle: on the gain (their families')
+        p = min(1.0, p * sg.get("search_count", 1))   # a segmentation's or a cycle's search (modules blocks, cycle)
         blocked = sg["channel"] == fx.channels.SESSION_TIME and not seg   # a block's level: from runs within it
         folds = sg.get("folds") or (blocks if blocked else rand)   # a segmentation's own (block_signal)
-        gain, per_run = cv_signal_gain(dev.theta, dev.cov, z, folds, dev.load, null_fits, seg)
+        gain, per_run = cv_signal_gain(dev.theta, dev.cov, z, folds, dev.load, null_fits, seg or cy)
         label = (_category().label(sg["channel"]) if cat else _blocks().label(len(sg["edges"]) + 1) if seg
+                 else _cycle().label(sg["period_s"]) if cy
                  else fx.channels.signal_label(sg["channel"], sg["transform"]))
-        reg = _blocks().regressor if seg else fx.channels.regressor_of(sg["channel"])
+        reg = _blocks().regressor if seg else _cycle().regressor if cy else fx.channels.regressor_of(sg["channel"])
         out.append(SignalEvidence(sg["channel"], sg["transform"], label, reg,
                                   mean, sd, p, gain, tuple(float(x) for x in b) + (0.0,) * (3 - len(b)),
                                   bool(p < level and gain > 0),
                                   blocked, per_run, sg.get("run_spread"),
                                   levels=tuple(sg["levels"]) if cat else None,
-                                  shares=tuple(sg["shares"]) if cat or seg else None, dof=dof,
+                                  shares=tuple(sg["shares"]) if cat or seg or cy else None, dof=dof,
+                                  period_s=float(sg["period_s"]) if cy else None,
                                   edges=tuple(sg["edges"]) if seg else None, centre=float(sg.get("centre", 0.0)),
                                   slope=float(sg.get("slope", 0.0))))
         zs.append(z)
@@ -406,7 +427,12 @@ def signal_evidence(dev: RunDeviations, signals_, *, alpha: float, k: int, seed:
                                   sources=history_sources([sg["channel"] for sg in signals_]))
     for e, dom in zip(out, dominated):
         e.dominated_by = out[dom].label if dom is not None else None
-    return sorted(out, key=lambda e: (e.dominated_by is not None, e.p_value, -e.cv_gain))
+    return sorted(out, key=rank)
+
+
+def rank(e: SignalEvidence) -> tuple:
+    """The order of signals' evidence: undominated before dominated, then the smallest p-value, the larger gain."""
+    return e.dominated_by is not None, e.p_value, -e.cv_gain
 
 
 def _beyond(z: np.ndarray, given: np.ndarray) -> np.ndarray:
@@ -586,6 +612,10 @@ def analyse(df: pd.DataFrame, model, mask: np.ndarray, channels, *, alpha: float
         seg = block_signal(dev, times.mean().to_numpy(float)[keep], fit.T, level=level, k=k, seed=seed)
         if seg is not None:
             evidence += signal_evidence(dev, [seg], alpha=level, k=k, seed=seed, session_order=start)
+    cycle = cyc.cycle_signal(dev, times.mean().to_numpy(float)[keep])   # a cycle of the session: beside the signals
+    if cycle is not None:
+        evidence = sorted(evidence + signal_evidence(dev, [cycle], alpha=level, k=k, seed=seed, session_order=start),
+                          key=rank)
     return RunLevelAnalysis(dev, fit, q, qp, evidence, signals_level)
 
 
@@ -612,6 +642,9 @@ def candidates(analysis: RunLevelAnalysis, ctx) -> list:
         if e.edges is not None:
             full += [candidate(ctx, h) for h in _blocks().hypotheses([{"edges": e.edges, "shares": e.shares}])]
             continue
+        if e.period_s is not None:
+            full += [candidate(ctx, h) for h in _cycle().hypotheses([{"period_s": e.period_s, "means": e.shares}])]
+            continue
         fam = fx.family("run_level") if e.levels is None else _category()
         sg = offered_signal(e)
         full += [candidate(ctx, h) for h in fam.hypotheses([sg])]
@@ -633,8 +666,8 @@ def offered_signal(e: SignalEvidence) -> dict:
 def is_run_level(c) -> bool:
     """Whether a candidate is constant along the stroke by construction (a run-level family or a channel's run mean)."""
     spec = c.spec or {}
-    return spec.get("kind") in ("run_level", _category().kind, _blocks().kind) or (spec.get("kind") == "channel"
-                                                                  and spec.get("level") == "run")
+    return (spec.get("kind") in ("run_level", _category().kind, _blocks().kind, _cycle().kind)
+            or (spec.get("kind") == "channel" and spec.get("level") == "run"))
 
 
 def is_last_resort(c) -> bool:
