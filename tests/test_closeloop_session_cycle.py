@@ -109,11 +109,24 @@ def test_the_search_finds_a_made_cycle_beside_a_drift_and_corrects_its_p_value()
     ev = rl.signal_evidence(dev, [sg], alpha=0.01, k=4, seed=0, session_order=t)[0]
     assert ev.p_value == pytest.approx(min(1.0, p[best] * len(periods)), rel=1e-9)
     assert ev.significant and ev.cv_gain > 0.1 and ev.dof == 2        # two gains: the cosine's and the sine's
+    stretches = [np.sort(b) for b in np.array_split(np.argsort(t), 4)]     # held out: stretches of the session
+    assert ev.cv_gain == pytest.approx(rs.cv_signal_gain(dev.theta, dev.cov, sg["columns"], stretches, None,
+                                                         gain_only=True)[0], rel=1e-12)
     assert ev.label == f"session_cycle({sg['period_s']:.1f} s)" and ev.regressor == "session_cycle"
     assert ev.period_s == sg["period_s"] and ev.shares == sg["shares"] and ev.blocked_folds
     d = ev.to_dict()
     assert d["period_s"] == sg["period_s"] and d["gain_per_sd"] is None and d["folds"] == "session blocks"
     assert (d["cos_gain"], d["sin_gain"]) == ev.coef[:2]
+
+
+def test_the_search_reads_the_cycle_on_the_gain_alone_the_familys_form():
+    # a stronger cycle of another period in the runs' offsets: the family scales the drive force, so the search
+    # reads the gain's cycle
+    t = _session(seed=5)
+    dev = _deviations(0.02 * np.cos(2 * np.pi * t / 37.0), seed=6)
+    dev.theta[:, 1] += 0.3 * np.sin(2 * np.pi * t / 17.0)
+    P = cyc.cycle_signal(dev, t)["period_s"]
+    assert abs(1 / P - 1 / 37.0) <= 1 / (3 * np.ptp(t))
 
 
 def test_a_drift_of_the_session_or_no_change_gives_no_cycle():
@@ -146,3 +159,28 @@ def test_a_significant_cycle_offers_its_family_with_its_period_and_centring():
     assert len(got) == 1 and got[0].family == ev[0].label
     assert got[0].spec == {"kind": "session_cycle", **fc.cycle_spec(ev[0].period_s, *ev[0].shares)}
     assert analysis.round_record(1)["signals"][0]["signal"] == ev[0].label
+
+
+def test_every_analysis_searches_the_cycle_beside_the_signals_and_ranks_it_by_its_corrected_p_value(monkeypatch):
+    import pandas as pd
+    t = _session(seed=7)
+    n = len(t)
+    dev = _deviations(0.02 * np.cos(2 * np.pi * t / 31.0), seed=8)
+    dev.theta[:, 0] += 0.01 * np.where(np.arange(n) % 2, 1.0, -1.0)         # and a logged setting's effect
+    df = pd.DataFrame({"run": np.repeat(np.arange(n), 5), "time_s": np.repeat(t, 5) + np.tile(np.arange(5) * 0.1, n)})
+    setting = {"channel": "setting", "transform": "none", "values": np.where(np.arange(n) % 2, 1.0, -1.0)}
+    monkeypatch.setattr(rl, "run_deviations", lambda *a: dev)
+    monkeypatch.setattr(rl, "run_signals", lambda *a: [setting])
+    a = rl.analyse(df, None, np.ones(len(df), bool), [], alpha=0.01, k=4, seed=0)
+    labels = [e.label for e in a.evidence]
+    assert len(labels) == 2 and labels[0].startswith("session_cycle(")        # the smaller corrected p-value first
+    assert [e.significant for e in a.evidence] == [True, True]
+    t_mean = df.groupby("run")["time_s"].mean().to_numpy()
+    sg = cyc.cycle_signal(dev, t_mean)
+    assert a.evidence[0].period_s == sg["period_s"]
+    level = 0.01 / 2                                                           # one signal, and the cycle
+    want = rl.signal_evidence(dev, [sg], alpha=level, k=4, seed=0,
+                              session_order=df.groupby("run")["time_s"].min().to_numpy())[0]
+    assert a.evidence[0].p_value == pytest.approx(want.p_value) and a.evidence[0].cv_gain == pytest.approx(
+        want.cv_gain)
+    assert rl.rank(a.evidence[0]) < rl.rank(a.evidence[1])
