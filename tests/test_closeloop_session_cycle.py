@@ -161,7 +161,7 @@ def test_a_significant_cycle_offers_its_family_with_its_period_and_centring():
     assert analysis.round_record(1)["signals"][0]["signal"] == ev[0].label
 
 
-def test_every_analysis_searches_the_cycle_beside_the_signals_and_ranks_it_by_its_corrected_p_value(monkeypatch):
+def test_an_analysis_asked_for_it_searches_the_cycle_beside_the_signals_and_ranks_it_by_its_p_value(monkeypatch):
     import pandas as pd
     t = _session(seed=7)
     n = len(t)
@@ -171,7 +171,8 @@ def test_every_analysis_searches_the_cycle_beside_the_signals_and_ranks_it_by_it
     setting = {"channel": "setting", "transform": "none", "values": np.where(np.arange(n) % 2, 1.0, -1.0)}
     monkeypatch.setattr(rl, "run_deviations", lambda *a: dev)
     monkeypatch.setattr(rl, "run_signals", lambda *a: [setting])
-    a = rl.analyse(df, None, np.ones(len(df), bool), [], alpha=0.01, k=4, seed=0)
+    assert len(rl.analyse(df, None, np.ones(len(df), bool), [], alpha=0.01, k=4, seed=0).evidence) == 1   # off
+    a = rl.analyse(df, None, np.ones(len(df), bool), [], alpha=0.01, k=4, seed=0, cycle=True)
     labels = [e.label for e in a.evidence]
     assert len(labels) == 2 and labels[0].startswith("session_cycle(")        # the smaller corrected p-value first
     assert [e.significant for e in a.evidence] == [True, True]

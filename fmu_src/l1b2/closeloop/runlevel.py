@@ -592,8 +592,9 @@ class RunLevelAnalysis:
 
 
 def analyse(df: pd.DataFrame, model, mask: np.ndarray, channels, *, alpha: float, k: int,
-            seed: int) -> RunLevelAnalysis:
-    """Deviations of every run from ``model``, their REML shrinkage and every run-level signal's evidence."""
+            seed: int, cycle: bool = False) -> RunLevelAnalysis:
+    """Deviations of every run from ``model``, their REML shrinkage and every run-level signal's evidence
+    (``cycle``: a cycle of the session clock searched too, :mod:`l1b2.closeloop.cycle`)."""
     dev = run_deviations(df, model, mask)
     sigs = run_signals(df, channels)
     keep = pd.Index(pd.unique(df[dataio.RUN])).get_indexer(dev.runs)
@@ -612,9 +613,9 @@ def analyse(df: pd.DataFrame, model, mask: np.ndarray, channels, *, alpha: float
         seg = block_signal(dev, times.mean().to_numpy(float)[keep], fit.T, level=level, k=k, seed=seed)
         if seg is not None:
             evidence += signal_evidence(dev, [seg], alpha=level, k=k, seed=seed, session_order=start)
-    cycle = cyc.cycle_signal(dev, times.mean().to_numpy(float)[keep])   # a cycle of the session: beside the signals
-    if cycle is not None:
-        evidence = sorted(evidence + signal_evidence(dev, [cycle], alpha=level, k=k, seed=seed, session_order=start),
+    found = cyc.cycle_signal(dev, times.mean().to_numpy(float)[keep]) if cycle else None   # beside the signals
+    if found is not None:
+        evidence = sorted(evidence + signal_evidence(dev, [found], alpha=level, k=k, seed=seed, session_order=start),
                           key=rank)
     return RunLevelAnalysis(dev, fit, q, qp, evidence, signals_level)
 

@@ -132,7 +132,8 @@ def cv_signal_gain(theta, cov, z, folds_idx, w=None, null_fits: dict | None = No
 def joint_test(dev, z: np.ndarray, gain_only: bool = False) -> tuple[np.ndarray, float, int]:
     """``(b, p, dof)``: a signal's coefficients in the REML mean of :func:`signal_design` (:func:`signal_index`) of
     the runs' deviations ``dev`` (:class:`l1b2.closeloop.runlevel.RunDeviations`), the p-value of their joint
-    Wald test ``b' C^-1 b`` (``C`` their block of REML's ``beta_cov``) against chi-square with ``dof = len(b)`` degrees of freedom: 3 per column of ``z`` (2 without load variation).
+    Wald test ``b' C^-1 b`` (``C`` their block of REML's ``beta_cov``) against chi-square with ``dof = len(b)``
+    degrees of freedom: 3 per column of ``z`` (2 without load variation).
 
     A coefficient the runs do not identify (:func:`identified_columns`) is left out of the mean and of the test: its
     ``b`` is 0 and ``dof`` counts the identified ones only (none: ``p`` 1)."""
