@@ -1,5 +1,6 @@
 """A cycle of the session that the runs' own deviations show: the period search of the run-level analysis
-(:mod:`l1b2.closeloop.runlevel`) for the family :class:`l1b2.predictor.effects.cycle.SessionCycle`.
+(:mod:`l1b2.closeloop.runlevel`) for the family :class:`l1b2.predictor.effects.cycle.SessionCycle`, when the loop's
+``session_cycle`` option asks for it.
 
 The runs' deviations ``theta_r`` (gain, offset; :class:`l1b2.closeloop.runlevel.RunDeviations`) are set against
 their mean session times ``t_r``. For each period ``P`` of a grid (:func:`periods_s`) the cycle's cosine and sine of

@@ -43,6 +43,9 @@ that curvature, which the channel's linear value misses. When none of them has W
 Bonferroni level, whatever its cross-validated gain), a cut of
 the session into contiguous blocks (:func:`block_signal`, :mod:`l1b2.closeloop.blocks`: its p-value corrected for
 the search) is tested as one more signal and offered as a :class:`~l1b2.predictor.effects.blocks.SessionBlocks`
+candidate. With ``cycle`` (the loop's ``session_cycle`` option) a cycle of the session clock
+(:mod:`l1b2.closeloop.cycle`, its p-value corrected for the periods searched) is tested in every analysis, beside
+the signals, at the blocks' level, and offered as a :class:`~l1b2.predictor.effects.cycle.SessionCycle`
 candidate. A signal with evidence that its folds do not confirm (the session clock's trend over held-out blocks of
 the session) is not replaced by blocks, whose level is cross-validated over interleaved runs.
 """
