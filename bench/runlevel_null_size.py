@@ -4,7 +4,7 @@
 Each draw makes ``N`` runs' deviations (gain, offset) with a between-run spread (normal, or Student t with three
 degrees of freedom scaled to unit variance: ``--tail t3``), each run's own sampling noise (a covariance drawn
 per run), loads in pairs of opposite directions, and a signal per run that acts on nothing: log-uniform over two
-decades (``lin``) and its logarithm (``log``). ``l1b2.closeloop.runlevel.joint_test`` gives the Wald statistic's
+decades (``lin``) and its logarithm (``log``). ``l1b2.closeloop.runstats.joint_test`` gives the Wald statistic's
 p-value against chi-square (the package's reference); the same statistic over its degrees of freedom read against
 F(dof, runs - the mean's coefficients) gives the small-sample reference (decision 0166). Prints one line per signal
 form: the share of draws with p below 0.001, 0.01 and 0.05 by each reference.
@@ -20,6 +20,7 @@ from scipy import stats
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "fmu_src"))
 from l1b2.closeloop import runlevel as rl  # noqa: E402
+from l1b2.closeloop import runstats as rs  # noqa: E402
 
 LEVELS = (0.001, 0.01, 0.05)
 
@@ -54,8 +55,8 @@ def main(argv=None):
         dev, z = draw(rng, args.runs, args.tail)
         for form, v in (("lin", z), ("log", np.log(z))):
             v = (v - v.mean()) / v.std()
-            _, pc, dof = rl.joint_test(dev, v)
-            k = len(rl.identified_columns(rl.signal_design(v, dev.load)))     # the mean's coefficients
+            _, pc, dof = rs.joint_test(dev, v)
+            k = len(rs.identified_columns(rs.signal_design(v, dev.load)))     # the mean's coefficients
             p[form][0].append(f_reference(pc, dof, args.runs, k))
             p[form][1].append(pc)
     for form, (pf, pc) in p.items():

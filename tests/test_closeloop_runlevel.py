@@ -16,6 +16,7 @@ from l1b2.cli import build_parser
 from l1b2.closeloop import acceptance as acc
 from l1b2.closeloop import folds as fo
 from l1b2.closeloop import runlevel as rl
+from l1b2.closeloop import runstats as rs
 from l1b2.closeloop.auxiliary import DERIVED_ATTR
 from l1b2.closeloop.candidates import CandidateForce, candidate, channels_of
 from l1b2.closeloop.loop import CloseLoop, prefer
@@ -191,21 +192,21 @@ def test_reml_with_a_covariate_uses_the_residual_degrees_of_freedom():
     theta = 1.0 + 0.7 * z + rng.normal(0, 0.8, n)
     X = np.column_stack([np.ones(n), z])
     coef, rss = np.linalg.lstsq(X, theta, rcond=None)[:2]
-    fit = rl.reml(theta[:, None], np.full((n, 1, 1), s2), rl.design_rows(z, n, 1))
+    fit = rl.reml(theta[:, None], np.full((n, 1, 1), s2), rs.design_rows(z, n, 1))
     assert fit.T[0, 0] == pytest.approx(float(rss[0]) / (n - 2) - s2, rel=1e-6)
     np.testing.assert_allclose(fit.beta, coef, rtol=1e-8)
 
 
 def test_design_rows_put_each_component_on_its_own_intercept_and_slope():
     z = np.array([0.5, -1.0])
-    D = rl.design_rows(z, 2, 2)
+    D = rs.design_rows(z, 2, 2)
     np.testing.assert_array_equal(D[0], [[1, 0.5, 0, 0], [0, 0, 1, 0.5]])
     np.testing.assert_array_equal(D[1], [[1, -1.0, 0, 0], [0, 0, 1, -1.0]])
     w = np.array([0.2, -0.4])          # the signal's design: the offset also scales with the run's load
-    S = rl.signal_design(z, w)
+    S = rs.signal_design(z, w)
     np.testing.assert_array_equal(S[0], [[1, 0.5, 0, 0, 0], [0, 0, 1, 0.5, 0.1]])
     np.testing.assert_array_equal(S[1], [[1, -1.0, 0, 0, 0], [0, 0, 1, -1.0, 0.4]])
-    np.testing.assert_array_equal(rl.signal_design(z), D)
+    np.testing.assert_array_equal(rs.signal_design(z), D)
 
 
 def test_heterogeneity_is_cochrans_q():
@@ -423,10 +424,10 @@ def test_a_gain_with_an_extremum_inside_the_channels_range_shows_in_its_curvatur
 
 
 def _gain_by_hand(theta, cov, z, folds):
-    """:func:`runlevel.cv_signal_gain` written out: per fold both REML fits on the other runs, the held-out runs'
+    """:func:`runstats.cv_signal_gain` written out: per fold both REML fits on the other runs, the held-out runs'
     weighted squared deviations with the null fit's between-run covariance."""
     n, p = theta.shape
-    X0, X1 = rl.design_rows(None, n, p), rl.signal_design(z)
+    X0, X1 = rs.design_rows(None, n, p), rs.signal_design(z)
     s0, s1 = np.zeros(n), np.zeros(n)
     for te in folds:
         tr = np.setdiff1d(np.arange(n), te)
@@ -448,15 +449,15 @@ def test_the_null_fold_fits_are_shared_by_value_of_the_runs_and_the_folds():
     other = dev.theta + rng.normal(scale=0.05, size=dev.theta.shape)
     memo: dict = {}
     for theta, folds in ((dev.theta, rand), (dev.theta, blocks), (other, rand), (dev.theta, rand)):
-        g, per_run = rl.cv_signal_gain(theta, dev.cov, z, folds, null_fits=memo)
+        g, per_run = rs.cv_signal_gain(theta, dev.cov, z, folds, null_fits=memo)
         g_ref, per_run_ref = _gain_by_hand(theta, dev.cov, z, folds)
         assert g == g_ref and np.array_equal(per_run, per_run_ref)
     assert len(memo) == 12                       # one fit per distinct (deviations, fold): 4 + 4 + 4
     te = rand[1]
     tr = np.setdiff1d(np.arange(30), te)
-    again = rl.null_fold_fit(dev.theta, dev.cov, te.copy(), memo)
-    assert again is rl.null_fold_fit(dev.theta, dev.cov, te, memo)           # taken from the memo
-    fresh = rl.reml(dev.theta[tr], dev.cov[tr], rl.design_rows(None, 30, 2)[tr])
+    again = rs.null_fold_fit(dev.theta, dev.cov, te.copy(), memo)
+    assert again is rs.null_fold_fit(dev.theta, dev.cov, te, memo)           # taken from the memo
+    fresh = rl.reml(dev.theta[tr], dev.cov[tr], rs.design_rows(None, 30, 2)[tr])
     assert np.array_equal(again.T, fresh.T) and np.array_equal(again.beta, fresh.beta)
 
 

@@ -14,6 +14,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from l1b2.closeloop import ranges, runlevel as rl
+from l1b2.closeloop import runstats as rs
 from l1b2.predictor import effects as fx
 from l1b2.predictor.effects import category as ch
 from l1b2.predictor.effects import channels
@@ -79,15 +80,15 @@ def test_the_categorical_family_gives_each_level_a_drive_gain_an_offset_and_a_lo
 def test_the_mean_design_of_several_columns_puts_each_on_the_gain_the_offset_and_the_load_offset():
     Z = np.array([[1.0, 2.0], [3.0, 4.0], [5.0, 6.0]])
     w = np.array([0.5, -1.0, 2.0])
-    X = rl.signal_design(Z, w)
+    X = rs.signal_design(Z, w)
     assert X.shape == (3, 2, 8)
     for r in range(3):
         z1, z2 = Z[r]
         np.testing.assert_allclose(X[r, 0], [1, z1, z2, 0, 0, 0, 0, 0])
         np.testing.assert_allclose(X[r, 1], [0, 0, 0, 1, z1, z2, z1 * w[r], z2 * w[r]])
-    assert rl.signal_index(2, True) == [1, 2, 4, 5, 6, 7] and rl.signal_index(2, False) == [1, 2, 4, 5]
-    assert rl.signal_index(1, True) == [1, 3, 4]                   # the value signal's (g1, o1, o2)
-    np.testing.assert_allclose(rl.signal_design(Z[:, 0], w), rl.signal_design(Z[:, :1], w))
+    assert rs.signal_index(2, True) == [1, 2, 4, 5, 6, 7] and rs.signal_index(2, False) == [1, 2, 4, 5]
+    assert rs.signal_index(1, True) == [1, 3, 4]                   # the value signal's (g1, o1, o2)
+    np.testing.assert_allclose(rs.signal_design(Z[:, 0], w), rs.signal_design(Z[:, :1], w))
 
 
 def _category_runs(n_per=12, effect=(0.5, -0.5, -0.5, 0.5), noise=0.01, seed=3):
@@ -110,7 +111,7 @@ def test_the_joint_test_is_ordinary_least_squares_chi_square_with_two_per_level_
     dev = rl.RunDeviations(np.arange(n), theta, np.repeat(np.eye(2)[None] * s2, n, axis=0), np.full(n, 400))
     levels, shares = ch.category_levels(c)
     Z = ch.category_columns(c, levels, shares)
-    b, p, dof = rl.joint_test(dev, Z)
+    b, p, dof = rs.joint_test(dev, Z)
     A = np.column_stack([np.ones(n), np.eye(4)[c.astype(int) - 1][:, :3]])     # uncentred dummies: same span
     chi2 = 0.0
     for k in range(2):
@@ -127,7 +128,7 @@ def test_the_joint_test_is_ordinary_least_squares_chi_square_with_two_per_level_
     # with load variation the offset's load slopes join (offset on [1, Z, Z w]): 3 (L - 1) degrees of freedom
     w = np.where(np.arange(n) % 2 == 0, 0.5, -1.0)
     dev.load = w
-    _, p, dof = rl.joint_test(dev, Z)
+    _, p, dof = rs.joint_test(dev, Z)
     y = theta[:, 1]
     Aw = np.column_stack([A, A[:, 1:] * w[:, None]])
     chi2_w = chi2 - (np.sum((y - y.mean()) ** 2) - np.sum((y - A @ np.linalg.lstsq(A, y, rcond=None)[0]) ** 2))
@@ -277,8 +278,8 @@ def test_identified_columns_drop_each_column_in_the_span_of_those_before():
     rng = np.random.default_rng(3)
     a, b = rng.normal(size=(8, 2)), rng.normal(size=(8, 2))
     X = np.stack([a, b, np.zeros((8, 2)), 2 * a - b, rng.normal(size=(8, 2))], axis=2)   # (n, p, k)
-    assert rl.identified_columns(X) == [0, 1, 4]
-    assert rl.identified_columns(X[:, :, [0, 1, 4]]) == [0, 1, 2]
+    assert rs.identified_columns(X) == [0, 1, 4]
+    assert rs.identified_columns(X[:, :, [0, 1, 4]]) == [0, 1, 2]
 
 
 def test_a_category_whose_load_slopes_the_runs_do_not_identify_is_tested_on_the_rest():
@@ -293,8 +294,8 @@ def test_a_category_whose_load_slopes_the_runs_do_not_identify_is_tested_on_the_
     dev = rl.RunDeviations(np.arange(n), theta, np.repeat(np.eye(2)[None] * s2, n, axis=0), np.full(n, 400), w)
     levels, shares = ch.category_levels(c)
     Z = ch.category_columns(c, levels, shares)
-    assert len(rl.identified_columns(rl.signal_design(Z, w))) == 2 + 3 * 3 - 1
-    b, p, dof = rl.joint_test(dev, Z)
+    assert len(rs.identified_columns(rs.signal_design(Z, w))) == 2 + 3 * 3 - 1
+    b, p, dof = rs.joint_test(dev, Z)
     A = np.column_stack([np.ones(n), np.eye(4)[c.astype(int) - 1][:, :3]])
     chi2 = 0.0
     for k, Ak in ((0, A), (1, np.column_stack([A, w, (c == 3) * w]))):
@@ -302,5 +303,5 @@ def test_a_category_whose_load_slopes_the_runs_do_not_identify_is_tested_on_the_
         chi2 += (np.sum((y - y.mean()) ** 2) - np.sum((y - Ak @ np.linalg.lstsq(Ak, y, rcond=None)[0]) ** 2)) / s2
     assert dof == 8 and len(b) == 9
     assert p == pytest.approx(stats.chi2.sf(chi2, 8), rel=2e-3)
-    gain, per_run = rl.cv_signal_gain(dev.theta, dev.cov, Z, [np.arange(i, n, 4) for i in range(4)], w)
+    gain, per_run = rs.cv_signal_gain(dev.theta, dev.cov, Z, [np.arange(i, n, 4) for i in range(4)], w)
     assert np.isfinite(gain) and np.all(np.isfinite(per_run))

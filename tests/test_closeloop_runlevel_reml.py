@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from l1b2.closeloop import reml as rm
 from l1b2.closeloop import runlevel as rl
+from l1b2.closeloop import runstats as rs
 from scipy import optimize
 
 
@@ -32,7 +33,7 @@ def restricted_loglik_stacked(theta, S, X, T):
 
 def _world(n=40, seed=0, T_true=((4e-4, -3e-4), (-3e-4, 9e-4)), spread=1.0):
     """Runs' (gain, offset) with unequal, correlated sampling covariances, a covariate ``z`` in the mean and the
-    runs' loads ``w`` (the signal's design of :func:`runlevel.signal_design`)."""
+    runs' loads ``w`` (the signal's design of :func:`runstats.signal_design`)."""
     rng = np.random.default_rng(seed)
     z = rng.normal(size=n)
     w = rng.choice([-1.0, -0.5, 0.5, 1.0], n)
@@ -40,7 +41,7 @@ def _world(n=40, seed=0, T_true=((4e-4, -3e-4), (-3e-4, 9e-4)), spread=1.0):
     for r in range(n):
         a, b, rho = 0.02 * rng.uniform(0.5, 2.0), 0.03 * rng.uniform(0.5, 2.0), rng.uniform(-0.8, 0.8)
         S[r] = [[a * a, rho * a * b], [rho * a * b, b * b]]
-    X = rl.signal_design(z, w)
+    X = rs.signal_design(z, w)
     beta = np.array([1.0, 0.02, 0.0, 0.05, 0.01])
     u = rng.multivariate_normal([0, 0], np.asarray(T_true), n) if np.any(T_true) else np.zeros((n, 2))
     e = np.array([rng.multivariate_normal([0, 0], s) for s in S])
@@ -171,7 +172,7 @@ def test_the_fold_fits_of_a_realistic_session_converge_before_the_cap(monkeypatc
         fits.append(f)
         return f
 
-    monkeypatch.setattr(rl, "reml", recording)
+    monkeypatch.setattr(rs, "reml", recording)
     sigs = [{"channel": "aux", "transform": "none", "values": 3.0 + z},
             {"channel": "noise", "transform": "none", "values": rng.normal(size=n)}]
     rl.signal_evidence(dev, sigs, alpha=0.01, k=5, seed=0)

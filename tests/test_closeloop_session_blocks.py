@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from l1b2.closeloop import blocks as blk
 from l1b2.closeloop import runlevel as rl
+from l1b2.closeloop import runstats as rs
 from l1b2.closeloop.acceptance import time_dependent
 from l1b2.closeloop.candidates import CandidateForce
 from l1b2.predictor import effects as fx
@@ -131,13 +132,13 @@ def test_the_search_finds_made_blocks_and_corrects_its_p_value():
     # the made edges, midway between runs 11 and 12, 23 and 24, 35 and 36, are all found (the runs' own scatter
     # may cut a block once more)
     assert {58.5, 118.5, 178.5} <= set(sg["edges"]) and len(sg["edges"]) <= 4
-    p_raw = rl.joint_test(dev, fb.index_columns(sg["values"], sg["shares"]), gain_only=True)[1]
+    p_raw = rs.joint_test(dev, fb.index_columns(sg["values"], sg["shares"]), gain_only=True)[1]
     assert sg["search_count"] == blk.search_count(n, len(sg["edges"]) + 1) * (blk.MAX_BLOCKS - 1)
     ev = rl.signal_evidence(dev, [sg], alpha=0.01, k=4, seed=0)[0]
     assert ev.p_value == pytest.approx(min(1.0, p_raw * sg["search_count"]), rel=1e-9, abs=0)
     assert sg["p_value"] == pytest.approx(ev.p_value, rel=1e-9, abs=0)   # the search's p is the evidence's
     cols = fb.index_columns(sg["values"], sg["shares"])
-    assert ev.cv_gain == pytest.approx(rl.cv_signal_gain(dev.theta, dev.cov, cols, sg["folds"], dev.load,
+    assert ev.cv_gain == pytest.approx(rs.cv_signal_gain(dev.theta, dev.cov, cols, sg["folds"], dev.load,
                                                          gain_only=True)[0], rel=1e-9)
     assert ev.significant and ev.edges == sg["edges"] and ev.label == f"session_blocks({len(sg['edges']) + 1})"
     assert ev.regressor == "session_block" and not ev.blocked_folds
@@ -152,12 +153,12 @@ def test_a_segmentations_evidence_is_one_level_per_block_on_the_gain():
     Z = fb.index_columns(np.repeat([0.0, 1.0, 2.0], 12), (1 / 3, 1 / 3))          # (n, 2) centred indicators
     one, zero = np.ones((n, 1)), np.zeros((n, 1))
     X = np.stack([np.hstack([one, Z, zero]), np.hstack([zero, 0 * Z, one])], axis=1)   # gain [1 Z 0], offset [0 0 1]
-    assert rl.signal_design(Z, None, gain_only=True) == pytest.approx(X, abs=0)
-    assert rl.signal_index(2, True, gain_only=True) == [1, 2]
+    assert rs.signal_design(Z, None, gain_only=True) == pytest.approx(X, abs=0)
+    assert rs.signal_index(2, True, gain_only=True) == [1, 2]
     fit = reml(dev.theta, dev.cov, X)
     b, C = fit.beta[1:3], fit.beta_cov[1:3, 1:3]
     want_p = stats.chi2.sf(float(b @ np.linalg.solve(C, b)), 2)
-    got_b, got_p, dof = rl.joint_test(dev, Z, gain_only=True)
+    got_b, got_p, dof = rs.joint_test(dev, Z, gain_only=True)
     assert dof == 2 and got_b == pytest.approx(b, rel=1e-9) and got_p == pytest.approx(want_p, rel=1e-9, abs=0)
     # the held-out share: for each fold, the null's and the signal's REML fits on the other runs, the held-out
     # runs' squared deviations weighted by the null fit's (T0 + S_r)^-1
@@ -172,11 +173,11 @@ def test_a_segmentations_evidence_is_one_level_per_block_on_the_gain():
         r1 = dev.theta[te] - np.einsum("rpk,k->rp", X[te], f1.beta)
         s0 += np.einsum("rp,rpq,rq->", r0, W, r0)
         s1 += np.einsum("rp,rpq,rq->", r1, W, r1)
-    gain = rl.cv_signal_gain(dev.theta, dev.cov, Z, folds, None, gain_only=True)[0]
+    gain = rs.cv_signal_gain(dev.theta, dev.cov, Z, folds, None, gain_only=True)[0]
     assert gain == pytest.approx(1 - s1 / s0, rel=1e-9) and gain > 0.2
     # the run-level family's design (gain, offset and load slopes per column) gives another gain and test
-    assert rl.cv_signal_gain(dev.theta, dev.cov, Z, folds, None)[0] != pytest.approx(gain, rel=1e-3)
-    assert rl.joint_test(dev, Z)[2] == 4
+    assert rs.cv_signal_gain(dev.theta, dev.cov, Z, folds, None)[0] != pytest.approx(gain, rel=1e-3)
+    assert rs.joint_test(dev, Z)[2] == 4
 
 
 def test_the_number_of_blocks_is_the_fewest_within_the_parsimony_of_the_best_gain():
@@ -189,9 +190,9 @@ def test_the_number_of_blocks_is_the_fewest_within_the_parsimony_of_the_best_gai
     segs = blk.segmentations(dev.theta, dev.cov, T, t)
     folds = [np.flatnonzero(np.isin(dev.runs, f)) for f in res.run_folds(dev.runs, 4, 0)]
     cols = [fb.index_columns(g["values"], g["shares"]) for g in segs]
-    p = [min(1.0, rl.joint_test(dev, z, gain_only=True)[1] * g["search_count"]) for z, g in zip(cols, segs)]
+    p = [min(1.0, rs.joint_test(dev, z, gain_only=True)[1] * g["search_count"]) for z, g in zip(cols, segs)]
     passed = [i for i in range(len(segs)) if p[i] < 0.001]
-    gain = {i: rl.cv_signal_gain(dev.theta, dev.cov, cols[i], folds, None, gain_only=True)[0] for i in passed}
+    gain = {i: rs.cv_signal_gain(dev.theta, dev.cov, cols[i], folds, None, gain_only=True)[0] for i in passed}
     best = max(gain.values())
     pick = min(i for i in passed if gain[i] >= blk.PARSIMONY * best)
     sg = rl.block_signal(dev, t, T, level=0.001, k=4, seed=0)

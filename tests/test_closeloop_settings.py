@@ -18,14 +18,15 @@ DEFAULTS = {"order": 8, "k_folds": 5, "alpha": 0.01, "min_gain": 0.05, "parsimon
             "refit_repeats": 1, "tie_repeats": 3, "min_cv_gain": 0.03, "min_cv_drop": 0.005, "refit_nfev": 10,
             "final_nfev": 60,
             "screen_alpha": 0.01, "noise_fit": "alternate", "noise": "common", "client": None, "baseline": "eq29",
-            "run_level": True, "stroke_speed_gain": False, "response_columns": None, "clock_folds": "blocks",
+            "run_level": True, "session_cycle": False, "stroke_speed_gain": False, "response_columns": None,
+            "clock_folds": "blocks",
             "fold_unit": "run"}
 
 #: settings other than the defaults for every rule the report records
 CHANGED = {"order": 3, "n_starts": 1, "max_rounds": 0, "min_gain": 0.07, "alpha": 0.02, "parsimony": 0.8,
            "k_folds": 3, "shortlist": 1, "refit_folds": 2, "refit_repeats": 2, "tie_repeats": 5, "min_cv_gain": 0.04,
            "min_cv_drop": 0.006, "screen_alpha": None, "noise_fit": "profile", "noise": "per_run",
-           "run_level": False, "stroke_speed_gain": True, "clock_folds": "rotation",
+           "run_level": False, "session_cycle": True, "stroke_speed_gain": True, "clock_folds": "rotation",
            "response_columns": ("aux_a", "aux_b"),
            "fold_unit": "condition"}
 
@@ -60,7 +61,8 @@ def test_the_report_records_the_rules_as_given():
     rules = {"min_gain": 0.07, "alpha": 0.02, "parsimony": 0.8, "k_folds": 3, "shortlist": 1, "refit_folds": 2,
              "refit_repeats": 2, "tie_repeats": 5, "min_cv_gain": 0.04, "min_cv_drop": 0.006, "screen_alpha": None,
              "noise_fit": "profile", "noise": "per_run", "fold_unit": "condition", "max_rounds": 0, "run_level": False,
-             "stroke_speed_gain": True, "clock_folds": "rotation", "response_columns": ["aux_a", "aux_b"]}
+             "session_cycle": True, "stroke_speed_gain": True, "clock_folds": "rotation",
+             "response_columns": ["aux_a", "aux_b"]}
     assert CloseLoop(**CHANGED).settings.rules() == rules
     res = close_loop(small_train(), **CHANGED)
     got = res.diagnosis["rules"]

@@ -544,8 +544,8 @@ def test_every_family_of_the_package_has_a_kernel():
     # its calibrated models Python FMUs (the export says so)
     from l1b2.predictor.effects import kernels as ek
     assert set(CARRIED) - set(ek.KERNEL_KINDS) == set(), "families without a kernel in l1b2.predictor.effects.kernels"
-    assert set(fx.KINDS) - set(ek.KERNEL_KINDS) == {"run_level_category", "session_blocks"}   # no kernel: a logged
-    # channel, the session clock
+    # no kernel: a logged channel's categories, the session clock's blocks and cycle
+    assert set(fx.KINDS) - set(ek.KERNEL_KINDS) == {"run_level_category", "session_blocks", "session_cycle"}
 
 
 OUTPUTS = ("v", "v_steady", "v_baseline", "F_extra")

@@ -305,7 +305,8 @@ class CloseLoop(EstimatorSettings):
             min_gain=self.min_cv_gain, final_nfev=self.final_nfev, clock=say)
         cur_err: dict = {}
         def analyse(mdl):   # the run-level analysis against a model; rl_of: the model of the latest one
-            return runlevel.analyse(dtr, mdl, mask, it.channels, alpha=self.alpha, k=self.k_folds, seed=self.seed)
+            return runlevel.analyse(dtr, mdl, mask, it.channels, alpha=self.alpha, k=self.k_folds, seed=self.seed,
+                                    cycle=self.session_cycle)
         rl_of, sm, carry = None, screen_mask(dtr, mask), []   # sm: the screen's (thinned) rows, every round
         for rnd in range(1, self.max_rounds + 1):
             n_rnd, cur = len(it.rounds), it.model

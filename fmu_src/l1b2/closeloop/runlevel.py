@@ -16,11 +16,11 @@ estimates and explains:
    log-likelihood maximised over a Cholesky factor of ``T``) and each run's deviation is its
    best linear unbiased prediction ``X_r beta + T W_r (theta_r - X_r beta)``, ``W_r = (T + S_r)^-1``.
 3. **Explanation** (:func:`signal_evidence`): each run-level signal ``z`` (standardised) enters the mean
-   (:func:`signal_design`): the gain as ``g0 + g1 z_r``, the offset as ``o0 + o1 z_r + o2 z_r w_r`` with
-   ``w_r = d m / max|m|`` the run's drive-coordinate load (a signal that changes the contact changes the load's
-   slope as well as the drive); its evidence is the Wald test of ``(g1, o1, o2)`` (chi-square, 3 degrees of
-   freedom; 2 without load variation) and the cross-validated share of the runs' weighted held-out deviation
-   it removes (folds over runs: contiguous blocks of the session for the session clock,
+   (:func:`l1b2.closeloop.runstats.signal_design`): the gain as ``g0 + g1 z_r``, the offset as ``o0 + o1 z_r +
+   o2 z_r w_r`` with ``w_r = d m / max|m|`` the run's drive-coordinate load (a signal that changes the contact
+   changes the load's slope as well as the drive); its evidence is the Wald test of ``(g1, o1, o2)``
+   (chi-square, 3 degrees of freedom; 2 without load variation) and the cross-validated share of the runs'
+   weighted held-out deviation it removes (folds over runs: contiguous blocks of the session for the session clock,
    :func:`l1b2.closeloop.folds.session_blocks`).
    A signal is significant when its p-value is below ``alpha`` / the effective number of signals tested
    (Bonferroni over :func:`effective_signal_count`: value signals that follow each other count as fewer tests) and
@@ -43,6 +43,9 @@ that curvature, which the channel's linear value misses. When none of them has W
 Bonferroni level, whatever its cross-validated gain), a cut of
 the session into contiguous blocks (:func:`block_signal`, :mod:`l1b2.closeloop.blocks`: its p-value corrected for
 the search) is tested as one more signal and offered as a :class:`~l1b2.predictor.effects.blocks.SessionBlocks`
+candidate. With ``cycle`` (the loop's ``session_cycle`` option) a cycle of the session clock
+(:mod:`l1b2.closeloop.cycle`, its p-value corrected for the periods searched) is tested in every analysis, beside
+the signals, at the blocks' level, and offered as a :class:`~l1b2.predictor.effects.cycle.SessionCycle`
 candidate. A signal with evidence that its folds do not confirm (the session clock's trend over held-out blocks of
 the session) is not replaced by blocks, whose level is cross-validated over interleaved runs.
 """
@@ -59,9 +62,10 @@ from ..data import measurements as dataio
 from ..predictor import effects as fx
 from ..predictor import model as pr
 from ..units import history_source
-from . import blocks as blk, residuals as res
+from . import blocks as blk, cycle as cyc, residuals as res
 from .auxiliary import derived_columns
-from .reml import REMLFit, design_rows, reml
+from .reml import REMLFit, reml
+from .runstats import cv_signal_gain, joint_test, signal_design, signal_index
 
 #: the columns a reduced run-level form leaves out, in the order :func:`offer` tries them: the drive gain and the
 #: load term (whose products with a signal of V0 or of the load are what two run-level forms share), then the offset
@@ -137,52 +141,6 @@ def run_deviations(df: pd.DataFrame, model, mask: np.ndarray) -> RunDeviations:
                          np.array(ns), w / scale if scale > 0 else None)
 
 
-def signal_design(z: np.ndarray, w: np.ndarray | None = None, gain_only: bool = False) -> np.ndarray:
-    """The mean's design of a signal, ``(n, 2, 5)`` (``(n, 2, 4)`` without ``w``): gain row ``[1, z, 0, 0, 0]``,
-    offset row ``[0, 0, 1, z, z w]``; coefficients ``(g0, g1, o0, o1, o2)``.
-
-    ``z`` (n, q), q columns (a categorical signal's centred level indicators): ``(n, 2, 2 + 3 q)``, gain row
-    ``[1, Z, 0, 0.., 0..]``, offset row ``[0, 0.., 1, Z, Z w]`` (:func:`signal_index`: where the signal's are).
-    ``gain_only``: the signal acts on the gain alone (the session's blocks, one level each:
-    :mod:`l1b2.predictor.effects.blocks`), ``(n, 2, 2 + q)``, gain row ``[1, Z, 0]``, offset row ``[0, 0.., 1]``."""
-    z = np.asarray(z, float)
-    n = len(z)
-    Z = z.reshape(n, -1)
-    one, zero = np.ones((n, 1)), np.zeros(Z.shape)
-    if gain_only:
-        return np.stack([np.hstack([one, Z, 0 * one]), np.hstack([0 * one, zero, one])], axis=1)
-    gain = [one, Z, 0 * one, zero]
-    off = [0 * one, zero, one, Z]
-    if w is not None:
-        gain.append(zero)
-        off.append(Z * np.asarray(w, float)[:, None])
-    return np.stack([np.hstack(gain), np.hstack(off)], axis=1)
-
-
-def identified_columns(X: np.ndarray) -> list:
-    """The columns of a mean's design ``X`` (n, p, k) that the runs identify, in order: each is kept when it is
-    not in the span of the columns kept before it (numerical rank of the stacked ``(n p, k)`` design). All of them
-    when the design has full rank; a categorical signal's load column of a value whose runs share one load, or whose
-    runs carry no load, is not identified."""
-    A = np.asarray(X, float).reshape(-1, np.shape(X)[2])
-    keep: list = []
-    for j in range(A.shape[1]):
-        if np.linalg.matrix_rank(A[:, keep + [j]]) == len(keep) + 1:
-            keep.append(j)
-    return keep
-
-
-def signal_index(q: int, load: bool, gain_only: bool = False) -> list:
-    """The coefficients of a signal of ``q`` columns in :func:`signal_design` (gain, offset[, load] slopes):
-    ``[1, 3, 4]`` for one column with the load, ``3 q`` (``2 q`` without) in all, the joint test's degrees of
-    freedom; ``1 ... q`` for a signal on the gain alone (``gain_only``)."""
-    gain = list(range(1, 1 + q))
-    if gain_only:
-        return gain
-    off = list(range(2 + q, 2 + 2 * q))
-    return gain + off + (list(range(2 + 2 * q, 2 + 3 * q)) if load else [])
-
-
 def heterogeneity(theta: np.ndarray, cov: np.ndarray) -> tuple[float, float]:
     """Cochran's Q of the runs' deviations about their precision-weighted mean and its chi-square p-value
     (``p (n - 1)`` degrees of freedom): small p, the runs differ by more than their sampling error."""
@@ -218,7 +176,8 @@ class SignalEvidence:
     #: given it (:func:`dominated_signals`); None: not dominated
     dominated_by: str | None = None
     #: a categorical signal's TRAIN levels and the runs' shares of all but the last (None: a value signal); its
-    #: ``coef`` is then ``(gain, offset, load)`` per level but the last, against the runs' average, flat
+    #: ``coef`` is then ``(gain, offset, load)`` per level but the last, against the runs' average, flat; a cycle's
+    #: ``shares`` are its waves' means over the runs
     levels: tuple | None = None
     shares: tuple | None = None
     #: the joint test's degrees of freedom
@@ -227,6 +186,9 @@ class SignalEvidence:
     #: blocks' shares of the runs but the last, ``coef`` as a category's, ``p_value`` times its search count);
     #: None: no segmentation
     edges: tuple | None = None
+    #: a cycle's period [s] (:mod:`l1b2.closeloop.cycle`: ``coef`` its cosine's and sine's gains, ``p_value`` times
+    #: its search count); None: no cycle
+    period_s: float | None = None
     #: the value a logged channel's ``drive`` or ``square`` signal is centred on, a ``square`` one's line taken off
     centre: float = 0.0
     slope: float = 0.0
@@ -240,6 +202,9 @@ class SignalEvidence:
         if self.edges is not None:
             out.update(gain_per_sd=None, offset_per_sd_N=None, load_offset_per_sd_N=None,
                        edges_s=list(self.edges), blocks=len(self.edges) + 1)
+        if self.period_s is not None:
+            out.update(gain_per_sd=None, offset_per_sd_N=None, load_offset_per_sd_N=None, period_s=self.period_s,
+                       cos_gain=self.coef[0], sin_gain=self.coef[1])
         if self.levels is not None:
             q = len(self.levels) - 1
             c = list(self.coef) + [0.0] * (3 * q - len(self.coef))
@@ -317,6 +282,15 @@ def _is_blocks(sg) -> bool:
     return sg.get("transform") == fx.blocks.BLOCKS
 
 
+def _cycle() -> fx.Effect:
+    """The session's cycle (:class:`l1b2.predictor.effects.cycle.SessionCycle`)."""
+    return fx.family("session_cycle")
+
+
+def _is_cycle(sg) -> bool:
+    return sg.get("transform") == fx.cycle.CYCLE
+
+
 def block_signal(dev: RunDeviations, t_run_s: np.ndarray, T: np.ndarray, *, level: float, k: int,
                  seed: int) -> dict | None:
     """The segmentation of the session into contiguous blocks (:func:`l1b2.closeloop.blocks.segmentations`) as a
@@ -377,70 +351,10 @@ def signal_columns(sg: dict) -> tuple[np.ndarray, float, float]:
         return _category().columns(sg), 0.0, 1.0
     if _is_blocks(sg):
         return fx.blocks.index_columns(sg["values"], sg["shares"]), 0.0, 1.0
+    if _is_cycle(sg):
+        return np.asarray(sg["columns"], float), 0.0, 1.0
     mean, sd = float(np.mean(v)), float(np.std(v))
     return (v - mean) / sd, mean, sd
-
-
-def independent_columns(Z: np.ndarray) -> np.ndarray:
-    """The columns of ``Z`` (n, q) that add to the rank of ``[1, the columns kept so far]``, in order (a fold
-    whose training runs miss a level: its indicator is then constant, or the others sum to one)."""
-    Z = np.asarray(Z, float).reshape(len(Z), -1)
-    keep: list = []
-    for j in range(Z.shape[1]):
-        M = np.column_stack([np.ones(len(Z)), Z[:, keep + [j]]])
-        if np.linalg.matrix_rank(M) == len(keep) + 2:
-            keep.append(j)
-    return np.array(keep, int)
-
-
-def _weighted_sse(theta, cov, T, X, beta) -> np.ndarray:
-    """Per run ``(theta_r - X_r beta)' (T + S_r)^-1 (theta_r - X_r beta)``."""
-    r = theta - np.einsum("rpk,k->rp", X, beta)
-    return np.einsum("rp,rpq,rq->r", r, np.linalg.inv(T[None] + cov), r)
-
-
-def null_fold_fit(theta, cov, te, memo: dict | None = None) -> REMLFit:
-    """The null model's (intercepts only) REML fit on the runs not in ``te`` (indices of held-out runs), as
-    :func:`cv_signal_gain` fits it.
-
-    ``memo``: a dict kept by the caller: the fit is stored under ``theta``, ``cov`` and the held-out indices
-    (their values) and returned from there when they come again (every signal of one :func:`signal_evidence` is
-    scored on the same folds against the same null fits)."""
-    theta, cov, te = np.asarray(theta, float), np.asarray(cov, float), np.asarray(te)
-    key = (theta.shape, theta.tobytes(), cov.tobytes(), te.dtype.str, te.tobytes())
-    if memo is not None and key in memo:
-        return memo[key]
-    n, p = theta.shape
-    tr = np.setdiff1d(np.arange(n), te)
-    fit = reml(theta[tr], cov[tr], design_rows(None, n, p)[tr])
-    if memo is not None:
-        memo[key] = fit
-    return fit
-
-
-def cv_signal_gain(theta, cov, z, folds_idx, w=None, null_fits: dict | None = None,
-                   gain_only: bool = False) -> tuple[float, np.ndarray]:
-    """Held-out share of the runs' weighted deviation that the signal ``z`` removes, and the per-run reductions.
-
-    For each fold (indices of held-out runs) the null (intercepts) and the signal's model are fitted by REML on
-    the other runs; the held-out runs' weighted squared deviations (weights ``(T0 + S_r)^-1`` of the null fit,
-    the same for both) are compared: gain ``1 - sum SSE1 / sum SSE0``. ``null_fits``: a memo of
-    :func:`null_fold_fit` (None: every null fit computed here).
-    """
-    n, p = theta.shape
-    Z = np.asarray(z, float).reshape(n, -1)
-    X0 = design_rows(None, n, p)
-    s0, s1 = np.zeros(n), np.zeros(n)
-    for te in folds_idx:
-        tr = np.setdiff1d(np.arange(n), te)
-        X1 = signal_design(Z if Z.shape[1] == 1 else Z[:, independent_columns(Z[tr])], w, gain_only)
-        X1 = X1[:, :, identified_columns(X1[tr])]
-        f0 = null_fold_fit(theta, cov, te, null_fits)
-        f1 = reml(theta[tr], cov[tr], X1[tr])
-        s0[te] = _weighted_sse(theta[te], cov[te], f0.T, X0[te], f0.beta)
-        s1[te] = _weighted_sse(theta[te], cov[te], f0.T, X1[te], f1.beta)
-    gain = float(1 - s1.sum() / s0.sum()) if s0.sum() > 0 else 0.0
-    return gain, (s0 - s1) / max(s0.mean(), 1e-300)
 
 
 def effective_tests(Z: np.ndarray) -> float:
@@ -463,7 +377,8 @@ def effective_signal_count(signals_) -> float:
     """How many tests the run-level signals ``signals_`` (:func:`run_signals`' dicts) count as, at least 1: the
     value signals' :func:`effective_tests` over their run values (a channel's lags, its logarithm and the inputs it
     follows are not as many independent tests as signals), plus one per categorical signal or segmentation."""
-    values = [np.asarray(sg["values"], float) for sg in signals_ if not (_is_category(sg) or _is_blocks(sg))]
+    values = [np.asarray(sg["values"], float) for sg in signals_
+              if not (_is_category(sg) or _is_blocks(sg) or _is_cycle(sg))]
     other = len(signals_) - len(values)
     return max(1.0, other + (effective_tests(np.column_stack(values)) if values else 0.0))
 
@@ -489,21 +404,23 @@ def signal_evidence(dev: RunDeviations, signals_, *, alpha: float, k: int, seed:
     null_fits: dict = {}     # the null model's fold fits, shared by every signal (same deviations, same folds)
     for sg in signals_:
         z, mean, sd = signal_columns(sg)
-        cat, seg = _is_category(sg), _is_blocks(sg)
-        b, p, dof = joint_test(dev, z, seg)     # a segmentation: one level per block, on the gain
-        p = min(1.0, p * sg.get("search_count", 1))   # a segmentation's search (module blocks)
+        cat, seg, cy = _is_category(sg), _is_blocks(sg), _is_cycle(sg)
+        b, p, dof = joint_test(dev, z, seg or cy)     # a segmentation or a cycle: on the gain (their families')
+        p = min(1.0, p * sg.get("search_count", 1))   # a segmentation's or a cycle's search (modules blocks, cycle)
         blocked = sg["channel"] == fx.channels.SESSION_TIME and not seg   # a block's level: from runs within it
         folds = sg.get("folds") or (blocks if blocked else rand)   # a segmentation's own (block_signal)
-        gain, per_run = cv_signal_gain(dev.theta, dev.cov, z, folds, dev.load, null_fits, seg)
+        gain, per_run = cv_signal_gain(dev.theta, dev.cov, z, folds, dev.load, null_fits, seg or cy)
         label = (_category().label(sg["channel"]) if cat else _blocks().label(len(sg["edges"]) + 1) if seg
+                 else _cycle().label(sg["period_s"]) if cy
                  else fx.channels.signal_label(sg["channel"], sg["transform"]))
-        reg = _blocks().regressor if seg else fx.channels.regressor_of(sg["channel"])
+        reg = _blocks().regressor if seg else _cycle().regressor if cy else fx.channels.regressor_of(sg["channel"])
         out.append(SignalEvidence(sg["channel"], sg["transform"], label, reg,
                                   mean, sd, p, gain, tuple(float(x) for x in b) + (0.0,) * (3 - len(b)),
                                   bool(p < level and gain > 0),
                                   blocked, per_run, sg.get("run_spread"),
                                   levels=tuple(sg["levels"]) if cat else None,
-                                  shares=tuple(sg["shares"]) if cat or seg else None, dof=dof,
+                                  shares=tuple(sg["shares"]) if cat or seg or cy else None, dof=dof,
+                                  period_s=float(sg["period_s"]) if cy else None,
                                   edges=tuple(sg["edges"]) if seg else None, centre=float(sg.get("centre", 0.0)),
                                   slope=float(sg.get("slope", 0.0))))
         zs.append(z)
@@ -513,32 +430,12 @@ def signal_evidence(dev: RunDeviations, signals_, *, alpha: float, k: int, seed:
                                   sources=history_sources([sg["channel"] for sg in signals_]))
     for e, dom in zip(out, dominated):
         e.dominated_by = out[dom].label if dom is not None else None
-    return sorted(out, key=lambda e: (e.dominated_by is not None, e.p_value, -e.cv_gain))
+    return sorted(out, key=rank)
 
 
-def joint_test(dev: RunDeviations, z: np.ndarray, gain_only: bool = False) -> tuple[np.ndarray, float, int]:
-    """``(b, p, dof)``: a signal's coefficients in the REML mean of :func:`signal_design` (:func:`signal_index`),
-    the p-value of their joint Wald test ``b' C^-1 b`` (``C`` their block of REML's ``beta_cov``) against
-    chi-square with ``dof = len(b)`` degrees of freedom: 3 per column of ``z`` (2 without load variation).
-
-    A coefficient the runs do not identify (:func:`identified_columns`) is left out of the mean and of the test: its
-    ``b`` is 0 and ``dof`` counts the identified ones only (none: ``p`` 1)."""
-    Z = np.asarray(z, float).reshape(len(z), -1)
-    idx = signal_index(Z.shape[1], dev.load is not None, gain_only)
-    X = signal_design(z, dev.load, gain_only)
-    keep = identified_columns(X)
-    fit = reml(dev.theta, dev.cov, X[:, :, keep])
-    at = {j: i for i, j in enumerate(keep)}
-    tested = [at[j] for j in idx if j in at]
-    b = np.array([fit.beta[at[j]] if j in at else 0.0 for j in idx])
-    if not tested:
-        return b, 1.0, 0
-    bt, C = fit.beta[tested], fit.beta_cov[np.ix_(tested, tested)]
-    try:
-        p = float(stats.chi2.sf(float(bt @ np.linalg.solve(C, bt)), len(tested)))
-    except np.linalg.LinAlgError:
-        p = 1.0
-    return b, p, len(tested)
+def rank(e: SignalEvidence) -> tuple:
+    """The order of signals' evidence: undominated before dominated, then the smallest p-value, the larger gain."""
+    return e.dominated_by is not None, e.p_value, -e.cv_gain
 
 
 def _beyond(z: np.ndarray, given: np.ndarray) -> np.ndarray:
@@ -698,8 +595,9 @@ class RunLevelAnalysis:
 
 
 def analyse(df: pd.DataFrame, model, mask: np.ndarray, channels, *, alpha: float, k: int,
-            seed: int) -> RunLevelAnalysis:
-    """Deviations of every run from ``model``, their REML shrinkage and every run-level signal's evidence."""
+            seed: int, cycle: bool = False) -> RunLevelAnalysis:
+    """Deviations of every run from ``model``, their REML shrinkage and every run-level signal's evidence
+    (``cycle``: a cycle of the session clock searched too, :mod:`l1b2.closeloop.cycle`)."""
     dev = run_deviations(df, model, mask)
     sigs = run_signals(df, channels)
     keep = pd.Index(pd.unique(df[dataio.RUN])).get_indexer(dev.runs)
@@ -718,6 +616,10 @@ def analyse(df: pd.DataFrame, model, mask: np.ndarray, channels, *, alpha: float
         seg = block_signal(dev, times.mean().to_numpy(float)[keep], fit.T, level=level, k=k, seed=seed)
         if seg is not None:
             evidence += signal_evidence(dev, [seg], alpha=level, k=k, seed=seed, session_order=start)
+    found = cyc.cycle_signal(dev, times.mean().to_numpy(float)[keep]) if cycle else None   # beside the signals
+    if found is not None:
+        evidence = sorted(evidence + signal_evidence(dev, [found], alpha=level, k=k, seed=seed, session_order=start),
+                          key=rank)
     return RunLevelAnalysis(dev, fit, q, qp, evidence, signals_level)
 
 
@@ -744,6 +646,9 @@ def candidates(analysis: RunLevelAnalysis, ctx) -> list:
         if e.edges is not None:
             full += [candidate(ctx, h) for h in _blocks().hypotheses([{"edges": e.edges, "shares": e.shares}])]
             continue
+        if e.period_s is not None:
+            full += [candidate(ctx, h) for h in _cycle().hypotheses([{"period_s": e.period_s, "means": e.shares}])]
+            continue
         fam = fx.family("run_level") if e.levels is None else _category()
         sg = offered_signal(e)
         full += [candidate(ctx, h) for h in fam.hypotheses([sg])]
@@ -765,8 +670,8 @@ def offered_signal(e: SignalEvidence) -> dict:
 def is_run_level(c) -> bool:
     """Whether a candidate is constant along the stroke by construction (a run-level family or a channel's run mean)."""
     spec = c.spec or {}
-    return spec.get("kind") in ("run_level", _category().kind, _blocks().kind) or (spec.get("kind") == "channel"
-                                                                  and spec.get("level") == "run")
+    return (spec.get("kind") in ("run_level", _category().kind, _blocks().kind, _cycle().kind)
+            or (spec.get("kind") == "channel" and spec.get("level") == "run"))
 
 
 def is_last_resort(c) -> bool:

@@ -94,6 +94,10 @@ class LoopSettings:
         (:mod:`l1b2.closeloop.runlevel`, Bonferroni over the signals' effective number of tests) as one more
         candidate of the cross-validated refit; among accepted candidates within ``parsimony`` of the best, a form
         constant along the stroke is preferred over a within-run form when the run-level evidence names its regressor.
+    session_cycle : bool
+        With ``run_level``, also search each round's runs for a cycle of the session clock
+        (:mod:`l1b2.closeloop.cycle`) and offer a significant one as the family ``session_cycle``. Off by default: a
+        cycle of a few runs can follow the plan's own pattern (decision 0179).
     clock_folds : {"blocks", "rotation"}
         Folds of the candidates that depend on the session clock (screen and refit, whatever ``run_level``):
         ``"blocks"`` k contiguous blocks, ``"rotation"`` conditions dealt in turn (:mod:`~l1b2.closeloop.acceptance`).
@@ -144,6 +148,7 @@ class LoopSettings:
     client: Any = field(default=None, compare=False)
     baseline: str = "eq29"
     run_level: bool = True
+    session_cycle: bool = False
     stroke_speed_gain: bool = False
     response_columns: tuple | None = None
     clock_folds: str = "blocks"
@@ -161,7 +166,8 @@ class LoopSettings:
                 "refit_repeats": self.refit_repeats, "tie_repeats": self.tie_repeats, "min_cv_gain": self.min_cv_gain,
                 "min_cv_drop": self.min_cv_drop, "screen_alpha": self.screen_alpha,
                 "noise_fit": self.noise_fit, "noise": self.noise, "fold_unit": self.fold_unit,
-                "max_rounds": self.max_rounds, "run_level": self.run_level, "stroke_speed_gain": self.stroke_speed_gain,
+                "max_rounds": self.max_rounds, "run_level": self.run_level, "session_cycle": self.session_cycle,
+                "stroke_speed_gain": self.stroke_speed_gain,
                 "clock_folds": self.clock_folds,
                 "response_columns": (list(self.response_columns) if self.response_columns is not None
                                      else None)}

@@ -21,7 +21,7 @@ logged channel and the protocol's clock in generic forms; ``run_level``: a run-l
 own deviations, offered by the close loop's run-level analysis, not by a library) and :mod:`~.category`
 (``run_level_category``: a logged run setting's values, each its own run-level effect, offered the same way) and
 :mod:`~.blocks` (``session_blocks``: contiguous blocks of the session's runs, each its own run-level effect, offered
-the same way).
+the same way) and :mod:`~.cycle` (``session_cycle``: a cycle of the session's clock, offered the same way).
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ from .plugins import load_all as _load_plugins
 
 #: the package's family modules, imported (and so registered) in this order: the candidate library's order
 FAMILY_MODULES = ("thermal", "direction", "bar", "load_path", "drive", "motion", "interactions", "generic", "channels",
-                  "category", "blocks")
+                  "category", "blocks", "cycle")
 for _m in FAMILY_MODULES:
     importlib.import_module(f"{__name__}.{_m}")
 _load_plugins()
