@@ -16,9 +16,11 @@ TRAIN = fx.TrainingSummary(
     # a logged run setting of three values whose summary records its category (the categorical family's grid)
     channels=({"name": "fixture_id", "kind": "logged", "mean": 2.0, "sd": 0.8, "lo": 1.0, "hi": 3.0,
                "within_run": False, "run_spread": 0.0, "levels": (1.0, 2.0, 3.0), "shares": (0.4, 0.4)},
-              # the session clock, whose record holds a segmentation into blocks (the session blocks' grid)
+              # the session clock, whose record holds a segmentation into blocks (the session blocks' grid) and a
+              # cycle (the session cycle's grid)
               {"name": "time_s", "kind": "protocol", "mean": 150.0, "sd": 86.6, "within_run": True,
-               "block_edges": (100.0, 200.0), "block_shares": (0.3, 0.35)}))
+               "block_edges": (100.0, 200.0), "block_shares": (0.3, 0.35), "cycle_period_s": 40.0,
+               "cycle_means": (0.1, -0.05)}))
 
 
 def _signals(n=50, seed=0):

@@ -103,6 +103,8 @@ class SessionCycle(Effect):
         return out
 
     def grid(self, train):
-        """None: the loop does not list cycles; its run-level analysis offers :meth:`hypotheses` of a significant
-        one."""
-        return []
+        """The hypothesis of every cycle ``train``'s session clock record holds (``cycle_period_s`` and
+        ``cycle_means``, what :mod:`l1b2.closeloop.cycle` finds). The loop does not list these: its run-level
+        analysis offers :meth:`hypotheses` of a significant cycle."""
+        return self.hypotheses([{"period_s": ch["cycle_period_s"], "means": ch["cycle_means"]} for ch in train.channels
+                                if ch.get("name") == SESSION_TIME and "cycle_period_s" in ch and "cycle_means" in ch])
