@@ -604,7 +604,7 @@ def analyse(df: pd.DataFrame, model, mask: np.ndarray, channels, *, alpha: float
     sigs = [_kept(s, keep) for s in sigs]
     sigs = [s for s in sigs if s is not None]
     times = df.groupby(dataio.RUN, sort=False)[dataio.TIME]
-    start = times.min().to_numpy(float)[keep]
+    start, middle = times.min().to_numpy(float)[keep], times.mean().to_numpy(float)[keep]
     if len(dev.runs) < 6:
         return RunLevelAnalysis(dev, None, float("nan"), 1.0, [], alpha / effective_signal_count(sigs))
     q, qp = heterogeneity(dev.theta, dev.cov)
@@ -613,10 +613,10 @@ def analyse(df: pd.DataFrame, model, mask: np.ndarray, channels, *, alpha: float
     evidence = signal_evidence(dev, sigs, alpha=alpha, k=k, seed=seed, session_order=start, tests=m)
     signals_level, level = alpha / m, alpha / (m + 1)
     if searches_blocks(evidence, signals_level):   # blocks of the session: the evidence of last resort
-        seg = block_signal(dev, times.mean().to_numpy(float)[keep], fit.T, level=level, k=k, seed=seed)
+        seg = block_signal(dev, middle, fit.T, level=level, k=k, seed=seed)
         if seg is not None:
             evidence += signal_evidence(dev, [seg], alpha=level, k=k, seed=seed, session_order=start)
-    found = cyc.cycle_signal(dev, times.mean().to_numpy(float)[keep]) if cycle else None   # beside the signals
+    found = cyc.cycle_signal(dev, middle) if cycle else None   # beside the signals
     if found is not None:
         evidence = sorted(evidence + signal_evidence(dev, [found], alpha=level, k=k, seed=seed, session_order=start),
                           key=rank)
