@@ -122,8 +122,8 @@ def with_protocol_channels(train: pd.DataFrame, test: pd.DataFrame | None, respo
     channels logged, not of those derived here) and the run settings of the columns the consequence test classed
     responses (:func:`l1b2.closeloop.runsetting.with_response_settings`, ``response_tests`` the test's records);
     ``records`` their records under ``"event_clocks"``, ``"lagged_channels"``, ``"pause_channel"``, ``"break_clock"``,
-    ``"previous_pass"``, ``"run_clock"``, ``"run_travel"``, ``"log_channels"`` and ``"response_settings"``. Each returned frame names the
-    columns derived here in its ``attrs`` (:func:`l1b2.closeloop.auxiliary.derived_columns`).
+    ``"previous_pass"``, ``"run_clock"``, ``"run_travel"``, ``"log_channels"`` and ``"response_settings"``. Each
+    returned frame names the columns derived here in its ``attrs`` (:func:`l1b2.closeloop.auxiliary.derived_columns`).
     ``sess``: the frames' :func:`~l1b2.closeloop.events.session` before any derivation."""
     rec = {}
     before = set(train.columns)

@@ -24,10 +24,19 @@ theirs from TRAIN's law (``beta``, ``gamma``, the history's scale and the stroke
 measured speed: the run's setting as the reading carries it. When the law is exact it holds nothing of the speed;
 what it holds of the speed is the law's misfit, which the loop's acceptance weighs like any candidate's.
 
+**What the plan fixes is no setting.** A reading whose level follows the drive amplitude (a sound level, a sensor's
+gain drift with the supply) leaves run levels that the plan's inputs fix, up to the law's misfit of the speed's
+echo, which is itself a function of the run's speed: read as a cause, it would carry TEST's own speed into the
+prediction. So the settings are kept only when the plan's inputs explain less than :data:`PLAN_SHARE_MAX` of their
+variance over TRAIN's runs (:func:`plan_share`: a least-squares fit on the standardised drive amplitude, load and
+drive frequency, each with its square, the direction and the direction times the load), as a logged setting that
+only relabels the plan is offered nothing (:mod:`l1b2.closeloop.relabels`).
+
 It is derived for every column the test classed a response (``response`` true and among the loop's responses; not
 for the named responses of the default list or of the user's setting, which no law was fitted to), that varies in
-every run of TRAIN (a column constant in some runs was tested on the others only) and that TEST logs when a TEST is
-given. Each is recorded (:func:`with_response_settings`), derived or not and why.
+every run of TRAIN (a column constant in some runs was tested on the others only), that TEST logs when a TEST is
+given and whose settings the plan does not fix. Each is recorded (:func:`with_response_settings`), derived or not
+and why.
 """
 
 from __future__ import annotations
@@ -41,7 +50,11 @@ from ..data import measurements as dataio
 from ..units import SETTING_SUFFIX
 from .responses import history_basis, position_basis, position_span, within_runs
 
-__all__ = ["ResponseLaw", "fit_response_law", "with_response_settings"]
+__all__ = ["PLAN_SHARE_MAX", "ResponseLaw", "fit_response_law", "plan_share", "with_response_settings"]
+
+#: the largest share of the settings' variance over TRAIN's runs that the plan's inputs may explain for the settings
+#: to be derived (more than half of it is the runs' own)
+PLAN_SHARE_MAX = 0.5
 
 
 @dataclass(frozen=True)
@@ -89,6 +102,27 @@ def fit_response_law(df: pd.DataFrame, channel: str, history: str, tau_s: float 
                        beta=tuple(float(b) for b in coef[:k]), gamma=tuple(float(g) for g in coef[k:]))
 
 
+def plan_share(df: pd.DataFrame, values) -> float:
+    """The share of the variance over ``df``'s runs of the per-sample column ``values``' run means that the plan's
+    inputs explain (the R^2 of a least-squares fit with an intercept on the runs' standardised drive amplitude,
+    load and drive frequency, each with its square, the direction and the direction times the standardised load;
+    the inputs constant over the runs left out); 1 for run means that do not vary."""
+    runs = df.assign(_v=np.asarray(values, float)).groupby(dataio.RUN, sort=False)
+    y = runs["_v"].mean().to_numpy(float)
+    first = runs.first()
+    z = {c: first[c].to_numpy(float) for c in (dataio.VOLTAGE, dataio.LOAD, dataio.FREQUENCY) if c in first}
+    z = {c: (x - x.mean()) / x.std() for c, x in z.items() if np.ptp(x) > 0}
+    d = first[dataio.DIRECTION].to_numpy(float)
+    cols = [np.ones_like(y), d] + [x for c in z for x in (z[c], z[c] ** 2)]
+    cols += [d * z[dataio.LOAD]] if dataio.LOAD in z else []
+    ss = float(np.sum((y - y.mean()) ** 2))
+    if not ss > 0:
+        return 1.0
+    X = np.column_stack(cols)
+    e = y - X @ np.linalg.lstsq(X, y, rcond=None)[0]
+    return float(1.0 - (e @ e) / ss)
+
+
 def _spread(values: np.ndarray, run) -> float:
     """The standard deviation over runs of a per-sample column's run means."""
     means = pd.Series(values).groupby(np.asarray(run), sort=False).mean().to_numpy(float)
@@ -99,9 +133,9 @@ def with_response_settings(train: pd.DataFrame, test: pd.DataFrame | None, tests
     """``(train, test, record)``: the frames with ``<column>_setting`` appended for every column that the consequence
     test classed a response (``tests``: :func:`l1b2.closeloop.responses.response_tests`' records, ``response`` true,
     the column among ``response_columns``) and that qualifies (module docstring); ``record`` one dict per such
-    column: ``{"channel" (the derived name), "from", "derived", "note"}`` and, when derived, the law's ``history``
-    and ``tau_s``, ``run_spread`` (the standard deviation over TRAIN's runs of the settings) and ``echo_spread`` (of
-    the runs' mean echo), in the column's unit. The frames are returned unchanged when nothing is derived."""
+    column: ``{"channel" (the derived name), "from", "derived", "note"}`` and, when the law was fitted, its
+    ``history`` and ``tau_s``, ``run_spread`` (the standard deviation over TRAIN's runs of the settings) and
+    ``echo_spread`` (of the runs' mean echo), in the column's unit, and ``plan_share`` (:func:`plan_share`). The frames are returned unchanged when nothing is derived."""
     record, new_tr, new_te = [], {}, {}
     responses = set(response_columns)
     for rec in tests:
@@ -118,14 +152,18 @@ def with_response_settings(train: pd.DataFrame, test: pd.DataFrame | None, tests
             record.append({**row, "note": "TEST does not log it: no setting derived"})
             continue
         law = fit_response_law(train, column, rec["history"], rec["tau_s"])
-        new_tr[name] = law.run_settings(train)
+        values = law.run_settings(train)
+        row.update(history=law.history, tau_s=law.tau_s, run_spread=_spread(values, train[dataio.RUN]),
+                   echo_spread=_spread(law.echo(train), train[dataio.RUN]), plan_share=plan_share(train, values))
+        if not row["plan_share"] < PLAN_SHARE_MAX:
+            record.append({**row, "note": f"the plan's inputs explain {row['plan_share']:.0%} of its run levels: "
+                                          "they fix them, no setting derived"})
+            continue
+        new_tr[name] = values
         if test is not None:
             new_te[name] = law.run_settings(test)
-        record.append({**row, "derived": True, "history": law.history, "tau_s": law.tau_s,
-                       "run_spread": _spread(new_tr[name], train[dataio.RUN]),
-                       "echo_spread": _spread(law.echo(train), train[dataio.RUN]),
-                       "note": "the run's level less the speed's echo by the consequence test's law, TRAIN's law "
-                               "on TEST"})
+        record.append({**row, "derived": True, "note": "the run's level less the speed's echo by the consequence "
+                                                       "test's law, TRAIN's law on TEST"})
     if not new_tr:
         return train, test, record
     train = train.assign(**new_tr)
