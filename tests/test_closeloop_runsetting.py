@@ -10,6 +10,7 @@ import pytest
 from l1b2.closeloop.candidates import channels_of
 from l1b2.closeloop.derived import is_derivable_name, with_protocol_channels
 from l1b2.closeloop.events import session as session_of
+from l1b2.closeloop.report import response_setting_lines
 from l1b2.closeloop.responses import response_tests
 from l1b2.closeloop.runsetting import PLAN_SHARE_MAX, fit_response_law, plan_share, with_response_settings
 from l1b2.units import SETTING_SUFFIX, column_unit
@@ -182,3 +183,17 @@ def test_a_response_whose_levels_the_plan_fixes_gets_no_setting():
     tr, _, record = with_response_settings(train, None, tests, ("vcm_current_A",))
     assert tr is train and not record[0]["derived"] and record[0]["plan_share"] > PLAN_SHARE_MAX
     assert "the plan's inputs explain" in record[0]["note"]
+
+
+def test_report_md_names_each_setting_derived_or_not_and_why(frames):
+    train, test, _ = frames
+    tests = response_tests(train)
+    (rec,) = with_response_settings(train, test, tests, ("vcm_current_A",))[2]
+    refused = {"channel": "mic_setting", "from": "mic", "derived": False, "run_spread": 2.0, "echo_spread": 1.0,
+               "plan_share": 0.99, "note": "the plan's inputs explain 99% of its run levels: they fix them"}
+    lines = response_setting_lines([rec, refused])
+    assert lines[0] == "" and "less than half" in lines[1]
+    assert lines[3].startswith("- `vcm_current_A` -> `vcm_current_A_setting`: spread over TRAIN's runs ")
+    assert lines[3].endswith(f"the plan explains {rec['plan_share']:.0%}; derived, a candidate")
+    assert lines[4].endswith("the plan explains 99%; the plan's inputs explain 99% of its run levels: they fix them")
+    assert response_setting_lines([]) == []

@@ -315,6 +315,19 @@ def response_test_lines(tests) -> list:
                     f"{'not a candidate' if r['applied'] else 'a candidate'}" for r in tests]
 
 
+def response_setting_lines(records) -> list:
+    """report.md's lines on the run settings derived from the responses (``diagnosis.response_settings``): one per
+    column classed a response, derived or not and why; empty when there is none."""
+    if not records:
+        return []
+    lines = ["", "Run settings of the responses (each run's level less the speed's echo by the consequence test's "
+             "law, derived when the plan's inputs explain less than half of them):", ""]
+    return lines + [f"- `{r['from']}` -> `{r['channel']}`: "
+                    + (f"spread over TRAIN's runs {r['run_spread']:.4g}, the echo's {r['echo_spread']:.4g}, the plan "
+                       f"explains {r['plan_share']:.0%}; " if "plan_share" in r else "")
+                    + ("derived, a candidate" if r["derived"] else r["note"]) for r in records]
+
+
 def channel_range_line(rec: Mapping) -> str:
     """One line on a logged channel whose TEST values leave TRAIN's range (a record of
     ``diagnosis.channel_ranges``); empty when none does."""
