@@ -344,6 +344,20 @@ def test_a_logged_channels_run_mean_times_the_direction_is_a_signal_of_its_own_a
                                np.column_stack([V0 / 300.0 * z, z, 9.81 * dd * load * z]))
 
 
+def test_a_responses_run_setting_is_read_as_a_logged_setting_with_its_direction_and_curvature():
+    # ``aux_setting`` (a run setting the loop derived from a response, :mod:`l1b2.closeloop.runsetting`) gets the
+    # logged channel's direction and square copies; ``aux_lag3r`` (a history) still does not
+    d = np.array([1, -1, -1, 1, 1, -1, 1, -1, -1, 1, -1, 1], float)
+    df = _runs_frame(d).rename(columns={"aux": "aux_setting"})
+    df.attrs[DERIVED_ATTR] = ("aux_lag3r", "aux_setting")
+    sigs = {(s["channel"], s["transform"]): s for s in rl.run_signals(df, channels_of(df))}
+    mean = df.groupby("run")["aux_setting"].mean().to_numpy()
+    np.testing.assert_allclose(sigs[("aux_setting", "drive")]["values"], d * (mean - mean.mean()))
+    u = mean - mean.mean()
+    np.testing.assert_allclose(sigs[("aux_setting", "square")]["values"], u * u - np.mean(u ** 3) / np.mean(u * u) * u)
+    assert ("aux_lag3r", "drive") not in sigs and ("aux_lag3r", "square") not in sigs
+
+
 def test_a_gain_that_follows_the_channel_times_the_direction_shows_in_that_signal_alone():
     dev, z, rng = _deviations(slope=(0.04, 0.0))
     d = np.where(rng.uniform(size=len(z)) < 0.5, -1.0, 1.0)

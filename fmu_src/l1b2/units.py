@@ -152,6 +152,9 @@ SUFFIX_UNITS: dict[str, str] = {"C": "degC"}
 LAG_SUFFIX_RE = re.compile(r"_lag[0-9]+r$")
 #: the name of a channel derived as a setting's step from its previous different setting: ``X + STEP_SUFFIX``
 STEP_SUFFIX = "_step"
+#: the name of a channel derived as the run's setting a response column carries beside the speed's echo
+#: (:mod:`l1b2.closeloop.runsetting`): ``X + SETTING_SUFFIX``, in ``X``'s unit
+SETTING_SUFFIX = "_setting"
 #: the name of a channel that is the natural logarithm of a quantity in a unit: ``LOG_PREFIX + Q`` where ``Q``
 #: names the quantity with its unit by the naming rule (``ln_pause_s``: ``ln(pause / 1 s)``)
 LOG_PREFIX = "ln_"
@@ -165,13 +168,15 @@ def lag_suffix(n) -> str:
 
 
 def _derived_base(name: str) -> tuple[str, str] | None:
-    """``(kind, base)`` of a name built as ``base + suffix`` (kind ``"lag"`` or ``"step"``), or ``LOG_PREFIX + base``
-    (kind ``"log"``); None for any other name."""
+    """``(kind, base)`` of a name built as ``base + suffix`` (kind ``"lag"``, ``"step"`` or ``"setting"``), or
+    ``LOG_PREFIX + base`` (kind ``"log"``); None for any other name."""
     m = LAG_SUFFIX_RE.search(name)
     if m and m.start() > 0:
         return "lag", name[:m.start()]
     if name.endswith(STEP_SUFFIX) and len(name) > len(STEP_SUFFIX):
         return "step", name[:-len(STEP_SUFFIX)]
+    if name.endswith(SETTING_SUFFIX) and len(name) > len(SETTING_SUFFIX):
+        return "setting", name[:-len(SETTING_SUFFIX)]
     if name.startswith(LOG_PREFIX) and len(name) > len(LOG_PREFIX):
         return "log", name[len(LOG_PREFIX):]
     return None
@@ -199,6 +204,7 @@ def column_unit(name: str) -> str | None:
     * ``X_lag<n>r`` (:data:`LAG_SUFFIX_RE`, a low-pass of ``X``): ``X``'s unit;
     * ``X_step`` (:data:`STEP_SUFFIX`, a difference of two values of ``X``): ``X``'s unit, an offset unit's
       coherent one (:data:`DIFFERENCE_UNITS`: degC -> K);
+    * ``X_setting`` (:data:`SETTING_SUFFIX`, a run's level of ``X``): ``X``'s unit;
     * ``ln_Q`` (:data:`LOG_PREFIX`, ``ln(Q / 1 unit)`` of a quantity ``Q`` in a unit): ``1`` (:func:`unit_note` says
       of what, in which unit).
 

@@ -35,6 +35,7 @@ import pandas as pd
 from ..data import measurements as dataio
 from ..data.gaps import fill_gaps
 from ..errors import DataFormatError
+from ..units import SETTING_SUFFIX
 
 __all__ = ["MAX_LABELS", "MAX_TOKEN_SHARE", "LABELS_ATTR", "DERIVED_ATTR", "derived_columns", "with_usable_channels",
            "label_codes", "label_columns", "check_test_columns"]
@@ -58,9 +59,12 @@ def label_columns(df: pd.DataFrame) -> tuple:
 DERIVED_ATTR = "l1b2_derived_columns"
 
 
-def derived_columns(df: pd.DataFrame) -> tuple:
-    """The columns of ``df`` that :func:`l1b2.closeloop.derived.with_protocol_channels` derived from the log."""
-    return tuple(df.attrs.get(DERIVED_ATTR, ()))
+def derived_columns(df: pd.DataFrame, settings: bool = True) -> tuple:
+    """The columns of ``df`` that :func:`l1b2.closeloop.derived.with_protocol_channels` derived from the log;
+    without the run settings of response columns when ``settings`` is False (``X_setting``,
+    :mod:`l1b2.closeloop.runsetting`: a setting logged through a response, read as a logged setting is)."""
+    cols = tuple(df.attrs.get(DERIVED_ATTR, ()))
+    return cols if settings else tuple(c for c in cols if not str(c).endswith(SETTING_SUFFIX))
 
 
 #: The columns that are never auxiliary (candidate) channels: the required ones (the plan, the run id and the

@@ -8,6 +8,7 @@ previous run's load, ``prev_run_load_kg``;
 :mod:`~l1b2.closeloop.runclock`: the time since each run's first sample, ``time_in_run_s``, and the way gone since,
 ``travel_in_run_m``;
 :mod:`~l1b2.closeloop.logscale`: the logarithm ``ln_<column>`` of a logged channel that spans decades;
+:mod:`~l1b2.closeloop.runsetting`: the run's setting ``<column>_setting`` that a response column carries;
 :func:`with_protocol_channels` derives them all). A rig's own column may carry
 one of those names by chance (a logger that writes its own ``ln_pause_s``, an export that already holds a
 ``voltage_V_lag3r``). Taken as the derived channel, such a column would replace the derivation (or be
@@ -20,7 +21,8 @@ A name a derivation *could* produce: exactly :data:`l1b2.closeloop.pauses.COLUMN
 :data:`l1b2.closeloop.pauses.BREAK_COLUMN`, :data:`l1b2.closeloop.pauses.BREAK_COUNT_COLUMN`,
 :data:`l1b2.closeloop.runclock.COLUMN`, :data:`l1b2.closeloop.runclock.TRAVEL_COLUMN` or
 :data:`l1b2.closeloop.history.LOAD_COLUMN`, or ``X + suffix`` for a column ``X`` of the frame and a suffix of the
-event clock, of a lag of :data:`l1b2.closeloop.lags.TAU_RUNS` periods or of a setting's step (``_step``), or
+event clock, of a lag of :data:`l1b2.closeloop.lags.TAU_RUNS` periods, of a setting's step (``_step``) or of a
+response's run setting (``_setting``, :mod:`~l1b2.closeloop.runsetting`), or
 ``LOG_PREFIX + X`` (:data:`l1b2.units.LOG_PREFIX`) for a column ``X`` of the frame. The required columns and the
 speed are never renamed.
 """
@@ -32,12 +34,13 @@ import pandas as pd
 from .auxiliary import DERIVED_ATTR, NOT_CANDIDATES, derived_columns, with_usable_channels
 from .candidates import channel_kinds
 from .events import SUFFIX as EVENT_SUFFIX, Session, with_event_clocks
-from ..units import LOG_PREFIX, STEP_SUFFIX, lag_suffix
+from ..units import LOG_PREFIX, SETTING_SUFFIX, STEP_SUFFIX, lag_suffix
 from .history import LOAD_COLUMN as PREVIOUS_LOAD_COLUMN, with_previous_pass
 from .lags import TAU_RUNS, with_lagged_channels
 from .logscale import with_log_channels
 from .pauses import BREAK_COLUMN, BREAK_COUNT_COLUMN, COLUMN as PAUSE_COLUMN, with_break_clock, with_pause_channel
 from .runclock import COLUMN as RUN_CLOCK_COLUMN, TRAVEL_COLUMN, with_run_clock, with_run_travel
+from .runsetting import with_response_settings
 
 __all__ = ["RENAMED_SUFFIX", "derived_suffixes", "is_derivable_name", "set_aside_derivable_names",
            "prepare_channels", "with_protocol_channels"]
@@ -47,8 +50,9 @@ RENAMED_SUFFIX = "_logged"
 
 
 def derived_suffixes() -> tuple[str, ...]:
-    """The suffixes the loop's derivations append to a column's name: the event clock's, each lag's, the step's."""
-    return (EVENT_SUFFIX,) + tuple(lag_suffix(n) for n in TAU_RUNS) + (STEP_SUFFIX,)
+    """The suffixes the loop's derivations append to a column's name: the event clock's, each lag's, the step's, the
+    run setting's."""
+    return (EVENT_SUFFIX,) + tuple(lag_suffix(n) for n in TAU_RUNS) + (STEP_SUFFIX, SETTING_SUFFIX)
 
 
 def is_derivable_name(name: str, columns) -> bool:
@@ -106,7 +110,8 @@ def prepare_channels(train: pd.DataFrame, test: pd.DataFrame | None = None, resp
     return train, test, renamed + usable, responses
 
 
-def with_protocol_channels(train: pd.DataFrame, test: pd.DataFrame | None, response_columns, sess: Session):
+def with_protocol_channels(train: pd.DataFrame, test: pd.DataFrame | None, response_columns, sess: Session,
+                           response_tests=()):
     """``(train, test, records)``: the frames with every channel the loop derives from the log appended, in this
     order: the event clocks (:func:`l1b2.closeloop.events.with_event_clocks`), the lags and steps
     (:func:`l1b2.closeloop.lags.with_lagged_channels`), the pause (:func:`l1b2.closeloop.pauses.with_pause_channel`),
@@ -114,10 +119,11 @@ def with_protocol_channels(train: pd.DataFrame, test: pd.DataFrame | None, respo
     (:func:`l1b2.closeloop.history.with_previous_pass`), the run's clock and travel
     (:func:`l1b2.closeloop.runclock.with_run_clock`, :func:`~l1b2.closeloop.runclock.with_run_travel`) and the
     logarithms of the logged channels that span decades (:func:`l1b2.closeloop.logscale.with_log_channels`: of the
-    channels logged, not of those derived here);
+    channels logged, not of those derived here) and the run settings of the columns the consequence test classed
+    responses (:func:`l1b2.closeloop.runsetting.with_response_settings`, ``response_tests`` the test's records);
     ``records`` their records under ``"event_clocks"``, ``"lagged_channels"``, ``"pause_channel"``, ``"break_clock"``,
-    ``"previous_pass"``, ``"run_clock"``, ``"run_travel"`` and ``"log_channels"``. Each returned frame names the
-    columns derived here in its ``attrs`` (:func:`l1b2.closeloop.auxiliary.derived_columns`).
+    ``"previous_pass"``, ``"run_clock"``, ``"run_travel"``, ``"log_channels"`` and ``"response_settings"``. Each
+    returned frame names the columns derived here in its ``attrs`` (:func:`l1b2.closeloop.auxiliary.derived_columns`).
     ``sess``: the frames' :func:`~l1b2.closeloop.events.session` before any derivation."""
     rec = {}
     before = set(train.columns)
@@ -130,6 +136,7 @@ def with_protocol_channels(train: pd.DataFrame, test: pd.DataFrame | None, respo
     train, test, rec["run_clock"] = with_run_clock(train, test)   # along the stroke only
     train, test, rec["run_travel"] = with_run_travel(train, test)   # along the stroke only
     train, test, rec["log_channels"] = with_log_channels(train, test, logged)
+    train, test, rec["response_settings"] = with_response_settings(train, test, response_tests, response_columns)
     for df in (train, test):
         if df is not None:
             df.attrs[DERIVED_ATTR] = derived_columns(df) + tuple(c for c in df.columns if c not in before)

@@ -162,7 +162,7 @@ class CloseLoop(EstimatorSettings):
         dtr, dte, aux_rec, responses = prepare_channels(dtr, dte, responses)   # derivable names, flags, labels, gaps
         response_rec = response_tests(dtr, responses)   # columns that follow the speed: responses unless set
         responses = self.response_columns_ = classed_responses(self.response_columns, responses, response_rec)
-        dtr, dte, derived_rec = with_protocol_channels(dtr, dte, responses, sess)   # clocks, lags, pause, history
+        dtr, dte, derived_rec = with_protocol_channels(dtr, dte, responses, sess, response_rec)   # clocks, lags, ...
         mask_tr = np.array(train.mask)
         folds = stratified_folds(dtr, self.refit_folds, self.seed)   # TRAIN's run folds, one split for the fit
 

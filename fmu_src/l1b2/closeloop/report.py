@@ -137,6 +137,8 @@ class Diagnosis(_Record):
     (:mod:`l1b2.closeloop.runclock`); ``run_travel`` whether the way gone since each run's start was derived as a
     channel and TRAIN's runs' spans of the position (:func:`l1b2.closeloop.runclock.with_run_travel`);
     ``log_channels`` the logarithms derived from logged channels that span decades (:mod:`l1b2.closeloop.logscale`);
+    ``response_settings`` the run settings derived from the columns classed responses, derived or not and why
+    (:func:`l1b2.closeloop.runsetting.with_response_settings`);
     ``unseen_levels`` the TEST values of an added categorical setting that TRAIN never had
     (:func:`l1b2.closeloop.ranges.unseen_test_levels`); ``channel_ranges`` per logged channel an added effect
     reads, the share of TEST's samples and runs outside TRAIN's range of it
@@ -195,6 +197,7 @@ class Diagnosis(_Record):
     run_clock: dict = field(default_factory=dict)
     run_travel: dict = field(default_factory=dict)
     log_channels: list = field(default_factory=list)
+    response_settings: list = field(default_factory=list)
     unseen_levels: dict = field(default_factory=dict)
     channel_ranges: list = field(default_factory=list)
     test_session: dict = field(default_factory=dict)
@@ -310,6 +313,19 @@ def response_test_lines(tests) -> list:
                     f"{'a response' if r['response'] else 'not a response'}"
                     f"{'' if r['decided_by'] == 'test' else ' (the response_columns setting decides)'}; "
                     f"{'not a candidate' if r['applied'] else 'a candidate'}" for r in tests]
+
+
+def response_setting_lines(records) -> list:
+    """report.md's lines on the run settings derived from the responses (``diagnosis.response_settings``): one per
+    column classed a response, derived or not and why; empty when there is none."""
+    if not records:
+        return []
+    lines = ["", "Run settings of the responses (each run's level less the speed's echo by the consequence test's "
+             "law, derived when the plan's inputs explain less than half of them):", ""]
+    return lines + [f"- `{r['from']}` -> `{r['channel']}`: "
+                    + (f"spread over TRAIN's runs {r['run_spread']:.4g}, the echo's {r['echo_spread']:.4g}, the plan "
+                       f"explains {r['plan_share']:.0%}; " if "plan_share" in r else "")
+                    + ("derived, a candidate" if r["derived"] else r["note"]) for r in records]
 
 
 def channel_range_line(rec: Mapping) -> str:

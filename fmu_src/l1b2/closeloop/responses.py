@@ -67,7 +67,8 @@ from ..data import measurements as dataio
 from .auxiliary import NOT_CANDIDATES
 
 __all__ = ["TAUS_S", "RATE_TAUS_S", "HISTORIES", "DEGREE", "SHARE_MIN", "P_MAX", "POSITION_DEGREE", "MODEL_INPUTS",
-           "speed_history", "drive_course", "speed_rate", "history_columns", "speed_histories", "response_statistic",
+           "speed_history", "drive_course", "speed_rate", "history_basis", "history_columns", "within_runs",
+           "position_basis", "position_span", "speed_histories", "response_statistic",
            "active_runs", "response_tests", "classed_responses"]
 
 #: the sensor time constants [s] searched: none (the instantaneous speed), then 10 ms to 0.3 s (a meter's fast
@@ -118,40 +119,49 @@ def speed_rate(speed_m_s, time_s, run, tau_s: float) -> np.ndarray:
     return (v - speed_history(v, time_s, run, tau_s, signed=True)) / tau_s
 
 
-def _scaled(a: np.ndarray) -> np.ndarray:
-    """``a``'s columns, each over its largest magnitude (a column of zeros as it is)."""
-    top = np.max(np.abs(a), axis=0)
-    return a / np.where(top > 0, top, 1.0)
+def history_basis(speed_m_s, time_s, run, history: str, tau_s: float | None = None, scale=None):
+    """``(columns, scale)``: the columns of a history of :data:`HISTORIES` [1] and the scale they were divided by.
+    ``u``, ``u^2``, ``u^3`` of the speed's magnitude or the signed speed through the low-pass of ``tau_s``
+    (:func:`speed_history`), ``u`` over ``scale`` (a 1-tuple); for ``rate``, the bank: :func:`speed_rate` at every
+    ``tau`` of :data:`RATE_TAUS_S`, each over its entry of ``scale`` (``tau_s`` unused). ``scale`` None: each
+    column's own largest magnitude (1 for a column of zeros), the scale another frame's columns are then put on."""
+    if history == "rate":
+        raw = np.column_stack([speed_rate(speed_m_s, time_s, run, tau) for tau in RATE_TAUS_S])
+    elif history in HISTORIES:
+        raw = speed_history(speed_m_s, time_s, run, tau_s, signed=history == "signed")[:, None]
+    else:
+        raise ValueError(f"history {history!r} is not one of {', '.join(HISTORIES)}")
+    if scale is None:
+        top = np.max(np.abs(raw), axis=0) if len(raw) else np.ones(raw.shape[1])
+        scale = tuple(float(x) if x > 0 else 1.0 for x in top)
+    a = raw / np.asarray(scale, float)
+    return (a if history == "rate" else np.vander(a[:, 0], DEGREE + 1, increasing=True)[:, 1:]), tuple(scale)
 
 
 def history_columns(speed_m_s, time_s, run, history: str, tau_s: float | None = None) -> np.ndarray:
-    """The columns of a history of :data:`HISTORIES` [1]: ``u``, ``u^2``, ``u^3`` of the speed's magnitude or the
-    signed speed through the low-pass of ``tau_s`` (:func:`speed_history`), ``u`` over its largest magnitude; for
-    ``rate``, the bank: :func:`speed_rate` at every ``tau`` of :data:`RATE_TAUS_S`, each over its largest
-    magnitude (``tau_s`` unused)."""
-    if history == "rate":
-        return _scaled(np.column_stack([speed_rate(speed_m_s, time_s, run, tau) for tau in RATE_TAUS_S]))
-    if history not in HISTORIES:
-        raise ValueError(f"history {history!r} is not one of {', '.join(HISTORIES)}")
-    u = _scaled(speed_history(speed_m_s, time_s, run, tau_s, signed=history == "signed")[:, None])[:, 0]
-    return np.vander(u, DEGREE + 1, increasing=True)[:, 1:]
+    """The columns of a history of :data:`HISTORIES` [1], each history over its own largest magnitude
+    (:func:`history_basis`)."""
+    return history_basis(speed_m_s, time_s, run, history, tau_s)[0]
+
+
+def within_runs(A: np.ndarray, run, time_s) -> np.ndarray:
+    """``A`` (columns) with each run's mean and least-squares line in ``time_s`` removed (runs in consecutive
+    blocks)."""
+    t = np.asarray(time_s, float)
+    out = np.array(A, float)
+    for _, sl in dataio.run_slices(np.asarray(run)):
+        tt = t[sl] - t[sl].mean()
+        out[sl] -= out[sl].mean(axis=0)
+        ss = tt @ tt
+        if ss > 0:
+            out[sl] -= np.outer(tt, tt @ out[sl] / ss)
+    return out
 
 
 def _nuisance_residual(X: np.ndarray, run: np.ndarray, t: np.ndarray, P: np.ndarray) -> np.ndarray:
     """``X`` (columns) with each run's mean and linear trend in ``t`` removed, then the shared position basis ``P``
     (itself so residualised) projected out: the residual of the least-squares fit on both."""
-    blocks = [sl for _, sl in dataio.run_slices(run)]
-
-    def within(A):
-        out = np.array(A, float)
-        for sl in blocks:
-            tt = t[sl] - t[sl].mean()
-            out[sl] -= out[sl].mean(axis=0)
-            ss = tt @ tt
-            if ss > 0:
-                out[sl] -= np.outer(tt, tt @ out[sl] / ss)
-        return out
-    R, Pr = within(X), within(P)
+    R, Pr = within_runs(X, run, t), within_runs(P, run, t)
     Q, _ = np.linalg.qr(Pr)
     return R - Q @ (Q.T @ R)
 
@@ -217,11 +227,19 @@ def _sign_test_p(k: int, n: int) -> float:
     return float(sum(math.comb(n, j) for j in range(k, n + 1)) / 2.0 ** n) if n else 1.0
 
 
-def _position_basis(position_m) -> np.ndarray:
-    """The Legendre polynomials of degree 1 to :data:`POSITION_DEGREE` of the position over its range (columns)."""
+def position_basis(position_m, span=None) -> np.ndarray:
+    """The Legendre polynomials of degree 1 to :data:`POSITION_DEGREE` of the position over ``span`` (``(lowest,
+    range)`` [m]; None: the position's own, :func:`position_span`) as columns."""
     s = np.asarray(position_m, float)
-    z = 2.0 * (s - s.min()) / (np.ptp(s) or 1.0) - 1.0
+    lo, width = position_span(s) if span is None else span
+    z = 2.0 * (s - lo) / width - 1.0
     return np.polynomial.legendre.legvander(z, POSITION_DEGREE)[:, 1:]
+
+
+def position_span(position_m) -> tuple[float, float]:
+    """``(lowest, range)`` [m] of the positions (a range of 0 read as 1 m)."""
+    s = np.asarray(position_m, float)
+    return float(s.min()), float(np.ptp(s)) or 1.0
 
 
 def speed_histories(speed_m_s, time_s, position_m, run) -> list[tuple[str, float | None, np.ndarray]]:
@@ -231,7 +249,7 @@ def speed_histories(speed_m_s, time_s, position_m, run) -> list[tuple[str, float
     one computation serves every column of a frame (:func:`response_statistic`'s ``histories``)."""
     run = np.asarray(run)
     t = np.asarray(time_s, float)
-    P = _position_basis(position_m)
+    P = position_basis(position_m)
     return [(history, tau, _nuisance_residual(history_columns(speed_m_s, t, run, history, tau), run, t, P))
             for history in HISTORIES for tau in ((None,) if history == "rate" else TAUS_S)]
 
@@ -249,7 +267,7 @@ def response_statistic(column, speed_m_s, time_s, position_m, run, histories=Non
     c = np.asarray(column, float)
     run = np.asarray(run)
     t = np.asarray(time_s, float)
-    P = _position_basis(position_m)
+    P = position_basis(position_m)
     cr = _nuisance_residual(c[:, None], run, t, P)[:, 0]
     blocks = [sl for _, sl in dataio.run_slices(run)]
     n_runs = len(blocks)
