@@ -185,3 +185,10 @@ def test_an_analysis_asked_for_it_searches_the_cycle_beside_the_signals_and_rank
     assert a.evidence[0].p_value == pytest.approx(want.p_value) and a.evidence[0].cv_gain == pytest.approx(
         want.cv_gain)
     assert rl.rank(a.evidence[0]) < rl.rank(a.evidence[1])
+    # the cycle is tested at the blocks' level, alpha over the signals' count plus one (the signals' own: alpha / 1)
+    calls, real = [], rl.signal_evidence
+    monkeypatch.setattr(rl, "signal_evidence",
+                        lambda d, sigs, **kw: calls.append(([s["transform"] for s in sigs], kw["alpha"])) or real(
+                            d, sigs, **kw))
+    rl.analyse(df, None, np.ones(len(df), bool), [], alpha=0.01, k=4, seed=0, cycle=True)
+    assert calls == [(["none"], 0.01), ([cyc.CYCLE], pytest.approx(level))]
