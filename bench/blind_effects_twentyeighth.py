@@ -22,7 +22,7 @@ seed. The kinds:
   drive force ``F_d`` (the period-mean force on the slider, positive toward +position: up to 2.7 N at a start and
   0.8-1.9 N along a run, the guide's damping and friction, the load and the slider's inertia, so it follows the
   speed within each run), and its cross-talk ``x`` (``|x|`` drawn in 1.5-3.5 %, its sign at random: the cell's
-  off-axis sensitivity) adds ``x F_d`` to the reading (up to +-95 mN). So the logged reading is ``P_set f + k_pre
+  off-axis sensitivity) adds ``x F_d`` to the reading (up to +-96 mN). So the logged reading is ``P_set f + k_pre
   delta(s) + x F_d``: the run's setting, which acts through the contact's preload, the slider's position through the
   bar (the same law in every run) and an echo of its drive force that acts on nothing. The preload's effect on the
   speed changes with V0 and the load (+5 % of it: -0.5 to +2.9 % of speed at four conditions of the motor's own;
