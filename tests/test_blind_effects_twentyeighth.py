@@ -171,6 +171,26 @@ def test_the_plates_staircase_the_modes_and_the_spare(audit, world):
         assert T.min() == pytest.approx(lo, abs=0.05) and T.max() == pytest.approx(hi, abs=0.05)
 
 
+def test_the_runs_motors(audit, world):
+    """:func:`run_motor` of each kind: the run's index (0-based) against the 1-based runs of the laws."""
+    nominal, factors = world[1], (1.02, 0.97)
+    mp0 = audit.scattered_motor(nominal, factors)
+    p = {"k_c": 20, "c": 0.08, "d_c": -1}
+    for k, d, cracked in ((19, -1, False), (20, -1, True), (20, 1, False), (71, -1, True)):   # run k + 1
+        mp = audit.run_motor("electrode_crack_asym", mp0, p, k, d, factors)
+        assert mp.stator.A_b_N_per_V == pytest.approx(nominal.stator.A_b_N_per_V * (0.92 if cracked else 1.0))
+    p = {"P_set_N": np.array([5.5, 7.1, 6.0])}
+    mp = audit.run_motor("preload_cell_crosstalk", mp0, p, 1, 1, factors)
+    assert mp.stator.P0_N == pytest.approx(7.1 * 1.02, rel=1e-15) and mp.interface.mu_p == mp0.interface.mu_p
+    p = {"P_s": 20.0, "tau_p_s": 12.0, "T_set_C": [21.0, 30.5], "c_b_Hz_K": -25.0, "c_l_Hz_K": -12.0}
+    T = 21.0 + 4.0 * math.exp(-13.0 / 12.0)
+    mp = audit.run_motor("stator_tc_swap", mp0, p, 5, -1, factors, 13.0)
+    assert mp.stator.f_b0_Hz == pytest.approx(mp0.stator.f_b0_Hz - 25.0 * (T - 25.0), rel=1e-14)
+    assert mp.stator.f_l0_Hz == pytest.approx(mp0.stator.f_l0_Hz - 12.0 * (T - 25.0), rel=1e-14)
+    for kind in (KIND_DECOY, "clean"):
+        assert audit.run_motor(kind, mp0, {}, 3, 1, factors, 40.0) == mp0
+
+
 def test_the_size_measure(audit):
     assert audit.speed_change is audit.b26.speed_change and audit.b26.__file__.endswith("blind_effects_twentysixth.py")
 
@@ -470,3 +490,6 @@ def test_the_command_line(audit, tmp_path, capsys, monkeypatch):
     assert "preload_cell_N" in train.columns and len(set(train["run"]) | set(test["run"])) == 5
     audit.main(["preload_cell_crosstalk", "2", "--data-only", "--cache", str(tmp_path)])    # in the cache: not remade
     assert capsys.readouterr().out.strip() == str(out) and made == [("preload_cell_crosstalk", 2)]
+    for kind in audit.KINDS[1:]:                                       # every kind is a choice of the command
+        audit.main([kind, "1", "--data-only", "--cache", str(tmp_path)])
+        assert capsys.readouterr().out.strip() == str(tmp_path / f"{kind}_1") and made[-1] == (kind, 1)
