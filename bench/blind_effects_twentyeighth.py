@@ -37,7 +37,8 @@ seed. The kinds:
   The supply diffuser's swing louvre sweeps the draught on the session's clock, ``w = W cos(2 pi t / P + phi)``
   (``W`` drawn in 0.08-0.15 m/s, ``P`` in 25-50 s, ``phi`` uniform in 0-2 pi): the reading at rest moves from run to
   run with the louvre (0.05-0.16 m/s at seeds 1-3) and within a run follows ``|v - w|`` (up to 0.47 m/s against the
-  draught; its correlation with the measured ``|speed|`` within a run about 0.8), neither of which the plan sets. The
+  draught; its correlation with the measured ``|speed|`` within a run about 0.8 in the median run, negative in a run
+  that goes with the draught at about its speed); the louvre's sweep follows neither the plan nor the motor. The
   draught's force on the carriage (some 10 uN) and the probe's lead are left out: it acts on nothing and must not be
   traced.
 * ``electrode_crack_asym`` -- no column; a change between runs at a run nobody logs, in one direction only. The drive
@@ -47,9 +48,9 @@ seed. The kinds:
   after run ``k_c`` (drawn among runs 14-30) a crack runs from the joint across the electrode and isolates a share
   ``c`` (drawn in 6-10 %) of it. From run ``k_c + 1`` on, the runs of that electrode's direction ``d_c`` (drawn
   among -1 and +1) force B2 with ``(1 - c) A_b``; the other direction's runs, and every run before, are the motor's
-  own. A direction asymmetry that appears mid-session, in half the runs: those runs slow by 3-13 % (seeds 1-3; the
-  most against a load), and the plan's factors and the clock show nothing of it. The crack's share of L1's forcing
-  and its change of the modes' phase are left out.
+  own. A direction asymmetry that appears mid-session, in one direction's runs after ``k_c`` (22-27 runs of 72 at
+  seeds 1-3, all backward): they slow by 3-13 % (the most against a load), and the plan's factors and the clock show
+  nothing of it. The crack's share of L1's forcing and its change of the modes' phase are left out.
 * ``stator_tc_swap`` -- logged ``stator_tc_C`` per sample, a fine thermocouple glued on the stator's face near its
   nodal line (0.05 K of noise, 0.01 degC resolution), whose bead is replaced mid-session: a cause logged through a
   sensor whose calibration shifts. A temperature study: the holder's pads are Peltier elements whose controller (on

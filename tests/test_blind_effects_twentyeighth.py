@@ -344,6 +344,10 @@ def test_the_cracks_made_data(audit, load_bench):
             assert run["position_m"].to_numpy() == pytest.approx(positions(plan, r), abs=1e-12)
             assert len(run) > len(clean[clean["run"] == k])            # the cracked runs are slower
     assert cracked == 2
+    # the docstring's numbers: 27 / 22 / 27 cracked runs at seeds 1-3, all backward
+    for seed, n in ((1, 27), (2, 22), (3, 27)):
+        q, conds = audit.draw("electrode_crack_asym", seed, 72), be.setting("clean", seed, audit.draw)[2]
+        assert q["d_c"] == -1 and sum(k + 1 > q["k_c"] and d == q["d_c"] for k, (_, _, d) in enumerate(conds)) == n
 
 
 def test_the_thermocouples_made_data(audit, load_bench):
