@@ -77,4 +77,4 @@ def test_a_logged_column_of_its_name_is_set_aside_and_the_channel_derived_beside
     assert recs["previous_pass"]["derived"]
     assert _per_run(tr, LOAD_COLUMN)["min"].tolist()[1:] == pytest.approx([0.0, 0.05, 0.1, 0.02])
     assert set(recs) == {"event_clocks", "lagged_channels", "pause_channel", "break_clock", "previous_pass",
-                         "run_clock", "run_travel", "log_channels", "response_settings"}
+                         "run_clock", "run_travel", "log_channels", "run_settings"}

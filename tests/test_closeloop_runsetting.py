@@ -6,13 +6,15 @@ the stroke term's mean), TRAIN's law on another frame, the derivation's record a
 import numpy as np
 import pandas as pd
 import pytest
+from scipy.stats import chi2
 
-from l1b2.closeloop.candidates import channels_of
+from l1b2.closeloop.candidates import channels_of, is_along_stroke
 from l1b2.closeloop.derived import is_derivable_name, with_protocol_channels
 from l1b2.closeloop.events import session as session_of
-from l1b2.closeloop.report import response_setting_lines
+from l1b2.closeloop.report import run_setting_lines
 from l1b2.closeloop.responses import response_tests
-from l1b2.closeloop.runsetting import PLAN_SHARE_MAX, fit_response_law, plan_share, with_response_settings
+from l1b2.closeloop.runsetting import (PLAN_SHARE_MAX, fit_response_law, plan_share, scatter_p,
+                                       with_run_settings)
 from l1b2.units import SETTING_SUFFIX, column_unit
 
 DT = 1e-3
@@ -106,9 +108,10 @@ def test_the_classed_current_gets_its_setting_in_both_frames(frames):
     tests = response_tests(train)
     (rec,) = [r for r in tests if r["channel"] == "vcm_current_A"]
     assert rec["response"]
-    tr, te, record = with_response_settings(train, test, tests, ("vcm_current_A",))
+    tr, te, record = with_run_settings(train, test, tests, ("vcm_current_A",))
     name = "vcm_current_A" + SETTING_SUFFIX
-    assert record == [{**record[0], "channel": name, "from": "vcm_current_A", "derived": True}]
+    assert record == [{**record[0], "channel": name, "from": "vcm_current_A", "source": "response", "derived": True}]
+    assert record[0]["scatter_p"] < 1e-12
     # the settings' spread is the levels' (uniform over +-0.1125 A), the echo's that of the runs' mean speed
     assert record[0]["run_spread"] == pytest.approx(np.std(_run_means(tr, name)), rel=1e-12)
     assert 0.03 < record[0]["run_spread"] < 0.1
@@ -120,12 +123,12 @@ def test_no_setting_for_a_column_not_applied_or_constant_in_some_runs_or_missing
     train, test, _ = frames
     tests = response_tests(train)
     # the user's setting names no response: the classed column is a candidate as logged, no setting derived
-    assert with_response_settings(train, test, tests, ())[2] == []
+    assert with_run_settings(train, test, tests, ())[2] == []
     rec = [{**r, "runs_constant": 3} if r["channel"] == "vcm_current_A" else r for r in tests]
-    tr, te, record = with_response_settings(train, test, rec, ("vcm_current_A",))
+    tr, te, record = with_run_settings(train, test, rec, ("vcm_current_A",))
     assert not record[0]["derived"] and "constant within 3" in record[0]["note"]
     assert tr is train and te is test
-    tr, te, record = with_response_settings(train, test.drop(columns="vcm_current_A"), tests, ("vcm_current_A",))
+    tr, te, record = with_run_settings(train, test.drop(columns="vcm_current_A"), tests, ("vcm_current_A",))
     assert not record[0]["derived"] and "TEST does not log it" in record[0]["note"]
 
 
@@ -135,7 +138,7 @@ def test_the_protocol_channels_carry_the_setting_as_a_derived_column(frames):
     tr, te, rec = with_protocol_channels(train, test, ("vcm_current_A",), session_of(train, test), tests)
     name = "vcm_current_A" + SETTING_SUFFIX
     assert name in tr.attrs["l1b2_derived_columns"] and name in te.columns
-    assert [r["channel"] for r in rec["response_settings"]] == [name]
+    assert [r["channel"] for r in rec["run_settings"]] == [name]
     # a logged column that a derivation could produce is set aside: its name is derivable
     assert is_derivable_name(name, train.columns) and not is_derivable_name("fan_setting", train.columns)
 
@@ -180,7 +183,7 @@ def test_a_response_whose_levels_the_plan_fixes_gets_no_setting():
     train["vcm_current_A"] += 1e-3 * (train["voltage_V"] - 240.0) - level + level.mean()
     tests = response_tests(train)
     assert [r["response"] for r in tests if r["channel"] == "vcm_current_A"] == [True]
-    tr, _, record = with_response_settings(train, None, tests, ("vcm_current_A",))
+    tr, _, record = with_run_settings(train, None, tests, ("vcm_current_A",))
     assert tr is train and not record[0]["derived"] and record[0]["plan_share"] > PLAN_SHARE_MAX
     assert "the plan's inputs explain" in record[0]["note"]
 
@@ -188,12 +191,62 @@ def test_a_response_whose_levels_the_plan_fixes_gets_no_setting():
 def test_report_md_names_each_setting_derived_or_not_and_why(frames):
     train, test, _ = frames
     tests = response_tests(train)
-    (rec,) = with_response_settings(train, test, tests, ("vcm_current_A",))[2]
-    refused = {"channel": "mic_setting", "from": "mic", "derived": False, "run_spread": 2.0, "echo_spread": 1.0,
-               "plan_share": 0.99, "note": "the plan's inputs explain 99% of its run levels: they fix them"}
-    lines = response_setting_lines([rec, refused])
-    assert lines[0] == "" and "less than half" in lines[1]
-    assert lines[3].startswith("- `vcm_current_A` -> `vcm_current_A_setting`: spread over TRAIN's runs ")
-    assert lines[3].endswith(f"the plan explains {rec['plan_share']:.0%}; derived, a candidate")
-    assert lines[4].endswith("the plan explains 99%; the plan's inputs explain 99% of its run levels: they fix them")
-    assert response_setting_lines([]) == []
+    (rec,) = with_run_settings(train, test, tests, ("vcm_current_A",))[2]
+    refused = {"channel": "mic_setting", "from": "mic", "source": "response", "derived": False, "run_spread": 2.0,
+               "echo_spread": 1.0, "plan_share": 0.99, "scatter_p": 0.0,
+               "note": "the plan's inputs explain 99% of its run levels: they fix them"}
+    lines = run_setting_lines([rec, refused, {"channel": "x_setting", "from": "x", "source": "along_stroke",
+                                              "derived": False, "note": "TEST does not log it"}])
+    assert lines[0] == "" and "less than half" in lines[1] and "beyond their noise" in lines[1]
+    assert lines[3].startswith("- `vcm_current_A` (a response) -> `vcm_current_A_setting`: spread over TRAIN's runs ")
+    assert lines[3].endswith(f"the plan explains {rec['plan_share']:.0%}, scatter p {rec['scatter_p']:.2g}; "
+                             "derived, a candidate")
+    assert lines[4].endswith("scatter p 0; the plan's inputs explain 99% of its run levels: they fix them")
+    assert lines[5] == "- `x` (read along the stroke) -> `x_setting`: TEST does not log it"
+    assert run_setting_lines([]) == []
+
+
+def _preload_runs(seed, n_runs=30, noise_N=0.005, set_N=None):
+    """Runs (as :func:`_runs`) with a load cell under a preload spring: the preload set per run (5-7.7 N, or
+    ``set_N``) plus the spring's deflection along the stroke, ``0.8 (s / STROKE)^2`` N, and ``noise_N`` of noise."""
+    df, _ = _runs(seed, n_runs)
+    rng = np.random.default_rng(seed + 100)
+    preload = rng.uniform(5.0, 7.7, n_runs) if set_N is None else np.full(n_runs, set_N)
+    z = df["position_m"].to_numpy() / STROKE
+    cell = preload[df["run"].to_numpy()] + 0.8 * z ** 2 + rng.normal(0.0, noise_N, len(df))
+    return df.drop(columns="vcm_current_A").assign(preload_cell_N=cell), preload
+
+
+def test_a_column_read_along_the_stroke_gets_the_runs_preload_as_its_setting():
+    train, preload = _preload_runs(11)
+    test, preload_te = _preload_runs(12, n_runs=8)
+    assert is_along_stroke(train, "preload_cell_N")
+    tr, te, (rec,) = with_run_settings(train, test, [], (), ["preload_cell_N"])
+    assert rec["source"] == "along_stroke" and rec["derived"] and rec["history"] is None and rec["scatter_p"] < 1e-12
+    np.testing.assert_allclose(_offset(_run_means(tr, "preload_cell_N_setting"), preload), 0.0, atol=2e-3)
+    np.testing.assert_allclose(_offset(_run_means(te, "preload_cell_N_setting"), preload_te), 0.0, atol=2e-3)
+
+
+def test_a_column_of_the_position_alone_scatters_by_its_noise_and_gets_no_setting():
+    # one preload for every run: the run levels differ by the noise of their means only
+    train, _ = _preload_runs(13, set_N=6.0, noise_N=0.02)
+    law = fit_response_law(train, "preload_cell_N")
+    assert 1e-3 < scatter_p(train, law)
+    tr, _, (rec,) = with_run_settings(train, None, [], (), ["preload_cell_N"])
+    assert tr is train and not rec["derived"] and "scatter by its noise only" in rec["note"]
+
+
+def test_the_scatter_test_against_a_chi_square_written_out():
+    # white noise, one level per run: Q = sum w (a - abar)^2 with w = n / s^2 (rho near 0, floored at 0)
+    train, preload = _preload_runs(14, n_runs=12, noise_N=0.05)
+    law = fit_response_law(train, "preload_cell_N")
+    rest = train["preload_cell_N"].to_numpy() - law.echo(train)
+    g = pd.Series(rest).groupby(train["run"].to_numpy(), sort=False)
+    e = pd.Series(rest - g.transform("mean").to_numpy())   # a law read along the stroke: each run's mean only
+    eg = e.groupby(train["run"].to_numpy(), sort=False)
+    n = g.size().to_numpy(float)
+    rho = max(sum(float(x.to_numpy()[1:] @ x.to_numpy()[:-1]) for _, x in eg) / float(e @ e), 0.0)
+    se2 = eg.apply(lambda x: float(x @ x)).to_numpy() / (n - 1) / n * (1 + rho) / (1 - rho)
+    a, w = g.mean().to_numpy(), 1.0 / se2
+    q = float(np.sum(w * (a - np.sum(w * a) / np.sum(w)) ** 2))
+    assert scatter_p(train, law) == pytest.approx(chi2.sf(q, 11), rel=1e-9, abs=1e-300)

@@ -8,7 +8,8 @@ previous run's load, ``prev_run_load_kg``;
 :mod:`~l1b2.closeloop.runclock`: the time since each run's first sample, ``time_in_run_s``, and the way gone since,
 ``travel_in_run_m``;
 :mod:`~l1b2.closeloop.logscale`: the logarithm ``ln_<column>`` of a logged channel that spans decades;
-:mod:`~l1b2.closeloop.runsetting`: the run's setting ``<column>_setting`` that a response column carries;
+:mod:`~l1b2.closeloop.runsetting`: the run's setting ``<column>_setting`` that a response column or a column read
+along the stroke carries;
 :func:`with_protocol_channels` derives them all). A rig's own column may carry
 one of those names by chance (a logger that writes its own ``ln_pause_s``, an export that already holds a
 ``voltage_V_lag3r``). Taken as the derived channel, such a column would replace the derivation (or be
@@ -22,7 +23,7 @@ A name a derivation *could* produce: exactly :data:`l1b2.closeloop.pauses.COLUMN
 :data:`l1b2.closeloop.runclock.COLUMN`, :data:`l1b2.closeloop.runclock.TRAVEL_COLUMN` or
 :data:`l1b2.closeloop.history.LOAD_COLUMN`, or ``X + suffix`` for a column ``X`` of the frame and a suffix of the
 event clock, of a lag of :data:`l1b2.closeloop.lags.TAU_RUNS` periods, of a setting's step (``_step``) or of a
-response's run setting (``_setting``, :mod:`~l1b2.closeloop.runsetting`), or
+run setting (``_setting``, :mod:`~l1b2.closeloop.runsetting`), or
 ``LOG_PREFIX + X`` (:data:`l1b2.units.LOG_PREFIX`) for a column ``X`` of the frame. The required columns and the
 speed are never renamed.
 """
@@ -32,7 +33,7 @@ from __future__ import annotations
 import pandas as pd
 
 from .auxiliary import DERIVED_ATTR, NOT_CANDIDATES, derived_columns, with_usable_channels
-from .candidates import channel_kinds
+from .candidates import channel_kinds, is_along_stroke
 from .events import SUFFIX as EVENT_SUFFIX, Session, with_event_clocks
 from ..units import LOG_PREFIX, SETTING_SUFFIX, STEP_SUFFIX, lag_suffix
 from .history import LOAD_COLUMN as PREVIOUS_LOAD_COLUMN, with_previous_pass
@@ -40,7 +41,8 @@ from .lags import TAU_RUNS, with_lagged_channels
 from .logscale import with_log_channels
 from .pauses import BREAK_COLUMN, BREAK_COUNT_COLUMN, COLUMN as PAUSE_COLUMN, with_break_clock, with_pause_channel
 from .runclock import COLUMN as RUN_CLOCK_COLUMN, TRAVEL_COLUMN, with_run_clock, with_run_travel
-from .runsetting import with_response_settings
+from .responses import MODEL_INPUTS
+from .runsetting import with_run_settings
 
 __all__ = ["RENAMED_SUFFIX", "derived_suffixes", "is_derivable_name", "set_aside_derivable_names",
            "prepare_channels", "with_protocol_channels"]
@@ -120,14 +122,16 @@ def with_protocol_channels(train: pd.DataFrame, test: pd.DataFrame | None, respo
     (:func:`l1b2.closeloop.runclock.with_run_clock`, :func:`~l1b2.closeloop.runclock.with_run_travel`) and the
     logarithms of the logged channels that span decades (:func:`l1b2.closeloop.logscale.with_log_channels`: of the
     channels logged, not of those derived here) and the run settings of the columns the consequence test classed
-    responses (:func:`l1b2.closeloop.runsetting.with_response_settings`, ``response_tests`` the test's records);
+    responses and of the logged columns read along the stroke (:func:`l1b2.closeloop.runsetting.with_run_settings`,
+    ``response_tests`` the test's records; the model's inputs are read per sample);
     ``records`` their records under ``"event_clocks"``, ``"lagged_channels"``, ``"pause_channel"``, ``"break_clock"``,
-    ``"previous_pass"``, ``"run_clock"``, ``"run_travel"``, ``"log_channels"`` and ``"response_settings"``. Each
+    ``"previous_pass"``, ``"run_clock"``, ``"run_travel"``, ``"log_channels"`` and ``"run_settings"``. Each
     returned frame names the columns derived here in its ``attrs`` (:func:`l1b2.closeloop.auxiliary.derived_columns`).
     ``sess``: the frames' :func:`~l1b2.closeloop.events.session` before any derivation."""
     rec = {}
     before = set(train.columns)
     logged = [name for name, kind in channel_kinds(train, response_columns) if kind == "logged"]
+    before_frame = train
     train, test, rec["event_clocks"] = with_event_clocks(train, test, response_columns, sess)
     train, test, rec["lagged_channels"] = with_lagged_channels(train, test, response_columns, sess)
     train, test, rec["pause_channel"] = with_pause_channel(train, test, sess)
@@ -136,7 +140,8 @@ def with_protocol_channels(train: pd.DataFrame, test: pd.DataFrame | None, respo
     train, test, rec["run_clock"] = with_run_clock(train, test)   # along the stroke only
     train, test, rec["run_travel"] = with_run_travel(train, test)   # along the stroke only
     train, test, rec["log_channels"] = with_log_channels(train, test, logged)
-    train, test, rec["response_settings"] = with_response_settings(train, test, response_tests, response_columns)
+    along = [name for name in logged if name not in MODEL_INPUTS and is_along_stroke(before_frame, name)]
+    train, test, rec["run_settings"] = with_run_settings(train, test, response_tests, response_columns, along)
     for df in (train, test):
         if df is not None:
             df.attrs[DERIVED_ATTR] = derived_columns(df) + tuple(c for c in df.columns if c not in before)

@@ -137,8 +137,8 @@ class Diagnosis(_Record):
     (:mod:`l1b2.closeloop.runclock`); ``run_travel`` whether the way gone since each run's start was derived as a
     channel and TRAIN's runs' spans of the position (:func:`l1b2.closeloop.runclock.with_run_travel`);
     ``log_channels`` the logarithms derived from logged channels that span decades (:mod:`l1b2.closeloop.logscale`);
-    ``response_settings`` the run settings derived from the columns classed responses, derived or not and why
-    (:func:`l1b2.closeloop.runsetting.with_response_settings`);
+    ``run_settings`` the run settings sought in the columns classed responses and the columns read along the
+    stroke, derived or not and why (:func:`l1b2.closeloop.runsetting.with_run_settings`);
     ``unseen_levels`` the TEST values of an added categorical setting that TRAIN never had
     (:func:`l1b2.closeloop.ranges.unseen_test_levels`); ``channel_ranges`` per logged channel an added effect
     reads, the share of TEST's samples and runs outside TRAIN's range of it
@@ -197,7 +197,7 @@ class Diagnosis(_Record):
     run_clock: dict = field(default_factory=dict)
     run_travel: dict = field(default_factory=dict)
     log_channels: list = field(default_factory=list)
-    response_settings: list = field(default_factory=list)
+    run_settings: list = field(default_factory=list)
     unseen_levels: dict = field(default_factory=dict)
     channel_ranges: list = field(default_factory=list)
     test_session: dict = field(default_factory=dict)
@@ -315,16 +315,19 @@ def response_test_lines(tests) -> list:
                     f"{'not a candidate' if r['applied'] else 'a candidate'}" for r in tests]
 
 
-def response_setting_lines(records) -> list:
-    """report.md's lines on the run settings derived from the responses (``diagnosis.response_settings``): one per
-    column classed a response, derived or not and why; empty when there is none."""
+def run_setting_lines(records) -> list:
+    """report.md's lines on the run settings (``diagnosis.run_settings``): one per column a setting was sought in (a
+    response, a column read along the stroke), derived or not and why; empty when there is none."""
     if not records:
         return []
-    lines = ["", "Run settings of the responses (each run's level less the speed's echo by the consequence test's "
-             "law, derived when the plan's inputs explain less than half of them):", ""]
-    return lines + [f"- `{r['from']}` -> `{r['channel']}`: "
-                    + (f"spread over TRAIN's runs {r['run_spread']:.4g}, the echo's {r['echo_spread']:.4g}, the plan "
-                       f"explains {r['plan_share']:.0%}; " if "plan_share" in r else "")
+    lines = ["", "Run settings of the readings the motion makes in part (each run's level less what the motion makes "
+             "of it by a law fitted on TRAIN; derived when the plan's inputs explain less than half of the levels "
+             "and they scatter beyond their noise):", ""]
+    what = {"response": "a response", "along_stroke": "read along the stroke"}
+    return lines + [f"- `{r['from']}` ({what.get(r.get('source'), r.get('source'))}) -> `{r['channel']}`: "
+                    + (f"spread over TRAIN's runs {r['run_spread']:.4g}, the motion's {r['echo_spread']:.4g}, the "
+                       f"plan explains {r['plan_share']:.0%}, scatter p {r['scatter_p']:.2g}; "
+                       if "scatter_p" in r else "")
                     + ("derived, a candidate" if r["derived"] else r["note"]) for r in records]
 
 

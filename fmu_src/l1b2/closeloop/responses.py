@@ -144,16 +144,16 @@ def history_columns(speed_m_s, time_s, run, history: str, tau_s: float | None = 
     return history_basis(speed_m_s, time_s, run, history, tau_s)[0]
 
 
-def within_runs(A: np.ndarray, run, time_s) -> np.ndarray:
+def within_runs(A: np.ndarray, run, time_s, trend: bool = True) -> np.ndarray:
     """``A`` (columns) with each run's mean and least-squares line in ``time_s`` removed (runs in consecutive
-    blocks)."""
+    blocks; ``trend`` False: the mean only)."""
     t = np.asarray(time_s, float)
     out = np.array(A, float)
     for _, sl in dataio.run_slices(np.asarray(run)):
         tt = t[sl] - t[sl].mean()
         out[sl] -= out[sl].mean(axis=0)
         ss = tt @ tt
-        if ss > 0:
+        if trend and ss > 0:
             out[sl] -= np.outer(tt, tt @ out[sl] / ss)
     return out
 

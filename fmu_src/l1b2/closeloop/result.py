@@ -29,7 +29,7 @@ from ..predictor.effects import ExtendedPredictor
 from . import residuals as res
 from .crosscheck import describe
 from .report import (SCHEMA_VERSION, Diagnosis, ReportFormatError, Round, chain_line, left_line, loop_check_lines,
-                     pct, response_setting_lines, response_test_lines)
+                     pct, run_setting_lines, response_test_lines)
 from .selection import Score
 
 #: file names (without ``.png``) of the figures, in report order
@@ -424,7 +424,7 @@ def markdown_report(rep: dict) -> str:
                          f"{'yes' if c['significant'] else 'no'} | "
                          f"{'yes' if c['added'] else ('no: ' + c['not_added'] if c.get('not_added') else 'no')} |")
     lines += response_test_lines(d.get("response_test") or [])
-    lines += response_setting_lines(d.get("response_settings") or [])
+    lines += run_setting_lines(d.get("run_settings") or [])
     if d.get("auxiliary_columns"):
         lines += ["", "Auxiliary columns not numeric and finite as logged (flags, text labels, gaps):", ""]
         lines += [f"- `{a['channel']}`: {a['action']}: {a['note']}" for a in d["auxiliary_columns"]]
