@@ -12,7 +12,7 @@ from l1b2.closeloop.candidates import channels_of, is_along_stroke
 from l1b2.closeloop.derived import is_derivable_name, with_protocol_channels
 from l1b2.closeloop.events import session as session_of
 from l1b2.closeloop.report import run_setting_lines
-from l1b2.closeloop.responses import response_tests
+from l1b2.closeloop.responses import response_tests, speed_rate
 from l1b2.closeloop.runsetting import (PLAN_SHARE_MAX, fit_response_law, plan_share, scatter_p,
                                        with_run_settings)
 from l1b2.units import SETTING_SUFFIX, column_unit
@@ -250,3 +250,20 @@ def test_the_scatter_test_against_a_chi_square_written_out():
     a, w = g.mean().to_numpy(), 1.0 / se2
     q = float(np.sum(w * (a - np.sum(w * a) / np.sum(w)) ** 2))
     assert scatter_p(train, law) == pytest.approx(chi2.sf(q, 11), rel=1e-9, abs=1e-300)
+
+
+def test_a_reading_of_the_speeds_rate_gets_its_runs_offset_with_trains_scale_on_test():
+    # an accelerometer through a 3 ms filter (a column of the rate's bank) plus an offset per run, noise-free
+    def with_accel(seed, n_runs):
+        df, _ = _runs(seed, n_runs)
+        offset = np.random.default_rng(seed + 200).uniform(-0.5, 0.5, n_runs)
+        rate = speed_rate(df["speed_m_s"], df["time_s"], df["run"].to_numpy(), 0.003)
+        return df.assign(accel_m_s2=0.1 * rate + offset[df["run"].to_numpy()]), offset
+    train, level = with_accel(15, 24)
+    test, level_te = with_accel(16, 8)
+    law = fit_response_law(train, "accel_m_s2", "rate")
+    assert law.history == "rate" and len(law.scale) == len(law.beta) == 4
+    np.testing.assert_allclose(_offset(_run_means(train.assign(g=law.run_settings(train)), "g"), level), 0.0,
+                               atol=1e-9)
+    np.testing.assert_allclose(_offset(_run_means(test.assign(g=law.run_settings(test)), "g"), level_te), 0.0,
+                               atol=1e-9)
