@@ -6,6 +6,7 @@ the stroke term's mean), TRAIN's law on another frame, the derivation's record a
 import numpy as np
 import pandas as pd
 import pytest
+from scipy.signal import lfilter
 from scipy.stats import chi2
 
 from l1b2.closeloop.candidates import channels_of, is_along_stroke
@@ -70,6 +71,17 @@ def test_the_settings_are_the_injected_run_levels_without_noise():
     np.testing.assert_allclose(law.beta[1:], 0.0, atol=1e-9)
 
 
+def test_the_setting_is_the_runs_mean_of_what_the_law_leaves():
+    # a course within each run that no law of the speed or the position holds (a skewed one, exp of the run's
+    # clock): the setting is the run's mean of the column less the law's echo, written out here
+    df, _ = _runs(10, 12)
+    t_run = df["time_s"] - df.groupby("run")["time_s"].transform("min")
+    df["vcm_current_A"] += 1e-3 * np.exp(t_run / 0.02)
+    law = fit_response_law(df, "vcm_current_A", "signed", 0.0)
+    want = (df["vcm_current_A"] - law.echo(df)).groupby(df["run"]).transform("mean").to_numpy()
+    np.testing.assert_allclose(law.run_settings(df), want, rtol=1e-12, atol=1e-15)
+
+
 def test_with_noise_the_settings_stay_within_a_fiftieth_of_their_range():
     # 2 mA of noise: each run's mean carries ~0.1 mA, the law's coefficients an error shared by the runs of one
     # direction (the position's polynomials and the speed are nearly collinear within runs)
@@ -124,6 +136,9 @@ def test_no_setting_for_a_column_not_applied_or_constant_in_some_runs_or_missing
     tests = response_tests(train)
     # the user's setting names no response: the classed column is a candidate as logged, no setting derived
     assert with_run_settings(train, test, tests, ())[2] == []
+    # a column the user names a response that the test does not class one: no law fitted, none derived
+    unclassed = [{**r, "response": False} for r in tests]
+    assert with_run_settings(train, test, unclassed, ("vcm_current_A",))[2] == []
     rec = [{**r, "runs_constant": 3} if r["channel"] == "vcm_current_A" else r for r in tests]
     tr, te, record = with_run_settings(train, test, rec, ("vcm_current_A",))
     assert not record[0]["derived"] and "constant within 3" in record[0]["note"]
@@ -180,11 +195,12 @@ def test_a_response_whose_levels_the_plan_fixes_gets_no_setting():
     # a current whose run level follows the drive amplitude (a supply's share), not a setting of its own
     train = _with_plan(_runs(9, 30, noise_A=0.0002)[0])
     level = train.groupby("run")["vcm_current_A"].transform("mean")
-    train["vcm_current_A"] += 1e-3 * (train["voltage_V"] - 240.0) - level + level.mean()
+    own = np.random.default_rng(9).uniform(-0.04, 0.04, 30)[train["run"].to_numpy()]   # and a little of its own
+    train["vcm_current_A"] += 1e-3 * (train["voltage_V"] - 240.0) + own - level + level.mean()
     tests = response_tests(train)
     assert [r["response"] for r in tests if r["channel"] == "vcm_current_A"] == [True]
     tr, _, record = with_run_settings(train, None, tests, ("vcm_current_A",))
-    assert tr is train and not record[0]["derived"] and record[0]["plan_share"] > PLAN_SHARE_MAX
+    assert tr is train and not record[0]["derived"] and PLAN_SHARE_MAX < record[0]["plan_share"] < 0.8
     assert "the plan's inputs explain" in record[0]["note"]
 
 
@@ -206,14 +222,16 @@ def test_report_md_names_each_setting_derived_or_not_and_why(frames):
     assert run_setting_lines([]) == []
 
 
-def _preload_runs(seed, n_runs=30, noise_N=0.005, set_N=None):
+def _preload_runs(seed, n_runs=30, noise_N=0.005, set_N=None, phi=0.0):
     """Runs (as :func:`_runs`) with a load cell under a preload spring: the preload set per run (5-7.7 N, or
-    ``set_N``) plus the spring's deflection along the stroke, ``0.8 (s / STROKE)^2`` N, and ``noise_N`` of noise."""
+    ``set_N``) plus the spring's deflection along the stroke, ``0.8 (s / STROKE)^2`` N, and ``noise_N`` of noise
+    (``phi``: first-order autoregressive, ``e_k = phi e_(k-1) + w_k``, across the samples)."""
     df, _ = _runs(seed, n_runs)
     rng = np.random.default_rng(seed + 100)
     preload = rng.uniform(5.0, 7.7, n_runs) if set_N is None else np.full(n_runs, set_N)
     z = df["position_m"].to_numpy() / STROKE
-    cell = preload[df["run"].to_numpy()] + 0.8 * z ** 2 + rng.normal(0.0, noise_N, len(df))
+    noise = lfilter([1.0], [1.0, -phi], rng.normal(0.0, noise_N, len(df)))
+    cell = preload[df["run"].to_numpy()] + 0.8 * z ** 2 + noise
     return df.drop(columns="vcm_current_A").assign(preload_cell_N=cell), preload
 
 
@@ -237,8 +255,8 @@ def test_a_column_of_the_position_alone_scatters_by_its_noise_and_gets_no_settin
 
 
 def test_the_scatter_test_against_a_chi_square_written_out():
-    # white noise, one level per run: Q = sum w (a - abar)^2 with w = n / s^2 (rho near 0, floored at 0)
-    train, preload = _preload_runs(14, n_runs=12, noise_N=0.05)
+    # one preload for every run, autoregressive noise: Q = sum w (a - abar)^2 with w = n / (s^2 (1+rho)/(1-rho))
+    train, _ = _preload_runs(14, n_runs=12, noise_N=0.05, set_N=6.0, phi=0.6)
     law = fit_response_law(train, "preload_cell_N")
     rest = train["preload_cell_N"].to_numpy() - law.echo(train)
     g = pd.Series(rest).groupby(train["run"].to_numpy(), sort=False)
@@ -249,7 +267,8 @@ def test_the_scatter_test_against_a_chi_square_written_out():
     se2 = eg.apply(lambda x: float(x @ x)).to_numpy() / (n - 1) / n * (1 + rho) / (1 - rho)
     a, w = g.mean().to_numpy(), 1.0 / se2
     q = float(np.sum(w * (a - np.sum(w * a) / np.sum(w)) ** 2))
-    assert scatter_p(train, law) == pytest.approx(chi2.sf(q, 11), rel=1e-9, abs=1e-300)
+    assert 0.3 < rho < 0.9 and 1e-3 < chi2.sf(q, 11) < 0.999
+    assert scatter_p(train, law) == pytest.approx(chi2.sf(q, 11), rel=1e-9)
 
 
 def test_a_reading_of_the_speeds_rate_gets_its_runs_offset_with_trains_scale_on_test():
@@ -267,3 +286,15 @@ def test_a_reading_of_the_speeds_rate_gets_its_runs_offset_with_trains_scale_on_
                                atol=1e-9)
     np.testing.assert_allclose(_offset(_run_means(test.assign(g=law.run_settings(test)), "g"), level_te), 0.0,
                                atol=1e-9)
+
+
+def test_the_protocol_channels_seek_a_setting_in_a_column_read_along_the_stroke_not_in_a_model_input():
+    # a drive that tracks the resonance along the stroke logs a frequency read along the stroke: a model input, read
+    # per sample, no setting sought; the preload cell's is derived
+    train, _ = _preload_runs(17)
+    train["frequency_Hz"] = 48500.0 + 200.0 * (train["position_m"] / STROKE) ** 2 + np.random.default_rng(17).choice(
+        [-100.0, 100.0], 30)[train["run"].to_numpy()]
+    assert is_along_stroke(train, "frequency_Hz") and is_along_stroke(train, "preload_cell_N")
+    tr, _, rec = with_protocol_channels(train, None, (), session_of(train, None), [])
+    assert [(r["from"], r["derived"]) for r in rec["run_settings"]] == [("preload_cell_N", True)]
+    assert "preload_cell_N_setting" in tr.attrs["l1b2_derived_columns"]
