@@ -152,7 +152,7 @@ SUFFIX_UNITS: dict[str, str] = {"C": "degC"}
 LAG_SUFFIX_RE = re.compile(r"_lag[0-9]+r$")
 #: the name of a channel derived as a setting's step from its previous different setting: ``X + STEP_SUFFIX``
 STEP_SUFFIX = "_step"
-#: the name of a channel derived as the run's setting a response column carries beside the speed's echo
+#: the name of a channel derived as the run's setting that column ``X`` carries beside what the motion makes of it
 #: (:mod:`l1b2.closeloop.runsetting`): ``X + SETTING_SUFFIX``, in ``X``'s unit
 SETTING_SUFFIX = "_setting"
 #: the name of a channel that is the natural logarithm of a quantity in a unit: ``LOG_PREFIX + Q`` where ``Q``

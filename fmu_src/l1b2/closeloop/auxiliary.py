@@ -61,8 +61,8 @@ DERIVED_ATTR = "l1b2_derived_columns"
 
 def derived_columns(df: pd.DataFrame, settings: bool = True) -> tuple:
     """The columns of ``df`` that :func:`l1b2.closeloop.derived.with_protocol_channels` derived from the log;
-    without the run settings of response columns when ``settings`` is False (``X_setting``,
-    :mod:`l1b2.closeloop.runsetting`: a setting logged through a response, read as a logged setting is)."""
+    without the run settings when ``settings`` is False (``X_setting``, :mod:`l1b2.closeloop.runsetting`: a setting
+    read through a reading the motion makes in part, read as a logged setting is)."""
     cols = tuple(df.attrs.get(DERIVED_ATTR, ()))
     return cols if settings else tuple(c for c in cols if not str(c).endswith(SETTING_SUFFIX))
 

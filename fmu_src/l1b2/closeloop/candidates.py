@@ -300,9 +300,9 @@ def channels_of(df: pd.DataFrame, response_columns=None) -> tuple:
     channel that is, run by run, a function of one or two of the plan's inputs
     (:func:`l1b2.closeloop.relabels.follows_plan`, those inputs under ``follows``: listed, no hypothesis; never a
     channel the loop derived, :func:`l1b2.closeloop.auxiliary.derived_columns`: its histories have their own
-    rules; a response's run setting is read as a logged setting), or ``"label"`` for a text column coded by
-    :func:`l1b2.closeloop.auxiliary.with_usable_channels` (its codes have no order: only the categorical run-level
-    family reads them);
+    rules; a run setting, :mod:`l1b2.closeloop.runsetting`, is read as a logged setting), or ``"label"`` for a
+    text column coded by :func:`l1b2.closeloop.auxiliary.with_usable_channels` (its codes have no order: only the
+    categorical run-level family reads them);
     ``sd`` 0 for a constant column, which is listed but gets no hypothesis;
     ``within_run``: it varies inside some run; ``run_values``: how many distinct run means it has; ``run_spread``:
     :func:`l1b2.predictor.effects.channels.run_spread`; ``along_stroke``: a logged channel whose variation within
