@@ -52,6 +52,7 @@ the session) is not replaced by blocks, whose level is cross-validated over inte
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -292,6 +293,32 @@ def _is_cycle(sg) -> bool:
     return sg.get("transform") == fx.cycle.CYCLE
 
 
+@dataclass(frozen=True)
+class _Searched:
+    """How the evidence reads a run-level signal that is no channel's value (a category's levels, a segmentation of
+    the session, a cycle of its clock): its ``columns`` in the mean (mean 0, sd 1), its ``label`` and ``regressor``,
+    and ``gain_only`` (its family acts on the drive force's gain alone: the Wald test and the held-out gain read the
+    gain's row only)."""
+
+    columns: Callable[[dict], np.ndarray]
+    label: Callable[[dict], str]
+    regressor: Callable[[dict], str]
+    gain_only: bool = False
+
+
+#: the signals that are no channel's value, by their ``transform``; a value signal is read by
+#: :func:`signal_columns`'s standardisation and :func:`l1b2.predictor.effects.channels.signal_label`
+SEARCHED = {
+    fx.category.CATEGORY: _Searched(lambda sg: _category().columns(sg), lambda sg: _category().label(sg["channel"]),
+                                    lambda sg: fx.channels.regressor_of(sg["channel"])),
+    fx.blocks.BLOCKS: _Searched(lambda sg: fx.blocks.index_columns(sg["values"], sg["shares"]),
+                                lambda sg: _blocks().label(len(sg["edges"]) + 1), lambda sg: _blocks().regressor,
+                                gain_only=True),
+    fx.cycle.CYCLE: _Searched(lambda sg: np.asarray(sg["columns"], float), lambda sg: _cycle().label(sg["period_s"]),
+                              lambda sg: _cycle().regressor, gain_only=True),
+}
+
+
 def block_signal(dev: RunDeviations, t_run_s: np.ndarray, T: np.ndarray, *, level: float, k: int,
                  seed: int) -> dict | None:
     """The segmentation of the session into contiguous blocks (:func:`l1b2.closeloop.blocks.segmentations`) as a
@@ -347,13 +374,10 @@ def category_signals(df: pd.DataFrame, channels) -> list[dict]:
 def signal_columns(sg: dict) -> tuple[np.ndarray, float, float]:
     """A signal's columns in the run-level mean and its mean and sd: ``z = (v - mean) / sd`` (n,) of a value
     signal, the categorical family's columns (n, L - 1) of a categorical one (mean 0, sd 1)."""
+    searched = SEARCHED.get(sg.get("transform"))
+    if searched is not None:
+        return searched.columns(sg), 0.0, 1.0
     v = np.asarray(sg["values"], float)
-    if _is_category(sg):
-        return _category().columns(sg), 0.0, 1.0
-    if _is_blocks(sg):
-        return fx.blocks.index_columns(sg["values"], sg["shares"]), 0.0, 1.0
-    if _is_cycle(sg):
-        return np.asarray(sg["columns"], float), 0.0, 1.0
     mean, sd = float(np.mean(v)), float(np.std(v))
     return (v - mean) / sd, mean, sd
 
@@ -378,8 +402,7 @@ def effective_signal_count(signals_) -> float:
     """How many tests the run-level signals ``signals_`` (:func:`run_signals`' dicts) count as, at least 1: the
     value signals' :func:`effective_tests` over their run values (a channel's lags, its logarithm and the inputs it
     follows are not as many independent tests as signals), plus one per categorical signal or segmentation."""
-    values = [np.asarray(sg["values"], float) for sg in signals_
-              if not (_is_category(sg) or _is_blocks(sg) or _is_cycle(sg))]
+    values = [np.asarray(sg["values"], float) for sg in signals_ if sg.get("transform") not in SEARCHED]
     other = len(signals_) - len(values)
     return max(1.0, other + (effective_tests(np.column_stack(values)) if values else 0.0))
 
@@ -405,16 +428,17 @@ def signal_evidence(dev: RunDeviations, signals_, *, alpha: float, k: int, seed:
     null_fits: dict = {}     # the null model's fold fits, shared by every signal (same deviations, same folds)
     for sg in signals_:
         z, mean, sd = signal_columns(sg)
+        searched = SEARCHED.get(sg.get("transform"))
+        gain_only = searched is not None and searched.gain_only   # a segmentation or a cycle: on the gain
         cat, seg, cy = _is_category(sg), _is_blocks(sg), _is_cycle(sg)
-        b, p, dof = joint_test(dev, z, seg or cy)     # a segmentation or a cycle: on the gain (their families')
+        b, p, dof = joint_test(dev, z, gain_only)
         p = min(1.0, p * sg.get("search_count", 1))   # a segmentation's or a cycle's search (modules blocks, cycle)
         blocked = sg["channel"] == fx.channels.SESSION_TIME and not seg   # a block's level: from runs within it
         folds = sg.get("folds") or (blocks if blocked else rand)   # a segmentation's own (block_signal)
-        gain, per_run = cv_signal_gain(dev.theta, dev.cov, z, folds, dev.load, null_fits, seg or cy)
-        label = (_category().label(sg["channel"]) if cat else _blocks().label(len(sg["edges"]) + 1) if seg
-                 else _cycle().label(sg["period_s"]) if cy
+        gain, per_run = cv_signal_gain(dev.theta, dev.cov, z, folds, dev.load, null_fits, gain_only)
+        label = (searched.label(sg) if searched is not None
                  else fx.channels.signal_label(sg["channel"], sg["transform"]))
-        reg = _blocks().regressor if seg else _cycle().regressor if cy else fx.channels.regressor_of(sg["channel"])
+        reg = searched.regressor(sg) if searched is not None else fx.channels.regressor_of(sg["channel"])
         out.append(SignalEvidence(sg["channel"], sg["transform"], label, reg,
                                   mean, sd, p, gain, tuple(float(x) for x in b) + (0.0,) * (3 - len(b)),
                                   bool(p < level and gain > 0),
