@@ -14,7 +14,7 @@ from l1b2.closeloop.derived import is_derivable_name, with_protocol_channels
 from l1b2.closeloop.events import session as session_of
 from l1b2.closeloop.report import run_setting_lines
 from l1b2.closeloop.responses import response_tests, speed_rate
-from l1b2.closeloop.runsetting import (PLAN_SHARE_MAX, fit_response_law, plan_share, scatter_p,
+from l1b2.closeloop.runsetting import (PLAN_SHARE_MAX, fit_motion_law, plan_share, scatter_p,
                                        with_run_settings)
 from l1b2.units import SETTING_SUFFIX, column_unit
 
@@ -61,7 +61,7 @@ def _offset(got, level):
 
 def test_the_settings_are_the_injected_run_levels_without_noise():
     df, level = _runs(1, 24)
-    law = fit_response_law(df, "vcm_current_A", "signed", 0.0)
+    law = fit_motion_law(df, "vcm_current_A", "signed", 0.0)
     got = law.run_settings(df)
     np.testing.assert_allclose(_offset(_run_means(df.assign(g=got), "g"), level), 0.0, atol=1e-9)
     # constant within each run
@@ -77,7 +77,7 @@ def test_the_setting_is_the_runs_mean_of_what_the_law_leaves():
     df, _ = _runs(10, 12)
     t_run = df["time_s"] - df.groupby("run")["time_s"].transform("min")
     df["vcm_current_A"] += 1e-3 * np.exp(t_run / 0.02)
-    law = fit_response_law(df, "vcm_current_A", "signed", 0.0)
+    law = fit_motion_law(df, "vcm_current_A", "signed", 0.0)
     want = (df["vcm_current_A"] - law.echo(df)).groupby(df["run"]).transform("mean").to_numpy()
     np.testing.assert_allclose(law.run_settings(df), want, rtol=1e-12, atol=1e-15)
 
@@ -86,24 +86,24 @@ def test_with_noise_the_settings_stay_within_a_fiftieth_of_their_range():
     # 2 mA of noise: each run's mean carries ~0.1 mA, the law's coefficients an error shared by the runs of one
     # direction (the position's polynomials and the speed are nearly collinear within runs)
     df, level = _runs(2, 30, noise_A=0.002)
-    got = _run_means(df.assign(g=fit_response_law(df, "vcm_current_A", "signed", 0.0).run_settings(df)), "g")
+    got = _run_means(df.assign(g=fit_motion_law(df, "vcm_current_A", "signed", 0.0).run_settings(df)), "g")
     assert np.max(np.abs(_offset(got, level))) < 0.002 < np.ptp(level) / 50
 
 
 def test_another_frame_is_read_with_trains_law_scale_and_span():
     train, _ = _runs(3, 24, top_speed_m_s=0.25)
     test, level = _runs(4, 10, top_speed_m_s=0.12)   # slower runs: another largest speed than TRAIN's
-    law = fit_response_law(train, "vcm_current_A", "signed", 0.0)
+    law = fit_motion_law(train, "vcm_current_A", "signed", 0.0)
     np.testing.assert_allclose(_offset(_run_means(test.assign(g=law.run_settings(test)), "g"), level), 0.0, atol=1e-9)
     # the same law refitted on TEST's own scale has other coefficients: the scale is carried, not recomputed
-    assert fit_response_law(test, "vcm_current_A", "signed", 0.0).scale != law.scale
+    assert fit_motion_law(test, "vcm_current_A", "signed", 0.0).scale != law.scale
 
 
 def test_the_run_level_is_not_explained_by_the_law_when_the_echo_is_dropped():
     # the law of a column with no echo: the settings are the runs' means less the stroke's term
     df, level = _runs(5, 20)
     df["vcm_current_A"] = df["vcm_current_A"] + K_N_A * df["speed_m_s"] / R_OHM
-    law = fit_response_law(df, "vcm_current_A", "signed", 0.0)
+    law = fit_motion_law(df, "vcm_current_A", "signed", 0.0)
     np.testing.assert_allclose(law.beta, 0.0, atol=1e-9)
     np.testing.assert_allclose(_offset(_run_means(df.assign(g=law.run_settings(df)), "g"), level), 0.0, atol=1e-9)
 
@@ -248,7 +248,7 @@ def test_a_column_read_along_the_stroke_gets_the_runs_preload_as_its_setting():
 def test_a_column_of_the_position_alone_scatters_by_its_noise_and_gets_no_setting():
     # one preload for every run: the run levels differ by the noise of their means only
     train, _ = _preload_runs(13, set_N=6.0, noise_N=0.02)
-    law = fit_response_law(train, "preload_cell_N")
+    law = fit_motion_law(train, "preload_cell_N")
     assert 1e-3 < scatter_p(train, law)
     tr, _, (rec,) = with_run_settings(train, None, [], (), ["preload_cell_N"])
     assert tr is train and not rec["derived"] and "scatter by its noise only" in rec["note"]
@@ -257,7 +257,7 @@ def test_a_column_of_the_position_alone_scatters_by_its_noise_and_gets_no_settin
 def test_the_scatter_test_against_a_chi_square_written_out():
     # one preload for every run, autoregressive noise: Q = sum w (a - abar)^2 with w = n / (s^2 (1+rho)/(1-rho))
     train, _ = _preload_runs(14, n_runs=12, noise_N=0.05, set_N=6.0, phi=0.6)
-    law = fit_response_law(train, "preload_cell_N")
+    law = fit_motion_law(train, "preload_cell_N")
     rest = train["preload_cell_N"].to_numpy() - law.echo(train)
     g = pd.Series(rest).groupby(train["run"].to_numpy(), sort=False)
     e = pd.Series(rest - g.transform("mean").to_numpy())   # a law read along the stroke: each run's mean only
@@ -280,7 +280,7 @@ def test_a_reading_of_the_speeds_rate_gets_its_runs_offset_with_trains_scale_on_
         return df.assign(accel_m_s2=0.1 * rate + offset[df["run"].to_numpy()]), offset
     train, level = with_accel(15, 24)
     test, level_te = with_accel(16, 8)
-    law = fit_response_law(train, "accel_m_s2", "rate")
+    law = fit_motion_law(train, "accel_m_s2", "rate")
     assert law.history == "rate" and len(law.scale) == len(law.beta) == 4
     np.testing.assert_allclose(_offset(_run_means(train.assign(g=law.run_settings(train)), "g"), level), 0.0,
                                atol=1e-9)

@@ -58,14 +58,13 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-
 from scipy import stats
 
 from ..data import measurements as dataio
 from ..units import SETTING_SUFFIX
 from .responses import history_basis, position_basis, position_span, within_runs
 
-__all__ = ["PLAN_SHARE_MAX", "SCATTER_P", "ResponseLaw", "fit_response_law", "plan_share", "scatter_p",
+__all__ = ["PLAN_SHARE_MAX", "SCATTER_P", "MotionLaw", "fit_motion_law", "plan_share", "scatter_p",
            "with_run_settings"]
 
 #: the largest share of the settings' variance over TRAIN's runs that the plan's inputs may explain for the settings
@@ -76,7 +75,7 @@ SCATTER_P = 1e-3
 
 
 @dataclass(frozen=True)
-class ResponseLaw:
+class MotionLaw:
     """The law of a column fitted on TRAIN (module docstring): the column's ``channel``, the speed's ``history`` and
     its ``tau_s`` [s] (None for the rate's bank; ``history`` None: no speed part, a column read along the stroke), the
     history's ``scale`` (the divisors of its columns, TRAIN's largest magnitudes), the position's ``span``
@@ -115,8 +114,8 @@ def _history(df: pd.DataFrame, history: str | None, tau_s, scale=None):
                          df[dataio.RUN].to_numpy(), history, tau_s, scale)
 
 
-def fit_response_law(df: pd.DataFrame, channel: str, history: str | None = None,
-                     tau_s: float | None = None) -> ResponseLaw:
+def fit_motion_law(df: pd.DataFrame, channel: str, history: str | None = None,
+                     tau_s: float | None = None) -> MotionLaw:
     """The law of column ``channel`` of ``df`` (TRAIN, runs in consecutive blocks) with the speed's ``history`` at
     ``tau_s`` [s] (None: the position's polynomials only, and no trend per run), fitted by least squares on the
     within-run residuals (module docstring)."""
@@ -129,7 +128,7 @@ def fit_response_law(df: pd.DataFrame, channel: str, history: str | None = None,
     c = within_runs(df[channel].to_numpy(float)[:, None], run, t, trend)[:, 0]
     coef = np.linalg.lstsq(A, c, rcond=None)[0]
     k = X.shape[1]
-    return ResponseLaw(channel=str(channel), history=history, tau_s=tau_s, scale=tuple(scale), span=span,
+    return MotionLaw(channel=str(channel), history=history, tau_s=tau_s, scale=tuple(scale), span=span,
                        beta=tuple(float(b) for b in coef[:k]), gamma=tuple(float(g) for g in coef[k:]), trend=trend)
 
 
@@ -154,8 +153,8 @@ def plan_share(df: pd.DataFrame, values) -> float:
     return float(1.0 - (e @ e) / ss)
 
 
-def scatter_p(df: pd.DataFrame, law: ResponseLaw) -> float:
-    """The p-value of the scatter of the settings of ``df``'s runs (:meth:`ResponseLaw.run_settings`) against their
+def scatter_p(df: pd.DataFrame, law: MotionLaw) -> float:
+    """The p-value of the scatter of the settings of ``df``'s runs (:meth:`MotionLaw.run_settings`) against their
     noise: ``Q = sum w_r (a_r - abar)^2`` with ``w_r = 1 / se_r^2`` and ``abar`` the ``w``-weighted mean, against
     chi-square with ``n_runs - 1`` degrees of freedom. ``se_r^2 = s_r^2 / n_r (1 + rho) / (1 - rho)``: ``s_r^2`` the
     variance of the run's residual (``c - echo`` less the run's mean and, for a law with the trend, its line in time;
@@ -227,7 +226,7 @@ def with_run_settings(train: pd.DataFrame, test: pd.DataFrame | None, tests, res
         if why is not None:
             record.append({**row, "note": why})
             continue
-        law = fit_response_law(train, column, rec.get("history"), rec.get("tau_s"))
+        law = fit_motion_law(train, column, rec.get("history"), rec.get("tau_s"))
         values = law.run_settings(train)
         row.update(history=law.history, tau_s=law.tau_s, run_spread=_spread(values, train[dataio.RUN]),
                    echo_spread=_spread(law.echo(train), train[dataio.RUN]), plan_share=plan_share(train, values),
