@@ -78,6 +78,41 @@ def test_the_detrended_waves_are_their_residual_on_the_session_clocks_line():
     np.testing.assert_allclose(cyc.detrended(3.0 + 0.2 * t, t), 0, atol=1e-12)       # a line has no cycle
 
 
+def test_the_plans_columns_written_out_and_the_waves_free_of_them():
+    V, d, m = np.array([150.0, 200, 250, 300, 150]), np.array([1.0, -1, 1, -1, 1]), np.array([0.0, 0.05, -0.05, 0, 0])
+    cols = np.column_stack([V, V ** 2, d * m, np.abs(m), m ** 2, d, d * V])
+    np.testing.assert_allclose(cyc.plan_columns(V, d, m), (cols - cols.mean(0)) / cols.std(0), atol=1e-12)
+    np.testing.assert_allclose(cyc.plan_columns(V, np.ones(5), m)[:, 5], 0.0)        # a constant input: 0
+    rng = np.random.default_rng(2)
+    t, P = np.sort(rng.uniform(0, 90, 40)), rng.normal(size=(40, 7))
+    Z = fc.cycle_waves(t, 21.0)
+    R = cyc.detrended(Z, t, P)
+    G = np.column_stack([np.ones(40), t, P])
+    np.testing.assert_allclose(R, Z - G @ np.linalg.solve(G.T @ G, G.T @ Z), atol=1e-10)
+    np.testing.assert_allclose(G.T @ R, 0.0, atol=1e-9)
+
+
+def test_a_period_of_the_plans_own_pattern_is_no_cycle_once_the_waves_are_free_of_the_plan():
+    # V0 repeats every four runs and the runs' gain follows it (an effect of V0 the model lacks): without the plan's
+    # columns the search takes the plan's period for a cycle; with them it finds none, and a true cycle beside the
+    # same pattern keeps its evidence
+    t = _session(seed=3)
+    n = len(t)
+    V = np.array([150.0, 200.0, 250.0, 300.0])[np.arange(n) % 4]
+    plan = cyc.plan_columns(V, np.ones(n), np.zeros(n))
+    dev = _deviations(0.015 * (V - 225.0) / 56.0, seed=4)
+    naive = cyc.cycle_signal(dev, t)
+    p_naive = rl.signal_evidence(dev, [naive], alpha=0.01, k=4, seed=0, session_order=t)[0].p_value
+    free = cyc.cycle_signal(dev, t, plan)
+    p_free = rl.signal_evidence(dev, [free], alpha=0.01, k=4, seed=0, session_order=t)[0].p_value
+    assert p_naive < 1e-4 and p_free > 0.05
+    assert naive["period_s"] < 4 * np.median(np.diff(t)) * 1.5                  # the plan's few runs
+    both = _deviations(0.015 * (V - 225.0) / 56.0 + 0.02 * np.cos(2 * np.pi * t / 37.0), seed=4)
+    sg = cyc.cycle_signal(both, t, plan)
+    assert abs(1 / sg["period_s"] - 1 / 37.0) <= 1 / (3 * np.ptp(t))
+    assert rl.signal_evidence(both, [sg], alpha=0.01, k=4, seed=0, session_order=t)[0].p_value < 1e-4
+
+
 def _deviations(gain_by_run, seed, sd_between=0.004, se=0.004):
     """Made run deviations: each run's gain ``gain_by_run`` plus a between-run scatter and sampling noise."""
     rng = np.random.default_rng(seed)
@@ -167,7 +202,8 @@ def test_an_analysis_asked_for_it_searches_the_cycle_beside_the_signals_and_rank
     n = len(t)
     dev = _deviations(0.02 * np.cos(2 * np.pi * t / 31.0), seed=8)
     dev.theta[:, 0] += 0.01 * np.where(np.arange(n) % 2, 1.0, -1.0)         # and a logged setting's effect
-    df = pd.DataFrame({"run": np.repeat(np.arange(n), 5), "time_s": np.repeat(t, 5) + np.tile(np.arange(5) * 0.1, n)})
+    df = pd.DataFrame({"run": np.repeat(np.arange(n), 5), "time_s": np.repeat(t, 5) + np.tile(np.arange(5) * 0.1, n),
+                       "voltage_V": 220.0, "direction": 1.0, "load_kg": 0.0})
     setting = {"channel": "setting", "transform": "none", "values": np.where(np.arange(n) % 2, 1.0, -1.0)}
     monkeypatch.setattr(rl, "run_deviations", lambda *a: dev)
     monkeypatch.setattr(rl, "run_signals", lambda *a: [setting])
@@ -192,3 +228,20 @@ def test_an_analysis_asked_for_it_searches_the_cycle_beside_the_signals_and_rank
                             d, sigs, **kw))
     rl.analyse(df, None, np.ones(len(df), bool), [], alpha=0.01, k=4, seed=0, cycle=True)
     assert calls == [(["none"], 0.01), ([cyc.CYCLE], pytest.approx(level))]
+
+
+def test_an_analysis_reads_the_cycle_free_of_the_plans_inputs_per_run(monkeypatch):
+    import pandas as pd
+    t = _session(seed=3)
+    n = len(t)
+    V = np.array([150.0, 200.0, 250.0, 300.0])[np.arange(n) % 4]
+    dev = _deviations(0.015 * (V - 225.0) / 56.0, seed=4)
+    df = pd.DataFrame({"run": np.repeat(np.arange(n), 5), "time_s": np.repeat(t, 5) + np.tile(np.arange(5) * 0.1, n),
+                       "voltage_V": np.repeat(V, 5), "direction": 1.0, "load_kg": 0.0})
+    monkeypatch.setattr(rl, "run_deviations", lambda *a: dev)
+    monkeypatch.setattr(rl, "run_signals", lambda *a: [])
+    a = rl.analyse(df, None, np.ones(len(df), bool), [], alpha=0.01, k=4, seed=0, cycle=True)
+    (ev,) = [e for e in a.evidence if e.period_s is not None]
+    t_mean = df.groupby("run")["time_s"].mean().to_numpy()
+    want = cyc.cycle_signal(dev, t_mean, cyc.plan_columns(V, np.ones(n), np.zeros(n)))
+    assert ev.period_s == want["period_s"] and not ev.significant

@@ -11,6 +11,12 @@ drift would otherwise pass for the longest ones), enter the runs' mean on the ga
 test (2 degrees of freedom) is the cycle found (:func:`cycle_signal`); its p-value is multiplied by the number of
 periods tried (a union bound over every period the search could have returned).
 
+The waves are also taken free of the plan's inputs per run (:func:`plan_columns`: V0 and its square, the
+drive-coordinate load ``d m``, the load's size and square, the direction and the direction times V0): a plan that
+repeats its settings every few runs gives the runs' deviations a period of its own (an effect of V0 or the load the
+model lacks follows the plan's pattern), which a cycle of the session clock must not take. A cycle that the plan's
+sequence carries cannot be told from the plan, and is not searched.
+
 The grid: frequencies from ``1/S`` (``S`` the span of the runs' mean times: one cycle over the session) to
 ``1/(MIN_RUNS_PER_CYCLE dt)`` (``dt`` the median step between consecutive runs' mean times), in steps of
 ``1/(OVERSAMPLING S)``: :data:`OVERSAMPLING` points per independent frequency of the runs' span.
@@ -46,17 +52,31 @@ def periods_s(t_run_s) -> np.ndarray:
     return 1.0 / f
 
 
-def detrended(Z, t_s) -> np.ndarray:
-    """The columns of ``Z`` (n, q) less their least-squares line in ``t_s`` (n,): the residual on ``[1, t]``."""
+def plan_columns(voltage_V, direction, load_kg) -> np.ndarray:
+    """The plan's inputs per run that the cycle's waves are taken free of (module docstring), ``(n, 7)``: ``V0``,
+    ``V0^2``, ``d m``, ``|m|``, ``m^2``, ``d`` and ``d V0``, each standardised (centred, over its standard deviation;
+    a constant one left at 0)."""
+    V, d, m = (np.asarray(x, float) for x in (voltage_V, direction, load_kg))
+    cols = np.column_stack([V, V * V, d * m, np.abs(m), m * m, d, d * V])
+    sd = cols.std(axis=0)
+    return (cols - cols.mean(axis=0)) / np.where(sd > 0, sd, 1.0)
+
+
+def detrended(Z, t_s, plan=None) -> np.ndarray:
+    """The columns of ``Z`` (n, q) less their least-squares fit on ``[1, t]`` (``t_s`` (n,): their line in the session
+    times) and on the columns of ``plan`` (n, p) when given (:func:`plan_columns`): the residual."""
     Z = np.asarray(Z, float).reshape(len(t_s), -1)
-    G = np.column_stack([np.ones(len(Z)), np.asarray(t_s, float) - float(np.mean(t_s))])
+    G = np.column_stack([np.ones(len(Z)), np.asarray(t_s, float) - float(np.mean(t_s))]
+                        + ([] if plan is None else [np.asarray(plan, float).reshape(len(Z), -1)]))
     return Z - G @ np.linalg.lstsq(G, Z, rcond=None)[0]
 
 
-def cycle_signal(dev, t_run_s) -> dict | None:
+def cycle_signal(dev, t_run_s, plan=None) -> dict | None:
     """The session's cycle as a run-level signal, or None when no period is searched (:func:`periods_s`).
 
-    ``dev``: the runs' deviations; ``t_run_s``: each run's mean session time [s], in ``dev.runs``' order. The signal
+    ``dev``: the runs' deviations; ``t_run_s``: each run's mean session time [s], in ``dev.runs``' order; ``plan``:
+    the plan's inputs per run, in that order (:func:`plan_columns`; None: the waves are free of the line only). The
+    signal
     ``{"channel": "time_s", "transform": "cycle", "values": t_run_s, "columns", "period_s", "shares",
     "search_count"}``: ``columns`` the detrended waves of the period found (what its evidence tests), ``shares`` the
     plain waves' means over the runs (the family's centring, :func:`l1b2.predictor.effects.cycle.cycle_spec`),
@@ -67,7 +87,7 @@ def cycle_signal(dev, t_run_s) -> dict | None:
         return None
     best = None
     for P in periods:
-        z = detrended(cycle_waves(t, P), t)
+        z = detrended(cycle_waves(t, P), t, plan)
         p = joint_test(dev, z, True)[1]
         if best is None or p < best[0]:
             best = (p, float(P), z)

@@ -641,7 +641,8 @@ def analyse(df: pd.DataFrame, model, mask: np.ndarray, channels, *, alpha: float
         seg = block_signal(dev, middle, fit.T, level=level, k=k, seed=seed)
         if seg is not None:
             evidence += signal_evidence(dev, [seg], alpha=level, k=k, seed=seed, session_order=start)
-    found = cyc.cycle_signal(dev, middle) if cycle else None   # beside the signals
+    runs = df.groupby(dataio.RUN, sort=False)[[dataio.VOLTAGE, dataio.DIRECTION, dataio.LOAD]].first().to_numpy(float)
+    found = cyc.cycle_signal(dev, middle, cyc.plan_columns(*runs[keep].T)) if cycle else None   # beside the signals
     if found is not None:
         evidence = sorted(evidence + signal_evidence(dev, [found], alpha=level, k=k, seed=seed, session_order=start),
                           key=rank)

@@ -96,8 +96,9 @@ class LoopSettings:
         constant along the stroke is preferred over a within-run form when the run-level evidence names its regressor.
     session_cycle : bool
         With ``run_level``, also search each round's runs for a cycle of the session clock
-        (:mod:`l1b2.closeloop.cycle`) and offer a significant one as the family ``session_cycle``. Off by default: a
-        cycle of a few runs can follow the plan's own pattern (decision 0179).
+        (:mod:`l1b2.closeloop.cycle`, its waves free of the plan's inputs per run) and offer a significant one as
+        the family ``session_cycle``. Off by default: a cycle of a few runs followed the plan's own pattern before
+        the waves were free of it (decision 0179), and the stored cases are not swept again yet (decision 0180).
     clock_folds : {"blocks", "rotation"}
         Folds of the candidates that depend on the session clock (screen and refit, whatever ``run_level``):
         ``"blocks"`` k contiguous blocks, ``"rotation"`` conditions dealt in turn (:mod:`~l1b2.closeloop.acceptance`).
