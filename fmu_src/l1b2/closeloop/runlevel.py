@@ -641,12 +641,16 @@ def analyse(df: pd.DataFrame, model, mask: np.ndarray, channels, *, alpha: float
         seg = block_signal(dev, middle, fit.T, level=level, k=k, seed=seed)
         if seg is not None:
             evidence += signal_evidence(dev, [seg], alpha=level, k=k, seed=seed, session_order=start)
-    runs = df.groupby(dataio.RUN, sort=False)[[dataio.VOLTAGE, dataio.DIRECTION, dataio.LOAD]].first().to_numpy(float)
-    found = cyc.cycle_signal(dev, middle, cyc.plan_columns(*runs[keep].T)) if cycle else None   # beside the signals
+    found = cyc.cycle_signal(dev, middle, cyc.plan_columns(*_run_plan(df)[keep].T)) if cycle else None   # beside
     if found is not None:
         evidence = sorted(evidence + signal_evidence(dev, [found], alpha=level, k=k, seed=seed, session_order=start),
                           key=rank)
     return RunLevelAnalysis(dev, fit, q, qp, evidence, signals_level)
+
+
+def _run_plan(df: pd.DataFrame) -> np.ndarray:
+    """Each run's V0, direction and load (columns), in the runs' order of appearance."""
+    return df.groupby(dataio.RUN, sort=False)[[dataio.VOLTAGE, dataio.DIRECTION, dataio.LOAD]].first().to_numpy(float)
 
 
 def searches_blocks(evidence, level: float) -> bool:
