@@ -76,9 +76,8 @@ def make(kind: str, seed: int, cache: Path) -> Path:
 
 
 def passes(row: dict) -> bool:
-    """The decoy's pass rule on a printed row."""
-    stem = DECOY[row["kind"]]
-    return not any(stem in x for x in row["traced_all"]) and row["after"] <= 1.02 * row["before"]
+    """The decoy's pass rule on a printed row (the audits' rule for a decoy, :func:`blind_effects.audit_verdict`)."""
+    return be.audit_verdict(row, {}, DECOY, None)["passes"]
 
 
 def main(argv=None):
