@@ -131,7 +131,7 @@ def with_protocol_channels(train: pd.DataFrame, test: pd.DataFrame | None, respo
     rec = {}
     before = set(train.columns)
     logged = [name for name, kind in channel_kinds(train, response_columns) if kind == "logged"]
-    before_frame = train
+    along = [name for name in logged if name not in MODEL_INPUTS and is_along_stroke(train, name)]
     train, test, rec["event_clocks"] = with_event_clocks(train, test, response_columns, sess)
     train, test, rec["lagged_channels"] = with_lagged_channels(train, test, response_columns, sess)
     train, test, rec["pause_channel"] = with_pause_channel(train, test, sess)
@@ -140,7 +140,6 @@ def with_protocol_channels(train: pd.DataFrame, test: pd.DataFrame | None, respo
     train, test, rec["run_clock"] = with_run_clock(train, test)   # along the stroke only
     train, test, rec["run_travel"] = with_run_travel(train, test)   # along the stroke only
     train, test, rec["log_channels"] = with_log_channels(train, test, logged)
-    along = [name for name in logged if name not in MODEL_INPUTS and is_along_stroke(before_frame, name)]
     train, test, rec["run_settings"] = with_run_settings(train, test, response_tests, response_columns, along)
     for df in (train, test):
         if df is not None:
