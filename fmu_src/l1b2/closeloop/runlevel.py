@@ -223,8 +223,9 @@ def run_signals(df: pd.DataFrame, channels) -> list[dict]:
     (:func:`l1b2.closeloop.auxiliary.derived_columns`), or the run setting a reading carries
     (:mod:`l1b2.closeloop.runsetting`: a setting read through a response or a column read along the stroke), its
     run mean less its mean over the runs (``centre``) times the run's direction too (transform ``drive``,
-    ``d*<column>``), when the runs go both ways, and its curvature (transform ``square``, ``<column>^2``: :func:`_squared`); the categorical signals;
-    and the inputs of :data:`~l1b2.predictor.effects.channels.INPUT_SIGNALS`; ``{"channel", "transform", "values",
+    ``d*<column>``), when the runs go both ways, and its curvature (transform ``square``, ``<column>^2``:
+    :func:`_squared`); the categorical signals; and the inputs of
+    :data:`~l1b2.predictor.effects.channels.INPUT_SIGNALS`; ``{"channel", "transform", "values",
     "run_spread"}`` with one value per run (in run order) and the largest deviation of a sample's value from its run's
     (:func:`l1b2.predictor.effects.channels.run_spread`: what the export checks)."""
     out = []
